@@ -1,0 +1,1 @@
+"""Hopkinson-bar calibration: pure NumPy/SciPy analysis (no drivers, no Qt)."""

@@ -1,0 +1,116 @@
+"""The discrete dynamic model A(d⁻¹)·y(k) = B(d⁻¹)·u(k − delay) and its JSON form.
+
+a[0] = 1. Coefficients are in powers of the backshift operator d⁻¹ (= z⁻¹), so the
+transfer function is H(z) = B(z⁻¹)/A(z⁻¹) and `scipy.signal.lfilter(b, a, u)` simulates it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.errors import AnalysisError
+
+
+def complex_pairs(values: np.ndarray) -> list[list[float]]:
+    """Complex numbers as [re, im] pairs for JSON."""
+    return [[float(np.real(v)), float(np.imag(v))] for v in np.asarray(values, dtype=complex)]
+
+
+def from_pairs(pairs: Any, what: str) -> np.ndarray:
+    """[re, im] pairs back to complex numbers; `what` names the field in errors."""
+    try:
+        arr = np.asarray(pairs, dtype=float).reshape(-1, 2)
+    except (TypeError, ValueError):
+        raise AnalysisError(f"{what}: expected a list of [re, im] pairs") from None
+    return arr[:, 0] + 1j * arr[:, 1]
+
+
+@dataclass(frozen=True)
+class DiscreteModel:
+    """A discrete transfer function with its sample interval and input delay."""
+
+    sample_interval_s: float
+    a: np.ndarray  # denominator A(d⁻¹), a[0] = 1
+    b: np.ndarray  # numerator B(d⁻¹), b[0] is the direct term
+    delay_samples: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)  # fit details (loss by order, fit %, …)
+
+    def __post_init__(self) -> None:
+        a = np.atleast_1d(np.asarray(self.a, dtype=float))
+        b = np.atleast_1d(np.asarray(self.b, dtype=float))
+        if a.size == 0 or a[0] == 0:
+            raise AnalysisError("model: a[0] must be non-zero")
+        object.__setattr__(self, "b", b / a[0])
+        object.__setattr__(self, "a", a / a[0])
+
+    @property
+    def order(self) -> int:
+        return int(self.a.size - 1)
+
+    @property
+    def poles(self) -> np.ndarray:
+        return np.roots(self.a) if self.order > 0 else np.array([], dtype=complex)
+
+    @property
+    def zeros(self) -> np.ndarray:
+        b = np.trim_zeros(self.b, "b")
+        return np.roots(b) if b.size > 1 else np.array([], dtype=complex)
+
+    @property
+    def dc_gain(self) -> float:
+        den = float(np.sum(self.a))
+        if den == 0:
+            raise AnalysisError("model has a pole at z = 1: no DC gain")
+        return float(np.sum(self.b) / den)
+
+    @property
+    def is_stable(self) -> bool:
+        return bool(np.all(np.abs(self.poles) < 1.0))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The model JSON fields (DESIGN.md, 'Model / DCM JSON')."""
+        return {
+            "sample_interval_s": self.sample_interval_s,
+            "order": self.order,
+            "a": [float(x) for x in self.a],
+            "b": [float(x) for x in self.b],
+            "delay_samples": float(self.delay_samples),
+            "poles": complex_pairs(self.poles),
+            "zeros": complex_pairs(self.zeros),
+            "dc_gain": self.dc_gain,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "model") -> DiscreteModel:
+        """Build from the JSON fields; `source` names the file in errors."""
+        for key in ("sample_interval_s", "a", "b"):
+            if key not in data:
+                raise AnalysisError(f"{source}: missing key '{key}'")
+        try:
+            dt = float(data["sample_interval_s"])
+            a = np.asarray(data["a"], dtype=float)
+            b = np.asarray(data["b"], dtype=float)
+        except (TypeError, ValueError):
+            raise AnalysisError(f"{source}: sample_interval_s, a and b must be numbers") from None
+        if not dt > 0:
+            raise AnalysisError(f"{source}: sample_interval_s must be positive")
+        return cls(dt, a, b, float(data.get("delay_samples", 0.0)))
+
+
+def load_model(path: str | Path) -> DiscreteModel:
+    """Read a model JSON file written by `hopkinson identify -o`."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise AnalysisError(f"{path}: no such file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise AnalysisError(f"{path}: not a JSON model file ({exc})") from None
+    if not isinstance(data, dict):
+        raise AnalysisError(f"{path}: expected a JSON object")
+    return DiscreteModel.from_dict(data.get("model", data), source=str(path))

@@ -1,0 +1,1 @@
+"""Instrument drivers (no Qt, no analysis); drivers.sim is the simulated rig."""

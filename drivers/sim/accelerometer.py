@@ -1,0 +1,100 @@
+"""The true accelerometer of the simulated rig: modes, amplifier low-pass, noise.
+
+A continuous-time model (resonances plus an optional Butterworth amplifier low-pass) whose
+discrete poles at sample interval T are exactly exp(s·T). Tests use it as the independent
+truth that identification must recover; the simulator uses it to make the response channel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One lightly damped mechanical resonance: natural frequency (Hz) and damping ratio."""
+
+    natural_frequency_hz: float
+    damping_ratio: float
+
+
+@dataclass(frozen=True)
+class AccelerometerTruth:
+    """Known accelerometer + amplifier dynamics, unit DC gain times `sensitivity`.
+
+    modes: mechanical resonances (each a unit-DC-gain second-order low-pass).
+    lowpass_hz / lowpass_order: the bridge amplifier's Butterworth filter (0 = none).
+    sensitivity: DC gain, response units per m/s² (1.0 for a normalised model).
+    """
+
+    modes: tuple[Mode, ...] = (Mode(27_000.0, 0.05),)
+    lowpass_hz: float = 0.0
+    lowpass_order: int = 2
+    sensitivity: float = 1.0
+    zero_shift: float = 0.0  # constant offset added to the response (units of the response)
+    extra: dict = field(default_factory=dict)
+
+    def continuous_zpk(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """Zeros, poles (rad/s) and gain of the continuous model H(s)."""
+        poles: list[complex] = []
+        gain = self.sensitivity
+        for m in self.modes:
+            wn = 2 * np.pi * m.natural_frequency_hz
+            z = m.damping_ratio
+            wd = wn * np.sqrt(max(1 - z * z, 0.0))
+            if z < 1:
+                poles += [complex(-z * wn, wd), complex(-z * wn, -wd)]
+            else:
+                r = wn * np.sqrt(z * z - 1)
+                poles += [complex(-z * wn + r, 0), complex(-z * wn - r, 0)]
+            gain *= wn * wn
+        if self.lowpass_hz > 0:
+            _, p, k = signal.butter(self.lowpass_order, 2 * np.pi * self.lowpass_hz, analog=True, output="zpk")
+            poles += list(p)
+            gain *= float(np.real(k))
+        return np.array([], dtype=complex), np.array(poles, dtype=complex), float(gain)
+
+    @property
+    def order(self) -> int:
+        return len(self.continuous_zpk()[1])
+
+    def discrete_poles(self, sample_interval_s: float) -> np.ndarray:
+        """The poles exp(s·T) every discretisation of this model shares."""
+        return np.exp(self.continuous_zpk()[1] * sample_interval_s)
+
+    def frequency_response(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """Complex H(j2πf) of the continuous model."""
+        z, p, k = self.continuous_zpk()
+        _, h = signal.freqs_zpk(z, p, k, worN=2 * np.pi * np.asarray(frequency_hz, dtype=float))
+        return h
+
+    def discrete_tf(self, sample_interval_s: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
+        """Discrete (b, a) in powers of z⁻¹ by scipy's cont2discrete."""
+        z, p, k = self.continuous_zpk()
+        num, den = signal.zpk2tf(z, p, k)
+        bd, ad, _ = signal.cont2discrete((num, den), sample_interval_s, method=method)
+        bd = np.atleast_1d(np.squeeze(bd))
+        return bd / ad[0], ad / ad[0]
+
+    def respond(self, excitation: np.ndarray, sample_interval_s: float, method: str = "zoh") -> np.ndarray:
+        """Noise-free response to a sampled excitation (m/s²) starting at rest."""
+        b, a = self.discrete_tf(sample_interval_s, method)
+        return signal.lfilter(b, a, np.asarray(excitation, dtype=float)) + self.zero_shift
+
+
+def white_noise(clean: np.ndarray, snr_db: float, rng: np.random.Generator) -> np.ndarray:
+    """White Gaussian noise with power `snr_db` below the power of `clean`."""
+    power = float(np.mean(np.square(clean)))
+    return rng.standard_normal(clean.shape) * np.sqrt(power / 10 ** (snr_db / 10))
+
+
+def coloured_noise(
+    clean: np.ndarray, snr_db: float, rng: np.random.Generator, pole: float = 0.9
+) -> np.ndarray:
+    """Low-pass coloured noise (white through 1/(1 − pole·z⁻¹)), scaled to `snr_db` below `clean`."""
+    raw = signal.lfilter([1.0], [1.0, -pole], rng.standard_normal(clean.shape))
+    power = float(np.mean(np.square(clean)))
+    return raw * np.sqrt(power / 10 ** (snr_db / 10) / float(np.mean(np.square(raw))))

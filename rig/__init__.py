@@ -1,0 +1,1 @@
+"""Rig orchestration: sequencer, interlocks, shot files, campaigns, command line."""
