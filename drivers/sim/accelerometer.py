@@ -72,12 +72,19 @@ class AccelerometerTruth:
         return h
 
     def discrete_tf(self, sample_interval_s: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
-        """Discrete (b, a) in powers of z⁻¹ by scipy's cont2discrete."""
+        """Discrete (b, a) in powers of z⁻¹ by scipy's cont2discrete.
+
+        The model is discretised in time units of one sample (s·T), which keeps the state
+        matrices O(1); in seconds a 6th-order model's coefficients span ~30 decades and the
+        discrete poles come out ~1e-5 off exp(s·T).
+        """
         z, p, k = self.continuous_zpk()
-        num, den = signal.zpk2tf(z, p, k)
-        bd, ad, _ = signal.cont2discrete((num, den), sample_interval_s, method=method)
-        bd = np.atleast_1d(np.squeeze(bd))
-        return bd / ad[0], ad / ad[0]
+        order = len(p)
+        scaled = signal.zpk2ss(z * sample_interval_s, p * sample_interval_s, k * sample_interval_s ** (order - len(z)))
+        ad, bd, cd, dd, _ = signal.cont2discrete(scaled, 1.0, method=method)
+        b, a = signal.ss2tf(ad, bd, cd, dd)
+        b = np.atleast_1d(np.squeeze(b))
+        return np.real(b) / a[0], np.real(a) / a[0]
 
     def respond(self, excitation: np.ndarray, sample_interval_s: float, method: str = "zoh") -> np.ndarray:
         """Noise-free response to a sampled excitation (m/s²) starting at rest."""
