@@ -1,0 +1,330 @@
+"""Frequency response, band of small distortion (FBSD), pole analysis and d → c conversion.
+
+The FBSD at level L is the first frequency from DC at which the normalised gain
+|H(f)/H(0)| leaves the band 1 ± L (the paper's ±5 % and ±10 % bands). The test is
+two-sided: near a lightly damped resonance the gain rises above 1 + L long before it ever
+falls below 1 − L (a one-sided "bandwidth", e.g. python-control's, is ~4.6× too wide).
+
+A band edge that is never reached below the highest frequency examined (Nyquist for a
+discrete model) is reported AT that frequency with `crossing = "none"`, so every figure
+stays a finite, JSON-safe number; `fbsd_report` carries the flag beside the figure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import optimize, signal
+
+from analysis.errors import AnalysisError
+from analysis.model import DiscreteModel, complex_pairs
+
+DEFAULT_LEVELS = (0.05, 0.10)
+
+# Frequencies examined before the root-finder refines a crossing: a uniform grid plus a
+# geometric one (for crossings far below f_max), plus the caller's frequencies of interest
+# (pole and zero angles, where narrow peaks and notches sit).
+_LINEAR_POINTS = 20_001
+_LOG_POINTS = 2_001
+_LOG_DECADES = 6
+
+
+def level_key(level: float) -> str:
+    """The dictionary key of a band level: 0.05 → "5", 0.10 → "10" (per cent)."""
+    return f"{round(level * 100.0, 6):g}"
+
+
+@dataclass(frozen=True)
+class BandEdge:
+    """Where the normalised gain first leaves 1 ± level.
+
+    crossing: "above" (the gain rose past 1 + level), "below" (fell under 1 − level) or
+    "none" (it stayed within the band up to f_max: frequency_hz is then f_max itself).
+    """
+
+    level: float
+    frequency_hz: float
+    crossing: str
+
+    @property
+    def reached(self) -> bool:
+        return self.crossing != "none"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "level": self.level,
+            "frequency_hz": self.frequency_hz,
+            "crossing": self.crossing,
+            "within_band_to_limit": not self.reached,
+        }
+
+
+def band_edges(
+    gain: Callable[[np.ndarray], np.ndarray],
+    f_max_hz: float,
+    levels: Sequence[float] = DEFAULT_LEVELS,
+    frequencies_of_interest_hz: Iterable[float] = (),
+) -> dict[str, BandEdge]:
+    """Band edges of a normalised gain function g(f) = |H(f)/H(0)| on [0, f_max_hz].
+
+    `gain` takes an array of frequencies (Hz) and returns the normalised magnitude. The
+    first grid point outside 1 ± level brackets the crossing with the point before it;
+    brentq then locates it to ~1e-12 relative. Narrow features can only be found if the
+    grid samples them: pass their frequencies in `frequencies_of_interest_hz`.
+    """
+    if not f_max_hz > 0:
+        raise AnalysisError(f"band edges: f_max must be positive, got {f_max_hz}")
+    grid = np.concatenate(
+        [
+            np.linspace(0.0, f_max_hz, _LINEAR_POINTS),
+            np.geomspace(f_max_hz * 10.0**-_LOG_DECADES, f_max_hz, _LOG_POINTS),
+            np.asarray([f for f in frequencies_of_interest_hz if 0.0 < f < f_max_hz], dtype=float),
+        ]
+    )
+    grid = np.unique(grid)
+    g = np.asarray(gain(grid), dtype=float)
+    if not np.all(np.isfinite(g)):
+        raise AnalysisError("band edges: the gain is not finite on [0, f_max] (a pole on the unit circle?)")
+    edges: dict[str, BandEdge] = {}
+    for level in levels:
+        if not 0.0 < level < 1.0:
+            raise AnalysisError(f"band edges: level must be between 0 and 1, got {level}")
+        outside = np.flatnonzero(np.abs(g - 1.0) > level)
+        if outside.size == 0:
+            edges[level_key(level)] = BandEdge(float(level), float(f_max_hz), "none")
+            continue
+        i = int(outside[0])
+        if i == 0:
+            raise AnalysisError("band edges: the gain at DC is not 1; normalise it by H(0) first")
+        above = g[i] > 1.0
+        target = 1.0 + level if above else 1.0 - level
+
+        def offset(f: float, target: float = target) -> float:
+            return float(np.asarray(gain(np.array([f])), dtype=float)[0]) - target
+
+        f_edge = optimize.brentq(offset, grid[i - 1], grid[i], xtol=1e-12 * grid[i], rtol=1e-14)
+        edges[level_key(level)] = BandEdge(float(level), float(f_edge), "above" if above else "below")
+    return edges
+
+
+def fbsd_from_response(
+    frequency_hz: np.ndarray, magnitude_normalised: np.ndarray, levels: Sequence[float] = DEFAULT_LEVELS
+) -> dict[str, BandEdge]:
+    """Band edges from a sampled normalised magnitude (e.g. a measured response).
+
+    The crossing is interpolated linearly between the two samples that bracket it; the
+    band is only as exact as the sampling. frequency_hz must start at or near DC.
+    """
+    f = np.asarray(frequency_hz, dtype=float)
+    m = np.asarray(magnitude_normalised, dtype=float)
+    if f.ndim != 1 or f.shape != m.shape or f.size < 2:
+        raise AnalysisError("FBSD: frequency and magnitude must be 1-D arrays of the same length (≥ 2)")
+    if np.any(np.diff(f) <= 0):
+        raise AnalysisError("FBSD: frequencies must be increasing")
+    edges: dict[str, BandEdge] = {}
+    for level in levels:
+        outside = np.flatnonzero(np.abs(m - 1.0) > level)
+        if outside.size == 0:
+            edges[level_key(level)] = BandEdge(float(level), float(f[-1]), "none")
+            continue
+        i = int(outside[0])
+        if i == 0:
+            raise AnalysisError("FBSD: the first magnitude sample is already outside the band; normalise by H(0)")
+        above = m[i] > 1.0
+        target = 1.0 + level if above else 1.0 - level
+        frac = (target - m[i - 1]) / (m[i] - m[i - 1])
+        edges[level_key(level)] = BandEdge(
+            float(level), float(f[i - 1] + frac * (f[i] - f[i - 1])), "above" if above else "below"
+        )
+    return edges
+
+
+def frequency_response(model: DiscreteModel, frequency_hz: np.ndarray) -> np.ndarray:
+    """Complex H(e^{j2πfT}) of the model at the given frequencies (Hz).
+
+    The model's input delay (delay_samples) is not included: it changes the phase only,
+    and the identified dynamics are what the FBSD and DCM describe.
+    """
+    f = np.atleast_1d(np.asarray(frequency_hz, dtype=float))
+    _, h = signal.freqz(model.b, model.a, worN=f, fs=1.0 / model.sample_interval_s)
+    return h
+
+
+def nyquist_hz(model: DiscreteModel) -> float:
+    """Half the sample rate of the model."""
+    return 0.5 / model.sample_interval_s
+
+
+def pole_zero_frequencies_hz(values: np.ndarray, sample_interval_s: float) -> np.ndarray:
+    """The frequencies |arg z|/(2πT) where discrete poles or zeros put peaks and notches."""
+    v = np.asarray(values, dtype=complex)
+    return np.abs(np.angle(v)) / (2.0 * np.pi * sample_interval_s)
+
+
+def normalised_gain_function(
+    b: np.ndarray, a: np.ndarray, sample_interval_s: float
+) -> Callable[[np.ndarray], np.ndarray]:
+    """g(f) = |H(f)/H(0)| of a discrete (b, a) in powers of z⁻¹."""
+    dc = float(np.sum(b) / np.sum(a)) if np.sum(a) != 0 else np.inf
+    if not np.isfinite(dc) or dc == 0.0:
+        raise AnalysisError("FBSD: the model has no finite, non-zero DC gain (a pole or zero at z = 1)")
+    fs = 1.0 / sample_interval_s
+
+    def gain(frequency_hz: np.ndarray) -> np.ndarray:
+        _, h = signal.freqz(b, a, worN=np.atleast_1d(frequency_hz), fs=fs)
+        return np.abs(h) / abs(dc)
+
+    return gain
+
+
+def fbsd_edges(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, BandEdge]:
+    """The model's band edges (BandEdge per level key), searched up to Nyquist."""
+    gain = normalised_gain_function(model.b, model.a, model.sample_interval_s)
+    special = pole_zero_frequencies_hz(np.concatenate([model.poles, model.zeros]), model.sample_interval_s)
+    return band_edges(gain, nyquist_hz(model), levels, special)
+
+
+def fbsd_hz(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, float]:
+    """FBSD in Hz per level: {"5": f5, "10": f10} for the default levels.
+
+    An edge never reached below Nyquist is reported as the Nyquist frequency; use
+    `fbsd_report` to see which edges were reached and from which side.
+    """
+    return {k: e.frequency_hz for k, e in fbsd_edges(model, levels).items()}
+
+
+def fbsd_report(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, dict[str, Any]]:
+    """JSON-safe band edges with the side crossed and whether Nyquist limited them."""
+    return {k: e.to_dict() for k, e in fbsd_edges(model, levels).items()}
+
+
+def response_times_samples(poles: np.ndarray) -> np.ndarray:
+    """T'_r of each pole in sample intervals (Eqs. 18–21): 3 / ln(cos θ / α), θ = atan(β/α).
+
+    cos θ / α equals 1/|p| (for α > 0), so T'_r = −3 / ln|p|, which also covers real
+    poles (3 / ln(1/p)) and poles with a negative real part. A pole at the origin has
+    T'_r = 0; a pole on or outside the unit circle never settles and is an error.
+    """
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    mag = np.abs(p)
+    if np.any(mag >= 1.0):
+        bad = p[np.argmax(mag)]
+        raise AnalysisError(f"pole {bad.real:.6g}{bad.imag:+.6g}j is on or outside the unit circle: the model is unstable")
+    with np.errstate(divide="ignore"):
+        return np.where(mag > 0.0, -3.0 / np.log(np.where(mag > 0.0, mag, 1.0)), 0.0)
+
+
+def pole_analysis(poles: np.ndarray) -> list[dict[str, Any]]:
+    """Table 1 of the paper: per pole its [re, im], response time T'_r and ratio r_i.
+
+    ratio = T'_r(slowest pole) / T'_r; a pole at the origin (T'_r = 0) has ratio None.
+    Listed in the order given.
+    """
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if p.size == 0:
+        return []
+    tr = response_times_samples(p)
+    slowest = float(np.max(tr))
+    rows = []
+    for pole, t in zip(complex_pairs(p), tr, strict=True):
+        rows.append(
+            {
+                "pole": pole,
+                "response_time_samples": float(t),
+                "ratio": float(slowest / t) if t > 0 else None,
+            }
+        )
+    return rows
+
+
+def natural_frequency_damping(poles: np.ndarray, sample_interval_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Natural frequency (Hz) and damping ratio of each discrete pole, via s = ln(z)/T.
+
+    A negative real pole maps to the Nyquist frequency; a pole at the origin is an error.
+    """
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if np.any(p == 0):
+        raise AnalysisError("a pole at z = 0 (a pure delay) has no natural frequency")
+    s = np.log(p) / sample_interval_s
+    wn = np.abs(s)
+    return wn / (2.0 * np.pi), -s.real / wn
+
+
+def model_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
+    """Zeros, poles and gain of H in POSITIVE powers of z (as scipy's zpk2sos expects).
+
+    b and a are in powers of z⁻¹; leading zeros of b (a delay) become poles at the
+    origin, a shorter b becomes zeros at the origin, so zero and pole counts match.
+    (scipy's tf2sos misreads z⁻¹ coefficients with leading zeros; hence by hand.)
+    """
+    b = np.asarray(model.b, dtype=float)
+    nz = np.flatnonzero(b)
+    if nz.size == 0:
+        raise AnalysisError("model: the numerator b is all zeros")
+    delay = int(nz[0])
+    b = np.trim_zeros(b[delay:], "b")
+    zeros = np.roots(b) if b.size > 1 else np.array([], dtype=complex)
+    poles = model.poles
+    origin = poles.size - zeros.size - delay
+    if origin >= 0:
+        zeros = np.concatenate([zeros, np.zeros(origin)])
+    else:
+        poles = np.concatenate([poles, np.zeros(-origin)])
+    return zeros.astype(complex), poles.astype(complex), float(b[0])
+
+
+def model_sos(model: DiscreteModel) -> np.ndarray:
+    """Second-order sections of the model (numerically safer than (b, a) at high order)."""
+    z, p, k = model_zpk(model)
+    return signal.zpk2sos(z, p, k)
+
+
+def to_continuous(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
+    """Continuous zeros, poles (rad/s) and gain matching the discrete model.
+
+    Method: pole-zero matching, s = ln(z)/T, the inverse of the matched z-transform.
+    scipy has no d2c; an inverse bilinear transform would warp every pole's frequency
+    (exactly only at one prewarp frequency) while the matched mapping returns the true
+    continuous poles whatever the discretisation (ZOH, impulse-invariant, matched), since
+    all of them place the poles at exp(sT). Zeros on the negative real axis are the
+    sampling zeros a ZOH adds (continuous zeros at infinity) and are dropped, as are
+    zeros/poles at the origin (delays). A negative real pole, which has no real
+    first-order counterpart, becomes the pair (ln|p| ± jπ)/T. The gain is set so the DC
+    gains agree. The input delay is not included.
+    """
+    T = model.sample_interval_s
+    p = model.poles
+    if np.any(np.abs(p - 1.0) < 1e-12):
+        raise AnalysisError("model has a pole at z = 1 (an integrator): no finite DC gain to match")
+    cont_p: list[complex] = []
+    for pole in p:
+        if abs(pole) == 0.0:
+            continue
+        if abs(pole.imag) == 0.0 and pole.real < 0:
+            sigma = np.log(abs(pole.real)) / T
+            cont_p += [complex(sigma, np.pi / T), complex(sigma, -np.pi / T)]
+        else:
+            cont_p.append(np.log(pole) / T)
+    cont_z = [
+        np.log(z) / T
+        for z in model.zeros
+        if abs(z) > 0.0 and not (abs(z.imag) <= 1e-12 * max(1.0, abs(z)) and z.real < 0)
+    ]
+    poles_s = np.array(cont_p, dtype=complex)
+    zeros_s = np.array(cont_z, dtype=complex)
+    # DC gain of k·Π(s − z)/Π(s − p) at s = 0 is k·Π(−z)/Π(−p).
+    shape_dc = np.prod(-zeros_s) / np.prod(-poles_s)
+    if shape_dc == 0:
+        raise AnalysisError("model has a zero at z = 1: no DC gain to match")
+    gain = float(np.real(model.dc_gain / shape_dc))
+    return zeros_s, poles_s, gain
+
+
+def continuous_tf(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous (num, den) in descending powers of s from `to_continuous`."""
+    z, p, k = to_continuous(model)
+    num, den = signal.zpk2tf(z, p, k)
+    return np.real(num), np.real(den)
