@@ -253,12 +253,11 @@ def natural_frequency_damping(poles: np.ndarray, sample_interval_s: float) -> tu
     return wn / (2.0 * np.pi), -s.real / wn
 
 
-def model_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
-    """Zeros, poles and gain of H in POSITIVE powers of z (as scipy's zpk2sos expects).
+def _delay_free_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """Zeros, poles, gain (positive powers of z, as many zeros as poles) and the delay d.
 
-    b and a are in powers of z⁻¹; leading zeros of b (a delay) become poles at the
-    origin, a shorter b becomes zeros at the origin, so zero and pole counts match.
-    (scipy's tf2sos misreads z⁻¹ coefficients with leading zeros; hence by hand.)
+    H(z) = z^(−d) · k·Π(z − zᵢ)/Π(z − pᵢ). b and a are in powers of z⁻¹: d leading zeros
+    of b are the delay; a b shorter than a gives zeros at the origin, a longer one poles.
     """
     b = np.asarray(model.b, dtype=float)
     nz = np.flatnonzero(b)
@@ -268,18 +267,31 @@ def model_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
     b = np.trim_zeros(b[delay:], "b")
     zeros = np.roots(b) if b.size > 1 else np.array([], dtype=complex)
     poles = model.poles
-    origin = poles.size - zeros.size - delay
-    if origin >= 0:
-        zeros = np.concatenate([zeros, np.zeros(origin)])
+    if zeros.size < poles.size:
+        zeros = np.concatenate([zeros, np.zeros(poles.size - zeros.size)])
     else:
-        poles = np.concatenate([poles, np.zeros(-origin)])
-    return zeros.astype(complex), poles.astype(complex), float(b[0])
+        poles = np.concatenate([poles, np.zeros(zeros.size - poles.size)])
+    return zeros.astype(complex), poles.astype(complex), float(b[0]), delay
+
+
+def model_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
+    """Zeros, poles and gain of H in POSITIVE powers of z (a delay = poles at the origin)."""
+    z, p, k, delay = _delay_free_zpk(model)
+    return z, np.concatenate([p, np.zeros(delay, dtype=complex)]), k
 
 
 def model_sos(model: DiscreteModel) -> np.ndarray:
-    """Second-order sections of the model (numerically safer than (b, a) at high order)."""
-    z, p, k = model_zpk(model)
-    return signal.zpk2sos(z, p, k)
+    """Second-order sections of the model (numerically safer than (b, a) at high order).
+
+    Built by hand because scipy's tf2sos/zpk2sos misread z⁻¹ coefficients with leading
+    zeros (a delay): they pad the zeros with zeros at the origin, which advances the
+    output. Here the delay-free part goes through zpk2sos and the delay is appended as
+    pure-delay sections (b = [0, 0, 1] or [0, 1, 0]).
+    """
+    z, p, k, delay = _delay_free_zpk(model)
+    sos = signal.zpk2sos(z, p, k) if p.size else np.array([[k, 0.0, 0.0, 1.0, 0.0, 0.0]])
+    delays = [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]] * (delay // 2) + [[0.0, 1.0, 0.0, 1.0, 0.0, 0.0]] * (delay % 2)
+    return np.vstack([sos, *[np.array([row]) for row in delays]]) if delays else sos
 
 
 def to_continuous(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
