@@ -1,0 +1,291 @@
+"""Campaign plans: a TOML file listing the shots to fire, validated and expanded on load.
+
+Example (config/campaigns/example.toml is the documented one)::
+
+    name = "ayz3-sn0001"              # campaign name (run folders are named after it)
+    operator = "A. Technician"
+    description = "..."               # optional
+    authorise_firing = false          # true: the plan itself authorises FIRE for its shots
+
+    [accelerometer]
+    model = "AYZ-3"
+    serial = "SN0001"
+    sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
+
+    [defaults]                        # every key optional; per-shot keys override
+    pressure_bar = 2.0
+    projectile = 3                    # 1, 2 or 3 (No. 3 gives the shortest pulse)
+    [defaults.analysis]
+    max_order = 12
+    order = 4                         # optional: a fixed order instead of the knee rule
+    sample_rate_hz = 1.0e6
+    dcm_ratio = 12.5                  # response-time ratio r of the DCM
+    dcm_damping = 0.707               # damping ζ_e of the DCM's new poles
+
+    [[shots]]
+    pressure_bar = 1.5
+    repeats = 3
+    [shots.analysis]                  # optional per-shot overrides
+    max_order = 8
+
+Entries expand in order into planned shots with stable ids "s<entry>-r<repeat>"
+(s001-r1, s001-r2, s002-r1, ...). Entry numbers in ids and in error messages count from 1:
+"shots[2].pressure_bar" is the pressure of the second [[shots]] table, whose ids are s002-*.
+Pressure upper limits belong to the rig (config/rig.toml [limits]); the sequencer checks them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from rig.errors import ConfigError
+
+PROJECTILES = (1, 2, 3)
+MAX_ORDER_LIMIT = 40
+
+
+@dataclass(frozen=True)
+class Accelerometer:
+    """The accelerometer under calibration."""
+
+    model: str
+    serial: str
+    sensitivity_v_per_m_s2: float | None = None  # nominal, at the amplifier output
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """Analysis settings of a shot (defaults from DESIGN.md and the paper's example)."""
+
+    max_order: int = 12
+    order: int | None = None  # None: chosen where the bias-corrected loss stops falling
+    sample_rate_hz: float = 1.0e6
+    dcm_ratio: float = 12.5
+    dcm_damping: float = 0.707
+
+
+@dataclass(frozen=True)
+class PlannedShot:
+    """One shot to fire: a stable id, its settings and its analysis options."""
+
+    id: str  # "s001-r1"
+    index: int  # 0-based position in the campaign
+    entry: int  # 1-based [[shots]] entry
+    repeat: int  # 1-based repeat within the entry
+    pressure_bar: float
+    projectile: int
+    analysis: AnalysisOptions
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class CampaignPlan:
+    """A validated campaign plan with its shots expanded in firing order."""
+
+    path: Path
+    name: str
+    operator: str
+    accelerometer: Accelerometer
+    shots: tuple[PlannedShot, ...]
+    description: str = ""
+    authorise_firing: bool = False
+    text: str = ""  # the TOML text as loaded (copied into the run folder)
+
+    def shot(self, shot_id: str) -> PlannedShot:
+        for s in self.shots:
+            if s.id == shot_id:
+                return s
+        raise KeyError(shot_id)
+
+    @property
+    def fingerprint(self) -> str:
+        """SHA-256 of what gets fired (ids, settings, analysis): equal plans, equal print."""
+        canonical = json.dumps([s.to_dict() for s in self.shots], sort_keys=True)
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+_TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "defaults", "shots"}
+_ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2"}
+_SHOT_KEYS = {"pressure_bar", "projectile", "analysis"}
+_ENTRY_KEYS = _SHOT_KEYS | {"repeats"}
+_ANALYSIS_KEYS = set(AnalysisOptions.__dataclass_fields__)
+
+
+class _Checker:
+    """Type and range checks that name the file and the key in every message."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, reason: str) -> ConfigError:
+        return ConfigError(f"{self.path}: {key}: {reason}")
+
+    def table(self, value: Any, key: str, allowed: set[str]) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.fail(key, f"must be a table, got {_kind(value)}")
+        unknown = sorted(set(value) - allowed)
+        if unknown:
+            where = f"{key}." if key else ""
+            raise self.fail(
+                f"{where}{unknown[0]}", f"unknown key (allowed here: {', '.join(sorted(allowed))})"
+            )
+        return value
+
+    def text(self, value: Any, key: str, required: bool = True) -> str:
+        if not isinstance(value, str):
+            raise self.fail(key, f"must be a string, got {_kind(value)}")
+        if required and not value.strip():
+            raise self.fail(key, "must not be empty")
+        return value
+
+    def number(self, value: Any, key: str, low: float, low_open: bool = True,
+               high: float = math.inf, high_open: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.fail(key, f"must be a number, got {_kind(value)}")
+        x = float(value)
+        too_low = x <= low if low_open else x < low
+        too_high = x >= high if high_open else x > high
+        if not math.isfinite(x) or too_low or too_high:
+            lo = f"> {low:g}" if low_open else f">= {low:g}"
+            hi = "" if high == math.inf else (f" and < {high:g}" if high_open else f" and <= {high:g}")
+            raise self.fail(key, f"must be {lo}{hi} (got {value})")
+        return x
+
+    def integer(self, value: Any, key: str, low: int, high: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(key, f"must be an integer, got {_kind(value)}")
+        if value < low or (high is not None and value > high):
+            span = f"{low}..{high}" if high is not None else f">= {low}"
+            raise self.fail(key, f"must be {span} (got {value})")
+        return value
+
+
+def _kind(value: Any) -> str:
+    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+             list: "an array", dict: "a table"}
+    return names.get(type(value), type(value).__name__)
+
+
+def load_plan(path: str | Path) -> CampaignPlan:
+    """Read and validate a campaign plan; ConfigError names the file, the key and the reason."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such plan file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot be read as UTF-8 text ({exc})") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return plan_from_dict(doc, path, text)
+
+
+def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignPlan:
+    """Validate a parsed plan (`path` names it in errors) and expand its shots."""
+    c = _Checker(path)
+    c.table(doc, "", _TOP_KEYS)
+    for key in ("name", "operator", "accelerometer", "shots"):
+        if key not in doc:
+            raise c.fail(key, "missing (required)")
+    name = c.text(doc["name"], "name")
+    if any(ch in name for ch in "/\\:") or name.startswith("."):
+        raise c.fail("name", f"must be usable as a folder name (got {name!r})")
+    operator = c.text(doc["operator"], "operator")
+    description = c.text(doc.get("description", ""), "description", required=False)
+    authorise = doc.get("authorise_firing", False)
+    if not isinstance(authorise, bool):
+        raise c.fail("authorise_firing", f"must be true or false, got {_kind(authorise)}")
+
+    acc = c.table(doc["accelerometer"], "accelerometer", _ACCEL_KEYS)
+    for key in ("model", "serial"):
+        if key not in acc:
+            raise c.fail(f"accelerometer.{key}", "missing (required)")
+    sensitivity = acc.get("sensitivity_v_per_m_s2")
+    accelerometer = Accelerometer(
+        c.text(acc["model"], "accelerometer.model"),
+        c.text(acc["serial"], "accelerometer.serial"),
+        None if sensitivity is None
+        else c.number(sensitivity, "accelerometer.sensitivity_v_per_m_s2", 0.0),
+    )
+
+    defaults = c.table(doc.get("defaults", {}), "defaults", _SHOT_KEYS)
+    base = _shot_settings(c, defaults, "defaults", {}, AnalysisOptions())
+
+    entries = doc["shots"]
+    if not isinstance(entries, list) or not entries:
+        raise c.fail("shots", "must be one or more [[shots]] tables")
+    width = max(3, len(str(len(entries))))
+    shots: list[PlannedShot] = []
+    for number, entry in enumerate(entries, start=1):
+        key = f"shots[{number}]"
+        entry = c.table(entry, key, _ENTRY_KEYS)
+        settings = _shot_settings(c, entry, key, base, base["analysis"])
+        for name_ in ("pressure_bar", "projectile"):
+            if name_ not in settings:
+                raise c.fail(f"{key}.{name_}", "missing (and no default in [defaults])")
+        repeats = c.integer(entry.get("repeats", 1), f"{key}.repeats", 1)
+        for repeat in range(1, repeats + 1):
+            shots.append(
+                PlannedShot(
+                    id=f"s{number:0{width}d}-r{repeat}",
+                    index=len(shots),
+                    entry=number,
+                    repeat=repeat,
+                    pressure_bar=settings["pressure_bar"],
+                    projectile=settings["projectile"],
+                    analysis=settings["analysis"],
+                )
+            )
+    return CampaignPlan(
+        path=path,
+        name=name,
+        operator=operator,
+        accelerometer=accelerometer,
+        shots=tuple(shots),
+        description=description,
+        authorise_firing=authorise,
+        text=text,
+    )
+
+
+def _shot_settings(
+    c: _Checker, table: dict[str, Any], key: str, inherited: dict[str, Any], analysis: AnalysisOptions
+) -> dict[str, Any]:
+    """Pressure, projectile and analysis options of a table, over what it inherits."""
+    out = dict(inherited)
+    if "pressure_bar" in table:
+        out["pressure_bar"] = c.number(table["pressure_bar"], f"{key}.pressure_bar", 0.0)
+    if "projectile" in table:
+        out["projectile"] = c.integer(table["projectile"], f"{key}.projectile", 1, 3)
+    options = asdict(analysis)
+    if "analysis" in table:
+        akey = f"{key}.analysis"
+        given = c.table(table["analysis"], akey, _ANALYSIS_KEYS)
+        if "max_order" in given:
+            options["max_order"] = c.integer(given["max_order"], f"{akey}.max_order", 1, MAX_ORDER_LIMIT)
+        if "order" in given:
+            options["order"] = c.integer(given["order"], f"{akey}.order", 1, MAX_ORDER_LIMIT)
+        if "sample_rate_hz" in given:
+            options["sample_rate_hz"] = c.number(given["sample_rate_hz"], f"{akey}.sample_rate_hz", 0.0)
+        if "dcm_ratio" in given:
+            options["dcm_ratio"] = c.number(given["dcm_ratio"], f"{akey}.dcm_ratio", 1.0, low_open=False)
+        if "dcm_damping" in given:
+            options["dcm_damping"] = c.number(given["dcm_damping"], f"{akey}.dcm_damping", 0.0, high=1.0)
+        if options["order"] is not None and options["order"] > options["max_order"]:
+            bad = "order" if "order" in given else "max_order"
+            raise c.fail(
+                f"{akey}.{bad}",
+                f"order {options['order']} exceeds max_order {options['max_order']}",
+            )
+    out["analysis"] = AnalysisOptions(**options)
+    return out
