@@ -280,18 +280,30 @@ def model_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
     return z, np.concatenate([p, np.zeros(delay, dtype=complex)]), k
 
 
-def model_sos(model: DiscreteModel) -> np.ndarray:
-    """Second-order sections of the model (numerically safer than (b, a) at high order).
+def zpk_to_sos(zeros: np.ndarray, poles: np.ndarray, gain: float, delay_samples: int = 0) -> np.ndarray:
+    """Second-order sections of z^(−delay)·k·Π(z − zᵢ)/Π(z − pᵢ) (positive powers of z).
 
-    Built by hand because scipy's tf2sos/zpk2sos misread z⁻¹ coefficients with leading
-    zeros (a delay): they pad the zeros with zeros at the origin, which advances the
-    output. Here the delay-free part goes through zpk2sos and the delay is appended as
-    pure-delay sections (b = [0, 0, 1] or [0, 1, 0]).
+    Built by hand around zpk2sos because scipy's zpk2sos (and tf2sos on z⁻¹ coefficients
+    with leading zeros) pads missing zeros with zeros at the origin, which silently turns a
+    strictly proper filter into one that runs ahead of its input. Here the relative
+    degree and any delay become explicit pure-delay sections (b = [0, 0, 1] or [0, 1, 0]).
     """
+    z = np.atleast_1d(np.asarray(zeros, dtype=complex))
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    lag = p.size - z.size
+    if lag < 0:
+        raise AnalysisError(f"{z.size} zeros but only {p.size} poles: the filter would not be causal")
+    z = np.concatenate([z, np.zeros(lag, dtype=complex)])
+    sos = signal.zpk2sos(z, p, gain) if p.size else np.array([[gain, 0.0, 0.0, 1.0, 0.0, 0.0]])
+    delay = lag + int(delay_samples)
+    rows = [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]] * (delay // 2) + [[0.0, 1.0, 0.0, 1.0, 0.0, 0.0]] * (delay % 2)
+    return np.vstack([sos, np.array(rows)]) if rows else sos
+
+
+def model_sos(model: DiscreteModel) -> np.ndarray:
+    """Second-order sections of the model (numerically safer than (b, a) at high order)."""
     z, p, k, delay = _delay_free_zpk(model)
-    sos = signal.zpk2sos(z, p, k) if p.size else np.array([[k, 0.0, 0.0, 1.0, 0.0, 0.0]])
-    delays = [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]] * (delay // 2) + [[0.0, 1.0, 0.0, 1.0, 0.0, 0.0]] * (delay % 2)
-    return np.vstack([sos, *[np.array([row]) for row in delays]]) if delays else sos
+    return zpk_to_sos(z, p, k, delay)
 
 
 def to_continuous(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
