@@ -1,0 +1,300 @@
+"""Bridge amplifier of the accelerometer, over a serial line (pyserial).
+
+Protocol (line-based ASCII, designed for this rig; the simulated amplifier speaks it too)
+------------------------------------------------------------------------------------------
+Every line, both ways, is ``<payload>*<XX>\\n``: XX is the NMEA-0183 style checksum, two
+upper-case hex digits of the XOR of all payload bytes. ``\\r\\n`` is accepted as the end
+of a line. The checksum is optional from host to amplifier (so a person can type into a
+terminal); the driver always sends it, and the amplifier answers a wrong one with
+``<VERB> ERR CHECKSUM``. Replies always carry the checksum and begin with the verb of the
+command they answer (an echo check: a stale or foreign reply is never taken for the answer).
+
+====================  ======================  ==========================================
+command               reply                   meaning
+====================  ======================  ==========================================
+``*IDN?``             ``*IDN v,model,sn,fw``  identity
+``EXC <volts>``       ``EXC OK``              bridge excitation, 0.5 … 10 V
+``EXC?``              ``EXC 5.000``
+``GAIN <g>``          ``GAIN OK``             gain, one of GAINS
+``GAIN?``             ``GAIN 10``
+``LP <hz>|OFF``       ``LP OK``               low-pass filter corner, one of LOWPASS_HZ
+``LP?``               ``LP 200000`` / ``LP OFF``
+``AZ``                ``AZ OK``               auto-zero (bridge balance); clears overload
+``SHUNT ON|OFF``      ``SHUNT OK``            shunt calibration resistor in/out
+``SHUNT?``            ``SHUNT ON|OFF``
+``OVL?``              ``OVL 0|1``             output overload (latched)
+``OVL CLR``           ``OVL OK``              clear the overload latch
+``OUT?``              ``OUT 0.0123``          DC output monitor, volts
+====================  ======================  ==========================================
+
+An error is ``<VERB> ERR <REASON>`` (UNKNOWN, RANGE, SYNTAX, CHECKSUM).
+
+Example bytes: the driver sends ``b"GAIN 20*23\\n"``; the amplifier answers ``b"GAIN OK*25\\n"``.
+
+The driver retries a command `retries` times after a timeout or a bad checksum (every
+command here is idempotent), flushing the input first; then it raises an InstrumentError
+that names the amplifier, the command and the reply.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import TracebackType
+
+import serial
+
+from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+
+GAINS: tuple[float, ...] = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
+LOWPASS_HZ: tuple[float, ...] = (1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3)  # plus 0 = OFF
+EXCITATION_RANGE_V = (0.5, 10.0)
+MAX_LINE_BYTES = 256
+
+
+class FramingError(ValueError):
+    """A line that is not ``<payload>*<XX>`` with the right checksum."""
+
+
+def checksum(payload: str | bytes) -> str:
+    """NMEA-style checksum: XOR of every byte of the payload, as two upper-case hex digits."""
+    data = payload.encode("ascii") if isinstance(payload, str) else payload
+    value = 0
+    for byte in data:
+        value ^= byte
+    return f"{value:02X}"
+
+
+def frame(payload: str) -> bytes:
+    """One line on the wire: ``<payload>*<XX>\\n``."""
+    if "\n" in payload or "\r" in payload:
+        raise ValueError("payload must be one line")
+    return f"{payload}*{checksum(payload)}\n".encode("ascii")
+
+
+def parse_line(line: bytes, require_checksum: bool = True) -> str:
+    """The payload of one received line; FramingError for a missing or wrong checksum."""
+    if not line.endswith(b"\n"):
+        raise FramingError("line not terminated by \\n")
+    body = line.rstrip(b"\r\n")
+    try:
+        text = body.decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise FramingError("non-ASCII bytes in line") from exc
+    payload, star, digits = text.rpartition("*")
+    if not star or len(digits) != 2 or not all(c in "0123456789ABCDEFabcdef" for c in digits):
+        if require_checksum:
+            raise FramingError("no *XX checksum at the end of the line")
+        return text
+    if digits.upper() != checksum(payload):
+        raise FramingError(f"checksum mismatch: line says {digits.upper()}, payload gives {checksum(payload)}")
+    return payload
+
+
+@dataclass(frozen=True)
+class AmplifierStatus:
+    """Settings and state of the bridge amplifier."""
+
+    identity: str
+    excitation_v: float
+    gain: float
+    lowpass_hz: float  # 0 = filter off
+    shunt_on: bool
+    overloaded: bool
+    output_v: float
+
+
+class BridgeAmplifier:
+    """Driver of the accelerometer bridge amplifier (serial, protocol in the module docstring)."""
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = 115200,
+        timeout_s: float = 1.0,
+        retries: int = 1,
+        name: str | None = None,
+    ) -> None:
+        if timeout_s <= 0:
+            raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        self.port = port
+        self.baudrate = baudrate
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.name = name or f"bridge amplifier {port}"
+        self._serial: serial.Serial | None = None
+
+    # -- connection ---------------------------------------------------------------------
+    def connect(self) -> None:
+        """Open the serial port; InstrumentConnectionError if it cannot be opened."""
+        self.close()
+        try:
+            self._serial = serial.Serial(self.port, self.baudrate, timeout=self.timeout_s,
+                                         write_timeout=self.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise InstrumentConnectionError(self.name, "open", f"cannot open serial port: {exc}") from exc
+        self._serial.reset_input_buffer()
+
+    def close(self) -> None:
+        """Close the port (idempotent)."""
+        if self._serial is not None:
+            try:
+                self._serial.close()
+            finally:
+                self._serial = None
+
+    def __enter__(self) -> BridgeAmplifier:
+        self.connect()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # -- operations -----------------------------------------------------------------------
+    def identity(self) -> str:
+        """Vendor, model, serial number and firmware."""
+        return self.query("*IDN?")
+
+    def set_excitation_v(self, excitation_v: float) -> None:
+        """Bridge excitation voltage, 0.5 … 10 V."""
+        low, high = EXCITATION_RANGE_V
+        if not low <= excitation_v <= high:
+            raise ValueError(f"{self.name}: excitation {excitation_v} V outside {low}..{high} V")
+        self._expect_ok(f"EXC {excitation_v:.3f}")
+
+    def excitation_v(self) -> float:
+        return self._number("EXC?")
+
+    def set_gain(self, gain: float) -> None:
+        """Amplifier gain, one of GAINS."""
+        if gain not in GAINS:
+            raise ValueError(f"{self.name}: gain {gain} not one of {', '.join(f'{g:g}' for g in GAINS)}")
+        self._expect_ok(f"GAIN {gain:g}")
+
+    def gain(self) -> float:
+        return self._number("GAIN?")
+
+    def set_lowpass_hz(self, lowpass_hz: float) -> None:
+        """Low-pass corner, one of LOWPASS_HZ, or 0 to switch the filter off."""
+        if lowpass_hz != 0 and lowpass_hz not in LOWPASS_HZ:
+            raise ValueError(f"{self.name}: low-pass {lowpass_hz} Hz not one of "
+                             f"{', '.join(f'{f:g}' for f in LOWPASS_HZ)} or 0 (off)")
+        self._expect_ok("LP OFF" if lowpass_hz == 0 else f"LP {lowpass_hz:g}")
+
+    def lowpass_hz(self) -> float:
+        """The low-pass corner in Hz; 0 when the filter is off."""
+        value = self.query("LP?")
+        return 0.0 if value == "OFF" else self._to_float("LP?", value)
+
+    def auto_zero(self) -> None:
+        """Balance the bridge (zero the output); also clears the overload latch."""
+        self._expect_ok("AZ")
+
+    def set_shunt(self, on: bool) -> None:
+        """Switch the shunt-calibration resistor in (True) or out."""
+        self._expect_ok(f"SHUNT {'ON' if on else 'OFF'}")
+
+    def shunt(self) -> bool:
+        return self._choice("SHUNT?", {"ON": True, "OFF": False})
+
+    def overloaded(self) -> bool:
+        """True when the output has overloaded since the last clear (latched)."""
+        return self._choice("OVL?", {"1": True, "0": False})
+
+    def clear_overload(self) -> None:
+        self._expect_ok("OVL CLR")
+
+    def output_v(self) -> float:
+        """DC output monitor in volts."""
+        return self._number("OUT?")
+
+    def configure(self, *, gain: float, excitation_v: float, lowpass_hz: float) -> None:
+        """Set excitation, gain and low-pass, then read them back to check."""
+        self.set_excitation_v(excitation_v)
+        self.set_gain(gain)
+        self.set_lowpass_hz(lowpass_hz)
+        got = (self.excitation_v(), self.gain(), self.lowpass_hz())
+        if abs(got[0] - excitation_v) > 1e-3 or got[1] != gain or got[2] != lowpass_hz:
+            raise InstrumentError(self.name, "configure", "settings did not stick",
+                                  f"EXC {got[0]}, GAIN {got[1]:g}, LP {got[2]:g}")
+
+    def status(self) -> AmplifierStatus:
+        """Everything the amplifier reports."""
+        return AmplifierStatus(
+            identity=self.identity(), excitation_v=self.excitation_v(), gain=self.gain(),
+            lowpass_hz=self.lowpass_hz(), shunt_on=self.shunt(), overloaded=self.overloaded(),
+            output_v=self.output_v(),
+        )
+
+    # -- protocol -----------------------------------------------------------------------
+    def query(self, command: str) -> str:
+        """Send one command; return the reply's value (the text after the echoed verb).
+
+        Raises InstrumentTimeout (no complete line in time), InstrumentError for a bad
+        checksum, a reply to another command, or an ``ERR`` reply.
+        """
+        verb = command.split(" ", 1)[0].rstrip("?")
+        last: InstrumentError | None = None
+        for _attempt in range(self.retries + 1):
+            try:
+                payload = self._exchange(command)
+            except (InstrumentTimeout, _GarbledReply) as exc:
+                last = exc if isinstance(exc, InstrumentError) else InstrumentError(
+                    self.name, command, str(exc), exc.line)
+                continue
+            head, _, value = payload.partition(" ")
+            if head != verb:
+                last = InstrumentError(self.name, command, f"reply is not for {verb!r}", payload)
+                continue
+            if value.startswith("ERR"):
+                raise InstrumentError(self.name, command, f"amplifier refused: {value[3:].strip() or 'error'}",
+                                      payload)
+            return value
+        assert last is not None
+        raise last
+
+    def _exchange(self, command: str) -> str:
+        port = self._serial
+        if port is None:
+            raise InstrumentConnectionError(self.name, command, "not connected (use `with` or connect())")
+        try:
+            port.reset_input_buffer()  # drop stale or noisy bytes from an earlier exchange
+            port.write(frame(command))
+            port.flush()
+            line = port.read_until(b"\n", MAX_LINE_BYTES)
+        except (serial.SerialException, OSError) as exc:
+            raise InstrumentConnectionError(self.name, command, f"serial port failed: {exc}") from exc
+        if not line.endswith(b"\n"):
+            raise InstrumentTimeout(self.name, command, f"no complete reply within {self.timeout_s:g} s", line)
+        try:
+            return parse_line(line)
+        except FramingError as exc:
+            raise _GarbledReply(str(exc), line) from exc
+
+    def _expect_ok(self, command: str) -> None:
+        value = self.query(command)
+        if value != "OK":
+            raise InstrumentError(self.name, command, "expected OK", value)
+
+    def _number(self, command: str) -> float:
+        return self._to_float(command, self.query(command))
+
+    def _to_float(self, command: str, value: str) -> float:
+        try:
+            return float(value)
+        except ValueError:
+            raise InstrumentError(self.name, command, "reply is not a number", value) from None
+
+    def _choice(self, command: str, choices: dict[str, bool]) -> bool:
+        value = self.query(command)
+        if value not in choices:
+            raise InstrumentError(self.name, command, f"reply is not one of {', '.join(choices)}", value)
+        return choices[value]
+
+
+class _GarbledReply(Exception):
+    def __init__(self, problem: str, line: bytes) -> None:
+        super().__init__(problem)
+        self.line = line
