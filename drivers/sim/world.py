@@ -1,0 +1,561 @@
+"""The one physics model behind the simulated rig (DESIGN.md, "Physics of the simulated rig").
+
+The Modbus controller, the SCPI digitizer and the serial amplifier of the simulated rig all
+read and change this one World, so a fired shot gives consistent pressures, trigger and
+waveforms.
+
+Time. The world keeps simulated time, `time_scale` times the wall clock (monotonic), and
+advances lazily: every access first integrates the state from the last access to now, in
+closed form per step (linear fill ramp, exponential vent/exhaust/pump-down, linear leak), so
+the result does not depend on how often it is polled. Tests may pass their own `clock`.
+
+Pneumatics. Pressures are gauge bar (0 = ambient). The fill valve feeds the reservoir at
+`fill_rate_bar_s` from a supply at `supply_pressure_bar`; the controller regulates: while the
+fill coil is on, the fill valve closes itself at the set-point (fault `stuck-fill-valve`: the
+valve, once open, stays open whatever it is told, and the pressure climbs to the supply).
+The vent valve and an open fire valve let the reservoir decay exponentially to ambient. The
+fixture vacuum (absolute mbar) falls exponentially to `pump_floor_mbar` while the pump runs
+and leaks back towards atmosphere at `leak_rate_mbar_s` when it stops (fault `vacuum-leak`:
+the pump cannot get below `fault_leak_floor_mbar`).
+
+Shot. Opening the fire valve (a rising edge of the fire coil) with at least
+`min_fire_pressure_bar` in the reservoir launches the projectile: speed = k·√p; the
+calibrated object's velocity change Δv = `velocity_transfer`·speed; a half-sine acceleration
+pulse of the projectile's width δ (No. 3: 38.6 µs; wider for No. 1 and 2) and peak
+π·Δv/(2δ); then the object flies off at constant speed. The hardware interlock chain of the
+controller keeps the fire valve shut while the door is open or the e-stop is tripped.
+If the digitizer is armed at that moment, the next `capture(settings)` returns the
+two channels: PM beat (drivers/sim/doppler_beat.pm_beat) and amplifier output (the true
+accelerometer model with the amplifier's gain, low-pass, offset and noise). The truth of
+the last shot is kept in `last_shot_truth` (JSON-ready).
+
+Amplifier. Gain, excitation, low-pass, auto-zero (removes the bridge offset), shunt
+calibration (adds the output of a known equivalent acceleration) and an overload latch (set
+when the output passes `output_limit_v`, cleared by `clear_amp_overload` or auto-zero; fault
+`amp-overload` forces it on).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drivers.sim.accelerometer import AccelerometerTruth, Mode, coloured_noise, white_noise
+from drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, pm_beat
+from drivers.sim.faults import FaultSet
+from drivers.sim.shock import G_M_S2, half_sine_m_s2
+
+PROJECTILES = (1, 2, 3)
+
+
+@dataclass(frozen=True)
+class PneumaticsParams:
+    """Reservoir, valves, vacuum fixture and interlock inputs."""
+
+    supply_pressure_bar: float = 10.0
+    fill_rate_bar_s: float = 0.5
+    vent_time_constant_s: float = 1.0
+    fire_exhaust_time_constant_s: float = 0.05
+    min_fire_pressure_bar: float = 0.05
+    atmosphere_mbar: float = 1013.25
+    pump_time_constant_s: float = 2.0
+    pump_floor_mbar: float = 2.0
+    leak_rate_mbar_s: float = 1.0
+    fault_leak_floor_mbar: float = 500.0
+    door_closed: bool = True
+    fixture_clamped: bool = True
+    estop_healthy: bool = True
+
+
+@dataclass(frozen=True)
+class LauncherParams:
+    """Projectile launch: pressure → speed → velocity change and pulse width of the object."""
+
+    projectile: int = 3
+    speed_m_s_per_sqrt_bar: float = 10.0
+    velocity_transfer: float = 0.85
+    pulse_width_s: tuple[float, float, float] = (120e-6, 75e-6, 38.6e-6)  # projectiles No. 1, 2, 3
+
+
+@dataclass(frozen=True)
+class AccelerometerParams:
+    """The true accelerometer: modes, zero shift and bridge sensitivity."""
+
+    modes: tuple[Mode, ...] = (Mode(27_000.0, 0.05),)
+    zero_shift_m_s2: float = 0.0
+    sensitivity_v_per_m_s2: float = 2.0e-7  # bridge output at the nominal excitation
+    nominal_excitation_v: float = 5.0
+    shunt_equivalent_m_s2: float = 490_332.5  # 50 000 g
+    bridge_offset_v: float = 0.002  # bridge unbalance at the amplifier input until auto-zero
+
+
+@dataclass(frozen=True)
+class AmplifierParams:
+    """The bridge amplifier's identity, power-on settings and limits."""
+
+    identity: str = "Hopkinson-Sim,SIMAMP-1,SIM0002,1.0"
+    gain: float = 10.0
+    excitation_v: float = 5.0
+    lowpass_hz: float = 200_000.0  # 0 = filter off
+    lowpass_order: int = 2
+    output_limit_v: float = 10.0
+    auto_zero_residual_v: float = 0.0
+
+
+@dataclass(frozen=True)
+class SignalParams:
+    """Doppler channel and noise of the response channel."""
+
+    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M
+    orders: tuple[int, int] = (1, -1)
+    pm_amplitude_v: float = 0.4
+    pm_dc_offset_v: float = 0.15
+    pm_fluctuation: float = 0.1
+    pm_snr_db: float = 30.0
+    response_white_snr_db: float = 60.0
+    response_coloured_snr_db: float = 50.0
+    response_coloured_pole: float = 0.9
+    response_rate_hz: float = 10e6  # internal rate of the response model (see _response_v)
+
+
+@dataclass(frozen=True)
+class WorldParams:
+    """Everything config/sim.toml sets about the physics."""
+
+    time_scale: float = 1.0
+    seed: int = 0
+    pneumatics: PneumaticsParams = field(default_factory=PneumaticsParams)
+    launcher: LauncherParams = field(default_factory=LauncherParams)
+    accelerometer: AccelerometerParams = field(default_factory=AccelerometerParams)
+    amplifier: AmplifierParams = field(default_factory=AmplifierParams)
+    signals: SignalParams = field(default_factory=SignalParams)
+
+
+@dataclass
+class AmplifierState:
+    """The bridge amplifier's current settings and status (guarded by the world's lock)."""
+
+    gain: float
+    excitation_v: float
+    lowpass_hz: float
+    shunt_on: bool = False
+    overload_latched: bool = False
+    bridge_offset_v: float = 0.0
+
+
+@dataclass(frozen=True)
+class _Shot:
+    number: int
+    fired_at_s: float
+    pressure_bar: float
+    projectile: int
+    speed_m_s: float
+    delta_v_m_s: float
+    width_s: float
+    peak_m_s2: float
+    truth: AccelerometerTruth
+    gain: float
+    excitation_v: float
+    bridge_sensitivity_v_per_m_s2: float
+    output_offset_v: float
+
+
+class World:
+    """The simulated rig's physics; thread-safe, advanced lazily from `clock`."""
+
+    def __init__(
+        self,
+        params: WorldParams | None = None,
+        faults: FaultSet | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.params = params or WorldParams()
+        self.faults = faults if faults is not None else FaultSet()
+        self._clock = clock
+        self._lock = threading.RLock()
+        p = self.params.pneumatics
+        self._t0_wall = clock()
+        self._sim_s = 0.0
+        self._pressure_bar = 0.0
+        self._vacuum_mbar = p.atmosphere_mbar
+        self._setpoint_bar = 0.0
+        self._coils = {"fire": False, "fill": False, "vent": False, "pump": False}
+        self._fill_open = False  # the fill valve's physical state
+        self._inputs = {"door": p.door_closed, "clamped": p.fixture_clamped, "estop": p.estop_healthy}
+        self._projectile = self.params.launcher.projectile
+        a = self.params.amplifier
+        self.amplifier = AmplifierState(a.gain, a.excitation_v, a.lowpass_hz,
+                                        bridge_offset_v=self.params.accelerometer.bridge_offset_v)
+        self.shots_fired = 0
+        self.fire_refusals: list[str] = []
+        self.last_shot_truth: dict[str, Any] | None = None
+        self._pending: _Shot | None = None
+        # Set by the simulated rig: is the digitizer armed right now? None = always armed.
+        self.digitizer_armed: Callable[[], bool] | None = None
+
+    # -- time -----------------------------------------------------------------------------
+    def sim_time_s(self) -> float:
+        """Simulated seconds since the world started (advances the state)."""
+        with self._lock:
+            self._advance()
+            return self._sim_s
+
+    def _advance(self) -> None:
+        now = (self._clock() - self._t0_wall) * self.params.time_scale
+        dt = now - self._sim_s
+        if dt <= 0:
+            return
+        # Steps of at most 50 ms simulated: each step is exact for its constant regime; the
+        # step only matters where the regime changes (the set-point is reached).
+        steps = max(1, min(100_000, math.ceil(dt / 0.05)))
+        h = dt / steps
+        for _ in range(steps):
+            self._step(h)
+        self._sim_s = now
+
+    def _step(self, h: float) -> None:
+        p = self.params.pneumatics
+        # Fill valve physics: the controller closes it at the set-point unless it is stuck.
+        stuck = self.faults.active("stuck-fill-valve") and self._fill_open
+        if not stuck:
+            self._fill_open = self._coils["fill"] and self._pressure_bar < self._setpoint_bar
+        target = p.supply_pressure_bar if stuck else min(self._setpoint_bar, p.supply_pressure_bar)
+        rate = p.fill_rate_bar_s if self._fill_open else 0.0
+        inverse_tau = 0.0
+        if self._coils["vent"]:
+            inverse_tau += 1.0 / p.vent_time_constant_s
+        if self._coils["fire"]:
+            inverse_tau += 1.0 / p.fire_exhaust_time_constant_s
+        if inverse_tau > 0:
+            equilibrium = rate / inverse_tau
+            self._pressure_bar = equilibrium + (self._pressure_bar - equilibrium) * math.exp(-h * inverse_tau)
+        else:
+            self._pressure_bar += rate * h
+        if self._fill_open and self._pressure_bar > target:  # the step crossed the set-point
+            self._pressure_bar = target
+        self._pressure_bar = max(self._pressure_bar, 0.0)
+        # Vacuum fixture.
+        floor = p.pump_floor_mbar
+        if self.faults.active("vacuum-leak"):
+            floor = max(floor, p.fault_leak_floor_mbar)
+        if self._coils["pump"]:
+            self._vacuum_mbar = floor + (self._vacuum_mbar - floor) * math.exp(-h / p.pump_time_constant_s)
+            if self._vacuum_mbar < floor:  # the leak fault struck with a good vacuum
+                self._vacuum_mbar = min(floor, self._vacuum_mbar + 100.0 * p.leak_rate_mbar_s * h)
+        else:
+            leak = p.leak_rate_mbar_s * (100.0 if self.faults.active("vacuum-leak") else 1.0)
+            self._vacuum_mbar = min(p.atmosphere_mbar, self._vacuum_mbar + leak * h)
+
+    # -- controller side ------------------------------------------------------------------
+    def coils(self) -> dict[str, bool]:
+        """Commanded actuator states: fire, fill, vent, pump."""
+        with self._lock:
+            return dict(self._coils)
+
+    def set_fill_valve(self, open_: bool) -> None:
+        with self._lock:
+            self._advance()
+            self._coils["fill"] = bool(open_)
+            if open_ and self._pressure_bar < self._setpoint_bar:
+                self._fill_open = True
+            elif not open_ and not self.faults.active("stuck-fill-valve"):
+                self._fill_open = False
+
+    def set_vent_valve(self, open_: bool) -> None:
+        with self._lock:
+            self._advance()
+            self._coils["vent"] = bool(open_)
+
+    def set_pump(self, on: bool) -> None:
+        with self._lock:
+            self._advance()
+            self._coils["pump"] = bool(on)
+
+    def set_pressure_setpoint_bar(self, pressure_bar: float) -> None:
+        with self._lock:
+            self._advance()
+            self._setpoint_bar = max(0.0, float(pressure_bar))
+
+    def pressure_setpoint_bar(self) -> float:
+        with self._lock:
+            return self._setpoint_bar
+
+    def load_projectile(self, projectile: int) -> None:
+        """The projectile type now in the barrel (1..3)."""
+        if projectile not in PROJECTILES:
+            raise ValueError(f"projectile must be one of {PROJECTILES}, got {projectile}")
+        with self._lock:
+            self._projectile = projectile
+
+    def projectile(self) -> int:
+        with self._lock:
+            return self._projectile
+
+    def set_fire_valve(self, open_: bool) -> None:
+        """Command the fire valve; a rising edge with pressure in the reservoir fires a shot."""
+        # Ask the digitizer before taking our lock: its server calls capture() under its own.
+        armed = True if self.digitizer_armed is None else bool(self.digitizer_armed())
+        with self._lock:
+            self._advance()
+            was_open = self._coils["fire"]
+            if open_ and not was_open:
+                refusal = self._fire_refusal()
+                if refusal:
+                    self.fire_refusals.append(refusal)
+                    return  # the valve stays shut; the coil reads back shut
+                self._coils["fire"] = True
+                if self._pressure_bar >= self.params.pneumatics.min_fire_pressure_bar:
+                    self._launch(armed)
+            elif not open_:
+                self._coils["fire"] = False
+
+    def _fire_refusal(self) -> str:
+        if not self.estop_healthy():
+            return "e-stop tripped"
+        if not self.door_closed():
+            return "door open"
+        return ""
+
+    def reservoir_pressure_bar(self) -> float:
+        with self._lock:
+            self._advance()
+            return self._pressure_bar
+
+    def fixture_vacuum_mbar(self) -> float:
+        with self._lock:
+            self._advance()
+            return self._vacuum_mbar
+
+    def door_closed(self) -> bool:
+        with self._lock:
+            return self._inputs["door"] and not self.faults.active("door-open")
+
+    def fixture_clamped(self) -> bool:
+        with self._lock:
+            return self._inputs["clamped"]
+
+    def estop_healthy(self) -> bool:
+        with self._lock:
+            return self._inputs["estop"] and not self.faults.active("estop")
+
+    def set_inputs(self, *, door_closed: bool | None = None, fixture_clamped: bool | None = None,
+                   estop_healthy: bool | None = None) -> None:
+        """Operate the door, the clamp or the e-stop (tests and the panel's sim controls)."""
+        with self._lock:
+            for key, value in (("door", door_closed), ("clamped", fixture_clamped), ("estop", estop_healthy)):
+                if value is not None:
+                    self._inputs[key] = bool(value)
+
+    # -- amplifier side -------------------------------------------------------------------
+    def amp_settings(self) -> AmplifierState:
+        """A copy of the amplifier's state."""
+        with self._lock:
+            return AmplifierState(**asdict(self.amplifier))
+
+    def set_amp_gain(self, gain: float) -> None:
+        with self._lock:
+            self.amplifier.gain = float(gain)
+
+    def set_amp_excitation_v(self, excitation_v: float) -> None:
+        with self._lock:
+            self.amplifier.excitation_v = float(excitation_v)
+
+    def set_amp_lowpass_hz(self, lowpass_hz: float) -> None:
+        with self._lock:
+            self.amplifier.lowpass_hz = float(lowpass_hz)
+
+    def set_amp_shunt(self, on: bool) -> None:
+        with self._lock:
+            self.amplifier.shunt_on = bool(on)
+
+    def amp_auto_zero(self) -> None:
+        """Balance the bridge: the output offset goes to the residual; clears the overload latch."""
+        with self._lock:
+            a = self.amplifier
+            residual = self.params.amplifier.auto_zero_residual_v
+            a.bridge_offset_v = residual / a.gain if a.gain else 0.0
+            a.overload_latched = False
+
+    def clear_amp_overload(self) -> None:
+        with self._lock:
+            self.amplifier.overload_latched = False
+
+    def amp_output_v(self) -> float:
+        """DC output of the amplifier (offset, plus the shunt step when shunt cal is on)."""
+        with self._lock:
+            a = self.amplifier
+            out = a.gain * (a.bridge_offset_v + (self._shunt_bridge_v() if a.shunt_on else 0.0))
+            limit = self.params.amplifier.output_limit_v
+            if abs(out) > limit:
+                a.overload_latched = True
+            return float(np.clip(out, -limit, limit))
+
+    def amp_overloaded(self) -> bool:
+        with self._lock:
+            self.amp_output_v()
+            return self.amplifier.overload_latched or self.faults.active("amp-overload")
+
+    def _bridge_sensitivity(self) -> float:
+        acc = self.params.accelerometer
+        return acc.sensitivity_v_per_m_s2 * self.amplifier.excitation_v / acc.nominal_excitation_v
+
+    def _shunt_bridge_v(self) -> float:
+        return self._bridge_sensitivity() * self.params.accelerometer.shunt_equivalent_m_s2
+
+    # -- the shot -------------------------------------------------------------------------
+    def _launch(self, armed: bool) -> None:
+        launcher = self.params.launcher
+        pressure = self._pressure_bar
+        speed = launcher.speed_m_s_per_sqrt_bar * math.sqrt(pressure)
+        delta_v = launcher.velocity_transfer * speed
+        width = launcher.pulse_width_s[self._projectile - 1]
+        peak = math.pi * delta_v / (2.0 * width)
+        a = self.amplifier
+        acc = self.params.accelerometer
+        truth = AccelerometerTruth(
+            modes=tuple(acc.modes),
+            lowpass_hz=a.lowpass_hz,
+            lowpass_order=self.params.amplifier.lowpass_order,
+            sensitivity=1.0,
+            zero_shift=acc.zero_shift_m_s2,
+        )
+        self.shots_fired += 1
+        shunt = self._shunt_bridge_v() if a.shunt_on else 0.0
+        shot = _Shot(
+            number=self.shots_fired, fired_at_s=self._sim_s, pressure_bar=pressure,
+            projectile=self._projectile, speed_m_s=speed, delta_v_m_s=delta_v, width_s=width,
+            peak_m_s2=peak, truth=truth, gain=a.gain, excitation_v=a.excitation_v,
+            bridge_sensitivity_v_per_m_s2=self._bridge_sensitivity(),
+            output_offset_v=a.gain * (a.bridge_offset_v + shunt),
+        )
+        self.last_shot_truth = _truth_dict(shot, self.params.signals)
+        # The static peak output latches the overload even when nobody records the shot;
+        # capture() checks the actual waveform (resonance overshoot included).
+        peak_out = abs(shot.output_offset_v) + shot.gain * shot.bridge_sensitivity_v_per_m_s2 * peak
+        if peak_out > self.params.amplifier.output_limit_v:
+            a.overload_latched = True
+        self._pending = shot if armed and not self.faults.active("no-trigger") else None
+
+    def capture(self, settings: Any) -> dict[int, np.ndarray] | None:
+        """The digitizer's view: None until a shot fired while armed, then its two channels.
+
+        `settings` has sample_rate_hz, record_length and pre_trigger_samples (the simulated
+        digitizer's AcquisitionSettings); the pulse starts at the trigger index. A shot is
+        delivered once.
+        """
+        with self._lock:
+            if self.faults.active("no-trigger") or self._pending is None:
+                return None
+            shot, self._pending = self._pending, None
+        fs = float(settings.sample_rate_hz)
+        n = int(settings.record_length)
+        pre = int(settings.pre_trigger_samples)
+        time_s = (np.arange(n) - pre) / fs
+        rng = np.random.default_rng([self.params.seed, shot.number])
+        velocity = _half_sine_velocity_m_s(time_s, shot.width_s, shot.peak_m_s2)
+        sig = self.params.signals
+        doppler = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders),
+                          amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
+                          fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db, rng=rng)
+        response = self._response_v(shot, time_s, fs, rng)
+        with self._lock:
+            if self.last_shot_truth is not None and self.last_shot_truth["shot_number"] == shot.number:
+                self.last_shot_truth["capture"] = {
+                    "sample_rate_hz": fs, "record_length": n, "pre_trigger_samples": pre,
+                    "pulse_start_index": pre,
+                }
+                self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot)
+            if np.any(np.abs(response) >= self.params.amplifier.output_limit_v):
+                self.amplifier.overload_latched = True
+        return {1: doppler, 2: response}
+
+    def _response_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator) -> np.ndarray:
+        """Amplifier output (V) at the digitizer's times.
+
+        The accelerometer + low-pass model is run at `response_rate_hz` (≤ fs) and linearly
+        interpolated to the digitizer's grid: its transfer-function form loses precision for
+        6th-order models at 100 MS/s (poles within 1e-3 of z = 1), and the channel carries
+        nothing above a few hundred kHz, so 10 MS/s with linear interpolation is exact to
+        ~1e-4 of the signal.
+        """
+        sig = self.params.signals
+        rate = min(fs, sig.response_rate_hz)
+        n_int = int(np.ceil((time_s[-1] - time_s[0]) * rate)) + 2
+        t_int = time_s[0] + np.arange(n_int) / rate
+        accel = half_sine_m_s2(t_int, shot.width_s, shot.peak_m_s2, start_s=0.0)
+        scale = shot.gain * shot.bridge_sensitivity_v_per_m_s2
+        clean = shot.truth.respond(accel, 1.0 / rate) * scale
+        if sig.response_coloured_snr_db > 0:
+            clean = clean + coloured_noise(clean, sig.response_coloured_snr_db, rng, sig.response_coloured_pole)
+        out = np.interp(time_s, t_int, clean) + shot.output_offset_v
+        if sig.response_white_snr_db > 0:
+            out = out + white_noise(out - shot.output_offset_v, sig.response_white_snr_db, rng)
+        limit = self.params.amplifier.output_limit_v
+        return np.clip(out, -limit, limit)
+
+
+def _half_sine_velocity_m_s(time_s: np.ndarray, width_s: float, peak_m_s2: float) -> np.ndarray:
+    """Exact integral of the half-sine pulse starting at t = 0: the object's velocity."""
+    t = np.clip(time_s, 0.0, width_s)
+    return peak_m_s2 * width_s / math.pi * (1.0 - np.cos(math.pi * t / width_s))
+
+
+def _truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
+    truth = shot.truth
+    return {
+        "shot_number": shot.number,
+        "fired_at_sim_s": shot.fired_at_s,
+        "pressure_bar": shot.pressure_bar,
+        "projectile": shot.projectile,
+        "projectile_speed_m_s": shot.speed_m_s,
+        "pulse": {"shape": "half_sine", "peak_m_s2": shot.peak_m_s2, "width_s": shot.width_s,
+                  "start_s": 0.0},
+        "peak_acceleration_m_s2": shot.peak_m_s2,
+        "peak_g": shot.peak_m_s2 / G_M_S2,
+        "pulse_width_s": shot.width_s,
+        "delta_velocity_m_s": shot.delta_v_m_s,
+        "accelerometer": {
+            "modes": [{"natural_frequency_hz": m.natural_frequency_hz, "damping_ratio": m.damping_ratio}
+                      for m in truth.modes],
+            "lowpass_hz": truth.lowpass_hz,
+            "lowpass_order": truth.lowpass_order,
+            "sensitivity": truth.sensitivity,
+            "zero_shift": truth.zero_shift,
+        },
+        "amplifier_gain": shot.gain,
+        "excitation_v": shot.excitation_v,
+        "sensitivity_v_per_m_s2": shot.bridge_sensitivity_v_per_m_s2,
+        "output_offset_v": shot.output_offset_v,
+        "grating_pitch_m": signals.grating_pitch_m,
+        "orders": list(signals.orders),
+    }
+
+
+def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot) -> dict[str, list[float]]:
+    """The true reference decimated to at most ~1 MS/s (JSON-sized)."""
+    fs = 1.0 / (time_s[1] - time_s[0]) if time_s.size > 1 else 1.0
+    step = max(1, int(round(fs / 1e6)))
+    t = time_s[::step]
+    return {
+        "time_s": t.tolist(),
+        "velocity_m_s": velocity[::step].tolist(),
+        "acceleration_m_s2": half_sine_m_s2(t, shot.width_s, shot.peak_m_s2).tolist(),
+    }
+
+
+def accelerometer_truth(truth: dict[str, Any]) -> AccelerometerTruth:
+    """The AccelerometerTruth of a shot from its `last_shot_truth` dict (round trip)."""
+    acc = truth["accelerometer"]
+    return AccelerometerTruth(
+        modes=tuple(Mode(m["natural_frequency_hz"], m["damping_ratio"]) for m in acc["modes"]),
+        lowpass_hz=acc["lowpass_hz"],
+        lowpass_order=acc["lowpass_order"],
+        sensitivity=acc["sensitivity"],
+        zero_shift=acc["zero_shift"],
+    )
