@@ -18,6 +18,7 @@ from typing import Any
 COMMAND_MODULES = [
     "rig.commands_analysis",
     "rig.commands_demo",
+    "rig.commands_dcm",
 ]
 
 
