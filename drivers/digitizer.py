@@ -33,10 +33,25 @@ from drivers.errors import InstrumentConnectionError, InstrumentError, Instrumen
 from drivers.ieee488_block import BlockFormatError, read_block
 from drivers.scpi_dialect import GenericScpiDialect, Preamble, ReplyFormatError
 
-# Size of each low-level read of a waveform block (each read has its own timeout). pyvisa-py's
-# socket session receives 4 kB pieces into a buffer that it slices per read; 64 KiB reads
-# measured fastest on loopback (~450-550 MB/s vs ~270-360 MB/s for 1 MiB, 10 M samples).
-BLOCK_CHUNK_BYTES = 1 << 16
+# Size of each low-level read of a waveform block (each read has its own timeout), and the
+# receive size given to pyvisa-py's socket session (see _enlarge_receive_size). Measured on
+# loopback, 10 M samples: 4 KiB receives ~450-650 MB/s; 64 KiB ~1300 MB/s; 1 MiB ~1550-1650 MB/s.
+BLOCK_CHUNK_BYTES = 1 << 20
+
+
+def _enlarge_receive_size(inst: pyvisa.resources.MessageBasedResource) -> None:
+    """Let pyvisa-py's TCPIP SOCKET session receive up to BLOCK_CHUNK_BYTES per recv() call.
+
+    pyvisa-py (0.7-0.8) fixes `max_recv_size = 4096` in its socket session, with no VISA
+    attribute to change it, so a 20 MB block costs ~5000 select()+recv() rounds (the read is
+    then ~4x slower than a raw socket). The attribute is set only where the backend session
+    has it; with another backend or a future pyvisa-py without it, reads stay correct, only
+    slower. recv() returns what is available, so text replies are unaffected.
+    """
+    sessions = getattr(inst.visalib, "sessions", None)
+    session = sessions.get(inst.session) if isinstance(sessions, dict) else None
+    if session is not None and isinstance(getattr(session, "max_recv_size", None), int):
+        session.max_recv_size = max(session.max_recv_size, BLOCK_CHUNK_BYTES)
 
 
 @dataclass(frozen=True)
@@ -128,6 +143,7 @@ class Digitizer:
             self.close()
             raise InstrumentConnectionError(self.instrument, "open", f"cannot open the VISA session: {exc}") from exc
         self._inst = inst  # type: ignore[assignment]
+        _enlarge_receive_size(inst)  # type: ignore[arg-type]
         try:
             self._identity = self._query(self.dialect.identity_query)
             self._write(self.dialect.clear_status)

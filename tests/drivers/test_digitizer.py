@@ -4,15 +4,19 @@ scripted socket server that sends exactly the bytes a test chooses."""
 
 from __future__ import annotations
 
+import json
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from drivers.digitizer import Digitizer
+from drivers.digitizer import BLOCK_CHUNK_BYTES, Digitizer
 from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from drivers.scpi_dialect import GenericScpiDialect, ReplyFormatError
 from drivers.sim.faults import FaultSet
@@ -88,6 +92,11 @@ def _expected_codes(volts: np.ndarray, range_v: float) -> np.ndarray:
 def test_identity(dig: Digitizer) -> None:
     assert dig.identity() == "Hopkinson-Sim,SIMDIG-2CH,SIM0001,1.0"
     assert dig.connected
+
+
+def test_pyvisa_py_socket_session_receives_in_large_pieces(dig: Digitizer) -> None:
+    session = dig._inst.visalib.sessions[dig._inst.session]  # type: ignore[union-attr]
+    assert session.max_recv_size == BLOCK_CHUNK_BYTES  # pyvisa-py's stock value is 4096
 
 
 def test_settings_round_trip_through_the_instrument(dig: Digitizer, server: SimDigitizerServer) -> None:
@@ -226,8 +235,9 @@ def test_block_read_does_not_stop_at_0x0a(dig: Digitizer, world: World, monkeypa
     wave = dig.fetch_waveform(2)
     newlines = wave.codes.tobytes().count(b"\n")
     assert newlines > 2_000
-    # header + preamble reply + 2 * n bytes in 64 KiB reads; a termchar-bound read would need > newlines
-    assert len(calls) <= 2 + 2 * n // (1 << 16) + 4 < newlines
+    # preamble reply + block header + 2 * n bytes in BLOCK_CHUNK_BYTES reads (a few spare);
+    # a read that stopped at every 0x0A would need more calls than there are newlines
+    assert len(calls) <= 4 + 2 * n // BLOCK_CHUNK_BYTES + 4 < newlines
 
 
 def test_wait_for_trigger_when_not_armed_raises(dig: Digitizer) -> None:
@@ -536,3 +546,20 @@ def test_dialect_parses_error_queue_replies() -> None:
     assert dialect.parse_error('-222,"Data out of range; :ACQ:SRAT 1e12"') == (-222, "Data out of range; :ACQ:SRAT 1e12")
     with pytest.raises(ReplyFormatError):
         dialect.parse_error("OK")
+
+
+def test_transfer_benchmark_smoke() -> None:
+    """The benchmark runs end to end on a small record; it checks itself that the three
+    readers return the same samples, and ends with one JSON line."""
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_transfer.py"
+    out = subprocess.run(
+        [sys.executable, str(script), "--samples", "200000", "--repeats", "1", "--default-repeats", "1"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout
+    result = json.loads(out.strip().splitlines()[-1])
+    assert result["bytes"] == 400_000 and result["newline_bytes"] > 100
+    for key in ("raw_socket_mb_s", "driver_mb_s", "driver_4k_recv_mb_s", "pyvisa_default_mb_s"):
+        assert result[key] > 0
