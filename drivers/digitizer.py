@@ -98,6 +98,7 @@ class Digitizer:
     resource: VISA resource, e.g. "TCPIP0::192.168.0.20::5025::SOCKET".
     timeout_s: per-operation I/O timeout. name: how errors name the instrument.
     dialect: the vendor's SCPI dialect (drivers/scpi_dialect.py).
+    Not thread-safe: one thread drives one instance.
     """
 
     def __init__(
@@ -358,6 +359,8 @@ class Digitizer:
             )
         if isinstance(exc, BlockFormatError):
             return InstrumentError(self.instrument, command, f"garbled binary block: {exc}", reply)
+        if isinstance(exc, UnicodeDecodeError):
+            return InstrumentError(self.instrument, command, "garbled reply: not ASCII text", reply)
         return InstrumentConnectionError(self.instrument, command, f"connection failed: {exc}", reply)
 
     def _write(self, command: str) -> None:

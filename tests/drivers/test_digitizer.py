@@ -501,13 +501,18 @@ def test_bad_preamble_names_command_and_reply(
 
 
 def test_unexpected_state_and_number_replies(scripted: Callable[..., ScriptedServer]) -> None:
-    srv = scripted({":ACQuire:STATe?": b"RUNNING\n", ":ACQuire:SRATe?": b"fast\n"})
+    srv = scripted(
+        {":ACQuire:STATe?": b"RUNNING\n", ":ACQuire:SRATe?": b"fast\n", ":ACQuire:POINts?": b"\xff\xfe12\n"}
+    )
     with Digitizer(srv.resource, timeout_s=1.0) as d:
         with pytest.raises(InstrumentError, match="unknown acquisition state") as info:
             d.acquisition_state()
         assert info.value.reply == "RUNNING"
         with pytest.raises(InstrumentError, match="expected a number"):
             d.sample_rate_hz()
+        with pytest.raises(InstrumentError, match="not ASCII text") as info:
+            d.record_length()
+        assert "\\xff\\xfe12" in info.value.reply
 
 
 def test_link_dropped_mid_block(scripted: Callable[..., ScriptedServer]) -> None:
