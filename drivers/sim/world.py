@@ -117,7 +117,7 @@ class SignalParams:
     pm_amplitude_v: float = 0.4
     pm_dc_offset_v: float = 0.15
     pm_fluctuation: float = 0.1
-    pm_snr_db: float = 30.0
+    pm_snr_db: float = 30.0  # every *_snr_db: 0 = no noise
     response_white_snr_db: float = 60.0
     response_coloured_snr_db: float = 50.0
     response_coloured_pole: float = 0.9
@@ -462,7 +462,7 @@ class World:
         sig = self.params.signals
         doppler = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders),
                           amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
-                          fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db, rng=rng)
+                          fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
         response = self._response_v(shot, time_s, fs, rng)
         with self._lock:
             if self.last_shot_truth is not None and self.last_shot_truth["shot_number"] == shot.number:
