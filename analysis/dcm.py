@@ -229,6 +229,11 @@ def design_dcm(
     ratio: r, how many times faster than the slowest model pole the compensated system
     responds (T'_rr = T'_r1 / r); damping: ζ_e in (0, 1]; extra_poles: further poles, each
     complex one with its conjugate, all inside the unit circle.
+
+    r acts on the decay envelope ζ·ω_n of the slowest pole, not on its frequency: the new
+    poles have ω_e = r·ζ·ω_n/ζ_e. For a lightly damped accelerometer (ζ = 0.05) the
+    compensated band is only wider than the resonance allows for r > ζ_e/ζ (≈ 14); with a
+    matched damping (ζ_e = ζ) the band and the rise time scale by r exactly.
     """
     p = np.atleast_1d(np.asarray(poles, dtype=complex))
     if p.size == 0:
