@@ -144,6 +144,8 @@ def test_stream_in_random_blocks_equals_one_shot():
         parts = [stream.process(block) for block in np.split(x, cuts)]
         parts.append(stream.process(np.array([])))
         np.testing.assert_allclose(np.concatenate(parts), whole, rtol=0, atol=1e-12 * np.max(np.abs(whole)))
+        blocked = apply(dcm, x, initial, block_samples=333)
+        np.testing.assert_allclose(blocked, whole, rtol=0, atol=1e-12 * np.max(np.abs(whole)))
     # and the one-shot equals the textbook transfer function G(z) = num/den
     np.testing.assert_allclose(apply(dcm, x), signal.lfilter(dcm.b, dcm.a, x), rtol=1e-8, atol=1e-8)
 
