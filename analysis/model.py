@@ -99,6 +99,8 @@ class DiscreteModel:
             raise AnalysisError(f"{source}: sample_interval_s, a and b must be numbers") from None
         if not dt > 0:
             raise AnalysisError(f"{source}: sample_interval_s must be positive")
+        if a.ndim != 1 or b.ndim != 1 or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+            raise AnalysisError(f"{source}: a and b must be flat lists of finite numbers")
         return cls(dt, a, b, float(data.get("delay_samples", 0.0)))
 
 

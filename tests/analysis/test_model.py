@@ -45,3 +45,10 @@ def test_bad_model_file_is_named(tmp_path):
     path.write_text("not json")
     with pytest.raises(AnalysisError, match="not a JSON model"):
         load_model(path)
+
+
+def test_nested_coefficients_are_a_clear_error(tmp_path):
+    path = tmp_path / "nested.json"
+    path.write_text('{"sample_interval_s": 1e-6, "a": [[1, 0.5], [0.1, 0.2]], "b": [1]}')
+    with pytest.raises(AnalysisError, match="flat lists"):
+        load_model(path)
