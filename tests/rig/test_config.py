@@ -1,0 +1,161 @@
+"""config/rig.toml and config/sim.toml: typed frozen sections; bad files name file, key and reason."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from drivers.sim.accelerometer import Mode
+from drivers.valve_controller import RegisterMap
+from rig.config import load_rig_config, load_sim_config
+from rig.errors import ConfigError
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+
+
+def test_shipped_rig_config_loads_into_typed_frozen_sections() -> None:
+    config = load_rig_config(CONFIG / "rig.toml")
+    assert config.path.endswith("rig.toml")
+    assert config.valve_controller.port == 502
+    assert isinstance(config.valve_controller.register_map, RegisterMap)
+    assert config.valve_controller.holding_registers.projectile == -1
+    assert config.digitizer.sample_rate_hz == 100e6 and isinstance(config.digitizer.sample_rate_hz, float)
+    assert config.digitizer.pre_trigger_samples == 20_000  # 0.1 of 200 000
+    assert config.amplifier.gain == 10.0
+    assert config.timeouts.charge_s == 120.0
+    assert config.analysis.orders == (1, -1)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        config.limits.max_pressure_bar = 99.0  # type: ignore[misc]
+    json.dumps(config.snapshot())
+    assert config.snapshot()["valve_controller"]["coils"]["fire_valve"] == 0
+
+
+def test_sim_variant_points_at_the_simulator_defaults() -> None:
+    rig = load_rig_config(CONFIG / "rig-sim.toml")
+    sim = load_sim_config(CONFIG / "sim.toml")
+    assert rig.valve_controller.host == sim.servers.host
+    assert rig.valve_controller.port == sim.servers.modbus_port
+    assert rig.digitizer.resource == f"TCPIP0::{sim.servers.host}::{sim.servers.digitizer_port}::SOCKET"
+    assert rig.amplifier.port == sim.servers.serial_link
+    assert rig.valve_controller.register_map == sim.register_map
+    assert sim.world.accelerometer.modes == (Mode(27_000.0, 0.05),)
+    assert sim.world.launcher.pulse_width_s == (120e-6, 75e-6, 38.6e-6)
+    assert rig.analysis.grating_pitch_m == sim.world.signals.grating_pitch_m
+    assert rig.analysis.sensitivity_v_per_m_s2 == sim.world.accelerometer.sensitivity_v_per_m_s2
+
+
+def edited(tmp_path: Path, source: str, old: str, new: str) -> Path:
+    text = (CONFIG / source).read_text()
+    assert old in text, old
+    path = tmp_path / source
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "reason"),
+    [
+        ("[limits]", "[limit]", "limit", "unknown section in top level"),
+        ("port = 502\n", "port = 502\nprot = 5\n", "valve_controller.prot", "unknown key"),
+        ("port = 502\n", 'port = "502"\n', "valve_controller.port", "must be an integer, got a string ('502')"),
+        ("port = 502\n", "port = 70000\n", "valve_controller.port", "must be at most 65535"),
+        ("port = 502\n", "port = true\n", "valve_controller.port", "must be an integer, got a boolean"),
+        ("device_id = 1", "device_id = 300", "valve_controller.device_id", "must be at most 247"),
+        ("fire_valve = 0", "fire_valve = -3", "valve_controller.coils.fire_valve", "must be at least 0"),
+        ("fill_valve = 1", "fill_valve = 0", "valve_controller.coils.fill_valve",
+         "address 0 is also valve_controller.coils.fire_valve"),
+        ("pressure_bar_per_count = 0.001", "pressure_bar_per_count = 0", "valve_controller.scales.pressure_bar_per_count",
+         "must be greater than 0"),
+        ('host = "192.168.10.20"\n', "", "valve_controller.host", "missing key"),
+        ('trigger_slope = "POS"', 'trigger_slope = "UP"', "digitizer.trigger_slope", "must be one of POS, NEG"),
+        ("sample_rate_hz = 100e6", "sample_rate_hz = nan", "digitizer.sample_rate_hz", "finite"),
+        ("record_length = 200000", "record_length = 2.5e5", "digitizer.record_length", "must be an integer"),
+        ("gain = 10.0", "gain = 3.0", "amplifier.gain", "must be one of 1, 2, 5, 10"),
+        ("lowpass_hz = 200000.0", "lowpass_hz = 30000.0", "amplifier.lowpass_hz", "0 (off) or one of the filter corners"),
+        ("excitation_v = 5.0", "excitation_v = 12.0", "amplifier.excitation_v", "must be at most 10"),
+        ("min_pressure_bar = 0.2", "min_pressure_bar = 9.0", "limits.min_pressure_bar",
+         "must be below limits.max_pressure_bar"),
+        ("charge_s = 120.0", "charge_s = -1.0", "timeouts.charge_s", "must be greater than 0"),
+        ("orders = [1, -1]", "orders = [1, 1]", "analysis.orders", "must differ"),
+        ("orders = [1, -1]", "orders = [1, -1, 2]", "analysis.orders", "must have 2 items, got 3"),
+        ("orders = [1, -1]", 'orders = [1, "-1"]', "analysis.orders[1]", "must be an integer"),
+    ],
+)
+def test_bad_rig_config_names_file_key_and_reason(tmp_path: Path, old: str, new: str, key: str, reason: str) -> None:
+    path = edited(tmp_path, "rig.toml", old, new)
+    with pytest.raises(ConfigError) as caught:
+        load_rig_config(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: {key}: "), message
+    assert reason in message, message
+
+
+def test_a_section_given_as_a_value(tmp_path: Path) -> None:
+    text = (CONFIG / "rig.toml").read_text()
+    path = tmp_path / "rig.toml"
+    path.write_text("timeouts = 5\n" + text.replace("[timeouts]", "[unused_timeouts]").split("[unused_timeouts]")[0]
+                    + text[text.index("[analysis]"):])
+    with pytest.raises(ConfigError, match=r"rig.toml: timeouts: must be a table, got an integer \(5\)"):
+        load_rig_config(path)
+
+
+def test_missing_section_file_and_toml_syntax(tmp_path: Path) -> None:
+    text = (CONFIG / "rig.toml").read_text()
+    start = text.index("[amplifier]")
+    no_amp = tmp_path / "no-amp.toml"
+    no_amp.write_text(text[:start] + text[text.index("[limits]"):])
+    with pytest.raises(ConfigError, match=r"no-amp.toml: amplifier: missing section"):
+        load_rig_config(no_amp)
+    with pytest.raises(ConfigError, match=r"absent.toml: no such file"):
+        load_rig_config(tmp_path / "absent.toml")
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[valve_controller\nhost = 1\n")
+    with pytest.raises(ConfigError, match=r"broken.toml: not valid TOML"):
+        load_rig_config(broken)
+
+
+def test_minimal_rig_config_takes_documented_defaults(tmp_path: Path) -> None:
+    path = tmp_path / "minimal.toml"
+    path.write_text('[valve_controller]\nhost = "10.0.0.5"\n[digitizer]\nresource = "TCPIP0::10.0.0.6::5025::SOCKET"\n'
+                    '[amplifier]\nport = "/dev/ttyS0"\n')
+    config = load_rig_config(path)
+    assert config.valve_controller.port == 502 and config.valve_controller.register_map == RegisterMap()
+    assert config.digitizer.trigger_source == "CH2"
+    assert config.limits.max_pressure_bar == 8.0
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "reason"),
+    [
+        ("time_scale = 10.0", "time_scale = 0.0", "world.time_scale", "must be greater than 0"),
+        ("projectile = 3", "projectile = 4", "world.launcher.projectile", "must be one of 1, 2, 3"),
+        ("pulse_width_s = [120e-6, 75e-6, 38.6e-6]", "pulse_width_s = [120e-6, 75e-6]",
+         "world.launcher.pulse_width_s", "must have 3 items"),
+        ("damping_ratio = 0.05", "damping_ratio = -0.05", "world.accelerometer.modes[0].damping_ratio",
+         "must be greater than 0"),
+        ("natural_frequency_hz = 27000.0", "natural_frequency_hz = 27000.0\nq = 3",
+         "world.accelerometer.modes[0].q", "unknown key"),
+        ("modbus_port = 5020", "modbus_port = 65536", "servers.modbus_port", "must be at most 65535"),
+        ("door_closed = true", "door_closed = 1", "world.pneumatics.door_closed", "must be true or false"),
+        ("pm_snr_db = 30.0", "pm_snr_db = -5.0", "world.signals.pm_snr_db", "0 (no noise)"),
+        ("orders = [1, -1]", "orders = [2, 2]", "world.signals.orders", "must differ"),
+    ],
+)
+def test_bad_sim_config_names_file_key_and_reason(tmp_path: Path, old: str, new: str, key: str, reason: str) -> None:
+    path = edited(tmp_path, "sim.toml", old, new)
+    with pytest.raises(ConfigError) as caught:
+        load_sim_config(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: {key}: "), message
+    assert reason in message, message
+
+
+def test_sim_register_map_override(tmp_path: Path) -> None:
+    path = tmp_path / "sim.toml"
+    path.write_text("[register_map.coils]\nfire_valve = 8\n[register_map.scales]\nvacuum_mbar_per_count = 1.0\n")
+    config = load_sim_config(path)
+    assert config.register_map.coils.fire_valve == 8 and config.register_map.coils.fill_valve == 1
+    assert config.register_map.scales.vacuum_mbar_per_count == 1.0
