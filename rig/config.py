@@ -362,7 +362,7 @@ def _convert(tp: Any, value: Any, path: Path, key: str) -> Any:
     if origin in (typing.Union, types.UnionType):
         raise TypeError(f"unsupported config type {tp} for {key}")
     out = _scalar(tp, value, path, key)
-    _apply_rule(out, path, key)
+    _apply_rule(out, value, path, key)
     return out
 
 
@@ -388,7 +388,8 @@ def _scalar(tp: Any, value: Any, path: Path, key: str) -> Any:
     raise TypeError(f"unsupported config type {tp} for {key}")
 
 
-def _apply_rule(value: Any, path: Path, key: str) -> None:
+def _apply_rule(value: Any, written: Any, path: Path, key: str) -> None:
+    """Check `value` against the first matching rule; messages quote the value as `written`."""
     pattern_key = _strip_indices(key)
     rule = next((r for pattern, r in RULES.items() if fnmatchcase(pattern_key, pattern)), None)
     if rule is None:
@@ -396,15 +397,15 @@ def _apply_rule(value: Any, path: Path, key: str) -> None:
     hint = f" ({rule.text})" if rule.text else ""
     if rule.choices is not None and value not in rule.choices:
         shown = ", ".join(f"{c:g}" if isinstance(c, float) else str(c) for c in rule.choices)
-        raise ConfigError(f"{path}: {key}: must be one of {shown}{hint}, got {value!r}")
+        raise ConfigError(f"{path}: {key}: must be one of {shown}{hint}, got {written!r}")
     if isinstance(value, str | bool):
         return
     if rule.above is not None and not value > rule.above:
-        raise ConfigError(f"{path}: {key}: must be greater than {rule.above:g}{hint}, got {value!r}")
+        raise ConfigError(f"{path}: {key}: must be greater than {rule.above:g}{hint}, got {written!r}")
     if rule.min is not None and value < rule.min:
-        raise ConfigError(f"{path}: {key}: must be at least {rule.min:g}{hint}, got {value!r}")
+        raise ConfigError(f"{path}: {key}: must be at least {rule.min:g}{hint}, got {written!r}")
     if rule.max is not None and value > rule.max:
-        raise ConfigError(f"{path}: {key}: must be at most {rule.max:g}{hint}, got {value!r}")
+        raise ConfigError(f"{path}: {key}: must be at most {rule.max:g}{hint}, got {written!r}")
 
 
 def _strip_indices(key: str) -> str:
