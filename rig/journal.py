@@ -27,8 +27,9 @@ The rules that make "no planned shot lost, none fired twice" hold:
    What was changed is in `Journal.resume_report`; UNKNOWN shots are in `needs_decision()`
    and in `summary()`; the campaign goes on with the other shots meanwhile.
 
-Every change is one transaction: the shot's row and an event row (history with the info
-given to `mark`). A kill -9 loses at most the transaction in flight, never half of one.
+Every change is one transaction, on disk once committed (synchronous=FULL): the shot's
+row and an event row (history with the info given to `mark`). A kill -9 loses at most the
+transaction in flight, never half of one.
 """
 
 from __future__ import annotations
@@ -142,7 +143,14 @@ class Journal:
         match what the journal was created with.
         """
         run = run_folder if isinstance(run_folder, RunFolder) else open_run_folder(run_folder)
-        plan = plan if plan is not None else run.load_plan()
+        copy = run.load_plan()
+        if plan is not None and plan.fingerprint != copy.fingerprint:
+            raise JournalError(
+                f"{run.journal_path}: the plan {plan.path} differs from the one this campaign "
+                f"started with (shots, settings or analysis changed); resume with the run "
+                f"folder's {run.plan_path.name}"
+            )
+        plan = plan if plan is not None else copy
         lock = run.lock()
         try:
             removed = run.clean_leftovers(lock)
@@ -220,8 +228,8 @@ class Journal:
             raise self._fail(f"journal schema {meta.get('schema_version')} is not {SCHEMA_VERSION}")
         if meta.get("plan_fingerprint") != self.plan.fingerprint:
             raise self._fail(
-                f"the plan {self.plan.path} differs from the one this campaign started with "
-                f"(shots, settings or analysis changed); resume with the run folder's {self.run.plan_path.name}"
+                f"the plan {self.plan.path} differs from the one this journal was started with "
+                "(was the run folder's plan copy edited?)"
             )
         ids = [row[0] for row in self._conn.execute("SELECT id FROM shots ORDER BY idx")]
         if ids != [s.id for s in self.plan.shots]:
@@ -420,7 +428,12 @@ class Journal:
 
 
 def _connect(path: Path) -> sqlite3.Connection:
-    """A connection in autocommit mode (explicit transactions), WAL, synchronous=FULL."""
+    """A connection in autocommit mode (explicit transactions), WAL, synchronous=FULL.
+
+    WAL with synchronous=FULL fsyncs the log at every commit (about 4 ms here, against 16 ms
+    for the rollback journal) and lets a reader (the panel) look on while the runner
+    writes. Like any SQLite database, the journal wants a local disk, not a network share.
+    """
     try:
         conn = sqlite3.connect(path, isolation_level=None, check_same_thread=False, timeout=10.0)
         conn.execute("PRAGMA journal_mode=WAL")

@@ -382,6 +382,9 @@ def test_plan_changed_since_start_is_refused(tmp_path: Path, plan_path: Path) ->
         Journal.open(run, load_plan(plan_path))
     with Journal.open(run) as j:  # the run folder's own copy still matches
         assert len(j.statuses()) == 8
+    run.plan_path.write_text(PLAN.replace("repeats = 2", "repeats = 1"))  # the copy edited
+    with pytest.raises(JournalError, match=r"plan\.toml differs from the one this journal was started with"):
+        Journal.open(run)
 
 
 def test_unusable_journal_files(tmp_path: Path, plan_path: Path) -> None:
