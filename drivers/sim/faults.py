@@ -9,16 +9,16 @@ from __future__ import annotations
 import threading
 
 FAULTS: dict[str, str] = {
-    "modbus-disconnect": "the valve/vacuum controller drops every Modbus TCP connection",
-    "modbus-slow": "the valve/vacuum controller answers each Modbus request after a long delay",
+    "modbus-disconnect": "the valve/vacuum controller drops every Modbus TCP connection at its next request",
+    "modbus-slow": "the valve/vacuum controller answers each Modbus request after a long delay (sim.toml modbus_slow_delay_s)",
     "visa-garbled-block": "the digitizer sends a waveform block with a corrupt length header",
     "no-trigger": "the digitizer never triggers: the shot is fired but nothing is captured",
-    "stuck-fill-valve": "the fill valve stays open when told to close; reservoir pressure keeps rising",
-    "vacuum-leak": "the fixture vacuum cannot be pulled below atmospheric/leak level",
-    "door-open": "the door/guard interlock input reads open",
-    "estop": "the e-stop interlock input reads tripped",
-    "amp-overload": "the bridge amplifier reports overload",
-    "serial-noise": "the bridge amplifier's serial replies are corrupted by line noise",
+    "stuck-fill-valve": "the fill valve, once open, stays open when told to close and past the set-point; pressure climbs to the supply",
+    "vacuum-leak": "the fixture vacuum cannot be pulled below the leak level (sim.toml fault_leak_floor_mbar, 500 mbar)",
+    "door-open": "the door/guard interlock input reads open; the controller keeps the fire valve shut",
+    "estop": "the e-stop interlock input reads tripped; the controller keeps the fire valve shut",
+    "amp-overload": "the bridge amplifier reports overload (OVL? answers 1 even after OVL CLR)",
+    "serial-noise": "the bridge amplifier's serial replies are corrupted by line noise (one flipped bit: bad checksum)",
 }
 
 
