@@ -25,7 +25,8 @@ pulse of the projectile's width δ (No. 3: 38.6 µs; wider for No. 1 and 2) and 
 π·Δv/(2δ); then the object flies off at constant speed. The hardware interlock chain of the
 controller keeps the fire valve shut while the door is open or the e-stop is tripped.
 If the digitizer is armed at that moment, the next `capture(settings)` returns the
-two channels: PM beat (drivers/sim/doppler_beat.pm_beat) and amplifier output (the true
+two channels (trigger source, level and slope are not modelled: an armed acquisition always
+triggers at the start of the pulse, which sits at settings.pre_trigger_samples): PM beat (drivers/sim/doppler_beat.pm_beat) and amplifier output (the true
 accelerometer model with the amplifier's gain, low-pass, offset and noise). The truth of
 the last shot is kept in `last_shot_truth` (JSON-ready).
 
