@@ -123,14 +123,14 @@ def peer_factory() -> Iterator[Callable[[Callable[[bytes], bytes | None]], Scrip
 
 def test_driver_sends_framed_commands_and_parses_the_reply(peer_factory) -> None:
     peer = peer_factory(lambda line: b"GAIN 20*" + xor_hex("GAIN 20").encode() + b"\n")
-    with BridgeAmplifier(peer.port, timeout_s=0.5) as amp:
+    with BridgeAmplifier(peer.port, timeout_s=1.0) as amp:
         assert amp.gain() == 20.0
     assert peer.received == [b"GAIN?*" + xor_hex("GAIN?").encode() + b"\n"]
 
 
 def test_wrong_checksum_is_retried_then_reported_with_the_reply(peer_factory) -> None:
     peer = peer_factory(lambda line: b"GAIN 20*00\n")
-    with BridgeAmplifier(peer.port, timeout_s=0.5, retries=2, name="amp (scripted)") as amp:
+    with BridgeAmplifier(peer.port, timeout_s=1.0, retries=2, name="amp (scripted)") as amp:
         with pytest.raises(InstrumentError) as caught:
             amp.gain()
     assert not isinstance(caught.value, InstrumentTimeout)
@@ -144,14 +144,14 @@ def test_wrong_checksum_is_retried_then_reported_with_the_reply(peer_factory) ->
 def test_one_noisy_reply_is_recovered_by_the_retry(peer_factory) -> None:
     answers = iter([b"GAIN 2O*23\n", b"GAIN 50*" + xor_hex("GAIN 50").encode() + b"\n"])
     peer = peer_factory(lambda line: next(answers))
-    with BridgeAmplifier(peer.port, timeout_s=0.5, retries=1) as amp:
+    with BridgeAmplifier(peer.port, timeout_s=1.0, retries=1) as amp:
         assert amp.gain() == 50.0
     assert len(peer.received) == 2
 
 
 def test_a_reply_to_another_command_is_not_taken(peer_factory) -> None:
     peer = peer_factory(lambda line: frame("EXC 5.000"))
-    with BridgeAmplifier(peer.port, timeout_s=0.5, retries=0) as amp:
+    with BridgeAmplifier(peer.port, timeout_s=1.0, retries=0) as amp:
         with pytest.raises(InstrumentError, match="reply is not for 'GAIN'"):
             amp.gain()
     assert len(peer.received) == 1
@@ -167,7 +167,7 @@ def test_silence_is_a_timeout(peer_factory) -> None:
 
 def test_an_err_reply_is_a_refusal_without_retry(peer_factory) -> None:
     peer = peer_factory(lambda line: frame("GAIN ERR RANGE"))
-    with BridgeAmplifier(peer.port, timeout_s=0.5, retries=3) as amp:
+    with BridgeAmplifier(peer.port, timeout_s=1.0, retries=3) as amp:
         with pytest.raises(InstrumentError, match="amplifier refused: RANGE"):
             amp.query("GAIN 3")
     assert peer.received == [frame("GAIN 3")]

@@ -47,6 +47,7 @@ def check_modbus_slow(rig: SimulatedRig, clock: FakeClock) -> None:
         with pytest.raises(InstrumentTimeout, match="no reply within 0.2 s"):
             vc.fixture_vacuum_mbar()
         rig.faults.clear("modbus-slow")
+        vc.timeout_s = 2.0  # the reconnect below uses it; 0.2 s was only to provoke the timeout
         rig.world.set_pump(True)
         clock.advance(10.0)
         fresh = rig.world.fixture_vacuum_mbar()

@@ -215,3 +215,18 @@ def test_unreachable_controller_names_itself() -> None:
             vc.connect()
     with pytest.raises(InstrumentConnectionError, match="not connected"):
         vc.reservoir_pressure_bar()
+
+
+def test_status_reads_everything_at_once(rig: SimulatedRig, clock: FakeClock) -> None:
+    with controller(rig) as vc:
+        vc.set_pressure_setpoint_bar(1.25)
+        vc.set_fill_valve(True)
+        vc.set_vacuum_pump(True)
+        rig.world.set_inputs(fixture_clamped=False)
+        clock.advance(1.0)
+        status = vc.status()
+    assert status.reservoir_pressure_bar == pytest.approx(0.5, abs=1e-3)
+    assert status.pressure_setpoint_bar == pytest.approx(1.25)
+    assert status.fixture_vacuum_mbar == pytest.approx(rig.world.fixture_vacuum_mbar(), abs=0.1)
+    assert (status.valves.fill_valve, status.valves.vacuum_pump, status.valves.fire_valve) == (True, True, False)
+    assert status.interlocks.problems() == ["fixture not clamped"]
