@@ -46,3 +46,21 @@ def test_coloured_noise_is_coloured():
     lag1 = np.corrcoef(n[:-1], n[1:])[0, 1]
     assert lag1 == pytest.approx(0.9, abs=0.02)
     assert signal.welch(n)[1][1] > 10 * signal.welch(n)[1][-1]
+
+
+@pytest.mark.parametrize("dt", [1e-6, 1e-8])
+def test_sections_have_the_true_poles_and_gain_at_any_rate(dt):
+    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05), Mode(60_000.0, 0.3)), lowpass_hz=80_000.0, lowpass_order=3)
+    sos = truth.sections(dt)
+    poles = np.concatenate([np.roots(np.trim_zeros(row[3:], "b")) for row in sos])
+    np.testing.assert_allclose(np.sort_complex(poles), np.sort_complex(truth.discrete_poles(dt)), rtol=1e-12, atol=1e-14)
+    y = truth.respond(np.ones(int(round(2e-3 / dt))), dt)  # 2 ms of step: settled
+    assert y[-1] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_sections_match_whole_model_zoh_at_low_rate():
+    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), lowpass_hz=100_000.0, lowpass_order=3)
+    u = np.sin(np.linspace(0, 3, 4000)) ** 2
+    b, a = truth.discrete_tf(1e-6)
+    whole = signal.lfilter(b, a, u)
+    np.testing.assert_allclose(truth.respond(u, 1e-6), whole, atol=2e-3 * np.max(np.abs(whole)))
