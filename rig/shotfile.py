@@ -40,6 +40,7 @@ after it the new file is complete. The cost is one copy of the raw data per anal
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
 import json
 import math
@@ -48,8 +49,9 @@ import re
 import uuid as uuid_module
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from pathlib import Path
+from datetime import UTC, date, datetime, time
+from enum import Enum
+from pathlib import Path, PurePath
 from typing import Any, NamedTuple
 
 import h5py
@@ -366,12 +368,25 @@ def _check_meta(path: Path, meta: ShotMeta) -> None:
 
 
 def _json_default(obj: Any) -> Any:
+    """JSON form of what a config snapshot or results may hold besides JSON types.
+
+    Arrays become lists, dataclasses (typed config sections) dicts, paths and TOML dates
+    text, enums their value; read back, they are those JSON forms.
+    """
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
         return obj.item()
-    if isinstance(obj, datetime):  # TOML date-times in a configuration snapshot
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return dataclasses.asdict(obj)
+    if isinstance(obj, datetime | date | time):
         return obj.isoformat()
+    if isinstance(obj, PurePath):
+        return str(obj)
+    if isinstance(obj, Enum):
+        return obj.value
+    if isinstance(obj, set | frozenset):
+        return sorted(obj)
     raise TypeError(f"{type(obj).__name__} is not JSON-ready")
 
 

@@ -355,3 +355,31 @@ def test_codes_of_a_wider_integer_type_are_accepted_when_they_fit(tmp_path: Path
     too_wide = RawShot({"doppler": (np.array([40000]), 1.0, 0.0), "response": (np.array([1]), 1.0, 0.0)}, 1e-8, 0)
     with pytest.raises(ShotFileError, match="int16 codes"):
         write_raw_shot(tmp_path / "t.h5", too_wide, known_meta())
+
+
+def test_config_snapshot_of_typed_sections_is_stored_in_json_form(tmp_path: Path) -> None:
+    import dataclasses
+    import datetime as dt
+    import enum
+
+    class Slope(enum.Enum):
+        RISING = "POS"
+
+    @dataclasses.dataclass(frozen=True)
+    class Digitizer:
+        resource: str
+        trigger_slope: Slope
+        calibration_file: Path
+
+    config = {
+        "digitizer": Digitizer("TCPIP0::127.0.0.1::5025::SOCKET", Slope.RISING, Path("/lab/cal.toml")),
+        "calibrated_on": dt.date(2026, 3, 1),
+        "gains": np.array([1.0, 10.0]),
+    }
+    shot = read_shot(write_raw_shot(tmp_path / "s.h5", known_raw(64), known_meta(config=config)))
+    assert shot.meta.config == {
+        "digitizer": {"resource": "TCPIP0::127.0.0.1::5025::SOCKET", "trigger_slope": "POS",
+                      "calibration_file": "/lab/cal.toml"},
+        "calibrated_on": "2026-03-01",
+        "gains": [1.0, 10.0],
+    }
