@@ -34,6 +34,7 @@ from analysis.response import (
     DEFAULT_LEVELS,
     BandEdge,
     band_edges,
+    fbsd_hz,
     frequency_response,
     model_sos,
     pole_zero_frequencies_hz,
@@ -401,3 +402,51 @@ def apply(dcm: DCM, data: np.ndarray, initial: str = "rest", block_samples: int 
     if block_samples < 1:
         raise AnalysisError(f"DCM: block_samples must be at least 1, got {block_samples}")
     return np.concatenate([stream.process(x[i : i + block_samples]) for i in range(0, x.size, block_samples)] or [x[:0]])
+
+
+DEFAULT_WIDENING = 3.0  # automatic design: compensated ±5 % band this many times the model's
+
+
+def ratio_for_widening(
+    model: DiscreteModel,
+    damping: float = 0.707,
+    widening: float = DEFAULT_WIDENING,
+    extra_poles: Sequence[complex] | np.ndarray = (),
+    ratios: np.ndarray | None = None,
+) -> float:
+    """The smallest response-time ratio r whose DCM widens the ±5 % FBSD by `widening`.
+
+    The paper leaves r to the engineer. r scales the decay envelope ζ·ω_n of the slowest
+    pole (see design_dcm), so the same r widens a lightly damped sensor's band far less than
+    a well damped one's; choosing r for a target band is what a calibration engineer wants.
+    Scans r on a log grid (compensated FBSD is cheap) and refines by bisection; when no r
+    reaches the target, returns the r of the widest band found.
+    """
+    if not widening > 1:
+        raise AnalysisError(f"DCM: the band widening must be > 1, got {widening}")
+    base = fbsd_hz(model)["5"]
+    target = widening * base
+    grid = np.geomspace(1.0, 2000.0, 60) if ratios is None else np.asarray(ratios, dtype=float)
+
+    def band(r: float) -> float:
+        try:
+            dcm = design_dcm(model.poles, model.sample_interval_s, r, damping, extra_poles)
+            return compensated_fbsd_hz(model, dcm)["5"]
+        except AnalysisError:
+            return 0.0
+
+    bands = np.array([band(r) for r in grid])
+    above = np.flatnonzero(bands >= target)
+    if above.size == 0:
+        return float(grid[int(np.argmax(bands))])
+    i = int(above[0])
+    if i == 0:
+        return float(grid[0])
+    lo, hi = float(grid[i - 1]), float(grid[i])
+    for _ in range(30):  # bisection on a possibly non-smooth function: no brentq
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if band(mid) < target else (lo, mid)
+        if hi / lo < 1.0005:
+            break
+    return hi
+

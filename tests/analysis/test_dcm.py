@@ -201,3 +201,17 @@ def test_model_and_dcm_sample_intervals_must_agree():
     dcm = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
     with pytest.raises(AnalysisError, match="sample interval"):
         compensated_fbsd_hz(all_pole_model(TABLE1_POLES, dt=2e-6), dcm)
+
+
+def test_ratio_for_widening_reaches_the_asked_band():
+    from analysis.dcm import ratio_for_widening
+    from drivers.sim.accelerometer import AccelerometerTruth, Mode
+
+    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), lowpass_hz=100_000.0)
+    b, a = truth.discrete_tf(1e-6)
+    model = DiscreteModel(1e-6, a, b)
+    r = ratio_for_widening(model, damping=0.707, widening=3.0)
+    dcm = design_dcm(model.poles, 1e-6, r, 0.707)
+    assert compensated_fbsd_hz(model, dcm)["5"] == pytest.approx(3.0 * fbsd_hz(model)["5"], rel=2e-3)
+    # a lightly damped sensor needs r well above zeta_e/zeta = 14 before the band widens at all
+    assert r > 0.707 / 0.05
