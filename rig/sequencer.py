@@ -232,6 +232,7 @@ class Sequencer:
         self._timeout_s: float | None = None
         self._last_report: InterlockReport | None = None
         self._last_reading_t = -1e9
+        self._last_reading_state = State.IDLE
         self._last_progress_t = -1e9
 
     # -- public -------------------------------------------------------------------------------
@@ -436,10 +437,11 @@ class Sequencer:
             raise _Abort(self._source(first), f"interlock lost: {'; '.join(report.problems())}")
         return report
 
-    def _publish_reading(self, report: InterlockReport, force: bool = False) -> None:
+    def _publish_reading(self, report: InterlockReport) -> None:
+        """A "reading" event: the first of each state, then at most every READINGS_INTERVAL_S."""
         now = time.monotonic()
-        if force or now - self._last_reading_t >= READINGS_INTERVAL_S:
-            self._last_reading_t = now
+        if self._state != self._last_reading_state or now - self._last_reading_t >= READINGS_INTERVAL_S:
+            self._last_reading_t, self._last_reading_state = now, self._state
             self.bus.emit("reading", self._state, "readings", **report.event_data())
 
     def _progress(self, message: str, force: bool = False, **data: Any) -> None:

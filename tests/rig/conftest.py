@@ -1,0 +1,131 @@
+"""Fixtures for the sequencer tests: a running in-process simulated rig (free ports, a pty),
+a RigConfig pointing at it with short timeouts, the connected instruments, and an event
+recorder. The simulator runs 100x faster than the wall clock so that evacuating, charging and
+venting take a few tens of milliseconds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import threading
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from drivers.sim.simulated_rig import ServerParams, SimConfig
+from drivers.sim.world import WorldParams
+from rig.config import RigConfig, load_rig_config
+from rig.events import EventBus, RigEvent
+from rig.instruments import Instruments, open_instruments
+from rig.sequencer import FireAuthorisation, Sequencer
+from rig.shot import ShotRequest
+from rig.sim_session import SimSession, sim_session
+
+REPO = Path(__file__).resolve().parents[2]
+TIME_SCALE = 100.0
+SLOW_DELAY_S = 0.3  # the `modbus-slow` fault's reply delay: longer than the controller timeout
+CONTROLLER_TIMEOUT_S = 0.15
+
+
+def fast_sim_config(time_scale: float = TIME_SCALE) -> SimConfig:
+    return SimConfig(world=WorldParams(time_scale=time_scale),
+                     servers=ServerParams(modbus_slow_delay_s=SLOW_DELAY_S))
+
+
+def short_timeouts_config(**timeouts: float) -> RigConfig:
+    """config/rig-sim.toml with short timeouts (wall seconds) for a 100x simulator."""
+    base = load_rig_config(REPO / "config" / "rig-sim.toml")
+    t = dataclasses.replace(base.timeouts, check_s=3.0, evacuate_s=1.0, charge_s=1.5, arm_s=1.0, fire_s=2.0,
+                            capture_s=1.0, safe_s=2.0, store_s=20.0, analyse_s=30.0)
+    t = dataclasses.replace(t, **timeouts)
+    return dataclasses.replace(
+        base, timeouts=t,
+        valve_controller=dataclasses.replace(base.valve_controller, timeout_s=CONTROLLER_TIMEOUT_S),
+        amplifier=dataclasses.replace(base.amplifier, timeout_s=0.3),
+        digitizer=dataclasses.replace(base.digitizer, timeout_s=2.0),
+    )
+
+
+class Recorder:
+    """Keeps every event; `states()` lists the state changes in order."""
+
+    def __init__(self, bus: EventBus) -> None:
+        self.events: list[RigEvent] = []
+        self._lock = threading.Lock()
+        bus.subscribe(self._add)
+
+    def _add(self, event: RigEvent) -> None:
+        with self._lock:
+            self.events.append(event)
+
+    def of(self, kind: str) -> list[RigEvent]:
+        with self._lock:
+            return [e for e in self.events if e.kind == kind]
+
+    def states(self) -> list[str]:
+        return [e.state for e in self.of("state")]
+
+
+class Rig:
+    """Everything a sequencer test needs, wired together."""
+
+    def __init__(self, session: SimSession, instruments: Instruments, out_dir: Path) -> None:
+        self.session = session
+        self.world = session.world
+        self.faults = session.rig.faults
+        self.config = session.config
+        self.instruments = instruments
+        self.out_dir = out_dir
+        self.bus = EventBus()
+        self.recorder = Recorder(self.bus)
+        self.sequencer = Sequencer(instruments, self.config, self.bus)
+
+    def request(self, **kw: object) -> ShotRequest:
+        kw.setdefault("pressure_bar", 1.0)
+        kw.setdefault("out_dir", self.out_dir)
+        kw.setdefault("operator", "test")
+        return ShotRequest(**kw)  # type: ignore[arg-type]
+
+    def on_state(self, state: str, action: Callable[[], None]) -> None:
+        """Run `action` (in the sequencer's thread) when the sequencer enters `state`."""
+        def callback(event: RigEvent) -> None:
+            if event.kind == "state" and event.state == state:
+                action()
+        self.bus.subscribe(callback)
+
+    def run(self, authorisation: FireAuthorisation | None = None, **request: object):
+        return self.sequencer.run_shot(self.request(**request), authorisation or FireAuthorisation.pre_given())
+
+    def assert_safe(self, vented: bool = True) -> None:
+        """The world's own coils: fire closed, fill closed, vent open; reservoir vented."""
+        coils = self.world.coils()
+        assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True, coils
+        if vented:
+            assert self.world.reservoir_pressure_bar() <= self.config.limits.vent_done_bar
+
+
+@pytest.fixture
+def make_rig(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    """make_rig(faults=(), config=None, time_scale=100) -> Rig; everything stopped after the test."""
+    stacks: list[contextlib.ExitStack] = []
+
+    def make(faults: tuple[str, ...] = (), config: RigConfig | None = None,
+             time_scale: float = TIME_SCALE) -> Rig:
+        stack = contextlib.ExitStack()
+        stacks.append(stack)
+        session = stack.enter_context(sim_session(config or short_timeouts_config(), fast_sim_config(time_scale), faults))
+        instruments = stack.enter_context(open_instruments(session.config, session.simulated_truth))
+        out = tmp_path / f"shots{len(stacks)}"
+        out.mkdir()
+        return Rig(session, instruments, out)
+
+    yield make
+    for stack in reversed(stacks):
+        stack.close()
+
+
+@pytest.fixture
+def rig(make_rig: Callable[..., Rig]) -> Rig:
+    return make_rig()

@@ -1,0 +1,312 @@
+"""The shot sequencer against the in-process simulated rig (real Modbus, VISA socket, pty).
+
+Safety is judged from the simulator's World itself (its coils, its launch counter), never
+from what the sequencer says about itself.
+"""
+
+from __future__ import annotations
+
+import threading
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rig.config import LimitsConfig
+from rig.errors import ShotAborted
+from rig.events import EventBus, EventQueue, RigEvent
+from rig.interlocks import INTERLOCKS, REQUIRED, RigReadings, evaluate
+from rig.sequencer import FINAL_STATES, TRANSITIONS, FireAuthorisation, Sequencer, State
+from rig.shot import AnalysisResult, ShotRequestError
+from rig.shotfile import RawShot, read_shot
+
+ACTIVE = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE)
+HAPPY_PATH = ["CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE", "CAPTURE", "SAFE", "STORE", "ANALYSE", "DONE"]
+
+
+# -- the transition table ------------------------------------------------------------------------
+def test_transition_table_every_active_state_can_only_go_on_or_to_safe() -> None:
+    assert set(TRANSITIONS) == set(State)
+    for state in ACTIVE:
+        assert State.SAFE in TRANSITIONS[state]
+        assert len(TRANSITIONS[state] - {State.SAFE}) <= 1  # the next state or SAFE, nothing else
+    # The final states are reached only through SAFE (and STORE/ANALYSE after it).
+    for state, targets in TRANSITIONS.items():
+        if targets & FINAL_STATES:
+            assert state in (State.SAFE, State.STORE, State.ANALYSE), state
+    # The happy path is a path of the table.
+    for a, b in zip(HAPPY_PATH, HAPPY_PATH[1:], strict=False):
+        assert State(b) in TRANSITIONS[State(a)]
+
+
+# -- a whole shot ----------------------------------------------------------------------------------
+def _peak_analysis(seen: dict):
+    """An analysis that records what it was given and whether the raw file existed already."""
+    def analyse(raw: RawShot, params: dict) -> AnalysisResult:
+        path = seen["path"]
+        seen["file_state_during_analysis"] = read_shot(path, load_raw=False).state if path.exists() else None
+        seen["params"] = params
+        response = raw.volts("response")
+        return AnalysisResult({"peak_response_v": float(response.max()), "samples": int(response.size)})
+    return analyse
+
+
+def test_complete_shot_stores_raw_before_analysis_and_ends_safe(rig) -> None:
+    seen: dict = {"path": rig.out_dir / "one.h5"}
+    rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus, analyse=_peak_analysis(seen))
+    outcome = rig.run(pressure_bar=1.0, shot_name="one", accelerometer_serial="SN1")
+
+    assert outcome.final_state == "DONE" and outcome.exit_code == 0 and outcome.error is None
+    assert outcome.fired and outcome.safe_confirmed and outcome.analysis_error is None
+    assert rig.recorder.states() == HAPPY_PATH
+    assert rig.world.shots_fired == 1
+    rig.assert_safe()
+
+    # Raw data was on disk (state "raw") when the analysis ran, and the analysis stored after.
+    assert seen["file_state_during_analysis"] == "raw"
+    shot = read_shot(outcome.shot_path)
+    assert shot.state == "analysed"
+    assert shot.results == outcome.results
+    assert shot.results["peak_response_v"] == pytest.approx(float(shot.volts("response").max()))
+    d = rig.config.digitizer
+    assert shot.raw.channels["doppler"].codes.size == d.record_length
+    assert shot.raw.trigger_index == d.pre_trigger_samples
+    assert shot.raw.sample_interval_s == pytest.approx(1 / d.sample_rate_hz)
+    # Meta: who/what, the config snapshot with this shot's settings, identities, simulated truth.
+    assert shot.meta.accelerometer_serial == "SN1" and shot.meta.operator == "test"
+    assert shot.meta.simulated_truth["pressure_bar"] == pytest.approx(1.0, abs=0.06)
+    assert shot.meta.simulated_truth == rig.world.last_shot_truth
+    assert shot.meta.config["shot_settings"]["amplifier_gain"] == rig.config.amplifier.gain
+    assert shot.meta.config["limits"]["max_pressure_bar"] == rig.config.limits.max_pressure_bar
+    assert "SIMDIG" in shot.meta.instruments["digitizer"]
+    assert seen["params"]["amplifier_gain"] == rig.config.amplifier.gain
+    assert seen["params"]["sensitivity_v_per_m_s2"] == rig.config.analysis.sensitivity_v_per_m_s2
+
+    # Events: readings with the agreed keys, a result event with the file and the results.
+    readings = rig.recorder.of("reading")
+    assert {"EVACUATE", "CHARGE", "ARM", "FIRE"} <= {e.state for e in readings}
+    for event in readings:
+        assert {"reservoir_pressure_bar", "fixture_vacuum_mbar", "interlocks"} <= set(event.data)
+    for state in {e.state for e in readings}:  # the first of each state, then at most ~10 Hz
+        times = [datetime.fromisoformat(e.utc.replace("Z", "+00:00")) for e in readings if e.state == state]
+        if len(times) > 1:
+            assert min(np.diff(times)).total_seconds() >= 0.09
+    (result,) = rig.recorder.of("result")
+    assert result.data["shot_path"] == str(outcome.shot_path)
+    assert result.data["results"] == outcome.results and result.data["error"] is None
+
+
+def test_analysis_failure_is_recorded_and_the_shot_kept(rig) -> None:
+    def broken(raw: RawShot, params: dict) -> AnalysisResult:
+        raise ValueError("no beat found in the Doppler channel")
+
+    rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus, analyse=broken)
+    outcome = rig.run()
+    assert outcome.final_state == "DONE" and outcome.exit_code == 0
+    assert outcome.results is None
+    assert "no beat found" in outcome.analysis_error
+    shot = read_shot(outcome.shot_path)
+    assert shot.state == "analysis_failed" and "no beat found" in shot.analysis_error
+    assert shot.raw.channels["response"].codes.size == rig.config.digitizer.record_length
+    rig.assert_safe()
+
+
+def test_two_shots_in_a_row_on_the_same_instruments(rig) -> None:
+    first = rig.run(pressure_bar=1.0)
+    second = rig.run(pressure_bar=1.5)
+    assert first.final_state == second.final_state == "DONE"
+    assert first.shot_path != second.shot_path
+    assert rig.world.shots_fired == 2
+    assert rig.world.last_shot_truth["pressure_bar"] == pytest.approx(1.5, abs=0.06)
+
+
+# -- confirmation ------------------------------------------------------------------------------------
+def test_no_confirmation_never_fires(rig) -> None:
+    outcome = rig.run(FireAuthorisation(), confirm_timeout_s=0.3)
+    assert outcome.final_state == "ABORTED" and outcome.aborted_in == "ARM" and outcome.exit_code == 3
+    assert "not confirmed" in outcome.error
+    assert not outcome.fired and outcome.shot_path is None
+    assert rig.world.shots_fired == 0 and rig.world.fire_refusals == []
+    assert rig.recorder.states()[-3:] == ["ARM", "SAFE", "ABORTED"]
+    rig.assert_safe()
+    with pytest.raises(ShotAborted, match="shot aborted in ARM: operator: shot not confirmed") as info:
+        outcome.raise_for_outcome()
+    assert info.value.exit_code == 3
+
+
+def test_confirmation_given_from_another_thread_fires(rig) -> None:
+    authorisation = FireAuthorisation()
+
+    def on_event(event: RigEvent) -> None:  # the panel: the operator clicks FIRE a little later
+        if event.data.get("awaiting_confirmation"):
+            threading.Timer(0.2, authorisation.give).start()
+
+    rig.bus.subscribe(on_event)
+    outcome = rig.run(authorisation, confirm_timeout_s=10.0)
+    assert outcome.final_state == "DONE" and outcome.fired
+    assert rig.world.shots_fired == 1
+    progress = [e.message for e in rig.recorder.of("progress") if e.state == "ARM"]
+    assert progress == ["armed: waiting for the fire confirmation", "fire confirmed"]
+
+
+def test_withdrawn_confirmation_does_not_fire(rig) -> None:
+    authorisation = FireAuthorisation.pre_given()
+    rig.on_state("CHARGE", authorisation.withdraw)
+    outcome = rig.run(authorisation, confirm_timeout_s=0.2)
+    assert outcome.aborted_in == "ARM" and rig.world.shots_fired == 0
+    rig.assert_safe()
+
+
+# -- abort, timeout, interrupt, lost interlock --------------------------------------------------------
+@pytest.mark.parametrize("state", ["CHARGE", "ARM"])
+def test_abort_from_another_thread_reaches_safe(make_rig, state: str) -> None:
+    rig = make_rig(time_scale=10.0)  # charging 4 bar takes ~0.8 s: the abort comes while charging
+    started = threading.Event()
+
+    def on_event(event: RigEvent) -> None:
+        if event.state == state and event.kind in ("progress", "reading"):
+            started.set()
+
+    rig.bus.subscribe(on_event)
+    aborter = threading.Thread(target=lambda: started.wait(10) and rig.sequencer.abort("operator pressed ABORT"))
+    aborter.start()
+    outcome = rig.run(FireAuthorisation(), pressure_bar=4.0, confirm_timeout_s=10.0)
+    aborter.join()
+    assert outcome.final_state == "ABORTED" and outcome.aborted_in == state and outcome.exit_code == 3
+    assert outcome.error.startswith(f"shot aborted in {state}: operator: aborted: operator pressed ABORT")
+    assert not outcome.fired and rig.world.shots_fired == 0
+    assert rig.recorder.states()[-2:] == ["SAFE", "ABORTED"]
+    rig.assert_safe()
+    rig.sequencer.abort("again")  # idempotent and harmless once the shot is over
+    assert rig.sequencer.state == State.ABORTED
+
+
+def test_state_timeout_reaches_safe(make_rig) -> None:
+    from tests.rig.conftest import short_timeouts_config
+
+    rig = make_rig(config=short_timeouts_config(charge_s=0.2), time_scale=10.0)  # 6 bar needs ~1.2 s
+    outcome = rig.run(pressure_bar=6.0)
+    assert outcome.aborted_in == "CHARGE" and outcome.final_state == "ABORTED"
+    assert "timed out after 0.2 s charging the reservoir" in outcome.error
+    assert rig.config.valve_controller.host in outcome.error  # names the instrument
+    rig.assert_safe()
+    assert rig.world.shots_fired == 0
+
+
+def test_keyboard_interrupt_in_charge_is_deferred_until_safe(rig) -> None:
+    def interrupt() -> None:
+        raise KeyboardInterrupt
+
+    rig.on_state("CHARGE", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        rig.run(pressure_bar=2.0)
+    # By the time the interrupt reaches the caller, SAFE has run and the rig is safe.
+    rig.assert_safe()
+    assert rig.recorder.states()[-3:] == ["CHARGE", "SAFE", "ABORTED"]
+    (result,) = rig.recorder.of("result")
+    assert result.data["aborted_in"] == "CHARGE" and "interrupted (KeyboardInterrupt)" in result.data["error"]
+    assert any(e.message.startswith("rig safe") for e in rig.recorder.of("log"))
+    assert rig.world.shots_fired == 0
+
+
+def test_door_opened_mid_arm_aborts(rig) -> None:
+    armed_readings = []
+
+    def on_event(event: RigEvent) -> None:
+        if event.kind == "reading" and event.state == "ARM":
+            armed_readings.append(event)
+            if len(armed_readings) == 2:  # the rig is armed and waiting: now someone opens the door
+                rig.faults.inject("door-open")
+
+    rig.bus.subscribe(on_event)
+    outcome = rig.run(FireAuthorisation(), confirm_timeout_s=10.0)
+    assert outcome.aborted_in == "ARM" and outcome.final_state == "ABORTED"
+    assert "interlock lost: door/guard open" in outcome.error
+    assert any(e.data.get("awaiting_confirmation") for e in rig.recorder.of("progress"))
+    assert armed_readings[0].data["interlocks"]["door"] is True
+    assert rig.world.shots_fired == 0
+    rig.assert_safe()
+    assert rig.sequencer.interlocks_ok is False
+
+
+# -- input, events --------------------------------------------------------------------------------
+def test_bad_request_moves_nothing(rig) -> None:
+    with pytest.raises(ShotRequestError, match="pressure_bar: 50 bar is outside the rig's limits"):
+        rig.run(pressure_bar=50.0)
+    with pytest.raises(ShotRequestError, match="projectile"):
+        rig.run(projectile=7)
+    assert rig.recorder.events == []
+    assert rig.world.coils() == {"fire": False, "fill": False, "vent": False, "pump": False}
+
+
+def test_a_failing_subscriber_does_not_break_the_shot(rig) -> None:
+    def broken(event: RigEvent) -> None:
+        raise RuntimeError("display crashed")
+
+    rig.bus.subscribe(broken)
+    outcome = rig.run()
+    assert outcome.final_state == "DONE" and rig.world.shots_fired == 1
+
+
+def test_event_bus_subscribe_unsubscribe_and_threads() -> None:
+    bus = EventBus()
+    queue = EventQueue(bus, kinds=("log",))
+    got: list[RigEvent] = []
+    unsubscribe = bus.subscribe(got.append)
+
+    def publish_many() -> None:
+        for i in range(200):
+            bus.emit("log", "IDLE", f"n{i}")
+
+    threads = [threading.Thread(target=publish_many) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(got) == 800 and len(queue.drain()) == 800
+    unsubscribe()
+    bus.emit("state", "CHECK", "after")
+    assert len(got) == 800
+    assert [e.message for e in queue.drain()] == []  # "state" is not a kind the queue keeps
+    with pytest.raises(ValueError, match="event kind"):
+        RigEvent("bogus", "IDLE", "x")
+
+
+# -- interlock rules (pure) ------------------------------------------------------------------------------
+def _readings(**kw: object) -> RigReadings:
+    base = dict(reservoir_pressure_bar=2.0, fixture_vacuum_mbar=50.0, door_closed=True, fixture_clamped=True,
+                estop_healthy=True, amplifier_overloaded=False, digitizer_state="ARMED")
+    base.update(kw)
+    return RigReadings(**base)  # type: ignore[arg-type]
+
+
+LIMITS = LimitsConfig(max_pressure_bar=8.0, min_pressure_bar=0.2, pressure_tolerance_bar=0.05,
+                      fixture_vacuum_max_mbar=100.0)
+
+
+@pytest.mark.parametrize("pressure, charging, ok", [
+    (2.0, False, True), (2.049, False, True), (2.051, False, False), (1.949, False, False),
+    (1.0, True, True), (2.049, True, True), (2.051, True, False), (8.01, True, False),
+])
+def test_pressure_interlock_bounds(pressure: float, charging: bool, ok: bool) -> None:
+    report = evaluate(_readings(reservoir_pressure_bar=pressure), LIMITS, ("pressure",), setpoint_bar=2.0,
+                      charging=charging)
+    assert report.all_ok is ok
+
+
+@pytest.mark.parametrize("field, value, name", [
+    ("door_closed", False, "door"), ("fixture_clamped", False, "clamp"), ("estop_healthy", False, "estop"),
+    ("fixture_vacuum_mbar", 100.1, "vacuum"), ("amplifier_overloaded", True, "amplifier"),
+    ("amplifier_overloaded", None, "amplifier"), ("digitizer_state", "IDLE", "digitizer"),
+])
+def test_each_interlock_fails_alone(field: str, value: object, name: str) -> None:
+    report = evaluate(_readings(**{field: value}), LIMITS, INTERLOCKS, setpoint_bar=2.0)
+    assert report.failing() == [name]
+    assert evaluate(_readings(), LIMITS, INTERLOCKS, setpoint_bar=2.0).all_ok
+    assert set(REQUIRED["FIRE"]) == set(INTERLOCKS)
+
+
+def test_out_dir_must_exist(rig, tmp_path: Path) -> None:
+    with pytest.raises(ShotRequestError, match="out_dir"):
+        rig.run(out_dir=tmp_path / "missing")
