@@ -17,8 +17,10 @@ from typing import Any
 # dependencies (Qt, pymodbus) load only when that command runs.
 COMMAND_MODULES = [
     "rig.commands_analysis",
+    "rig.commands_campaign",
     "rig.commands_demo",
     "rig.commands_dcm",
+    "rig.commands_report",
     "rig.commands_sim",
     "rig.commands_shot",
 ]

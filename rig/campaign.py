@@ -1,0 +1,550 @@
+"""The campaign runner: fire the shots of a plan one after another, journaled, resumable.
+
+    run, plan = prepare_run(plan_path, out=None, resume=False)     # a new run folder (or the one to resume)
+    check_authorisation(plan, yes)                                  # ConfigError (exit 2) unless authorised
+    with open_instruments(config) as instruments:
+        runner = CampaignRunner(run, plan, instruments, config, bus)
+    outcome = runner.run()                                          # blocking; outcome.exit_code 0 / 3
+
+How a shot moves through the journal (rig/journal.py has the rules):
+
+- the sequencer's "state" event FIRE (published before the fire valve opens) -> FIRING is
+  committed; if that commit fails, the runner aborts the shot before the valve opens;
+- the STORE "progress" event carrying the shot file's path (the raw file has its final name)
+  -> RECORDED, with the file's uuid;
+- the shot's end -> ANALYSED / ANALYSIS_FAILED when it was analysed; ABORTED when the
+  sequencer is sure nothing was fired; UNKNOWN when the fire command went out but no raw
+  file exists (an operator decides: `hopkinson campaign decide`).
+
+On start (and on `--resume`) the journal settles what a dead process left (leftover *.tmp
+removed, FIRING shots matched to their raw files). Shots recorded but not analysed are then
+analysed from their files (no instrument needed) before the next shot is fired.
+
+The runner stops at the first shot that does not end DONE (aborted to the safe state, or a
+FAULT): the operator looks at the rig before anything else is fired; `--resume` continues.
+`stop_after_shot()` (a pause) stops after the current shot; `abort(reason)` aborts the
+current shot (SAFE runs) and stops. Outcome exit codes: 0 every planned shot is done
+(analysed, analysis failed, or skipped); 3 the campaign stopped with shots left (aborted,
+paused, or waiting for an operator decision).
+
+Simulation only: `attach_fire_log` makes the simulated world append one JSON line per
+projectile launch (fsynced), tagged with the campaign shot being fired. It is an independent
+witness that no shot was fired twice across kills and resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rig.errors import ConfigError
+from rig.events import EventBus, RigEvent
+from rig.journal import Journal, ShotState, ShotStatus
+from rig.plan import CampaignPlan, PlannedShot, load_plan
+from rig.run_folder import PLAN_NAME, RunFolder, create_run_folder, open_run_folder
+from rig.shot import (
+    AnalysisResult,
+    ShotOutcome,
+    ShotRequest,
+    analyse_raw,
+    analysis_params,
+    record_analysis,
+)
+from rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
+
+if TYPE_CHECKING:
+    from drivers.sim.world import World
+    from rig.config import RigConfig
+    from rig.instruments import Instruments
+
+DEFAULT_RUNS_DIR = Path("runs")
+EXIT_COMPLETE = 0
+EXIT_STOPPED = 3
+CAMPAIGN_STATE = "CAMPAIGN"  # the `state` of the runner's own events (the sequencer's are its states)
+
+S = ShotState
+
+
+class CampaignNotAuthorised(ConfigError):
+    """Neither the plan (authorise_firing = true) nor the operator (--yes) authorised firing."""
+
+
+def check_authorisation(plan: CampaignPlan, yes: bool) -> None:
+    """Raise CampaignNotAuthorised (exit code 2, nothing fired) unless firing is authorised."""
+    if not (plan.authorise_firing or yes):
+        raise CampaignNotAuthorised(
+            f"{plan.path}: firing is not authorised: set authorise_firing = true in the plan or give "
+            "--yes; nothing was fired"
+        )
+
+
+def prepare_run(plan_path: str | Path, out: str | Path | None = None, resume: bool = False,
+                runs_dir: str | Path = DEFAULT_RUNS_DIR) -> tuple[RunFolder, CampaignPlan]:
+    """The run folder to use and the validated plan.
+
+    New run: `out` is the run folder to create (it must not exist yet, or be an empty
+    folder); without `out`, `<runs_dir>/<plan name>-<UTC time>`. Resume: `out` is the run folder
+    to continue; without `out`, the newest `<runs_dir>/<plan name>-*` folder. The plan must
+    be the one the run started with (the journal checks it when it opens).
+    """
+    plan = load_plan(plan_path)
+    if out is not None:
+        folder = Path(out)
+        has_plan = (folder / PLAN_NAME).is_file()
+        if resume:
+            if has_plan:
+                return open_run_folder(folder), plan
+            if not folder.is_dir():
+                raise ConfigError(f"{folder}: no such run folder to resume")
+            if any(p.name != "run.lock" for p in _files(folder)):
+                raise ConfigError(f"{folder}: not a campaign run folder (no {PLAN_NAME})")
+            # A run that died while creating its folder: start it afresh in the same place.
+        elif has_plan:
+            raise ConfigError(f"{folder}: this run folder exists; give --resume to continue it")
+        elif folder.is_dir() and any(folder.iterdir()):
+            raise ConfigError(f"{folder}: the folder exists and is not empty; choose a new --out")
+        if folder.is_dir():
+            _remove_empty_tree(folder)
+        return create_run_folder(plan_path, folder.parent, folder.name), plan
+    runs = Path(runs_dir)
+    if resume:
+        candidates = sorted(p for p in runs.glob(f"{plan.name}-*") if (p / PLAN_NAME).is_file())
+        if not candidates:
+            raise ConfigError(f"{runs}: no run folder of plan {plan.name!r} to resume (give --out RUN_FOLDER)")
+        return open_run_folder(max(candidates, key=lambda p: p.stat().st_mtime)), plan
+    return create_run_folder(plan_path, runs), plan
+
+
+def _files(folder: Path) -> list[Path]:
+    return [p for p in folder.rglob("*") if p.is_file()]
+
+
+def _remove_empty_tree(folder: Path) -> None:
+    """Remove a folder holding nothing but empty folders (and a stale lock file)."""
+    for path in sorted(folder.rglob("*"), key=lambda p: len(p.parts), reverse=True):
+        if path.is_dir():
+            path.rmdir()
+        else:
+            path.unlink()
+    folder.rmdir()
+
+
+@dataclass(frozen=True)
+class CampaignProgress:
+    """Where the campaign is: shot `index` (1-based) of `total`, its id and attempt."""
+
+    index: int
+    total: int
+    shot_id: str
+    pressure_bar: float
+    projectile: int
+
+    @property
+    def prefix(self) -> str:
+        """"[3/8] s002-r1": what every progress line starts with."""
+        return f"[{self.index}/{self.total}] {self.shot_id}"
+
+
+@dataclass
+class CampaignOutcome:
+    """How a campaign run ended."""
+
+    run_folder: Path
+    exit_code: int
+    message: str
+    summary: dict[str, Any]  # Journal.summary() at the end
+    fired_this_run: list[str] = field(default_factory=list)
+    resume_report: list[dict[str, Any]] = field(default_factory=list)
+    last_shot: ShotOutcome | None = None
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.summary.get("complete"))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "run_folder": str(self.run_folder),
+            "exit_code": self.exit_code,
+            "message": self.message,
+            "complete": self.complete,
+            "fired_this_run": list(self.fired_this_run),
+            "resume_report": list(self.resume_report),
+            "summary": self.summary,
+            "last_shot": self.last_shot.to_dict() if self.last_shot is not None else None,
+        }
+
+
+def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder) -> ShotRequest:
+    """The sequencer's request for a planned shot: file `shots/<id>.h5`, the plan's settings.
+
+    `confirm_timeout_s` 0: the runner only ever fires with the authorisation already given.
+    """
+    a = shot.analysis
+    return ShotRequest(
+        pressure_bar=shot.pressure_bar, projectile=shot.projectile, operator=plan.operator,
+        accelerometer_model=plan.accelerometer.model, accelerometer_serial=plan.accelerometer.serial,
+        sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
+        sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
+        out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
+        shot_index=shot.index, confirm_timeout_s=0.0,
+    )
+
+
+def with_fixed_order(analyse: Callable[[Any, dict[str, Any]], AnalysisResult], order: int | None
+                     ) -> Callable[[Any, dict[str, Any]], AnalysisResult]:
+    """`analyse` with the plan's fixed model order added to its parameters (when there is one):
+    ShotRequest has no `order`, the plan's [analysis] may have."""
+    if order is None:
+        return analyse
+
+    def run(raw: Any, params: dict[str, Any]) -> AnalysisResult:
+        return analyse(raw, {**params, "order": order})
+
+    return run
+
+
+class CampaignRunner:
+    """Runs a campaign's remaining shots; see the module docstring.
+
+    instruments: the connected rig (rig.instruments); the runner's `sequencer` fires on them
+    and publishes on `bus`. The runner subscribes to journal each shot and publishes its own
+    events with state "CAMPAIGN" (kind "progress" for a new shot, "log" for resume findings
+    and shot ends, "error" when it stops) whose data hold "shot_id", "index", "total".
+    analyse: the analysis computation (default rig.shot.analyse_raw); on_shot_start: called
+    with the shot about to be fired (None after it), e.g. to tag a simulation fire log.
+    """
+
+    def __init__(self, run: RunFolder, plan: CampaignPlan, instruments: Instruments, config: RigConfig,
+                 bus: EventBus, *, analyse: Callable[[Any, dict[str, Any]], AnalysisResult] | None = None,
+                 max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None) -> None:
+        from rig.sequencer import Sequencer  # the drivers load only when shots are fired
+
+        self.run_folder = run
+        self.plan = plan
+        self.config = config
+        self.bus = bus
+        self.max_aborts = max_aborts
+        self._analyse = analyse or analyse_raw
+        self._order: int | None = None  # the fixed model order of the shot being analysed
+        self.sequencer = Sequencer(instruments, config, bus, analyse=self._analyse_with_order)
+        self._on_shot_start = on_shot_start
+        self._journal: Journal | None = None
+        self._current: CampaignProgress | None = None
+        self._stop = threading.Event()
+        self._stop_reason = ""
+        self._mark_failure: str | None = None
+        self._lock = threading.Lock()
+
+    # -- control (any thread) ----------------------------------------------------------------
+    @property
+    def current(self) -> CampaignProgress | None:
+        """The shot being fired (None between shots)."""
+        return self._current
+
+    def stop_after_shot(self, reason: str = "paused by the operator") -> None:
+        """Finish the current shot, then stop (resume later with --resume)."""
+        with self._lock:
+            if not self._stop.is_set():
+                self._stop_reason = reason
+                self._stop.set()
+
+    def abort(self, reason: str = "aborted by the operator") -> None:
+        """Abort the current shot (the sequencer makes the rig safe) and stop the campaign."""
+        self.stop_after_shot(reason)
+        self.sequencer.abort(reason)
+
+    # -- the run -----------------------------------------------------------------------------
+    def run(self) -> CampaignOutcome:
+        """Open (or resume) the journal, analyse what is pending, fire what is left."""
+        journal = Journal.open(self.run_folder, self.plan, max_aborts=self.max_aborts)
+        self._journal = journal
+        fired: list[str] = []
+        last: ShotOutcome | None = None
+        unsubscribe = self.bus.subscribe(self._on_event)
+        try:
+            for item in journal.resume_report:
+                self._log(_resume_text(item), resume=item)
+            for shot in journal.pending_analysis():
+                self._analyse_from_file(shot)
+            stop_message = ""
+            while not self._stop.is_set():
+                shot = journal.next_shot()
+                if shot is None:
+                    break
+                last = self._fire(shot)
+                if last.fired:
+                    fired.append(shot.id)
+                if not last.done:
+                    stop_message = f"{shot.id}: {last.error or 'shot ended in ' + last.final_state}"
+                    break
+            if self._stop.is_set() and not stop_message:
+                stop_message = self._stop_reason
+            summary = journal.summary()
+            exit_code, message = self._conclusion(summary, stop_message)
+            if exit_code != EXIT_COMPLETE:
+                self.bus.emit("error", CAMPAIGN_STATE, message, campaign_stopped=True)
+            else:
+                self._log(message)
+            return CampaignOutcome(self.run_folder.path, exit_code, message, summary, fired,
+                                   list(journal.resume_report), last)
+        finally:
+            unsubscribe()
+            self._current = None
+            self._journal = None
+            journal.close()
+
+    def _conclusion(self, summary: dict[str, Any], stop_message: str) -> tuple[int, str]:
+        counts = summary["by_state"]
+        done = counts[S.ANALYSED.value] + counts[S.ANALYSIS_FAILED.value] + counts[S.SKIPPED.value]
+        if summary["complete"]:
+            failed = counts[S.ANALYSIS_FAILED.value]
+            note = f" ({failed} with a failed analysis)" if failed else ""
+            return EXIT_COMPLETE, f"campaign complete: {done} of {summary['total']} shots done{note}"
+        parts = [f"campaign stopped with {done} of {summary['total']} shots done"]
+        if stop_message:
+            parts.append(stop_message)
+        if summary["needs_decision"]:
+            ids = ", ".join(summary["needs_decision"])
+            parts.append(f"may have been fired without a record, an operator decides: {ids} "
+                         f"(hopkinson campaign decide {self.run_folder.path} SHOT_ID retry|skip)")
+        if summary["aborted_out"]:
+            parts.append(f"aborted {self.max_aborts} times, not retried: {', '.join(summary['aborted_out'])}")
+        parts.append(f"continue with --resume --out {self.run_folder.path}")
+        return EXIT_STOPPED, "; ".join(parts)
+
+    def _progress(self, shot: PlannedShot) -> CampaignProgress:
+        return CampaignProgress(shot.index + 1, len(self.plan.shots), shot.id, shot.pressure_bar, shot.projectile)
+
+    def _fire(self, shot: PlannedShot) -> ShotOutcome:
+        """One shot through the sequencer, journaled by `_on_event`, settled at its end."""
+        assert self._journal is not None
+        self._current = self._progress(shot)
+        self._mark_failure = None
+        if self._on_shot_start is not None:
+            self._on_shot_start(shot)
+        self.bus.emit("progress", CAMPAIGN_STATE, f"shot {shot.id}: {shot.pressure_bar:g} bar, projectile "
+                      f"No. {shot.projectile}", **self._data())
+        from rig.sequencer import FireAuthorisation
+
+        self._order = shot.analysis.order
+        try:
+            outcome = self.sequencer.run_shot(shot_request(self.plan, shot, self.run_folder),
+                                              FireAuthorisation.pre_given())
+            self._settle(shot, outcome)
+            return outcome
+        finally:
+            if self._on_shot_start is not None:
+                self._on_shot_start(None)
+            self._current = None
+
+    def _analyse_with_order(self, raw: Any, params: dict[str, Any]) -> AnalysisResult:
+        return with_fixed_order(self._analyse, self._order)(raw, params)
+
+    def _data(self, **extra: Any) -> dict[str, Any]:
+        c = self._current
+        base = {"shot_id": c.shot_id, "index": c.index, "total": c.total} if c is not None else {}
+        return {**base, **extra}
+
+    def _on_event(self, event: RigEvent) -> None:
+        """Journal the current shot from the sequencer's events (runs in the sequencer's thread)."""
+        current, journal = self._current, self._journal
+        if current is None or journal is None or event.state == CAMPAIGN_STATE:
+            return
+        sid = current.shot_id
+        if event.kind == "state" and event.state == "FIRE":
+            try:
+                journal.mark(sid, S.FIRING)
+            except Exception as exc:  # never fire a shot the journal does not know is firing
+                self._mark_failure = f"campaign journal: FIRING of {sid} could not be recorded ({exc})"
+                self.sequencer.abort(self._mark_failure + "; not fired")
+        elif event.kind == "progress" and event.state == "STORE" and event.data.get("shot_path"):
+            try:
+                self._mark_recorded(sid, Path(event.data["shot_path"]))
+            except Exception as exc:  # settled again when the shot ends
+                self._mark_failure = f"campaign journal: RECORDED of {sid} could not be recorded ({exc})"
+
+    def _mark_recorded(self, sid: str, path: Path) -> None:
+        assert self._journal is not None
+        if self._journal.status(sid).state != S.FIRING:
+            return
+        meta = read_shot_meta(path)
+        self._journal.mark(sid, S.RECORDED, uuid=meta.uuid, file=path.name)
+
+    def _settle(self, shot: PlannedShot, outcome: ShotOutcome) -> None:
+        """Bring the journal in line with how the shot ended."""
+        journal = self._journal
+        assert journal is not None
+        sid = shot.id
+        path = self.run_folder.shot_path(sid)
+        state = journal.status(sid).state
+        has_file = outcome.shot_path is not None and path.exists()
+        if has_file and state == S.FIRING:
+            self._mark_recorded(sid, path)
+            state = journal.status(sid).state
+        if state == S.RECORDED:
+            if outcome.done and outcome.analysis_error is None:
+                journal.mark(sid, S.ANALYSED, **_result_info(outcome.results))
+            elif outcome.done:
+                journal.mark(sid, S.ANALYSIS_FAILED, error=outcome.analysis_error)
+            elif outcome.final_state != "FAULT":  # recorded, then aborted: analyse the stored data
+                self._analyse_from_file(shot)
+        elif state == S.FIRING:
+            if outcome.fired:
+                journal.mark(sid, S.UNKNOWN, reason=outcome.error or "fired, but no raw file was stored")
+            else:
+                journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted")
+        elif state in (S.PLANNED, S.ABORTED):
+            journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted before FIRE")
+        status = journal.status(sid)
+        self._log(_shot_end_text(status, outcome), journal_state=status.state.value, final_state=outcome.final_state)
+
+    def _analyse_from_file(self, shot: PlannedShot) -> None:
+        """Analyse a RECORDED shot from its raw file and store the result (or the failure)."""
+        assert self._journal is not None
+        self._current = self._progress(shot)
+        path = self.run_folder.shot_path(shot.id)
+        self._log(f"analysing the recorded shot {path.name}")
+        result: AnalysisResult | None = None
+        error: str | None = None
+        try:
+            stored = read_shot(path)
+            assert stored.raw is not None
+            # The rig constants of this run's configuration; the amplifier gain read back at
+            # the shot (stored in the file) wins, as in the sequencer's own analysis.
+            settings = dict(stored.meta.config.get("shot_settings", {}))
+            params = analysis_params(shot_request(self.plan, shot, self.run_folder), self.config, settings)
+            self._order = shot.analysis.order
+            result = self._analyse_with_order(stored.raw, params)
+        except ShotFileError as exc:
+            error = str(exc)
+        except Exception as exc:  # the analysis failed: the shot stays recorded, the failure is noted
+            error = f"analysis failed: {exc}" if isinstance(exc, ValueError) else \
+                f"analysis failed: {type(exc).__name__}: {exc}"
+        if error is None:
+            try:
+                record_analysis(path, result, None)
+            except Exception as exc:
+                error = f"the analysis could not be stored in {path}: {exc}"
+        else:
+            try:
+                record_analysis(path, None, error)
+            except Exception:
+                pass  # the journal still says why
+        if error is None:
+            self._journal.mark(shot.id, S.ANALYSED, **_result_info(result.results if result else None))
+        else:
+            self._journal.mark(shot.id, S.ANALYSIS_FAILED, error=error)
+        self._log("ANALYSED" if error is None else f"ANALYSIS_FAILED: {error}")
+        self._current = None
+
+    def _log(self, message: str, **data: Any) -> None:
+        self.bus.emit("log", CAMPAIGN_STATE, message, **self._data(**data))
+
+
+def _result_info(results: dict[str, Any] | None) -> dict[str, Any]:
+    """A few figures of an analysis for the journal's info (the shot file holds the rest)."""
+    if not results:
+        return {}
+    info: dict[str, Any] = {}
+    model = results.get("model") or {}
+    if "order" in model:
+        info["order"] = model["order"]
+    if results.get("fbsd_hz"):
+        info["fbsd_hz"] = results["fbsd_hz"]
+    return info
+
+
+def _resume_text(item: dict[str, Any]) -> str:
+    if item.get("shot_id") is None:
+        return f"resume: {item.get('action', 'note')}: {item.get('path', '')}"
+    if item.get("from") == item.get("to"):
+        return f"resume: {item['shot_id']}: {item['reason']}"
+    return f"resume: {item['shot_id']}: {item['from']} -> {item['to']}: {item['reason']}"
+
+
+def _shot_end_text(status: ShotStatus, outcome: ShotOutcome) -> str:
+    text = status.state.value
+    if status.state == S.ANALYSED and outcome.results:
+        text += " " + result_line(outcome.results)
+    elif outcome.analysis_error:
+        text += f": {outcome.analysis_error}"
+    elif outcome.error:
+        text += f": {outcome.error}"
+    return text
+
+
+def result_line(results: dict[str, Any]) -> str:
+    """One line of an analysis' key figures: order, f_n, ζ, FBSD ±5 %/±10 %."""
+    parts = []
+    model = results.get("model") or {}
+    if "order" in model:
+        parts.append(f"order {model['order']}")
+    ident = results.get("identification") or {}
+    modes = ident.get("modes") or []
+    if modes:
+        m = modes[0]
+        if m.get("natural_frequency_hz") is not None:
+            parts.append(f"f_n {m['natural_frequency_hz'] / 1e3:.2f} kHz")
+        if m.get("damping_ratio") is not None:
+            parts.append(f"zeta {m['damping_ratio']:.4f}")
+    fbsd = results.get("fbsd_hz") or {}
+    if "5" in fbsd and "10" in fbsd:
+        parts.append(f"FBSD {fbsd['5'] / 1e3:.2f}/{fbsd['10'] / 1e3:.2f} kHz (±5/±10 %)")
+    return ", ".join(parts)
+
+
+# -- simulation: the fire log ------------------------------------------------------------------
+class FireLog:
+    """Append-only JSON lines, one per simulated launch, each fsynced before the call returns."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.parent.is_dir():
+            raise ConfigError(f"--sim-fire-log: folder {self.path.parent} does not exist")
+        self.shot_id: str | None = None  # the campaign shot being fired, set by the runner
+
+    def append(self, entry: dict[str, Any]) -> None:
+        line = json.dumps({"shot_id": self.shot_id, "pid": os.getpid(), "utc": utc_now_iso(), **entry})
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            os.write(fd, (line + "\n").encode())
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    def set_shot(self, shot: PlannedShot | None) -> None:
+        self.shot_id = shot.id if shot is not None else None
+
+
+def attach_fire_log(world: World, log: FireLog) -> None:
+    """Make the simulated `world` log every launch to `log` (test witness; simulation only).
+
+    The world has no launch callback, so its public `set_fire_valve` is wrapped on this
+    instance: after the original call, a rise of `shots_fired` is a launch. The line is
+    written in the simulator's server thread right after the launch, before the Modbus
+    reply goes back, so the sequencer cannot have seen the shot fired without the line.
+    """
+    original = world.set_fire_valve
+
+    def set_fire_valve(open_: bool) -> None:
+        before = world.shots_fired
+        original(open_)
+        if world.shots_fired > before:
+            truth = world.last_shot_truth or {}
+            log.append({"shot_number": world.shots_fired, "pressure_bar": truth.get("pressure_bar"),
+                        "fired_at_sim_s": truth.get("fired_at_sim_s")})
+
+    world.set_fire_valve = set_fire_valve  # type: ignore[method-assign]
+
+
+def read_fire_log(path: str | Path) -> list[dict[str, Any]]:
+    """The entries of a fire log (a missing file: none)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]

@@ -1,0 +1,245 @@
+"""`hopkinson campaign`: run a campaign plan, see where a run stands, decide on doubtful shots.
+
+    hopkinson campaign run PLAN.toml [--sim [--sim-config PATH] [--sim-fault NAME ...]
+                       [--sim-fire-log PATH]] [--config PATH] [--yes] [--out DIR] [--resume]
+                       [--report pdf,html | --no-report] [--json]
+    hopkinson campaign status RUN_FOLDER [--json]
+    hopkinson campaign decide RUN_FOLDER SHOT_ID {retry,skip} [--note TEXT]
+
+run: fires the plan's shots in order into a run folder (rig/run_folder.py): a new folder
+`--out DIR` (default runs/<plan name>-<UTC time>), or with --resume the run folder `--out DIR`
+(default: the newest runs/<plan name>-* folder), continuing after a crash, a kill -9 or an
+abort with no planned shot lost and none fired twice (rig/journal.py). Firing must be
+authorised by the plan (authorise_firing = true) or by --yes; otherwise the command stops
+with exit code 2 before anything is created, started or fired. Progress goes to stderr as
+plain lines ("[3/8] s002-r1 CHARGE 1.20 bar"); at the end stdout names the run folder and the
+report (report/report.pdf and report/report.html in the run folder, written also when the
+campaign stopped early, from the shots done so far).
+
+Exit codes: 0 every planned shot done (analysed, analysis failed, or skipped); 2 bad input or
+configuration, or firing not authorised (nothing fired); 3 the campaign stopped with shots
+left: a shot aborted to the safe state, a FAULT, or shots that may have been fired without a
+record (UNKNOWN: decide them with `campaign decide`, then --resume); 130 Ctrl-C or SIGTERM
+(the current shot is aborted to the safe state first).
+
+status: the journal's summary (counts by state, shots needing a decision). It opens the
+journal, so it refuses while a campaign runs in that folder.
+decide: an operator's decision on an UNKNOWN shot: "retry" (fire it again) or "skip".
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from rig.cli import emit_json
+from rig.config import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, load_rig_config, load_sim_config
+from rig.errors import ConfigError
+
+DEFAULT_SIM_RIG_CONFIG = Path("config/rig-sim.toml")
+REPORT_FORMATS = ("pdf", "html")
+EXIT_INTERRUPTED = 130
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `campaign` sub-command and its own sub-commands."""
+    p = subparsers.add_parser("campaign", help="run a campaign plan (many shots), resumable",
+                              description="Campaigns: run a TOML plan of shots, see a run's state, decide "
+                                          "on shots that may have been fired without a record.")
+    sub = p.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
+
+    run = sub.add_parser("run", help="fire a plan's shots into a run folder (--resume continues one)",
+                         description="Fire the shots of PLAN.toml in order, journaled in a run folder; "
+                                     "--resume continues after a crash or kill with no shot lost or fired twice.")
+    run.add_argument("plan", type=Path, metavar="PLAN.toml", help="campaign plan (config/campaigns/example.toml)")
+    run.add_argument("--config", type=Path, help=f"rig TOML (default {DEFAULT_RIG_CONFIG}; with --sim "
+                                                 f"{DEFAULT_SIM_RIG_CONFIG})")
+    run.add_argument("--sim", action="store_true", help="run against an in-process simulated rig")
+    run.add_argument("--sim-config", type=Path, default=DEFAULT_SIM_CONFIG,
+                     help="simulator TOML for --sim (default %(default)s)")
+    run.add_argument("--sim-fault", action="append", default=[], metavar="NAME",
+                     help="inject a simulator fault (repeatable; `hopkinson sim --list-faults`)")
+    run.add_argument("--sim-fire-log", type=Path, metavar="PATH",
+                     help="with --sim: append one JSON line per simulated launch here (a witness for tests)")
+    run.add_argument("--yes", action="store_true", help="authorise firing (when the plan does not)")
+    run.add_argument("--out", type=Path, metavar="DIR",
+                     help="the run folder (default: runs/<plan name>-<UTC time>; with --resume the newest one)")
+    run.add_argument("--resume", action="store_true", help="continue the run folder --out (or the newest one)")
+    run.add_argument("--report", default="pdf,html", metavar="FORMATS",
+                     help="report formats written into the run folder's report/ (default %(default)s)")
+    run.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+    run.add_argument("--json", action="store_true", help="one JSON object on stdout at the end (the outcome)")
+    run.set_defaults(func=run_campaign_command)
+
+    status = sub.add_parser("status", help="the journal summary of a run folder")
+    status.add_argument("run_folder", type=Path, metavar="RUN_FOLDER")
+    status.add_argument("--json", action="store_true", help="the summary as one JSON object")
+    status.set_defaults(func=status_command)
+
+    decide = sub.add_parser("decide", help="retry or skip a shot that may have been fired without a record")
+    decide.add_argument("run_folder", type=Path, metavar="RUN_FOLDER")
+    decide.add_argument("shot_id", metavar="SHOT_ID")
+    decide.add_argument("decision", choices=("retry", "skip"))
+    decide.add_argument("--note", default="", help="why (kept in the journal)")
+    decide.set_defaults(func=decide_command)
+
+
+def report_formats(text: str) -> list[str]:
+    """"pdf,html" -> ["pdf", "html"]; ConfigError for an unknown format."""
+    formats = [f.strip().lower() for f in text.split(",") if f.strip()]
+    unknown = [f for f in formats if f not in REPORT_FORMATS]
+    if unknown or not formats:
+        raise ConfigError(f"--report: {text!r}: formats are {', '.join(REPORT_FORMATS)} (comma-separated)")
+    return formats
+
+
+def run_campaign_command(args: argparse.Namespace) -> int:
+    from rig.campaign import CampaignRunner, FireLog, attach_fire_log, check_authorisation, prepare_run
+    from rig.events import EventBus
+    from rig.instruments import open_instruments
+    from rig.plan import load_plan
+
+    if not args.sim and (args.sim_fault or args.sim_fire_log):
+        raise ConfigError("--sim-fault and --sim-fire-log need --sim")
+    formats = [] if args.no_report else report_formats(args.report)
+    config = load_rig_config(args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else DEFAULT_RIG_CONFIG))
+    plan = load_plan(args.plan)
+    check_authorisation(plan, args.yes)  # exit 2 before anything is created or fired
+    sim_config = load_sim_config(args.sim_config) if args.sim else None
+    fire_log = FireLog(args.sim_fire_log) if args.sim_fire_log else None
+    run, plan = prepare_run(args.plan, args.out, args.resume)
+
+    bus = EventBus()
+    printer = ProgressPrinter()
+    bus.subscribe(printer)
+    interrupted = threading.Event()
+    with contextlib.ExitStack() as stack:
+        truth = None
+        if sim_config is not None:
+            from rig.sim_session import sim_session
+
+            session = stack.enter_context(sim_session(config, sim_config, args.sim_fault))
+            config, truth = session.config, session.simulated_truth
+            if fire_log is not None:
+                attach_fire_log(session.world, fire_log)
+        instruments = stack.enter_context(open_instruments(config, truth))
+        runner = CampaignRunner(run, plan, instruments, config, bus,
+                                on_shot_start=fire_log.set_shot if fire_log is not None else None)
+        printer.runner = runner
+        with _signals_abort(runner, interrupted):
+            outcome = runner.run()
+
+    reports: list[str] = []
+    if formats:
+        reports = _write_report(run.path, formats)
+    if args.json:
+        emit_json({**outcome.to_dict(), "reports": reports})
+    else:
+        print(f"run folder: {run.path}", flush=True)
+        for path in reports:
+            print(f"report: {path}", flush=True)
+    if interrupted.is_set():
+        sys.stderr.write("hopkinson: error: interrupted; the current shot was aborted to the safe state\n")
+        return EXIT_INTERRUPTED
+    if outcome.exit_code != 0:
+        sys.stderr.write(f"hopkinson: error: {outcome.message}\n")
+    return outcome.exit_code
+
+
+def _write_report(run_folder: Path, formats: list[str]) -> list[str]:
+    """The run's report in each format; a failure is a warning (the shots are what matters)."""
+    from rig.report_data import write_run_report
+
+    try:
+        return [str(p) for p in write_run_report(run_folder, formats)]
+    except Exception as exc:  # noqa: BLE001 - any report failure: say so, keep the exit code
+        sys.stderr.write(f"hopkinson: warning: the report could not be written: {exc}\n")
+        return []
+
+
+class ProgressPrinter:
+    """Prints the campaign's progress on stderr as plain lines (works without a terminal).
+
+    "[3/8] s002-r1 CHARGE", "[3/8] s002-r1 CHARGE 1.20 bar", "[3/8] s002-r1 ANALYSED order 4, ...".
+    """
+
+    def __init__(self, stream: Any = None) -> None:
+        self.stream = stream
+        self.runner: Any = None
+
+    def __call__(self, event: Any) -> None:
+        stream = self.stream or sys.stderr
+        current = self.runner.current if self.runner is not None else None
+        prefix = current.prefix if current is not None else "campaign:"
+        line = None
+        if event.kind == "state":
+            line = f"{prefix} {event.state}"
+        elif event.kind == "progress":
+            data = event.data
+            if event.state == "CHARGE" and "reservoir_pressure_bar" in data:
+                line = f"{prefix} CHARGE {data['reservoir_pressure_bar']:.2f} bar"
+            elif event.state == "CAMPAIGN":
+                line = f"{prefix} START {event.message.split(': ', 1)[-1]}"
+            else:
+                line = f"{prefix} {event.state} {event.message}"
+        elif event.kind == "log":
+            line = f"{prefix} {event.message}" if event.state == "CAMPAIGN" else f"{prefix} {event.state}   {event.message}"
+        elif event.kind == "error":
+            line = f"{prefix} {event.state} ! {event.message}"
+        if line is not None:
+            stream.write(line + "\n")
+            stream.flush()
+
+
+@contextlib.contextmanager
+def _signals_abort(runner: Any, interrupted: threading.Event) -> Iterator[None]:
+    """While the campaign runs, Ctrl-C and SIGTERM abort the current shot (SAFE runs) and stop
+    the campaign; the command then exits 130. Only in the main thread (signal handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, _frame: object) -> None:
+        interrupted.set()
+        runner.abort(f"interrupted ({signal.Signals(signum).name})")
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def status_command(args: argparse.Namespace) -> int:
+    from rig.journal import Journal
+
+    with Journal.open(args.run_folder) as journal:
+        summary = journal.summary()
+    if args.json:
+        emit_json(summary)
+        return 0
+    counts = ", ".join(f"{k} {v}" for k, v in summary["by_state"].items() if v)
+    print(f"{summary['campaign_id']}: {summary['total']} shots: {counts}")
+    for shot in summary["shots"]:
+        extra = shot.get("error") or shot.get("reason") or ""
+        print(f"  {shot['id']:<10} {shot['state']:<16} fired {shot['fire_count']}x  {extra}".rstrip())
+    if summary["needs_decision"]:
+        print(f"needs an operator decision: {', '.join(summary['needs_decision'])} "
+              f"(hopkinson campaign decide {args.run_folder} SHOT_ID retry|skip)")
+    return 0
+
+
+def decide_command(args: argparse.Namespace) -> int:
+    from rig.journal import Journal
+
+    with Journal.open(args.run_folder) as journal:
+        status = journal.decide(args.shot_id, args.decision, args.note)
+    print(f"{status.shot.id}: {status.state.value} (decision: {args.decision})")
+    return 0
