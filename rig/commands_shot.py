@@ -155,7 +155,8 @@ def _make_out_dir(out: Path) -> None:
 def _print_event(event: Any) -> None:
     if event.kind in ("state", "progress", "log", "error"):
         marker = {"error": "! ", "log": "  "}.get(event.kind, "")
-        print(f"{event.state:<9} {marker}{event.message}", flush=True)
+        sys.stdout.write(f"{event.state:<9} {marker}{event.message}\n")  # one write: one whole line
+        sys.stdout.flush()
 
 
 def _prompt(request: Any, authorisation: Any, sequencer: Any) -> None:
@@ -172,17 +173,35 @@ def _prompt(request: Any, authorisation: Any, sequencer: Any) -> None:
 @contextlib.contextmanager
 def _ctrl_c_aborts(sequencer: Any, interrupted: threading.Event) -> Iterator[None]:
     """While the shot runs, Ctrl-C (SIGINT) asks the sequencer to abort instead of raising
-    KeyboardInterrupt at a random point; the caller raises it after SAFE has run."""
+    KeyboardInterrupt at a random point; the caller raises it after SAFE has run.
+
+    The handler only sets a flag: it runs in the main thread between two bytecodes, where
+    taking a lock the interrupted code holds would deadlock and printing would re-enter the
+    stream. A watcher thread turns the flag into `sequencer.abort(...)`.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    hit = [False]
+    done = threading.Event()
 
     def handler(_signum: int, _frame: object) -> None:
-        interrupted.set()
-        sequencer.abort("interrupted (Ctrl-C)")
+        hit[0] = True
+
+    def watch() -> None:
+        while not done.wait(0.02):
+            if hit[0]:
+                interrupted.set()
+                sequencer.abort("interrupted (Ctrl-C)")
 
     previous = signal.signal(signal.SIGINT, handler)
+    watcher = threading.Thread(target=watch, name="shot-ctrl-c", daemon=True)
+    watcher.start()
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        done.set()
+        watcher.join()
+        if hit[0]:
+            interrupted.set()

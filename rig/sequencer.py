@@ -251,13 +251,16 @@ class Sequencer:
         return self._last_report
 
     def abort(self, reason: str = "abort requested") -> None:
-        """Ask the running shot to stop and go SAFE (any thread; idempotent; no-op when idle)."""
+        """Ask the running shot to stop and go SAFE (any thread; idempotent; no-op when idle).
+
+        Only sets a flag: the sequencer's own thread notices it within a poll and publishes the
+        "error" event, so no subscriber is ever called from the aborting thread.
+        """
         with self._lock:
             if self._abort_event.is_set() or self._state in FINAL_STATES or self._state == State.IDLE:
                 return
             self._abort_reason = reason
             self._abort_event.set()
-        self.bus.emit("log", self._state, f"abort requested: {reason}", level="warning")
 
     def run_shot(self, request: ShotRequest, authorisation: FireAuthorisation) -> ShotOutcome:
         """Run one shot to its end (blocking). ShotRequestError for a request that cannot be

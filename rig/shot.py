@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from analysis.errors import AnalysisError
 from analysis.records import Record
 from drivers.digitizer import Waveform
 from rig.config import RigConfig
@@ -215,12 +214,13 @@ class AnalysisResult:
 
 
 def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> dict[str, Any]:
-    """Everything the analysis needs besides the two channels (constants of the rig and options)."""
+    """Everything the analysis needs besides the two channels: the rig's constants and the
+    request's options, keyed as analysis.shot_analysis.AnalysisParams (None = its default)."""
     a = config.analysis
     return {
         "grating_pitch_m": a.grating_pitch_m,
         "orders": tuple(a.orders),
-        "amplifier_gain": float(settings.get("amplifier_gain", config.amplifier.gain)),
+        "amp_gain": float(settings.get("amplifier_gain", config.amplifier.gain)),
         "sensitivity_v_per_m_s2": request.sensitivity(config),
         "sample_rate_hz": request.sample_rate_hz or a.sample_rate_hz,
         "max_order": request.max_order,
@@ -230,12 +230,13 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
 
 
 def analyse_raw(raw: RawShot, params: dict[str, Any]) -> AnalysisResult:
-    """ANALYSE (the computation only; pure, may run in a worker thread).
+    """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
+    analysis (analysis.shot_analysis) of the raw channels in volts."""
+    from analysis.shot_analysis import AnalysisParams, analyse_raw_shot  # heavy: loaded when needed
 
-    TEMPORARY stub until analysis/shot_analysis.py (analyse_raw_shot) lands: it raises, so the
-    pipeline records an analysis failure and keeps the shot.
-    """
-    raise AnalysisError("the shot analysis (analysis.shot_analysis) is not available in this build")
+    analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s,
+                                AnalysisParams.from_options(**params))
+    return AnalysisResult(analysis.to_dict(), analysis.record)
 
 
 def record_analysis(path: Path, outcome: AnalysisResult | None, error: str | None) -> None:

@@ -80,7 +80,7 @@ def test_complete_shot_stores_raw_before_analysis_and_ends_safe(rig) -> None:
     assert shot.meta.config["shot_settings"]["amplifier_gain"] == rig.config.amplifier.gain
     assert shot.meta.config["limits"]["max_pressure_bar"] == rig.config.limits.max_pressure_bar
     assert "SIMDIG" in shot.meta.instruments["digitizer"]
-    assert seen["params"]["amplifier_gain"] == rig.config.amplifier.gain
+    assert seen["params"]["amp_gain"] == rig.config.amplifier.gain
     assert seen["params"]["sensitivity_v_per_m_s2"] == rig.config.analysis.sensitivity_v_per_m_s2
 
     # Events: readings with the agreed keys, a result event with the file and the results.

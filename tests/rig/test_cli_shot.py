@@ -1,0 +1,178 @@
+"""`hopkinson shot --sim`: exit codes, the one-line messages, the simulator's final state file,
+confirmation (--yes, a terminal prompt, none), and Ctrl-C deferred until SAFE has run."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rig.cli import main
+from rig.shotfile import read_shot
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def configs(tmp_path: Path) -> dict[str, Path]:
+    """A rig config with short timeouts and a simulator 100x (and 10x) faster than real time."""
+    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    short = {"evacuate_s": 2.0, "charge_s": 3.0, "arm_s": 1.0, "capture_s": 2.0, "safe_s": 3.0}
+    for key, value in short.items():
+        text, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+        assert n == 1, key
+    rig = tmp_path / "rig.toml"
+    rig.write_text(text, encoding="utf-8")
+    fast, slow = tmp_path / "sim-fast.toml", tmp_path / "sim-10x.toml"
+    fast.write_text("[world]\ntime_scale = 100.0\n", encoding="utf-8")
+    slow.write_text("[world]\ntime_scale = 10.0\n", encoding="utf-8")
+    return {"rig": rig, "sim": fast, "sim10": slow, "out": tmp_path / "shots", "state": tmp_path / "state.json"}
+
+
+def _args(c: dict[str, Path], *extra: str, sim: str = "sim") -> list[str]:
+    return ["shot", "--sim", "--config", str(c["rig"]), "--sim-config", str(c[sim]), "--out", str(c["out"]),
+            "--pressure-bar", "1.0", "--sim-state-file", str(c["state"]), *extra]
+
+
+def _state(c: dict[str, Path]) -> dict:
+    return json.loads(c["state"].read_text(encoding="utf-8"))
+
+
+def _assert_safe(state: dict) -> None:
+    assert state["fire_valve_open"] is False and state["fill_valve_open"] is False
+    assert state["vent_valve_open"] is True and state["reservoir_pressure_bar"] <= 0.05
+
+
+def test_shot_with_yes_fires_stores_and_reports_json(configs, capsys) -> None:
+    rc = main(_args(configs, "--yes", "--json", "--shot-name", "s1", "--operator", "ann",
+                    "--accelerometer-model", "M1", "--accelerometer-serial", "SN9"))
+    out, err = capsys.readouterr()
+    assert rc == 0
+    result = json.loads(out)
+    assert result["final_state"] == "DONE" and result["exit_code"] == 0 and result["fired"] is True
+    assert result["shot_path"] == str(configs["out"] / "s1.h5")
+    shot = read_shot(result["shot_path"])
+    assert (shot.meta.operator, shot.meta.accelerometer_model, shot.meta.accelerometer_serial) == ("ann", "M1", "SN9")
+    assert shot.meta.simulated_truth["shot_number"] == 1
+    state = _state(configs)
+    _assert_safe(state)
+    assert state["shots_fired"] == 1 and result["sim_state"]["shots_fired"] == 1
+    if result["analysis_error"] is not None:  # recorded, and said on stderr, but still exit 0
+        assert shot.state == "analysis_failed"
+        assert err.startswith("hopkinson: warning: the shot is recorded but its analysis failed")
+    else:
+        assert shot.state == "analysed" and result["results"] == shot.results
+
+
+def test_without_yes_it_runs_to_arm_goes_safe_and_exits_3(configs, capsys) -> None:
+    rc = main(_args(configs))
+    out, err = capsys.readouterr()
+    assert rc == 3
+    assert err.count("\n") == 1
+    assert err.startswith("hopkinson: error: shot aborted in ARM: operator: shot not confirmed")
+    assert "rig safe" in err
+    lines = [line.split()[0] for line in out.splitlines()]
+    assert "ARM" in lines and "FIRE" not in lines and lines[-1] == "ABORTED"
+    state = _state(configs)
+    assert state["shots_fired"] == 0 and state["fire_refusals"] == []
+    _assert_safe(state)
+    assert not list(configs["out"].iterdir())
+
+
+@pytest.mark.parametrize("fault, where, reason", [
+    ("door-open", "CHECK: valve controller", "interlock lost: door/guard open"),
+    ("no-trigger", "CAPTURE: digitizer", "the shot was fired but nothing was recorded"),
+])
+def test_sim_fault_aborts_with_one_line_and_the_state_file_is_safe(configs, capsys, fault, where, reason) -> None:
+    rc = main(_args(configs, "--yes", "--sim-fault", fault))
+    _, err = capsys.readouterr()
+    assert rc == 3 and err.count("\n") == 1
+    assert err.startswith(f"hopkinson: error: shot aborted in {where}") and reason in err
+    state = _state(configs)
+    _assert_safe(state)
+    assert state["faults"] == [fault]
+    assert state["shots_fired"] == (1 if fault == "no-trigger" else 0)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (("--pressure-bar", "50"), "pressure_bar: 50 bar is outside the rig's limits"),
+    (("--sim-fault", "gremlins"), "unknown simulator fault 'gremlins'"),
+    (("--max-order", "0"), "max_order"),
+])
+def test_bad_input_exits_2_with_one_line(configs, capsys, extra, message) -> None:
+    rc = main(_args(configs, "--yes", *extra))
+    out, err = capsys.readouterr()
+    assert rc == 2 and err.count("\n") == 1 and message in err and "Traceback" not in err
+    assert not configs["state"].exists()  # nothing was started
+
+
+def test_sim_options_need_sim_and_config_must_exist(configs, capsys, tmp_path) -> None:
+    assert main(["shot", "--config", str(configs["rig"]), "--sim-fault", "estop"]) == 2
+    assert "need --sim" in capsys.readouterr().err
+    assert main(["shot", "--sim", "--config", str(tmp_path / "nope.toml"), "--yes"]) == 2
+    assert "nope.toml: no such file" in capsys.readouterr().err
+
+
+# -- real processes: Ctrl-C and the terminal prompt ---------------------------------------------------
+def _read_until(stream, needle: str, proc: subprocess.Popen, timeout_s: float = 60.0) -> str:
+    """Lines of `stream` up to one containing `needle` (fails if the process ends first)."""
+    seen = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([stream], [], [], 0.5)
+        if not ready:
+            continue
+        line = stream.readline()
+        if not line:
+            break
+        seen.append(line)
+        if needle in line:
+            return "".join(seen)
+    proc.kill()
+    raise AssertionError(f"{needle!r} never came; got {''.join(seen)!r}")
+
+
+def test_ctrl_c_during_charge_goes_safe_then_exits_130(configs) -> None:
+    args = _args(configs, "--yes", sim="sim10")
+    args[args.index("1.0")] = "6.0"  # 6 bar take ~1.2 s to charge at 10x: time to press Ctrl-C
+    proc = subprocess.Popen([sys.executable, "-m", "rig.cli", *args], cwd=REPO, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    head = _read_until(proc.stdout, "CHARGE", proc)
+    proc.send_signal(signal.SIGINT)
+    rest, err = proc.communicate(timeout=60)
+    out = head + rest
+    assert proc.returncode == 130, (out, err)
+    assert err.strip() == "hopkinson: error: interrupted"
+    states = [line.split()[0] for line in out.splitlines()]
+    assert states.index("SAFE") > states.index("CHARGE") and "FIRE" not in states
+    assert "rig safe" in out and "aborted: interrupted (Ctrl-C)" in out
+    state = _state(configs)
+    _assert_safe(state)
+    assert state["shots_fired"] == 0
+
+
+def test_yes_typed_at_the_terminal_prompt_fires(configs) -> None:
+    master, slave = os.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "rig.cli", *_args(configs)], cwd=REPO, text=True,
+                            stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    os.close(slave)
+    try:
+        _read_until(proc.stdout, "waiting for the fire confirmation", proc)
+        os.write(master, b"yes\n")
+        out, err = proc.communicate(timeout=60)
+    finally:
+        os.close(master)
+    assert proc.returncode == 0, (out, err)
+    assert "Type yes to FIRE" in err
+    assert "fire confirmed" in out and "DONE" in out
+    state = _state(configs)
+    assert state["shots_fired"] == 1
+    _assert_safe(state)
