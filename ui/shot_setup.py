@@ -1,0 +1,184 @@
+"""Shot set-up: accelerometer, operator, pressure, projectile, analysis options and where the
+shot file goes; remembered between runs (QSettings, group "shot").
+
+`ShotSetup.request(confirm_timeout_s)` turns the form into a rig.shot.ShotRequest; the
+sequencer checks it again (`ShotRequest.check`) before anything moves.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import QSettings
+from PySide6.QtWidgets import (
+    QComboBox,
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QHBoxLayout,
+    QLineEdit,
+    QPushButton,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+from rig.config import RigConfig
+from rig.shot import ShotRequest
+from ui.widgets import section_title
+
+MICRO = 1e-6
+DEFAULT_MAX_ORDER = 12
+
+
+class ShotSetup(QWidget):
+    """The set-up form (module docstring)."""
+
+    def __init__(self, config: RigConfig, out_dir: Path, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        limits, analysis = config.limits, config.analysis
+        self.operator = QLineEdit()
+        self.operator.setPlaceholderText("name or initials")
+        self.accelerometer_model = QLineEdit()
+        self.accelerometer_model.setPlaceholderText("e.g. AYZ-3")
+        self.accelerometer_serial = QLineEdit()
+        self.accelerometer_serial.setPlaceholderText("serial number")
+        self.sensitivity = QDoubleSpinBox()
+        self.sensitivity.setDecimals(4)
+        self.sensitivity.setRange(1e-4, 1e6)
+        self.sensitivity.setSuffix(" µV/(m/s²)")
+        self.sensitivity.setValue(analysis.sensitivity_v_per_m_s2 / MICRO)
+        self.pressure = QDoubleSpinBox()
+        self.pressure.setDecimals(2)
+        self.pressure.setRange(limits.min_pressure_bar, limits.max_pressure_bar)
+        self.pressure.setSingleStep(0.1)
+        self.pressure.setSuffix(" bar")
+        self.pressure.setValue(min(max(2.0, limits.min_pressure_bar), limits.max_pressure_bar))
+        self.projectile = QComboBox()
+        for n in (1, 2, 3):
+            self.projectile.addItem(f"No. {n}", n)
+        self.projectile.setCurrentIndex(2)
+        self.max_order = QSpinBox()
+        self.max_order.setRange(1, 40)
+        self.max_order.setValue(DEFAULT_MAX_ORDER)
+        self.sample_rate = QDoubleSpinBox()
+        self.sample_rate.setDecimals(0)
+        self.sample_rate.setRange(10, 10_000)
+        self.sample_rate.setSuffix(" kS/s")
+        self.sample_rate.setValue(analysis.sample_rate_hz / 1e3)
+        self.dcm_ratio = QDoubleSpinBox()
+        self.dcm_ratio.setDecimals(2)
+        self.dcm_ratio.setRange(0.0, 100.0)
+        self.dcm_ratio.setSingleStep(0.5)
+        self.dcm_ratio.setSpecialValueText("auto")  # 0 = chosen by the analysis
+        self.dcm_ratio.setValue(0.0)
+        self.dcm_damping = QDoubleSpinBox()
+        self.dcm_damping.setDecimals(3)
+        self.dcm_damping.setRange(0.01, 1.0)
+        self.dcm_damping.setSingleStep(0.05)
+        self.dcm_damping.setValue(0.707)
+        self.out_dir = QLineEdit(str(out_dir))
+        browse = QPushButton("…")
+        browse.setFixedWidth(28)
+        browse.setToolTip("choose the folder for shot files")
+        browse.clicked.connect(self._browse)
+        out_row = QHBoxLayout()
+        out_row.setContentsMargins(0, 0, 0, 0)
+        out_row.addWidget(self.out_dir, 1)
+        out_row.addWidget(browse)
+
+        for spin in (self.sensitivity, self.pressure, self.sample_rate, self.dcm_ratio, self.dcm_damping,
+                     self.max_order):
+            spin.setKeyboardTracking(False)
+
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(8, 4, 8, 4)
+        layout.setSpacing(2)
+        layout.addWidget(section_title("Shot set-up"))
+        form = QFormLayout()
+        form.setVerticalSpacing(3)
+        form.addRow("Operator", self.operator)
+        form.addRow("Accelerometer", self.accelerometer_model)
+        form.addRow("Serial No.", self.accelerometer_serial)
+        form.addRow("Sensitivity", self.sensitivity)
+        form.addRow("Pressure", self.pressure)
+        form.addRow("Projectile", self.projectile)
+        form.addRow("Max. order", self.max_order)
+        form.addRow("Analysis rate", self.sample_rate)
+        form.addRow("DCM ratio r", self.dcm_ratio)
+        form.addRow("DCM damping ζₑ", self.dcm_damping)
+        form.addRow("Shot folder", out_row)
+        layout.addLayout(form)
+
+    # -- the request ---------------------------------------------------------------------------
+    def request(self, confirm_timeout_s: float) -> ShotRequest:
+        """The form as a ShotRequest (ShotRequest.check validates it)."""
+        ratio = self.dcm_ratio.value()
+        return ShotRequest(
+            pressure_bar=round(self.pressure.value(), 6),
+            projectile=int(self.projectile.currentData()),
+            operator=self.operator.text().strip(),
+            accelerometer_model=self.accelerometer_model.text().strip(),
+            accelerometer_serial=self.accelerometer_serial.text().strip(),
+            sensitivity_v_per_m_s2=self.sensitivity.value() * MICRO,
+            max_order=self.max_order.value(),
+            sample_rate_hz=self.sample_rate.value() * 1e3,
+            dcm_ratio=ratio if ratio > 0 else None,
+            dcm_damping=self.dcm_damping.value(),
+            out_dir=Path(self.out_dir.text().strip() or "."),
+            confirm_timeout_s=confirm_timeout_s,
+        )
+
+    def set_enabled_for_shot(self, idle: bool) -> None:
+        """The form is read-only while a shot runs."""
+        for child in self.findChildren(QWidget):
+            if child is not self:
+                child.setEnabled(idle)
+
+    # -- remembered between runs ------------------------------------------------------------------
+    def save(self, settings: QSettings) -> None:
+        settings.beginGroup("shot")
+        try:
+            for key, edit in self._texts().items():
+                settings.setValue(key, edit.text())
+            for key, spin in self._numbers().items():
+                settings.setValue(key, float(spin.value()))
+            settings.setValue("projectile", int(self.projectile.currentData()))
+        finally:
+            settings.endGroup()
+        settings.sync()
+
+    def load(self, settings: QSettings) -> None:
+        settings.beginGroup("shot")
+        try:
+            for key, edit in self._texts().items():
+                value = settings.value(key)
+                if value is not None:
+                    edit.setText(str(value))
+            for key, spin in self._numbers().items():
+                value = settings.value(key)
+                try:
+                    if value is not None:
+                        spin.setValue(type(spin.value())(float(value)))
+                except (TypeError, ValueError):
+                    pass  # a damaged setting keeps the default
+            projectile = settings.value("projectile")
+            index = self.projectile.findData(int(projectile)) if str(projectile or "").isdigit() else -1
+            if index >= 0:
+                self.projectile.setCurrentIndex(index)
+        finally:
+            settings.endGroup()
+
+    def _texts(self) -> dict[str, QLineEdit]:
+        return {"operator": self.operator, "accelerometer_model": self.accelerometer_model,
+                "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir}
+
+    def _numbers(self) -> dict[str, QDoubleSpinBox | QSpinBox]:
+        return {"sensitivity_uv_per_m_s2": self.sensitivity, "pressure_bar": self.pressure,
+                "max_order": self.max_order, "sample_rate_khz": self.sample_rate,
+                "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping}
+
+    def _browse(self) -> None:
+        folder = QFileDialog.getExistingDirectory(self, "Folder for shot files", self.out_dir.text())
+        if folder:
+            self.out_dir.setText(folder)

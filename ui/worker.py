@@ -1,0 +1,427 @@
+"""The panel's link to the rig, off the GUI thread.
+
+Threads. Every instrument call runs on ONE rig I/O thread (the drivers are not thread-safe):
+connecting, the idle readings (~2 Hz, driven by a QTimer in the GUI thread that only *submits*
+work) and the shot itself (`Sequencer.run_shot`, blocking until DONE/ABORTED/FAULT). While a
+shot runs, the idle poll is skipped: the sequencer publishes its own "reading" events.
+`abort()` is the one call made from the GUI thread straight into the rig layer
+(`Sequencer.abort` is thread-safe). Nothing here touches a widget.
+
+Events. The sequencer publishes RigEvents on an EventBus in the I/O thread; `RigLink.event`
+(a Qt signal) carries them to the GUI thread: a signal emitted in another thread reaches a
+receiver living in the GUI thread through Qt's queued connection. The other signals
+(`links_changed`, `shot_finished`, `message`) work the same way.
+
+ABORT always reaches the safe state:
+- a shot is running (or about to start): `Sequencer.abort`, and the request is remembered so
+  an abort pressed before the sequencer left IDLE is re-sent at its first state change;
+- no shot is running: the valves are commanded safe (fire and fill closed, vent open, pump
+  off) and read back, on the I/O thread.
+
+`Background` runs pure computations (loading a shot file, preparing plot data) on a
+separate worker thread and hands the result to a callback in the GUI thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from typing import Any
+
+from PySide6.QtCore import QObject, QTimer, Signal, Slot
+
+from drivers.errors import InstrumentConnectionError, InstrumentError
+from rig.config import RigConfig
+from rig.events import EventBus, RigEvent
+from rig.instruments import Instruments, make_instruments
+from rig.interlocks import REQUIRED, evaluate, read_readings
+from rig.sequencer import FINAL_STATES, FireAuthorisation, Sequencer, State
+from rig.shot import ShotOutcome, ShotRequest
+
+_log = logging.getLogger(__name__)
+
+POLL_INTERVAL_MS = 500  # idle readings at ~2 Hz
+RECONNECT_INTERVAL_S = 3.0  # a missing instrument is tried again at most this often
+DIGITIZER_CHECK_INTERVAL_S = 2.0  # the idle digitizer is asked for its state this often
+
+INSTRUMENT_KEYS = ("valve_controller", "digitizer", "amplifier")
+INSTRUMENT_LABELS = {
+    "valve_controller": "Valve / vacuum controller",
+    "digitizer": "Digitizer",
+    "amplifier": "Bridge amplifier",
+}
+
+
+@dataclass(frozen=True)
+class InstrumentLink:
+    """What the panel knows about one instrument's connection.
+
+    status: "connected" (answering), "error" (connected, but its last command failed),
+    "disconnected" (not reachable), "unknown" (not tried yet).
+    """
+
+    key: str
+    address: str
+    status: str = "unknown"
+    identity: str = ""
+    problem: str = ""
+
+    @property
+    def label(self) -> str:
+        return INSTRUMENT_LABELS[self.key]
+
+    @property
+    def usable(self) -> bool:
+        return self.status in ("connected", "error")
+
+
+class RigLink(QObject):
+    """Connection, idle readings and shots of one rig, for the panel (module docstring).
+
+    config: the rig configuration; simulated_truth: the simulator's truth getter (simulation).
+    """
+
+    event = Signal(object)  # RigEvent, in the GUI thread
+    links_changed = Signal(object)  # dict[str, InstrumentLink]
+    shot_finished = Signal(object)  # ShotOutcome
+    shot_failed = Signal(str)  # a shot that could not start or crashed: one line
+    campaign_finished = Signal(object)  # rig.campaign.CampaignOutcome
+    campaign_failed = Signal(str)  # a campaign that could not start or crashed: one line
+    message = Signal(str, str)  # level ("info" | "warning" | "error"), text
+    safe_done = Signal(bool, str)  # idle ABORT: confirmed?, what was done
+
+    def __init__(self, config: RigConfig,
+                 simulated_truth: Callable[[], dict[str, Any] | None] | None = None,
+                 parent: QObject | None = None, poll_interval_ms: int = POLL_INTERVAL_MS) -> None:
+        super().__init__(parent)
+        self.config = config
+        self.bus = EventBus()
+        self.instruments: Instruments = make_instruments(config)
+        self.instruments.simulated_truth = simulated_truth
+        self.sequencer = Sequencer(self.instruments, config, self.bus)
+        self._unsubscribe = self.bus.subscribe(self._on_bus_event)
+        self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rig-io")
+        self._lock = threading.Lock()
+        self._links = {
+            "valve_controller": InstrumentLink("valve_controller", f"Modbus TCP {config.valve_controller.host}:"
+                                                                   f"{config.valve_controller.port}"),
+            "digitizer": InstrumentLink("digitizer", config.digitizer.resource),
+            "amplifier": InstrumentLink("amplifier", f"serial {config.amplifier.port}"),
+        }
+        self._last_try = dict.fromkeys(INSTRUMENT_KEYS, -1e9)
+        self._last_digitizer_check = -1e9
+        self._poll_future: Future[None] | None = None
+        self._shot_future: Future[None] | None = None  # a shot or a campaign
+        self._active_sequencer: Sequencer = self.sequencer
+        self.campaign_runner: Any = None  # rig.campaign.CampaignRunner while a campaign runs
+        self._abort_requested = threading.Event()
+        self._abort_reason = ""
+        self._closed = False
+        self._timer = QTimer(self)
+        self._timer.setInterval(poll_interval_ms)
+        self._timer.timeout.connect(self.poll)
+
+    # -- public (GUI thread) ----------------------------------------------------------------
+    def start(self) -> None:
+        """Connect the instruments and start the idle readings."""
+        self.poll()
+        self._timer.start()
+
+    @property
+    def links(self) -> dict[str, InstrumentLink]:
+        with self._lock:
+            return dict(self._links)
+
+    @property
+    def all_connected(self) -> bool:
+        return all(link.usable for link in self.links.values())
+
+    @property
+    def shot_running(self) -> bool:
+        """A shot, or a campaign of shots, is running on the I/O thread."""
+        future = self._shot_future
+        return future is not None and not future.done()
+
+    @property
+    def campaign_running(self) -> bool:
+        return self.shot_running and self.campaign_runner is not None
+
+    @Slot()
+    def poll(self) -> None:
+        """Submit one idle poll (connect what is missing, read the gauges) unless one is pending
+        or a shot runs."""
+        if self._closed or self.shot_running:
+            return
+        if self._poll_future is not None and not self._poll_future.done():
+            return
+        self._poll_future = self._io.submit(self._guarded, self._poll_task)
+
+    def start_shot(self, request: ShotRequest) -> FireAuthorisation:
+        """Run `request` on the I/O thread; returns the authorisation FIRE gives.
+
+        Shots and campaigns queue on the one I/O thread: they never overlap (the panel
+        disables ARM while one runs).
+        """
+        authorisation = FireAuthorisation()
+        self._abort_requested.clear()
+        self._abort_reason = ""
+        self._active_sequencer = self.sequencer
+        self._shot_future = self._io.submit(self._guarded, lambda: self._shot_task(request, authorisation))
+        return authorisation
+
+    def start_campaign(self, run: Any, plan: Any) -> None:
+        """Run a campaign (rig.campaign.CampaignRunner on `run`, a RunFolder, and `plan`) on the
+        I/O thread; `campaign_finished` or `campaign_failed` tells how it ended. Firing must
+        have been authorised by the caller (rig.campaign.check_authorisation)."""
+        from rig.campaign import CampaignRunner
+
+        self._abort_requested.clear()
+        self._abort_reason = ""
+        runner = CampaignRunner(run, plan, self.instruments, self.config, self.bus)
+        self.campaign_runner = runner
+        self._active_sequencer = runner.sequencer
+        self._shot_future = self._io.submit(self._guarded, lambda: self._campaign_task(runner))
+
+    def pause_campaign(self) -> None:
+        """Stop the campaign after the shot now running (resume later)."""
+        runner = self.campaign_runner
+        if runner is not None:
+            runner.stop_after_shot("paused by the operator")
+
+    def abort(self, reason: str = "ABORT pressed on the panel") -> None:
+        """Stop the running shot and go SAFE; with no shot running, command the valves safe."""
+        if self.shot_running:
+            self._abort_reason = reason
+            self._abort_requested.set()
+            runner = self.campaign_runner
+            if runner is not None:
+                runner.abort(reason)  # aborts its shot and stops the campaign
+            else:
+                self._active_sequencer.abort(reason)  # thread-safe; before CHECK a no-op: re-sent below
+            return
+        self._io.submit(self._guarded, self._make_safe_task)
+
+    def shutdown(self, timeout_s: float = 30.0) -> None:
+        """Abort a running shot, wait for SAFE, close the instruments (GUI thread; blocks)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._timer.stop()
+        if self.shot_running:
+            self.abort("the panel is closing")
+        future = self._io.submit(self.instruments.close)
+        deadline = time.monotonic() + timeout_s
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        self._unsubscribe()
+        self._io.shutdown(wait=False, cancel_futures=True)
+
+    # -- I/O thread -----------------------------------------------------------------------------
+    def _guarded(self, task: Callable[[], None]) -> None:
+        """Run a task; a bug becomes a message on the panel, never a silent dead thread."""
+        try:
+            task()
+        except Exception as exc:  # a bug, not an instrument error: show it, keep the panel alive
+            _log.exception("rig I/O task failed")
+            self.message.emit("error", f"internal error in the rig link: {type(exc).__name__}: {exc} "
+                                       f"({traceback.format_exc(limit=1).strip().splitlines()[-1]})")
+
+    def _on_bus_event(self, event: RigEvent) -> None:
+        """Bus subscriber (sequencer's thread): re-send an early abort, forward to the GUI."""
+        if event.kind == "state" and self._abort_requested.is_set() and event.state not in (
+                State.SAFE, State.STORE, State.ANALYSE, *FINAL_STATES):
+            self._active_sequencer.abort(self._abort_reason or "ABORT pressed on the panel")
+        self.event.emit(event)
+
+    def _set_link(self, key: str, **changes: Any) -> None:
+        with self._lock:
+            old = self._links[key]
+            new = replace(old, **changes)
+            self._links[key] = new
+            links = dict(self._links)
+        if new != old:
+            self.links_changed.emit(links)
+
+    def _device(self, key: str) -> Any:
+        return {"valve_controller": self.instruments.valves, "digitizer": self.instruments.digitizer,
+                "amplifier": self.instruments.amplifier}[key]
+
+    def _key_of(self, exc: InstrumentError) -> str | None:
+        names = {self.instruments.valves.name: "valve_controller",
+                 self.instruments.digitizer.instrument: "digitizer",
+                 self.instruments.amplifier.name: "amplifier"}
+        return names.get(exc.instrument)
+
+    def _instrument_failed(self, exc: InstrumentError) -> None:
+        key = self._key_of(exc)
+        if key is None:
+            self.message.emit("error", str(exc))
+            return
+        was = self.links[key].status
+        if isinstance(exc, InstrumentConnectionError):
+            self._set_link(key, status="disconnected", problem=exc.problem)
+            if key != "valve_controller":  # the Modbus driver reconnects on its next request
+                self._device(key).close()
+            self._last_try[key] = time.monotonic()
+        else:
+            self._set_link(key, status="error", problem=f"{exc.command!r}: {exc.problem}")
+        if was != self.links[key].status or was == "connected":
+            self.message.emit("warning" if key != "valve_controller" else "error", str(exc))
+
+    def _connect(self, key: str) -> None:
+        device = self._device(key)
+        self._last_try[key] = time.monotonic()
+        try:
+            device.connect()
+        except InstrumentError as exc:
+            device.close()
+            status_before = self.links[key].status
+            self._set_link(key, status="disconnected", problem=exc.problem)
+            if status_before != "disconnected":
+                self.message.emit("warning", f"{INSTRUMENT_LABELS[key]} not connected: {exc}")
+            return
+        try:
+            identity = device.identity()
+        except InstrumentError as exc:  # identification is optional (e.g. Modbus device id)
+            identity = f"(no identification: {exc.problem})"
+        self._set_link(key, status="connected", identity=identity, problem="")
+        self.message.emit("info", f"{INSTRUMENT_LABELS[key]} connected: {identity}")
+
+    def _poll_task(self) -> None:
+        now = time.monotonic()
+        for key in INSTRUMENT_KEYS:
+            if not self.links[key].usable and now - self._last_try[key] >= RECONNECT_INTERVAL_S:
+                self._connect(key)
+        links = self.links
+        amp_ok = links["amplifier"].usable
+        if links["valve_controller"].usable:
+            try:
+                readings = read_readings(self.instruments, amplifier=amp_ok, digitizer=False)
+            except InstrumentError as exc:
+                self._instrument_failed(exc)
+            else:
+                for key in ("valve_controller", "amplifier") if amp_ok else ("valve_controller",):
+                    if self.links[key].status == "error":
+                        self._set_link(key, status="connected", problem="")
+                required = [n for n in REQUIRED["ARM"] if n != "digitizer" and (amp_ok or n != "amplifier")]
+                report = evaluate(readings, self.config.limits, required)
+                self.bus.emit("reading", self.sequencer.state, "readings", idle=True, **report.event_data())
+        if links["digitizer"].usable and now - self._last_digitizer_check >= DIGITIZER_CHECK_INTERVAL_S:
+            self._last_digitizer_check = now
+            try:
+                self.instruments.digitizer.acquisition_state()
+            except InstrumentError as exc:
+                self._instrument_failed(exc)
+            else:
+                if self.links["digitizer"].status == "error":
+                    self._set_link("digitizer", status="connected", problem="")
+
+    def _shot_task(self, request: ShotRequest, authorisation: FireAuthorisation) -> None:
+        missing = [INSTRUMENT_LABELS[k] for k, link in self.links.items() if not link.usable]
+        if missing:
+            self.shot_failed.emit(f"cannot start the shot: not connected: {', '.join(missing)}")
+            return
+        if self._abort_requested.is_set():
+            self.shot_failed.emit("shot not started: ABORT pressed")
+            return
+        try:
+            outcome: ShotOutcome = self.sequencer.run_shot(request, authorisation)
+        except Exception as exc:  # ShotRequestError (bad request) or a bug: one line for the operator
+            self._after_shot()
+            self.shot_failed.emit(str(exc) if str(exc) else type(exc).__name__)
+            return
+        self._after_shot()
+        self.shot_finished.emit(outcome)
+
+    def _campaign_task(self, runner: Any) -> None:
+        missing = [INSTRUMENT_LABELS[k] for k, link in self.links.items() if not link.usable]
+        outcome, failure = None, None
+        if missing:
+            failure = f"cannot start the campaign: not connected: {', '.join(missing)}"
+        else:
+            try:
+                outcome = runner.run()
+            except Exception as exc:  # a journal or plan problem (ConfigError) or a bug: one line
+                failure = str(exc) if str(exc) else type(exc).__name__
+        if self.campaign_runner is runner:
+            self.campaign_runner = None
+            self._active_sequencer = self.sequencer
+        self._after_shot()
+        if failure is not None:
+            self.campaign_failed.emit(failure)
+        else:
+            self.campaign_finished.emit(outcome)
+
+    def _after_shot(self) -> None:
+        """The sequencer may have closed the digitizer's session after a failure: re-check it."""
+        if not self.instruments.digitizer.connected:
+            self._set_link("digitizer", status="disconnected", problem="session closed after the shot")
+            self._last_try["digitizer"] = -1e9
+
+    def _make_safe_task(self) -> None:
+        """Idle ABORT: fire and fill closed, vent open, pump off; read back."""
+        valves = self.instruments.valves
+        try:
+            valves.set_fire_valve(False)
+            valves.set_fill_valve(False)
+            valves.set_vent_valve(True)
+            valves.set_vacuum_pump(False)
+            coils = valves.valves()
+        except InstrumentError as exc:
+            self._instrument_failed(exc)
+            self.safe_done.emit(False, f"SAFE NOT CONFIRMED: {exc}; check the rig by hand")
+            return
+        ok = not coils.fire_valve and not coils.fill_valve and coils.vent_valve and not coils.vacuum_pump
+        text = ("rig safe: fire and fill valves closed, vent open, pump off" if ok else
+                f"SAFE NOT CONFIRMED: the valves read back {coils}; check the rig by hand")
+        self.safe_done.emit(ok, text)
+
+
+class Background(QObject):
+    """Run a function on a worker thread; its result (or error) reaches a GUI-thread callback.
+
+        background.run(load, on_done=show, on_error=report)
+    """
+
+    _finished = Signal(object)
+
+    def __init__(self, parent: QObject | None = None, workers: int = 1) -> None:
+        super().__init__(parent)
+        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="panel-worker")
+        self._finished.connect(self._deliver)
+        self._pending = 0
+
+    @property
+    def busy(self) -> bool:
+        return self._pending > 0
+
+    def run(self, fn: Callable[[], Any], on_done: Callable[[Any], None],
+            on_error: Callable[[BaseException], None] | None = None) -> None:
+        self._pending += 1
+
+        def task() -> None:
+            try:
+                result, error = fn(), None
+            except Exception as exc:
+                _log.exception("background task failed")
+                result, error = None, exc
+            self._finished.emit((on_done, on_error, result, error))
+
+        self._pool.submit(task)
+
+    @Slot(object)
+    def _deliver(self, item: tuple[Any, Any, Any, BaseException | None]) -> None:
+        self._pending -= 1
+        on_done, on_error, result, error = item
+        if error is None:
+            on_done(result)
+        elif on_error is not None:
+            on_error(error)
+
+    def shutdown(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
