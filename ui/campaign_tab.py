@@ -1,0 +1,416 @@
+"""The Campaign tab: load a plan (or open a run folder), run, pause, resume, abort; a table of
+the shots with their journal state and results, and the campaign's progress.
+
+The campaign runs through rig.campaign (the same runner as `hopkinson campaign run`) on the
+panel's rig I/O thread (ui.worker.RigLink.start_campaign), journaled in the run folder:
+- Run: a new run folder under the runs folder (rig.campaign.prepare_run);
+- Pause: the runner stops after the shot now running (nothing is cut short);
+- Resume: the same run folder again (the journal's resume rules: no shot lost or fired twice);
+- Abort: the shot now running is aborted (the sequencer makes the rig safe) and the campaign stops.
+Firing needs the plan's `authorise_firing = true` or the operator's explicit confirmation
+(`confirm_campaign`, a dialog; tests replace it), exactly as `--yes` on the command line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QFileDialog,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QMessageBox,
+    QProgressBar,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from rig.campaign import CAMPAIGN_STATE, check_authorisation, prepare_run
+from rig.errors import ConfigError
+from rig.events import RigEvent
+from rig.journal import DONE_STATES, Journal
+from rig.plan import CampaignPlan, load_plan
+from rig.run_folder import RunFolder, open_run_folder
+from ui.plots import KILO, summary_of
+from ui.widgets import section_title
+from ui.worker import Background, RigLink
+
+COLUMNS = ("#", "Shot", "Pressure", "Proj.", "State", "Order", "f_n", "ζ", "FBSD ±5 %", "FBSD ±10 %",
+           "Shock sens.", "Shot file")
+_STATE_COLOURS = {"ANALYSED": "#1e6b2e", "ANALYSIS_FAILED": "#8a5a00", "ABORTED": "#b3261e", "UNKNOWN": "#b3261e",
+                  "SKIPPED": "#5f6368", "FIRING": "#1f6fd1", "RECORDED": "#1f6fd1"}
+
+
+class CampaignTab(QWidget):
+    """See the module docstring. `started`/`ended` tell the window the rig is busy/free."""
+
+    started = Signal()
+    ended = Signal()
+
+    def __init__(self, link: RigLink, background: Background, runs_dir: Path,
+                 parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.link = link
+        self.background = background
+        self.plan: CampaignPlan | None = None
+        self.plan_path: Path | None = None
+        self.run_folder: RunFolder | None = None
+        self.running = False
+        self.rows: dict[str, int] = {}
+        self.results: dict[str, dict[str, Any]] = {}
+        self.states: dict[str, str] = {}
+        self.last_outcome: Any = None
+        self._current: str | None = None
+
+        self.load_button = QPushButton("Load plan…")
+        self.open_button = QPushButton("Open run folder…")
+        self.runs_dir = QLineEdit(str(runs_dir))
+        self.runs_dir.setToolTip("new run folders are created here")
+        self.plan_label = QLabel("No plan loaded.")
+        self.plan_label.setWordWrap(True)
+        self.run_label = QLabel("")
+        self.run_label.setStyleSheet("color: #5f6368;")
+        self.run_label.setWordWrap(True)
+        self.run_button = QPushButton("Run")
+        self.pause_button = QPushButton("Pause")
+        self.resume_button = QPushButton("Resume")
+        self.abort_button = QPushButton("Abort campaign")
+        self.abort_button.setStyleSheet("QPushButton { color: white; background: #d0312d; font-weight: 600; "
+                                        "padding: 4px 10px; border-radius: 3px; }")
+        for b in (self.run_button, self.pause_button, self.resume_button):
+            b.setMinimumWidth(80)
+        self.progress = QProgressBar()
+        self.progress.setFormat("%v of %m shots done")
+        self.progress.setRange(0, 1)
+        self.progress.setValue(0)
+        self.current_label = QLabel("")
+        self.current_label.setStyleSheet("font-weight: 600;")
+        self.message = QLabel("")
+        self.message.setWordWrap(True)
+
+        self.table = QTableWidget(0, len(COLUMNS))
+        self.table.setHorizontalHeaderLabels(COLUMNS)
+        self.table.verticalHeader().setVisible(False)
+        self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setAlternatingRowColors(True)
+        header = self.table.horizontalHeader()
+        for i in range(len(COLUMNS) - 1):
+            header.setSectionResizeMode(i, QHeaderView.ResizeMode.ResizeToContents)
+        header.setSectionResizeMode(len(COLUMNS) - 1, QHeaderView.ResizeMode.Stretch)
+
+        top = QHBoxLayout()
+        top.addWidget(self.load_button)
+        top.addWidget(self.open_button)
+        top.addWidget(QLabel("Runs folder"))
+        top.addWidget(self.runs_dir, 1)
+        controls = QHBoxLayout()
+        for b in (self.run_button, self.pause_button, self.resume_button, self.abort_button):
+            controls.addWidget(b)
+        controls.addSpacing(12)
+        controls.addWidget(self.progress, 1)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(8, 8, 8, 8)
+        layout.addWidget(section_title("Campaign"))
+        layout.addLayout(top)
+        layout.addWidget(self.plan_label)
+        layout.addWidget(self.run_label)
+        layout.addLayout(controls)
+        layout.addWidget(self.current_label)
+        layout.addWidget(self.message)
+        layout.addWidget(self.table, 1)
+
+        self.load_button.clicked.connect(self._load_clicked)
+        self.open_button.clicked.connect(self._open_clicked)
+        self.run_button.clicked.connect(self.run)
+        self.pause_button.clicked.connect(self.pause)
+        self.resume_button.clicked.connect(self.resume)
+        self.abort_button.clicked.connect(self.abort)
+        link.campaign_finished.connect(self._finished)
+        link.campaign_failed.connect(self._failed)
+        self.update_buttons()
+
+    # -- seams ------------------------------------------------------------------------------------
+    def confirm_campaign(self, plan: CampaignPlan) -> bool:
+        """Ask the operator to authorise firing a plan that does not authorise itself."""
+        answer = QMessageBox.warning(
+            self, "Authorise the campaign",
+            f"The plan {plan.name!r} does not authorise firing (authorise_firing = false).\n\n"
+            f"Fire its {len(plan.shots)} shots on {plan.accelerometer.model} {plan.accelerometer.serial} "
+            "without asking before each one?",
+            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
+        return answer == QMessageBox.StandardButton.Yes
+
+    # -- plan and run folder ----------------------------------------------------------------------
+    def load_plan(self, path: Path) -> None:
+        """Load a plan (ConfigError shows on the tab); a new run will be created for it."""
+        try:
+            plan = load_plan(path)
+        except ConfigError as exc:
+            self._say(f"Plan not loaded: {exc}", error=True)
+            return
+        self.plan, self.plan_path, self.run_folder = plan, Path(path), None
+        self._fill_table(plan)
+        self._describe()
+        self._say(f"Plan {plan.name!r} loaded: press Run to start a new run.")
+        self.update_buttons()
+
+    def open_run_folder(self, path: Path) -> None:
+        """Open an existing run folder (to resume it); its journal gives each shot's state."""
+        try:
+            run = open_run_folder(path)
+            plan = run.load_plan()
+        except ConfigError as exc:
+            self._say(f"Run folder not opened: {exc}", error=True)
+            return
+        self.plan, self.plan_path, self.run_folder = plan, run.plan_path, run
+        self._fill_table(plan)
+        self._describe()
+        self.update_buttons()
+        self.background.run(lambda: _journal_summary(run, plan), self._show_summary,
+                            lambda exc: self._say(f"Journal not read: {exc}", error=True))
+
+    def _describe(self) -> None:
+        plan = self.plan
+        if plan is None:
+            return
+        auth = "authorises firing" if plan.authorise_firing else "does NOT authorise firing (you will be asked)"
+        self.plan_label.setText(f"<b>{plan.name}</b> — {len(plan.shots)} shots on {plan.accelerometer.model} "
+                                f"{plan.accelerometer.serial}, operator {plan.operator or '—'}; the plan {auth}. "
+                                f"<span style='color:#5f6368'>{plan.path}</span>")
+        self.run_label.setText(f"Run folder: {self.run_folder.path}" if self.run_folder else
+                               "Run folder: a new one under the runs folder")
+
+    def _fill_table(self, plan: CampaignPlan) -> None:
+        self.table.setRowCount(0)
+        self.rows.clear()
+        self.results.clear()
+        self.states.clear()
+        for shot in plan.shots:
+            row = self.table.rowCount()
+            self.table.insertRow(row)
+            self.rows[shot.id] = row
+            for col, text in enumerate((str(shot.index + 1), shot.id, f"{shot.pressure_bar:g} bar",
+                                        f"No. {shot.projectile}", "PLANNED")):
+                self.table.setItem(row, col, QTableWidgetItem(text))
+            self.states[shot.id] = "PLANNED"
+        self.progress.setRange(0, max(1, len(plan.shots)))
+        self._update_progress()
+
+    # -- control ------------------------------------------------------------------------------------
+    def run(self) -> None:
+        """Start a new run of the loaded plan (or continue the opened run folder)."""
+        if self.plan is None or self.running:
+            return
+        if self.run_folder is not None:
+            self.resume()
+            return
+        if not self._authorised():
+            return
+        try:
+            run, plan = prepare_run(self.plan_path, runs_dir=Path(self.runs_dir.text().strip() or "runs"))
+        except ConfigError as exc:
+            self._say(f"Not started: {exc}", error=True)
+            return
+        self.run_folder, self.plan = run, plan
+        self._describe()
+        self._start(run, plan)
+
+    def resume(self) -> None:
+        """Continue the current run folder (after a pause, an abort or a crash)."""
+        if self.plan is None or self.run_folder is None or self.running:
+            return
+        if not self._authorised():
+            return
+        try:
+            run, plan = prepare_run(self.run_folder.plan_path, out=self.run_folder.path, resume=True)
+        except ConfigError as exc:
+            self._say(f"Not resumed: {exc}", error=True)
+            return
+        self._start(run, plan)
+
+    def pause(self) -> None:
+        if self.running:
+            self.link.pause_campaign()
+            self._say("Pausing: the campaign stops after the shot now running.")
+
+    def abort(self) -> None:
+        if self.running:
+            self.link.abort("campaign aborted on the panel")
+            self._say("Aborting: the shot now running goes to the safe state; the campaign stops.", error=True)
+
+    def _authorised(self) -> bool:
+        assert self.plan is not None
+        confirmed = self.plan.authorise_firing or self.confirm_campaign(self.plan)
+        try:
+            check_authorisation(self.plan, confirmed)
+        except ConfigError as exc:
+            self._say(str(exc), error=True)
+            return False
+        return True
+
+    def _start(self, run: RunFolder, plan: CampaignPlan) -> None:
+        self.running = True
+        self.last_outcome = None
+        self._say(f"Campaign running in {run.path}")
+        self.started.emit()
+        self.update_buttons()
+        self.link.start_campaign(run, plan)
+
+    def update_buttons(self) -> None:
+        connected = self.link.all_connected
+        idle = not self.running and not self.link.shot_running
+        has_plan = self.plan is not None
+        self.run_button.setEnabled(has_plan and idle and connected and self.run_folder is None)
+        self.resume_button.setEnabled(has_plan and idle and connected and self.run_folder is not None
+                                      and not self._complete())
+        self.pause_button.setEnabled(self.running)
+        self.abort_button.setEnabled(self.running)
+        self.load_button.setEnabled(not self.running)
+        self.open_button.setEnabled(not self.running)
+        tip = "" if connected else "not every instrument is connected"
+        self.run_button.setToolTip(tip)
+        self.resume_button.setToolTip(tip)
+
+    def _complete(self) -> bool:
+        return bool(self.states) and all(s in {x.value for x in DONE_STATES} for s in self.states.values())
+
+    # -- events -------------------------------------------------------------------------------------
+    def on_event(self, event: RigEvent) -> None:
+        """Every rig event (GUI thread): campaign progress, shot ends, the current state."""
+        if not self.running:
+            return
+        data = event.data
+        if event.state == CAMPAIGN_STATE:
+            sid = data.get("shot_id")
+            if event.kind == "progress" and sid:
+                self._current = sid
+                self._set_state(sid, "FIRING…")
+                self.current_label.setText(f"[{data.get('index')}/{data.get('total')}] {sid}: {event.message}")
+            elif event.kind == "log" and sid and data.get("journal_state"):
+                self._set_state(sid, data["journal_state"])
+                if data["journal_state"] in ("ANALYSED", "ANALYSIS_FAILED") and self.run_folder is not None:
+                    self._load_results(sid, self.run_folder.shot_path(sid))
+            elif event.kind == "log" and sid and event.message.startswith(("ANALYSED", "ANALYSIS_FAILED")):
+                state = event.message.split(":")[0]
+                self._set_state(sid, state)
+                if self.run_folder is not None:
+                    self._load_results(sid, self.run_folder.shot_path(sid))
+            return
+        if self._current and event.kind == "state":
+            self.current_label.setText(f"{self._prefix()} {event.state}: {event.message}")
+        elif self._current and event.kind == "reading" and event.state in ("CHARGE", "EVACUATE"):
+            p, v = data.get("reservoir_pressure_bar"), data.get("fixture_vacuum_mbar")
+            if p is not None and v is not None:
+                self.current_label.setText(f"{self._prefix()} {event.state} {p:.2f} bar, {v:.0f} mbar")
+
+    def _prefix(self) -> str:
+        row = self.rows.get(self._current or "", -1)
+        return f"[{row + 1}/{len(self.rows)}] {self._current}"
+
+    def _set_state(self, sid: str, state: str) -> None:
+        row = self.rows.get(sid)
+        if row is None:
+            return
+        self.states[sid] = state
+        item = QTableWidgetItem(state)
+        colour = _STATE_COLOURS.get(state.rstrip("…"))
+        if colour:
+            from PySide6.QtGui import QBrush, QColor
+
+            item.setForeground(QBrush(QColor(colour)))
+        self.table.setItem(row, 4, item)
+        self._update_progress()
+
+    def _update_progress(self) -> None:
+        done = sum(1 for s in self.states.values() if s in {x.value for x in DONE_STATES})
+        self.progress.setValue(done)
+
+    def _load_results(self, sid: str, path: Path) -> None:
+        def load() -> dict[str, Any] | None:
+            from rig.shotfile import read_shot
+
+            return read_shot(path, load_raw=False).results
+
+        self.background.run(load, lambda results: self._show_results(sid, path, results),
+                            lambda exc: self._say(f"{path.name}: results not read: {exc}", error=True))
+
+    def _show_results(self, sid: str, path: Path, results: dict[str, Any] | None) -> None:
+        row = self.rows.get(sid)
+        if row is None:
+            return
+        self.table.setItem(row, 11, QTableWidgetItem(path.name))
+        if not results or "model" not in results:
+            return
+        self.results[sid] = results
+        s = summary_of(results)
+        fn, zeta = s.get("natural_frequency_hz"), s.get("damping_ratio")
+        fbsd, shock = s.get("fbsd_hz", {}), s.get("shock_sensitivity")
+        cells = {
+            5: str(s.get("order") or "—"),
+            6: f"{fn / KILO:.2f} kHz" if fn else "—",
+            7: f"{zeta:.4f}" if zeta is not None else "—",
+            8: f"{fbsd['5'] / KILO:.2f} kHz" if "5" in fbsd else "—",
+            9: f"{fbsd['10'] / KILO:.2f} kHz" if "10" in fbsd else "—",
+            10: f"{shock:.4g}" if shock is not None else "—",
+        }
+        for col, text in cells.items():
+            self.table.setItem(row, col, QTableWidgetItem(text))
+
+    def _show_summary(self, summary: dict[str, Any]) -> None:
+        for shot in summary.get("shots", []):
+            sid = shot["id"]
+            self._set_state(sid, shot["state"])
+            if shot.get("file") and self.run_folder is not None and shot["state"] in ("ANALYSED", "ANALYSIS_FAILED"):
+                self._load_results(sid, self.run_folder.shot_path(sid))
+        self.update_buttons()
+
+    def _finished(self, outcome: Any) -> None:
+        self.running = False
+        self._current = None
+        self.last_outcome = outcome
+        self.current_label.setText("")
+        self._show_summary(outcome.summary)
+        self._say(outcome.message, error=outcome.exit_code != 0)
+        self.update_buttons()
+        self.ended.emit()
+
+    def _failed(self, message: str) -> None:
+        self.running = False
+        self._current = None
+        self.current_label.setText("")
+        self._say(f"Campaign not run: {message}", error=True)
+        self.update_buttons()
+        self.ended.emit()
+
+    def _say(self, text: str, error: bool = False) -> None:
+        self.message.setStyleSheet("color: #b3261e;" if error else "color: #1e6b2e;")
+        self.message.setText(text)
+
+    # -- dialogs ---------------------------------------------------------------------------------------
+    def _load_clicked(self) -> None:
+        name, _ = QFileDialog.getOpenFileName(self, "Load a campaign plan", "config/campaigns", "Plans (*.toml)")
+        if name:
+            self.load_plan(Path(name))
+
+    def _open_clicked(self) -> None:
+        folder = QFileDialog.getExistingDirectory(self, "Open a run folder", self.runs_dir.text())
+        if folder:
+            self.open_run_folder(Path(folder))
+
+
+def _journal_summary(run: RunFolder, plan: CampaignPlan) -> dict[str, Any]:
+    """The journal's summary of a run folder (opens it briefly: takes and releases the run lock)."""
+    journal = Journal.open(run, plan)
+    try:
+        return journal.summary()
+    finally:
+        journal.close()

@@ -1,0 +1,419 @@
+"""DCM design: the response-time ratio r, the damping ζₑ of the new poles and extra poles as
+controls; the compensated magnitude (with FBSD), the step responses and the shot's
+compensated record follow every change. Export of the DCM (JSON, the `hopkinson dcm -o`
+format that `hopkinson compensate --dcm` reads) and of the shot's calibration report.
+
+The design and the figures come from analysis.dcm through rig.commands_dcm.design_report
+(the same numbers `hopkinson dcm` prints); this tab only draws them. A change is applied
+after a short pause (DEBOUNCE_MS) so that dragging the slider stays smooth; one redesign
+takes a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import (
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QSlider,
+    QVBoxLayout,
+    QWidget,
+)
+from scipy import signal
+
+from analysis.dcm import DCM, apply, design_dcm
+from analysis.errors import AnalysisError
+from analysis.model import DiscreteModel
+from analysis.records import Record
+from analysis.response import model_sos, response_times_samples
+from rig.commands_dcm import design_report, parse_poles
+from ui.plots import (
+    BAND_COLOURS,
+    COMP_PEN,
+    EDGE_COLOURS,
+    KILO,
+    LEVEL_KEYS,
+    MODEL_PEN,
+    REF_PEN,
+    RESP_PEN,
+    _fmt_hz,
+    _plot,
+    frequency_grid_hz,
+    magnitudes,
+    show_fbsd,
+)
+from ui.widgets import section_title
+
+DEBOUNCE_MS = 60
+RATIO_RANGE = (0.1, 200.0)
+SLIDER_STEPS = 1000
+MAX_STEP_SAMPLES = 20_000
+
+
+@dataclass
+class DcmDesign:
+    """One design and its figures (what the tab shows)."""
+
+    dcm: DCM
+    report: dict[str, Any]
+    frequency_hz: np.ndarray
+    magnitude: np.ndarray
+    compensated_magnitude: np.ndarray
+    step_time_s: np.ndarray
+    step_model: np.ndarray
+    step_compensated: np.ndarray
+    compensated_record: np.ndarray | None
+
+
+def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_poles: np.ndarray,
+                   record: Record | None = None) -> DcmDesign:
+    """Design the DCM and sample what the plots show (AnalysisError for an impossible design)."""
+    dcm = design_dcm(model.poles, model.sample_interval_s, ratio, damping, extra_poles)
+    report = design_report(model.poles, dcm, model, "panel")
+    f = frequency_grid_hz(model.sample_interval_s)
+    mag, comp = magnitudes(model, dcm, f)
+    slowest = float(np.max(response_times_samples(np.concatenate([model.poles, dcm.poles]))))
+    n = int(min(MAX_STEP_SAMPLES, max(64, math.ceil(3 * slowest) + dcm.order + model.b.size)))
+    step = np.ones(n)
+    # scipy filters (the model's delay-free sections, then the DCM) give the step responses
+    alone = signal.sosfilt(model_sos(model), step) / model.dc_gain
+    both = apply(dcm, alone) / dcm.dc_gain
+    compensated = None
+    if record is not None and record.n_samples > 0 and abs(record.sample_interval_s - model.sample_interval_s) <= \
+            1e-9 * model.sample_interval_s:
+        compensated = apply(dcm, np.asarray(record.response, dtype=float), initial="steady")
+    return DcmDesign(dcm, report, f, mag, comp, np.arange(n) * model.sample_interval_s, alone, both, compensated)
+
+
+class DcmTab(QWidget):
+    """The DCM design tab (module docstring). `set_model` gives it a shot's model."""
+
+    def __init__(self, parent: QWidget | None = None,
+                 export_report: Callable[[Path], None] | None = None) -> None:
+        super().__init__(parent)
+        self.model: DiscreteModel | None = None
+        self.record: Record | None = None
+        self.source = ""
+        self.shot_path: Path | None = None
+        self.design: DcmDesign | None = None
+        self.error: str | None = None
+        self._initial: tuple[float, float, str] = (1.0, 0.707, "")
+        self._export_report = export_report
+        self._syncing = False
+
+        self.ratio = QDoubleSpinBox()
+        self.ratio.setDecimals(3)
+        self.ratio.setRange(*RATIO_RANGE)
+        self.ratio.setSingleStep(0.5)
+        self.ratio.setValue(1.0)
+        self.ratio.setToolTip("r: how many times faster than the slowest model pole the compensated system "
+                              "decays (paper Eq. 40)")
+        self.ratio_slider = QSlider(Qt.Orientation.Horizontal)
+        self.ratio_slider.setRange(0, SLIDER_STEPS)
+        self.damping = QDoubleSpinBox()
+        self.damping.setDecimals(3)
+        self.damping.setRange(0.01, 1.0)
+        self.damping.setSingleStep(0.05)
+        self.damping.setValue(0.707)
+        self.extra = QLineEdit()
+        self.extra.setPlaceholderText("e.g. 0.6+0.1j, 0.6-0.1j (both of a pair)")
+        self.reset_button = QPushButton("Reset to the shot's DCM")
+        self.export_dcm_button = QPushButton("Export DCM (JSON)…")
+        self.export_report_button = QPushButton("Export report…")
+        self.message = QLabel("")
+        self.message.setWordWrap(True)
+        self.message.setStyleSheet("color: #b3261e;")
+
+        self.model_fbsd = {k: QLabel("—") for k in LEVEL_KEYS}
+        self.compensated_fbsd = {k: QLabel("—") for k in LEVEL_KEYS}
+        self.widening = {k: QLabel("—") for k in LEVEL_KEYS}
+        self.rise_label = QLabel("—")
+        self.poles_label = QLabel("—")
+        self.poles_label.setWordWrap(True)
+        self.poles_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        for label in (*self.compensated_fbsd.values(),):
+            label.setStyleSheet("font-size: 13pt; font-weight: 600; color: #b3261e;")
+        for label in (*self.model_fbsd.values(), *self.widening.values(), self.rise_label):
+            label.setStyleSheet("font-size: 11pt; font-weight: 600;")
+
+        controls = QVBoxLayout()
+        controls.setSpacing(4)
+        self.source_label = QLabel("No model yet: fire or open a shot.")
+        self.source_label.setWordWrap(True)
+        self.source_label.setStyleSheet("color: #3c4043;")
+        controls.addWidget(section_title("Design"))
+        controls.addWidget(self.source_label)
+        form = QFormLayout()
+        form.addRow("Ratio r", self.ratio)
+        form.addRow("", self.ratio_slider)
+        form.addRow("Damping ζₑ", self.damping)
+        form.addRow("Extra poles", self.extra)
+        controls.addLayout(form)
+        controls.addWidget(self.reset_button)
+        controls.addWidget(self.message)
+        controls.addSpacing(8)
+        controls.addWidget(section_title("Figures"))
+        figures = QGridLayout()
+        figures.setHorizontalSpacing(10)
+        figures.addWidget(QLabel(""), 0, 0)
+        for col, text in enumerate(("model", "with DCM", "×"), start=1):
+            head = QLabel(text)
+            head.setStyleSheet("color: #5f6368;")
+            figures.addWidget(head, 0, col)
+        for row, key in enumerate(LEVEL_KEYS, start=1):
+            figures.addWidget(QLabel(f"FBSD ±{key} %"), row, 0)
+            figures.addWidget(self.model_fbsd[key], row, 1)
+            figures.addWidget(self.compensated_fbsd[key], row, 2)
+            figures.addWidget(self.widening[key], row, 3)
+        figures.addWidget(QLabel("Rise 10–90 %"), 3, 0)
+        figures.addWidget(self.rise_label, 3, 1, 1, 3)
+        controls.addLayout(figures)
+        controls.addSpacing(4)
+        controls.addWidget(QLabel("DCM poles:"))
+        controls.addWidget(self.poles_label)
+        controls.addStretch(1)
+        controls.addWidget(self.export_dcm_button)
+        controls.addWidget(self.export_report_button)
+        left = QWidget()
+        left.setLayout(controls)
+        left.setFixedWidth(330)
+
+        self.mag_plot = _plot("Compensated magnitude", "normalised magnitude", "frequency (kHz)")
+        self.mag_plot.setLogMode(x=True, y=True)
+        self.mag_plot.addLegend(offset=(5, 5), labelTextSize="8pt")
+        for key in ("10", "5"):
+            level = int(key) / 100
+            band = pg.LinearRegionItem(values=(math.log10(1 - level), math.log10(1 + level)), orientation="horizontal",
+                                       brush=pg.mkBrush(*BAND_COLOURS[key]), pen=pg.mkPen(None), movable=False)
+            band.setZValue(-10)
+            self.mag_plot.addItem(band)
+        self.magnitude_curve = self.mag_plot.plot([], [], pen=MODEL_PEN, name="model")
+        self.compensated_curve = self.mag_plot.plot([], [], pen=COMP_PEN, name="model + DCM")
+        self.fbsd_lines: dict[str, pg.InfiniteLine] = {}
+        for i, key in enumerate(LEVEL_KEYS):
+            line = pg.InfiniteLine(angle=90, pen=pg.mkPen(EDGE_COLOURS[key], width=1.5, style=Qt.PenStyle.DashLine),
+                                   label="", labelOpts={"position": 0.10 + 0.12 * i, "color": EDGE_COLOURS[key],
+                                                        "fill": (255, 255, 255, 210)})
+            line.setVisible(False)
+            self.mag_plot.addItem(line)
+            self.fbsd_lines[key] = line
+
+        self.step_plot = _plot("Step response", "normalised output", "time", None, "s")
+        self.step_plot.addLegend(offset=(-5, -5), labelTextSize="8pt")
+        self.step_model_curve = self.step_plot.plot([], [], pen=MODEL_PEN, name="model")
+        self.step_comp_curve = self.step_plot.plot([], [], pen=COMP_PEN, name="model + DCM")
+        for level in (0.1, 0.9, 1.0):
+            self.step_plot.addItem(pg.InfiniteLine(pos=level, angle=0, pen=pg.mkPen("#bdc1c6", width=1,
+                                                                                    style=Qt.PenStyle.DotLine)))
+
+        self.record_plot = _plot("The shot, compensated", "acceleration (10³ m/s²)", "time", None, "s")
+        self.record_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
+        self.ref_curve = self.record_plot.plot([], [], pen=REF_PEN, name="reference")
+        self.resp_curve = self.record_plot.plot([], [], pen=RESP_PEN, name="response")
+        self.comp_record_curve = self.record_plot.plot([], [], pen=COMP_PEN, name="compensated response")
+
+        plots = QGridLayout()
+        plots.setSpacing(6)
+        plots.addWidget(self.mag_plot, 0, 0, 1, 2)
+        plots.addWidget(self.step_plot, 1, 0)
+        plots.addWidget(self.record_plot, 1, 1)
+        plots.setRowStretch(0, 1)
+        plots.setRowStretch(1, 1)
+
+        layout = QHBoxLayout(self)
+        layout.setContentsMargins(6, 6, 6, 6)
+        layout.addWidget(left)
+        layout.addLayout(plots, 1)
+
+        self.update_timer = QTimer(self)
+        self.update_timer.setSingleShot(True)
+        self.update_timer.setInterval(DEBOUNCE_MS)
+        self.update_timer.timeout.connect(self.redesign)
+        self.ratio.valueChanged.connect(self._ratio_changed)
+        self.ratio_slider.valueChanged.connect(self._slider_changed)
+        self.damping.valueChanged.connect(self._schedule)
+        self.extra.textChanged.connect(self._schedule)
+        self.reset_button.clicked.connect(self.reset)
+        self.export_dcm_button.clicked.connect(self._export_dcm_clicked)
+        self.export_report_button.clicked.connect(self._export_report_clicked)
+        self._set_slider(self.ratio.value())
+        self._enable(False)
+
+    # -- input ----------------------------------------------------------------------------------
+    def set_model(self, model: DiscreteModel, ratio: float, damping: float, extra_poles: np.ndarray | list = (),
+                  record: Record | None = None, source: str = "", shot_path: Path | None = None) -> None:
+        """Design for `model`, starting from the shot's own DCM settings."""
+        self.model, self.record, self.source, self.shot_path = model, record, source, shot_path
+        extra_text = ", ".join(_complex_text(complex(p)) for p in np.asarray(extra_poles, dtype=complex).ravel())
+        self._initial = (float(ratio), float(damping), extra_text)
+        self.source_label.setText(f"Model of {source or 'the shot'}: order {model.order}, "
+                                  f"{1 / model.sample_interval_s / 1e3:g} kS/s")
+        self._enable(True)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the shot's own design."""
+        ratio, damping, extra = self._initial
+        self._syncing = True
+        try:
+            self.ratio.setValue(min(max(ratio, RATIO_RANGE[0]), RATIO_RANGE[1]))
+            self._set_slider(self.ratio.value())
+            self.damping.setValue(damping)
+            self.extra.setText(extra)
+        finally:
+            self._syncing = False
+        self.redesign()
+
+    def _enable(self, on: bool) -> None:
+        for w in (self.ratio, self.ratio_slider, self.damping, self.extra, self.reset_button,
+                  self.export_dcm_button):
+            w.setEnabled(on)
+        self.export_report_button.setEnabled(on and self._export_report is not None)
+
+    def _ratio_changed(self, value: float) -> None:
+        if not self._syncing:
+            self._syncing = True
+            try:
+                self._set_slider(value)
+            finally:
+                self._syncing = False
+        self._schedule()
+
+    def _slider_changed(self, position: int) -> None:
+        if self._syncing:
+            return
+        lo, hi = (math.log10(v) for v in RATIO_RANGE)
+        value = 10 ** (lo + (hi - lo) * position / SLIDER_STEPS)
+        self._syncing = True
+        try:
+            self.ratio.setValue(round(value, 3))
+        finally:
+            self._syncing = False
+        self._schedule()
+
+    def _set_slider(self, value: float) -> None:
+        lo, hi = (math.log10(v) for v in RATIO_RANGE)
+        self.ratio_slider.setValue(round((math.log10(value) - lo) / (hi - lo) * SLIDER_STEPS))
+
+    def _schedule(self, *_args: object) -> None:
+        if not self._syncing:
+            self.update_timer.start()
+
+    # -- the design -----------------------------------------------------------------------------
+    def redesign(self) -> None:
+        """Design with the current controls and show it (an impossible design shows why)."""
+        self.update_timer.stop()
+        if self.model is None:
+            return
+        try:
+            extra = parse_poles(self.extra.text(), "extra poles") if self.extra.text().strip() else np.array([])
+            design = compute_design(self.model, self.ratio.value(), self.damping.value(), extra, self.record)
+        except AnalysisError as exc:
+            self.error = str(exc)
+            self.message.setText(f"Cannot design this DCM: {exc}")
+            self.export_dcm_button.setEnabled(False)
+            return
+        self.error = None
+        self.message.setText("")
+        self.export_dcm_button.setEnabled(True)
+        self.design = design
+        self._show(design)
+
+    def _show(self, d: DcmDesign) -> None:
+        rep = d.report
+        for key in LEVEL_KEYS:
+            before, after = rep["fbsd_hz"][key], rep["compensated_fbsd_hz"][key]
+            self.model_fbsd[key].setText(_fmt_hz(before))
+            self.compensated_fbsd[key].setText(_fmt_hz(after))
+            self.widening[key].setText(f"×{after / before:.2f}" if before > 0 else "—")
+            if rep["compensated_fbsd_detail"][key].get("within_band_to_limit"):
+                self.compensated_fbsd[key].setToolTip("never leaves the band below Nyquist")
+        rt, ratio = rep["rise_time_samples"], rep["rise_time_ratio"]
+        dt_us = self.model.sample_interval_s * 1e6 if self.model else 1.0
+        verdict = "" if ratio is None else (f" (×{ratio:.2f} faster)" if ratio > 1 else f" (×{1 / ratio:.2f} SLOWER)")
+        self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} → {rt['compensated'] * dt_us:.1f} µs{verdict}")
+        self.poles_label.setText(", ".join(_complex_text(p) for p in d.dcm.poles))
+        f_khz = d.frequency_hz / KILO
+        self.magnitude_curve.setData(f_khz, d.magnitude)
+        self.compensated_curve.setData(f_khz, d.compensated_magnitude)
+        show_fbsd(self.fbsd_lines, rep["compensated_fbsd_hz"], prefix="DCM ")
+        top = float(np.nanmax(np.concatenate([d.magnitude, d.compensated_magnitude])))
+        self.mag_plot.setYRange(math.log10(0.3), math.log10(max(2.0, min(top * 1.3, 30.0))), padding=0)
+        self.mag_plot.setXRange(math.log10(f_khz[0]), math.log10(f_khz[-1]), padding=0)
+        self.step_model_curve.setData(d.step_time_s, d.step_model)
+        self.step_comp_curve.setData(d.step_time_s, d.step_compensated)
+        self.step_plot.getPlotItem().enableAutoRange()
+        if self.record is not None:
+            t = self.record.time_s
+            self.ref_curve.setData(t, np.asarray(self.record.reference) / KILO)
+            self.resp_curve.setData(t, np.asarray(self.record.response) / KILO)
+            if d.compensated_record is not None:
+                self.comp_record_curve.setData(t, d.compensated_record / KILO)
+        else:
+            for curve in (self.ref_curve, self.resp_curve, self.comp_record_curve):
+                curve.setData([], [])
+        self.record_plot.getPlotItem().enableAutoRange()
+
+    def compensated_fbsd_hz(self) -> dict[str, float] | None:
+        """The current design's compensated FBSD (Hz per level), None without a design."""
+        return None if self.design is None else dict(self.design.report["compensated_fbsd_hz"])
+
+    # -- export -----------------------------------------------------------------------------------
+    def export_dcm(self, path: Path) -> Path:
+        """Write the current design as JSON (`hopkinson compensate --dcm` reads it)."""
+        if self.design is None or self.model is None:
+            raise AnalysisError("no DCM designed yet")
+        data = dict(self.design.report)
+        data["source"] = str(self.shot_path or self.source or "panel")
+        data["model"] = self.model.to_dict()
+        Path(path).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        return Path(path)
+
+    def _export_dcm_clicked(self) -> None:
+        name, _ = QFileDialog.getSaveFileName(self, "Export the DCM", str(_default_name(self.shot_path, "-dcm.json")),
+                                              "DCM JSON (*.json)")
+        if name:
+            try:
+                self.export_dcm(Path(name))
+                self.message.setStyleSheet("color: #2e9d43;")
+                self.message.setText(f"DCM written to {name}")
+            except (OSError, AnalysisError, ValueError) as exc:
+                self.message.setStyleSheet("color: #b3261e;")
+                self.message.setText(f"DCM not written: {exc}")
+
+    def _export_report_clicked(self) -> None:
+        if self._export_report is None:
+            return
+        name, _ = QFileDialog.getSaveFileName(self, "Export the calibration report",
+                                              str(_default_name(self.shot_path, "-report.pdf")),
+                                              "PDF report (*.pdf);;HTML report (*.html)")
+        if name:
+            self._export_report(Path(name))
+
+
+def _default_name(shot_path: Path | None, suffix: str) -> Path:
+    if shot_path is None:
+        return Path(f"shot{suffix}")
+    return shot_path.with_name(shot_path.stem + suffix)
+
+
+def _complex_text(value: complex) -> str:
+    value = complex(value)
+    if abs(value.imag) < 1e-12:
+        return f"{value.real:.5g}"
+    return f"{value.real:.5g}{value.imag:+.5g}j"

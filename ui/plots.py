@@ -1,0 +1,511 @@
+"""The shot's plots (pyqtgraph) and the data behind them.
+
+`load_shot_view(path)` reads a shot file and prepares everything the plots show (pure NumPy,
+run off the GUI thread); `ShotPlots.show_view(view)` draws it:
+
+- PM beat: the raw photomultiplier channel (volts against time from the trigger), zoomable
+  with the mouse (wheel / drag; right-click → "View All" resets), drawn with peak-preserving
+  downsampling so a 10 M-sample record stays fluid;
+- reference acceleration and the accelerometer's response (both m/s², on the analysis record)
+  overlaid;
+- the loss of every model order (bias-corrected and plain least squares), the chosen order marked;
+- the normalised magnitude |H(f)/H(0)| of the identified model and of the model followed by the
+  DCM, with the ±5 % / ±10 % bands shaded and the FBSD edges marked;
+- the pole-zero map (model poles ×, zeros ○, DCM poles +; the unit circle; in simulation the
+  true poles ◇);
+- the live reservoir pressure and fixture vacuum (`LiveTrend`, fed by the reading events).
+
+The analysis maths is the analysis package's (frequency_response, DCM.frequency_response);
+this module only samples it for drawing.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
+
+from analysis.dcm import DCM
+from analysis.model import DiscreteModel
+from analysis.response import frequency_response
+
+LEVEL_KEYS = ("5", "10")
+BAND_COLOURS = {"5": (46, 157, 67, 45), "10": (224, 160, 16, 35)}
+EDGE_COLOURS = {"5": "#2e9d43", "10": "#c98a00"}
+MODEL_PEN = pg.mkPen("#1f6fd1", width=2)
+COMP_PEN = pg.mkPen("#d0312d", width=2, style=Qt.PenStyle.DashLine)
+REF_PEN = pg.mkPen("#202124", width=2)
+RESP_PEN = pg.mkPen("#1f6fd1", width=1.5)
+PM_PEN = pg.mkPen("#5b3fa8", width=1)
+KILO = 1e3
+
+
+def configure_pyqtgraph() -> None:
+    """White plots with dark text and anti-aliasing (lab-report look)."""
+    pg.setConfigOptions(background="w", foreground="#202124", antialias=True)
+
+
+@dataclass
+class ShotView:
+    """Everything the shot plots show, prepared off the GUI thread."""
+
+    path: Path | None = None
+    title: str = ""
+    pm_time_s: np.ndarray | None = None
+    pm_volts: np.ndarray | None = None
+    record_time_s: np.ndarray | None = None
+    reference_m_s2: np.ndarray | None = None
+    response_m_s2: np.ndarray | None = None
+    raw_response_v: np.ndarray | None = None  # when there is no analysed record
+    loss_by_order: list[float | None] = field(default_factory=list)
+    arx_loss_by_order: list[float | None] = field(default_factory=list)
+    order: int | None = None
+    model: DiscreteModel | None = None
+    dcm: DCM | None = None
+    fbsd_hz: dict[str, float] = field(default_factory=dict)
+    compensated_fbsd_hz: dict[str, float] = field(default_factory=dict)
+    frequency_hz: np.ndarray | None = None
+    magnitude: np.ndarray | None = None
+    compensated_magnitude: np.ndarray | None = None
+    true_poles: np.ndarray | None = None
+    summary: dict[str, Any] = field(default_factory=dict)
+    results: dict[str, Any] | None = None
+    analysis_error: str | None = None
+
+
+def frequency_grid_hz(sample_interval_s: float, lowest_hz: float = 100.0, points: int = 1500) -> np.ndarray:
+    """Log-spaced frequencies from `lowest_hz` to just below Nyquist."""
+    nyquist = 0.5 / sample_interval_s
+    return np.geomspace(lowest_hz, 0.999 * nyquist, points)
+
+
+def magnitudes(model: DiscreteModel, dcm: DCM | None, frequency_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """|H(f)/H(0)| of the model, and of the model followed by the DCM (None without a DCM)."""
+    h = frequency_response(model, frequency_hz)
+    dc = abs(model.dc_gain)
+    model_mag = np.abs(h) / dc
+    if dcm is None:
+        return model_mag, None
+    return model_mag, np.abs(h * dcm.frequency_response(frequency_hz)) / (dc * abs(dcm.dc_gain))
+
+
+def summary_of(results: dict[str, Any]) -> dict[str, Any]:
+    """The numbers the results strip shows, from an analysis results dict (shot file form)."""
+    ident = results.get("identification", {}) or {}
+    reduction = results.get("reduction") or {}
+    excitation = results.get("excitation") or {}
+    dcm = results.get("dcm") or {}
+    pairs = [m for m in ident.get("modes", []) if m.get("kind") == "pair"]
+    main = pairs[0] if pairs else None
+    return {
+        "order": ident.get("order"),
+        "fit_percent": ident.get("fit_percent"),
+        "natural_frequency_hz": main.get("natural_frequency_hz") if main else None,
+        "damping_ratio": main.get("damping_ratio") if main else None,
+        "fbsd_hz": dict(results.get("fbsd_hz", {})),
+        "compensated_fbsd_hz": dict(dcm.get("compensated_fbsd_hz", {})),
+        "dcm_ratio": (dcm.get("design") or {}).get("ratio"),
+        "rise_time_ratio": dcm.get("rise_time_ratio"),
+        "shock_sensitivity": reduction.get("shock_sensitivity"),
+        "peak_acceleration_m_s2": reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")),
+        "pulse_width_s": reduction.get("pulse_width_s", excitation.get("width_s")),
+        "warnings": list(results.get("warnings", [])),
+    }
+
+
+def view_from_results(results: dict[str, Any], record: Any = None) -> ShotView:
+    """A ShotView of an analysis results dict (and its record, when known); no raw channels."""
+    from analysis.shot_analysis import ShotAnalysis
+
+    analysis = ShotAnalysis.from_dict(results, record)
+    ident = results.get("identification", {}) or {}
+    model, dcm = analysis.model, analysis.dcm
+    f = frequency_grid_hz(model.sample_interval_s)
+    mag, comp = magnitudes(model, dcm, f)
+    view = ShotView(
+        loss_by_order=list(ident.get("loss_by_order", [])),
+        arx_loss_by_order=list(ident.get("arx_loss_by_order", [])),
+        order=ident.get("order", model.order),
+        model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz), compensated_fbsd_hz=dict(analysis.compensated_fbsd_hz),
+        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, summary=summary_of(results), results=results,
+    )
+    if record is not None:
+        view.record_time_s = record.time_s
+        view.reference_m_s2 = np.asarray(record.reference, dtype=float)
+        view.response_m_s2 = np.asarray(record.response, dtype=float)
+    return view
+
+
+def load_shot_view(path: str | Path) -> ShotView:
+    """Read a shot file and prepare its plots (raw PM beat always; the rest when analysed)."""
+    from rig.shotfile import read_shot
+
+    shot = read_shot(path)
+    if shot.results and shot.analysis_error is None:
+        view = view_from_results(shot.results, shot.record)
+    else:
+        view = ShotView(analysis_error=shot.analysis_error or "the shot has not been analysed")
+    view.path = Path(path)
+    meta = shot.meta
+    view.title = (f"{Path(path).name} — {meta.accelerometer_model or 'accelerometer'} "
+                  f"{meta.accelerometer_serial}".rstrip() + f", {meta.pressure_bar:g} bar, projectile No. {meta.projectile}")
+    if shot.raw is not None:
+        view.pm_time_s = shot.raw.time_s()
+        view.pm_volts = shot.raw.volts("doppler")
+        if view.record_time_s is None:
+            view.raw_response_v = shot.raw.volts("response")
+    truth = meta.simulated_truth
+    if truth and view.model is not None:
+        view.true_poles = _true_poles(truth, view.model.sample_interval_s)
+    return view
+
+
+def _true_poles(truth: dict[str, Any], sample_interval_s: float) -> np.ndarray | None:
+    """The simulated accelerometer's discrete poles at the analysis interval (simulation only)."""
+    try:
+        from drivers.sim.world import accelerometer_truth
+
+        return accelerometer_truth(truth).discrete_poles(sample_interval_s)
+    except Exception:  # an older or partial truth record: the map simply goes without it
+        return None
+
+
+def _plot(title: str, left: str, bottom: str, left_units: str | None = None,
+          bottom_units: str | None = None) -> pg.PlotWidget:
+    widget = pg.PlotWidget()
+    item = widget.getPlotItem()
+    item.setTitle(f"<span style='font-size:10pt; font-weight:600'>{title}</span>")
+    item.setLabel("left", left, units=left_units)
+    item.setLabel("bottom", bottom, units=bottom_units)
+    item.showGrid(x=True, y=True, alpha=0.25)
+    for side, units in (("left", left_units), ("bottom", bottom_units)):
+        axis = item.getAxis(side)
+        axis.setTextPen("#202124")
+        if units is None:  # the unit is in the label text: no "(x0.001)" scale factor
+            axis.enableAutoSIPrefix(False)
+        if side == "left":
+            axis.setWidth(56)
+    widget.setMinimumSize(200, 150)
+    return widget
+
+
+def _fmt_hz(value: float | None) -> str:
+    if value is None or not math.isfinite(value):
+        return "—"
+    return f"{value / KILO:.2f} kHz"
+
+
+class ResultsStrip(QFrame):
+    """One row of the shot's key figures (FBSD, model, shock quantities)."""
+
+    FIELDS = (
+        ("fbsd_5", "FBSD ±5 %"),
+        ("fbsd_10", "FBSD ±10 %"),
+        ("comp_5", "Compensated ±5 %"),
+        ("comp_10", "Compensated ±10 %"),
+        ("model", "Model"),
+        ("resonance", "Resonance"),
+        ("shock", "Shock sensitivity"),
+        ("pulse", "Pulse"),
+    )
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setFrameShape(QFrame.Shape.StyledPanel)
+        self.setStyleSheet("ResultsStrip { background: #f8f9fa; border: 1px solid #dadce0; border-radius: 4px; }")
+        layout = QGridLayout(self)
+        layout.setContentsMargins(10, 3, 10, 3)
+        layout.setHorizontalSpacing(8)
+        layout.setVerticalSpacing(1)
+        self.values: dict[str, QLabel] = {}
+        for i, (key, caption) in enumerate(self.FIELDS):
+            row, col = divmod(i, 4)
+            title = QLabel(caption)
+            title.setStyleSheet("color: #5f6368; font-size: 9pt;")
+            title.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+            value = QLabel("—")
+            value.setStyleSheet("font-size: 10pt; font-weight: 600;")
+            value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+            layout.addWidget(title, row, 2 * col)
+            layout.addWidget(value, row, 2 * col + 1)
+            layout.setColumnStretch(2 * col + 1, 1)
+            self.values[key] = value
+
+    def clear(self) -> None:
+        for label in self.values.values():
+            label.setText("—")
+            label.setToolTip("")
+
+    def show_summary(self, s: dict[str, Any]) -> None:
+        fbsd, comp = s.get("fbsd_hz", {}), s.get("compensated_fbsd_hz", {})
+        self.values["fbsd_5"].setText(_fmt_hz(fbsd.get("5")))
+        self.values["fbsd_10"].setText(_fmt_hz(fbsd.get("10")))
+        self.values["comp_5"].setText(_fmt_hz(comp.get("5")))
+        self.values["comp_10"].setText(_fmt_hz(comp.get("10")))
+        ratio = s.get("dcm_ratio")
+        self.values["comp_5"].setToolTip(f"DCM r = {ratio:.3g}" if ratio else "")
+        order, fit = s.get("order"), s.get("fit_percent")
+        self.values["model"].setText(f"order {order}" + (f", fit {fit:.1f} %" if fit is not None else "")
+                                     if order is not None else "—")
+        fn, zeta = s.get("natural_frequency_hz"), s.get("damping_ratio")
+        self.values["resonance"].setText(f"{fn / KILO:.2f} kHz, ζ {zeta:.3f}" if fn and zeta is not None else "—")
+        shock = s.get("shock_sensitivity")
+        self.values["shock"].setText(f"{shock:.4g}" if shock is not None else "—")
+        peak, width = s.get("peak_acceleration_m_s2"), s.get("pulse_width_s")
+        text = []
+        if peak is not None:
+            text.append(f"{peak / KILO:,.0f}·10³ m/s²")
+        if width is not None:
+            text.append(f"{width * 1e6:.1f} µs")
+        self.values["pulse"].setText(", ".join(text) or "—")
+
+
+class ShotPlots(QWidget):
+    """The last shot: results strip over a 2 × 3 grid of plots (module docstring)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.view: ShotView | None = None
+        self.title = QLabel("No shot yet — set up the shot and press ARM.")
+        self.title.setStyleSheet("font-size: 10pt; color: #3c4043;")
+        self.title.setWordWrap(True)
+        self.strip = ResultsStrip()
+
+        self.pm_plot = _plot("PM beat (Doppler channel)", "PM signal", "time from trigger", "V", "s")
+        self.pm_curve = self.pm_plot.plot([], [], pen=PM_PEN)
+        self.pm_curve.setDownsampling(auto=True, method="peak")
+        self.pm_curve.setClipToView(True)
+        self.pm_plot.setMouseEnabled(x=True, y=False)
+
+        self.accel_plot = _plot("Reference and response", "acceleration (10³ m/s²)", "time", None, "s")
+        self.accel_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
+        self.reference_curve = self.accel_plot.plot([], [], pen=REF_PEN, name="reference (interferometer)")
+        self.response_curve = self.accel_plot.plot([], [], pen=RESP_PEN, name="accelerometer response")
+        self.accel_note = pg.TextItem("", color="#b3261e", anchor=(0, 0))
+        self.accel_plot.addItem(self.accel_note, ignoreBounds=True)
+
+        self.loss_plot = _plot("Loss by model order", "loss (response units²)", "model order")
+        self.loss_plot.setLogMode(x=False, y=True)
+        self.loss_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
+        self.loss_curve = self.loss_plot.plot([], [], pen=pg.mkPen("#1f6fd1", width=2), symbol="o", symbolSize=6,
+                                              symbolBrush="#1f6fd1", name="bias-corrected (order choice)")
+        self.arx_curve = self.loss_plot.plot([], [], pen=pg.mkPen("#9aa0a6", width=1.5), symbol="t", symbolSize=6,
+                                             symbolBrush="#9aa0a6", name="plain least squares")
+        self.order_line = pg.InfiniteLine(angle=90, pen=pg.mkPen("#d0312d", width=2),
+                                          label="chosen order {value:.0f}",
+                                          labelOpts={"position": 0.12, "color": "#d0312d", "fill": (255, 255, 255, 200)})
+        self.order_line.setVisible(False)
+        self.loss_plot.addItem(self.order_line)
+
+        self.mag_plot = _plot("Magnitude |H(f)/H(0)|", "normalised magnitude", "frequency (kHz)")
+        self.mag_plot.setLogMode(x=True, y=True)
+        self.mag_plot.addLegend(offset=(5, 5), labelTextSize="8pt")
+        self.bands: dict[str, pg.LinearRegionItem] = {}
+        for key in ("10", "5"):
+            level = int(key) / 100
+            band = pg.LinearRegionItem(values=(math.log10(1 - level), math.log10(1 + level)), orientation="horizontal",
+                                       brush=pg.mkBrush(*BAND_COLOURS[key]), pen=pg.mkPen(None), movable=False)
+            band.setZValue(-10)
+            self.mag_plot.addItem(band)
+            self.bands[key] = band
+        self.magnitude_curve = self.mag_plot.plot([], [], pen=MODEL_PEN, name="identified model")
+        self.compensated_curve = self.mag_plot.plot([], [], pen=COMP_PEN, name="with DCM")
+        self.fbsd_lines: dict[str, pg.InfiniteLine] = {}
+        for i, key in enumerate(LEVEL_KEYS):
+            line = pg.InfiniteLine(angle=90, pen=pg.mkPen(EDGE_COLOURS[key], width=1.5, style=Qt.PenStyle.DotLine),
+                                   label="", labelOpts={"position": 0.10 + 0.12 * i, "color": EDGE_COLOURS[key],
+                                                        "fill": (255, 255, 255, 210)})
+            line.setVisible(False)
+            self.mag_plot.addItem(line)
+            self.fbsd_lines[key] = line
+
+        self.pz_plot = _plot("Pole-zero map (z-plane)", "imaginary", "real")
+        self.pz_plot.setAspectLocked(True)
+        self.pz_plot.addLegend(offset=(5, 5), labelTextSize="8pt")
+        theta = np.linspace(0, 2 * np.pi, 721)
+        self.pz_plot.plot(np.cos(theta), np.sin(theta), pen=pg.mkPen("#9aa0a6", width=1))
+        self.pole_scatter = pg.ScatterPlotItem(symbol="x", size=11, pen=pg.mkPen("#1f6fd1", width=2),
+                                               brush=pg.mkBrush("#1f6fd1"), name="model poles")
+        self.zero_scatter = pg.ScatterPlotItem(symbol="o", size=9, pen=pg.mkPen("#1f6fd1", width=1.5),
+                                               brush=pg.mkBrush(None), name="model zeros")
+        self.dcm_scatter = pg.ScatterPlotItem(symbol="+", size=11, pen=pg.mkPen("#d0312d", width=2),
+                                              brush=pg.mkBrush("#d0312d"), name="DCM poles")
+        self.truth_scatter = pg.ScatterPlotItem(symbol="d", size=10, pen=pg.mkPen("#2e9d43", width=1.5),
+                                                brush=pg.mkBrush(None), name="true poles (sim)")
+        for item in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
+            self.pz_plot.addItem(item)
+
+        self.trend = LiveTrend()
+
+        grid = QGridLayout()
+        grid.setSpacing(6)
+        grid.addWidget(self.pm_plot, 0, 0)
+        grid.addWidget(self.accel_plot, 0, 1)
+        grid.addWidget(self.trend, 0, 2)
+        grid.addWidget(self.loss_plot, 1, 0)
+        grid.addWidget(self.mag_plot, 1, 1)
+        grid.addWidget(self.pz_plot, 1, 2)
+        for column in range(3):
+            grid.setColumnStretch(column, 1)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.setSpacing(4)
+        layout.addWidget(self.title)
+        layout.addWidget(self.strip)
+        layout.addLayout(grid, 1)
+
+    # -- drawing ---------------------------------------------------------------------------------
+    def clear(self, title: str = "") -> None:
+        """Forget the last shot's plots (the live trend keeps running)."""
+        self.view = None
+        for curve in (self.pm_curve, self.reference_curve, self.response_curve, self.loss_curve, self.arx_curve,
+                      self.magnitude_curve, self.compensated_curve):
+            curve.setData([], [])
+        for scatter in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
+            scatter.setData([], [])
+        self.order_line.setVisible(False)
+        for line in self.fbsd_lines.values():
+            line.setVisible(False)
+        self.accel_note.setText("")
+        self.strip.clear()
+        if title:
+            self.title.setText(title)
+
+    def show_view(self, view: ShotView) -> None:
+        """Draw a prepared shot (ShotView)."""
+        self.clear()
+        self.view = view
+        self.title.setText(view.title or (str(view.path) if view.path else "shot"))
+        if view.pm_time_s is not None and view.pm_volts is not None:
+            self.pm_curve.setData(view.pm_time_s, view.pm_volts)
+            self.pm_plot.getPlotItem().enableAutoRange()
+        if view.record_time_s is not None:
+            self.accel_plot.setLabel("left", "acceleration (10³ m/s²)")
+            self.reference_curve.setData(view.record_time_s, view.reference_m_s2 / KILO)
+            self.response_curve.setData(view.record_time_s, view.response_m_s2 / KILO)
+        elif view.raw_response_v is not None and view.pm_time_s is not None:
+            self.accel_plot.setLabel("left", "amplifier output", units="V")
+            self.response_curve.setData(view.pm_time_s, view.raw_response_v)
+        if view.analysis_error:
+            self.accel_note.setText(f"not analysed: {_short(view.analysis_error)}")
+            self.accel_note.setPos(0, 0)
+        self.accel_plot.getPlotItem().enableAutoRange()
+        self._show_losses(view)
+        self._show_magnitude(view)
+        self._show_poles(view)
+        self.strip.show_summary(view.summary)
+
+    def _show_losses(self, view: ShotView) -> None:
+        def finite(values: list[float | None]) -> tuple[np.ndarray, np.ndarray]:
+            orders = np.array([i + 1 for i, v in enumerate(values) if v is not None and v > 0 and math.isfinite(v)])
+            losses = np.array([v for v in values if v is not None and v > 0 and math.isfinite(v)], dtype=float)
+            return orders, losses
+
+        self.loss_curve.setData(*finite(view.loss_by_order))
+        self.arx_curve.setData(*finite(view.arx_loss_by_order))
+        if view.order is not None and view.loss_by_order:
+            self.order_line.setValue(view.order)
+            self.order_line.setVisible(True)
+        self.loss_plot.getPlotItem().enableAutoRange()
+
+    def _show_magnitude(self, view: ShotView) -> None:
+        if view.frequency_hz is None or view.magnitude is None:
+            return
+        f_khz = view.frequency_hz / KILO
+        self.magnitude_curve.setData(f_khz, view.magnitude)
+        if view.compensated_magnitude is not None:
+            self.compensated_curve.setData(f_khz, view.compensated_magnitude)
+        show_fbsd(self.fbsd_lines, view.fbsd_hz)
+        self.mag_plot.getPlotItem().enableAutoRange()
+        top = float(np.nanmax(view.magnitude))
+        self.mag_plot.setYRange(math.log10(0.3), math.log10(max(2.0, min(top * 1.3, 30.0))), padding=0)
+        self.mag_plot.setXRange(math.log10(f_khz[0]), math.log10(f_khz[-1]), padding=0)
+
+    def _show_poles(self, view: ShotView) -> None:
+        if view.model is None:
+            return
+        p, z = view.model.poles, view.model.zeros
+        self.pole_scatter.setData(p.real, p.imag)
+        self.zero_scatter.setData(z.real, z.imag)
+        if view.dcm is not None:
+            d = view.dcm.poles
+            self.dcm_scatter.setData(d.real, d.imag)
+        if view.true_poles is not None:
+            t = view.true_poles
+            self.truth_scatter.setData(t.real, t.imag)
+        self.pz_plot.setXRange(-1.1, 1.1, padding=0)
+        self.pz_plot.setYRange(-1.1, 1.1, padding=0)
+
+
+def show_fbsd(lines: dict[str, pg.InfiniteLine], fbsd_hz: dict[str, float], prefix: str = "") -> None:
+    """Put the FBSD edge lines (log-frequency axis in kHz) at their frequencies with labels."""
+    for key, line in lines.items():
+        value = fbsd_hz.get(key)
+        if value is None or not math.isfinite(value) or value <= 0:
+            line.setVisible(False)
+            continue
+        line.setValue(math.log10(value / KILO))
+        line.label.setFormat(f"{prefix}±{key} %: {value / KILO:.1f} kHz")
+        line.setVisible(True)
+
+
+def _short(text: str, limit: int = 90) -> str:
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+class LiveTrend(pg.PlotWidget):
+    """Reservoir pressure (bar, left axis) and fixture vacuum (mbar, right axis, log) over the
+    last `span_s` seconds, fed by reading events."""
+
+    def __init__(self, span_s: float = 120.0, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.span_s = span_s
+        self._t0 = time.monotonic()
+        self.samples: deque[tuple[float, float, float]] = deque(maxlen=4000)
+        item = self.getPlotItem()
+        item.setTitle("<span style='font-size:10pt; font-weight:600'>Live gauges</span>")
+        item.setLabel("left", "reservoir pressure (bar)", color="#1f6fd1")
+        item.setLabel("bottom", "time", units="s")
+        item.setLabel("right", "fixture vacuum (mbar)", color="#c98a00")
+        item.showGrid(x=True, y=True, alpha=0.25)
+        item.getAxis("left").setWidth(56)
+        item.getAxis("left").enableAutoSIPrefix(False)
+        item.getAxis("right").enableAutoSIPrefix(False)
+        self.pressure_curve = item.plot([], [], pen=pg.mkPen("#1f6fd1", width=2))
+        self.vacuum_box = pg.ViewBox()
+        item.scene().addItem(self.vacuum_box)
+        item.getAxis("right").linkToView(self.vacuum_box)
+        item.getAxis("right").setLogMode(True)
+        self.vacuum_box.setXLink(item)
+        self.vacuum_box.setLogMode = None  # a bare ViewBox: the curve below holds log10 values
+        self.vacuum_curve = pg.PlotDataItem([], [], pen=pg.mkPen("#c98a00", width=2))
+        self.vacuum_box.addItem(self.vacuum_curve)
+        item.vb.sigResized.connect(self._sync_views)
+        self.setMinimumSize(200, 150)
+
+    def _sync_views(self) -> None:
+        self.vacuum_box.setGeometry(self.getPlotItem().vb.sceneBoundingRect())
+        self.vacuum_box.linkedViewChanged(self.getPlotItem().vb, self.vacuum_box.XAxis)
+
+    def add_reading(self, pressure_bar: float | None, vacuum_mbar: float | None) -> None:
+        """Append one reading (None values are skipped)."""
+        if pressure_bar is None or vacuum_mbar is None:
+            return
+        now = time.monotonic() - self._t0
+        self.samples.append((now, float(pressure_bar), float(vacuum_mbar)))
+        data = np.array([s for s in self.samples if s[0] >= now - self.span_s])
+        t = data[:, 0] - now
+        self.pressure_curve.setData(t, data[:, 1])
+        self.vacuum_curve.setData(t, np.log10(np.maximum(data[:, 2], 1e-3)))
+        self.getPlotItem().setXRange(-self.span_s, 0, padding=0.01)
+        top = max(1.0, float(np.max(data[:, 1])) * 1.15)
+        self.getPlotItem().setYRange(0.0, top, padding=0)
+        self.vacuum_box.setYRange(0.0, math.log10(2000.0), padding=0)
