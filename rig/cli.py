@@ -20,6 +20,7 @@ COMMAND_MODULES = [
     "rig.commands_campaign",
     "rig.commands_demo",
     "rig.commands_dcm",
+    "rig.commands_panel",
     "rig.commands_report",
     "rig.commands_sim",
     "rig.commands_shot",
