@@ -1,0 +1,516 @@
+"""Identify the accelerometer's discrete model A(d⁻¹)·y(k) = B(d⁻¹)·u(k − delay) from a shock record.
+
+Steps (paper §2.1, done as PAPER-NOTES.md measured it must be done):
+
+1. Rate: a record sampled faster than the analysis rate is low-pass filtered and resampled
+   (analysis.resample; default 1 MS/s).
+2. Baselines: each channel's mean before the pulse is removed (a zero shift of the response).
+3. Delay: the integer input delay that best explains the data (least-squares loss over a window
+   of shifts around the cross-correlation peak) is removed; B keeps b_0 so a fractional
+   remainder is absorbed by the model.
+4. Loss of every order 1 … N by plain least squares from ONE factorisation of the augmented
+   information matrix of Eq. (3) (analysis.loss) — reported, and the starting point of step 5.
+5. Bias correction per order by refined instrumental variables with prefiltering by 1/Â
+   (Eq. 12; analysis.refined_iv). The order is chosen on the bias-corrected output-error loss
+   Σ(y − (B/A)u)²: the smallest order whose loss is within a tolerance of the best (the knee;
+   the plain ARX loss keeps falling and would always pick N). AIC and BIC are reported beside it.
+6. The chosen order is iterated to convergence and polished by an output-error fit; an unstable
+   or non-converging result is an error when the order was asked for, and is never returned
+   silently otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy import fft, linalg, signal
+
+from analysis.errors import AnalysisError
+from analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
+from analysis.model import DiscreteModel
+from analysis.records import Record
+from analysis.refined_iv import (
+    TransferFit,
+    output_error_refine,
+    refined_iv_fit,
+    simulate,
+    stabilised,
+)
+from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ, estimate_delay_samples, resample_to_rate
+
+__all__ = [
+    "DEFAULT_ANALYSIS_RATE_HZ",
+    "Identification",
+    "arx_fit",
+    "arx_loss_by_order",
+    "identify",
+    "modes_of",
+]
+
+# Samples per model parameter below which a record is too short for an order.
+MIN_SAMPLES_PER_PARAMETER = 10
+# An identified mode whose band the reference hardly excites (input amplitude spectrum around
+# its natural frequency below this fraction of the spectrum's peak) is not supported by the data.
+EXCITATION_FLOOR = 1e-2
+
+
+@dataclass
+class Identification:
+    """The identified model and everything that went into choosing it.
+
+    Losses are sums of squared errors in response units² over the aligned record; index 0 of
+    every *_by_order list is order 1; a loss is inf where that order's fit failed (unstable).
+    """
+
+    model: DiscreteModel
+    order: int
+    loss_by_order: list[float]  # bias-corrected output-error loss (the order choice uses it)
+    arx_loss_by_order: list[float]  # plain least-squares ||g2||², one factorisation
+    aic_by_order: list[float]  # on the bias-corrected loss
+    bic_by_order: list[float]
+    fit_percent: float  # 100·(1 − ||y − ŷ|| / ||y − ȳ||) of the final model
+    delay_samples: float  # input delay removed (samples at the analysis rate)
+    modes: list[dict[str, Any]]  # per pole pair / real pole: natural_frequency_hz, damping_ratio
+    warnings: list[str]
+    converged: bool
+    iterations: int
+    order_selection: str  # "knee" (chosen from the losses) or "asked"
+    knee_tolerance: float  # relative loss tolerance used for the knee
+    preprocessing: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def sample_interval_s(self) -> float:
+        return self.model.sample_interval_s
+
+    @property
+    def poles(self) -> np.ndarray:
+        return self.model.poles
+
+    @property
+    def zeros(self) -> np.ndarray:
+        return self.model.zeros
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready fields: the model JSON (DESIGN.md) plus the fit details; inf → None."""
+        out = self.model.to_dict()
+        out.update(
+            {
+                "loss_by_order": _finite_or_none(self.loss_by_order),
+                "arx_loss_by_order": _finite_or_none(self.arx_loss_by_order),
+                "aic_by_order": _finite_or_none(self.aic_by_order),
+                "bic_by_order": _finite_or_none(self.bic_by_order),
+                "order_selection": self.order_selection,
+                "knee_tolerance": self.knee_tolerance,
+                "fit_percent": _finite_or_none([self.fit_percent])[0],
+                "modes": [dict(m) for m in self.modes],
+                "converged": self.converged,
+                "iterations": self.iterations,
+                "warnings": list(self.warnings),
+                "preprocessing": dict(self.preprocessing),
+            }
+        )
+        return out
+
+
+def _finite_or_none(values: list[float]) -> list[float | None]:
+    return [float(v) if v is not None and math.isfinite(v) else None for v in values]
+
+
+def modes_of(poles: np.ndarray, sample_interval_s: float) -> list[dict[str, Any]]:
+    """Natural frequency (Hz) and damping ratio per complex pole pair or real pole (s = ln(z)/T).
+
+    Sorted by natural frequency. A real pole gives a damping ratio of 1 (over-damped section
+    with time constant 1/(2π·f_n)); a negative real pole sits at Nyquist (an artefact of the
+    discretisation, flagged `kind: "nyquist"`).
+    """
+    modes = []
+    for p in np.asarray(poles, dtype=complex):
+        if p.imag < 0:
+            continue
+        if p == 0:
+            modes.append({"kind": "origin", "pole": [0.0, 0.0], "natural_frequency_hz": None, "damping_ratio": None})
+            continue
+        s = np.log(p) / sample_interval_s
+        wn = float(abs(s))
+        if p.imag > 0:
+            kind = "pair"
+        elif p.real > 0:
+            kind = "real"
+        else:
+            kind = "nyquist"
+        modes.append(
+            {
+                "kind": kind,
+                "pole": [float(p.real), float(p.imag)],
+                "natural_frequency_hz": wn / (2 * np.pi),
+                "damping_ratio": float(-s.real / wn) if wn > 0 else None,
+            }
+        )
+    return sorted(modes, key=lambda m: m["natural_frequency_hz"] or 0.0)
+
+
+def identify(
+    record: Record,
+    max_order: int = 12,
+    order: int | None = None,
+    sample_rate_hz: float | None = DEFAULT_ANALYSIS_RATE_HZ,
+    *,
+    knee_tolerance: float = 0.01,
+    max_delay_samples: int = 32,
+    remove_delay: bool = True,
+    search_iterations: int = 8,
+    max_iterations: int = 40,
+) -> Identification:
+    """Identify a discrete model of the accelerometer from a two-channel record.
+
+    max_order: the largest order tried (losses are reported for 1 … max_order).
+    order: fit exactly this order (errors if unstable or not converged; a warning if the data
+        support only a lower order); None: choose it at the knee of the bias-corrected loss.
+    sample_rate_hz: analysis rate; a faster record is resampled to it. None: use the record's.
+    knee_tolerance: relative loss above the best order's that still counts as "no longer
+        falling" (the chance improvement 2(2N+1) parameters could give is added to it).
+    max_delay_samples: largest channel offset searched (samples at the analysis rate).
+    remove_delay: False keeps the channels as recorded (delay 0).
+    search_iterations / max_iterations: SRIV iterations per order while choosing / for the
+        final order.
+    """
+    if max_order < 1:
+        raise AnalysisError(f"max_order must be at least 1, got {max_order}")
+    if order is not None and order < 1:
+        raise AnalysisError(f"order must be at least 1, got {order}")
+    n_max = max(max_order, order or 0)
+    warnings: list[str] = []
+    pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
+
+    rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
+    if rec is not record:
+        pre["resampled_to_hz"] = rec.sample_rate_hz
+    ref, resp = _checked_channels(rec)
+    ref, resp, baselines = _remove_baselines(ref, resp)
+    pre.update(baselines)
+
+    shifts: range | None = None
+    xcorr = 0.0
+    if remove_delay:
+        shifts, xcorr = _shift_range(ref, resp, max_delay_samples)
+        pre["cross_correlation_delay_samples"] = xcorr
+    widest = max(abs(shifts.start), abs(shifts.stop - 1)) if shifts is not None else 0
+    need = MIN_SAMPLES_PER_PARAMETER * (2 * n_max + 1)
+    if ref.size - widest < need:
+        what = f"order {order}" if order is not None and order >= max_order else f"max order {n_max}"
+        raise AnalysisError(
+            f"record too short for {what}: {ref.size} samples at the analysis rate, "
+            f"need at least {need + widest} ({MIN_SAMPLES_PER_PARAMETER} per parameter, "
+            "plus the delay searched)"
+        )
+
+    # Bias-corrected fit of every order, each at its own best delay (the SRIV fit alternates
+    # with the delay; the search starts from the order-2 fit at the correlation peak).
+    delay = 0
+    if shifts is not None:
+        start = min(max(round(xcorr), shifts.start), shifts.stop - 1)
+        _, delay = _fit_at_best_delay(ref, resp, min(2, n_max), start, shifts, search_iterations)
+    fits: list[TransferFit] = []
+    delays: list[int] = []
+    for n in range(1, n_max + 1):
+        fit, delay = _fit_at_best_delay(ref, resp, n, delay, shifts, search_iterations)
+        fits.append(fit)
+        delays.append(delay)
+    # Losses are compared per row, then quoted over the rows every order has in common.
+    rows = ref.size - n_max - max(abs(d) for d in delays)
+    losses = [_mean_loss(f, ref.size, d) * rows for f, d in zip(fits, delays, strict=True)]
+    tolerance = knee_tolerance + 2.0 * (2 * n_max + 1) / rows
+    floor = 1e-12 * float(np.dot(resp, resp))
+    knee = _knee(losses, tolerance, floor)
+    if knee is None:
+        raise AnalysisError(
+            f"no stable model of order 1 … {n_max} fits this record (every bias-corrected fit was unstable)"
+        )
+
+    if order is None:
+        chosen, selection = knee, "knee"
+    else:
+        chosen, selection = order, "asked"
+        if knee < order:
+            drop = _relative_drop(losses, knee, order)
+            warnings.append(
+                f"order {order} was asked but the data support only order {knee}: the bias-corrected "
+                f"loss falls by {drop:.2%} from order {knee} to {order} (tolerance {tolerance:.2%}); "
+                "the extra poles are not determined by this record (a mode beyond the excitation's band?)"
+            )
+
+    delay = delays[chosen - 1]
+    u, y = _shifted(ref, resp, delay)
+    final = _finish(u, y, fits[chosen - 1], max_iterations)
+    if order is not None:
+        if not final.stable:
+            raise AnalysisError(f"the order-{order} fit is unstable (a pole on or outside the unit circle)")
+        if not final.converged:
+            raise AnalysisError(
+                f"the order-{order} fit did not converge in {final.iterations} iterations; try a lower order"
+            )
+    elif not final.stable:
+        final, chosen = _stable_fallback(ref, resp, fits, delays, chosen, losses, max_iterations, warnings)
+        delay = delays[chosen - 1]
+        u, y = _shifted(ref, resp, delay)
+    losses[chosen - 1] = min(losses[chosen - 1], _mean_loss(final, ref.size, delay) * rows)
+    aic, bic = _information_criteria(losses, rows)
+    # Plain least squares at the final delay, every order from one factorisation: reported
+    # beside the bias-corrected losses (it keeps falling, so it cannot choose the order).
+    arx_losses = [float(v) for v in arx_loss_by_order(u, y, n_max)]
+
+    dt = rec.sample_interval_s
+    model = DiscreteModel(dt, final.a, final.b, float(delay), info={"fit_method": final.method})
+    y_hat = simulate(u, final.a, final.b)
+    spread = float(np.linalg.norm(y - np.mean(y)))
+    fit_percent = 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / spread) if spread > 0 else float("nan")
+    modes = modes_of(model.poles, dt)
+    warnings += _excitation_warnings(u, dt, modes)
+    if final.reflected:
+        warnings.append(
+            f"the order-{chosen} fit had poles outside the unit circle during the iteration; they were "
+            "reflected inside (spare poles nearly cancelling zeros: a lower order may be enough)"
+        )
+    if not final.converged:
+        warnings.append(
+            f"the order-{chosen} fit did not fully converge in {final.iterations} iterations "
+            "(its loss was the lowest reached)"
+        )
+    model.info.update(
+        {"loss_by_order": losses, "fit_percent": fit_percent, "converged": final.converged, "warnings": warnings}
+    )
+    return Identification(
+        model=model,
+        order=chosen,
+        loss_by_order=losses,
+        arx_loss_by_order=arx_losses,
+        aic_by_order=aic,
+        bic_by_order=bic,
+        fit_percent=fit_percent,
+        delay_samples=float(delay),
+        modes=modes,
+        warnings=warnings,
+        converged=final.converged,
+        iterations=final.iterations,
+        order_selection=selection,
+        knee_tolerance=tolerance,
+        preprocessing=pre,
+    )
+
+
+def _checked_channels(rec: Record) -> tuple[np.ndarray, np.ndarray]:
+    ref = np.asarray(rec.reference, dtype=float).ravel()
+    resp = np.asarray(rec.response, dtype=float).ravel()
+    for name, x in (("reference", ref), ("response", resp)):
+        if not np.all(np.isfinite(x)):
+            bad = int(np.flatnonzero(~np.isfinite(x))[0])
+            raise AnalysisError(f"the {name} channel has a NaN or infinite value at sample {bad}")
+    if ref.size != resp.size:
+        raise AnalysisError(f"the channels differ in length ({ref.size} and {resp.size} samples)")
+    for name, x in (("reference", ref), ("response", resp)):
+        if x.size == 0 or np.ptp(x) == 0:
+            raise AnalysisError(f"the {name} channel is flat (constant): there is nothing to identify")
+    return ref, resp
+
+
+def _remove_baselines(ref: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Subtract each channel's mean over the quiet lead-in before the reference pulse.
+
+    The pulse starts where |reference| first exceeds 10 % of its peak (about its median);
+    the lead-in ends a margin before that. Without 16 quiet samples nothing is removed.
+    """
+    centred = np.abs(ref - np.median(ref))
+    start = int(np.argmax(centred > 0.1 * np.max(centred)))
+    margin = max(4, start // 10)
+    quiet = start - margin
+    if quiet < 16:
+        return ref, resp, {"baseline_removed": False}
+    ref_base = float(np.mean(ref[:quiet]))
+    resp_base = float(np.mean(resp[:quiet]))
+    return (
+        ref - ref_base,
+        resp - resp_base,
+        {"baseline_removed": True, "reference_baseline": ref_base, "response_baseline": resp_base,
+         "baseline_samples": quiet},
+    )
+
+
+def _shifted(ref: np.ndarray, resp: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """(u, y) with y(k) = response(k + d) against u(k) = reference(k): removes a delay of d."""
+    if d >= 0:
+        return ref[: ref.size - d], resp[d:]
+    return ref[-d:], resp[: resp.size + d]
+
+
+def _shift_range(ref: np.ndarray, resp: np.ndarray, max_lag: int) -> tuple[range, float]:
+    """Input delays worth trying, and the cross-correlation delay that bounds them.
+
+    The cross-correlation peak includes the sensor's own response time (for a 27 kHz
+    resonance and a 10 µs pulse it sits ~10 samples after the pure delay), so it is only an
+    upper bound: shifts from −max_lag to one past the peak are allowed.
+    """
+    max_lag = int(max(1, min(max_lag, ref.size // 4)))
+    xcorr = estimate_delay_samples(ref, resp, max_lag)
+    return range(-max_lag, min(max_lag, math.ceil(xcorr) + 1) + 1), xcorr
+
+
+def _best_shift_for_denominator(
+    a: np.ndarray, ref: np.ndarray, resp: np.ndarray, nb: int, shifts: range
+) -> tuple[int, np.ndarray]:
+    """The delay d (and B) minimising Σ (y(k) − B(d⁻¹)·(u/A)(k − d))² with A held fixed.
+
+    With A fixed the output error is linear in B, so every shift is scored at once from the
+    autocorrelation of u/A (a Toeplitz system, scipy.linalg.solve_toeplitz) and its
+    cross-correlation with the response over the whole record (records start and end near
+    rest, so end effects are ignored). Alternating this with the SRIV fit minimises the
+    output error over the coefficients and the delay together.
+    """
+    length = ref.size
+    u_f = signal.lfilter([1.0], stabilised(a), ref)
+    auto = np.array([np.vdot(u_f[: length - t], u_f[t:]) for t in range(nb)])
+    lags = range(shifts.start, shifts.stop - 1 + nb)
+    cross = np.array(
+        [np.vdot(resp[m:], u_f[: length - m]) if m >= 0 else np.vdot(resp[: length + m], u_f[-m:]) for m in lags]
+    )
+    windows = sliding_window_view(cross, nb)  # row i: c(d), …, c(d + nb − 1) for d = shifts[i]
+    try:
+        coef = linalg.solve_toeplitz(auto, windows.T)
+    except (linalg.LinAlgError, ValueError):
+        return shifts.start, np.zeros(nb)
+    explained = np.einsum("ij,ji->i", windows, coef)
+    i = int(np.argmax(explained))
+    return shifts[i], coef[:, i]
+
+
+def _fit_at_best_delay(
+    ref: np.ndarray,
+    resp: np.ndarray,
+    order: int,
+    delay: int,
+    shifts: range | None,
+    iterations: int,
+) -> tuple[TransferFit, int]:
+    """SRIV fit of `order`, alternated with the best delay for its denominator (≤ 4 rounds).
+
+    Starts from least squares at `delay`; after a move, from the fitted A and the B that
+    went with the new delay.
+    """
+    start: tuple[np.ndarray, np.ndarray] | None = None
+    fit: TransferFit | None = None
+    for _ in range(4):
+        u, y = _shifted(ref, resp, delay)
+        a0, b0 = start if start is not None else arx_coefficients_by_order(u, y, order)[-1]
+        fit = refined_iv_fit(u, y, a0, b0, max_iterations=iterations)
+        if shifts is None or not fit.stable:
+            break
+        best, b_best = _best_shift_for_denominator(fit.a, ref, resp, order + 1, shifts)
+        if best == delay:
+            break
+        delay, start = best, (fit.a, b_best)
+    assert fit is not None
+    return fit, delay
+
+
+def _mean_loss(fit: TransferFit, n_samples: int, delay: int) -> float:
+    """Output-error loss per row of a fit on the record shifted by `delay`."""
+    rows = n_samples - abs(delay) - fit.order
+    return fit.oe_loss / rows if rows > 0 else float("inf")
+
+
+def _information_criteria(losses: list[float], rows: int) -> tuple[list[float], list[float]]:
+    aic, bic = [], []
+    for n, loss in enumerate(losses, start=1):
+        p = 2 * n + 1
+        if math.isfinite(loss) and loss > 0:
+            base = rows * math.log(loss / rows)
+            aic.append(base + 2 * p)
+            bic.append(base + p * math.log(rows))
+        else:
+            aic.append(float("inf"))
+            bic.append(float("inf"))
+    return aic, bic
+
+
+def _knee(losses: list[float], tolerance: float, floor: float) -> int | None:
+    """Smallest order whose loss is within `tolerance` (relative, plus `floor`) of the best."""
+    finite = [v for v in losses if math.isfinite(v)]
+    if not finite:
+        return None
+    best = min(finite)
+    for n, loss in enumerate(losses, start=1):
+        if math.isfinite(loss) and loss <= best * (1 + tolerance) + floor:
+            return n
+    return None
+
+
+def _relative_drop(losses: list[float], low: int, high: int) -> float:
+    a, b = losses[low - 1], losses[high - 1]
+    if not (math.isfinite(a) and math.isfinite(b)) or a <= 0:
+        return float("nan")
+    return (a - b) / a
+
+
+def _finish(u: np.ndarray, y: np.ndarray, start: TransferFit, max_iterations: int) -> TransferFit:
+    """Iterate SRIV to convergence from the search fit, then polish by output error."""
+    if not start.stable:
+        return start
+    fit = refined_iv_fit(u, y, start.a, start.b, max_iterations=max_iterations)
+    if not fit.stable or fit.oe_loss > start.oe_loss:
+        fit = start
+    polished = output_error_refine(u, y, fit)
+    return TransferFit(
+        polished.a, polished.b, polished.oe_loss, start.iterations + fit.iterations,
+        fit.converged or polished.converged, polished.stable, polished.method, polished.reflected,
+    )
+
+
+def _stable_fallback(
+    ref: np.ndarray,
+    resp: np.ndarray,
+    fits: list[TransferFit],
+    delays: list[int],
+    chosen: int,
+    losses: list[float],
+    max_iterations: int,
+    warnings: list[str],
+) -> tuple[TransferFit, int]:
+    """When the knee order's final fit fails, fall back to the other orders (best loss first)."""
+    candidates = sorted(
+        (n for n in range(1, len(fits) + 1) if n != chosen and math.isfinite(losses[n - 1])),
+        key=lambda n: (losses[n - 1], n),
+    )
+    for n in candidates:
+        u, y = _shifted(ref, resp, delays[n - 1])
+        fit = _finish(u, y, fits[n - 1], max_iterations)
+        if fit.stable:
+            warnings.append(f"the order-{chosen} fit became unstable; order {n} (next best loss) is used")
+            return fit, n
+    raise AnalysisError("no order gives a stable model for this record")
+
+
+def _excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) -> list[str]:
+    """Warn about modes in a band the reference does not excite (the data cannot support them)."""
+    spectrum = np.abs(fft.rfft(u))
+    freqs = fft.rfftfreq(u.size, dt)
+    peak = float(np.max(spectrum)) if spectrum.size else 0.0
+    out = []
+    if peak <= 0:
+        return out
+    for m in modes:
+        f = m.get("natural_frequency_hz")
+        if f is None or m["kind"] != "pair":
+            continue
+        band = (freqs >= f / 1.25) & (freqs <= f * 1.25)
+        if not np.any(band):
+            continue
+        level = float(np.sqrt(np.mean(spectrum[band] ** 2))) / peak
+        if level < EXCITATION_FLOOR:
+            out.append(
+                f"the mode at {f:.4g} Hz lies where the reference is {20 * math.log10(max(level, 1e-300)):.0f} dB "
+                "below its spectral peak: this record cannot determine it"
+            )
+    return out
