@@ -21,6 +21,8 @@ States and what they do (every state has a timeout from [timeouts] in the rig co
   FIRE_PULSE_S. The "state" event of FIRE is published before the valve opens.
 - CAPTURE: wait for the digitizer's trigger, fetch both channels (int16 + scaling; one retry on
   a fresh VISA session), note an amplifier overload, take the simulated truth (simulation).
+  An abort asked for after the fire command does not stop CAPTURE (still bounded by
+  timeouts.capture_s): the projectile is on its way, and its record is worth keeping.
 - SAFE (on every path out): fire closed, fill closed, vent open, pump off, digitizer disarmed
   when nothing was captured; then the coils are read back (and re-commanded while wrong) until
   they are right and the reservoir is at or below limits.vent_done_bar, within timeouts.safe_s.
@@ -397,9 +399,9 @@ class Sequencer:
         self._deadline = time.monotonic() + (self._timeout_s if self._timeout_s is not None else 0.0)
         self.bus.emit("state", state, STATE_TEXT.get(state, state.value), timeout_s=self._timeout_s)
 
-    def _checkpoint(self, source: str, waiting_for: str) -> None:
-        """Raise _Abort when an abort was asked for or the state's time is up."""
-        if self._abort_event.is_set():
+    def _checkpoint(self, source: str, waiting_for: str, honour_abort: bool = True) -> None:
+        """Raise _Abort when an abort was asked for (if honoured) or the state's time is up."""
+        if honour_abort and self._abort_event.is_set():
             raise _Abort("operator", f"aborted: {self._abort_reason}")
         if self._timeout_s is not None and time.monotonic() > self._deadline:
             raise _Abort(source, f"timed out after {self._timeout_s:g} s {waiting_for}")
@@ -562,10 +564,11 @@ class Sequencer:
                 break
             if state != "ARMED":
                 raise _Abort(dig.instrument, f"the digitizer left the armed state before a trigger (state {state})")
-            self._abort_event.wait(min(self._poll_s, 0.01))
-            self._checkpoint(dig.instrument, "waiting for the trigger (the shot was fired; nothing recorded)")
+            time.sleep(min(self._poll_s, 0.01))
+            self._checkpoint(dig.instrument, "waiting for the trigger (the shot was fired; nothing recorded)",
+                             honour_abort=False)
         doppler, response = self._fetch(1), self._fetch(2)
-        self._checkpoint(dig.instrument, "fetching the record")
+        self._checkpoint(dig.instrument, "fetching the record", honour_abort=False)
         try:
             if self.instruments.amplifier.overloaded():
                 message = "the amplifier overloaded during the shot: the response may be clipped"
@@ -590,7 +593,7 @@ class Sequencer:
         except InstrumentError as exc:
             self.bus.emit("log", State.CAPTURE, f"fetching channel {channel} failed, retrying once: {exc}",
                           level="warning")
-            self._checkpoint(dig.instrument, "fetching the record")
+            self._checkpoint(dig.instrument, "fetching the record", honour_abort=False)
             dig.connect()
             return dig.fetch_waveform(channel)
 
@@ -689,6 +692,8 @@ class Sequencer:
         interrupt came and `abandon_on_abort`; the thread is then left to end on its own (a
         Python thread cannot be stopped) and its result is ignored.
         """
+        if abandon_on_abort and (self._abort_event.is_set() or shot.interrupt is not None):
+            return False, None, None  # asked to stop before it began: do not start it
         box: dict[str, Any] = {}
 
         def target() -> None:

@@ -182,6 +182,20 @@ def test_abort_from_another_thread_reaches_safe(make_rig, state: str) -> None:
     assert rig.sequencer.state == State.ABORTED
 
 
+def test_abort_right_after_the_fire_command_keeps_the_record(rig) -> None:
+    def abort_from_another_thread() -> None:
+        aborter = threading.Thread(target=rig.sequencer.abort, args=("too late",))
+        aborter.start()
+        aborter.join()
+
+    rig.on_state("CAPTURE", abort_from_another_thread)
+    outcome = rig.run()
+    assert outcome.fired and outcome.shot_path is not None
+    assert read_shot(outcome.shot_path).raw.channels["doppler"].codes.size == rig.config.digitizer.record_length
+    assert outcome.final_state == "DONE" and outcome.analysis_error.startswith("analysis abandoned: too late")
+    rig.assert_safe()
+
+
 def test_state_timeout_reaches_safe(make_rig) -> None:
     from tests.rig.conftest import short_timeouts_config
 
