@@ -1,0 +1,192 @@
+"""What a calibration report shows, gathered from a shot file or a campaign run folder.
+
+    report = report_for(path)                          # a shot file (.h5) or a run folder
+    write_report(report, ["report.pdf", "report.html"])  # analysis.report
+    write_run_report(run_folder, ["pdf", "html"])      # into <run folder>/report/report.<fmt>
+
+A shot's analysis is rebuilt from its shot file (`/analysis` results and `/derived/record`)
+with `ShotAnalysis.from_dict`; a shot whose analysis failed or is missing is reported with
+its error. A run folder's shots are listed in the plan's order with their journal state,
+read from the journal without taking the run lock (read-only SQLite), so a report can be
+made while a campaign still runs.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+from analysis.errors import AnalysisError
+from analysis.report import G_M_S2, CalibrationReport, ShotEntry, write_report
+from analysis.shot_analysis import ShotAnalysis
+from rig.errors import ConfigError
+from rig.plan import CampaignPlan
+from rig.run_folder import JOURNAL_NAME, PLAN_NAME, RunFolder, open_run_folder
+from rig.shotfile import Shot, ShotFileError, read_shot
+
+REPORT_NAME = "report"
+
+
+def _sensitivity(shot: Shot) -> float | None:
+    settings = shot.meta.config.get("shot_settings", {}) if isinstance(shot.meta.config, dict) else {}
+    value = settings.get("sensitivity_v_per_m_s2")
+    if value is None:
+        value = shot.meta.config.get("analysis", {}).get("sensitivity_v_per_m_s2")
+    return float(value) if value is not None else None
+
+
+def accelerometer_text(model: str, serial: str) -> str:
+    return f"{model or '(model not given)'}, serial {serial or '(not given)'}"
+
+
+def shot_identity(shot: Shot) -> dict[str, str]:
+    """Who, what, when and with what rig a shot was fired, as report rows."""
+    m = shot.meta
+    settings = m.config.get("shot_settings", {})
+    rows = {
+        "Accelerometer": accelerometer_text(m.accelerometer_model, m.accelerometer_serial),
+    }
+    s = _sensitivity(shot)
+    if s is not None:
+        rows["Nominal sensitivity"] = f"{s:.4g} V/(m/s²) = {s * G_M_S2 * 1e3:.4g} mV/g (amplifier input)"
+    rows["Shot"] = (m.shot_id or shot.path.stem) + (f" of campaign {m.campaign_id}" if m.campaign_id else "")
+    rows["Fired (UTC)"] = m.utc_time
+    rows["Operator"] = m.operator or "—"
+    fire_p = settings.get("pressure_at_fire_bar")
+    rows["Reservoir pressure, projectile"] = (f"{m.pressure_bar:g} bar set "
+                                              + (f"({fire_p:.3f} bar at fire)" if fire_p is not None else "")
+                                              + f", projectile No. {m.projectile}")
+    if "amplifier_gain" in settings:
+        rows["Bridge amplifier"] = (f"gain {settings['amplifier_gain']:g}, excitation "
+                                    f"{settings.get('amplifier_excitation_v', float('nan')):g} V, low-pass "
+                                    f"{settings.get('amplifier_lowpass_hz', 0) / 1e3:g} kHz"
+                                    + (" — OVERLOADED during the shot" if settings.get("amplifier_overloaded") else ""))
+    names = {"valve_controller": "Valve/vacuum controller", "digitizer": "Digitizer", "amplifier": "Amplifier"}
+    for key, identity in m.instruments.items():
+        rows[names.get(key, key)] = identity
+    if m.config.get("path"):
+        rows["Rig configuration"] = str(m.config["path"])
+    rows["Shot file"] = f"{shot.path.name} (uuid {m.uuid})"
+    rows["Software"] = f"hopkinson {m.software_version}"
+    if m.simulated_truth is not None:
+        rows["Rig"] = "SIMULATED (the true accelerometer model is recorded with the shot)"
+    return rows
+
+
+def shot_entry(path: str | Path, state: str | None = None, label: str | None = None) -> ShotEntry:
+    """A report entry from a shot file: identity, analysis (rebuilt), or the reason there is none."""
+    path = Path(path)
+    shot = read_shot(path, load_raw=False)
+    truth = shot.meta.simulated_truth
+    truth_modes = None
+    if truth is not None:
+        truth_modes = [dict(m) for m in truth.get("accelerometer", {}).get("modes", [])] or None
+    analysis: ShotAnalysis | None = None
+    error: str | None = None
+    if shot.state == "analysed" and shot.results:
+        try:
+            analysis = ShotAnalysis.from_dict(shot.results, record=shot.record)
+        except AnalysisError as exc:
+            error = f"{path}: {exc}"
+    elif shot.state == "analysis_failed":
+        error = shot.analysis_error or "the analysis failed"
+    else:
+        error = "not analysed yet (raw data only)"
+    return ShotEntry(
+        label=label or shot.meta.shot_id or path.stem,
+        identity=shot_identity(shot),
+        analysis=analysis,
+        error=error,
+        state=state or shot.state,
+        truth_modes=truth_modes,
+        nominal_sensitivity_v_per_m_s2=_sensitivity(shot),
+        pressure_bar=shot.meta.pressure_bar,
+    )
+
+
+def shot_report(path: str | Path) -> CalibrationReport:
+    """The report of one shot file."""
+    entry = shot_entry(path)
+    identity = {k: v for k, v in entry.identity.items()}
+    title = f"Calibration report: {entry.identity['Accelerometer']}, shot {entry.label}"
+    return CalibrationReport(title=title, identity=identity, shots=[entry], campaign=False)
+
+
+def journal_states(run: RunFolder) -> dict[str, dict[str, Any]]:
+    """shot id -> {"state", "fire_count"} read from the journal without its lock (read-only).
+
+    Empty when there is no journal yet or it cannot be read (the shot files still tell).
+    """
+    path = run.path / JOURNAL_NAME
+    if not path.exists():
+        return {}
+    try:
+        conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=5.0)
+        try:
+            rows = conn.execute("SELECT id, state, fire_count FROM shots ORDER BY idx").fetchall()
+        finally:
+            conn.close()
+    except sqlite3.Error:
+        return {}
+    return {r[0]: {"state": r[1], "fire_count": r[2]} for r in rows}
+
+
+def run_report(run_folder: str | Path) -> CalibrationReport:
+    """The campaign report of a run folder: every planned shot that has a shot file, in plan order."""
+    run = open_run_folder(run_folder)
+    plan: CampaignPlan = run.load_plan()
+    states = journal_states(run)
+    entries: list[ShotEntry] = []
+    missing: list[str] = []
+    for planned in plan.shots:
+        path = run.shot_path(planned.id)
+        state = states.get(planned.id, {}).get("state")
+        if not path.exists():
+            missing.append(f"{planned.id} ({state or 'no file'})")
+            continue
+        try:
+            entries.append(shot_entry(path, state=state, label=planned.id))
+        except ShotFileError as exc:
+            missing.append(f"{planned.id} (unreadable: {exc})")
+    if not entries:
+        raise ConfigError(f"{run.path}: no shot files yet; nothing to report")
+    first = entries[0]
+    identity = {
+        "Campaign": f"{run.campaign_id} (plan {plan.name!r}{': ' + plan.description if plan.description else ''})",
+        "Accelerometer": accelerometer_text(plan.accelerometer.model, plan.accelerometer.serial),
+    }
+    if "Nominal sensitivity" in first.identity:
+        identity["Nominal sensitivity"] = first.identity["Nominal sensitivity"]
+    identity["Operator"] = plan.operator
+    identity["Shots"] = (f"{len(plan.shots)} planned, {len(entries)} with a shot file, "
+                         f"{sum(1 for e in entries if e.analysis is not None)} analysed")
+    for key in ("Valve/vacuum controller", "Digitizer", "Amplifier", "Bridge amplifier", "Rig configuration",
+                "Software", "Rig"):
+        if key in first.identity:
+            identity[key] = first.identity[key]
+    identity["Fired (UTC)"] = f"{entries[0].identity['Fired (UTC)']} … {entries[-1].identity['Fired (UTC)']}"
+    notes = [f"Shots without a shot file: {', '.join(missing)}."] if missing else []
+    title = f"Calibration report: {identity['Accelerometer']}, campaign {run.campaign_id}"
+    return CalibrationReport(title=title, identity=identity, shots=entries, campaign=True, notes=notes)
+
+
+def report_for(path: str | Path) -> CalibrationReport:
+    """A shot file's report, or a run folder's campaign report."""
+    path = Path(path)
+    if path.is_dir():
+        if not (path / PLAN_NAME).is_file():
+            raise ConfigError(f"{path}: not a campaign run folder (no {PLAN_NAME}) and not a shot file")
+        return run_report(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: no such shot file or run folder")
+    return shot_report(path)
+
+
+def write_run_report(run_folder: str | Path, formats: list[str] | tuple[str, ...] = ("pdf", "html"),
+                     report: CalibrationReport | None = None) -> list[Path]:
+    """Write `<run folder>/report/report.<fmt>` for each format (from `report`, or gathered
+    from the run folder); returns the paths."""
+    run = open_run_folder(run_folder)
+    report = report if report is not None else run_report(run.path)
+    return write_report(report, [run.report_dir / f"{REPORT_NAME}.{fmt}" for fmt in formats])
