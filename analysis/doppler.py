@@ -1,0 +1,611 @@
+"""Demodulation of the differential laser Doppler interferometer's photomultiplier (PM) beat.
+
+The beat's instantaneous frequency is Δf = v·(φ − ξ)/d (method paper, Eq. 37; grating pitch d,
+diffraction orders φ, ξ; orders ±1 give 2v/d), so its unwrapped phase is 2π·(φ − ξ)/d times
+the grating's displacement. The reference acceleration is the time derivative of the velocity
+(Eq. 38). This module turns a PM record sampled at ~100 MS/s into velocity and acceleration
+at the analysis rate (default 1 MS/s).
+
+How (and why this way):
+
+1. **Analytic signal in overlapping blocks** (power-of-two FFTs of 2¹⁶ samples, 2¹² kept on
+   each side as overlap). A single FFT of a 10⁷-sample record costs about a second; the blocks
+   cost a fraction of that. The band below a low edge (1/8 of the dominant beat, 20–250 kHz:
+   the DC offset of the PM and the electronics) is removed in the same step.
+2. **Phase increments, not a discriminator of averages**: the angle of z[n]·conj(z[n−1]) for
+   every sample (|Δφ| < π because the beat stays below half the sampling rate), summed per
+   block of M samples. The sum telescopes to the exact unwrapped phase difference, so noise
+   does not bias it (the angle of a *sum* of products does: it pulls the frequency towards
+   the centre of the noise band). Each block's *mean* phase is kept, i.e. the phase passes
+   the same M-sample box-car as any companion channel decimated by `boxcar_decimate`.
+   Blocks whose beat power is below `GATE_FRACTION` of the beat's power (the object at rest:
+   no beat, only noise) contribute no phase: the velocity is held at zero.
+3. **Onset** (the object leaving rest): there the beat is slower than its own chirp and an
+   analytic signal cannot represent it (a still grating gives a constant PM level, whose
+   quadrature is not observable by any linear filter). Up to the hand-over frequency
+   (half the peak beat, at most `HANDOVER_MAX_HZ`) the phase is instead read from the
+   low-passed PM signal normalised by the beat's offset and amplitude,
+   cos φ = (x − offset)/amplitude, unfolded at the fringe's turning points (a Schmitt trigger
+   with half a fringe of hysteresis), held at its rest value before the motion, and joined
+   to the analytic phase after the hand-over.
+4. **Rate and differentiation**: the phase goes to the analysis rate with
+   `analysis.resample.resample_to_rate`; velocity and acceleration come from a
+   **differentiating low-pass**: a Kaiser-windowed low-pass L of bandwidth B convolved with
+   a Kaiser-windowed ideal differentiator (exact on ramps), so the acceleration is L applied
+   to the true acceleration, to 10⁻⁴ in the band. B is chosen from the pulse
+   (`bandwidth_for_rise_time`) unless given, and reported. A companion channel passed
+   through `lowpass` gets the same L, so a model fitted between the two is not distorted.
+
+Sign: a single PM channel cannot tell the direction of motion (the beat of +v equals that of
+−v). The object moves one way during a Hopkinson shock (the velocity rises monotonically to
+its flight value for a half-sine), so the velocity is reported as positive in that direction.
+A velocity history that reverses (the object comes back) cannot be demodulated from one PM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft, signal
+
+from analysis.errors import AnalysisError
+from analysis.records import Record
+from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ, resample_to_rate
+
+# --- documented constants of the method ------------------------------------------------------
+BLOCK_SAMPLES = 2**16  # FFT length of one analytic-signal block
+BLOCK_OVERLAP = 2**12  # samples discarded at each end of a block (the Hilbert kernel's reach)
+ANALYTIC_LOW_MIN_HZ = 20e3  # analytic band's low edge: at least this (removes DC, slow drift)
+ANALYTIC_LOW_MAX_HZ = 250e3  # ... and at most this
+DECIMATED_RATE_HZ = 10e6  # rate of the phase after the box-car (≥ 8× the analysis rate)
+GATE_FRACTION = 0.1  # a block carries phase when its power is ≥ this × the beat power
+HANDOVER_MAX_HZ = 2e6  # the fringe tracker reads the onset up to this beat frequency
+MIN_SAMPLE_RATE_HZ = 5e6  # below this a PM beat record is certainly mis-sampled
+MAX_BEAT_FRACTION = 0.45  # a beat above this × the sampling rate is aliased
+BANDWIDTH_RISE_PRODUCT = 5.0  # B = this / (10–90 % rise time of the velocity)
+MAX_BANDWIDTH_FRACTION = 0.4  # B ≤ this × the analysis rate (the low-pass must fit below Nyquist)
+STOPBAND_ATTENUATION_DB = 80.0  # of the low-pass L
+
+
+@dataclass(frozen=True)
+class BeatPhase:
+    """Unwrapped phase of a PM beat, decimated by a box-car of `decimation` raw samples.
+
+    phase_rad[k] is the mean phase over raw samples k·M … k·M + M − 1 (M = decimation), so
+    its time is start_time_s + k·sample_interval_s with start_time_s = (M − 1)/2 raw intervals
+    (relative to the raw record's first sample). Zero at rest, increasing with the motion.
+    """
+
+    sample_interval_s: float
+    start_time_s: float
+    phase_rad: np.ndarray
+    decimation: int
+    beat_peak_hz: float  # highest beat frequency of the record
+    onset_time_s: float  # where the motion leaves rest (phase exceeds its rest value)
+    handover_time_s: float  # where the analytic phase takes over from the fringe tracker
+    snr_db: float  # beat power over the noise power of the record, estimated
+    offset_v: float  # DC level of the PM beat
+    amplitude_v: float  # beat amplitude near the hand-over
+
+
+@dataclass(frozen=True)
+class Demodulated:
+    """Velocity and acceleration of the grating at the analysis rate."""
+
+    sample_interval_s: float
+    start_time_s: float
+    velocity_m_s: np.ndarray
+    acceleration_m_s2: np.ndarray
+    bandwidth_hz: float  # −6 dB bandwidth of the differentiating low-pass
+    beat: BeatPhase
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return self.start_time_s + self.sample_interval_s * np.arange(self.velocity_m_s.size)
+
+
+def metres_per_radian(grating_pitch_m: float, orders: tuple[int, int]) -> float:
+    """Grating displacement per radian of beat phase: d / (2π·(φ − ξ)) (from Eq. 37)."""
+    if not grating_pitch_m > 0:
+        raise AnalysisError(f"grating pitch must be positive, got {grating_pitch_m!r} m")
+    order_difference = int(orders[0]) - int(orders[1])
+    if order_difference == 0:
+        raise AnalysisError(f"diffraction orders {orders} must differ (φ − ξ = 0 gives no beat)")
+    return grating_pitch_m / (2.0 * np.pi * abs(order_difference))
+
+
+# --- stage 1-3: the beat's phase -------------------------------------------------------------
+def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rate_hz: float = DECIMATED_RATE_HZ,
+               source: str = "doppler channel") -> BeatPhase:
+    """Unwrapped phase (rad) of a single-channel PM beat, box-car decimated to ~`decimated_rate_hz`.
+
+    Raises AnalysisError (naming `source`) when the record is too short, sampled too slowly,
+    clipped, or carries no beat.
+    """
+    x = np.asarray(doppler_v, dtype=np.float32).ravel()
+    fs = _check_record(x, sample_interval_s, source)
+    m = max(1, int(fs // decimated_rate_hz))
+    n_blocks = x.size // m
+    if n_blocks < 64:
+        raise AnalysisError(f"{source}: {x.size} samples is too short to demodulate (needs ≥ {64 * m})")
+    x = x[: n_blocks * m]
+    increments, power, low_hz = _phase_increments(x, sample_interval_s, m)
+    beat_power = float(np.percentile(power, 99.0))
+    noise_power = float(np.percentile(power, 1.0))
+    gate = power >= GATE_FRACTION * beat_power
+    if not np.any(gate) or beat_power <= 4.0 * noise_power:
+        raise AnalysisError(f"{source}: no Doppler beat found (beat power not above the noise)")
+    # Per-block sums of the increments: the phase change from block k's mean to block k+1's mean
+    # is sum of (M−1−i)/M weighted increments in block k+1 plus ... — see _block_mean_phase.
+    phase = _block_mean_phase(increments, m, gate)
+    dt_m = m * sample_interval_s
+    frequency_hz = np.diff(phase, prepend=phase[0]) / (2.0 * np.pi * dt_m)
+    smooth_hz = signal.medfilt(np.where(gate, frequency_hz, 0.0), 11)
+    beat_peak_hz = float(np.max(smooth_hz))
+    if beat_peak_hz > MAX_BEAT_FRACTION * fs:
+        raise AnalysisError(
+            f"{source}: the beat reaches {beat_peak_hz / 1e6:.1f} MHz, above {MAX_BEAT_FRACTION:.0%} of the "
+            f"{fs / 1e6:g} MS/s sampling rate: the record is aliased or its sample interval is wrong"
+        )
+    if beat_peak_hz * x.size * sample_interval_s < 10.0:
+        raise AnalysisError(f"{source}: no Doppler beat found (fewer than 10 fringes in the record)")
+    handover_hz = min(HANDOVER_MAX_HZ, max(0.5 * beat_peak_hz, 4.0 * low_hz))
+    above = np.flatnonzero(smooth_hz >= handover_hz)
+    if above.size == 0:
+        raise AnalysisError(f"{source}: no Doppler beat found (the beat never rises above {handover_hz / 1e3:.0f} kHz)")
+    k_h = int(above[0])
+    offset_v = float(np.mean(x[np.repeat(smooth_hz >= handover_hz, m)]))
+    phase, k_on, amplitude_v = _onset_phase(x, sample_interval_s, m, phase, k_h, handover_hz, offset_v,
+                                            smooth_hz, power, noise_power, low_hz, source)
+    snr_db = 10.0 * np.log10(max(beat_power - noise_power, 1e-30) / max(noise_power, 1e-30))
+    return BeatPhase(dt_m, 0.5 * (m - 1) * sample_interval_s, phase - phase[0], m, beat_peak_hz,
+                     (k_on + 0.5) * dt_m, (k_h + 0.5) * dt_m, float(snr_db), offset_v, amplitude_v)
+
+
+def _check_record(x: np.ndarray, sample_interval_s: float, source: str) -> float:
+    if not (np.isfinite(sample_interval_s) and sample_interval_s > 0):
+        raise AnalysisError(f"{source}: sample interval must be positive, got {sample_interval_s!r} s")
+    fs = 1.0 / sample_interval_s
+    if fs < MIN_SAMPLE_RATE_HZ:
+        raise AnalysisError(
+            f"{source}: sampled at {fs / 1e6:g} MS/s; a PM beat needs ≥ {MIN_SAMPLE_RATE_HZ / 1e6:g} MS/s "
+            f"(~100 MS/s): wrong channel or wrong sample interval?"
+        )
+    if x.size < 4096:
+        raise AnalysisError(f"{source}: only {x.size} samples; a Doppler record needs at least 4096")
+    if not np.all(np.isfinite(x)):
+        raise AnalysisError(f"{source}: has a NaN or infinite sample at index {int(np.flatnonzero(~np.isfinite(x))[0])}")
+    lo, hi = float(np.min(x)), float(np.max(x))
+    if hi == lo:
+        raise AnalysisError(f"{source}: the signal is constant ({lo:g} V): no Doppler beat")
+    # Clipping: a digitizer at full scale sits on its rail for runs of samples. A clean
+    # beat touches its extremes only for single samples at any beat frequency that matters.
+    for rail in (lo, hi):
+        at_rail = x == rail
+        runs = np.count_nonzero(at_rail[1:] & at_rail[:-1])
+        if runs >= max(8, x.size // 10000):
+            raise AnalysisError(
+                f"{source}: clipped at {rail:g} V ({int(np.count_nonzero(at_rail))} samples on the rail): "
+                f"reduce the digitizer's gain or widen its range"
+            )
+    return fs
+
+
+def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per-sample phase increments (float32, angle of z[n]·z*[n−1]; first one 0), the mean
+    analytic power of every M-sample block, and the low edge (Hz) of the analytic band used.
+
+    The spectra of all overlapping blocks are computed first; the strongest beat frequency in
+    them sets the analytic band's low edge (`_analytic_low_hz`), then the blocks go back.
+    """
+    n = x.size
+    keep = BLOCK_SAMPLES - 2 * BLOCK_OVERLAP
+    n_fft_blocks = -(-n // keep)
+    padded = np.empty(n_fft_blocks * keep + 2 * BLOCK_OVERLAP, dtype=np.float32)
+    padded[BLOCK_OVERLAP : BLOCK_OVERLAP + n] = x
+    padded[:BLOCK_OVERLAP] = x[0]
+    padded[BLOCK_OVERLAP + n :] = x[-1]
+    freq = fft.rfftfreq(BLOCK_SAMPLES, sample_interval_s)
+    frames = np.lib.stride_tricks.sliding_window_view(padded, BLOCK_SAMPLES)[:: keep][:n_fft_blocks]
+    spectra = fft.rfft(frames, axis=1)  # complex64 for float32 input
+    low_hz = _analytic_low_hz(spectra, freq)
+    gain = _analytic_gain(freq, low_hz).astype(np.float32)
+    increments = np.empty(n, dtype=np.float32)
+    power = np.empty(n, dtype=np.float32)
+    previous = np.complex64(0)
+    batch = 16  # FFT blocks per call: low Python overhead, bounded memory
+    full = np.zeros((batch, BLOCK_SAMPLES), dtype=np.complex64)
+    for first in range(0, n_fft_blocks, batch):
+        count = min(batch, n_fft_blocks - first)
+        full[:count, : freq.size] = spectra[first : first + count] * gain
+        z = fft.ifft(full[:count], axis=1)[:, BLOCK_OVERLAP : BLOCK_OVERLAP + keep].reshape(-1)
+        lo = first * keep
+        hi = min(n, lo + z.size)
+        z = z[: hi - lo]
+        prod = np.empty_like(z)
+        prod[1:] = z[1:] * np.conj(z[:-1])
+        prod[0] = z[0] * np.conj(previous) if lo > 0 else 0
+        previous = z[-1]
+        increments[lo:hi] = np.angle(prod)
+        power[lo:hi] = z.real * z.real + z.imag * z.imag
+    return increments, power.reshape(-1, m).mean(axis=1), low_hz
+
+
+def _analytic_low_hz(spectra: np.ndarray, freq_hz: np.ndarray) -> float:
+    """Low edge of the analytic band: 1/8 of the highest dominant beat frequency among the
+    blocks that carry a beat, within [ANALYTIC_LOW_MIN_HZ, ANALYTIC_LOW_MAX_HZ].
+
+    The edge removes the PM's DC offset and the slow step its level makes when the grating
+    leaves rest; the higher it is, the sooner that step stops disturbing the analytic phase.
+    The fringe tracker covers the beat up to 4× this edge (see `beat_phase`).
+    """
+    usable = freq_hz >= ANALYTIC_LOW_MIN_HZ
+    psd = np.abs(spectra[:, usable]) ** 2
+    block_power = psd.sum(axis=1)
+    beating = block_power >= 0.1 * block_power.max()
+    dominant = freq_hz[usable][np.argmax(psd[beating], axis=1)]
+    return float(np.clip(dominant.max() / 8.0, ANALYTIC_LOW_MIN_HZ, ANALYTIC_LOW_MAX_HZ))
+
+
+def _analytic_gain(freq_hz: np.ndarray, low_hz: float) -> np.ndarray:
+    """One-sided gain of the analytic-signal filter: 2 above `low_hz` (raised-cosine edge from
+    half of it), 0 at DC and below; the Nyquist bin counts once."""
+    edge = np.clip((freq_hz - 0.5 * low_hz) / (0.5 * low_hz), 0.0, 1.0)
+    gain = 2.0 * 0.5 * (1.0 - np.cos(np.pi * edge))
+    gain[-1] *= 0.5
+    return gain
+
+
+def _block_mean_phase(increments: np.ndarray, m: int, gate: np.ndarray) -> np.ndarray:
+    """Mean phase of every M-sample block from per-sample increments (gated blocks add none).
+
+    Within block k (samples kM + j), φ[kM + j] = φ[kM] + Σ_{i≤j} Δ[kM + i] (Δ[n] = φ[n] − φ[n−1]),
+    so mean_j φ = φ[kM] + Σ_i Δ[kM + i]·(M − i)/M, and φ[(k+1)M] = φ[kM] + Σ_i Δ[kM + i] + Δ[(k+1)M]…
+    Computed with two dot products per block instead of a 10⁷-sample cumulative sum.
+    """
+    d = increments.reshape(-1, m).astype(np.float64)
+    d[~gate] = 0.0
+    weights = (m - np.arange(m)) / m  # weight of increment i in the block mean
+    within = d @ weights  # mean_j φ − φ[kM − 1]... relative to the sample before the block
+    total = d.sum(axis=1)  # φ[kM + M − 1] − φ[kM − 1]
+    start = np.concatenate([[0.0], np.cumsum(total)[:-1]])  # φ[kM − 1] relative to the first
+    return start + within
+
+
+# --- stage 3: the onset ------------------------------------------------------------------------
+def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, handover_hz: float,
+                 offset_v: float, smooth_hz: np.ndarray, power: np.ndarray, noise_power: float,
+                 low_hz: float, source: str) -> tuple[np.ndarray, int, float]:
+    """Replace the analytic phase before the hand-over block k_h by the fringe tracker's.
+
+    Returns the new phase (block means), the onset block and the beat amplitude used.
+    """
+    fs = 1.0 / dt
+    # Window: from well before the motion to a little after the hand-over. The analytic beat
+    # frequency, coarse below the hand-over but good enough for this, falls below a tenth of the
+    # hand-over frequency at block k_10; the motion began less than (k_h − k_10) before that for
+    # any onset whose velocity grows like tᵖ with p ≤ 3, so twice that span reaches into rest.
+    slow = np.flatnonzero(smooth_hz[:k_h] < 0.1 * handover_hz)
+    if slow.size == 0:
+        raise AnalysisError(
+            f"{source}: the record starts while the object is already moving (no rest before the pulse): "
+            f"record more pre-trigger"
+        )
+    k_10 = int(slow[-1])
+    rise_blocks = max(k_h - k_10, 1)
+    k_a = max(0, k_10 - 2 * rise_blocks - int(round(5e-6 / (m * dt))))
+    # The tracker runs on past the hand-over until the analytic phase has settled (the step the
+    # PM level makes when the grating leaves rest rings in the analytic band's low edge for a few
+    # of its periods) or the beat nears the tracker's low-pass, whichever comes first; the two
+    # phases are cross-faded over that stretch.
+    settle = int(np.ceil(5.0 / (low_hz * m * dt)))
+    fast = np.flatnonzero(smooth_hz[k_h:] > 3.0 * handover_hz)
+    overlap = max(4, min(settle, int(fast[0]) if fast.size else settle))
+    k_b = min(phase.size, k_h + overlap + 1)
+    # Low-pass the PM signal (zero-phase; ends padded with their edge value) at 5× the hand-over
+    # frequency and bring it to ~10× that cut-off.
+    cutoff_hz = 5.0 * handover_hz
+    down = max(1, int(fs // (10.0 * cutoff_hz)))
+    taps = signal.firwin(int(8 * fs / cutoff_hz) | 1, cutoff_hz, window=("kaiser", 8.0), fs=fs)
+    half = taps.size // 2
+    raw = x[k_a * m : k_b * m].astype(float) - offset_v
+    y = signal.oaconvolve(np.pad(raw, half, mode="edge"), taps, mode="valid")[::down]
+    t_y = (k_a * m + np.arange(y.size) * down) * dt  # raw-record time of each y sample
+    amplitude_h = float(np.sqrt(max(np.mean(power[k_h:k_b]) - noise_power, 1e-30)))
+    # Rest: the first quarter of the window. Its level is the median of its second half
+    # (nearest the motion), its noise the robust spread of y there.
+    idx = np.arange(y.size)
+    n_rest = max(8, y.size // 4)
+    rest_level = float(np.median(y[n_rest // 2 : n_rest]))
+    noise_y = 1.4826 * float(np.median(np.abs(y[:n_rest] - np.median(y[:n_rest]))))
+    # Fringe turning points: a Schmitt trigger with half an amplitude of hysteresis.
+    turns, kinds = _turning_points(y, 0.5 * amplitude_h)
+    # The trigger's extremes before the first one far (≥ half an amplitude) from the rest level
+    # may be the rest's own noisy highs and lows. Between the rest and that far extreme the
+    # grating turned at most once, on the rest's side (a "near" extreme: the rest sat just short
+    # of a fringe's extreme). If it did, the signal reached that extreme, ±amplitude, shortly
+    # before it last crossed the rest level towards the far extreme; if not, it only left the
+    # rest level there. The decision takes the peak of the signal, smoothed over a quarter of
+    # the first half-fringe, in the two half-fringes before that crossing, and asks which of
+    # the two it is nearer. When the two are closer than the noise allows to tell, the rest
+    # phase is put on the extreme itself (an error of at most the distance to it, instead of
+    # twice it).
+    rest_on_extreme = False
+    far = np.flatnonzero(np.abs(y[turns] - rest_level) >= 0.5 * amplitude_h) if turns.size else np.zeros(0, int)
+    if far.size and far[0] + 1 < turns.size:
+        j = int(far[0])
+        big = int(turns[j])
+        near_kind = -int(kinds[j])
+        half_fringe = int(turns[j + 1] - big)
+        width = max(1, half_fringe // 4) | 1
+        y_smooth = np.convolve(np.pad(y, width // 2, mode="edge"), np.ones(width) / width, mode="valid")
+        near_side = np.flatnonzero((y_smooth[:big] - rest_level) * near_kind >= 0)
+        crossing = int(near_side[-1]) if near_side.size else big
+        search = np.arange(max(0, crossing - 2 * half_fringe), crossing + 1)
+        best = int(search[np.argmax(y_smooth[search] * near_kind)])
+        peak = float(y_smooth[best] * near_kind)
+        extreme = float(_parabolic_extreme(np.abs(y), turns[j : j + 1])[0])  # fringe amplitude
+        noise = 3.0 * noise_y / np.sqrt(max(width / 5.0, 1.0)) + 0.01 * extreme
+        turns, kinds = turns[j:], kinds[j:]
+        if extreme - abs(rest_level) <= 2.0 * noise:
+            rest_on_extreme = True
+        if rest_on_extreme or peak - rest_level * near_kind > extreme - peak:
+            turns = np.concatenate([[best], turns])
+            kinds = np.concatenate([[near_kind], kinds])
+    # Amplitude through the turning points (the extreme's distance from the offset, refined by
+    # a parabola through the three samples around it), extrapolated before the first one along
+    # the line through the first few (the slow fluctuation goes on while the grating leaves
+    # rest) and held after the last one.
+    if turns.size:
+        amp_t = t_y[turns]
+        amp_v = _parabolic_extreme(np.abs(y), turns)
+        amplitude = np.interp(t_y, amp_t, amp_v)
+        early = slice(0, min(4, turns.size))
+        if turns.size >= 2:
+            slope, intercept = np.polyfit(amp_t[early], amp_v[early], 1)
+            amplitude[: turns[0]] = slope * t_y[: turns[0]] + intercept
+        else:
+            amplitude[: turns[0]] = amp_v[0]
+    else:
+        amplitude = np.full(y.size, amplitude_h)
+    alpha = np.arccos(np.clip(y / amplitude, -1.0, 1.0))
+    # Branch of each sample: after a maximum the fringe falls (θ = α), after a minimum it rises
+    # (θ = 2π − α); before the first turning point, the branch that leads into it.
+    if kinds.size:
+        nxt = np.searchsorted(turns, idx, side="left")
+        kind_next = np.concatenate([kinds, [-kinds[-1]]])[nxt]
+    else:  # no turning point: one direction throughout, taken from the trend of y
+        kind_next = np.full(y.size, 1 if y[-1] > y[n_rest] else -1)
+    theta = np.where(kind_next > 0, 2.0 * np.pi - alpha, alpha)
+    theta += 2.0 * np.pi * np.searchsorted(turns[kinds > 0], idx, side="left")
+    # The rest phase is the median over the rest (or the first extreme's, see above); before
+    # that the phase is held there and it never drops below it (no motion backwards).
+    if rest_on_extreme:
+        # Held on the extreme until the (smoothed) signal leaves the rest level for good.
+        rest_phase = float(theta[turns[0]])
+        end = int(turns[1]) if turns.size > 1 else y.size
+        at_rest = np.flatnonzero(np.abs(y_smooth[:end] - rest_level) <= noise)
+        held = int(at_rest[-1]) + 1 if at_rest.size else int(turns[0])
+    else:
+        rest_phase = float(np.median(theta[:n_rest]))
+        held = n_rest
+    theta[:held] = rest_phase
+    # Near a fringe's extreme (|cos θ| > 0.95) arccos amplifies noise and amplitude error
+    # (dθ = dc / sin θ): there θ is interpolated in time between well-conditioned samples
+    # (and the held rest).
+    good = np.abs(y / amplitude) <= 0.95
+    good[:held] = True
+    theta[~good] = np.interp(idx[~good], idx[good], theta[good])
+    theta = np.maximum(theta, rest_phase)
+    # Block means (the tracker phase at block centres) and the join with the analytic phase.
+    centres = (np.arange(k_a, k_b) * m + 0.5 * (m - 1)) * dt
+    tracked = np.interp(centres, t_y, theta)
+    # Join: align the analytic phase on the tracker over the overlap, then cross-fade
+    # (raised cosine) so neither a step nor a kink is left at the hand-over.
+    join = slice(k_h - k_a, k_b - k_a)
+    out = phase + float(np.mean(tracked[join] - phase[k_h:k_b]))
+    fade = 0.5 * (1.0 + np.cos(np.pi * np.arange(k_b - k_h) / (k_b - k_h)))
+    out[k_h:k_b] = fade * tracked[join] + (1.0 - fade) * out[k_h:k_b]
+    out[k_a:k_h] = tracked[: k_h - k_a]
+    out[:k_a] = rest_phase
+    moving = np.flatnonzero(theta > rest_phase + 0.1)
+    k_on = k_a + int(np.searchsorted(centres, t_y[moving[0]])) if moving.size else k_h
+    return out, k_on, amplitude_h
+
+
+def _parabolic_extreme(y: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Height of the peaks of `y` (≥ 0 near them) at the indices `at`: the vertex of a parabola
+    fitted by least squares to the contiguous samples within 10 % of the peak sample (cos θ
+    within 0.45 rad of its extreme; the quartic term costs < 0.2 %). Using many samples keeps
+    the noise of single samples, and the upward bias of picking the largest, out of it."""
+    heights = np.empty(len(at))
+    for j, i in enumerate(np.asarray(at, dtype=int)):
+        level = 0.9 * y[i]
+        lo = i
+        while lo > 0 and y[lo - 1] >= level:
+            lo -= 1
+        hi = i
+        while hi < y.size - 1 and y[hi + 1] >= level:
+            hi += 1
+        if hi - lo < 2:
+            lo, hi = max(0, i - 1), min(y.size - 1, i + 1)
+        k = np.arange(lo, hi + 1) - i
+        c2, c1, c0 = np.polyfit(k, y[lo : hi + 1], 2)
+        heights[j] = c0 - 0.25 * c1 * c1 / c2 if c2 < 0 else y[i]
+    return heights
+
+
+def _turning_points(y: np.ndarray, hysteresis: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices and kinds (+1 maximum, −1 minimum) of the extremes of `y` confirmed by a move of
+    more than `hysteresis` away from them (a Schmitt trigger; noise smaller than that is ignored).
+
+    A sequential scan (a few thousand samples of the onset window): numpy has no vector form
+    of a hysteresis comparator.
+    """
+    idx: list[int] = []
+    kinds: list[int] = []
+    hi_i = lo_i = 0
+    state = 0  # 0: undecided, +1: rising (looking for a maximum), −1: falling
+    for i in range(1, y.size):
+        v = y[i]
+        if state >= 0 and v > y[hi_i]:
+            hi_i = i
+        if state <= 0 and v < y[lo_i]:
+            lo_i = i
+        if state >= 0 and v < y[hi_i] - hysteresis:
+            idx.append(hi_i)
+            kinds.append(1)
+            state, lo_i = -1, i
+        elif state <= 0 and v > y[lo_i] + hysteresis:
+            idx.append(lo_i)
+            kinds.append(-1)
+            state, hi_i = 1, i
+    return np.asarray(idx, dtype=int), np.asarray(kinds, dtype=int)
+
+
+# --- stage 4: bandwidth, filters, differentiation ---------------------------------------------
+def bandwidth_for_rise_time(rise_time_s: float, sample_rate_hz: float) -> float:
+    """Bandwidth B (Hz) of the differentiating low-pass for a velocity rising in `rise_time_s`.
+
+    B = BANDWIDTH_RISE_PRODUCT / t_rise (10–90 %), capped at MAX_BANDWIDTH_FRACTION of the rate.
+    For a half-sine of width δ, t_rise = 0.59·δ and B ≈ 8.5/δ: there the envelope of the
+    pulse's spectrum, 1/(4(fδ)²), is 0.35 % of its DC value, so the low-pass changes the peak by
+    < 0.05 % and the 10 %-width by < 0.5 %, while passing 8.5× less noise bandwidth than Nyquist.
+    """
+    if not rise_time_s > 0:
+        raise AnalysisError(f"velocity rise time must be positive, got {rise_time_s!r} s")
+    return float(min(BANDWIDTH_RISE_PRODUCT / rise_time_s, MAX_BANDWIDTH_FRACTION * sample_rate_hz))
+
+
+def lowpass_taps(bandwidth_hz: float, sample_rate_hz: float) -> np.ndarray:
+    """Odd-length linear-phase low-pass L: −6 dB at `bandwidth_hz`, transition ±B/4, 80 dB stopband."""
+    nyquist = 0.5 * sample_rate_hz
+    if not 0 < bandwidth_hz <= MAX_BANDWIDTH_FRACTION * sample_rate_hz * (1 + 1e-9):
+        raise AnalysisError(
+            f"bandwidth {bandwidth_hz:g} Hz must be positive and ≤ {MAX_BANDWIDTH_FRACTION:g} × the "
+            f"analysis rate ({MAX_BANDWIDTH_FRACTION * sample_rate_hz:g} Hz)"
+        )
+    numtaps, beta = signal.kaiserord(STOPBAND_ATTENUATION_DB, 0.5 * bandwidth_hz / nyquist)
+    numtaps |= 1
+    return signal.firwin(numtaps, bandwidth_hz, window=("kaiser", beta), fs=sample_rate_hz)
+
+
+def ideal_derivative_taps(sample_rate_hz: float, half_length: int = 40) -> np.ndarray:
+    """Kaiser-windowed (β = 8) ideal differentiator (−1)ᵐ/m, per second, normalised so that it
+    differentiates a ramp exactly; its gain is j2πf to ~10⁻⁴ up to ~0.8 × Nyquist."""
+    k = np.arange(-half_length, half_length + 1)
+    g = np.zeros(k.size)
+    nz = k != 0
+    g[nz] = np.cos(np.pi * k[nz]) / k[nz]
+    g *= signal.windows.kaiser(k.size, 8.0)
+    g /= -np.sum(k * g)
+    return g * sample_rate_hz
+
+
+def derivative_taps(bandwidth_hz: float, sample_rate_hz: float) -> np.ndarray:
+    """Differentiating low-pass D = L ∗ g (per second): in L's band D equals j2πf·L to ~10⁻⁴."""
+    return np.convolve(lowpass_taps(bandwidth_hz, sample_rate_hz), ideal_derivative_taps(sample_rate_hz))
+
+
+def apply_zero_phase(x: np.ndarray, taps: np.ndarray) -> np.ndarray:
+    """Convolve with an odd-length symmetric/antisymmetric FIR, centred (no delay); the ends are
+    extended by odd reflection, which continues a constant or a ramp without a jump."""
+    x = np.asarray(x, dtype=float)
+    half = taps.size // 2
+    pad = min(half, x.size - 1)
+    ext = np.pad(x, pad, mode="reflect", reflect_type="odd")
+    if pad < half:
+        ext = np.pad(ext, half - pad, mode="edge")
+    return signal.oaconvolve(ext, taps, mode="valid")
+
+
+def lowpass(x: np.ndarray, bandwidth_hz: float, sample_rate_hz: float) -> np.ndarray:
+    """The low-pass L of the differentiating filter applied (zero-phase) to a companion channel."""
+    return apply_zero_phase(x, lowpass_taps(bandwidth_hz, sample_rate_hz))
+
+
+def rise_time_s(velocity: np.ndarray, sample_interval_s: float) -> float:
+    """10–90 % rise time of a velocity rising from rest to its peak (linear interpolation)."""
+    v = np.asarray(velocity, dtype=float)
+    peak_index = int(np.argmax(v))
+    peak = v[peak_index]
+    if not peak > 0:
+        raise AnalysisError("velocity never rises above zero: no motion found")
+    t10 = _last_crossing_before(v, 0.1 * peak, peak_index)
+    t90 = _last_crossing_before(v, 0.9 * peak, peak_index)
+    return max((t90 - t10) * sample_interval_s, sample_interval_s)
+
+
+def _last_crossing_before(v: np.ndarray, level: float, end: int) -> float:
+    below = np.flatnonzero(v[: end + 1] < level)
+    if below.size == 0:
+        return 0.0
+    i = int(below[-1])
+    return i + (level - v[i]) / (v[i + 1] - v[i])
+
+
+def demodulate(
+    doppler_v: np.ndarray,
+    sample_interval_s: float,
+    grating_pitch_m: float,
+    orders: tuple[int, int] = (1, -1),
+    *,
+    analysis_rate_hz: float = DEFAULT_ANALYSIS_RATE_HZ,
+    bandwidth_hz: float | None = None,
+) -> Demodulated:
+    """Velocity (m/s) and acceleration (m/s²) of the grating from a PM beat, at the analysis rate.
+
+    `bandwidth_hz` None: chosen from the pulse by `bandwidth_for_rise_time`.
+    """
+    beat = beat_phase(doppler_v, sample_interval_s)
+    displacement = beat.phase_rad * metres_per_radian(grating_pitch_m, orders)
+    at_rate = displacement_to_rate(displacement, np.zeros(displacement.size), beat.sample_interval_s,
+                                   beat.start_time_s, analysis_rate_hz)
+    return differentiate(at_rate.reference, at_rate.sample_interval_s, at_rate.start_time_s, beat, bandwidth_hz)
+
+
+def displacement_to_rate(displacement_m: np.ndarray, companion: np.ndarray, sample_interval_s: float,
+                         start_time_s: float, rate_hz: float) -> Record:
+    """Displacement (as `reference`) and a companion channel (as `response`) brought to
+    `rate_hz` together by `analysis.resample.resample_to_rate` (one anti-alias filter).
+
+    The displacement is at rest at the start and in flight (a ramp) at the end; the resampler
+    detrends by the straight line through the end points, which leaves a kink at each end
+    that would ring into the record. So both ends are first extended the way the motion
+    continues (constant before, the final slope after; the companion by its end values) and
+    the extension is cut off again afterwards.
+    """
+    x = np.asarray(displacement_m, dtype=float)
+    c = np.asarray(companion, dtype=float)
+    pad = 400  # samples at the input rate: longer than resample_poly's filter reaches
+    tail = min(pad, x.size - 1)
+    slope = (x[-1] - x[-1 - tail]) / tail
+    x_ext = np.concatenate([np.full(pad, x[0]), x, x[-1] + slope * np.arange(1, pad + 1)])
+    c_ext = np.concatenate([np.full(pad, c[0]), c, np.full(pad, c[-1])])
+    extended = Record(sample_interval_s, x_ext, c_ext, start_time_s - pad * sample_interval_s)
+    out = resample_to_rate(extended, rate_hz)
+    if out is extended:
+        return Record(sample_interval_s, x, c, start_time_s)
+    ratio = sample_interval_s / out.sample_interval_s  # output samples per input sample
+    cut = int(np.ceil(pad * ratio))
+    keep = slice(cut, out.n_samples - cut)
+    return Record(out.sample_interval_s, out.reference[keep], out.response[keep],
+                  out.start_time_s + cut * out.sample_interval_s)
+
+
+def differentiate(displacement_m: np.ndarray, sample_interval_s: float, start_time_s: float, beat: BeatPhase,
+                  bandwidth_hz: float | None = None) -> Demodulated:
+    """Velocity and acceleration from displacement at the analysis rate by the differentiating
+    low-pass; bandwidth chosen from the pulse when None."""
+    rate = 1.0 / sample_interval_s
+    if bandwidth_hz is None:
+        widest = MAX_BANDWIDTH_FRACTION * rate
+        first = apply_zero_phase(displacement_m, derivative_taps(widest, rate))
+        bandwidth_hz = bandwidth_for_rise_time(rise_time_s(first, sample_interval_s), rate)
+    d = derivative_taps(bandwidth_hz, rate)
+    velocity = apply_zero_phase(displacement_m, d)
+    # The velocity is already band-limited by L: a plain (wide-band) differentiator is exact on
+    # it, so the acceleration is L applied to the true acceleration.
+    acceleration = apply_zero_phase(velocity, ideal_derivative_taps(rate))
+    return Demodulated(sample_interval_s, start_time_s, velocity, acceleration, float(bandwidth_hz), beat)

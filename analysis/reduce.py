@@ -1,0 +1,283 @@
+"""Raw shot → two-channel record: the interferometer reduction and the shock quantities.
+
+A raw shot is two channels sampled together by the digitizer (~100 MS/s): the photomultiplier
+beat of the Doppler interferometer and the bridge amplifier's output (V). `reduce_raw` gives
+the record `identify` reads (time_s, reference in m/s², response) at the analysis rate:
+
+1. Reference: `analysis.doppler` demodulates the beat into the grating's phase (displacement),
+   box-car decimated by M raw samples.
+2. Response: zero offset removed (mean of the pre-trigger part, before the motion begins),
+   scaled from volts to m/s² by 1/(amplifier gain × nominal sensitivity) (both 1: stays in
+   V), and box-car decimated by the same M samples as the phase.
+3. Both channels go to the analysis rate together (`analysis.resample.resample_to_rate`: one
+   anti-alias filter for both). The displacement becomes velocity and acceleration through the
+   differentiating low-pass of bandwidth B (chosen from the pulse, reported); the response gets
+   the same low-pass L, so the record relates them by the accelerometer's dynamics alone.
+4. Delay of the response behind the reference: estimated by cross-correlation
+   (`estimate_delay_samples`) and reported. Both channels come from one digitizer and the
+   filters above are zero-phase, so what it measures is the accelerometer's (and the
+   amplifier's) own group delay, which belongs to the model `identify` fits: the response is
+   shifted only when `align=True` (e.g. channels from two instruments with a known skew).
+
+Shock quantities: peak reference acceleration and pulse width at 10 % of peak (ISO 16063-22,
+`analysis.excitation.pulse_width`), peak velocity change (flight velocity minus rest, 0), and
+the shock sensitivity (ISO 16063-13): the response's peak ÷ the reference's peak, in the
+response's units per m/s²; also in V/(m/s²) at the amplifier input.
+
+Raw input files (`read_raw_table`): CSV with header `time_s,doppler,response` or NPZ with
+those keys. The HDF5 shot file is read by the command (rig.shotfile), which passes arrays.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.doppler import (
+    BeatPhase,
+    Demodulated,
+    beat_phase,
+    differentiate,
+    displacement_to_rate,
+    lowpass,
+    metres_per_radian,
+)
+from analysis.errors import AnalysisError, RecordError
+from analysis.excitation import pulse_width
+from analysis.records import Record
+from analysis.resample import (
+    DEFAULT_ANALYSIS_RATE_HZ,
+    estimate_delay_samples,
+    shift_samples,
+)
+
+RAW_KEYS = ("time_s", "doppler", "response")
+DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/doppler_beat.py)
+PRE_TRIGGER_MARGIN_S = 2e-6  # the zero offset is taken up to this long before the motion
+MIN_PRE_TRIGGER_SAMPLES = 100  # fewer pre-trigger samples cannot give a zero offset
+MAX_DELAY_S = 50e-6  # the delay search spans ±this
+
+
+@dataclass(frozen=True)
+class RawTable:
+    """A raw shot read from a table file: uniform sample interval, channels in volts."""
+
+    sample_interval_s: float
+    start_time_s: float
+    doppler_v: np.ndarray
+    response_v: np.ndarray
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Reduction:
+    """The reduced shot: the record at the analysis rate and what the reduction measured."""
+
+    record: Record  # time_s, reference (m/s²), response (m/s² or V), at the analysis rate
+    velocity_m_s: np.ndarray  # grating velocity on the record's time axis
+    peak_velocity_m_s: float
+    peak_acceleration_m_s2: float
+    pulse_width_s: float
+    delay_s: float
+    aligned: bool
+    shock_sensitivity: float  # response units per m/s²
+    shock_sensitivity_v_per_m_s2: float  # volts at the amplifier input per m/s²
+    response_unit: str  # "m/s^2" when scaled by gain and sensitivity, else "V"
+    response_offset_v: float
+    demodulation_bandwidth_hz: float
+    beat: BeatPhase
+
+    def quantities(self) -> dict[str, Any]:
+        """JSON-ready shock quantities and reduction diagnostics."""
+        return {
+            "peak_velocity_m_s": self.peak_velocity_m_s,
+            "peak_acceleration_m_s2": self.peak_acceleration_m_s2,
+            "pulse_width_s": self.pulse_width_s,
+            "delay_s": self.delay_s,
+            "aligned": self.aligned,
+            "shock_sensitivity": self.shock_sensitivity,
+            "shock_sensitivity_v_per_m_s2": self.shock_sensitivity_v_per_m_s2,
+            "response_unit": self.response_unit,
+            "response_offset_v": self.response_offset_v,
+            "demodulation_bandwidth_hz": self.demodulation_bandwidth_hz,
+            "analysis_rate_hz": self.record.sample_rate_hz,
+            "beat_peak_hz": self.beat.beat_peak_hz,
+            "beat_snr_db": self.beat.snr_db,
+            "onset_time_s": self.beat.onset_time_s,
+        }
+
+
+def reduce_raw(
+    doppler_v: np.ndarray,
+    response_v: np.ndarray,
+    sample_interval_s: float,
+    *,
+    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M,
+    orders: tuple[int, int] = (1, -1),
+    amp_gain: float = 1.0,
+    sensitivity_v_per_m_s2: float = 1.0,
+    sample_rate_hz: float = DEFAULT_ANALYSIS_RATE_HZ,
+    bandwidth_hz: float | None = None,
+    align: bool = False,
+    start_time_s: float = 0.0,
+    source: str = "raw shot",
+) -> Reduction:
+    """Reduce a raw shot (PM beat and amplifier output in volts, sampled together) to the
+    two-channel record at `sample_rate_hz`; see the module docstring for the steps."""
+    doppler = np.asarray(doppler_v, dtype=float).ravel()
+    response = np.asarray(response_v, dtype=float).ravel()
+    if doppler.size != response.size:
+        raise AnalysisError(f"{source}: the doppler and response channels differ in length "
+                            f"({doppler.size} and {response.size} samples)")
+    for name, value in (("amplifier gain", amp_gain), ("sensitivity", sensitivity_v_per_m_s2),
+                        ("analysis sample rate", sample_rate_hz)):
+        if not (np.isfinite(value) and value != 0):
+            raise AnalysisError(f"{source}: {name} must be a finite non-zero number, got {value!r}")
+    if not np.all(np.isfinite(response)):
+        raise AnalysisError(f"{source}: response channel has a NaN or infinite sample at index "
+                            f"{int(np.flatnonzero(~np.isfinite(response))[0])}")
+    _check_response_clipping(response, source)
+    beat = beat_phase(doppler, sample_interval_s, source=f"{source}: doppler channel")
+    m = beat.decimation
+
+    # Response: zero offset from the pre-trigger part, then volts → m/s².
+    pre_end = int((beat.onset_time_s - PRE_TRIGGER_MARGIN_S) / sample_interval_s)
+    if pre_end < MIN_PRE_TRIGGER_SAMPLES:
+        raise AnalysisError(
+            f"{source}: only {max(pre_end, 0)} samples before the pulse (need ≥ {MIN_PRE_TRIGGER_SAMPLES} "
+            f"for the response's zero offset): record more pre-trigger"
+        )
+    offset_v = float(np.mean(response[:pre_end]))
+    scale = 1.0 / (amp_gain * sensitivity_v_per_m_s2)
+    unit = "V" if amp_gain == 1.0 and sensitivity_v_per_m_s2 == 1.0 else "m/s^2"
+    n_blocks = beat.phase_rad.size
+    response_blocks = ((response[: n_blocks * m] - offset_v) * scale).reshape(n_blocks, m).mean(axis=1)
+
+    # Both channels to the analysis rate with one anti-alias filter.
+    displacement = beat.phase_rad * metres_per_radian(grating_pitch_m, orders)
+    at_rate = displacement_to_rate(displacement, response_blocks, beat.sample_interval_s,
+                                   start_time_s + beat.start_time_s, sample_rate_hz)
+    demod: Demodulated = differentiate(at_rate.reference, at_rate.sample_interval_s, at_rate.start_time_s,
+                                       beat, bandwidth_hz)
+    rate = 1.0 / at_rate.sample_interval_s
+    response_out = lowpass(at_rate.response, demod.bandwidth_hz, rate)
+    reference = demod.acceleration_m_s2
+
+    max_lag = max(1, int(MAX_DELAY_S * rate))
+    delay_samples = estimate_delay_samples(reference, response_out, max_lag)
+    if align:
+        response_out = shift_samples(response_out, -delay_samples)
+    record = Record(at_rate.sample_interval_s, reference, response_out, at_rate.start_time_s)
+
+    pulse = pulse_width(reference, record.sample_interval_s, record.start_time_s)
+    extreme = int(np.argmax(np.abs(response_out)))
+    peak_response = float(response_out[extreme])
+    shock_sensitivity = peak_response / pulse.peak_m_s2
+    return Reduction(
+        record=record,
+        velocity_m_s=demod.velocity_m_s,
+        peak_velocity_m_s=float(np.max(demod.velocity_m_s)),
+        peak_acceleration_m_s2=float(pulse.peak_m_s2),
+        pulse_width_s=float(pulse.width_s),
+        delay_s=float(delay_samples * record.sample_interval_s),
+        aligned=align,
+        shock_sensitivity=float(shock_sensitivity),
+        # response = V / (gain · S): volts at the amplifier input = response · S
+        shock_sensitivity_v_per_m_s2=float(shock_sensitivity * sensitivity_v_per_m_s2),
+        response_unit=unit,
+        response_offset_v=offset_v,
+        demodulation_bandwidth_hz=demod.bandwidth_hz,
+        beat=beat,
+    )
+
+
+def _check_response_clipping(response: np.ndarray, source: str) -> None:
+    """A response sitting on one value for a run of samples at its extreme is clipped."""
+    for rail in (float(np.min(response)), float(np.max(response))):
+        at_rail = response == rail
+        runs = int(np.count_nonzero(at_rail[1:] & at_rail[:-1]))
+        if runs >= max(8, response.size // 10000) and np.ptp(response) > 0:
+            raise AnalysisError(
+                f"{source}: response channel clipped at {rail:g} V ({int(np.count_nonzero(at_rail))} samples "
+                f"on the rail): lower the amplifier gain or widen the digitizer's range"
+            )
+
+
+# ------------------------------------------------------------------------------ raw tables
+def read_raw_table(path: str | Path) -> RawTable:
+    """Read a raw shot from CSV (header time_s,doppler,response) or NPZ (same keys).
+
+    Raises RecordError naming the file and the problem (missing key, ragged or non-uniform
+    time axis, non-finite values).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise RecordError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                missing = [k for k in RAW_KEYS if k not in data.files]
+                if missing:
+                    raise RecordError(f"{path}: missing key(s) {', '.join(missing)}; a raw NPZ needs "
+                                      f"{', '.join(RAW_KEYS)}")
+                columns = [np.asarray(data[k], dtype=float).ravel() for k in RAW_KEYS]
+        except (OSError, ValueError) as exc:
+            raise RecordError(f"{path}: not a readable NPZ file ({exc})") from None
+    elif suffix == ".csv":
+        columns = _read_csv_columns(path)
+    else:
+        raise RecordError(f"{path}: unknown raw shot format '{suffix}' (use .csv, .npz or an .h5 shot file)")
+    time_s, doppler, response = columns
+    n = time_s.size
+    if doppler.size != n or response.size != n:
+        raise RecordError(f"{path}: columns have different lengths")
+    if n < 2:
+        raise RecordError(f"{path}: only {n} samples")
+    for key, col in zip(RAW_KEYS, columns, strict=True):
+        if not np.all(np.isfinite(col)):
+            raise RecordError(f"{path}: column '{key}' has a NaN or infinite value at row "
+                              f"{int(np.flatnonzero(~np.isfinite(col))[0])}")
+    step = (time_s[-1] - time_s[0]) / (n - 1)
+    if not step > 0:
+        raise RecordError(f"{path}: time_s is not increasing")
+    if np.max(np.abs(np.diff(time_s) - step)) > 1e-3 * step:
+        raise RecordError(f"{path}: time_s is not uniformly sampled (step varies by more than 0.1 %)")
+    return RawTable(float(step), float(time_s[0]), doppler, response)
+
+
+def _read_csv_columns(path: Path) -> list[np.ndarray]:
+    with open(path, newline="") as fh:
+        header = next(csv.reader(fh), None)
+    if header is None:
+        raise RecordError(f"{path}: empty file")
+    names = [h.strip() for h in header]
+    missing = [k for k in RAW_KEYS if k not in names]
+    if missing:
+        raise RecordError(f"{path}: header lacks {', '.join(missing)}; a raw CSV needs the header "
+                          f"{','.join(RAW_KEYS)}")
+    try:
+        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
+                           usecols=[names.index(k) for k in RAW_KEYS])
+    except ValueError as exc:
+        raise RecordError(f"{path}: not a numeric table ({exc})") from None
+    return [table[:, i].copy() for i in range(3)]
+
+
+def write_raw_table(path: str | Path, time_s: np.ndarray, doppler_v: np.ndarray, response_v: np.ndarray) -> Path:
+    """Write a raw shot as NPZ or CSV (by suffix) with the keys time_s, doppler, response."""
+    path = Path(path)
+    arrays = dict(zip(RAW_KEYS, (np.asarray(time_s, float), np.asarray(doppler_v, float),
+                                 np.asarray(response_v, float)), strict=True))
+    if path.suffix.lower() == ".npz":
+        np.savez(path, **arrays)
+    elif path.suffix.lower() == ".csv":
+        np.savetxt(path, np.column_stack(list(arrays.values())), delimiter=",", header=",".join(RAW_KEYS),
+                   comments="", fmt="%.10g")
+    else:
+        raise RecordError(f"{path}: unknown raw shot format '{path.suffix}' (use .csv or .npz)")
+    return path
