@@ -20,6 +20,7 @@ from rig.interlocks import INTERLOCKS, REQUIRED, RigReadings, evaluate
 from rig.sequencer import FINAL_STATES, TRANSITIONS, FireAuthorisation, Sequencer, State
 from rig.shot import AnalysisResult, ShotRequestError
 from rig.shotfile import RawShot, read_shot
+from tests.rig.conftest import short_timeouts_config
 
 ACTIVE = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE)
 HAPPY_PATH = ["CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE", "CAPTURE", "SAFE", "STORE", "ANALYSE", "DONE"]
@@ -161,7 +162,8 @@ def test_withdrawn_confirmation_does_not_fire(rig) -> None:
 # -- abort, timeout, interrupt, lost interlock --------------------------------------------------------
 @pytest.mark.parametrize("state", ["CHARGE", "ARM"])
 def test_abort_from_another_thread_reaches_safe(make_rig, state: str) -> None:
-    rig = make_rig(time_scale=10.0)  # charging 4 bar takes ~0.8 s: the abort comes while charging
+    # At 10x, charging 4 bar takes ~0.8 s: the abort comes while charging (timeouts with margin).
+    rig = make_rig(config=short_timeouts_config(evacuate_s=5.0, charge_s=5.0), time_scale=10.0)
     started = threading.Event()
 
     def on_event(event: RigEvent) -> None:
@@ -197,9 +199,7 @@ def test_abort_right_after_the_fire_command_keeps_the_record(rig) -> None:
 
 
 def test_state_timeout_reaches_safe(make_rig) -> None:
-    from tests.rig.conftest import short_timeouts_config
-
-    rig = make_rig(config=short_timeouts_config(charge_s=0.2), time_scale=10.0)  # 6 bar needs ~1.2 s
+    rig = make_rig(config=short_timeouts_config(evacuate_s=5.0, charge_s=0.2), time_scale=10.0)  # 6 bar: ~1.2 s
     outcome = rig.run(pressure_bar=6.0)
     assert outcome.aborted_in == "CHARGE" and outcome.final_state == "ABORTED"
     assert "timed out after 0.2 s charging the reservoir" in outcome.error
