@@ -47,7 +47,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import fft, signal
+from scipy import fft, ndimage, signal
 
 from analysis.errors import AnalysisError
 from analysis.records import Record
@@ -130,18 +130,16 @@ def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rat
     if n_blocks < 64:
         raise AnalysisError(f"{source}: {x.size} samples is too short to demodulate (needs ≥ {64 * m})")
     x = x[: n_blocks * m]
-    increments, power, low_hz = _phase_increments(x, sample_interval_s, m)
+    weighted, total, power, low_hz = _phase_increments(x, sample_interval_s, m)
     beat_power = float(np.percentile(power, 99.0))
     noise_power = float(np.percentile(power, 1.0))
     gate = power >= GATE_FRACTION * beat_power
     if not np.any(gate) or beat_power <= 4.0 * noise_power:
         raise AnalysisError(f"{source}: no Doppler beat found (beat power not above the noise)")
-    # Per-block sums of the increments: the phase change from block k's mean to block k+1's mean
-    # is sum of (M−1−i)/M weighted increments in block k+1 plus ... — see _block_mean_phase.
-    phase = _block_mean_phase(increments, m, gate)
+    phase = _block_mean_phase(weighted, total, gate)
     dt_m = m * sample_interval_s
     frequency_hz = np.diff(phase, prepend=phase[0]) / (2.0 * np.pi * dt_m)
-    smooth_hz = signal.medfilt(np.where(gate, frequency_hz, 0.0), 11)
+    smooth_hz = ndimage.median_filter(np.where(gate, frequency_hz, 0.0), size=11, mode="nearest")
     beat_peak_hz = float(np.max(smooth_hz))
     if beat_peak_hz > MAX_BEAT_FRACTION * fs:
         raise AnalysisError(
@@ -155,7 +153,8 @@ def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rat
     if above.size == 0:
         raise AnalysisError(f"{source}: no Doppler beat found (the beat never rises above {handover_hz / 1e3:.0f} kHz)")
     k_h = int(above[0])
-    offset_v = float(np.mean(x[np.repeat(smooth_hz >= handover_hz, m)]))
+    block_means = x.reshape(-1, m) @ np.full(m, 1.0 / m, dtype=np.float32)
+    offset_v = float(np.mean(block_means[smooth_hz >= handover_hz]))
     phase, k_on, amplitude_v = _onset_phase(x, sample_interval_s, m, phase, k_h, handover_hz, offset_v,
                                             smooth_hz, power, noise_power, low_hz, source)
     snr_db = 10.0 * np.log10(max(beat_power - noise_power, 1e-30) / max(noise_power, 1e-30))
@@ -192,44 +191,55 @@ def _check_record(x: np.ndarray, sample_interval_s: float, source: str) -> float
     return fs
 
 
-def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per-sample phase increments (float32, angle of z[n]·z*[n−1]; first one 0), the mean
-    analytic power of every M-sample block, and the low edge (Hz) of the analytic band used.
+def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Per M-sample block: the weighted and plain sums of the phase increments (the angle of
+    z[n]·z*[n−1], see `_block_mean_phase`), the mean analytic power, and the low edge (Hz) of
+    the analytic band used.
 
-    The spectra of all overlapping blocks are computed first; the strongest beat frequency in
-    them sets the analytic band's low edge (`_analytic_low_hz`), then the blocks go back.
+    The spectra of all overlapping FFT blocks are computed first; the strongest beat frequency
+    in them sets the analytic band's low edge (`_analytic_low_hz`), then the blocks go back.
+    Each FFT block keeps a whole number of M-sample blocks, so the per-sample increments are
+    reduced to block sums as they are made (never a 10⁷-sample array of them).
     """
     n = x.size
-    keep = BLOCK_SAMPLES - 2 * BLOCK_OVERLAP
+    keep = (BLOCK_SAMPLES - 2 * BLOCK_OVERLAP) // m * m  # kept samples per FFT block
+    lead = BLOCK_OVERLAP  # discarded before the kept part (the rest of the block after it)
     n_fft_blocks = -(-n // keep)
-    padded = np.empty(n_fft_blocks * keep + 2 * BLOCK_OVERLAP, dtype=np.float32)
-    padded[BLOCK_OVERLAP : BLOCK_OVERLAP + n] = x
-    padded[:BLOCK_OVERLAP] = x[0]
-    padded[BLOCK_OVERLAP + n :] = x[-1]
+    padded = np.empty(n_fft_blocks * keep + BLOCK_SAMPLES - keep, dtype=np.float32)
+    padded[lead : lead + n] = x
+    padded[:lead] = x[0]
+    padded[lead + n :] = x[-1]
     freq = fft.rfftfreq(BLOCK_SAMPLES, sample_interval_s)
-    frames = np.lib.stride_tricks.sliding_window_view(padded, BLOCK_SAMPLES)[:: keep][:n_fft_blocks]
+    frames = np.lib.stride_tricks.sliding_window_view(padded, BLOCK_SAMPLES)[::keep][:n_fft_blocks]
     spectra = fft.rfft(frames, axis=1)  # complex64 for float32 input
     low_hz = _analytic_low_hz(spectra, freq)
     gain = _analytic_gain(freq, low_hz).astype(np.float32)
-    increments = np.empty(n, dtype=np.float32)
-    power = np.empty(n, dtype=np.float32)
-    previous = np.complex64(0)
+    n_blocks = n // m
+    weighted = np.empty(n_blocks, dtype=np.float32)
+    total = np.empty(n_blocks, dtype=np.float32)
+    power = np.empty(n_blocks, dtype=np.float32)
+    w_mean = ((m - np.arange(m)) / m).astype(np.float32)  # weight of increment i in a block mean
+    ones = np.ones(m, dtype=np.float32)
+    previous = None
     batch = 16  # FFT blocks per call: low Python overhead, bounded memory
     full = np.zeros((batch, BLOCK_SAMPLES), dtype=np.complex64)
     for first in range(0, n_fft_blocks, batch):
         count = min(batch, n_fft_blocks - first)
         full[:count, : freq.size] = spectra[first : first + count] * gain
-        z = fft.ifft(full[:count], axis=1)[:, BLOCK_OVERLAP : BLOCK_OVERLAP + keep].reshape(-1)
+        z = fft.ifft(full[:count], axis=1)[:, lead : lead + keep].reshape(-1)
         lo = first * keep
-        hi = min(n, lo + z.size)
-        z = z[: hi - lo]
+        z = z[: min(n, lo + z.size) - lo]
         prod = np.empty_like(z)
         prod[1:] = z[1:] * np.conj(z[:-1])
-        prod[0] = z[0] * np.conj(previous) if lo > 0 else 0
+        prod[0] = 0 if previous is None else z[0] * np.conj(previous)
         previous = z[-1]
-        increments[lo:hi] = np.angle(prod)
-        power[lo:hi] = z.real * z.real + z.imag * z.imag
-    return increments, power.reshape(-1, m).mean(axis=1), low_hz
+        angles = np.angle(prod).reshape(-1, m)
+        k0, k1 = lo // m, lo // m + angles.shape[0]
+        weighted[k0:k1] = angles @ w_mean
+        total[k0:k1] = angles @ ones
+        power[k0:k1] = np.square(z.view(np.float32)).reshape(-1, 2 * m) @ np.full(2 * m, 1.0 / m, np.float32)
+    return weighted, total, power, low_hz
 
 
 def _analytic_low_hz(spectra: np.ndarray, freq_hz: np.ndarray) -> float:
@@ -240,11 +250,15 @@ def _analytic_low_hz(spectra: np.ndarray, freq_hz: np.ndarray) -> float:
     leaves rest; the higher it is, the sooner that step stops disturbing the analytic phase.
     The fringe tracker covers the beat up to 4× this edge (see `beat_phase`).
     """
-    usable = freq_hz >= ANALYTIC_LOW_MIN_HZ
-    psd = np.abs(spectra[:, usable]) ** 2
-    block_power = psd.sum(axis=1)
-    beating = block_power >= 0.1 * block_power.max()
-    dominant = freq_hz[usable][np.argmax(psd[beating], axis=1)]
+    first = int(np.searchsorted(freq_hz, ANALYTIC_LOW_MIN_HZ))
+    block_power = np.array([np.vdot(b[first:], b[first:]).real for b in spectra])
+    beating = np.flatnonzero(block_power >= 0.1 * block_power.max())
+    # The strongest block and up to 15 others spread over the beating ones suffice (a long
+    # flight repeats the same beat in every block) and keep this cheap for 10⁷ samples.
+    chosen = np.union1d(beating[np.linspace(0, beating.size - 1, min(16, beating.size)).astype(int)],
+                        [int(np.argmax(block_power))])
+    psd = np.abs(spectra[chosen, first:]) ** 2
+    dominant = freq_hz[first:][np.argmax(psd, axis=1)]
     return float(np.clip(dominant.max() / 8.0, ANALYTIC_LOW_MIN_HZ, ANALYTIC_LOW_MAX_HZ))
 
 
@@ -257,19 +271,18 @@ def _analytic_gain(freq_hz: np.ndarray, low_hz: float) -> np.ndarray:
     return gain
 
 
-def _block_mean_phase(increments: np.ndarray, m: int, gate: np.ndarray) -> np.ndarray:
-    """Mean phase of every M-sample block from per-sample increments (gated blocks add none).
+def _block_mean_phase(weighted: np.ndarray, total: np.ndarray, gate: np.ndarray) -> np.ndarray:
+    """Mean phase of every M-sample block from its sums of per-sample increments (gated blocks
+    add none).
 
-    Within block k (samples kM + j), φ[kM + j] = φ[kM] + Σ_{i≤j} Δ[kM + i] (Δ[n] = φ[n] − φ[n−1]),
-    so mean_j φ = φ[kM] + Σ_i Δ[kM + i]·(M − i)/M, and φ[(k+1)M] = φ[kM] + Σ_i Δ[kM + i] + Δ[(k+1)M]…
-    Computed with two dot products per block instead of a 10⁷-sample cumulative sum.
+    Within block k (samples kM + j), φ[kM + j] = φ[kM − 1] + Σ_{i≤j} Δ[kM + i] with
+    Δ[n] = φ[n] − φ[n−1], so mean_j φ = φ[kM − 1] + Σ_i Δ[kM + i]·(M − i)/M (`weighted`) and
+    φ[kM + M − 1] = φ[kM − 1] + Σ_i Δ[kM + i] (`total`). Float32 block sums of ≤ M increments
+    lose < 10⁻⁵ rad; the running sum is float64.
     """
-    d = increments.reshape(-1, m).astype(np.float64)
-    d[~gate] = 0.0
-    weights = (m - np.arange(m)) / m  # weight of increment i in the block mean
-    within = d @ weights  # mean_j φ − φ[kM − 1]... relative to the sample before the block
-    total = d.sum(axis=1)  # φ[kM + M − 1] − φ[kM − 1]
-    start = np.concatenate([[0.0], np.cumsum(total)[:-1]])  # φ[kM − 1] relative to the first
+    within = np.where(gate, weighted, 0.0)
+    steps = np.where(gate, total, 0.0).astype(np.float64)
+    start = np.concatenate([[0.0], np.cumsum(steps)[:-1]])  # φ[kM − 1] relative to the first
     return start + within
 
 
