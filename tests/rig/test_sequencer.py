@@ -98,6 +98,25 @@ def test_complete_shot_stores_raw_before_analysis_and_ends_safe(rig) -> None:
     assert result.data["results"] == outcome.results and result.data["error"] is None
 
 
+def test_real_analysis_identifies_the_simulated_accelerometer(rig) -> None:
+    """The default analysis (analysis.shot_analysis) through the whole pipeline, judged against
+    the simulator's truth recorded with the shot."""
+    outcome = rig.run(pressure_bar=2.0)
+    assert outcome.final_state == "DONE" and outcome.analysis_error is None, outcome.analysis_error
+    shot = read_shot(outcome.shot_path)
+    assert shot.state == "analysed" and shot.results == outcome.results
+    truth = shot.meta.simulated_truth
+    (true_mode,) = truth["accelerometer"]["modes"]
+    modes = [m for m in outcome.results["identification"]["modes"] if m["kind"] == "pair"]
+    found = min(modes, key=lambda m: abs(m["natural_frequency_hz"] - true_mode["natural_frequency_hz"]))
+    assert found["natural_frequency_hz"] == pytest.approx(true_mode["natural_frequency_hz"], rel=0.01)
+    assert found["damping_ratio"] == pytest.approx(true_mode["damping_ratio"], rel=0.1)
+    reduction = outcome.results["reduction"]
+    assert reduction["peak_acceleration_m_s2"] == pytest.approx(truth["peak_acceleration_m_s2"], rel=0.02)
+    assert reduction["peak_velocity_m_s"] == pytest.approx(truth["delta_velocity_m_s"], rel=0.02)
+    assert shot.record is not None and shot.record.sample_rate_hz == pytest.approx(rig.config.analysis.sample_rate_hz)
+
+
 def test_analysis_failure_is_recorded_and_the_shot_kept(rig) -> None:
     def broken(raw: RawShot, params: dict) -> AnalysisResult:
         raise ValueError("no beat found in the Doppler channel")
