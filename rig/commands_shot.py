@@ -135,6 +135,10 @@ def run_shot_command(args: argparse.Namespace) -> int:
         emit_json(out)
     elif outcome.shot_path is not None:
         print(f"shot file: {outcome.shot_path}", flush=True)
+        if outcome.results:
+            from rig.campaign import result_line  # the campaign's one-line summary of the figures
+
+            print(f"results:   {result_line(outcome.results)}", flush=True)
     for warning in outcome.warnings:
         sys.stderr.write(f"hopkinson: warning: {warning}\n")
     if outcome.done and outcome.analysis_error:

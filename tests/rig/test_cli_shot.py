@@ -81,6 +81,15 @@ def test_analysis_failure_still_exits_0_and_says_why(configs, capsys) -> None:
     assert read_shot(result["shot_path"]).state == "analysis_failed"
 
 
+def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
+    assert main(_args(configs, "--yes")) == 0
+    out = capsys.readouterr().out
+    states = [line.split()[0] for line in out.splitlines() if not line.startswith(("shot file:", "results:"))]
+    assert [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s] == [
+        "CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE", "CAPTURE", "SAFE", "STORE", "ANALYSE", "DONE"]
+    assert re.search(r"^results: .*f_n 2\d\.\d\d kHz.*FBSD", out, flags=re.M)
+
+
 def test_without_yes_it_runs_to_arm_goes_safe_and_exits_3(configs, capsys) -> None:
     rc = main(_args(configs))
     out, err = capsys.readouterr()
