@@ -89,6 +89,7 @@ class Reduction:
     response_unit: str  # "m/s^2" when scaled by gain and sensitivity, else "V"
     response_offset_v: float
     demodulation_bandwidth_hz: float
+    onset_time_s: float  # where the grating leaves rest, on the record's time axis
     beat: BeatPhase
 
     def quantities(self) -> dict[str, Any]:
@@ -107,7 +108,7 @@ class Reduction:
             "analysis_rate_hz": self.record.sample_rate_hz,
             "beat_peak_hz": self.beat.beat_peak_hz,
             "beat_snr_db": self.beat.snr_db,
-            "onset_time_s": self.beat.onset_time_s,
+            "onset_time_s": self.onset_time_s,
         }
 
 
@@ -191,6 +192,7 @@ def reduce_raw(
         response_unit=unit,
         response_offset_v=offset_v,
         demodulation_bandwidth_hz=demod.bandwidth_hz,
+        onset_time_s=start_time_s + beat.onset_time_s,
         beat=beat,
     )
 

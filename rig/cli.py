@@ -21,6 +21,7 @@ COMMAND_MODULES = [
     "rig.commands_demo",
     "rig.commands_dcm",
     "rig.commands_panel",
+    "rig.commands_reduce",
     "rig.commands_report",
     "rig.commands_sim",
     "rig.commands_shot",
