@@ -58,7 +58,7 @@ from analysis.shot_analysis import ShotAnalysis
 
 G_M_S2 = 9.80665  # standard gravity: accelerations are also shown in g
 A4_PORTRAIT_IN = (8.27, 11.69)
-PNG_DPI = 110
+PNG_DPI = 90
 BAND_LEVELS = (("5", 0.05, "tab:green"), ("10", 0.10, "tab:orange"))
 FORMATS = ("pdf", "html")
 
@@ -622,7 +622,7 @@ def excitation_page(entry: ShotEntry) -> Figure:
     ax_l.set_ylabel("loss (response units²)")
     ax_l.set_title("Loss by order", fontsize=9)
     ax_l.legend(fontsize=6.5)
-    ax_l.grid(alpha=0.3, which="both")
+    ax_l.grid(alpha=0.3)
 
     aic, bic = ident.get("aic_by_order") or [], ident.get("bic_by_order") or []
     if aic:
@@ -638,7 +638,7 @@ def excitation_page(entry: ShotEntry) -> Figure:
     return fig
 
 
-def _frequency_grid(model: DiscreteModel, points: int = 3000) -> np.ndarray:
+def _frequency_grid(model: DiscreteModel, points: int = 1200) -> np.ndarray:
     nyq = nyquist_hz(model)
     return np.logspace(np.log10(nyq / 1e4), np.log10(nyq * 0.999), points)
 
@@ -680,11 +680,11 @@ def model_page(entry: ShotEntry) -> Figure:
     ax_db.set_xlabel("frequency (kHz)")
     ax_db.set_ylabel("|H(f)/H(0)| (dB)")
     ax_db.set_title("Normalised magnitude, DC to Nyquist", fontsize=9)
-    ax_db.grid(alpha=0.3, which="both")
+    ax_db.grid(alpha=0.3)
     ax_db.legend(fontsize=7)
 
     f10 = a.fbsd_hz.get("10") or nyquist_hz(model) / 10
-    fl = np.linspace(0.0, min(nyquist_hz(model), 2.5 * f10), 2000)
+    fl = np.linspace(0.0, min(nyquist_hz(model), 2.5 * f10), 800)
     ml = _normalised(frequency_response(model, fl), dc)
     ax_band.plot(fl / 1e3, ml, color="tab:blue", lw=1.5, label="model")
     _bands(ax_band, a.fbsd_hz)
@@ -706,14 +706,14 @@ def model_page(entry: ShotEntry) -> Figure:
     ax_ph.set_xlabel("frequency (kHz)")
     ax_ph.set_ylabel("phase (degrees)")
     ax_ph.set_title("Phase (input delay not included)", fontsize=9)
-    ax_ph.grid(alpha=0.3, which="both")
+    ax_ph.grid(alpha=0.3)
     ax_ph.legend(fontsize=7)
     return fig
 
 
 def _z_plane(ax: Any, a: ShotAnalysis, xlim: tuple[float, float], ylim: tuple[float, float],
              legend: bool) -> None:
-    theta = np.linspace(0, 2 * np.pi, 2000)
+    theta = np.linspace(0, 2 * np.pi, 720)
     ax.plot(np.cos(theta), np.sin(theta), color="0.6", lw=0.8, label="unit circle")
     poles, zeros, dp = a.model.poles, a.model.zeros, a.dcm.poles
 
@@ -785,7 +785,7 @@ def dcm_page(entry: ShotEntry) -> Figure:
     ax_m, ax_s, ax_tab = fig.subplots(3, 1, height_ratios=[1.3, 1.0, 0.6])
     comp = a.compensated_fbsd_hz
     top = max(comp.get("10") or 0.0, a.fbsd_hz.get("10") or 0.0)
-    f = np.linspace(0.0, min(nyquist_hz(model), 1.6 * top if top else nyquist_hz(model)), 2500)
+    f = np.linspace(0.0, min(nyquist_hz(model), 1.6 * top if top else nyquist_hz(model)), 1000)
     h = frequency_response(model, f)
     g = dcm.frequency_response(f)
     ax_m.plot(f / 1e3, _normalised(h, model.dc_gain), color="tab:blue", lw=1.2, label="model H")
@@ -888,7 +888,7 @@ def campaign_responses_page(entries: Sequence[ShotEntry]) -> Figure:
     for e, c in zip(analysed, colours, strict=True):
         a = e.analysis
         assert a is not None
-        f = _frequency_grid(a.model, 1500)
+        f = _frequency_grid(a.model, 800)
         ax_db.semilogx(f / 1e3, 20 * np.log10(_normalised(frequency_response(a.model, f), a.model.dc_gain)),
                        color=c, lw=1, label=e.label)
         top = max(top, a.fbsd_hz.get("10") or 0.0)
@@ -898,12 +898,12 @@ def campaign_responses_page(entries: Sequence[ShotEntry]) -> Figure:
     ax_db.set_xlabel("frequency (kHz)")
     ax_db.set_ylabel("|H(f)/H(0)| (dB)")
     ax_db.set_title("Normalised magnitude of each shot's model", fontsize=9)
-    ax_db.grid(alpha=0.3, which="both")
+    ax_db.grid(alpha=0.3)
     ax_db.legend(fontsize=6.5, ncol=3)
     for e, c in zip(analysed, colours, strict=True):
         a = e.analysis
         assert a is not None
-        fl = np.linspace(0.0, min(nyquist_hz(a.model), 2.5 * top if top else nyquist_hz(a.model)), 1500)
+        fl = np.linspace(0.0, min(nyquist_hz(a.model), 2.5 * top if top else nyquist_hz(a.model)), 600)
         ax_band.plot(fl / 1e3, _normalised(frequency_response(a.model, fl), a.model.dc_gain), color=c, lw=1,
                      label=e.label)
         f5 = a.fbsd_hz.get("5")

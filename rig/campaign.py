@@ -486,8 +486,9 @@ def result_line(results: dict[str, Any]) -> str:
         parts.append(f"order {model['order']}")
     ident = results.get("identification") or {}
     modes = ident.get("modes") or []
-    if modes:
-        m = modes[0]
+    pairs = [m for m in modes if m.get("kind") == "pair" and m.get("natural_frequency_hz")]
+    if pairs or modes:  # the main resonance: the lowest complex pair (else the lowest mode)
+        m = min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else modes[0]
         if m.get("natural_frequency_hz") is not None:
             parts.append(f"f_n {m['natural_frequency_hz'] / 1e3:.2f} kHz")
         if m.get("damping_ratio") is not None:
