@@ -64,6 +64,8 @@ HANDOVER_MAX_HZ = 2e6  # the fringe tracker reads the onset up to this beat freq
 MIN_SAMPLE_RATE_HZ = 5e6  # below this a PM beat record is certainly mis-sampled
 MAX_BEAT_FRACTION = 0.45  # a beat above this × the sampling rate is aliased
 BANDWIDTH_RISE_PRODUCT = 5.0  # B = this / (10–90 % rise time of the velocity)
+_DEBUG = False
+_DEBUG_STORE: dict = {}
 MAX_BANDWIDTH_FRACTION = 0.4  # B ≤ this × the analysis rate (the low-pass must fit below Nyquist)
 STOPBAND_ATTENUATION_DB = 80.0  # of the low-pass L
 
@@ -331,6 +333,16 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
     idx = np.arange(y.size)
     n_rest = max(8, y.size // 4)
     rest_level = float(np.median(y[n_rest // 2 : n_rest]))
+    # The level drifts with the slow amplitude fluctuation (A·cos φ0 changes with A): over a
+    # rest of ≥ 20 µs a straight line through it is extrapolated; a shorter one is taken flat.
+    if t_y[n_rest - 1] - t_y[0] >= 20e-6:
+        rest_line = np.polyfit(t_y[:n_rest] - t_y[0], y[:n_rest], 1)
+    else:
+        rest_line = np.array([0.0, rest_level])
+
+    def rest_at(i: np.ndarray | int) -> np.ndarray | float:
+        return np.polyval(rest_line, t_y[i] - t_y[0])
+
     noise_y = 1.4826 * float(np.median(np.abs(y[:n_rest] - np.median(y[:n_rest]))))
     # Fringe turning points: a Schmitt trigger with half an amplitude of hysteresis.
     turns, kinds = _turning_points(y, 0.5 * amplitude_h)
@@ -345,44 +357,60 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
     # phase is put on the extreme itself (an error of at most the distance to it, instead of
     # twice it).
     rest_on_extreme = False
+    width = max(1, int(0.25e-6 / (down * dt))) | 1  # boxcar of the smoothed signal (refined below)
+    y_smooth = None
+    noise = 0.0
+    far_turn = y.size  # the first extreme far from the rest level (the onset ends there)
     far = np.flatnonzero(np.abs(y[turns] - rest_level) >= 0.5 * amplitude_h) if turns.size else np.zeros(0, int)
     if far.size and far[0] + 1 < turns.size:
         j = int(far[0])
-        big = int(turns[j])
+        big = far_turn = int(turns[j])
         near_kind = -int(kinds[j])
         half_fringe = int(turns[j + 1] - big)
         width = max(1, half_fringe // 4) | 1
-        y_smooth = np.convolve(np.pad(y, width // 2, mode="edge"), np.ones(width) / width, mode="valid")
-        near_side = np.flatnonzero((y_smooth[:big] - rest_level) * near_kind >= 0)
+        y_smooth = _boxcar(y, width)
+        near_side = np.flatnonzero((y_smooth[:big] - rest_at(idx[:big])) * near_kind >= 0)
         crossing = int(near_side[-1]) if near_side.size else big
         search = np.arange(max(0, crossing - 2 * half_fringe), crossing + 1)
         best = int(search[np.argmax(y_smooth[search] * near_kind)])
         peak = float(y_smooth[best] * near_kind)
         extreme = float(_parabolic_extreme(np.abs(y), turns[j : j + 1])[0])  # fringe amplitude
-        noise = 3.0 * noise_y / np.sqrt(max(width / 5.0, 1.0)) + 0.01 * extreme
+        noise = _smoothed_noise(noise_y, width) + 0.01 * extreme
         turns, kinds = turns[j:], kinds[j:]
-        if extreme - abs(rest_level) <= 2.0 * noise:
-            rest_on_extreme = True
-        if rest_on_extreme or peak - rest_level * near_kind > extreme - peak:
+        if _DEBUG:
+            print("DECIDE", dict(rest=rest_level, extreme=extreme, peak=peak, noise=noise, best=best, crossing=crossing, big=big, near_kind=near_kind, width=width))
+        rest_level = float(rest_at(best))
+        excursion = peak - rest_level * near_kind
+        # (Twice the noise: in doubt the rest goes on the extreme, which costs at most the
+        # small distance to it.)
+        if excursion <= 2.0 * noise and extreme - abs(rest_level) <= 2.0 * noise + 0.01 * extreme:
+            rest_on_extreme = True  # no excursion, and the rest within noise and drift of the extreme
+        if rest_on_extreme or excursion > 2.0 * noise:
             turns = np.concatenate([[best], turns])
             kinds = np.concatenate([[near_kind], kinds])
     # Amplitude through the turning points (the extreme's distance from the offset, refined by
-    # a parabola through the three samples around it), extrapolated before the first one along
-    # the line through the first few (the slow fluctuation goes on while the grating leaves
-    # rest) and held after the last one.
+    # a parabola fitted around it), held before the first one and after the last one (a slow
+    # fluctuation changes it by well under 1 % over an onset; extrapolating a slope from a few
+    # noisy extremes is worse).
     if turns.size:
         amp_t = t_y[turns]
         amp_v = _parabolic_extreme(np.abs(y), turns)
-        amplitude = np.interp(t_y, amp_t, amp_v)
-        early = slice(0, min(4, turns.size))
-        if turns.size >= 2:
-            slope, intercept = np.polyfit(amp_t[early], amp_v[early], 1)
-            amplitude[: turns[0]] = slope * t_y[: turns[0]] + intercept
-        else:
-            amplitude[: turns[0]] = amp_v[0]
+        amplitude = np.interp(t_y, amp_t, amp_v)  # held before the first and after the last
+        if rest_on_extreme:  # the rest sits on the extreme: its level is the amplitude there
+            amplitude[: turns[1] if turns.size > 1 else y.size] = abs(rest_level)
     else:
         amplitude = np.full(y.size, amplitude_h)
+    if y_smooth is None:
+        y_smooth = _boxcar(y, width)
+        noise = _smoothed_noise(noise_y, width) + 0.01 * amplitude_h
     alpha = np.arccos(np.clip(y / amplitude, -1.0, 1.0))
+    # Near a fringe's extreme (|cos θ| > 0.95) arccos amplifies noise (dθ = dc / sin θ). Before
+    # the first far extreme (the onset, slow fringes) α is taken there from the smoothed signal;
+    # later, where the fringes are fast and regular, θ is interpolated in time (below).
+    ill = np.abs(y / amplitude) > 0.95
+    smooth_alpha = np.arccos(np.clip(y_smooth / amplitude, -1.0, 1.0))
+    early = ill & (idx < far_turn)
+    alpha[early] = smooth_alpha[early]
     # Branch of each sample: after a maximum the fringe falls (θ = α), after a minimum it rises
     # (θ = 2π − α); before the first turning point, the branch that leads into it.
     if kinds.size:
@@ -392,25 +420,35 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
         kind_next = np.full(y.size, 1 if y[-1] > y[n_rest] else -1)
     theta = np.where(kind_next > 0, 2.0 * np.pi - alpha, alpha)
     theta += 2.0 * np.pi * np.searchsorted(turns[kinds > 0], idx, side="left")
-    # The rest phase is the median over the rest (or the first extreme's, see above); before
-    # that the phase is held there and it never drops below it (no motion backwards).
+    # Departure from rest: the last sample before the first real extreme (the far one when the
+    # rest was put on an extreme) at which the smoothed signal is still within the noise of the
+    # rest level. Up to there the phase is held at the rest phase: that of the rest level on the
+    # branch leading into the first extreme (from the level, not from a median of noisy
+    # arccos values, which are biased near an extreme), or the extreme's own phase.
+    end = far_turn if rest_on_extreme else (int(turns[0]) if turns.size else y.size)
+    at_rest = np.flatnonzero(np.abs(y_smooth[:end] - rest_at(idx[:end])) <= noise)
+    held = max(int(at_rest[-1]) + 1 if at_rest.size else 0, n_rest // 2)
     if rest_on_extreme:
-        # Held on the extreme until the (smoothed) signal leaves the rest level for good.
         rest_phase = float(theta[turns[0]])
-        end = int(turns[1]) if turns.size > 1 else y.size
-        at_rest = np.flatnonzero(np.abs(y_smooth[:end] - rest_level) <= noise)
-        held = int(at_rest[-1]) + 1 if at_rest.size else int(turns[0])
     else:
-        rest_phase = float(np.median(theta[:n_rest]))
-        held = n_rest
+        k = min(held, y.size - 1)
+        alpha_rest = float(np.arccos(np.clip(rest_at(k) / amplitude[k], -1.0, 1.0)))
+        rest_phase = (2.0 * np.pi - alpha_rest if kind_next[k] > 0 else alpha_rest) \
+            + 2.0 * np.pi * int(np.searchsorted(turns[kinds > 0], k, side="left"))
     theta[:held] = rest_phase
-    # Near a fringe's extreme (|cos θ| > 0.95) arccos amplifies noise and amplitude error
-    # (dθ = dc / sin θ): there θ is interpolated in time between well-conditioned samples
-    # (and the held rest).
-    good = np.abs(y / amplitude) <= 0.95
+    good = ~ill | early
     good[:held] = True
     theta[~good] = np.interp(idx[~good], idx[good], theta[good])
     theta = np.maximum(theta, rest_phase)
+    if rest_on_extreme:
+        # On an extreme the signal hides the first part of the motion (1 − cos δ ≈ δ²/2 stays
+        # within the noise): the phase there is continued back from where it is observable
+        # along a power law δ = c·(t − t0)^p (any onset whose velocity grows like a power of
+        # time; a half-sine gives p = 3).
+        visible = float(np.sqrt(2.0 * noise / max(abs(rest_level), 1e-30)))
+        _extrapolate_onset(theta, t_y, rest_phase, held, far_turn, visible)
+    if _DEBUG:
+        _DEBUG_STORE.update(t_y=t_y, theta=theta.copy(), y=y.copy(), amplitude=amplitude.copy(), held=held, turns=turns.copy(), rest_phase=rest_phase)
     # Block means (the tracker phase at block centres) and the join with the analytic phase.
     centres = (np.arange(k_a, k_b) * m + 0.5 * (m - 1)) * dt
     tracked = np.interp(centres, t_y, theta)
@@ -425,6 +463,51 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
     moving = np.flatnonzero(theta > rest_phase + 0.1)
     k_on = k_a + int(np.searchsorted(centres, t_y[moving[0]])) if moving.size else k_h
     return out, k_on, amplitude_h
+
+
+def _extrapolate_onset(theta: np.ndarray, t: np.ndarray, rest_phase: float, held: int, end: int,
+                       visible: float) -> None:
+    """In place: replace θ between the rest and the first sample where it has moved 1.5×
+    `visible` from `rest_phase` by the power law δ = c·(t − t0)^p (1 ≤ p ≤ 4) fitted to the
+    part that moved between 1.5× `visible` and π/2 (fit in log-log for each start t0 on a grid;
+    the best one wins)."""
+    delta = theta[:end] - rest_phase
+    fit_range = np.flatnonzero((delta >= 1.5 * visible) & (delta <= 0.5 * np.pi))
+    if fit_range.size < 8:
+        return
+    first = int(fit_range[0])
+    t_first = t[first]
+    span = t[fit_range[-1]] - t_first
+    best: tuple[float, float, float, float] | None = None
+    for t0 in t_first - span * np.linspace(0.05, 3.0, 60):
+        if t0 < t[0]:
+            break
+        lt = np.log(t[fit_range] - t0)
+        ld = np.log(delta[fit_range])
+        p, logc = np.polyfit(lt, ld, 1)
+        if not 1.0 <= p <= 4.0:
+            continue
+        err = float(np.sum((ld - (p * lt + logc)) ** 2))
+        if best is None or err < best[0]:
+            best = (err, float(t0), float(p), float(logc))
+    if best is None:
+        return
+    _, t0, p, logc = best
+    bridge = np.arange(max(0, int(np.searchsorted(t, t0))), first)
+    theta[bridge] = rest_phase + np.exp(logc) * (t[bridge] - t0) ** p
+    theta[: bridge[0] if bridge.size else first] = np.minimum(theta[: bridge[0] if bridge.size else first],
+                                                              rest_phase)
+
+
+def _boxcar(y: np.ndarray, width: int) -> np.ndarray:
+    """Moving mean over `width` (odd) samples, ends padded with their edge value."""
+    return np.convolve(np.pad(y, width // 2, mode="edge"), np.ones(width) / width, mode="valid")
+
+
+def _smoothed_noise(noise_y: float, width: int) -> float:
+    """Three standard deviations of y's noise after a `width`-sample boxcar (y is sampled at
+    10× its low-pass cut-off, so ~5 consecutive samples are correlated)."""
+    return 3.0 * noise_y / np.sqrt(max(width / 5.0, 1.0))
 
 
 def _parabolic_extreme(y: np.ndarray, at: np.ndarray) -> np.ndarray:

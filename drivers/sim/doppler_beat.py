@@ -45,7 +45,7 @@ def pm_beat(
     amplitude_v: float = 0.4,
     dc_offset_v: float = 0.15,
     fluctuation: float = 0.1,
-    fluctuation_hz: float = 3_000.0,
+    fluctuation_hz: float = 1_000.0,
     snr_db: float | None = 30.0,
     initial_phase_rad: float | None = None,
     rng: np.random.Generator | None = None,
