@@ -97,8 +97,21 @@ def run_panel(args: argparse.Namespace) -> int:
             return 0
         finally:
             sys.excepthook = previous_hook
-            window.close()
-            app.processEvents()
+            dispose(app, window)
+
+
+def dispose(app: Any, window: Any) -> None:
+    """Close and delete the window now, while Qt still runs: PySide6 6.12 with many pyqtgraph
+    items can crash in the interpreter's final garbage collection when the widgets are left to it."""
+    import gc
+
+    from PySide6.QtCore import QCoreApplication, QEvent
+
+    window.close()
+    window.deleteLater()
+    QCoreApplication.sendPostedEvents(None, QEvent.Type.DeferredDelete)
+    app.processEvents()
+    gc.collect()
 
 
 def _excepthook(window: Any, errors: list[str]) -> Any:
@@ -197,6 +210,7 @@ def _demo_shot(app: Any, window: Any, screenshot: str | None, errors: list[str])
     window.link.shot_finished.connect(shot_finished)
     window.link.shot_failed.connect(shot_failed)
     window.shot_view_shown.connect(view_shown)
+    window.shot_view_failed.connect(lambda _message: view_shown(None))
     timer = QTimer(window)
     timer.timeout.connect(tick)
     timer.start(100)

@@ -43,19 +43,19 @@ from analysis.records import Record
 from analysis.response import model_sos, response_times_samples
 from rig.commands_dcm import design_report, parse_poles
 from ui.plots import (
-    BAND_COLOURS,
     COMP_PEN,
-    EDGE_COLOURS,
     KILO,
     LEVEL_KEYS,
     MODEL_PEN,
     REF_PEN,
     RESP_PEN,
+    MagnitudePlot,
     _fmt_hz,
     _plot,
     frequency_grid_hz,
     magnitudes,
-    show_fbsd,
+    pulse_window_s,
+    set_y_with_legend_room,
 )
 from ui.widgets import section_title
 
@@ -147,9 +147,11 @@ class DcmTab(QWidget):
         self.poles_label.setWordWrap(True)
         self.poles_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         for label in (*self.compensated_fbsd.values(),):
-            label.setStyleSheet("font-size: 13pt; font-weight: 600; color: #b3261e;")
-        for label in (*self.model_fbsd.values(), *self.widening.values(), self.rise_label):
-            label.setStyleSheet("font-size: 11pt; font-weight: 600;")
+            label.setStyleSheet("font-size: 11pt; font-weight: 700; color: #b3261e;")
+        for label in (*self.model_fbsd.values(), *self.widening.values()):
+            label.setStyleSheet("font-size: 10pt; font-weight: 600;")
+        self.rise_label.setStyleSheet("font-size: 10pt;")
+        self.rise_label.setWordWrap(True)
 
         controls = QVBoxLayout()
         controls.setSpacing(4)
@@ -180,9 +182,9 @@ class DcmTab(QWidget):
             figures.addWidget(self.model_fbsd[key], row, 1)
             figures.addWidget(self.compensated_fbsd[key], row, 2)
             figures.addWidget(self.widening[key], row, 3)
-        figures.addWidget(QLabel("Rise 10–90 %"), 3, 0)
-        figures.addWidget(self.rise_label, 3, 1, 1, 3)
         controls.addLayout(figures)
+        controls.addWidget(QLabel("Step response rise time (10–90 %):"))
+        controls.addWidget(self.rise_label)
         controls.addSpacing(4)
         controls.addWidget(QLabel("DCM poles:"))
         controls.addWidget(self.poles_label)
@@ -193,25 +195,10 @@ class DcmTab(QWidget):
         left.setLayout(controls)
         left.setFixedWidth(330)
 
-        self.mag_plot = _plot("Compensated magnitude", "normalised magnitude", "frequency (kHz)")
-        self.mag_plot.setLogMode(x=True, y=True)
-        self.mag_plot.addLegend(offset=(5, 5), labelTextSize="8pt")
-        for key in ("10", "5"):
-            level = int(key) / 100
-            band = pg.LinearRegionItem(values=(math.log10(1 - level), math.log10(1 + level)), orientation="horizontal",
-                                       brush=pg.mkBrush(*BAND_COLOURS[key]), pen=pg.mkPen(None), movable=False)
-            band.setZValue(-10)
-            self.mag_plot.addItem(band)
-        self.magnitude_curve = self.mag_plot.plot([], [], pen=MODEL_PEN, name="model")
-        self.compensated_curve = self.mag_plot.plot([], [], pen=COMP_PEN, name="model + DCM")
-        self.fbsd_lines: dict[str, pg.InfiniteLine] = {}
-        for i, key in enumerate(LEVEL_KEYS):
-            line = pg.InfiniteLine(angle=90, pen=pg.mkPen(EDGE_COLOURS[key], width=1.5, style=Qt.PenStyle.DashLine),
-                                   label="", labelOpts={"position": 0.10 + 0.12 * i, "color": EDGE_COLOURS[key],
-                                                        "fill": (255, 255, 255, 210)})
-            line.setVisible(False)
-            self.mag_plot.addItem(line)
-            self.fbsd_lines[key] = line
+        self.mag_plot = MagnitudePlot("Compensated magnitude", "model", "model + DCM", edge_prefix="DCM ")
+        self.magnitude_curve = self.mag_plot.magnitude_curve
+        self.compensated_curve = self.mag_plot.compensated_curve
+        self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.step_plot = _plot("Step response", "normalised output", "time", None, "s")
         self.step_plot.addLegend(offset=(-5, -5), labelTextSize="8pt")
@@ -223,9 +210,11 @@ class DcmTab(QWidget):
 
         self.record_plot = _plot("The shot, compensated", "acceleration (10³ m/s²)", "time", None, "s")
         self.record_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
-        self.ref_curve = self.record_plot.plot([], [], pen=REF_PEN, name="reference")
         self.resp_curve = self.record_plot.plot([], [], pen=RESP_PEN, name="response")
+        self.ref_curve = self.record_plot.plot([], [], pen=REF_PEN, name="reference")
         self.comp_record_curve = self.record_plot.plot([], [], pen=COMP_PEN, name="compensated response")
+        self.ref_curve.setZValue(5)
+        self.comp_record_curve.setZValue(6)
 
         plots = QGridLayout()
         plots.setSpacing(6)
@@ -341,20 +330,18 @@ class DcmTab(QWidget):
             self.model_fbsd[key].setText(_fmt_hz(before))
             self.compensated_fbsd[key].setText(_fmt_hz(after))
             self.widening[key].setText(f"×{after / before:.2f}" if before > 0 else "—")
+            narrower = before > 0 and after < before
+            self.widening[key].setStyleSheet("font-size: 10pt; font-weight: 600;" +
+                                             (" color: #b3261e;" if narrower else " color: #1e6b2e;"))
+            self.widening[key].setToolTip("the DCM NARROWS the band with this design" if narrower else "")
             if rep["compensated_fbsd_detail"][key].get("within_band_to_limit"):
                 self.compensated_fbsd[key].setToolTip("never leaves the band below Nyquist")
         rt, ratio = rep["rise_time_samples"], rep["rise_time_ratio"]
         dt_us = self.model.sample_interval_s * 1e6 if self.model else 1.0
-        verdict = "" if ratio is None else (f" (×{ratio:.2f} faster)" if ratio > 1 else f" (×{1 / ratio:.2f} SLOWER)")
-        self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} → {rt['compensated'] * dt_us:.1f} µs{verdict}")
+        verdict = "" if ratio is None else (f", ×{ratio:.2f} faster" if ratio > 1 else f", ×{1 / ratio:.2f} SLOWER")
+        self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} µs → {rt['compensated'] * dt_us:.1f} µs{verdict}")
         self.poles_label.setText(", ".join(_complex_text(p) for p in d.dcm.poles))
-        f_khz = d.frequency_hz / KILO
-        self.magnitude_curve.setData(f_khz, d.magnitude)
-        self.compensated_curve.setData(f_khz, d.compensated_magnitude)
-        show_fbsd(self.fbsd_lines, rep["compensated_fbsd_hz"], prefix="DCM ")
-        top = float(np.nanmax(np.concatenate([d.magnitude, d.compensated_magnitude])))
-        self.mag_plot.setYRange(math.log10(0.3), math.log10(max(2.0, min(top * 1.3, 30.0))), padding=0)
-        self.mag_plot.setXRange(math.log10(f_khz[0]), math.log10(f_khz[-1]), padding=0)
+        self.mag_plot.show_curves(d.frequency_hz, d.magnitude, d.compensated_magnitude, rep["compensated_fbsd_hz"])
         self.step_model_curve.setData(d.step_time_s, d.step_model)
         self.step_comp_curve.setData(d.step_time_s, d.step_compensated)
         self.step_plot.getPlotItem().enableAutoRange()
@@ -364,10 +351,18 @@ class DcmTab(QWidget):
             self.resp_curve.setData(t, np.asarray(self.record.response) / KILO)
             if d.compensated_record is not None:
                 self.comp_record_curve.setData(t, d.compensated_record / KILO)
+            window = pulse_window_s(t, np.asarray(self.record.reference), np.asarray(self.record.response))
         else:
+            window = None
             for curve in (self.ref_curve, self.resp_curve, self.comp_record_curve):
                 curve.setData([], [])
         self.record_plot.getPlotItem().enableAutoRange()
+        if window is not None:
+            self.record_plot.setXRange(*window, padding=0)
+            curves = [np.asarray(self.record.reference) / KILO, np.asarray(self.record.response) / KILO]
+            if d.compensated_record is not None:
+                curves.append(d.compensated_record / KILO)
+            set_y_with_legend_room(self.record_plot, *curves)
 
     def compensated_fbsd_hz(self) -> dict[str, float] | None:
         """The current design's compensated FBSD (Hz per level), None without a design."""

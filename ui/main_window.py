@@ -83,6 +83,7 @@ class MainWindow(QMainWindow):
     """
 
     shot_view_shown = Signal(object)  # a ShotView was drawn (tests and --demo-shot wait on it)
+    shot_view_failed = Signal(str)  # a shot file could not be shown (the message)
 
     def __init__(self, config: RigConfig, *, settings: QSettings | None = None,
                  simulated_truth: Any = None, out_dir: Path = Path("shots"), runs_dir: Path = Path("runs"),
@@ -252,8 +253,9 @@ class MainWindow(QMainWindow):
         self.hide_banner()
         self.plots.clear("Shot running…")
         self.setup.set_enabled_for_shot(False)
-        self.log_view.add_message("info", f"ARM: {request.pressure_bar:g} bar, projectile No. {request.projectile}, "
-                                          f"{request.accelerometer_model} {request.accelerometer_serial}".rstrip())
+        what = f"{request.accelerometer_model} {request.accelerometer_serial}".strip()
+        self.log_view.add_message("info", f"ARM: {request.pressure_bar:g} bar, projectile No. {request.projectile}"
+                                          + (f", {what}" if what else ""))
         self.authorisation = self.link.start_shot(request)
         self.update_buttons()
 
@@ -416,6 +418,7 @@ class MainWindow(QMainWindow):
     def _shot_not_loaded(self, path: Path, exc: BaseException) -> None:
         self.log_view.add_message("error", f"{path}: not shown: {exc}")
         self.plots.clear(f"{path}: could not be shown: {exc}")
+        self.shot_view_failed.emit(f"{path}: could not be shown: {exc}")
 
     def show_shot_view(self, view: ShotView) -> None:
         self.last_view = view

@@ -158,7 +158,7 @@ def load_shot_view(path: str | Path) -> ShotView:
     view.title = (f"{Path(path).name} — {meta.accelerometer_model or 'accelerometer'} "
                   f"{meta.accelerometer_serial}".rstrip() + f", {meta.pressure_bar:g} bar, projectile No. {meta.projectile}")
     if shot.raw is not None:
-        view.pm_time_s = shot.raw.time_s()
+        view.pm_time_s = shot.raw.time_s
         view.pm_volts = shot.raw.volts("doppler")
         if view.record_time_s is None:
             view.raw_response_v = shot.raw.volts("response")
@@ -166,6 +166,31 @@ def load_shot_view(path: str | Path) -> ShotView:
     if truth and view.model is not None:
         view.true_poles = _true_poles(truth, view.model.sample_interval_s)
     return view
+
+
+def pulse_window_s(time_s: np.ndarray, reference: np.ndarray, response: np.ndarray) -> tuple[float, float] | None:
+    """The time span worth looking at: from a little before the pulse to where the response has
+    rung down (|x| above 3 % of its peak), with margins; None for an empty record."""
+    if time_s.size < 2:
+        return None
+    ref, resp = np.abs(reference), np.abs(response)
+    if not (np.max(ref) > 0 and np.max(resp) > 0):
+        return None
+    start = int(np.flatnonzero(ref > 0.05 * np.max(ref))[0])
+    end = int(max(np.flatnonzero(resp > 0.03 * np.max(resp))[-1], np.flatnonzero(ref > 0.05 * np.max(ref))[-1]))
+    span = max(time_s[end] - time_s[start], 10 * (time_s[1] - time_s[0]))
+    return float(max(time_s[0], time_s[start] - 0.15 * span)), float(min(time_s[-1], time_s[end] + 0.15 * span))
+
+
+def set_y_with_legend_room(plot: pg.PlotWidget, *curves: np.ndarray) -> None:
+    """Y range of the curves with a third of free space on top, where the legend sits."""
+    values = np.concatenate([np.asarray(c, dtype=float).ravel() for c in curves])
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return
+    lo, hi = float(values.min()), float(values.max())
+    span = hi - lo if hi > lo else 1.0
+    plot.setYRange(lo - 0.05 * span, hi + 0.5 * span, padding=0)
 
 
 def _true_poles(truth: dict[str, Any], sample_interval_s: float) -> np.ndarray | None:
@@ -178,9 +203,9 @@ def _true_poles(truth: dict[str, Any], sample_interval_s: float) -> np.ndarray |
         return None
 
 
-def _plot(title: str, left: str, bottom: str, left_units: str | None = None,
-          bottom_units: str | None = None) -> pg.PlotWidget:
-    widget = pg.PlotWidget()
+def configure_plot(widget: pg.PlotWidget, title: str, left: str, bottom: str, left_units: str | None = None,
+                   bottom_units: str | None = None) -> pg.PlotWidget:
+    """Title, axis labels (units in the label, or SI-prefixed by pyqtgraph when given), grid."""
     item = widget.getPlotItem()
     item.setTitle(f"<span style='font-size:10pt; font-weight:600'>{title}</span>")
     item.setLabel("left", left, units=left_units)
@@ -197,10 +222,77 @@ def _plot(title: str, left: str, bottom: str, left_units: str | None = None,
     return widget
 
 
+def _plot(title: str, left: str, bottom: str, left_units: str | None = None,
+          bottom_units: str | None = None) -> pg.PlotWidget:
+    return configure_plot(pg.PlotWidget(), title, left, bottom, left_units, bottom_units)
+
+
 def _fmt_hz(value: float | None) -> str:
     if value is None or not math.isfinite(value):
         return "—"
     return f"{value / KILO:.2f} kHz"
+
+
+class MagnitudePlot(pg.PlotWidget):
+    """Normalised magnitude on a log-frequency axis (kHz), linear gain 0 … 2 so the ±5 % and
+    ±10 % bands (shaded) are readable; FBSD edges as labelled vertical lines; a resonance peak
+    above the scale is noted in words (zoom out with the mouse to see it)."""
+
+    Y_MAX = 2.0
+
+    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "",
+                 edges_of: str = "model") -> None:
+        super().__init__()
+        configure_plot(self, title, "normalised magnitude", "frequency (kHz)")
+        self.setLogMode(x=True, y=False)
+        self.addLegend(offset=(5, -5), labelTextSize="8pt")
+        self.edge_prefix = edge_prefix
+        self.edges_of = edges_of
+        for key in ("10", "5"):
+            level = int(key) / 100
+            band = pg.LinearRegionItem(values=(1 - level, 1 + level), orientation="horizontal",
+                                       brush=pg.mkBrush(*BAND_COLOURS[key]), pen=pg.mkPen(None), movable=False)
+            band.setZValue(-10)
+            self.addItem(band)
+        self.magnitude_curve = self.plot([], [], pen=MODEL_PEN, name=model_name)
+        self.compensated_curve = self.plot([], [], pen=COMP_PEN, name=compensated_name)
+        self.fbsd_lines: dict[str, pg.InfiniteLine] = {}
+        for i, key in enumerate(LEVEL_KEYS):
+            line = pg.InfiniteLine(angle=90, pen=pg.mkPen(EDGE_COLOURS[key], width=1.5, style=Qt.PenStyle.DashLine),
+                                   label="", labelOpts={"position": 0.93 - 0.09 * i, "color": EDGE_COLOURS[key],
+                                                        "fill": (255, 255, 255, 220), "anchors": [(1, 0.5), (1, 0.5)]})
+            line.setVisible(False)
+            self.addItem(line)
+            self.fbsd_lines[key] = line
+        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 0))
+        self.addItem(self.peak_note, ignoreBounds=True)
+        self.setYRange(0, self.Y_MAX, padding=0)
+
+    def clear_curves(self) -> None:
+        self.magnitude_curve.setData([], [])
+        self.compensated_curve.setData([], [])
+        for line in self.fbsd_lines.values():
+            line.setVisible(False)
+        self.peak_note.setText("")
+
+    def show_curves(self, frequency_hz: np.ndarray, magnitude: np.ndarray, compensated: np.ndarray | None,
+                    fbsd_hz: dict[str, float]) -> None:
+        """Draw the curves (|H/H0|) and mark the FBSD edges (Hz per level key)."""
+        f_khz = np.asarray(frequency_hz) / KILO
+        self.magnitude_curve.setData(f_khz, magnitude)
+        self.compensated_curve.setData(f_khz, compensated if compensated is not None else [])
+        if compensated is None:
+            self.compensated_curve.setData([], [])
+        show_fbsd(self.fbsd_lines, fbsd_hz, self.edge_prefix)
+        lo, hi = math.log10(f_khz[0]), math.log10(f_khz[-1])
+        self.setXRange(lo, hi, padding=0)
+        self.setYRange(0, self.Y_MAX, padding=0)
+        i = int(np.nanargmax(magnitude))
+        if magnitude[i] > self.Y_MAX:
+            self.peak_note.setText(f"resonance ×{magnitude[i]:.1f} at {f_khz[i]:.1f} kHz ↑")
+            self.peak_note.setPos(hi, self.Y_MAX)
+        else:
+            self.peak_note.setText("")
 
 
 class ResultsStrip(QFrame):
@@ -209,11 +301,11 @@ class ResultsStrip(QFrame):
     FIELDS = (
         ("fbsd_5", "FBSD ±5 %"),
         ("fbsd_10", "FBSD ±10 %"),
-        ("comp_5", "Compensated ±5 %"),
-        ("comp_10", "Compensated ±10 %"),
+        ("comp_5", "with DCM ±5 %"),
+        ("comp_10", "with DCM ±10 %"),
         ("model", "Model"),
         ("resonance", "Resonance"),
-        ("shock", "Shock sensitivity"),
+        ("shock", "Shock sens."),
         ("pulse", "Pulse"),
     )
 
@@ -238,11 +330,18 @@ class ResultsStrip(QFrame):
             layout.addWidget(value, row, 2 * col + 1)
             layout.setColumnStretch(2 * col + 1, 1)
             self.values[key] = value
+        self.warnings = QLabel("")
+        self.warnings.setWordWrap(True)
+        self.warnings.setStyleSheet("color: #8a5a00; font-size: 9pt;")
+        self.warnings.setVisible(False)
+        layout.addWidget(self.warnings, 2, 0, 1, 8)
 
     def clear(self) -> None:
         for label in self.values.values():
             label.setText("—")
             label.setToolTip("")
+        self.warnings.setText("")
+        self.warnings.setVisible(False)
 
     def show_summary(self, s: dict[str, Any]) -> None:
         fbsd, comp = s.get("fbsd_hz", {}), s.get("compensated_fbsd_hz", {})
@@ -266,6 +365,10 @@ class ResultsStrip(QFrame):
         if width is not None:
             text.append(f"{width * 1e6:.1f} µs")
         self.values["pulse"].setText(", ".join(text) or "—")
+        self.values["pulse"].setToolTip("peak acceleration, pulse width at 10 % of the peak (ISO 16063-22)")
+        warnings = s.get("warnings") or []
+        self.warnings.setText("⚠ " + "; ".join(warnings) if warnings else "")
+        self.warnings.setVisible(bool(warnings))
 
 
 class ShotPlots(QWidget):
@@ -287,8 +390,9 @@ class ShotPlots(QWidget):
 
         self.accel_plot = _plot("Reference and response", "acceleration (10³ m/s²)", "time", None, "s")
         self.accel_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
-        self.reference_curve = self.accel_plot.plot([], [], pen=REF_PEN, name="reference (interferometer)")
         self.response_curve = self.accel_plot.plot([], [], pen=RESP_PEN, name="accelerometer response")
+        self.reference_curve = self.accel_plot.plot([], [], pen=REF_PEN, name="reference (interferometer)")
+        self.reference_curve.setZValue(5)
         self.accel_note = pg.TextItem("", color="#b3261e", anchor=(0, 0))
         self.accel_plot.addItem(self.accel_note, ignoreBounds=True)
 
@@ -300,32 +404,15 @@ class ShotPlots(QWidget):
         self.arx_curve = self.loss_plot.plot([], [], pen=pg.mkPen("#9aa0a6", width=1.5), symbol="t", symbolSize=6,
                                              symbolBrush="#9aa0a6", name="plain least squares")
         self.order_line = pg.InfiniteLine(angle=90, pen=pg.mkPen("#d0312d", width=2),
-                                          label="chosen order {value:.0f}",
+                                          label="chosen order",
                                           labelOpts={"position": 0.12, "color": "#d0312d", "fill": (255, 255, 255, 200)})
         self.order_line.setVisible(False)
         self.loss_plot.addItem(self.order_line)
 
-        self.mag_plot = _plot("Magnitude |H(f)/H(0)|", "normalised magnitude", "frequency (kHz)")
-        self.mag_plot.setLogMode(x=True, y=True)
-        self.mag_plot.addLegend(offset=(5, 5), labelTextSize="8pt")
-        self.bands: dict[str, pg.LinearRegionItem] = {}
-        for key in ("10", "5"):
-            level = int(key) / 100
-            band = pg.LinearRegionItem(values=(math.log10(1 - level), math.log10(1 + level)), orientation="horizontal",
-                                       brush=pg.mkBrush(*BAND_COLOURS[key]), pen=pg.mkPen(None), movable=False)
-            band.setZValue(-10)
-            self.mag_plot.addItem(band)
-            self.bands[key] = band
-        self.magnitude_curve = self.mag_plot.plot([], [], pen=MODEL_PEN, name="identified model")
-        self.compensated_curve = self.mag_plot.plot([], [], pen=COMP_PEN, name="with DCM")
-        self.fbsd_lines: dict[str, pg.InfiniteLine] = {}
-        for i, key in enumerate(LEVEL_KEYS):
-            line = pg.InfiniteLine(angle=90, pen=pg.mkPen(EDGE_COLOURS[key], width=1.5, style=Qt.PenStyle.DotLine),
-                                   label="", labelOpts={"position": 0.10 + 0.12 * i, "color": EDGE_COLOURS[key],
-                                                        "fill": (255, 255, 255, 210)})
-            line.setVisible(False)
-            self.mag_plot.addItem(line)
-            self.fbsd_lines[key] = line
+        self.mag_plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "identified model", "with DCM", edge_prefix="")
+        self.magnitude_curve = self.mag_plot.magnitude_curve
+        self.compensated_curve = self.mag_plot.compensated_curve
+        self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.pz_plot = _plot("Pole-zero map (z-plane)", "imaginary", "real")
         self.pz_plot.setAspectLocked(True)
@@ -339,7 +426,7 @@ class ShotPlots(QWidget):
         self.dcm_scatter = pg.ScatterPlotItem(symbol="+", size=11, pen=pg.mkPen("#d0312d", width=2),
                                               brush=pg.mkBrush("#d0312d"), name="DCM poles")
         self.truth_scatter = pg.ScatterPlotItem(symbol="d", size=10, pen=pg.mkPen("#2e9d43", width=1.5),
-                                                brush=pg.mkBrush(None), name="true poles (sim)")
+                                                brush=pg.mkBrush(None), name="true poles (sim.)")
         for item in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
             self.pz_plot.addItem(item)
 
@@ -372,8 +459,7 @@ class ShotPlots(QWidget):
         for scatter in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
             scatter.setData([], [])
         self.order_line.setVisible(False)
-        for line in self.fbsd_lines.values():
-            line.setVisible(False)
+        self.mag_plot.clear_curves()
         self.accel_note.setText("")
         self.strip.clear()
         if title:
@@ -391,13 +477,19 @@ class ShotPlots(QWidget):
             self.accel_plot.setLabel("left", "acceleration (10³ m/s²)")
             self.reference_curve.setData(view.record_time_s, view.reference_m_s2 / KILO)
             self.response_curve.setData(view.record_time_s, view.response_m_s2 / KILO)
+            window = pulse_window_s(view.record_time_s, view.reference_m_s2, view.response_m_s2)
         elif view.raw_response_v is not None and view.pm_time_s is not None:
             self.accel_plot.setLabel("left", "amplifier output", units="V")
             self.response_curve.setData(view.pm_time_s, view.raw_response_v)
+        else:
+            window = None
         if view.analysis_error:
             self.accel_note.setText(f"not analysed: {_short(view.analysis_error)}")
             self.accel_note.setPos(0, 0)
         self.accel_plot.getPlotItem().enableAutoRange()
+        if window is not None:
+            self.accel_plot.setXRange(*window, padding=0)
+            set_y_with_legend_room(self.accel_plot, view.reference_m_s2 / KILO, view.response_m_s2 / KILO)
         self._show_losses(view)
         self._show_magnitude(view)
         self._show_poles(view)
@@ -412,22 +504,15 @@ class ShotPlots(QWidget):
         self.loss_curve.setData(*finite(view.loss_by_order))
         self.arx_curve.setData(*finite(view.arx_loss_by_order))
         if view.order is not None and view.loss_by_order:
+            self.order_line.setVisible(True)  # (an InfiniteLine's label only updates while visible)
             self.order_line.setValue(view.order)
-            self.order_line.setVisible(True)
+            self.order_line.label.setFormat(f"chosen order {view.order}")
         self.loss_plot.getPlotItem().enableAutoRange()
 
     def _show_magnitude(self, view: ShotView) -> None:
         if view.frequency_hz is None or view.magnitude is None:
             return
-        f_khz = view.frequency_hz / KILO
-        self.magnitude_curve.setData(f_khz, view.magnitude)
-        if view.compensated_magnitude is not None:
-            self.compensated_curve.setData(f_khz, view.compensated_magnitude)
-        show_fbsd(self.fbsd_lines, view.fbsd_hz)
-        self.mag_plot.getPlotItem().enableAutoRange()
-        top = float(np.nanmax(view.magnitude))
-        self.mag_plot.setYRange(math.log10(0.3), math.log10(max(2.0, min(top * 1.3, 30.0))), padding=0)
-        self.mag_plot.setXRange(math.log10(f_khz[0]), math.log10(f_khz[-1]), padding=0)
+        self.mag_plot.show_curves(view.frequency_hz, view.magnitude, view.compensated_magnitude, view.fbsd_hz)
 
     def _show_poles(self, view: ShotView) -> None:
         if view.model is None:
@@ -452,9 +537,9 @@ def show_fbsd(lines: dict[str, pg.InfiniteLine], fbsd_hz: dict[str, float], pref
         if value is None or not math.isfinite(value) or value <= 0:
             line.setVisible(False)
             continue
+        line.setVisible(True)  # (an InfiniteLine's label only updates while visible)
         line.setValue(math.log10(value / KILO))
         line.label.setFormat(f"{prefix}±{key} %: {value / KILO:.1f} kHz")
-        line.setVisible(True)
 
 
 def _short(text: str, limit: int = 90) -> str:
@@ -465,7 +550,7 @@ class LiveTrend(pg.PlotWidget):
     """Reservoir pressure (bar, left axis) and fixture vacuum (mbar, right axis, log) over the
     last `span_s` seconds, fed by reading events."""
 
-    def __init__(self, span_s: float = 120.0, parent: QWidget | None = None) -> None:
+    def __init__(self, span_s: float = 60.0, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.span_s = span_s
         self._t0 = time.monotonic()

@@ -67,7 +67,7 @@ class StatusPanel(QWidget):
         for key in INSTRUMENT_KEYS:
             lamp = LampLabel(INSTRUMENT_LABELS[key])
             lamp.caption.setStyleSheet("font-weight: 600;")
-            detail = QLabel("not connected yet")
+            detail = QLabel("connecting…")
             detail.setStyleSheet("color: #5f6368; font-size: 9pt; margin-left: 22px;")
             detail.setWordWrap(True)
             detail.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
@@ -122,7 +122,8 @@ class StatusPanel(QWidget):
                 text = f"DISCONNECTED — {link.problem}. Check the cable/power; retrying."
             else:
                 text = "connecting…"
-            detail.setText(f"{text}\n{link.address}")
+            detail.setText(text)
+            detail.setToolTip(link.address)
             lamp.set_state(levels[link.status], f"{link.label}: {link.status}\n{link.address}\n{link.problem}")
 
     def show_reading(self, event: RigEvent) -> None:

@@ -1,0 +1,139 @@
+"""The panel fires a shot through its real widgets on the simulated rig: ARM, FIRE with the
+confirmation, the plots holding the shot's data and the FBSD labels the analysed values; the
+window stays responsive; screenshots of every tab go to test-artifacts/."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+from PySide6.QtCore import Qt, QTimer
+
+from analysis.response import band_edges
+from drivers.sim.world import accelerometer_truth
+from rig.shotfile import read_shot
+from tests.ui.conftest import save_shot
+
+SHOT_TIMEOUT_MS = 60_000
+
+
+def true_fbsd_hz(truth: dict, level: float) -> float:
+    """Independent truth: the band edge of the simulated accelerometer + amplifier (continuous)."""
+    acc = accelerometer_truth(truth)
+
+    def gain(f: np.ndarray) -> np.ndarray:
+        h = acc.frequency_response(np.atleast_1d(f))
+        return np.abs(h) / abs(acc.frequency_response(np.array([1e-3]))[0])
+
+    return band_edges(gain, 200e3, (level,), np.array([m.natural_frequency_hz for m in acc.modes]))[
+        f"{round(level * 100)}"].frequency_hz
+
+
+def fire_one_shot(qtbot, panel, confirm: bool = True):
+    """Press ARM, wait for FIRE to light, press FIRE (confirmation answered), wait for the end."""
+    w = panel.window
+    asked: list[bool] = []
+
+    def confirm_fire() -> bool:
+        asked.append(True)
+        return confirm
+
+    w.confirm_fire = confirm_fire
+    assert w.arm_button.isEnabled() and not w.fire_button.isEnabled()
+    qtbot.mouseClick(w.arm_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(w.fire_button.isEnabled, timeout=SHOT_TIMEOUT_MS)
+    assert w.state_bar.state == "ARM" and w.awaiting_confirmation
+    assert not w.arm_button.isEnabled()
+    with qtbot.waitSignal(w.link.shot_finished, timeout=SHOT_TIMEOUT_MS) as finished:
+        qtbot.mouseClick(w.fire_button, Qt.MouseButton.LeftButton)
+    assert asked == [True]
+    return finished.args[0]
+
+
+def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_dir):
+    panel = make_panel()
+    w = panel.window
+    save_shot(w, artifacts_dir / "panel-idle.png")
+
+    # the GUI thread must keep running its event loop while the shot is captured and analysed
+    ticks: list[str] = []
+    heartbeat = QTimer()
+    heartbeat.timeout.connect(lambda: ticks.append(w.state_bar.state))
+    heartbeat.start(10)
+    threads: set[str] = set()
+    w.link.bus.subscribe(lambda e: threads.add(threading.current_thread().name))
+
+    with qtbot.waitSignal(w.shot_view_shown, timeout=SHOT_TIMEOUT_MS) as shown:
+        outcome = fire_one_shot(qtbot, panel)
+    heartbeat.stop()
+    assert outcome.done and outcome.analysis_error is None, outcome.error or outcome.analysis_error
+    assert panel.world.shots_fired == 1
+    assert w.state_bar.state == "DONE" and w.arm_button.isEnabled() and not w.fire_button.isEnabled()
+    assert threading.main_thread().name not in threads  # every rig event came from a worker thread
+    assert {"CAPTURE", "ANALYSE"} <= set(ticks)  # the GUI ticked while capturing and analysing
+
+    # the plots hold this shot's data, read back independently from its file
+    view = shown.args[0]
+    shot = read_shot(outcome.shot_path)
+    plots = w.plots
+    x, y = plots.pm_curve.getOriginalDataset()
+    assert np.array_equal(y, shot.raw.volts("doppler")) and np.allclose(x, shot.raw.time_s)
+    x, y = plots.reference_curve.getOriginalDataset()
+    assert np.allclose(y * 1e3, shot.record.reference) and x.size == shot.record.n_samples
+    x, y = plots.response_curve.getOriginalDataset()
+    assert np.allclose(y * 1e3, shot.record.response)
+    orders, losses = plots.loss_curve.getOriginalDataset()
+    ident = shot.results["identification"]
+    assert list(orders) == [i + 1 for i, v in enumerate(ident["loss_by_order"]) if v is not None and v > 0]
+    assert plots.order_line.value() == ident["order"] == view.order
+    px, py = plots.pole_scatter.getData()
+    poles = np.array([complex(*p) for p in shot.results["model"]["poles"]])
+    assert sorted(px) == pytest.approx(sorted(poles.real)) and sorted(py) == pytest.approx(sorted(poles.imag))
+
+    # FBSD: labels and marker lines show the analysed values; those match the simulated truth
+    fbsd = shot.results["fbsd_hz"]
+    comp = shot.results["dcm"]["compensated_fbsd_hz"]
+    strip = plots.strip.values
+    assert strip["fbsd_5"].text() == f"{fbsd['5'] / 1e3:.2f} kHz"
+    assert strip["fbsd_10"].text() == f"{fbsd['10'] / 1e3:.2f} kHz"
+    assert strip["comp_5"].text() == f"{comp['5'] / 1e3:.2f} kHz"
+    for key in ("5", "10"):
+        line = plots.fbsd_lines[key]
+        assert line.isVisible() and line.value() == pytest.approx(math.log10(fbsd[key] / 1e3))
+        assert f"{fbsd[key] / 1e3:.1f} kHz" in line.label.toPlainText()
+    truth = shot.meta.simulated_truth
+    assert fbsd["5"] == pytest.approx(true_fbsd_hz(truth, 0.05), rel=0.05)
+    assert fbsd["10"] == pytest.approx(true_fbsd_hz(truth, 0.10), rel=0.05)
+
+    # the DCM tab took the shot's model and design
+    dcm = w.dcm_tab
+    assert dcm.model is not None and dcm.ratio.value() == pytest.approx(shot.results["dcm"]["design"]["ratio"], rel=1e-3)
+    assert dcm.compensated_fbsd["5"].text() == f"{comp['5'] / 1e3:.2f} kHz"
+
+    # the set-up is remembered, the log tells the story
+    kinds = [k for k, _ in w.log_view.messages()]
+    assert "result" in kinds and "state" in kinds
+    save_shot(w, artifacts_dir / "panel-shot.png")
+    w.tabs.setCurrentWidget(w.dcm_tab)
+    save_shot(w, artifacts_dir / "panel-dcm.png")
+    w.tabs.setCurrentWidget(w.log_view)
+    save_shot(w, artifacts_dir / "panel-log.png")
+
+
+def test_fire_not_confirmed_keeps_the_rig_armed_then_abort_stands_down(qtbot, make_panel):
+    panel = make_panel()
+    w = panel.window
+    w.confirm_fire = lambda: False
+    qtbot.mouseClick(w.arm_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(w.fire_button.isEnabled, timeout=SHOT_TIMEOUT_MS)
+    qtbot.mouseClick(w.fire_button, Qt.MouseButton.LeftButton)  # the operator answers No
+    assert w.fire_button.isEnabled() and w.state_bar.state == "ARM" and not w.authorisation.given
+    with qtbot.waitSignal(w.link.shot_finished, timeout=SHOT_TIMEOUT_MS) as finished:
+        qtbot.mouseClick(w.abort_button, Qt.MouseButton.LeftButton)
+    outcome = finished.args[0]
+    assert outcome.final_state == "ABORTED" and outcome.aborted_in == "ARM" and not outcome.fired
+    assert panel.world.shots_fired == 0
+    coils = panel.world.coils()
+    assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True
