@@ -100,7 +100,13 @@ def report_formats(text: str) -> list[str]:
 
 
 def run_campaign_command(args: argparse.Namespace) -> int:
-    from rig.campaign import CampaignRunner, FireLog, attach_fire_log, check_authorisation, prepare_run
+    from rig.campaign import (
+        CampaignRunner,
+        FireLog,
+        attach_fire_log,
+        check_authorisation,
+        prepare_run,
+    )
     from rig.events import EventBus
     from rig.instruments import open_instruments
     from rig.plan import load_plan
