@@ -29,13 +29,17 @@ import queue
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import Any
-
-from rig.shotfile import utc_now_iso
 
 EVENT_KINDS = ("state", "progress", "reading", "log", "error", "result")
 
 _log = logging.getLogger(__name__)
+
+
+def utc_now_iso() -> str:
+    """The current UTC time as ISO 8601 text ending in Z (as in shot files)."""
+    return datetime.now(UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
 
 
 @dataclass(frozen=True)

@@ -282,21 +282,6 @@ class Sequencer:
             raise shot.interrupt
         return outcome
 
-    def read_interlocks(self) -> InterlockReport | None:
-        """When no shot runs: read every interlock once and publish a "reading" event.
-        Returns None (and reads nothing) while a shot runs; instrument errors propagate."""
-        if not self._run_lock.acquire(blocking=False):
-            return None
-        try:
-            readings = read_readings(self.instruments, amplifier=True, digitizer=False)
-            required = [n for n in REQUIRED["ARM"] if n != "digitizer"]
-            report = evaluate(readings, self.config.limits, required)
-            self._last_report = report
-            self.bus.emit("reading", self._state, "readings", **report.event_data())
-            return report
-        finally:
-            self._run_lock.release()
-
     # -- the run ------------------------------------------------------------------------------
     def _run(self, shot: _Shot) -> ShotOutcome:
         failure: _Failure | None = None

@@ -7,10 +7,8 @@ from what the sequencer says about itself.
 from __future__ import annotations
 
 import threading
-from datetime import datetime
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from rig.config import LimitsConfig
@@ -89,10 +87,6 @@ def test_complete_shot_stores_raw_before_analysis_and_ends_safe(rig) -> None:
     assert {"EVACUATE", "CHARGE", "ARM", "FIRE"} <= {e.state for e in readings}
     for event in readings:
         assert {"reservoir_pressure_bar", "fixture_vacuum_mbar", "interlocks"} <= set(event.data)
-    for state in {e.state for e in readings}:  # the first of each state, then at most ~10 Hz
-        times = [datetime.fromisoformat(e.utc.replace("Z", "+00:00")) for e in readings if e.state == state]
-        if len(times) > 1:
-            assert min(np.diff(times)).total_seconds() >= 0.09
     (result,) = rig.recorder.of("result")
     assert result.data["shot_path"] == str(outcome.shot_path)
     assert result.data["results"] == outcome.results and result.data["error"] is None
