@@ -32,7 +32,7 @@ How (and why this way):
    `analysis.resample.resample_to_rate`; velocity and acceleration come from a
    **differentiating low-pass**: a Kaiser-windowed low-pass L of bandwidth B convolved with
    a Kaiser-windowed ideal differentiator (exact on ramps), so the acceleration is L applied
-   to the true acceleration, to 10⁻⁴ in the band. B is chosen from the pulse
+   to the true acceleration, to 10⁻⁵ in the band. B is chosen from the pulse
    (`bandwidth_for_rise_time`) unless given, and reported. A companion channel passed
    through `lowpass` gets the same L, so a model fitted between the two is not distorted.
 
@@ -63,9 +63,8 @@ GATE_FRACTION = 0.1  # a block carries phase when its power is ≥ this × the b
 HANDOVER_MAX_HZ = 2e6  # the fringe tracker reads the onset up to this beat frequency
 MIN_SAMPLE_RATE_HZ = 5e6  # below this a PM beat record is certainly mis-sampled
 MAX_BEAT_FRACTION = 0.45  # a beat above this × the sampling rate is aliased
+NOISE_BAND_FRACTION = 0.46  # the band above this × the sampling rate measures the noise
 BANDWIDTH_RISE_PRODUCT = 5.0  # B = this / (10–90 % rise time of the velocity)
-_DEBUG = False
-_DEBUG_STORE: dict = {}
 MAX_BANDWIDTH_FRACTION = 0.4  # B ≤ this × the analysis rate (the low-pass must fit below Nyquist)
 STOPBAND_ATTENUATION_DB = 80.0  # of the low-pass L
 
@@ -132,12 +131,11 @@ def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rat
     if n_blocks < 64:
         raise AnalysisError(f"{source}: {x.size} samples is too short to demodulate (needs ≥ {64 * m})")
     x = x[: n_blocks * m]
-    weighted, total, power, low_hz = _phase_increments(x, sample_interval_s, m)
+    weighted, total, power, low_hz, noise_power = _phase_increments(x, sample_interval_s, m)
     beat_power = float(np.percentile(power, 99.0))
-    noise_power = float(np.percentile(power, 1.0))
     gate = power >= GATE_FRACTION * beat_power
     if not np.any(gate) or beat_power <= 4.0 * noise_power:
-        raise AnalysisError(f"{source}: no Doppler beat found (beat power not above the noise)")
+        raise AnalysisError(f"{source}: no Doppler beat found (beat power not 6 dB above the noise)")
     phase = _block_mean_phase(weighted, total, gate)
     dt_m = m * sample_interval_s
     frequency_hz = np.diff(phase, prepend=phase[0]) / (2.0 * np.pi * dt_m)
@@ -194,10 +192,10 @@ def _check_record(x: np.ndarray, sample_interval_s: float, source: str) -> float
 
 
 def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
     """Per M-sample block: the weighted and plain sums of the phase increments (the angle of
-    z[n]·z*[n−1], see `_block_mean_phase`), the mean analytic power, and the low edge (Hz) of
-    the analytic band used.
+    z[n]·z*[n−1], see `_block_mean_phase`), the mean analytic power; and the low edge (Hz) of
+    the analytic band used and the noise's power in the analytic signal.
 
     The spectra of all overlapping FFT blocks are computed first; the strongest beat frequency
     in them sets the analytic band's low edge (`_analytic_low_hz`), then the blocks go back.
@@ -217,6 +215,12 @@ def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int
     spectra = fft.rfft(frames, axis=1)  # complex64 for float32 input
     low_hz = _analytic_low_hz(spectra, freq)
     gain = _analytic_gain(freq, low_hz).astype(np.float32)
+    # Noise: white noise of variance σ² has E|X_k|² = N·σ² in every bin; the band above
+    # NOISE_BAND_FRACTION of the rate holds no beat (it is below MAX_BEAT_FRACTION), so its mean
+    # bin power measures the noise. Its power in the analytic signal is that times Σ gain²/N².
+    noise_bins = freq >= NOISE_BAND_FRACTION / sample_interval_s
+    noise_bin_power = float(np.mean(np.abs(spectra[:, noise_bins]) ** 2))
+    noise_power = noise_bin_power * float(np.sum(gain.astype(float) ** 2)) / BLOCK_SAMPLES**2
     n_blocks = n // m
     weighted = np.empty(n_blocks, dtype=np.float32)
     total = np.empty(n_blocks, dtype=np.float32)
@@ -241,7 +245,7 @@ def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int
         weighted[k0:k1] = angles @ w_mean
         total[k0:k1] = angles @ ones
         power[k0:k1] = np.square(z.view(np.float32)).reshape(-1, 2 * m) @ np.full(2 * m, 1.0 / m, np.float32)
-    return weighted, total, power, low_hz
+    return weighted, total, power, low_hz, noise_power
 
 
 def _analytic_low_hz(spectra: np.ndarray, freq_hz: np.ndarray) -> float:
@@ -302,7 +306,7 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
     # hand-over frequency at block k_10; the motion began less than (k_h − k_10) before that for
     # any onset whose velocity grows like tᵖ with p ≤ 3, so twice that span reaches into rest.
     slow = np.flatnonzero(smooth_hz[:k_h] < 0.1 * handover_hz)
-    if slow.size == 0:
+    if slow.size < max(10, int(2e-6 / (m * dt))):  # ≥ 2 µs of rest (not just the record's edge)
         raise AnalysisError(
             f"{source}: the record starts while the object is already moving (no rest before the pulse): "
             f"record more pre-trigger"
@@ -377,8 +381,6 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
         extreme = float(_parabolic_extreme(np.abs(y), turns[j : j + 1])[0])  # fringe amplitude
         noise = _smoothed_noise(noise_y, width) + 0.01 * extreme
         turns, kinds = turns[j:], kinds[j:]
-        if _DEBUG:
-            print("DECIDE", dict(rest=rest_level, extreme=extreme, peak=peak, noise=noise, best=best, crossing=crossing, big=big, near_kind=near_kind, width=width))
         rest_level = float(rest_at(best))
         excursion = peak - rest_level * near_kind
         # (Twice the noise: in doubt the rest goes on the extreme, which costs at most the
@@ -447,8 +449,6 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
         # time; a half-sine gives p = 3).
         visible = float(np.sqrt(2.0 * noise / max(abs(rest_level), 1e-30)))
         _extrapolate_onset(theta, t_y, rest_phase, held, far_turn, visible)
-    if _DEBUG:
-        _DEBUG_STORE.update(t_y=t_y, theta=theta.copy(), y=y.copy(), amplitude=amplitude.copy(), held=held, turns=turns.copy(), rest_phase=rest_phase)
     # Block means (the tracker phase at block centres) and the join with the analytic phase.
     centres = (np.arange(k_a, k_b) * m + 0.5 * (m - 1)) * dt
     tracked = np.interp(centres, t_y, theta)
@@ -587,20 +587,21 @@ def lowpass_taps(bandwidth_hz: float, sample_rate_hz: float) -> np.ndarray:
     return signal.firwin(numtaps, bandwidth_hz, window=("kaiser", beta), fs=sample_rate_hz)
 
 
-def ideal_derivative_taps(sample_rate_hz: float, half_length: int = 40) -> np.ndarray:
-    """Kaiser-windowed (β = 8) ideal differentiator (−1)ᵐ/m, per second, normalised so that it
-    differentiates a ramp exactly; its gain is j2πf to ~10⁻⁴ up to ~0.8 × Nyquist."""
+def ideal_derivative_taps(sample_rate_hz: float, half_length: int = 100) -> np.ndarray:
+    """Kaiser-windowed (β = 14) ideal differentiator (−1)ᵐ/m, per second, normalised so that it
+    differentiates a ramp exactly; its gain is j2πf to 4·10⁻⁶ up to 0.8 × Nyquist (the window's
+    side lobes set that: β = 8 over 81 taps leaves a 1.4·10⁻³ gain error in the whole band)."""
     k = np.arange(-half_length, half_length + 1)
     g = np.zeros(k.size)
     nz = k != 0
     g[nz] = np.cos(np.pi * k[nz]) / k[nz]
-    g *= signal.windows.kaiser(k.size, 8.0)
+    g *= signal.windows.kaiser(k.size, 14.0)
     g /= -np.sum(k * g)
     return g * sample_rate_hz
 
 
 def derivative_taps(bandwidth_hz: float, sample_rate_hz: float) -> np.ndarray:
-    """Differentiating low-pass D = L ∗ g (per second): in L's band D equals j2πf·L to ~10⁻⁴."""
+    """Differentiating low-pass D = L ∗ g (per second): in L's band D equals j2πf·L to 10⁻⁵."""
     return np.convolve(lowpass_taps(bandwidth_hz, sample_rate_hz), ideal_derivative_taps(sample_rate_hz))
 
 
