@@ -105,6 +105,7 @@ class MainWindow(QMainWindow):
         self.last_outcome: ShotOutcome | None = None
         self.last_view: ShotView | None = None
         self.shots_loaded = 0
+        self._setup_enabled: bool | None = None
 
         self.setWindowTitle("Hopkinson-bar shock calibration" + (f" — {title_note}" if title_note else ""))
         self.setMinimumSize(*MIN_SIZE)
@@ -252,7 +253,6 @@ class MainWindow(QMainWindow):
         self.state_bar.set_text("starting the shot…")
         self.hide_banner()
         self.plots.clear("Shot running…")
-        self.setup.set_enabled_for_shot(False)
         what = f"{request.accelerometer_model} {request.accelerometer_serial}".strip()
         self.log_view.add_message("info", f"ARM: {request.pressure_bar:g} bar, projectile No. {request.projectile}"
                                           + (f", {what}" if what else ""))
@@ -307,7 +307,9 @@ class MainWindow(QMainWindow):
         self.arm_button.setToolTip("" if connected else "cannot arm: not every instrument is connected")
         self.fire_button.setEnabled(self.fire_allowed())
         self.abort_button.setEnabled(True)
-        self.setup.set_enabled_for_shot(not self.busy)
+        if self._setup_enabled != (not self.busy):
+            self._setup_enabled = not self.busy
+            self.setup.set_enabled_for_shot(self._setup_enabled)
         self.campaign_tab.update_buttons()
 
     # -- banner -------------------------------------------------------------------------------------

@@ -66,8 +66,9 @@ class LampLabel(QWidget):
 
     def set_state(self, level: str, detail: str = "") -> None:
         self.lamp.set_level(level)
-        self.setToolTip(detail)
-        self.caption.setToolTip(detail)
+        if detail != self.toolTip():
+            self.setToolTip(detail)
+            self.caption.setToolTip(detail)
 
 
 def section_title(text: str) -> QLabel:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import gc
+import socket
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,28 @@ def test_rig_config() -> RigConfig:
 
 
 test_rig_config.__test__ = False  # a helper, not a test
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on (bound, then released)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def unreachable_config(tmp_path: Path, keep: tuple[str, ...] = (), base: RigConfig | None = None) -> RigConfig:
+    """The test configuration with the instruments not in `keep` pointed where nothing answers."""
+    config = base or test_rig_config()
+    if "valve_controller" not in keep:
+        config = dataclasses.replace(config, valve_controller=dataclasses.replace(
+            config.valve_controller, host="127.0.0.1", port=free_port()))
+    if "digitizer" not in keep:
+        config = dataclasses.replace(config, digitizer=dataclasses.replace(
+            config.digitizer, resource=f"TCPIP0::127.0.0.1::{free_port()}::SOCKET"))
+    if "amplifier" not in keep:
+        config = dataclasses.replace(config, amplifier=dataclasses.replace(
+            config.amplifier, port=str(tmp_path / "no-such-serial-port")))
+    return config
 
 
 def dispose(widget: Any) -> None:
