@@ -22,7 +22,7 @@ Steps (paper §2.1, done as PAPER-NOTES.md measured it must be done):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -56,6 +56,12 @@ MIN_SAMPLES_PER_PARAMETER = 10
 # An identified mode whose band the reference hardly excites (input amplitude spectrum around
 # its natural frequency below this fraction of the spectrum's peak) is not supported by the data.
 EXCITATION_FLOOR = 1e-2
+# A final model with a pole this close to the unit circle (a time constant beyond 10⁶ samples,
+# seconds at the analysis rate) sits on the stability boundary: the fit pushed against it, so
+# the data call for an unstable model. It is treated as unstable.
+MARGINAL_POLE = 1e-6
+# Below this fit percentage the model is reported as explaining little of the response.
+POOR_FIT_PERCENT = 50.0
 
 
 @dataclass
@@ -164,6 +170,7 @@ def identify(
     remove_delay: bool = True,
     search_iterations: int = 8,
     max_iterations: int = 40,
+    patience: int | None = 4,
 ) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record.
 
@@ -177,6 +184,8 @@ def identify(
     remove_delay: False keeps the channels as recorded (delay 0).
     search_iterations / max_iterations: SRIV iterations per order while choosing / for the
         final order.
+    patience: stop trying higher orders once this many past the knee gave no gain (their
+        losses are NaN: not evaluated); None tries every order up to max_order.
     """
     if max_order < 1:
         raise AnalysisError(f"max_order must be at least 1, got {max_order}")
@@ -214,18 +223,27 @@ def identify(
     if shifts is not None:
         start = min(max(round(xcorr), shifts.start), shifts.stop - 1)
         _, delay = _fit_at_best_delay(ref, resp, min(2, n_max), start, shifts, search_iterations)
-    fits: list[TransferFit] = []
-    delays: list[int] = []
+    # Losses are compared per row (mean squared output error) while searching; `patience`
+    # orders past the knee with no gain end the search (the rest stay NaN: not evaluated).
+    tolerance = knee_tolerance + 2.0 * (2 * n_max + 1) / (ref.size - widest - n_max)
+    floor = 1e-12 * float(np.dot(resp, resp)) / ref.size
+    fits: list[TransferFit | None] = [None] * n_max
+    delays: list[int] = [delay] * n_max
+    mean_losses = [float("nan")] * n_max
     for n in range(1, n_max + 1):
         fit, delay = _fit_at_best_delay(ref, resp, n, delay, shifts, search_iterations)
-        fits.append(fit)
-        delays.append(delay)
-    # Losses are compared per row, then quoted over the rows every order has in common.
+        fits[n - 1], delays[n - 1] = fit, delay
+        # A fit that settles on an unstable estimate is no candidate (its reflected stand-in
+        # may still fit tolerably, but it is not what the data say).
+        mean_losses[n - 1] = float("inf") if fit.estimate_unstable else _mean_loss(fit, ref.size, delay)
+        knee_so_far = _knee(mean_losses, tolerance, floor)
+        must_reach = order or 0
+        if patience is not None and knee_so_far is not None and n >= max(knee_so_far + patience, must_reach):
+            break
+    # Quoted as sums over the rows every order has in common.
     rows = ref.size - n_max - max(abs(d) for d in delays)
-    losses = [_mean_loss(f, ref.size, d) * rows for f, d in zip(fits, delays, strict=True)]
-    tolerance = knee_tolerance + 2.0 * (2 * n_max + 1) / rows
-    floor = 1e-12 * float(np.dot(resp, resp))
-    knee = _knee(losses, tolerance, floor)
+    losses = [v * rows for v in mean_losses]
+    knee = _knee(losses, tolerance, floor * rows)
     if knee is None:
         raise AnalysisError(
             f"no stable model of order 1 … {n_max} fits this record (every bias-corrected fit was unstable)"
@@ -245,15 +263,20 @@ def identify(
 
     delay = delays[chosen - 1]
     u, y = _shifted(ref, resp, delay)
-    final = _finish(u, y, fits[chosen - 1], max_iterations)
+    chosen_fit = fits[chosen - 1]
+    assert chosen_fit is not None  # the knee and an asked order are always evaluated
+    final = _finish(u, y, chosen_fit, max_iterations)
     if order is not None:
-        if not final.stable:
-            raise AnalysisError(f"the order-{order} fit is unstable (a pole on or outside the unit circle)")
+        if not _acceptable(final):
+            raise AnalysisError(
+                f"the order-{order} fit is unstable: the estimate settles with a pole on or outside the "
+                "unit circle (is the response really the sensor's answer to this reference?)"
+            )
         if not final.converged:
             raise AnalysisError(
                 f"the order-{order} fit did not converge in {final.iterations} iterations; try a lower order"
             )
-    elif not final.stable:
+    elif not _acceptable(final):
         final, chosen = _stable_fallback(ref, resp, fits, delays, chosen, losses, max_iterations, warnings)
         delay = delays[chosen - 1]
         u, y = _shifted(ref, resp, delay)
@@ -265,11 +288,17 @@ def identify(
 
     dt = rec.sample_interval_s
     model = DiscreteModel(dt, final.a, final.b, float(delay), info={"fit_method": final.method})
-    y_hat = simulate(u, final.a, final.b)
+    y_hat = simulate(u, final.a, final.b) + final.offset
+    pre["response_offset_fitted"] = final.offset
     spread = float(np.linalg.norm(y - np.mean(y)))
     fit_percent = 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / spread) if spread > 0 else float("nan")
     modes = modes_of(model.poles, dt)
     warnings += _excitation_warnings(u, dt, modes)
+    if fit_percent < POOR_FIT_PERCENT:
+        warnings.append(
+            f"the model explains only {fit_percent:.1f} % of the response (fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)): "
+            "check that the channels belong together and that the response is not mostly noise"
+        )
     if final.reflected:
         warnings.append(
             f"the order-{chosen} fit had poles outside the unit circle during the iteration; they were "
@@ -455,23 +484,33 @@ def _relative_drop(losses: list[float], low: int, high: int) -> float:
 
 
 def _finish(u: np.ndarray, y: np.ndarray, start: TransferFit, max_iterations: int) -> TransferFit:
-    """Iterate SRIV to convergence from the search fit, then polish by output error."""
+    """Iterate SRIV to convergence from the search fit; if it will not settle, polish the
+    best iterate by minimising the output error directly (which has a clean stopping rule)."""
     if not start.stable:
         return start
     fit = refined_iv_fit(u, y, start.a, start.b, max_iterations=max_iterations)
+    unstable = fit.estimate_unstable
     if not fit.stable or fit.oe_loss > start.oe_loss:
         fit = start
+    if fit.converged and not unstable:
+        return replace(fit, iterations=start.iterations + fit.iterations, converged=True)
     polished = output_error_refine(u, y, fit)
-    return TransferFit(
-        polished.a, polished.b, polished.oe_loss, start.iterations + fit.iterations,
-        fit.converged or polished.converged, polished.stable, polished.method, polished.reflected,
+    return replace(
+        polished, iterations=start.iterations + fit.iterations, estimate_unstable=unstable or fit.estimate_unstable
     )
+
+
+def _acceptable(fit: TransferFit) -> bool:
+    """Stable, not settled on an unstable estimate, and not hugging the unit circle."""
+    if not fit.stable or fit.estimate_unstable:
+        return False
+    return fit.order == 0 or float(np.max(np.abs(np.roots(fit.a)))) < 1.0 - MARGINAL_POLE
 
 
 def _stable_fallback(
     ref: np.ndarray,
     resp: np.ndarray,
-    fits: list[TransferFit],
+    fits: list[TransferFit | None],
     delays: list[int],
     chosen: int,
     losses: list[float],
@@ -480,16 +519,21 @@ def _stable_fallback(
 ) -> tuple[TransferFit, int]:
     """When the knee order's final fit fails, fall back to the other orders (best loss first)."""
     candidates = sorted(
-        (n for n in range(1, len(fits) + 1) if n != chosen and math.isfinite(losses[n - 1])),
+        (n for n in range(1, len(fits) + 1) if n != chosen and fits[n - 1] is not None and math.isfinite(losses[n - 1])),
         key=lambda n: (losses[n - 1], n),
     )
     for n in candidates:
         u, y = _shifted(ref, resp, delays[n - 1])
-        fit = _finish(u, y, fits[n - 1], max_iterations)
-        if fit.stable:
+        start = fits[n - 1]
+        assert start is not None
+        fit = _finish(u, y, start, max_iterations)
+        if _acceptable(fit):
             warnings.append(f"the order-{chosen} fit became unstable; order {n} (next best loss) is used")
             return fit, n
-    raise AnalysisError("no order gives a stable model for this record")
+    raise AnalysisError(
+        "no order gives a stable model for this record (every fit settles with a pole on or outside "
+        "the unit circle)"
+    )
 
 
 def _excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) -> list[str]:
@@ -510,7 +554,7 @@ def _excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) 
         level = float(np.sqrt(np.mean(spectrum[band] ** 2))) / peak
         if level < EXCITATION_FLOOR:
             out.append(
-                f"the mode at {f:.4g} Hz lies where the reference is {20 * math.log10(max(level, 1e-300)):.0f} dB "
+                f"the mode at {f / 1e3:.4g} kHz lies where the reference is {20 * math.log10(max(level, 1e-300)):.0f} dB "
                 "below its spectral peak: this record cannot determine it"
             )
     return out
