@@ -217,8 +217,8 @@ def model_delay_samples(analysis: ShotAnalysis) -> int:
 def prepared_channels(analysis: ShotAnalysis, delay_samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(u, y): the shot's reference and response as its identification fitted them.
 
-    The record at the model's rate, each channel's lead-in baseline subtracted (the values the
-    identification stored) and an input delay removed: y(k) = response(k + d), d = the shot's
+    The record at the model's rate, each channel's lead-in baseline and the response offset
+    fitted with the model subtracted (the values the identification stored), an input delay removed: y(k) = response(k + d), d = the shot's
     own delay unless `delay_samples` is given. A model is its (b, a) together with the delay it
     was fitted with, so another shot's model is tried with that model's delay.
     """
@@ -230,7 +230,10 @@ def prepared_channels(analysis: ShotAnalysis, delay_samples: int | None = None) 
         record = resample_to_rate(record, 1.0 / dt)
     pre = identification_dict(analysis).get("preprocessing") or {}
     u = np.asarray(record.reference, dtype=float) - float(pre.get("reference_baseline", 0.0) or 0.0)
-    y = np.asarray(record.response, dtype=float) - float(pre.get("response_baseline", 0.0) or 0.0)
+    # The response's lead-in baseline, and the constant offset the identification fitted with
+    # the model (a property of this shot's data, not of the model).
+    y = (np.asarray(record.response, dtype=float) - float(pre.get("response_baseline", 0.0) or 0.0)
+         - float(pre.get("response_offset_fitted", 0.0) or 0.0))
     d = model_delay_samples(analysis) if delay_samples is None else int(delay_samples)
     if d >= 0:
         return u[: u.size - d], y[d:]
