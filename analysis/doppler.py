@@ -216,10 +216,17 @@ def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int
     low_hz = _analytic_low_hz(spectra, freq)
     gain = _analytic_gain(freq, low_hz).astype(np.float32)
     # Noise: white noise of variance σ² has E|X_k|² = N·σ² in every bin; the band above
-    # NOISE_BAND_FRACTION of the rate holds no beat (it is below MAX_BEAT_FRACTION), so its mean
-    # bin power measures the noise. Its power in the analytic signal is that times Σ gain²/N².
+    # NOISE_BAND_FRACTION of the rate holds no beat (it is below MAX_BEAT_FRACTION), so its bin
+    # power measures the noise: the median (|X_k|² is exponential: mean = median / ln 2), which
+    # a stray line (an aliased beat) does not move. Its power in the analytic signal is that
+    # times Σ gain²/N².
+    # Frames that are mostly padding (the record's ends) are left out.
     noise_bins = freq >= NOISE_BAND_FRACTION / sample_interval_s
-    noise_bin_power = float(np.mean(np.abs(spectra[:, noise_bins]) ** 2))
+    frame_start = np.arange(n_fft_blocks) * keep - lead
+    data_fraction = (np.minimum(frame_start + BLOCK_SAMPLES, n) - np.maximum(frame_start, 0)) / BLOCK_SAMPLES
+    medians = np.median(np.abs(spectra[:, noise_bins]) ** 2, axis=1)
+    full_frames = data_fraction >= 0.9
+    noise_bin_power = float(np.median(medians[full_frames]) if np.any(full_frames) else medians.max()) / np.log(2.0)
     noise_power = noise_bin_power * float(np.sum(gain.astype(float) ** 2)) / BLOCK_SAMPLES**2
     n_blocks = n // m
     weighted = np.empty(n_blocks, dtype=np.float32)

@@ -186,8 +186,9 @@ def test_wrong_sample_rate_is_a_clear_error() -> None:
     t, acc, vel, beat = half_sine_shot(100_000, 38.6e-6, 30.0, 1.0)
     with pytest.raises(AnalysisError, match="sampled at 1 MS/s"):
         doppler.beat_phase(beat[::100], 1e-6)
-    # A beat faster than 45 % of the rate is aliased (30 m/s at 2 µm pitch: 30 MHz at 50 MS/s).
-    fast = pm_beat(np.concatenate([np.zeros(20_000), np.linspace(0, 30, 20_000), np.full(60_000, 30.0)]), 2e-8,
+    # A beat above 45 % of the rate is (about to be) aliased: 23.5 m/s at 2 µm pitch beats at
+    # 23.5 MHz, 47 % of 50 MS/s.
+    fast = pm_beat(np.concatenate([np.zeros(20_000), np.linspace(0, 23.5, 2_000), np.full(78_000, 23.5)]), 2e-8,
                    snr_db=30.0, rng=np.random.default_rng(1))
     with pytest.raises(AnalysisError, match="aliased"):
         doppler.beat_phase(fast, 2e-8)

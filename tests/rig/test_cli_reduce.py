@@ -1,0 +1,128 @@
+"""`hopkinson reduce`: raw shot files in, a record and the shock quantities out; clear errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.records import read_record
+from analysis.reduce import write_raw_table
+from drivers.sim.accelerometer import AccelerometerTruth, Mode
+from drivers.sim.doppler_beat import raw_shot
+from drivers.sim.shock import G_M_S2, half_sine_m_s2
+from rig.cli import main
+from rig.shotfile import RawChannel, RawShot, ShotMeta, write_raw_shot
+
+DT = 1e-8
+N = 120_000
+TRIGGER = 20_000  # the pulse starts 200 µs into the record
+GAIN, SENS = 100.0, 1.0e-8
+FLAT = AccelerometerTruth(modes=(Mode(20.0e6, 0.7),))
+KEYS = ("peak_velocity_m_s", "peak_acceleration_m_s2", "pulse_width_s", "delay_s", "shock_sensitivity",
+        "demodulation_bandwidth_hz")
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    t = np.arange(N) * DT
+    acc = half_sine_m_s2(t, 38.6e-6, 100_000 * G_M_S2, TRIGGER * DT)
+    return t - TRIGGER * DT, raw_shot(acc, FLAT, DT, amp_gain=GAIN, sensitivity_v_per_m_s2=SENS,
+                                      rng=np.random.default_rng(3), initial_phase_rad=2.0)
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_reduce_npz_writes_the_record_and_json(tmp_path: Path, simulated, capsys) -> None:
+    time_s, s = simulated
+    raw = write_raw_table(tmp_path / "raw.npz", time_s, s.doppler_v, s.response_v)
+    out = tmp_path / "record.csv"
+    code, stdout, stderr = run(["reduce", str(raw), "--amp-gain", str(GAIN), "--sensitivity-v-per-m-s2", str(SENS),
+                                "-o", str(out), "--json"], capsys)
+    assert code == 0, stderr
+    result = json.loads(stdout.strip().splitlines()[-1])
+    for key in KEYS:
+        assert key in result
+    assert result["peak_acceleration_m_s2"] == pytest.approx(100_000 * G_M_S2, rel=5e-3)
+    assert result["shock_sensitivity"] == pytest.approx(1.0, rel=5e-3)
+    assert result["response_unit"] == "m/s^2"
+    record = read_record(out)
+    assert record.sample_rate_hz == pytest.approx(1e6)
+    assert record.time_s[np.argmax(record.reference)] == pytest.approx(19.3e-6, abs=1.5e-6)  # trigger = 0
+    assert np.max(record.reference) == pytest.approx(result["peak_acceleration_m_s2"], rel=1e-6)
+
+
+def test_reduce_csv_with_options_and_text_output(tmp_path: Path, simulated, capsys) -> None:
+    time_s, s = simulated
+    raw = write_raw_table(tmp_path / "raw.csv", time_s, s.doppler_v, s.response_v)
+    out = tmp_path / "record.npz"
+    code, stdout, stderr = run(["reduce", str(raw), "--sample-rate", "2e6", "--orders", "1,-1", "--grating-pitch-m",
+                                "2e-6", "--bandwidth-hz", "150e3", "-o", str(out)], capsys)
+    assert code == 0, stderr
+    assert "peak acceleration" in stdout and "150 kHz" in stdout
+    record = read_record(out)
+    assert record.sample_rate_hz == pytest.approx(2e6)
+    assert np.max(record.reference) == pytest.approx(100_000 * G_M_S2, rel=5e-3)
+
+
+def test_reduce_hdf5_shot_file_takes_its_settings(tmp_path: Path, simulated, capsys) -> None:
+    time_s, s = simulated
+    channels = {}
+    for name, volts in (("doppler", s.doppler_v), ("response", s.response_v)):
+        scale = float(np.max(np.abs(volts))) / 30000.0
+        channels[name] = RawChannel(np.round(volts / scale).astype(np.int16), scale, 0.0)
+    meta = ShotMeta(operator="test", accelerometer_model="AYZ-3", accelerometer_serial="1", pressure_bar=2.0,
+                    projectile=3, config={"analysis": {"grating_pitch_m": 2e-6, "orders": [1, -1],
+                                                       "sensitivity_v_per_m_s2": SENS},
+                                          "amplifier": {"gain": GAIN}})
+    shot_file = write_raw_shot(tmp_path / "shot.h5", RawShot(channels, DT, TRIGGER), meta)
+    out = tmp_path / "record.csv"
+    code, stdout, stderr = run(["reduce", str(shot_file), "-o", str(out), "--json"], capsys)
+    assert code == 0, stderr
+    result = json.loads(stdout)
+    assert result["response_unit"] == "m/s^2"  # gain and sensitivity came from the shot file
+    assert result["shock_sensitivity"] == pytest.approx(1.0, rel=5e-3)
+    assert result["onset_time_s"] == pytest.approx(0.0, abs=3e-6)  # times count from the trigger
+
+
+def test_bad_inputs_are_one_line_and_exit_2(tmp_path: Path, simulated, capsys) -> None:
+    time_s, s = simulated
+    cases = []
+    cases.append((["reduce", str(tmp_path / "missing.npz"), "-o", str(tmp_path / "o.csv")], "no such file"))
+    (tmp_path / "raw.txt").write_text("1,2,3\n")
+    cases.append((["reduce", str(tmp_path / "raw.txt"), "-o", str(tmp_path / "o.csv")], "unknown raw shot format"))
+    noise = write_raw_table(tmp_path / "noise.npz", time_s, np.random.default_rng(0).normal(0, 0.01, N), s.response_v)
+    cases.append((["reduce", str(noise), "-o", str(tmp_path / "o.csv")], "no Doppler beat"))
+    clipped = write_raw_table(tmp_path / "clipped.npz", time_s, np.clip(s.doppler_v, -0.5, 0.45), s.response_v)
+    cases.append((["reduce", str(clipped), "-o", str(tmp_path / "o.csv")], "clipped"))
+    slow = write_raw_table(tmp_path / "slow.npz", time_s[::100], s.doppler_v[::100], s.response_v[::100])
+    cases.append((["reduce", str(slow), "-o", str(tmp_path / "o.csv")], "sampled at 1 MS/s"))
+    aliased = write_raw_table(tmp_path / "aliased.npz", time_s[::2], s.doppler_v[::2], s.response_v[::2])
+    cases.append((["reduce", str(aliased), "-o", str(tmp_path / "o.csv")], "aliased"))  # 24 MHz at 50 MS/s
+    short = write_raw_table(tmp_path / "short.npz", time_s[:2000], s.doppler_v[:2000], s.response_v[:2000])
+    cases.append((["reduce", str(short), "-o", str(tmp_path / "o.csv")], "only 2000 samples"))
+    raw = write_raw_table(tmp_path / "raw.npz", time_s, s.doppler_v, s.response_v)
+    cases.append((["reduce", str(raw), "--orders", "1", "-o", str(tmp_path / "o.csv")], "--orders"))
+    for argv, message in cases:
+        code, stdout, stderr = run(argv, capsys)
+        assert code == 2, (argv, stderr)
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and message in lines[0], (argv, stderr)
+        assert "Traceback" not in stderr
+
+
+def test_console_command_runs(tmp_path: Path, simulated) -> None:
+    time_s, s = simulated
+    raw = write_raw_table(tmp_path / "raw.npz", time_s, s.doppler_v, s.response_v)
+    done = subprocess.run([sys.executable, "-m", "rig.cli", "reduce", str(raw), "-o", str(tmp_path / "r.csv"),
+                           "--json"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["demodulation_bandwidth_hz"] > 0
