@@ -1,0 +1,67 @@
+"""`hopkinson demo`: the simulated rig in-process, a short campaign, its shot files and report;
+the identified models match the simulated truth the shot files hold (poles within 1 %)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from drivers.sim.world import accelerometer_truth
+from rig.cli import main
+from rig.commands_demo import demo_plan_text
+from rig.journal import Journal
+from rig.plan import plan_from_dict
+from rig.shotfile import read_shot
+
+
+def test_demo_fires_a_short_campaign_and_its_models_match_the_truth(tmp_path: Path, capsys) -> None:
+    sim = tmp_path / "sim-fast.toml"
+    sim.write_text("[world]\ntime_scale = 100.0\n", encoding="utf-8")
+    out = tmp_path / "demo-output"
+    assert main(["demo", "--shots", "2", "--out", str(out), "--sim-config", str(sim), "--report", "html"]) == 0
+    stdout = capsys.readouterr().out
+    report = re.search(r"^report: (.+report\.html)$", stdout, re.M)
+    assert report is not None, stdout
+    assert Path(report.group(1)).is_file()
+    assert "the simulated rig fired 2 shot(s)" in stdout
+
+    (run,) = [p for p in out.iterdir() if p.is_dir()]
+    assert (out / "demo-plan.toml").is_file() and (run / "plan.toml").is_file()
+    with Journal.open(run) as journal:
+        assert [(s.shot.id, s.state.value, s.fire_count) for s in journal.statuses()] == [
+            ("s001-r1", "ANALYSED", 1), ("s002-r1", "ANALYSED", 1)]
+    for sid in ("s001-r1", "s002-r1"):
+        shot = read_shot(run / "shots" / f"{sid}.h5", load_raw=False)
+        truth = accelerometer_truth(shot.meta.simulated_truth)
+        dt = shot.results["model"]["sample_interval_s"]
+        identified = np.array([complex(*p) for p in shot.results["model"]["poles"]])
+        # Every true resonance is identified: the nearest identified pole within 1 % (s = ln z / T).
+        for mode in truth.modes:
+            w = 2 * np.pi * mode.natural_frequency_hz
+            s_true = complex(-mode.damping_ratio * w, w * np.sqrt(1 - mode.damping_ratio ** 2))
+            s_id = np.log(identified[identified.imag > 0]) / dt
+            error = np.min(np.abs(s_id - s_true)) / abs(s_true)
+            assert error < 0.01, (sid, error)
+        fn_truth = truth.modes[0].natural_frequency_hz / 1e3
+        assert re.search(rf"{sid}: f_n [\d.]+ kHz \(truth {fn_truth:.3f}\), .*, pole error [\d.]+ %", stdout)
+    page = Path(report.group(1)).read_text(encoding="utf-8")
+    assert "pole error" in page and "SIMULATED" in page
+
+
+def test_demo_plan_spreads_the_levels() -> None:
+    import tomllib
+
+    plan = plan_from_dict(tomllib.loads(demo_plan_text(4)), Path("demo-plan.toml"))
+    assert plan.authorise_firing and [s.pressure_bar for s in plan.shots] == [1.5, 2.0, 2.5, 3.0]
+    assert [s.id for s in plan.shots] == ["s001-r1", "s002-r1", "s003-r1", "s004-r1"]
+    one = plan_from_dict(tomllib.loads(demo_plan_text(1)), Path("demo-plan.toml"))
+    assert [s.pressure_bar for s in one.shots] == [1.5]
+
+
+def test_demo_bad_shot_count_is_exit_2(tmp_path: Path, capsys) -> None:
+    assert main(["demo", "--shots", "0", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["hopkinson: error: --shots: must be 1..50, got 0"]
+    assert not list(tmp_path.iterdir())
