@@ -95,6 +95,7 @@ def test_complete_shot_stores_raw_before_analysis_and_ends_safe(rig) -> None:
 def test_real_analysis_identifies_the_simulated_accelerometer(rig) -> None:
     """The default analysis (analysis.shot_analysis) through the whole pipeline, judged against
     the simulator's truth recorded with the shot."""
+    rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus)  # the default analysis
     outcome = rig.run(pressure_bar=2.0)
     assert outcome.final_state == "DONE" and outcome.analysis_error is None, outcome.analysis_error
     shot = read_shot(outcome.shot_path)

@@ -29,7 +29,7 @@ from drivers.sim.faults import FAULTS
 from rig.events import RigEvent
 from rig.sequencer import FireAuthorisation
 from rig.shotfile import read_shot
-from tests.rig.conftest import SLOW_DELAY_S, Rig
+from tests.rig.conftest import SLOW_DELAY_S, Rig, short_timeouts_config
 
 STATES = ("CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE")
 MODBUS = ("modbus-disconnect", "modbus-slow")
@@ -91,7 +91,8 @@ def _human_confirmation(rig: Rig, authorisation: FireAuthorisation, after_readin
 
 @pytest.mark.parametrize("fault, state", CASES, ids=[f"{f}@{s}" for f, s in CASES])
 def test_fault_in_state_ends_safe(make_rig, fault: str, state: str) -> None:
-    rig = make_rig()
+    # no-trigger waits out the capture timeout: keep it short there.
+    rig = make_rig(config=short_timeouts_config(capture_s=0.5) if fault == "no-trigger" else None)
     authorisation = FireAuthorisation()
     _human_confirmation(rig, authorisation)
     rig.on_state(state, lambda: rig.faults.inject(fault))
