@@ -139,7 +139,7 @@ def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rat
     phase = _block_mean_phase(weighted, total, gate)
     dt_m = m * sample_interval_s
     frequency_hz = np.diff(phase, prepend=phase[0]) / (2.0 * np.pi * dt_m)
-    smooth_hz = ndimage.median_filter(np.where(gate, frequency_hz, 0.0), size=11, mode="nearest")
+    smooth_hz = ndimage.uniform_filter1d(np.where(gate, frequency_hz, 0.0), size=11, mode="nearest")
     beat_peak_hz = float(np.max(smooth_hz))
     if beat_peak_hz > MAX_BEAT_FRACTION * fs:
         raise AnalysisError(
@@ -234,24 +234,33 @@ def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int
     power = np.empty(n_blocks, dtype=np.float32)
     w_mean = ((m - np.arange(m)) / m).astype(np.float32)  # weight of increment i in a block mean
     ones = np.ones(m, dtype=np.float32)
-    previous = None
+    previous = np.complex64(0)
+    prod = np.empty(keep, dtype=np.complex64)
+    angles = np.empty(keep, dtype=np.float32)
     batch = 16  # FFT blocks per call: low Python overhead, bounded memory
     full = np.zeros((batch, BLOCK_SAMPLES), dtype=np.complex64)
     for first in range(0, n_fft_blocks, batch):
         count = min(batch, n_fft_blocks - first)
         full[:count, : freq.size] = spectra[first : first + count] * gain
-        z = fft.ifft(full[:count], axis=1)[:, lead : lead + keep].reshape(-1)
-        lo = first * keep
-        z = z[: min(n, lo + z.size) - lo]
-        prod = np.empty_like(z)
-        prod[1:] = z[1:] * np.conj(z[:-1])
-        prod[0] = 0 if previous is None else z[0] * np.conj(previous)
-        previous = z[-1]
-        angles = np.angle(prod).reshape(-1, m)
-        k0, k1 = lo // m, lo // m + angles.shape[0]
-        weighted[k0:k1] = angles @ w_mean
-        total[k0:k1] = angles @ ones
-        power[k0:k1] = np.square(z.view(np.float32)).reshape(-1, 2 * m) @ np.full(2 * m, 1.0 / m, np.float32)
+        analytic = fft.ifft(full[:count], axis=1, overwrite_x=True)
+        for row in range(count):
+            lo = (first + row) * keep
+            length = min(keep, n - lo)
+            z = analytic[row, lead : lead + length]  # a contiguous view
+            p = prod[:length]
+            np.multiply(z[1:], np.conj(z[:-1]), out=p[1:])
+            p[0] = z[0] * np.conj(previous)
+            previous = z[-1]
+            a = angles[:length].reshape(-1, m)
+            np.arctan2(p.imag, p.real, out=angles[:length])
+            k0 = lo // m
+            k1 = k0 + length // m
+            np.matmul(a, w_mean, out=weighted[k0:k1])
+            np.matmul(a, ones, out=total[k0:k1])
+            zf = z.view(np.float32).reshape(-1, 2 * m)
+            np.einsum("ij,ij->i", zf, zf, out=power[k0:k1])
+        full[:count, freq.size :] = 0  # the transform may have used `full` as its output
+    power /= m
     return weighted, total, power, low_hz, noise_power
 
 
