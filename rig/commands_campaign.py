@@ -206,21 +206,40 @@ class ProgressPrinter:
 @contextlib.contextmanager
 def _signals_abort(runner: Any, interrupted: threading.Event) -> Iterator[None]:
     """While the campaign runs, Ctrl-C and SIGTERM abort the current shot (SAFE runs) and stop
-    the campaign; the command then exits 130. Only in the main thread (signal handlers)."""
+    the campaign; the command then exits 130. Only in the main thread (signal handlers).
+
+    The handler only notes the signal: it runs in the main thread between two bytecodes, where
+    taking a lock the interrupted code holds would deadlock. A watcher thread calls
+    `runner.abort(...)`.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    hit: list[int] = []
+    done = threading.Event()
 
     def handler(signum: int, _frame: object) -> None:
-        interrupted.set()
-        runner.abort(f"interrupted ({signal.Signals(signum).name})")
+        hit.append(signum)
+
+    def watch() -> None:
+        while not done.wait(0.02):
+            if hit:
+                interrupted.set()
+                runner.abort(f"interrupted ({signal.Signals(hit[0]).name})")
+                return
 
     previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    watcher = threading.Thread(target=watch, name="campaign-signals", daemon=True)
+    watcher.start()
     try:
         yield
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
+        done.set()
+        watcher.join()
+        if hit:
+            interrupted.set()
 
 
 def status_command(args: argparse.Namespace) -> int:

@@ -44,17 +44,17 @@ IDS = ["s001-r1", "s001-r2", "s002-r1", "s002-r2"]
 
 
 class Campaign:
-    def __init__(self, tmp_path: Path) -> None:
+    def __init__(self, tmp_path: Path, plan: str = PLAN) -> None:
         self.plan = tmp_path / "plan.toml"
-        self.plan.write_text(PLAN, encoding="utf-8")
+        self.plan.write_text(plan, encoding="utf-8")
         self.sim = tmp_path / "sim-fast.toml"
         self.sim.write_text("[world]\ntime_scale = 100.0\n", encoding="utf-8")
         self.run = tmp_path / "run"
         self.log = tmp_path / "fire.log"
         self.started = 0
 
-    def start(self, kill_at: str | None) -> tuple[int, list[str]]:
-        """Run (or resume) the campaign; SIGKILL it when a stderr line starts with `kill_at`."""
+    def start(self, kill_at: str | None, sig: int = signal.SIGKILL) -> tuple[int, list[str]]:
+        """Run (or resume) the campaign; send `sig` when a stderr line starts with `kill_at`."""
         argv = [sys.executable, "-m", "rig.cli", "campaign", "run", str(self.plan), "--sim", "--sim-config",
                 str(self.sim), "--out", str(self.run), "--no-report", "--sim-fire-log", str(self.log)]
         if self.started:
@@ -66,8 +66,10 @@ class Campaign:
         for line in proc.stderr:
             lines.append(line.rstrip("\n"))
             if kill_at is not None and line.startswith(kill_at):
-                proc.send_signal(signal.SIGKILL)
-                break
+                proc.send_signal(sig)
+                if sig == signal.SIGKILL:
+                    break
+                kill_at = None
         lines += proc.stderr.read().splitlines()
         return proc.wait(timeout=60), lines
 
@@ -138,3 +140,19 @@ def test_killed_at_several_points_and_resumed_ends_with_exactly_the_planned_shot
     with Journal.open(run) as journal:
         firing = Counter(e["shot_id"] for e in journal.events() if e["to"] == "FIRING")
     assert firing == fired
+
+
+def test_ctrl_c_aborts_the_shot_to_the_safe_state_and_a_resume_fires_it_once(tmp_path: Path) -> None:
+    c = Campaign(tmp_path, PLAN.split("[[shots]]")[0] + "[[shots]]\npressure_bar = 1.2\n")
+    rc, lines = c.start("[1/1] s001-r1 CHARGE", sig=signal.SIGINT)
+    assert rc == 130, lines[-5:]
+    assert lines[-1] == "hopkinson: error: interrupted; the current shot was aborted to the safe state"
+    assert any(ln.startswith("[1/1] s001-r1 SAFE") and "rig safe: fire and fill closed, vent open" in ln for ln in lines)
+    assert not c.fired()  # interrupted before FIRE: nothing left the barrel
+    with Journal.open(c.run) as journal:
+        status = journal.status("s001-r1")
+        assert (status.state.value, status.fire_count) == ("ABORTED", 0)
+        assert "interrupted (SIGINT)" in status.info["reason"]
+    rc, lines = c.start(None)
+    assert rc == 0, lines[-5:]
+    assert c.fired() == Counter({"s001-r1": 1})
