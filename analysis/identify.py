@@ -30,7 +30,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft, linalg, signal
 
 from analysis.errors import AnalysisError
-from analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
+from analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order, long_dot
 from analysis.model import DiscreteModel
 from analysis.records import Record
 from analysis.refined_iv import (
@@ -226,7 +226,7 @@ def identify(
     # Losses are compared per row (mean squared output error) while searching; `patience`
     # orders past the knee with no gain end the search (the rest stay NaN: not evaluated).
     tolerance = knee_tolerance + 2.0 * (2 * n_max + 1) / (ref.size - widest - n_max)
-    floor = 1e-12 * float(np.dot(resp, resp)) / ref.size
+    floor = 1e-12 * long_dot(resp, resp) / ref.size
     fits: list[TransferFit | None] = [None] * n_max
     delays: list[int] = [delay] * n_max
     mean_losses = [float("nan")] * n_max
@@ -249,17 +249,19 @@ def identify(
             f"no stable model of order 1 … {n_max} fits this record (every bias-corrected fit was unstable)"
         )
 
+    unsupported = ""
     if order is None:
         chosen, selection = knee, "knee"
     else:
         chosen, selection = order, "asked"
         if knee < order:
             drop = _relative_drop(losses, knee, order)
-            warnings.append(
-                f"order {order} was asked but the data support only order {knee}: the bias-corrected "
-                f"loss falls by {drop:.2%} from order {knee} to {order} (tolerance {tolerance:.2%}); "
-                "the extra poles are not determined by this record (a mode beyond the excitation's band?)"
+            unsupported = (
+                f"the data support only order {knee}: the bias-corrected loss falls by {drop:.2%} from "
+                f"order {knee} to {order} (tolerance {tolerance:.2%}); the extra poles are not "
+                "determined by this record (a mode beyond the excitation's band?)"
             )
+            warnings.append(f"order {order} was asked but {unsupported}")
 
     delay = delays[chosen - 1]
     u, y = _shifted(ref, resp, delay)
@@ -268,9 +270,10 @@ def identify(
     final = _finish(u, y, chosen_fit, max_iterations)
     if order is not None:
         if not _acceptable(final):
+            why = unsupported if knee < order else "is the response really the sensor's answer to this reference?"
             raise AnalysisError(
                 f"the order-{order} fit is unstable: the estimate settles with a pole on or outside the "
-                "unit circle (is the response really the sensor's answer to this reference?)"
+                f"unit circle ({why})"
             )
         if not final.converged:
             raise AnalysisError(
@@ -290,8 +293,9 @@ def identify(
     model = DiscreteModel(dt, final.a, final.b, float(delay), info={"fit_method": final.method})
     y_hat = simulate(u, final.a, final.b) + final.offset
     pre["response_offset_fitted"] = final.offset
-    spread = float(np.linalg.norm(y - np.mean(y)))
-    fit_percent = 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / spread) if spread > 0 else float("nan")
+    centred, error = y - np.mean(y), y - y_hat
+    spread = math.sqrt(long_dot(centred, centred))
+    fit_percent = 100.0 * (1.0 - math.sqrt(long_dot(error, error)) / spread) if spread > 0 else float("nan")
     modes = modes_of(model.poles, dt)
     warnings += _excitation_warnings(u, dt, modes)
     if fit_percent < POOR_FIT_PERCENT:
@@ -400,10 +404,10 @@ def _best_shift_for_denominator(
     """
     length = ref.size
     u_f = signal.lfilter([1.0], stabilised(a), ref)
-    auto = np.array([np.vdot(u_f[: length - t], u_f[t:]) for t in range(nb)])
+    auto = np.array([long_dot(u_f[: length - t], u_f[t:]) for t in range(nb)])
     lags = range(shifts.start, shifts.stop - 1 + nb)
     cross = np.array(
-        [np.vdot(resp[m:], u_f[: length - m]) if m >= 0 else np.vdot(resp[: length + m], u_f[-m:]) for m in lags]
+        [long_dot(resp[m:], u_f[: length - m]) if m >= 0 else long_dot(resp[: length + m], u_f[-m:]) for m in lags]
     )
     windows = sliding_window_view(cross, nb)  # row i: c(d), …, c(d + nb − 1) for d = shifts[i]
     try:

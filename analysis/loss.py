@@ -31,6 +31,21 @@ from analysis.errors import AnalysisError
 # (its relative error is ~ eps / ratio); the QR path is then used.
 _CHOLESKY_MIN_PIVOT_RATIO = 1e-9
 _QR_BLOCK_ROWS = 32_768
+# OpenBLAS runs a dot product of more than 10 000 elements on several threads; on a machine
+# whose cores are busy those threads wait for each other and one dot product can take 50×
+# longer. Chunks below that size keep every dot product on the calling thread.
+_DOT_CHUNK = 8192
+
+
+def long_dot(a: np.ndarray, b: np.ndarray) -> float:
+    """Σ a·b of two equally long 1-D float arrays, in single-threaded BLAS chunks."""
+    n = a.size
+    if n <= _DOT_CHUNK:
+        return float(np.dot(a, b))
+    total = 0.0
+    for i in range(0, n, _DOT_CHUNK):
+        total += float(np.dot(a[i : i + _DOT_CHUNK], b[i : i + _DOT_CHUNK]))
+    return total
 
 
 def _as_pair(u: np.ndarray, y: np.ndarray, max_order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -74,7 +89,7 @@ def lagged_cross_products(
             for forward in (True, False):
                 # value(s, m) = Σ_{t=s}^{s+rows−1} xp(t)·xq(t+m): xp leads, xq lags by m.
                 xp, xq = (left[p], right[q]) if forward else (right[q], left[p])
-                full = np.array([np.vdot(xp[: length - m], xq[m:]) for m in range(n_max + 1)])
+                full = np.array([long_dot(xp[: length - m], xq[m:]) for m in range(n_max + 1)])
                 lead = sliding_window_view(xq[: 2 * n_max + 1], n_max + 1)[:n_max]
                 head = np.zeros((n_max + 1, n_max + 1))
                 np.cumsum(xp[:n_max, None] * lead, axis=0, out=head[1:])

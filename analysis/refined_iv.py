@@ -13,8 +13,9 @@ SRIV converges from the (biased) least-squares start in a few iterations, but fo
 identified poles (a heavily damped amplifier low-pass) its estimate scatters several times
 more than the minimum of the output-error loss Σ (y − (B/A)·u)², which is the maximum-
 likelihood fit for white output noise and stays consistent for coloured noise. So the
-chosen order is finished by minimising that loss (scipy.optimize.least_squares, trust
-region, analytic Jacobian by filtering) from the SRIV estimate.
+chosen order can be finished by minimising that loss (scipy.optimize.least_squares,
+Levenberg–Marquardt, analytic Jacobian by filtering) from the SRIV estimate — identify()
+does so when the SRIV iteration does not settle.
 
 numpy/scipy have no instrumental-variable transfer-function estimator (and the packages
 that do, e.g. SIPPY, are not dependencies and were measured far slower), so the SRIV
@@ -29,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, optimize, signal
 
-from analysis.loss import lagged_cross_products
+from analysis.loss import lagged_cross_products, long_dot
 
 
 @dataclass(frozen=True)
@@ -90,7 +91,7 @@ def output_error_loss(u: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray
     n = a.size - 1
     with np.errstate(over="ignore", invalid="ignore"):
         e = y[n:] - offset - simulate(u, a, b)[n:]
-        value = float(np.dot(e, e))
+        value = long_dot(e, e)
     return value if np.isfinite(value) else float("inf")
 
 
@@ -117,7 +118,7 @@ def _iv_step(
     e = y[order:] - x[order:]
     offset = float(np.mean(e)) if fit_offset else 0.0
     e -= offset
-    loss = float(np.dot(e, e))
+    loss = long_dot(e, e)
     y_f = signal.lfilter([1.0], a_f, y - offset if offset else y)
     x_f = signal.lfilter([1.0], a_f, x)
     # Augmented form (analysis.loss): columns [u_f(k−n), −y_f(k−n), …, u_f(k), −y_f(k)];
@@ -199,12 +200,12 @@ def refined_iv_fit(
 def output_error_refine(
     u: np.ndarray, y: np.ndarray, fit: TransferFit, max_evaluations: int = 50, fit_offset: bool = True
 ) -> TransferFit:
-    """Minimise Σ (y − c − (B/A)·u)² from a stable fit (trust-region least squares).
+    """Minimise Σ (y − c − (B/A)·u)² from a stable fit (Levenberg–Marquardt).
 
     Residual sensitivities come from filtering: ∂ŷ/∂b_i = (1/A)·u(k−i) and
-    ∂ŷ/∂a_i = −(1/A)·ŷ(k−i); the offset c has sensitivity 1. Unstable trial steps give
-    non-finite residuals, which the trust-region method rejects. Returns `fit` unchanged if
-    the refinement does not lower the loss or ends unstable.
+    ∂ŷ/∂a_i = −(1/A)·ŷ(k−i); the offset c has sensitivity 1. Unstable trial steps are
+    rejected (a huge residual). Returns `fit` unchanged if the refinement does not lower the
+    loss or ends unstable.
     """
     if not fit.stable:
         return fit
@@ -216,10 +217,14 @@ def output_error_refine(
         offset = float(theta[-1]) if fit_offset else 0.0
         return np.concatenate(([1.0], theta[:n])), theta[n : n + nb], offset
 
+    # An unstable trial step gets a residual far above any stable model's, so the
+    # Levenberg–Marquardt step control rejects it and shortens the step.
+    rejected = np.full(rows, 1e3 * (float(np.max(np.abs(y))) + 1.0))
+
     def residual(theta: np.ndarray) -> np.ndarray:
         a, b, offset = split(theta)
         if not is_stable(a):
-            return np.full(rows, np.inf)
+            return rejected
         return y[n:] - offset - simulate(u, a, b)[n:]
 
     def jacobian(theta: np.ndarray) -> np.ndarray:
@@ -238,8 +243,10 @@ def output_error_refine(
 
     theta0 = np.concatenate((fit.a[1:], fit.b, [fit.offset] if fit_offset else []))
     try:
+        # MINPACK's Levenberg–Marquardt factorises the Jacobian with its own QR: unlike the
+        # trust-region method's LAPACK SVD it never waits on BLAS threads of a busy machine.
         result = optimize.least_squares(
-            residual, theta0, jac=jacobian, method="trf", x_scale="jac",
+            residual, theta0, jac=jacobian, method="lm", x_scale="jac",
             xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_evaluations,
         )
     except (ValueError, np.linalg.LinAlgError):

@@ -262,9 +262,15 @@ def test_mode_beyond_the_excitation_band_gives_the_lower_order() -> None:
     assert result.order == 2
     resonance = truth.discrete_poles(T)[:2]
     assert np.max(s_plane_errors(result.poles, resonance, T)) < 5e-3
-    asked = identify(record, order=4)
-    assert asked.order == 4 and asked.order_selection == "asked"
-    assert any("support only order 2" in w for w in asked.warnings), asked.warnings
+    # The spare pair is undetermined: it may settle inside the unit circle (a warning) or
+    # outside (an error) — either way the answer says the data support only order 2.
+    try:
+        asked = identify(record, order=4)
+    except AnalysisError as exc:
+        assert "support only order 2" in str(exc)
+    else:
+        assert asked.order == 4 and asked.order_selection == "asked"
+        assert any("support only order 2" in w for w in asked.warnings), asked.warnings
 
 
 def test_a_mode_where_the_reference_has_no_energy_is_flagged() -> None:
