@@ -41,6 +41,7 @@ from analysis.doppler import (
     BeatPhase,
     Demodulated,
     beat_phase,
+    decimated_rate_for,
     differentiate,
     displacement_to_rate,
     lowpass,
@@ -142,7 +143,8 @@ def reduce_raw(
         raise AnalysisError(f"{source}: response channel has a NaN or infinite sample at index "
                             f"{int(np.flatnonzero(~np.isfinite(response))[0])}")
     _check_response_clipping(response, source)
-    beat = beat_phase(doppler, sample_interval_s, source=f"{source}: doppler channel")
+    beat = beat_phase(doppler, sample_interval_s, decimated_rate_hz=decimated_rate_for(sample_rate_hz),
+                      source=f"{source}: doppler channel")
     m = beat.decimation
 
     # Response: zero offset from the pre-trigger part, then volts → m/s².

@@ -208,3 +208,21 @@ def test_bad_grating_or_orders_are_clear_errors() -> None:
         doppler.metres_per_radian(2e-6, (1, 1))
     with pytest.raises(AnalysisError, match="pitch"):
         doppler.metres_per_radian(0.0, (1, -1))
+
+
+def test_benchmark_script_smoke() -> None:
+    # benchmarks/bench_doppler.py on a small record: runs, ends with one JSON line, and our
+    # demodulation is at least as accurate as the hilbert+gradient baseline (no timing asserted).
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_doppler.py"
+    done = subprocess.run([sys.executable, str(script), "--samples", "200000", "--repeats", "1"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["samples"] == 200_000
+    assert result["velocity_max_error_rel"] < 1e-3
+    assert result["velocity_max_error_rel"] <= result["baseline_velocity_max_error_rel"]
