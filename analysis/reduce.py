@@ -130,7 +130,7 @@ def reduce_raw(
 ) -> Reduction:
     """Reduce a raw shot (PM beat and amplifier output in volts, sampled together) to the
     two-channel record at `sample_rate_hz`; see the module docstring for the steps."""
-    doppler = np.asarray(doppler_v, dtype=float).ravel()
+    doppler = np.asarray(doppler_v).ravel()  # beat_phase takes it to float32 itself
     response = np.asarray(response_v, dtype=float).ravel()
     if doppler.size != response.size:
         raise AnalysisError(f"{source}: the doppler and response channels differ in length "
@@ -158,7 +158,8 @@ def reduce_raw(
     scale = 1.0 / (amp_gain * sensitivity_v_per_m_s2)
     unit = "V" if amp_gain == 1.0 and sensitivity_v_per_m_s2 == 1.0 else "m/s^2"
     n_blocks = beat.phase_rad.size
-    response_blocks = ((response[: n_blocks * m] - offset_v) * scale).reshape(n_blocks, m).mean(axis=1)
+    block_mean = response[: n_blocks * m].reshape(n_blocks, m) @ np.full(m, 1.0 / m)
+    response_blocks = (block_mean - offset_v) * scale
 
     # Both channels to the analysis rate with one anti-alias filter.
     displacement = beat.phase_rad * metres_per_radian(grating_pitch_m, orders)
