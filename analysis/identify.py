@@ -430,22 +430,26 @@ def _fit_at_best_delay(
     """SRIV fit of `order`, alternated with the best delay for its denominator (≤ 4 rounds).
 
     Starts from least squares at `delay`; after a move, from the fitted A and the B that
-    went with the new delay.
+    went with the new delay. Returns the fit with the lowest loss per row and its delay.
     """
     start: tuple[np.ndarray, np.ndarray] | None = None
-    fit: TransferFit | None = None
+    best_fit: tuple[TransferFit, int] | None = None
+    tried: set[int] = set()
     for _ in range(4):
         u, y = _shifted(ref, resp, delay)
         a0, b0 = start if start is not None else arx_coefficients_by_order(u, y, order)[-1]
         fit = refined_iv_fit(u, y, a0, b0, max_iterations=iterations)
+        tried.add(delay)
+        if best_fit is None or _mean_loss(fit, ref.size, delay) < _mean_loss(best_fit[0], ref.size, best_fit[1]):
+            best_fit = (fit, delay)
         if shifts is None or not fit.stable:
             break
         best, b_best = _best_shift_for_denominator(fit.a, ref, resp, order + 1, shifts)
-        if best == delay:
+        if best in tried:
             break
         delay, start = best, (fit.a, b_best)
-    assert fit is not None
-    return fit, delay
+    assert best_fit is not None
+    return best_fit
 
 
 def _mean_loss(fit: TransferFit, n_samples: int, delay: int) -> float:

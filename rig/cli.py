@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "rig.commands_analysis",
     "rig.commands_campaign",
     "rig.commands_demo",
+    "rig.commands_identify",
     "rig.commands_dcm",
     "rig.commands_panel",
     "rig.commands_reduce",

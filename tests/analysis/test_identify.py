@@ -84,6 +84,7 @@ def assert_matches_truth(result: Identification, truth: AccelerometerTruth, nois
     errors = s_plane_errors(result.poles, truth.discrete_poles(T), T)
     assert np.max(errors) < POLE_TOLERANCE[noise], f"pole errors {errors}"
     assert result.model.is_stable
+    assert result.fit_percent > 95.0  # the model with its delay reproduces the response
     assert_band_matches_truth(result.model, truth)
 
 
