@@ -334,160 +334,18 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
 
     Returns the new phase (block means), the onset block and the beat amplitude used.
     """
-    fs = 1.0 / dt
-    # Window: from well before the motion to a little after the hand-over. The analytic beat
-    # frequency, coarse below the hand-over but good enough for this, falls below a tenth of the
-    # hand-over frequency at block k_10; the motion began less than (k_h − k_10) before that for
-    # any onset whose velocity grows like tᵖ with p ≤ 3, so twice that span reaches into rest.
-    slow = np.flatnonzero(smooth_hz[:k_h] < 0.1 * handover_hz)
-    if slow.size < max(10, int(2e-6 / (m * dt))):  # ≥ 2 µs of rest (not just the record's edge)
-        raise AnalysisError(
-            f"{source}: the record starts while the object is already moving (no rest before the pulse): "
-            f"record more pre-trigger"
-        )
-    k_10 = int(slow[-1])
-    rise_blocks = max(k_h - k_10, 1)
-    k_a = max(0, k_10 - 2 * rise_blocks - int(round(5e-6 / (m * dt))))
-    # The tracker runs on past the hand-over until the analytic phase has settled (the step the
-    # PM level makes when the grating leaves rest rings in the analytic band's low edge for a few
-    # of its periods) or the beat nears the tracker's low-pass, whichever comes first; the two
-    # phases are cross-faded over that stretch.
-    settle = int(np.ceil(5.0 / (low_hz * m * dt)))
-    fast = np.flatnonzero(smooth_hz[k_h:] > 3.0 * handover_hz)
-    overlap = max(4, min(settle, int(fast[0]) if fast.size else settle))
-    k_b = min(phase.size, k_h + overlap + 1)
-    # Low-pass the PM signal (zero-phase; ends padded with their edge value) at 5× the hand-over
-    # frequency and bring it to ~10× that cut-off.
-    cutoff_hz = 5.0 * handover_hz
-    down = max(1, int(fs // (10.0 * cutoff_hz)))
-    taps = signal.firwin(int(8 * fs / cutoff_hz) | 1, cutoff_hz, window=("kaiser", 8.0), fs=fs)
-    half = taps.size // 2
-    raw = x[k_a * m : k_b * m].astype(float) - offset_v
-    y = signal.oaconvolve(np.pad(raw, half, mode="edge"), taps, mode="valid")[::down]
-    t_y = (k_a * m + np.arange(y.size) * down) * dt  # raw-record time of each y sample
+    k_a, k_b = _onset_window(smooth_hz, k_h, handover_hz, low_hz, m * dt, phase.size, source)
+    y, t_y, down = _tracker_signal(x, dt, m, k_a, k_b, offset_v, handover_hz)
     amplitude_h = float(np.sqrt(max(np.mean(power[k_h:k_b]) - noise_power, 1e-30)))
-    # Rest: the first quarter of the window. Its level is the median of its second half
-    # (nearest the motion), its noise the robust spread of y there.
-    idx = np.arange(y.size)
-    n_rest = max(8, y.size // 4)
-    rest_level = float(np.median(y[n_rest // 2 : n_rest]))
-    # The level drifts with the slow amplitude fluctuation (A·cos φ0 changes with A): over a
-    # rest of ≥ 20 µs a straight line through it is extrapolated; a shorter one is taken flat.
-    if t_y[n_rest - 1] - t_y[0] >= 20e-6:
-        rest_line = np.polyfit(t_y[:n_rest] - t_y[0], y[:n_rest], 1)
-    else:
-        rest_line = np.array([0.0, rest_level])
-
-    def rest_at(i: np.ndarray | int) -> np.ndarray | float:
-        return np.polyval(rest_line, t_y[i] - t_y[0])
-
-    noise_y = 1.4826 * float(np.median(np.abs(y[:n_rest] - np.median(y[:n_rest]))))
-    # Fringe turning points: a Schmitt trigger with half an amplitude of hysteresis.
+    rest = _Rest.of(y, t_y)
     turns, kinds = _turning_points(y, 0.5 * amplitude_h)
-    # The trigger's extremes before the first one far (≥ half an amplitude) from the rest level
-    # may be the rest's own noisy highs and lows. Between the rest and that far extreme the
-    # grating turned at most once, on the rest's side (a "near" extreme: the rest sat just short
-    # of a fringe's extreme). If it did, the signal reached that extreme, ±amplitude, shortly
-    # before it last crossed the rest level towards the far extreme; if not, it only left the
-    # rest level there. The decision takes the peak of the signal, smoothed over a quarter of
-    # the first half-fringe, in the two half-fringes before that crossing, and asks which of
-    # the two it is nearer. When the two are closer than the noise allows to tell, the rest
-    # phase is put on the extreme itself (an error of at most the distance to it, instead of
-    # twice it).
-    rest_on_extreme = False
-    width = max(1, int(0.25e-6 / (down * dt))) | 1  # boxcar of the smoothed signal (refined below)
-    y_smooth = None
-    noise = 0.0
-    far_turn = y.size  # the first extreme far from the rest level (the onset ends there)
-    far = np.flatnonzero(np.abs(y[turns] - rest_level) >= 0.5 * amplitude_h) if turns.size else np.zeros(0, int)
-    if far.size and far[0] + 1 < turns.size:
-        j = int(far[0])
-        big = far_turn = int(turns[j])
-        near_kind = -int(kinds[j])
-        half_fringe = int(turns[j + 1] - big)
-        width = max(1, half_fringe // 4) | 1
-        y_smooth = _boxcar(y, width)
-        near_side = np.flatnonzero((y_smooth[:big] - rest_at(idx[:big])) * near_kind >= 0)
-        crossing = int(near_side[-1]) if near_side.size else big
-        search = np.arange(max(0, crossing - 2 * half_fringe), crossing + 1)
-        best = int(search[np.argmax(y_smooth[search] * near_kind)])
-        peak = float(y_smooth[best] * near_kind)
-        extreme = float(_parabolic_extreme(np.abs(y), turns[j : j + 1])[0])  # fringe amplitude
-        noise = _smoothed_noise(noise_y, width) + 0.01 * extreme
-        turns, kinds = turns[j:], kinds[j:]
-        rest_level = float(rest_at(best))
-        excursion = peak - rest_level * near_kind
-        # (Twice the noise: in doubt the rest goes on the extreme, which costs at most the
-        # small distance to it.)
-        if excursion <= 2.0 * noise and extreme - abs(rest_level) <= 2.0 * noise + 0.01 * extreme:
-            rest_on_extreme = True  # no excursion, and the rest within noise and drift of the extreme
-        if rest_on_extreme or excursion > 2.0 * noise:
-            turns = np.concatenate([[best], turns])
-            kinds = np.concatenate([[near_kind], kinds])
-    # Amplitude through the turning points (the extreme's distance from the offset, refined by
-    # a parabola fitted around it), held before the first one and after the last one (a slow
-    # fluctuation changes it by well under 1 % over an onset; extrapolating a slope from a few
-    # noisy extremes is worse).
-    if turns.size:
-        amp_t = t_y[turns]
-        amp_v = _parabolic_extreme(np.abs(y), turns)
-        amplitude = np.interp(t_y, amp_t, amp_v)  # held before the first and after the last
-        if rest_on_extreme:  # the rest sits on the extreme: its level is the amplitude there
-            amplitude[: turns[1] if turns.size > 1 else y.size] = abs(rest_level)
-    else:
-        amplitude = np.full(y.size, amplitude_h)
-    if y_smooth is None:
-        y_smooth = _boxcar(y, width)
-        noise = _smoothed_noise(noise_y, width) + 0.01 * amplitude_h
-    alpha = np.arccos(np.clip(y / amplitude, -1.0, 1.0))
-    # Near a fringe's extreme (|cos θ| > 0.95) arccos amplifies noise (dθ = dc / sin θ). Before
-    # the first far extreme (the onset, slow fringes) α is taken there from the smoothed signal;
-    # later, where the fringes are fast and regular, θ is interpolated in time (below).
-    ill = np.abs(y / amplitude) > 0.95
-    smooth_alpha = np.arccos(np.clip(y_smooth / amplitude, -1.0, 1.0))
-    early = ill & (idx < far_turn)
-    alpha[early] = smooth_alpha[early]
-    # Branch of each sample: after a maximum the fringe falls (θ = α), after a minimum it rises
-    # (θ = 2π − α); before the first turning point, the branch that leads into it.
-    if kinds.size:
-        nxt = np.searchsorted(turns, idx, side="left")
-        kind_next = np.concatenate([kinds, [-kinds[-1]]])[nxt]
-    else:  # no turning point: one direction throughout, taken from the trend of y
-        kind_next = np.full(y.size, 1 if y[-1] > y[n_rest] else -1)
-    theta = np.where(kind_next > 0, 2.0 * np.pi - alpha, alpha)
-    theta += 2.0 * np.pi * np.searchsorted(turns[kinds > 0], idx, side="left")
-    # Departure from rest: the last sample before the first real extreme (the far one when the
-    # rest was put on an extreme) at which the smoothed signal is still within the noise of the
-    # rest level. Up to there the phase is held at the rest phase: that of the rest level on the
-    # branch leading into the first extreme (from the level, not from a median of noisy
-    # arccos values, which are biased near an extreme), or the extreme's own phase.
-    end = far_turn if rest_on_extreme else (int(turns[0]) if turns.size else y.size)
-    at_rest = np.flatnonzero(np.abs(y_smooth[:end] - rest_at(idx[:end])) <= noise)
-    held = max(int(at_rest[-1]) + 1 if at_rest.size else 0, n_rest // 2)
-    if rest_on_extreme:
-        rest_phase = float(theta[turns[0]])
-    else:
-        k = min(held, y.size - 1)
-        alpha_rest = float(np.arccos(np.clip(rest_at(k) / amplitude[k], -1.0, 1.0)))
-        rest_phase = (2.0 * np.pi - alpha_rest if kind_next[k] > 0 else alpha_rest) \
-            + 2.0 * np.pi * int(np.searchsorted(turns[kinds > 0], k, side="left"))
-    theta[:held] = rest_phase
-    good = ~ill | early
-    good[:held] = True
-    theta[~good] = np.interp(idx[~good], idx[good], theta[good])
-    theta = np.maximum(theta, rest_phase)
-    if rest_on_extreme:
-        # On an extreme the signal hides the first part of the motion (1 − cos δ ≈ δ²/2 stays
-        # within the noise): the phase there is continued back from where it is observable
-        # along a power law δ = c·(t − t0)^p (any onset whose velocity grows like a power of
-        # time; a half-sine gives p = 3).
-        visible = float(np.sqrt(2.0 * noise / max(abs(rest_level), 1e-30)))
-        _extrapolate_onset(theta, t_y, rest_phase, held, far_turn, visible)
-    # Block means (the tracker phase at block centres) and the join with the analytic phase.
+    first = _first_extreme(y, t_y, turns, kinds, rest, amplitude_h, down * dt)
+    theta, rest_phase = _unfold(y, t_y, first, rest, amplitude_h)
+    # Block means (the tracker phase at block centres) and the join with the analytic phase:
+    # aligned on the tracker over the overlap, then cross-faded (raised cosine) so neither a
+    # step nor a kink is left at the hand-over.
     centres = (np.arange(k_a, k_b) * m + 0.5 * (m - 1)) * dt
     tracked = np.interp(centres, t_y, theta)
-    # Join: align the analytic phase on the tracker over the overlap, then cross-fade
-    # (raised cosine) so neither a step nor a kink is left at the hand-over.
     join = slice(k_h - k_a, k_b - k_a)
     out = phase + float(np.mean(tracked[join] - phase[k_h:k_b]))
     fade = 0.5 * (1.0 + np.cos(np.pi * np.arange(k_b - k_h) / (k_b - k_h)))
@@ -499,8 +357,193 @@ def _onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, 
     return out, k_on, amplitude_h
 
 
-def _extrapolate_onset(theta: np.ndarray, t: np.ndarray, rest_phase: float, held: int, end: int,
-                       visible: float) -> None:
+def _onset_window(smooth_hz: np.ndarray, k_h: int, handover_hz: float, low_hz: float, block_s: float,
+                  n_blocks: int, source: str) -> tuple[int, int]:
+    """Blocks [k_a, k_b) the fringe tracker reads: from well before the motion to past the
+    hand-over block k_h.
+
+    The analytic beat frequency, coarse below the hand-over but good enough for this, falls
+    below a tenth of the hand-over frequency at block k_10; the motion began less than
+    (k_h − k_10) before that for any onset whose velocity grows like tᵖ with p ≤ 3, so twice
+    that span (and 5 µs more) reaches into rest. After the hand-over the tracker runs on until
+    the analytic phase has settled (the step the PM level makes when the grating leaves rest
+    rings in the analytic band's low edge for a few of its periods) or the beat nears the
+    tracker's low-pass (3× the hand-over), whichever comes first.
+    """
+    slow = np.flatnonzero(smooth_hz[:k_h] < 0.1 * handover_hz)
+    if slow.size < max(10, int(2e-6 / block_s)):  # ≥ 2 µs of rest (not just the record's edge)
+        raise AnalysisError(
+            f"{source}: the record starts while the object is already moving (no rest before the pulse): "
+            f"record more pre-trigger"
+        )
+    k_10 = int(slow[-1])
+    k_a = max(0, k_10 - 2 * max(k_h - k_10, 1) - int(round(5e-6 / block_s)))
+    settle = int(np.ceil(5.0 / (low_hz * block_s)))
+    fast = np.flatnonzero(smooth_hz[k_h:] > 3.0 * handover_hz)
+    overlap = max(4, min(settle, int(fast[0]) if fast.size else settle))
+    return k_a, min(n_blocks, k_h + overlap + 1)
+
+
+def _tracker_signal(x: np.ndarray, dt: float, m: int, k_a: int, k_b: int, offset_v: float,
+                    handover_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """The PM signal of blocks [k_a, k_b) minus its offset, low-passed (zero-phase Kaiser FIR,
+    ends padded with their edge value) at 5× the hand-over frequency and sampled at ~10× that
+    cut-off; with its raw-record times and the down-sampling factor."""
+    fs = 1.0 / dt
+    cutoff_hz = 5.0 * handover_hz
+    down = max(1, int(fs // (10.0 * cutoff_hz)))
+    taps = signal.firwin(int(8 * fs / cutoff_hz) | 1, cutoff_hz, window=("kaiser", 8.0), fs=fs)
+    raw = x[k_a * m : k_b * m].astype(float) - offset_v
+    y = signal.oaconvolve(np.pad(raw, taps.size // 2, mode="edge"), taps, mode="valid")[::down]
+    return y, (k_a * m + np.arange(y.size) * down) * dt, down
+
+
+@dataclass(frozen=True)
+class _Rest:
+    """The rest at the start of the tracker's window (its first quarter): level and noise.
+
+    The level drifts with the slow amplitude fluctuation (A·cos φ0 changes with A): over a rest
+    of ≥ 20 µs a straight line through it is extrapolated; a shorter one is taken flat at the
+    median of its second half (nearest the motion). The noise is y's robust spread there.
+    """
+
+    n: int  # samples of y in the rest
+    line: np.ndarray  # polynomial (numpy.polyval order) in time since t0
+    t0: float
+    noise: float
+
+    @classmethod
+    def of(cls, y: np.ndarray, t_y: np.ndarray) -> _Rest:
+        n = max(8, y.size // 4)
+        if t_y[n - 1] - t_y[0] >= 20e-6:
+            line = np.polyfit(t_y[:n] - t_y[0], y[:n], 1)
+        else:
+            line = np.array([0.0, float(np.median(y[n // 2 : n]))])
+        noise = 1.4826 * float(np.median(np.abs(y[:n] - np.median(y[:n]))))
+        return cls(n, line, float(t_y[0]), noise)
+
+    def level(self, t: np.ndarray | float) -> np.ndarray | float:
+        return np.polyval(self.line, np.asarray(t) - self.t0)
+
+
+@dataclass(frozen=True)
+class _FirstExtreme:
+    """The fringe extremes from the rest on, after the decision about the rest's branch."""
+
+    turns: np.ndarray  # indices into y
+    kinds: np.ndarray  # +1 maximum, −1 minimum
+    far: int  # index of the first extreme far from the rest level (the onset ends there)
+    rest_on_extreme: bool  # the rest is put on turns[0], an extreme too close to tell
+    y_smooth: np.ndarray
+    noise: float  # what the smoothed signal must move to be seen (3 σ + 1 % of the amplitude)
+    rest_level: float  # the rest level at the decision
+
+
+def _first_extreme(y: np.ndarray, t_y: np.ndarray, turns: np.ndarray, kinds: np.ndarray, rest: _Rest,
+                   amplitude_h: float, sample_s: float) -> _FirstExtreme:
+    """Decide whether the grating passed a fringe's extreme right after leaving rest.
+
+    The trigger's extremes before the first one far (≥ half an amplitude) from the rest level
+    may be the rest's own noisy highs and lows. Between the rest and that far extreme the
+    grating turned at most once, on the rest's side (a "near" extreme: the rest sat just short
+    of a fringe's extreme). If it did, the signal reached that extreme shortly before it last
+    crossed the rest level towards the far one; if not, it only left the rest level there. The
+    peak of the signal, smoothed over a quarter of the first half-fringe, in the two
+    half-fringes before that crossing decides: beyond the rest level by more than twice the
+    noise, a near extreme; else none, unless the rest itself is that close to the extreme, in
+    which case the rest is put on the extreme (in doubt this costs at most the small distance
+    to it, instead of twice it).
+    """
+    width = max(1, int(0.25e-6 / sample_s)) | 1
+    rest_level = float(rest.level(t_y[0]))
+    far = np.flatnonzero(np.abs(y[turns] - rest.level(t_y[turns])) >= 0.5 * amplitude_h) if turns.size \
+        else np.zeros(0, int)
+    if not (far.size and far[0] + 1 < turns.size):
+        return _FirstExtreme(turns, kinds, y.size, False, _boxcar(y, width),
+                             _smoothed_noise(rest.noise, width) + 0.01 * amplitude_h, rest_level)
+    j = int(far[0])
+    big = int(turns[j])
+    near_kind = -int(kinds[j])
+    half_fringe = int(turns[j + 1] - big)
+    width = max(1, half_fringe // 4) | 1
+    y_smooth = _boxcar(y, width)
+    near_side = np.flatnonzero((y_smooth[:big] - rest.level(t_y[:big])) * near_kind >= 0)
+    crossing = int(near_side[-1]) if near_side.size else big
+    search = np.arange(max(0, crossing - 2 * half_fringe), crossing + 1)
+    best = int(search[np.argmax(y_smooth[search] * near_kind)])
+    extreme = float(_parabolic_extreme(np.abs(y), turns[j : j + 1])[0])  # fringe amplitude
+    noise = _smoothed_noise(rest.noise, width) + 0.01 * extreme
+    rest_level = float(rest.level(t_y[best]))
+    excursion = float(y_smooth[best]) * near_kind - rest_level * near_kind
+    turns, kinds = turns[j:], kinds[j:]
+    on_extreme = excursion <= 2.0 * noise and extreme - abs(rest_level) <= 2.0 * noise + 0.01 * extreme
+    if on_extreme or excursion > 2.0 * noise:
+        turns = np.concatenate([[best], turns])
+        kinds = np.concatenate([[near_kind], kinds])
+    return _FirstExtreme(turns, kinds, big, on_extreme, y_smooth, noise, rest_level)
+
+
+def _unfold(y: np.ndarray, t_y: np.ndarray, first: _FirstExtreme, rest: _Rest,
+            amplitude_h: float) -> tuple[np.ndarray, float]:
+    """Monotonic phase θ of y = A·cos θ from the extremes' order, and the rest phase."""
+    turns, kinds = first.turns, first.kinds
+    idx = np.arange(y.size)
+    # Amplitude through the extremes (each one's distance from the offset, a parabola fitted
+    # around it), held before the first one and after the last one (a slow fluctuation changes
+    # it by well under 1 % over an onset; extrapolating a slope from a few noisy extremes is
+    # worse). A rest put on an extreme gives the amplitude there.
+    if turns.size:
+        amplitude = np.interp(t_y, t_y[turns], _parabolic_extreme(np.abs(y), turns))
+        if first.rest_on_extreme:
+            amplitude[: turns[1] if turns.size > 1 else y.size] = abs(first.rest_level)
+    else:
+        amplitude = np.full(y.size, amplitude_h)
+    # Near a fringe's extreme (|cos θ| > 0.95) arccos amplifies noise (dθ = dc / sin θ). Before
+    # the first far extreme (the onset, slow fringes) α is taken there from the smoothed signal;
+    # later, where the fringes are fast and regular, θ is interpolated in time (below).
+    alpha = np.arccos(np.clip(y / amplitude, -1.0, 1.0))
+    ill = np.abs(y / amplitude) > 0.95
+    early = ill & (idx < first.far)
+    alpha[early] = np.arccos(np.clip(first.y_smooth / amplitude, -1.0, 1.0))[early]
+    # Branch of each sample: after a maximum the fringe falls (θ = α), after a minimum it rises
+    # (θ = 2π − α); before the first extreme, the branch that leads into it.
+    if kinds.size:
+        kind_next = np.concatenate([kinds, [-kinds[-1]]])[np.searchsorted(turns, idx, side="left")]
+    else:  # no extreme: one direction throughout, taken from the trend of y
+        kind_next = np.full(y.size, 1 if y[-1] > y[rest.n] else -1)
+    theta = np.where(kind_next > 0, 2.0 * np.pi - alpha, alpha)
+    theta += 2.0 * np.pi * np.searchsorted(turns[kinds > 0], idx, side="left")
+    # Departure from rest: the last sample before the first real extreme (the far one when the
+    # rest was put on an extreme) at which the smoothed signal is still within the noise of the
+    # rest level. Up to there the phase is held at the rest phase: that of the rest level on the
+    # branch leading into the first extreme (from the level, not from a median of noisy arccos
+    # values, which are biased near an extreme), or the extreme's own phase.
+    end = first.far if first.rest_on_extreme else (int(turns[0]) if turns.size else y.size)
+    at_rest = np.flatnonzero(np.abs(first.y_smooth[:end] - rest.level(t_y[:end])) <= first.noise)
+    held = max(int(at_rest[-1]) + 1 if at_rest.size else 0, rest.n // 2)
+    if first.rest_on_extreme:
+        rest_phase = float(theta[turns[0]])
+    else:
+        k = min(held, y.size - 1)
+        alpha_rest = float(np.arccos(np.clip(rest.level(t_y[k]) / amplitude[k], -1.0, 1.0)))
+        rest_phase = (2.0 * np.pi - alpha_rest if kind_next[k] > 0 else alpha_rest) \
+            + 2.0 * np.pi * int(np.searchsorted(turns[kinds > 0], k, side="left"))
+    theta[:held] = rest_phase
+    good = ~ill | early
+    good[:held] = True
+    theta[~good] = np.interp(idx[~good], idx[good], theta[good])
+    theta = np.maximum(theta, rest_phase)
+    if first.rest_on_extreme:
+        # On an extreme the signal hides the first part of the motion (1 − cos δ ≈ δ²/2 stays
+        # within the noise): the phase there is continued back from where it is observable
+        # along a power law δ = c·(t − t0)^p (any onset whose velocity grows like a power of
+        # time; a half-sine gives p = 3).
+        visible = float(np.sqrt(2.0 * first.noise / max(abs(first.rest_level), 1e-30)))
+        _extrapolate_onset(theta, t_y, rest_phase, first.far, visible)
+    return theta, rest_phase
+
+
+def _extrapolate_onset(theta: np.ndarray, t: np.ndarray, rest_phase: float, end: int, visible: float) -> None:
     """In place: replace θ between the rest and the first sample where it has moved 1.5×
     `visible` from `rest_phase` by the power law δ = c·(t − t0)^p (1 ≤ p ≤ 4) fitted to the
     part that moved between 1.5× `visible` and π/2 (fit in log-log for each start t0 on a grid;
