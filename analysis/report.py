@@ -272,11 +272,23 @@ class CampaignStatistics:
     cross_validation_percent: np.ndarray  # [i, j]: model i on shot j
 
     def to_dict(self) -> dict[str, Any]:
-        cv = [[None if not math.isfinite(v) else float(v) for v in row] for row in self.cross_validation_percent]
-        return {"shots": self.labels, "figures": self.figures, "spread": self.spread,
-                "cross_validation_percent": cv,
-                "cross_validation_note": "row i: model of shot i; column j: simulated on shot j's reference; "
-                                         "fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)"}
+        """JSON-ready (strict JSON: a NaN or infinite figure becomes None)."""
+        return _json_safe({"shots": self.labels, "figures": self.figures, "spread": self.spread,
+                           "cross_validation_percent": self.cross_validation_percent.tolist(),
+                           "cross_validation_note": "row i: model of shot i; column j: simulated on shot j's "
+                                                    "reference; fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)"})
+
+
+def _json_safe(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
 
 
 def campaign_statistics(entries: Sequence[ShotEntry]) -> CampaignStatistics:

@@ -9,8 +9,9 @@ with the chosen order, the model's magnitude and phase with the ±5 %/±10 % ban
 the pole analysis, the DCM with its compensated response and step response, the shock
 sensitivity. A run folder's report adds, across its shots, the spread (mean, standard
 deviation) and the cross-validation matrix. --json prints {"reports": [...], "shots": [...],
-"campaign": statistics or null}. Exit codes: 0 written; 2 bad input (no such file, not a shot
-file or run folder, nothing analysed to report, an unknown -o suffix).
+"campaign": statistics or null}. A shot whose analysis failed is reported with its error.
+Exit codes: 0 written; 2 bad input (no such file, not a shot file or run folder, a run folder
+without shot files, an unknown -o suffix or a missing output folder).
 """
 
 from __future__ import annotations
