@@ -210,6 +210,24 @@ def test_a_recorded_shot_is_analysed_on_resume_not_fired_again(tmp_path: Path, r
     assert states(run)["s001-r1"] == ("ANALYSED", 1)
 
 
+def test_a_shot_is_not_fired_when_firing_cannot_be_journaled(tmp_path: Path, rig: Rig, monkeypatch) -> None:
+    run, plan = new_run(tmp_path, entries="[[shots]]\npressure_bar = 1.2\n")
+    original = Journal.mark
+
+    def disk_full_at_firing(self, shot_id, state, **info):
+        if state == S.FIRING:
+            raise OSError("disk full")
+        return original(self, shot_id, state, **info)
+
+    monkeypatch.setattr(Journal, "mark", disk_full_at_firing)
+    outcome = rig.runner(run, plan).run()
+    monkeypatch.undo()
+    assert outcome.exit_code == 3 and not outcome.last_shot.fired
+    assert "FIRING of s001-r1 could not be recorded (disk full)" in outcome.message
+    assert rig.fired() == [] and rig.session.world.shots_fired == 0  # the valve never opened
+    assert states(run)["s001-r1"] == ("ABORTED", 0)
+
+
 # ------------------------------------------------------------------ the command line
 
 
