@@ -168,9 +168,9 @@ def identify(
     knee_tolerance: float = 0.01,
     max_delay_samples: int = 32,
     remove_delay: bool = True,
-    search_iterations: int = 8,
+    search_iterations: int = 5,
     max_iterations: int = 40,
-    patience: int | None = 4,
+    patience: int | None = 3,
 ) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record.
 

@@ -84,12 +84,18 @@ def lagged_cross_products(
     out = np.empty((size, size))
     # All (s, m) with lag m = 0 … N and window start s = 0 … N − m.
     s_idx, m_idx = np.nonzero(np.add.outer(np.arange(n_max + 1), np.arange(n_max + 1)) <= n_max)
+    same = {p: left[p] is right[p] for p in range(2)}
     for p in range(2):
         for q in range(2):
+            full_forward: np.ndarray | None = None
             for forward in (True, False):
                 # value(s, m) = Σ_{t=s}^{s+rows−1} xp(t)·xq(t+m): xp leads, xq lags by m.
                 xp, xq = (left[p], right[q]) if forward else (right[q], left[p])
-                full = np.array([long_dot(xp[: length - m], xq[m:]) for m in range(n_max + 1)])
+                if not forward and p == q and same[p] and full_forward is not None:
+                    full = full_forward  # a series against itself: both directions agree
+                else:
+                    full = np.array([long_dot(xp[: length - m], xq[m:]) for m in range(n_max + 1)])
+                full_forward = full
                 lead = sliding_window_view(xq[: 2 * n_max + 1], n_max + 1)[:n_max]
                 head = np.zeros((n_max + 1, n_max + 1))
                 np.cumsum(xp[:n_max, None] * lead, axis=0, out=head[1:])

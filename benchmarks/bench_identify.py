@@ -1,0 +1,189 @@
+"""Benchmark: the loss of every order from one factorisation, and the whole identification.
+
+Data: a 4th-order simulated accelerometer (27 kHz / ζ 0.05 and 70 kHz / ζ 0.03 resonances) at
+1 MS/s, driven by a train of 10 µs half-sine shocks every 5 ms, 40 dB white noise on the
+response and on the reference.
+
+1. Loss ||g2||² of ARX orders 1 … 30. Baseline, measured in the same run: one
+   numpy.linalg.lstsq per order on the explicit regression matrix (same rows). Ours: the Gram
+   matrix of the augmented information matrix from lagged dot products + one Cholesky
+   (analysis.loss, "cholesky"), and the accurate fallback, a blocked QR ("qr"). At 1 000 000
+   samples the lstsq sweep would take minutes, so lstsq is timed on orders 1, 10, 20, 30 and
+   the sweep's time interpolated (cost ∝ L·(2n+1)² fitted to those four; flagged "estimated").
+2. Whole identification (analysis.identify: resample check, delay, bias-corrected fits of
+   every order with order choice at the knee, final fit). Baseline: plain least squares
+   swept over orders 1 … 12 (one lstsq each) — faster to run, but biased; pole error is the
+   relative error of the s-plane poles ln(p)/T against the truth.
+
+BLAS runs on one thread (OPENBLAS_NUM_THREADS=1, set before numpy loads unless already set):
+on a shared machine threaded BLAS-1 calls can be 50× slower and the figures meaningless.
+
+    .venv/bin/python benchmarks/bench_identify.py [--sizes 200000,1000000] [--repeats 3]
+
+Prints the figures and, on its last line, one JSON object.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy.optimize import linear_sum_assignment  # noqa: E402
+
+from analysis.identify import identify  # noqa: E402
+from analysis.loss import arx_fit, arx_loss_by_order  # noqa: E402
+from analysis.records import Record  # noqa: E402
+from drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise  # noqa: E402
+from drivers.sim.shock import half_sine_m_s2  # noqa: E402
+
+DT = 1e-6
+TRUTH = AccelerometerTruth(modes=(Mode(27_000.0, 0.05), Mode(70_000.0, 0.03)))
+PULSE_SPACING = 5000  # samples between shocks
+
+
+def shock_train(n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(reference, response) of the truth to a train of half-sine shocks, 40 dB noise on both."""
+    t = np.arange(n) * DT
+    u = np.zeros(n)
+    for k in range(max(1, n // PULSE_SPACING)):
+        u += half_sine_m_s2(t, 10e-6, 1.0 if k % 2 == 0 else 0.7, (k * PULSE_SPACING + 100) * DT)
+    rng = np.random.default_rng(seed)
+    y = TRUTH.respond(u, DT)
+    return u + white_noise(u, 40.0, rng), y + white_noise(y, 40.0, rng)
+
+
+def best_time(fn: Callable[[], Any], repeats: int) -> tuple[float, Any]:
+    """Shortest wall time of `repeats` calls, and the last result."""
+    best, out = float("inf"), None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def lstsq_loss(u: np.ndarray, y: np.ndarray, order: int, max_order: int) -> float:
+    """One numpy.linalg.lstsq: the ARX loss of `order` over the augmented matrix's rows."""
+    rows = u.size - max_order
+    t = np.arange(order, order + rows)
+    phi = np.column_stack([-y[t - i] for i in range(1, order + 1)] + [u[t - i] for i in range(order + 1)])
+    theta, *_ = np.linalg.lstsq(phi, y[t], rcond=None)
+    r = y[t] - phi @ theta
+    return float(r @ r)
+
+
+def pole_error(poles: np.ndarray) -> float:
+    """Largest relative s-plane error against the truth (optimal pairing)."""
+    est = np.log(np.asarray(poles, dtype=complex)) / DT
+    true = np.log(TRUTH.discrete_poles(DT)) / DT
+    if est.size != true.size:
+        return float("inf")
+    cost = np.abs(est[:, None] - true[None, :]) / np.abs(true[None, :])
+    rows, cols = linear_sum_assignment(cost)
+    return float(np.max(cost[rows, cols]))
+
+
+def bench_losses(u: np.ndarray, y: np.ndarray, max_order: int, repeats: int, full_baseline: bool) -> dict[str, Any]:
+    chol_s, chol = best_time(lambda: arx_loss_by_order(u, y, max_order, method="cholesky"), repeats)
+    qr_s, qr = best_time(lambda: arx_loss_by_order(u, y, max_order, method="qr"), 1)
+    if full_baseline:
+        t0 = time.perf_counter()
+        ref = np.array([lstsq_loss(u, y, n, max_order) for n in range(1, max_order + 1)])
+        lstsq_s, estimated = time.perf_counter() - t0, False
+        agree = {"cholesky": float(np.max(np.abs(chol / ref - 1))), "qr": float(np.max(np.abs(qr / ref - 1)))}
+    else:
+        probe = sorted({1, max_order // 3, 2 * max_order // 3, max_order})
+        times, ref_probe = [], []
+        for n in probe:
+            t0 = time.perf_counter()
+            ref_probe.append(lstsq_loss(u, y, n, max_order))
+            times.append(time.perf_counter() - t0)
+        # Fit t(n) = c0 + c1·(2n+1)² to the probes, sum over every order.
+        x = np.array([(2 * n + 1) ** 2 for n in probe], dtype=float)
+        c1, c0 = np.polyfit(x, np.array(times), 1)
+        lstsq_s = float(sum(max(c0 + c1 * (2 * n + 1) ** 2, 0.0) for n in range(1, max_order + 1)))
+        estimated = True
+        idx = [n - 1 for n in probe]
+        ref_probe = np.array(ref_probe)
+        agree = {"cholesky": float(np.max(np.abs(chol[idx] / ref_probe - 1))),
+                 "qr": float(np.max(np.abs(qr[idx] / ref_probe - 1)))}
+    return {
+        "orders": max_order,
+        "lstsq_per_order_s": lstsq_s,
+        "lstsq_estimated": estimated,
+        "one_factorisation_cholesky_s": chol_s,
+        "one_factorisation_qr_s": qr_s,
+        "speedup_cholesky": lstsq_s / chol_s,
+        "speedup_qr": lstsq_s / qr_s,
+        "max_rel_loss_difference_vs_lstsq": agree,
+    }
+
+
+def bench_identify(u: np.ndarray, y: np.ndarray, repeats: int) -> dict[str, Any]:
+    record = Record(DT, u, y)
+    ours_s, result = best_time(lambda: identify(record), repeats)
+
+    def arx_sweep() -> tuple[np.ndarray, np.ndarray]:
+        fits = [arx_fit(u, y, n) for n in range(1, 13)]
+        return fits[3]
+
+    base_s, (a_arx, _) = best_time(arx_sweep, 1)
+    ours_err = pole_error(result.poles)
+    arx_err = pole_error(np.roots(a_arx))
+    return {
+        "identify_s": ours_s,
+        "order_chosen": result.order,
+        "true_order": TRUTH.order,
+        "pole_error": ours_err,
+        "fit_percent": result.fit_percent,
+        "baseline_arx_sweep_1_12_s": base_s,
+        "baseline_arx_order4_pole_error": arx_err,
+        "time_ratio_vs_arx_sweep": ours_s / base_s,
+        "pole_error_ratio_arx_vs_ours": arx_err / ours_err if ours_err > 0 else float("inf"),
+    }
+
+
+def run(sizes: list[int], max_order: int = 30, repeats: int = 3) -> dict[str, Any]:
+    """All figures for the given record sizes; prints them as it goes."""
+    out: dict[str, Any] = {"benchmark": "identify", "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS")}
+    for n in sizes:
+        u, y = shock_train(n)
+        full = n <= 200_000
+        losses = bench_losses(u, y, max_order, repeats, full)
+        est = " (estimated from orders 1, 10, 20, 30)" if losses["lstsq_estimated"] else ""
+        print(f"{n} samples — loss of orders 1..{max_order}:")
+        print(f"  one lstsq per order{est}: {losses['lstsq_per_order_s']:.3f} s")
+        print(f"  one factorisation, Cholesky: {losses['one_factorisation_cholesky_s'] * 1e3:.1f} ms "
+              f"({losses['speedup_cholesky']:.0f}× faster); QR: {losses['one_factorisation_qr_s'] * 1e3:.0f} ms "
+              f"({losses['speedup_qr']:.0f}×)")
+        print(f"  largest relative difference from lstsq: {losses['max_rel_loss_difference_vs_lstsq']}")
+        ident = bench_identify(u, y, repeats if n <= 200_000 else 1)
+        print(f"{n} samples — identification: {ident['identify_s']:.3f} s, order {ident['order_chosen']} "
+              f"(truth {ident['true_order']}), pole error {ident['pole_error']:.2e}, fit {ident['fit_percent']:.2f} %")
+        print(f"  plain least squares, orders 1..12: {ident['baseline_arx_sweep_1_12_s']:.3f} s "
+              f"(ours {ident['time_ratio_vs_arx_sweep']:.2f}× its time), its order-4 pole error "
+              f"{ident['baseline_arx_order4_pole_error']:.2e} ({ident['pole_error_ratio_arx_vs_ours']:.0f}× ours)")
+        out[str(n)] = {"loss_by_order": losses, "identification": ident}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", default="200000,1000000", help="record lengths, comma-separated")
+    parser.add_argument("--max-order", type=int, default=30)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    result = run([int(s) for s in args.sizes.split(",")], args.max_order, args.repeats)
+    print(json.dumps(result, allow_nan=False))
+
+
+if __name__ == "__main__":
+    main()
