@@ -4,19 +4,20 @@ Steps (paper §2.1, done as PAPER-NOTES.md measured it must be done):
 
 1. Rate: a record sampled faster than the analysis rate is low-pass filtered and resampled
    (analysis.resample; default 1 MS/s).
-2. Baselines: each channel's mean before the pulse is removed (a zero shift of the response).
-3. Delay: the integer input delay that best explains the data (least-squares loss over a window
-   of shifts around the cross-correlation peak) is removed; B keeps b_0 so a fractional
-   remainder is absorbed by the model.
-4. Loss of every order 1 … N by plain least squares from ONE factorisation of the augmented
-   information matrix of Eq. (3) (analysis.loss) — reported, and the starting point of step 5.
-5. Bias correction per order by refined instrumental variables with prefiltering by 1/Â
-   (Eq. 12; analysis.refined_iv). The order is chosen on the bias-corrected output-error loss
-   Σ(y − (B/A)u)²: the smallest order whose loss is within a tolerance of the best (the knee;
-   the plain ARX loss keeps falling and would always pick N). AIC and BIC are reported beside it.
-6. The chosen order is iterated to convergence and polished by an output-error fit; an unstable
-   or non-converging result is an error when the order was asked for, and is never returned
-   silently otherwise.
+2. Baselines: each channel's mean before the pulse is removed; what is left of a response
+   offset is fitted with every model (a constant output term).
+3. Bias correction per order 1 … N by refined instrumental variables with prefiltering by 1/Â
+   (Eq. 12; analysis.refined_iv), started from plain least squares. The integer input delay
+   is estimated and removed per order, alternating the fit with the delay that minimises the
+   output error for the fitted denominator (scored for every shift at once); B keeps b_0, so
+   a fractional remainder is absorbed by the model.
+4. Order: chosen on the bias-corrected output-error loss Σ(y − c − (B/A)u)² — the smallest
+   order within a tolerance of the best (the knee). The plain least-squares loss ||g2||² of
+   every order (one factorisation of the augmented information matrix of Eq. 3,
+   analysis.loss) keeps falling and would always pick N; it is reported beside AIC and BIC.
+5. The chosen order is iterated to convergence (and polished by a direct output-error fit if
+   SRIV will not settle); an unstable or non-converging result is an error when the order was
+   asked for, and is never returned silently otherwise (fallback order + warning).
 """
 
 from __future__ import annotations
