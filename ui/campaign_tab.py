@@ -84,7 +84,8 @@ class CampaignTab(QWidget):
         self.resume_button = QPushButton("Resume")
         self.abort_button = QPushButton("Abort campaign")
         self.abort_button.setStyleSheet("QPushButton { color: white; background: #d0312d; font-weight: 600; "
-                                        "padding: 4px 10px; border-radius: 3px; }")
+                                        "padding: 4px 10px; border-radius: 3px; } "
+                                        "QPushButton:disabled { background: #e8eaed; color: #9aa0a6; }")
         for b in (self.run_button, self.pause_button, self.resume_button):
             b.setMinimumWidth(80)
         self.progress = QProgressBar()
@@ -379,7 +380,8 @@ class CampaignTab(QWidget):
         self.last_outcome = outcome
         self.current_label.setText("")
         self._show_summary(outcome.summary)
-        self._say(outcome.message, error=outcome.exit_code != 0)
+        self._say(outcome.message + ("" if outcome.exit_code == 0 else " — on the panel: press Resume."),
+                  error=outcome.exit_code != 0)
         self.update_buttons()
         self.ended.emit()
 

@@ -135,6 +135,8 @@ class DcmTab(QWidget):
         self.reset_button = QPushButton("Reset to the shot's DCM")
         self.export_dcm_button = QPushButton("Export DCM (JSON)…")
         self.export_report_button = QPushButton("Export report…")
+        self.export_report_button.setToolTip("the shot's calibration report (PDF or HTML) as analysed, "
+                                             "like `hopkinson report`; export the tuned DCM with Export DCM")
         self.message = QLabel("")
         self.message.setWordWrap(True)
         self.message.setStyleSheet("color: #b3261e;")

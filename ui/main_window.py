@@ -130,6 +130,12 @@ class MainWindow(QMainWindow):
         header = QHBoxLayout()
         header.setContentsMargins(10, 8, 10, 4)
         header.addWidget(self.state_bar, 1)
+        self.mode_badge = QLabel(title_note)
+        self.mode_badge.setStyleSheet("QLabel { background: #fef7e0; color: #7a4f01; border: 1px solid #f9d97c; "
+                                      "border-radius: 4px; padding: 3px 8px; font-weight: 700; font-size: 9pt; }")
+        self.mode_badge.setVisible(bool(title_note))
+        self.mode_badge.setToolTip("the panel drives a simulated rig: nothing real moves")
+        header.addWidget(self.mode_badge, 0, Qt.AlignmentFlag.AlignTop)
         header.addSpacing(12)
         for button in (self.arm_button, self.fire_button, self.abort_button):
             header.addWidget(button)
@@ -404,11 +410,19 @@ class MainWindow(QMainWindow):
 
     def _campaign_started(self) -> None:
         self.busy = True
+        self.hide_banner()
         self.state_bar.reset()
         self.update_buttons()
 
     def _campaign_ended(self) -> None:
         self.busy = False
+        outcome = self.campaign_tab.last_outcome
+        if outcome is None:
+            self.show_banner("error", self.campaign_tab.message.text())
+        elif outcome.exit_code == 0:
+            self.show_banner("ok", f"Campaign: {outcome.message} ({outcome.run_folder})")
+        else:
+            self.show_banner("error", _actionable(f"Campaign: {outcome.message}"))
         self.update_buttons()
 
     # -- shots ----------------------------------------------------------------------------------------
@@ -434,16 +448,18 @@ class MainWindow(QMainWindow):
         self.shot_view_shown.emit(view)
 
     def export_report(self, path: Path) -> None:
-        """Write the calibration report of the shot shown (PDF or HTML) off the GUI thread."""
+        """Write the calibration report of the shot shown (PDF or HTML, by suffix) off the GUI
+        thread; it reports the shot as analysed (hopkinson report), not a DCM tuned in the tab."""
         view = self.last_view
         if view is None or view.path is None:
             self.show_banner("warning", "No shot to report on yet.")
             return
 
         def write() -> Path:
-            from rig.commands_report import write_shot_report
+            from analysis.report import write_report
+            from rig.report_data import shot_report
 
-            return write_shot_report(view.path, path)
+            return write_report(shot_report(view.path), [path])[0]
 
         self.background.run(write, lambda p: self.show_banner("ok", f"Report written to {p}"),
                             lambda exc: self.show_banner("error", f"Report not written: {exc}"))

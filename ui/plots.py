@@ -473,6 +473,7 @@ class ShotPlots(QWidget):
         if view.pm_time_s is not None and view.pm_volts is not None:
             self.pm_curve.setData(view.pm_time_s, view.pm_volts)
             self.pm_plot.getPlotItem().enableAutoRange()
+        window = None
         if view.record_time_s is not None:
             self.accel_plot.setLabel("left", "acceleration (10³ m/s²)")
             self.reference_curve.setData(view.record_time_s, view.reference_m_s2 / KILO)
@@ -481,8 +482,6 @@ class ShotPlots(QWidget):
         elif view.raw_response_v is not None and view.pm_time_s is not None:
             self.accel_plot.setLabel("left", "amplifier output", units="V")
             self.response_curve.setData(view.pm_time_s, view.raw_response_v)
-        else:
-            window = None
         if view.analysis_error:
             self.accel_note.setText(f"not analysed: {_short(view.analysis_error)}")
             self.accel_note.setPos(0, 0)

@@ -70,7 +70,11 @@ def unreachable_config(tmp_path: Path, keep: tuple[str, ...] = (), base: RigConf
 
 
 def dispose(widget: Any) -> None:
-    """Close and delete a widget now (see the module docstring)."""
+    """Close and delete a widget now (see the module docstring); a deleted one is left alone."""
+    import shiboken6
+
+    if not shiboken6.isValid(widget):
+        return
     widget.close()
     widget.deleteLater()
     QCoreApplication.sendPostedEvents(None, QEvent.Type.DeferredDelete)

@@ -14,7 +14,7 @@ from PySide6.QtCore import Qt, QTimer
 from analysis.response import band_edges
 from drivers.sim.world import accelerometer_truth
 from rig.shotfile import read_shot
-from tests.ui.conftest import save_shot
+from tests.ui.conftest import save_shot, unreachable_config
 
 SHOT_TIMEOUT_MS = 60_000
 
@@ -137,3 +137,39 @@ def test_fire_not_confirmed_keeps_the_rig_armed_then_abort_stands_down(qtbot, ma
     assert panel.world.shots_fired == 0
     coils = panel.world.coils()
     assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True
+
+
+def test_a_shot_whose_analysis_failed_still_shows_its_raw_channels(qtbot, make_panel, tmp_path):
+    from rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+
+    n = 5000
+    t = np.arange(n)
+    raw = RawShot({"doppler": RawChannel((1000 * np.sin(t / 7)).astype(np.int16), 1e-4, 0.0),
+                   "response": RawChannel((t % 300).astype(np.int16), 1e-3, -0.1)}, 1e-8, 500)
+    path = write_raw_shot(tmp_path / "failed.h5", raw, ShotMeta("t", "ACC", "1", 2.0, 3))
+    add_analysis(path, {}, error="analysis failed: no pulse found in the reference")
+    w = make_panel(simulate=False, connect=False, config=unreachable_config(tmp_path)).window
+    with qtbot.waitSignal(w.shot_view_shown, timeout=20_000):
+        w.load_shot(path)
+    plots = w.plots
+    x, y = plots.pm_curve.getOriginalDataset()
+    assert np.allclose(y, raw.volts("doppler")) and np.allclose(x, raw.time_s)
+    _, y = plots.response_curve.getOriginalDataset()
+    assert np.allclose(y, raw.volts("response"))
+    assert "no pulse found" in plots.accel_note.toPlainText()
+    assert plots.strip.values["fbsd_5"].text() == "—" and w.dcm_tab.model is None
+
+
+def test_export_report_of_the_shot_shown(qtbot, make_panel, tmp_path):
+    panel = make_panel()
+    w = panel.window
+    with qtbot.waitSignal(w.shot_view_shown, timeout=SHOT_TIMEOUT_MS):
+        fire_one_shot(qtbot, panel)
+    target = tmp_path / "report.html"
+    w.export_report(target)
+    qtbot.waitUntil(lambda: w.banner_level in ("ok", "error") and "Report" in w.banner.text(), timeout=60_000)
+    assert w.banner_level == "ok", w.banner.text()
+    html = target.read_text(encoding="utf-8")
+    shot = read_shot(w.last_view.path, load_raw=False)
+    assert w.last_view.path.stem in html  # the report of this shot, with its analysed FBSD
+    assert f"{shot.results['fbsd_hz']['5'] / 1e3:.3f} kHz" in html

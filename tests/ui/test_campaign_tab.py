@@ -1,0 +1,132 @@
+"""The Campaign tab runs a plan through rig.campaign on the simulated rig: run, pause, resume,
+abort, the table of shots with their results, and the authorisation rule."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import Qt
+
+from rig.journal import Journal
+from rig.shotfile import read_shot
+from tests.ui.conftest import save_shot
+
+CAMPAIGN_TIMEOUT_MS = 120_000
+PLAN = """
+name = "ui-test"
+operator = "panel test"
+authorise_firing = {authorise}
+
+[accelerometer]
+model = "SIM-ACC"
+serial = "SIM0001"
+
+[defaults]
+projectile = 3
+
+[defaults.analysis]
+max_order = 6
+dcm_ratio = 12.5
+dcm_damping = 0.707
+
+[[shots]]
+pressure_bar = 1.5
+repeats = 2
+
+[[shots]]
+pressure_bar = 2.5
+"""
+
+
+def write_plan(folder: Path, authorise: bool = True) -> Path:
+    path = folder / "plan.toml"
+    path.write_text(PLAN.format(authorise="true" if authorise else "false"), encoding="utf-8")
+    return path
+
+
+def column(tab, col: int) -> list[str]:
+    return [tab.table.item(r, col).text() if tab.table.item(r, col) else "" for r in range(tab.table.rowCount())]
+
+
+def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artifacts_dir):
+    panel = make_panel(time_scale=5.0)  # charging 1.5 bar takes ~0.6 s: time to press Abort
+    w = panel.window
+    tab = w.campaign_tab
+    w.tabs.setCurrentWidget(tab)
+    tab.load_plan(write_plan(tmp_path))
+    assert column(tab, 1) == ["s001-r1", "s001-r2", "s002-r1"] and set(column(tab, 4)) == {"PLANNED"}
+    assert tab.run_button.isEnabled() and not tab.pause_button.isEnabled()
+
+    # Run, and Pause while the first shot runs: the campaign stops after that shot
+    def pause_on_first_shot(event):
+        if event.state == "CAMPAIGN" and event.kind == "progress" and event.data.get("shot_id") == "s001-r1":
+            tab.pause_button.click()
+    w.link.event.connect(pause_on_first_shot)
+    with qtbot.waitSignal(tab.ended, timeout=CAMPAIGN_TIMEOUT_MS):
+        qtbot.mouseClick(tab.run_button, Qt.MouseButton.LeftButton)
+        assert w.busy and not w.arm_button.isEnabled() and tab.pause_button.isEnabled()
+    w.link.event.disconnect(pause_on_first_shot)
+    assert tab.last_outcome.exit_code == 3 and "paused" in tab.last_outcome.message
+    assert column(tab, 4) == ["ANALYSED", "PLANNED", "PLANNED"]
+    assert panel.world.shots_fired == 1
+    assert tab.resume_button.isEnabled() and not tab.run_button.isEnabled() and w.arm_button.isEnabled()
+
+    # Resume, and Abort the second shot while it charges: it goes SAFE, the campaign stops
+    current: list[str] = []
+    filling_when_pressed: list[bool] = []
+
+    def abort_in_charge(event):
+        if event.state == "CAMPAIGN" and event.kind == "progress":
+            current.append(event.data["shot_id"])
+        if event.kind == "state" and event.state == "CHARGE" and current[-1:] == ["s001-r2"]:
+            filling_when_pressed.append(panel.world.coils()["fill"])
+            tab.abort_button.click()
+    w.link.event.connect(abort_in_charge)
+    with qtbot.waitSignal(tab.ended, timeout=CAMPAIGN_TIMEOUT_MS):
+        qtbot.mouseClick(tab.resume_button, Qt.MouseButton.LeftButton)
+    w.link.event.disconnect(abort_in_charge)
+    assert filling_when_pressed == [True]  # Abort was pressed while the reservoir was charging
+    assert tab.last_outcome.exit_code == 3
+    assert column(tab, 4) == ["ANALYSED", "ABORTED", "PLANNED"]
+    assert panel.world.shots_fired == 1
+    coils = panel.world.coils()
+    assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True
+
+    # Resume to the end: the aborted shot is retried, every shot fired exactly once
+    with qtbot.waitSignal(tab.ended, timeout=CAMPAIGN_TIMEOUT_MS):
+        qtbot.mouseClick(tab.resume_button, Qt.MouseButton.LeftButton)
+    assert tab.last_outcome.exit_code == 0 and tab.last_outcome.complete
+    qtbot.waitUntil(lambda: all(column(tab, 8)), timeout=10_000)  # results read from the shot files
+    assert column(tab, 4) == ["ANALYSED"] * 3 and panel.world.shots_fired == 3
+    assert tab.progress.value() == tab.progress.maximum() == 3
+    run = tab.run_folder
+    for row, sid in enumerate(("s001-r1", "s001-r2", "s002-r1")):
+        results = read_shot(run.shot_path(sid), load_raw=False).results
+        assert tab.table.item(row, 8).text() == f"{results['fbsd_hz']['5'] / 1e3:.2f} kHz"
+        assert tab.table.item(row, 5).text() == str(results["identification"]["order"])
+        assert tab.table.item(row, 11).text() == f"{sid}.h5"
+    with Journal.open(run) as journal:
+        assert [s.fire_count for s in journal.statuses()] == [1, 1, 1]
+    assert not tab.resume_button.isEnabled()  # nothing left to do
+    save_shot(w, artifacts_dir / "panel-campaign.png")
+
+
+def test_a_plan_without_authorisation_fires_nothing_unless_confirmed(qtbot, make_panel, tmp_path):
+    panel = make_panel()
+    tab = panel.window.campaign_tab
+    tab.load_plan(write_plan(tmp_path, authorise=False))
+    asked = []
+    tab.confirm_campaign = lambda plan: asked.append(plan.name) or False
+    qtbot.mouseClick(tab.run_button, Qt.MouseButton.LeftButton)
+    assert asked == ["ui-test"] and not tab.running
+    assert "not authorised" in tab.message.text() and tab.run_folder is None
+    assert panel.world.shots_fired == 0
+
+
+def test_a_bad_plan_is_named_with_its_problem(qtbot, make_panel, tmp_path):
+    tab = make_panel().window.campaign_tab
+    bad = tmp_path / "bad.toml"
+    bad.write_text(PLAN.format(authorise="true").replace("pressure_bar = 2.5", "pressure_bar = -1"))
+    tab.load_plan(bad)
+    assert tab.plan is None and "Plan not loaded" in tab.message.text() and "pressure_bar" in tab.message.text()
+    assert not tab.run_button.isEnabled()

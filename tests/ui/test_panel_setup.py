@@ -1,0 +1,128 @@
+"""Shot set-up remembered between runs; missing instruments show as disconnected (never a crash),
+with ARM refused; a bad set-up is refused with a clear message before anything moves."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from PySide6.QtCore import QSettings, Qt
+
+from tests.ui.conftest import dispose, test_rig_config, unreachable_config
+
+
+def test_setup_is_remembered_between_runs(qtbot, tmp_path):
+    from ui.shot_setup import ShotSetup
+
+    config = test_rig_config()
+    settings_file = str(tmp_path / "panel.ini")
+    first = ShotSetup(config, tmp_path / "shots")
+    first.operator.setText("A. Technician")
+    first.accelerometer_model.setText("AYZ-3")
+    first.accelerometer_serial.setText("SN0042")
+    first.sensitivity.setValue(0.35)
+    first.pressure.setValue(3.25)
+    first.projectile.setCurrentIndex(0)
+    first.max_order.setValue(8)
+    first.dcm_ratio.setValue(12.5)
+    first.dcm_damping.setValue(0.6)
+    first.out_dir.setText(str(tmp_path / "elsewhere"))
+    first.save(QSettings(settings_file, QSettings.Format.IniFormat))
+    dispose(first)
+
+    second = ShotSetup(config, tmp_path / "default")
+    second.load(QSettings(settings_file, QSettings.Format.IniFormat))
+    request = second.request(confirm_timeout_s=60.0)
+    dispose(second)
+    assert (request.operator, request.accelerometer_model, request.accelerometer_serial) == \
+        ("A. Technician", "AYZ-3", "SN0042")
+    assert request.sensitivity_v_per_m_s2 == pytest.approx(0.35e-6)
+    assert request.pressure_bar == pytest.approx(3.25) and request.projectile == 1
+    assert request.max_order == 8 and request.dcm_ratio == pytest.approx(12.5)
+    assert request.dcm_damping == pytest.approx(0.6) and request.out_dir == tmp_path / "elsewhere"
+    assert request.confirm_timeout_s == 60.0
+
+
+def test_auto_dcm_ratio_means_none(qtbot, tmp_path):
+    from ui.shot_setup import ShotSetup
+
+    setup = ShotSetup(test_rig_config(), tmp_path)
+    assert setup.dcm_ratio.text() == "auto" and setup.request(1.0).dcm_ratio is None
+    dispose(setup)
+
+
+def test_no_instruments_show_disconnected_and_arm_is_refused(qtbot, make_panel, tmp_path):
+    panel = make_panel(simulate=False, config=unreachable_config(tmp_path))
+    w = panel.window
+    qtbot.waitUntil(lambda: all(lamp.level == "fault" for lamp in w.status_panel.instrument_lamps.values()),
+                    timeout=15_000)
+    for key, lamp in w.status_panel.instrument_lamps.items():
+        assert lamp.level == "fault", key
+        assert "DISCONNECTED" in w.status_panel.instrument_details[key].text()
+    assert not w.arm_button.isEnabled() and "not every instrument" in w.arm_button.toolTip()
+    assert w.abort_button.isEnabled()
+    w.arm()  # even called directly: nothing starts
+    assert not w.busy and not w.link.shot_running
+    messages = " ".join(text for _, text in w.log_view.messages())
+    assert "valve controller 127.0.0.1" in messages and "not connected" in messages
+    assert w.status_panel.pressure_value.text() == "— bar"
+    # the window stays alive and answers: ABORT with nothing connected reports it cannot confirm SAFE
+    with qtbot.waitSignal(w.link.safe_done, timeout=10_000) as done:
+        qtbot.mouseClick(w.abort_button, Qt.MouseButton.LeftButton)
+    assert done.args[0] is False and "SAFE NOT CONFIRMED" in done.args[1]
+    assert "SAFE NOT CONFIRMED" in w.banner.text()
+
+
+def test_one_missing_instrument_keeps_the_others_live(qtbot, make_panel, tmp_path):
+    from rig.sim_session import sim_session
+    from tests.ui.conftest import fast_sim_config
+
+    with sim_session(test_rig_config(), fast_sim_config(), ()) as session:
+        config = unreachable_config(tmp_path, keep=("valve_controller", "digitizer"), base=session.config)
+        panel = make_panel(simulate=False, config=config)
+        w = panel.window
+        lamps = w.status_panel.instrument_lamps
+        qtbot.waitUntil(lambda: lamps["amplifier"].level == "fault" and lamps["valve_controller"].level == "ok"
+                        and lamps["digitizer"].level == "ok", timeout=15_000)
+        qtbot.waitUntil(lambda: w.status_panel.reservoir_pressure_bar is not None, timeout=5000)
+        assert w.status_panel.instrument_lamps["amplifier"].level == "fault"
+        assert w.status_panel.instrument_lamps["valve_controller"].level == "ok"
+        assert "Hopkinson-Sim" in w.status_panel.instrument_details["digitizer"].text()
+        assert w.status_panel.vacuum_value.text().endswith("mbar") and "—" not in w.status_panel.vacuum_value.text()
+        assert not w.arm_button.isEnabled()
+        dispose(w)  # before the simulator stops
+
+
+def test_a_bad_setup_is_refused_before_anything_moves(qtbot, make_panel, tmp_path):
+    panel = make_panel()
+    w = panel.window
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    w.setup.out_dir.setText(str(Path(blocker) / "shots"))
+    w.arm()
+    assert not w.busy and w.banner.isVisible() and "Not armed" in w.banner.text()
+    assert "cannot create" in w.banner.text() and str(blocker) in w.banner.text()
+    assert panel.world.coils()["fill"] is False and panel.world.shots_fired == 0
+
+
+def test_instrument_errors_show_on_the_lamps_and_recover(qtbot, make_panel):
+    """A dropped controller link and a noisy amplifier line: messages naming the instrument,
+    lamps red/amber, the window alive; when the fault goes, the panel reconnects by itself."""
+    panel = make_panel()
+    w = panel.window
+    lamps, details = w.status_panel.instrument_lamps, w.status_panel.instrument_details
+    panel.faults.inject("modbus-disconnect")
+    qtbot.waitUntil(lambda: lamps["valve_controller"].level == "fault", timeout=15_000)
+    assert "DISCONNECTED" in details["valve_controller"].text()
+    assert not w.arm_button.isEnabled()
+    assert w.banner.isVisible() and "valve controller" in w.banner.text()
+    assert "cable" in w.banner.text() or "network" in w.banner.text()
+    panel.faults.clear("modbus-disconnect")
+    qtbot.waitUntil(lambda: lamps["valve_controller"].level == "ok", timeout=15_000)
+    qtbot.waitUntil(w.arm_button.isEnabled, timeout=5000)
+
+    panel.faults.inject("serial-noise")
+    qtbot.waitUntil(lambda: lamps["amplifier"].level in ("warn", "fault"), timeout=15_000)
+    assert "bridge amplifier" in " ".join(text for _, text in w.log_view.messages())
+    panel.faults.clear("serial-noise")
+    qtbot.waitUntil(lambda: lamps["amplifier"].level == "ok", timeout=15_000)
