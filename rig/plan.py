@@ -19,7 +19,8 @@ Example (config/campaigns/example.toml is the documented one)::
     max_order = 12
     order = 4                         # optional: a fixed order instead of the knee rule
     sample_rate_hz = 1.0e6
-    dcm_ratio = 12.5                  # response-time ratio r of the DCM
+    dcm_ratio = "auto"                # response-time ratio r of the DCM; "auto" (default): r that
+                                      # widens the ±5 % band 3× (analysis.dcm.ratio_for_widening)
     dcm_damping = 0.707               # damping ζ_e of the DCM's new poles
 
     [[shots]]
@@ -66,7 +67,7 @@ class AnalysisOptions:
     max_order: int = 12
     order: int | None = None  # None: chosen where the bias-corrected loss stops falling
     sample_rate_hz: float = 1.0e6
-    dcm_ratio: float = 12.5
+    dcm_ratio: float | None = None  # None ("auto"): the r that widens the ±5 % band 3×
     dcm_damping: float = 0.707
 
 
@@ -277,7 +278,9 @@ def _shot_settings(
             options["order"] = c.integer(given["order"], f"{akey}.order", 1, MAX_ORDER_LIMIT)
         if "sample_rate_hz" in given:
             options["sample_rate_hz"] = c.number(given["sample_rate_hz"], f"{akey}.sample_rate_hz", 0.0)
-        if "dcm_ratio" in given:
+        if "dcm_ratio" in given and given["dcm_ratio"] == "auto":
+            options["dcm_ratio"] = None
+        elif "dcm_ratio" in given:
             options["dcm_ratio"] = c.number(given["dcm_ratio"], f"{akey}.dcm_ratio", 1.0, low_open=False)
         if "dcm_damping" in given:
             options["dcm_damping"] = c.number(given["dcm_damping"], f"{akey}.dcm_damping", 0.0, high=1.0)

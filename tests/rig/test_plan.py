@@ -147,3 +147,15 @@ def test_bad_toml_and_missing_file(tmp_path: Path) -> None:
         load_plan(path)
     with pytest.raises(ConfigError, match="no such plan file"):
         load_plan(tmp_path / "absent.toml")
+
+
+def test_dcm_ratio_auto_is_the_default_and_can_be_written(tmp_path):
+    from rig.plan import load_plan
+
+    path = tmp_path / "auto.toml"
+    path.write_text('name = "a"\noperator = "op"\n[accelerometer]\nmodel = "m"\nserial = "1"\n'
+                    '[[shots]]\npressure_bar = 1.0\nprojectile = 3\n'
+                    '[[shots]]\npressure_bar = 1.0\nprojectile = 3\n[shots.analysis]\ndcm_ratio = "auto"\n'
+                    '[[shots]]\npressure_bar = 1.0\nprojectile = 3\n[shots.analysis]\ndcm_ratio = 12.5\n')
+    plan = load_plan(path)
+    assert [s.analysis.dcm_ratio for s in plan.shots] == [None, None, 12.5]
