@@ -264,7 +264,7 @@ class MagnitudePlot(pg.PlotWidget):
             line.setVisible(False)
             self.addItem(line)
             self.fbsd_lines[key] = line
-        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 0))
+        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 1))
         self.addItem(self.peak_note, ignoreBounds=True)
         self.setYRange(0, self.Y_MAX, padding=0)
 
@@ -289,8 +289,8 @@ class MagnitudePlot(pg.PlotWidget):
         self.setYRange(0, self.Y_MAX, padding=0)
         i = int(np.nanargmax(magnitude))
         if magnitude[i] > self.Y_MAX:
-            self.peak_note.setText(f"resonance ×{magnitude[i]:.1f} at {f_khz[i]:.1f} kHz ↑")
-            self.peak_note.setPos(hi, self.Y_MAX)
+            self.peak_note.setText(f"peak ×{magnitude[i]:.1f}\nat {f_khz[i]:.1f} kHz ↑")
+            self.peak_note.setPos(hi, 0.8 * self.Y_MAX)
         else:
             self.peak_note.setText("")
 
@@ -301,8 +301,8 @@ class ResultsStrip(QFrame):
     FIELDS = (
         ("fbsd_5", "FBSD ±5 %"),
         ("fbsd_10", "FBSD ±10 %"),
-        ("comp_5", "with DCM ±5 %"),
-        ("comp_10", "with DCM ±10 %"),
+        ("comp_5", "DCM ±5 %"),
+        ("comp_10", "DCM ±10 %"),
         ("model", "Model"),
         ("resonance", "Resonance"),
         ("shock", "Shock sens."),
@@ -354,6 +354,7 @@ class ResultsStrip(QFrame):
         order, fit = s.get("order"), s.get("fit_percent")
         self.values["model"].setText(f"order {order}" + (f", fit {fit:.1f} %" if fit is not None else "")
                                      if order is not None else "—")
+        self.values["model"].setToolTip("model order; fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)")
         fn, zeta = s.get("natural_frequency_hz"), s.get("damping_ratio")
         self.values["resonance"].setText(f"{fn / KILO:.2f} kHz, ζ {zeta:.3f}" if fn and zeta is not None else "—")
         shock = s.get("shock_sensitivity")
