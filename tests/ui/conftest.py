@@ -31,7 +31,7 @@ def fast_sim_config(time_scale: float = TIME_SCALE) -> SimConfig:
     return SimConfig(world=WorldParams(time_scale=time_scale), servers=ServerParams(modbus_slow_delay_s=0.3))
 
 
-def test_rig_config() -> RigConfig:
+def rig_config_for_tests() -> RigConfig:
     """config/rig-sim.toml with timeouts for a fast simulator (wall seconds)."""
     base = load_rig_config(REPO / "config" / "rig-sim.toml")
     t = dataclasses.replace(base.timeouts, check_s=5.0, evacuate_s=10.0, charge_s=10.0, arm_s=5.0, fire_s=3.0,
@@ -44,9 +44,6 @@ def test_rig_config() -> RigConfig:
     )
 
 
-test_rig_config.__test__ = False  # a helper, not a test
-
-
 def free_port() -> int:
     """A loopback port nothing listens on (bound, then released)."""
     with socket.socket() as sock:
@@ -56,7 +53,7 @@ def free_port() -> int:
 
 def unreachable_config(tmp_path: Path, keep: tuple[str, ...] = (), base: RigConfig | None = None) -> RigConfig:
     """The test configuration with the instruments not in `keep` pointed where nothing answers."""
-    config = base or test_rig_config()
+    config = base or rig_config_for_tests()
     if "valve_controller" not in keep:
         config = dataclasses.replace(config, valve_controller=dataclasses.replace(
             config.valve_controller, host="127.0.0.1", port=free_port()))
@@ -114,7 +111,7 @@ def make_panel(qtbot: Any, tmp_path: Path) -> Iterator[Callable[..., Panel]]:
     def make(time_scale: float = TIME_SCALE, faults: tuple[str, ...] = (), config: RigConfig | None = None,
              simulate: bool = True, connect: bool = True) -> Panel:
         session = None
-        rig_config = config or test_rig_config()
+        rig_config = config or rig_config_for_tests()
         truth = None
         if simulate:
             session = stack.enter_context(sim_session(rig_config, fast_sim_config(time_scale), faults))

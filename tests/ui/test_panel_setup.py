@@ -8,13 +8,13 @@ from pathlib import Path
 import pytest
 from PySide6.QtCore import QSettings, Qt
 
-from tests.ui.conftest import dispose, test_rig_config, unreachable_config
+from tests.ui.conftest import dispose, rig_config_for_tests, unreachable_config
 
 
 def test_setup_is_remembered_between_runs(qtbot, tmp_path):
     from ui.shot_setup import ShotSetup
 
-    config = test_rig_config()
+    config = rig_config_for_tests()
     settings_file = str(tmp_path / "panel.ini")
     first = ShotSetup(config, tmp_path / "shots")
     first.operator.setText("A. Technician")
@@ -46,7 +46,7 @@ def test_setup_is_remembered_between_runs(qtbot, tmp_path):
 def test_auto_dcm_ratio_means_none(qtbot, tmp_path):
     from ui.shot_setup import ShotSetup
 
-    setup = ShotSetup(test_rig_config(), tmp_path)
+    setup = ShotSetup(rig_config_for_tests(), tmp_path)
     assert setup.dcm_ratio.text() == "auto" and setup.request(1.0).dcm_ratio is None
     dispose(setup)
 
@@ -77,7 +77,7 @@ def test_one_missing_instrument_keeps_the_others_live(qtbot, make_panel, tmp_pat
     from rig.sim_session import sim_session
     from tests.ui.conftest import fast_sim_config
 
-    with sim_session(test_rig_config(), fast_sim_config(), ()) as session:
+    with sim_session(rig_config_for_tests(), fast_sim_config(), ()) as session:
         config = unreachable_config(tmp_path, keep=("valve_controller", "digitizer"), base=session.config)
         panel = make_panel(simulate=False, config=config)
         w = panel.window
