@@ -258,8 +258,13 @@ def test_random_kills_keep_every_shot_exactly_once(tmp_path: Path, plan_path: Pa
     for attempt in range(40):
         proc = start_child(folder, seed=seed * 1000 + attempt, abort_p=0.25)
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-        if attempt < 6:  # kill the first runs at random times (each gets a few shots done)
-            time.sleep(rng.uniform(0.0, 0.12))
+        if attempt < 6:  # kill the first runs at random points, after 0-2 more fires (by the fire log,
+            # not by the clock: a fast machine would otherwise finish the campaign before the kills)
+            target = len(fired(folder)) + rng.randint(0, 2)
+            deadline = time.monotonic() + 60
+            while proc.poll() is None and len(fired(folder)) < target and time.monotonic() < deadline:
+                time.sleep(0.002)
+            time.sleep(rng.uniform(0.0, 0.02))
             proc.send_signal(signal.SIGKILL)
         out, err = proc.communicate(timeout=120)
         assert proc.returncode in (0, -signal.SIGKILL), err
