@@ -325,22 +325,31 @@ def _rise_time(step: np.ndarray, final: float) -> float:
     return first_crossing(0.9) - first_crossing(0.1)
 
 
-def rise_times_samples(model: DiscreteModel, dcm: DCM) -> tuple[float, float]:
-    """10–90 % step-response rise times (samples): (model alone, model followed by the DCM)."""
+def step_responses(model: DiscreteModel, dcm: DCM, n_samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Unit-step responses normalised to their final values: (model alone, model then DCM).
+
+    The model's sections are delay-free (its input delay only shifts the curve). `n_samples`
+    None: long enough for the slowest pole to settle (4 response times).
+    """
     _same_interval(model, dcm)
     slowest = float(np.max(response_times_samples(np.concatenate([model.poles, dcm.poles]))))
-    n = int(np.ceil(4 * slowest)) + model.b.size + dcm.order + 64
+    n = int(np.ceil(4 * slowest)) + model.b.size + dcm.order + 64 if n_samples is None else int(n_samples)
     if n > _MAX_STEP_SAMPLES:
         raise AnalysisError(
-            f"rise time: a pole settles in {slowest:.3g} samples; too slow for a step-response rise time"
+            f"step response: a pole settles in {slowest:.3g} samples; too slow to simulate a step response"
         )
-    step = np.ones(n)
-    alone = signal.sosfilt(model_sos(model), step)
-    both = signal.sosfilt(dcm.sos(), alone)
     final = model.dc_gain
     if final == 0:
-        raise AnalysisError("rise time: the model has zero DC gain")
-    return _rise_time(alone, final), _rise_time(both, final * dcm.dc_gain)
+        raise AnalysisError("step response: the model has zero DC gain")
+    alone = signal.sosfilt(model_sos(model), np.ones(n))
+    both = signal.sosfilt(dcm.sos(), alone)
+    return alone / final, both / (final * dcm.dc_gain)
+
+
+def rise_times_samples(model: DiscreteModel, dcm: DCM) -> tuple[float, float]:
+    """10–90 % step-response rise times (samples): (model alone, model followed by the DCM)."""
+    alone, both = step_responses(model, dcm)
+    return _rise_time(alone, 1.0), _rise_time(both, 1.0)
 
 
 def rise_time_ratio(model: DiscreteModel, dcm: DCM) -> float:
@@ -349,6 +358,28 @@ def rise_time_ratio(model: DiscreteModel, dcm: DCM) -> float:
     if after <= 0:
         raise AnalysisError("rise time: the compensated step response rises within one sample")
     return before / after
+
+
+def _settling_time(step: np.ndarray, tolerance: float) -> float:
+    """Samples until the normalised step response stays within 1 ± tolerance."""
+    outside = np.flatnonzero(np.abs(step - 1.0) > tolerance)
+    return 0.0 if outside.size == 0 else float(outside[-1] + 1)
+
+
+def settling_times_samples(model: DiscreteModel, dcm: DCM, tolerance: float = 0.05) -> tuple[float, float]:
+    """Samples to settle within ±5 % of the final value: (model alone, model followed by the DCM)."""
+    alone, both = step_responses(model, dcm)
+    return _settling_time(alone, tolerance), _settling_time(both, tolerance)
+
+
+def settling_time_ratio(model: DiscreteModel, dcm: DCM, tolerance: float = 0.05) -> float:
+    """Uncompensated ÷ compensated time to settle within ±5 % (the paper's response time T_r).
+
+    For a lightly damped sensor this is the figure that shows what the DCM buys: the sensor
+    rises fast (its 10–90 % rise time is short) but rings for hundreds of samples.
+    """
+    before, after = settling_times_samples(model, dcm, tolerance)
+    return before / max(after, 1.0)
 
 
 class DcmStream:

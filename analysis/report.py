@@ -41,7 +41,7 @@ from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 from scipy import signal
 
-from analysis.dcm import apply as apply_dcm
+from analysis.dcm import step_responses as dcm_step_responses
 from analysis.errors import AnalysisError
 from analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
 from analysis.model import DiscreteModel
@@ -355,6 +355,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         ("FBSD ±5 % / ±10 % with DCM",
          f"{_fmt(a.compensated_fbsd_hz.get('5'), 1e3)} / {_fmt(a.compensated_fbsd_hz.get('10'), 1e3)} kHz"),
         ("rise-time ratio (10–90 %, without ÷ with DCM)", _fmt(a.rise_time_ratio)),
+        ("settling-time ratio (±5 %, without ÷ with DCM)", _fmt(a.settling_time_ratio)),
     ]
     cmp = truth_comparison(entry)
     if cmp is not None:
@@ -783,12 +784,8 @@ def step_responses(analysis: ShotAnalysis) -> tuple[np.ndarray, np.ndarray, np.n
     """(time_s, model step response, model followed by the DCM), both normalised to 1 at DC."""
     model, dcm = analysis.model, analysis.dcm
     slowest = float(np.max(response_times_samples(np.concatenate([model.poles, dcm.poles]))))
-    n = int(min(max(1.5 * slowest, 64), 20_000))
-    step = np.ones(n)
-    alone = simulate(model, step)
-    both = apply_dcm(dcm, alone)
-    t = np.arange(n) * model.sample_interval_s
-    return t, alone / model.dc_gain, both / (model.dc_gain * dcm.dc_gain)
+    alone, both = dcm_step_responses(model, dcm, int(min(max(1.5 * slowest, 64), 20_000)))
+    return np.arange(alone.size) * model.sample_interval_s, alone, both
 
 
 def dcm_page(entry: ShotEntry) -> Figure:
@@ -819,7 +816,8 @@ def dcm_page(entry: ShotEntry) -> Figure:
 
     t, alone, both = step_responses(a)
     ax_s.plot(t * 1e6, alone, color="tab:blue", label="model (uncompensated)")
-    ax_s.plot(t * 1e6, both, color="tab:red", label=f"with DCM (rise-time ratio {_fmt(a.rise_time_ratio, digits=3)}: without ÷ with)")
+    ax_s.plot(t * 1e6, both, color="tab:red", label=f"with DCM (without ÷ with: rise time {_fmt(a.rise_time_ratio, digits=3)}, "
+                f"±5 % settling {_fmt(a.settling_time_ratio, digits=3)})")
     for level in (0.1, 0.9):
         ax_s.axhline(level, color="0.6", lw=0.6, ls=":")
     ax_s.axhline(1.0, color="0.3", lw=0.6)

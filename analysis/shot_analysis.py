@@ -23,6 +23,7 @@ from analysis.dcm import (
     design_dcm,
     ratio_for_widening,
     rise_time_ratio,
+    settling_time_ratio,
 )
 from analysis.errors import AnalysisError
 from analysis.excitation import ExcitationSummary, excitation_summary
@@ -85,6 +86,7 @@ class ShotAnalysis:
     dcm: DCM
     compensated_fbsd_hz: dict[str, float]
     rise_time_ratio: float
+    settling_time_ratio: float | None = None  # ±5 % settling, uncompensated ÷ compensated
     warnings: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
@@ -105,6 +107,7 @@ class ShotAnalysis:
                 **self.dcm.to_dict(),
                 "compensated_fbsd_hz": dict(self.compensated_fbsd_hz),
                 "rise_time_ratio": self.rise_time_ratio,
+                "settling_time_ratio": self.settling_time_ratio,
             },
             "warnings": list(self.warnings),
         }
@@ -122,7 +125,8 @@ class ShotAnalysis:
                 excitation=data["excitation"], identification=data["identification"], model=model,
                 fbsd_hz=dict(data["fbsd_hz"]), pole_analysis=list(data["pole_analysis"]), dcm=dcm,
                 compensated_fbsd_hz=dict(data["dcm"]["compensated_fbsd_hz"]),
-                rise_time_ratio=float(data["dcm"]["rise_time_ratio"]), warnings=list(data.get("warnings", [])),
+                rise_time_ratio=float(data["dcm"]["rise_time_ratio"]),
+                settling_time_ratio=data["dcm"].get("settling_time_ratio"), warnings=list(data.get("warnings", [])),
             )
         except (KeyError, TypeError) as exc:
             raise AnalysisError(f"shot analysis results are incomplete: missing {exc}") from None
@@ -146,13 +150,14 @@ def analyse_record(record: Record, params: AnalysisParams = AnalysisParams(),
     dcm = design_dcm(model.poles, model.sample_interval_s, ratio, params.dcm_damping, params.extra_poles)
     comp = compensated_fbsd_hz(model, dcm)
     rtr = rise_time_ratio(model, dcm)
-    if rtr <= 1:
-        warnings.append(f"the compensated step response rises {1 / rtr:.2f}× slower (10–90 %) than the "
-                        "uncompensated one: the sensor rings fast but settles slowly")
+    settling = settling_time_ratio(model, dcm)
+    if settling <= 1:
+        warnings.append(f"the DCM does not shorten the ±5 % settling time (ratio {settling:.2f}): choose a larger "
+                        "ratio r or a band widening")
     return ShotAnalysis(
         params=params, record=record, reduction=reduction, excitation=exc, identification=ident, model=model,
         fbsd_hz=fbsd_hz(model), pole_analysis=pole_analysis(model.poles), dcm=dcm, compensated_fbsd_hz=comp,
-        rise_time_ratio=float(rtr), warnings=warnings,
+        rise_time_ratio=float(rtr), settling_time_ratio=float(settling), warnings=warnings,
     )
 
 

@@ -26,6 +26,7 @@ from analysis.dcm import (
     format_complex,
     load_dcm,
     rise_times_samples,
+    settling_times_samples,
 )
 from analysis.errors import AnalysisError
 from analysis.model import DiscreteModel, load_model
@@ -91,6 +92,9 @@ def design_report(
         result["fbsd_widening"] = {k: after[k].frequency_hz / before[k].frequency_hz for k in before}
         result["rise_time_samples"] = {"uncompensated": rt_before, "compensated": rt_after}
         result["rise_time_ratio"] = rt_before / rt_after if rt_after > 0 else None
+        st_before, st_after = settling_times_samples(model, dcm)
+        result["settling_time_samples"] = {"uncompensated": st_before, "compensated": st_after}
+        result["settling_time_ratio"] = st_before / max(st_after, 1.0)
     return result
 
 
@@ -136,6 +140,10 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
         rt, ratio = result["rise_time_samples"], result["rise_time_ratio"]
         factor = "" if ratio is None else f" (ratio {ratio:.2f}: {'faster' if ratio > 1 else 'NOT faster'})"
         out.write(f"Rise time 10-90 %: {rt['uncompensated']:.3f} -> {rt['compensated']:.3f} samples{factor}\n")
+        st, sratio = result["settling_time_samples"], result["settling_time_ratio"]
+        verdict = "shorter" if sratio > 1 else "NOT shorter"
+        out.write(f"Settling time to ±5 %: {st['uncompensated']:.0f} -> {st['compensated']:.0f} samples "
+                  f"(ratio {sratio:.2f}: {verdict})\n")
 
 
 def run_dcm(args: argparse.Namespace) -> int:

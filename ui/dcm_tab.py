@@ -34,13 +34,12 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
-from scipy import signal
 
-from analysis.dcm import DCM, apply, design_dcm
+from analysis.dcm import DCM, apply, design_dcm, step_responses
 from analysis.errors import AnalysisError
 from analysis.model import DiscreteModel
 from analysis.records import Record
-from analysis.response import model_sos, response_times_samples
+from analysis.response import response_times_samples
 from rig.commands_dcm import design_report, parse_poles
 from ui.plots import (
     COMP_PEN,
@@ -89,10 +88,7 @@ def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_pol
     mag, comp = magnitudes(model, dcm, f)
     slowest = float(np.max(response_times_samples(np.concatenate([model.poles, dcm.poles]))))
     n = int(min(MAX_STEP_SAMPLES, max(64, math.ceil(3 * slowest) + dcm.order + model.b.size)))
-    step = np.ones(n)
-    # scipy filters (the model's delay-free sections, then the DCM) give the step responses
-    alone = signal.sosfilt(model_sos(model), step) / model.dc_gain
-    both = apply(dcm, alone) / dcm.dc_gain
+    alone, both = step_responses(model, dcm, n)
     compensated = None
     if record is not None and record.n_samples > 0 and abs(record.sample_interval_s - model.sample_interval_s) <= \
             1e-9 * model.sample_interval_s:
@@ -341,7 +337,9 @@ class DcmTab(QWidget):
         rt, ratio = rep["rise_time_samples"], rep["rise_time_ratio"]
         dt_us = self.model.sample_interval_s * 1e6 if self.model else 1.0
         verdict = "" if ratio is None else (f", ×{ratio:.2f} faster" if ratio > 1 else f", ×{1 / ratio:.2f} SLOWER")
-        self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} µs → {rt['compensated'] * dt_us:.1f} µs{verdict}")
+        st = rep["settling_time_samples"]
+        self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} µs → {rt['compensated'] * dt_us:.1f} µs{verdict}; "
+                                f"±5 % settling {st['uncompensated'] * dt_us:.0f} µs → {st['compensated'] * dt_us:.0f} µs")
         self.poles_label.setText(", ".join(_complex_text(p) for p in d.dcm.poles))
         self.mag_plot.show_curves(d.frequency_hz, d.magnitude, d.compensated_magnitude, rep["compensated_fbsd_hz"])
         self.step_model_curve.setData(d.step_time_s, d.step_model)

@@ -215,3 +215,23 @@ def test_ratio_for_widening_reaches_the_asked_band():
     assert compensated_fbsd_hz(model, dcm)["5"] == pytest.approx(3.0 * fbsd_hz(model)["5"], rel=2e-3)
     # a lightly damped sensor needs r well above zeta_e/zeta = 14 before the band widens at all
     assert r > 0.707 / 0.05
+
+
+def test_settling_time_ratio_of_a_second_order_pair_against_its_envelope():
+    """A lightly damped pair settles to ±5 % in about 3/(ζ·ω_n) (the paper's T_r, Eq. 21);
+    compensated to a well damped pair, the settling time ratio approaches the envelope ratio."""
+    from analysis.dcm import settling_time_ratio
+
+    dt = 1e-6
+    wn, zeta = 2 * np.pi * 27_000.0, 0.05
+    s = -zeta * wn + 1j * wn * np.sqrt(1 - zeta**2)
+    p = np.exp(np.array([s, np.conj(s)]) * dt)
+    a = np.real(np.poly(p))
+    model = DiscreteModel(dt, a, [np.sum(a)])
+    r = 40.0
+    dcm = design_dcm(model.poles, dt, r, 0.9)
+    ratio = settling_time_ratio(model, dcm)
+    # envelope settling: 3/(ζω_n) before, T_r / r after (the design target), to within the
+    # ripple of where the last ±5 % excursion happens to fall (half a ringing period)
+    assert ratio == pytest.approx(r, rel=0.25)
+    assert rise_time_ratio(model, dcm) < 1  # while the 10–90 % rise time gets longer

@@ -72,6 +72,11 @@ def test_dcm_from_model_file_and_output(tmp_path, capsys):
     for key in ("5", "10"):
         assert result["compensated_fbsd_hz"][key] > 2.5 * result["fbsd_hz"][key]
     assert result["rise_time_ratio"] > 1.1
+    # ±5 % settling is the paper's response time: 185.45 samples before, T'_rr = 14.836 aimed at
+    st = result["settling_time_samples"]
+    assert st["uncompensated"] == pytest.approx(185.45, rel=0.15)
+    assert result["settling_time_ratio"] == pytest.approx(st["uncompensated"] / st["compensated"])
+    assert result["settling_time_ratio"] > 5
     assert result["fbsd_detail"]["5"]["crossing"] == "above"  # the resonance: two-sided band
     saved = load_dcm(out)
     np.testing.assert_allclose(saved.num, result["dcm"]["num"])
