@@ -13,19 +13,18 @@ import json
 import sys
 from typing import Any
 
-# Modules that provide sub-commands; each is imported lazily so that a command's heavy
-# dependencies (Qt, pymodbus) load only when that command runs.
+# Modules that provide sub-commands, in the order `hopkinson --help` lists them. Each keeps
+# its heavy imports (Qt, pymodbus, matplotlib) inside the functions that need them.
 COMMAND_MODULES = [
-    "rig.commands_analysis",
+    "rig.commands_shot",
     "rig.commands_campaign",
-    "rig.commands_demo",
+    "rig.commands_panel",
+    "rig.commands_sim",
     "rig.commands_identify",
     "rig.commands_dcm",
-    "rig.commands_panel",
     "rig.commands_reduce",
     "rig.commands_report",
-    "rig.commands_sim",
-    "rig.commands_shot",
+    "rig.commands_demo",
 ]
 
 
@@ -51,13 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:  # a command module not written yet
-            if exc.name == name:
-                continue
-            raise
-        module.register(sub)
+        importlib.import_module(name).register(sub)
     return parser
 
 
