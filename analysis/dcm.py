@@ -19,7 +19,6 @@ block equals the whole record compensated at once.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +28,7 @@ import numpy as np
 from scipy import signal
 
 from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel, complex_pairs, from_pairs
+from analysis.model import DiscreteModel, complex_pairs, from_pairs, load_json_object
 from analysis.response import (
     DEFAULT_LEVELS,
     BandEdge,
@@ -195,15 +194,7 @@ class DCM:
 
 def load_dcm(path: str | Path) -> DCM:
     """Read a DCM JSON file written by `hopkinson dcm -o` (the DCM under "dcm" or at top level)."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise AnalysisError(f"{path}: no such file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise AnalysisError(f"{path}: not a JSON DCM file ({exc})") from None
-    if not isinstance(data, dict):
-        raise AnalysisError(f"{path}: expected a JSON object")
+    data = load_json_object(path, "DCM")
     return DCM.from_dict(data.get("dcm", data), source=str(path))
 
 

@@ -104,15 +104,21 @@ class DiscreteModel:
         return cls(dt, a, b, float(data.get("delay_samples", 0.0)))
 
 
-def load_model(path: str | Path) -> DiscreteModel:
-    """Read a model JSON file written by `hopkinson identify -o`."""
+def load_json_object(path: str | Path, what: str) -> dict[str, Any]:
+    """Read a JSON file that must hold one object; `what` names the kind of file in errors."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
         raise AnalysisError(f"{path}: no such file") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise AnalysisError(f"{path}: not a JSON model file ({exc})") from None
+        raise AnalysisError(f"{path}: not a JSON {what} file ({exc})") from None
     if not isinstance(data, dict):
         raise AnalysisError(f"{path}: expected a JSON object")
+    return data
+
+
+def load_model(path: str | Path) -> DiscreteModel:
+    """Read a model JSON file written by `hopkinson identify -o` (under "model" or at top level)."""
+    data = load_json_object(path, "model")
     return DiscreteModel.from_dict(data.get("model", data), source=str(path))

@@ -30,7 +30,6 @@ those keys. The HDF5 shot file is read by the command (rig.shotfile), which pass
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,7 +48,7 @@ from analysis.doppler import (
 )
 from analysis.errors import AnalysisError, RecordError
 from analysis.excitation import pulse_width
-from analysis.records import Record
+from analysis.records import Record, read_columns, validated_columns
 from analysis.resample import (
     DEFAULT_ANALYSIS_RATE_HZ,
     estimate_delay_samples,
@@ -220,57 +219,11 @@ def read_raw_table(path: str | Path) -> RawTable:
     time axis, non-finite values).
     """
     path = Path(path)
-    if not path.exists():
-        raise RecordError(f"{path}: no such file")
-    suffix = path.suffix.lower()
-    if suffix == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                missing = [k for k in RAW_KEYS if k not in data.files]
-                if missing:
-                    raise RecordError(f"{path}: missing key(s) {', '.join(missing)}; a raw NPZ needs "
-                                      f"{', '.join(RAW_KEYS)}")
-                columns = [np.asarray(data[k], dtype=float).ravel() for k in RAW_KEYS]
-        except (OSError, ValueError) as exc:
-            raise RecordError(f"{path}: not a readable NPZ file ({exc})") from None
-    elif suffix == ".csv":
-        columns = _read_csv_columns(path)
-    else:
-        raise RecordError(f"{path}: unknown raw shot format '{suffix}' (use .csv, .npz or an .h5 shot file)")
-    time_s, doppler, response = columns
-    n = time_s.size
-    if doppler.size != n or response.size != n:
-        raise RecordError(f"{path}: columns have different lengths")
-    if n < 2:
-        raise RecordError(f"{path}: only {n} samples")
-    for key, col in zip(RAW_KEYS, columns, strict=True):
-        if not np.all(np.isfinite(col)):
-            raise RecordError(f"{path}: column '{key}' has a NaN or infinite value at row "
-                              f"{int(np.flatnonzero(~np.isfinite(col))[0])}")
-    step = (time_s[-1] - time_s[0]) / (n - 1)
-    if not step > 0:
-        raise RecordError(f"{path}: time_s is not increasing")
-    if np.max(np.abs(np.diff(time_s) - step)) > 1e-3 * step:
-        raise RecordError(f"{path}: time_s is not uniformly sampled (step varies by more than 0.1 %)")
-    return RawTable(float(step), float(time_s[0]), doppler, response)
-
-
-def _read_csv_columns(path: Path) -> list[np.ndarray]:
-    with open(path, newline="") as fh:
-        header = next(csv.reader(fh), None)
-    if header is None:
-        raise RecordError(f"{path}: empty file")
-    names = [h.strip() for h in header]
-    missing = [k for k in RAW_KEYS if k not in names]
-    if missing:
-        raise RecordError(f"{path}: header lacks {', '.join(missing)}; a raw CSV needs the header "
-                          f"{','.join(RAW_KEYS)}")
-    try:
-        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
-                           usecols=[names.index(k) for k in RAW_KEYS])
-    except ValueError as exc:
-        raise RecordError(f"{path}: not a numeric table ({exc})") from None
-    return [table[:, i].copy() for i in range(3)]
+    if path.suffix.lower() not in (".csv", ".npz"):
+        raise RecordError(f"{path}: unknown raw shot format '{path.suffix}' (use .csv, .npz or an .h5 shot file)")
+    columns = read_columns(path, RAW_KEYS, what="raw shot")
+    step, (time_s, doppler, response) = validated_columns(columns, RAW_KEYS, str(path), min_samples=2)
+    return RawTable(step, float(time_s[0]), doppler, response)
 
 
 def write_raw_table(path: str | Path, time_s: np.ndarray, doppler_v: np.ndarray, response_v: np.ndarray) -> Path:

@@ -41,7 +41,7 @@ def test_nan_is_reported_with_row(tmp_path):
 def test_non_numeric_line_is_reported(tmp_path):
     path = tmp_path / "text.csv"
     path.write_text("time_s,reference,response\n0,1,2\n1e-6,abc,2\n")
-    with pytest.raises(RecordError, match="line 3"):
+    with pytest.raises(RecordError, match="not a numeric table.*abc"):
         read_record(path)
 
 

@@ -126,7 +126,7 @@ def test_raw_tables_round_trip_and_bad_tables(tmp_path: Path) -> None:
     with pytest.raises(RecordError, match="missing key.*response"):
         read_raw_table(tmp_path / "bad.npz")
     (tmp_path / "bad.csv").write_text("time_s,doppler\n0,1\n1,2\n")
-    with pytest.raises(RecordError, match="header lacks response"):
+    with pytest.raises(RecordError, match="missing column.*response"):
         read_raw_table(tmp_path / "bad.csv")
     t2 = t.copy()
     t2[100] += 0.5 * DT
