@@ -39,10 +39,9 @@ from pathlib import Path
 from typing import Any
 
 from rig.cli import emit_json
-from rig.config import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, load_rig_config, load_sim_config
+from rig.config import add_rig_arguments, load_rig_config, load_sim_config, rig_config_path
 from rig.errors import ConfigError
 
-DEFAULT_SIM_RIG_CONFIG = Path("config/rig-sim.toml")
 REPORT_FORMATS = ("pdf", "html")
 EXIT_INTERRUPTED = 130
 
@@ -58,13 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          description="Fire the shots of PLAN.toml in order, journaled in a run folder; "
                                      "--resume continues after a crash or kill with no shot lost or fired twice.")
     run.add_argument("plan", type=Path, metavar="PLAN.toml", help="campaign plan (config/campaigns/example.toml)")
-    run.add_argument("--config", type=Path, help=f"rig TOML (default {DEFAULT_RIG_CONFIG}; with --sim "
-                                                 f"{DEFAULT_SIM_RIG_CONFIG})")
-    run.add_argument("--sim", action="store_true", help="run against an in-process simulated rig")
-    run.add_argument("--sim-config", type=Path, default=DEFAULT_SIM_CONFIG,
-                     help="simulator TOML for --sim (default %(default)s)")
-    run.add_argument("--sim-fault", action="append", default=[], metavar="NAME",
-                     help="inject a simulator fault (repeatable; `hopkinson sim --list-faults`)")
+    add_rig_arguments(run)
     run.add_argument("--sim-fire-log", type=Path, metavar="PATH",
                      help="with --sim: append one JSON line per simulated launch here (a witness for tests)")
     run.add_argument("--yes", action="store_true", help="authorise firing (when the plan does not)")
@@ -114,7 +107,7 @@ def run_campaign_command(args: argparse.Namespace) -> int:
     if not args.sim and (args.sim_fault or args.sim_fire_log):
         raise ConfigError("--sim-fault and --sim-fire-log need --sim")
     formats = [] if args.no_report else report_formats(args.report)
-    config = load_rig_config(args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else DEFAULT_RIG_CONFIG))
+    config = load_rig_config(rig_config_path(args))
     plan = load_plan(args.plan)
     check_authorisation(plan, args.yes)  # exit 2 before anything is created or fired
     sim_config = load_sim_config(args.sim_config) if args.sim else None

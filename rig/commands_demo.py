@@ -18,8 +18,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rig.commands_campaign import DEFAULT_SIM_RIG_CONFIG, ProgressPrinter, report_formats
-from rig.config import DEFAULT_SIM_CONFIG, load_rig_config, load_sim_config
+from rig.commands_campaign import ProgressPrinter, report_formats
+from rig.config import DEFAULT_SIM_CONFIG, DEFAULT_SIM_RIG_CONFIG, load_rig_config, load_sim_config
 from rig.errors import ConfigError
 
 DEFAULT_OUT = Path("demo-output")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rig.config import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG
+from rig.config import add_rig_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -20,13 +20,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "panel", help="the technician's panel: rig status, ARM/FIRE/ABORT, plots, DCM design, campaigns",
         description="Open the Qt panel for the rig (or for an in-process simulated rig with --sim).")
-    p.add_argument("--config", type=Path, help=f"rig TOML (default {DEFAULT_RIG_CONFIG}; with --sim "
-                                                   "config/rig-sim.toml: limits, timeouts, analysis constants)")
-    p.add_argument("--sim", action="store_true", help="run against an in-process simulated rig")
-    p.add_argument("--sim-config", type=Path, default=DEFAULT_SIM_CONFIG,
-                   help="simulator TOML for --sim (default %(default)s)")
-    p.add_argument("--sim-fault", action="append", default=[], metavar="NAME",
-                   help="inject a simulator fault (repeatable; `hopkinson sim --list-faults`)")
+    add_rig_arguments(p)
     p.add_argument("--out", type=Path, default=Path("shots"), help="default folder for shot files (default %(default)s)")
     p.add_argument("--runs", type=Path, default=Path("runs"), help="folder for campaign runs (default %(default)s)")
     p.add_argument("--demo-shot", action="store_true",

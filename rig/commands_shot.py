@@ -35,10 +35,9 @@ from pathlib import Path
 from typing import Any
 
 from rig.cli import emit_json
-from rig.config import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, load_rig_config, load_sim_config
+from rig.config import add_rig_arguments, load_rig_config, load_sim_config, rig_config_path
 from rig.errors import ConfigError
 
-DEFAULT_SIM_RIG_CONFIG = Path("config/rig-sim.toml")
 PROMPT_TIMEOUT_S = 60.0
 
 
@@ -48,13 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "shot", help="fire one calibration shot (CHECK..FIRE..ANALYSE), store and analyse it",
         description="Fire one shot: check, evacuate, charge, arm, fire, capture, make safe, store the "
                     "raw data, analyse. Fires only with --yes or a 'yes' typed at the prompt.")
-    p.add_argument("--config", type=Path, help=f"rig TOML (default {DEFAULT_RIG_CONFIG}; with --sim "
-                                               f"{DEFAULT_SIM_RIG_CONFIG})")
-    p.add_argument("--sim", action="store_true", help="run against an in-process simulated rig")
-    p.add_argument("--sim-config", type=Path, default=DEFAULT_SIM_CONFIG,
-                   help="simulator TOML for --sim (default %(default)s)")
-    p.add_argument("--sim-fault", action="append", default=[], metavar="NAME",
-                   help="inject a simulator fault (repeatable; `hopkinson sim --list-faults`)")
+    add_rig_arguments(p)
     p.add_argument("--sim-state-file", type=Path, metavar="PATH",
                    help="with --sim: write the simulator's final state as JSON here (also on failures)")
     p.add_argument("--pressure-bar", type=float, default=2.0, help="reservoir pressure, gauge bar (default %(default)s)")
@@ -83,7 +76,7 @@ def run_shot_command(args: argparse.Namespace) -> int:
 
     if not args.sim and (args.sim_fault or args.sim_state_file):
         raise ConfigError("--sim-fault and --sim-state-file need --sim")
-    config = load_rig_config(args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else DEFAULT_RIG_CONFIG))
+    config = load_rig_config(rig_config_path(args))
     _make_out_dir(args.out)
     interactive = not args.yes and sys.stdin is not None and sys.stdin.isatty()
     request = ShotRequest(

@@ -26,10 +26,9 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from rig.config import DEFAULT_RIG_CONFIG, load_rig_config, load_sim_config
+from rig.config import load_rig_config, load_sim_config, rig_config_path
 from rig.errors import ConfigError
 
-DEFAULT_SIM_RIG_CONFIG = Path("config/rig-sim.toml")
 SCREENSHOT_SIZE = (1280, 800)
 DEMO_TIMEOUT_S = 180.0
 EXIT_DEMO_FAILED = 3
@@ -53,7 +52,7 @@ def run_panel(args: argparse.Namespace) -> int:
         raise ConfigError(f"--screenshot: folder {Path(args.screenshot).parent} does not exist")
     if args.screenshot is not None:
         _use_offscreen_without_display()
-    config = load_rig_config(args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else DEFAULT_RIG_CONFIG))
+    config = load_rig_config(rig_config_path(args))
 
     try:
         from PySide6.QtCore import QSettings
