@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import signal
 
 from analysis.dcm import (
     DCM,
@@ -31,7 +32,7 @@ from analysis.identify import Identification, identify
 from analysis.model import DiscreteModel
 from analysis.records import Record
 from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
-from analysis.response import fbsd_hz, pole_analysis
+from analysis.response import fbsd_hz, model_sos, pole_analysis
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,7 @@ class ShotAnalysis:
     compensated_fbsd_hz: dict[str, float]
     rise_time_ratio: float
     settling_time_ratio: float | None = None  # ±5 % settling, uncompensated ÷ compensated
+    peak_overshoot: float | None = None  # model's peak response ÷ (DC gain × peak reference)
     warnings: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
@@ -109,6 +111,7 @@ class ShotAnalysis:
                 "rise_time_ratio": self.rise_time_ratio,
                 "settling_time_ratio": self.settling_time_ratio,
             },
+            "peak_overshoot": self.peak_overshoot,
             "warnings": list(self.warnings),
         }
 
@@ -126,7 +129,8 @@ class ShotAnalysis:
                 fbsd_hz=dict(data["fbsd_hz"]), pole_analysis=list(data["pole_analysis"]), dcm=dcm,
                 compensated_fbsd_hz=dict(data["dcm"]["compensated_fbsd_hz"]),
                 rise_time_ratio=float(data["dcm"]["rise_time_ratio"]),
-                settling_time_ratio=data["dcm"].get("settling_time_ratio"), warnings=list(data.get("warnings", [])),
+                settling_time_ratio=data["dcm"].get("settling_time_ratio"),
+                peak_overshoot=data.get("peak_overshoot"), warnings=list(data.get("warnings", [])),
             )
         except (KeyError, TypeError) as exc:
             raise AnalysisError(f"shot analysis results are incomplete: missing {exc}") from None
@@ -154,11 +158,32 @@ def analyse_record(record: Record, params: AnalysisParams = AnalysisParams(),
     if settling <= 1:
         warnings.append(f"the DCM does not shorten the ±5 % settling time (ratio {settling:.2f}): choose a larger "
                         "ratio r or a band widening")
+    overshoot = peak_overshoot(model, record.reference)
+    if overshoot > 1.02:
+        warnings.append(
+            f"the pulse excites the sensor's resonance: its peak response is {overshoot:.3f}× the DC gain times "
+            "the peak reference, so a peak-ratio shock sensitivity (ISO 16063-13) reads that much high; the "
+            "model's DC gain is the sensitivity without the overshoot (or use a longer pulse)"
+        )
     return ShotAnalysis(
         params=params, record=record, reduction=reduction, excitation=exc, identification=ident, model=model,
         fbsd_hz=fbsd_hz(model), pole_analysis=pole_analysis(model.poles), dcm=dcm, compensated_fbsd_hz=comp,
-        rise_time_ratio=float(rtr), settling_time_ratio=float(settling), warnings=warnings,
+        rise_time_ratio=float(rtr), settling_time_ratio=float(settling), peak_overshoot=overshoot,
+        warnings=warnings,
     )
+
+
+def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:
+    """How much the model's response to this reference peaks above DC gain × peak reference.
+
+    1.0 for a pulse too slow to excite the sensor's dynamics; a lightly damped sensor hit by a
+    short pulse rings above it, and a peak-ratio shock sensitivity inherits the excess.
+    """
+    predicted = signal.sosfilt(model_sos(model), np.asarray(reference_m_s2, dtype=float))
+    peak_in = float(np.max(np.abs(reference_m_s2)))
+    if peak_in == 0 or model.dc_gain == 0:
+        return float("nan")
+    return float(np.max(np.abs(predicted)) / (abs(model.dc_gain) * peak_in))
 
 
 def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_interval_s: float,

@@ -57,3 +57,25 @@ def test_unknown_option_is_named():
 def test_incomplete_results_are_a_clear_error():
     with pytest.raises(AnalysisError, match="incomplete"):
         ShotAnalysis.from_dict({"params": {}})
+
+
+def test_peak_overshoot_against_closed_form_second_order():
+    """A half-sine much longer than the resonance period barely overshoots; a short one rings.
+    Independent truth: the continuous system's response to the pulse by scipy's lsim."""
+    from scipy import signal
+
+    from analysis.model import DiscreteModel
+    from analysis.shot_analysis import peak_overshoot
+
+    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))
+    b, a = truth.discrete_tf(1e-6)
+    model = DiscreteModel(1e-6, a, b)
+    t = np.arange(2000) * 1e-6
+    wn = 2 * np.pi * 27_000.0
+    system = signal.lti([wn**2], [1, 2 * 0.05 * wn, wn**2])
+    for width_s in (38.6e-6, 400e-6):
+        pulse = half_sine_m_s2(t, width_s, 1.0, 1e-4)
+        fine_t = np.arange(200_000) * 1e-8
+        _, y, _ = signal.lsim(system, half_sine_m_s2(fine_t, width_s, 1.0, 1e-4), fine_t)
+        assert peak_overshoot(model, pulse) == pytest.approx(np.max(np.abs(y)), rel=0.01)
+    assert peak_overshoot(model, half_sine_m_s2(t, 400e-6, 1.0, 1e-4)) < 1.02
