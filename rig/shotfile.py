@@ -49,7 +49,7 @@ import re
 import uuid as uuid_module
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, date, datetime, time
+from datetime import date, datetime, time
 from enum import Enum
 from pathlib import Path, PurePath
 from typing import Any, NamedTuple
@@ -59,6 +59,7 @@ import numpy as np
 
 from analysis.errors import RecordError
 from analysis.records import Record
+from rig.events import utc_now_iso
 
 FORMAT = "hopkinson-shot"
 FORMAT_VERSION = 1
@@ -111,11 +112,6 @@ def software_version() -> str:
         return importlib.metadata.version("hopkinson")
     except importlib.metadata.PackageNotFoundError:
         return "unknown"
-
-
-def utc_now_iso() -> str:
-    """The current UTC time as ISO 8601 text ending in Z."""
-    return datetime.now(UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
 
 
 @dataclass(frozen=True)
