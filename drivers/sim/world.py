@@ -28,7 +28,8 @@ If the digitizer is armed at that moment, the next `capture(settings)` returns t
 two channels (trigger source, level and slope are not modelled: an armed acquisition always
 triggers at the start of the pulse, which sits at settings.pre_trigger_samples): PM beat (drivers/sim/doppler_beat.pm_beat) and amplifier output (the true
 accelerometer model with the amplifier's gain, low-pass, offset and noise). The truth of
-the last shot is kept in `last_shot_truth` (JSON-ready).
+the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
+`launch_listeners` is called with it at each launch (a witness such as a fire log).
 
 Amplifier. Gain, excitation, low-pass, auto-zero (removes the bridge offset), shunt
 calibration (adds the output of a known equivalent acceleration) and an overload latch (set
@@ -199,6 +200,10 @@ class World:
         self._pending: _Shot | None = None
         # Set by the simulated rig: is the digitizer armed right now? None = always armed.
         self.digitizer_armed: Callable[[], bool] | None = None
+        # Called once per launch with a copy of that shot's `last_shot_truth` (taken before any
+        # capture adds to it), in the thread that opened the fire valve, after the world's lock
+        # is released and before set_fire_valve returns (so before the Modbus reply goes back).
+        self.launch_listeners: list[Callable[[dict[str, Any]], None]] = []
 
     # -- time -----------------------------------------------------------------------------
     def sim_time_s(self) -> float:
@@ -302,6 +307,7 @@ class World:
         """Command the fire valve; a rising edge with pressure in the reservoir fires a shot."""
         # Ask the digitizer before taking our lock: its server calls capture() under its own.
         armed = True if self.digitizer_armed is None else bool(self.digitizer_armed())
+        launched: dict[str, Any] | None = None
         with self._lock:
             self._advance()
             was_open = self._coils["fire"]
@@ -312,9 +318,12 @@ class World:
                     return  # the valve stays shut; the coil reads back shut
                 self._coils["fire"] = True
                 if self._pressure_bar >= self.params.pneumatics.min_fire_pressure_bar:
-                    self._launch(armed)
+                    launched = dict(self._launch(armed))
             elif not open_:
                 self._coils["fire"] = False
+        if launched is not None:
+            for listener in list(self.launch_listeners):  # outside the lock: a listener may be slow
+                listener(launched)
 
     def _fire_refusal(self) -> str:
         if not self.estop_healthy():
@@ -410,7 +419,8 @@ class World:
         return self._bridge_sensitivity() * self.params.accelerometer.shunt_equivalent_m_s2
 
     # -- the shot -------------------------------------------------------------------------
-    def _launch(self, armed: bool) -> None:
+    def _launch(self, armed: bool) -> dict[str, Any]:
+        """Fire the projectile at the reservoir's pressure; return the shot's truth dict."""
         launcher = self.params.launcher
         pressure = self._pressure_bar
         speed = launcher.speed_m_s_per_sqrt_bar * math.sqrt(pressure)
@@ -435,13 +445,14 @@ class World:
             bridge_sensitivity_v_per_m_s2=self._bridge_sensitivity(),
             output_offset_v=a.gain * (a.bridge_offset_v + shunt),
         )
-        self.last_shot_truth = _truth_dict(shot, self.params.signals)
+        shot_truth = self.last_shot_truth = _truth_dict(shot, self.params.signals)
         # The static peak output latches the overload even when nobody records the shot;
         # capture() checks the actual waveform (resonance overshoot included).
         peak_out = abs(shot.output_offset_v) + shot.gain * shot.bridge_sensitivity_v_per_m_s2 * peak
         if peak_out > self.params.amplifier.output_limit_v:
             a.overload_latched = True
         self._pending = shot if armed and not self.faults.active("no-trigger") else None
+        return shot_truth
 
     def capture(self, settings: Any) -> dict[int, np.ndarray] | None:
         """The digitizer's view: None until a shot fired while armed, then its two channels.

@@ -119,6 +119,36 @@ def test_highest_pressure_reaches_about_100_000_g_with_projectile_3(clock: FakeC
     assert 90_000 < world.last_shot_truth["peak_g"] < 110_000
 
 
+def test_launch_listeners_hear_each_launch_once_and_nothing_else(clock: FakeClock) -> None:
+    world = charged_world(clock, 4.0)
+    heard: list[dict] = []
+    free: list[bool] = []
+
+    def listener(truth: dict) -> None:
+        heard.append(truth)
+        other = threading.Thread(target=world.reservoir_pressure_bar)  # needs the world's lock
+        other.start()
+        other.join(5.0)
+        free.append(not other.is_alive())
+
+    world.launch_listeners.append(listener)
+    world.set_inputs(door_closed=False)
+    world.set_fire_valve(True)  # refused by the interlock: no launch
+    world.set_inputs(door_closed=True)
+    world.set_fire_valve(True)
+    world.set_fire_valve(True)  # no new edge
+    clock.advance(10.0)  # the open valve empties the reservoir
+    world.set_fire_valve(False)
+    world.set_fire_valve(True)  # an edge with nothing to fire
+    assert world.shots_fired == 1 and len(heard) == 1
+    assert heard[0]["shot_number"] == 1
+    assert heard[0]["pressure_bar"] == pytest.approx(4.0, abs=1e-9)
+    assert free == [True]  # called after the world's lock was released
+    world.set_fire_valve(False)
+    world.capture(Settings(record_length=1_000, pre_trigger_samples=100))
+    assert "capture" in world.last_shot_truth and "capture" not in heard[0]  # the listener got a copy
+
+
 def test_capture_waits_for_a_shot_fired_while_armed(clock: FakeClock) -> None:
     world = charged_world(clock)
     armed = False
