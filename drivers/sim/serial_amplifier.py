@@ -2,9 +2,10 @@
 
 `os.openpty()` gives a master/slave pair; this device serves on the master and the driver
 opens the slave's path (e.g. /dev/pts/7) with pyserial, exactly as it would open
-/dev/ttyUSB0. The protocol is the one documented in drivers/amplifier.py; the framing is
-parsed here independently of the driver, so loopback tests check one reading against the
-other. Optionally a symlink (`link_path`) gives the device a stable name for a config file.
+/dev/ttyUSB0. The protocol is the one documented in drivers/amplifier.py; lines are
+split and parsed here independently of the driver, so loopback tests check one reading
+against the other (the checksum is the driver's `checksum`, pinned to known bytes by
+tests/drivers/test_amplifier.py). Optionally a symlink (`link_path`) gives the device a stable name for a config file.
 
 Fault `serial-noise`: every reply has one byte flipped (its checksum no longer matches), as
 line noise would do.
@@ -18,18 +19,9 @@ import select
 import threading
 import tty
 
-from drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ
+from drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ, MAX_LINE_BYTES, checksum
 from drivers.sim.faults import FaultSet
 from drivers.sim.world import World
-
-MAX_LINE_BYTES = 256
-
-
-def _xor_hex(payload: bytes) -> str:
-    value = 0
-    for byte in payload:
-        value ^= byte
-    return f"{value:02X}"
 
 
 class SimSerialAmplifier:
@@ -109,7 +101,7 @@ class SimSerialAmplifier:
 
     def _reply(self, master: int, line: bytes) -> None:
         payload = self.handle(line).encode("ascii")
-        out = bytearray(payload + b"*" + _xor_hex(payload).encode("ascii") + b"\n")
+        out = bytearray(payload + b"*" + checksum(payload).encode("ascii") + b"\n")
         if self.faults.active("serial-noise") and payload:
             out[len(payload) // 2] ^= 0x04  # one flipped bit: the checksum no longer matches
         self.lines_served += 1
@@ -125,7 +117,7 @@ class SimSerialAmplifier:
         body, star, digits = text.rpartition("*")
         if star and len(digits) == 2 and body:
             verb = body.split(" ", 1)[0].rstrip("?")
-            if digits.upper() != _xor_hex(body.encode("ascii")):
+            if digits.upper() != checksum(body):
                 return f"{verb} ERR CHECKSUM"
             text = body
         if not text:
