@@ -2,7 +2,8 @@
 
 The server speaks the dialect the real driver uses (drivers/scpi_dialect.py), but parses it
 independently here so that tests over loopback check the driver against a second reading of
-the protocol, not against itself. Messages end with "\\n"; message units are separated by
+the protocol, not against itself (the block header is drivers/ieee488_block.block_header,
+pinned to known bytes by its own tests). Messages end with "\\n"; message units are separated by
 ";" (e.g. ":ACQuire:SRATe 1E8;:SYSTem:ERRor?"); headers take the SCPI short or long form in
 any case. Replies to the queries of one message are joined by ";" and end with "\\n".
 
@@ -45,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drivers.ieee488_block import block_header
 from drivers.sim.faults import FaultSet
 
 IDENTITY = "Hopkinson-Sim,SIMDIG-2CH,SIM0001,1.0"
@@ -421,12 +423,10 @@ class _Handler(socketserver.BaseRequestHandler):
         if text:
             sock.sendall((";".join(text) + "\n").encode("ascii"))
         for block in blocks:
-            n = len(block.payload)
-            digits = str(n)
-            header = f"#{len(digits)}{digits}".encode("ascii")
+            header = block_header(len(block.payload))
             if self.server.instrument.faults.active("visa-garbled-block"):
                 # Corrupt length header: the digit count survives, the length digits do not.
-                header = f"#{len(digits)}".encode("ascii") + b"?\x0a" + b"X" * max(len(digits) - 2, 0)
+                header = header[:2] + b"?\x0a" + b"X" * max(len(header) - 4, 0)
             sock.sendall(header)
             sock.sendall(block.payload)  # sent from the array's memory: no 20 MB copy
             sock.sendall(b"\n")
