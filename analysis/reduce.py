@@ -30,7 +30,7 @@ those keys. The HDF5 shot file is read by the command (rig.shotfile), which pass
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -70,7 +70,6 @@ class RawTable:
     start_time_s: float
     doppler_v: np.ndarray
     response_v: np.ndarray
-    metadata: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

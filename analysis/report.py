@@ -45,7 +45,6 @@ from analysis.dcm import step_responses as dcm_step_responses
 from analysis.errors import AnalysisError
 from analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
 from analysis.model import DiscreteModel
-from analysis.records import Record
 from analysis.resample import resample_to_rate
 from analysis.response import (
     frequency_response,
@@ -548,10 +547,6 @@ def title_page(report: CalibrationReport, stats: CampaignStatistics | None) -> F
         page.heading("Notes")
         page.table(None, [[n] for n in report.notes], [1.0], wrap=[130])
     return fig
-
-
-def _time_axis_us(record: Record) -> np.ndarray:
-    return record.time_s * 1e6
 
 
 def excitation_page(entry: ShotEntry) -> Figure:

@@ -274,12 +274,6 @@ def _delay_free_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float
     return zeros.astype(complex), poles.astype(complex), float(b[0]), delay
 
 
-def model_zpk(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
-    """Zeros, poles and gain of H in POSITIVE powers of z (a delay = poles at the origin)."""
-    z, p, k, delay = _delay_free_zpk(model)
-    return z, np.concatenate([p, np.zeros(delay, dtype=complex)]), k
-
-
 def zpk_to_sos(zeros: np.ndarray, poles: np.ndarray, gain: float, delay_samples: int = 0) -> np.ndarray:
     """Second-order sections of z^(−delay)·k·Π(z − zᵢ)/Π(z − pᵢ) (positive powers of z).
 
