@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.sim import shock
 from drivers.sim.accelerometer import AccelerometerTruth, white_noise
-from drivers.sim.shock import velocity_m_s
 
 # Grating pitch d of the simulated interferometer: 2 µm (500 lines/mm). With orders ±1 the
 # beat is 2v/d = 1 MHz per m/s: 25 m/s (100 000 g over the 38.6 µs pulse of projectile
@@ -81,12 +81,8 @@ def pm_beat(
 
 
 def velocity_m_s_to_displacement_m(velocity_m_s: np.ndarray, sample_interval_s: float) -> np.ndarray:
-    """Displacement (m) from rest by cumulative trapezoidal integration of the velocity."""
-    v = np.asarray(velocity_m_s, dtype=float)
-    x = np.empty_like(v)
-    x[0] = 0.0
-    np.cumsum(0.5 * (v[1:] + v[:-1]) * sample_interval_s, out=x[1:])
-    return x
+    """Displacement (m) from rest: the cumulative trapezoid of shock.velocity_m_s, one level up."""
+    return shock.velocity_m_s(velocity_m_s, sample_interval_s)
 
 
 @dataclass(frozen=True)
@@ -136,7 +132,7 @@ def raw_shot(
     """
     rng = np.random.default_rng() if rng is None else rng
     acc = np.asarray(acceleration_m_s2, dtype=float)
-    vel = velocity_m_s(acc, sample_interval_s)
+    vel = shock.velocity_m_s(acc, sample_interval_s)
     doppler = pm_beat(vel, sample_interval_s, grating_pitch_m, orders, snr_db=doppler_snr_db, rng=rng,
                       **beat_options)
     response = truth.respond(acc, sample_interval_s) * sensitivity_v_per_m_s2 * amp_gain
