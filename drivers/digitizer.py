@@ -116,7 +116,6 @@ class Digitizer:
         self.dialect = dialect or GenericScpiDialect()
         self._rm: pyvisa.ResourceManager | None = None
         self._inst: pyvisa.resources.MessageBasedResource | None = None
-        self._identity = ""
 
     @property
     def instrument(self) -> str:
@@ -146,7 +145,7 @@ class Digitizer:
         self._inst = inst  # type: ignore[assignment]
         _enlarge_receive_size(inst)  # type: ignore[arg-type]
         try:
-            self._identity = self._query(self.dialect.identity_query)
+            self._query(self.dialect.identity_query)  # the session answers
             self._write(self.dialect.clear_status)
         except InstrumentError:
             self.close()
@@ -173,8 +172,7 @@ class Digitizer:
     # -- identity and settings -----------------------------------------------------------
     def identity(self) -> str:
         """The instrument's *IDN? reply (manufacturer,model,serial,firmware)."""
-        self._identity = self._query(self.dialect.identity_query)
-        return self._identity
+        return self._query(self.dialect.identity_query)
 
     def set_sample_rate_hz(self, sample_rate_hz: float) -> None:
         self._require_positive("sample_rate_hz", sample_rate_hz)

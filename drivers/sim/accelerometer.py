@@ -7,7 +7,7 @@ truth that identification must recover; the simulator uses it to make the respon
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
@@ -35,7 +35,6 @@ class AccelerometerTruth:
     lowpass_order: int = 2
     sensitivity: float = 1.0
     zero_shift: float = 0.0  # constant offset added to the response (units of the response)
-    extra: dict = field(default_factory=dict)
 
     def continuous_zpk(self) -> tuple[np.ndarray, np.ndarray, float]:
         """Zeros, poles (rad/s) and gain of the continuous model H(s)."""

@@ -55,7 +55,6 @@ class SimModbusServer:
         self.host = host
         self.port = port
         self.slow_delay_s = slow_delay_s
-        self.requests_served = 0
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -97,11 +96,6 @@ class SimModbusServer:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
-
-    def drop_connections(self) -> None:
-        """Close every open client connection (as the `modbus-disconnect` fault does)."""
-        if self._loop is not None and self._server is not None:
-            self._loop.call_soon_threadsafe(self._close_clients)
 
     def _run(self) -> None:
         loop = asyncio.new_event_loop()
@@ -174,7 +168,6 @@ class SimModbusServer:
             return ExcCodes.DEVICE_FAILURE  # never sent: the connection is gone
         if self.faults.active("modbus-slow"):
             await asyncio.sleep(self.slow_delay_s)
-        self.requests_served += 1
         if function_code in (_WRITE_COIL, _WRITE_COILS) and set_values is not None:
             for i, value in enumerate(set_values):
                 self._write_coil(address + i, bool(value))

@@ -99,7 +99,6 @@ class SimulatedRig:
                                       port=s.modbus_port, slow_delay_s=s.modbus_slow_delay_s)
         self.digitizer = SimDigitizerServer(self.world.capture, self.faults, host=s.host, port=s.digitizer_port)
         self.amplifier = SimSerialAmplifier(self.world, self.faults, link_path=s.serial_link or None)
-        self._started = False
 
     def start(self) -> None:
         """Start the three servers; if one fails, the others are stopped again."""
@@ -111,14 +110,12 @@ class SimulatedRig:
             self.stop()
             raise
         self.world.digitizer_armed = lambda: self.digitizer.state == "ARMED"
-        self._started = True
 
     def stop(self) -> None:
         """Stop every server and join its threads (idempotent)."""
         self.world.digitizer_armed = None
         for server in (self.amplifier, self.digitizer, self.modbus):
             server.stop()
-        self._started = False
 
     def __enter__(self) -> SimulatedRig:
         self.start()
