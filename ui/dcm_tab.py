@@ -144,7 +144,7 @@ class DcmTab(QWidget):
         self.poles_label = QLabel("—")
         self.poles_label.setWordWrap(True)
         self.poles_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        for label in (*self.compensated_fbsd.values(),):
+        for label in self.compensated_fbsd.values():
             label.setStyleSheet("font-size: 11pt; font-weight: 700; color: #b3261e;")
         for label in (*self.model_fbsd.values(), *self.widening.values()):
             label.setStyleSheet("font-size: 10pt; font-weight: 600;")
@@ -194,8 +194,6 @@ class DcmTab(QWidget):
         left.setFixedWidth(330)
 
         self.mag_plot = MagnitudePlot("Compensated magnitude", "model", "model + DCM", edge_prefix="DCM ")
-        self.magnitude_curve = self.mag_plot.magnitude_curve
-        self.compensated_curve = self.mag_plot.compensated_curve
         self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.step_plot = _plot("Step response", "normalised output", "time", None, "s")

@@ -104,7 +104,6 @@ class MainWindow(QMainWindow):
         self.last_reading: RigEvent | None = None
         self.last_outcome: ShotOutcome | None = None
         self.last_view: ShotView | None = None
-        self.shots_loaded = 0
         self._setup_enabled: bool | None = None
 
         self.setWindowTitle("Hopkinson-bar shock calibration" + (f" — {title_note}" if title_note else ""))
@@ -444,7 +443,6 @@ class MainWindow(QMainWindow):
             self.dcm_tab.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
                                    [complex(*p) for p in design.get("extra_poles", [])], _record_of(view),
                                    source=view.path.name if view.path else "", shot_path=view.path)
-        self.shots_loaded += 1
         self.shot_view_shown.emit(view)
 
     def export_report(self, path: Path) -> None:

@@ -71,13 +71,11 @@ class ShotView:
     model: DiscreteModel | None = None
     dcm: DCM | None = None
     fbsd_hz: dict[str, float] = field(default_factory=dict)
-    compensated_fbsd_hz: dict[str, float] = field(default_factory=dict)
     frequency_hz: np.ndarray | None = None
     magnitude: np.ndarray | None = None
     compensated_magnitude: np.ndarray | None = None
     true_poles: np.ndarray | None = None
     summary: dict[str, Any] = field(default_factory=dict)
-    results: dict[str, Any] | None = None
     analysis_error: str | None = None
 
 
@@ -134,8 +132,8 @@ def view_from_results(results: dict[str, Any], record: Any = None) -> ShotView:
         loss_by_order=list(ident.get("loss_by_order", [])),
         arx_loss_by_order=list(ident.get("arx_loss_by_order", [])),
         order=ident.get("order", model.order),
-        model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz), compensated_fbsd_hz=dict(analysis.compensated_fbsd_hz),
-        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, summary=summary_of(results), results=results,
+        model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz),
+        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, summary=summary_of(results),
     )
     if record is not None:
         view.record_time_s = record.time_s
@@ -240,14 +238,12 @@ class MagnitudePlot(pg.PlotWidget):
 
     Y_MAX = 2.0
 
-    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "",
-                 edges_of: str = "model") -> None:
+    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "") -> None:
         super().__init__()
         configure_plot(self, title, "normalised magnitude", "frequency (kHz)")
         self.setLogMode(x=True, y=False)
         self.addLegend(offset=(5, -5), labelTextSize="8pt")
         self.edge_prefix = edge_prefix
-        self.edges_of = edges_of
         for key in ("10", "5"):
             level = int(key) / 100
             band = pg.LinearRegionItem(values=(1 - level, 1 + level), orientation="horizontal",
@@ -280,9 +276,10 @@ class MagnitudePlot(pg.PlotWidget):
         """Draw the curves (|H/H0|) and mark the FBSD edges (Hz per level key)."""
         f_khz = np.asarray(frequency_hz) / KILO
         self.magnitude_curve.setData(f_khz, magnitude)
-        self.compensated_curve.setData(f_khz, compensated if compensated is not None else [])
         if compensated is None:
             self.compensated_curve.setData([], [])
+        else:
+            self.compensated_curve.setData(f_khz, compensated)
         show_fbsd(self.fbsd_lines, fbsd_hz, self.edge_prefix)
         lo, hi = math.log10(f_khz[0]), math.log10(f_khz[-1])
         self.setXRange(lo, hi, padding=0)
@@ -410,9 +407,7 @@ class ShotPlots(QWidget):
         self.order_line.setVisible(False)
         self.loss_plot.addItem(self.order_line)
 
-        self.mag_plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "identified model", "with DCM", edge_prefix="")
-        self.magnitude_curve = self.mag_plot.magnitude_curve
-        self.compensated_curve = self.mag_plot.compensated_curve
+        self.mag_plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "identified model", "with DCM")
         self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.pz_plot = _plot("Pole-zero map (z-plane)", "imaginary", "real")
@@ -454,8 +449,7 @@ class ShotPlots(QWidget):
     def clear(self, title: str = "") -> None:
         """Forget the last shot's plots (the live trend keeps running)."""
         self.view = None
-        for curve in (self.pm_curve, self.reference_curve, self.response_curve, self.loss_curve, self.arx_curve,
-                      self.magnitude_curve, self.compensated_curve):
+        for curve in (self.pm_curve, self.reference_curve, self.response_curve, self.loss_curve, self.arx_curve):
             curve.setData([], [])
         for scatter in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
             scatter.setData([], [])
