@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 import numpy as np
 import pyvisa
@@ -263,15 +263,12 @@ class Digitizer:
                 )
             length = record_length if record_length is not None else self.record_length()
             pre_trigger_samples = min(int(round(pre_trigger_fraction * length)), length - 1)
-        trigger = (trigger_source, trigger_level_v, trigger_slope, pre_trigger_samples)
+        trigger = (trigger_source, trigger_level_v, trigger_slope, pre_trigger_samples)  # set_trigger's order
         if any(v is not None for v in trigger):
-            now = self.trigger_settings() if any(v is None for v in trigger) else None
-            self.set_trigger(
-                trigger_source if trigger_source is not None else now.source,  # type: ignore[union-attr]
-                trigger_level_v if trigger_level_v is not None else now.level_v,  # type: ignore[union-attr]
-                trigger_slope if trigger_slope is not None else now.slope,  # type: ignore[union-attr]
-                pre_trigger_samples if pre_trigger_samples is not None else now.pre_trigger_samples,  # type: ignore[union-attr]
-            )
+            if any(v is None for v in trigger):  # fill the gaps from the instrument (same field order)
+                held = astuple(self.trigger_settings())
+                trigger = tuple(h if v is None else v for v, h in zip(trigger, held, strict=True))
+            self.set_trigger(*trigger)
 
     # -- acquisition ---------------------------------------------------------------------
     def arm_single(self) -> None:
