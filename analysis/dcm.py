@@ -300,20 +300,26 @@ def compensated_fbsd_hz(model: DiscreteModel, dcm: DCM, levels: Sequence[float] 
     return {k: e.frequency_hz for k, e in compensated_fbsd_edges(model, dcm, levels).items()}
 
 
-def _rise_time(step: np.ndarray, final: float) -> float:
-    """10–90 % rise time in samples, first crossings interpolated linearly."""
-    s = step / final
+def _rise_time(step: np.ndarray) -> float:
+    """10–90 % rise time in samples of a step response normalised to 1, first crossings
+    interpolated linearly."""
 
     def first_crossing(level: float) -> float:
-        idx = np.flatnonzero(s >= level)
+        idx = np.flatnonzero(step >= level)
         if idx.size == 0:
             raise AnalysisError("rise time: the step response never reaches 90 % of its final value")
         i = int(idx[0])
         if i == 0:
             return 0.0
-        return (i - 1) + (level - s[i - 1]) / (s[i] - s[i - 1])
+        return (i - 1) + (level - step[i - 1]) / (step[i] - step[i - 1])
 
     return first_crossing(0.9) - first_crossing(0.1)
+
+
+def _settling_time(step: np.ndarray, tolerance: float) -> float:
+    """Samples until the normalised step response stays within 1 ± tolerance."""
+    outside = np.flatnonzero(np.abs(step - 1.0) > tolerance)
+    return 0.0 if outside.size == 0 else float(outside[-1] + 1)
 
 
 def step_responses(model: DiscreteModel, dcm: DCM, n_samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -337,40 +343,62 @@ def step_responses(model: DiscreteModel, dcm: DCM, n_samples: int | None = None)
     return alone / final, both / (final * dcm.dc_gain)
 
 
+@dataclass(frozen=True)
+class StepComparison:
+    """The normalised step responses of the model alone and followed by the DCM (one simulation,
+    `compare_steps`) and the times read off them, in samples: (without, with the DCM)."""
+
+    alone: np.ndarray
+    both: np.ndarray
+
+    def rise_times_samples(self) -> tuple[float, float]:
+        """10–90 % rise times."""
+        return _rise_time(self.alone), _rise_time(self.both)
+
+    def rise_time_ratio(self) -> float:
+        """Uncompensated ÷ compensated 10–90 % rise time (> 1 when the DCM speeds it up)."""
+        before, after = self.rise_times_samples()
+        if after <= 0:
+            raise AnalysisError("rise time: the compensated step response rises within one sample")
+        return before / after
+
+    def settling_times_samples(self, tolerance: float = 0.05) -> tuple[float, float]:
+        """Samples to settle within ±5 % of the final value."""
+        return _settling_time(self.alone, tolerance), _settling_time(self.both, tolerance)
+
+    def settling_time_ratio(self, tolerance: float = 0.05) -> float:
+        """Uncompensated ÷ compensated time to settle within ±5 % (the paper's response time T_r).
+
+        For a lightly damped sensor this is the figure that shows what the DCM buys: the sensor
+        rises fast (its 10–90 % rise time is short) but rings for hundreds of samples.
+        """
+        before, after = self.settling_times_samples(tolerance)
+        return before / max(after, 1.0)
+
+
+def compare_steps(model: DiscreteModel, dcm: DCM) -> StepComparison:
+    """Simulate both step responses once (`step_responses`) for every time and ratio read off them."""
+    return StepComparison(*step_responses(model, dcm))
+
+
 def rise_times_samples(model: DiscreteModel, dcm: DCM) -> tuple[float, float]:
     """10–90 % step-response rise times (samples): (model alone, model followed by the DCM)."""
-    alone, both = step_responses(model, dcm)
-    return _rise_time(alone, 1.0), _rise_time(both, 1.0)
+    return compare_steps(model, dcm).rise_times_samples()
 
 
 def rise_time_ratio(model: DiscreteModel, dcm: DCM) -> float:
     """Uncompensated ÷ compensated 10–90 % rise time (> 1 when the DCM speeds it up)."""
-    before, after = rise_times_samples(model, dcm)
-    if after <= 0:
-        raise AnalysisError("rise time: the compensated step response rises within one sample")
-    return before / after
-
-
-def _settling_time(step: np.ndarray, tolerance: float) -> float:
-    """Samples until the normalised step response stays within 1 ± tolerance."""
-    outside = np.flatnonzero(np.abs(step - 1.0) > tolerance)
-    return 0.0 if outside.size == 0 else float(outside[-1] + 1)
+    return compare_steps(model, dcm).rise_time_ratio()
 
 
 def settling_times_samples(model: DiscreteModel, dcm: DCM, tolerance: float = 0.05) -> tuple[float, float]:
     """Samples to settle within ±5 % of the final value: (model alone, model followed by the DCM)."""
-    alone, both = step_responses(model, dcm)
-    return _settling_time(alone, tolerance), _settling_time(both, tolerance)
+    return compare_steps(model, dcm).settling_times_samples(tolerance)
 
 
 def settling_time_ratio(model: DiscreteModel, dcm: DCM, tolerance: float = 0.05) -> float:
-    """Uncompensated ÷ compensated time to settle within ±5 % (the paper's response time T_r).
-
-    For a lightly damped sensor this is the figure that shows what the DCM buys: the sensor
-    rises fast (its 10–90 % rise time is short) but rings for hundreds of samples.
-    """
-    before, after = settling_times_samples(model, dcm, tolerance)
-    return before / max(after, 1.0)
+    """Uncompensated ÷ compensated time to settle within ±5 % (see StepComparison.settling_time_ratio)."""
+    return compare_steps(model, dcm).settling_time_ratio(tolerance)
 
 
 class DcmStream:

@@ -20,11 +20,10 @@ from scipy import signal
 from analysis.dcm import (
     DCM,
     DEFAULT_WIDENING,
+    compare_steps,
     compensated_fbsd_hz,
     design_dcm,
     ratio_for_widening,
-    rise_time_ratio,
-    settling_time_ratio,
 )
 from analysis.errors import AnalysisError
 from analysis.excitation import ExcitationSummary, excitation_summary
@@ -153,8 +152,9 @@ def analyse_record(record: Record, params: AnalysisParams = AnalysisParams(),
         ratio = ratio_for_widening(model, params.dcm_damping, params.dcm_widening, params.extra_poles)
     dcm = design_dcm(model.poles, model.sample_interval_s, ratio, params.dcm_damping, params.extra_poles)
     comp = compensated_fbsd_hz(model, dcm)
-    rtr = rise_time_ratio(model, dcm)
-    settling = settling_time_ratio(model, dcm)
+    steps = compare_steps(model, dcm)  # one simulation for both ratios
+    rtr = steps.rise_time_ratio()
+    settling = steps.settling_time_ratio()
     if settling <= 1:
         warnings.append(f"the DCM does not shorten the ±5 % settling time (ratio {settling:.2f}): choose a larger "
                         "ratio r or a band widening")
