@@ -253,7 +253,7 @@ class ValveController:
     def pressure_setpoint_bar(self) -> float:
         """The set-point as the controller holds it (gauge bar)."""
         address = self.map.holding_registers.pressure_setpoint
-        (count,) = self._read_registers("read holding registers", address, 1, holding=True)
+        (count,) = self._read_registers("read holding registers", address, 1)
         return count * self.map.scales.pressure_bar_per_count
 
     def set_projectile(self, projectile: int) -> None:
@@ -306,19 +306,19 @@ class ValveController:
         self._call(f"write register {address} ({what})={count}",
                    lambda c: c.write_register(address, count, device_id=self.device_id))
 
+    # `function` is the Modbus function as errors name it; its words are the pymodbus client
+    # method ("read coils" -> read_coils).
     def _read_bits(self, function: str, addresses: list[int]) -> list[bool]:
         start, stop = min(addresses), max(addresses)
-        reader = "read_coils" if function == "read coils" else "read_discrete_inputs"
-        response = self._call(f"{function} {start}..{stop}", lambda c: getattr(c, reader)(
+        response = self._call(f"{function} {start}..{stop}", lambda c: getattr(c, function.replace(" ", "_"))(
             start, count=stop - start + 1, device_id=self.device_id))
         bits = list(response.bits)
         if len(bits) < stop - start + 1:
             raise InstrumentError(self.name, f"{function} {start}..{stop}", "short reply", str(bits))
         return [bool(bits[a - start]) for a in addresses]
 
-    def _read_registers(self, function: str, address: int, count: int, holding: bool = False) -> list[int]:
-        reader = "read_holding_registers" if holding else "read_input_registers"
-        response = self._call(f"{function} {address}", lambda c: getattr(c, reader)(
+    def _read_registers(self, function: str, address: int, count: int) -> list[int]:
+        response = self._call(f"{function} {address}", lambda c: getattr(c, function.replace(" ", "_"))(
             address, count=count, device_id=self.device_id))
         registers = list(response.registers)
         if len(registers) != count:
