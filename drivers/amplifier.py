@@ -133,7 +133,6 @@ class BridgeAmplifier:
                                          write_timeout=self.timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise InstrumentConnectionError(self.name, "open", f"cannot open serial port: {exc}") from exc
-        self._serial.reset_input_buffer()
 
     def close(self) -> None:
         """Close the port (idempotent)."""
