@@ -78,7 +78,10 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     def abort_in_charge(event):
         if event.state == "CAMPAIGN" and event.kind == "progress":
             current.append(event.data["shot_id"])
-        if event.kind == "state" and event.state == "CHARGE" and current[-1:] == ["s001-r2"]:
+        # on the first CHARGE reading (the sequencer reads only after opening the fill valve), not
+        # on entering CHARGE: that state event can reach the GUI before the valve has opened
+        if (event.kind == "reading" and event.state == "CHARGE" and current[-1:] == ["s001-r2"]
+                and not filling_when_pressed):
             filling_when_pressed.append(panel.world.coils()["fill"])
             tab.abort_button.click()
     w.link.event.connect(abort_in_charge)
