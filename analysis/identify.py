@@ -48,8 +48,10 @@ __all__ = [
     "Identification",
     "arx_fit",
     "arx_loss_by_order",
+    "fit_percent",
     "identify",
     "modes_of",
+    "remove_input_delay",
 ]
 
 # Samples per model parameter below which a record is too short for an order.
@@ -265,7 +267,7 @@ def identify(
             warnings.append(f"order {order} was asked but {unsupported}")
 
     delay = delays[chosen - 1]
-    u, y = _shifted(ref, resp, delay)
+    u, y = remove_input_delay(ref, resp, delay)
     chosen_fit = fits[chosen - 1]
     assert chosen_fit is not None  # the knee and an asked order are always evaluated
     final = _finish(u, y, chosen_fit, max_iterations)
@@ -283,7 +285,7 @@ def identify(
     elif not _acceptable(final):
         final, chosen = _stable_fallback(ref, resp, fits, delays, chosen, losses, max_iterations, warnings)
         delay = delays[chosen - 1]
-        u, y = _shifted(ref, resp, delay)
+        u, y = remove_input_delay(ref, resp, delay)
     losses[chosen - 1] = min(losses[chosen - 1], _mean_loss(final, ref.size, delay) * rows)
     aic, bic = _information_criteria(losses, rows)
     # Plain least squares at the final delay, every order from one factorisation: reported
@@ -292,16 +294,13 @@ def identify(
 
     dt = rec.sample_interval_s
     model = DiscreteModel(dt, final.a, final.b, float(delay), info={"fit_method": final.method})
-    y_hat = simulate(u, final.a, final.b) + final.offset
     pre["response_offset_fitted"] = final.offset
-    centred, error = y - np.mean(y), y - y_hat
-    spread = math.sqrt(long_dot(centred, centred))
-    fit_percent = 100.0 * (1.0 - math.sqrt(long_dot(error, error)) / spread) if spread > 0 else float("nan")
+    fit = fit_percent(y, simulate(u, final.a, final.b) + final.offset)
     modes = modes_of(model.poles, dt)
     warnings += _excitation_warnings(u, dt, modes)
-    if fit_percent < POOR_FIT_PERCENT:
+    if fit < POOR_FIT_PERCENT:
         warnings.append(
-            f"the model explains only {fit_percent:.1f} % of the response (fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)): "
+            f"the model explains only {fit:.1f} % of the response (fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)): "
             "check that the channels belong together and that the response is not mostly noise"
         )
     if final.reflected:
@@ -315,7 +314,7 @@ def identify(
             "(its loss was the lowest reached)"
         )
     model.info.update(
-        {"loss_by_order": losses, "fit_percent": fit_percent, "converged": final.converged, "warnings": warnings}
+        {"loss_by_order": losses, "fit_percent": fit, "converged": final.converged, "warnings": warnings}
     )
     return Identification(
         model=model,
@@ -324,7 +323,7 @@ def identify(
         arx_loss_by_order=arx_losses,
         aic_by_order=aic,
         bic_by_order=bic,
-        fit_percent=fit_percent,
+        fit_percent=fit,
         delay_samples=float(delay),
         modes=modes,
         warnings=warnings,
@@ -373,11 +372,19 @@ def _remove_baselines(ref: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np
     )
 
 
-def _shifted(ref: np.ndarray, resp: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
-    """(u, y) with y(k) = response(k + d) against u(k) = reference(k): removes a delay of d."""
+def remove_input_delay(ref: np.ndarray, resp: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """(u, y) with y(k) = response(k + d) against u(k) = reference(k): removes a delay of d samples."""
     if d >= 0:
         return ref[: ref.size - d], resp[d:]
     return ref[-d:], resp[: resp.size + d]
+
+
+def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
+    """100·(1 − ‖y − ŷ‖/‖y − ȳ‖): 100 is a perfect fit, 0 no better than the mean; NaN for a constant y."""
+    y = np.asarray(measured, dtype=float)
+    centred, error = y - np.mean(y), y - np.asarray(simulated, dtype=float)
+    spread = math.sqrt(long_dot(centred, centred))
+    return 100.0 * (1.0 - math.sqrt(long_dot(error, error)) / spread) if spread > 0 else float("nan")
 
 
 def _shift_range(ref: np.ndarray, resp: np.ndarray, max_lag: int) -> tuple[range, float]:
@@ -437,7 +444,7 @@ def _fit_at_best_delay(
     best_fit: tuple[TransferFit, int] | None = None
     tried: set[int] = set()
     for _ in range(4):
-        u, y = _shifted(ref, resp, delay)
+        u, y = remove_input_delay(ref, resp, delay)
         a0, b0 = start if start is not None else arx_coefficients_by_order(u, y, order)[-1]
         fit = refined_iv_fit(u, y, a0, b0, max_iterations=iterations)
         tried.add(delay)
@@ -532,7 +539,7 @@ def _stable_fallback(
         key=lambda n: (losses[n - 1], n),
     )
     for n in candidates:
-        u, y = _shifted(ref, resp, delays[n - 1])
+        u, y = remove_input_delay(ref, resp, delays[n - 1])
         start = fits[n - 1]
         assert start is not None
         fit = _finish(u, y, start, max_iterations)

@@ -44,6 +44,7 @@ from scipy import signal
 from analysis.dcm import step_responses as dcm_step_responses
 from analysis.errors import AnalysisError
 from analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
+from analysis.identify import fit_percent, remove_input_delay
 from analysis.model import DiscreteModel
 from analysis.resample import resample_to_rate
 from analysis.response import (
@@ -198,15 +199,6 @@ def spread(values: Iterable[float | None]) -> dict[str, float | int | None]:
     return {"n": n, "mean": mean, "std": std, "cv_percent": cv, "min": float(np.min(x)), "max": float(np.max(x))}
 
 
-def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
-    """100·(1 − ‖y − ŷ‖/‖y − ȳ‖): 100 is a perfect fit, 0 no better than the mean."""
-    y = np.asarray(measured, dtype=float)
-    spread_ = float(np.linalg.norm(y - np.mean(y)))
-    if spread_ == 0:
-        raise AnalysisError("fit: the measured response is constant")
-    return 100.0 * (1.0 - float(np.linalg.norm(y - np.asarray(simulated, dtype=float))) / spread_)
-
-
 def model_delay_samples(analysis: ShotAnalysis) -> int:
     """The integer input delay the identification removed before fitting the model."""
     ident = identification_dict(analysis)
@@ -234,9 +226,7 @@ def prepared_channels(analysis: ShotAnalysis, delay_samples: int | None = None) 
     y = (np.asarray(record.response, dtype=float) - float(pre.get("response_baseline", 0.0) or 0.0)
          - float(pre.get("response_offset_fitted", 0.0) or 0.0))
     d = model_delay_samples(analysis) if delay_samples is None else int(delay_samples)
-    if d >= 0:
-        return u[: u.size - d], y[d:]
-    return u[-d:], y[: y.size + d]
+    return remove_input_delay(u, y, d)
 
 
 def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
