@@ -35,7 +35,7 @@ from analysis.response import (
     band_edges,
     fbsd_hz,
     frequency_response,
-    model_sos,
+    model_output,
     pole_zero_frequencies_hz,
     response_times_samples,
     zpk_to_sos,
@@ -338,7 +338,7 @@ def step_responses(model: DiscreteModel, dcm: DCM, n_samples: int | None = None)
     final = model.dc_gain
     if final == 0:
         raise AnalysisError("step response: the model has zero DC gain")
-    alone = signal.sosfilt(model_sos(model), np.ones(n))
+    alone = model_output(model, np.ones(n))
     both = signal.sosfilt(dcm.sos(), alone)
     return alone / final, both / (final * dcm.dc_gain)
 

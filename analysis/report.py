@@ -39,7 +39,6 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
-from scipy import signal
 
 from analysis.dcm import step_responses as dcm_step_responses
 from analysis.errors import AnalysisError
@@ -49,7 +48,7 @@ from analysis.model import DiscreteModel
 from analysis.resample import resample_to_rate
 from analysis.response import (
     frequency_response,
-    model_sos,
+    model_output,
     natural_frequency_damping,
     nyquist_hz,
     response_times_samples,
@@ -229,11 +228,6 @@ def prepared_channels(analysis: ShotAnalysis, delay_samples: int | None = None) 
     return remove_input_delay(u, y, d)
 
 
-def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
-    """The model's response to u (second-order sections: well conditioned at high order)."""
-    return signal.sosfilt(model_sos(model), np.asarray(u, dtype=float))
-
-
 def cross_validation(analyses: Sequence[ShotAnalysis]) -> np.ndarray:
     """Fit % of model i (with its delay) on shot j's record: matrix [i, j]; NaN where it cannot be computed."""
     n = len(analyses)
@@ -245,7 +239,7 @@ def cross_validation(analyses: Sequence[ShotAnalysis]) -> np.ndarray:
                 continue
             try:
                 u, y = prepared_channels(b, d)
-                out[i, j] = fit_percent(y, simulate(a.model, u))
+                out[i, j] = fit_percent(y, model_output(a.model, u))
             except AnalysisError:
                 pass
     return out
@@ -558,7 +552,7 @@ def excitation_page(entry: ShotEntry) -> Figure:
         u, y = prepared_channels(a)
         d = model_delay_samples(a)
         t_us = (np.arange(u.size) * rec.sample_interval_s + rec.start_time_s) * 1e6
-        y_hat = simulate(a.model, u)
+        y_hat = model_output(a.model, u)
         ax_t.plot(t_us, u / G_M_S2, color="0.2", lw=1.2, label="reference (laser interferometer)")
         ax_t.plot(t_us, y / G_M_S2, color="tab:blue", lw=1.0,
                   label=f"accelerometer response (shifted by its delay, {d} samples)")

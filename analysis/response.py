@@ -300,6 +300,12 @@ def model_sos(model: DiscreteModel) -> np.ndarray:
     return zpk_to_sos(z, p, k, delay)
 
 
+def model_output(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
+    """The model's response to u from rest, through its second-order sections (well conditioned
+    at high order). The input delay (delay_samples) is not included."""
+    return signal.sosfilt(model_sos(model), np.asarray(u, dtype=float))
+
+
 def to_continuous(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
     """Continuous zeros, poles (rad/s) and gain matching the discrete model.
 
