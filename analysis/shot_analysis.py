@@ -29,6 +29,7 @@ from analysis.excitation import ExcitationSummary, excitation_summary
 from analysis.identify import Identification, identify
 from analysis.model import DiscreteModel
 from analysis.records import Record
+from analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
 from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 from analysis.response import fbsd_hz, model_output, pole_analysis
 
@@ -37,7 +38,7 @@ from analysis.response import fbsd_hz, model_output, pole_analysis
 class AnalysisParams:
     """Rig constants and analysis options for one shot."""
 
-    grating_pitch_m: float = 2.0e-6
+    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M
     orders: tuple[int, int] = (1, -1)
     amp_gain: float = 1.0  # bridge amplifier gain (V/V)
     sensitivity_v_per_m_s2: float = 1.0  # accelerometer nominal sensitivity at the amplifier input
@@ -188,8 +189,6 @@ def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:
 def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_interval_s: float,
                      params: AnalysisParams = AnalysisParams()) -> ShotAnalysis:
     """Reduce the raw channels (PM beat, amplifier volts) to a record, then analyse it."""
-    from analysis.reduce import reduce_raw  # noqa: PLC0415  (landing with the interferometer reduction)
-
     reduced = reduce_raw(
         doppler_v, response_v, sample_interval_s,
         grating_pitch_m=params.grating_pitch_m, orders=params.orders, amp_gain=params.amp_gain,
