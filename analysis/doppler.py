@@ -193,20 +193,34 @@ def _check_record(x: np.ndarray, sample_interval_s: float, source: str) -> float
         raise AnalysisError(f"{source}: only {x.size} samples; a Doppler record needs at least 4096")
     if not np.all(np.isfinite(x)):
         raise AnalysisError(f"{source}: has a NaN or infinite sample at index {int(np.flatnonzero(~np.isfinite(x))[0])}")
+    lo = float(np.min(x))
+    if float(np.max(x)) == lo:
+        raise AnalysisError(f"{source}: the signal is constant ({lo:g} V): no Doppler beat")
+    clipped = clipped_rail(x)
+    if clipped is not None:
+        raise AnalysisError(
+            f"{source}: clipped at {clipped[0]:g} V ({clipped[1]} samples on the rail): "
+            f"reduce the digitizer's gain or widen its range"
+        )
+    return fs
+
+
+def clipped_rail(x: np.ndarray) -> tuple[float, int] | None:
+    """(rail in V, samples on it) when a digitizer channel is clipped, else None.
+
+    A digitizer at full scale sits on its rail (the channel's lowest or highest value) for runs
+    of samples: clipped when at least max(8, n/10⁴) neighbouring pairs share the rail value. A
+    clean signal touches its extremes only for single samples at any frequency that matters.
+    A constant channel has no rail (None).
+    """
     lo, hi = float(np.min(x)), float(np.max(x))
     if hi == lo:
-        raise AnalysisError(f"{source}: the signal is constant ({lo:g} V): no Doppler beat")
-    # Clipping: a digitizer at full scale sits on its rail for runs of samples. A clean
-    # beat touches its extremes only for single samples at any beat frequency that matters.
+        return None
     for rail in (lo, hi):
         at_rail = x == rail
-        runs = np.count_nonzero(at_rail[1:] & at_rail[:-1])
-        if runs >= max(8, x.size // 10000):
-            raise AnalysisError(
-                f"{source}: clipped at {rail:g} V ({int(np.count_nonzero(at_rail))} samples on the rail): "
-                f"reduce the digitizer's gain or widen its range"
-            )
-    return fs
+        if np.count_nonzero(at_rail[1:] & at_rail[:-1]) >= max(8, x.size // 10000):
+            return rail, int(np.count_nonzero(at_rail))
+    return None
 
 
 def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int

@@ -40,6 +40,7 @@ from analysis.doppler import (
     BeatPhase,
     Demodulated,
     beat_phase,
+    clipped_rail,
     decimated_rate_for,
     differentiate,
     displacement_to_rate,
@@ -140,7 +141,12 @@ def reduce_raw(
     if not np.all(np.isfinite(response)):
         raise AnalysisError(f"{source}: response channel has a NaN or infinite sample at index "
                             f"{int(np.flatnonzero(~np.isfinite(response))[0])}")
-    _check_response_clipping(response, source)
+    clipped = clipped_rail(response)
+    if clipped is not None:
+        raise AnalysisError(
+            f"{source}: response channel clipped at {clipped[0]:g} V ({clipped[1]} samples on the rail): "
+            f"lower the amplifier gain or widen the digitizer's range"
+        )
     beat = beat_phase(doppler, sample_interval_s, decimated_rate_hz=decimated_rate_for(sample_rate_hz),
                       source=f"{source}: doppler channel")
     m = beat.decimation
@@ -196,18 +202,6 @@ def reduce_raw(
         onset_time_s=start_time_s + beat.onset_time_s,
         beat=beat,
     )
-
-
-def _check_response_clipping(response: np.ndarray, source: str) -> None:
-    """A response sitting on one value for a run of samples at its extreme is clipped."""
-    for rail in (float(np.min(response)), float(np.max(response))):
-        at_rail = response == rail
-        runs = int(np.count_nonzero(at_rail[1:] & at_rail[:-1]))
-        if runs >= max(8, response.size // 10000) and np.ptp(response) > 0:
-            raise AnalysisError(
-                f"{source}: response channel clipped at {rail:g} V ({int(np.count_nonzero(at_rail))} samples "
-                f"on the rail): lower the amplifier gain or widen the digitizer's range"
-            )
 
 
 # ------------------------------------------------------------------------------ raw tables
