@@ -8,8 +8,9 @@ response and on the reference.
    numpy.linalg.lstsq per order on the explicit regression matrix (same rows). Ours: the Gram
    matrix of the augmented information matrix from lagged dot products + one Cholesky
    (analysis.loss, "cholesky"), and the accurate fallback, a blocked QR ("qr"). At 1 000 000
-   samples the lstsq sweep would take minutes, so lstsq is timed on orders 1, 10, 20, 30 and
-   the sweep's time interpolated (cost ∝ L·(2n+1)² fitted to those four; flagged "estimated").
+   samples the lstsq sweep would take minutes, so lstsq is timed on orders 1, N/3, 2N/3, N
+   (1, 10, 20, 30) and the sweep's time interpolated (cost ∝ L·(2n+1)² fitted to those four;
+   flagged "estimated").
 2. Whole identification (analysis.identify: resample check, delay, bias-corrected fits of
    every order with order choice at the knee, final fit). Baseline: plain least squares
    swept over orders 1 … 12 (one lstsq each) — faster to run, but biased; pole error is the
@@ -91,6 +92,11 @@ def pole_error(poles: np.ndarray) -> float:
     return float(np.max(cost[rows, cols]))
 
 
+def probe_orders(max_order: int) -> list[int]:
+    """The orders lstsq is timed on when the whole sweep would take too long."""
+    return sorted({1, max_order // 3, 2 * max_order // 3, max_order})
+
+
 def bench_losses(u: np.ndarray, y: np.ndarray, max_order: int, repeats: int, full_baseline: bool) -> dict[str, Any]:
     chol_s, chol = best_time(lambda: arx_loss_by_order(u, y, max_order, method="cholesky"), repeats)
     qr_s, qr = best_time(lambda: arx_loss_by_order(u, y, max_order, method="qr"), 1)
@@ -100,7 +106,7 @@ def bench_losses(u: np.ndarray, y: np.ndarray, max_order: int, repeats: int, ful
         lstsq_s, estimated = time.perf_counter() - t0, False
         agree = {"cholesky": float(np.max(np.abs(chol / ref - 1))), "qr": float(np.max(np.abs(qr / ref - 1)))}
     else:
-        probe = sorted({1, max_order // 3, 2 * max_order // 3, max_order})
+        probe = probe_orders(max_order)
         times, ref_probe = [], []
         for n in probe:
             t0 = time.perf_counter()
@@ -158,7 +164,8 @@ def run(sizes: list[int], max_order: int = 30, repeats: int = 3) -> dict[str, An
         u, y = shock_train(n)
         full = n <= 200_000
         losses = bench_losses(u, y, max_order, repeats, full)
-        est = " (estimated from orders 1, 10, 20, 30)" if losses["lstsq_estimated"] else ""
+        probed = ", ".join(str(k) for k in probe_orders(max_order))
+        est = f" (estimated from orders {probed})" if losses["lstsq_estimated"] else ""
         print(f"{n} samples — loss of orders 1..{max_order}:")
         print(f"  one lstsq per order{est}: {losses['lstsq_per_order_s']:.3f} s")
         print(f"  one factorisation, Cholesky: {losses['one_factorisation_cholesky_s'] * 1e3:.1f} ms "
