@@ -31,7 +31,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft, linalg, signal
 
 from analysis.errors import AnalysisError
-from analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order, long_dot
+from analysis.loss import arx_coefficients_by_order, arx_loss_by_order, long_dot
 from analysis.model import DiscreteModel
 from analysis.records import Record
 from analysis.refined_iv import (
@@ -42,17 +42,6 @@ from analysis.refined_iv import (
     stabilised,
 )
 from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ, estimate_delay_samples, resample_to_rate
-
-__all__ = [
-    "DEFAULT_ANALYSIS_RATE_HZ",
-    "Identification",
-    "arx_fit",
-    "arx_loss_by_order",
-    "fit_percent",
-    "identify",
-    "modes_of",
-    "remove_input_delay",
-]
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10
