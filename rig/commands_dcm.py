@@ -12,27 +12,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from analysis.dcm import (
-    DCM,
-    apply,
-    compensated_fbsd_edges,
-    design_dcm,
-    format_complex,
-    load_dcm,
-    rise_times_samples,
-    settling_times_samples,
-)
 from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel, load_model
-from analysis.records import read_record, write_record
-from analysis.response import fbsd_edges, pole_analysis
 from rig.cli import emit_json
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from analysis.dcm import DCM
+    from analysis.model import DiscreteModel
 
 DEFAULT_BLOCK_SAMPLES = 65_536
 
@@ -46,18 +38,22 @@ def parse_complex(text: str, option: str) -> complex:
         value = complex(raw.replace("i", "j").replace("I", "j").replace("J", "j"))
     except ValueError:
         raise AnalysisError(f"{option}: {text.strip()!r} is not a complex number (write poles like 0.974+0.1396j)") from None
-    if not (np.isfinite(value.real) and np.isfinite(value.imag)):
+    if not (math.isfinite(value.real) and math.isfinite(value.imag)):
         raise AnalysisError(f"{option}: {text.strip()!r} is not a finite number")
     return value
 
 
 def parse_poles(text: str, option: str) -> np.ndarray:
     """A comma-separated list of poles."""
+    import numpy as np
+
     return np.array([parse_complex(part, option) for part in text.split(",")], dtype=complex)
 
 
 def _load_model_checked(path: str) -> DiscreteModel:
     """load_model, with any malformed content turned into one clear message."""
+    from analysis.model import load_model
+
     try:
         model = load_model(path)
     except AnalysisError:
@@ -75,6 +71,9 @@ def design_report(
     poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, source: str
 ) -> dict[str, Any]:
     """The JSON result of `hopkinson dcm` (also what -o writes)."""
+    from analysis.dcm import compensated_fbsd_edges, rise_times_samples, settling_times_samples
+    from analysis.response import fbsd_edges, pole_analysis
+
     result: dict[str, Any] = {
         "source": source,
         "sample_interval_s": dcm.sample_interval_s,
@@ -109,6 +108,8 @@ def _poly_text(coeffs: np.ndarray) -> str:
 
 
 def _print_design(result: dict[str, Any], dcm: DCM) -> None:
+    from analysis.dcm import format_complex
+
     out = sys.stdout
     out.write(f"Model: {result['source']} (sample interval {dcm.sample_interval_s:g} s)\n")
     out.write("Pole analysis (paper Table 1; response time in samples):\n")
@@ -148,6 +149,8 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
 
 def run_dcm(args: argparse.Namespace) -> int:
     """Design the DCM and report it (text or --json); -o writes the DCM file."""
+    from analysis.dcm import design_dcm
+
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
     model: DiscreteModel | None = None
@@ -162,7 +165,7 @@ def run_dcm(args: argparse.Namespace) -> int:
         if not args.sample_interval > 0:
             raise AnalysisError(f"dcm: --sample-interval must be positive, got {args.sample_interval}")
         poles, dt, source = parse_poles(args.poles, "--poles"), args.sample_interval, "--poles"
-    extra = parse_poles(args.extra_poles, "--extra-poles") if args.extra_poles else np.array([], dtype=complex)
+    extra = parse_poles(args.extra_poles, "--extra-poles") if args.extra_poles else ()
     dcm = design_dcm(poles, dt, args.ratio, args.damping, extra)
     result = design_report(poles, dcm, model, source)
     if args.output:
@@ -183,6 +186,9 @@ def run_dcm(args: argparse.Namespace) -> int:
 
 def run_compensate(args: argparse.Namespace) -> int:
     """Apply a DCM to a record's response, block by block, and write the compensated record."""
+    from analysis.dcm import apply, load_dcm
+    from analysis.records import read_record, write_record
+
     if args.block_samples < 1:
         raise AnalysisError(f"compensate: --block-samples must be at least 1, got {args.block_samples}")
     dcm = load_dcm(args.dcm)

@@ -15,18 +15,19 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from analysis.errors import AnalysisError
-from analysis.identify import Identification, identify
-from analysis.records import read_record
-from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
-from analysis.response import fbsd_hz, pole_analysis
 from rig.cli import emit_json
+
+if TYPE_CHECKING:
+    from analysis.identify import Identification
 
 
 def identification_report(result: Identification, source: str) -> dict[str, Any]:
     """The JSON object of `hopkinson identify` (also what -o writes)."""
+    from analysis.response import fbsd_hz, pole_analysis
+
     report = {"source": source, **result.to_dict()}
     report["fbsd_hz"] = fbsd_hz(result.model)
     report["pole_analysis"] = pole_analysis(result.poles)
@@ -60,6 +61,10 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
 
 def run_identify(args: argparse.Namespace) -> int:
     """Identify the model of RECORD; print a summary or the JSON; optionally write the JSON."""
+    from analysis.identify import identify
+    from analysis.records import read_record
+    from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
+
     if args.max_order < 1:
         raise AnalysisError(f"--max-order must be at least 1, got {args.max_order}")
     if args.order is not None and args.order < 1:
@@ -67,8 +72,9 @@ def run_identify(args: argparse.Namespace) -> int:
     if args.sample_rate is not None and not (math.isfinite(args.sample_rate) and args.sample_rate > 0):
         raise AnalysisError(f"--sample-rate must be a positive number of Hz, got {args.sample_rate}")
     record = read_record(args.record)
+    sample_rate_hz = DEFAULT_ANALYSIS_RATE_HZ if args.sample_rate is None else args.sample_rate
     try:
-        result = identify(record, max_order=args.max_order, order=args.order, sample_rate_hz=args.sample_rate)
+        result = identify(record, max_order=args.max_order, order=args.order, sample_rate_hz=sample_rate_hz)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}: {exc}") from None
     report = identification_report(result, str(args.record))
@@ -103,9 +109,9 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--sample-rate",
         type=float,
-        default=DEFAULT_ANALYSIS_RATE_HZ,
         metavar="HZ",
-        help=f"analysis rate: a record sampled faster is low-pass filtered and resampled (default {DEFAULT_ANALYSIS_RATE_HZ:g})",
+        # None: analysis.resample.DEFAULT_ANALYSIS_RATE_HZ, resolved in run_identify (scipy loads there)
+        help="analysis rate: a record sampled faster is low-pass filtered and resampled (default 1e6)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", metavar="MODEL.json", help="write the model JSON (read by `hopkinson dcm --model`)")

@@ -21,9 +21,6 @@ from pathlib import Path
 from typing import Any
 
 from analysis.errors import AnalysisError
-from analysis.records import write_record
-from analysis.reduce import DEFAULT_GRATING_PITCH_M, read_raw_table, reduce_raw
-from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 from rig.cli import emit_json
 
 
@@ -39,6 +36,8 @@ class RawInput:
 
 
 def _read_table(path: Path) -> RawInput:
+    from analysis.reduce import read_raw_table
+
     table = read_raw_table(path)
     return RawInput(table.doppler_v, table.response_v, table.sample_interval_s, table.start_time_s)
 
@@ -104,6 +103,10 @@ def parse_orders(text: str) -> tuple[int, int]:
 
 def run_reduce(args: argparse.Namespace) -> int:
     """Reduce RAW, write the record, print the shock quantities."""
+    from analysis.records import write_record
+    from analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
+    from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
+
     raw = read_raw(args.raw)
     settings = dict(raw.settings)
     for key, value in (("grating_pitch_m", args.grating_pitch_m), ("amp_gain", args.amp_gain),
