@@ -11,6 +11,7 @@ import argparse
 import importlib
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 # Modules that provide sub-commands, in the order `hopkinson --help` lists them. Each keeps
@@ -26,6 +27,30 @@ COMMAND_MODULES = [
     "rig.commands_report",
     "rig.commands_demo",
 ]
+
+# The project's config/ folder, wherever the command is started from. These defaults and the
+# shared rig options live here, not in rig.config: building the parser must not load the
+# drivers (pymodbus) that the configuration's register maps come from.
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+DEFAULT_RIG_CONFIG = CONFIG_DIR / "rig.toml"
+DEFAULT_SIM_CONFIG = CONFIG_DIR / "sim.toml"
+DEFAULT_SIM_RIG_CONFIG = CONFIG_DIR / "rig-sim.toml"  # rig.toml's variant for the simulated rig
+
+
+def add_rig_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every rig command shares: --config, --sim, --sim-config, --sim-fault."""
+    parser.add_argument("--config", type=Path, help=f"rig TOML (default {DEFAULT_RIG_CONFIG}; with --sim "
+                                                    f"{DEFAULT_SIM_RIG_CONFIG})")
+    parser.add_argument("--sim", action="store_true", help="run against an in-process simulated rig")
+    parser.add_argument("--sim-config", type=Path, default=DEFAULT_SIM_CONFIG,
+                        help="simulator TOML for --sim (default %(default)s)")
+    parser.add_argument("--sim-fault", action="append", default=[], metavar="NAME",
+                        help="inject a simulator fault (repeatable; `hopkinson sim --list-faults`)")
+
+
+def rig_config_path(args: argparse.Namespace) -> Path:
+    """The rig TOML a command uses: --config, else the simulated or the real rig's default."""
+    return args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else DEFAULT_RIG_CONFIG)
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:

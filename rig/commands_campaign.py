@@ -38,8 +38,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from rig.cli import emit_json
-from rig.config import add_rig_arguments, load_rig_config, load_sim_config, rig_config_path
+from rig.cli import add_rig_arguments, emit_json, rig_config_path
 from rig.errors import ConfigError
 
 REPORT_FORMATS = ("pdf", "html")
@@ -100,6 +99,7 @@ def run_campaign_command(args: argparse.Namespace) -> int:
         check_authorisation,
         prepare_run,
     )
+    from rig.config import load_rig_config, load_sim_config
     from rig.events import EventBus
     from rig.instruments import open_instruments
     from rig.plan import load_plan

@@ -18,8 +18,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from rig.cli import DEFAULT_SIM_CONFIG, DEFAULT_SIM_RIG_CONFIG
 from rig.commands_campaign import ProgressPrinter, report_formats
-from rig.config import DEFAULT_SIM_CONFIG, DEFAULT_SIM_RIG_CONFIG, load_rig_config, load_sim_config
 from rig.errors import ConfigError
 
 DEFAULT_OUT = Path("demo-output")
@@ -72,6 +72,7 @@ def demo_plan_text(shots: int) -> str:
 def demo_command(args: argparse.Namespace) -> int:
     from analysis.report import truth_comparison
     from rig.campaign import CampaignRunner, prepare_run
+    from rig.config import load_rig_config, load_sim_config
     from rig.events import EventBus
     from rig.instruments import open_instruments
     from rig.report_data import run_report, write_run_report

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rig.config import add_rig_arguments
+from rig.cli import add_rig_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

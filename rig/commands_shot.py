@@ -34,8 +34,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from rig.cli import emit_json
-from rig.config import add_rig_arguments, load_rig_config, load_sim_config, rig_config_path
+from rig.cli import add_rig_arguments, emit_json, rig_config_path
 from rig.errors import ConfigError
 
 PROMPT_TIMEOUT_S = 60.0
@@ -69,6 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_shot_command(args: argparse.Namespace) -> int:
     # Imported here: the drivers (pymodbus, pyvisa, pyserial) load only when a shot runs.
+    from rig.config import load_rig_config, load_sim_config
     from rig.events import EventBus, RigEvent
     from rig.instruments import open_instruments
     from rig.sequencer import FireAuthorisation, Sequencer

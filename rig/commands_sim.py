@@ -17,16 +17,12 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rig.cli import emit_json, fail
-from rig.config import (
-    DEFAULT_RIG_CONFIG,
-    DEFAULT_SIM_CONFIG,
-    RigConfig,
-    load_rig_config,
-    load_sim_config,
-)
+from rig.cli import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, emit_json, fail
+
+if TYPE_CHECKING:
+    from rig.config import RigConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -54,6 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_sim(args: argparse.Namespace) -> int:
     from drivers.sim.faults import FAULTS
     from drivers.sim.simulated_rig import fault_list_text, run_simulator
+    from rig.config import load_sim_config
 
     if args.list_faults:
         print(fault_list_text())
@@ -70,6 +67,8 @@ def run_sim(args: argparse.Namespace) -> int:
 
 # -- status ---------------------------------------------------------------------------------------
 def run_status(args: argparse.Namespace) -> int:
+    from rig.config import load_rig_config
+
     config = load_rig_config(args.config)
     report = rig_status(config)
     if args.json:

@@ -23,7 +23,6 @@ one generic reader of dataclasses (`_build`), so every section is checked the sa
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import tomllib
@@ -43,32 +42,11 @@ from drivers.valve_controller import (
     RegisterMap,
     ScaleMap,
 )
+from rig.cli import rig_config_path as rig_config_path  # re-exported for ui/app.py
 from rig.errors import ConfigError
 
 if typing.TYPE_CHECKING:
     from drivers.sim.simulated_rig import SimConfig
-
-# The project's config/ folder, wherever the command is started from.
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
-DEFAULT_RIG_CONFIG = CONFIG_DIR / "rig.toml"
-DEFAULT_SIM_CONFIG = CONFIG_DIR / "sim.toml"
-DEFAULT_SIM_RIG_CONFIG = CONFIG_DIR / "rig-sim.toml"  # rig.toml's variant for the simulated rig
-
-
-def add_rig_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options every rig command shares: --config, --sim, --sim-config, --sim-fault."""
-    parser.add_argument("--config", type=Path, help=f"rig TOML (default {DEFAULT_RIG_CONFIG}; with --sim "
-                                                    f"{DEFAULT_SIM_RIG_CONFIG})")
-    parser.add_argument("--sim", action="store_true", help="run against an in-process simulated rig")
-    parser.add_argument("--sim-config", type=Path, default=DEFAULT_SIM_CONFIG,
-                        help="simulator TOML for --sim (default %(default)s)")
-    parser.add_argument("--sim-fault", action="append", default=[], metavar="NAME",
-                        help="inject a simulator fault (repeatable; `hopkinson sim --list-faults`)")
-
-
-def rig_config_path(args: argparse.Namespace) -> Path:
-    """The rig TOML a command uses: --config, else the simulated or the real rig's default."""
-    return args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else DEFAULT_RIG_CONFIG)
 
 
 @dataclass(frozen=True)
