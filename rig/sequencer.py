@@ -282,6 +282,28 @@ class Sequencer:
             raise shot.interrupt
         return outcome
 
+    def make_safe(self) -> tuple[bool, str | None]:
+        """With no shot running, do SAFE's work and confirm it (blocking; the caller's thread
+        must be the one that owns the instruments): fire and fill closed, vent open, pump off,
+        digitizer disarmed, coils read back (re-commanded while wrong) until right and the
+        reservoir at or below limits.vent_done_bar, within timeouts.safe_s.
+
+        Returns (confirmed, problem). The state does not change; SAFE's "reading", "log" and
+        "error" events are published. RuntimeError while a shot runs: abort() it instead.
+        """
+        if not self._run_lock.acquire(blocking=False):
+            raise RuntimeError("a shot is running on this sequencer: abort() it and its SAFE runs")
+        try:
+            # SAFE keeps its bookkeeping (held interrupt, controller timeouts) on a _Shot; an
+            # idle make-safe has no request of its own, hence this placeholder.
+            shot = _Shot(ShotRequest(pressure_bar=0.0), FireAuthorisation())
+            confirmed = self._safe(shot)
+        finally:
+            self._run_lock.release()
+        if shot.interrupt is not None:
+            raise shot.interrupt
+        return confirmed
+
     # -- the run ------------------------------------------------------------------------------
     def _run(self, shot: _Shot) -> ShotOutcome:
         failure: _Failure | None = None
@@ -312,6 +334,7 @@ class Sequencer:
         if failure is not None:
             self._shielded(shot, lambda: self.bus.emit("error", failure.state, f"aborting: {failure.detail}"))
 
+        self._shielded(shot, lambda: self._enter(State.SAFE))
         safe_ok, safe_problem = self._safe(shot)
 
         path: Path | None = None
@@ -591,7 +614,6 @@ class Sequencer:
 
     def _safe(self, shot: _Shot) -> tuple[bool, str | None]:
         """Make the rig safe and confirm it (never raises); returns (confirmed, problem)."""
-        self._shielded(shot, lambda: self._enter(State.SAFE))
         inst, limits = self.instruments, self.config.limits
         valves = inst.valves
         start = time.monotonic()

@@ -7,6 +7,7 @@ from what the sequencer says about itself.
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -256,6 +257,56 @@ def test_door_opened_mid_arm_aborts(rig) -> None:
     assert rig.world.shots_fired == 0
     rig.assert_safe()
     assert rig.sequencer.interlocks_ok is False
+
+
+# -- make_safe: SAFE's work with no shot running -----------------------------------------------------
+def _leave_the_rig_charged(rig, stuck_fill_valve: bool = False) -> None:
+    """A rig left as after a FAULT: fill open, vent shut, pump on, reservoir charged to 1 bar or more."""
+    if stuck_fill_valve:
+        rig.faults.inject("stuck-fill-valve")
+    world = rig.world
+    world.set_vent_valve(False)
+    world.set_pump(True)
+    world.set_pressure_setpoint_bar(2.0)
+    world.set_fill_valve(True)
+    deadline = time.monotonic() + 5.0
+    while world.reservoir_pressure_bar() < 1.0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert world.reservoir_pressure_bar() >= 1.0
+
+
+def test_make_safe_when_idle_vents_the_rig_and_leaves_the_state_alone(rig) -> None:
+    _leave_the_rig_charged(rig)
+    assert rig.sequencer.make_safe() == (True, None)
+    rig.assert_safe()
+    assert rig.world.coils()["pump"] is False
+    assert rig.sequencer.state == State.IDLE and rig.recorder.states() == []
+    assert any(e.message.startswith("rig safe") for e in rig.recorder.of("log"))
+
+
+def test_make_safe_reports_what_it_could_not_confirm(make_rig) -> None:
+    rig = make_rig(config=short_timeouts_config(safe_s=1.0))
+    _leave_the_rig_charged(rig, stuck_fill_valve=True)
+    confirmed, problem = rig.sequencer.make_safe()
+    assert confirmed is False and "fill valve stuck open?" in problem
+    assert any("SAFE NOT CONFIRMED" in e.message for e in rig.recorder.of("error"))
+    rig.assert_safe(vented=False)
+
+
+def test_make_safe_refuses_while_a_shot_runs(rig) -> None:
+    assert rig.sequencer.make_safe() == (True, None)  # idle: done, and the sequencer is free again
+    refused: list[str] = []
+
+    def attempt() -> None:
+        try:
+            rig.sequencer.make_safe()
+        except RuntimeError as exc:
+            refused.append(str(exc))
+
+    rig.on_state("EVACUATE", attempt)
+    outcome = rig.run()
+    assert refused and "a shot is running" in refused[0]
+    assert outcome.final_state == "DONE" and rig.world.shots_fired == 1
 
 
 # -- input, events --------------------------------------------------------------------------------
