@@ -8,9 +8,13 @@ code (2: bad input or configuration; 3: shot aborted to the safe state); no trac
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import signal
 import sys
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +94,47 @@ def fail(message: str, exit_code: int = 2) -> int:
     """Write one clear line on stderr and return the exit code."""
     sys.stderr.write(f"hopkinson: error: {message}\n")
     return exit_code
+
+
+@contextlib.contextmanager
+def signals_abort(abort: Callable[[str], None], interrupted: threading.Event,
+                  reasons: dict[signal.Signals, str]) -> Iterator[None]:
+    """While the block runs, each signal in `reasons` calls `abort(reason)` (the shot goes SAFE)
+    instead of raising KeyboardInterrupt at a random point, and sets `interrupted`; the caller
+    reports the interruption once the block is done. Only in the main thread (signal handlers).
+
+    The handler only notes the signal: it runs in the main thread between two bytecodes, where
+    taking a lock the interrupted code holds would deadlock and printing would re-enter the
+    stream. A watcher thread calls `abort` (again every 20 ms: an abort asked for before the
+    sequencer left IDLE is a no-op; `abort` must be idempotent).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    hit: list[signal.Signals] = []
+    done = threading.Event()
+
+    def handler(signum: int, _frame: object) -> None:
+        hit.append(signal.Signals(signum))
+
+    def watch() -> None:
+        while not done.wait(0.02):
+            if hit:
+                interrupted.set()
+                abort(reasons[hit[0]])
+
+    previous = {sig: signal.signal(sig, handler) for sig in reasons}
+    watcher = threading.Thread(target=watch, name="signals-abort", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        done.set()
+        watcher.join()
+        if hit:
+            interrupted.set()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -34,11 +34,10 @@ import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from rig.cli import add_rig_arguments, emit_json, rig_config_path
+from rig.cli import add_rig_arguments, emit_json, rig_config_path, signals_abort
 from rig.errors import ConfigError
 
 REPORT_FORMATS = ("pdf", "html")
@@ -131,7 +130,8 @@ def run_campaign_command(args: argparse.Namespace) -> int:
         runner = CampaignRunner(run, plan, instruments, config, bus,
                                 on_shot_start=fire_log.set_shot if fire_log is not None else None)
         printer.runner = runner
-        with _signals_abort(runner, interrupted):
+        with signals_abort(runner.abort, interrupted, {sig: f"interrupted ({sig.name})"
+                                                       for sig in (signal.SIGINT, signal.SIGTERM)}):
             outcome = runner.run()
 
     reports: list[str] = []
@@ -194,45 +194,6 @@ class ProgressPrinter:
         if line is not None:
             stream.write(line + "\n")
             stream.flush()
-
-
-@contextlib.contextmanager
-def _signals_abort(runner: Any, interrupted: threading.Event) -> Iterator[None]:
-    """While the campaign runs, Ctrl-C and SIGTERM abort the current shot (SAFE runs) and stop
-    the campaign; the command then exits 130. Only in the main thread (signal handlers).
-
-    The handler only notes the signal: it runs in the main thread between two bytecodes, where
-    taking a lock the interrupted code holds would deadlock. A watcher thread calls
-    `runner.abort(...)`.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    hit: list[int] = []
-    done = threading.Event()
-
-    def handler(signum: int, _frame: object) -> None:
-        hit.append(signum)
-
-    def watch() -> None:
-        while not done.wait(0.02):
-            if hit:
-                interrupted.set()
-                runner.abort(f"interrupted ({signal.Signals(hit[0]).name})")
-                return
-
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-    watcher = threading.Thread(target=watch, name="campaign-signals", daemon=True)
-    watcher.start()
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-        done.set()
-        watcher.join()
-        if hit:
-            interrupted.set()
 
 
 def status_command(args: argparse.Namespace) -> int:

@@ -30,11 +30,10 @@ import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from rig.cli import add_rig_arguments, emit_json, rig_config_path
+from rig.cli import add_rig_arguments, emit_json, rig_config_path, signals_abort
 from rig.errors import ConfigError
 
 PROMPT_TIMEOUT_S = 60.0
@@ -115,7 +114,7 @@ def run_shot_command(args: argparse.Namespace) -> int:
                                  name="shot-prompt", daemon=True).start()
 
         bus.subscribe(on_event)
-        with _ctrl_c_aborts(sequencer, interrupted):
+        with signals_abort(sequencer.abort, interrupted, {signal.SIGINT: "interrupted (Ctrl-C)"}):
             outcome = sequencer.run_shot(request, authorisation)
         if args.sim:
             sim_state = session.state()
@@ -165,40 +164,3 @@ def _prompt(request: Any, authorisation: Any, sequencer: Any) -> None:
         authorisation.give()
     else:
         sequencer.abort("the operator did not confirm the shot")
-
-
-@contextlib.contextmanager
-def _ctrl_c_aborts(sequencer: Any, interrupted: threading.Event) -> Iterator[None]:
-    """While the shot runs, Ctrl-C (SIGINT) asks the sequencer to abort instead of raising
-    KeyboardInterrupt at a random point; the caller raises it after SAFE has run.
-
-    The handler only sets a flag: it runs in the main thread between two bytecodes, where
-    taking a lock the interrupted code holds would deadlock and printing would re-enter the
-    stream. A watcher thread turns the flag into `sequencer.abort(...)`.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    hit = [False]
-    done = threading.Event()
-
-    def handler(_signum: int, _frame: object) -> None:
-        hit[0] = True
-
-    def watch() -> None:
-        while not done.wait(0.02):
-            if hit[0]:
-                interrupted.set()
-                sequencer.abort("interrupted (Ctrl-C)")
-
-    previous = signal.signal(signal.SIGINT, handler)
-    watcher = threading.Thread(target=watch, name="shot-ctrl-c", daemon=True)
-    watcher.start()
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        done.set()
-        watcher.join()
-        if hit[0]:
-            interrupted.set()
