@@ -22,6 +22,9 @@ from typing import TYPE_CHECKING, Any
 from rig.cli import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, emit_json, fail
 
 if TYPE_CHECKING:
+    from drivers.amplifier import BridgeAmplifier
+    from drivers.digitizer import Digitizer
+    from drivers.valve_controller import ValveController
     from rig.config import RigConfig
 
 
@@ -80,11 +83,14 @@ def run_status(args: argparse.Namespace) -> int:
 
 def rig_status(config: RigConfig) -> dict[str, Any]:
     """Ask every instrument; a failure is recorded under its name, never raised."""
+    from rig.instruments import make_instruments
+
+    instruments = make_instruments(config)
     report: dict[str, Any] = {"config": config.path}
     report["valve_controller"] = _ask(f"{config.valve_controller.host}:{config.valve_controller.port}",
-                                      lambda: _valve_controller_status(config))
-    report["digitizer"] = _ask(config.digitizer.resource, lambda: _digitizer_status(config))
-    report["amplifier"] = _ask(config.amplifier.port, lambda: _amplifier_status(config))
+                                      lambda: _valve_controller_status(instruments.valves))
+    report["digitizer"] = _ask(config.digitizer.resource, lambda: _digitizer_status(instruments.digitizer))
+    report["amplifier"] = _ask(config.amplifier.port, lambda: _amplifier_status(instruments.amplifier))
     report["ok"] = all(report[k]["ok"] for k in ("valve_controller", "digitizer", "amplifier"))
     return report
 
@@ -98,14 +104,10 @@ def _ask(address: str, query: Any) -> dict[str, Any]:
         return {"address": address, "ok": False, "error": str(exc)}
 
 
-def _valve_controller_status(config: RigConfig) -> dict[str, Any]:
+def _valve_controller_status(vc: ValveController) -> dict[str, Any]:
     from drivers.errors import InstrumentError
-    from drivers.valve_controller import ValveController
 
-    vc_config = config.valve_controller
-    with ValveController(vc_config.host, vc_config.port, device_id=vc_config.device_id,
-                         timeout_s=vc_config.timeout_s, retries=vc_config.retries,
-                         register_map=vc_config.register_map) as vc:
+    with vc:
         try:
             identity = vc.identity()
         except InstrumentError as exc:  # identification is optional in Modbus: report, go on
@@ -122,10 +124,8 @@ def _valve_controller_status(config: RigConfig) -> dict[str, Any]:
     }
 
 
-def _digitizer_status(config: RigConfig) -> dict[str, Any]:
-    from drivers.digitizer import Digitizer
-
-    with Digitizer(config.digitizer.resource, timeout_s=config.digitizer.timeout_s) as dig:
+def _digitizer_status(dig: Digitizer) -> dict[str, Any]:
+    with dig:
         return {
             "identity": dig.identity(),
             "state": dig.acquisition_state(),
@@ -134,12 +134,8 @@ def _digitizer_status(config: RigConfig) -> dict[str, Any]:
         }
 
 
-def _amplifier_status(config: RigConfig) -> dict[str, Any]:
-    from drivers.amplifier import BridgeAmplifier
-
-    amp_config = config.amplifier
-    with BridgeAmplifier(amp_config.port, baudrate=amp_config.baudrate, timeout_s=amp_config.timeout_s,
-                         retries=amp_config.retries) as amp:
+def _amplifier_status(amp: BridgeAmplifier) -> dict[str, Any]:
+    with amp:
         return asdict(amp.status())
 
 
