@@ -70,6 +70,7 @@ from rig.shot import (
     ShotOutcome,
     ShotRequest,
     analyse_raw,
+    analysis_error_text,
     analysis_params,
     record_analysis,
     shot_meta,
@@ -772,8 +773,7 @@ class Sequencer:
             else:
                 error = f"analysis did not finish within {timeout_s:g} s (re-analyse the stored shot)"
         elif exc is not None:
-            error = f"analysis failed: {type(exc).__name__}: {exc}" if not isinstance(exc, ValueError) \
-                else f"analysis failed: {exc}"
+            error = analysis_error_text(exc)
         elif not isinstance(value, AnalysisResult):
             error = f"analysis failed: the analysis returned {type(value).__name__}, not an AnalysisResult"
         else:

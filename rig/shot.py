@@ -8,7 +8,8 @@ file and never loses the shot.
 - ShotOutcome: how it ended (final state, file, results, error, exit code, the state it was
   aborted in, whether the fire command was sent). `raise_for_outcome()` raises ShotAborted
   with the one-line message for exit code 3.
-- store_raw_shot / analyse_stored_shot: the STORE and ANALYSE steps of the sequencer.
+- store_raw_shot / analyse_raw / record_analysis: the STORE and ANALYSE steps of the sequencer
+  (and of a campaign analysing a recorded shot from its file).
 
 Analysis failures. When the analysis raises (bad data, a fit the data cannot support, a
 bug), the shot file keeps its raw data and gets an /analysis group with status "failed" and
@@ -237,6 +238,14 @@ def analyse_raw(raw: RawShot, params: dict[str, Any]) -> AnalysisResult:
     analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s,
                                 AnalysisParams.from_options(**params))
     return AnalysisResult(analysis.to_dict(), analysis.record)
+
+
+def analysis_error_text(exc: BaseException) -> str:
+    """The one-line error of an analysis that raised: a ValueError (bad data, a fit the data
+    cannot support) says why; anything else also names its type."""
+    if isinstance(exc, ValueError):
+        return f"analysis failed: {exc}"
+    return f"analysis failed: {type(exc).__name__}: {exc}"
 
 
 def record_analysis(path: Path, outcome: AnalysisResult | None, error: str | None) -> None:
