@@ -52,6 +52,7 @@ from rig.shot import (
     ShotOutcome,
     ShotRequest,
     analyse_raw,
+    analysis_error_text,
     analysis_params,
     record_analysis,
 )
@@ -195,19 +196,6 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder) -> ShotR
     )
 
 
-def with_fixed_order(analyse: Callable[[Any, dict[str, Any]], AnalysisResult], order: int | None
-                     ) -> Callable[[Any, dict[str, Any]], AnalysisResult]:
-    """`analyse` with the plan's fixed model order added to its parameters (when there is one):
-    ShotRequest has no `order`, the plan's [analysis] may have."""
-    if order is None:
-        return analyse
-
-    def run(raw: Any, params: dict[str, Any]) -> AnalysisResult:
-        return analyse(raw, {**params, "order": order})
-
-    return run
-
-
 class CampaignRunner:
     """Runs a campaign's remaining shots; see the module docstring.
 
@@ -343,7 +331,11 @@ class CampaignRunner:
             self._current = None
 
     def _analyse_with_order(self, raw: Any, params: dict[str, Any]) -> AnalysisResult:
-        return with_fixed_order(self._analyse, self._order)(raw, params)
+        """The analysis, with the plan's fixed model order of the shot (when there is one) added
+        to its parameters: ShotRequest has no `order`, the plan's [analysis] may have."""
+        if self._order is not None:
+            params = {**params, "order": self._order}
+        return self._analyse(raw, params)
 
     def _data(self, **extra: Any) -> dict[str, Any]:
         c = self._current
@@ -423,8 +415,7 @@ class CampaignRunner:
         except ShotFileError as exc:
             error = str(exc)
         except Exception as exc:  # the analysis failed: the shot stays recorded, the failure is noted
-            error = f"analysis failed: {exc}" if isinstance(exc, ValueError) else \
-                f"analysis failed: {type(exc).__name__}: {exc}"
+            error = analysis_error_text(exc)
         if error is None:
             try:
                 record_analysis(path, result, None)
