@@ -368,15 +368,17 @@ class Journal:
             ).fetchall()
         return [ShotStatus(self._by_id[r[0]], S(r[1]), r[2], r[3], json.loads(r[4]), r[5]) for r in rows]
 
+    def _fireable(self, s: ShotStatus) -> bool:
+        """May `next_shot` hand it out: PLANNED, or ABORTED fewer than max_aborts times."""
+        return s.state == S.PLANNED or (s.state == S.ABORTED and s.aborts < self.max_aborts)
+
     def next_shot(self) -> PlannedShot | None:
         """The next shot to fire (PLANNED, or ABORTED fewer than max_aborts times), else None."""
-        for s in self.statuses():
+        statuses = self.statuses()
+        for s in statuses:
             if s.state == S.FIRING:
                 raise self._fail(f"shot {s.shot.id} is still FIRING: mark it before the next shot")
-        for s in self.statuses():
-            if s.state == S.PLANNED or (s.state == S.ABORTED and s.aborts < self.max_aborts):
-                return s.shot
-        return None
+        return next((s.shot for s in statuses if self._fireable(s)), None)
 
     def pending_analysis(self) -> list[PlannedShot]:
         """RECORDED shots: raw data stored, analysis not (yet) done."""
@@ -414,8 +416,7 @@ class Journal:
             "total": len(statuses),
             "by_state": by_state,
             "complete": all(s.state in DONE_STATES for s in statuses),
-            "next_shot": next((s.shot.id for s in statuses if s.state == S.PLANNED
-                               or (s.state == S.ABORTED and s.aborts < self.max_aborts)), None),
+            "next_shot": next((s.shot.id for s in statuses if self._fireable(s)), None),
             "needs_decision": [s.shot.id for s in statuses if s.state == S.UNKNOWN],
             "pending_analysis": [s.shot.id for s in statuses if s.state == S.RECORDED],
             "aborted_out": [s.shot.id for s in statuses if s.state == S.ABORTED and s.aborts >= self.max_aborts],
