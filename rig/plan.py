@@ -47,7 +47,6 @@ from typing import Any
 
 from rig.errors import ConfigError
 
-PROJECTILES = (1, 2, 3)
 MAX_ORDER_LIMIT = 40
 
 
