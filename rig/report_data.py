@@ -22,7 +22,7 @@ from analysis.report import G_M_S2, CalibrationReport, ShotEntry, write_report
 from analysis.shot_analysis import ShotAnalysis
 from rig.errors import ConfigError
 from rig.plan import CampaignPlan
-from rig.run_folder import JOURNAL_NAME, PLAN_NAME, RunFolder, open_run_folder
+from rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
 from rig.shotfile import Shot, ShotFileError, read_shot
 
 REPORT_NAME = "report"
@@ -108,9 +108,8 @@ def shot_entry(path: str | Path, state: str | None = None, label: str | None = N
 def shot_report(path: str | Path) -> CalibrationReport:
     """The report of one shot file."""
     entry = shot_entry(path)
-    identity = {k: v for k, v in entry.identity.items()}
     title = f"Calibration report: {entry.identity['Accelerometer']}, shot {entry.label}"
-    return CalibrationReport(title=title, identity=identity, shots=[entry], campaign=False)
+    return CalibrationReport(title=title, identity=dict(entry.identity), shots=[entry], campaign=False)
 
 
 def journal_states(run: RunFolder) -> dict[str, dict[str, Any]]:
@@ -118,7 +117,7 @@ def journal_states(run: RunFolder) -> dict[str, dict[str, Any]]:
 
     Empty when there is no journal yet or it cannot be read (the shot files still tell).
     """
-    path = run.path / JOURNAL_NAME
+    path = run.journal_path
     if not path.exists():
         return {}
     try:
