@@ -457,8 +457,36 @@ def _open_shot(path: Path) -> h5py.File:
 
 
 def read_shot_meta(path: str | Path) -> ShotMeta:
-    """Only the meta of a shot file (cheap: no raw data is read)."""
-    return read_shot(path, load_raw=False).meta
+    """Only the meta of a shot file (cheap: the root attributes; no raw, derived or analysis data)."""
+    path = Path(path)
+    f = _open_shot(path)
+    try:
+        with f:
+            return _meta(f.attrs)
+    except KeyError as exc:
+        raise ShotFileError(f"{path}: damaged shot file: meta: missing {exc}") from None
+    except (OSError, ValueError) as exc:
+        raise ShotFileError(f"{path}: damaged shot file: meta cannot be read ({exc})") from None
+
+
+def _meta(attrs: Any) -> ShotMeta:
+    """The ShotMeta held in a shot file's root attributes."""
+    return ShotMeta(
+        operator=str(attrs["operator"]),
+        accelerometer_model=str(attrs["accelerometer_model"]),
+        accelerometer_serial=str(attrs["accelerometer_serial"]),
+        pressure_bar=float(attrs["pressure_bar"]),
+        projectile=int(attrs["projectile"]),
+        instruments=json.loads(attrs["instruments_json"]),
+        config=json.loads(attrs["config_json"]),
+        shot_id=str(attrs["shot_id"]) if "shot_id" in attrs else None,
+        shot_index=int(attrs["shot_index"]) if "shot_index" in attrs else None,
+        campaign_id=str(attrs["campaign_id"]) if "campaign_id" in attrs else None,
+        simulated_truth=json.loads(attrs["truth_json"]) if "truth_json" in attrs else None,
+        uuid=str(attrs["uuid"]),
+        utc_time=str(attrs["utc_time"]),
+        software_version=str(attrs["software_version"]),
+    )
 
 
 def read_shot(path: str | Path, load_raw: bool = True) -> Shot:
@@ -468,24 +496,7 @@ def read_shot(path: str | Path, load_raw: bool = True) -> Shot:
     where = "meta"
     try:
         with f:
-            attrs = f.attrs
-            truth = json.loads(attrs["truth_json"]) if "truth_json" in attrs else None
-            meta = ShotMeta(
-                operator=str(attrs["operator"]),
-                accelerometer_model=str(attrs["accelerometer_model"]),
-                accelerometer_serial=str(attrs["accelerometer_serial"]),
-                pressure_bar=float(attrs["pressure_bar"]),
-                projectile=int(attrs["projectile"]),
-                instruments=json.loads(attrs["instruments_json"]),
-                config=json.loads(attrs["config_json"]),
-                shot_id=str(attrs["shot_id"]) if "shot_id" in attrs else None,
-                shot_index=int(attrs["shot_index"]) if "shot_index" in attrs else None,
-                campaign_id=str(attrs["campaign_id"]) if "campaign_id" in attrs else None,
-                simulated_truth=truth,
-                uuid=str(attrs["uuid"]),
-                utc_time=str(attrs["utc_time"]),
-                software_version=str(attrs["software_version"]),
-            )
+            meta = _meta(f.attrs)
             where = "/raw"
             raw_group = f["raw"]
             raw = None
@@ -521,7 +532,7 @@ def read_shot(path: str | Path, load_raw: bool = True) -> Shot:
                         )
                     else:
                         derived[name] = obj[...]
-            return Shot(path, meta, raw, str(attrs["state"]), results, error, record, derived)
+            return Shot(path, meta, raw, str(f.attrs["state"]), results, error, record, derived)
     except KeyError as exc:
         raise ShotFileError(f"{path}: damaged shot file: {where}: missing {exc}") from None
     except (OSError, ValueError) as exc:
