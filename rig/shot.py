@@ -20,7 +20,6 @@ the error text; the shot still ends DONE (it was fired and recorded) with
 from __future__ import annotations
 
 import math
-import re
 import uuid
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -34,9 +33,8 @@ from analysis.records import Record
 from drivers.digitizer import Waveform
 from rig.config import RigConfig
 from rig.errors import ConfigError, ShotAborted
-from rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+from rig.shotfile import PLAIN_NAME_RE, RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
 
-_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 EXIT_DONE = 0
 EXIT_ABORTED = 3
 
@@ -87,7 +85,7 @@ class ShotRequest:
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")
-        if self.shot_name is not None and not _NAME_RE.match(self.shot_name):
+        if self.shot_name is not None and not PLAIN_NAME_RE.match(self.shot_name):
             raise ShotRequestError(f"shot_name: {self.shot_name!r} is not a plain file name "
                                    "(letters, digits, '_', '.', '-')")
         if not Path(self.out_dir).is_dir():

@@ -68,7 +68,7 @@ RAW_TMP_SUFFIX = ".tmp"  # <name>.h5.tmp: an unfinished raw write
 ANALYSIS_TMP_SUFFIX = ".analysis.tmp"  # <name>.h5.analysis.tmp: an unfinished analysis write
 TMP_SUFFIXES = (ANALYSIS_TMP_SUFFIX, RAW_TMP_SUFFIX)
 _CHUNK_SAMPLES = 1 << 20  # 2 MiB chunks of int16: checksummed without slowing the write
-_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+PLAIN_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
 
 class ShotFileError(RecordError):
@@ -232,7 +232,7 @@ def add_analysis(
     derived_arrays = {}
     for name, values in (derived or {}).items():
         arr = np.asarray(values)
-        if arr.dtype.kind not in "biuf" or name == "record" or not _NAME_RE.match(name):
+        if arr.dtype.kind not in "biuf" or name == "record" or not PLAIN_NAME_RE.match(name):
             raise ShotFileError(f"{path}: derived '{name}' must be a numeric array with a plain name")
         derived_arrays[name] = arr
     if record is not None and not isinstance(record, Record):
@@ -316,7 +316,7 @@ def _checked_channels(path: Path, raw: RawShot) -> dict[str, tuple[np.ndarray, f
     out: dict[str, tuple[np.ndarray, float, float]] = {}
     lengths = set()
     for name, channel in raw.channels.items():
-        if not _NAME_RE.match(name):
+        if not PLAIN_NAME_RE.match(name):
             raise ShotFileError(f"{path}: channel name {name!r} is not a plain name")
         try:
             codes, scale_v, offset_v = channel
