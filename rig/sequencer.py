@@ -83,6 +83,8 @@ FIRE_PULSE_S = 0.2  # how long the fire valve stays open (wall seconds); the lau
 POLL_INTERVAL_S = 0.05  # watch loops: one read of the interlocks per poll
 READINGS_INTERVAL_S = 0.1  # "reading" events at most 10 Hz
 PROGRESS_INTERVAL_S = 0.5  # "progress" events of evacuation/charging at most 2 Hz
+# Interlocks judged for display while the rig is made or kept safe (SAFE, STORE, ANALYSE).
+DISPLAY_INTERLOCKS = ("door", "clamp", "estop", "vacuum", "pressure")
 
 
 class State(StrEnum):
@@ -656,7 +658,7 @@ class Sequencer:
                 attempt(lambda name=name: setters[name](wanted[name]))
             readings = attempt(lambda: read_readings(inst, amplifier=False))
             if readings is not None:
-                report = evaluate(readings, limits, ("door", "clamp", "estop", "vacuum", "pressure"))
+                report = evaluate(readings, limits, DISPLAY_INTERLOCKS)
                 self._shielded(shot, lambda report=report: self._publish_reading(report))
             clean_round = errors == errors_before and coils is not None and readings is not None
             vented = readings is not None and readings.reservoir_pressure_bar <= limits.vent_done_bar
@@ -729,7 +731,7 @@ class Sequencer:
             if readings_ok:  # the rig is safe: readings are for the display only
                 try:
                     report = evaluate(read_readings(self.instruments, amplifier=False), self.config.limits,
-                                      ("door", "clamp", "estop", "vacuum", "pressure"))
+                                      DISPLAY_INTERLOCKS)
                     self._publish_reading(report)
                 except Exception:
                     readings_ok = False
