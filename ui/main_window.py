@@ -441,7 +441,7 @@ class MainWindow(QMainWindow):
         if view.model is not None and view.dcm is not None:
             design = view.dcm.design or {}
             self.dcm_tab.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
-                                   [complex(*p) for p in design.get("extra_poles", [])], _record_of(view),
+                                   [complex(*p) for p in design.get("extra_poles", [])], view.record,
                                    source=view.path.name if view.path else "", shot_path=view.path)
         self.shot_view_shown.emit(view)
 
@@ -461,16 +461,6 @@ class MainWindow(QMainWindow):
 
         self.background.run(write, lambda p: self.show_banner("ok", f"Report written to {p}"),
                             lambda exc: self.show_banner("error", f"Report not written: {exc}"))
-
-
-def _record_of(view: ShotView) -> Any:
-    if view.record_time_s is None or view.model is None:
-        return None
-    from analysis.records import Record
-
-    dt = float(view.record_time_s[1] - view.record_time_s[0]) if view.record_time_s.size > 1 else \
-        view.model.sample_interval_s
-    return Record(dt, view.reference_m_s2, view.response_m_s2, float(view.record_time_s[0]))
 
 
 def _actionable(message: str) -> str:

@@ -35,6 +35,7 @@ from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
 
 from analysis.dcm import DCM
 from analysis.model import DiscreteModel
+from analysis.records import Record
 from analysis.response import frequency_response
 
 LEVEL_KEYS = ("5", "10")
@@ -61,9 +62,7 @@ class ShotView:
     title: str = ""
     pm_time_s: np.ndarray | None = None
     pm_volts: np.ndarray | None = None
-    record_time_s: np.ndarray | None = None
-    reference_m_s2: np.ndarray | None = None
-    response_m_s2: np.ndarray | None = None
+    record: Record | None = None  # the analysis record (reference and response in m/s²)
     raw_response_v: np.ndarray | None = None  # when there is no analysed record
     loss_by_order: list[float | None] = field(default_factory=list)
     arx_loss_by_order: list[float | None] = field(default_factory=list)
@@ -119,7 +118,7 @@ def summary_of(results: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def view_from_results(results: dict[str, Any], record: Any = None) -> ShotView:
+def view_from_results(results: dict[str, Any], record: Record | None = None) -> ShotView:
     """A ShotView of an analysis results dict (and its record, when known); no raw channels."""
     from analysis.shot_analysis import ShotAnalysis
 
@@ -128,18 +127,13 @@ def view_from_results(results: dict[str, Any], record: Any = None) -> ShotView:
     model, dcm = analysis.model, analysis.dcm
     f = frequency_grid_hz(model.sample_interval_s)
     mag, comp = magnitudes(model, dcm, f)
-    view = ShotView(
+    return ShotView(
         loss_by_order=list(ident.get("loss_by_order", [])),
         arx_loss_by_order=list(ident.get("arx_loss_by_order", [])),
         order=ident.get("order", model.order),
         model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz),
-        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, summary=summary_of(results),
+        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, summary=summary_of(results), record=record,
     )
-    if record is not None:
-        view.record_time_s = record.time_s
-        view.reference_m_s2 = np.asarray(record.reference, dtype=float)
-        view.response_m_s2 = np.asarray(record.response, dtype=float)
-    return view
 
 
 def load_shot_view(path: str | Path) -> ShotView:
@@ -158,7 +152,7 @@ def load_shot_view(path: str | Path) -> ShotView:
     if shot.raw is not None:
         view.pm_time_s = shot.raw.time_s
         view.pm_volts = shot.raw.volts("doppler")
-        if view.record_time_s is None:
+        if view.record is None:
             view.raw_response_v = shot.raw.volts("response")
     truth = meta.simulated_truth
     if truth and view.model is not None:
@@ -469,11 +463,13 @@ class ShotPlots(QWidget):
             self.pm_curve.setData(view.pm_time_s, view.pm_volts)
             self.pm_plot.getPlotItem().enableAutoRange()
         window = None
-        if view.record_time_s is not None:
+        record = view.record
+        if record is not None:
+            t, reference, response = record.time_s, np.asarray(record.reference), np.asarray(record.response)
             self.accel_plot.setLabel("left", "acceleration (10³ m/s²)")
-            self.reference_curve.setData(view.record_time_s, view.reference_m_s2 / KILO)
-            self.response_curve.setData(view.record_time_s, view.response_m_s2 / KILO)
-            window = pulse_window_s(view.record_time_s, view.reference_m_s2, view.response_m_s2)
+            self.reference_curve.setData(t, reference / KILO)
+            self.response_curve.setData(t, response / KILO)
+            window = pulse_window_s(t, reference, response)
         elif view.raw_response_v is not None and view.pm_time_s is not None:
             self.accel_plot.setLabel("left", "amplifier output", units="V")
             self.response_curve.setData(view.pm_time_s, view.raw_response_v)
@@ -483,7 +479,7 @@ class ShotPlots(QWidget):
         self.accel_plot.getPlotItem().enableAutoRange()
         if window is not None:
             self.accel_plot.setXRange(*window, padding=0)
-            set_y_with_legend_room(self.accel_plot, view.reference_m_s2 / KILO, view.response_m_s2 / KILO)
+            set_y_with_legend_room(self.accel_plot, reference / KILO, response / KILO)
         self._show_losses(view)
         self._show_magnitude(view)
         self._show_poles(view)
