@@ -15,7 +15,7 @@ run off the GUI thread); `ShotPlots.show_view(view)` draws it:
   true poles ◇);
 - the live reservoir pressure and fixture vacuum (`LiveTrend`, fed by the reading events).
 
-The analysis maths is the analysis package's (frequency_response, DCM.frequency_response);
+The analysis maths is the analysis package's (normalised_gain_function, DCM.frequency_response);
 this module only samples it for drawing.
 """
 
@@ -36,7 +36,7 @@ from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
 from analysis.dcm import DCM
 from analysis.model import DiscreteModel
 from analysis.records import Record
-from analysis.response import frequency_response
+from analysis.response import normalised_gain_function
 
 LEVEL_KEYS = ("5", "10")
 BAND_COLOURS = {"5": (46, 157, 67, 45), "10": (224, 160, 16, 35)}
@@ -85,13 +85,12 @@ def frequency_grid_hz(sample_interval_s: float, lowest_hz: float = 100.0, points
 
 
 def magnitudes(model: DiscreteModel, dcm: DCM | None, frequency_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """|H(f)/H(0)| of the model, and of the model followed by the DCM (None without a DCM)."""
-    h = frequency_response(model, frequency_hz)
-    dc = abs(model.dc_gain)
-    model_mag = np.abs(h) / dc
+    """|H(f)/H(0)| of the model (the gain its FBSD is found on), and of the model followed by the
+    DCM (None without a DCM)."""
+    model_mag = normalised_gain_function(model.b, model.a, model.sample_interval_s)(frequency_hz)
     if dcm is None:
         return model_mag, None
-    return model_mag, np.abs(h * dcm.frequency_response(frequency_hz)) / (dc * abs(dcm.dc_gain))
+    return model_mag, model_mag * np.abs(dcm.frequency_response(frequency_hz)) / abs(dcm.dc_gain)
 
 
 def summary_of(results: dict[str, Any]) -> dict[str, Any]:
