@@ -108,6 +108,8 @@ class DcmTab(QWidget):
         self.shot_path: Path | None = None
         self.design: DcmDesign | None = None
         self.error: str | None = None
+        self._record_kilo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # t, reference, response (10³)
+        self._record_window: tuple[float, float] | None = None
         self._initial: tuple[float, float, str] = (1.0, 0.707, "")
         self._export_report = export_report
         self._syncing = False
@@ -248,8 +250,26 @@ class DcmTab(QWidget):
         self._initial = (float(ratio), float(damping), extra_text)
         self.source_label.setText(f"Model of {source or 'the shot'}: order {model.order}, "
                                   f"{1 / model.sample_interval_s / 1e3:g} kS/s")
+        self._draw_record()
         self._enable(True)
         self.reset()
+
+    def _draw_record(self) -> None:
+        """The shot's reference and response, drawn once per model (a redesign only changes the
+        compensated curve)."""
+        self.comp_record_curve.setData([], [])
+        record = self.record
+        if record is None:
+            self._record_kilo = self._record_window = None
+            self.ref_curve.setData([], [])
+            self.resp_curve.setData([], [])
+            return
+        t, reference, response = record.time_s, np.asarray(record.reference), np.asarray(record.response)
+        reference_kilo, response_kilo = reference / KILO, response / KILO
+        self.ref_curve.setData(t, reference_kilo)
+        self.resp_curve.setData(t, response_kilo)
+        self._record_kilo = (t, reference_kilo, response_kilo)
+        self._record_window = pulse_window_s(t, reference, response)
 
     def reset(self) -> None:
         """Back to the shot's own design."""
@@ -343,23 +363,16 @@ class DcmTab(QWidget):
         self.step_model_curve.setData(d.step_time_s, d.step_model)
         self.step_comp_curve.setData(d.step_time_s, d.step_compensated)
         self.step_plot.getPlotItem().enableAutoRange()
-        if self.record is not None:
-            t = self.record.time_s
-            self.ref_curve.setData(t, np.asarray(self.record.reference) / KILO)
-            self.resp_curve.setData(t, np.asarray(self.record.response) / KILO)
-            if d.compensated_record is not None:
-                self.comp_record_curve.setData(t, d.compensated_record / KILO)
-            window = pulse_window_s(t, np.asarray(self.record.reference), np.asarray(self.record.response))
-        else:
-            window = None
-            for curve in (self.ref_curve, self.resp_curve, self.comp_record_curve):
-                curve.setData([], [])
         self.record_plot.getPlotItem().enableAutoRange()
-        if window is not None:
-            self.record_plot.setXRange(*window, padding=0)
-            curves = [np.asarray(self.record.reference) / KILO, np.asarray(self.record.response) / KILO]
-            if d.compensated_record is not None:
-                curves.append(d.compensated_record / KILO)
+        if self._record_kilo is None:
+            return
+        t, reference, response = self._record_kilo
+        curves = [reference, response]
+        if d.compensated_record is not None:
+            curves.append(d.compensated_record / KILO)
+            self.comp_record_curve.setData(t, curves[-1])
+        if self._record_window is not None:
+            self.record_plot.setXRange(*self._record_window, padding=0)
             set_y_with_legend_room(self.record_plot, *curves)
 
     def compensated_fbsd_hz(self) -> dict[str, float] | None:
