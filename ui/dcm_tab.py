@@ -35,7 +35,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from analysis.dcm import DCM, apply, design_dcm, step_responses
+from analysis.dcm import DCM, apply, design_dcm, format_complex, step_responses
 from analysis.errors import AnalysisError
 from analysis.model import DiscreteModel
 from analysis.records import Record
@@ -246,7 +246,7 @@ class DcmTab(QWidget):
                   record: Record | None = None, source: str = "", shot_path: Path | None = None) -> None:
         """Design for `model`, starting from the shot's own DCM settings."""
         self.model, self.record, self.source, self.shot_path = model, record, source, shot_path
-        extra_text = ", ".join(_complex_text(complex(p)) for p in np.asarray(extra_poles, dtype=complex).ravel())
+        extra_text = ", ".join(format_complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel())
         self._initial = (float(ratio), float(damping), extra_text)
         self.source_label.setText(f"Model of {source or 'the shot'}: order {model.order}, "
                                   f"{1 / model.sample_interval_s / 1e3:g} kS/s")
@@ -358,7 +358,7 @@ class DcmTab(QWidget):
         st = rep["settling_time_samples"]
         self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} µs → {rt['compensated'] * dt_us:.1f} µs{verdict}; "
                                 f"±5 % settling {st['uncompensated'] * dt_us:.0f} µs → {st['compensated'] * dt_us:.0f} µs")
-        self.poles_label.setText(", ".join(_complex_text(p) for p in d.dcm.poles))
+        self.poles_label.setText(", ".join(format_complex(p) for p in d.dcm.poles))
         self.mag_plot.show_curves(d.frequency_hz, d.magnitude, d.compensated_magnitude, rep["compensated_fbsd_hz"])
         self.step_model_curve.setData(d.step_time_s, d.step_model)
         self.step_comp_curve.setData(d.step_time_s, d.step_compensated)
@@ -416,10 +416,3 @@ def _default_name(shot_path: Path | None, suffix: str) -> Path:
     if shot_path is None:
         return Path(f"shot{suffix}")
     return shot_path.with_name(shot_path.stem + suffix)
-
-
-def _complex_text(value: complex) -> str:
-    value = complex(value)
-    if abs(value.imag) < 1e-12:
-        return f"{value.real:.5g}"
-    return f"{value.real:.5g}{value.imag:+.5g}j"
