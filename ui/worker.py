@@ -29,7 +29,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -214,10 +214,7 @@ class RigLink(QObject):
         self._timer.stop()
         if self.shot_running:
             self.abort("the panel is closing")
-        future = self._io.submit(self.instruments.close)
-        deadline = time.monotonic() + timeout_s
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait([self._io.submit(self.instruments.close)], timeout=timeout_s)
         self._unsubscribe()
         self._io.shutdown(wait=False, cancel_futures=True)
 
@@ -321,8 +318,11 @@ class RigLink(QObject):
                 if self.links["digitizer"].status == "error":
                     self._set_link("digitizer", status="connected", problem="")
 
+    def _missing_instruments(self) -> list[str]:
+        return [link.label for link in self.links.values() if not link.usable]
+
     def _shot_task(self, request: ShotRequest, authorisation: FireAuthorisation) -> None:
-        missing = [INSTRUMENT_LABELS[k] for k, link in self.links.items() if not link.usable]
+        missing = self._missing_instruments()
         if missing:
             self.shot_failed.emit(f"cannot start the shot: not connected: {', '.join(missing)}")
             return
@@ -339,7 +339,7 @@ class RigLink(QObject):
         self.shot_finished.emit(outcome)
 
     def _campaign_task(self, runner: Any) -> None:
-        missing = [INSTRUMENT_LABELS[k] for k, link in self.links.items() if not link.usable]
+        missing = self._missing_instruments()
         outcome, failure = None, None
         if missing:
             failure = f"cannot start the campaign: not connected: {', '.join(missing)}"
