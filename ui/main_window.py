@@ -10,7 +10,7 @@ Rules the buttons follow:
   (`confirm_fire`, a dialog; tests and --demo-shot replace it) and then gives the
   FireAuthorisation. The sequencer reads the interlocks again before it opens the valve.
 - ABORT: always enabled. A running shot is aborted (the sequencer runs SAFE); with no shot
-  running the valves are commanded safe and read back.
+  running the sequencer does SAFE's work without a shot (Sequencer.make_safe).
 
 Instrument errors show as a red banner under the buttons (what, which instrument, what to do),
 in the log tab, and on the instrument's lamp; never as a traceback or a frozen window: every

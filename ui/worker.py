@@ -15,8 +15,8 @@ receiver living in the GUI thread through Qt's queued connection. The other sign
 ABORT always reaches the safe state:
 - a shot is running (or about to start): `Sequencer.abort`, and the request is remembered so
   an abort pressed before the sequencer left IDLE is re-sent at its first state change;
-- no shot is running: the valves are commanded safe (fire and fill closed, vent open, pump
-  off) and read back, on the I/O thread.
+- no shot is running: `Sequencer.make_safe` does SAFE's work (fire and fill closed, vent
+  open, pump off, read back until confirmed and vented, within timeouts.safe_s) on the I/O thread.
 
 `Background` runs pure computations (loading a shot file, preparing plot data) on a
 separate worker thread and hands the result to a callback in the GUI thread.
@@ -364,22 +364,11 @@ class RigLink(QObject):
             self._last_try["digitizer"] = -1e9
 
     def _make_safe_task(self) -> None:
-        """Idle ABORT: fire and fill closed, vent open, pump off; read back."""
-        valves = self.instruments.valves
-        try:
-            valves.set_fire_valve(False)
-            valves.set_fill_valve(False)
-            valves.set_vent_valve(True)
-            valves.set_vacuum_pump(False)
-            coils = valves.valves()
-        except InstrumentError as exc:
-            self._instrument_failed(exc)
-            self.safe_done.emit(False, f"SAFE NOT CONFIRMED: {exc}; check the rig by hand")
-            return
-        ok = not coils.fire_valve and not coils.fill_valve and coils.vent_valve and not coils.vacuum_pump
-        text = ("rig safe: fire and fill valves closed, vent open, pump off" if ok else
-                f"SAFE NOT CONFIRMED: the valves read back {coils}; check the rig by hand")
-        self.safe_done.emit(ok, text)
+        """Idle ABORT: the sequencer's SAFE without a shot (Sequencer.make_safe)."""
+        confirmed, problem = self.sequencer.make_safe()
+        text = ("rig safe: fire and fill valves closed, vent open, pump off" if confirmed else
+                f"SAFE NOT CONFIRMED: {problem}; check the rig by hand")
+        self.safe_done.emit(confirmed, text)
 
 
 class Background(QObject):

@@ -3,6 +3,7 @@ with ARM refused; a bad set-up is refused with a clear message before anything m
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -52,7 +53,10 @@ def test_auto_dcm_ratio_means_none(qtbot, tmp_path):
 
 
 def test_no_instruments_show_disconnected_and_arm_is_refused(qtbot, make_panel, tmp_path):
-    panel = make_panel(simulate=False, config=unreachable_config(tmp_path))
+    config = unreachable_config(tmp_path)
+    # an idle ABORT keeps trying to make the rig safe for timeouts.safe_s before it gives up
+    config = dataclasses.replace(config, timeouts=dataclasses.replace(config.timeouts, safe_s=2.0))
+    panel = make_panel(simulate=False, config=config)
     w = panel.window
     qtbot.waitUntil(lambda: all(lamp.level == "fault" for lamp in w.status_panel.instrument_lamps.values()),
                     timeout=15_000)
