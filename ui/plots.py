@@ -575,7 +575,9 @@ class LiveTrend(pg.PlotWidget):
             return
         now = time.monotonic() - self._t0
         self.samples.append((now, float(pressure_bar), float(vacuum_mbar)))
-        data = np.array([s for s in self.samples if s[0] >= now - self.span_s])
+        while self.samples[0][0] < now - self.span_s:  # oldest first: forget what left the window
+            self.samples.popleft()
+        data = np.array(self.samples)
         t = data[:, 0] - now
         self.pressure_curve.setData(t, data[:, 1])
         self.vacuum_curve.setData(t, np.log10(np.maximum(data[:, 2], 1e-3)))
