@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import Signal
+from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
     QFileDialog,
@@ -39,7 +40,7 @@ from rig.events import RigEvent
 from rig.journal import DONE_STATES, Journal
 from rig.plan import CampaignPlan, load_plan
 from rig.run_folder import RunFolder, open_run_folder
-from ui.plots import KILO, summary_of
+from ui.plots import format_khz, summary_of
 from ui.widgets import section_title
 from ui.worker import Background, RigLink
 
@@ -47,6 +48,7 @@ COLUMNS = ("#", "Shot", "Pressure", "Proj.", "State", "Order", "f_n", "ζ", "FBS
            "Shock sens.", "Shot file")
 _STATE_COLOURS = {"ANALYSED": "#1e6b2e", "ANALYSIS_FAILED": "#8a5a00", "ABORTED": "#b3261e", "UNKNOWN": "#b3261e",
                   "SKIPPED": "#5f6368", "FIRING": "#1f6fd1", "RECORDED": "#1f6fd1"}
+_DONE = frozenset(state.value for state in DONE_STATES)
 
 
 class CampaignTab(QWidget):
@@ -65,7 +67,6 @@ class CampaignTab(QWidget):
         self.run_folder: RunFolder | None = None
         self.running = False
         self.rows: dict[str, int] = {}
-        self.results: dict[str, dict[str, Any]] = {}
         self.states: dict[str, str] = {}
         self.last_outcome: Any = None
         self._current: str | None = None
@@ -193,7 +194,6 @@ class CampaignTab(QWidget):
     def _fill_table(self, plan: CampaignPlan) -> None:
         self.table.setRowCount(0)
         self.rows.clear()
-        self.results.clear()
         self.states.clear()
         for shot in plan.shots:
             row = self.table.rowCount()
@@ -282,7 +282,7 @@ class CampaignTab(QWidget):
         self.resume_button.setToolTip(tip)
 
     def _complete(self) -> bool:
-        return bool(self.states) and all(s in {x.value for x in DONE_STATES} for s in self.states.values())
+        return bool(self.states) and all(s in _DONE for s in self.states.values())
 
     # -- events -------------------------------------------------------------------------------------
     def on_event(self, event: RigEvent) -> None:
@@ -325,14 +325,12 @@ class CampaignTab(QWidget):
         item = QTableWidgetItem(state)
         colour = _STATE_COLOURS.get(state.rstrip("…"))
         if colour:
-            from PySide6.QtGui import QBrush, QColor
-
             item.setForeground(QBrush(QColor(colour)))
         self.table.setItem(row, 4, item)
         self._update_progress()
 
     def _update_progress(self) -> None:
-        done = sum(1 for s in self.states.values() if s in {x.value for x in DONE_STATES})
+        done = sum(1 for s in self.states.values() if s in _DONE)
         self.progress.setValue(done)
 
     def _load_results(self, sid: str, path: Path) -> None:
@@ -351,16 +349,15 @@ class CampaignTab(QWidget):
         self.table.setItem(row, 11, QTableWidgetItem(path.name))
         if not results or "model" not in results:
             return
-        self.results[sid] = results
         s = summary_of(results)
         fn, zeta = s.get("natural_frequency_hz"), s.get("damping_ratio")
         fbsd, shock = s.get("fbsd_hz", {}), s.get("shock_sensitivity")
         cells = {
             5: str(s.get("order") or "—"),
-            6: f"{fn / KILO:.2f} kHz" if fn else "—",
+            6: format_khz(fn),
             7: f"{zeta:.4f}" if zeta is not None else "—",
-            8: f"{fbsd['5'] / KILO:.2f} kHz" if "5" in fbsd else "—",
-            9: f"{fbsd['10'] / KILO:.2f} kHz" if "10" in fbsd else "—",
+            8: format_khz(fbsd.get("5")),
+            9: format_khz(fbsd.get("10")),
             10: f"{shock:.4g}" if shock is not None else "—",
         }
         for col, text in cells.items():

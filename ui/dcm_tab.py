@@ -49,8 +49,8 @@ from ui.plots import (
     REF_PEN,
     RESP_PEN,
     MagnitudePlot,
-    _fmt_hz,
     _plot,
+    format_khz,
     frequency_grid_hz,
     magnitudes,
     pulse_window_s,
@@ -343,8 +343,8 @@ class DcmTab(QWidget):
         rep = d.report
         for key in LEVEL_KEYS:
             before, after = rep["fbsd_hz"][key], rep["compensated_fbsd_hz"][key]
-            self.model_fbsd[key].setText(_fmt_hz(before))
-            self.compensated_fbsd[key].setText(_fmt_hz(after))
+            self.model_fbsd[key].setText(format_khz(before))
+            self.compensated_fbsd[key].setText(format_khz(after))
             self.widening[key].setText(f"×{after / before:.2f}" if before > 0 else "—")
             narrower = before > 0 and after < before
             self.widening[key].setStyleSheet("font-size: 10pt; font-weight: 600;" +

@@ -218,7 +218,8 @@ def _plot(title: str, left: str, bottom: str, left_units: str | None = None,
     return configure_plot(pg.PlotWidget(), title, left, bottom, left_units, bottom_units)
 
 
-def _fmt_hz(value: float | None) -> str:
+def format_khz(value: float | None) -> str:
+    """A frequency in Hz as "12.34 kHz" ("—" when unknown)."""
     if value is None or not math.isfinite(value):
         return "—"
     return f"{value / KILO:.2f} kHz"
@@ -335,10 +336,10 @@ class ResultsStrip(QFrame):
 
     def show_summary(self, s: dict[str, Any]) -> None:
         fbsd, comp = s.get("fbsd_hz", {}), s.get("compensated_fbsd_hz", {})
-        self.values["fbsd_5"].setText(_fmt_hz(fbsd.get("5")))
-        self.values["fbsd_10"].setText(_fmt_hz(fbsd.get("10")))
-        self.values["comp_5"].setText(_fmt_hz(comp.get("5")))
-        self.values["comp_10"].setText(_fmt_hz(comp.get("10")))
+        self.values["fbsd_5"].setText(format_khz(fbsd.get("5")))
+        self.values["fbsd_10"].setText(format_khz(fbsd.get("10")))
+        self.values["comp_5"].setText(format_khz(comp.get("5")))
+        self.values["comp_10"].setText(format_khz(comp.get("10")))
         ratio = s.get("dcm_ratio")
         self.values["comp_5"].setToolTip(f"DCM r = {ratio:.3g}" if ratio else "")
         order, fit = s.get("order"), s.get("fit_percent")
