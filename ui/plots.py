@@ -167,8 +167,9 @@ def pulse_window_s(time_s: np.ndarray, reference: np.ndarray, response: np.ndarr
     ref, resp = np.abs(reference), np.abs(response)
     if not (np.max(ref) > 0 and np.max(resp) > 0):
         return None
-    start = int(np.flatnonzero(ref > 0.05 * np.max(ref))[0])
-    end = int(max(np.flatnonzero(resp > 0.03 * np.max(resp))[-1], np.flatnonzero(ref > 0.05 * np.max(ref))[-1]))
+    pulse = np.flatnonzero(ref > 0.05 * np.max(ref))
+    start = int(pulse[0])
+    end = int(max(np.flatnonzero(resp > 0.03 * np.max(resp))[-1], pulse[-1]))
     span = max(time_s[end] - time_s[start], 10 * (time_s[1] - time_s[0]))
     return float(max(time_s[0], time_s[start] - 0.15 * span)), float(min(time_s[-1], time_s[end] + 0.15 * span))
 

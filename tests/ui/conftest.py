@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import gc
 import socket
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from PySide6.QtCore import QCoreApplication, QEvent, QSettings
+from PySide6.QtCore import QCoreApplication, QSettings
 
 from drivers.sim.simulated_rig import ServerParams, SimConfig
 from drivers.sim.world import WorldParams
@@ -67,16 +66,14 @@ def unreachable_config(tmp_path: Path, keep: tuple[str, ...] = (), base: RigConf
 
 
 def dispose(widget: Any) -> None:
-    """Close and delete a widget now (see the module docstring); a deleted one is left alone."""
+    """Close and delete a widget now (ui.app.dispose; see the module docstring); a deleted one
+    is left alone."""
     import shiboken6
 
-    if not shiboken6.isValid(widget):
-        return
-    widget.close()
-    widget.deleteLater()
-    QCoreApplication.sendPostedEvents(None, QEvent.Type.DeferredDelete)
-    QCoreApplication.processEvents()
-    gc.collect()
+    from ui.app import dispose as dispose_now
+
+    if shiboken6.isValid(widget):
+        dispose_now(QCoreApplication.instance(), widget)
 
 
 @dataclasses.dataclass
