@@ -109,10 +109,9 @@ def summary_of(results: dict[str, Any]) -> dict[str, Any]:
         "fbsd_hz": dict(results.get("fbsd_hz", {})),
         "compensated_fbsd_hz": dict(dcm.get("compensated_fbsd_hz", {})),
         "dcm_ratio": (dcm.get("design") or {}).get("ratio"),
-        "rise_time_ratio": dcm.get("rise_time_ratio"),
         "shock_sensitivity": reduction.get("shock_sensitivity"),
         "peak_acceleration_m_s2": reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")),
-        "pulse_width_s": reduction.get("pulse_width_s", excitation.get("width_s")),
+        "pulse_width_s": reduction.get("pulse_width_s", excitation.get("pulse_width_s")),
         "warnings": list(results.get("warnings", [])),
     }
 
