@@ -91,7 +91,9 @@ def run_panel(args: argparse.Namespace) -> int:
             if args.demo_shot:
                 return _demo_shot(app, window, args.screenshot, errors)
             if args.screenshot is not None:
-                _after(app, 1500, lambda: (_save_screenshot(window, Path(args.screenshot)), window.close()))
+                from PySide6.QtCore import QTimer
+
+                QTimer.singleShot(1500, lambda: (_save_screenshot(window, Path(args.screenshot)), window.close()))
             app.exec()
             return 0
         finally:
@@ -123,12 +125,6 @@ def _excepthook(window: Any, errors: list[str]) -> Any:
             window.log_view.add_message("error", line)
             window.show_banner("error", f"{line} (the rig is unaffected; see the log)")
     return hook
-
-
-def _after(app: Any, ms: int, action: Any) -> None:
-    from PySide6.QtCore import QTimer
-
-    QTimer.singleShot(ms, action)
 
 
 def _save_screenshot(window: Any, path: Path) -> Path:
