@@ -4,8 +4,6 @@ the gauges show them."""
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
-
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -15,7 +13,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from rig.events import RigEvent
+from rig.events import RigEvent, utc_now_iso
 
 MAX_ROWS = 5000
 _COLOURS = {"error": "#b3261e", "warning": "#8a5a00", "result": "#0b57d0"}
@@ -51,8 +49,7 @@ class LogView(QTableWidget):
 
     def add_message(self, level: str, text: str, state: str = "") -> None:
         """Log a panel message ("info", "warning", "error")."""
-        now = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-        self.add_row(now, state, level, text)
+        self.add_row(utc_now_iso(), state, level, text)
 
     def add_row(self, utc: str, state: str, kind: str, message: str) -> None:
         if self.rowCount() >= MAX_ROWS:
