@@ -26,7 +26,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from rig.config import load_rig_config, load_sim_config, rig_config_path
+from rig.cli import rig_config_path
+from rig.config import load_rig_config, load_sim_config
 from rig.errors import ConfigError
 
 SCREENSHOT_SIZE = (1280, 800)
