@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
+from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
 
@@ -49,9 +50,22 @@ PM_PEN = pg.mkPen("#5b3fa8", width=1)
 KILO = 1e3
 
 
+_GUI_THREAD_GC: GarbageCollector | None = None
+
+
 def configure_pyqtgraph() -> None:
-    """White plots with dark text and anti-aliasing (lab-report look)."""
+    """White plots with dark text and anti-aliasing (lab-report look); garbage collected on the GUI thread.
+
+    Python's cycle collector runs in whichever thread happens to allocate. When that is a worker
+    (the rig I/O thread, a report export), it can destroy pyqtgraph's Qt objects there while the
+    GUI thread deletes widgets, and the two threads deadlock (seen in the panel's tests). pyqtgraph's
+    GarbageCollector disables automatic collection and collects from a GUI-thread timer instead;
+    installed once per process.
+    """
+    global _GUI_THREAD_GC
     pg.setConfigOptions(background="w", foreground="#202124", antialias=True)
+    if _GUI_THREAD_GC is None:
+        _GUI_THREAD_GC = GarbageCollector(interval=0.5)
 
 
 @dataclass
