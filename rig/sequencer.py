@@ -661,7 +661,9 @@ class Sequencer:
                 report = evaluate(readings, limits, DISPLAY_INTERLOCKS)
                 self._shielded(shot, lambda report=report: self._publish_reading(report))
             clean_round = errors == errors_before and coils is not None and readings is not None
-            vented = readings is not None and readings.reservoir_pressure_bar <= limits.vent_done_bar
+            # the gauge reads to the nearest count: the true pressure may be half a count higher
+            half_count = 0.5 * self.config.valve_controller.scales.pressure_bar_per_count
+            vented = readings is not None and readings.reservoir_pressure_bar + half_count <= limits.vent_done_bar
             now = time.monotonic()
             hold_until = start + (self._safe_hold_s() if shot.controller_timed_out else 0.0)
             if clean_round and not wrong and vented and now >= hold_until:
