@@ -516,22 +516,12 @@ class FireLog:
 def attach_fire_log(world: World, log: FireLog) -> None:
     """Make the simulated `world` log every launch to `log` (test witness; simulation only).
 
-    The world has no launch callback, so its public `set_fire_valve` is wrapped on this
-    instance: after the original call, a rise of `shots_fired` is a launch. The line is
-    written in the simulator's server thread right after the launch, before the Modbus
-    reply goes back, so the sequencer cannot have seen the shot fired without the line.
+    The line is written by the world's launch listener, in the simulator's server thread
+    before the Modbus reply goes back, so the sequencer cannot have seen the shot fired
+    without the line.
     """
-    original = world.set_fire_valve
-
-    def set_fire_valve(open_: bool) -> None:
-        before = world.shots_fired
-        original(open_)
-        if world.shots_fired > before:
-            truth = world.last_shot_truth or {}
-            log.append({"shot_number": world.shots_fired, "pressure_bar": truth.get("pressure_bar"),
-                        "fired_at_sim_s": truth.get("fired_at_sim_s")})
-
-    world.set_fire_valve = set_fire_valve  # type: ignore[method-assign]
+    world.launch_listeners.append(lambda truth: log.append(
+        {k: truth.get(k) for k in ("shot_number", "pressure_bar", "fired_at_sim_s")}))
 
 
 def read_fire_log(path: str | Path) -> list[dict[str, Any]]:

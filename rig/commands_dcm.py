@@ -71,7 +71,7 @@ def design_report(
     poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, source: str
 ) -> dict[str, Any]:
     """The JSON result of `hopkinson dcm` (also what -o writes)."""
-    from analysis.dcm import compensated_fbsd_edges, rise_times_samples, settling_times_samples
+    from analysis.dcm import compare_steps, compensated_fbsd_edges
     from analysis.response import fbsd_edges, pole_analysis
 
     result: dict[str, Any] = {
@@ -83,7 +83,8 @@ def design_report(
     if model is not None:
         before = fbsd_edges(model)
         after = compensated_fbsd_edges(model, dcm)
-        rt_before, rt_after = rise_times_samples(model, dcm)
+        steps = compare_steps(model, dcm)  # one step-response simulation for both times
+        rt_before, rt_after = steps.rise_times_samples()
         result["fbsd_hz"] = {k: e.frequency_hz for k, e in before.items()}
         result["compensated_fbsd_hz"] = {k: e.frequency_hz for k, e in after.items()}
         result["fbsd_detail"] = {k: e.to_dict() for k, e in before.items()}
@@ -91,9 +92,9 @@ def design_report(
         result["fbsd_widening"] = {k: after[k].frequency_hz / before[k].frequency_hz for k in before}
         result["rise_time_samples"] = {"uncompensated": rt_before, "compensated": rt_after}
         result["rise_time_ratio"] = rt_before / rt_after if rt_after > 0 else None
-        st_before, st_after = settling_times_samples(model, dcm)
+        st_before, st_after = steps.settling_times_samples()
         result["settling_time_samples"] = {"uncompensated": st_before, "compensated": st_after}
-        result["settling_time_ratio"] = st_before / max(st_after, 1.0)
+        result["settling_time_ratio"] = steps.settling_time_ratio()
     return result
 
 

@@ -42,7 +42,6 @@ from drivers.valve_controller import (
     RegisterMap,
     ScaleMap,
 )
-from rig.cli import rig_config_path as rig_config_path  # re-exported for ui/app.py
 from rig.errors import ConfigError
 
 if typing.TYPE_CHECKING:
