@@ -25,11 +25,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import signal
-
-from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel, complex_pairs, from_pairs, load_json_object
-from analysis.response import (
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel, complex_pairs, from_pairs, load_json_object
+from hopkinson.analysis.response import (
     DEFAULT_LEVELS,
     BandEdge,
     band_edges,
@@ -40,6 +38,7 @@ from analysis.response import (
     response_times_samples,
     zpk_to_sos,
 )
+from scipy import signal
 
 _CONJ_TOL = 1e-9
 _MAX_STEP_SAMPLES = 4_000_000  # longest step response simulated for a rise time

@@ -65,11 +65,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ, resample_to_rate
 from scipy import fft, ndimage, signal
-
-from analysis.errors import AnalysisError
-from analysis.records import Record
-from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ, resample_to_rate
 
 # --- documented constants of the method ------------------------------------------------------
 BLOCK_SAMPLES = 2**16  # FFT length of one analytic-signal block

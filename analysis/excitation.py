@@ -26,9 +26,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from hopkinson.analysis.errors import AnalysisError
 from scipy import fft, optimize
-
-from analysis.errors import AnalysisError
 
 WIDTH_FRACTION = 0.10  # ISO 16063-22: pulse duration at 10 % of the peak
 MINUS_3DB = 10 ** (-3 / 20)  # amplitude ratio at −3 dB (0.7079)

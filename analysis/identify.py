@@ -27,21 +27,24 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
-from scipy import fft, linalg, signal
-
-from analysis.errors import AnalysisError
-from analysis.loss import arx_coefficients_by_order, arx_loss_by_order, long_dot
-from analysis.model import DiscreteModel
-from analysis.records import Record
-from analysis.refined_iv import (
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.loss import arx_coefficients_by_order, arx_loss_by_order, long_dot
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.refined_iv import (
     TransferFit,
     output_error_refine,
     refined_iv_fit,
     simulate,
     stabilised,
 )
-from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ, estimate_delay_samples, resample_to_rate
+from hopkinson.analysis.resample import (
+    DEFAULT_ANALYSIS_RATE_HZ,
+    estimate_delay_samples,
+    resample_to_rate,
+)
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy import fft, linalg, signal
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10

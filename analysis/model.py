@@ -12,8 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from analysis.errors import AnalysisError
+from hopkinson.analysis.errors import AnalysisError
 
 
 def complex_pairs(values: np.ndarray) -> list[list[float]]:

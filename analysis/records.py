@@ -11,8 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from analysis.errors import RecordError
+from hopkinson.analysis.errors import RecordError
 
 RECORD_KEYS = ("time_s", "reference", "response")
 

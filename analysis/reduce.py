@@ -35,8 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from analysis.doppler import (
+from hopkinson.analysis.doppler import (
     BeatPhase,
     Demodulated,
     beat_phase,
@@ -47,10 +46,10 @@ from analysis.doppler import (
     lowpass,
     metres_per_radian,
 )
-from analysis.errors import AnalysisError, RecordError
-from analysis.excitation import pulse_width
-from analysis.records import Record, read_columns, validated_columns
-from analysis.resample import (
+from hopkinson.analysis.errors import AnalysisError, RecordError
+from hopkinson.analysis.excitation import pulse_width
+from hopkinson.analysis.records import Record, read_columns, validated_columns
+from hopkinson.analysis.resample import (
     DEFAULT_ANALYSIS_RATE_HZ,
     estimate_delay_samples,
     shift_samples,

@@ -28,9 +28,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from hopkinson.analysis.loss import lagged_cross_products, long_dot
 from scipy import linalg, optimize, signal
-
-from analysis.loss import lagged_cross_products, long_dot
 
 
 @dataclass(frozen=True)

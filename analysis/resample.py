@@ -13,10 +13,9 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.records import Record
 from scipy import fft, signal
-
-from analysis.errors import AnalysisError
-from analysis.records import Record
 
 DEFAULT_ANALYSIS_RATE_HZ = 1e6
 

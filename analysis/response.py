@@ -17,10 +17,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from scipy import optimize, signal
-
-from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel, complex_pairs
 
 DEFAULT_LEVELS = (0.05, 0.10)
 

@@ -15,8 +15,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-
-from analysis.dcm import (
+from hopkinson.analysis.dcm import (
     DCM,
     DEFAULT_WIDENING,
     compare_steps,
@@ -24,14 +23,14 @@ from analysis.dcm import (
     design_dcm,
     ratio_for_widening,
 )
-from analysis.errors import AnalysisError
-from analysis.excitation import ExcitationSummary, excitation_summary
-from analysis.identify import Identification, identify
-from analysis.model import DiscreteModel
-from analysis.records import Record
-from analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
-from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
-from analysis.response import fbsd_hz, model_output, pole_analysis
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
+from hopkinson.analysis.identify import Identification, identify
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
+from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
+from hopkinson.analysis.response import fbsd_hz, model_output, pole_analysis
 
 
 @dataclass(frozen=True)

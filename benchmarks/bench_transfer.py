@@ -18,20 +18,15 @@ from __future__ import annotations
 import argparse
 import json
 import socket
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import pyvisa
-
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from drivers.digitizer import Digitizer  # noqa: E402
-from drivers.ieee488_block import digit_count, payload_length  # noqa: E402
-from drivers.sim.faults import FaultSet  # noqa: E402
-from drivers.sim.scpi_digitizer import AcquisitionSettings, SimDigitizerServer  # noqa: E402
+from hopkinson.drivers.digitizer import Digitizer
+from hopkinson.drivers.ieee488_block import digit_count, payload_length
+from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.scpi_digitizer import AcquisitionSettings, SimDigitizerServer
 
 CHANNEL = 2
 RANGE_V = 10.0

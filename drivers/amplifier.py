@@ -42,8 +42,7 @@ from dataclasses import dataclass
 from types import TracebackType
 
 import serial
-
-from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 
 GAINS: tuple[float, ...] = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
 LOWPASS_HZ: tuple[float, ...] = (1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3)  # plus 0 = OFF

@@ -28,10 +28,9 @@ import numpy as np
 import pyvisa
 import pyvisa.constants
 import pyvisa.errors
-
-from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
-from drivers.ieee488_block import BlockFormatError, read_block
-from drivers.scpi_dialect import GenericScpiDialect, Preamble, ReplyFormatError
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.ieee488_block import BlockFormatError, read_block
+from hopkinson.drivers.scpi_dialect import GenericScpiDialect, Preamble, ReplyFormatError
 
 # Size of each low-level read of a waveform block (each read has its own timeout), and the
 # receive size given to pyvisa-py's socket session (see _enlarge_receive_size). Measured on

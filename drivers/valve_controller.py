@@ -29,10 +29,9 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
 
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
-
-from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 
 UINT16_MAX = 0xFFFF
 

@@ -42,12 +42,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rig.errors import ConfigError
-from rig.events import EventBus, RigEvent
-from rig.journal import Journal, ShotState, ShotStatus
-from rig.plan import CampaignPlan, PlannedShot, load_plan
-from rig.run_folder import PLAN_NAME, RunFolder, create_run_folder, open_run_folder
-from rig.shot import (
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.journal import Journal, ShotState, ShotStatus
+from hopkinson.rig.plan import CampaignPlan, PlannedShot, load_plan
+from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, create_run_folder, open_run_folder
+from hopkinson.rig.shot import (
     AnalysisResult,
     ShotOutcome,
     ShotRequest,
@@ -56,12 +56,12 @@ from rig.shot import (
     analysis_params,
     record_analysis,
 )
-from rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
+from hopkinson.rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
 
 if TYPE_CHECKING:
-    from drivers.sim.world import World
-    from rig.config import RigConfig
-    from rig.instruments import Instruments
+    from hopkinson.drivers.sim.world import World
+    from hopkinson.rig.config import RigConfig
+    from hopkinson.rig.instruments import Instruments
 
 DEFAULT_RUNS_DIR = Path("runs")
 EXIT_COMPLETE = 0
@@ -210,7 +210,7 @@ class CampaignRunner:
     def __init__(self, run: RunFolder, plan: CampaignPlan, instruments: Instruments, config: RigConfig,
                  bus: EventBus, *, analyse: Callable[[Any, dict[str, Any]], AnalysisResult] | None = None,
                  max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None) -> None:
-        from rig.sequencer import Sequencer  # the drivers load only when shots are fired
+        from hopkinson.rig.sequencer import Sequencer  # the drivers load only when shots are fired
 
         self.run_folder = run
         self.plan = plan
@@ -317,7 +317,7 @@ class CampaignRunner:
             self._on_shot_start(shot)
         self.bus.emit("progress", CAMPAIGN_STATE, f"shot {shot.id}: {shot.pressure_bar:g} bar, projectile "
                       f"No. {shot.projectile}", **self._data())
-        from rig.sequencer import FireAuthorisation
+        from hopkinson.rig.sequencer import FireAuthorisation
 
         self._order = shot.analysis.order
         try:

@@ -33,8 +33,8 @@ from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any
 
-from drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ
-from drivers.valve_controller import (
+from hopkinson.drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ
+from hopkinson.drivers.valve_controller import (
     CoilMap,
     DiscreteInputMap,
     HoldingRegisterMap,
@@ -42,10 +42,10 @@ from drivers.valve_controller import (
     RegisterMap,
     ScaleMap,
 )
-from rig.errors import ConfigError
+from hopkinson.rig.errors import ConfigError
 
 if typing.TYPE_CHECKING:
-    from drivers.sim.simulated_rig import SimConfig
+    from hopkinson.drivers.sim.simulated_rig import SimConfig
 
 
 @dataclass(frozen=True)
@@ -261,7 +261,7 @@ def load_rig_config(path: str | Path) -> RigConfig:
 def load_sim_config(path: str | Path) -> SimConfig:
     """Read and validate config/sim.toml; ConfigError on anything wrong."""
     # Imported here: the simulator's servers are only loaded by the commands that run them.
-    from drivers.sim.simulated_rig import SimConfig
+    from hopkinson.drivers.sim.simulated_rig import SimConfig
 
     path = Path(path)
     config = _build(SimConfig, _read_toml(path), path, "")

@@ -24,14 +24,14 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from drivers.amplifier import BridgeAmplifier
-from drivers.digitizer import Digitizer
-from drivers.errors import InstrumentError
-from drivers.valve_controller import RegisterMap, ValveController
-from rig.config import RigConfig
+from hopkinson.drivers.amplifier import BridgeAmplifier
+from hopkinson.drivers.digitizer import Digitizer
+from hopkinson.drivers.errors import InstrumentError
+from hopkinson.drivers.valve_controller import RegisterMap, ValveController
+from hopkinson.rig.config import RigConfig
 
 if TYPE_CHECKING:
-    from drivers.sim.simulated_rig import SimAddresses
+    from hopkinson.drivers.sim.simulated_rig import SimAddresses
 
 
 @dataclass

@@ -22,10 +22,10 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from rig.config import LimitsConfig
+from hopkinson.rig.config import LimitsConfig
 
 if TYPE_CHECKING:
-    from rig.instruments import Instruments
+    from hopkinson.rig.instruments import Instruments
 
 INTERLOCKS = ("door", "clamp", "estop", "vacuum", "pressure", "digitizer", "amplifier")
 _BASIC = ("door", "clamp", "estop", "amplifier")

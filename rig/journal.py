@@ -44,10 +44,10 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from rig.errors import ConfigError
-from rig.plan import CampaignPlan, PlannedShot
-from rig.run_folder import RunFolder, RunLock, open_run_folder
-from rig.shotfile import ShotFileError, read_shot_meta, utc_now_iso
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan import CampaignPlan, PlannedShot
+from hopkinson.rig.run_folder import RunFolder, RunLock, open_run_folder
+from hopkinson.rig.shotfile import ShotFileError, read_shot_meta, utc_now_iso
 
 SCHEMA_VERSION = 1
 

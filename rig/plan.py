@@ -45,7 +45,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from rig.errors import ConfigError
+from hopkinson.rig.errors import ConfigError
 
 MAX_ORDER_LIMIT = 40
 

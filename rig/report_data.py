@@ -1,7 +1,7 @@
 """What a calibration report shows, gathered from a shot file or a campaign run folder.
 
     report = report_for(path)                          # a shot file (.h5) or a run folder
-    write_report(report, ["report.pdf", "report.html"])  # analysis.report
+    write_report(report, ["report.pdf", "report.html"])  # reports.report
     write_run_report(run_folder, ["pdf", "html"])      # into <run folder>/report/report.<fmt>
 
 A shot's analysis is rebuilt from its shot file (`/analysis` results and `/derived/record`)
@@ -17,13 +17,13 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-from analysis.errors import AnalysisError
-from analysis.report import G_M_S2, CalibrationReport, ShotEntry, write_report
-from analysis.shot_analysis import ShotAnalysis
-from rig.errors import ConfigError
-from rig.plan import CampaignPlan
-from rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
-from rig.shotfile import Shot, ShotFileError, read_shot
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.shot_analysis import ShotAnalysis
+from hopkinson.reports.report import G_M_S2, CalibrationReport, ShotEntry, write_report
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan import CampaignPlan
+from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
+from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot
 
 REPORT_NAME = "report"
 

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from rig.errors import ConfigError
-from rig.plan import CampaignPlan, load_plan
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan import CampaignPlan, load_plan
 
 PLAN_NAME = "plan.toml"
 JOURNAL_NAME = "journal.sqlite"

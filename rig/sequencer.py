@@ -56,12 +56,12 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from drivers.errors import InstrumentError, InstrumentTimeout
-from rig.config import RigConfig
-from rig.events import EventBus
-from rig.instruments import Instruments
-from rig.interlocks import REQUIRED, InterlockReport, evaluate, read_readings
-from rig.shot import (
+from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.events import EventBus
+from hopkinson.rig.instruments import Instruments
+from hopkinson.rig.interlocks import REQUIRED, InterlockReport, evaluate, read_readings
+from hopkinson.rig.shot import (
     EXIT_ABORTED,
     EXIT_DONE,
     AnalyseFn,

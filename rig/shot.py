@@ -28,12 +28,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from analysis.records import Record
-from drivers.digitizer import Waveform
-from rig.config import RigConfig
-from rig.errors import ConfigError, ShotAborted
-from rig.shotfile import PLAIN_NAME_RE, RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+from hopkinson.analysis.records import Record
+from hopkinson.drivers.digitizer import Waveform
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.errors import ConfigError, ShotAborted
+from hopkinson.rig.shotfile import (
+    PLAIN_NAME_RE,
+    RawChannel,
+    RawShot,
+    ShotMeta,
+    add_analysis,
+    write_raw_shot,
+)
 
 EXIT_DONE = 0
 EXIT_ABORTED = 3
@@ -231,7 +237,10 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
 def analyse_raw(raw: RawShot, params: dict[str, Any]) -> AnalysisResult:
     """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
     analysis (analysis.shot_analysis) of the raw channels in volts."""
-    from analysis.shot_analysis import AnalysisParams, analyse_raw_shot  # heavy: loaded when needed
+    from hopkinson.analysis.shot_analysis import (  # heavy: loaded when needed
+        AnalysisParams,
+        analyse_raw_shot,
+    )
 
     analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s,
                                 AnalysisParams.from_options(**params))

@@ -56,10 +56,9 @@ from typing import Any, NamedTuple
 
 import h5py
 import numpy as np
-
-from analysis.errors import RecordError
-from analysis.records import Record
-from rig.events import utc_now_iso
+from hopkinson.analysis.errors import RecordError
+from hopkinson.analysis.records import Record
+from hopkinson.rig.events import utc_now_iso
 
 FORMAT = "hopkinson-shot"
 FORMAT_VERSION = 1

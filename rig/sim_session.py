@@ -23,12 +23,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drivers.sim.faults import FAULTS
-from drivers.sim.simulated_rig import SimConfig, SimulatedRig
-from drivers.sim.world import World
-from rig.config import RigConfig
-from rig.errors import ConfigError
-from rig.instruments import sim_rig_config
+from hopkinson.drivers.sim.faults import FAULTS
+from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
+from hopkinson.drivers.sim.world import World
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.instruments import sim_rig_config
 
 
 @dataclass

@@ -26,9 +26,9 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from rig.cli import rig_config_path
-from rig.config import load_rig_config, load_sim_config
-from rig.errors import ConfigError
+from hopkinson.rig.cli.main import rig_config_path
+from hopkinson.rig.config import load_rig_config, load_sim_config
+from hopkinson.rig.errors import ConfigError
 
 SCREENSHOT_SIZE = (1280, 800)
 DEMO_TIMEOUT_S = 180.0
@@ -65,7 +65,7 @@ def run_panel(args: argparse.Namespace) -> int:
         truth = None
         note = ""
         if args.sim:
-            from rig.sim_session import sim_session
+            from hopkinson.rig.sim_session import sim_session
 
             session = stack.enter_context(sim_session(config, load_sim_config(args.sim_config), args.sim_fault))
             config, truth = session.config, session.simulated_truth
@@ -78,7 +78,7 @@ def run_panel(args: argparse.Namespace) -> int:
         else:
             settings = QSettings("hopkinson", "panel-sim" if args.sim else "panel")
 
-        from ui.main_window import MainWindow
+        from hopkinson.ui.main_window import MainWindow
 
         window = MainWindow(config, settings=settings, simulated_truth=truth, out_dir=args.out,
                             runs_dir=args.runs, title_note=note)

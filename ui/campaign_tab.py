@@ -16,6 +16,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from hopkinson.rig.campaign import CAMPAIGN_STATE, check_authorisation, prepare_run
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.events import RigEvent
+from hopkinson.rig.journal import DONE_STATES, Journal
+from hopkinson.rig.plan import CampaignPlan, load_plan
+from hopkinson.rig.run_folder import RunFolder, open_run_folder
+from hopkinson.ui.plots import format_khz, summary_of
+from hopkinson.ui.widgets import section_title
+from hopkinson.ui.worker import Background, RigLink
 from PySide6.QtCore import Signal
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
@@ -33,16 +42,6 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
-
-from rig.campaign import CAMPAIGN_STATE, check_authorisation, prepare_run
-from rig.errors import ConfigError
-from rig.events import RigEvent
-from rig.journal import DONE_STATES, Journal
-from rig.plan import CampaignPlan, load_plan
-from rig.run_folder import RunFolder, open_run_folder
-from ui.plots import format_khz, summary_of
-from ui.widgets import section_title
-from ui.worker import Background, RigLink
 
 COLUMNS = ("#", "Shot", "Pressure", "Proj.", "State", "Order", "f_n", "ζ", "FBSD ±5 %", "FBSD ±10 %",
            "Shock sens.", "Shot file")
@@ -335,7 +334,7 @@ class CampaignTab(QWidget):
 
     def _load_results(self, sid: str, path: Path) -> None:
         def load() -> dict[str, Any] | None:
-            from rig.shotfile import read_shot
+            from hopkinson.rig.shotfile import read_shot
 
             return read_shot(path, load_raw=False).results
 

@@ -3,7 +3,7 @@ controls; the compensated magnitude (with FBSD), the step responses and the shot
 compensated record follow every change. Export of the DCM (JSON, the `hopkinson dcm -o`
 format that `hopkinson compensate --dcm` reads) and of the shot's calibration report.
 
-The design and the figures come from analysis.dcm through rig.commands_dcm.design_report
+The design and the figures come from analysis.dcm through rig.cli.dcm.design_report
 (the same numbers `hopkinson dcm` prints); this tab only draws them. A change is applied
 after a short pause (DEBOUNCE_MS) so that dragging the slider stays smooth; one redesign
 takes a few milliseconds.
@@ -20,28 +20,13 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import (
-    QDoubleSpinBox,
-    QFileDialog,
-    QFormLayout,
-    QGridLayout,
-    QHBoxLayout,
-    QLabel,
-    QLineEdit,
-    QPushButton,
-    QSlider,
-    QVBoxLayout,
-    QWidget,
-)
-
-from analysis.dcm import DCM, apply, design_dcm, format_complex, step_responses
-from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel
-from analysis.records import Record
-from analysis.response import response_times_samples
-from rig.commands_dcm import design_report, parse_poles
-from ui.plots import (
+from hopkinson.analysis.dcm import DCM, apply, design_dcm, format_complex, step_responses
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.response import response_times_samples
+from hopkinson.rig.cli.dcm import design_report, parse_poles
+from hopkinson.ui.plots import (
     COMP_PEN,
     KILO,
     LEVEL_KEYS,
@@ -56,7 +41,21 @@ from ui.plots import (
     pulse_window_s,
     set_y_with_legend_room,
 )
-from ui.widgets import section_title
+from hopkinson.ui.widgets import section_title
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import (
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QSlider,
+    QVBoxLayout,
+    QWidget,
+)
 
 DEBOUNCE_MS = 60
 RATIO_RANGE = (0.1, 200.0)

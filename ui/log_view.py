@@ -4,6 +4,7 @@ the gauges show them."""
 
 from __future__ import annotations
 
+from hopkinson.rig.events import RigEvent, utc_now_iso
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -12,8 +13,6 @@ from PySide6.QtWidgets import (
     QTableWidgetItem,
     QWidget,
 )
-
-from rig.events import RigEvent, utc_now_iso
 
 MAX_ROWS = 5000
 _COLOURS = {"error": "#b3261e", "warning": "#8a5a00", "result": "#0b57d0"}

@@ -23,6 +23,20 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.events import RigEvent
+from hopkinson.rig.interlocks import INTERLOCKS
+from hopkinson.rig.sequencer import State
+from hopkinson.rig.shot import ShotOutcome, ShotRequest
+from hopkinson.ui.campaign_tab import CampaignTab
+from hopkinson.ui.dcm_tab import DcmTab
+from hopkinson.ui.log_view import LogView
+from hopkinson.ui.plots import ShotPlots, ShotView, configure_pyqtgraph, load_shot_view
+from hopkinson.ui.shot_setup import ShotSetup
+from hopkinson.ui.state_bar import StateBar
+from hopkinson.ui.status_panel import StatusPanel
+from hopkinson.ui.worker import Background, InstrumentLink, RigLink
 from PySide6.QtCore import QSettings, Qt, Signal
 from PySide6.QtGui import QCloseEvent
 from PySide6.QtWidgets import (
@@ -38,21 +52,6 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
-
-from rig.config import RigConfig
-from rig.errors import ConfigError
-from rig.events import RigEvent
-from rig.interlocks import INTERLOCKS
-from rig.sequencer import State
-from rig.shot import ShotOutcome, ShotRequest
-from ui.campaign_tab import CampaignTab
-from ui.dcm_tab import DcmTab
-from ui.log_view import LogView
-from ui.plots import ShotPlots, ShotView, configure_pyqtgraph, load_shot_view
-from ui.shot_setup import ShotSetup
-from ui.state_bar import StateBar
-from ui.status_panel import StatusPanel
-from ui.worker import Background, InstrumentLink, RigLink
 
 _log = logging.getLogger(__name__)
 
@@ -454,8 +453,8 @@ class MainWindow(QMainWindow):
             return
 
         def write() -> Path:
-            from analysis.report import write_report
-            from rig.report_data import shot_report
+            from hopkinson.reports.report import write_report
+            from hopkinson.rig.report_data import shot_report
 
             return write_report(shot_report(view.path), [path])[0]
 

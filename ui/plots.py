@@ -30,14 +30,13 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
+from hopkinson.analysis.dcm import DCM
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.response import normalised_gain_function
 from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
-
-from analysis.dcm import DCM
-from analysis.model import DiscreteModel
-from analysis.records import Record
-from analysis.response import normalised_gain_function
 
 LEVEL_KEYS = ("5", "10")
 BAND_COLOURS = {"5": (46, 157, 67, 45), "10": (224, 160, 16, 35)}
@@ -132,7 +131,7 @@ def summary_of(results: dict[str, Any]) -> dict[str, Any]:
 
 def view_from_results(results: dict[str, Any], record: Record | None = None) -> ShotView:
     """A ShotView of an analysis results dict (and its record, when known); no raw channels."""
-    from analysis.shot_analysis import ShotAnalysis
+    from hopkinson.analysis.shot_analysis import ShotAnalysis
 
     analysis = ShotAnalysis.from_dict(results, record)
     ident = results.get("identification", {}) or {}
@@ -150,7 +149,7 @@ def view_from_results(results: dict[str, Any], record: Record | None = None) -> 
 
 def load_shot_view(path: str | Path) -> ShotView:
     """Read a shot file and prepare its plots (raw PM beat always; the rest when analysed)."""
-    from rig.shotfile import read_shot
+    from hopkinson.rig.shotfile import read_shot
 
     shot = read_shot(path)
     if shot.results and shot.analysis_error is None:
@@ -201,7 +200,7 @@ def set_y_with_legend_room(plot: pg.PlotWidget, *curves: np.ndarray) -> None:
 def _true_poles(truth: dict[str, Any], sample_interval_s: float) -> np.ndarray | None:
     """The simulated accelerometer's discrete poles at the analysis interval (simulation only)."""
     try:
-        from drivers.sim.world import accelerometer_truth
+        from hopkinson.drivers.sim.world import accelerometer_truth
 
         return accelerometer_truth(truth).discrete_poles(sample_interval_s)
     except Exception:  # an older or partial truth record: the map simply goes without it

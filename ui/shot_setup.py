@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.shot import ShotRequest
+from hopkinson.ui.widgets import section_title
 from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import (
     QComboBox,
@@ -22,10 +25,6 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
-
-from rig.config import RigConfig
-from rig.shot import ShotRequest
-from ui.widgets import section_title
 
 MICRO = 1e-6
 DEFAULT_MAX_ORDER = 12

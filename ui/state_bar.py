@@ -3,10 +3,9 @@ one blue (red when the shot was aborted or faulted), with the current state's te
 
 from __future__ import annotations
 
+from hopkinson.rig.sequencer import State
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QVBoxLayout, QWidget
-
-from rig.sequencer import State
 
 STEPS = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE, State.SAFE,
          State.STORE, State.ANALYSE, State.DONE)

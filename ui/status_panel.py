@@ -11,14 +11,13 @@ from __future__ import annotations
 
 from typing import Any
 
+from hopkinson.rig.config import LimitsConfig
+from hopkinson.rig.events import RigEvent
+from hopkinson.rig.interlocks import INTERLOCKS
+from hopkinson.ui.widgets import LampLabel, section_title
+from hopkinson.ui.worker import INSTRUMENT_KEYS, INSTRUMENT_LABELS, InstrumentLink
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
-
-from rig.config import LimitsConfig
-from rig.events import RigEvent
-from rig.interlocks import INTERLOCKS
-from ui.widgets import LampLabel, section_title
-from ui.worker import INSTRUMENT_KEYS, INSTRUMENT_LABELS, InstrumentLink
 
 INTERLOCK_CAPTIONS = {
     "door": "Door / guard closed",

@@ -33,15 +33,14 @@ from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
 from typing import Any
 
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.instruments import Instruments, make_instruments
+from hopkinson.rig.interlocks import REQUIRED, evaluate, read_readings
+from hopkinson.rig.sequencer import FINAL_STATES, FireAuthorisation, Sequencer, State
+from hopkinson.rig.shot import ShotOutcome, ShotRequest
 from PySide6.QtCore import QObject, QTimer, Signal, Slot
-
-from drivers.errors import InstrumentConnectionError, InstrumentError
-from rig.config import RigConfig
-from rig.events import EventBus, RigEvent
-from rig.instruments import Instruments, make_instruments
-from rig.interlocks import REQUIRED, evaluate, read_readings
-from rig.sequencer import FINAL_STATES, FireAuthorisation, Sequencer, State
-from rig.shot import ShotOutcome, ShotRequest
 
 _log = logging.getLogger(__name__)
 
@@ -178,7 +177,7 @@ class RigLink(QObject):
         """Run a campaign (rig.campaign.CampaignRunner on `run`, a RunFolder, and `plan`) on the
         I/O thread; `campaign_finished` or `campaign_failed` tells how it ended. Firing must
         have been authorised by the caller (rig.campaign.check_authorisation)."""
-        from rig.campaign import CampaignRunner
+        from hopkinson.rig.campaign import CampaignRunner
 
         self._abort_requested.clear()
         self._abort_reason = ""

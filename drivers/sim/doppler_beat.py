@@ -17,9 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from drivers.sim import shock
-from drivers.sim.accelerometer import AccelerometerTruth, white_noise
+from hopkinson.drivers.sim import shock
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, white_noise
 
 # Grating pitch d of the simulated interferometer: 2 µm (500 lines/mm). With orders ±1 the
 # beat is 2v/d = 1 MHz per m/s: 25 m/s (100 000 g over the 38.6 µs pulse of projectile

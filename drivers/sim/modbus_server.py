@@ -22,14 +22,13 @@ from __future__ import annotations
 import asyncio
 import threading
 
+from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.world import World
+from hopkinson.drivers.valve_controller import UINT16_MAX, RegisterMap
 from pymodbus.constants import ExcCodes
 from pymodbus.pdu.device import ModbusDeviceIdentification
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
-
-from drivers.sim.faults import FaultSet
-from drivers.sim.world import World
-from drivers.valve_controller import UINT16_MAX, RegisterMap
 
 IDENTITY = ("Hopkinson-Sim", "SIMVAC-1", "1.0")  # vendor, product code, revision
 

@@ -45,9 +45,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from drivers.ieee488_block import block_header
-from drivers.sim.faults import FaultSet
+from hopkinson.drivers.ieee488_block import block_header
+from hopkinson.drivers.sim.faults import FaultSet
 
 IDENTITY = "Hopkinson-Sim,SIMDIG-2CH,SIM0001,1.0"
 CHANNELS = (1, 2)

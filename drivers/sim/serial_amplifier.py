@@ -19,9 +19,15 @@ import select
 import threading
 import tty
 
-from drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ, MAX_LINE_BYTES, checksum
-from drivers.sim.faults import FaultSet
-from drivers.sim.world import World
+from hopkinson.drivers.amplifier import (
+    EXCITATION_RANGE_V,
+    GAINS,
+    LOWPASS_HZ,
+    MAX_LINE_BYTES,
+    checksum,
+)
+from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.world import World
 
 
 class SimSerialAmplifier:

@@ -29,12 +29,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from drivers.sim.faults import FAULTS, FaultSet
-from drivers.sim.modbus_server import SimModbusServer
-from drivers.sim.scpi_digitizer import SimDigitizerServer
-from drivers.sim.serial_amplifier import SimSerialAmplifier
-from drivers.sim.world import World, WorldParams
-from drivers.valve_controller import RegisterMap
+from hopkinson.drivers.sim.faults import FAULTS, FaultSet
+from hopkinson.drivers.sim.modbus_server import SimModbusServer
+from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
+from hopkinson.drivers.sim.serial_amplifier import SimSerialAmplifier
+from hopkinson.drivers.sim.world import World, WorldParams
+from hopkinson.drivers.valve_controller import RegisterMap
 
 
 @dataclass(frozen=True)

@@ -47,11 +47,15 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-
-from drivers.sim.accelerometer import AccelerometerTruth, Mode, coloured_noise, white_noise
-from drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, pm_beat
-from drivers.sim.faults import FaultSet
-from drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.drivers.sim.accelerometer import (
+    AccelerometerTruth,
+    Mode,
+    coloured_noise,
+    white_noise,
+)
+from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, pm_beat
+from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
 
 PROJECTILES = (1, 2, 3)
 

@@ -7,9 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from scipy import signal
-
-from analysis.dcm import (
+from hopkinson.analysis.dcm import (
     DCM,
     DcmStream,
     apply,
@@ -20,9 +18,10 @@ from analysis.dcm import (
     rise_time_ratio,
     rise_times_samples,
 )
-from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel
-from analysis.response import fbsd_hz
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.response import fbsd_hz
+from scipy import signal
 
 TABLE1_POLES = np.array([0.9740 + 0.1396j, 0.9740 - 0.1396j, 0.8174 + 0.0518j, 0.8174 - 0.0518j])
 EXTRA = [0.6 + 0.1j, 0.6 - 0.1j]  # the paper's text says 0.4 ± 0.1j: a typo (PAPER-NOTES)
@@ -204,8 +203,8 @@ def test_model_and_dcm_sample_intervals_must_agree():
 
 
 def test_ratio_for_widening_reaches_the_asked_band():
-    from analysis.dcm import ratio_for_widening
-    from drivers.sim.accelerometer import AccelerometerTruth, Mode
+    from hopkinson.analysis.dcm import ratio_for_widening
+    from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 
     truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), lowpass_hz=100_000.0)
     b, a = truth.discrete_tf(1e-6)
@@ -220,7 +219,7 @@ def test_ratio_for_widening_reaches_the_asked_band():
 def test_settling_time_ratio_of_a_second_order_pair_against_its_envelope():
     """A lightly damped pair settles to ±5 % in about 3/(ζ·ω_n) (the paper's T_r, Eq. 21);
     compensated to a well damped pair, the settling time ratio approaches the envelope ratio."""
-    from analysis.dcm import settling_time_ratio
+    from hopkinson.analysis.dcm import settling_time_ratio
 
     dt = 1e-6
     wn, zeta = 2 * np.pi * 27_000.0, 0.05

@@ -10,17 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from analysis import doppler
-from analysis.errors import AnalysisError
-from analysis.excitation import pulse_width
-from drivers.sim.doppler_beat import (
+from hopkinson.analysis import doppler
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import pulse_width
+from hopkinson.drivers.sim.doppler_beat import (
     DEFAULT_GRATING_PITCH_M,
     beat_frequency_hz,
     pm_beat,
     velocity_m_s_to_displacement_m,
 )
-from drivers.sim.shock import G_M_S2, half_sine_m_s2, velocity_m_s
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2, velocity_m_s
 
 DT = 1e-8  # 100 MS/s
 START_S = 300e-6  # pre-trigger rest before the pulse

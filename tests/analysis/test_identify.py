@@ -15,18 +15,22 @@ import json
 
 import numpy as np
 import pytest
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.identify import Identification, _excitation_warnings, identify, modes_of
+from hopkinson.analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.resample import shift_samples
+from hopkinson.analysis.response import band_edges, fbsd_hz, frequency_response
+from hopkinson.drivers.sim.accelerometer import (
+    AccelerometerTruth,
+    Mode,
+    coloured_noise,
+    white_noise,
+)
+from hopkinson.drivers.sim.shock import dipole_m_s2, gaussian_velocity_m_s2, half_sine_m_s2
 from scipy import signal
 from scipy.optimize import linear_sum_assignment
-
-from analysis.errors import AnalysisError
-from analysis.identify import Identification, _excitation_warnings, identify, modes_of
-from analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
-from analysis.model import DiscreteModel
-from analysis.records import Record
-from analysis.resample import shift_samples
-from analysis.response import band_edges, fbsd_hz, frequency_response
-from drivers.sim.accelerometer import AccelerometerTruth, Mode, coloured_noise, white_noise
-from drivers.sim.shock import dipole_m_s2, gaussian_velocity_m_s2, half_sine_m_s2
 
 T = 1e-6  # analysis sample interval, s
 N = 20_000  # samples per record (20 ms at 1 MS/s)

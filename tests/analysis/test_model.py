@@ -6,9 +6,8 @@ import json
 
 import numpy as np
 import pytest
-
-from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel, load_model
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel, load_model
 
 
 def test_poles_zeros_gain_of_known_polynomials():

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from analysis.errors import RecordError
-from analysis.records import Record, read_record, record_from_arrays, write_record
+from hopkinson.analysis.errors import RecordError
+from hopkinson.analysis.records import Record, read_record, record_from_arrays, write_record
 
 
 def _record(n: int = 200) -> Record:

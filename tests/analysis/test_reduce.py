@@ -7,13 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from analysis.errors import AnalysisError, RecordError
-from analysis.identify import identify
-from analysis.reduce import read_raw_table, reduce_raw, write_raw_table
-from drivers.sim.accelerometer import AccelerometerTruth, Mode
-from drivers.sim.doppler_beat import raw_shot
-from drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.analysis.errors import AnalysisError, RecordError
+from hopkinson.analysis.identify import identify
+from hopkinson.analysis.reduce import read_raw_table, reduce_raw, write_raw_table
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+from hopkinson.drivers.sim.doppler_beat import raw_shot
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
 
 DT = 1e-8
 START_S = 200e-6

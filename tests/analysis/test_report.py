@@ -13,11 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from matplotlib.lines import Line2D
-
-from analysis.errors import AnalysisError
-from analysis.records import Record
-from analysis.report import (
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_record
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.reports.report import (
     CalibrationReport,
     ShotEntry,
     campaign_statistics,
@@ -32,9 +33,7 @@ from analysis.report import (
     truth_comparison,
     write_report,
 )
-from analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_record
-from drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
-from drivers.sim.shock import G_M_S2, half_sine_m_s2
+from matplotlib.lines import Line2D
 
 DT = 1e-6
 SENSOR_A = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))

@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from analysis.errors import AnalysisError
-from analysis.records import Record
-from analysis.resample import (
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.resample import (
     DEFAULT_ANALYSIS_RATE_HZ,
     estimate_delay_samples,
     resample_to_rate,
     resampling_factors,
     shift_samples,
 )
-from drivers.sim.shock import gaussian_velocity_m_s2
+from hopkinson.drivers.sim.shock import gaussian_velocity_m_s2
 
 
 def _gauss(t_s: np.ndarray, centre_s: float, sigma_s: float) -> np.ndarray:

@@ -7,11 +7,9 @@ import json
 
 import numpy as np
 import pytest
-from scipy import signal
-
-from analysis.errors import AnalysisError
-from analysis.model import DiscreteModel
-from analysis.response import (
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.response import (
     band_edges,
     continuous_tf,
     fbsd_from_response,
@@ -23,7 +21,8 @@ from analysis.response import (
     pole_analysis,
     to_continuous,
 )
-from drivers.sim.accelerometer import AccelerometerTruth, Mode
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+from scipy import signal
 
 TABLE1_POLES = np.array([0.9740 + 0.1396j, 0.9740 - 0.1396j, 0.8174 + 0.0518j, 0.8174 - 0.0518j])
 

@@ -6,12 +6,11 @@ import json
 
 import numpy as np
 import pytest
-
-from analysis.errors import AnalysisError
-from analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_raw_shot
-from drivers.sim.accelerometer import AccelerometerTruth, Mode
-from drivers.sim.doppler_beat import raw_shot
-from drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_raw_shot
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+from hopkinson.drivers.sim.doppler_beat import raw_shot
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
 
 DT_S = 1e-8  # 100 MS/s, as the digitizer records
 
@@ -62,10 +61,9 @@ def test_incomplete_results_are_a_clear_error():
 def test_peak_overshoot_against_closed_form_second_order():
     """A half-sine much longer than the resonance period barely overshoots; a short one rings.
     Independent truth: the continuous system's response to the pulse by scipy's lsim."""
+    from hopkinson.analysis.model import DiscreteModel
+    from hopkinson.analysis.shot_analysis import peak_overshoot
     from scipy import signal
-
-    from analysis.model import DiscreteModel
-    from analysis.shot_analysis import peak_overshoot
 
     truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))
     b, a = truth.discrete_tf(1e-6)

@@ -7,9 +7,8 @@ from collections.abc import Iterator
 from dataclasses import replace
 
 import pytest
-
-from drivers.sim.simulated_rig import SimConfig, SimulatedRig
-from drivers.sim.world import WorldParams
+from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
+from hopkinson.drivers.sim.world import WorldParams
 
 
 class FakeClock:

@@ -12,16 +12,15 @@ from functools import reduce
 
 import pytest
 import serial
-
-from drivers.amplifier import (
+from hopkinson.drivers.amplifier import (
     BridgeAmplifier,
     FramingError,
     checksum,
     frame,
     parse_line,
 )
-from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
-from drivers.sim.simulated_rig import SimulatedRig
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 
 
 def xor_hex(text: str) -> str:

@@ -15,12 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from drivers.digitizer import BLOCK_CHUNK_BYTES, Digitizer
-from drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
-from drivers.scpi_dialect import GenericScpiDialect, ReplyFormatError
-from drivers.sim.faults import FaultSet
-from drivers.sim.scpi_digitizer import AcquisitionSettings, SimDigitizerServer
+from hopkinson.drivers.digitizer import BLOCK_CHUNK_BYTES, Digitizer
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.scpi_dialect import GenericScpiDialect, ReplyFormatError
+from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.scpi_digitizer import AcquisitionSettings, SimDigitizerServer
 
 N_SMALL = 40_000
 

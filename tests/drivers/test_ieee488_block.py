@@ -6,8 +6,7 @@ import io
 
 import numpy as np
 import pytest
-
-from drivers.ieee488_block import (
+from hopkinson.drivers.ieee488_block import (
     BlockFormatError,
     block_header,
     encode_block,

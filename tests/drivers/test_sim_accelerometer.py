@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hopkinson.drivers.sim.accelerometer import (
+    AccelerometerTruth,
+    Mode,
+    coloured_noise,
+    white_noise,
+)
 from scipy import signal
-
-from drivers.sim.accelerometer import AccelerometerTruth, Mode, coloured_noise, white_noise
 
 
 def test_single_mode_matches_second_order_closed_form():

@@ -10,19 +10,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
-
-from drivers.digitizer import Digitizer
-from drivers.sim.accelerometer import Mode
-from drivers.sim.faults import FaultSet
-from drivers.sim.simulated_rig import SimulatedRig
-from drivers.sim.world import (
+from hopkinson.drivers.digitizer import Digitizer
+from hopkinson.drivers.sim.accelerometer import Mode
+from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.simulated_rig import SimulatedRig
+from hopkinson.drivers.sim.world import (
     AmplifierParams,
     LauncherParams,
     World,
     WorldParams,
     accelerometer_truth,
 )
-from drivers.valve_controller import ValveController
+from hopkinson.drivers.valve_controller import ValveController
+
 from tests.drivers.conftest import FakeClock, sim_config
 
 

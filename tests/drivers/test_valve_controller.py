@@ -7,10 +7,9 @@ import socket
 from dataclasses import replace
 
 import pytest
-
-from drivers.errors import InstrumentConnectionError, InstrumentError
-from drivers.sim.simulated_rig import SimulatedRig
-from drivers.valve_controller import (
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
+from hopkinson.drivers.sim.simulated_rig import SimulatedRig
+from hopkinson.drivers.valve_controller import (
     CoilMap,
     DiscreteInputMap,
     HoldingRegisterMap,
@@ -19,6 +18,7 @@ from drivers.valve_controller import (
     ScaleMap,
     ValveController,
 )
+
 from tests.drivers.conftest import FakeClock, sim_config
 
 

@@ -13,16 +13,15 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-
-from drivers.sim.simulated_rig import ServerParams, SimConfig
-from drivers.sim.world import WorldParams
-from rig.config import RigConfig, load_rig_config
-from rig.events import EventBus, RigEvent
-from rig.instruments import Instruments, open_instruments
-from rig.sequencer import FireAuthorisation, Sequencer
-from rig.shot import AnalysisResult, ShotRequest
-from rig.shotfile import RawShot
-from rig.sim_session import SimSession, sim_session
+from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
+from hopkinson.drivers.sim.world import WorldParams
+from hopkinson.rig.config import RigConfig, load_rig_config
+from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.instruments import Instruments, open_instruments
+from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
+from hopkinson.rig.shot import AnalysisResult, ShotRequest
+from hopkinson.rig.shotfile import RawShot
+from hopkinson.rig.sim_session import SimSession, sim_session
 
 REPO = Path(__file__).resolve().parents[2]
 TIME_SCALE = 100.0

@@ -15,24 +15,24 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-
-from rig.campaign import (
+from hopkinson.rig.campaign import (
     CampaignRunner,
     FireLog,
     attach_fire_log,
     read_fire_log,
     shot_request,
 )
-from rig.cli import main
-from rig.commands_campaign import ProgressPrinter
-from rig.events import EventBus, RigEvent
-from rig.instruments import open_instruments
-from rig.journal import Journal, ShotState
-from rig.plan import load_plan
-from rig.run_folder import create_run_folder
-from rig.sequencer import FireAuthorisation, Sequencer
-from rig.shotfile import read_shot
-from rig.sim_session import SimSession, sim_session
+from hopkinson.rig.cli.campaign import ProgressPrinter
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.instruments import open_instruments
+from hopkinson.rig.journal import Journal, ShotState
+from hopkinson.rig.plan import load_plan
+from hopkinson.rig.run_folder import create_run_folder
+from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
+from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.sim_session import SimSession, sim_session
+
 from tests.rig.conftest import fast_sim_config, short_timeouts_config
 
 S = ShotState

@@ -15,11 +15,11 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from rig.campaign import read_fire_log
-from rig.cli import main
-from rig.journal import Journal
-from rig.run_folder import open_run_folder
-from rig.shotfile import read_shot
+from hopkinson.rig.campaign import read_fire_log
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.journal import Journal
+from hopkinson.rig.run_folder import open_run_folder
+from hopkinson.rig.shotfile import read_shot
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = """
@@ -55,7 +55,7 @@ class Campaign:
 
     def start(self, kill_at: str | None, sig: int = signal.SIGKILL) -> tuple[int, list[str]]:
         """Run (or resume) the campaign; send `sig` when a stderr line starts with `kill_at`."""
-        argv = [sys.executable, "-m", "rig.cli", "campaign", "run", str(self.plan), "--sim", "--sim-config",
+        argv = [sys.executable, "-m", "hopkinson", "campaign", "run", str(self.plan), "--sim", "--sim-config",
                 str(self.sim), "--out", str(self.run), "--no-report", "--sim-fire-log", str(self.log)]
         if self.started:
             argv.append("--resume")

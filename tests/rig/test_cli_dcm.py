@@ -10,13 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from analysis.dcm import apply, load_dcm
-from analysis.model import DiscreteModel
-from analysis.records import read_record, record_from_arrays, write_record
-from drivers.sim.accelerometer import AccelerometerTruth, Mode
-from drivers.sim.shock import half_sine_m_s2
-from rig.cli import main
+from hopkinson.analysis.dcm import apply, load_dcm
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import read_record, record_from_arrays, write_record
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+from hopkinson.drivers.sim.shock import half_sine_m_s2
+from hopkinson.rig.cli.main import main
 
 TABLE1 = "0.9740+0.1396j,0.9740-0.1396j,0.8174+0.0518j,0.8174-0.0518j"
 PAPER_ARGS = ["--ratio", "12.5", "--damping", "0.707", "--extra-poles", "0.6+0.1j,0.6-0.1j"]

@@ -7,12 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from analysis.model import load_model
-from analysis.records import Record, write_record
-from drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
-from drivers.sim.shock import half_sine_m_s2
-from rig.cli import main
+from hopkinson.analysis.model import load_model
+from hopkinson.analysis.records import Record, write_record
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
+from hopkinson.drivers.sim.shock import half_sine_m_s2
+from hopkinson.rig.cli.main import main
 
 T = 1e-6
 TRUTH = AccelerometerTruth(modes=(Mode(27_000.0, 0.05), Mode(70_000.0, 0.03)))

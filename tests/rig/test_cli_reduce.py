@@ -9,14 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from analysis.records import read_record
-from analysis.reduce import write_raw_table
-from drivers.sim.accelerometer import AccelerometerTruth, Mode
-from drivers.sim.doppler_beat import raw_shot
-from drivers.sim.shock import G_M_S2, half_sine_m_s2
-from rig.cli import main
-from rig.shotfile import RawChannel, RawShot, ShotMeta, write_raw_shot
+from hopkinson.analysis.records import read_record
+from hopkinson.analysis.reduce import write_raw_table
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+from hopkinson.drivers.sim.doppler_beat import raw_shot
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, write_raw_shot
 
 DT = 1e-8
 N = 120_000
@@ -122,7 +121,7 @@ def test_bad_inputs_are_one_line_and_exit_2(tmp_path: Path, simulated, capsys) -
 def test_console_command_runs(tmp_path: Path, simulated) -> None:
     time_s, s = simulated
     raw = write_raw_table(tmp_path / "raw.npz", time_s, s.doppler_v, s.response_v)
-    done = subprocess.run([sys.executable, "-m", "rig.cli", "reduce", str(raw), "-o", str(tmp_path / "r.csv"),
+    done = subprocess.run([sys.executable, "-m", "hopkinson", "reduce", str(raw), "-o", str(tmp_path / "r.csv"),
                            "--json"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["demodulation_bandwidth_hz"] > 0

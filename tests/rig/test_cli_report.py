@@ -10,10 +10,9 @@ import zlib
 from pathlib import Path
 
 import pytest
-
-from rig.cli import main
-from rig.commands_report import default_outputs
-from rig.shotfile import add_analysis, read_shot
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.cli.report import default_outputs
+from hopkinson.rig.shotfile import add_analysis, read_shot
 
 PLAN = """
 name = "rep"

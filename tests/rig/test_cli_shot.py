@@ -14,9 +14,8 @@ import time
 from pathlib import Path
 
 import pytest
-
-from rig.cli import main
-from rig.shotfile import read_shot
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.shotfile import read_shot
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -161,7 +160,7 @@ def _read_until(stream, needle: str, proc: subprocess.Popen, timeout_s: float = 
 def test_ctrl_c_during_charge_goes_safe_then_exits_130(configs) -> None:
     args = _args(configs, "--yes", sim="sim10")
     args[args.index("1.0")] = "6.0"  # 6 bar take ~1.2 s to charge at 10x: time to press Ctrl-C
-    proc = subprocess.Popen([sys.executable, "-m", "rig.cli", *args], cwd=REPO, text=True,
+    proc = subprocess.Popen([sys.executable, "-m", "hopkinson", *args], cwd=REPO, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     head = _read_until(proc.stdout, "CHARGE", proc)
     proc.send_signal(signal.SIGINT)
@@ -179,7 +178,7 @@ def test_ctrl_c_during_charge_goes_safe_then_exits_130(configs) -> None:
 
 def test_yes_typed_at_the_terminal_prompt_fires(configs) -> None:
     master, slave = os.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "rig.cli", *_args(configs)], cwd=REPO, text=True,
+    proc = subprocess.Popen([sys.executable, "-m", "hopkinson", *_args(configs)], cwd=REPO, text=True,
                             stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     os.close(slave)
     try:

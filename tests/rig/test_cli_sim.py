@@ -12,10 +12,9 @@ import time
 from pathlib import Path
 
 import pytest
-
-from drivers.sim.faults import FAULTS
-from drivers.sim.simulated_rig import SimAddresses, SimulatedRig
-from rig.cli import main
+from hopkinson.drivers.sim.faults import FAULTS
+from hopkinson.drivers.sim.simulated_rig import SimAddresses, SimulatedRig
+from hopkinson.rig.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "config"
@@ -64,7 +63,7 @@ def test_sim_process_serves_status_and_stops_cleanly_on_ctrl_c(
     sim_toml.write_text(f'[servers]\nmodbus_port = 0\ndigitizer_port = 0\nserial_link = "{link}"\n')
     addresses_json = tmp_path / "addresses.json"
     process = subprocess.Popen(
-        [sys.executable, "-m", "rig.cli", "sim", "--config", str(sim_toml), "--fault", "door-open",
+        [sys.executable, "-m", "hopkinson", "sim", "--config", str(sim_toml), "--fault", "door-open",
          "--addresses-json", str(addresses_json)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )

@@ -7,11 +7,10 @@ import json
 from pathlib import Path
 
 import pytest
-
-from drivers.sim.accelerometer import Mode
-from drivers.valve_controller import RegisterMap
-from rig.config import load_rig_config, load_sim_config
-from rig.errors import ConfigError
+from hopkinson.drivers.sim.accelerometer import Mode
+from hopkinson.drivers.valve_controller import RegisterMap
+from hopkinson.rig.config import load_rig_config, load_sim_config
+from hopkinson.rig.errors import ConfigError
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 

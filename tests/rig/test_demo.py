@@ -7,13 +7,12 @@ import re
 from pathlib import Path
 
 import numpy as np
-
-from drivers.sim.world import accelerometer_truth
-from rig.cli import main
-from rig.commands_demo import demo_plan_text
-from rig.journal import Journal
-from rig.plan import plan_from_dict
-from rig.shotfile import read_shot
+from hopkinson.drivers.sim.world import accelerometer_truth
+from hopkinson.rig.cli.demo import demo_plan_text
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.journal import Journal
+from hopkinson.rig.plan import plan_from_dict
+from hopkinson.rig.shotfile import read_shot
 
 
 def test_demo_fires_a_short_campaign_and_its_models_match_the_truth(tmp_path: Path, capsys) -> None:

@@ -22,12 +22,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from rig.errors import ConfigError
-from rig.journal import Journal, JournalError, ShotState
-from rig.plan import load_plan
-from rig.run_folder import create_run_folder, open_run_folder
-from rig.shotfile import RawShot, ShotMeta, read_shot, write_raw_shot
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.journal import Journal, JournalError, ShotState
+from hopkinson.rig.plan import load_plan
+from hopkinson.rig.run_folder import create_run_folder, open_run_folder
+from hopkinson.rig.shotfile import RawShot, ShotMeta, read_shot, write_raw_shot
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -74,8 +73,8 @@ CHILD = textwrap.dedent(
     """
     import os, random, signal, sys, uuid
     from pathlib import Path
-    import rig.shotfile as sf
-    from rig.journal import Journal
+    import hopkinson.rig.shotfile as sf
+    from hopkinson.rig.journal import Journal
     from tests.rig.test_journal import meta_for, raw_for
 
     folder, die_at, die_shot = Path(sys.argv[1]), sys.argv[2], sys.argv[3]

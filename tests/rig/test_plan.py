@@ -5,9 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from rig.errors import ConfigError
-from rig.plan import AnalysisOptions, load_plan
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan import AnalysisOptions, load_plan
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -150,7 +149,7 @@ def test_bad_toml_and_missing_file(tmp_path: Path) -> None:
 
 
 def test_dcm_ratio_auto_is_the_default_and_can_be_written(tmp_path):
-    from rig.plan import load_plan
+    from hopkinson.rig.plan import load_plan
 
     path = tmp_path / "auto.toml"
     path.write_text('name = "a"\noperator = "op"\n[accelerometer]\nmodel = "m"\nserial = "1"\n'

@@ -11,14 +11,14 @@ import time
 from pathlib import Path
 
 import pytest
+from hopkinson.rig.config import LimitsConfig
+from hopkinson.rig.errors import ShotAborted
+from hopkinson.rig.events import EventBus, EventQueue, RigEvent
+from hopkinson.rig.interlocks import INTERLOCKS, REQUIRED, RigReadings, evaluate
+from hopkinson.rig.sequencer import FINAL_STATES, TRANSITIONS, FireAuthorisation, Sequencer, State
+from hopkinson.rig.shot import AnalysisResult, ShotRequestError
+from hopkinson.rig.shotfile import RawShot, read_shot
 
-from rig.config import LimitsConfig
-from rig.errors import ShotAborted
-from rig.events import EventBus, EventQueue, RigEvent
-from rig.interlocks import INTERLOCKS, REQUIRED, RigReadings, evaluate
-from rig.sequencer import FINAL_STATES, TRANSITIONS, FireAuthorisation, Sequencer, State
-from rig.shot import AnalysisResult, ShotRequestError
-from rig.shotfile import RawShot, read_shot
 from tests.rig.conftest import short_timeouts_config
 
 ACTIVE = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE)

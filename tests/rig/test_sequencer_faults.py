@@ -24,11 +24,11 @@ import threading
 import time
 
 import pytest
+from hopkinson.drivers.sim.faults import FAULTS
+from hopkinson.rig.events import RigEvent
+from hopkinson.rig.sequencer import FireAuthorisation
+from hopkinson.rig.shotfile import read_shot
 
-from drivers.sim.faults import FAULTS
-from rig.events import RigEvent
-from rig.sequencer import FireAuthorisation
-from rig.shotfile import read_shot
 from tests.rig.conftest import SLOW_DELAY_S, Rig, short_timeouts_config
 
 STATES = ("CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE")

@@ -14,10 +14,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-
-from analysis.records import Record
-from rig.run_folder import RunFolder
-from rig.shotfile import (
+from hopkinson.analysis.records import Record
+from hopkinson.rig.run_folder import RunFolder
+from hopkinson.rig.shotfile import (
     RawChannel,
     RawShot,
     ShotFileError,
@@ -200,7 +199,7 @@ def test_failed_analysis_write_leaves_the_file_untouched(tmp_path: Path, monkeyp
     def no_space(src: object, dst: object) -> None:
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("rig.shotfile.os.replace", no_space)
+    monkeypatch.setattr("hopkinson.rig.shotfile.os.replace", no_space)
     with pytest.raises(ShotFileError, match=r"s\.h5: could not be written .*No space left"):
         add_analysis(path, RESULTS)
     assert sha256(path) == before and sorted(p.name for p in tmp_path.iterdir()) == ["s.h5"]
@@ -214,7 +213,7 @@ CRASH_CHILD = textwrap.dedent(
     """
     import os, signal, sys
     import numpy as np
-    import rig.shotfile as sf
+    import hopkinson.rig.shotfile as sf
     from tests.rig.test_shotfile import known_raw, known_meta
     path, step = sys.argv[1], sys.argv[2]
     if step == "analysis":

@@ -14,12 +14,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
+from hopkinson.drivers.sim.world import WorldParams
+from hopkinson.rig.config import RigConfig, load_rig_config
+from hopkinson.rig.sim_session import SimSession, sim_session
 from PySide6.QtCore import QCoreApplication, QSettings
-
-from drivers.sim.simulated_rig import ServerParams, SimConfig
-from drivers.sim.world import WorldParams
-from rig.config import RigConfig, load_rig_config
-from rig.sim_session import SimSession, sim_session
 
 REPO = Path(__file__).resolve().parents[2]
 TIME_SCALE = 100.0
@@ -69,8 +68,7 @@ def dispose(widget: Any) -> None:
     """Close and delete a widget now (ui.app.dispose; see the module docstring); a deleted one
     is left alone."""
     import shiboken6
-
-    from ui.app import dispose as dispose_now
+    from hopkinson.ui.app import dispose as dispose_now
 
     if shiboken6.isValid(widget):
         dispose_now(QCoreApplication.instance(), widget)
@@ -100,7 +98,7 @@ class Panel:
 @pytest.fixture
 def make_panel(qtbot: Any, tmp_path: Path) -> Iterator[Callable[..., Panel]]:
     """make_panel(time_scale=100, faults=(), config=None, connect=True) -> Panel (stopped after the test)."""
-    from ui.main_window import MainWindow
+    from hopkinson.ui.main_window import MainWindow
 
     stack = contextlib.ExitStack()
     windows: list[Any] = []

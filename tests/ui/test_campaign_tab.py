@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hopkinson.rig.journal import Journal
+from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import Qt
 
-from rig.journal import Journal
-from rig.shotfile import read_shot
 from tests.ui.conftest import save_shot
 
 CAMPAIGN_TIMEOUT_MS = 120_000

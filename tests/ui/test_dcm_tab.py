@@ -9,10 +9,10 @@ import math
 
 import numpy as np
 import pytest
+from hopkinson.analysis.dcm import load_dcm
+from hopkinson.analysis.model import DiscreteModel
 from PySide6.QtCore import Qt
 
-from analysis.dcm import load_dcm
-from analysis.model import DiscreteModel
 from tests.ui.conftest import dispose, save_shot
 
 DT = 1e-6
@@ -45,8 +45,8 @@ def hz(label) -> float:
 
 @pytest.fixture
 def tab(qtbot):
-    from ui.dcm_tab import DcmTab
-    from ui.plots import configure_pyqtgraph
+    from hopkinson.ui.dcm_tab import DcmTab
+    from hopkinson.ui.plots import configure_pyqtgraph
 
     configure_pyqtgraph()
     widget = DcmTab()

@@ -9,14 +9,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from rig.shotfile import read_shot
+from hopkinson.rig.shotfile import read_shot
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 def hopkinson(*args: str, timeout: float = 180.0) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
-    return subprocess.run([sys.executable, "-m", "rig.cli", *args], cwd=REPO, env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "hopkinson", *args], cwd=REPO, env=env, capture_output=True,
                           text=True, timeout=timeout)
 
 

@@ -13,7 +13,7 @@ from tests.ui.conftest import dispose, rig_config_for_tests, unreachable_config
 
 
 def test_setup_is_remembered_between_runs(qtbot, tmp_path):
-    from ui.shot_setup import ShotSetup
+    from hopkinson.ui.shot_setup import ShotSetup
 
     config = rig_config_for_tests()
     settings_file = str(tmp_path / "panel.ini")
@@ -45,7 +45,7 @@ def test_setup_is_remembered_between_runs(qtbot, tmp_path):
 
 
 def test_auto_dcm_ratio_means_none(qtbot, tmp_path):
-    from ui.shot_setup import ShotSetup
+    from hopkinson.ui.shot_setup import ShotSetup
 
     setup = ShotSetup(rig_config_for_tests(), tmp_path)
     assert setup.dcm_ratio.text() == "auto" and setup.request(1.0).dcm_ratio is None
@@ -78,7 +78,8 @@ def test_no_instruments_show_disconnected_and_arm_is_refused(qtbot, make_panel, 
 
 
 def test_one_missing_instrument_keeps_the_others_live(qtbot, make_panel, tmp_path):
-    from rig.sim_session import sim_session
+    from hopkinson.rig.sim_session import sim_session
+
     from tests.ui.conftest import fast_sim_config
 
     with sim_session(rig_config_for_tests(), fast_sim_config(), ()) as session:

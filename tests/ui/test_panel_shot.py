@@ -9,11 +9,11 @@ import threading
 
 import numpy as np
 import pytest
+from hopkinson.analysis.response import band_edges
+from hopkinson.drivers.sim.world import accelerometer_truth
+from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import Qt, QTimer
 
-from analysis.response import band_edges
-from drivers.sim.world import accelerometer_truth
-from rig.shotfile import read_shot
 from tests.ui.conftest import save_shot, unreachable_config
 
 SHOT_TIMEOUT_MS = 60_000
@@ -140,7 +140,7 @@ def test_fire_not_confirmed_keeps_the_rig_armed_then_abort_stands_down(qtbot, ma
 
 
 def test_a_shot_whose_analysis_failed_still_shows_its_raw_channels(qtbot, make_panel, tmp_path):
-    from rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
 
     n = 5000
     t = np.arange(n)

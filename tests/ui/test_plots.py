@@ -6,15 +6,14 @@ import math
 
 import numpy as np
 import pytest
-
-from analysis.excitation import excitation_summary
-from drivers.sim.shock import half_sine_m_s2
+from hopkinson.analysis.excitation import excitation_summary
+from hopkinson.drivers.sim.shock import half_sine_m_s2
 
 
 def test_pulse_figures_come_from_the_excitation_without_a_reduction():
     """A record analysed without an interferometer reduction: peak and 10 % width of the
     reference pulse, checked against the half-sine's closed form."""
-    from ui.plots import summary_of
+    from hopkinson.ui.plots import summary_of
 
     dt, width_s, peak = 1e-7, 50e-6, 2.0e5
     t = np.arange(3000) * dt

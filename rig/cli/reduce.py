@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from analysis.errors import AnalysisError
-from rig.cli import emit_json
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.rig.cli.main import emit_json
 
 
 @dataclass(frozen=True)
@@ -36,14 +36,14 @@ class RawInput:
 
 
 def _read_table(path: Path) -> RawInput:
-    from analysis.reduce import read_raw_table
+    from hopkinson.analysis.reduce import read_raw_table
 
     table = read_raw_table(path)
     return RawInput(table.doppler_v, table.response_v, table.sample_interval_s, table.start_time_s)
 
 
 def _read_shot_file(path: Path) -> RawInput:
-    from rig.shotfile import read_shot  # h5py: loaded only for shot files
+    from hopkinson.rig.shotfile import read_shot  # h5py: loaded only for shot files
 
     shot = read_shot(path)
     raw = shot.raw
@@ -103,9 +103,9 @@ def parse_orders(text: str) -> tuple[int, int]:
 
 def run_reduce(args: argparse.Namespace) -> int:
     """Reduce RAW, write the record, print the shock quantities."""
-    from analysis.records import write_record
-    from analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
-    from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
+    from hopkinson.analysis.records import write_record
+    from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
+    from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 
     raw = read_raw(args.raw)
     settings = dict(raw.settings)

@@ -19,13 +19,13 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rig.cli import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, emit_json, fail
+from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, emit_json, fail
 
 if TYPE_CHECKING:
-    from drivers.amplifier import BridgeAmplifier
-    from drivers.digitizer import Digitizer
-    from drivers.valve_controller import ValveController
-    from rig.config import RigConfig
+    from hopkinson.drivers.amplifier import BridgeAmplifier
+    from hopkinson.drivers.digitizer import Digitizer
+    from hopkinson.drivers.valve_controller import ValveController
+    from hopkinson.rig.config import RigConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -51,9 +51,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 # -- sim ------------------------------------------------------------------------------------------
 def run_sim(args: argparse.Namespace) -> int:
-    from drivers.sim.faults import FAULTS
-    from drivers.sim.simulated_rig import fault_list_text, run_simulator
-    from rig.config import load_sim_config
+    from hopkinson.drivers.sim.faults import FAULTS
+    from hopkinson.drivers.sim.simulated_rig import fault_list_text, run_simulator
+    from hopkinson.rig.config import load_sim_config
 
     if args.list_faults:
         print(fault_list_text())
@@ -70,7 +70,7 @@ def run_sim(args: argparse.Namespace) -> int:
 
 # -- status ---------------------------------------------------------------------------------------
 def run_status(args: argparse.Namespace) -> int:
-    from rig.config import load_rig_config
+    from hopkinson.rig.config import load_rig_config
 
     config = load_rig_config(args.config)
     report = rig_status(config)
@@ -83,7 +83,7 @@ def run_status(args: argparse.Namespace) -> int:
 
 def rig_status(config: RigConfig) -> dict[str, Any]:
     """Ask every instrument; a failure is recorded under its name, never raised."""
-    from rig.instruments import make_instruments
+    from hopkinson.rig.instruments import make_instruments
 
     instruments = make_instruments(config)
     report: dict[str, Any] = {"config": config.path}
@@ -96,7 +96,7 @@ def rig_status(config: RigConfig) -> dict[str, Any]:
 
 
 def _ask(address: str, query: Any) -> dict[str, Any]:
-    from drivers.errors import InstrumentError
+    from hopkinson.drivers.errors import InstrumentError
 
     try:
         return {"address": address, "ok": True, **query()}
@@ -105,7 +105,7 @@ def _ask(address: str, query: Any) -> dict[str, Any]:
 
 
 def _valve_controller_status(vc: ValveController) -> dict[str, Any]:
-    from drivers.errors import InstrumentError
+    from hopkinson.drivers.errors import InstrumentError
 
     with vc:
         try:

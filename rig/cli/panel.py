@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rig.cli import add_rig_arguments
+from hopkinson.rig.cli.main import add_rig_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +31,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_panel_command(args: argparse.Namespace) -> int:
-    from ui.app import run_panel  # Qt loads only for this command
+    from hopkinson.ui.app import run_panel  # Qt loads only for this command
 
     return run_panel(args)

@@ -37,8 +37,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from rig.cli import add_rig_arguments, emit_json, rig_config_path, signals_abort
-from rig.errors import ConfigError
+from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path, signals_abort
+from hopkinson.rig.errors import ConfigError
 
 REPORT_FORMATS = ("pdf", "html")
 EXIT_INTERRUPTED = 130
@@ -91,17 +91,17 @@ def report_formats(text: str) -> list[str]:
 
 
 def run_campaign_command(args: argparse.Namespace) -> int:
-    from rig.campaign import (
+    from hopkinson.rig.campaign import (
         CampaignRunner,
         FireLog,
         attach_fire_log,
         check_authorisation,
         prepare_run,
     )
-    from rig.config import load_rig_config, load_sim_config
-    from rig.events import EventBus
-    from rig.instruments import open_instruments
-    from rig.plan import load_plan
+    from hopkinson.rig.config import load_rig_config, load_sim_config
+    from hopkinson.rig.events import EventBus
+    from hopkinson.rig.instruments import open_instruments
+    from hopkinson.rig.plan import load_plan
 
     if not args.sim and (args.sim_fault or args.sim_fire_log):
         raise ConfigError("--sim-fault and --sim-fire-log need --sim")
@@ -120,7 +120,7 @@ def run_campaign_command(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         truth = None
         if sim_config is not None:
-            from rig.sim_session import sim_session
+            from hopkinson.rig.sim_session import sim_session
 
             session = stack.enter_context(sim_session(config, sim_config, args.sim_fault))
             config, truth = session.config, session.simulated_truth
@@ -153,7 +153,7 @@ def run_campaign_command(args: argparse.Namespace) -> int:
 
 def _write_report(run_folder: Path, formats: list[str]) -> list[str]:
     """The run's report in each format; a failure is a warning (the shots are what matters)."""
-    from rig.report_data import write_run_report
+    from hopkinson.rig.report_data import write_run_report
 
     try:
         return [str(p) for p in write_run_report(run_folder, formats)]
@@ -197,7 +197,7 @@ class ProgressPrinter:
 
 
 def status_command(args: argparse.Namespace) -> int:
-    from rig.journal import Journal
+    from hopkinson.rig.journal import Journal
 
     with Journal.open(args.run_folder) as journal:
         summary = journal.summary()
@@ -216,7 +216,7 @@ def status_command(args: argparse.Namespace) -> int:
 
 
 def decide_command(args: argparse.Namespace) -> int:
-    from rig.journal import Journal
+    from hopkinson.rig.journal import Journal
 
     with Journal.open(args.run_folder) as journal:
         status = journal.decide(args.shot_id, args.decision, args.note)

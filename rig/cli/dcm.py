@@ -17,14 +17,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from analysis.errors import AnalysisError
-from rig.cli import emit_json
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.rig.cli.main import emit_json
 
 if TYPE_CHECKING:
     import numpy as np
-
-    from analysis.dcm import DCM
-    from analysis.model import DiscreteModel
+    from hopkinson.analysis.dcm import DCM
+    from hopkinson.analysis.model import DiscreteModel
 
 DEFAULT_BLOCK_SAMPLES = 65_536
 
@@ -52,7 +51,7 @@ def parse_poles(text: str, option: str) -> np.ndarray:
 
 def _load_model_checked(path: str) -> DiscreteModel:
     """load_model, with any malformed content turned into one clear message."""
-    from analysis.model import load_model
+    from hopkinson.analysis.model import load_model
 
     try:
         model = load_model(path)
@@ -71,8 +70,8 @@ def design_report(
     poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, source: str
 ) -> dict[str, Any]:
     """The JSON result of `hopkinson dcm` (also what -o writes)."""
-    from analysis.dcm import compare_steps, compensated_fbsd_edges
-    from analysis.response import fbsd_edges, pole_analysis
+    from hopkinson.analysis.dcm import compare_steps, compensated_fbsd_edges
+    from hopkinson.analysis.response import fbsd_edges, pole_analysis
 
     result: dict[str, Any] = {
         "source": source,
@@ -109,7 +108,7 @@ def _poly_text(coeffs: np.ndarray) -> str:
 
 
 def _print_design(result: dict[str, Any], dcm: DCM) -> None:
-    from analysis.dcm import format_complex
+    from hopkinson.analysis.dcm import format_complex
 
     out = sys.stdout
     out.write(f"Model: {result['source']} (sample interval {dcm.sample_interval_s:g} s)\n")
@@ -150,7 +149,7 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
 
 def run_dcm(args: argparse.Namespace) -> int:
     """Design the DCM and report it (text or --json); -o writes the DCM file."""
-    from analysis.dcm import design_dcm
+    from hopkinson.analysis.dcm import design_dcm
 
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
@@ -187,8 +186,8 @@ def run_dcm(args: argparse.Namespace) -> int:
 
 def run_compensate(args: argparse.Namespace) -> int:
     """Apply a DCM to a record's response, block by block, and write the compensated record."""
-    from analysis.dcm import apply, load_dcm
-    from analysis.records import read_record, write_record
+    from hopkinson.analysis.dcm import apply, load_dcm
+    from hopkinson.analysis.records import read_record, write_record
 
     if args.block_samples < 1:
         raise AnalysisError(f"compensate: --block-samples must be at least 1, got {args.block_samples}")

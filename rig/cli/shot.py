@@ -33,8 +33,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from rig.cli import add_rig_arguments, emit_json, rig_config_path, signals_abort
-from rig.errors import ConfigError
+from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path, signals_abort
+from hopkinson.rig.errors import ConfigError
 
 PROMPT_TIMEOUT_S = 60.0
 
@@ -67,11 +67,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_shot_command(args: argparse.Namespace) -> int:
     # Imported here: the drivers (pymodbus, pyvisa, pyserial) load only when a shot runs.
-    from rig.config import load_rig_config, load_sim_config
-    from rig.events import EventBus, RigEvent
-    from rig.instruments import open_instruments
-    from rig.sequencer import FireAuthorisation, Sequencer
-    from rig.shot import ShotRequest
+    from hopkinson.rig.config import load_rig_config, load_sim_config
+    from hopkinson.rig.events import EventBus, RigEvent
+    from hopkinson.rig.instruments import open_instruments
+    from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
+    from hopkinson.rig.shot import ShotRequest
 
     if not args.sim and (args.sim_fault or args.sim_state_file):
         raise ConfigError("--sim-fault and --sim-state-file need --sim")
@@ -98,7 +98,7 @@ def run_shot_command(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         truth = None
         if args.sim:
-            from rig.sim_session import sim_session
+            from hopkinson.rig.sim_session import sim_session
 
             session = stack.enter_context(sim_session(config, load_sim_config(args.sim_config), args.sim_fault,
                                                       args.sim_state_file))
@@ -128,7 +128,9 @@ def run_shot_command(args: argparse.Namespace) -> int:
     elif outcome.shot_path is not None:
         print(f"shot file: {outcome.shot_path}", flush=True)
         if outcome.results:
-            from rig.campaign import result_line  # the campaign's one-line summary of the figures
+            from hopkinson.rig.campaign import (
+                result_line,  # the campaign's one-line summary of the figures
+            )
 
             print(f"results:   {result_line(outcome.results)}", flush=True)
     for warning in outcome.warnings:

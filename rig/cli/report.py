@@ -19,8 +19,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rig.cli import emit_json
-from rig.errors import ConfigError
+from hopkinson.rig.cli.main import emit_json
+from hopkinson.rig.errors import ConfigError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,8 +42,8 @@ def default_outputs(source: Path) -> list[Path]:
 
 
 def report_command(args: argparse.Namespace) -> int:
-    from analysis.report import campaign_statistics, write_report
-    from rig.report_data import report_for
+    from hopkinson.reports.report import campaign_statistics, write_report
+    from hopkinson.rig.report_data import report_for
 
     outputs = args.output or default_outputs(args.source)
     for out in outputs:

@@ -17,16 +17,16 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from analysis.errors import AnalysisError
-from rig.cli import emit_json
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.rig.cli.main import emit_json
 
 if TYPE_CHECKING:
-    from analysis.identify import Identification
+    from hopkinson.analysis.identify import Identification
 
 
 def identification_report(result: Identification, source: str) -> dict[str, Any]:
     """The JSON object of `hopkinson identify` (also what -o writes)."""
-    from analysis.response import fbsd_hz, pole_analysis
+    from hopkinson.analysis.response import fbsd_hz, pole_analysis
 
     report = {"source": source, **result.to_dict()}
     report["fbsd_hz"] = fbsd_hz(result.model)
@@ -61,9 +61,9 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
 
 def run_identify(args: argparse.Namespace) -> int:
     """Identify the model of RECORD; print a summary or the JSON; optionally write the JSON."""
-    from analysis.identify import identify
-    from analysis.records import read_record
-    from analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
+    from hopkinson.analysis.identify import identify
+    from hopkinson.analysis.records import read_record
+    from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 
     if args.max_order < 1:
         raise AnalysisError(f"--max-order must be at least 1, got {args.max_order}")

@@ -18,27 +18,31 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from hopkinson.rig.config_paths import (
+    DEFAULT_SIM_CONFIG,
+    DEFAULT_SIM_RIG_CONFIG,
+    default_rig_config,
+)
+
+from hopkinson import __version__
+
 # Modules that provide sub-commands, in the order `hopkinson --help` lists them. Each keeps
 # its heavy imports (Qt, pymodbus, matplotlib) inside the functions that need them.
 COMMAND_MODULES = [
-    "rig.commands_shot",
-    "rig.commands_campaign",
-    "rig.commands_panel",
-    "rig.commands_sim",
-    "rig.commands_identify",
-    "rig.commands_dcm",
-    "rig.commands_reduce",
-    "rig.commands_report",
-    "rig.commands_demo",
+    "hopkinson.rig.cli.shot",
+    "hopkinson.rig.cli.campaign",
+    "hopkinson.rig.cli.panel",
+    "hopkinson.rig.cli.sim",
+    "hopkinson.rig.cli.identify",
+    "hopkinson.rig.cli.dcm",
+    "hopkinson.rig.cli.reduce",
+    "hopkinson.rig.cli.report",
+    "hopkinson.rig.cli.demo",
 ]
 
-# The project's config/ folder, wherever the command is started from. These defaults and the
-# shared rig options live here, not in rig.config: building the parser must not load the
+# The shared rig options live here, not in rig.config: building the parser must not load the
 # drivers (pymodbus) that the configuration's register maps come from.
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
-DEFAULT_RIG_CONFIG = CONFIG_DIR / "rig.toml"
-DEFAULT_SIM_CONFIG = CONFIG_DIR / "sim.toml"
-DEFAULT_SIM_RIG_CONFIG = CONFIG_DIR / "rig-sim.toml"  # rig.toml's variant for the simulated rig
+DEFAULT_RIG_CONFIG = default_rig_config()
 
 
 def add_rig_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,12 +62,12 @@ def rig_config_path(args: argparse.Namespace) -> Path:
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:
-    from analysis.errors import AnalysisError
-    from rig.errors import ConfigError, ShotAborted
+    from hopkinson.analysis.errors import AnalysisError
+    from hopkinson.rig.errors import ConfigError, ShotAborted
 
     errors: list[type[BaseException]] = [AnalysisError, ConfigError, ShotAborted]
     try:
-        from drivers.errors import InstrumentError
+        from hopkinson.drivers.errors import InstrumentError
 
         errors.append(InstrumentError)
     except ImportError:
@@ -77,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="hopkinson",
         description="Hopkinson-bar shock calibration of high-g accelerometers.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)

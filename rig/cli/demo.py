@@ -18,9 +18,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rig.cli import DEFAULT_SIM_CONFIG, DEFAULT_SIM_RIG_CONFIG
-from rig.commands_campaign import ProgressPrinter, report_formats
-from rig.errors import ConfigError
+from hopkinson.rig.cli.campaign import ProgressPrinter, report_formats
+from hopkinson.rig.cli.main import DEFAULT_SIM_CONFIG, DEFAULT_SIM_RIG_CONFIG
+from hopkinson.rig.errors import ConfigError
 
 DEFAULT_OUT = Path("demo-output")
 MAX_SHOTS = 50
@@ -70,13 +70,13 @@ def demo_plan_text(shots: int) -> str:
 
 
 def demo_command(args: argparse.Namespace) -> int:
-    from analysis.report import truth_comparison
-    from rig.campaign import CampaignRunner, prepare_run
-    from rig.config import load_rig_config, load_sim_config
-    from rig.events import EventBus
-    from rig.instruments import open_instruments
-    from rig.report_data import run_report, write_run_report
-    from rig.sim_session import sim_session
+    from hopkinson.reports.report import truth_comparison
+    from hopkinson.rig.campaign import CampaignRunner, prepare_run
+    from hopkinson.rig.config import load_rig_config, load_sim_config
+    from hopkinson.rig.events import EventBus
+    from hopkinson.rig.instruments import open_instruments
+    from hopkinson.rig.report_data import run_report, write_run_report
+    from hopkinson.rig.sim_session import sim_session
 
     if not 1 <= args.shots <= MAX_SHOTS:
         raise ConfigError(f"--shots: must be 1..{MAX_SHOTS}, got {args.shots}")

@@ -36,24 +36,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.backends.backend_pdf import PdfPages
-from matplotlib.figure import Figure
-
-from analysis.dcm import step_responses as dcm_step_responses
-from analysis.errors import AnalysisError
-from analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
-from analysis.identify import fit_percent, remove_input_delay
-from analysis.model import DiscreteModel
-from analysis.resample import resample_to_rate
-from analysis.response import (
+from hopkinson.analysis.dcm import step_responses as dcm_step_responses
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
+from hopkinson.analysis.identify import fit_percent, remove_input_delay
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.resample import resample_to_rate
+from hopkinson.analysis.response import (
     frequency_response,
     model_output,
     natural_frequency_damping,
     nyquist_hz,
     response_times_samples,
 )
-from analysis.shot_analysis import ShotAnalysis
+from hopkinson.analysis.shot_analysis import ShotAnalysis
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.backends.backend_pdf import PdfPages
+from matplotlib.figure import Figure
 
 G_M_S2 = 9.80665  # standard gravity: accelerations are also shown in g
 A4_PORTRAIT_IN = (8.27, 11.69)

@@ -1,0 +1,4 @@
+"""Calibration reports (matplotlib pages, PDF and HTML writers) from analysis results.
+
+Imports `analysis` and plotting libraries, never `rig`, `drivers` or `ui`.
+"""
