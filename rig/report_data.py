@@ -1,7 +1,7 @@
 """What a calibration report shows, gathered from a shot file or a campaign run folder.
 
     report = report_for(path)                          # a shot file (.h5) or a run folder
-    write_report(report, ["report.pdf", "report.html"])  # reports.report
+    write_report(report, ["report.pdf", "report.html"])  # reports.writers
     write_run_report(run_folder, ["pdf", "html"])      # into <run folder>/report/report.<fmt>
 
 A shot's analysis is rebuilt from its shot file (`/analysis` results and `/derived/record`)
@@ -19,7 +19,8 @@ from typing import Any
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.shot_analysis import ShotAnalysis
-from hopkinson.reports.report import G_M_S2, CalibrationReport, ShotEntry, write_report
+from hopkinson.reports.data import G_M_S2, CalibrationReport, ShotEntry
+from hopkinson.reports.writers import write_report
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, open_run_folder

@@ -453,7 +453,7 @@ class MainWindow(QMainWindow):
             return
 
         def write() -> Path:
-            from hopkinson.reports.report import write_report
+            from hopkinson.reports.writers import write_report
             from hopkinson.rig.report_data import shot_report
 
             return write_report(shot_report(view.path), [path])[0]

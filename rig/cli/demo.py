@@ -70,7 +70,7 @@ def demo_plan_text(shots: int) -> str:
 
 
 def demo_command(args: argparse.Namespace) -> int:
-    from hopkinson.reports.report import truth_comparison
+    from hopkinson.reports.data import truth_comparison
     from hopkinson.rig.campaign import CampaignRunner, prepare_run
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.events import EventBus

@@ -42,7 +42,8 @@ def default_outputs(source: Path) -> list[Path]:
 
 
 def report_command(args: argparse.Namespace) -> int:
-    from hopkinson.reports.report import campaign_statistics, write_report
+    from hopkinson.reports.statistics import campaign_statistics
+    from hopkinson.reports.writers import write_report
     from hopkinson.rig.report_data import report_for
 
     outputs = args.output or default_outputs(args.source)

@@ -1,0 +1,293 @@
+"""Calibration reports: campaign statistics against known systems and closed forms, the figures
+(bands and FBSD drawn where the analysis put them), and the PDF/HTML files (pages and text).
+
+Records are simulated from known accelerometer models (drivers/sim) and analysed with the
+shared shot analysis; the report must show what the analysis found and the truth predicts.
+"""
+
+from __future__ import annotations
+
+import re
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_record
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
+from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.reports.data import CalibrationReport, ShotEntry, main_mode, truth_comparison
+from hopkinson.reports.pages import report_pages
+from hopkinson.reports.shot_pages import dcm_page, excitation_page, model_page, step_responses
+from hopkinson.reports.statistics import campaign_statistics, cross_validation, spread
+from hopkinson.reports.writers import write_pngs, write_report
+from matplotlib.lines import Line2D
+from matplotlib.text import Text
+
+DT = 1e-6
+SENSOR_A = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))
+SENSOR_B = AccelerometerTruth(modes=(Mode(40_000.0, 0.03),))
+
+
+def simulated_record(truth: AccelerometerTruth, peak_g: float, seed: int) -> Record:
+    """A 2 ms record at 1 MS/s: half-sine pulse (38.6 µs) and the sensor's response, 50 dB SNR."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(-200, 1800) * DT
+    ref = half_sine_m_s2(t, 38.6e-6, peak_g * G_M_S2)
+    resp = truth.respond(ref, DT)
+    return Record(DT, ref + white_noise(ref, 50, rng), resp + white_noise(resp, 50, rng), t[0])
+
+
+def entry(label: str, analysis: ShotAnalysis | None, truth: AccelerometerTruth | None = None,
+          error: str | None = None) -> ShotEntry:
+    modes = None if truth is None else [{"natural_frequency_hz": m.natural_frequency_hz,
+                                         "damping_ratio": m.damping_ratio} for m in truth.modes]
+    return ShotEntry(label, {"Accelerometer": "SIM-ACC, serial T1", "Fired (UTC)": "2026-01-01T00:00:00Z"},
+                     analysis, error=error, state="ANALYSED" if analysis else "ANALYSIS_FAILED",
+                     truth_modes=modes, nominal_sensitivity_v_per_m_s2=2e-7, pressure_bar=2.0)
+
+
+@pytest.fixture(scope="module")
+def analyses() -> dict[str, ShotAnalysis]:
+    params = AnalysisParams(max_order=6)
+    return {
+        "a1": analyse_record(simulated_record(SENSOR_A, 30_000, 1), params),
+        "a2": analyse_record(simulated_record(SENSOR_A, 80_000, 2), params),
+        "b1": analyse_record(simulated_record(SENSOR_B, 50_000, 3), params),
+    }
+
+
+# ------------------------------------------------------------------ statistics
+
+
+def test_spread_closed_form() -> None:
+    s = spread([1.0, 2.0, 3.0, None, float("nan")])
+    assert s["n"] == 3 and s["mean"] == 2.0 and s["std"] == pytest.approx(1.0) and s["cv_percent"] == pytest.approx(50.0)
+    assert (s["min"], s["max"]) == (1.0, 3.0)
+    one = spread([5.0])
+    assert one["n"] == 1 and one["mean"] == 5.0 and one["std"] is None
+    assert spread([])["n"] == 0 and spread([])["mean"] is None
+
+
+def test_cross_validation_of_known_systems(analyses: dict[str, ShotAnalysis]) -> None:
+    order = ["a1", "a2", "b1"]
+    m = cross_validation([analyses[k] for k in order])
+    # The diagonal is each shot's own fit, as the identification reported it.
+    for i, k in enumerate(order):
+        assert m[i, i] == pytest.approx(analyses[k].identification.fit_percent, abs=1e-9)
+        assert m[i, i] > 99.0
+    # Same sensor at another shock level: the model predicts the other shot as well as its own.
+    assert m[0, 1] > 99.0 and m[1, 0] > 99.0
+    assert abs(m[0, 1] - m[1, 1]) < 0.2 and abs(m[1, 0] - m[0, 0]) < 0.2
+    # Another sensor (40 kHz, not 27 kHz): its model does not predict these shots, nor theirs it.
+    assert m[2, 0] < 80.0 and m[2, 1] < 80.0 and m[0, 2] < 80.0
+
+
+def test_campaign_statistics_agree_with_the_truth(analyses: dict[str, ShotAnalysis]) -> None:
+    stats = campaign_statistics([entry("s001-r1", analyses["a1"]), entry("s002-r1", analyses["a2"]),
+                                 entry("s003-r1", None, error="analysis failed: test")])
+    assert stats.labels == ["s001-r1", "s002-r1"]  # the failed shot is not in the statistics
+    fn = stats.spread["natural_frequency_hz"]
+    assert fn["n"] == 2 and fn["mean"] == pytest.approx(27_000.0, rel=1e-3) and fn["std"] < 30.0
+    assert stats.spread["damping_ratio"]["mean"] == pytest.approx(0.05, rel=0.02)
+    # Each FBSD in the spread is the analysis' own figure.
+    assert stats.spread["fbsd_5_hz"]["min"] == min(analyses["a1"].fbsd_hz["5"], analyses["a2"].fbsd_hz["5"])
+    assert stats.cross_validation_percent.shape == (2, 2)
+    d = stats.to_dict()
+    assert d["shots"] == stats.labels and len(d["cross_validation_percent"]) == 2
+
+
+def test_truth_comparison_is_the_continuous_pole_error(analyses: dict[str, ShotAnalysis]) -> None:
+    good = truth_comparison(entry("s", analyses["a1"], SENSOR_A))
+    assert good is not None and good["pole_error_percent"] < 0.5
+    mode = main_mode(analyses["a1"])
+    assert good["natural_frequency_hz"] == mode["natural_frequency_hz"]
+    wrong = AccelerometerTruth(modes=(Mode(30_000.0, 0.05),))
+    bad = truth_comparison(entry("s", analyses["a1"], wrong))
+    # |s − s_t|/|s_t| for poles on a common damping line is the relative frequency difference.
+    assert bad["pole_error_percent"] == pytest.approx(100 * 3_000 / 30_000, rel=0.02)
+    assert truth_comparison(entry("s", None, SENSOR_A)) is None
+
+
+# ------------------------------------------------------------------ figures
+
+
+def vertical_lines(ax) -> dict[str, float]:
+    """label -> x of the vertical lines (axvline) of an axes."""
+    out = {}
+    for line in ax.get_lines():
+        x = np.asarray(line.get_xdata(), dtype=float)
+        if x.size == 2 and x[0] == x[1] and isinstance(line, Line2D):
+            out[line.get_label()] = float(x[0])
+    return out
+
+
+def test_model_page_marks_the_bands_and_the_fbsd(analyses: dict[str, ShotAnalysis]) -> None:
+    a = analyses["a1"]
+    fig = model_page(entry("s001-r1", a))
+    ax_db, ax_band, ax_phase = fig.axes
+    lines = vertical_lines(ax_band)
+    for key in ("5", "10"):
+        label = next(k for k in lines if k.startswith(f"FBSD ±{key} % = "))
+        assert lines[label] == pytest.approx(a.fbsd_hz[key] / 1e3)
+        assert label.endswith(f"{a.fbsd_hz[key] / 1e3:.4g} kHz")
+    # The bands are shaded at 1 ± 0.05 and 1 ± 0.10.
+    y_bands = sorted((p.get_y(), p.get_y() + p.get_height()) for p in ax_band.patches)
+    assert len(y_bands) == 2
+    assert y_bands[0] == pytest.approx((0.9, 1.1)) and y_bands[1] == pytest.approx((0.95, 1.05))
+    # The normalised model curve crosses 1.05 at the FBSD ±5 % line.
+    curve = ax_band.get_lines()[0]
+    f, g = (np.asarray(v, dtype=float) for v in curve.get_data())
+    assert np.interp(a.fbsd_hz["5"] / 1e3, f, g) == pytest.approx(1.05, abs=2e-3)
+    assert "(kHz)" in ax_band.get_xlabel() and "|H(f)/H(0)|" in ax_band.get_ylabel()
+    assert "(dB)" in ax_db.get_ylabel() and "(degrees)" in ax_phase.get_ylabel()
+
+
+def test_dcm_page_and_step_responses(analyses: dict[str, ShotAnalysis]) -> None:
+    a = analyses["a1"]
+    fig = dcm_page(entry("s001-r1", a))
+    lines = vertical_lines(fig.axes[0])
+    label = next(k for k in lines if k.startswith("compensated FBSD ±5 %"))
+    assert lines[label] == pytest.approx(a.compensated_fbsd_hz["5"] / 1e3)
+    t, alone, both = step_responses(a)
+    # Both step responses are normalised: they settle at 1 (unit DC gain of the DCM).
+    assert alone[-1] == pytest.approx(1.0, abs=0.02) and both[-1] == pytest.approx(1.0, abs=0.02)
+    assert t[1] - t[0] == pytest.approx(DT)
+
+
+def test_excitation_page_shows_the_loss_by_order_and_the_chosen_order(analyses: dict[str, ShotAnalysis]) -> None:
+    a = analyses["a1"]
+    fig = excitation_page(entry("s001-r1", a))
+    ax_loss = fig.axes[2]
+    lines = vertical_lines(ax_loss)
+    assert lines[f"chosen order {a.model.order}"] == a.model.order
+    corrected = next(ln for ln in ax_loss.get_lines() if ln.get_label().startswith("bias-corrected"))
+    np.testing.assert_allclose(corrected.get_ydata(), a.identification.loss_by_order)
+    assert ax_loss.get_xlabel() == "model order n"
+    assert "(g)" in fig.axes[0].get_ylabel() and "(µs)" in fig.axes[0].get_xlabel()
+
+
+# ------------------------------------------------------------------ files
+
+
+def pdf_text(data: bytes) -> str:
+    """The text drawn in a matplotlib PDF (content streams inflated, TJ/Tj strings joined)."""
+    streams = b""
+    for m in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.S):
+        try:
+            streams += zlib.decompress(m.group(1))
+        except zlib.error:
+            pass
+    parts = []
+    for m in re.finditer(rb"\[(.*?)\]\s*TJ|\(((?:[^()\\]|\\.)*)\)\s*Tj", streams, re.S):
+        chunk = b"".join(re.findall(rb"\(((?:[^()\\]|\\.)*)\)", m.group(1))) if m.group(1) is not None else m.group(2)
+        parts.append(chunk.replace(b"\\(", b"(").replace(b"\\)", b")"))
+    return b" ".join(parts).decode("latin-1")
+
+
+def pdf_pages(data: bytes) -> int:
+    return len(re.findall(rb"/Type\s*/Page\b", data))
+
+
+@pytest.fixture(scope="module")
+def single_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> tuple[CalibrationReport, list]:
+    """One shot's report, drawn once for the module; every page saved as a PNG for people to look at."""
+    e = entry("s001-r1", analyses["a1"], SENSOR_A)
+    report = CalibrationReport("Calibration report: SIM-ACC, serial T1, shot s001-r1", dict(e.identity), [e])
+    pages = report_pages(report)
+    write_pngs(pages, artifacts_dir, "report-shot", dpi=80)
+    return report, pages
+
+
+@pytest.fixture(scope="module")
+def campaign_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> tuple[CalibrationReport, list]:
+    entries = [entry("s001-r1", analyses["a1"], SENSOR_A), entry("s002-r1", analyses["a2"], SENSOR_A),
+               entry("s003-r1", None, error="analysis failed: no beat in the Doppler channel")]
+    report = CalibrationReport("Calibration report: SIM-ACC, serial SIM0001, campaign 20260101T000000Z-example",
+                               {"Campaign": "c-1"}, entries, campaign=True,
+                               notes=["Shots without a shot file: s004-r1 (UNKNOWN)."])
+    pages = report_pages(report)
+    write_pngs(pages[:3], artifacts_dir, "report-campaign", dpi=80)  # the shots' pages are as above
+    return report, pages
+
+
+def test_single_shot_report_files(tmp_path: Path, analyses: dict[str, ShotAnalysis], single_report) -> None:
+    a = analyses["a1"]
+    report, pages = single_report
+    pdf, page_html = write_report(report, [tmp_path / "r.pdf", tmp_path / "r.html"], pages=pages)
+    data = pdf.read_bytes()
+    assert pdf_pages(data) == 5  # summary + excitation, model, poles, DCM
+    assert b"/Title (Calibration report: SIM-ACC, serial T1, shot s001-r1)" in data
+    text = pdf_text(data)
+    f5 = f"{a.fbsd_hz['5'] / 1e3:.4g} kHz"
+    for needle in ("Results", "model order", f5, "Band of small distortion", "Pole analysis", "SIM-ACC, serial T1",
+                   "Step responses", "Loss by order", "simulated truth"):
+        assert needle in text, needle
+    page = page_html.read_text(encoding="utf-8")
+    assert page.count("<img ") == 4 and page.count("data:image/png;base64,") == 4
+    for needle in ("FBSD ±5 %", f5, "Pole analysis (Table 1)", "SIM-ACC, serial T1", "zeros (= model poles)",
+                   "pole error"):
+        assert needle in page, needle
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_campaign_report_pdf(tmp_path: Path, campaign_report) -> None:
+    report, pages = campaign_report
+    entries = report.shots
+    (pdf,) = write_report(report, [tmp_path / "c.pdf"], pages=pages)
+    data = pdf.read_bytes()
+    assert pdf_pages(data) == 1 + 2 + 4 * 2 + 1  # summary, 2 campaign pages, 2 analysed shots, 1 failed
+    text = pdf_text(data)
+    stats = campaign_statistics(entries)
+    for needle in ("Cross-validation", "Spread across 2 analysed shots", "s004-r1 (UNKNOWN)",
+                   "no beat in the Doppler channel", "s003-r1: no analysis",
+                   f"{stats.spread['natural_frequency_hz']['mean'] / 1e3:.5g}",  # the spread table's mean f_n
+                   f"{stats.cross_validation_percent[0, 1]:.2f}"):  # a cross-validation matrix cell
+        assert needle in text, needle
+
+
+def text_boxes(fig) -> list[tuple[str, object]]:
+    """(text, window extent in pixels) of every non-empty text drawn on a figure (after a draw)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    out = []
+    for t in fig.findobj(Text):
+        if t.get_visible() and t.get_text().strip() and t.figure is fig:
+            out.append((t.get_text(), t.get_window_extent(renderer)))
+    return out
+
+
+@pytest.mark.parametrize("which", ["single_report", "campaign_report"])
+def test_summary_pages_stay_on_the_page_and_never_overlap(which: str, request) -> None:
+    # The layout defects of issue 13: the title ran past the page edge, the shot table's headers ran together.
+    report, pages = request.getfixturevalue(which)
+    summaries = [fig for caption, fig in pages if caption.startswith("Summary")]
+    assert summaries
+    for fig in summaries:
+        width, height = fig.canvas.get_width_height()
+        boxes = [(text, box) for text, box in text_boxes(fig) if box.width > 0]
+        assert any(text.startswith("Calibration report") for text, _ in boxes) or fig is not summaries[0]
+        for text, box in boxes:
+            assert box.x0 >= 0 and box.x1 <= width and box.y0 >= 0 and box.y1 <= height, f"off the page: {text!r}"
+        for i, (text_a, a) in enumerate(boxes):
+            for text_b, b in boxes[i + 1:]:
+                overlap_x = min(a.x1, b.x1) - max(a.x0, b.x0)
+                overlap_y = min(a.y1, b.y1) - max(a.y0, b.y0)
+                assert overlap_x <= 0.5 or overlap_y <= 0.5, f"{text_a!r} overlaps {text_b!r}"
+    for caption, fig in pages:  # every plot page's title fits the page's width
+        fig.canvas.draw()
+        if fig._suptitle is not None:
+            box = fig._suptitle.get_window_extent(fig.canvas.get_renderer())
+            assert box.x0 >= 0 and box.x1 <= fig.canvas.get_width_height()[0], caption
+
+
+def test_report_input_errors(tmp_path: Path, analyses: dict[str, ShotAnalysis]) -> None:
+    report = CalibrationReport("r", {}, [entry("s", analyses["a1"])])
+    with pytest.raises(AnalysisError, match=r"r\.txt: a report is \.pdf or \.html"):
+        write_report(report, [tmp_path / "r.txt"])
+    with pytest.raises(AnalysisError, match="does not exist"):
+        write_report(report, [tmp_path / "missing" / "r.pdf"])
+    with pytest.raises(AnalysisError, match="no shots"):
+        write_report(CalibrationReport("r", {}, []), [tmp_path / "r.pdf"])
