@@ -1,0 +1,118 @@
+"""The campaign's own pages: the cross-validation matrix with the spread of f_n and S_sh
+against the shock level, and every shot's identified response on one plot."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.response import frequency_response, nyquist_hz
+from hopkinson.reports.data import G_M_S2, ShotEntry
+from hopkinson.reports.layout import plot_page
+from hopkinson.reports.shot_pages import BAND_LEVELS, frequency_grid, normalised
+from hopkinson.reports.statistics import CampaignStatistics
+from hopkinson.reports.tables import fmt
+from matplotlib.figure import Figure
+
+
+def cross_validation_page(stats: CampaignStatistics, entries: Sequence[ShotEntry]) -> Figure:
+    """The cross-validation matrix and f_n / S_sh / FBSD against the shock level."""
+    fig = plot_page("Campaign: cross-validation and spread",
+                  "row i: model identified on shot i; column j: simulated on shot j's reference")
+    ax_cv, ax_fn, ax_s = fig.subplots(3, 1, height_ratios=[1.4, 1.0, 1.0])
+    m = stats.cross_validation_percent
+    labels = stats.labels
+    if m.size:
+        finite = m[np.isfinite(m)]
+        low = float(np.min(finite)) if finite.size else 0.0
+        im = ax_cv.imshow(m, cmap="viridis", vmin=min(low, 99.0), vmax=100.0)
+        for i in range(m.shape[0]):
+            for j in range(m.shape[1]):
+                if np.isfinite(m[i, j]):
+                    ax_cv.text(j, i, f"{m[i, j]:.2f}", ha="center", va="center", fontsize=7,
+                               color="white" if m[i, j] < (low + 100) / 2 else "black")
+        ax_cv.set_xticks(range(len(labels)), labels, rotation=45, ha="right", fontsize=7)
+        ax_cv.set_yticks(range(len(labels)), labels, fontsize=7)
+        fig.colorbar(im, ax=ax_cv, label="fit (%)", shrink=0.8)
+    ax_cv.set_xlabel("shot j (reference and measured response)")
+    ax_cv.set_ylabel("model of shot i")
+    ax_cv.set_title("Cross-validation fit %: 100·(1 − ‖y_j − ŷ_ij‖ / ‖y_j − ȳ_j‖)", fontsize=9)
+
+    peaks = np.array([np.nan if f["peak_acceleration_m_s2"] is None else f["peak_acceleration_m_s2"] / G_M_S2
+                      for f in stats.figures])
+
+    def series(key: str, scale: float) -> np.ndarray:
+        return np.array([np.nan if f[key] is None else f[key] / scale for f in stats.figures])
+
+    def with_spread(ax: Any, key: str, scale: float, colour: str, label: str) -> None:
+        y = series(key, scale)
+        s = stats.spread[key]
+        if s["mean"] is None:
+            ax.text(0.5, 0.5, "not available for these shots", ha="center", va="center", transform=ax.transAxes)
+            return
+        ax.plot(peaks, y, "o", color=colour, label=label)
+        mean = s["mean"] / scale
+        std = (s["std"] or 0.0) / scale
+        ax.axhline(mean, color=colour, lw=1, label=f"mean {fmt(mean, digits=5)}")
+        if s["std"] is not None:
+            ax.axhspan(mean - std, mean + std, color=colour, alpha=0.12, label=f"± 1 std ({fmt(std, digits=3)})")
+        # At least ±1 % of the mean in view, so a tiny spread looks tiny.
+        half = max(3.0 * std, 0.01 * abs(mean), float(np.nanmax(np.abs(y - mean))) * 1.2)
+        ax.set_ylim(mean - half, mean + half)
+        ax.ticklabel_format(axis="y", useOffset=False)
+        ax.legend(fontsize=7)
+
+    with_spread(ax_fn, "natural_frequency_hz", 1e3, "tab:blue", "f_n per shot")
+    ax_fn.set_xlabel("peak acceleration (g)")
+    ax_fn.set_ylabel("natural frequency f_n (kHz)")
+    ax_fn.set_title("Main resonance against the shock level", fontsize=9)
+    ax_fn.grid(alpha=0.3)
+    with_spread(ax_s, "shock_sensitivity", 1.0, "tab:green", "S_sh per shot")
+    ax_s.set_xlabel("peak acceleration (g)")
+    ax_s.set_ylabel("shock sensitivity (× nominal)")
+    ax_s.set_title("Shock sensitivity (ISO 16063-13) against the shock level: linearity", fontsize=9)
+    ax_s.grid(alpha=0.3)
+    return fig
+
+
+def campaign_responses_page(entries: Sequence[ShotEntry]) -> Figure:
+    """Every shot's normalised magnitude on one plot, with the bands and each FBSD ±5 %."""
+    fig = plot_page("Campaign: identified responses of all shots")
+    ax_db, ax_band = fig.subplots(2, 1)
+    analysed = [e for e in entries if e.analysis is not None]
+    colours = [f"C{i % 10}" for i in range(len(analysed))]
+    top = 0.0
+    for e, c in zip(analysed, colours, strict=True):
+        a = e.analysis
+        assert a is not None
+        f = frequency_grid(a.model, 800)
+        ax_db.semilogx(f / 1e3, 20 * np.log10(normalised(frequency_response(a.model, f), a.model.dc_gain)),
+                       color=c, lw=1, label=e.label)
+        top = max(top, a.fbsd_hz.get("10") or 0.0)
+    for key, level, colour in BAND_LEVELS:
+        ax_db.axhspan(20 * np.log10(1 - level), 20 * np.log10(1 + level), color=colour, alpha=0.2,
+                      label=f"±{key} % band")
+    ax_db.set_xlabel("frequency (kHz)")
+    ax_db.set_ylabel("|H(f)/H(0)| (dB)")
+    ax_db.set_title("Normalised magnitude of each shot's model", fontsize=9)
+    ax_db.grid(alpha=0.3)
+    ax_db.legend(fontsize=6.5, ncol=3)
+    for e, c in zip(analysed, colours, strict=True):
+        a = e.analysis
+        assert a is not None
+        fl = np.linspace(0.0, min(nyquist_hz(a.model), 2.5 * top if top else nyquist_hz(a.model)), 600)
+        ax_band.plot(fl / 1e3, normalised(frequency_response(a.model, fl), a.model.dc_gain), color=c, lw=1,
+                     label=e.label)
+        f5 = a.fbsd_hz.get("5")
+        if f5:
+            ax_band.axvline(f5 / 1e3, color=c, ls="--", lw=0.8)
+    for key, level, colour in BAND_LEVELS:
+        ax_band.axhspan(1 - level, 1 + level, color=colour, alpha=0.1, label=f"±{key} % band")
+    ax_band.set_ylim(0.8, 1.2)
+    ax_band.set_xlabel("frequency (kHz)")
+    ax_band.set_ylabel("|H(f)/H(0)| (ratio)")
+    ax_band.set_title("Around the bands (dashed: each shot's FBSD ±5 %)", fontsize=9)
+    ax_band.grid(alpha=0.3)
+    ax_band.legend(fontsize=6.5, ncol=3, loc="lower left")
+    return fig

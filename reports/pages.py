@@ -1,0 +1,86 @@
+"""Every page of a report in order: the summary (title page), the campaign pages, each shot's.
+
+The summary page holds the identity of the accelerometer and the rig and either the shot's key
+results or (a campaign) the per-shot table, the spread and the cross-validation summary; it is
+laid out by `layout.TextPages`, so it continues on a second page rather than run off the first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hopkinson.reports.campaign_pages import campaign_responses_page, cross_validation_page
+from hopkinson.reports.data import CalibrationReport
+from hopkinson.reports.layout import TextPages, freeze_layout, new_figure
+from hopkinson.reports.shot_pages import shot_pages
+from hopkinson.reports.statistics import CampaignStatistics, campaign_statistics
+from hopkinson.reports.tables import per_shot_rows, results_rows, spread_rows
+from matplotlib.figure import Figure
+
+SUBTITLE = ("Hopkinson-bar shock calibration: dynamic model, band of small distortion (FBSD) and dynamic "
+            "compensation model (DCM)")
+SUMMARY = "Summary"
+
+
+def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> list[Figure]:
+    """The summary: identity, then the key results (one shot) or the campaign's tables."""
+    first = new_figure()
+
+    def continued(fig: Figure) -> float:
+        fig.text(0.5, 1.0 - 30.0 / (fig.get_figheight() * 72.0), f"{report.title} (continued)", ha="center",
+                 va="top", fontsize=9, color="0.3", parse_math=False)
+        return 52.0
+
+    page = TextPages(first, continued=continued)
+    page.centred(report.title, 13.0)
+    page.centred(SUBTITLE, 9.0, bold=False)
+    page.heading("Accelerometer, rig and campaign" if report.campaign else "Accelerometer and rig")
+    page.table(None, [list(row) for row in report.identity.items()], widths=[0.3, 0.7])
+    if report.campaign and stats is not None:
+        page.heading("Shots")
+        page.table(*per_shot_rows(report.shots), size=7.0)
+        page.paragraph("δ: pulse width at 10 % of peak; n: model order; S_sh: shock sensitivity (× nominal, "
+                       "ISO 16063-13); fit: measured vs model response", size=6.5)
+        page.heading(f"Spread across {len(stats.labels)} analysed shots (standard deviation with n − 1)")
+        page.table(*spread_rows(stats), size=7.5)
+        text = cross_validation_summary(stats)
+        if text:
+            page.heading("Cross-validation (each shot's model on every other shot)")
+            page.paragraph(text)
+    else:
+        page.heading("Results")
+        page.table(None, [list(row) for row in results_rows(report.shots[0])], widths=[0.38, 0.62])
+    if report.notes:
+        page.heading("Notes")
+        for note in report.notes:
+            page.paragraph(note)
+    return page.pages
+
+
+def cross_validation_summary(stats: CampaignStatistics) -> str:
+    """One line: the lowest, diagonal and off-diagonal fit % of the cross-validation matrix."""
+    m = stats.cross_validation_percent
+    finite = m[np.isfinite(m)] if m.size else m
+    if not stats.labels or not finite.size:
+        return ""
+    off = m[~np.eye(m.shape[0], dtype=bool)] if m.shape[0] > 1 else finite
+    off = off[np.isfinite(off)]
+    text = f"fit % of model i on shot j: lowest {np.min(finite):.3f} %, diagonal mean {np.nanmean(np.diag(m)):.3f} %"
+    if off.size and m.shape[0] > 1:
+        text += f", off-diagonal mean {np.mean(off):.3f} %"
+    return text + " (matrix on the next page)"
+
+
+def report_pages(report: CalibrationReport, stats: CampaignStatistics | None = None) -> list[tuple[str, Figure]]:
+    """Every page of the report in order: summary, campaign pages (if any), then each shot's."""
+    if report.campaign and stats is None:
+        stats = campaign_statistics(report.shots)
+    summary = title_pages(report, stats)
+    pages = [(SUMMARY if i == 0 else f"{SUMMARY} (continued)", fig) for i, fig in enumerate(summary)]
+    if report.campaign and stats is not None and stats.labels:
+        pages.append(("Campaign: cross-validation and spread", cross_validation_page(stats, report.shots)))
+        pages.append(("Campaign: responses of all shots", campaign_responses_page(report.shots)))
+    for entry in report.shots:
+        pages.extend(shot_pages(entry))
+    for _caption, fig in pages:
+        freeze_layout(fig)
+    return pages
