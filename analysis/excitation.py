@@ -198,3 +198,44 @@ def excitation_summary(
         band_eq35_high_hz=high35,
         paper_rule_max_natural_frequency_hz=float(PAPER_RULE_CONSTANT / pulse.width_s),
     )
+
+
+# An excitation supports the frequencies where its amplitude spectrum stands this far above
+# the reference's noise in the same window (amplitude ratio: 20 dB) ...
+SUPPORT_SNR = 10.0
+# ... and above this fraction of its own maximum (−40 dB): below it, the dynamics of the
+# reference chain itself and the model's own errors weigh more than the data.
+SUPPORT_FLOOR = 1e-2
+
+
+def supported_band_hz(
+    acceleration: np.ndarray,
+    sample_interval_s: float,
+    noise_rms: float | None = None,
+    *,
+    snr: float = SUPPORT_SNR,
+    floor: float = SUPPORT_FLOOR,
+) -> tuple[float, float]:
+    """The band [low, high] (Hz) the excitation supports: the contiguous band around the
+    spectral maximum of the pulse window where |F(f)| ≥ floor·max|F| and ≥ snr × the amplitude
+    spectrum white noise of `noise_rms` (reference units) has over the same window.
+
+    The pulse window is the main pulse widened by two pulse widths on each side; white noise
+    of standard deviation σ over L samples has an amplitude spectrum of about σ·√L·T. A
+    half-sine's band ends near its first spectral null (f·δ ≈ 1.5); a bipolar pulse's starts
+    above DC. Invariant to the scale of `acceleration` (with `noise_rms` scaled alike).
+    """
+    a = np.asarray(acceleration, dtype=float)
+    pulse = pulse_width(a, sample_interval_s)
+    segment = a[pulse_window(pulse, a.size, sample_interval_s)]
+    freq, mag = amplitude_spectrum(segment, sample_interval_s)
+    i_max = int(np.argmax(mag))
+    level = floor * mag[i_max]
+    if noise_rms is not None and noise_rms > 0:
+        level = max(level, snr * noise_rms * np.sqrt(segment.size) * sample_interval_s)
+    ok = mag >= level
+    below_hi = np.flatnonzero(~ok[i_max:])
+    hi = freq[i_max + below_hi[0] - 1] if below_hi.size else freq[-1]
+    below_lo = np.flatnonzero(~ok[: i_max + 1])
+    lo = freq[below_lo[-1] + 1] if below_lo.size else 0.0
+    return float(lo), float(hi)

@@ -28,8 +28,9 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import supported_band_hz
 from hopkinson.analysis.loss import arx_coefficients_by_order, arx_loss_by_order, long_dot
-from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.refined_iv import (
     TransferFit,
@@ -82,6 +83,26 @@ class Identification:
     order_selection: str  # "knee" (chosen from the losses) or "asked"
     knee_tolerance: float  # relative loss tolerance used for the knee
     preprocessing: dict[str, Any] = field(default_factory=dict)
+    supported_band_hz: tuple[float, float] | None = None  # band the excitation supports
+    noise: dict[str, float | None] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
+    order_evidence: dict[str, Any] = field(default_factory=dict)  # why this order
+
+    @property
+    def main_mode(self) -> dict[str, Any] | None:
+        """The lowest supported complex pole pair (the sensor's main resonance), or None."""
+        return main_mode(self.modes)
+
+    @property
+    def nonminimum_phase_zeros(self) -> np.ndarray:
+        """Zeros on or outside the unit circle (a DCM must never invert them)."""
+        z = self.model.zeros
+        return z[np.abs(z) >= 1.0]
+
+    def supported_poles(self) -> np.ndarray:
+        """The poles of the supported modes (both poles of a pair): what a DCM may cancel."""
+        keep = [complex(*m["pole"]) for m in self.modes if m["supported"]]
+        poles = [p for q in keep for p in ((q, q.conjugate()) if q.imag > 0 else (q,))]
+        return np.array(poles, dtype=complex)
 
     @property
     def sample_interval_s(self) -> float:
@@ -112,6 +133,11 @@ class Identification:
                 "iterations": self.iterations,
                 "warnings": list(self.warnings),
                 "preprocessing": dict(self.preprocessing),
+                "main_mode": dict(self.main_mode) if self.main_mode is not None else None,
+                "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
+                "nonminimum_phase_zeros": complex_pairs(self.nonminimum_phase_zeros),
+                "noise": dict(self.noise),
+                "order_evidence": dict(self.order_evidence),
             }
         )
         return out
@@ -121,37 +147,50 @@ def _finite_or_none(values: list[float]) -> list[float | None]:
     return [float(v) if v is not None and math.isfinite(v) else None for v in values]
 
 
-def modes_of(poles: np.ndarray, sample_interval_s: float) -> list[dict[str, Any]]:
+def modes_of(
+    poles: np.ndarray, sample_interval_s: float, supported_band_hz: tuple[float, float] | None = None
+) -> list[dict[str, Any]]:
     """Natural frequency (Hz) and damping ratio per complex pole pair or real pole (s = ln(z)/T).
 
-    Sorted by natural frequency. A real pole gives a damping ratio of 1 (over-damped section
-    with time constant 1/(2π·f_n)); a negative real pole sits at Nyquist (an artefact of the
-    discretisation, flagged `kind: "nyquist"`).
+    Sorted by natural frequency. `kind` is "complex" (a pair, listed once with its positive
+    imaginary part) or "real". A real pole gives a damping ratio of 1 (over-damped section with
+    time constant 1/(2π·f_n)); a negative real pole sits at Nyquist (an artefact of the
+    discretisation: `nyquist` True, never supported); a pole at the origin has no frequency.
+    `supported`: the natural frequency lies inside `supported_band_hz` (the band the excitation
+    supports; None: not judged, True).
     """
     modes = []
     for p in np.asarray(poles, dtype=complex):
         if p.imag < 0:
             continue
         if p == 0:
-            modes.append({"kind": "origin", "pole": [0.0, 0.0], "natural_frequency_hz": None, "damping_ratio": None})
+            modes.append({"kind": "real", "pole": [0.0, 0.0], "natural_frequency_hz": None, "damping_ratio": None,
+                          "nyquist": False, "supported": False})
             continue
         s = np.log(p) / sample_interval_s
         wn = float(abs(s))
-        if p.imag > 0:
-            kind = "pair"
-        elif p.real > 0:
-            kind = "real"
-        else:
-            kind = "nyquist"
+        f_n = wn / (2 * np.pi)
+        nyquist = bool(p.imag == 0 and p.real < 0)
+        supported = not nyquist and (
+            supported_band_hz is None or supported_band_hz[0] <= f_n <= supported_band_hz[1]
+        )
         modes.append(
             {
-                "kind": kind,
+                "kind": "complex" if p.imag > 0 else "real",
                 "pole": [float(p.real), float(p.imag)],
-                "natural_frequency_hz": wn / (2 * np.pi),
+                "natural_frequency_hz": f_n,
                 "damping_ratio": float(-s.real / wn) if wn > 0 else None,
+                "nyquist": nyquist,
+                "supported": bool(supported),
             }
         )
     return sorted(modes, key=lambda m: m["natural_frequency_hz"] or 0.0)
+
+
+def main_mode(modes: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The sensor's main mode: the lowest supported complex pole pair (None if there is none)."""
+    pairs = [m for m in modes if m["kind"] == "complex" and m["supported"]]
+    return min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else None
 
 
 def identify(
@@ -196,6 +235,15 @@ def identify(
     ref, resp = _checked_channels(rec)
     ref, resp, baselines = _remove_baselines(ref, resp)
     pre.update(baselines)
+    quiet = int(baselines.get("baseline_samples", 0))
+    noise = {
+        "reference_rms": float(np.std(ref[:quiet])) if quiet else None,
+        "response_rms": float(np.std(resp[:quiet])) if quiet else None,
+    }
+    try:
+        band = supported_band_hz(ref, rec.sample_interval_s, noise["reference_rms"])
+    except AnalysisError:
+        band = None
 
     shifts: range | None = None
     xcorr = 0.0
@@ -288,7 +336,7 @@ def identify(
     model = DiscreteModel(dt, final.a, final.b, float(delay), info={"fit_method": final.method})
     pre["response_offset_fitted"] = final.offset
     fit = fit_percent(y, simulate(u, final.a, final.b) + final.offset)
-    modes = modes_of(model.poles, dt)
+    modes = modes_of(model.poles, dt, band)
     warnings += _excitation_warnings(u, dt, modes)
     if fit < POOR_FIT_PERCENT:
         warnings.append(
@@ -324,6 +372,10 @@ def identify(
         order_selection=selection,
         knee_tolerance=tolerance,
         preprocessing=pre,
+        supported_band_hz=band,
+        noise=noise,
+        order_evidence={"criterion": selection, "knee_order": knee, "tolerance": tolerance,
+                        "loss_by_order": _finite_or_none(losses)},
     )
 
 
@@ -554,7 +606,7 @@ def _excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) 
         return out
     for m in modes:
         f = m.get("natural_frequency_hz")
-        if f is None or m["kind"] != "pair":
+        if f is None or m["kind"] != "complex":
             continue
         band = (freqs >= f / 1.25) & (freqs <= f * 1.25)
         if not np.any(band):

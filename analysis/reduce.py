@@ -48,6 +48,7 @@ from hopkinson.analysis.doppler import (
 )
 from hopkinson.analysis.errors import AnalysisError, RecordError
 from hopkinson.analysis.excitation import pulse_width
+from hopkinson.analysis.params import DEFAULT_GRATING_PITCH_M
 from hopkinson.analysis.records import Record, read_columns, validated_columns
 from hopkinson.analysis.resample import (
     DEFAULT_ANALYSIS_RATE_HZ,
@@ -56,7 +57,6 @@ from hopkinson.analysis.resample import (
 )
 
 RAW_KEYS = ("time_s", "doppler", "response")
-DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/doppler_beat.py)
 PRE_TRIGGER_MARGIN_S = 2e-6  # the zero offset is taken up to this long before the motion
 MIN_PRE_TRIGGER_SAMPLES = 100  # fewer pre-trigger samples cannot give a zero offset
 MAX_DELAY_S = 50e-6  # the delay search spans ±this

@@ -14,10 +14,9 @@ from fractions import Fraction
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
 from scipy import fft, signal
-
-DEFAULT_ANALYSIS_RATE_HZ = 1e6
 
 # Largest denominator of the rational resampling ratio: keeps the polyphase filter small
 # while the achieved rate stays within ~0.1 % of the one asked for any sane pair of rates.

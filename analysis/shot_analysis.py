@@ -11,13 +11,12 @@ r acts on the decay envelope and a fixed r can narrow a lightly damped sensor's 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from hopkinson.analysis.dcm import (
     DCM,
-    DEFAULT_WIDENING,
     compare_steps,
     compensated_fbsd_hz,
     design_dcm,
@@ -26,48 +25,13 @@ from hopkinson.analysis.dcm import (
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
 from hopkinson.analysis.identify import Identification, identify
+from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
-from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
+from hopkinson.analysis.reduce import reduce_raw
+from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_hz, model_output, pole_analysis
-
-
-@dataclass(frozen=True)
-class AnalysisParams:
-    """Rig constants and analysis options for one shot."""
-
-    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M
-    orders: tuple[int, int] = (1, -1)
-    amp_gain: float = 1.0  # bridge amplifier gain (V/V)
-    sensitivity_v_per_m_s2: float = 1.0  # accelerometer nominal sensitivity at the amplifier input
-    sample_rate_hz: float = DEFAULT_ANALYSIS_RATE_HZ
-    max_order: int = 12
-    order: int | None = None  # None: chosen where the bias-corrected loss stops falling
-    dcm_ratio: float | None = None  # None: chosen for `dcm_widening`
-    dcm_damping: float = 0.707
-    dcm_widening: float = DEFAULT_WIDENING
-    extra_poles: tuple[complex, ...] = ()
-
-    @classmethod
-    def from_options(cls, **options: Any) -> AnalysisParams:
-        """Build from keyword options, ignoring None (= default) and naming unknown keys."""
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise AnalysisError(f"unknown analysis option(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-        values = {k: v for k, v in options.items() if v is not None}
-        if "orders" in values:
-            values["orders"] = tuple(int(o) for o in values["orders"])
-        if "extra_poles" in values:
-            values["extra_poles"] = tuple(complex(p) for p in values["extra_poles"])
-        return cls(**values)
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["orders"] = list(self.orders)
-        d["extra_poles"] = [[p.real, p.imag] for p in self.extra_poles]
-        return d
 
 
 @dataclass
@@ -93,8 +57,8 @@ class ShotAnalysis:
         """JSON-ready results (stored in shot files, printed by --json)."""
         ident = self.identification
         exc = self.excitation
-        modes = ident.get("modes") if isinstance(ident, dict) else ident.modes
-        f_n = modes[0]["natural_frequency_hz"] if modes else None
+        main = main_mode_of(ident) if isinstance(ident, dict) else ident.main_mode
+        f_n = main["natural_frequency_hz"] if main else None
         return {
             "params": self.params.to_dict(),
             "reduction": self.reduction,
@@ -117,8 +81,7 @@ class ShotAnalysis:
     def from_dict(cls, data: dict[str, Any], record: Record | None = None) -> ShotAnalysis:
         """Rebuild from `to_dict()` output (e.g. a shot file): model and DCM become objects again."""
         try:
-            params = AnalysisParams.from_options(**{k: v for k, v in data["params"].items() if k != "extra_poles"},
-                                                 extra_poles=[complex(*p) for p in data["params"].get("extra_poles", [])])
+            params = AnalysisParams.from_dict(data["params"], ignore_unknown=True)
             model = DiscreteModel.from_dict(data["model"], source="shot analysis")
             dcm = DCM.from_dict(data["dcm"], source="shot analysis DCM")
             return cls(
@@ -139,9 +102,10 @@ class ShotAnalysis:
         return None if self.reduction is None else self.reduction.get("shock_sensitivity")
 
 
-def analyse_record(record: Record, params: AnalysisParams = AnalysisParams(),
+def analyse_record(record: Record, params: AnalysisParams | None = None,
                    reduction: dict[str, Any] | None = None) -> ShotAnalysis:
     """Analyse a two-channel record (reference m/s², response in any unit)."""
+    params = AnalysisParams() if params is None else params
     ident = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz)
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
@@ -157,7 +121,8 @@ def analyse_record(record: Record, params: AnalysisParams = AnalysisParams(),
     if settling <= 1:
         warnings.append(f"the DCM does not shorten the ±5 % settling time (ratio {settling:.2f}): choose a larger "
                         "ratio r or a band widening")
-    overshoot = peak_overshoot(model, record.reference)
+    # The model runs at its own (analysis) rate: the reference is brought to it first.
+    overshoot = peak_overshoot(model, resample_to_rate(record, 1.0 / model.sample_interval_s).reference)
     if overshoot > 1.02:
         warnings.append(
             f"the pulse excites the sensor's resonance: its peak response is {overshoot:.3f}× the DC gain times "
@@ -186,8 +151,9 @@ def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:
 
 
 def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_interval_s: float,
-                     params: AnalysisParams = AnalysisParams()) -> ShotAnalysis:
+                     params: AnalysisParams | None = None) -> ShotAnalysis:
     """Reduce the raw channels (PM beat, amplifier volts) to a record, then analyse it."""
+    params = AnalysisParams() if params is None else params
     reduced = reduce_raw(
         doppler_v, response_v, sample_interval_s,
         grating_pitch_m=params.grating_pitch_m, orders=params.orders, amp_gain=params.amp_gain,

@@ -61,7 +61,7 @@ def excitation_dict(analysis: ShotAnalysis) -> dict[str, Any]:
 def main_mode(analysis: ShotAnalysis) -> dict[str, Any] | None:
     """The sensor's main resonance: the lowest complex pole pair (else the lowest mode)."""
     modes = identification_dict(analysis).get("modes") or []
-    pairs = [m for m in modes if m.get("kind", "pair") == "pair" and m.get("natural_frequency_hz")]
+    pairs = [m for m in modes if m.get("kind", "pair") in ("complex", "pair") and m.get("natural_frequency_hz")]
     if pairs:
         return min(pairs, key=lambda m: m["natural_frequency_hz"])
     return modes[0] if modes else None

@@ -477,7 +477,7 @@ def result_line(results: dict[str, Any]) -> str:
         parts.append(f"order {model['order']}")
     ident = results.get("identification") or {}
     modes = ident.get("modes") or []
-    pairs = [m for m in modes if m.get("kind") == "pair" and m.get("natural_frequency_hz")]
+    pairs = [m for m in modes if m.get("kind") in ("complex", "pair") and m.get("natural_frequency_hz")]
     if pairs or modes:  # the main resonance: the lowest complex pair (else the lowest mode)
         m = min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else modes[0]
         if m.get("natural_frequency_hz") is not None:

@@ -112,7 +112,7 @@ def summary_of(results: dict[str, Any]) -> dict[str, Any]:
     reduction = results.get("reduction") or {}
     excitation = results.get("excitation") or {}
     dcm = results.get("dcm") or {}
-    pairs = [m for m in ident.get("modes", []) if m.get("kind") == "pair"]
+    pairs = [m for m in ident.get("modes", []) if m.get("kind") in ("complex", "pair")]
     main = pairs[0] if pairs else None
     return {
         "order": ident.get("order"),

@@ -43,7 +43,7 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
     ]
     for mode in result.modes:
         pole = complex(*mode["pole"])
-        sign = "±" if mode["kind"] == "pair" else ""
+        sign = "±" if mode["kind"] == "complex" else ""
         f_n, zeta = mode["natural_frequency_hz"], mode["damping_ratio"]
         where = f"f_n = {f_n / 1e3:.4g} kHz, ζ = {zeta:.4g}" if f_n is not None and zeta is not None else "at the origin"
         lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode['kind']}): {where}")

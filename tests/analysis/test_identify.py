@@ -209,7 +209,7 @@ def test_plain_least_squares_loss_keeps_falling_while_the_knee_finds_the_order(k
 
 def test_modes_report_natural_frequency_and_damping(known_systems) -> None:
     _, _, result = known_systems[("two resonances", "white")]
-    pairs = [m for m in result.modes if m["kind"] == "pair"]
+    pairs = [m for m in result.modes if m["kind"] == "complex"]
     assert [m["natural_frequency_hz"] for m in pairs] == pytest.approx([27_000.0, 70_000.0], rel=1e-3)
     assert [m["damping_ratio"] for m in pairs] == pytest.approx([0.05, 0.03], rel=1e-2)
     real = modes_of(np.array([0.9]), T)[0]

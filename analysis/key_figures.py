@@ -1,0 +1,253 @@
+"""A shot's headline numbers, computed once: the one typed object the report, the campaign,
+the panel and the commands read (never the results dict itself).
+
+`KeyFigures.from_results(results)` builds it from a results dict (`ShotAnalysis.to_dict()`,
+a shot file's /analysis, old files included); `from_analysis(ShotAnalysis)` from the object.
+Each uncertain figure is a `Figure(value, u, interval)`: the value reported everywhere, its
+standard uncertainty and its 95 % coverage interval (GUM Supplement 1), u and interval None
+when the shot was analysed without uncertainty. Light: no NumPy at import.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hopkinson.analysis.shot_analysis import ShotAnalysis
+
+LEVELS = ("5", "10")  # FBSD band levels in per cent (keys of fbsd_hz)
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A value with its standard uncertainty and 95 % coverage interval (None without)."""
+
+    value: float | None
+    u: float | None = None
+    interval: tuple[float, float] | None = None
+
+    @property
+    def expanded(self) -> float | None:
+        """U: half the width of the 95 % coverage interval (k ≈ 2 for a normal distribution)."""
+        if self.interval is None:
+            return None
+        return 0.5 * (self.interval[1] - self.interval[0])
+
+    @property
+    def u_rel(self) -> float | None:
+        if self.u is None or not self.value:
+            return None
+        return abs(self.u / self.value)
+
+    def format(self, scale: float = 1.0, digits: int = 4, unit: str = "") -> str:
+        """'27.01 ± 0.12 kHz' (value ± U, 95 %), or the value alone without uncertainty."""
+        if self.value is None:
+            return "—"
+        suffix = f" {unit}" if unit else ""
+        big = self.expanded
+        if big is None:
+            return f"{self.value / scale:.{digits}g}{suffix}"
+        # As many decimals as the two significant digits of U need (GUM 7.2.6).
+        decimals = _decimals_for(big / scale)
+        return f"{self.value / scale:.{decimals}f} ± {big / scale:.{decimals}f}{suffix}"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"value": self.value, "u": self.u,
+                "interval": list(self.interval) if self.interval is not None else None}
+
+    @classmethod
+    def of(cls, data: Any) -> Figure | None:
+        """From a number, a {"value", "u", "interval"} dict, or None."""
+        if data is None:
+            return None
+        if isinstance(data, dict):
+            value = _number(data.get("value"))
+            interval = data.get("interval")
+            pair = None
+            if isinstance(interval, (list, tuple)) and len(interval) == 2:
+                lo, hi = _number(interval[0]), _number(interval[1])
+                pair = (lo, hi) if lo is not None and hi is not None else None
+            return cls(value, _number(data.get("u")), pair)
+        return cls(_number(data))
+
+    def with_value(self, value: float | None) -> Figure:
+        """The same uncertainty around another reported value (the value elsewhere wins)."""
+        return Figure(value, self.u, self.interval)
+
+
+@dataclass(frozen=True)
+class FbsdBound:
+    """An FBSD edge beyond what the shot supports: only 'above lower_bound_hz' is known."""
+
+    lower_bound_hz: float
+    reason: str
+
+
+@dataclass(frozen=True)
+class KeyFigures:
+    """The shot's headline numbers (see the module docstring)."""
+
+    sensitivity: Figure  # DC gain, response units per m/s²
+    response_unit: str
+    shock_sensitivity: Figure | None  # ISO 16063-13 peak ratio, response units per m/s²
+    natural_frequency_hz: Figure | None  # main mode: lowest supported complex pole pair
+    damping_ratio: Figure | None
+    fbsd_hz: dict[str, Figure]  # "5", "10": the model's edge
+    fbsd_bounds: dict[str, FbsdBound]  # edges beyond the supported band (report "> bound")
+    supported_band_hz: tuple[float, float] | None
+    order: int | None
+    order_selection: str | None
+    fit_percent: float | None
+    delay_s: float | None
+    pulse_width_s: Figure | None
+    peak_acceleration_m_s2: Figure | None
+    peak_velocity_m_s: Figure | None
+    compensated_fbsd_hz: dict[str, float]
+    dcm_recommended: bool | None
+    dcm_not_recommended_reason: str | None
+    compensation_check: dict[str, Any] | None
+    compensated_peak: Figure | None
+    uncertainty_method: str | None
+    draws: int | None
+    coverage_probability: float | None
+    budget: tuple[dict[str, Any], ...]
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def has_uncertainty(self) -> bool:
+        return self.sensitivity.u is not None
+
+    def fbsd_text(self, level: str, scale: float = 1e3, unit: str = "kHz") -> str:
+        """'> 18 kHz (unsupported by the excitation)' for a bound, else value ± U."""
+        bound = self.fbsd_bounds.get(level)
+        if bound is not None:
+            return f"> {bound.lower_bound_hz / scale:.3g} {unit} ({bound.reason})"
+        figure = self.fbsd_hz.get(level)
+        return figure.format(scale, unit=unit) if figure is not None else "—"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (Figures as {"value", "u", "interval"})."""
+        out = asdict(self)
+        for key in list(out):
+            attr = getattr(self, key)
+            if isinstance(attr, Figure):
+                out[key] = attr.to_dict()
+            elif key == "fbsd_hz":
+                out[key] = {k: f.to_dict() for k, f in attr.items()}
+        out["supported_band_hz"] = list(self.supported_band_hz) if self.supported_band_hz else None
+        out["budget"] = [dict(b) for b in self.budget]
+        out["warnings"] = list(self.warnings)
+        return out
+
+    @classmethod
+    def from_analysis(cls, analysis: ShotAnalysis) -> KeyFigures:
+        """From a ShotAnalysis object (the same path as a stored results dict)."""
+        return cls.from_results(analysis.to_dict())
+
+    @classmethod
+    def from_results(cls, results: dict[str, Any]) -> KeyFigures:
+        """From a results dict (ShotAnalysis.to_dict(), a shot file's /analysis; old files too)."""
+        results = results or {}
+        ident = results.get("identification") or {}
+        model = results.get("model") or {}
+        reduction = results.get("reduction") or {}
+        excitation = results.get("excitation") or {}
+        dcm = results.get("dcm") or {}
+        unc = results.get("uncertainty") or {}
+        unc_main = unc.get("main_mode") or {}
+        unc_fbsd = unc.get("fbsd_hz") or {}
+
+        dc_gain = _number(model.get("dc_gain", ident.get("dc_gain")))
+        sensitivity = _figure(dc_gain, unc.get("dc_gain"))
+        shock_value = _number(reduction.get("shock_sensitivity"))
+        shock = _figure(shock_value, unc.get("shock_sensitivity")) if shock_value is not None else None
+
+        main = main_mode_of(ident)
+        f_n = _figure(_number(main.get("natural_frequency_hz")), unc_main.get("natural_frequency_hz")) if main else None
+        zeta = _figure(_number(main.get("damping_ratio")), unc_main.get("damping_ratio")) if main else None
+
+        fbsd_values = results.get("fbsd_hz") or {}
+        fbsd = {k: _figure(_number(fbsd_values.get(k)), unc_fbsd.get(k)) for k in LEVELS if k in fbsd_values}
+        bounds = {}
+        for k, b in (results.get("fbsd_bounds") or {}).items():
+            if isinstance(b, dict) and _number(b.get("lower_bound_hz")) is not None:
+                bounds[str(k)] = FbsdBound(float(b["lower_bound_hz"]), str(b.get("reason", "")))
+        band = ident.get("supported_band_hz")
+        band_pair = (float(band[0]), float(band[1])) if isinstance(band, (list, tuple)) and len(band) == 2 else None
+
+        dt = _number(model.get("sample_interval_s"))
+        delay = _number(model.get("delay_samples", ident.get("delay_samples")))
+        ref_unc = reduction.get("uncertainty") or {}
+        pulse_width = _number(reduction.get("pulse_width_s", excitation.get("pulse_width_s")))
+        peak_acc = _number(reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")))
+        peak_vel = _number(reduction.get("peak_velocity_m_s"))
+        comp = dcm.get("compensated_fbsd_hz") or {}
+        warnings = list(results.get("warnings") or [])
+        for w in unc.get("warnings") or []:
+            if w not in warnings:
+                warnings.append(w)
+        return cls(
+            sensitivity=sensitivity,
+            response_unit=str(reduction.get("response_unit") or "response units"),
+            shock_sensitivity=shock,
+            natural_frequency_hz=f_n,
+            damping_ratio=zeta,
+            fbsd_hz=fbsd,
+            fbsd_bounds=bounds,
+            supported_band_hz=band_pair,
+            order=_int(model.get("order", ident.get("order"))),
+            order_selection=ident.get("order_selection"),
+            fit_percent=_number(ident.get("fit_percent")),
+            delay_s=delay * dt if delay is not None and dt is not None else None,
+            pulse_width_s=_figure(pulse_width, ref_unc.get("pulse_width_s")) if pulse_width is not None else None,
+            peak_acceleration_m_s2=_figure(peak_acc, ref_unc.get("peak_acceleration_m_s2")) if peak_acc is not None else None,
+            peak_velocity_m_s=_figure(peak_vel, ref_unc.get("peak_velocity_m_s")) if peak_vel is not None else None,
+            compensated_fbsd_hz={k: float(v) for k, v in comp.items() if _number(v) is not None},
+            dcm_recommended=dcm.get("recommended"),
+            dcm_not_recommended_reason=dcm.get("not_recommended_reason"),
+            compensation_check=dcm.get("check"),
+            compensated_peak=Figure.of(dcm.get("compensated_peak")),
+            uncertainty_method=unc.get("method"),
+            draws=_int(unc.get("draws")),
+            coverage_probability=_number(unc.get("coverage_probability")),
+            budget=tuple(dict(b) for b in unc.get("budget") or [] if isinstance(b, dict)),
+            warnings=tuple(warnings),
+        )
+
+
+def main_mode_of(identification: dict[str, Any]) -> dict[str, Any] | None:
+    """The main mode of an identification dict: its `main_mode`, else (older results) the
+    lowest complex pole pair not flagged unsupported. None when there is none."""
+    if "main_mode" in identification:
+        main = identification.get("main_mode")
+        return dict(main) if isinstance(main, dict) else None
+    pairs = [
+        m for m in identification.get("modes") or []
+        if m.get("kind") in ("complex", "pair") and m.get("supported", True) and _number(m.get("natural_frequency_hz"))
+    ]
+    return dict(min(pairs, key=lambda m: m["natural_frequency_hz"])) if pairs else None
+
+
+def _figure(value: float | None, uncertainty: Any) -> Figure:
+    """The reported value with the uncertainty stored beside it (if any)."""
+    found = Figure.of(uncertainty) if isinstance(uncertainty, dict) else None
+    return found.with_value(value) if found is not None else Figure(value)
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _int(value: Any) -> int | None:
+    return int(value) if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def _decimals_for(expanded: float) -> int:
+    """Decimals that show two significant digits of `expanded` (at least 0, at most 12)."""
+    if not (expanded > 0 and math.isfinite(expanded)):
+        return 4
+    return int(min(12, max(0, 1 - math.floor(math.log10(expanded)))))

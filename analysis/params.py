@@ -1,0 +1,184 @@
+"""The options of one shot's analysis: rig constants, identification, uncertainty, DCM.
+
+`AnalysisParams` travels end to end (sequencer, campaign, shot file /analysis/params, the
+panel): `check()` validates every field and names the option that is wrong (the sequencer
+calls it before FIRE, so a bad option never costs a shot); `to_dict()` / `from_dict()` are
+its JSON form. Light on purpose: no NumPy or SciPy at import (the rig imports it early).
+
+Reference-chain uncertainties (GUM: relative standard uncertainties, k = 1) are the lab's
+own, from its calibration certificates; the defaults are typical values, documented in
+config/rig.toml [uncertainty] and the README, and are meant to be replaced:
+- grating pitch d: a holographic grating's period is certified to about 1e-4;
+- interferometer: beat-frequency demodulation and beam alignment (cosine error), 5e-4;
+- amplifier gain: a calibrated bridge amplifier, 2e-3;
+- digitizer gain: the response channel's vertical gain after calibration, 2e-3;
+- channel skew: timing skew between the two channels, 1 ns.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+from hopkinson.analysis.errors import AnalysisError
+
+DEFAULT_ANALYSIS_RATE_HZ = 1e6
+DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/doppler_beat.py)
+DEFAULT_DCM_WIDENING = 3.0  # analysis.dcm.DEFAULT_WIDENING (kept equal; dcm imports NumPy)
+# Monte Carlo draws per shot (GUM-S1 §7.9: enough for the 95 % interval's ends to be stable
+# to about one significant digit of the standard uncertainty; see analysis.uncertainty).
+DEFAULT_DRAWS = 400
+MAX_ORDER_LIMIT = 60
+MAX_DRAWS = 1_000_000
+MIN_DRAWS = 50  # fewer cannot locate the ends of a 95 % interval
+
+
+@dataclass(frozen=True)
+class AnalysisParams:
+    """Rig constants and analysis options for one shot."""
+
+    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M
+    orders: tuple[int, int] = (1, -1)
+    amp_gain: float = 1.0  # bridge amplifier gain (V/V)
+    sensitivity_v_per_m_s2: float = 1.0  # accelerometer nominal sensitivity at the amplifier input
+    sample_rate_hz: float = DEFAULT_ANALYSIS_RATE_HZ
+    max_order: int = 12
+    order: int | None = None  # None: chosen by analysis.identify's order test
+    dcm_ratio: float | None = None  # None: chosen for `dcm_widening`
+    dcm_damping: float = 0.707
+    dcm_widening: float = DEFAULT_DCM_WIDENING
+    extra_poles: tuple[complex, ...] = ()
+    # Uncertainty (analysis.uncertainty, GUM Supplement 1)
+    uncertainty: bool = True
+    draws: int = DEFAULT_DRAWS
+    seed: int | None = None  # None: fresh draws; the seed used is stored with the result
+    u_grating_pitch_rel: float = 1e-4
+    u_interferometer_rel: float = 5e-4
+    u_amp_gain_rel: float = 2e-3
+    u_digitizer_gain_rel: float = 2e-3
+    u_channel_skew_s: float = 1e-9
+
+    @classmethod
+    def from_options(cls, **options: Any) -> AnalysisParams:
+        """Build from keyword options, ignoring None (= default) and naming unknown keys."""
+        return cls.from_dict({k: v for k, v in options.items() if v is not None})
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, ignore_unknown: bool = False) -> AnalysisParams:
+        """Build from `to_dict()` output (or a plan's options); unknown keys are an error unless
+        `ignore_unknown` (reading results written by another version). Values are checked."""
+        if not isinstance(data, dict):
+            raise AnalysisError(f"analysis options must be a table of names and values, got {type(data).__name__}")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown and not ignore_unknown:
+            raise AnalysisError(
+                f"unknown analysis option(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}"
+            )
+        values = {k: v for k, v in data.items() if k in known}
+        try:
+            if "orders" in values:
+                values["orders"] = tuple(int(o) for o in values["orders"])
+            if "extra_poles" in values:
+                values["extra_poles"] = tuple(_complex(p) for p in values["extra_poles"] or ())
+        except (TypeError, ValueError):
+            raise AnalysisError("analysis option orders / extra_poles: expected a list of numbers") from None
+        params = cls(**values)
+        params.check()
+        return params
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: tuples as lists, complex poles as [re, im]."""
+        d = asdict(self)
+        d["orders"] = list(self.orders)
+        d["extra_poles"] = [[p.real, p.imag] for p in self.extra_poles]
+        return d
+
+    def check(self) -> None:
+        """Raise AnalysisError naming the first option whose value cannot be used."""
+        _finite(self.grating_pitch_m, "grating_pitch_m", above=0.0, at_most=1e-3)
+        if len(self.orders) != 2 or not all(_is_int(o) for o in self.orders) or self.orders[0] == self.orders[1]:
+            raise AnalysisError(f"analysis option orders: two different integer diffraction orders, got {self.orders!r}")
+        _finite(self.amp_gain, "amp_gain", nonzero=True)
+        _finite(self.sensitivity_v_per_m_s2, "sensitivity_v_per_m_s2", nonzero=True)
+        _finite(self.sample_rate_hz, "sample_rate_hz", above=0.0, at_most=1e10)
+        _integer(self.max_order, "max_order", 1, MAX_ORDER_LIMIT)
+        if self.order is not None:
+            _integer(self.order, "order", 1, MAX_ORDER_LIMIT)
+        if self.dcm_ratio is not None:
+            _finite(self.dcm_ratio, "dcm_ratio", above=0.0, at_most=1e4)
+        _finite(self.dcm_damping, "dcm_damping", above=0.0, at_most=10.0)
+        _finite(self.dcm_widening, "dcm_widening", above=1.0, at_most=1e3)
+        for p in self.extra_poles:
+            if not (isinstance(p, complex) and math.isfinite(p.real) and math.isfinite(p.imag) and abs(p) < 1.0):
+                raise AnalysisError(f"analysis option extra_poles: {p!r} must be a finite complex number inside "
+                                    "the unit circle")
+        if not isinstance(self.uncertainty, bool):
+            raise AnalysisError(f"analysis option uncertainty: true or false, got {self.uncertainty!r}")
+        _integer(self.draws, "draws", MIN_DRAWS, MAX_DRAWS)
+        if self.seed is not None:
+            _integer(self.seed, "seed", 0, 2**63 - 1)
+        for name in ("u_grating_pitch_rel", "u_interferometer_rel", "u_amp_gain_rel", "u_digitizer_gain_rel"):
+            _finite(getattr(self, name), name, at_least=0.0, at_most=0.5)
+        _finite(self.u_channel_skew_s, "u_channel_skew_s", at_least=0.0, at_most=1e-3)
+
+    def reference_chain(self) -> dict[str, float]:
+        """Relative standard uncertainties of the reference chain, by source name."""
+        return {
+            "grating pitch": self.u_grating_pitch_rel,
+            "interferometer": self.u_interferometer_rel,
+            "amplifier gain": self.u_amp_gain_rel,
+            "digitizer gain": self.u_digitizer_gain_rel,
+        }
+
+
+def _complex(p: Any) -> complex:
+    if isinstance(p, complex):
+        return p
+    if isinstance(p, (list, tuple)) and len(p) == 2:
+        return complex(float(p[0]), float(p[1]))
+    return complex(p)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _integer(value: Any, name: str, low: int, high: int) -> None:
+    if not _is_int(value) or not low <= value <= high:
+        raise AnalysisError(f"analysis option {name}: an integer from {low} to {high}, got {value!r}")
+
+
+def _finite(
+    value: Any,
+    name: str,
+    *,
+    above: float | None = None,
+    at_least: float | None = None,
+    at_most: float | None = None,
+    nonzero: bool = False,
+) -> None:
+    """A real finite number within the bounds, or AnalysisError naming the option."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok and above is not None and not value > above:
+        ok = False
+    if ok and at_least is not None and not value >= at_least:
+        ok = False
+    if ok and at_most is not None and not value <= at_most:
+        ok = False
+    if ok and nonzero and value == 0:
+        ok = False
+    if ok:
+        return
+    bounds = []
+    if above is not None:
+        bounds.append(f"above {above:g}")
+    if at_least is not None:
+        bounds.append(f"at least {at_least:g}")
+    if at_most is not None:
+        bounds.append(f"at most {at_most:g}")
+    if nonzero:
+        bounds.append("non-zero")
+    need = "a finite number" + (f" ({', '.join(bounds)})" if bounds else "")
+    raise AnalysisError(f"analysis option {name}: {need}, got {value!r}")
