@@ -7,35 +7,56 @@ Layout (format "hopkinson-shot", format_version 1)::
                            accelerometer_model, accelerometer_serial, software_version,
                            pressure_bar, projectile, simulated (bool), and when known shot_id,
                            shot_index, campaign_id; config_json, instruments_json and (in
-                           simulation) truth_json: the exact JSON text of those dicts
+                           simulation) truth_json: the exact JSON text of those dicts;
+                           NX_class = "NXroot", default = "entry" (NeXus: where a viewer's
+                           default plot is)
     /meta/config           the configuration snapshot mirrored as groups/attributes/datasets
                            (for people browsing the file; config_json is the exact copy)
     /meta/instruments      attrs: instrument name -> identity string
     /truth                 simulation only: the simulated truth mirrored (truth_json is exact)
-    /raw                   attrs: sample_interval_s, trigger_index, channels
-    /raw/<channel>         int16 codes exactly as recorded ("doppler", "response", ...);
-                           attrs: scale_v, offset_v (volts = codes * scale_v + offset_v),
-                           sample_interval_s, trigger_index, units = "V"; chunked with the
-                           HDF5 fletcher32 checksum so a damaged file is detected on read
-    /derived/record        the reduced two-channel record: datasets reference (m/s²) and
-                           response; attrs sample_interval_s, start_time_s
-    /derived/<name>        any other derived array (e.g. velocity_m_s)
+    /raw                   attrs: sample_interval_s, trigger_index, channels (the roles present)
+    /raw/<role>            the digitizer's codes exactly as recorded, in their native type
+                           (int8, uint8, int16, uint16 or float32), one per role present
+                           ("doppler", "response", "doppler_quadrature", "response_2");
+                           attrs: scale_v, offset_v (volts = codes * scale_v + offset_v; also as
+                           CF's scale_factor/add_offset, so netCDF-aware readers unpack volts),
+                           units = "V" (of the unpacked value), long_name, sample_interval_s,
+                           trigger_index, and code_min/code_max (the format's full-scale codes)
+                           when the digitizer gave them; chunked with the HDF5 fletcher32
+                           checksum so a damaged file is detected on read; dimension 0 is
+                           the scale /raw/time_s
+    /raw/time_s            time from the trigger, s (float64; an HDF5 dimension scale,
+                           compressed: a ramp costs little)
+    /derived/record        the reduced two-channel record: datasets reference (m/s^2) and
+                           response (units from the reduction: m/s^2 when scaled by gain and
+                           sensitivity, else V), time_s (s, their dimension scale); attrs
+                           sample_interval_s, start_time_s
+    /derived/<name>        any other derived array (e.g. velocity_m_s), units from its name
     /analysis              attrs: status ("ok" | "failed"), error (when failed), utc_time,
                            software_version, results_json (the whole results dict as JSON
                            text: the exact round-trip); groups mirror the results dict
                            (nested dicts -> groups, numbers/strings -> attributes, numeric
                            lists -> datasets; anything else -> a "<key>_json" attribute)
+    /entry                 NeXus NXentry, default = "signals": what a generic viewer (HDFView,
+                           silx, h5web) plots without being told
+    /entry/signals         NXdata: signal "response", auxiliary_signals (the other roles),
+                           axes "time_s": the channels in volts (float32, units "V") against
+                           /raw/time_s (hard links to the same data)
+    /entry/record          NXdata (once analysed): signal "response", auxiliary_signals
+                           ["reference"], axes "time_s": hard links into /derived/record
+
+Units are spelled one way everywhere: "V", "s", "m/s^2", "m/s", "Hz" (UDUNITS).
 
 Durability. `write_raw_shot` writes `<name>.h5.tmp` in the same folder, flushes, fsyncs,
 renames it over the final name with os.replace and fsyncs the folder: a crash leaves either
 no file or a complete one under the final name, plus possibly a `*.tmp` leftover that
 rig.run_folder removes on resume. `add_analysis` never opens the shot file for writing:
 HDF5 has no journal, so an append that dies half-way can damage the file's metadata and
-with it the raw data. Instead it builds a new file `<name>.h5.analysis.tmp` (every object of
-the old file except /derived and /analysis copied with H5Ocopy, then the new results),
-fsyncs it and renames it over the old one. Until that rename the old file is untouched;
-after it the new file is complete. The cost is one copy of the raw data per analysis
-(about 30 ms for 2 × 10 M samples on the development machine).
+with it the raw data. Instead it copies the file byte for byte to `<name>.h5.analysis.tmp`,
+replaces /derived, /analysis and /entry/record in the copy (every reference inside the file,
+such as the dimension scales, stays valid in a byte copy), fsyncs it and renames it over the
+old one. Until that rename the old file is untouched; after it the new file is complete. The
+cost is one copy of the file per analysis (tens of ms for 2 × 10 M samples).
 """
 
 from __future__ import annotations
@@ -46,6 +67,7 @@ import json
 import math
 import os
 import re
+import shutil
 import uuid as uuid_module
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -63,6 +85,16 @@ from hopkinson.rig.events import utc_now_iso
 FORMAT = "hopkinson-shot"
 FORMAT_VERSION = 1
 REQUIRED_CHANNELS = ("doppler", "response")
+CODE_DTYPES = tuple(np.dtype(t) for t in ("int8", "uint8", "int16", "uint16", "float32"))  # as digitizers send them
+TIME_NAME = "time_s"
+ROLE_NAMES = {  # long names for viewers
+    "doppler": "photomultiplier (Doppler beat)",
+    "doppler_quadrature": "photomultiplier, quadrature",
+    "response": "accelerometer response (amplifier output)",
+    "response_2": "second sensor (amplifier output)",
+}
+UNIT_SUFFIXES = (("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_hz", "Hz"), ("_s", "s"), ("_v", "V"), ("_m", "m"),
+                 ("_bar", "bar"), ("_mbar", "mbar"))
 RAW_TMP_SUFFIX = ".tmp"  # <name>.h5.tmp: an unfinished raw write
 ANALYSIS_TMP_SUFFIX = ".analysis.tmp"  # <name>.h5.analysis.tmp: an unfinished analysis write
 TMP_SUFFIXES = (ANALYSIS_TMP_SUFFIX, RAW_TMP_SUFFIX)
@@ -77,9 +109,10 @@ class ShotFileError(RecordError):
 class RawChannel(NamedTuple):
     """One digitizer channel as recorded: volts = codes * scale_v + offset_v."""
 
-    codes: np.ndarray  # int16
+    codes: np.ndarray  # native type: int8, uint8, int16, uint16 or float32
     scale_v: float
     offset_v: float
+    code_range: tuple[float, float] | None = None  # the format's full-scale codes, when known
 
     @property
     def volts(self) -> np.ndarray:
@@ -90,7 +123,7 @@ class RawChannel(NamedTuple):
 class RawShot:
     """The raw channels of one shot, all sampled together."""
 
-    channels: dict[str, RawChannel]  # name -> (int16 codes, scale_v, offset_v)
+    channels: dict[str, RawChannel]  # role -> (codes, scale_v, offset_v[, code_range])
     sample_interval_s: float
     trigger_index: int  # sample index of the trigger within each channel
 
@@ -198,15 +231,26 @@ def write_raw_shot(path: str | Path, raw: RawShot, meta: ShotMeta) -> Path:
         raw_group.attrs["sample_interval_s"] = float(raw.sample_interval_s)
         raw_group.attrs["trigger_index"] = int(raw.trigger_index)
         raw_group.attrs["channels"] = list(channels)
-        for name, (codes, scale_v, offset_v) in channels.items():
+        n = next(iter(channels.values())).codes.size
+        time_s = _time_scale(raw_group, (np.arange(n) - raw.trigger_index) * raw.sample_interval_s,
+                             "time from the trigger")
+        for name, channel in channels.items():
+            codes = channel.codes
             ds = raw_group.create_dataset(
                 name, data=codes, chunks=(min(codes.size, _CHUNK_SAMPLES),), fletcher32=True
             )
-            ds.attrs["scale_v"] = float(scale_v)
-            ds.attrs["offset_v"] = float(offset_v)
+            ds.attrs["scale_v"] = channel.scale_v
+            ds.attrs["offset_v"] = channel.offset_v
+            ds.attrs["scale_factor"] = channel.scale_v  # CF convention: unpacked = codes * scale_factor + add_offset
+            ds.attrs["add_offset"] = channel.offset_v
             ds.attrs["sample_interval_s"] = float(raw.sample_interval_s)
             ds.attrs["trigger_index"] = int(raw.trigger_index)
             ds.attrs["units"] = "V"
+            ds.attrs["long_name"] = f"{ROLE_NAMES.get(name, name)}: digitizer codes (volts = codes · scale_v + offset_v)"
+            if channel.code_range is not None:
+                ds.attrs["code_min"], ds.attrs["code_max"] = channel.code_range
+            ds.dims[0].attach_scale(time_s)
+        _nexus_signals(f, channels, time_s)
 
     _atomic_write(path, path.with_name(path.name + RAW_TMP_SUFFIX), build)
     return path
@@ -218,12 +262,15 @@ def add_analysis(
     record: Record | None = None,
     error: str | None = None,
     derived: dict[str, np.ndarray] | None = None,
+    response_units: str | None = None,
 ) -> Path:
     """Store analysis results (and the reduced record) in an existing shot file, atomically.
 
     With `error` the analysis is recorded as failed (state "analysis_failed"); `results` may
     then hold whatever was computed before the failure. A second call replaces the previous
     /derived and /analysis. The raw data is copied, never rewritten in place (module doc).
+    response_units: the record's response unit (default: the reduction's `response_unit` in
+    the results, else "1").
     """
     path = Path(path)
     _open_shot(path).close()  # a readable shot file, or a clear error before anything is written
@@ -237,24 +284,35 @@ def add_analysis(
     if record is not None and not isinstance(record, Record):
         raise ShotFileError(f"{path}: record must be an analysis.records.Record")
 
+    units = response_units or ((results.get("reduction") or {}).get("response_unit") if isinstance(results, dict)
+                               else None) or "1"
+
     def build(dst: h5py.File) -> None:
-        with h5py.File(path, "r") as src:
-            for key, value in src.attrs.items():
-                dst.attrs[key] = value
-            for name in src:
-                if name not in ("derived", "analysis"):
-                    src.copy(src[name], dst, name=name)
+        # dst is a byte copy of the shot file (module doc): replace what an analysis writes.
+        for name in ("derived", "analysis"):
+            if name in dst:
+                del dst[name]
+        if "entry" in dst and "record" in dst["entry"]:
+            del dst["entry/record"]
         dst.attrs["state"] = "analysis_failed" if error is not None else "analysed"
         derived_group = dst.create_group("derived")
         if record is not None:
             rec = derived_group.create_group("record")
             rec.attrs["sample_interval_s"] = float(record.sample_interval_s)
             rec.attrs["start_time_s"] = float(record.start_time_s)
-            rec.create_dataset("reference", data=np.asarray(record.reference, dtype=float))
-            rec.create_dataset("response", data=np.asarray(record.response, dtype=float))
-            rec["reference"].attrs["units"] = "m/s2"
+            time_s = _time_scale(rec, record.time_s, "time")
+            for key, values, unit, long_name in (
+                ("reference", record.reference, "m/s^2", "reference acceleration (laser interferometer)"),
+                ("response", record.response, units, "accelerometer response"),
+            ):
+                ds = rec.create_dataset(key, data=np.asarray(values, dtype=float))
+                ds.attrs["units"] = unit
+                ds.attrs["long_name"] = f"{long_name} ({unit})"
+                ds.dims[0].attach_scale(time_s)
+            _nexus_record(dst, rec)
         for name, arr in derived_arrays.items():
-            derived_group.create_dataset(name, data=arr)
+            ds = derived_group.create_dataset(name, data=arr)
+            ds.attrs["units"] = units_of_name(name)
         analysis = dst.create_group("analysis")
         analysis.attrs["status"] = "failed" if error is not None else "ok"
         if error is not None:
@@ -264,17 +322,76 @@ def add_analysis(
         analysis.attrs["results_json"] = results_json
         _mirror(analysis, results)
 
-    _atomic_write(path, path.with_name(path.name + ANALYSIS_TMP_SUFFIX), build)
+    _atomic_write(path, path.with_name(path.name + ANALYSIS_TMP_SUFFIX), build, seed=path)
     return path
 
 
-def _atomic_write(final: Path, tmp: Path, build: Callable[[h5py.File], None]) -> None:
-    """Build an HDF5 file under `tmp`, fsync it, rename it to `final`, fsync the folder."""
+def units_of_name(name: str) -> str:
+    """The unit a name's suffix states (`velocity_m_s` -> "m/s"); "1" (a plain number) without one."""
+    for suffix, unit in UNIT_SUFFIXES:
+        if name.endswith(suffix):
+            return unit
+    return "1"
+
+
+def _time_scale(group: h5py.Group, time_s: np.ndarray, long_name: str) -> h5py.Dataset:
+    """A time axis (s) as an HDF5 dimension scale; compressed (a ramp shrinks ~25×)."""
+    n = int(np.size(time_s))
+    options = dict(chunks=(min(n, _CHUNK_SAMPLES),), compression="gzip", compression_opts=1, shuffle=True) \
+        if n > 4096 else {}
+    ds = group.create_dataset(TIME_NAME, data=np.asarray(time_s, dtype=np.float64), **options)
+    ds.attrs["units"] = "s"
+    ds.attrs["long_name"] = f"{long_name} (s)"
+    ds.make_scale(long_name)
+    return ds
+
+
+def _nexus_signals(f: h5py.File, channels: dict[str, RawChannel], time_s: h5py.Dataset) -> None:
+    """/entry/signals: every channel in volts against time, the file's default plot (NeXus NXdata)."""
+    f.attrs["NX_class"] = "NXroot"
+    f.attrs["default"] = "entry"
+    entry = f.create_group("entry")
+    entry.attrs["NX_class"] = "NXentry"
+    entry.attrs["default"] = "signals"
+    data = entry.create_group("signals")
+    data.attrs["NX_class"] = "NXdata"
+    data.attrs["signal"] = "response"
+    data.attrs["auxiliary_signals"] = [name for name in channels if name != "response"]
+    data.attrs["axes"] = [TIME_NAME]
+    data.attrs[f"{TIME_NAME}_indices"] = 0
+    data[TIME_NAME] = time_s  # a hard link: one time axis in the file
+    for name, channel in channels.items():
+        volts = (channel.codes.astype(np.float64) * channel.scale_v + channel.offset_v).astype(np.float32)
+        ds = data.create_dataset(name, data=volts, chunks=(min(volts.size, _CHUNK_SAMPLES),))
+        ds.attrs["units"] = "V"
+        ds.attrs["long_name"] = f"{ROLE_NAMES.get(name, name)} (V)"
+        ds.dims[0].attach_scale(time_s)
+
+
+def _nexus_record(f: h5py.File, record_group: h5py.Group) -> None:
+    """/entry/record: the analysed two-channel record (NeXus NXdata), linked to /derived/record."""
+    if "entry" not in f:  # a shot file written before the NeXus default existed
+        return
+    data = f["entry"].create_group("record")
+    data.attrs["NX_class"] = "NXdata"
+    data.attrs["signal"] = "response"
+    data.attrs["auxiliary_signals"] = ["reference"]
+    data.attrs["axes"] = [TIME_NAME]
+    data.attrs[f"{TIME_NAME}_indices"] = 0
+    for name in ("response", "reference", TIME_NAME):
+        data[name] = record_group[name]
+
+
+def _atomic_write(final: Path, tmp: Path, build: Callable[[h5py.File], None], seed: Path | None = None) -> None:
+    """Build an HDF5 file under `tmp` (new, or a byte copy of `seed` opened for update), fsync
+    it, rename it to `final`, fsync the folder."""
     if not final.parent.is_dir():
         raise ShotFileError(f"{final}: folder {final.parent} does not exist")
     tmp.unlink(missing_ok=True)  # our own leftover from an earlier interrupted attempt
     try:
-        with h5py.File(tmp, "w", track_order=True) as f:
+        if seed is not None:
+            shutil.copyfile(seed, tmp)
+        with h5py.File(tmp, "r+" if seed is not None else "w", track_order=True) as f:
             build(f)
             f.flush()
         _fsync_path(tmp)
@@ -306,34 +423,41 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def _checked_channels(path: Path, raw: RawShot) -> dict[str, tuple[np.ndarray, float, float]]:
+def _checked_channels(path: Path, raw: RawShot) -> dict[str, RawChannel]:
     missing = [c for c in REQUIRED_CHANNELS if c not in raw.channels]
     if missing:
         raise ShotFileError(f"{path}: raw shot lacks channel(s) {', '.join(missing)}")
     if not (math.isfinite(raw.sample_interval_s) and raw.sample_interval_s > 0):
         raise ShotFileError(f"{path}: sample_interval_s must be > 0 (got {raw.sample_interval_s})")
-    out: dict[str, tuple[np.ndarray, float, float]] = {}
+    out: dict[str, RawChannel] = {}
     lengths = set()
     for name, channel in raw.channels.items():
-        if not PLAIN_NAME_RE.match(name):
+        if not PLAIN_NAME_RE.match(name) or name == TIME_NAME:
             raise ShotFileError(f"{path}: channel name {name!r} is not a plain name")
         try:
-            codes, scale_v, offset_v = channel
+            codes, scale_v, offset_v, *rest = channel
+            code_range = rest[0] if rest else None
         except (TypeError, ValueError):
             raise ShotFileError(f"{path}: channel '{name}' must be (codes, scale_v, offset_v)") from None
         codes = np.asarray(codes)
         if codes.ndim != 1 or codes.size == 0:
             raise ShotFileError(f"{path}: channel '{name}' must be a non-empty 1-D array")
-        if codes.dtype != np.int16:
+        if codes.dtype not in CODE_DTYPES:
             if codes.dtype.kind not in "iu" or codes.min() < -32768 or codes.max() > 32767:
                 raise ShotFileError(
-                    f"{path}: channel '{name}' must hold int16 codes as recorded (got {codes.dtype})"
+                    f"{path}: channel '{name}' must hold int16 codes (or int8, uint8, uint16, float32) as "
+                    f"recorded, or integers that fit int16 (got {codes.dtype})"
                 )
             codes = codes.astype(np.int16)
         if not (math.isfinite(scale_v) and scale_v != 0 and math.isfinite(offset_v)):
             raise ShotFileError(f"{path}: channel '{name}' scale_v/offset_v must be finite, scale non-zero")
+        if code_range is not None:
+            lo, hi = (float(c) for c in code_range)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ShotFileError(f"{path}: channel '{name}' code_range must be two finite codes, low < high")
+            code_range = (lo, hi)
         lengths.add(codes.size)
-        out[name] = (codes, float(scale_v), float(offset_v))
+        out[name] = RawChannel(codes, float(scale_v), float(offset_v), code_range)
     if len(lengths) != 1:
         raise ShotFileError(f"{path}: raw channels have different lengths {sorted(lengths)}")
     n = lengths.pop()
@@ -414,7 +538,9 @@ def _mirror(group: h5py.Group, obj: dict[str, Any]) -> None:
         else:
             arr = _numeric_array(value)
             if arr is not None:
-                group.create_dataset(name, data=arr)
+                ds = group.create_dataset(name, data=arr)
+                if units_of_name(name) != "1":
+                    ds.attrs["units"] = units_of_name(name)
             elif isinstance(value, list | tuple) and value and all(isinstance(v, str) for v in value):
                 group.attrs[name] = list(value)
             else:
@@ -504,8 +630,10 @@ def read_shot(path: str | Path, load_raw: bool = True) -> Shot:
                 for name in raw_group.attrs["channels"]:
                     where = f"/raw/{name}"
                     ds = raw_group[name]
+                    code_range = ((float(ds.attrs["code_min"]), float(ds.attrs["code_max"]))
+                                  if "code_min" in ds.attrs and "code_max" in ds.attrs else None)
                     channels[str(name)] = RawChannel(
-                        ds[...], float(ds.attrs["scale_v"]), float(ds.attrs["offset_v"])
+                        ds[...], float(ds.attrs["scale_v"]), float(ds.attrs["offset_v"]), code_range
                     )
                 raw = RawShot(
                     channels,

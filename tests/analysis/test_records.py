@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hopkinson.analysis.errors import RecordError
@@ -62,3 +65,79 @@ def test_too_short_and_missing_file(tmp_path):
         record_from_arrays(np.arange(5.0), np.ones(5), np.ones(5))
     with pytest.raises(RecordError, match="no such file"):
         read_record(tmp_path / "absent.csv")
+
+
+# ---------------------------------------------------------------------------- units in the files
+
+
+@pytest.mark.parametrize("name", ["r.csv", "r.npz"])
+def test_units_travel_with_the_file(tmp_path, name):
+    t = 1e-6 * np.arange(100)
+    rec = record_from_arrays(t, np.sin(2e4 * t), np.cos(3e4 * t), response_unit="V")
+    path = write_record(tmp_path / name, rec)
+    if name.endswith(".csv"):
+        assert path.read_text().splitlines()[0] == "time_s,reference [m/s^2],response [V]"
+    back = read_record(path)
+    assert back.response_unit == "V"
+    np.testing.assert_allclose(back.response, rec.response, rtol=1e-9, atol=1e-12)
+    assert read_record(write_record(tmp_path / f"none-{name}", _record())).response_unit is None
+
+
+def test_a_header_without_units_still_reads_and_a_wrong_reference_unit_is_refused(tmp_path):
+    path = tmp_path / "old.csv"
+    t = 1e-6 * np.arange(20)
+    path.write_text("time_s,reference,response\n" + "".join(f"{a},{a * 1e6},{a}\n" for a in t))
+    assert read_record(path).response_unit is None and read_record(path).n_samples == 20
+    path.write_text("time_s,reference [g],response [V]\n" + "".join(f"{a},{a * 1e6},{a}\n" for a in t))
+    with pytest.raises(RecordError, match=r"old\.csv: the reference must be acceleration in m/s\^2.*'g'"):
+        read_record(path)
+
+
+# ---------------------------------------------------------------------------- bad input (issue 9)
+
+
+def _rows(n: int, extra_at: int | None = None) -> str:
+    lines = ["time_s,reference,response"]
+    for i in range(n):
+        lines.append(f"{i * 1e-6},{np.sin(i / 5)},{np.cos(i / 5)}" + (",7" if i == extra_at else ""))
+    return "\n".join(lines) + "\n"
+
+
+def test_bad_inputs_give_one_line_naming_the_file(tmp_path):
+    folder = tmp_path / "folder.csv"
+    folder.mkdir()
+    huge = tmp_path / "huge.csv"
+    huge.write_text(_rows(40).replace("time_s,reference,response", "time_s,reference,response," + "x" * 200_000))
+    absurd = tmp_path / "absurd.csv"
+    lines = _rows(40).splitlines()
+    lines[6] = "5e-06,1e300,0.5"  # data row 5
+    absurd.write_text("\n".join(lines) + "\n")
+    extra = tmp_path / "extra.csv"
+    extra.write_text(_rows(40, extra_at=30))
+    wide = tmp_path / "wide.csv"
+    wide.write_text(_rows(40).replace("\n", ",1\n").replace("response,1\n", "response\n"))
+    cases = [
+        (folder, "a folder, not a record file"),
+        (Path("/dev/zero"), "not a regular file"),
+        (huge, "the header line is longer than 64 KiB"),
+        (absurd, r"column 'reference' has the value 1e\+300 at row 5"),
+        (extra, "line 32 has 4 fields where the lines above have 3"),
+        (wide, "the rows have 4 fields but the header names 3"),
+    ]
+    for path, reason in cases:
+        with pytest.raises(RecordError) as info:
+            read_record(path)
+        message = str(info.value)
+        assert message.startswith(f"{path}: ") and "\n" not in message
+        assert re.search(reason, message), (path, message)
+
+
+def test_the_commands_turn_bad_input_into_exit_2(tmp_path, capsys):
+    from hopkinson.rig.cli.main import main
+
+    extra = tmp_path / "extra.csv"
+    extra.write_text(_rows(40, extra_at=30))
+    for path in (extra, tmp_path):
+        assert main(["identify", str(path)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and str(path) in err and "Traceback" not in err

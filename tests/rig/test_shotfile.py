@@ -81,7 +81,7 @@ def test_raw_round_trip_and_layout(tmp_path: Path) -> None:
     assert shot.meta.software_version == software_version() != "unknown"
     assert shot.raw is not None and shot.raw.sample_interval_s == 1e-8 and shot.raw.trigger_index == TRIGGER
     for name in ("doppler", "response"):
-        codes, scale_v, offset_v = raw.channels[name]
+        codes, scale_v, offset_v, *_ = raw.channels[name]
         got = shot.raw.channels[name]
         assert got.codes.dtype == np.int16 and np.array_equal(got.codes, codes)
         assert (got.scale_v, got.offset_v) == (scale_v, offset_v)
@@ -161,7 +161,7 @@ def test_analysis_round_trip_exact(tmp_path: Path) -> None:
         assert json.loads(f["analysis"].attrs["pole_analysis_json"]) == RESULTS["pole_analysis"]
         assert list(f["analysis/excitation"].attrs["warnings"]) == ["pulse close to the rule"]
         assert f["analysis"].attrs["status"] == "ok"
-        assert f["derived/record/reference"].attrs["units"] == "m/s2"
+        assert f["derived/record/reference"].attrs["units"] == "m/s^2"
 
 
 def test_second_analysis_replaces_the_first(tmp_path: Path) -> None:
@@ -382,3 +382,97 @@ def test_config_snapshot_of_typed_sections_is_stored_in_json_form(tmp_path: Path
         "calibrated_on": "2026-03-01",
         "gains": [1.0, 10.0],
     }
+
+
+# ----------------------------------------------------------------------------- self-describing files
+
+UNITS = {"V", "s", "m/s^2", "m/s", "Hz", "1"}
+
+
+def nexus_default_plot(f: h5py.File) -> tuple[h5py.Dataset, h5py.Dataset, list[h5py.Dataset]]:
+    """(signal, axis, auxiliary signals) as a NeXus viewer finds them: root @default -> NXentry
+    @default -> NXdata @signal / @axes (https://www.nexusformat.org/2014_How_to_find_default_data.html)."""
+    assert f.attrs["NX_class"] == "NXroot"
+    entry = f[f.attrs["default"]]
+    assert entry.attrs["NX_class"] == "NXentry"
+    data = entry[entry.attrs["default"]]
+    assert data.attrs["NX_class"] == "NXdata"
+    axes = [str(a) for a in data.attrs["axes"]]
+    aux = [data[str(name)] for name in data.attrs.get("auxiliary_signals", [])]
+    return data[str(data.attrs["signal"])], data[axes[0]], aux
+
+
+def test_every_dataset_carries_units_in_one_spelling(tmp_path: Path) -> None:
+    path = write_raw_shot(tmp_path / "s.h5", known_raw(), known_meta())
+    record = Record(1e-6, np.ones(300), np.ones(300), start_time_s=-5e-5)
+    add_analysis(path, {"reduction": {"response_unit": "m/s^2"}, **RESULTS}, record=record,
+                 derived={"velocity_m_s": np.zeros(300)})
+    seen: dict[str, str] = {}
+
+    def visit(name: str, obj: object) -> None:
+        if isinstance(obj, h5py.Dataset) and not name.startswith(("meta/", "truth/", "analysis/")):
+            seen[name] = obj.attrs.get("units")
+
+    with h5py.File(path, "r") as f:
+        f.visititems(visit)
+        assert f["derived/record/response"].attrs["units"] == "m/s^2"  # issue 13: it had none
+        assert f["derived/record/reference"].attrs["units"] == "m/s^2"  # and was spelled m/s2
+        assert f["derived/velocity_m_s"].attrs["units"] == "m/s"
+        assert f["raw/response"].attrs["units"] == "V" and f["raw/time_s"].attrs["units"] == "s"
+    assert {"raw/doppler", "derived/record/response", "entry/signals/response"} <= set(seen)  # (a hard-linked
+    # time axis is visited once, under one of its names)
+    assert all(unit in UNITS for unit in seen.values()), seen
+
+
+def test_time_is_a_dimension_scale_and_the_default_plot_is_volts_against_time(tmp_path: Path) -> None:
+    raw = known_raw()
+    path = write_raw_shot(tmp_path / "s.h5", raw, known_meta())
+    with h5py.File(path, "r") as f:
+        for name in ("doppler", "response"):
+            scale = f[f"raw/{name}"].dims[0][0]
+            assert scale == f["raw/time_s"] and scale.is_scale
+        expected_t = (np.arange(N) - TRIGGER) * 1e-8
+        np.testing.assert_allclose(f["raw/time_s"][...], expected_t, rtol=0, atol=1e-20)
+        signal, axis, aux = nexus_default_plot(f)
+        assert axis == f["raw/time_s"] and signal.attrs["units"] == "V" and axis.attrs["units"] == "s"
+        assert signal.dims[0][0] == f["raw/time_s"]
+        codes, scale_v, offset_v, _ = raw.channels["response"]
+        np.testing.assert_allclose(signal[...], codes * scale_v + offset_v, rtol=1e-6)  # float32 volts
+        (doppler,) = aux
+        np.testing.assert_allclose(doppler[...], raw.channels["doppler"][0] * 3.0517578125e-05 - 0.0125,
+                                   rtol=1e-6, atol=1e-9)
+    # The analysis rewrite keeps all of it valid (a byte copy: references survive) and adds the record.
+    time_s = -5e-5 + np.arange(300) * 1e-6
+    add_analysis(path, RESULTS, record=Record(1e-6, np.sin(time_s * 1e4), np.cos(time_s * 1e4), -5e-5))
+    add_analysis(path, RESULTS, record=Record(1e-6, np.sin(time_s * 1e4), np.cos(time_s * 1e4), -5e-5))
+    with h5py.File(path, "r") as f:
+        assert f["raw/response"].dims[0][0] == f["raw/time_s"]
+        assert nexus_default_plot(f)[0] == f["entry/signals/response"]
+        record = f["entry/record"]
+        assert record.attrs["NX_class"] == "NXdata" and record["response"] == f["derived/record/response"]
+        np.testing.assert_allclose(f["derived/record/response"].dims[0][0][...], time_s)
+
+
+@pytest.mark.parametrize("dtype", ["int8", "uint8", "int16", "uint16", "float32"])
+def test_codes_keep_their_native_type_and_full_scale(tmp_path: Path, dtype: str) -> None:
+    info = np.finfo(dtype) if dtype == "float32" else np.iinfo(dtype)
+    lo, hi = (-1.0, 1.0) if dtype == "float32" else (float(info.min), float(info.max))
+    codes = np.linspace(lo, hi, 64).astype(dtype)
+    raw = RawShot({"doppler": RawChannel(codes, 0.01, -0.5, (lo, hi)), "response": (codes, 0.02, 0.0)}, 1e-8, 3)
+    shot = read_shot(write_raw_shot(tmp_path / "s.h5", raw, known_meta()))
+    got = shot.raw.channels["doppler"]
+    assert got.codes.dtype == np.dtype(dtype) and np.array_equal(got.codes, codes)
+    assert got.code_range == (lo, hi) and shot.raw.channels["response"].code_range is None
+    np.testing.assert_allclose(shot.volts("doppler"), codes.astype(float) * 0.01 - 0.5)
+
+
+def test_a_file_without_the_nexus_default_still_reads(tmp_path: Path) -> None:
+    # Shot files written before the NeXus default and the time scale existed.
+    path = write_raw_shot(tmp_path / "s.h5", known_raw(), known_meta())
+    with h5py.File(path, "r+") as f:
+        del f["entry"], f["raw/time_s"]
+        for key in ("NX_class", "default"):
+            del f.attrs[key]
+    add_analysis(path, RESULTS, record=Record(1e-6, np.ones(50), np.ones(50)))
+    shot = read_shot(path)
+    assert shot.state == "analysed" and shot.record is not None and shot.raw.channels["doppler"].codes.size == N
