@@ -25,7 +25,6 @@ KNOWN_EXCEPTIONS: set[tuple[str, str]] = {
     ("drivers/sim/scpi_digitizer.py", "hopkinson.drivers.ieee488_block"),
     ("drivers/sim/serial_amplifier.py", "hopkinson.drivers.amplifier"),
     ("drivers/sim/simulated_rig.py", "hopkinson.drivers.valve_controller"),
-    ("ui/app.py", "hopkinson.rig.cli.main"),
     ("ui/dcm_tab.py", "hopkinson.rig.cli.dcm"),
 }
 

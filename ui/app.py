@@ -26,8 +26,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from hopkinson.rig.cli.main import rig_config_path
 from hopkinson.rig.config import load_rig_config, load_sim_config
+from hopkinson.rig.config_paths import DEFAULT_SIM_RIG_CONFIG, default_rig_config
 from hopkinson.rig.errors import ConfigError
 
 SCREENSHOT_SIZE = (1280, 800)
@@ -53,7 +53,7 @@ def run_panel(args: argparse.Namespace) -> int:
         raise ConfigError(f"--screenshot: folder {Path(args.screenshot).parent} does not exist")
     if args.screenshot is not None:
         _use_offscreen_without_display()
-    config = load_rig_config(rig_config_path(args))
+    config = load_rig_config(args.config or (DEFAULT_SIM_RIG_CONFIG if args.sim else default_rig_config()))
 
     try:
         from PySide6.QtCore import QSettings

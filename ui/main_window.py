@@ -31,7 +31,7 @@ from hopkinson.rig.sequencer import State
 from hopkinson.rig.shot import ShotOutcome, ShotRequest
 from hopkinson.ui.campaign_tab import CampaignTab
 from hopkinson.ui.dcm_tab import DcmTab
-from hopkinson.ui.log_view import LogView
+from hopkinson.ui.log_view import LogTab, LogView
 from hopkinson.ui.plots import ShotPlots, ShotView, configure_pyqtgraph, load_shot_view
 from hopkinson.ui.shot_setup import ShotSetup
 from hopkinson.ui.state_bar import StateBar
@@ -166,11 +166,12 @@ class MainWindow(QMainWindow):
         self.dcm_tab = DcmTab(export_report=self.export_report)
         self.campaign_tab = CampaignTab(self.link, self.background, runs_dir)
         self.log_view = LogView()
+        self.log_tab = LogTab(self.log_view, default_folder=out_dir)
         self.tabs = QTabWidget()
         self.tabs.addTab(self.plots, "Shot")
         self.tabs.addTab(self.dcm_tab, "DCM design")
         self.tabs.addTab(self.campaign_tab, "Campaign")
-        self.tabs.addTab(self.log_view, "Log")
+        self.tabs.addTab(self.log_tab, "Log")
 
         splitter = QSplitter(Qt.Orientation.Horizontal)
         splitter.addWidget(scroll)

@@ -4,6 +4,7 @@ window stays responsive; screenshots of every tab go to test-artifacts/."""
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 
@@ -52,7 +53,7 @@ def fire_one_shot(qtbot, panel, confirm: bool = True):
     return finished.args[0]
 
 
-def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_dir):
+def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_dir, tmp_path):
     panel = make_panel()
     w = panel.window
     save_shot(w, artifacts_dir / "panel-idle.png")
@@ -118,8 +119,18 @@ def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_d
     save_shot(w, artifacts_dir / "panel-shot.png")
     w.tabs.setCurrentWidget(w.dcm_tab)
     save_shot(w, artifacts_dir / "panel-dcm.png")
-    w.tabs.setCurrentWidget(w.log_view)
+    w.tabs.setCurrentWidget(w.log_tab)
     save_shot(w, artifacts_dir / "panel-log.png")
+
+    # the Log tab can be saved: JSON lines, one object per row, oldest first, with full UTC times
+    w.log_tab.save(tmp_path / "panel.log.jsonl")
+    rows = [json.loads(line) for line in (tmp_path / "panel.log.jsonl").read_text().splitlines()]
+    assert [(r["kind"], r["message"]) for r in rows] == w.log_view.messages()
+    assert all(r["utc"].endswith("Z") and len(r["utc"]) >= 20 for r in rows)
+    assert "Log saved to" in w.log_tab.message.text()
+    w.log_tab.save(tmp_path / "panel.log.txt")
+    text_rows = (tmp_path / "panel.log.txt").read_text().splitlines()
+    assert text_rows[0] == "utc\tstate\tkind\tmessage" and len(text_rows) == len(rows) + 1
 
 
 def test_fire_not_confirmed_keeps_the_rig_armed_then_abort_stands_down(qtbot, make_panel):
