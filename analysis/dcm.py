@@ -14,12 +14,20 @@ Design (checked against Eqs. (40)–(42) in PAPER-NOTES.md):
 - the gain K makes G(1) = 1 (unit DC gain).
 
 Filtering uses second-order sections with carried state, so a stream compensated block by
-block equals the whole record compensated at once.
+block equals the whole record compensated at once. A stream can also remove the latency
+(`DcmStream(align=True)`): the output is advanced by `DCM.latency_samples` (whole samples
+held back, the fraction by a windowed-sinc fractional-delay FIR), so it lines up in time
+with the reference; `flush()` returns the held-back tail.
+
+Which poles a shot lets the DCM cancel, the automatic ratio, the band limit and the noise
+gain bound live in analysis.dcm_design; the check of a DCM on its own shot in
+analysis.compensation.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,7 +39,6 @@ from hopkinson.analysis.response import (
     DEFAULT_LEVELS,
     BandEdge,
     band_edges,
-    fbsd_hz,
     frequency_response,
     model_output,
     pole_zero_frequencies_hz,
@@ -48,6 +55,26 @@ def format_complex(value: complex) -> str:
     """A pole as people write it: 0.974+0.1396j (real poles without the j part)."""
     v = complex(value)
     return f"{v.real:.6g}" if v.imag == 0 else f"{v.real:.6g}{v.imag:+.6g}j"
+
+
+def parse_complex(text: str, option: str) -> complex:
+    """One pole such as 0.974+0.1396j, 0.974-0.1396i or 0.5 (the inverse of `format_complex`);
+    AnalysisError naming `option` otherwise."""
+    raw = text.strip().replace(" ", "")
+    if not raw:
+        raise AnalysisError(f"{option}: empty pole in the list (write poles like 0.974+0.1396j, comma-separated)")
+    try:
+        value = complex(raw.replace("i", "j").replace("I", "j").replace("J", "j"))
+    except ValueError:
+        raise AnalysisError(f"{option}: {text.strip()!r} is not a complex number (write poles like 0.974+0.1396j)") from None
+    if not (math.isfinite(value.real) and math.isfinite(value.imag)):
+        raise AnalysisError(f"{option}: {text.strip()!r} is not a finite number")
+    return value
+
+
+def parse_poles(text: str, option: str) -> np.ndarray:
+    """A comma-separated list of poles (what `hopkinson dcm --poles` and the panel accept)."""
+    return np.array([parse_complex(part, option) for part in text.split(",")], dtype=complex)
 
 
 def check_conjugate_pairs(values: np.ndarray, what: str) -> None:
@@ -72,6 +99,47 @@ def check_inside_unit_circle(values: np.ndarray, what: str) -> None:
             raise AnalysisError(f"{what}: {format_complex(x)} is on or outside the unit circle (|p| = {abs(x):.6g}); the filter would be unstable")
 
 
+def dc_group_delay_samples(zeros: np.ndarray, poles: np.ndarray) -> float:
+    """Group delay at DC (samples) of k·Π(z − zeros)/Π(z − poles): see DCM.group_delay_samples."""
+    z = np.atleast_1d(np.asarray(zeros, dtype=complex))
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if np.any(np.abs(1 - z) < 1e-12) or np.any(np.abs(1 - p) < 1e-12):
+        raise AnalysisError("group delay: a zero or pole at z = 1 has no delay at DC")
+    return float(np.sum(np.real(1 / (1 - p))) - np.sum(np.real(1 / (1 - z))))
+
+
+def passband_delay_samples(
+    frequency_response: Callable[[np.ndarray], np.ndarray], band_hz: float, sample_interval_s: float
+) -> float:
+    """The delay (samples) that best lines up what a system passes in [0, band_hz]: the
+    least-squares slope through the origin of its unwrapped phase against ω·T (256 points).
+
+    The group delay exactly at DC would do for a clean model, but a slow spare pole-zero pair of
+    a fit (a doublet at a few hundred Hz) moves it by tens of samples while changing nothing a
+    shock pulse contains; the slope over the band the compensated system passes flat is the
+    delay its content sees.
+    """
+    if not band_hz > 0:
+        raise AnalysisError(f"passband delay: the band must be above 0 Hz, got {band_hz:g}")
+    f = np.linspace(0.0, band_hz, 256)
+    h = np.asarray(frequency_response(f), dtype=complex)
+    if not np.all(np.isfinite(h)) or h[0] == 0:
+        raise AnalysisError("passband delay: the response is not finite and non-zero at DC")
+    phase = np.unwrap(np.angle(h / h[0]))
+    w = 2 * np.pi * f * sample_interval_s
+    return float(-np.dot(w, phase) / np.dot(w, w))
+
+
+def model_dc_group_delay_samples(model: DiscreteModel) -> float:
+    """Group delay at DC (samples) of the model B(z⁻¹)/A(z⁻¹), without its input delay: the
+    phase slope of Σ b_k e^{−jωk} at ω = 0 is −Σ k·b_k/Σ b_k, so τ(0) = Σ k·b_k/Σ b_k − Σ k·a_k/Σ a_k
+    (exact; no roots needed, a leading zero of b counts as its sample of delay)."""
+    b, a = np.asarray(model.b, dtype=float), np.asarray(model.a, dtype=float)
+    if np.sum(b) == 0 or np.sum(a) == 0:
+        raise AnalysisError("group delay: the model has no finite, non-zero DC gain")
+    return float(np.dot(np.arange(b.size), b) / np.sum(b) - np.dot(np.arange(a.size), a) / np.sum(a))
+
+
 def _real_poly(roots: np.ndarray) -> np.ndarray:
     """Coefficients (descending powers) of Π(z − r) for conjugate-complete roots."""
     return np.real(np.poly(roots)) if np.size(roots) else np.array([1.0])
@@ -86,12 +154,18 @@ class DCM:
     poles: np.ndarray
     gain: float
     design: dict[str, Any] = field(default_factory=dict)  # how it was designed (ratio, ζ, …)
+    # Total latency of the compensated output behind the reference, in samples: the identified
+    # channel delay plus the low-frequency group delay of model × DCM (analysis.dcm_design).
+    # None: not known (a DCM from poles alone): the DCM's own group delay is used.
+    latency_samples: float | None = None
 
     def __post_init__(self) -> None:
         z = np.atleast_1d(np.asarray(self.zeros, dtype=complex))
         p = np.atleast_1d(np.asarray(self.poles, dtype=complex))
-        if not self.sample_interval_s > 0:
-            raise AnalysisError("DCM: sample_interval_s must be positive")
+        if not (math.isfinite(self.sample_interval_s) and self.sample_interval_s > 0):
+            raise AnalysisError("DCM: sample_interval_s must be a positive number")
+        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(p))):
+            raise AnalysisError("DCM: its zeros and poles must be finite numbers")
         if z.size > p.size:
             raise AnalysisError(f"DCM: {z.size} zeros but {p.size} poles; a causal DCM needs at least as many poles as zeros")
         check_conjugate_pairs(z, "DCM zeros")
@@ -102,6 +176,16 @@ class DCM:
         object.__setattr__(self, "zeros", z)
         object.__setattr__(self, "poles", p)
         object.__setattr__(self, "gain", float(self.gain))
+        if not (np.all(np.isfinite(self.num)) and math.isfinite(self.dc_gain)):
+            raise AnalysisError(
+                f"DCM: gain {self.gain:g} with these zeros gives coefficients that are not finite numbers (overflow)"
+            )
+        if np.any(np.abs(1 - z) < 1e-12):
+            raise AnalysisError("DCM: a zero at z = 1 gives it zero DC gain: it would remove the acceleration itself")
+        if self.latency_samples is not None:
+            if not math.isfinite(self.latency_samples):
+                raise AnalysisError("DCM: latency must be a finite number of samples")
+            object.__setattr__(self, "latency_samples", float(self.latency_samples))
 
     @property
     def num(self) -> np.ndarray:
@@ -131,6 +215,40 @@ class DCM:
     def dc_gain(self) -> float:
         return float(np.real(self.gain * np.prod(1 - self.zeros) / np.prod(1 - self.poles)))
 
+    @property
+    def group_delay_samples(self) -> float:
+        """The DCM's own group delay at DC, in samples (closed form, exact).
+
+        Each factor (z − a) of G at z = e^{jω} turns the phase by arg(e^{jω} − a), whose
+        derivative at ω = 0 is Re(1/(1 − a)); so τ(0) = Σ_poles Re 1/(1 − p) − Σ_zeros Re 1/(1 − z)
+        (a pole at the origin is one sample). scipy.signal.group_delay evaluates the same from
+        polynomial coefficients numerically and warns at singular points; this needs neither.
+        """
+        return dc_group_delay_samples(self.zeros, self.poles)
+
+    @property
+    def latency_s(self) -> float:
+        """Total latency of the compensated output (s): the stored one, else the DCM's own."""
+        samples = self.group_delay_samples if self.latency_samples is None else self.latency_samples
+        return samples * self.sample_interval_s
+
+    def noise_gain(self) -> float:
+        """RMS amplification of white noise at the DCM's rate: sqrt(Σ h[k]²) over its impulse
+        response h (the H2 norm; equal to the RMS of |G| over the band 0 … Nyquist)."""
+        h = self.impulse_response()
+        return float(np.sqrt(np.dot(h, h)))
+
+    def impulse_response(self) -> np.ndarray:
+        """h[k] until it has decayed below 1e-10 of its start (error if a pole is too slow)."""
+        slowest = float(np.max(np.abs(self.poles))) if self.poles.size else 0.0
+        tail = 0 if slowest == 0 else math.ceil(2 * math.log(1e-10) / math.log(slowest))
+        n = self.order + 16 + tail
+        if n > _MAX_STEP_SAMPLES:
+            raise AnalysisError(f"DCM: a pole at |p| = {slowest:.9g} decays too slowly to evaluate its noise gain")
+        impulse = np.zeros(n)
+        impulse[0] = 1.0
+        return signal.sosfilt(self.sos(), impulse)
+
     def sos(self) -> np.ndarray:
         """Second-order sections (what `apply` and `DcmStream` filter with)."""
         return zpk_to_sos(self.zeros, self.poles, self.gain)
@@ -154,6 +272,9 @@ class DCM:
             "poles": complex_pairs(self.poles),
             "gain": self.gain,
             "dc_gain": self.dc_gain,
+            "group_delay_s": self.group_delay_samples * self.sample_interval_s,
+            "latency_s": self.latency_s,
+            "noise_gain": self.noise_gain(),
             "design": self.design,
         }
 
@@ -184,8 +305,10 @@ class DCM:
                 gain = float(num[0] / den[0])
             else:
                 raise AnalysisError(f"{source}: missing keys: a DCM needs zeros, poles and gain (or num and den)")
-            return cls(dt, zeros, poles, gain, design)
-        except (TypeError, ValueError) as exc:
+            latency = data.get("latency_s")
+            latency_samples = None if latency is None else float(latency) / dt
+            return cls(dt, zeros, poles, gain, design, latency_samples)
+        except (TypeError, ValueError, ZeroDivisionError) as exc:
             if isinstance(exc, AnalysisError):
                 raise AnalysisError(f"{exc}" if str(exc).startswith(source) else f"{source}: {exc}") from None
             raise AnalysisError(f"{source}: DCM coefficients must be numbers") from None
@@ -400,30 +523,82 @@ def settling_time_ratio(model: DiscreteModel, dcm: DCM, tolerance: float = 0.05)
     return compare_steps(model, dcm).settling_time_ratio(tolerance)
 
 
+# Fractional part of a latency removed by a windowed-sinc FIR of 2·16 + 1 taps (Kaiser, β = 8):
+# its response is within 2e-4 of the exact fractional delay below 0.3 × the sample rate
+# (measured), far above where a compensated record (band-limited by its DCM) has content.
+_ALIGN_HALF_TAPS = 16
+_ALIGN_KAISER_BETA = 8.0
+
+
+def fractional_delay_fir(delay_samples: float, half_taps: int = _ALIGN_HALF_TAPS) -> np.ndarray:
+    """Taps of an FIR that delays by `delay_samples` (within ±1 of `half_taps`): a Kaiser-windowed
+    sinc centred on the delay, normalised to unit DC gain.
+
+    Written here because scipy.signal designs linear-phase FIRs only with integer or half-integer
+    delays (firwin); a fractional delay needs the sinc sampled off its centre.
+    """
+    k = np.arange(2 * half_taps + 1, dtype=float) - delay_samples
+    window = np.i0(_ALIGN_KAISER_BETA * np.sqrt(np.clip(1 - (k / (half_taps + 1)) ** 2, 0, None))) / np.i0(
+        _ALIGN_KAISER_BETA
+    )
+    taps = np.sinc(k) * window
+    return taps / np.sum(taps)
+
+
 class DcmStream:
     """Apply a DCM block by block, carrying the filter state between blocks.
 
     initial="rest": the filter starts from zero state (as lfilter does by default);
     initial="steady": it starts in the steady state for a constant input equal to the
     first sample (no start-up transient on a record with an offset).
+    align=True: the output is advanced by the DCM's latency (`DCM.latency_samples`, else its
+    own group delay) so that it lines up with the reference: the whole samples are held back
+    at the start (`process` returns fewer samples than it was given until they are used up),
+    the fraction is removed by a fractional-delay FIR, and `flush()` returns the tail,
+    computed by continuing the input with its last sample. Every output is checked: a
+    non-finite sample (an overflowing DCM) is an AnalysisError.
     """
 
-    def __init__(self, dcm: DCM, initial: str = "rest") -> None:
+    def __init__(self, dcm: DCM, initial: str = "rest", align: bool = False) -> None:
         if initial not in ("rest", "steady"):
             raise AnalysisError(f"DCM stream: initial must be 'rest' or 'steady', got {initial!r}")
         self.dcm = dcm
         self.initial = initial
+        self.align = align
         self._sos = dcm.sos()
-        self._zi: np.ndarray | None = None
-        self.samples_processed = 0
+        self._fir: np.ndarray | None = None
+        self._hold = 0
+        if align:
+            latency = dcm.latency_s / dcm.sample_interval_s
+            whole = math.floor(latency)
+            fraction = latency - whole
+            if fraction > 1e-9:
+                self._fir = fractional_delay_fir(_ALIGN_HALF_TAPS - fraction)
+                whole += _ALIGN_HALF_TAPS
+            if whole < 0:
+                raise AnalysisError(
+                    f"DCM stream: a latency of {latency:.3g} samples (the output ahead of its input) cannot be removed"
+                )
+            self._hold = whole
+        self.reset()
+
+    @property
+    def held_samples(self) -> int:
+        """Output samples held back at the start to remove the latency (0 without align)."""
+        return self._hold
 
     def reset(self) -> None:
         """Forget the carried state: the next block starts a new stream."""
-        self._zi = None
+        self._zi: np.ndarray | None = None
+        self._fir_zi: np.ndarray | None = None
+        self._to_drop = self._hold
+        self._last = 0.0
         self.samples_processed = 0
+        self.samples_returned = 0
 
     def process(self, block: np.ndarray) -> np.ndarray:
-        """Compensate the next block of samples and return it (same length)."""
+        """Compensate the next block of samples and return what is ready (the same length
+        without align)."""
         x = np.asarray(block, dtype=float)
         if x.ndim != 1:
             raise AnalysisError("DCM stream: a block must be a 1-D array of samples")
@@ -431,74 +606,60 @@ class DcmStream:
             return x.copy()
         if not np.all(np.isfinite(x)):
             raise AnalysisError(f"DCM stream: NaN or infinite sample at {self.samples_processed + int(np.flatnonzero(~np.isfinite(x))[0])}")
-        if self._zi is None:
-            zi = signal.sosfilt_zi(self._sos) * x[0] if self.initial == "steady" else np.zeros((self._sos.shape[0], 2))
-            self._zi = zi
-        y, self._zi = signal.sosfilt(self._sos, x, zi=self._zi)
+        y = self._filter(x)
         self.samples_processed += x.size
+        self._last = float(x[-1])
+        return self._release(y)
+
+    def flush(self) -> np.ndarray:
+        """The held-back tail (align only): the input continued by its last sample through the
+        filter, so the whole output is as long as the whole input. Ends the stream."""
+        missing = self.samples_processed - self.samples_returned
+        if missing <= 0:
+            return np.zeros(0)
+        y = self._release(self._filter(np.full(self._hold, self._last)))
+        return y[:missing]
+
+    def _filter(self, x: np.ndarray) -> np.ndarray:
+        if self._zi is None:
+            steady = self.initial == "steady"
+            self._zi = signal.sosfilt_zi(self._sos) * x[0] if steady else np.zeros((self._sos.shape[0], 2))
+        y, self._zi = signal.sosfilt(self._sos, x, zi=self._zi)
+        if self._fir is not None:
+            if self._fir_zi is None:
+                level = y[0] if self.initial == "steady" else 0.0
+                self._fir_zi = signal.lfilter_zi(self._fir, [1.0]) * level
+            y, self._fir_zi = signal.lfilter(self._fir, [1.0], y, zi=self._fir_zi)
+        if not np.all(np.isfinite(y)):
+            bad = self.samples_processed + int(np.flatnonzero(~np.isfinite(y))[0])
+            raise AnalysisError(
+                f"the DCM's output is not a finite number from input sample {bad} on (it overflows: gain "
+                f"{self.dcm.gain:g}, DC gain {self.dcm.dc_gain:g}); this DCM cannot compensate this record"
+            )
+        return y
+
+    def _release(self, y: np.ndarray) -> np.ndarray:
+        if self._to_drop:
+            drop = min(self._to_drop, y.size)
+            self._to_drop -= drop
+            y = y[drop:]
+        self.samples_returned += y.size
         return y
 
 
-def apply(dcm: DCM, data: np.ndarray, initial: str = "rest", block_samples: int | None = None) -> np.ndarray:
+def apply(
+    dcm: DCM, data: np.ndarray, initial: str = "rest", block_samples: int | None = None, align: bool = False
+) -> np.ndarray:
     """Compensate a record: at once, or in blocks of `block_samples` through a DcmStream.
 
-    Both give the same samples (the stream carries the filter state between blocks).
+    Both give the same samples (the stream carries the filter state between blocks). align:
+    the output is advanced by the DCM's latency (see DcmStream), same length as the input.
     """
-    stream = DcmStream(dcm, initial)
+    stream = DcmStream(dcm, initial, align)
     x = np.asarray(data, dtype=float)
-    if block_samples is None:
-        return stream.process(x)
-    if block_samples < 1:
+    if block_samples is not None and block_samples < 1:
         raise AnalysisError(f"DCM: block_samples must be at least 1, got {block_samples}")
-    return np.concatenate([stream.process(x[i : i + block_samples]) for i in range(0, x.size, block_samples)] or [x[:0]])
-
-
-DEFAULT_WIDENING = 3.0  # automatic design: compensated ±5 % band this many times the model's
-
-
-def ratio_for_widening(
-    model: DiscreteModel,
-    damping: float = 0.707,
-    widening: float = DEFAULT_WIDENING,
-    extra_poles: Sequence[complex] | np.ndarray = (),
-) -> float:
-    """The smallest response-time ratio r whose DCM widens the ±5 % FBSD by `widening`.
-
-    The paper leaves r to the engineer. r scales the decay envelope ζ·ω_n of the slowest
-    pole (see design_dcm), so the same r widens a lightly damped sensor's band far less than
-    a well damped one's; choosing r for a target band is what a calibration engineer wants.
-    Scans r upwards on a log grid (1 … 2000) until the band reaches the target and refines by
-    bisection; when no r reaches it, returns the r of the widest band found. Only the ±5 %
-    edge is searched for (the ±10 % one would cost as much again and is not used).
-    """
-    if not widening > 1:
-        raise AnalysisError(f"DCM: the band widening must be > 1, got {widening}")
-    level = (0.05,)
-    target = widening * fbsd_hz(model, level)["5"]
-    poles = model.poles
-
-    def band(r: float) -> float:
-        try:
-            dcm = design_dcm(poles, model.sample_interval_s, r, damping, extra_poles)
-            return compensated_fbsd_hz(model, dcm, level)["5"]
-        except AnalysisError:
-            return 0.0
-
-    grid = np.geomspace(1.0, 2000.0, 60)
-    bands: list[float] = []
-    for r in grid:
-        bands.append(band(r))
-        if bands[-1] >= target:
-            break
-    else:
-        return float(grid[int(np.argmax(bands))])
-    i = len(bands) - 1
-    if i == 0:
-        return float(grid[0])
-    lo, hi = float(grid[i - 1]), float(grid[i])
-    for _ in range(30):  # bisection on a possibly non-smooth function: no brentq
-        mid = np.sqrt(lo * hi)
-        lo, hi = (mid, hi) if band(mid) < target else (lo, mid)
-        if hi / lo < 1.0005:
-            break
-    return hi
+    step = x.size if block_samples is None else block_samples
+    parts = [stream.process(x[i : i + step]) for i in range(0, x.size, max(step, 1))]
+    parts.append(stream.flush())
+    return np.concatenate(parts) if x.size else x.copy()

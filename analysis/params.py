@@ -25,7 +25,8 @@ from hopkinson.analysis.errors import AnalysisError
 
 DEFAULT_ANALYSIS_RATE_HZ = 1e6
 DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/doppler_beat.py)
-DEFAULT_DCM_WIDENING = 3.0  # analysis.dcm.DEFAULT_WIDENING (kept equal; dcm imports NumPy)
+DEFAULT_DCM_WIDENING = 3.0  # DCM: compensated ±5 % band this many times the model's (analysis.dcm_design)
+DEFAULT_DCM_NOISE_GAIN_LIMIT = 4.0  # DCM white-noise RMS gain allowed (12 dB; analysis.dcm_design)
 # Monte Carlo draws per shot (GUM-S1 §7.9: enough for the 95 % interval's ends to be stable
 # to about one significant digit of the standard uncertainty; see analysis.uncertainty).
 DEFAULT_DRAWS = 400
@@ -49,6 +50,9 @@ class AnalysisParams:
     dcm_damping: float = 0.707
     dcm_widening: float = DEFAULT_DCM_WIDENING
     extra_poles: tuple[complex, ...] = ()
+    # DCM noise gain (white-noise RMS gain at the analysis rate) allowed in the automatic design
+    dcm_noise_gain_limit: float = DEFAULT_DCM_NOISE_GAIN_LIMIT
+    dcm_band_limit_hz: float | None = None  # DCM low-pass cut-off; None: from the shot, 0: none
     # Uncertainty (analysis.uncertainty, GUM Supplement 1)
     uncertainty: bool = True
     draws: int = DEFAULT_DRAWS
@@ -110,6 +114,9 @@ class AnalysisParams:
             _finite(self.dcm_ratio, "dcm_ratio", above=0.0, at_most=1e4)
         _finite(self.dcm_damping, "dcm_damping", above=0.0, at_most=10.0)
         _finite(self.dcm_widening, "dcm_widening", above=1.0, at_most=1e3)
+        _finite(self.dcm_noise_gain_limit, "dcm_noise_gain_limit", above=0.0, at_most=1e6)
+        if self.dcm_band_limit_hz is not None:
+            _finite(self.dcm_band_limit_hz, "dcm_band_limit_hz", at_least=0.0, at_most=1e10)
         for p in self.extra_poles:
             if not (isinstance(p, complex) and math.isfinite(p.real) and math.isfinite(p.imag) and abs(p) < 1.0):
                 raise AnalysisError(f"analysis option extra_poles: {p!r} must be a finite complex number inside "

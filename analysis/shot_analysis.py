@@ -4,9 +4,11 @@ The single entry point the rig, the campaign runner, the report and the panel sh
 analysis of a shot is the same wherever it runs. `ShotAnalysis.to_dict()` is what shot files
 store under /analysis; `ShotAnalysis.from_dict` rebuilds the model and the DCM from it.
 
-DCM ratio: the paper leaves r to the engineer; `dcm_ratio=None` chooses the r that widens
-the ±5 % band `dcm_widening` times (analysis.dcm.ratio_for_widening), because the paper's
-r acts on the decay envelope and a fixed r can narrow a lightly damped sensor's band.
+DCM (analysis.compensation.compensate_shot): designed from the modes the shot supports, with
+the automatic ratio (`dcm_ratio=None`: the r that widens the ±5 % band `dcm_widening` times,
+because the paper's r acts on the decay envelope and a fixed r can narrow a lightly damped
+sensor's band), the noise-gain bound and the band limit; checked on the shot itself, and
+marked not recommended where it does not improve it.
 """
 
 from __future__ import annotations
@@ -15,13 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from hopkinson.analysis.dcm import (
-    DCM,
-    compare_steps,
-    compensated_fbsd_hz,
-    design_dcm,
-    ratio_for_widening,
-)
+from hopkinson.analysis.compensation import compensate_shot
+from hopkinson.analysis.dcm import DCM, compare_steps
+from hopkinson.analysis.dcm_design import DcmOptions
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
 from hopkinson.analysis.identify import Identification, identify
@@ -32,6 +30,11 @@ from hopkinson.analysis.records import Record
 from hopkinson.analysis.reduce import reduce_raw
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_hz, model_output, pole_analysis
+
+# Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
+COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "noise_gain", "noise_gain_limit",
+                     "band_limit_hz", "band_limit_reason", "latency_s", "recommended", "not_recommended_reason",
+                     "check", "compensated_peak")
 
 
 @dataclass
@@ -52,6 +55,8 @@ class ShotAnalysis:
     settling_time_ratio: float | None = None  # ±5 % settling, uncompensated ÷ compensated
     peak_overshoot: float | None = None  # model's peak response ÷ (DC gain × peak reference)
     warnings: list[str] = field(default_factory=list)
+    # the DCM's design figures, its check on the shot and the verdict (ShotCompensation.to_dict)
+    compensation: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready results (stored in shot files, printed by --json)."""
@@ -69,6 +74,7 @@ class ShotAnalysis:
             "pole_analysis": self.pole_analysis,
             "dcm": {
                 **self.dcm.to_dict(),
+                **self.compensation,
                 "compensated_fbsd_hz": dict(self.compensated_fbsd_hz),
                 "rise_time_ratio": self.rise_time_ratio,
                 "settling_time_ratio": self.settling_time_ratio,
@@ -92,6 +98,7 @@ class ShotAnalysis:
                 rise_time_ratio=float(data["dcm"]["rise_time_ratio"]),
                 settling_time_ratio=data["dcm"].get("settling_time_ratio"),
                 peak_overshoot=data.get("peak_overshoot"), warnings=list(data.get("warnings", [])),
+                compensation={k: data["dcm"][k] for k in COMPENSATION_KEYS if k in data["dcm"]},
             )
         except (KeyError, TypeError) as exc:
             raise AnalysisError(f"shot analysis results are incomplete: missing {exc}") from None
@@ -110,11 +117,10 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
     warnings = list(ident.warnings)
-    ratio = params.dcm_ratio
-    if ratio is None:
-        ratio = ratio_for_widening(model, params.dcm_damping, params.dcm_widening, params.extra_poles)
-    dcm = design_dcm(model.poles, model.sample_interval_s, ratio, params.dcm_damping, params.extra_poles)
-    comp = compensated_fbsd_hz(model, dcm)
+    # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
+    compensation = compensate_shot(ident, record, DcmOptions.from_params(params))
+    warnings += compensation.warnings
+    dcm, comp = compensation.design.dcm, compensation.design.compensated_fbsd_hz
     steps = compare_steps(model, dcm)  # one simulation for both ratios
     rtr = steps.rise_time_ratio()
     settling = steps.settling_time_ratio()
@@ -133,7 +139,7 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
         params=params, record=record, reduction=reduction, excitation=exc, identification=ident, model=model,
         fbsd_hz=fbsd_hz(model), pole_analysis=pole_analysis(model.poles), dcm=dcm, compensated_fbsd_hz=comp,
         rise_time_ratio=float(rtr), settling_time_ratio=float(settling), peak_overshoot=overshoot,
-        warnings=warnings,
+        warnings=warnings, compensation=compensation.to_dict(),
     )
 
 

@@ -203,7 +203,7 @@ def test_model_and_dcm_sample_intervals_must_agree():
 
 
 def test_ratio_for_widening_reaches_the_asked_band():
-    from hopkinson.analysis.dcm import ratio_for_widening
+    from hopkinson.analysis.dcm_design import ratio_for_widening
     from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 
     truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), lowpass_hz=100_000.0)

@@ -1,0 +1,278 @@
+"""A DCM applied to records: every shot's check of its own compensation, the compensated peak
+with its uncertainty, and records brought to a DCM's rate (issue 11).
+
+The check compensates the shot's own response and compares both estimates of the
+acceleration with the reference over the pulse window (the main pulse widened by two pulse
+widths on each side, analysis.excitation.pulse_window):
+- uncompensated: response ÷ DC gain, advanced by its own latency (channel delay + the model's
+  delay over its ±5 % band, analysis.dcm.passband_delay_samples), so that the comparison is
+  not won by alignment alone;
+- compensated: the DCM's output (analysis.dcm.apply with align: the latency removed) ÷ DC gain.
+Figures relative to the reference's peak: the RMS error over the window and the error of the
+peak of the reference's polarity. The DCM is recommended only where it lowers the RMS error,
+does not raise the peak error by more than PEAK_TOLERANCE_PCT, widens the ±5 % band, keeps
+its noise gain within the limit and has something to cancel. The check is in-sample (the
+model was fitted to this shot): it catches a compensation that makes the shot worse, it does
+not prove one that makes it better on other records.
+
+Compensated peak uncertainty: each Monte Carlo model draw H_i (analysis.uncertainty) is a
+sensor the shot cannot rule out. Had it been the sensor, the compensated peak read with the
+nominal DCM and DC gain S would be off by q_i = peak(G·H_i·u) / (S·peak(u)) (u the
+reference); the true peak is then (â + e_i)/q_i, e_i the white response noise after the DCM
+(noise gain × response noise ÷ S, drawn normally). The value stays â; u and the 95 %
+interval (2.5 and 97.5 percentiles, GUM-S1) come from the draws.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.dcm import DCM, apply, passband_delay_samples
+from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import PulseWidth, pulse_width, pulse_window
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.resample import resample_to_rate, resampling_factors, shift_samples
+from hopkinson.analysis.response import fbsd_hz, frequency_response, model_output
+from scipy import signal
+
+# A compensated peak error this much larger (percentage points) than the uncompensated one
+# counts as worse: below it the difference is within what the reference's own noise moves.
+PEAK_TOLERANCE_PCT = 0.5
+COVERAGE = 0.95
+
+
+@dataclass(frozen=True)
+class CompensationCheck:
+    """The shot's own compensation against its reference (module docstring); percentages
+    of the reference peak; (uncompensated, compensated) pairs."""
+
+    rms_error_pct: tuple[float, float]
+    peak_error_pct: tuple[float, float]
+    window_s: tuple[float, float]
+    reference_peak_m_s2: float
+    compensated_peak_m_s2: float
+
+    @property
+    def improves(self) -> bool:
+        return self.rms_error_pct[1] < self.rms_error_pct[0] and not self.peak_worse
+
+    @property
+    def peak_worse(self) -> bool:
+        return abs(self.peak_error_pct[1]) > abs(self.peak_error_pct[0]) + PEAK_TOLERANCE_PCT
+
+    def reason(self) -> str | None:
+        """Why compensation does not improve the shot (None when it does)."""
+        unc, comp = self.rms_error_pct
+        if comp >= unc:
+            return (f"compensating this shot raises the RMS error over the pulse from {unc:.3g} % to {comp:.3g} % "
+                    "of the peak")
+        if self.peak_worse:
+            unc, comp = self.peak_error_pct
+            return f"compensating this shot moves the peak error from {unc:+.3g} % to {comp:+.3g} %"
+        return None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rms_error_pct": {"uncompensated": self.rms_error_pct[0], "compensated": self.rms_error_pct[1]},
+            "peak_error_pct": {"uncompensated": self.peak_error_pct[0], "compensated": self.peak_error_pct[1]},
+            "window_s": list(self.window_s),
+            "reference_peak_m_s2": self.reference_peak_m_s2,
+            "compensated_peak_m_s2": self.compensated_peak_m_s2,
+        }
+
+
+@dataclass(frozen=True)
+class _Pulse:
+    """The reference pulse of a record and the response with its baseline removed."""
+
+    pulse: PulseWidth
+    window: slice
+    response: np.ndarray  # baseline removed, response units
+
+
+def _pulse_of(record: Record) -> _Pulse:
+    dt = record.sample_interval_s
+    pulse = pulse_width(record.reference, dt, record.start_time_s)
+    window = pulse_window(pulse, record.n_samples, dt, record.start_time_s)
+    quiet = int((pulse.start_s - pulse.width_s - record.start_time_s) / dt)
+    response = np.asarray(record.response, dtype=float)
+    base = float(np.mean(response[:quiet])) if quiet >= 16 else 0.0
+    return _Pulse(pulse, window, response - base)
+
+
+def estimates(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float
+              ) -> tuple[slice, np.ndarray, np.ndarray]:
+    """(pulse window, uncompensated, compensated) estimates of the acceleration (m/s²), both
+    aligned with the reference; the record at the DCM's rate."""
+    _same_rate(record, dcm)
+    p = _pulse_of(record)
+    gain = model.dc_gain
+    dt = model.sample_interval_s
+    own = channel_delay_samples + passband_delay_samples(
+        lambda f: frequency_response(model, f), min(fbsd_hz(model, (0.05,))["5"], 0.4 / dt), dt
+    )
+    uncompensated = shift_samples(p.response / gain, -own)
+    compensated = apply(dcm, p.response, initial="steady", align=True) / gain
+    return p.window, uncompensated, compensated
+
+
+def check_compensation(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float
+                       ) -> CompensationCheck:
+    """Compensate the shot's own response and compare with its reference (module docstring)."""
+    window, uncompensated, compensated = estimates(record, model, dcm, channel_delay_samples)
+    ref = np.asarray(record.reference, dtype=float)[window]
+    peak = ref[int(np.argmax(np.abs(ref)))]
+    sign = 1.0 if peak > 0 else -1.0
+
+    def figures(est: np.ndarray) -> tuple[float, float, float]:
+        e = est[window]
+        rms = 100.0 * math.sqrt(float(np.mean((e - ref) ** 2))) / abs(peak)
+        top = sign * float(np.max(sign * e))
+        return rms, 100.0 * (top - peak) / peak, top
+
+    rms_u, peak_u, _ = figures(uncompensated)
+    rms_c, peak_c, top_c = figures(compensated)
+    t0 = record.start_time_s + window.start * record.sample_interval_s
+    t1 = record.start_time_s + (window.stop - 1) * record.sample_interval_s
+    return CompensationCheck((rms_u, rms_c), (peak_u, peak_c), (t0, t1), float(peak), top_c)
+
+
+def recommendation(design: DcmDesign, check: CompensationCheck | None) -> tuple[bool | None, str | None]:
+    """(recommended, reason) for a DcmDesign (analysis.dcm_design) and its check on the shot.
+    None: not judged (no check and nothing against the design)."""
+    if design.poles.cancelled.size == 0:
+        return False, "nothing to compensate: no pole of the model is one the shot supports"
+    if design.noise_gain_exceeded:
+        return False, (f"its noise gain {design.noise_gain:.3g} exceeds the limit {design.options.noise_gain_limit:g}: "
+                       "it amplifies the record's noise more than allowed")
+    if design.reached_widening is not None and design.reached_widening <= 1.0:
+        return False, f"it does not widen the ±5 % band (×{design.reached_widening:.2f})"
+    if check is None:
+        return None, None
+    reason = check.reason()
+    return reason is None, reason
+
+
+def compensated_peak(record: Record, dcm: DCM, gain: float, channel_delay_samples: float,
+                     draws: Sequence[DiscreteModel], response_noise_rms: float | None,
+                     seed: int | None = None) -> dict[str, Any] | None:
+    """The compensated peak (m/s²) of the shot with the uncertainty of the model draws
+    (module docstring): {"value", "u", "interval"}; None without draws."""
+    if not draws:
+        return None
+    _same_rate(record, dcm)
+    p = _pulse_of(record)
+    reference = np.asarray(record.reference, dtype=float)
+    sign = 1.0 if p.pulse.peak_m_s2 > 0 else -1.0
+    peak_ref = sign * float(np.max(sign * reference[p.window]))
+    measured = apply(dcm, p.response, initial="steady", align=True) / gain
+    value = sign * float(np.max(sign * measured[p.window]))
+    # a draw's simulated response has no channel delay: remove only the rest of the latency
+    simulated_dcm = replace(dcm, latency_samples=dcm.latency_s / dcm.sample_interval_s - channel_delay_samples)
+    ratios = np.array([
+        sign * float(np.max(sign * apply(simulated_dcm, model_output(m, reference), align=True)[p.window]))
+        / (gain * peak_ref)
+        for m in draws
+    ])
+    if not np.all(np.isfinite(ratios)) or np.any(ratios * np.sign(value) <= 0):
+        raise AnalysisError("compensated peak: a model draw gives no peak of the reference's polarity")
+    rng = np.random.default_rng(seed)
+    noise = (dcm.noise_gain() * response_noise_rms / abs(gain)) if response_noise_rms else 0.0
+    truths = (value + noise * rng.standard_normal(ratios.size)) / ratios
+    tail = 100 * (1 - COVERAGE) / 2
+    lo, hi = np.percentile(truths, [tail, 100 - tail])
+    return {"value": value, "u": float(np.std(truths, ddof=1)), "interval": [float(lo), float(hi)]}
+
+
+def to_rate(record: Record, sample_rate_hz: float) -> tuple[Record, str | None]:
+    """The record at `sample_rate_hz` (within 0.1 %) and what was done (None: nothing).
+
+    Faster records go through analysis.resample.resample_to_rate (anti-alias low-pass, as
+    `identify` does); slower ones are interpolated with scipy.signal.resample_poly (band-limited:
+    nothing appears above the record's own Nyquist frequency).
+    """
+    source = record.sample_rate_hz
+    if abs(source - sample_rate_hz) <= 1e-3 * sample_rate_hz:
+        return record, None
+    if source > sample_rate_hz:
+        out = resample_to_rate(record, sample_rate_hz)
+        how = "low-pass filtered and resampled"
+    else:
+        up, down = resampling_factors(source, sample_rate_hz)
+        out = Record(
+            record.sample_interval_s * down / up,
+            signal.resample_poly(record.reference, up, down, padtype="line"),
+            signal.resample_poly(record.response, up, down, padtype="line"),
+            record.start_time_s,
+        )
+        how = "interpolated (band-limited)"
+    if abs(out.sample_rate_hz - sample_rate_hz) > 1e-3 * sample_rate_hz:
+        raise AnalysisError(
+            f"cannot bring a record at {source:g} Hz to {sample_rate_hz:g} Hz (the nearest rational rate is "
+            f"{out.sample_rate_hz:g} Hz)"
+        )
+    return out, f"{how} from {source:g} Hz to {out.sample_rate_hz:g} Hz, the DCM's rate"
+
+
+def _same_rate(record: Record, dcm: DCM) -> None:
+    if abs(record.sample_interval_s - dcm.sample_interval_s) > 1e-3 * dcm.sample_interval_s:
+        raise AnalysisError(
+            f"the record is sampled every {record.sample_interval_s:g} s, the DCM was designed for "
+            f"{dcm.sample_interval_s:g} s (bring it to the DCM's rate first: analysis.compensation.to_rate)"
+        )
+
+
+@dataclass(frozen=True)
+class ShotCompensation:
+    """A shot's DCM design, its check on the shot and the verdict (the results' "dcm" extras)."""
+
+    design: DcmDesign
+    check: CompensationCheck | None
+    recommended: bool | None
+    not_recommended_reason: str | None
+    compensated_peak: dict[str, Any] | None
+    warnings: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The issue-11 keys of the results' "dcm" object (CONTRACTS)."""
+        return {
+            **self.design.to_dict(),
+            "recommended": self.recommended,
+            "not_recommended_reason": self.not_recommended_reason,
+            "check": None if self.check is None else self.check.to_dict(),
+            "compensated_peak": self.compensated_peak,
+        }
+
+
+def compensate_shot(identification: Any, record: Record, options: DcmOptions,
+                    draws: Sequence[DiscreteModel] = (), seed: int | None = None) -> ShotCompensation:
+    """Design the DCM the shot supports, check it on the shot, judge it, and (with model draws)
+    give the compensated peak its interval. A failed check is a warning, never a failed shot."""
+    model = identification.model
+    rec, _ = to_rate(record, 1.0 / model.sample_interval_s)
+    support = ShotSupport.from_identification(identification, rec)
+    design = design_compensation(support, options)
+    warnings: list[str] = []
+    if design.widening_note and options.ratio is None:
+        warnings.append(f"DCM: the band widening {design.widening_note}")
+    check = peak = None
+    try:
+        check = check_compensation(rec, model, design.dcm, support.channel_delay_samples)
+    except AnalysisError as exc:
+        warnings.append(f"DCM: the compensation could not be checked on the shot ({exc})")
+    recommended, reason = recommendation(design, check)
+    if recommended is False:
+        warnings.append(f"DCM not recommended for this shot: {reason}")
+    if draws:
+        noise = (getattr(identification, "noise", None) or {}).get("response_rms")
+        try:
+            peak = compensated_peak(rec, design.dcm, model.dc_gain, support.channel_delay_samples, draws, noise, seed)
+        except AnalysisError as exc:
+            warnings.append(f"DCM: no interval for the compensated peak ({exc})")
+    return ShotCompensation(design, check, recommended, reason, peak, tuple(warnings))

@@ -1,0 +1,523 @@
+"""The DCM a shot supports: which poles it cancels, the automatic ratio, the band limit, the
+noise-gain bound and the latency (issue 11). analysis.dcm holds the paper's design itself.
+
+- **Cancelled poles.** Only modes the excitation supports (Identification.modes[i]["supported"]);
+  never a pole at the origin, a negative real pole (at Nyquist: a discretisation artefact), a
+  mode within 20 % of Nyquist, or a pole that a model zero nearly cancels (a spare pole-zero
+  pair of the fit: cancelling the pole alone would leave the zero as a notch). Model zeros are
+  never inverted (the DCM's zeros are the cancelled poles only), so a non-minimum-phase zero
+  stays what it is; the DCM's poles all lie inside the unit circle.
+- **Ratio.** The paper's r (Eqs. 21-25) from the slowest cancelled pole. Automatic (default):
+  the smallest r whose compensated ±5 % band reaches `widening` × the model's, within the
+  noise-gain limit; when no r reaches it, the r of the widest band within the limit (the
+  smallest r within 1 % of it), and `widening_note` says what stopped it.
+- **Band limit.** A 2nd-order Butterworth low-pass (poles exp(s·T) of the analog prototype,
+  unit DC gain) at the top of the band the shot vouches for: the band the excitation supports
+  (its spectrum ≥ 1 % of its peak and 20 dB above the reference noise: analysis.excitation)
+  and, with the shot's record, the band where the response stands 20 dB above its own noise.
+  Beyond it the model is not measured, so the DCM must not amplify there.
+- **Noise gain.** RMS amplification of white noise at the analysis rate (DCM.noise_gain),
+  bounded by `noise_gain_limit` in the automatic design; an explicit ratio above the limit is
+  designed as asked and reported.
+- **Latency.** The identified channel delay plus the low-frequency group delay of model × DCM
+  (the cancelled poles' delays cancel; what is left is the designed poles', the band limit's,
+  and the model's uncancelled zeros and poles): what `hopkinson compensate` removes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.dcm import (
+    DCM,
+    compare_steps,
+    compensated_fbsd_edges,
+    design_dcm,
+    passband_delay_samples,
+)
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import SUPPORT_SNR, amplitude_spectrum, pulse_width, pulse_window
+from hopkinson.analysis.model import DiscreteModel, complex_pairs
+from hopkinson.analysis.params import DEFAULT_DCM_NOISE_GAIN_LIMIT as DEFAULT_NOISE_GAIN_LIMIT
+from hopkinson.analysis.params import DEFAULT_DCM_WIDENING as DEFAULT_WIDENING
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.response import (
+    fbsd_edges,
+    frequency_response,
+    pole_analysis,
+    response_times_samples,
+)
+from scipy import signal
+
+DEFAULT_DAMPING = 0.707
+# The automatic design keeps the DCM's white-noise RMS gain at the analysis rate below
+# DEFAULT_NOISE_GAIN_LIMIT: a compensated record at most 4× (12 dB) as noisy as the raw one.
+BAND_LIMIT_ORDER = 2
+# |H| of a 2nd-order Butterworth is 0.95 at this fraction of its cut-off: the widest ±5 % band
+# the band limit allows ((1/0.95² − 1)^(1/4)).
+_BAND_LIMIT_FBSD5 = (1 / 0.95**2 - 1) ** 0.25
+NEAR_NYQUIST = 0.8  # a mode above this fraction of Nyquist is not resolved by the record
+# A pole with a model zero within this fraction of its distance to the unit circle forms a
+# pair that changes the model's gain by at most ~10 %: the fit's spare pole-zero pair.
+DOUBLET = 0.1
+_SEARCH_POINTS = 48
+_MAX_DESIGNED_ANGLE = 0.45 * math.pi  # designed poles' ω_e·T at most 0.45 π (below 0.45 × Nyquist)
+
+
+@dataclass(frozen=True)
+class ShotSupport:
+    """What a shot tells the DCM design: its model and what the data vouch for.
+
+    modes: Identification.modes (kind, pole, natural_frequency_hz, supported, nyquist); None
+    (a bare model file): every stable mode counts as supported, the other rules still apply.
+    supported_band_hz: the band the excitation supports (None: not known).
+    response_band_top_hz: where the response stops standing above its noise (None: not known).
+    channel_delay_samples: the identified input delay (samples at the model's rate).
+    """
+
+    model: DiscreteModel
+    modes: list[dict[str, Any]] | None = None
+    supported_band_hz: tuple[float, float] | None = None
+    response_band_top_hz: float | None = None
+    channel_delay_samples: float = 0.0
+
+    @classmethod
+    def from_identification(cls, ident: Any, record: Record | None = None) -> ShotSupport:
+        """From an analysis.identify.Identification (and the record at the model's rate, for
+        the response's own signal-to-noise band)."""
+        top = None
+        rms = (getattr(ident, "noise", None) or {}).get("response_rms")
+        if record is not None and rms:
+            top = response_band_top_hz(record, ident.model, float(rms))
+        band = getattr(ident, "supported_band_hz", None)
+        return cls(
+            model=ident.model,
+            modes=[dict(m) for m in ident.modes],
+            supported_band_hz=tuple(band) if band else None,
+            response_band_top_hz=top,
+            channel_delay_samples=float(ident.delay_samples),
+        )
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], model: DiscreteModel) -> ShotSupport:
+        """From a model JSON (`hopkinson identify -o`) or a results dict's identification."""
+        modes = data.get("modes")
+        valid = isinstance(modes, list) and all(isinstance(m, dict) and "pole" in m for m in modes)
+        band = data.get("supported_band_hz")
+        pair = (float(band[0]), float(band[1])) if isinstance(band, (list, tuple)) and len(band) == 2 else None
+        return cls(
+            model=model,
+            modes=[dict(m) for m in modes] if valid else None,
+            supported_band_hz=pair,
+            response_band_top_hz=_number(data.get("response_band_top_hz")),
+            channel_delay_samples=float(model.delay_samples),
+        )
+
+
+@dataclass(frozen=True)
+class PoleChoice:
+    """The poles the DCM cancels, and every other pole with the reason it is left alone."""
+
+    cancelled: np.ndarray
+    skipped: list[dict[str, Any]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"cancelled_poles": complex_pairs(self.cancelled), "skipped_poles": [dict(s) for s in self.skipped]}
+
+
+def choose_poles(support: ShotSupport) -> PoleChoice:
+    """The poles a DCM may cancel for this shot (module docstring), each conjugate pair whole."""
+    model = support.model
+    poles = model.poles
+    unstable = poles[np.abs(poles) >= 1.0]
+    if unstable.size:
+        p = unstable[0]
+        raise AnalysisError(f"model pole {p.real:.6g}{p.imag:+.6g}j is on or outside the unit circle: the model is unstable")
+    zeros = model.zeros
+    nyquist_hz = 0.5 / model.sample_interval_s
+    cancelled: list[complex] = []
+    skipped: list[dict[str, Any]] = []
+    for mode in support.modes if support.modes is not None else _modes(poles, model.sample_interval_s):
+        p = complex(*mode["pole"])
+        reason = _why_not_cancelled(p, mode, zeros, nyquist_hz)
+        if reason is None:
+            cancelled += [p, p.conjugate()] if p.imag > 0 else [p]
+        else:
+            f_n = mode.get("natural_frequency_hz")
+            skipped.append({"pole": [p.real, p.imag], "kind": mode.get("kind"), "natural_frequency_hz": f_n,
+                            "reason": reason})
+    return PoleChoice(np.array(cancelled, dtype=complex), skipped)
+
+
+def _modes(poles: np.ndarray, sample_interval_s: float) -> list[dict[str, Any]]:
+    """Modes of a bare model (no identification): each pole pair / real pole, judged supported."""
+    out = []
+    for p in poles:
+        if p.imag < 0:
+            continue
+        f_n = float(abs(np.log(p)) / (2 * np.pi * sample_interval_s)) if p != 0 else None
+        out.append({"kind": "complex" if p.imag > 0 else "real", "pole": [p.real, p.imag],
+                    "natural_frequency_hz": f_n, "supported": True})
+    return out
+
+
+def _why_not_cancelled(p: complex, mode: dict[str, Any], zeros: np.ndarray, nyquist_hz: float) -> str | None:
+    if p == 0:
+        return "at the origin: a pure delay, no dynamics to compensate"
+    if mode.get("nyquist") or (p.imag == 0 and p.real < 0):
+        return "a negative real pole (at Nyquist): an artefact of the discretisation, not a mode of the sensor"
+    f_n = _number(mode.get("natural_frequency_hz"))
+    if not mode.get("supported", True):
+        where = f" (f_n = {f_n / 1e3:.4g} kHz)" if f_n is not None else ""
+        return f"outside the band the excitation supports{where}: the shot cannot vouch for it"
+    if f_n is not None and f_n >= NEAR_NYQUIST * nyquist_hz:
+        return f"f_n = {f_n / 1e3:.4g} kHz lies within {1 - NEAR_NYQUIST:.0%} of Nyquist: not resolved by the record"
+    if zeros.size:
+        near = zeros[int(np.argmin(np.abs(zeros - p)))]
+        if abs(near - p) <= DOUBLET * (1 - abs(p)):
+            return (f"nearly cancelled by the model zero {near.real:.6g}{near.imag:+.6g}j (a spare pole-zero pair "
+                    "of the fit): cancelling the pole alone would leave the zero as a notch")
+    return None
+
+
+def band_limit_poles(cutoff_hz: float, sample_interval_s: float, order: int = BAND_LIMIT_ORDER) -> np.ndarray:
+    """Poles exp(s·T) of an analog Butterworth low-pass at `cutoff_hz` (the matched mapping the
+    paper uses for every pole; all-pole, so it adds roll-off without zeros)."""
+    _, s_poles, _ = signal.butter(order, 2 * np.pi * cutoff_hz, analog=True, output="zpk")
+    return np.exp(np.asarray(s_poles, dtype=complex) * sample_interval_s)
+
+
+def response_band_top_hz(record: Record, model: DiscreteModel, noise_rms: float, snr: float = SUPPORT_SNR
+                         ) -> float | None:
+    """Top of the band where the response stands `snr` × above its own noise: the model's
+    response to the reference pulse, |H(f)·F(f)| (F over the pulse window, the main pulse ± two
+    widths, as analysis.excitation uses), against the amplitude spectrum σ·√L·T that white noise
+    of standard deviation σ has over the same L samples. The model's response is used rather
+    than the recorded one because the window cuts the sensor's ringing, whose leakage would
+    pass for signal. None when there is no pulse or no noise estimate."""
+    if not noise_rms > 0:
+        return None
+    dt = record.sample_interval_s
+    try:
+        pulse = pulse_width(record.reference, dt)
+    except AnalysisError:
+        return None
+    window = pulse_window(pulse, record.n_samples, dt)
+    segment = np.asarray(record.reference[window], dtype=float)
+    freq, mag = amplitude_spectrum(segment - np.median(record.reference[: max(window.start, 1)]), dt)
+    response = mag * np.abs(frequency_response(model, freq))
+    ok = response >= snr * noise_rms * math.sqrt(segment.size) * dt
+    i_max = int(np.argmax(response))
+    below = np.flatnonzero(~ok[i_max:])
+    return float(freq[i_max + below[0] - 1]) if below.size else float(freq[-1])
+
+
+@dataclass(frozen=True)
+class DcmOptions:
+    """How to design: ratio None = automatic (for `widening`); band_limit_hz None = automatic,
+    0 = none; noise_gain_limit bounds the automatic design."""
+
+    ratio: float | None = None
+    damping: float = DEFAULT_DAMPING
+    widening: float = DEFAULT_WIDENING
+    noise_gain_limit: float = DEFAULT_NOISE_GAIN_LIMIT
+    band_limit_hz: float | None = None
+    extra_poles: tuple[complex, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.ratio is not None and not (math.isfinite(self.ratio) and self.ratio > 0):
+            raise AnalysisError(f"DCM: the response-time ratio must be a positive number, got {self.ratio}")
+        if not (math.isfinite(self.widening) and self.widening > 1):
+            raise AnalysisError(f"DCM: the band widening must be a number above 1, got {self.widening}")
+        if not (self.noise_gain_limit > 0):  # inf: no bound
+            raise AnalysisError(f"DCM: the noise gain limit must be a positive number, got {self.noise_gain_limit}")
+        if self.band_limit_hz is not None and not (math.isfinite(self.band_limit_hz) and self.band_limit_hz >= 0):
+            raise AnalysisError(f"DCM: the band limit must be a frequency ≥ 0 Hz (0: none), got {self.band_limit_hz}")
+
+    @classmethod
+    def from_params(cls, params: Any) -> DcmOptions:
+        """From analysis.params.AnalysisParams (its dcm_* fields and extra_poles)."""
+        return cls(
+            ratio=params.dcm_ratio,
+            damping=params.dcm_damping,
+            widening=params.dcm_widening,
+            noise_gain_limit=params.dcm_noise_gain_limit,
+            band_limit_hz=params.dcm_band_limit_hz,
+            extra_poles=tuple(params.extra_poles),
+        )
+
+
+@dataclass(frozen=True)
+class BandLimit:
+    """The band-limiting low-pass: cut-off (None: none) and why it sits there."""
+
+    cutoff_hz: float | None
+    reason: str
+
+    def poles(self, sample_interval_s: float) -> np.ndarray:
+        if self.cutoff_hz is None:
+            return np.zeros(0, dtype=complex)
+        return band_limit_poles(self.cutoff_hz, sample_interval_s)
+
+
+def choose_band_limit(support: ShotSupport, asked_hz: float | None) -> BandLimit:
+    """The band limit: asked (> 0), none (0), or the top of what the shot vouches for."""
+    nyquist = 0.5 / support.model.sample_interval_s
+    if asked_hz is not None:
+        if asked_hz == 0:
+            return BandLimit(None, "switched off (band_limit_hz = 0)")
+        if asked_hz >= nyquist:
+            raise AnalysisError(f"DCM: the band limit {asked_hz:g} Hz must lie below Nyquist ({nyquist:g} Hz)")
+        return BandLimit(float(asked_hz), "as asked")
+    tops = []
+    if support.supported_band_hz is not None and support.supported_band_hz[1] > 0:
+        tops.append((support.supported_band_hz[1], "the top of the band the excitation supports"))
+    if support.response_band_top_hz is not None and support.response_band_top_hz > 0:
+        tops.append((support.response_band_top_hz, "where the response stops standing 20 dB above its noise"))
+    if not tops:
+        return BandLimit(None, "none: the model does not say which band the shot supports")
+    top, why = min(tops)
+    cap = NEAR_NYQUIST * nyquist
+    if top > cap:
+        return BandLimit(cap, f"{NEAR_NYQUIST:.0%} of Nyquist ({why} lies above it)")
+    return BandLimit(float(top), why)
+
+
+@dataclass(frozen=True)
+class DcmDesign:
+    """A DCM designed for a shot, with the figures issue 11 asks to report."""
+
+    dcm: DCM
+    model: DiscreteModel
+    poles: PoleChoice
+    band_limit: BandLimit
+    options: DcmOptions
+    fbsd_hz: dict[str, float]
+    compensated_fbsd_hz: dict[str, float]
+    target_widening: float | None
+    reached_widening: float | None
+    widening_note: str | None
+    noise_gain: float
+    channel_delay_samples: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def noise_gain_exceeded(self) -> bool:
+        return self.noise_gain > self.options.noise_gain_limit * (1 + 1e-9)
+
+    @property
+    def latency_s(self) -> float:
+        return self.dcm.latency_s
+
+    def to_dict(self) -> dict[str, Any]:
+        """The design figures of the results' "dcm" object (issue 11 / CONTRACTS keys)."""
+        return {
+            "target_widening": self.target_widening,
+            "reached_widening": self.reached_widening,
+            "widening_note": self.widening_note,
+            "noise_gain": self.noise_gain,
+            "noise_gain_limit": self.options.noise_gain_limit,
+            "band_limit_hz": self.band_limit.cutoff_hz,
+            "band_limit_reason": self.band_limit.reason,
+            "latency_s": self.latency_s,
+            "compensated_fbsd_hz": dict(self.compensated_fbsd_hz),
+        }
+
+
+def design_compensation(support: ShotSupport, options: DcmOptions | None = None) -> DcmDesign:
+    """Design the DCM this shot supports (module docstring)."""
+    options = DcmOptions() if options is None else options
+    model = support.model
+    choice = choose_poles(support)
+    limit = choose_band_limit(support, options.band_limit_hz)
+    before = {k: e.frequency_hz for k, e in fbsd_edges(model).items()}
+    notes: list[str] = []
+    if choice.cancelled.size == 0:
+        dcm = _assemble(model, choice, limit, None, options, support.channel_delay_samples)
+        note = "nothing to compensate: no pole of the model is one the shot supports"
+        return _finish(dcm, model, choice, limit, options, before, None, note, support, [note])
+    if options.ratio is not None:
+        dcm = _assemble(model, choice, limit, options.ratio, options, support.channel_delay_samples)
+        note = f"ratio r = {options.ratio:g} given: no widening was aimed for"
+        design = _finish(dcm, model, choice, limit, options, before, None, note, support, notes)
+        if design.noise_gain_exceeded:
+            design.notes.append(
+                f"the noise gain {design.noise_gain:.3g} exceeds the limit {options.noise_gain_limit:g} at the given r"
+            )
+        return design
+    ratio, note = _automatic_ratio(model, choice, limit, options, before["5"])
+    dcm = _assemble(model, choice, limit, ratio, options, support.channel_delay_samples)
+    return _finish(dcm, model, choice, limit, options, before, options.widening, note, support, notes)
+
+
+def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio: float | None,
+              options: DcmOptions, channel_delay_samples: float) -> DCM:
+    """Paper DCM for the cancelled poles at ratio r, cascaded with the band limit, unit DC gain,
+    with the total latency (channel delay + DC group delay of model × DCM)."""
+    dt = model.sample_interval_s
+    lp = limit.poles(dt)
+    if ratio is None:
+        zeros, poles, design = np.zeros(0, complex), lp, {"method": "no compensation: nothing to cancel"}
+        gain = float(np.real(np.prod(1 - lp)))
+    else:
+        core = design_dcm(choice.cancelled, dt, ratio, options.damping, options.extra_poles)
+        zeros, poles = core.zeros, np.concatenate([core.poles, lp])
+        gain = core.gain * float(np.real(np.prod(1 - lp)))
+        design = dict(core.design)
+    design.update(choice.to_dict())
+    design["band_limit"] = {"cutoff_hz": limit.cutoff_hz, "order": BAND_LIMIT_ORDER if lp.size else 0,
+                            "poles": complex_pairs(lp), "reason": limit.reason}
+    design["nonminimum_phase_zeros"] = complex_pairs(model.zeros[np.abs(model.zeros) >= 1.0])
+    design["zeros_inverted"] = False
+    return DCM(dt, zeros, poles, gain, design)
+
+
+def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit, options: DcmOptions,
+            before: dict[str, float], target: float | None, note: str | None, support: ShotSupport,
+            notes: list[str]) -> DcmDesign:
+    after = {k: e.frequency_hz for k, e in compensated_fbsd_edges(model, dcm).items()}
+    reached = after["5"] / before["5"] if before["5"] > 0 else None
+    noise = dcm.noise_gain()
+    dt = model.sample_interval_s
+    fit_band = min(max(after["5"], before["5"]), 0.4 / dt)
+    in_band = passband_delay_samples(lambda f: frequency_response(model, f) * dcm.frequency_response(f), fit_band, dt)
+    latency = support.channel_delay_samples + in_band
+    figures = {
+        "target_widening": target, "reached_widening": reached, "widening_note": note,
+        "noise_gain": noise, "noise_gain_limit": options.noise_gain_limit,
+        "latency": {
+            "total_s": latency * dt,
+            "channel_delay_s": support.channel_delay_samples * dt,
+            "compensated_delay_s": in_band * dt,
+            "fitted_up_to_hz": fit_band,
+            "dcm_dc_group_delay_s": dcm.group_delay_samples * dt,
+            "how": "channel delay + the delay of model × DCM over its flat band (phase slope, least squares)",
+        },
+    }
+    dcm = replace(dcm, design={**dcm.design, **figures}, latency_samples=latency)
+    return DcmDesign(dcm, model, choice, limit, options, before, after, target, reached, note, noise,
+                     support.channel_delay_samples, list(notes))
+
+
+def _automatic_ratio(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, options: DcmOptions,
+                     model_fbsd5_hz: float) -> tuple[float, str | None]:
+    """The smallest r reaching the widening within the noise-gain limit, else the best r and why."""
+    target = options.widening * model_fbsd5_hz
+    slowest = float(np.max(response_times_samples(choice.cancelled)))
+    r_max = _MAX_DESIGNED_ANGLE * options.damping * slowest / 3.0
+    if r_max <= 1.0:
+        return r_max, (f"the slowest supported pole already responds within {slowest:.3g} samples: the designed "
+                       "poles cannot be made faster at this sample rate")
+
+    def evaluate(r: float) -> tuple[float, float]:
+        dcm = _assemble(model, choice, limit, r, options, 0.0)
+        return compensated_fbsd_edges(model, dcm, (0.05,))["5"].frequency_hz, dcm.noise_gain()
+
+    grid = np.geomspace(1.0, r_max, _SEARCH_POINTS)
+    bands: list[float] = []
+    noisy_from: float | None = None
+    for r in grid:
+        band, noise = evaluate(float(r))
+        if noise > options.noise_gain_limit:
+            noisy_from = float(r)
+            break
+        bands.append(band)
+        if band >= target:
+            lo = float(grid[len(bands) - 2]) if len(bands) > 1 else None
+            return (float(r) if lo is None else _bisect(lambda x: evaluate(x)[0] >= target, lo, float(r))), None
+    feasible = grid[: len(bands)]
+    if noisy_from is not None:
+        if not bands:
+            return float(grid[0]), (f"even r = 1 has a noise gain above the limit {options.noise_gain_limit:g}; "
+                                    "the DCM is designed at r = 1")
+        edge = _bisect(lambda x: evaluate(x)[1] > options.noise_gain_limit, float(feasible[-1]), noisy_from)
+        lo_edge = edge / 1.0005
+        feasible = np.append(feasible, lo_edge)
+        bands.append(evaluate(lo_edge)[0])
+    best = max(bands)
+    r = float(feasible[int(np.flatnonzero(np.asarray(bands) >= 0.99 * best)[0])])
+    return r, _why_short(best, target, model_fbsd5_hz, limit, noisy_from is not None, options)
+
+
+def _why_short(best: float, target: float, model_fbsd5_hz: float, limit: BandLimit, noisy: bool,
+               options: DcmOptions) -> str:
+    aim = f"{options.widening:g}× (±5 % band {target / 1e3:.4g} kHz) was not reached: "
+    got = f"the widest band is {best / 1e3:.4g} kHz (×{best / model_fbsd5_hz:.2f})" if model_fbsd5_hz > 0 else ""
+    if limit.cutoff_hz is not None and best >= 0.8 * _BAND_LIMIT_FBSD5 * limit.cutoff_hz:
+        return (aim + f"the band limit at {limit.cutoff_hz / 1e3:.4g} kHz ({limit.reason}) caps it; " + got)
+    if noisy:
+        return aim + f"the noise gain limit {options.noise_gain_limit:g} stops the ratio; " + got
+    return (aim + "the dynamics the DCM does not cancel (unsupported modes, the model's zeros) or the sample rate "
+            "cap it; " + got)
+
+
+def _bisect(reached: Any, lo: float, hi: float) -> float:
+    """Smallest r in (lo, hi] with reached(r) (reached(lo) False, reached(hi) True), on a log scale.
+    By hand: the band is a step-like function of r near an edge, so no root-finder applies."""
+    for _ in range(30):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (lo, mid) if reached(mid) else (mid, hi)
+        if hi / lo < 1.0005:
+            break
+    return hi
+
+
+def design_report(poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, source: str,
+                  design: DcmDesign | None = None) -> dict[str, Any]:
+    """The JSON result of `hopkinson dcm` (also what -o writes and the panel shows)."""
+    result: dict[str, Any] = {
+        "source": source,
+        "sample_interval_s": dcm.sample_interval_s,
+        "pole_analysis": pole_analysis(poles),
+        "dcm": dcm.to_dict(),
+    }
+    if design is not None:
+        result["dcm"].update(design.to_dict())
+        result["dcm"]["notes"] = list(design.notes)
+    if model is not None:
+        before = fbsd_edges(model)
+        after = compensated_fbsd_edges(model, dcm)
+        steps = compare_steps(model, dcm)  # one step-response simulation for both times
+        rt_before, rt_after = steps.rise_times_samples()
+        result["fbsd_hz"] = {k: e.frequency_hz for k, e in before.items()}
+        result["compensated_fbsd_hz"] = {k: e.frequency_hz for k, e in after.items()}
+        result["fbsd_detail"] = {k: e.to_dict() for k, e in before.items()}
+        result["compensated_fbsd_detail"] = {k: e.to_dict() for k, e in after.items()}
+        result["fbsd_widening"] = {k: after[k].frequency_hz / before[k].frequency_hz for k in before}
+        result["rise_time_samples"] = {"uncompensated": rt_before, "compensated": rt_after}
+        result["rise_time_ratio"] = rt_before / rt_after if rt_after > 0 else None
+        st_before, st_after = steps.settling_times_samples()
+        result["settling_time_samples"] = {"uncompensated": st_before, "compensated": st_after}
+        result["settling_time_ratio"] = steps.settling_time_ratio()
+    return result
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def poles_only_model(poles: Sequence[complex] | np.ndarray, sample_interval_s: float) -> DiscreteModel:
+    """The unit-DC-gain all-pole model these poles describe (for a design from poles alone)."""
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    a = np.real(np.poly(p))
+    return DiscreteModel(sample_interval_s, a, [float(np.sum(a))])
+
+
+def ratio_for_widening(
+    model: DiscreteModel,
+    damping: float = DEFAULT_DAMPING,
+    widening: float = DEFAULT_WIDENING,
+    extra_poles: Sequence[complex] | np.ndarray = (),
+) -> float:
+    """The automatic r for a bare model: every stable pole cancelled, no band limit, no noise
+    bound (the paper's design alone); `design_compensation` is the shot's full design."""
+    options = DcmOptions(damping=damping, widening=widening, noise_gain_limit=math.inf, band_limit_hz=0.0,
+                         extra_poles=tuple(complex(p) for p in np.atleast_1d(extra_poles)))
+    design = design_compensation(ShotSupport(model), options)
+    return float(design.dcm.design["ratio"])
