@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import remove_input_delay
+from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 
@@ -24,7 +26,11 @@ G_M_S2 = 9.80665  # standard gravity: accelerations are also shown in g
 
 @dataclass
 class ShotEntry:
-    """One shot of a report: who/what/when, its analysis (None when it failed or is missing)."""
+    """One shot of a report: who/what/when, its analysis (None when it failed or is missing).
+
+    `results` is the stored results dict (a shot file's /analysis) when there is one: the key
+    figures, the uncertainty and the compensation check are read from it (from the analysis
+    object's own dict otherwise)."""
 
     label: str  # shot id, or the file name
     identity: dict[str, str]  # label -> text, in display order
@@ -34,6 +40,80 @@ class ShotEntry:
     truth_modes: list[dict[str, Any]] | None = None  # simulation: the true modes (f_n, ζ)
     nominal_sensitivity_v_per_m_s2: float | None = None
     pressure_bar: float | None = None
+    results: dict[str, Any] | None = None
+
+    @cached_property
+    def stored(self) -> dict[str, Any]:
+        """The results dict: as stored, else the analysis' own (empty without an analysis)."""
+        if self.results is not None:
+            return self.results
+        return self.analysis.to_dict() if self.analysis is not None else {}
+
+    @cached_property
+    def key_figures(self) -> KeyFigures | None:
+        """The shot's headline numbers (analysis.key_figures), None without an analysis."""
+        return KeyFigures.from_results(self.stored) if self.analysis is not None else None
+
+    @cached_property
+    def compensation(self) -> CompensationCheck | None:
+        """How the DCM did on the shot itself (issue 11), None when the results do not say."""
+        return CompensationCheck.of(self.stored.get("dcm") or {}) if self.analysis is not None else None
+
+
+@dataclass(frozen=True)
+class CompensationCheck:
+    """The DCM's check on its own shot, as the analysis stored it (results["dcm"]): errors over
+    the pulse before and with compensation, the widening aimed for and reached, the noise gain
+    and its limit, the band-limiting low-pass, the latency, and whether a DCM is recommended."""
+
+    recommended: bool | None
+    not_recommended_reason: str | None
+    rms_error_pct: tuple[float | None, float | None] | None  # (uncompensated, compensated)
+    peak_error_pct: tuple[float | None, float | None] | None
+    target_widening: float | None
+    reached_widening: float | None
+    widening_note: str | None
+    noise_gain: float | None
+    noise_gain_limit: float | None
+    band_limit_hz: float | None
+    latency_s: float | None
+    compensated_peak: Figure | None
+
+    @classmethod
+    def of(cls, dcm: dict[str, Any]) -> CompensationCheck | None:
+        """From the results' "dcm" object; None when it holds none of the check's figures."""
+        keys = ("recommended", "check", "noise_gain", "band_limit_hz", "reached_widening", "latency_s")
+        if not any(dcm.get(k) is not None for k in keys):
+            return None
+        check = dcm.get("check") or {}
+
+        def pair(name: str) -> tuple[float | None, float | None] | None:
+            d = check.get(name)
+            if not isinstance(d, dict):
+                return None
+            return _number(d.get("uncompensated")), _number(d.get("compensated"))
+
+        recommended = dcm.get("recommended")
+        return cls(
+            recommended=bool(recommended) if recommended is not None else None,
+            not_recommended_reason=dcm.get("not_recommended_reason"),
+            rms_error_pct=pair("rms_error_pct"),
+            peak_error_pct=pair("peak_error_pct"),
+            target_widening=_number(dcm.get("target_widening")),
+            reached_widening=_number(dcm.get("reached_widening")),
+            widening_note=dcm.get("widening_note"),
+            noise_gain=_number(dcm.get("noise_gain")),
+            noise_gain_limit=_number(dcm.get("noise_gain_limit")),
+            band_limit_hz=_number(dcm.get("band_limit_hz")),
+            latency_s=_number(dcm.get("latency_s")),
+            compensated_peak=Figure.of(dcm.get("compensated_peak")),
+        )
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value) if math.isfinite(value) else None
 
 
 @dataclass
@@ -58,15 +138,6 @@ def excitation_dict(analysis: ShotAnalysis) -> dict[str, Any]:
     return exc if isinstance(exc, dict) else exc.to_dict()
 
 
-def main_mode(analysis: ShotAnalysis) -> dict[str, Any] | None:
-    """The sensor's main resonance: the lowest complex pole pair (else the lowest mode)."""
-    modes = identification_dict(analysis).get("modes") or []
-    pairs = [m for m in modes if m.get("kind", "pair") in ("complex", "pair") and m.get("natural_frequency_hz")]
-    if pairs:
-        return min(pairs, key=lambda m: m["natural_frequency_hz"])
-    return modes[0] if modes else None
-
-
 QUANTITIES: tuple[tuple[str, str, str, float], ...] = (
     # key, label, unit, display scale (value / scale)
     ("natural_frequency_hz", "f_n", "kHz", 1e3),
@@ -80,27 +151,27 @@ QUANTITIES: tuple[tuple[str, str, str, float], ...] = (
 
 
 def figures_of_merit(entry: ShotEntry) -> dict[str, Any]:
-    """A shot's key numbers (None where unknown), for tables and the spread."""
+    """A shot's key numbers as plain values (None where unknown), for tables and the spread;
+    read from its KeyFigures (analysis.key_figures), never recomputed."""
     out: dict[str, Any] = {k: None for k, *_ in QUANTITIES}
     out.update(order=None, peak_acceleration_m_s2=None, pulse_width_s=None, sensitivity_v_per_m_s2=None)
-    a = entry.analysis
-    if a is None:
+    kf = entry.key_figures
+    if kf is None:
         return out
-    ident = identification_dict(a)
-    mode = main_mode(a)
-    if mode is not None:
-        out["natural_frequency_hz"] = mode.get("natural_frequency_hz")
-        out["damping_ratio"] = mode.get("damping_ratio")
-    out["fbsd_5_hz"] = a.fbsd_hz.get("5")
-    out["fbsd_10_hz"] = a.fbsd_hz.get("10")
-    out["compensated_fbsd_5_hz"] = a.compensated_fbsd_hz.get("5")
-    out["fit_percent"] = ident.get("fit_percent")
-    out["order"] = a.model.order
-    exc = excitation_dict(a)
-    red = a.reduction or {}
-    out["peak_acceleration_m_s2"] = red.get("peak_acceleration_m_s2", exc.get("peak_m_s2"))
-    out["pulse_width_s"] = red.get("pulse_width_s", exc.get("pulse_width_s"))
-    s = a.shock_sensitivity
+
+    def value(figure: Figure | None) -> float | None:
+        return figure.value if figure is not None else None
+
+    out["natural_frequency_hz"] = value(kf.natural_frequency_hz)
+    out["damping_ratio"] = value(kf.damping_ratio)
+    out["fbsd_5_hz"] = value(kf.fbsd_hz.get("5"))
+    out["fbsd_10_hz"] = value(kf.fbsd_hz.get("10"))
+    out["compensated_fbsd_5_hz"] = kf.compensated_fbsd_hz.get("5")
+    out["fit_percent"] = kf.fit_percent
+    out["order"] = kf.order
+    out["peak_acceleration_m_s2"] = value(kf.peak_acceleration_m_s2)
+    out["pulse_width_s"] = value(kf.pulse_width_s)
+    s = value(kf.shock_sensitivity)
     out["shock_sensitivity"] = s
     if s is not None and entry.nominal_sensitivity_v_per_m_s2:
         out["sensitivity_v_per_m_s2"] = s * entry.nominal_sensitivity_v_per_m_s2
@@ -113,12 +184,12 @@ def truth_comparison(entry: ShotEntry) -> dict[str, float] | None:
     pole_error_percent = |s − s_true| / |s_true| · 100 for the continuous pole
     s = −ζω_n + jω_n√(1 − ζ²) (upper half plane). None without an analysis or a truth.
     """
-    if entry.analysis is None or not entry.truth_modes:
+    kf = entry.key_figures
+    if kf is None or not entry.truth_modes or kf.natural_frequency_hz is None or kf.damping_ratio is None:
         return None
-    mode = main_mode(entry.analysis)
-    if mode is None or not mode.get("natural_frequency_hz") or mode.get("damping_ratio") is None:
+    fn, zeta = kf.natural_frequency_hz.value, kf.damping_ratio.value
+    if not fn or zeta is None:
         return None
-    fn, zeta = float(mode["natural_frequency_hz"]), float(mode["damping_ratio"])
     truth = min(entry.truth_modes, key=lambda m: abs(float(m["natural_frequency_hz"]) - fn))
     fn_t, zeta_t = float(truth["natural_frequency_hz"]), float(truth["damping_ratio"])
 

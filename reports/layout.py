@@ -47,18 +47,24 @@ def plot_page(title: str, subtitle: str = "") -> Figure:
     return fig
 
 
+MEASURE_DPI = 720.0  # fine enough for the outline's own width
+HINTING_MARGIN = 1.09  # hinted text in an 80–100 dpi PNG renders up to 8 % wider than its outline
+
+
 @lru_cache(maxsize=8192)
 def text_width_pt(text: str, size: float, bold: bool = False) -> float:
-    """The width of one line of `text` at `size` points (DejaVu Sans, matplotlib's default), points."""
+    """The width one line of `text` at `size` points (DejaVu Sans, matplotlib's default) may take
+    on the page, points: its outline measured at MEASURE_DPI, with the HINTING_MARGIN a screen
+    resolution PNG needs (the PDF draws the outline)."""
     renderer = _measuring_renderer()
     prop = FontProperties(size=size, weight="bold" if bold else "normal")
     width_px, _h, _d = renderer.get_text_width_height_descent(text, prop, ismath=False)
-    return float(width_px) * POINTS_PER_INCH / renderer.dpi
+    return float(width_px) * POINTS_PER_INCH / renderer.dpi * HINTING_MARGIN
 
 
 @lru_cache(maxsize=1)
 def _measuring_renderer() -> Any:
-    return FigureCanvasAgg(Figure(dpi=POINTS_PER_INCH)).get_renderer()
+    return FigureCanvasAgg(Figure(dpi=MEASURE_DPI)).get_renderer()
 
 
 def wrap_to_width(text: str, size: float, width_pt: float, bold: bool = False) -> list[str]:
@@ -249,8 +255,9 @@ class TextPages:
 
 
 def table_in_axes(ax: Any, header: list[str] | None, rows: list[list[str]], fontsize: float = 8.0,
-                  col_widths: list[float] | None = None) -> None:
-    """A small table filling an axes (matplotlib's table: one line per row)."""
+                  col_widths: list[float] | None = None, line_heights: bool = False) -> None:
+    """A small table at the top of an axes (matplotlib's table). Every row is one line high,
+    unless `line_heights`: then a row is as high as its cells' wrapped lines (`wrap_chars`)."""
     ax.axis("off")
     if not rows:
         ax.text(0.0, 1.0, "—", va="top", transform=ax.transAxes)
@@ -260,6 +267,12 @@ def table_in_axes(ax: Any, header: list[str] | None, rows: list[list[str]], font
     t.auto_set_font_size(False)
     t.set_fontsize(fontsize)
     t.scale(1.0, 1.25)
+    if line_heights:
+        offset = 1 if header is not None else 0
+        for (r, _c), cell in t.get_celld().items():
+            if r >= offset:
+                lines = max(str(c).count("\n") + 1 for c in rows[r - offset])
+                cell.set_height(cell.get_height() * lines)
     for (r, _c), cell in t.get_celld().items():
         cell.set_edgecolor("0.75")
         if header is not None and r == 0:

@@ -12,8 +12,17 @@ from hopkinson.reports.campaign_pages import campaign_responses_page, cross_vali
 from hopkinson.reports.data import CalibrationReport
 from hopkinson.reports.layout import TextPages, freeze_layout, new_figure
 from hopkinson.reports.shot_pages import shot_pages
-from hopkinson.reports.statistics import CampaignStatistics, campaign_statistics
-from hopkinson.reports.tables import per_shot_rows, results_rows, spread_rows
+from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
+from hopkinson.reports.tables import (
+    budget_rows,
+    combined_rows,
+    compensation_rows,
+    per_shot_rows,
+    results_rows,
+    spread_rows,
+    uncertainty_method,
+    uncertainty_rows,
+)
 from matplotlib.figure import Figure
 
 SUBTITLE = ("Hopkinson-bar shock calibration: dynamic model, band of small distortion (FBSD) and dynamic "
@@ -42,13 +51,41 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
                        "ISO 16063-13); fit: measured vs model response", size=6.5)
         page.heading(f"Spread across {len(stats.labels)} analysed shots (standard deviation with n − 1)")
         page.table(*spread_rows(stats), size=7.5)
+        header, rows = combined_rows(stats)
+        if rows:
+            page.heading("Key figures of the campaign: mean of the shots with its expanded uncertainty")
+            page.table(header, rows, size=7.5)
+            page.paragraph(COMBINATION_NOTE, size=6.5, colour="0.25")
+        flagged = [(e.label, e.compensation) for e in report.shots
+                   if e.compensation is not None and e.compensation.recommended is False]
+        if flagged:
+            page.heading("DCM not recommended")
+            for label, check in flagged:
+                page.paragraph(f"{label}: {check.not_recommended_reason or 'compensation does not improve the shot'}",
+                               colour="#a00000")
         text = cross_validation_summary(stats)
         if text:
             page.heading("Cross-validation (each shot's model on every other shot)")
             page.paragraph(text)
     else:
+        entry = report.shots[0]
         page.heading("Results")
-        page.table(None, [list(row) for row in results_rows(report.shots[0])], widths=[0.38, 0.62])
+        page.table(None, [list(row) for row in results_rows(entry)], widths=[0.38, 0.62])
+        header, rows = uncertainty_rows(entry)
+        if rows:
+            page.heading("Measurement uncertainty")
+            page.table(header, rows, size=7.5)
+            page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
+            header, rows = budget_rows(entry)
+            if rows:
+                page.heading("Uncertainty budget", size=9.5)
+                page.table(header, rows, size=7.5, widths=[0.7, 0.3])
+        elif entry.key_figures is not None:
+            page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
+        rows = compensation_rows(entry)
+        if rows:
+            page.heading("Compensation checked on the shot itself")
+            page.table(None, [list(r) for r in rows], widths=[0.45, 0.55])
     if report.notes:
         page.heading("Notes")
         for note in report.notes:

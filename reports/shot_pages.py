@@ -26,12 +26,11 @@ from hopkinson.reports.data import (
     ShotEntry,
     excitation_dict,
     identification_dict,
-    main_mode,
     model_delay_samples,
     prepared_channels,
 )
-from hopkinson.reports.layout import plot_page, table_in_axes, wrap_chars
-from hopkinson.reports.tables import dcm_rows, fmt, pole_rows
+from hopkinson.reports.layout import plot_page, table_in_axes, wrap_chars, wrap_to_width
+from hopkinson.reports.tables import compensation_rows, dcm_rows, fmt, pole_rows
 from matplotlib.figure import Figure
 
 BAND_LEVELS = (("5", 0.05, "tab:green"), ("10", 0.10, "tab:orange"))
@@ -49,7 +48,8 @@ def excitation_page(entry: ShotEntry) -> Figure:
     ax_c = fig.add_subplot(grid[2, 1])
     exc = excitation_dict(a)
     ident = identification_dict(a)
-    mode = main_mode(a)
+    kf = entry.key_figures
+    fn = kf.natural_frequency_hz.value if kf is not None and kf.natural_frequency_hz is not None else None
 
     rec = a.record
     if rec is not None:
@@ -94,8 +94,7 @@ def excitation_page(entry: ShotEntry) -> Figure:
         if rule:
             ax_f.axvline(rule / 1e3, color="tab:purple", ls="--", lw=1,
                          label=f"paper's rule f_n ≤ 1.06/δ = {fmt(rule, 1e3)} kHz")
-        if mode is not None and mode.get("natural_frequency_hz"):
-            fn = mode["natural_frequency_hz"]
+        if fn:
             ax_f.axvline(fn / 1e3, color="tab:red", lw=1, label=f"identified f_n = {fmt(fn, 1e3)} kHz")
         ax_f.set_ylim(-60, 3)
         ax_f.legend(fontsize=7, loc="upper right")
@@ -172,10 +171,11 @@ def model_page(entry: ShotEntry) -> Figure:
     for key, level, colour in BAND_LEVELS:
         ax_db.axhspan(20 * np.log10(1 - level), 20 * np.log10(1 + level), color=colour, alpha=0.2,
                       label=f"±{key} % band")
-    mode = main_mode(a)
-    if mode is not None and mode.get("natural_frequency_hz"):
-        ax_db.axvline(mode["natural_frequency_hz"] / 1e3, color="tab:red", lw=0.8, ls=":",
-                      label=f"f_n = {fmt(mode['natural_frequency_hz'], 1e3)} kHz, ζ = {fmt(mode.get('damping_ratio'))}")
+    kf = entry.key_figures
+    if kf is not None and kf.natural_frequency_hz is not None and kf.natural_frequency_hz.value:
+        zeta = kf.damping_ratio.format() if kf.damping_ratio is not None else "—"
+        ax_db.axvline(kf.natural_frequency_hz.value / 1e3, color="tab:red", lw=0.8, ls=":",
+                      label=f"f_n = {kf.natural_frequency_hz.format(1e3, unit='kHz')}, ζ = {zeta}")
     ax_db.set_xlabel("frequency (kHz)")
     ax_db.set_ylabel("|H(f)/H(0)| (dB)")
     ax_db.set_title("Normalised magnitude, DC to Nyquist", fontsize=9)
@@ -277,9 +277,14 @@ def dcm_page(entry: ShotEntry) -> Figure:
     assert a is not None
     model, dcm = a.model, a.dcm
     fig = plot_page(f"{entry.label}: dynamic compensation model (DCM)")
-    ax_m, ax_s, ax_tab = fig.subplots(3, 1, height_ratios=[1.3, 1.0, 0.6])
+    check = entry.compensation
+    rows = [[wrap_chars(k, 46), wrap_chars(v, 80)] for k, v in dcm_rows(a) + compensation_rows(entry)[1:]]
+    lines = sum(max(r[0].count("\n"), r[1].count("\n")) + 1 for r in rows)
+    ax_m, ax_s, ax_tab = fig.subplots(3, 1, height_ratios=[1.3, 1.0, 0.15 + 0.075 * lines])
     comp = a.compensated_fbsd_hz
     top = max(comp.get("10") or 0.0, a.fbsd_hz.get("10") or 0.0)
+    if check is not None and check.band_limit_hz:  # the band limit in view too
+        top = max(top, check.band_limit_hz / 1.4)
     f = np.linspace(0.0, min(nyquist_hz(model), 1.6 * top if top else nyquist_hz(model)), 1000)
     h = frequency_response(model, f)
     g = dcm.frequency_response(f)
@@ -293,7 +298,16 @@ def dcm_page(entry: ShotEntry) -> Figure:
     ax_m.set_xlim(0, f[-1] / 1e3)
     ax_m.set_xlabel("frequency (kHz)")
     ax_m.set_ylabel("|H(f)/H(0)| (ratio)")
-    ax_m.set_title("Compensated response: the DCM widens the band of small distortion", fontsize=9)
+    if check is not None and check.band_limit_hz:
+        ax_m.axvline(check.band_limit_hz / 1e3, color="tab:purple", lw=1.2, ls="-.",
+                     label=f"band limit of the compensation {fmt(check.band_limit_hz, 1e3)} kHz")
+    if check is not None and check.recommended is False:
+        reason = check.not_recommended_reason or "compensation does not improve this shot"
+        width_pt = 0.85 * fig.get_figwidth() * 72.0
+        ax_m.set_title("\n".join(wrap_to_width(f"DCM NOT RECOMMENDED: {reason}", 9.0, width_pt, bold=True)),
+                       fontsize=9, color="#a00000", fontweight="bold")
+    else:
+        ax_m.set_title("Compensated response: the DCM widens the band of small distortion", fontsize=9)
     ax_m.legend(fontsize=6.5, loc="upper left", ncol=2)
     ax_m.grid(alpha=0.3)
 
@@ -309,8 +323,8 @@ def dcm_page(entry: ShotEntry) -> Figure:
     ax_s.set_title("Step responses (10 % and 90 % marked)", fontsize=9)
     ax_s.legend(fontsize=7)
     ax_s.grid(alpha=0.3)
-    table_in_axes(ax_tab, None, [[k, v] for k, v in dcm_rows(a)], fontsize=7.5, col_widths=[0.25, 0.75])
-    ax_tab.set_title("DCM design (Eqs. 13–25)", loc="left", fontsize=9)
+    table_in_axes(ax_tab, None, rows, fontsize=7.5, col_widths=[0.36, 0.64], line_heights=True)
+    ax_tab.set_title("DCM design (Eqs. 13–25) and its check on this shot", loc="left", fontsize=9)
     return fig
 
 

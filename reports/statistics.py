@@ -6,19 +6,22 @@
   model i simulated on shot j's reference against shot j's measured response,
   100·(1 − ‖y − ŷ‖/‖y − ȳ‖), the measure `analysis.identify` reports for its own shot (the
   diagonal equals each shot's own fit). Shot j's channels are prepared as the identification
-  prepared them (its baselines and input delay, stored in its results).
+  prepared them (its baselines and input delay, stored in its results);
+- the campaign's value of each uncertain key figure (`combine`): the mean of the shots, their
+  repeatability and a combined expanded uncertainty (see `combine` for how).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import fit_percent
+from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.response import model_output
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.reports.data import (
@@ -59,21 +62,114 @@ def cross_validation(analyses: Sequence[ShotAnalysis]) -> np.ndarray:
     return out
 
 
+COVERAGE = 0.95
+COMBINATION_NOTE = (
+    "Combined across shots (GUM 5.1 and G.4): the campaign's value is the mean x̄ of the n shots; "
+    "u_c(x̄)² = s²/n + ū², where s is the repeatability (standard deviation of the shots' values, n − 1), "
+    "s/√n its share in the mean, and ū the root mean square of the shots' own standard uncertainties "
+    "(Monte Carlo, GUM Supplement 1), taken as fully correlated between shots: the reference chain is "
+    "common to all of them (the noise share of ū, already seen in s, is then counted twice: on the safe "
+    "side). U = k·u_c with k from Student's t at the Welch–Satterthwaite degrees of freedom "
+    "(ν = u_c⁴ / ((s²/n)² / (n − 1)); the Monte Carlo part has ν = ∞), for 95 % coverage. FBSD edges that "
+    "a shot reports only as a bound are left out of the mean.")
+
+# key, label, unit, display scale, the KeyFigures field (Figure or, for FBSD, a level)
+COMBINED: tuple[tuple[str, str, str, float, str], ...] = (
+    ("sensitivity", "sensitivity (model DC gain)", "× nominal", 1.0, "sensitivity"),
+    ("shock_sensitivity", "shock sensitivity S_sh (ISO 16063-13)", "× nominal", 1.0, "shock_sensitivity"),
+    ("natural_frequency_hz", "main mode f_n", "kHz", 1e3, "natural_frequency_hz"),
+    ("damping_ratio", "main mode damping ζ", "", 1.0, "damping_ratio"),
+    ("fbsd_5_hz", "FBSD ±5 %", "kHz", 1e3, "5"),
+    ("fbsd_10_hz", "FBSD ±10 %", "kHz", 1e3, "10"),
+)
+
+
+@dataclass(frozen=True)
+class Combined:
+    """One key figure combined across shots (see COMBINATION_NOTE)."""
+
+    n: int  # shots with a value
+    mean: float | None
+    repeatability: float | None  # s, the shots' standard deviation (n − 1); None for one shot
+    u_shots: float | None  # ū, the RMS of the shots' standard uncertainties; None when none has one
+    n_with_u: int
+    u_combined: float | None
+    dof: float | None  # effective degrees of freedom (inf: Monte Carlo only)
+    k: float | None
+    expanded: float | None  # U = k·u_c
+    excluded_bounds: int = 0  # FBSD edges reported only as bounds
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"n": self.n, "mean": self.mean, "repeatability": self.repeatability, "u_shots": self.u_shots,
+                "n_with_u": self.n_with_u, "u_combined": self.u_combined,
+                "dof": None if self.dof is None or math.isinf(self.dof) else self.dof, "k": self.k,
+                "expanded": self.expanded, "excluded_bounds": self.excluded_bounds}
+
+    def figure(self) -> Figure:
+        """The combined value as a Figure (interval mean ± U) for formatting."""
+        if self.mean is None or self.expanded is None:
+            return Figure(self.mean)
+        return Figure(self.mean, self.u_combined, (self.mean - self.expanded, self.mean + self.expanded))
+
+
+def combine(figures: Sequence[Figure | None], excluded_bounds: int = 0) -> Combined:
+    """The mean of the shots' values with its repeatability and combined expanded uncertainty
+    (COMBINATION_NOTE); shots without a value are skipped."""
+    from scipy.stats import t as student_t
+
+    known = [f for f in figures if f is not None and f.value is not None and math.isfinite(f.value)]
+    n = len(known)
+    if n == 0:
+        return Combined(0, None, None, None, 0, None, None, None, None, excluded_bounds)
+    x = np.array([f.value for f in known], dtype=float)
+    mean = float(np.mean(x))
+    s = float(np.std(x, ddof=1)) if n > 1 else None
+    us = [f.u for f in known if f.u is not None and math.isfinite(f.u)]
+    u_shots = float(np.sqrt(np.mean(np.square(us)))) if us else None
+    var_repeat = s * s / n if s is not None else None
+    if var_repeat is None and u_shots is None:
+        return Combined(n, mean, s, None, 0, None, None, None, None, excluded_bounds)
+    u_c = math.sqrt((var_repeat or 0.0) + (u_shots or 0.0) ** 2)
+    if var_repeat:
+        dof = u_c ** 4 / (var_repeat ** 2 / (n - 1))
+    else:
+        dof = math.inf
+    k = float(student_t.ppf(0.5 + COVERAGE / 2, dof))  # 1.960 for ν = ∞
+    return Combined(n, mean, s, u_shots, len(us), u_c, dof, k, k * u_c, excluded_bounds)
+
+
+def combined_figures(key_figures: Sequence[KeyFigures]) -> dict[str, Combined]:
+    """Every COMBINED key figure across the shots' KeyFigures."""
+    out = {}
+    for key, _label, _unit, _scale, attr in COMBINED:
+        if attr in ("5", "10"):
+            bounded = sum(1 for kf in key_figures if attr in kf.fbsd_bounds)
+            figures = [kf.fbsd_hz.get(attr) for kf in key_figures if attr not in kf.fbsd_bounds]
+            out[key] = combine(figures, bounded)
+        else:
+            out[key] = combine([getattr(kf, attr) for kf in key_figures])
+    return out
+
+
 @dataclass
 class CampaignStatistics:
-    """Across the analysed shots: per-shot figures, their spread, the cross-validation matrix."""
+    """Across the analysed shots: per-shot figures, their spread, the combined key figures and
+    the cross-validation matrix."""
 
     labels: list[str]  # the analysed shots, in order
     figures: list[dict[str, Any]]  # figures_of_merit per analysed shot
     spread: dict[str, dict[str, float | int | None]]  # quantity key -> spread()
     cross_validation_percent: np.ndarray  # [i, j]: model i on shot j
+    combined: dict[str, Combined] = field(default_factory=dict)  # COMBINED key -> combination
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (strict JSON: a NaN or infinite figure becomes None)."""
         return json_safe({"shots": self.labels, "figures": self.figures, "spread": self.spread,
-                           "cross_validation_percent": self.cross_validation_percent.tolist(),
-                           "cross_validation_note": "row i: model of shot i; column j: simulated on shot j's "
-                                                    "reference; fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)"})
+                          "combined": {k: c.to_dict() for k, c in self.combined.items()},
+                          "combination_note": COMBINATION_NOTE,
+                          "cross_validation_percent": self.cross_validation_percent.tolist(),
+                          "cross_validation_note": "row i: model of shot i; column j: simulated on shot j's "
+                                                   "reference; fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)"})
 
 
 def json_safe(obj: Any) -> Any:
@@ -95,4 +191,5 @@ def campaign_statistics(entries: Sequence[ShotEntry]) -> CampaignStatistics:
     keys = [k for k, *_ in QUANTITIES] + ["sensitivity_v_per_m_s2", "peak_acceleration_m_s2", "pulse_width_s"]
     stats = {k: spread(f[k] for f in figures) for k in keys}
     matrix = cross_validation([e.analysis for e in analysed])  # type: ignore[misc]
-    return CampaignStatistics([e.label for e in analysed], figures, stats, matrix)
+    combined = combined_figures([e.key_figures for e in analysed if e.key_figures is not None])
+    return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined)

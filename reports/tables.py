@@ -1,6 +1,8 @@
 """The report's tables as text rows (label, value) or (header, rows), shared by the PDF pages
-and the HTML: one shot's results, its pole analysis and DCM design, and a campaign's per-shot
-figures and spread."""
+and the HTML: one shot's results (value ± U, k ≈ 2, where the shot has its uncertainty), its
+measurement uncertainty and budget, its compensation check, its pole analysis and DCM design;
+a campaign's per-shot figures, spread and combined key figures. Every figure comes from the
+shot's KeyFigures (analysis.key_figures) or its CompensationCheck, never recomputed."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.response import natural_frequency_damping
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.reports.data import (
@@ -16,10 +19,9 @@ from hopkinson.reports.data import (
     QUANTITIES,
     ShotEntry,
     figures_of_merit,
-    identification_dict,
     truth_comparison,
 )
-from hopkinson.reports.statistics import CampaignStatistics
+from hopkinson.reports.statistics import COMBINED, CampaignStatistics
 
 
 def fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:
@@ -42,45 +44,205 @@ def unit_suffix(unit: str) -> str:
     return f" ({unit})" if unit else ""
 
 
+def sensitivity_text(figure: Figure | None, kf: KeyFigures, nominal_v_per_m_s2: float | None) -> str:
+    """A sensitivity (response units per m/s²) as value ± U, with V/(m/s²) and mV/g when the
+    response was scaled by a nominal sensitivity ("× nominal")."""
+    if figure is None or figure.value is None:
+        return "—"
+    if kf.response_unit != "m/s^2":
+        return f"{figure.format(digits=5)} {kf.response_unit}/(m/s²)"
+    text = f"{figure.format(digits=5)} × nominal"
+    if nominal_v_per_m_s2:
+        volts = Figure(figure.value * nominal_v_per_m_s2, None,
+                       None if figure.interval is None else tuple(v * nominal_v_per_m_s2 for v in figure.interval))
+        milli_g = Figure(volts.value * G_M_S2 * 1e3, None,
+                         None if volts.interval is None else tuple(v * G_M_S2 * 1e3 for v in volts.interval))
+        text += f" = {volts.format(digits=5)} V/(m/s²) = {milli_g.format(digits=5)} mV/g"
+    return text
+
+
+def figure_text(figure: Figure | None, scale: float = 1.0, unit: str = "", digits: int = 4) -> str:
+    """value ± U (k ≈ 2) in `unit`, or the value alone; "—" when unknown."""
+    if figure is None or figure.value is None:
+        return "—"
+    if figure.expanded is None:
+        return fmt(figure.value, scale, digits) + (f" {unit}" if unit else "")
+    return figure.format(scale, digits, unit)
+
+
 def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
-    """The key results of one shot as (label, text) rows."""
-    a = entry.analysis
-    if a is None:
+    """The key results of one shot as (label, text) rows (value ± U where it has its uncertainty)."""
+    a, kf = entry.analysis, entry.key_figures
+    if a is None or kf is None:
         return [("analysis", entry.error or "no analysis")]
-    f = figures_of_merit(entry)
-    ident = identification_dict(a)
+    peak = kf.peak_acceleration_m_s2
     rows = [
-        ("model order", f"{a.model.order} ({ident.get('order_selection', 'knee')})"),
-        ("main mode f_n", f"{fmt(f['natural_frequency_hz'], 1e3, 5)} kHz"),
-        ("main mode damping ζ", fmt(f["damping_ratio"], digits=4)),
-        ("FBSD ±5 %", f"{fmt(f['fbsd_5_hz'], 1e3)} kHz"),
-        ("FBSD ±10 %", f"{fmt(f['fbsd_10_hz'], 1e3)} kHz"),
-        ("fit (measured vs model)", f"{fmt(f['fit_percent'], digits=5)} %"),
-        ("peak acceleration", f"{fmt(f['peak_acceleration_m_s2'])} m/s² ({fmt(f['peak_acceleration_m_s2'], G_M_S2)} g)"),
-        ("pulse width (10 % of peak)", f"{fmt(f['pulse_width_s'], 1e-6)} µs"),
+        ("model order", f"{kf.order} ({kf.order_selection or 'knee'})"),
+        ("sensitivity (model DC gain)", sensitivity_text(kf.sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)),
+        ("main mode f_n", figure_text(kf.natural_frequency_hz, 1e3, "kHz", 5)),
+        ("main mode damping ζ", figure_text(kf.damping_ratio)),
+        ("FBSD ±5 %", kf.fbsd_text("5")),
+        ("FBSD ±10 %", kf.fbsd_text("10")),
+        ("fit (measured vs model)", f"{fmt(kf.fit_percent, digits=5)} %"),
+        ("peak acceleration", f"{figure_text(peak, unit='m/s²')} ({figure_text(peak, G_M_S2, 'g')})"
+         if peak is not None else "—"),
+        ("pulse width (10 % of peak)", figure_text(kf.pulse_width_s, 1e-6, "µs")),
     ]
-    if f["shock_sensitivity"] is not None:
-        text = f"{fmt(f['shock_sensitivity'], digits=5)} × nominal"
-        if f["sensitivity_v_per_m_s2"] is not None:
-            text += (f" = {fmt(f['sensitivity_v_per_m_s2'], digits=5)} V/(m/s²)"
-                     f" = {fmt(f['sensitivity_v_per_m_s2'] * G_M_S2 * 1e3, digits=5)} mV/g")
-        rows.append(("shock sensitivity S_sh (ISO 16063-13)", text))
+    if kf.shock_sensitivity is not None:
+        rows.append(("shock sensitivity S_sh (ISO 16063-13)",
+                     sensitivity_text(kf.shock_sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)))
     design = a.dcm.design or {}
+    comp = kf.compensated_fbsd_hz
     rows += [
         ("DCM ratio r, damping ζ_e", f"{fmt(design.get('ratio'))}, {fmt(design.get('damping'))}"),
-        ("FBSD ±5 % / ±10 % with DCM",
-         f"{fmt(a.compensated_fbsd_hz.get('5'), 1e3)} / {fmt(a.compensated_fbsd_hz.get('10'), 1e3)} kHz"),
+        ("FBSD ±5 % / ±10 % with DCM", f"{fmt(comp.get('5'), 1e3)} / {fmt(comp.get('10'), 1e3)} kHz"),
         ("rise-time ratio (10–90 %, without ÷ with DCM)", fmt(a.rise_time_ratio)),
         ("settling-time ratio (±5 %, without ÷ with DCM)", fmt(a.settling_time_ratio)),
     ]
+    check = entry.compensation
+    if check is not None and check.recommended is not None:
+        rows.append(("DCM", "recommended" if check.recommended else
+                     f"NOT RECOMMENDED: {check.not_recommended_reason or 'compensation does not improve this shot'}"))
     cmp = truth_comparison(entry)
     if cmp is not None:
         rows.append(("simulated truth f_n, ζ", f"{fmt(cmp['truth_natural_frequency_hz'], 1e3, 5)} kHz, "
                                                f"{fmt(cmp['truth_damping_ratio'])}: pole error "
                                                f"{cmp['pole_error_percent']:.3f} %"))
-    for w in a.warnings:
+    for w in kf.warnings:
         rows.append(("warning", w))
     return rows
+
+
+# (label, unit, scale, KeyFigures field) of the uncertainty table, in order
+UNCERTAIN: tuple[tuple[str, str, float, str], ...] = (
+    ("sensitivity (model DC gain)", "", 1.0, "sensitivity"),
+    ("shock sensitivity S_sh", "", 1.0, "shock_sensitivity"),
+    ("main mode f_n", "kHz", 1e3, "natural_frequency_hz"),
+    ("main mode damping ζ", "", 1.0, "damping_ratio"),
+    ("FBSD ±5 %", "kHz", 1e3, "5"),
+    ("FBSD ±10 %", "kHz", 1e3, "10"),
+    ("peak acceleration", "km/s²", 1e3, "peak_acceleration_m_s2"),
+    ("pulse width", "µs", 1e-6, "pulse_width_s"),
+)
+
+
+def uncertainty_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
+    """The measurement uncertainty table: value, u, U (k ≈ 2), the 95 % coverage interval and
+    the relative standard uncertainty of each key figure that carries one (empty without)."""
+    header = ["quantity", "value", "standard uncertainty u", "U (k ≈ 2)", "95 % coverage interval", "u (relative)"]
+    kf = entry.key_figures
+    if kf is None or not kf.has_uncertainty:
+        return header, []
+    rows = []
+    for label, unit, scale, attr in UNCERTAIN:
+        figure = kf.fbsd_hz.get(attr) if attr in ("5", "10") else getattr(kf, attr)
+        if figure is None or figure.value is None or figure.u is None:
+            continue
+        if attr in kf.fbsd_bounds:
+            rows.append([label + unit_suffix(unit), kf.fbsd_text(attr), "—", "—", "—", "—"])
+            continue
+        rows.append([label + unit_suffix(unit if unit else ("× nominal" if attr.endswith("sensitivity") and
+                                                          kf.response_unit == "m/s^2" else ""))]
+                    + uncertainty_cells(figure, scale))
+    check = entry.compensation
+    if check is not None and check.compensated_peak is not None and check.compensated_peak.u is not None:
+        rows.append(["compensated peak (km/s²)"] + uncertainty_cells(check.compensated_peak, 1e3))
+    return header, rows
+
+
+def uncertainty_cells(figure: Figure, scale: float) -> list[str]:
+    """value, u, U, [interval], u_rel: u and U to two significant digits, the value and the
+    interval to the decimals of U (GUM 7.2.6)."""
+    big = figure.expanded
+    decimals = 1 - math.floor(math.log10(big / scale)) if big and big > 0 else None
+
+    def fixed(x: float | None) -> str:
+        if x is None:
+            return "—"
+        return f"{x / scale:.{max(decimals, 0)}f}" if decimals is not None else fmt(x, scale)
+
+    lo, hi = figure.interval if figure.interval is not None else (None, None)
+    return [fixed(figure.value), fmt(figure.u, scale, 2), fmt(big, scale, 2), f"[{fixed(lo)}, {fixed(hi)}]",
+            f"{fmt(100 * figure.u_rel, digits=2)} %" if figure.u_rel is not None else "—"]
+
+
+def uncertainty_method(entry: ShotEntry) -> str:
+    """One sentence: how the uncertainty was evaluated (or why there is none)."""
+    kf = entry.key_figures
+    if kf is None:
+        return ""
+    if not kf.has_uncertainty:
+        return "No uncertainty was evaluated for this shot (analysed without it, or it failed: see the warnings)."
+    p = kf.coverage_probability or 0.95
+    method = (kf.uncertainty_method or "Monte Carlo").replace("-", " ").replace("_", " ")
+    method = "Monte Carlo" if method.lower() == "monte carlo" else method
+    return (f"Method: {method} after GUM Supplement 1, {kf.draws or '—'} draws. "
+            f"u is the standard uncertainty, the interval the {100 * p:.0f} % coverage interval of the draws, "
+            f"U its half-width (k ≈ 2); the value is the figure reported everywhere else.")
+
+
+def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
+    """The uncertainty budget: each source's relative standard uncertainty, largest first."""
+    header = ["source", "relative standard uncertainty"]
+    kf = entry.key_figures
+    if kf is None or not kf.budget:
+        return header, []
+    items = sorted(kf.budget, key=lambda b: -(b.get("u_rel") or 0.0))
+    return header, [[str(b.get("source", "—")), f"{fmt(100 * b['u_rel'], digits=2)} %"
+                     if isinstance(b.get("u_rel"), int | float) else "—"] for b in items]
+
+
+def compensation_rows(entry: ShotEntry) -> list[tuple[str, str]]:
+    """The DCM's check on the shot itself (issue 11): errors before and with compensation, the
+    compensated band, the noise gain and band limit, the widening, the latency, the verdict."""
+    check, kf = entry.compensation, entry.key_figures
+    if check is None or kf is None:
+        return []
+    rows = []
+    if check.recommended is not None:
+        rows.append(("verdict", "DCM recommended" if check.recommended else
+                     f"DCM NOT RECOMMENDED: {check.not_recommended_reason or 'it does not improve this shot'}"))
+
+    def before_after(pair: tuple[float | None, float | None] | None) -> str:
+        if pair is None:
+            return "—"
+        return f"{fmt(pair[0], digits=3)} % → {fmt(pair[1], digits=3)} %"
+
+    rows.append(("RMS error over the pulse (of the peak), without → with DCM", before_after(check.rms_error_pct)))
+    rows.append(("peak error, without → with DCM", before_after(check.peak_error_pct)))
+    comp = kf.compensated_fbsd_hz
+    rows.append(("compensated FBSD ±5 % / ±10 % (model)", f"{fmt(comp.get('5'), 1e3)} / {fmt(comp.get('10'), 1e3)} kHz"))
+    if check.target_widening is not None or check.reached_widening is not None:
+        text = f"aimed ×{fmt(check.target_widening, digits=3)}, reached ×{fmt(check.reached_widening, digits=3)}"
+        if check.widening_note:
+            text += f" ({check.widening_note})"
+        rows.append(("widening of the ±5 % band", text))
+    if check.noise_gain is not None:
+        rows.append(("noise gain (RMS, white noise)", f"{fmt(check.noise_gain, digits=3)}"
+                     + (f" (limit {fmt(check.noise_gain_limit, digits=3)})" if check.noise_gain_limit else "")))
+    if check.band_limit_hz is not None:
+        rows.append(("band limit of the compensation (low-pass)", f"{fmt(check.band_limit_hz, 1e3)} kHz"))
+    if check.latency_s is not None:
+        rows.append(("latency removed (channel delay + DCM group delay)", f"{fmt(check.latency_s, 1e-6)} µs"))
+    if check.compensated_peak is not None and check.compensated_peak.value is not None:
+        rows.append(("compensated peak", figure_text(check.compensated_peak, 1e3, "km/s²")))
+    return rows
+
+
+def combined_rows(stats: CampaignStatistics) -> tuple[list[str], list[list[str]]]:
+    """The campaign's key figures: mean of the shots, repeatability s, ū, u_c, ν, k and U."""
+    header = ["quantity", "n", "mean", "repeatability s", "ū (shots)", "u_c", "ν_eff", "k", "U (95 %)"]
+    rows = []
+    for key, label, unit, scale, _attr in COMBINED:
+        c = stats.combined.get(key)
+        if c is None or c.n == 0:
+            continue
+        dof = "∞" if c.dof is not None and math.isinf(c.dof) else fmt(c.dof, digits=2)
+        n_text = str(c.n) + (f" (+{c.excluded_bounds} bound)" if c.excluded_bounds else "")
+        rows.append([label + unit_suffix(unit), n_text, fmt(c.mean, scale, 5), fmt(c.repeatability, scale, 2),
+                     fmt(c.u_shots, scale, 2), fmt(c.u_combined, scale, 2), dof, fmt(c.k, digits=3),
+                     fmt(c.expanded, scale, 2)])
+    return header, rows
 
 
 def pole_rows(analysis: ShotAnalysis) -> tuple[list[str], list[list[str]]]:

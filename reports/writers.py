@@ -14,14 +14,19 @@ from pathlib import Path
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.reports.data import CalibrationReport
 from hopkinson.reports.pages import report_pages
-from hopkinson.reports.statistics import CampaignStatistics, campaign_statistics
+from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
 from hopkinson.reports.tables import (
+    budget_rows,
+    combined_rows,
+    compensation_rows,
     dcm_rows,
     fmt,
     per_shot_rows,
     pole_rows,
     results_rows,
     spread_rows,
+    uncertainty_method,
+    uncertainty_rows,
 )
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
@@ -67,7 +72,7 @@ table { border-collapse: collapse; margin: 0.5em 0 1em 0; font-size: 0.9em; }
 td, th { border: 1px solid #ccc; padding: 0.2em 0.6em; text-align: left; vertical-align: top; }
 th { background: #eee; } table.kv td:first-child { font-weight: bold; white-space: nowrap; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
-figcaption { font-size: 0.85em; color: #555; } .error { color: #a00; }
+figcaption { font-size: 0.85em; color: #555; } .error { color: #a00; } .note { font-size: 0.85em; color: #444; }
 """
 
 
@@ -85,6 +90,10 @@ def _write_html(path: Path, report: CalibrationReport, pages: list[tuple[str, Fi
         parts.append(_html_table(*per_shot_rows(report.shots)))
         parts.append(f"<h2>Spread across {len(stats.labels)} analysed shots</h2>")
         parts.append(_html_table(*spread_rows(stats)))
+        header, rows = combined_rows(stats)
+        if rows:
+            parts.append("<h2>Key figures of the campaign</h2>" + _html_table(header, rows)
+                         + f"<p class='note'>{e(COMBINATION_NOTE)}</p>")
         parts.append("<h2>Cross-validation</h2><p>Row i: the model identified on shot i; column j: its response "
                      "simulated on shot j's reference, compared with shot j's measured response: fit % = "
                      "100·(1 − ‖y − ŷ‖/‖y − ȳ‖).</p>")
@@ -101,6 +110,20 @@ def _write_html(path: Path, report: CalibrationReport, pages: list[tuple[str, Fi
             parts.append(f"<p class='error'>No analysis: {e(entry.error or 'none stored')}</p>")
             continue
         parts.append("<h3>Results</h3>" + _html_table(None, results_rows(entry), "kv"))
+        check = entry.compensation
+        if check is not None and check.recommended is False:
+            parts.append(f"<p class='error'><b>DCM not recommended</b>: "
+                         f"{e(check.not_recommended_reason or 'compensation does not improve this shot')}</p>")
+        header, rows = uncertainty_rows(entry)
+        if rows:
+            parts.append("<h3>Measurement uncertainty</h3>" + _html_table(header, rows)
+                         + f"<p class='note'>{e(uncertainty_method(entry))}</p>")
+            header, rows = budget_rows(entry)
+            if rows:
+                parts.append("<h4>Uncertainty budget</h4>" + _html_table(header, rows))
+        rows = compensation_rows(entry)
+        if rows:
+            parts.append("<h3>Compensation checked on the shot itself</h3>" + _html_table(None, rows, "kv"))
         for caption, fig in [(c, f) for c, f in pages if c.startswith(f"{entry.label}: ")]:
             parts.append(_html_figure(caption, fig))
             if caption.endswith("poles and zeros"):

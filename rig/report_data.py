@@ -103,6 +103,7 @@ def shot_entry(path: str | Path, state: str | None = None, label: str | None = N
         truth_modes=truth_modes,
         nominal_sensitivity_v_per_m_s2=_sensitivity(shot),
         pressure_bar=shot.meta.pressure_bar,
+        results=shot.results if analysis is not None else None,
     )
 
 

@@ -8,8 +8,11 @@ identity of the accelerometer and the rig, the excitation (pulse, spectrum), the
 with the chosen order, the model's magnitude and phase with the ±5 %/±10 % bands and the FBSD,
 the pole analysis, the DCM with its compensated response and step response, the shock
 sensitivity. A run folder's report adds, across its shots, the spread (mean, standard
-deviation) and the cross-validation matrix. --json prints {"reports": [...], "shots": [...],
-"campaign": statistics or null}. A shot whose analysis failed is reported with its error.
+deviation), the combined key figures (mean, repeatability, U) and the cross-validation matrix.
+--json prints {"reports": [...], "shots": [{"id", "state", "analysed", "error", "key_figures"}],
+"campaign": statistics or null}; key_figures is analysis.key_figures.KeyFigures.to_dict() (each
+uncertain figure as {"value", "u", "interval"}). A shot whose analysis failed is reported with
+its error.
 Exit codes: 0 written; 2 bad input (no such file, not a shot file or run folder, a run folder
 without shot files, an unknown -o suffix or a missing output folder).
 """
@@ -56,12 +59,13 @@ def report_command(args: argparse.Namespace) -> int:
             else:
                 raise ConfigError(f"-o {out}: folder {out.parent} does not exist")
     report = report_for(args.source)
-    written = write_report(report, outputs)
+    written = write_report(report, outputs, inputs=[args.source])
     if args.json:
         stats = campaign_statistics(report.shots) if report.campaign else None
         emit_json({
             "reports": [str(p) for p in written],
-            "shots": [{"id": e.label, "state": e.state, "analysed": e.analysis is not None, "error": e.error}
+            "shots": [{"id": e.label, "state": e.state, "analysed": e.analysis is not None, "error": e.error,
+                       "key_figures": e.key_figures.to_dict() if e.key_figures is not None else None}
                       for e in report.shots],
             "campaign": stats.to_dict() if stats is not None else None,
         })

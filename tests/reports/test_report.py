@@ -14,14 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_record
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
-from hopkinson.reports.data import CalibrationReport, ShotEntry, main_mode, truth_comparison
-from hopkinson.reports.pages import report_pages
+from hopkinson.reports.data import CalibrationReport, ShotEntry, truth_comparison
+from hopkinson.reports.layout import freeze_layout
+from hopkinson.reports.pages import report_pages, title_pages
 from hopkinson.reports.shot_pages import dcm_page, excitation_page, model_page, step_responses
-from hopkinson.reports.statistics import campaign_statistics, cross_validation, spread
+from hopkinson.reports.statistics import campaign_statistics, combine, cross_validation, spread
+from hopkinson.reports.tables import budget_rows, compensation_rows, uncertainty_rows
 from hopkinson.reports.writers import write_pngs, write_report
 from matplotlib.lines import Line2D
 from matplotlib.text import Text
@@ -41,12 +44,48 @@ def simulated_record(truth: AccelerometerTruth, peak_g: float, seed: int) -> Rec
 
 
 def entry(label: str, analysis: ShotAnalysis | None, truth: AccelerometerTruth | None = None,
-          error: str | None = None) -> ShotEntry:
+          error: str | None = None, results: dict | None = None) -> ShotEntry:
     modes = None if truth is None else [{"natural_frequency_hz": m.natural_frequency_hz,
                                          "damping_ratio": m.damping_ratio} for m in truth.modes]
     return ShotEntry(label, {"Accelerometer": "SIM-ACC, serial T1", "Fired (UTC)": "2026-01-01T00:00:00Z"},
                      analysis, error=error, state="ANALYSED" if analysis else "ANALYSIS_FAILED",
-                     truth_modes=modes, nominal_sensitivity_v_per_m_s2=2e-7, pressure_bar=2.0)
+                     truth_modes=modes, nominal_sensitivity_v_per_m_s2=2e-7, pressure_bar=2.0, results=results)
+
+
+def contract_figure(value: float, u_rel: float) -> dict:
+    """{"value", "u", "interval"} as issue 10's JSON contract has it (a normal 95 % interval)."""
+    u = abs(value) * u_rel
+    return {"value": value, "u": u, "interval": [value - 1.96 * u, value + 1.96 * u]}
+
+
+BUDGET = [{"source": "response channel noise", "u_rel": 0.0021}, {"source": "grating pitch", "u_rel": 0.0005},
+          {"source": "amplifier gain", "u_rel": 0.0030}, {"source": "order choice", "u_rel": 0.0008}]
+
+
+def contract_results(analysis: ShotAnalysis, u_rel: float = 0.004, recommended: bool = True) -> dict:
+    """The shot's results dict with the uncertainty (issue 10) and the compensation check (issue 11)
+    shaped as the JSON contracts (CONTRACTS.md) have them, for the display of both."""
+    results = analysis.to_dict()
+    kf = KeyFigures.from_results(results)
+    results["uncertainty"] = {
+        "method": "monte-carlo", "draws": 200, "coverage_probability": 0.95,
+        "dc_gain": contract_figure(kf.sensitivity.value, u_rel),
+        "main_mode": {"natural_frequency_hz": contract_figure(kf.natural_frequency_hz.value, u_rel),
+                      "damping_ratio": contract_figure(kf.damping_ratio.value, 10 * u_rel)},
+        "fbsd_hz": {k: contract_figure(kf.fbsd_hz[k].value, 2 * u_rel) for k in ("5", "10")},
+        "budget": BUDGET,
+    }
+    results["dcm"].update({
+        "recommended": recommended,
+        "not_recommended_reason": None if recommended else "the compensated RMS error (6.1 %) exceeds the "
+                                                           "uncompensated one (4.9 %): noise gain too high",
+        "target_widening": 3.0, "reached_widening": 2.6, "widening_note": "the noise-gain limit stops r at 12",
+        "noise_gain": 3.2, "noise_gain_limit": 10.0, "band_limit_hz": 40_000.0, "latency_s": 4.2e-6,
+        "check": {"rms_error_pct": {"uncompensated": 4.95, "compensated": 1.8 if recommended else 6.1},
+                  "peak_error_pct": {"uncompensated": 60.7, "compensated": -0.7}},
+        "compensated_peak": contract_figure(2.94e5, 0.006),
+    })
+    return results
 
 
 @pytest.fixture(scope="module")
@@ -102,8 +141,8 @@ def test_campaign_statistics_agree_with_the_truth(analyses: dict[str, ShotAnalys
 def test_truth_comparison_is_the_continuous_pole_error(analyses: dict[str, ShotAnalysis]) -> None:
     good = truth_comparison(entry("s", analyses["a1"], SENSOR_A))
     assert good is not None and good["pole_error_percent"] < 0.5
-    mode = main_mode(analyses["a1"])
-    assert good["natural_frequency_hz"] == mode["natural_frequency_hz"]
+    # the main mode is the key figures' (the lowest supported complex pair), as everywhere else
+    assert good["natural_frequency_hz"] == KeyFigures.from_analysis(analyses["a1"]).natural_frequency_hz.value
     wrong = AccelerometerTruth(modes=(Mode(30_000.0, 0.05),))
     bad = truth_comparison(entry("s", analyses["a1"], wrong))
     # |s − s_t|/|s_t| for poles on a common damping line is the relative frequency difference.
@@ -175,9 +214,9 @@ def test_excitation_page_shows_the_loss_by_order_and_the_chosen_order(analyses: 
 def pdf_text(data: bytes) -> str:
     """The text drawn in a matplotlib PDF (content streams inflated, TJ/Tj strings joined)."""
     streams = b""
-    for m in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.S):
-        try:
-            streams += zlib.decompress(m.group(1))
+    for m in re.finditer(rb"stream\r?\n(.*?)endstream", data, re.S):
+        try:  # (a decompressor object stops at the stream's end: the line break before endstream
+            streams += zlib.decompressobj().decompress(m.group(1))  # may be \n or \r\n)
         except zlib.error:
             pass
     parts = []
@@ -203,7 +242,8 @@ def single_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> tup
 
 @pytest.fixture(scope="module")
 def campaign_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> tuple[CalibrationReport, list]:
-    entries = [entry("s001-r1", analyses["a1"], SENSOR_A), entry("s002-r1", analyses["a2"], SENSOR_A),
+    entries = [entry("s001-r1", analyses["a1"], SENSOR_A, results=contract_results(analyses["a1"])),
+               entry("s002-r1", analyses["a2"], SENSOR_A, results=contract_results(analyses["a2"], recommended=False)),
                entry("s003-r1", None, error="analysis failed: no beat in the Doppler channel")]
     report = CalibrationReport("Calibration report: SIM-ACC, serial SIM0001, campaign 20260101T000000Z-example",
                                {"Campaign": "c-1"}, entries, campaign=True,
@@ -244,8 +284,98 @@ def test_campaign_report_pdf(tmp_path: Path, campaign_report) -> None:
     for needle in ("Cross-validation", "Spread across 2 analysed shots", "s004-r1 (UNKNOWN)",
                    "no beat in the Doppler channel", "s003-r1: no analysis",
                    f"{stats.spread['natural_frequency_hz']['mean'] / 1e3:.5g}",  # the spread table's mean f_n
-                   f"{stats.cross_validation_percent[0, 1]:.2f}"):  # a cross-validation matrix cell
+                   f"{stats.cross_validation_percent[0, 1]:.2f}",  # a cross-validation matrix cell
+                   "of the campaign: mean of the shots", "Welch", "DCM not recommended", "noise gain too high"):
         assert needle in text, needle
+    # the campaign's f_n: the mean of the shots with U from their repeatability and their own u
+    combined = stats.combined["natural_frequency_hz"]
+    values = [KeyFigures.from_results(e.results).natural_frequency_hz for e in entries[:2]]
+    assert combined.n == 2 and combined.mean == pytest.approx(np.mean([v.value for v in values]))
+    assert f"{combined.mean / 1e3:.5g}" in text
+
+
+@pytest.fixture(scope="module")
+def uncertain_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> tuple[CalibrationReport, list]:
+    """A shot with its uncertainty and a DCM not recommended: the summary and the DCM page only."""
+    a = analyses["a1"]
+    e = entry("s001-r1", a, SENSOR_A, results=contract_results(a, recommended=False))
+    report = CalibrationReport("Calibration report: SIM-ACC, serial T1, shot s001-r1 (with uncertainty)",
+                               dict(e.identity), [e])
+    pages = [("Summary", fig) for fig in title_pages(report, None)] + [
+        ("s001-r1: dynamic compensation model", dcm_page(e))]
+    for _, fig in pages:
+        freeze_layout(fig)
+    write_pngs(pages, artifacts_dir, "report-uncertainty", dpi=80)
+    return report, pages
+
+
+def test_the_uncertainty_and_the_compensation_check_are_shown(tmp_path: Path, uncertain_report) -> None:
+    report, pages = uncertain_report
+    (e,) = report.shots
+    u = e.results["uncertainty"]
+    header, rows = uncertainty_rows(e)
+    by_label = {r[0]: r for r in rows}
+    f_n = u["main_mode"]["natural_frequency_hz"]
+    row = by_label["main mode f_n (kHz)"]
+    assert float(row[1]) == pytest.approx(f_n["value"] / 1e3, abs=0.005)  # to the decimals of U (0.21)
+    assert float(row[2]) == pytest.approx(f_n["u"] / 1e3, rel=0.05)
+    assert float(row[3]) == pytest.approx(1.96 * f_n["u"] / 1e3, rel=0.05)  # U = half the 95 % interval
+    assert row[5] == "0.4 %"
+    assert header[3] == "U (k ≈ 2)" and "FBSD ±5 % (kHz)" in by_label and "main mode damping ζ" in by_label
+    # the budget, largest source first
+    assert [r[0] for r in budget_rows(e)[1]] == ["amplifier gain", "response channel noise", "order choice",
+                                                 "grating pitch"]
+    check = dict(compensation_rows(e))
+    assert check["verdict"].startswith("DCM NOT RECOMMENDED: the compensated RMS error (6.1 %)")
+    assert check["RMS error over the pulse (of the peak), without → with DCM"] == "4.95 % → 6.1 %"
+    assert check["band limit of the compensation (low-pass)"] == "40 kHz"
+    pdf, page_html = write_report(report, [tmp_path / "u.pdf", tmp_path / "u.html"], pages=pages)
+    text = pdf_text(pdf.read_bytes())  # (matplotlib draws "fi" as a ligature: needles avoid it)
+    big_u = 1.96 * f_n["u"] / 1e3
+    decimals = 1 - int(np.floor(np.log10(big_u)))  # U to two significant digits (GUM 7.2.6)
+    for needle in ("Measurement uncertainty", "Uncertainty budget", "grating pitch", "Monte Carlo",
+                   "DCM NOT RECOMMENDED", "noise gain too high", "Compensation checked on the shot itself",
+                   f"{f_n['value'] / 1e3:.{decimals}f} ± {big_u:.{decimals}f} kHz"):
+        assert needle in text, needle
+    page = page_html.read_text(encoding="utf-8")
+    for needle in ("Measurement uncertainty", "U (k ≈ 2)", "DCM not recommended", "noise gain too high"):
+        assert needle in page, needle
+
+
+def test_combination_across_shots_closed_form() -> None:
+    from scipy.stats import t as student_t
+
+    shots = [Figure(1.0, 0.1), Figure(2.0, 0.1), Figure(3.0, 0.1)]
+    c = combine(shots)
+    var_repeat = 1.0 / 3  # s = 1, s²/n
+    u_c = np.sqrt(var_repeat + 0.01)
+    dof = u_c ** 4 / (var_repeat ** 2 / 2)
+    assert (c.n, c.mean, c.repeatability, c.u_shots) == (3, 2.0, pytest.approx(1.0), pytest.approx(0.1))
+    assert c.u_combined == pytest.approx(u_c) and c.dof == pytest.approx(dof)
+    assert c.expanded == pytest.approx(student_t.ppf(0.975, dof) * u_c)
+    alone = combine([Figure(1.0), Figure(2.0), Figure(3.0)])  # repeatability only: k from t with n − 1
+    assert alone.u_combined == pytest.approx(1 / np.sqrt(3)) and alone.k == pytest.approx(4.3027, abs=1e-4)
+    one = combine([Figure(5.0, 0.2), None])  # one shot: its own uncertainty, k = 1.96
+    assert one.n == 1 and one.u_combined == pytest.approx(0.2) and one.k == pytest.approx(1.95996, abs=1e-4)
+    assert combine([]).mean is None and combine([Figure(1.0)]).expanded is None
+
+
+def test_combined_uncertainty_covers_the_truth_and_is_not_needlessly_wide() -> None:
+    # Shots of one sensor: a bias common to all shots (the reference chain, u_sys) plus independent
+    # noise (σ); each shot reports its own u = √(u_sys² + σ²) as a Monte Carlo would.
+    rng = np.random.default_rng(2026)
+    truth, u_sys, sigma, n, trials = 100.0, 0.3, 0.5, 5, 2000
+    u_shot = float(np.hypot(u_sys, sigma))
+    covered, widths = 0, []
+    for _ in range(trials):
+        x = truth + rng.normal(0.0, u_sys) + rng.normal(0.0, sigma, n)
+        c = combine([Figure(float(v), u_shot) for v in x])
+        covered += abs(c.mean - truth) <= c.expanded
+        widths.append(c.expanded)
+    coverage = covered / trials
+    assert coverage >= 0.94  # at least the 95 % promised (conservative by construction)
+    ideal = 1.96 * np.sqrt(u_sys ** 2 + sigma ** 2 / n)  # U if the split of u were known
+    assert np.mean(widths) < 1.9 * ideal  # conservative, not absurd
 
 
 def text_boxes(fig) -> list[tuple[str, object]]:
@@ -259,13 +389,14 @@ def text_boxes(fig) -> list[tuple[str, object]]:
     return out
 
 
-@pytest.mark.parametrize("which", ["single_report", "campaign_report"])
+@pytest.mark.parametrize("which", ["single_report", "campaign_report", "uncertain_report"])
 def test_summary_pages_stay_on_the_page_and_never_overlap(which: str, request) -> None:
     # The layout defects of issue 13: the title ran past the page edge, the shot table's headers ran together.
     report, pages = request.getfixturevalue(which)
     summaries = [fig for caption, fig in pages if caption.startswith("Summary")]
     assert summaries
-    for fig in summaries:
+    for fig, dpi in [(fig, dpi) for fig in summaries for dpi in (80, 100)]:  # as the PNGs and the PDF draw it
+        fig.set_dpi(dpi)
         width, height = fig.canvas.get_width_height()
         boxes = [(text, box) for text, box in text_boxes(fig) if box.width > 0]
         assert any(text.startswith("Calibration report") for text, _ in boxes) or fig is not summaries[0]
@@ -275,12 +406,17 @@ def test_summary_pages_stay_on_the_page_and_never_overlap(which: str, request) -
             for text_b, b in boxes[i + 1:]:
                 overlap_x = min(a.x1, b.x1) - max(a.x0, b.x0)
                 overlap_y = min(a.y1, b.y1) - max(a.y0, b.y0)
-                assert overlap_x <= 0.5 or overlap_y <= 0.5, f"{text_a!r} overlaps {text_b!r}"
-    for caption, fig in pages:  # every plot page's title fits the page's width
+                assert overlap_x <= 0.5 or overlap_y <= 0.5, f"{text_a!r} overlaps {text_b!r} at {dpi} dpi"
+        fig.set_dpi(100)
+    for caption, fig in pages[:5]:  # every plot page's titles fit the page's width (a campaign's later
+        # pages are its shots' pages, drawn as in the single-shot report)
         fig.canvas.draw()
-        if fig._suptitle is not None:
-            box = fig._suptitle.get_window_extent(fig.canvas.get_renderer())
-            assert box.x0 >= 0 and box.x1 <= fig.canvas.get_width_height()[0], caption
+        renderer, width = fig.canvas.get_renderer(), fig.canvas.get_width_height()[0]
+        titles = [fig._suptitle] if fig._suptitle is not None else []
+        titles += [ax.title for ax in fig.axes if ax.title.get_text()]
+        for title in titles:
+            box = title.get_window_extent(renderer)
+            assert box.x0 >= 0 and box.x1 <= width, f"{caption}: {title.get_text()!r} runs off the page"
 
 
 def test_report_input_errors(tmp_path: Path, analyses: dict[str, ShotAnalysis]) -> None:

@@ -10,6 +10,7 @@ import zlib
 from pathlib import Path
 
 import pytest
+from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.cli.report import default_outputs
 from hopkinson.rig.shotfile import add_analysis, read_shot
@@ -52,9 +53,9 @@ def pdf_pages(data: bytes) -> int:
 
 def pdf_text(data: bytes) -> str:
     streams = b""
-    for m in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.S):
-        try:
-            streams += zlib.decompress(m.group(1))
+    for m in re.finditer(rb"stream\r?\n(.*?)endstream", data, re.S):
+        try:  # (a decompressor object stops at the stream's end, whatever line break follows it)
+            streams += zlib.decompressobj().decompress(m.group(1))
         except zlib.error:
             pass
     parts = [b"".join(re.findall(rb"\(((?:[^()\\]|\\.)*)\)", m.group(0)))
@@ -87,6 +88,13 @@ def test_run_folder_report_with_spread_and_cross_validation(run_folder: Path, ca
         "accelerometer"]["modes"][0]["natural_frequency_hz"]
     assert campaign["spread"]["natural_frequency_hz"]["mean"] == pytest.approx(truth_fn, rel=0.01)
     assert campaign["spread"]["natural_frequency_hz"]["n"] == 2
+    # every shot's key figures are the analysis' own (analysis.key_figures), and the campaign's
+    # combined f_n is their mean
+    for shot in result["shots"]:
+        stored = read_shot(run_folder / "shots" / f"{shot['id']}.h5", load_raw=False).results
+        assert shot["key_figures"] == json.loads(json.dumps(KeyFigures.from_results(stored).to_dict()))
+    means = [s["key_figures"]["natural_frequency_hz"]["value"] for s in result["shots"]]
+    assert campaign["combined"]["natural_frequency_hz"]["mean"] == pytest.approx(sum(means) / 2)
     page = out.read_text(encoding="utf-8")
     for needle in ("campaign run", "SIM-ACC, serial R1", "<h2>Cross-validation</h2>", "Shot s002-r1",
                    "Spread across 2 analysed shots", "SIMULATED", "Hopkinson-Sim,SIMDIG-2CH"):
