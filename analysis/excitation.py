@@ -22,6 +22,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -213,27 +214,35 @@ def supported_band_hz(
     sample_interval_s: float,
     noise_rms: float | None = None,
     *,
+    noise_psd: Callable[[np.ndarray], np.ndarray] | None = None,
     snr: float = SUPPORT_SNR,
     floor: float = SUPPORT_FLOOR,
 ) -> tuple[float, float]:
     """The band [low, high] (Hz) the excitation supports: the contiguous band around the
     spectral maximum of the pulse window where |F(f)| ≥ floor·max|F| and ≥ snr × the amplitude
-    spectrum white noise of `noise_rms` (reference units) has over the same window.
+    spectrum the reference's noise has over the same window.
 
-    The pulse window is the main pulse widened by two pulse widths on each side; white noise
-    of standard deviation σ over L samples has an amplitude spectrum of about σ·√L·T. A
-    half-sine's band ends near its first spectral null (f·δ ≈ 1.5); a bipolar pulse's starts
-    above DC. Invariant to the scale of `acceleration` (with `noise_rms` scaled alike).
+    The noise is white of standard deviation `noise_rms`, or has the one-sided power spectral
+    density `noise_psd(f)` (units²/Hz); over a window of L samples its amplitude spectrum is
+    about √(L·S(f)·f_s/2)·T (σ·√L·T for white noise). The pulse window is the main pulse
+    widened by two pulse widths on each side. A half-sine's band ends near its first spectral
+    null (f·δ ≈ 1.5); a bipolar pulse's starts above DC. Invariant to the scale of
+    `acceleration` (with the noise scaled alike).
     """
     a = np.asarray(acceleration, dtype=float)
     pulse = pulse_width(a, sample_interval_s)
     segment = a[pulse_window(pulse, a.size, sample_interval_s)]
     freq, mag = amplitude_spectrum(segment, sample_interval_s)
     i_max = int(np.argmax(mag))
-    level = floor * mag[i_max]
-    if noise_rms is not None and noise_rms > 0:
-        level = max(level, snr * noise_rms * np.sqrt(segment.size) * sample_interval_s)
+    level = np.full(mag.size, floor * mag[i_max])
+    if noise_psd is not None:
+        noise = np.sqrt(segment.size * np.asarray(noise_psd(freq)) / (2.0 * sample_interval_s)) * sample_interval_s
+        level = np.maximum(level, snr * noise)
+    elif noise_rms is not None and noise_rms > 0:
+        level = np.maximum(level, snr * noise_rms * np.sqrt(segment.size) * sample_interval_s)
     ok = mag >= level
+    if not ok[i_max]:
+        raise AnalysisError("excitation: the pulse's spectrum does not rise above the reference's noise")
     below_hi = np.flatnonzero(~ok[i_max:])
     hi = freq[i_max + below_hi[0] - 1] if below_hi.size else freq[-1]
     below_lo = np.flatnonzero(~ok[: i_max + 1])

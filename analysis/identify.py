@@ -1,23 +1,41 @@
-"""Identify the accelerometer's discrete model A(d⁻¹)·y(k) = B(d⁻¹)·u(k − delay) from a shock record.
+"""Identify the accelerometer's discrete model A(d⁻¹)·y(k) = B(d⁻¹)·u(k − τ) from a shock record.
 
-Steps (paper §2.1, done as PAPER-NOTES.md measured it must be done):
+Steps (paper §2.1, made well-posed for real records; README "The method"):
 
 1. Rate: a record sampled faster than the analysis rate is low-pass filtered and resampled
    (analysis.resample; default 1 MS/s).
-2. Baselines: each channel's mean before the pulse is removed; what is left of a response
-   offset is fitted with every model (a constant output term).
-3. Bias correction per order 1 … N by refined instrumental variables with prefiltering by 1/Â
-   (Eq. 12; analysis.refined_iv), started from plain least squares. The integer input delay
-   is estimated and removed per order, alternating the fit with the delay that minimises the
-   output error for the fitted denominator (scored for every shift at once); B keeps b_0, so
-   a fractional remainder is absorbed by the model.
-4. Order: chosen on the bias-corrected output-error loss Σ(y − c − (B/A)u)² — the smallest
-   order within a tolerance of the best (the knee). The plain least-squares loss ||g2||² of
-   every order (one factorisation of the augmented information matrix of Eq. 3,
-   analysis.loss) keeps falling and would always pick N; it is reported beside AIC and BIC.
-5. The chosen order is iterated to convergence (and polished by a direct output-error fit if
-   SRIV will not settle); an unstable or non-converging result is an error when the order was
-   asked for, and is never returned silently otherwise (fallback order + warning).
+2. Scale: each channel is divided by its largest excursion, so nothing below depends on units
+   or gains: rescaling a channel by any factor leaves order, poles, zeros, delay and FBSD as
+   they are and scales the DC gain exactly (the factor is put back into B at the end).
+3. Baselines and noise: each channel's pre-pulse mean is removed; a linear drift is removed
+   when quiet stretches before and after the pulse pin it. The noise spectrum of each channel
+   is measured where it is quiet (analysis.noise): the reference before the pulse and in
+   flight after it, the response before the pulse and after its ringing has died away.
+4. Window and band: the fit uses the record from just before the pulse to where the response
+   has died into its noise (a record cut short keeps a transient term, see
+   analysis.frequency_fit), and only the frequencies the excitation supports: where the
+   reference's spectrum stands 20 dB above its noise and within 40 dB of its maximum
+   (analysis.excitation.supported_band_hz).
+5. Fit of every order n = 1, 2, … in turn (analysis.frequency_fit): the errors-in-variables
+   output-error cost V_n (each bin's error over its noise, reference noise included), with a
+   causal fractional delay τ ≥ 0 fitted with the model. Each order starts from the order
+   below (embedded with a cancelling pole and zero, so V never rises with the order) and from
+   a Sanathanan–Koerner linear start, and keeps the better optimum.
+6. Order: the smallest n that no higher order beats both on frequency bins it was not fitted
+   on (two-fold validation over interleaved bins: fit on the even bins, cost on the odd ones
+   and back) and in the frequency response where the pulse has energy (by more than 0.1 %
+   RMS: at high SNR a rational discrete model shows its own small mismatch with a continuous
+   sensor, and a parasitic pole pair that mends it is no mode). The evidence (V, validation
+   costs, response changes) is reported; the stability of the choice across resampled noise
+   is measured by analysis.uncertainty, which also draws the order.
+7. Claims stay inside the band: modes outside it are flagged `supported: False` (a DCM may
+   only cancel supported poles; the main mode is the lowest supported complex pair); the
+   response leading the reference, zeros outside the unit circle, a model that leaves far
+   more residual than the noise explains, and a poor fit are reported.
+
+The plain least-squares loss ||g2||² of every order (one factorisation of the augmented
+information matrix of Eq. 3, analysis.loss) is reported beside V: it keeps falling with the
+order and cannot choose it.
 """
 
 from __future__ import annotations
@@ -28,64 +46,114 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.excitation import supported_band_hz
-from hopkinson.analysis.loss import arx_coefficients_by_order, arx_loss_by_order, long_dot
+from hopkinson.analysis.excitation import pulse_width, supported_band_hz
+from hopkinson.analysis.frequency_fit import (
+    OrderFit,
+    OrderProblem,
+    SpectralData,
+    is_stable,
+    response,
+)
+from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
+from hopkinson.analysis.noise import NoiseSpectrum, active_end
+from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.refined_iv import (
-    TransferFit,
-    output_error_refine,
-    refined_iv_fit,
-    simulate,
-    stabilised,
-)
-from hopkinson.analysis.resample import (
-    DEFAULT_ANALYSIS_RATE_HZ,
-    estimate_delay_samples,
-    resample_to_rate,
-)
-from numpy.lib.stride_tricks import sliding_window_view
-from scipy import fft, linalg, signal
+from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate, shift_samples
+from scipy import fft, signal, special
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10
-# An identified mode whose band the reference hardly excites (input amplitude spectrum around
-# its natural frequency below this fraction of the spectrum's peak) is not supported by the data.
-EXCITATION_FLOOR = 1e-2
-# A final model with a pole this close to the unit circle (a time constant beyond 10⁶ samples,
-# seconds at the analysis rate) sits on the stability boundary: the fit pushed against it, so
-# the data call for an unstable model. It is treated as unstable.
+# A final model with a pole this close to the unit circle sits on the stability boundary.
 MARGINAL_POLE = 1e-6
 # Below this fit percentage the model is reported as explaining little of the response.
 POOR_FIT_PERCENT = 50.0
+# The order test: a higher order must be significant at this level (F test on V) ...
+SIGNIFICANCE = 0.01
+# ... and lower V by more than this fraction (DEFAULT knee_tolerance) to be preferred.
+KNEE_TOLERANCE = 0.01
+# Chance level of a validation cost difference (V units: half a χ² of a few degrees of freedom).
+CHANCE_COST = 2.0
+# A higher order must change the excitation-weighted frequency response by more than this (RMS,
+# relative) to be preferred: below it, it only mends the discrete model's own approximation.
+FRF_TOLERANCE = 1e-3
+# More bins than this are summed in groups of adjacent bins (same cost while G is flat there).
+MAX_BINS = 2048
+# A response leading the reference by more than this (samples, significant) is reported.
+LEAD_WARNING_SAMPLES = 0.2
+# V per degree of freedom above this: the model, not the noise, dominates the residual.
+MODEL_ERROR_RATIO = 2.0
+# Quiet stretches shorter than this are not used for a noise spectrum.
+MIN_QUIET = 32
+
+
+@dataclass
+class FitContext:
+    """What the fit worked on (normalised units), kept for analysis.uncertainty; not serialised."""
+
+    sample_interval_s: float
+    scale_u: float  # the record's reference = scale_u × u
+    scale_y: float
+    u: np.ndarray  # window, normalised, baseline and drift removed
+    y: np.ndarray
+    window_start: int  # index of the window's first sample in the analysis-rate record
+    bin_frequency_hz: np.ndarray  # frequencies of the fitted DFT bins
+    u_bins: np.ndarray  # DFT of u at those bins
+    y_bins: np.ndarray
+    var_u: np.ndarray  # noise variance per bin
+    var_y: np.ndarray
+    group: int  # bins per group in `spectral` (1: per bin)
+    spectral: SpectralData
+    noise_u: NoiseSpectrum  # normalised units
+    noise_y: NoiseSpectrum
+    fits: dict[int, OrderFit]  # every order evaluated
+    delay_mode: str | float
+    significance: float
+    knee_tolerance: float
+    asked_order: int | None
+    model_error_ratio: float  # V / degrees of freedom of the chosen order (≈ 1: noise explains it)
 
 
 @dataclass
 class Identification:
     """The identified model and everything that went into choosing it.
 
-    Losses are sums of squared errors in response units² over the aligned record; index 0 of
-    every *_by_order list is order 1; a loss is inf where that order's fit failed (unstable).
+    Losses are the errors-in-variables output-error cost V (dimensionless: each fitted DFT bin
+    adds its error over its noise; ≈ the number of bins for the right model); index 0 of every
+    *_by_order list is order 1; NaN where an order was not evaluated.
     """
 
     model: DiscreteModel
     order: int
-    loss_by_order: list[float]  # bias-corrected output-error loss (the order choice uses it)
-    arx_loss_by_order: list[float]  # plain least-squares ||g2||², one factorisation
-    aic_by_order: list[float]  # on the bias-corrected loss
+    loss_by_order: list[float]  # V_n (the order choice uses it)
+    arx_loss_by_order: list[float]  # plain least-squares ||g2||², one factorisation (normalised units)
+    aic_by_order: list[float]  # on V
     bic_by_order: list[float]
-    fit_percent: float  # 100·(1 − ||y − ŷ|| / ||y − ȳ||) of the final model
-    delay_samples: float  # input delay removed (samples at the analysis rate)
-    modes: list[dict[str, Any]]  # per pole pair / real pole: natural_frequency_hz, damping_ratio
+    fit_percent: float  # 100·(1 − ||y − ŷ|| / ||y − ȳ||) of the final model over the fitted window
+    delay_samples: float  # causal fractional input delay τ ≥ 0 (samples at the analysis rate)
+    modes: list[dict[str, Any]]  # per pole pair / real pole: natural_frequency_hz, damping_ratio, kind, supported
     warnings: list[str]
     converged: bool
     iterations: int
-    order_selection: str  # "knee" (chosen from the losses) or "asked"
-    knee_tolerance: float  # relative loss tolerance used for the knee
+    order_selection: str  # "knee" (chosen by the order test) or "asked"
+    knee_tolerance: float  # relative gain in V a higher order must also bring
     preprocessing: dict[str, Any] = field(default_factory=dict)
     supported_band_hz: tuple[float, float] | None = None  # band the excitation supports
-    noise: dict[str, float | None] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
+    noise: dict[str, Any] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
     order_evidence: dict[str, Any] = field(default_factory=dict)  # why this order
+    context: FitContext | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def sample_interval_s(self) -> float:
+        return self.model.sample_interval_s
+
+    @property
+    def poles(self) -> np.ndarray:
+        return self.model.poles
+
+    @property
+    def zeros(self) -> np.ndarray:
+        return self.model.zeros
 
     @property
     def main_mode(self) -> dict[str, Any] | None:
@@ -104,20 +172,8 @@ class Identification:
         poles = [p for q in keep for p in ((q, q.conjugate()) if q.imag > 0 else (q,))]
         return np.array(poles, dtype=complex)
 
-    @property
-    def sample_interval_s(self) -> float:
-        return self.model.sample_interval_s
-
-    @property
-    def poles(self) -> np.ndarray:
-        return self.model.poles
-
-    @property
-    def zeros(self) -> np.ndarray:
-        return self.model.zeros
-
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready fields: the model JSON (DESIGN.md) plus the fit details; inf → None."""
+        """JSON-ready fields: the model JSON (DESIGN.md) plus the fit details; inf/NaN → None."""
         out = self.model.to_dict()
         out.update(
             {
@@ -137,7 +193,7 @@ class Identification:
                 "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
                 "nonminimum_phase_zeros": complex_pairs(self.nonminimum_phase_zeros),
                 "noise": dict(self.noise),
-                "order_evidence": dict(self.order_evidence),
+                "order_evidence": _jsonable(self.order_evidence),
             }
         )
         return out
@@ -145,6 +201,18 @@ class Identification:
 
 def _finite_or_none(values: list[float]) -> list[float | None]:
     return [float(v) if v is not None and math.isfinite(v) else None for v in values]
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
 
 
 def modes_of(
@@ -193,33 +261,85 @@ def main_mode(modes: list[dict[str, Any]]) -> dict[str, Any] | None:
     return min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else None
 
 
+# ------------------------------------------------------------------------------ the order test
+def choose_order(
+    validation: dict[int, float],
+    change: dict[tuple[int, int], float],
+    tolerance: float = KNEE_TOLERANCE,
+    chance: float = CHANCE_COST,
+    frf_tolerance: float = FRF_TOLERANCE,
+) -> int | None:
+    """The smallest order no higher order beats; m beats n when both
+    - on held-out bins it predicts better: validation cost below (1 − `tolerance`) × n's
+      less `chance` (an extra pole pair can always sit on a chance peak of the noise in the
+      bins it was fitted on; on bins it never saw that only costs), and
+    - it changes the response where the pulse has energy: `change[(n, m)]`, the excitation-
+      weighted RMS of the difference of the two frequency responses relative to n's, above
+      `frf_tolerance` (a high-SNR record shows even the tiny mismatch between a rational
+      discrete model and a continuous sensor; a pole pair that only mends that is parasitic).
+    """
+    finite = sorted(n for n, v in validation.items() if math.isfinite(v))
+    for n in finite:
+        if not any(
+            validation[m] < validation[n] * (1.0 - tolerance) - chance and change.get((n, m), math.inf) > frf_tolerance
+            for m in finite if m > n
+        ):
+            return n
+    return None
+
+
+def response_change(fits: dict[int, OrderFit], data: SpectralData) -> dict[tuple[int, int], float]:
+    """Excitation-weighted RMS relative difference of the frequency responses of every pair of
+    evaluated orders (see choose_order)."""
+    weight = data.suu
+    responses = {n: response(f, data.omega) for n, f in fits.items()}
+    out = {}
+    for n, hn in responses.items():
+        norm = float(np.sum(weight * np.abs(hn) ** 2))
+        for m, hm in responses.items():
+            if m > n:
+                out[(n, m)] = math.sqrt(float(np.sum(weight * np.abs(hm - hn) ** 2)) / norm) if norm > 0 else math.inf
+    return out
+
+
+def validation_cost(data_halves: tuple[SpectralData, SpectralData], fit: OrderFit, delay_mode: str | float,
+                    max_delay: int, max_evaluations: int) -> float:
+    """Two-fold validation over interleaved bins: fit on the even bins (from `fit`), cost on
+    the odd ones, and the other way round; the sum."""
+    total = 0.0
+    for train, test in (data_halves, data_halves[::-1]):
+        trained = OrderProblem(train, fit.order, delay_mode, max_delay).solve(replace(fit, cost=math.nan),
+                                                                              max_evaluations)
+        checker = OrderProblem(test, fit.order, delay_mode, max_delay)
+        total += checker.cost(checker.pack(trained)) if is_stable(trained.a) else math.inf
+    return total
+
+
+# ------------------------------------------------------------------------------ identify
 def identify(
     record: Record,
     max_order: int = 12,
     order: int | None = None,
     sample_rate_hz: float | None = DEFAULT_ANALYSIS_RATE_HZ,
     *,
-    knee_tolerance: float = 0.01,
+    knee_tolerance: float = KNEE_TOLERANCE,
+    significance: float = SIGNIFICANCE,
     max_delay_samples: int = 32,
     remove_delay: bool = True,
-    search_iterations: int = 5,
-    max_iterations: int = 40,
     patience: int | None = 3,
+    max_evaluations: int = 60,
 ) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record.
 
-    max_order: the largest order tried (losses are reported for 1 … max_order).
-    order: fit exactly this order (errors if unstable or not converged; a warning if the data
-        support only a lower order); None: choose it at the knee of the bias-corrected loss.
-    sample_rate_hz: analysis rate; a faster record is resampled to it. None: use the record's.
-    knee_tolerance: relative loss above the best order's that still counts as "no longer
-        falling" (the chance improvement 2(2N+1) parameters could give is added to it).
-    max_delay_samples: largest channel offset searched (samples at the analysis rate).
-    remove_delay: False keeps the channels as recorded (delay 0).
-    search_iterations / max_iterations: SRIV iterations per order while choosing / for the
-        final order.
-    patience: stop trying higher orders once this many past the knee gave no gain (their
-        losses are NaN: not evaluated); None tries every order up to max_order.
+    max_order: the largest order tried. order: fit exactly this order (an error if its fit is
+        unstable; a warning if the data support only a lower one); None: chosen by the order
+        test (module docstring, step 6).
+    sample_rate_hz: analysis rate; a faster record is resampled to it. None: the record's.
+    knee_tolerance / significance: the order test's practical and statistical thresholds.
+    max_delay_samples: largest input delay searched (samples at the analysis rate).
+    remove_delay: False fixes the delay at 0.
+    patience: stop trying higher orders once this many past the current choice gave no gain
+        (their losses are NaN: not evaluated); None tries every order up to max_order.
     """
     if max_order < 1:
         raise AnalysisError(f"max_order must be at least 1, got {max_order}")
@@ -233,150 +353,406 @@ def identify(
     if rec is not record:
         pre["resampled_to_hz"] = rec.sample_rate_hz
     ref, resp = _checked_channels(rec)
-    ref, resp, baselines = _remove_baselines(ref, resp)
-    pre.update(baselines)
-    quiet = int(baselines.get("baseline_samples", 0))
-    noise = {
-        "reference_rms": float(np.std(ref[:quiet])) if quiet else None,
-        "response_rms": float(np.std(resp[:quiet])) if quiet else None,
-    }
-    try:
-        band = supported_band_hz(ref, rec.sample_interval_s, noise["reference_rms"])
-    except AnalysisError:
-        band = None
-
-    shifts: range | None = None
-    xcorr = 0.0
-    if remove_delay:
-        shifts, xcorr = _shift_range(ref, resp, max_delay_samples)
-        pre["cross_correlation_delay_samples"] = xcorr
-    widest = max(abs(shifts.start), abs(shifts.stop - 1)) if shifts is not None else 0
+    dt = rec.sample_interval_s
     need = MIN_SAMPLES_PER_PARAMETER * (2 * n_max + 1)
-    if ref.size - widest < need:
+    if ref.size < need:
         what = f"order {order}" if order is not None and order >= max_order else f"max order {n_max}"
         raise AnalysisError(
-            f"record too short for {what}: {ref.size} samples at the analysis rate, "
-            f"need at least {need + widest} ({MIN_SAMPLES_PER_PARAMETER} per parameter, "
-            "plus the delay searched)"
+            f"record too short for {what}: {ref.size} samples at the analysis rate, need at least {need} "
+            f"({MIN_SAMPLES_PER_PARAMETER} per parameter)"
         )
+    scale_u = _scale(ref)
+    scale_y = _scale(resp)
+    u_all, y_all = (ref - np.median(ref)) / scale_u, (resp - np.median(resp)) / scale_y
+    prep = _prepare(u_all, y_all, dt, max_delay_samples, warnings)
+    pre.update(
+        {
+            "reference_baseline": float(np.median(ref) + prep.baseline_u * scale_u),
+            "response_baseline": float(np.median(resp) + prep.baseline_y * scale_y),
+            "baseline_removed": True,
+            "drift_removed": prep.drift_removed,
+            "window_start_s": rec.start_time_s + prep.start * dt,
+            "window_samples": int(prep.u.size),
+            "fitted_bins": prep.spectral.bins,
+            "bin_group": prep.group,
+            "transient_term": prep.spectral.transient,
+            "scale_reference": scale_u,
+            "scale_response": scale_y,
+        }
+    )
+    data = prep.spectral
 
-    # Bias-corrected fit of every order, each at its own best delay (the SRIV fit alternates
-    # with the delay; the search starts from the order-2 fit at the correlation peak).
-    delay = 0
-    if shifts is not None:
-        start = min(max(round(xcorr), shifts.start), shifts.stop - 1)
-        _, delay = _fit_at_best_delay(ref, resp, min(2, n_max), start, shifts, search_iterations)
-    # Losses are compared per row (mean squared output error) while searching; `patience`
-    # orders past the knee with no gain end the search (the rest stay NaN: not evaluated).
-    tolerance = knee_tolerance + 2.0 * (2 * n_max + 1) / (ref.size - widest - n_max)
-    floor = 1e-12 * long_dot(resp, resp) / ref.size
-    fits: list[TransferFit | None] = [None] * n_max
-    delays: list[int] = [delay] * n_max
-    mean_losses = [float("nan")] * n_max
-    for n in range(1, n_max + 1):
-        fit, delay = _fit_at_best_delay(ref, resp, n, delay, shifts, search_iterations)
-        fits[n - 1], delays[n - 1] = fit, delay
-        # A fit that settles on an unstable estimate is no candidate (its reflected stand-in
-        # may still fit tolerably, but it is not what the data say).
-        mean_losses[n - 1] = float("inf") if fit.estimate_unstable else _mean_loss(fit, ref.size, delay)
-        knee_so_far = _knee(mean_losses, tolerance, floor)
-        must_reach = order or 0
-        if patience is not None and knee_so_far is not None and n >= max(knee_so_far + patience, must_reach):
-            break
-    # Quoted as sums over the rows every order has in common.
-    rows = ref.size - n_max - max(abs(d) for d in delays)
-    losses = [v * rows for v in mean_losses]
-    knee = _knee(losses, tolerance, floor * rows)
-    if knee is None:
+    # Delay start: the causal delay that best fits a second-order model (a coarse grid).
+    delay_mode: str | float = "causal" if remove_delay else 0.0
+    max_delay_samples = max(1, int(max_delay_samples))
+    tau0 = _initial_delay(data, prep, min(2, n_max), max_delay_samples) if remove_delay else 0.0
+    # Each order needs more real residuals (two per bin) than parameters (2n + 2, and n more
+    # with a transient term); a narrow band limits the orders that can be tried.
+    per_order = 3 if data.transient else 2
+    allowed = (2 * data.bins - 4) // per_order
+    if allowed < 1 or (order is not None and order > allowed):
         raise AnalysisError(
-            f"no stable model of order 1 … {n_max} fits this record (every bias-corrected fit was unstable)"
+            f"the supported band holds only {data.bins} frequency bins: too few for "
+            f"{'order ' + str(order) if order is not None else 'any model'} (a longer record or a shorter pulse)"
         )
+    if n_max > allowed:
+        warnings.append(f"orders above {allowed} were not tried: the supported band holds only {data.bins} "
+                        "frequency bins")
+        n_max = allowed
 
-    unsupported = ""
+    fits: dict[int, OrderFit] = {}
+    parameters: dict[int, int] = {}
+    costs: dict[int, float] = {}
+    validation: dict[int, float] = {}
+    halves = data.halves()
+    tau = tau0
+    previous: OrderFit | None = None
+    for n in range(1, n_max + 1):
+        problem = OrderProblem(data, n, delay_mode, max_delay_samples)
+        starts = [problem.linear_start(tau)]
+        if abs(tau - tau0) > 0.5:
+            starts.append(problem.linear_start(tau0))
+        if previous is not None:
+            starts.append(previous.embedded())
+        best = None
+        for start in starts:
+            fitted = replace(problem.solve(start, max_evaluations), start_unstable=starts[0].start_unstable)
+            if best is None or fitted.cost < best.cost:
+                best = fitted
+        assert best is not None
+        fits[n], parameters[n], costs[n] = best, problem.size, best.cost
+        validation[n] = (validation_cost(halves, best, delay_mode, max_delay_samples, max_evaluations // 3)
+                         if _acceptable(best) else math.inf)  # an unstable or marginal order is no candidate
+        previous, tau = best, best.delay
+        if patience is not None:
+            chosen_so_far = choose_order(validation, response_change(fits, data), knee_tolerance)
+            if chosen_so_far is not None and n >= max(chosen_so_far + patience, order or 0):
+                break
+    changes = response_change(fits, data)
+    chosen_auto = choose_order(validation, changes, knee_tolerance)
+    evidence: dict[str, Any] = {}
+    if chosen_auto is None:
+        raise AnalysisError(f"no stable model of order 1 … {n_max} fits this record (every fit was unstable)")
+
+    def polished(n: int) -> OrderFit:
+        """The order-n fit iterated to convergence (the search gave each order a short budget)."""
+        if not fits[n].converged:
+            done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 8 * max_evaluations)
+            fits[n] = replace(done, start_unstable=fits[n].start_unstable)
+        return fits[n]
+
     if order is None:
-        chosen, selection = knee, "knee"
+        chosen, selection = chosen_auto, "knee"
+        if not _acceptable(polished(chosen)):
+            others = sorted((n for n in fits if n != chosen and math.isfinite(validation[n])),
+                            key=lambda n: (validation[n], n))
+            fallback = next((n for n in others if _acceptable(polished(n))), None)
+            if fallback is None:
+                raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
+                                    "or outside the unit circle)")
+            warnings.append(f"the order-{chosen} fit became unstable when iterated to convergence; order {fallback} "
+                            "(next best on held-out bins) is used")
+            chosen = fallback
     else:
         chosen, selection = order, "asked"
-        if knee < order:
-            drop = _relative_drop(losses, knee, order)
-            unsupported = (
-                f"the data support only order {knee}: the bias-corrected loss falls by {drop:.2%} from "
-                f"order {knee} to {order} (tolerance {tolerance:.2%}); the extra poles are not "
-                "determined by this record (a mode beyond the excitation's band?)"
-            )
-            warnings.append(f"order {order} was asked but {unsupported}")
-
-    delay = delays[chosen - 1]
-    u, y = remove_input_delay(ref, resp, delay)
-    chosen_fit = fits[chosen - 1]
-    assert chosen_fit is not None  # the knee and an asked order are always evaluated
-    final = _finish(u, y, chosen_fit, max_iterations)
-    if order is not None:
-        if not _acceptable(final):
-            why = unsupported if knee < order else "is the response really the sensor's answer to this reference?"
+        if not _acceptable(polished(order)):
+            why = (f"the data support only order {chosen_auto}" if chosen_auto < order
+                   else "is the response really the sensor's answer to this reference?")
             raise AnalysisError(
-                f"the order-{order} fit is unstable: the estimate settles with a pole on or outside the "
-                f"unit circle ({why})"
+                f"the order-{order} fit is unstable: the estimate settles with a pole on or outside the unit "
+                f"circle ({why})"
             )
-        if not final.converged:
-            raise AnalysisError(
-                f"the order-{order} fit did not converge in {final.iterations} iterations; try a lower order"
+        if chosen_auto < order:
+            warnings.append(
+                f"order {order} was asked but the data support only order {chosen_auto}: on frequency bins not "
+                f"used for the fit, order {order} predicts no better (validation cost {validation[order]:.4g} "
+                f"against {validation[chosen_auto]:.4g}); the extra poles are not determined by this record (a "
+                "mode beyond the excitation's band?)"
             )
-    elif not _acceptable(final):
-        final, chosen = _stable_fallback(ref, resp, fits, delays, chosen, losses, max_iterations, warnings)
-        delay = delays[chosen - 1]
-        u, y = remove_input_delay(ref, resp, delay)
-    losses[chosen - 1] = min(losses[chosen - 1], _mean_loss(final, ref.size, delay) * rows)
-    aic, bic = _information_criteria(losses, rows)
-    # Plain least squares at the final delay, every order from one factorisation: reported
-    # beside the bias-corrected losses (it keeps falling, so it cannot choose the order).
-    arx_losses = [float(v) for v in arx_loss_by_order(u, y, n_max)]
+    final = fits[chosen]
+    if not final.converged:
+        warnings.append(f"the order-{chosen} fit stopped before converging in {final.evaluations} evaluations "
+                        "(its cost was the lowest reached)")
 
-    dt = rec.sample_interval_s
-    model = DiscreteModel(dt, final.a, final.b, float(delay), info={"fit_method": final.method})
-    pre["response_offset_fitted"] = final.offset
-    fit = fit_percent(y, simulate(u, final.a, final.b) + final.offset)
+    # The model in the record's units: the scales go back into B.
+    b = final.b * (scale_y / scale_u)
+    model = DiscreteModel(dt, final.a, b, float(final.delay), info={"fit_method": "eiv-frequency-oe"})
+    band = prep.band
     modes = modes_of(model.poles, dt, band)
-    warnings += _excitation_warnings(u, dt, modes)
+    y_hat = _simulate(prep.u, final)
+    residual = prep.y - y_hat
+    fit = fit_percent(prep.y, y_hat)
+    pre["response_offset_fitted"] = float(np.mean(residual) * scale_y)
+    dof = 2 * data.bins - parameters[chosen]
+    ratio = 2.0 * final.cost / dof if dof > 0 else math.inf
+    warnings += _claims_warnings(modes, band, model)
+    if remove_delay:
+        warnings += _lead_warning(data, final, dt, significance)
+    if ratio > MODEL_ERROR_RATIO:
+        warnings.append(
+            f"the model leaves {ratio:.1f}× the residual the measured noise explains (V per degree of freedom): "
+            "the residual is mostly model error (unmodelled dynamics of the sensor or the reference chain, or "
+            "noise the quiet parts of the record did not show); the uncertainty is widened by √ of that factor"
+        )
     if fit < POOR_FIT_PERCENT:
         warnings.append(
             f"the model explains only {fit:.1f} % of the response (fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)): "
             "check that the channels belong together and that the response is not mostly noise"
         )
-    if final.reflected:
-        warnings.append(
-            f"the order-{chosen} fit had poles outside the unit circle during the iteration; they were "
-            "reflected inside (spare poles nearly cancelling zeros: a lower order may be enough)"
-        )
-    if not final.converged:
-        warnings.append(
-            f"the order-{chosen} fit did not fully converge in {final.iterations} iterations "
-            "(its loss was the lowest reached)"
-        )
-    model.info.update(
-        {"loss_by_order": losses, "fit_percent": fit, "converged": final.converged, "warnings": warnings}
+    loss_list = [fits[n].cost if n in fits else math.nan for n in range(1, n_max + 1)]
+    aic, bic = _information_criteria(loss_list, [parameters.get(n, 0) for n in range(1, n_max + 1)], data.bins)
+    shift = int(math.floor(final.delay))
+    arx_u, arx_y = remove_input_delay(u_all, y_all, shift)
+    try:
+        arx_losses = [float(v) for v in arx_loss_by_order(arx_u, arx_y, n_max)]
+    except AnalysisError:
+        arx_losses = [math.nan] * n_max
+    model.info.update({"loss_by_order": loss_list, "fit_percent": fit, "converged": final.converged,
+                       "warnings": warnings})
+    noise = {
+        "reference_rms": prep.noise_u.rms * scale_u if prep.noise_u.samples else None,
+        "response_rms": prep.noise_y.rms * scale_y if prep.noise_y.samples else None,
+        "reference_source": prep.noise_u.source,
+        "response_source": prep.noise_y.source,
+        "residual_rms": float(np.std(residual) * scale_y),
+        "v_per_degree_of_freedom": ratio,
+    }
+    evidence.update({
+        "criterion": "the smallest order no higher order beats, both on held-out frequency bins (two-fold "
+                     f"validation, by more than {knee_tolerance:.0%} + {CHANCE_COST:g}) and in the excitation-weighted "
+                     f"frequency response (by more than {FRF_TOLERANCE:.1%} RMS)",
+        "chosen_by_validation": chosen_auto,
+        "selection": selection,
+        "bins": data.bins,
+        "parameters_by_order": {str(n): parameters[n] for n in sorted(parameters)},
+        "cost_by_order": {str(n): fits[n].cost for n in sorted(fits)},
+        "validation_cost_by_order": {str(n): validation[n] for n in sorted(validation)},
+        "response_change_to_next_order": {str(n): changes[(n, n + 1)] for n in sorted(fits) if (n, n + 1) in changes},
+    })
+    context = FitContext(
+        sample_interval_s=dt, scale_u=scale_u, scale_y=scale_y, u=prep.u, y=prep.y, window_start=prep.start,
+        bin_frequency_hz=prep.bin_hz, u_bins=prep.u_bins, y_bins=prep.y_bins, var_u=prep.var_u,
+        var_y=prep.var_y, group=prep.group, spectral=data, noise_u=prep.noise_u, noise_y=prep.noise_y,
+        fits=fits, delay_mode=delay_mode, significance=significance, knee_tolerance=knee_tolerance,
+        asked_order=order, model_error_ratio=ratio,
     )
     return Identification(
-        model=model,
-        order=chosen,
-        loss_by_order=losses,
-        arx_loss_by_order=arx_losses,
-        aic_by_order=aic,
-        bic_by_order=bic,
-        fit_percent=fit,
-        delay_samples=float(delay),
-        modes=modes,
-        warnings=warnings,
-        converged=final.converged,
-        iterations=final.iterations,
-        order_selection=selection,
-        knee_tolerance=tolerance,
-        preprocessing=pre,
-        supported_band_hz=band,
-        noise=noise,
-        order_evidence={"criterion": selection, "knee_order": knee, "tolerance": tolerance,
-                        "loss_by_order": _finite_or_none(losses)},
+        model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,
+        bic_by_order=bic, fit_percent=fit, delay_samples=float(final.delay), modes=modes, warnings=warnings,
+        converged=final.converged, iterations=final.evaluations, order_selection=selection,
+        knee_tolerance=knee_tolerance, preprocessing=pre, supported_band_hz=band, noise=noise,
+        order_evidence=evidence, context=context,
     )
+
+
+# ------------------------------------------------------------------------------ preparation
+@dataclass
+class _Prepared:
+    u: np.ndarray
+    y: np.ndarray
+    start: int
+    baseline_u: float
+    baseline_y: float
+    drift_removed: bool
+    noise_u: NoiseSpectrum
+    noise_y: NoiseSpectrum
+    band: tuple[float, float]
+    bin_hz: np.ndarray
+    u_bins: np.ndarray
+    y_bins: np.ndarray
+    var_u: np.ndarray
+    var_y: np.ndarray
+    group: int
+    spectral: SpectralData
+    pulse_start: int
+
+
+def _scale(x: np.ndarray) -> float:
+    """The channel's largest excursion from its median: the unit the fit works in."""
+    return float(np.max(np.abs(x - np.median(x))))
+
+
+def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: list[str]) -> _Prepared:
+    """Baselines, drift, noise spectra, the fitted window, the supported band and the DFT bins."""
+    n = u.size
+    try:
+        pulse = pulse_width(u, dt)
+    except AnalysisError as exc:
+        raise AnalysisError(f"the reference has no pulse to identify from: {exc}") from None
+    width = max(1, int(round(pulse.width_s / dt)))
+    i_start = int(math.floor(pulse.start_s / dt))
+    i_end = int(math.ceil(pulse.end_s / dt))
+    margin = max(4, width // 2)
+    pre_end = max(i_start - margin, 0)
+    # Baselines: the mean before the pulse.
+    base_u = float(np.mean(u[:pre_end])) if pre_end >= 16 else 0.0
+    base_y = float(np.mean(y[:pre_end])) if pre_end >= 16 else 0.0
+    u = u - base_u
+    y = y - base_y
+    noise_y0 = float(np.std(y[:pre_end])) if pre_end >= 16 else 0.0
+    if noise_y0 == 0.0:  # no lead-in: a robust level from the record's last tenth
+        tail = y[-max(n // 10, 16):]
+        noise_y0 = float(1.4826 * np.median(np.abs(tail - np.median(tail))))
+    quiet_from = active_end(y, noise_y0, i_end)
+    post_margin = max(20, 2 * width, (quiet_from - i_start) // 4)
+    end = min(n, quiet_from + post_margin)
+    truncated = quiet_from + post_margin > n
+    pre_window = max(3 * width, 32) + max_delay
+    start = max(0, i_start - pre_window)
+    cold_start = i_start - start < min(pre_window, 16)
+    # Noise: the reference before the pulse and in flight after it; the response before the
+    # pulse and after its ringing. A drift: the line through the quiet stretches before and after.
+    ref_after = min(n, i_end + 2 * width + max_delay)
+    u_segments = [slice(0, pre_end), slice(ref_after, n)]
+    y_segments = [slice(0, pre_end), slice(end, n)]
+    drift = False
+    for x, segs in ((u, u_segments), (y, y_segments)):
+        if all(s.stop - s.start >= MIN_QUIET for s in segs):
+            idx = np.concatenate([np.arange(s.start, s.stop) for s in segs])
+            slope, intercept = np.polyfit(idx, x[idx], 1)
+            x -= slope * np.arange(n) + intercept
+            drift = True
+    rate = 1.0 / dt
+    noise_u = NoiseSpectrum.measure(u, rate, u_segments)
+    noise_y = NoiseSpectrum.measure(y, rate, y_segments)
+    if noise_u.samples == 0:
+        warnings.append("the reference has no quiet stretch (before the pulse or in flight after it) to measure "
+                        "its noise: it is taken as noise-free, which understates the uncertainty")
+    uw, yw = u[start:end], y[start:end]
+    try:
+        band = supported_band_hz(u, dt, noise_psd=noise_u.at if noise_u.samples else None)
+    except AnalysisError as exc:
+        raise AnalysisError(f"the reference's pulse is lost in its noise: {exc}") from None
+    length = uw.size
+    freq = fft.rfftfreq(length, dt)
+    keep = (freq >= max(band[0], freq[1] if freq.size > 1 else 0.0)) & (freq <= band[1])
+    keep[0] = False
+    if not np.any(keep):
+        raise AnalysisError("the supported band holds no frequency bin of the fitted window (record too short)")
+    u_spec = fft.rfft(uw)[keep]
+    y_spec = fft.rfft(yw)[keep]
+    bin_hz = freq[keep]
+    omega = 2.0 * np.pi * bin_hz * dt
+    var_u = noise_u.bin_variance(bin_hz, length) if noise_u.samples else np.zeros(bin_hz.size)
+    if noise_y.samples == 0:
+        noise_y = NoiseSpectrum.white(noise_y0, rate, "record tail (robust)", 0)
+        warnings.append("the response has no quiet stretch to measure its noise: a robust level from the end of "
+                        "the record is used")
+    var_y = noise_y.bin_variance(bin_hz, length)
+    floor = 1e-12 * float(np.mean(np.abs(y_spec) ** 2))  # a noise-free record still gets finite weights
+    var_y = np.maximum(var_y, floor)
+    transient = truncated or cold_start
+    if truncated:
+        warnings.append("the record ends before the response has died away: a transient term is fitted with the "
+                        "model, and the uncertainty is larger than a complete record would give")
+    if transient:
+        t = np.arange(length, dtype=float)
+        ramp = fft.rfft((t - t.mean()) / length)[keep]
+        spectral = SpectralData.per_bin(omega, u_spec, y_spec, var_u, var_y, ramp, True)
+        group = 1
+    else:
+        group = max(1, math.ceil(bin_hz.size / MAX_BINS))
+        if group == 1:
+            spectral = SpectralData.per_bin(omega, u_spec, y_spec, var_u, var_y)
+        else:
+            spectral = SpectralData.grouped_from(omega, u_spec, y_spec, var_u, var_y, group)
+    return _Prepared(uw, yw, start, base_u, base_y, drift, noise_u, noise_y, band, bin_hz, u_spec, y_spec,
+                     var_u, var_y, group, spectral, i_start)
+
+
+def _initial_delay(data: SpectralData, prep: _Prepared, order: int, max_delay: int) -> float:
+    """A start for the causal delay: on a half-sample grid up to just past the cross-correlation
+    lag, the three best linear starts of `order` are refined and the best refined delay kept."""
+    try:
+        xcorr = estimate_delay_samples(prep.u, prep.y, max(1, min(max_delay, prep.u.size // 4)))
+    except AnalysisError:
+        xcorr = 0.0
+    top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
+    problem = OrderProblem(data, order, "causal", max_delay)
+    starts = sorted((problem.linear_start(float(tau)) for tau in np.arange(0.0, top + 0.25, 0.5)),
+                    key=lambda f: f.cost)
+    picked: list[OrderFit] = []
+    for start in starts:
+        if all(abs(start.delay - p.delay) >= 1.0 for p in picked):
+            picked.append(start)
+        if len(picked) == 3:
+            break
+    refined = [problem.solve(start, 40) for start in picked]
+    return min(refined, key=lambda f: f.cost).delay if refined else 0.0
+
+
+# ------------------------------------------------------------------------------ checks
+def _acceptable(fit: OrderFit) -> bool:
+    """Stable with a margin, and not a fit whose linear start called for an unstable model
+    while the optimum presses against the unit circle."""
+    if fit.order == 0:
+        return True
+    radius = float(np.max(np.abs(np.roots(fit.a))))
+    if radius >= 1.0 - MARGINAL_POLE:
+        return False
+    return not (fit.start_unstable and radius > 1.0 - 1e-3)
+
+
+def _claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], model: DiscreteModel) -> list[str]:
+    out = []
+    lo, hi = band
+    for m in modes:
+        f = m.get("natural_frequency_hz")
+        if m["kind"] == "complex" and not m["supported"] and f is not None:
+            out.append(
+                f"the mode at {f / 1e3:.4g} kHz (ζ = {m['damping_ratio']:.3g}) lies outside the band the excitation "
+                f"supports ({lo / 1e3:.3g}–{hi / 1e3:.3g} kHz): this record cannot determine it, so it is kept out "
+                "of the key figures and the DCM"
+            )
+    if main_mode(modes) is None:
+        out.append(
+            f"no resonance (complex pole pair) lies inside the supported band ({lo / 1e3:.3g}–{hi / 1e3:.3g} kHz): "
+            "the sensor's natural frequency and damping are not reported; a shorter pulse would excite it"
+        )
+    return out
+
+
+def _lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: float) -> list[str]:
+    """Whether the response leads the reference: the same order with the delay free to go
+    negative, when that fits significantly better (the causal model cannot follow a lead)."""
+    if fit.delay > LEAD_WARNING_SAMPLES:
+        return []
+    problem = OrderProblem(data, fit.order, "free")
+    free = problem.solve(replace(fit, cost=math.nan), 60)
+    gain = fit.cost - free.cost
+    dof = 2 * data.bins - problem.size
+    if free.delay >= -LEAD_WARNING_SAMPLES or dof <= 0 or gain <= 0:
+        return []
+    critical = float(special.fdtri(1, dof, 1.0 - significance))
+    if (2.0 * gain) / (2.0 * free.cost / dof) <= critical:
+        return []
+    lead = -free.delay
+    return [
+        f"the response leads the reference by about {lead:.2g} samples ({lead * dt * 1e6:.3g} µs): no sensor answers "
+        "before it is excited, so the channels are skewed (digitizer deskew, cable lengths, trigger alignment); the "
+        "model is kept causal (delay ≥ 0) and absorbs the lead into its zeros, which biases it — correct the skew"
+    ]
+
+
+# ------------------------------------------------------------------------------ helpers
+def _simulate(u: np.ndarray, fit: OrderFit) -> np.ndarray:
+    """Model output (B/A)·u(k − τ) from rest (the fractional delay by shift_samples)."""
+    shifted = shift_samples(u, fit.delay) if fit.delay else u
+    return signal.lfilter(fit.b, fit.a, shifted)
+
+
+def _information_criteria(losses: list[float], parameters: list[int], bins: int) -> tuple[list[float], list[float]]:
+    """AIC and BIC on V (2K real residuals of unit variance: −2 log L = 2V + const)."""
+    aic, bic = [], []
+    rows = 2 * bins
+    for loss, p in zip(losses, parameters, strict=True):
+        if math.isfinite(loss) and loss > 0:
+            aic.append(2.0 * loss + 2 * p)
+            bic.append(2.0 * loss + p * math.log(rows))
+        else:
+            aic.append(math.nan)
+            bic.append(math.nan)
+    return aic, bic
 
 
 def _checked_channels(rec: Record) -> tuple[np.ndarray, np.ndarray]:
@@ -394,28 +770,6 @@ def _checked_channels(rec: Record) -> tuple[np.ndarray, np.ndarray]:
     return ref, resp
 
 
-def _remove_baselines(ref: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """Subtract each channel's mean over the quiet lead-in before the reference pulse.
-
-    The pulse starts where |reference| first exceeds 10 % of its peak (about its median);
-    the lead-in ends a margin before that. Without 16 quiet samples nothing is removed.
-    """
-    centred = np.abs(ref - np.median(ref))
-    start = int(np.argmax(centred > 0.1 * np.max(centred)))
-    margin = max(4, start // 10)
-    quiet = start - margin
-    if quiet < 16:
-        return ref, resp, {"baseline_removed": False}
-    ref_base = float(np.mean(ref[:quiet]))
-    resp_base = float(np.mean(resp[:quiet]))
-    return (
-        ref - ref_base,
-        resp - resp_base,
-        {"baseline_removed": True, "reference_baseline": ref_base, "response_baseline": resp_base,
-         "baseline_samples": quiet},
-    )
-
-
 def remove_input_delay(ref: np.ndarray, resp: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
     """(u, y) with y(k) = response(k + d) against u(k) = reference(k): removes a delay of d samples."""
     if d >= 0:
@@ -431,190 +785,16 @@ def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
     return 100.0 * (1.0 - math.sqrt(long_dot(error, error)) / spread) if spread > 0 else float("nan")
 
 
-def _shift_range(ref: np.ndarray, resp: np.ndarray, max_lag: int) -> tuple[range, float]:
-    """Input delays worth trying, and the cross-correlation delay that bounds them.
-
-    The cross-correlation peak includes the sensor's own response time (for a 27 kHz
-    resonance and a 10 µs pulse it sits ~10 samples after the pure delay), so it is only an
-    upper bound: shifts from −max_lag to one past the peak are allowed.
-    """
-    max_lag = int(max(1, min(max_lag, ref.size // 4)))
-    xcorr = estimate_delay_samples(ref, resp, max_lag)
-    return range(-max_lag, min(max_lag, math.ceil(xcorr) + 1) + 1), xcorr
-
-
-def _best_shift_for_denominator(
-    a: np.ndarray, ref: np.ndarray, resp: np.ndarray, nb: int, shifts: range
-) -> tuple[int, np.ndarray]:
-    """The delay d (and B) minimising Σ (y(k) − B(d⁻¹)·(u/A)(k − d))² with A held fixed.
-
-    With A fixed the output error is linear in B, so every shift is scored at once from the
-    autocorrelation of u/A (a Toeplitz system, scipy.linalg.solve_toeplitz) and its
-    cross-correlation with the response over the whole record (records start and end near
-    rest, so end effects are ignored). Alternating this with the SRIV fit minimises the
-    output error over the coefficients and the delay together.
-    """
-    length = ref.size
-    u_f = signal.lfilter([1.0], stabilised(a), ref)
-    auto = np.array([long_dot(u_f[: length - t], u_f[t:]) for t in range(nb)])
-    lags = range(shifts.start, shifts.stop - 1 + nb)
-    cross = np.array(
-        [long_dot(resp[m:], u_f[: length - m]) if m >= 0 else long_dot(resp[: length + m], u_f[-m:]) for m in lags]
-    )
-    windows = sliding_window_view(cross, nb)  # row i: c(d), …, c(d + nb − 1) for d = shifts[i]
-    try:
-        coef = linalg.solve_toeplitz(auto, windows.T)
-    except (linalg.LinAlgError, ValueError):
-        return shifts.start, np.zeros(nb)
-    explained = np.einsum("ij,ji->i", windows, coef)
-    i = int(np.argmax(explained))
-    return shifts[i], coef[:, i]
-
-
-def _fit_at_best_delay(
-    ref: np.ndarray,
-    resp: np.ndarray,
-    order: int,
-    delay: int,
-    shifts: range | None,
-    iterations: int,
-) -> tuple[TransferFit, int]:
-    """SRIV fit of `order`, alternated with the best delay for its denominator (≤ 4 rounds).
-
-    Starts from least squares at `delay`; after a move, from the fitted A and the B that
-    went with the new delay. Returns the fit with the lowest loss per row and its delay.
-    """
-    start: tuple[np.ndarray, np.ndarray] | None = None
-    best_fit: tuple[TransferFit, int] | None = None
-    tried: set[int] = set()
-    for _ in range(4):
-        u, y = remove_input_delay(ref, resp, delay)
-        a0, b0 = start if start is not None else arx_coefficients_by_order(u, y, order)[-1]
-        fit = refined_iv_fit(u, y, a0, b0, max_iterations=iterations)
-        tried.add(delay)
-        if best_fit is None or _mean_loss(fit, ref.size, delay) < _mean_loss(best_fit[0], ref.size, best_fit[1]):
-            best_fit = (fit, delay)
-        if shifts is None or not fit.stable:
-            break
-        best, b_best = _best_shift_for_denominator(fit.a, ref, resp, order + 1, shifts)
-        if best in tried:
-            break
-        delay, start = best, (fit.a, b_best)
-    assert best_fit is not None
-    return best_fit
-
-
-def _mean_loss(fit: TransferFit, n_samples: int, delay: int) -> float:
-    """Output-error loss per row of a fit on the record shifted by `delay`."""
-    rows = n_samples - abs(delay) - fit.order
-    return fit.oe_loss / rows if rows > 0 else float("inf")
-
-
-def _information_criteria(losses: list[float], rows: int) -> tuple[list[float], list[float]]:
-    aic, bic = [], []
-    for n, loss in enumerate(losses, start=1):
-        p = 2 * n + 1
-        if math.isfinite(loss) and loss > 0:
-            base = rows * math.log(loss / rows)
-            aic.append(base + 2 * p)
-            bic.append(base + p * math.log(rows))
-        else:
-            aic.append(float("inf"))
-            bic.append(float("inf"))
-    return aic, bic
-
-
-def _knee(losses: list[float], tolerance: float, floor: float) -> int | None:
-    """Smallest order whose loss is within `tolerance` (relative, plus `floor`) of the best."""
-    finite = [v for v in losses if math.isfinite(v)]
-    if not finite:
-        return None
-    best = min(finite)
-    for n, loss in enumerate(losses, start=1):
-        if math.isfinite(loss) and loss <= best * (1 + tolerance) + floor:
-            return n
-    return None
-
-
-def _relative_drop(losses: list[float], low: int, high: int) -> float:
-    a, b = losses[low - 1], losses[high - 1]
-    if not (math.isfinite(a) and math.isfinite(b)) or a <= 0:
-        return float("nan")
-    return (a - b) / a
-
-
-def _finish(u: np.ndarray, y: np.ndarray, start: TransferFit, max_iterations: int) -> TransferFit:
-    """Iterate SRIV to convergence from the search fit; if it will not settle, polish the
-    best iterate by minimising the output error directly (which has a clean stopping rule)."""
-    if not start.stable:
-        return start
-    fit = refined_iv_fit(u, y, start.a, start.b, max_iterations=max_iterations)
-    unstable = fit.estimate_unstable
-    if not fit.stable or fit.oe_loss > start.oe_loss:
-        fit = start
-    if fit.converged and not unstable:
-        return replace(fit, iterations=start.iterations + fit.iterations, converged=True)
-    polished = output_error_refine(u, y, fit)
-    return replace(
-        polished, iterations=start.iterations + fit.iterations, estimate_unstable=unstable or fit.estimate_unstable
-    )
-
-
-def _acceptable(fit: TransferFit) -> bool:
-    """Stable, not settled on an unstable estimate, and not hugging the unit circle."""
-    if not fit.stable or fit.estimate_unstable:
-        return False
-    return fit.order == 0 or float(np.max(np.abs(np.roots(fit.a)))) < 1.0 - MARGINAL_POLE
-
-
-def _stable_fallback(
-    ref: np.ndarray,
-    resp: np.ndarray,
-    fits: list[TransferFit | None],
-    delays: list[int],
-    chosen: int,
-    losses: list[float],
-    max_iterations: int,
-    warnings: list[str],
-) -> tuple[TransferFit, int]:
-    """When the knee order's final fit fails, fall back to the other orders (best loss first)."""
-    candidates = sorted(
-        (n for n in range(1, len(fits) + 1) if n != chosen and fits[n - 1] is not None and math.isfinite(losses[n - 1])),
-        key=lambda n: (losses[n - 1], n),
-    )
-    for n in candidates:
-        u, y = remove_input_delay(ref, resp, delays[n - 1])
-        start = fits[n - 1]
-        assert start is not None
-        fit = _finish(u, y, start, max_iterations)
-        if _acceptable(fit):
-            warnings.append(f"the order-{chosen} fit became unstable; order {n} (next best loss) is used")
-            return fit, n
-    raise AnalysisError(
-        "no order gives a stable model for this record (every fit settles with a pole on or outside "
-        "the unit circle)"
-    )
-
-
 def _excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) -> list[str]:
-    """Warn about modes in a band the reference does not excite (the data cannot support them)."""
-    spectrum = np.abs(fft.rfft(u))
-    freqs = fft.rfftfreq(u.size, dt)
-    peak = float(np.max(spectrum)) if spectrum.size else 0.0
+    """Warn about modes outside the band the reference `u` supports (the data cannot determine them)."""
+    band = supported_band_hz(u, dt)
+    flagged = modes_of(np.array([complex(*m["pole"]) for m in modes] +
+                                [complex(*m["pole"]).conjugate() for m in modes if m["kind"] == "complex"]), dt,
+                       band)
     out = []
-    if peak <= 0:
-        return out
-    for m in modes:
+    for m in flagged:
         f = m.get("natural_frequency_hz")
-        if f is None or m["kind"] != "complex":
-            continue
-        band = (freqs >= f / 1.25) & (freqs <= f * 1.25)
-        if not np.any(band):
-            continue
-        level = float(np.sqrt(np.mean(spectrum[band] ** 2))) / peak
-        if level < EXCITATION_FLOOR:
-            out.append(
-                f"the mode at {f / 1e3:.4g} kHz lies where the reference is {20 * math.log10(max(level, 1e-300)):.0f} dB "
-                "below its spectral peak: this record cannot determine it"
-            )
+        if m["kind"] == "complex" and not m["supported"] and f is not None:
+            out.append(f"the mode at {f / 1e3:.4g} kHz lies outside the band the reference supports "
+                       f"({band[0] / 1e3:.3g}–{band[1] / 1e3:.3g} kHz): this record cannot determine it")
     return out

@@ -1,0 +1,411 @@
+"""Errors-in-variables output-error fit of one model order, in the frequency domain, weighted
+to the band the excitation supports.
+
+The model relates the DFTs of the two channels over a window of L samples,
+
+    Y_k = e^{−jω_k τ} · B(z_k⁻¹)/A(z_k⁻¹) · U_k  [+ I(z_k⁻¹)/A(z_k⁻¹) + c·R_k] + noise,
+
+with z_k = e^{jω_k}, a fractional input delay τ ≥ 0 (samples), and, for a record that ends
+before the response has died away, the transient term I/A (deg I = n − 1: the state left at
+the window's end) and a drift c·R_k (R the DFT of a ramp). Both channels are noisy: with
+noise variances σ_U²(k), σ_Y²(k) per bin (analysis.noise) the estimate minimises
+
+    V(θ) = Σ_k |Y_k − G_k U_k − …|² / (σ_Y²(k) + |G_k|²·σ_U²(k))
+
+over the bins of the supported band: the sample maximum-likelihood estimator of Pintelon and
+Schoukens (System Identification: A Frequency Domain Approach, 2nd ed., §10.3, §12), which
+stays consistent when the reference is noisy (errors-in-variables), where plain output error
+is biased towards a smaller gain. At the true model each bin adds 1 on average, so V ≈ K and
+nested orders can be compared by an F test (analysis.identify).
+
+Long records (more bins than the band needs) are reduced to groups of M adjacent bins, whose
+sufficient statistics S_uu, S_yy, S_yu give the same cost exactly when G is constant across
+the group (the groups are far narrower than any resonance the band can resolve).
+
+Starting values: Sanathanan–Koerner iterations (the linearised cost re-weighted by the last
+1/|A|², the frequency-domain Steiglitz–McBride) from a linear least-squares fit; then
+Levenberg–Marquardt (scipy.optimize.least_squares, MINPACK) on V with its analytic Jacobian.
+Unstable trial steps are rejected. numpy/scipy have no errors-in-variables transfer-function
+estimator, hence this module.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from hopkinson.analysis.refined_iv import stabilised
+from scipy import linalg, optimize
+
+# A pole this close to the unit circle is on the stability boundary (treated as unstable).
+STABILITY_MARGIN = 1e-8
+CAUSAL_START = 1e-4  # samples: a causal delay starts at least this far from zero
+SK_ITERATIONS = 6
+
+
+@dataclass(frozen=True)
+class SpectralData:
+    """The two channels' DFT over the fitted bins, and their noise variances per bin.
+
+    Per-bin form (`grouped` False): u, y are U_k, Y_k. Grouped form: suu, syy, syu are sums
+    over each group of M bins (u, y None); `count` holds M. var_u, var_y are E|N_k|² of one
+    bin in the group. `ramp` (per-bin only) is the DFT of the drift ramp, `transient` whether
+    the transient term is fitted.
+    """
+
+    omega: np.ndarray  # rad/sample at each bin / group centre
+    var_u: np.ndarray
+    var_y: np.ndarray
+    count: np.ndarray
+    suu: np.ndarray
+    syy: np.ndarray
+    syu: np.ndarray
+    u: np.ndarray | None = None
+    y: np.ndarray | None = None
+    ramp: np.ndarray | None = None
+    transient: bool = False
+
+    @property
+    def grouped(self) -> bool:
+        return self.u is None
+
+    @property
+    def bins(self) -> int:
+        """Number of DFT bins the cost sums over."""
+        return int(np.sum(self.count))
+
+    @classmethod
+    def per_bin(
+        cls, omega: np.ndarray, u: np.ndarray, y: np.ndarray, var_u: np.ndarray, var_y: np.ndarray,
+        ramp: np.ndarray | None = None, transient: bool = False,
+    ) -> SpectralData:
+        return cls(omega, var_u, var_y, np.ones(omega.size), np.abs(u) ** 2, np.abs(y) ** 2, y * np.conj(u),
+                   u, y, ramp, transient)
+
+    @classmethod
+    def grouped_from(
+        cls, omega: np.ndarray, u: np.ndarray, y: np.ndarray, var_u: np.ndarray, var_y: np.ndarray, group: int
+    ) -> SpectralData:
+        """Sufficient statistics of groups of `group` adjacent bins (the last group may be shorter)."""
+        edges = np.arange(0, omega.size, group)
+        count = np.diff(np.append(edges, omega.size)).astype(float)
+        suu = np.add.reduceat(np.abs(u) ** 2, edges)
+        syy = np.add.reduceat(np.abs(y) ** 2, edges)
+        syu = np.add.reduceat(y * np.conj(u), edges)
+        centre = np.add.reduceat(omega, edges) / count
+        return cls(centre, np.add.reduceat(var_u, edges) / count, np.add.reduceat(var_y, edges) / count, count,
+                   suu, syy, syu)
+
+    def subset(self, keep: np.ndarray) -> SpectralData:
+        """Only the bins (groups) `keep` selects: e.g. every other one, for validation."""
+        def pick(x: np.ndarray | None) -> np.ndarray | None:
+            return None if x is None else x[keep]
+
+        return replace(self, omega=self.omega[keep], var_u=self.var_u[keep], var_y=self.var_y[keep],
+                       count=self.count[keep], suu=self.suu[keep], syy=self.syy[keep], syu=self.syu[keep],
+                       u=pick(self.u), y=pick(self.y), ramp=pick(self.ramp))
+
+    def halves(self) -> tuple[SpectralData, SpectralData]:
+        """The even and the odd bins (groups): two independent samples of the noise."""
+        index = np.arange(self.omega.size)
+        return self.subset(index % 2 == 0), self.subset(index % 2 == 1)
+
+    def perturbed(self, u: np.ndarray, y: np.ndarray, group: int) -> SpectralData:
+        """The same bins and noise with other channel spectra (a Monte Carlo draw)."""
+        if self.grouped:
+            edges = np.arange(0, u.size, group)
+            return replace(self, suu=np.add.reduceat(np.abs(u) ** 2, edges),
+                           syy=np.add.reduceat(np.abs(y) ** 2, edges),
+                           syu=np.add.reduceat(y * np.conj(u), edges))
+        return replace(self, u=u, y=y, suu=np.abs(u) ** 2, syy=np.abs(y) ** 2, syu=y * np.conj(u))
+
+
+@dataclass(frozen=True)
+class OrderFit:
+    """One order's fit: A, B (a[0] = 1), delay τ (samples), transient and drift terms, cost V."""
+
+    a: np.ndarray
+    b: np.ndarray
+    delay: float
+    transient: np.ndarray
+    drift: float
+    cost: float  # V(θ): Σ over bins of |error|² / noise variance (≈ bins at the truth)
+    parameters: int
+    evaluations: int
+    converged: bool
+    delay_fixed: bool
+    start_unstable: bool = False  # its linear start settled with poles outside the unit circle
+
+    @property
+    def order(self) -> int:
+        return int(self.a.size - 1)
+
+    @property
+    def stable(self) -> bool:
+        return is_stable(self.a)
+
+    def embedded(self) -> OrderFit:
+        """The same transfer function as an order n + 1 model (a pole and a zero at z = 0)."""
+        return replace(self, a=np.append(self.a, 0.0), b=np.append(self.b, 0.0),
+                       transient=np.append(self.transient, 0.0) if self.transient.size else self.transient)
+
+
+def response(fit: OrderFit, omega: np.ndarray) -> np.ndarray:
+    """e^{−jωτ}·B/A of a fit at `omega` (rad/sample)."""
+    z = np.exp(-1j * np.outer(omega, np.arange(fit.a.size)))
+    return np.exp(-1j * omega * fit.delay) * (z[:, : fit.b.size] @ fit.b) / (z @ fit.a)
+
+
+def is_stable(a: np.ndarray, margin: float = STABILITY_MARGIN) -> bool:
+    """Every root of A(z⁻¹) inside the circle of radius 1 − margin.
+
+    The Schur–Cohn step-down recursion (reflection coefficients |k| < 1) on A(ρz⁻¹)/…, i.e. on
+    a_i/ρ^i: O(n²) arithmetic, several times faster than the roots for the small orders here.
+    """
+    n = a.size - 1
+    if n <= 0:
+        return True
+    p = np.asarray(a, dtype=float) / ((1.0 - margin) ** np.arange(n + 1))
+    p = p / p[0]
+    for m in range(n, 0, -1):
+        k = p[m]
+        if not abs(k) < 1.0:
+            return False
+        p = (p[:m] - k * p[m:0:-1]) / (1.0 - k * k)
+    return True
+
+
+class OrderProblem:
+    """V(θ) of one order on one SpectralData: residuals, Jacobian, starts and the solve.
+
+    delay: "causal" (0 ≤ τ ≤ max_delay, as τ = max_delay·sin²t: the parameter is t), "free"
+    (τ of either sign: only to test whether the response leads the reference) or a number (τ
+    fixed there).
+    """
+
+    def __init__(self, data: SpectralData, order: int, delay: str | float = "causal", max_delay: float = 32.0) -> None:
+        self.max_delay = float(max_delay)
+        self.data = data
+        self.n = order
+        self.delay_mode = delay if isinstance(delay, str) else "fixed"
+        if self.delay_mode not in ("causal", "free", "fixed"):
+            raise ValueError(f"unknown delay mode {delay!r}")
+        self.fixed_delay = None if isinstance(delay, str) else float(delay)
+        self.powers = np.exp(-1j * np.outer(data.omega, np.arange(order + 1)))  # z_k^{-i}
+        self.n_transient = order if (data.transient and not data.grouped) else 0
+        self.drift = data.ramp is not None and not data.grouped
+        self.size = 2 * order + 1 + (self.fixed_delay is None) + self.n_transient + int(self.drift)
+        self._rejected: np.ndarray | None = None
+
+    # -- parameter vector ------------------------------------------------------------------
+    def pack(self, fit: OrderFit) -> np.ndarray:
+        parts = [fit.a[1:], fit.b]
+        if self.delay_mode == "causal":
+            # τ = τmax·sin²t: a start on a bound would have no gradient in t, so it starts just off it.
+            x = min(max(fit.delay, CAUSAL_START), self.max_delay - CAUSAL_START) / self.max_delay
+            parts.append([math.asin(math.sqrt(x))])
+        elif self.delay_mode == "free":
+            parts.append([fit.delay])
+        if self.n_transient:
+            t = fit.transient if fit.transient.size == self.n_transient else np.zeros(self.n_transient)
+            parts.append(t)
+        if self.drift:
+            parts.append([fit.drift])
+        return np.concatenate([np.asarray(p, dtype=float) for p in parts])
+
+    def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, float]:
+        n = self.n
+        a = np.concatenate(([1.0], theta[:n]))
+        b = theta[n : 2 * n + 1]
+        k = 2 * n + 1
+        if self.delay_mode == "fixed":
+            tau = float(self.fixed_delay)
+        else:
+            tau = self.max_delay * math.sin(theta[k]) ** 2 if self.delay_mode == "causal" else float(theta[k])
+            k += 1
+        transient = theta[k : k + self.n_transient]
+        k += self.n_transient
+        drift = float(theta[k]) if self.drift else 0.0
+        return a, b, tau, transient, drift
+
+    def fit_of(self, theta: np.ndarray, cost: float, evaluations: int, converged: bool) -> OrderFit:
+        a, b, tau, transient, drift = self.unpack(theta)
+        return OrderFit(a, b, tau, np.array(transient), drift, cost, self.size, evaluations, converged,
+                        self.fixed_delay is not None)
+
+    # -- model pieces ------------------------------------------------------------------------
+    def _pieces(self, theta: np.ndarray) -> dict[str, np.ndarray | float]:
+        a, b, tau, transient, drift = self.unpack(theta)
+        d = self.data
+        pw = self.powers
+        big_a = pw @ a
+        big_b = pw @ b
+        g = big_b / big_a
+        delay = np.exp(-1j * d.omega * tau)
+        s2 = d.var_y + np.abs(g) ** 2 * d.var_u
+        return {"A": big_a, "B": big_b, "G": g, "D": delay, "s2": s2, "tau": tau, "transient": transient,
+                "drift": drift}
+
+    def residual(self, theta: np.ndarray) -> np.ndarray:
+        a = np.concatenate(([1.0], theta[: self.n]))
+        if not is_stable(a):
+            return self._reject()
+        p = self._pieces(theta)
+        d = self.data
+        sigma = np.sqrt(p["s2"])
+        gd = p["D"] * p["G"]
+        if d.grouped:
+            ghat = d.syu / d.suu
+            c = np.maximum(d.syy - np.abs(d.syu) ** 2 / d.suu, 0.0)
+            r1 = math.sqrt(2.0) * np.sqrt(d.suu) * (gd - ghat) / sigma
+            r2 = np.sqrt(2.0 * c) / sigma
+            return np.concatenate((r1.real, r1.imag, r2))
+        err = self._error(p)
+        r = math.sqrt(2.0) * err / sigma
+        return np.concatenate((r.real, r.imag))
+
+    def _error(self, p: dict) -> np.ndarray:
+        d = self.data
+        pred = p["D"] * p["G"] * d.u
+        if self.n_transient:
+            pred = pred + (self.powers[:, : self.n_transient] @ p["transient"]) / p["A"]
+        if self.drift:
+            pred = pred + p["drift"] * d.ramp
+        return d.y - pred
+
+    def _reject(self) -> np.ndarray:
+        if self._rejected is None:
+            m = 3 * self.data.omega.size if self.data.grouped else 2 * self.data.omega.size
+            self._rejected = np.full(m, 1e8)
+        return self._rejected
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        p = self._pieces(theta)
+        d = self.data
+        n = self.n
+        big_a, g, delay = p["A"], p["G"], p["D"]
+        s2 = p["s2"]
+        sigma = np.sqrt(s2)
+        e_over_a = self.powers / big_a[:, None]  # z^{-i}/A
+        dg = np.empty((d.omega.size, self.size), dtype=complex)  # ∂G/∂θ for the weight
+        dg[:, :n] = -g[:, None] * e_over_a[:, 1 : n + 1]
+        dg[:, n : 2 * n + 1] = e_over_a
+        dg[:, 2 * n + 1 :] = 0.0
+        ds2 = 2.0 * d.var_u[:, None] * np.real(np.conj(g)[:, None] * dg)
+        if d.grouped:
+            gd = delay * g
+            dgd = delay[:, None] * dg
+            if self.fixed_delay is None:
+                dgd[:, 2 * n + 1] = -1j * d.omega * gd * self._dtau(theta)
+            ghat = d.syu / d.suu
+            c = np.maximum(d.syy - np.abs(d.syu) ** 2 / d.suu, 0.0)
+            w = math.sqrt(2.0) * np.sqrt(d.suu)
+            j1 = w[:, None] * (dgd / sigma[:, None] - ((gd - ghat) / (2.0 * s2 * sigma))[:, None] * ds2)
+            j2 = -(np.sqrt(2.0 * c) / (2.0 * s2 * sigma))[:, None] * ds2
+            return np.vstack((j1.real, j1.imag, j2))
+        err = self._error(p)
+        dpred = delay[:, None] * dg * d.u[:, None]
+        if self.n_transient:
+            trans = (self.powers[:, : self.n_transient] @ p["transient"]) / big_a
+            dpred[:, :n] -= trans[:, None] * e_over_a[:, 1 : n + 1]
+        k = 2 * n + 1
+        if self.fixed_delay is None:
+            dpred[:, k] = -1j * d.omega * delay * g * d.u * self._dtau(theta)
+            k += 1
+        if self.n_transient:
+            dpred[:, k : k + self.n_transient] = e_over_a[:, : self.n_transient]
+            k += self.n_transient
+        if self.drift:
+            dpred[:, k] = d.ramp
+        jac = math.sqrt(2.0) * (-dpred / sigma[:, None] - (err / (2.0 * s2 * sigma))[:, None] * ds2)
+        return np.vstack((jac.real, jac.imag))
+
+    def _dtau(self, theta: np.ndarray) -> float:
+        """∂τ/∂(delay parameter): τmax·sin 2t for τ = τmax·sin²t, else 1."""
+        return self.max_delay * math.sin(2.0 * theta[2 * self.n + 1]) if self.delay_mode == "causal" else 1.0
+
+    def cost(self, theta: np.ndarray) -> float:
+        r = self.residual(theta)
+        return 0.5 * float(r @ r)
+
+    # -- solving -----------------------------------------------------------------------------
+    def solve(self, start: OrderFit, max_evaluations: int = 60, tolerance: float = 1e-8) -> OrderFit:
+        """Levenberg–Marquardt from `start`; never returns a higher cost than the start's
+        (`start.cost`, when it was evaluated on these data, else its cost here)."""
+        theta0 = self.pack(start)
+        cost0 = self.cost(theta0)
+        if math.isfinite(start.cost) and start.cost < cost0 and start.a.size == self.n + 1:
+            fallback = replace(start, parameters=self.size, evaluations=0, converged=False)
+        else:
+            fallback = self.fit_of(theta0, cost0, 0, False)
+        if self.residual_size() < self.size:
+            return fallback
+        try:
+            result = optimize.least_squares(
+                self.residual, theta0, jac=self.jacobian, method="lm", x_scale="jac",
+                xtol=tolerance, ftol=tolerance, gtol=tolerance, max_nfev=max_evaluations,
+            )
+        except (ValueError, np.linalg.LinAlgError):
+            return fallback
+        cost = self.cost(result.x)
+        if not (np.isfinite(cost) and cost <= fallback.cost):
+            return replace(fallback, evaluations=int(result.nfev))
+        return self.fit_of(result.x, cost, int(result.nfev), result.status > 0)
+
+    def residual_size(self) -> int:
+        return (3 if self.data.grouped else 2) * self.data.omega.size
+
+    def linear_start(self, delay: float, iterations: int = SK_ITERATIONS) -> OrderFit:
+        """Sanathanan–Koerner start at a fixed delay (no drift), poles reflected inside."""
+        d = self.data
+        n = self.n
+        dl = np.exp(-1j * d.omega * delay)
+        pw = self.powers
+        a = np.concatenate(([1.0], np.zeros(n)))
+        b = np.zeros(n + 1)
+        transient = np.zeros(self.n_transient)
+        raw_unstable = False
+        for _ in range(iterations):
+            big_a = pw @ a
+            g = (pw @ b) / big_a
+            weight = 1.0 / (np.abs(big_a) * np.sqrt(d.var_y + np.abs(g) ** 2 * d.var_u))
+            rows, rhs = self._linear_rows(dl, weight)
+            try:
+                x, *_ = linalg.lstsq(np.vstack((rows.real, rows.imag)), np.concatenate((rhs.real, rhs.imag)),
+                                     check_finite=False, lapack_driver="gelsy")
+            except (linalg.LinAlgError, ValueError):
+                break
+            raw = np.concatenate(([1.0], x[:n]))
+            raw_unstable = not is_stable(raw)
+            a = stabilised(raw)
+            b = x[n : 2 * n + 1]
+            transient = x[2 * n + 1 :]
+            if not np.all(np.isfinite(a)) or not np.all(np.isfinite(b)):
+                a, b = np.concatenate(([1.0], np.zeros(n))), np.zeros(n + 1)
+                break
+        fit = OrderFit(a, b, delay, transient, 0.0, float("nan"), self.size, 0, False, self.fixed_delay is not None,
+                       raw_unstable)
+        return replace(fit, cost=self.cost(self.pack(fit)))
+
+    def _linear_rows(self, dl: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of the linearised cost Σ w²|A·Y − D·B·U − I|² in x = (a_1..a_n, b_0..b_n, i)."""
+        d = self.data
+        n = self.n
+        pw = self.powers
+        if d.grouped:
+            # Σ_k |A·Y_k − D·B·U_k|² = ‖R·(A, −D·B)‖² with RᴴR = [[S_yy, S_yu], [S_yu*, S_uu]].
+            r11 = np.sqrt(np.maximum(d.syy, 1e-300))
+            r12 = d.syu / r11
+            r22 = np.sqrt(np.maximum(d.suu - np.abs(d.syu) ** 2 / d.syy, 0.0))
+            w = weight[:, None]
+            row1 = np.hstack((w * r11[:, None] * pw[:, 1:], -w * (r12 * dl)[:, None] * pw))
+            row2 = np.hstack((np.zeros((d.omega.size, n), dtype=complex), -w * (r22 * dl)[:, None] * pw))
+            rows = np.vstack((row1, row2))
+            rhs = np.concatenate((-weight * r11, np.zeros(d.omega.size)))
+            return rows, rhs
+        w = weight[:, None]
+        parts = [w * d.y[:, None] * pw[:, 1:], -w * (dl * d.u)[:, None] * pw]
+        if self.n_transient:
+            parts.append(-w * pw[:, : self.n_transient])
+        return np.hstack(parts), -weight * d.y

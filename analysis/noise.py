@@ -1,0 +1,129 @@
+"""The noise of a channel, measured where the channel carries no signal, as a spectrum.
+
+Both channels of a shock record are noisy: the response (sensor, amplifier, digitizer) and
+the reference (for an interferometer, phase noise differentiated twice: it rises with
+frequency up to the demodulation low-pass; for a reference accelerometer, its own noise).
+The identification weighs each frequency by the noise there (errors-in-variables), and the
+uncertainty draws noise records with these spectra, so a single RMS is not enough.
+
+- `quiet_segments`: the stretches of a record before the pulse and after the signal has
+  died away (the response's ringing below a few noise RMS).
+- `NoiseSpectrum.measure`: Welch's averaged periodogram (scipy.signal.welch, linear detrend
+  per segment, so a slow drift does not pass for noise) over those stretches; where they
+  disagree (an interferometer is quiet at rest but noisy in flight) the larger level is kept.
+- `NoiseSpectrum.bin_variance`: E|N_k|² of the DFT N_k = Σ n(t)·e^{−jω_k t} of a window of
+  L samples: L·S(f_k)·f_s/2 with S the one-sided PSD.
+- `NoiseSpectrum.draw`: noise records with the measured spectrum (white Gaussian noise shaped
+  in the frequency domain).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft, signal
+
+# Shortest quiet stretch worth a spectrum, and the Welch segment length (frequency resolution
+# f_s / WELCH_SEGMENT: 4 kHz at 1 MS/s).
+MIN_QUIET_SAMPLES = 32
+WELCH_SEGMENT = 256
+
+
+@dataclass(frozen=True)
+class NoiseSpectrum:
+    """One-sided noise PSD (channel units²/Hz) on `frequency_hz`, and where it came from."""
+
+    frequency_hz: np.ndarray
+    psd: np.ndarray
+    sample_rate_hz: float
+    samples: int  # quiet samples it was estimated from (0: not measured)
+    source: str  # "quiet segments", "residual", "none"
+
+    @property
+    def rms(self) -> float:
+        """Standard deviation of the noise (∫ S df)."""
+        if self.frequency_hz.size < 2:
+            return float(np.sqrt(max(self.psd[0], 0.0) * self.sample_rate_hz / 2)) if self.psd.size else 0.0
+        return float(np.sqrt(max(np.trapezoid(self.psd, self.frequency_hz), 0.0)))
+
+    def at(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """The one-sided PSD at arbitrary frequencies (linear interpolation, ends held)."""
+        return np.interp(np.abs(frequency_hz), self.frequency_hz, self.psd)
+
+    def bin_variance(self, frequency_hz: np.ndarray, window_samples: int) -> np.ndarray:
+        """E|N_k|² of the unnormalised DFT of `window_samples` samples of this noise."""
+        return window_samples * self.at(frequency_hz) * self.sample_rate_hz / 2.0
+
+    def scaled(self, factor: float) -> NoiseSpectrum:
+        """The same spectrum for the channel multiplied by `factor` (PSD by factor²)."""
+        return NoiseSpectrum(self.frequency_hz, self.psd * factor * factor, self.sample_rate_hz, self.samples,
+                             self.source)
+
+    def draw(self, n: int, rng: np.random.Generator, count: int | None = None) -> np.ndarray:
+        """Noise records of `n` samples with this spectrum: shape (n,) or (count, n)."""
+        shape = (n,) if count is None else (count, n)
+        white = rng.standard_normal(shape)
+        if not np.any(self.psd > 0):
+            return np.zeros(shape)
+        spec = fft.rfft(white, axis=-1)
+        f = fft.rfftfreq(n, 1.0 / self.sample_rate_hz)
+        spec *= np.sqrt(self.at(f) * self.sample_rate_hz / 2.0)
+        return fft.irfft(spec, n, axis=-1)
+
+    @classmethod
+    def white(cls, rms: float, sample_rate_hz: float, source: str, samples: int = 0) -> NoiseSpectrum:
+        """Flat spectrum of standard deviation `rms`."""
+        level = 2.0 * rms * rms / sample_rate_hz
+        return cls(np.array([0.0, sample_rate_hz / 2]), np.array([level, level]), sample_rate_hz, samples, source)
+
+    @classmethod
+    def measure(cls, x: np.ndarray, sample_rate_hz: float, segments: Sequence[slice]) -> NoiseSpectrum:
+        """Welch spectrum over the quiet `segments` of `x`; the larger where segments disagree.
+
+        Segments shorter than MIN_QUIET_SAMPLES are skipped; with none left the spectrum is
+        zero and `samples` is 0 (the caller falls back on residuals)."""
+        x = np.asarray(x, dtype=float)
+        spectra = []
+        used = 0
+        for seg in segments:
+            piece = x[seg]
+            if piece.size < MIN_QUIET_SAMPLES:
+                continue
+            nper = min(WELCH_SEGMENT, piece.size)
+            f, p = signal.welch(piece, fs=sample_rate_hz, nperseg=nper, detrend="linear")
+            p[0] = p[1] if p.size > 1 else p[0]  # the detrend empties the DC bin; the noise does not stop there
+            spectra.append((f, p, piece.size))
+            used += piece.size
+        if not spectra:
+            return cls(np.array([0.0, sample_rate_hz / 2]), np.zeros(2), sample_rate_hz, 0, "none")
+        grid = max(spectra, key=lambda s: s[0].size)[0]
+        levels = np.array([np.interp(grid, f, p) for f, p, _ in spectra])
+        return cls(grid, np.max(levels, axis=0), sample_rate_hz, used, "quiet segments")
+
+
+def quiet_segments(
+    reference: np.ndarray,
+    response: np.ndarray,
+    pulse_start: int,
+    active_end: int,
+    margin: int,
+) -> tuple[list[slice], list[slice]]:
+    """Quiet stretches of each channel: before the pulse (less a margin) and after the active
+    part of the record (where the response has died away) — (reference's, response's)."""
+    n = min(reference.size, response.size)
+    before = slice(0, max(pulse_start - margin, 0))
+    after = slice(min(active_end, n), n)
+    return [before, after], [before, after]
+
+
+def active_end(y: np.ndarray, noise_rms: float, start: int, threshold: float = 4.0) -> int:
+    """One past the last sample after `start` where |y| (box-car smoothed over 5 samples)
+    exceeds `threshold` noise RMS: the response has died away into its noise after it."""
+    if y.size == 0:
+        return 0
+    smooth = np.convolve(np.abs(y), np.full(5, 0.2), mode="same")
+    level = threshold * noise_rms if noise_rms > 0 else 1e-3 * float(np.max(smooth))
+    loud = np.flatnonzero(smooth[start:] > level)
+    return int(start + loud[-1] + 1) if loud.size else int(start)
