@@ -31,18 +31,20 @@ An error is ``<VERB> ERR <REASON>`` (UNKNOWN, RANGE, SYNTAX, CHECKSUM).
 
 Example bytes: the driver sends ``b"GAIN 20*23\\n"``; the amplifier answers ``b"GAIN OK*25\\n"``.
 
-The driver retries a command `retries` times after a timeout or a bad checksum (every
-command here is idempotent), flushing the input first; then it raises an InstrumentError
-that names the amplifier, the command and the reply.
+The driver retries a command `retries` times after a timeout, a bad checksum or an overlong
+line (every command here is idempotent), flushing the input first; then it raises an
+InstrumentError that names the amplifier, the command and the reply. The port is opened
+exclusively and every read is bounded (drivers/serial_link.py).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import TracebackType
 
-import serial
-from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.base import TraceHook
+from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
+from hopkinson.drivers.roles import AmplifierSettings
+from hopkinson.drivers.serial_link import SerialLineDriver
 
 GAINS: tuple[float, ...] = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
 LOWPASS_HZ: tuple[float, ...] = (1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3)  # plus 0 = OFF
@@ -102,8 +104,10 @@ class AmplifierStatus:
     output_v: float
 
 
-class BridgeAmplifier:
+class BridgeAmplifier(SerialLineDriver):
     """Driver of the accelerometer bridge amplifier (serial, protocol in the module docstring)."""
+
+    max_line_bytes = MAX_LINE_BYTES
 
     def __init__(
         self,
@@ -113,42 +117,13 @@ class BridgeAmplifier:
         timeout_s: float = 1.0,
         retries: int = 1,
         name: str | None = None,
+        trace: TraceHook | None = None,
     ) -> None:
-        if timeout_s <= 0:
-            raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
-        self.port = port
-        self.baudrate = baudrate
-        self.timeout_s = timeout_s
+        super().__init__(port, baudrate=baudrate, timeout_s=timeout_s, name=name or f"bridge amplifier {port}",
+                         trace=trace)
+        if not 0 <= retries <= 10:
+            raise ValueError(f"{self.name}: retries must be 0..10, got {retries}")
         self.retries = retries
-        self.name = name or f"bridge amplifier {port}"
-        self._serial: serial.Serial | None = None
-
-    # -- connection ---------------------------------------------------------------------
-    def connect(self) -> None:
-        """Open the serial port; InstrumentConnectionError if it cannot be opened."""
-        self.close()
-        try:
-            self._serial = serial.Serial(self.port, self.baudrate, timeout=self.timeout_s,
-                                         write_timeout=self.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise InstrumentConnectionError(self.name, "open", f"cannot open serial port: {exc}") from exc
-
-    def close(self) -> None:
-        """Close the port (idempotent)."""
-        if self._serial is not None:
-            try:
-                self._serial.close()
-            finally:
-                self._serial = None
-
-    def __enter__(self) -> BridgeAmplifier:
-        self.connect()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     # -- operations -----------------------------------------------------------------------
     def identity(self) -> str:
@@ -218,6 +193,10 @@ class BridgeAmplifier:
             raise InstrumentError(self.name, "configure", "settings did not stick",
                                   f"EXC {got[0]}, GAIN {got[1]:g}, LP {got[2]:g}")
 
+    def settings(self) -> AmplifierSettings:
+        """Gain, excitation and low-pass as the amplifier reports them."""
+        return AmplifierSettings(gain=self.gain(), excitation_v=self.excitation_v(), lowpass_hz=self.lowpass_hz())
+
     def status(self) -> AmplifierStatus:
         """Everything the amplifier reports."""
         return AmplifierStatus(
@@ -254,18 +233,14 @@ class BridgeAmplifier:
         raise last
 
     def _exchange(self, command: str) -> str:
-        port = self._serial
-        if port is None:
-            raise InstrumentConnectionError(self.name, command, "not connected (use `with` or connect())")
         try:
-            port.reset_input_buffer()  # drop stale or noisy bytes from an earlier exchange
-            port.write(frame(command))
-            port.flush()
-            line = port.read_until(b"\n", MAX_LINE_BYTES)
-        except (serial.SerialException, OSError) as exc:
-            raise InstrumentConnectionError(self.name, command, f"serial port failed: {exc}") from exc
-        if not line.endswith(b"\n"):
-            raise InstrumentTimeout(self.name, command, f"no complete reply within {self.timeout_s:g} s", line)
+            line = self.exchange(frame(command), command)
+        except InstrumentTimeout:
+            raise
+        except InstrumentError as exc:
+            if exc.problem.startswith("reply longer"):  # line noise ate the end of line
+                raise _GarbledReply(exc.problem, exc.reply.encode("ascii", "replace")) from exc
+            raise
         try:
             return parse_line(line)
         except FramingError as exc:

@@ -1,218 +1,113 @@
-"""Gas valve / vacuum controller of the Hopkinson bar, over Modbus TCP (pymodbus).
+"""Gas valve / vacuum controller of the Hopkinson bar, over Modbus TCP or RTU (pymodbus).
 
-The controller (a PLC or a remote-I/O box) exposes:
+The controller (a PLC or a remote-I/O box) exposes, at addresses that come from
+`config/rig.toml` as a `RegisterMap` (drivers/registers.py):
 
 - coils: fire valve, fill valve, vent valve, vacuum pump (True = open / running);
-- a holding register: the reservoir pressure set-point (scaled integer);
-- input registers: reservoir pressure and fixture vacuum (scaled integers);
-- discrete inputs: door/guard closed, fixture clamped, e-stop healthy (True = safe).
+- discrete inputs: door/guard closed, fixture clamped, e-stop healthy (True = safe) and,
+  where the valves have limit switches, their real positions (True = open);
+- holding registers: reservoir pressure set-point; projectile type; the link-watchdog
+  heartbeat (and its time); the fire-pulse length;
+- input registers: reservoir pressure, fixture vacuum, watchdog state, fire-pulse count.
 
-Register numbers (0-based protocol addresses) and scale factors differ from lab to lab: they
-come from `config/rig.toml` as a :class:`RegisterMap`. Pressures are gauge pressures in bar
-(0 = ambient); the fixture vacuum is an absolute pressure in mbar (≈1013 = no vacuum).
+Pressures are gauge bar (0 = ambient); the fixture vacuum is absolute mbar (~1013 = none).
 
-Fill-valve regulation lives in the controller: while the fill coil is on, the controller
-fills the reservoir up to the set-point and holds it there (the coil stays as commanded).
-The rig still watches the pressure and closes the fill coil itself; a controller without
-regulation only needs the rig's watch.
+Fill regulation lives in the controller: while the fill coil is on, it fills the reservoir up
+to the set-point and holds it there. The rig still watches the pressure and closes the fill.
 
-Errors name the instrument, the Modbus function and address, and what came back. After a
-timeout or a dropped connection the socket is closed; the next call reconnects, so a late
-reply can never be taken for the answer to a later request (inside `with`, the next call
-reconnects by itself).
+What the software cannot guarantee, the controller does:
+
+- **Link watchdog.** `start_heartbeat()` writes 1 to the heartbeat register (a new session:
+  clears a tripped watchdog and arms it; first the watchdog time, when the map has
+  `watchdog_ms`) and then, from a driver thread, beats 2..65535 every `watchdog_s / 4`. When
+  the controller hears nothing for `watchdog_s`, it de-energises fill and fire, stops the
+  pump and opens the vent, and latches "tripped" until the next session. `stop_heartbeat()`
+  writes 0 (disarm). A read-only client (`status`, `probe`) never writes the register.
+- **Fire pulse.** `fire_pulse(duration_s)` writes the length in ms; the controller opens the
+  fire valve and closes it itself, and counts the pulse (`fire_pulse_count()`). A pulse its
+  interlock chain refuses is answered with a Modbus exception: InstrumentError naming why.
+
+Errors name the instrument, the Modbus function and address, and what came back.
 """
 
 from __future__ import annotations
 
-import logging
-from dataclasses import dataclass, field
-from types import TracebackType
+import contextlib
+import threading
+from dataclasses import fields
 from typing import Any
 
-from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
-from pymodbus.client import ModbusTcpClient
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from hopkinson.drivers.base import TraceHook
+from hopkinson.drivers.errors import InstrumentError
+from hopkinson.drivers.modbus_link import ModbusDriver, ModbusRefusal, ModbusTarget
+from hopkinson.drivers.registers import (
+    CoilMap,
+    DiscreteInputMap,
+    HoldingRegisterMap,
+    InputRegisterMap,
+    Register,
+    RegisterMap,
+)
+from hopkinson.drivers.roles import (
+    WATCHDOG_STATES,
+    ControllerStatus,
+    Interlocks,
+    ValveStates,
+)
 
-UINT16_MAX = 0xFFFF
+__all__ = [
+    "CoilMap", "ControllerStatus", "DiscreteInputMap", "HoldingRegisterMap", "InputRegisterMap",
+    "Interlocks", "ModbusTarget", "RegisterMap", "ValveController", "ValveStates",
+]
 
-# pymodbus logs each failed request at ERROR level, with a hex dump of the last frames, before
-# raising; our InstrumentErrors carry the same facts in one line. Quiet it unless the
-# application has set the "pymodbus" logger's level itself (then that choice stands).
-if logging.getLogger("pymodbus").level == logging.NOTSET:
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-
-@dataclass(frozen=True)
-class CoilMap:
-    """Coil addresses (0-based) of the four actuators."""
-
-    fire_valve: int = 0
-    fill_valve: int = 1
-    vent_valve: int = 2
-    vacuum_pump: int = 3
-
-
-@dataclass(frozen=True)
-class DiscreteInputMap:
-    """Discrete-input addresses (0-based) of the interlocks; each input is True when safe."""
-
-    door_closed: int = 0
-    fixture_clamped: int = 1
-    estop_healthy: int = 2
+HEARTBEAT_STOP, HEARTBEAT_START, HEARTBEAT_FIRST_BEAT = 0, 1, 2
+DEFAULT_WATCHDOG_S = 3.0
+_VALVES = ("fire_valve", "fill_valve", "vent_valve")
 
 
-@dataclass(frozen=True)
-class HoldingRegisterMap:
-    """Holding-register addresses (0-based).
+class ValveController(ModbusDriver):
+    """Driver of the gas valve / vacuum controller (module docstring).
 
-    projectile: the projectile type loaded (1..3) as entered on the controller's panel;
-    -1 when the controller has no such register (then `set_projectile` is refused).
-    """
-
-    pressure_setpoint: int = 0
-    projectile: int = 1
-
-
-@dataclass(frozen=True)
-class InputRegisterMap:
-    """Input-register addresses (0-based) of the two gauges."""
-
-    reservoir_pressure: int = 0
-    fixture_vacuum: int = 1
-
-
-@dataclass(frozen=True)
-class ScaleMap:
-    """Engineering units per register count (unsigned 16-bit registers)."""
-
-    pressure_bar_per_count: float = 0.001
-    vacuum_mbar_per_count: float = 0.1
-
-
-@dataclass(frozen=True)
-class RegisterMap:
-    """Where every signal of the controller lives, and how its integers scale."""
-
-    coils: CoilMap = field(default_factory=CoilMap)
-    discrete_inputs: DiscreteInputMap = field(default_factory=DiscreteInputMap)
-    holding_registers: HoldingRegisterMap = field(default_factory=HoldingRegisterMap)
-    input_registers: InputRegisterMap = field(default_factory=InputRegisterMap)
-    scales: ScaleMap = field(default_factory=ScaleMap)
-
-
-@dataclass(frozen=True)
-class ValveStates:
-    """Commanded states of the actuators (coil values)."""
-
-    fire_valve: bool
-    fill_valve: bool
-    vent_valve: bool
-    vacuum_pump: bool
-
-
-@dataclass(frozen=True)
-class Interlocks:
-    """Interlock inputs, each True when safe."""
-
-    door_closed: bool
-    fixture_clamped: bool
-    estop_healthy: bool
-
-    @property
-    def all_safe(self) -> bool:
-        return self.door_closed and self.fixture_clamped and self.estop_healthy
-
-    def problems(self) -> list[str]:
-        """Plain-language list of the interlocks that are not safe."""
-        out = []
-        if not self.door_closed:
-            out.append("door/guard open")
-        if not self.fixture_clamped:
-            out.append("fixture not clamped")
-        if not self.estop_healthy:
-            out.append("e-stop tripped")
-        return out
-
-
-@dataclass(frozen=True)
-class ControllerStatus:
-    """Everything the controller reports, read in one go."""
-
-    reservoir_pressure_bar: float
-    pressure_setpoint_bar: float
-    fixture_vacuum_mbar: float
-    valves: ValveStates
-    interlocks: Interlocks
-
-
-class ValveController:
-    """Driver of the gas valve / vacuum controller (Modbus TCP).
-
-    Use as a context manager: `with ValveController(host, port) as vc: vc.status()`.
+    Use as a context manager: `with ValveController(ModbusTarget(host=...)) as vc: vc.status()`,
+    or `ValveController.tcp(host, port)`. Thread-safe: every transaction holds the driver lock.
     """
 
     def __init__(
         self,
-        host: str,
-        port: int = 502,
+        target: ModbusTarget,
         *,
-        device_id: int = 1,
+        register_map: RegisterMap | None = None,
         timeout_s: float = 1.0,
         retries: int = 0,
-        register_map: RegisterMap | None = None,
+        watchdog_s: float = DEFAULT_WATCHDOG_S,
         name: str | None = None,
+        trace: TraceHook | None = None,
     ) -> None:
-        if not 0 <= device_id <= 247:
-            raise ValueError(f"Modbus device id must be 0..247, got {device_id}")
-        if timeout_s <= 0:
-            raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
-        self.host = host
-        self.port = port
-        self.device_id = device_id
-        self.timeout_s = timeout_s
-        self.retries = retries
+        super().__init__(target, timeout_s=timeout_s, retries=retries,
+                         name=name or f"valve controller {target.label}", trace=trace)
+        if not 0 < watchdog_s <= 3600:
+            raise ValueError(f"{self.name}: watchdog_s must be in (0, 3600] s, got {watchdog_s!r}")
         self.map = register_map or RegisterMap()
-        self.name = name or f"valve controller {host}:{port}"
-        self._client: ModbusTcpClient | None = None
-        self._wanted = False  # connect() called and close() not: reconnect after a failure
+        self.watchdog_s = float(watchdog_s)
+        self.last_heartbeat_error: InstrumentError | None = None  # set by the heartbeat thread
+        self._beat_stop = threading.Event()
+        self._beat_thread: threading.Thread | None = None
 
-    # -- connection ---------------------------------------------------------------------
-    def connect(self) -> None:
-        """Open the TCP connection; InstrumentConnectionError when nobody answers."""
-        self._drop()
-        client = ModbusTcpClient(
-            self.host, port=self.port, timeout=self.timeout_s, retries=self.retries, name=self.name
-        )
-        if not client.connect():
-            client.close()
-            raise InstrumentConnectionError(self.name, "connect", "could not connect (nothing listening?)")
-        self._client = client
-        self._wanted = True
+    @classmethod
+    def tcp(cls, host: str, port: int = 502, *, unit_id: int = 1, **kwargs: Any) -> ValveController:
+        """A controller on Modbus TCP."""
+        return cls(ModbusTarget("tcp", host=host, port=port, unit_id=unit_id), **kwargs)
 
     def close(self) -> None:
-        """Close the connection (idempotent)."""
-        self._drop()
-        self._wanted = False
+        """Stop the heartbeat (disarming the watchdog, best effort) and close the link."""
+        self.stop_heartbeat()
+        super().close()
 
-    def _drop(self) -> None:
-        if self._client is not None:
-            self._client.close()
-            self._client = None
-
-    def __enter__(self) -> ValveController:
-        self.connect()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
-
-    # -- identity -----------------------------------------------------------------------
+    # -- identity -------------------------------------------------------------------------------
     def identity(self) -> str:
         """Vendor, product code and revision (Modbus 'read device identification', basic)."""
-        response = self._call("read device identification", lambda c: c.read_device_information(
-            read_code=0x01, object_id=0x00, device_id=self.device_id))
+        response = self.call("read device identification", lambda c: c.read_device_information(
+            read_code=0x01, object_id=0x00, device_id=self.unit_id))
         info = getattr(response, "information", {}) or {}
         parts = []
         for key in (0x00, 0x01, 0x02):
@@ -220,139 +115,196 @@ class ValveController:
             parts.append(value.decode("ascii", "replace") if isinstance(value, bytes) else str(value))
         return ",".join(parts)
 
-    # -- actuators ----------------------------------------------------------------------
+    # -- actuators ------------------------------------------------------------------------------
     def set_fire_valve(self, open_: bool) -> None:
-        """Open (fires the projectile) or close the fire valve."""
-        self._write_coil(self.map.coils.fire_valve, open_, "fire valve")
+        """Open or close the fire valve directly (a shot should use `fire_pulse`)."""
+        self._write_coil("fire_valve", open_)
 
     def set_fill_valve(self, open_: bool) -> None:
         """Open the fill valve (the controller fills up to the set-point) or close it."""
-        self._write_coil(self.map.coils.fill_valve, open_, "fill valve")
+        self._write_coil("fill_valve", open_)
 
     def set_vent_valve(self, open_: bool) -> None:
         """Open (reservoir vents to ambient) or close the vent valve."""
-        self._write_coil(self.map.coils.vent_valve, open_, "vent valve")
+        self._write_coil("vent_valve", open_)
 
     def set_vacuum_pump(self, on: bool) -> None:
         """Start or stop the fixture vacuum pump."""
-        self._write_coil(self.map.coils.vacuum_pump, on, "vacuum pump")
+        self._write_coil("vacuum_pump", on)
 
     def valves(self) -> ValveStates:
-        """Commanded states of the four actuators (coils read back)."""
-        c = self.map.coils
-        bits = self._read_bits("read coils", [c.fire_valve, c.fill_valve, c.vent_valve, c.vacuum_pump])
-        return ValveStates(*bits)
+        """The coils as commanded and, where the map has position inputs, the real positions."""
+        c, d = self.map.coils, self.map.discrete_inputs
+        coils = self.read_bits("coils", [getattr(c, f.name) for f in fields(c)])
+        mapped = {v: getattr(d, f"{v}_open") for v in _VALVES if getattr(d, f"{v}_open") >= 0}
+        positions = self.read_bits("discrete inputs", mapped.values()) if mapped else {}
+        return ValveStates(
+            *(coils[getattr(c, f.name)] for f in fields(c)),
+            **{f"{v}_position": positions[a] for v, a in mapped.items()},
+        )
 
     def set_pressure_setpoint_bar(self, pressure_bar: float) -> None:
-        """Reservoir pressure set-point (gauge bar); must fit the scaled register."""
-        scale = self.map.scales.pressure_bar_per_count
-        self._write_register(self.map.holding_registers.pressure_setpoint, pressure_bar, scale,
-                             "pressure set-point", "bar")
+        """Reservoir pressure set-point (gauge bar); ValueError when the register cannot hold it."""
+        self.write_value(self.map.holding_registers.pressure_setpoint, pressure_bar, "pressure set-point", "bar")
 
     def pressure_setpoint_bar(self) -> float:
         """The set-point as the controller holds it (gauge bar)."""
-        address = self.map.holding_registers.pressure_setpoint
-        (count,) = self._read_registers("read holding registers", address, 1)
-        return count * self.map.scales.pressure_bar_per_count
+        return self._read_one("holding registers", "pressure_setpoint", self.map.holding_registers.pressure_setpoint)
+
+    @property
+    def has_projectile_register(self) -> bool:
+        return self.map.holding_registers.projectile >= 0
 
     def set_projectile(self, projectile: int) -> None:
         """Tell the controller which projectile type (1..3) is loaded."""
         if projectile not in (1, 2, 3):
             raise ValueError(f"projectile must be 1, 2 or 3, got {projectile}")
-        address = self.map.holding_registers.projectile
-        if address < 0:
+        if not self.has_projectile_register:
             raise InstrumentError(self.name, "set projectile", "this controller has no projectile register")
-        self._call(f"write register {address}={projectile}",
-                   lambda c: c.write_register(address, projectile, device_id=self.device_id))
+        self.write_word(self.map.holding_registers.projectile, projectile, "projectile")
 
-    # -- gauges and interlocks ----------------------------------------------------------
+    # -- gauges and interlocks ------------------------------------------------------------------
+    @property
+    def pressure_resolution_bar(self) -> float:
+        return self.map.input_registers.reservoir_pressure.resolution
+
     def reservoir_pressure_bar(self) -> float:
         """Reservoir gauge pressure in bar."""
-        (count,) = self._read_registers("read input registers", self.map.input_registers.reservoir_pressure, 1)
-        return count * self.map.scales.pressure_bar_per_count
+        return self._read_one("input registers", "reservoir_pressure", self.map.input_registers.reservoir_pressure)
 
     def fixture_vacuum_mbar(self) -> float:
         """Absolute pressure in the vacuum fixture, mbar (lower is a better vacuum)."""
-        (count,) = self._read_registers("read input registers", self.map.input_registers.fixture_vacuum, 1)
-        return count * self.map.scales.vacuum_mbar_per_count
+        return self._read_one("input registers", "fixture_vacuum", self.map.input_registers.fixture_vacuum)
 
     def interlocks(self) -> Interlocks:
         """Door, clamp and e-stop inputs (True = safe)."""
         d = self.map.discrete_inputs
-        bits = self._read_bits("read discrete inputs", [d.door_closed, d.fixture_clamped, d.estop_healthy])
-        return Interlocks(*bits)
+        addresses = (d.door_closed, d.fixture_clamped, d.estop_healthy)
+        bits = self.read_bits("discrete inputs", addresses)
+        return Interlocks(*(bits[a] for a in addresses))
 
     def status(self) -> ControllerStatus:
-        """Pressures, vacuum, valve states and interlocks."""
+        """Pressures, vacuum, valves, interlocks, watchdog and pulse count (reads only)."""
+        i = self.map.input_registers
+        gauges = {"reservoir_pressure": i.reservoir_pressure, "fixture_vacuum": i.fixture_vacuum}
+        if i.fire_pulse_count.present:
+            gauges["fire_pulse_count"] = i.fire_pulse_count
+        values = self.read_values("input registers", gauges)
+        count = values.get("fire_pulse_count")
         return ControllerStatus(
-            reservoir_pressure_bar=self.reservoir_pressure_bar(),
+            reservoir_pressure_bar=values["reservoir_pressure"],
             pressure_setpoint_bar=self.pressure_setpoint_bar(),
-            fixture_vacuum_mbar=self.fixture_vacuum_mbar(),
+            fixture_vacuum_mbar=values["fixture_vacuum"],
             valves=self.valves(),
             interlocks=self.interlocks(),
+            watchdog=self.watchdog_state() if i.watchdog_state >= 0 else "",
+            fire_pulse_count=None if count is None else int(count),
         )
 
-    # -- protocol helpers ---------------------------------------------------------------
-    def _write_coil(self, address: int, value: bool, what: str) -> None:
-        self._call(f"write coil {address} ({what})={bool(value)}",
-                   lambda c: c.write_coil(address, bool(value), device_id=self.device_id))
+    # -- link watchdog --------------------------------------------------------------------------
+    def start_heartbeat(self) -> None:
+        """Start a heartbeat session (module docstring); InstrumentError without a heartbeat register."""
+        address = self._required("heartbeat", self.map.holding_registers.heartbeat)
+        self.stop_heartbeat_thread()
+        watchdog = self.map.holding_registers.watchdog_ms
+        if watchdog.present:
+            self.write_value(watchdog, self.watchdog_s * 1000.0, "watchdog time", "ms")
+        self.write_word(address, HEARTBEAT_START, "heartbeat: start a session")
+        self.last_heartbeat_error = None
+        self._beat_stop.clear()
+        self._beat_thread = threading.Thread(target=self._beat, args=(address,), daemon=True,
+                                             name=f"heartbeat {self.name}")
+        self._beat_thread.start()
 
-    def _write_register(self, address: int, value: float, scale: float, what: str, unit: str) -> None:
-        count = round(value / scale)
-        if not 0 <= count <= UINT16_MAX:
-            high = UINT16_MAX * scale
-            raise ValueError(f"{self.name}: {what} {value} {unit} outside the register range 0..{high:g} {unit}")
-        self._call(f"write register {address} ({what})={count}",
-                   lambda c: c.write_register(address, count, device_id=self.device_id))
+    def _beat(self, address: int) -> None:
+        period_s = max(0.02, self.watchdog_s / 4.0)
+        beat = HEARTBEAT_FIRST_BEAT
+        while not self._beat_stop.wait(period_s):
+            try:
+                self.write_word(address, beat, "heartbeat")
+                self.last_heartbeat_error = None
+            except InstrumentError as exc:  # keep trying: if the link stays down, the controller trips
+                self.last_heartbeat_error = exc
+            beat = beat + 1 if beat < 0xFFFF else HEARTBEAT_FIRST_BEAT
 
-    # `function` is the Modbus function as errors name it; its words are the pymodbus client
-    # method ("read coils" -> read_coils).
-    def _read_bits(self, function: str, addresses: list[int]) -> list[bool]:
-        start, stop = min(addresses), max(addresses)
-        response = self._call(f"{function} {start}..{stop}", lambda c: getattr(c, function.replace(" ", "_"))(
-            start, count=stop - start + 1, device_id=self.device_id))
-        bits = list(response.bits)
-        if len(bits) < stop - start + 1:
-            raise InstrumentError(self.name, f"{function} {start}..{stop}", "short reply", str(bits))
-        return [bool(bits[a - start]) for a in addresses]
+    def stop_heartbeat_thread(self) -> None:
+        """Stop the driver's beats without telling the controller (its watchdog will lapse)."""
+        thread, self._beat_thread = self._beat_thread, None
+        if thread is not None:
+            self._beat_stop.set()
+            thread.join(max(1.0, 2 * self.timeout_s * (self.retries + 1)))
 
-    def _read_registers(self, function: str, address: int, count: int) -> list[int]:
-        response = self._call(f"{function} {address}", lambda c: getattr(c, function.replace(" ", "_"))(
-            address, count=count, device_id=self.device_id))
-        registers = list(response.registers)
-        if len(registers) != count:
-            raise InstrumentError(self.name, f"{function} {address}", "short reply", str(registers))
-        return registers
+    def stop_heartbeat(self) -> None:
+        """Stop the beats and disarm the watchdog (0). Never raises: if the disarm cannot be
+        written, the watchdog lapses and the controller vents, which is safe."""
+        running = self._beat_thread is not None
+        self.stop_heartbeat_thread()
+        if running and self.connected:
+            with contextlib.suppress(InstrumentError):
+                self.write_word(self.map.holding_registers.heartbeat, HEARTBEAT_STOP, "heartbeat: stop")
 
-    def _call(self, command: str, request: Any) -> Any:
-        """Run one request; turn every pymodbus failure into an InstrumentError naming it."""
-        if self._client is None:
-            if not self._wanted:
-                raise InstrumentConnectionError(self.name, command, "not connected (use `with` or connect())")
-            self.connect()  # the last request failed: start afresh on a new connection
-        assert self._client is not None
+    @property
+    def heartbeat_running(self) -> bool:
+        return self._beat_thread is not None and self._beat_thread.is_alive()
+
+    def watchdog_state(self) -> str:
+        """"off", "armed" or "tripped" as the controller reports it."""
+        address = self._required("watchdog_state", self.map.input_registers.watchdog_state)
+        code = self.read_words("input registers", [address])[address]
+        if not 0 <= code < len(WATCHDOG_STATES):
+            raise InstrumentError(self.name, f"read input registers {address} (watchdog state)",
+                                  "not a watchdog state (0 off, 1 armed, 2 tripped)", str(code))
+        return WATCHDOG_STATES[code]
+
+    def watchdog_tripped(self) -> bool:
+        """True when the watchdog lapsed since the current heartbeat session started."""
+        return self.watchdog_state() == "tripped"
+
+    # -- fire pulse -----------------------------------------------------------------------------
+    def fire_pulse(self, duration_s: float) -> None:
+        """Have the controller open the fire valve for `duration_s` and close it itself."""
+        register = self.map.holding_registers.fire_pulse_ms
+        self._required("fire_pulse_ms", register.address)
+        if not 0 < duration_s <= 60:
+            raise ValueError(f"{self.name}: fire pulse must be in (0, 60] s, got {duration_s!r}")
         try:
-            response = request(self._client)
-        except ConnectionException as exc:
-            self._drop()
-            raise InstrumentConnectionError(self.name, command, f"connection lost: {exc}") from exc
-        except ModbusIOException as exc:
-            self._drop()
-            text = str(exc)
-            if "No response" in text or "timeout" in text.lower():
-                raise InstrumentTimeout(self.name, command, f"no reply within {self.timeout_s:g} s") from exc
-            raise InstrumentConnectionError(self.name, command, f"connection lost: {text}") from exc
-        except ModbusException as exc:
-            self._drop()
-            raise InstrumentError(self.name, command, f"Modbus failure: {exc}") from exc
-        except OSError as exc:
-            self._drop()
-            raise InstrumentConnectionError(self.name, command, f"socket error: {exc}") from exc
-        if response is None:
-            raise InstrumentError(self.name, command, "no response object")
-        if response.isError():
-            code = getattr(response, "exception_code", "?")
-            raise InstrumentError(self.name, command, f"controller refused (Modbus exception code {code})",
-                                  str(response))
-        return response
+            self.write_value(register, duration_s * 1000.0, "fire pulse", "ms")
+        except ModbusRefusal as exc:
+            raise InstrumentError(self.name, exc.command, f"fire pulse refused by the controller: {self._why_refused()}",
+                                  exc.reply) from exc
 
+    def fire_pulse_count(self) -> int:
+        """Pulses the controller fired since it started."""
+        register = self.map.input_registers.fire_pulse_count
+        self._required("fire_pulse_count", register.address)
+        return int(self._read_one("input registers", "fire_pulse_count", register))
+
+    def _why_refused(self) -> str:
+        """The controller's reason for refusing an output, as far as its inputs tell."""
+        reasons: list[str] = []
+        with contextlib.suppress(InstrumentError):
+            reasons += self.interlocks().problems()
+        if self.map.input_registers.watchdog_state >= 0:
+            with contextlib.suppress(InstrumentError):
+                if self.watchdog_tripped():
+                    reasons.append("link watchdog tripped (start a new heartbeat session)")
+        return ", ".join(reasons) or "its interlock chain (no input says why)"
+
+    # -- helpers --------------------------------------------------------------------------------
+    def _write_coil(self, coil: str, value: bool) -> None:
+        try:
+            self.write_coil(getattr(self.map.coils, coil), value, coil.replace("_", " "))
+        except ModbusRefusal as exc:
+            if not value:
+                raise
+            raise InstrumentError(self.name, exc.command, f"refused by the controller: {self._why_refused()}",
+                                  exc.reply) from exc
+
+    def _read_one(self, table: str, name: str, register: Register) -> float:
+        return self.read_values(table, {name: register})[name]
+
+    def _required(self, what: str, address: int) -> int:
+        if address < 0:
+            raise InstrumentError(self.name, what, f"the register map has no {what} register "
+                                  f"(valve_controller.*.{what} in rig.toml)")
+        return address

@@ -3,11 +3,14 @@
 `load_rig_config(path) -> RigConfig` reads the TOML file and returns typed, frozen dataclasses,
 one per section:
 
-    [valve_controller]   host, port, device_id, timeout_s, retries
-      [valve_controller.coils | .discrete_inputs | .holding_registers | .input_registers | .scales]
+    [valve_controller]   driver, transport (tcp | rtu), host, port, serial_port, baudrate, parity,
+                         stopbits, unit_id, timeout_s, retries, watchdog_s, fire_pulse_s
+      [valve_controller.coils | .discrete_inputs | .holding_registers | .input_registers]
+      [valve_controller.options]  (a lab's own driver: keyword arguments of its class)
     [digitizer]          resource, timeout_s, sample_rate_hz, record_length, pre_trigger_fraction,
                          ch1_range_v, ch2_range_v, trigger_source, trigger_level_v, trigger_slope
-    [amplifier]          port, baudrate, timeout_s, retries, gain, excitation_v, lowpass_hz
+    [amplifier]          driver (serial-bridge | manual | ...), port, baudrate, timeout_s, retries,
+                         gain, excitation_v, lowpass_hz, sensitivity_v_per_m_s2, identity
     [limits]             max_pressure_bar, min_pressure_bar, fixture_vacuum_max_mbar, ...
     [timeouts]           check_s, evacuate_s, charge_s, arm_s, fire_s, capture_s, safe_s, store_s, analyse_s
     [analysis]           grating_pitch_m, orders, sensitivity_v_per_m_s2, sample_rate_hz
@@ -18,13 +21,24 @@ one per section:
 Validation happens at load: an unknown section or key, a wrong type or a value out of range
 raises ConfigError naming the file, the key (dotted, e.g. "valve_controller.coils.fire_valve")
 and the reason. The rules are the RULES table below (one line per key pattern), applied by
-one generic reader of dataclasses (`_build`), so every section is checked the same way.
+one generic reader of dataclasses (`_build`), so every section is checked the same way. Then
+the file is checked as a whole (`_check_rig`): thresholds against the pressure limits and the
+gauge's resolution, every limit against what its register can hold, the register map for
+overlaps and the registers the safety functions need, each driver's own keys.
+
+Register values are written either as an address (a uint16, scale 1) or as a table
+``{ address = 0, type = "float32", word_order = "little", scale = 1.0, offset = 0.0 }``
+(drivers/registers.py). A serial port may be written ``"sim:amplifier"`` or
+``"sim:controller"``: the port of this user's running `hopkinson sim`, looked up when the
+instruments are opened (rig/instruments.py), never a fixed path in the shared /tmp.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import stat
 import tomllib
 import types
 import typing
@@ -34,14 +48,8 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ
-from hopkinson.drivers.valve_controller import (
-    CoilMap,
-    DiscreteInputMap,
-    HoldingRegisterMap,
-    InputRegisterMap,
-    RegisterMap,
-    ScaleMap,
-)
+from hopkinson.drivers.modbus_link import ModbusTarget
+from hopkinson.drivers.registers import REGISTER_TYPES, WORD_ORDERS, Register, RegisterMap
 from hopkinson.rig.errors import ConfigError
 
 if typing.TYPE_CHECKING:
@@ -50,23 +58,57 @@ if typing.TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class ValveControllerConfig:
-    """[valve_controller]: Modbus TCP address and register map of the gas/vacuum controller."""
+    """[valve_controller]: the gas/vacuum controller: its driver, Modbus link and register map.
 
-    host: str
+    driver "modbus" (the project's, drivers/valve_controller.py) or a lab's own class
+    ("package.module:Class" or an entry point of the `hopkinson.drivers` group), which gets
+    the [valve_controller.options] table as keyword arguments.
+    """
+
+    driver: str = "modbus"
+    options: dict[str, Any] = field(default_factory=dict)
+    transport: str = "tcp"
+    host: str = ""
     port: int = 502
-    device_id: int = 1
+    serial_port: str = ""
+    baudrate: int = 19200
+    parity: str = "N"
+    stopbits: int = 1
+    unit_id: int = 1
     timeout_s: float = 1.0
     retries: int = 0
-    coils: CoilMap = field(default_factory=CoilMap)
-    discrete_inputs: DiscreteInputMap = field(default_factory=DiscreteInputMap)
-    holding_registers: HoldingRegisterMap = field(default_factory=HoldingRegisterMap)
-    input_registers: InputRegisterMap = field(default_factory=InputRegisterMap)
-    scales: ScaleMap = field(default_factory=ScaleMap)
+    watchdog_s: float = 3.0
+    fire_pulse_s: float = 0.2
+    register_map: RegisterMap = field(default_factory=RegisterMap, metadata={"inline": True})
 
     @property
-    def register_map(self) -> RegisterMap:
-        return RegisterMap(self.coils, self.discrete_inputs, self.holding_registers,
-                           self.input_registers, self.scales)
+    def target(self) -> ModbusTarget:
+        """Where the controller is, as the Modbus driver takes it."""
+        return ModbusTarget(self.transport, host=self.host, port=self.port, serial_port=self.serial_port,
+                            baudrate=self.baudrate, parity=self.parity, stopbits=self.stopbits,
+                            unit_id=self.unit_id)
+
+    @property
+    def address(self) -> str:
+        """The rig's identity for its lock, e.g. "modbus-tcp://127.0.0.1:5020/1"."""
+        if self.driver != "modbus" and self.options:
+            return f"{self.driver}:{sorted(self.options.items())}"
+        return self.target.address
+
+    @property
+    def gauge_resolution_bar(self) -> float:
+        """One count of the reservoir gauge, bar (0 for a float32 gauge)."""
+        return self.register_map.input_registers.reservoir_pressure.resolution
+
+    # Transitional, for rig/sequencer.py until it asks the driver (has_projectile_register,
+    # pressure_resolution_bar) or gauge_resolution_bar: remove then.
+    @property
+    def holding_registers(self) -> Any:
+        return self.register_map.holding_registers
+
+    @property
+    def scales(self) -> Any:
+        return types.SimpleNamespace(pressure_bar_per_count=self.gauge_resolution_bar)
 
 
 @dataclass(frozen=True)
@@ -91,15 +133,25 @@ class DigitizerConfig:
 
 @dataclass(frozen=True)
 class AmplifierConfig:
-    """[amplifier]: serial port and settings of the bridge amplifier."""
+    """[amplifier]: the sensor's conditioner.
 
-    port: str
+    driver "serial-bridge" (drivers/amplifier.py: port, baudrate, ...; gain, excitation and
+    low-pass are set and read back), "manual" (drivers/manual_conditioner.py: no I/O; gain,
+    excitation, low-pass, sensitivity and identity are what the technician entered), or a
+    lab's own class with [amplifier.options].
+    """
+
+    driver: str = "serial-bridge"
+    options: dict[str, Any] = field(default_factory=dict)
+    port: str = ""
     baudrate: int = 115200
     timeout_s: float = 1.0
     retries: int = 1
     gain: float = 10.0
     excitation_v: float = 5.0
     lowpass_hz: float = 200_000.0  # 0 = filter off
+    sensitivity_v_per_m_s2: float = 0.0  # manual: entered on the conditioner (0 = not entered)
+    identity: str = ""  # manual: make, model, serial as the technician reads them
 
 
 @dataclass(frozen=True)
@@ -151,8 +203,15 @@ class RigConfig:
     path: str = ""  # where it was loaded from (not a TOML key)
 
     def snapshot(self) -> dict[str, Any]:
-        """The configuration as a JSON-ready dict (for shot files)."""
-        return _jsonable(dataclasses.asdict(self))
+        """The configuration as a JSON-ready dict (for shot files), shaped like the TOML file."""
+        data = _jsonable(dataclasses.asdict(self))
+        for section in dataclasses.fields(self):
+            value = getattr(self, section.name)
+            if dataclasses.is_dataclass(value):
+                for f in dataclasses.fields(value):
+                    if f.metadata.get("inline"):
+                        data[section.name].update(data[section.name].pop(f.name))
+        return data
 
 
 @dataclass(frozen=True)
@@ -172,17 +231,36 @@ _POSITIVE = _Rule(above=0.0)
 _TIMEOUT = _Rule(above=0.0, max=3600.0)
 
 # Key patterns (dotted; list items match without an index) → rule. First match wins.
+_BITS = _Rule(-1, 65535, text="-1 (none) or an address 0..65535")
+_BAUD = _Rule(choices=(1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600))
+_REGISTER_RULES: dict[str, _Rule] = {  # a register table, under valve_controller. and register_map.
+    "*.address": _BITS,
+    "*.type": _Rule(choices=tuple(REGISTER_TYPES)),
+    "*.word_order": _Rule(choices=WORD_ORDERS, text="big: high word first; little: low word first"),
+    "*.scale": _Rule(text="non-zero"),
+    "*.offset": _Rule(),
+    "coils.*": _ADDRESS,
+    "discrete_inputs.door_closed": _ADDRESS,
+    "discrete_inputs.fixture_clamped": _ADDRESS,
+    "discrete_inputs.estop_healthy": _ADDRESS,
+    "discrete_inputs.*": _BITS,
+    "holding_registers.*": _BITS,
+    "input_registers.*": _BITS,
+}
+
+# Key patterns (dotted; list items match without an index) → rule. First match wins.
 RULES: dict[str, _Rule] = {
+    "valve_controller.transport": _Rule(choices=("tcp", "rtu")),
     "valve_controller.port": _PORT,
-    "valve_controller.device_id": _Rule(0, 247),
+    "valve_controller.baudrate": _BAUD,
+    "valve_controller.parity": _Rule(choices=("N", "E", "O")),
+    "valve_controller.stopbits": _Rule(choices=(1, 2)),
+    "valve_controller.unit_id": _Rule(1, 247),
     "valve_controller.timeout_s": _TIMEOUT,
     "valve_controller.retries": _Rule(0, 10),
-    "valve_controller.holding_registers.projectile": _Rule(-1, 65535, text="-1 (none) or an address 0..65535"),
-    "valve_controller.coils.*": _ADDRESS,
-    "valve_controller.discrete_inputs.*": _ADDRESS,
-    "valve_controller.holding_registers.*": _ADDRESS,
-    "valve_controller.input_registers.*": _ADDRESS,
-    "valve_controller.scales.*": _POSITIVE,
+    "valve_controller.watchdog_s": _Rule(0.2, 60.0, text="the controller's link watchdog, seconds"),
+    "valve_controller.fire_pulse_s": _Rule(above=0.0, max=10.0),
+    **{f"valve_controller.{k}": r for k, r in _REGISTER_RULES.items()},
     "digitizer.timeout_s": _TIMEOUT,
     "digitizer.sample_rate_hz": _Rule(1e3, 1e10),
     "digitizer.record_length": _Rule(16, 100_000_000),
@@ -191,12 +269,13 @@ RULES: dict[str, _Rule] = {
     "digitizer.ch2_range_v": _Rule(above=0.0, max=100.0),
     "digitizer.trigger_source": _Rule(choices=("CH1", "CH2", "EXT")),
     "digitizer.trigger_slope": _Rule(choices=("POS", "NEG")),
-    "amplifier.baudrate": _Rule(choices=(9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)),
+    "amplifier.baudrate": _BAUD,
     "amplifier.timeout_s": _TIMEOUT,
     "amplifier.retries": _Rule(0, 10),
-    "amplifier.gain": _Rule(choices=GAINS),
-    "amplifier.excitation_v": _Rule(*EXCITATION_RANGE_V),
-    "amplifier.lowpass_hz": _Rule(choices=(0.0, *LOWPASS_HZ), text="0 (off) or one of the filter corners"),
+    "amplifier.gain": _Rule(above=0.0, max=1e6),  # the serial bridge's own steps: _check_amplifier
+    "amplifier.excitation_v": _Rule(0.0, EXCITATION_RANGE_V[1]),
+    "amplifier.lowpass_hz": _Rule(0.0, 1e8, text="0 (off) or the filter corner"),
+    "amplifier.sensitivity_v_per_m_s2": _Rule(0.0, 1.0, text="0 (not entered) or the sensitivity"),
     "limits.max_pressure_bar": _Rule(above=0.0, max=100.0),
     "limits.min_pressure_bar": _Rule(0.0, 100.0),
     "limits.pressure_tolerance_bar": _Rule(above=0.0, max=10.0),
@@ -208,12 +287,19 @@ RULES: dict[str, _Rule] = {
     "analysis.sensitivity_v_per_m_s2": _Rule(above=0.0),
     "analysis.sample_rate_hz": _Rule(1e3, 1e9),
     # config/sim.toml
+    "servers.modbus_transport": _Rule(choices=("tcp", "rtu")),
     "servers.modbus_port": _Rule(0, 65535),
+    "servers.modbus_unit_id": _Rule(1, 247),
+    "servers.modbus_baudrate": _BAUD,
+    "servers.modbus_parity": _Rule(choices=("N", "E", "O")),
+    "servers.modbus_stopbits": _Rule(choices=(1, 2)),
+    "servers.amplifier_baudrate": _BAUD,
     "servers.digitizer_port": _Rule(0, 65535),
     "servers.modbus_slow_delay_s": _Rule(0.0, 60.0),
     "world.time_scale": _Rule(above=0.0, max=10_000.0),
     "world.seed": _Rule(0, 2**63),
     "world.pneumatics.atmosphere_mbar": _Rule(above=0.0, max=2000.0),
+    "world.pneumatics.watchdog_s": _Rule(0.2, 60.0),
     "world.pneumatics.*_bar": _Rule(0.0, 100.0),
     "world.pneumatics.*_mbar": _Rule(0.0, 2000.0),
     "world.pneumatics.*_s": _POSITIVE,
@@ -239,12 +325,7 @@ RULES: dict[str, _Rule] = {
     "world.signals.response_coloured_pole": _Rule(0.0, 0.999),
     "world.signals.*_snr_db": _Rule(0.0, 200.0, text="0 (no noise) .. 200 dB"),
     "world.signals.*": _POSITIVE,
-    "register_map.coils.*": _ADDRESS,
-    "register_map.discrete_inputs.*": _ADDRESS,
-    "register_map.holding_registers.projectile": _Rule(-1, 65535),
-    "register_map.holding_registers.*": _ADDRESS,
-    "register_map.input_registers.*": _ADDRESS,
-    "register_map.scales.*": _POSITIVE,
+    **{f"register_map.{k}": r for k, r in _REGISTER_RULES.items()},
 }
 
 
@@ -264,12 +345,40 @@ def load_sim_config(path: str | Path) -> SimConfig:
     from hopkinson.drivers.sim.simulated_rig import SimConfig
 
     path = Path(path)
-    config = _build(SimConfig, _read_toml(path), path, "")
-    _check_register_map(config.register_map, path, "register_map")
+    data = _read_toml(path)
+    register_map = _build(RegisterMap, data.pop("register_map", {}), path, "register_map")
+    _check_register_map(register_map, path, "register_map")
+    config = _build(SimConfig, data, path, "", skip=("register_map",))
     if not config.world.accelerometer.modes:
         raise ConfigError(f"{path}: world.accelerometer.modes: at least one mode is needed")
     _check_orders(config.world.signals.orders, path, "world.signals.orders")
-    return config
+    return dataclasses.replace(config, register_map=controller_map_of(register_map))
+
+
+def controller_map_of(register_map: RegisterMap) -> dict[str, dict[str, Any]]:
+    """The simulated controller's map (drivers/sim/controller_map.py) for a driver's map."""
+    from hopkinson.drivers.sim.controller_map import Point
+
+    return {table: {name: Point(**dataclasses.asdict(entry)) if isinstance(entry, Register) else Point(entry)
+                    for name, entry in entries.items()}
+            for table, entries in register_map.blocks().items()}
+
+
+def register_map_of(controller_map: dict[str, dict[str, Any]]) -> RegisterMap:
+    """The driver's map that reaches a simulated controller laid out by `controller_map`."""
+    tables = {}
+    for block in dataclasses.fields(RegisterMap):
+        table_type = typing.get_type_hints(RegisterMap)[block.name]
+        points = controller_map.get(block.name, {})
+        values: dict[str, Any] = {}
+        for f in dataclasses.fields(table_type):
+            point = points.get(f.name)
+            if typing.get_type_hints(table_type)[f.name] is Register:
+                values[f.name] = Register(**dataclasses.asdict(point)) if point is not None else Register()
+            else:
+                values[f.name] = point.address if point is not None else -1
+        tables[block.name] = table_type(**values)
+    return RegisterMap(**tables)
 
 
 # -- checks across keys -------------------------------------------------------------------------
@@ -278,25 +387,115 @@ def _check_rig(config: RigConfig, path: Path) -> None:
     if limits.min_pressure_bar >= limits.max_pressure_bar:
         raise ConfigError(f"{path}: limits.min_pressure_bar: must be below limits.max_pressure_bar "
                           f"({limits.min_pressure_bar:g} >= {limits.max_pressure_bar:g})")
-    _check_register_map(config.valve_controller.register_map, path, "valve_controller")
     _check_orders(config.analysis.orders, path, "analysis.orders")
-    scale = config.valve_controller.scales.pressure_bar_per_count
-    if limits.max_pressure_bar / scale > 0xFFFF:
-        raise ConfigError(f"{path}: limits.max_pressure_bar: {limits.max_pressure_bar:g} bar does not fit the "
-                          f"16-bit set-point register at {scale:g} bar per count")
+    _check_valve_controller(config.valve_controller, path)
+    _check_thresholds(config, path)
+    _check_amplifier(config.amplifier, path)
+
+
+def _check_valve_controller(vc: ValveControllerConfig, path: Path) -> None:
+    _check_driver(vc.driver, ("modbus",), path, "valve_controller")
+    if vc.driver != "modbus":
+        return
+    if vc.options:
+        raise ConfigError(f"{path}: valve_controller.options: only for a lab's own driver (driver = "
+                          f"\"package.module:Class\"); the modbus driver takes the keys of [valve_controller]")
+    if vc.transport == "tcp" and not vc.host:
+        raise ConfigError(f"{path}: valve_controller.host: missing key (the controller's address on Modbus TCP)")
+    if vc.transport == "rtu" and not vc.serial_port:
+        raise ConfigError(f"{path}: valve_controller.serial_port: missing key (the RS-485 port for Modbus RTU)")
+    _check_register_map(vc.register_map, path, "valve_controller")
+    m = vc.register_map
+    required = {"holding_registers.heartbeat": m.holding_registers.heartbeat,
+                "input_registers.watchdog_state": m.input_registers.watchdog_state,
+                "holding_registers.fire_pulse_ms": m.holding_registers.fire_pulse_ms.address,
+                "input_registers.fire_pulse_count": m.input_registers.fire_pulse_count.address}
+    for key, address in required.items():
+        if address < 0:
+            raise ConfigError(f"{path}: valve_controller.{key}: missing (the controller's link watchdog and "
+                              "its fire pulse are what keep the rig safe when this computer fails; map them)")
+    for key, register, value, unit in (
+            ("holding_registers.fire_pulse_ms", m.holding_registers.fire_pulse_ms, vc.fire_pulse_s * 1000, "ms"),
+            ("holding_registers.watchdog_ms", m.holding_registers.watchdog_ms, vc.watchdog_s * 1000, "ms")):
+        _check_fits(register, value, unit, path, f"valve_controller.{key}",
+                    "valve_controller.fire_pulse_s" if "fire" in key else "valve_controller.watchdog_s")
+    if vc.fire_pulse_s >= vc.watchdog_s:
+        raise ConfigError(f"{path}: valve_controller.fire_pulse_s: {vc.fire_pulse_s:g} s must be shorter than "
+                          f"valve_controller.watchdog_s ({vc.watchdog_s:g} s)")
+
+
+def _check_thresholds(config: RigConfig, path: Path) -> None:
+    """Thresholds against the pressure limits, the gauge resolution and the registers."""
+    limits = config.limits
+    vc = config.valve_controller
+    if vc.driver == "modbus":
+        m = vc.register_map
+        for key, register, value, unit in (
+                ("holding_registers.pressure_setpoint", m.holding_registers.pressure_setpoint,
+                 limits.max_pressure_bar, "bar"),
+                ("input_registers.reservoir_pressure", m.input_registers.reservoir_pressure,
+                 limits.max_pressure_bar, "bar"),
+                ("input_registers.fixture_vacuum", m.input_registers.fixture_vacuum,
+                 limits.fixture_vacuum_max_mbar, "mbar")):
+            _check_fits(register, value, unit, path, f"valve_controller.{key}",
+                        "limits.fixture_vacuum_max_mbar" if "vacuum" in key else "limits.max_pressure_bar")
+        low, _ = m.input_registers.reservoir_pressure.value_range()
+        if low > 0:
+            raise ConfigError(f"{path}: valve_controller.input_registers.reservoir_pressure: the gauge cannot "
+                              f"read 0 bar (lowest {low:g} bar), so venting could never be confirmed")
+    resolution = vc.gauge_resolution_bar
+    if limits.vent_done_bar >= limits.min_pressure_bar:
+        raise ConfigError(f"{path}: limits.vent_done_bar: {limits.vent_done_bar:g} bar must be below "
+                          f"limits.min_pressure_bar ({limits.min_pressure_bar:g} bar): a reservoir this full "
+                          "is not vented")
+    if limits.vent_done_bar < resolution:
+        raise ConfigError(f"{path}: limits.vent_done_bar: {limits.vent_done_bar:g} bar is finer than the "
+                          f"reservoir gauge resolves ({resolution:g} bar per count)")
+    if limits.pressure_tolerance_bar > limits.min_pressure_bar / 2:
+        raise ConfigError(f"{path}: limits.pressure_tolerance_bar: {limits.pressure_tolerance_bar:g} bar is more "
+                          f"than half of limits.min_pressure_bar ({limits.min_pressure_bar:g} bar): a shot could "
+                          "count as charged far below its pressure")
+    if limits.pressure_tolerance_bar < resolution:
+        raise ConfigError(f"{path}: limits.pressure_tolerance_bar: {limits.pressure_tolerance_bar:g} bar is finer "
+                          f"than the reservoir gauge resolves ({resolution:g} bar per count)")
+
+
+def _check_fits(register: Register, value: float, unit: str, path: Path, key: str, setting: str) -> None:
+    if register.present and not register.holds(value):
+        low, high = register.value_range()
+        raise ConfigError(f"{path}: {setting}: {value:g} {unit} does not fit {key} "
+                          f"({register.type}, scale {register.scale:g}: {low:g} .. {high:g} {unit})")
+
+
+def _check_amplifier(amp: AmplifierConfig, path: Path) -> None:
+    _check_driver(amp.driver, ("serial-bridge", "manual"), path, "amplifier")
+    if amp.driver == "serial-bridge":
+        if not amp.port:
+            raise ConfigError(f"{path}: amplifier.port: missing key (the serial bridge amplifier's port)")
+        for key, value, allowed in (("gain", amp.gain, GAINS), ("lowpass_hz", amp.lowpass_hz, (0.0, *LOWPASS_HZ))):
+            if value not in allowed:
+                shown = ", ".join(f"{a:g}" for a in allowed)
+                raise ConfigError(f"{path}: amplifier.{key}: the serial bridge amplifier has {shown}; got {value:g}")
+        low, high = EXCITATION_RANGE_V
+        if not low <= amp.excitation_v <= high:
+            raise ConfigError(f"{path}: amplifier.excitation_v: the serial bridge amplifier has {low:g} .. {high:g} V,"
+                              f" got {amp.excitation_v:g}")
+    if amp.driver in ("serial-bridge", "manual") and amp.options:
+        raise ConfigError(f"{path}: amplifier.options: only for a lab's own driver (driver = \"package.module:Class\")")
+
+
+def _check_driver(driver: str, built_in: tuple[str, ...], path: Path, section: str) -> None:
+    """A lab's driver class must import and have its role's methods (rig/driver_classes.py)."""
+    if driver not in built_in:
+        from hopkinson.rig.driver_classes import driver_class
+
+        driver_class(driver, section, f"{path}: {section}.driver")
 
 
 def _check_register_map(register_map: RegisterMap, path: Path, prefix: str) -> None:
-    for block in ("coils", "discrete_inputs", "holding_registers", "input_registers"):
-        table = dataclasses.asdict(getattr(register_map, block))
-        seen: dict[int, str] = {}
-        for name, address in table.items():
-            if address < 0:
-                continue
-            if address in seen:
-                raise ConfigError(f"{path}: {prefix}.{block}.{name}: address {address} is also "
-                                  f"{prefix}.{block}.{seen[address]}")
-            seen[address] = name
+    overlaps = register_map.overlaps()
+    if overlaps:
+        raise ConfigError(f"{path}: {prefix}: {overlaps[0]}")
 
 
 def _check_orders(orders: tuple[int, int], path: Path, key: str) -> None:
@@ -305,46 +504,81 @@ def _check_orders(orders: tuple[int, int], path: Path, key: str) -> None:
 
 
 # -- the generic reader ---------------------------------------------------------------------------
+MAX_CONFIG_BYTES = 1 << 20  # a configuration is a few kB; more is not one (e.g. /dev/zero)
+
+
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
         with path.open("rb") as fh:
-            return tomllib.load(fh)
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                raise ConfigError(f"{path}: not a regular file")
+            data = fh.read(MAX_CONFIG_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder, not a configuration file") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{path}: larger than {MAX_CONFIG_BYTES // 1024} KiB: not a configuration file")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): is it a binary file?") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
 def _build(cls: type, table: Any, path: Path, prefix: str, skip: tuple[str, ...] = ()) -> Any:
-    """Make dataclass `cls` from a TOML table, checking keys, types and RULES."""
+    """Make dataclass `cls` from a TOML table, checking keys, types and RULES.
+
+    A field with metadata {"inline": True} is a dataclass whose own fields sit in this same
+    table (the register map's four tables in [valve_controller])."""
     where = prefix or "top level"
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: {prefix}: must be a table, got {_type_name(table)}")
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in skip}
-    for key in table:
-        if key not in fields:
-            kind = "section" if not prefix else "key"
-            known = ", ".join(fields)
-            raise ConfigError(f"{path}: {_join(prefix, key)}: unknown {kind} in {where} (known: {known})")
     hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in skip}
+    inline = {name: f for name, f in fields.items() if f.metadata.get("inline")}
+    keys = {name for name in fields if name not in inline}
+    for f in inline.values():
+        keys.update(g.name for g in dataclasses.fields(hints[f.name]))
+    for key in table:
+        if key not in keys:
+            kind = "section" if not prefix else "key"
+            raise ConfigError(f"{path}: {_join(prefix, key)}: unknown {kind} in {where} (known: {', '.join(sorted(keys))})")
     kwargs: dict[str, Any] = {}
     for name, f in fields.items():
         key = _join(prefix, name)
+        if name in inline:
+            own = {g.name for g in dataclasses.fields(hints[name])}
+            kwargs[name] = _build(hints[name], {k: v for k, v in table.items() if k in own}, path, prefix)
+            continue
         if name not in table:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 kind = "section" if dataclasses.is_dataclass(hints[name]) else "key"
                 raise ConfigError(f"{path}: {key}: missing {kind}")
             continue
         kwargs[name] = _convert(hints[name], table[name], path, key)
-    return cls(**kwargs)
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:  # a dataclass's own check (e.g. a register's scale of 0)
+        raise ConfigError(f"{path}: {prefix or where}: {exc}") from None
 
 
 def _convert(tp: Any, value: Any, path: Path, key: str) -> Any:
+    if tp is Register and isinstance(value, int) and not isinstance(value, bool):
+        _apply_rule(value, value, path, f"{key}.address")
+        return Register(value)
     if dataclasses.is_dataclass(tp):
         return _build(tp, value, path, key)
     origin = typing.get_origin(tp)
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{path}: {key}: must be a table, got {_type_name(value)}")
+        return dict(value)
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, list):

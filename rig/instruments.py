@@ -1,19 +1,23 @@
-"""The rig's three instruments opened together from a RigConfig, as one context.
+"""The rig's three instruments, built from a RigConfig by their configured drivers, opened
+together as one context.
 
     with open_instruments(config) as instruments:
         sequencer = Sequencer(instruments, config, bus)
 
-`open_instruments` connects the valve/vacuum controller (Modbus TCP), the digitizer (VISA)
-and the bridge amplifier (serial) in that order; if one cannot be reached, the ones already
-open are closed again and the InstrumentError (naming the instrument) propagates. On leaving
-the context every instrument is closed, whatever happened.
+Each `[valve_controller]`, `[digitizer]`, `[amplifier]` section names its driver: a built-in
+one (below), "package.module:Class" or an entry point (rig/driver_classes.py). A built-in
+driver is made from the section's typed keys; a lab's class gets the section's `options`
+table as keyword arguments, and the object is checked against its role (drivers/roles.py).
 
-The drivers are not thread-safe: one thread uses an Instruments at a time (the sequencer's
-while a shot runs).
+A serial port written ``"sim:amplifier"`` or ``"sim:controller"`` is the port of this user's
+running `hopkinson sim` (its addresses file in the private runtime folder).
 
-`sim_rig_config` makes a RigConfig that points at a running SimulatedRig (in-process, on
-free ports): the addresses and the register map come from the simulator, everything else
-(limits, timeouts, analysis constants) from the given base configuration.
+`open_instruments` connects the controller, the digitizer and the amplifier in that order;
+if one cannot be reached, the ones already open are closed again and the InstrumentError
+(naming the instrument) propagates. On leaving the context every instrument is closed.
+
+`sim_rig_config` makes a RigConfig that reaches a running SimulatedRig (in-process, on free
+ports): its addresses and register map, everything else from the given base configuration.
 """
 
 from __future__ import annotations
@@ -24,14 +28,24 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from hopkinson.drivers.amplifier import BridgeAmplifier
-from hopkinson.drivers.digitizer import Digitizer
-from hopkinson.drivers.errors import InstrumentError
-from hopkinson.drivers.valve_controller import RegisterMap, ValveController
-from hopkinson.rig.config import RigConfig
+from hopkinson.drivers.base import TraceHook
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
+from hopkinson.drivers.roles import (
+    ROLES,
+    AmplifierRole,
+    DigitizerRole,
+    ValveControllerRole,
+    missing_members,
+)
+from hopkinson.rig.config import AmplifierConfig, RigConfig, ValveControllerConfig, register_map_of
+from hopkinson.rig.driver_classes import driver_class
+from hopkinson.rig.errors import ConfigError
 
 if TYPE_CHECKING:
-    from hopkinson.drivers.sim.simulated_rig import SimAddresses
+    from hopkinson.drivers.sim.simulated_rig import SimulatedRig
+
+SIM_PORT_PREFIX = "sim:"
+SIM_PORTS = {"sim:amplifier": "serial_port", "sim:controller": "modbus_serial_port"}
 
 
 @dataclass
@@ -39,22 +53,30 @@ class Instruments:
     """The three connected drivers; `simulated_truth` returns the simulator's truth of the
     last shot (None on a real rig)."""
 
-    valves: ValveController
-    digitizer: Digitizer
-    amplifier: BridgeAmplifier
+    valves: ValveControllerRole
+    digitizer: DigitizerRole
+    amplifier: AmplifierRole
     simulated_truth: Callable[[], dict[str, Any] | None] | None = None
+
+    def each(self) -> dict[str, Any]:
+        """role name -> driver."""
+        return {"valve_controller": self.valves, "digitizer": self.digitizer, "amplifier": self.amplifier}
 
     def identities(self) -> dict[str, str]:
         """name -> identity string of each instrument; an unanswered query is noted, not raised
         (Modbus device identification is optional)."""
         out: dict[str, str] = {}
-        for key, instrument in (("valve_controller", self.valves), ("digitizer", self.digitizer),
-                                ("amplifier", self.amplifier)):
+        for key, instrument in self.each().items():
             try:
                 out[key] = instrument.identity()
             except InstrumentError as exc:
                 out[key] = f"(no identification: {exc.problem})"
         return out
+
+    def set_trace(self, hook: TraceHook | None) -> None:
+        """Send every instrument exchange to `hook` (None: stop)."""
+        for instrument in self.each().values():
+            instrument.trace = hook
 
     def close(self) -> None:
         """Close all three (idempotent; never raises)."""
@@ -63,15 +85,78 @@ class Instruments:
                 instrument.close()
 
 
+# -- built-in drivers ---------------------------------------------------------------------------
+def _modbus_controller(config: RigConfig) -> ValveControllerRole:
+    from hopkinson.drivers.valve_controller import ValveController
+
+    vc = config.valve_controller
+    target = vc.target
+    if target.transport == "rtu":
+        target = dataclasses.replace(target, serial_port=resolve_port(vc.serial_port, "valve controller"))
+    return ValveController(target, register_map=vc.register_map, timeout_s=vc.timeout_s, retries=vc.retries,
+                           watchdog_s=vc.watchdog_s)
+
+
+def _serial_bridge(config: RigConfig) -> AmplifierRole:
+    from hopkinson.drivers.amplifier import BridgeAmplifier
+
+    amp = config.amplifier
+    return BridgeAmplifier(resolve_port(amp.port, "bridge amplifier"), baudrate=amp.baudrate,
+                           timeout_s=amp.timeout_s, retries=amp.retries)
+
+
+def _manual(config: RigConfig) -> AmplifierRole:
+    from hopkinson.drivers.manual_conditioner import ManualConditioner
+
+    amp = config.amplifier
+    return ManualConditioner(gain=amp.gain, excitation_v=amp.excitation_v, lowpass_hz=amp.lowpass_hz,
+                             sensitivity_v_per_m_s2=amp.sensitivity_v_per_m_s2 or None, identity=amp.identity)
+
+
+def _scpi_digitizer(config: RigConfig) -> DigitizerRole:
+    from hopkinson.drivers.digitizer import Digitizer
+
+    return Digitizer(config.digitizer.resource, timeout_s=config.digitizer.timeout_s)  # type: ignore[return-value]
+
+
+BUILT_IN: dict[str, dict[str, Callable[[RigConfig], Any]]] = {
+    "valve_controller": {"modbus": _modbus_controller},
+    "digitizer": {"scpi": _scpi_digitizer},
+    "amplifier": {"serial-bridge": _serial_bridge, "manual": _manual},
+}
+DEFAULT_DRIVER = {"valve_controller": "modbus", "digitizer": "scpi", "amplifier": "serial-bridge"}
+
+
+def make_instrument(config: RigConfig, role: str) -> Any:
+    """The driver of one role ("valve_controller", "digitizer", "amplifier"), not connected.
+
+    ConfigError for a driver that cannot be built or does not play its role;
+    InstrumentConnectionError when a "sim:" port names a simulator that is not running."""
+    section = getattr(config, role)
+    driver = getattr(section, "driver", DEFAULT_DRIVER[role])
+    if driver in BUILT_IN[role]:
+        return BUILT_IN[role][driver](config)
+    where = f"{config.path or 'rig config'}: {role}.driver"
+    cls = driver_class(driver, role, where)
+    options = dict(getattr(section, "options", {}) or {})
+    try:
+        instrument = cls(**options)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{config.path or 'rig config'}: {role}.options: {driver} does not accept them: "
+                          f"{exc}") from None
+    missing = missing_members(instrument, ROLES[role])
+    if missing:
+        raise ConfigError(f"{where}: {driver} cannot be the {role.replace('_', ' ')}: it has no "
+                          f"{', '.join(missing)} (see docs/writing-a-driver.md)")
+    return instrument
+
+
 def make_instruments(config: RigConfig) -> Instruments:
     """The three drivers configured from `config`, not yet connected."""
-    vc = config.valve_controller
-    amp = config.amplifier
     return Instruments(
-        valves=ValveController(vc.host, vc.port, device_id=vc.device_id, timeout_s=vc.timeout_s,
-                               retries=vc.retries, register_map=vc.register_map),
-        digitizer=Digitizer(config.digitizer.resource, timeout_s=config.digitizer.timeout_s),
-        amplifier=BridgeAmplifier(amp.port, baudrate=amp.baudrate, timeout_s=amp.timeout_s, retries=amp.retries),
+        valves=make_instrument(config, "valve_controller"),
+        digitizer=make_instrument(config, "digitizer"),
+        amplifier=make_instrument(config, "amplifier"),
     )
 
 
@@ -90,16 +175,42 @@ def open_instruments(config: RigConfig,
         instruments.close()
 
 
-def sim_rig_config(base: RigConfig, addresses: SimAddresses, register_map: RegisterMap | None = None) -> RigConfig:
-    """`base` with the instrument addresses (and register map) of a running simulated rig."""
-    vc = dataclasses.replace(base.valve_controller, host=addresses.modbus_host, port=addresses.modbus_port)
-    if register_map is not None:
-        vc = dataclasses.replace(vc, coils=register_map.coils, discrete_inputs=register_map.discrete_inputs,
-                                 holding_registers=register_map.holding_registers,
-                                 input_registers=register_map.input_registers, scales=register_map.scales)
+def resolve_port(port: str, instrument: str) -> str:
+    """A "sim:..." port as this user's running `hopkinson sim` has it; any other port as is."""
+    if not port.startswith(SIM_PORT_PREFIX):
+        return port
+    from hopkinson.drivers.sim.simulated_rig import ADDRESSES_FILE, read_running_addresses
+
+    key = SIM_PORTS.get(port)
+    if key is None:
+        raise ConfigError(f"{instrument}: port {port!r}: the simulator has {', '.join(SIM_PORTS)}")
+    addresses = read_running_addresses()
+    if addresses is None:
+        raise InstrumentConnectionError(instrument, "open", f"port {port!r} names the simulated rig, but no "
+                                        f"`hopkinson sim` is running for this user (no live {ADDRESSES_FILE})")
+    found = addresses.get(key) or ""
+    if not found:
+        raise InstrumentConnectionError(instrument, "open", f"the running `hopkinson sim` has no {port!r} "
+                                        "(is its controller on Modbus TCP?)")
+    return str(found)
+
+
+def sim_rig_config(base: RigConfig, rig: SimulatedRig) -> RigConfig:
+    """`base` with the drivers, addresses and register map of a running simulated rig."""
+    a = rig.addresses
+    vc: ValveControllerConfig = dataclasses.replace(
+        base.valve_controller, driver="modbus", options={}, transport=a.modbus_transport,
+        host=a.modbus_host, port=a.modbus_port or base.valve_controller.port,
+        serial_port=a.modbus_serial_port, baudrate=a.modbus_baudrate, parity=a.modbus_parity,
+        stopbits=a.modbus_stopbits, unit_id=a.modbus_unit_id,
+        register_map=register_map_of(rig.config.register_map))
+    amp: AmplifierConfig = base.amplifier
+    if amp.driver == "serial-bridge" or amp.driver not in ("manual",):
+        amp = dataclasses.replace(amp, driver="serial-bridge", options={}, port=a.serial_port,
+                                  baudrate=a.amplifier_baudrate)
     return dataclasses.replace(
         base,
         valve_controller=vc,
-        digitizer=dataclasses.replace(base.digitizer, resource=addresses.visa_resource),
-        amplifier=dataclasses.replace(base.amplifier, port=addresses.serial_port),
+        digitizer=dataclasses.replace(base.digitizer, resource=a.visa_resource),
+        amplifier=amp,
     )

@@ -6,9 +6,11 @@ state as JSON (`--sim-state-file`).
         with open_instruments(session.config, session.simulated_truth) as instruments:
             ...
 
-The state file is written when the `with` block ends, whatever way it ends (after the
-sequencer has run SAFE), then the simulator is stopped. It holds at least fire_valve_open,
-fill_valve_open, vent_valve_open, reservoir_pressure_bar (see `world_state`).
+The state file is written (atomically) when the `with` block ends, whatever way it ends
+(after the sequencer has run SAFE), then the simulator is stopped. It holds the valves' real
+positions (fire_valve_open, fill_valve_open, vent_valve_open: a stuck fill valve is open),
+their commands (*_commanded), reservoir_pressure_bar, the watchdog and more (see
+`world_state`).
 """
 
 from __future__ import annotations
@@ -16,15 +18,18 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
-import json
-import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from hopkinson.drivers.sim.faults import FAULTS
-from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
+from hopkinson.drivers.sim.simulated_rig import (
+    SimConfig,
+    SimulatedRig,
+    world_state,
+    write_state_file,
+)
 from hopkinson.drivers.sim.world import World
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError
@@ -51,26 +56,6 @@ class SimSession:
         return world_state(self.rig.world)
 
 
-def world_state(world: World) -> dict[str, Any]:
-    """The simulated rig's state as the world sees it (coils = what the valves were told)."""
-    coils = world.coils()
-    return {
-        "fire_valve_open": coils["fire"],
-        "fill_valve_open": coils["fill"],
-        "vent_valve_open": coils["vent"],
-        "vacuum_pump_on": coils["pump"],
-        "reservoir_pressure_bar": world.reservoir_pressure_bar(),
-        "pressure_setpoint_bar": world.pressure_setpoint_bar(),
-        "fixture_vacuum_mbar": world.fixture_vacuum_mbar(),
-        "door_closed": world.door_closed(),
-        "estop_healthy": world.estop_healthy(),
-        "shots_fired": world.shots_fired,
-        "fire_refusals": list(world.fire_refusals),
-        "faults": world.faults.names(),
-        "sim_time_s": world.sim_time_s(),
-    }
-
-
 def check_fault_names(names: Iterable[str]) -> list[str]:
     """The names, or ConfigError naming the unknown one and listing the known ones."""
     names = list(names)
@@ -80,27 +65,19 @@ def check_fault_names(names: Iterable[str]) -> list[str]:
     return names
 
 
-def write_state_file(path: Path, state: dict[str, Any]) -> None:
-    """Write the state JSON atomically (tmp + rename)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(state, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-
-
 @contextlib.contextmanager
 def sim_session(base: RigConfig, sim_config: SimConfig, faults: Iterable[str] = (),
                 state_file: Path | None = None) -> Iterator[SimSession]:
-    """Run a simulated rig on free loopback ports and a pty (no symlink, so it never collides
+    """Run a simulated rig on free loopback ports and ptys (no symlinks, so it never collides
     with a `hopkinson sim` process), with `faults` injected; module docstring."""
     names = check_fault_names(faults)
     if state_file is not None and not Path(state_file).parent.is_dir():
         raise ConfigError(f"--sim-state-file: folder {Path(state_file).parent} does not exist")
-    servers = dataclasses.replace(sim_config.servers, modbus_port=0, digitizer_port=0, serial_link="")
+    servers = dataclasses.replace(sim_config.servers, modbus_port=0, digitizer_port=0)
     rig = SimulatedRig(dataclasses.replace(sim_config, servers=servers), names)
     rig.start()
     try:
-        session = SimSession(rig, sim_rig_config(base, rig.addresses, sim_config.register_map))
+        session = SimSession(rig, sim_rig_config(base, rig))
         try:
             yield session
         finally:

@@ -1,11 +1,12 @@
-"""The simulated bridge amplifier: a serial device on a pseudo-terminal, in front of the World.
+"""The simulated bridge amplifier: a serial device at the end of a simulated line, in front of
+the World.
 
-`os.openpty()` gives a master/slave pair; this device serves on the master and the driver
-opens the slave's path (e.g. /dev/pts/7) with pyserial, exactly as it would open
-/dev/ttyUSB0. The protocol is the one documented in drivers/amplifier.py; lines are
-split and parsed here independently of the driver, so loopback tests check one reading
-against the other (the checksum is the driver's `checksum`, pinned to known bytes by
-tests/drivers/test_amplifier.py). Optionally a symlink (`link_path`) gives the device a stable name for a config file.
+The device sits on the far end of a `PtyLine` (drivers/sim/serial_line.py): the driver opens
+`port` (e.g. /dev/pts/7) with pyserial, exactly as it would open /dev/ttyUSB0, and every byte
+takes the line's byte time (`baudrate`, 8N1). The protocol is the one documented in
+drivers/amplifier.py; this module implements the amplifier's side of it on its own (framing,
+checksum, the settings it accepts), so loopback tests check the driver's reading against the
+simulator's. Optionally a symlink (`link_path`) gives the port a stable name.
 
 Fault `serial-noise`: every reply has one byte flipped (its checksum no longer matches), as
 line noise would do.
@@ -17,64 +18,67 @@ import contextlib
 import os
 import select
 import threading
-import tty
 
-from hopkinson.drivers.amplifier import (
-    EXCITATION_RANGE_V,
-    GAINS,
-    LOWPASS_HZ,
-    MAX_LINE_BYTES,
-    checksum,
-)
 from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.serial_line import PtyLine, byte_time_s
 from hopkinson.drivers.sim.world import World
+
+# What the simulated amplifier accepts (its data sheet).
+GAINS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
+LOWPASS_HZ = (1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3)
+EXCITATION_RANGE_V = (0.5, 10.0)
+MAX_LINE_BYTES = 256  # a longer line without an end is dropped
+
+
+def checksum(payload: bytes) -> str:
+    """NMEA-0183 style: XOR of the payload bytes as two upper-case hex digits."""
+    value = 0
+    for byte in payload:
+        value ^= byte
+    return f"{value:02X}"
 
 
 class SimSerialAmplifier:
     """The amplifier's serial face. `port` is the path the driver opens (after start())."""
 
-    def __init__(self, world: World, faults: FaultSet, link_path: str | None = None) -> None:
+    def __init__(self, world: World, faults: FaultSet, link_path: str | None = None,
+                 baudrate: int = 115200) -> None:
         self.world = world
         self.faults = faults
-        self.link_path = link_path
-        self.port = ""
+        self.line = PtyLine(byte_time_s(baudrate), link_path=link_path, name="sim-amplifier-line")
+        self.baudrate = baudrate
         self.lines_served = 0
-        self._master: int | None = None
-        self._slave: int | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
 
+    @property
+    def port(self) -> str:
+        """The serial port the driver opens (valid after start())."""
+        return self.line.port
+
+    @property
+    def link_path(self) -> str | None:
+        return self.line.link_path
+
     # -- life cycle -----------------------------------------------------------------------
     def start(self) -> None:
-        """Create the pty (and the symlink) and serve it in a background thread."""
+        """Start the line (and its symlink) and serve the device end in a background thread."""
         if self._thread is not None:
             raise RuntimeError("simulated amplifier already started")
-        master, slave = os.openpty()
-        tty.setraw(slave)  # no echo, no CR/LF translation: bytes pass as sent
-        self._master, self._slave = master, slave
-        self.port = os.ttyname(slave)
-        if self.link_path:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.link_path)
-            os.symlink(self.port, self.link_path)
+        self.line.start()
         self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name="sim-amplifier", daemon=True)
+        self._thread = threading.Thread(target=self._serve, args=(self.line.device_fd,), name="sim-amplifier",
+                                        daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop serving, join the thread, close the pty and remove the symlink (idempotent)."""
+        """Stop serving, join the thread, stop the line (idempotent)."""
         if self._thread is None:
             return
         self._stop.set()
         self._thread.join(5.0)
         self._thread = None
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-        self._master = self._slave = None
-        if self.link_path and os.path.islink(self.link_path) and os.readlink(self.link_path) == self.port:
-            os.unlink(self.link_path)
+        self.line.stop()
 
     def __enter__(self) -> SimSerialAmplifier:
         self.start()
@@ -84,35 +88,33 @@ class SimSerialAmplifier:
         self.stop()
 
     # -- serving --------------------------------------------------------------------------
-    def _serve(self) -> None:
-        assert self._master is not None
-        master = self._master
+    def _serve(self, fd: int) -> None:
         buffer = bytearray()
         while not self._stop.is_set():
-            ready, _, _ = select.select([master], [], [], 0.05)
+            ready, _, _ = select.select([fd], [], [], 0.05)
             if not ready:
                 continue
             try:
-                data = os.read(master, 4096)
-            except OSError:  # no slave open at the moment (EIO): wait for one
+                data = os.read(fd, 4096)
+            except OSError:  # the line is going away
                 self._stop.wait(0.05)
                 continue
             buffer.extend(data)
             while (end := buffer.find(b"\n")) >= 0:
                 line = bytes(buffer[:end]).rstrip(b"\r")
                 del buffer[: end + 1]
-                self._reply(master, line)
+                self._reply(fd, line)
             if len(buffer) > MAX_LINE_BYTES:
                 buffer.clear()
 
-    def _reply(self, master: int, line: bytes) -> None:
+    def _reply(self, fd: int, line: bytes) -> None:
         payload = self.handle(line).encode("ascii")
         out = bytearray(payload + b"*" + checksum(payload).encode("ascii") + b"\n")
         if self.faults.active("serial-noise") and payload:
             out[len(payload) // 2] ^= 0x04  # one flipped bit: the checksum no longer matches
         self.lines_served += 1
         with contextlib.suppress(OSError):
-            os.write(master, bytes(out))
+            os.write(fd, bytes(out))
 
     def handle(self, line: bytes) -> str:
         """The reply payload for one received line (without its end of line)."""
@@ -123,7 +125,7 @@ class SimSerialAmplifier:
         body, star, digits = text.rpartition("*")
         if star and len(digits) == 2 and body:
             verb = body.split(" ", 1)[0].rstrip("?")
-            if digits.upper() != checksum(body):
+            if digits.upper() != checksum(body.encode("ascii")):
                 return f"{verb} ERR CHECKSUM"
             text = body
         if not text:

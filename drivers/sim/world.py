@@ -31,6 +31,20 @@ accelerometer model with the amplifier's gain, low-pass, offset and noise). The 
 the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
 `launch_listeners` is called with it at each launch (a witness such as a fire log).
 
+Controller. Like a real PLC, the controller keeps a link watchdog and times the fire pulse:
+
+- heartbeat writes (`heartbeat(value)`): 1 starts a session (clears a trip, arms the watchdog),
+  2..65535 are beats, 0 disarms. With the watchdog armed and no write for `watchdog_s` of
+  *wall-clock* time (the link's time, not the simulated physics' time), the controller trips:
+  fill and fire de-energised, pump stopped, vent opened; it stays "tripped" (and refuses to
+  energise fill, fire or pump) until a new session starts. The trip is applied at the exact
+  moment it fell due, however late the world is next looked at.
+- `fire_pulse(duration_s)`: the controller opens the fire valve for `duration_s` of simulated
+  time and closes it itself; refused (the reason returned) when the e-stop, the door or a
+  tripped watchdog forbids it; every pulse that opened the valve is counted.
+- `valve_positions()`: the valves as they really are (a stuck fill valve is open whatever its
+  coil says), beside `coils()`, what they were told.
+
 Amplifier. Gain, excitation, low-pass, auto-zero (removes the bridge offset), shunt
 calibration (adds the output of a known equivalent acceleration) and an overload latch (set
 when the output passes `output_limit_v`, cleared by `clear_amp_overload` or auto-zero; fault
@@ -77,6 +91,7 @@ class PneumaticsParams:
     door_closed: bool = True
     fixture_clamped: bool = True
     estop_healthy: bool = True
+    watchdog_s: float = 3.0  # the controller's own watchdog time until a host writes another
 
 
 @dataclass(frozen=True)
@@ -193,6 +208,13 @@ class World:
         self._setpoint_bar = 0.0
         self._coils = {"fire": False, "fill": False, "vent": False, "pump": False}
         self._fill_open = False  # the fill valve's physical state
+        self._watchdog_s = p.watchdog_s
+        self._watchdog = "off"  # "off" | "armed" | "tripped"
+        self._last_beat_wall = 0.0
+        self.watchdog_trips = 0
+        self.watchdog_tripped_at_sim_s: float | None = None
+        self._pulse_end_s: float | None = None  # simulated time the running fire pulse ends
+        self.fire_pulses = 0
         self._inputs = {"door": p.door_closed, "clamped": p.fixture_clamped, "estop": p.estop_healthy}
         self._projectile = self.params.launcher.projectile
         a = self.params.amplifier
@@ -218,7 +240,25 @@ class World:
 
     def _advance(self) -> None:
         now = (self._clock() - self._t0_wall) * self.params.time_scale
-        dt = now - self._sim_s
+        while True:  # controller events that fall due before now happen at their own time
+            due_s, event = self._next_event()
+            if event is None or due_s > now:
+                break
+            self._integrate_to(due_s)
+            event()
+        self._integrate_to(now)
+
+    def _next_event(self) -> tuple[float, Callable[[], None] | None]:
+        events: list[tuple[float, Callable[[], None]]] = []
+        if self._pulse_end_s is not None:
+            events.append((self._pulse_end_s, self._end_pulse))
+        if self._watchdog == "armed":
+            due_wall = self._last_beat_wall + self._watchdog_s
+            events.append(((due_wall - self._t0_wall) * self.params.time_scale, self._trip_watchdog))
+        return min(events, key=lambda e: e[0]) if events else (math.inf, None)
+
+    def _integrate_to(self, until_s: float) -> None:
+        dt = until_s - self._sim_s
         if dt <= 0:
             return
         # Steps of at most 50 ms simulated: each step is exact for its constant regime; the
@@ -227,7 +267,7 @@ class World:
         h = dt / steps
         for _ in range(steps):
             self._step(h)
-        self._sim_s = now
+        self._sim_s = until_s
 
     def _step(self, h: float) -> None:
         p = self.params.pneumatics
@@ -266,26 +306,44 @@ class World:
     def coils(self) -> dict[str, bool]:
         """Commanded actuator states: fire, fill, vent, pump."""
         with self._lock:
+            self._advance()
             return dict(self._coils)
 
-    def set_fill_valve(self, open_: bool) -> None:
+    def valve_positions(self) -> dict[str, bool]:
+        """The valves as they really are (True = open): fire, fill, vent."""
         with self._lock:
             self._advance()
+            return {"fire": self._coils["fire"], "fill": self._fill_open, "vent": self._coils["vent"]}
+
+    def _energise_refusal(self) -> str:
+        return "link watchdog tripped" if self._watchdog == "tripped" else ""
+
+    def set_fill_valve(self, open_: bool) -> str:
+        """Command the fill valve; returns the controller's refusal ("" = done)."""
+        with self._lock:
+            self._advance()
+            if open_ and (refusal := self._energise_refusal()):
+                return refusal
             self._coils["fill"] = bool(open_)
             if open_ and self._pressure_bar < self._setpoint_bar:
                 self._fill_open = True
             elif not open_ and not self.faults.active("stuck-fill-valve"):
                 self._fill_open = False
+            return ""
 
-    def set_vent_valve(self, open_: bool) -> None:
+    def set_vent_valve(self, open_: bool) -> str:
         with self._lock:
             self._advance()
             self._coils["vent"] = bool(open_)
+            return ""
 
-    def set_pump(self, on: bool) -> None:
+    def set_pump(self, on: bool) -> str:
         with self._lock:
             self._advance()
+            if on and (refusal := self._energise_refusal()):
+                return refusal
             self._coils["pump"] = bool(on)
+            return ""
 
     def set_pressure_setpoint_bar(self, pressure_bar: float) -> None:
         with self._lock:
@@ -307,8 +365,19 @@ class World:
         with self._lock:
             return self._projectile
 
-    def set_fire_valve(self, open_: bool) -> None:
-        """Command the fire valve; a rising edge with pressure in the reservoir fires a shot."""
+    def set_fire_valve(self, open_: bool) -> str:
+        """Command the fire valve; a rising edge with pressure in the reservoir fires a shot.
+        Returns the refusal ("" = done): the interlock chain keeps the valve (and its coil) shut."""
+        return self._operate_fire(open_, None)
+
+    def fire_pulse(self, duration_s: float) -> str:
+        """Open the fire valve for `duration_s` simulated seconds, closed by the controller.
+        Returns the refusal ("" = fired)."""
+        if not 0 < duration_s < math.inf:
+            raise ValueError(f"fire pulse must be positive, got {duration_s!r}")
+        return self._operate_fire(True, duration_s)
+
+    def _operate_fire(self, open_: bool, pulse_s: float | None) -> str:
         # Ask the digitizer before taking our lock: its server calls capture() under its own.
         armed = True if self.digitizer_armed is None else bool(self.digitizer_armed())
         launched: dict[str, Any] | None = None
@@ -319,22 +388,75 @@ class World:
                 refusal = self._fire_refusal()
                 if refusal:
                     self.fire_refusals.append(refusal)
-                    return  # the valve stays shut; the coil reads back shut
+                    return refusal  # the valve stays shut; the coil reads back shut
                 self._coils["fire"] = True
+                if pulse_s is not None:
+                    self._pulse_end_s = self._sim_s + pulse_s
+                    self.fire_pulses += 1
                 if self._pressure_bar >= self.params.pneumatics.min_fire_pressure_bar:
                     launched = dict(self._launch(armed))
+            elif open_ and pulse_s is not None:
+                return "the fire valve is already open"
             elif not open_:
                 self._coils["fire"] = False
+                self._pulse_end_s = None
         if launched is not None:
             for listener in list(self.launch_listeners):  # outside the lock: a listener may be slow
                 listener(launched)
+        return ""
+
+    def _end_pulse(self) -> None:
+        self._coils["fire"] = False
+        self._pulse_end_s = None
 
     def _fire_refusal(self) -> str:
         if not self.estop_healthy():
             return "e-stop tripped"
         if not self.door_closed():
             return "door open"
-        return ""
+        return self._energise_refusal()
+
+    # -- link watchdog ----------------------------------------------------------------------
+    def heartbeat(self, value: int) -> None:
+        """A write to the heartbeat register (module docstring: 0 stop, 1 start, else a beat)."""
+        with self._lock:
+            self._advance()  # a trip that fell due before this write happens first
+            self._last_beat_wall = self._clock()
+            if value == 0:
+                if self._watchdog == "armed":
+                    self._watchdog = "off"
+            elif value == 1:
+                self._watchdog = "armed"
+            elif self._watchdog == "off":
+                self._watchdog = "armed"  # a beat without a session start arms it too
+
+    def set_watchdog_s(self, seconds: float) -> None:
+        """The watchdog time the host asks for."""
+        if not 0 < seconds <= 3600:
+            raise ValueError(f"watchdog time must be in (0, 3600] s, got {seconds!r}")
+        with self._lock:
+            self._advance()
+            self._watchdog_s = float(seconds)
+
+    def watchdog_s(self) -> float:
+        with self._lock:
+            return self._watchdog_s
+
+    def watchdog_state(self) -> str:
+        """"off", "armed" or "tripped"."""
+        with self._lock:
+            self._advance()
+            return self._watchdog
+
+    def _trip_watchdog(self) -> None:
+        """The heartbeat fell silent: de-energise fill and fire, stop the pump, vent."""
+        self._watchdog = "tripped"
+        self.watchdog_trips += 1
+        self.watchdog_tripped_at_sim_s = self._sim_s
+        self._coils.update(fire=False, fill=False, pump=False, vent=True)
+        self._pulse_end_s = None
+        if not self.faults.active("stuck-fill-valve"):
+            self._fill_open = False
 
     def reservoir_pressure_bar(self) -> float:
         with self._lock:

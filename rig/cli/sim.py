@@ -4,12 +4,20 @@
     hopkinson sim --list-faults
     hopkinson status [--config config/rig.toml] [--json]
 
-`sim` prints the three addresses (Modbus host:port, VISA resource, serial device) and runs
-until Ctrl-C or SIGTERM, then stops its servers and exits 0. `status` connects to each
-instrument in turn and reports identity, pressures, vacuum, valves, interlocks and the
-amplifier's state; an instrument that cannot be reached is reported with the reason and the
-others are still asked. Exit code 0 when every instrument answered, 1 when one did not,
-2 for a bad configuration.
+`sim` prints the addresses (Modbus, VISA resource, serial ports) and runs until Ctrl-C or
+SIGTERM, then stops its servers and exits 0; its ptys, addresses and state live in the
+per-user runtime folder (drivers/sim/simulated_rig.py).
+
+`status` asks each instrument through its role (drivers/roles.py) and reports identity,
+pressures, vacuum, valves (commanded and real), interlocks, watchdog, the amplifier's
+settings. It only reads: it never writes the heartbeat or anything else. While a shot,
+campaign or panel holds the rig (rig/lock.py), it names the holder and asks only what can be
+shared without disturbing it: the controller over Modbus TCP (a second connection), never a
+held serial line or the digitizer's session. An instrument that cannot be reached is
+reported with the reason and the others are still asked. Exit code 0 when every instrument
+asked answered, 1 when one did not, 2 for a bad configuration.
+
+`probe` (rig/cli/probe.py) is registered here too: bringing up a rig, step by step.
 """
 
 from __future__ import annotations
@@ -22,10 +30,10 @@ from typing import TYPE_CHECKING, Any
 from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG, DEFAULT_SIM_CONFIG, emit_json, fail
 
 if TYPE_CHECKING:
-    from hopkinson.drivers.amplifier import BridgeAmplifier
-    from hopkinson.drivers.digitizer import Digitizer
-    from hopkinson.drivers.valve_controller import ValveController
+    from hopkinson.drivers.roles import AmplifierRole, DigitizerRole, ValveControllerRole
     from hopkinson.rig.config import RigConfig
+
+ROLE_TITLES = {"valve_controller": "valve/vacuum controller", "digitizer": "digitizer", "amplifier": "amplifier"}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -47,6 +55,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     status.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG, help="rig TOML (default %(default)s)")
     status.add_argument("--json", action="store_true", help="one JSON object on stdout")
     status.set_defaults(func=run_status)
+
+    from hopkinson.rig.cli import probe
+
+    probe.register(subparsers)
 
 
 # -- sim ------------------------------------------------------------------------------------------
@@ -82,92 +94,160 @@ def run_status(args: argparse.Namespace) -> int:
 
 
 def rig_status(config: RigConfig) -> dict[str, Any]:
-    """Ask every instrument; a failure is recorded under its name, never raised."""
-    from hopkinson.rig.instruments import make_instruments
+    """Ask every instrument (reads only); a failure is recorded under its name, never raised."""
+    from hopkinson.rig.instruments import make_instrument
 
-    instruments = make_instruments(config)
-    report: dict[str, Any] = {"config": config.path}
-    report["valve_controller"] = _ask(f"{config.valve_controller.host}:{config.valve_controller.port}",
-                                      lambda: _valve_controller_status(instruments.valves))
-    report["digitizer"] = _ask(config.digitizer.resource, lambda: _digitizer_status(instruments.digitizer))
-    report["amplifier"] = _ask(config.amplifier.port, lambda: _amplifier_status(instruments.amplifier))
-    report["ok"] = all(report[k]["ok"] for k in ("valve_controller", "digitizer", "amplifier"))
+    holder = lock_holder(config)
+    report: dict[str, Any] = {"config": config.path, "held_by": holder}
+    asks = {"valve_controller": _valve_controller_status, "digitizer": _digitizer_status,
+            "amplifier": _amplifier_status}
+    for role, ask in asks.items():
+        address = instrument_address(config, role)
+        if holder is not None and not shareable(config, role):
+            report[role] = {"address": address, "ok": True, "skipped": f"not asked: the rig is held by pid "
+                            f"{holder['pid']} ({holder['command']}) and this link cannot be shared"}
+            continue
+        report[role] = _ask(address, lambda role=role, ask=ask: ask(make_instrument(config, role)))
+    report["ok"] = all(report[k]["ok"] for k in asks)
     return report
+
+
+def lock_holder(config: RigConfig) -> dict[str, Any] | None:
+    """Who holds the rig (rig/lock.py: pid, command, since), or None."""
+    try:
+        from hopkinson.rig.lock import current_holder
+    except ImportError:  # the rig lock is not there yet
+        return None
+    holder = current_holder(config)
+    if holder is None:
+        return None
+    return {"pid": getattr(holder, "pid", None), "command": getattr(holder, "command", ""),
+            "since": str(getattr(holder, "since", ""))}
+
+
+def shareable(config: RigConfig, role: str) -> bool:
+    """Can a reader ask this instrument while another process drives the rig? Only a Modbus
+    TCP controller: a serial line is exclusive, a digitizer session is the shot's."""
+    vc = config.valve_controller
+    return role == "valve_controller" and vc.driver == "modbus" and vc.transport == "tcp"
+
+
+def instrument_address(config: RigConfig, role: str) -> str:
+    """Where an instrument is, as the report shows it."""
+    if role == "valve_controller":
+        return config.valve_controller.address
+    if role == "digitizer":
+        return config.digitizer.resource
+    amp = config.amplifier
+    return amp.port if amp.driver == "serial-bridge" else f"{amp.driver} (no link)" if amp.driver == "manual" \
+        else amp.driver
 
 
 def _ask(address: str, query: Any) -> dict[str, Any]:
     from hopkinson.drivers.errors import InstrumentError
+    from hopkinson.rig.errors import ConfigError
 
     try:
         return {"address": address, "ok": True, **query()}
-    except (InstrumentError, OSError, ValueError) as exc:
+    except (InstrumentError, ConfigError, OSError, ValueError) as exc:
         return {"address": address, "ok": False, "error": str(exc)}
 
 
-def _valve_controller_status(vc: ValveController) -> dict[str, Any]:
+def _identity(instrument: Any) -> str:
     from hopkinson.drivers.errors import InstrumentError
 
+    try:
+        return instrument.identity()
+    except InstrumentError as exc:  # identification is optional in Modbus: report, go on
+        return f"(no identification: {exc.problem})"
+
+
+def _valve_controller_status(vc: ValveControllerRole) -> dict[str, Any]:
     with vc:
-        try:
-            identity = vc.identity()
-        except InstrumentError as exc:  # identification is optional in Modbus: report, go on
-            identity = f"(no identification: {exc.problem})"
+        identity = _identity(vc)
         status = vc.status()
     return {
         "identity": identity,
         "reservoir_pressure_bar": status.reservoir_pressure_bar,
         "pressure_setpoint_bar": status.pressure_setpoint_bar,
         "fixture_vacuum_mbar": status.fixture_vacuum_mbar,
-        "valves": asdict(status.valves),
+        "valves": {k: v for k, v in asdict(status.valves).items() if v is not None},
+        "valve_problems": status.valves.mismatches(),
         "interlocks": asdict(status.interlocks),
         "interlock_problems": status.interlocks.problems(),
+        "watchdog": status.watchdog,
+        "fire_pulse_count": status.fire_pulse_count,
     }
 
 
-def _digitizer_status(dig: Digitizer) -> dict[str, Any]:
+def _digitizer_status(dig: DigitizerRole) -> dict[str, Any]:
     with dig:
-        return {
-            "identity": dig.identity(),
-            "state": dig.acquisition_state(),
-            "sample_rate_hz": dig.sample_rate_hz(),
-            "record_length": dig.record_length(),
-        }
+        if hasattr(dig, "settings"):
+            settings = dig.settings()
+            rate, length = settings.sample_rate_hz, settings.record_length
+        else:  # transitional: a digitizer driver from before the DigitizerRole's settings()
+            rate, length = dig.sample_rate_hz(), dig.record_length()  # type: ignore[attr-defined]
+        return {"identity": _identity(dig), "state": dig.acquisition_state(), "sample_rate_hz": rate,
+                "record_length": length}
 
 
-def _amplifier_status(amp: BridgeAmplifier) -> dict[str, Any]:
+def _amplifier_status(amp: AmplifierRole) -> dict[str, Any]:
     with amp:
-        return asdict(amp.status())
+        settings = amp.settings()
+        return {**settings.to_dict(), "identity": settings.identity or _identity(amp), "overloaded": amp.overloaded()}
 
 
 def format_status(report: dict[str, Any]) -> str:
     """The status report as lines for a person."""
     lines = [f"config: {report['config']}"]
-    titles = {"valve_controller": "valve/vacuum controller", "digitizer": "digitizer", "amplifier": "bridge amplifier"}
-    for key, title in titles.items():
+    holder = report.get("held_by")
+    if holder:
+        lines.append(f"the rig is held by pid {holder['pid']} ({holder['command']}, since {holder['since']}): "
+                     "reading only what can be shared")
+    for key, title in ROLE_TITLES.items():
         entry = report[key]
+        if "skipped" in entry:
+            lines.append(f"{title} ({entry['address']}): {entry['skipped']}")
+            continue
         if not entry["ok"]:
             lines.append(f"{title} ({entry['address']}): NOT REACHABLE: {entry['error']}")
             continue
         lines.append(f"{title} ({entry['address']}): {entry['identity']}")
         if key == "valve_controller":
-            v = entry["valves"]
-            valves = (f"fire {'open' if v['fire_valve'] else 'shut'}, fill {'open' if v['fill_valve'] else 'shut'}, "
-                      f"vent {'open' if v['vent_valve'] else 'shut'}, pump {'on' if v['vacuum_pump'] else 'off'}")
-            problems = ", ".join(entry["interlock_problems"]) or "all safe"
-            lines += [
-                f"  reservoir pressure {entry['reservoir_pressure_bar']:.3f} bar "
-                f"(set-point {entry['pressure_setpoint_bar']:.3f} bar)",
-                f"  fixture vacuum     {entry['fixture_vacuum_mbar']:.1f} mbar",
-                f"  valves             {valves}",
-                f"  interlocks         {problems}",
-            ]
+            lines += _controller_lines(entry)
         elif key == "digitizer":
             lines.append(f"  state {entry['state']}, {entry['sample_rate_hz'] / 1e6:g} MS/s, "
                          f"{entry['record_length']} samples")
         else:
             lowpass = "off" if entry["lowpass_hz"] == 0 else f"{entry['lowpass_hz'] / 1e3:g} kHz"
-            lines.append(f"  excitation {entry['excitation_v']:g} V, gain {entry['gain']:g}, low-pass {lowpass}, "
-                         f"shunt {'on' if entry['shunt_on'] else 'off'}, "
-                         f"{'OVERLOAD' if entry['overloaded'] else 'no overload'}, output {entry['output_v']:.4f} V")
+            lines.append(f"  gain {entry['gain']:g}, excitation {entry['excitation_v']:g} V, low-pass {lowpass} "
+                         f"({entry['source']}), {'OVERLOAD' if entry['overloaded'] else 'no overload'}")
     lines.append("all instruments answered" if report["ok"] else "some instruments did not answer")
     return "\n".join(lines)
+
+
+def _controller_lines(entry: dict[str, Any]) -> list[str]:
+    v = entry["valves"]
+
+    def valve(name: str) -> str:
+        told = "open" if v[name] else "shut"
+        real = v.get(f"{name}_position")
+        return told if real is None or real == v[name] else f"{told} (really {'open' if real else 'shut'})"
+
+    valves = (f"fire {valve('fire_valve')}, fill {valve('fill_valve')}, vent {valve('vent_valve')}, "
+              f"pump {'on' if v['vacuum_pump'] else 'off'}")
+    problems = ", ".join(entry["interlock_problems"]) or "all safe"
+    lines = [
+        f"  reservoir pressure {entry['reservoir_pressure_bar']:.3f} bar "
+        f"(set-point {entry['pressure_setpoint_bar']:.3f} bar)",
+        f"  fixture vacuum     {entry['fixture_vacuum_mbar']:.1f} mbar",
+        f"  valves             {valves}",
+        f"  interlocks         {problems}",
+    ]
+    if entry["watchdog"]:
+        count = entry["fire_pulse_count"]
+        lines.append(f"  link watchdog      {entry['watchdog']}"
+                     + (f", {count} fire pulses" if count is not None else ""))
+    if entry["valve_problems"]:
+        lines.append(f"  WARNING            {'; '.join(entry['valve_problems'])}")
+    return lines

@@ -9,6 +9,7 @@ from dataclasses import replace
 import pytest
 from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
 from hopkinson.drivers.sim.world import WorldParams
+from hopkinson.drivers.valve_controller import ModbusTarget, ValveController
 
 
 class FakeClock:
@@ -24,11 +25,23 @@ class FakeClock:
         self.now_s += seconds
 
 
-def sim_config(time_scale: float = 1.0, slow_delay_s: float = 0.6, **world: object) -> SimConfig:
-    """A simulator config on free ports with no pty symlink."""
+def sim_config(time_scale: float = 1.0, slow_delay_s: float = 0.6, modbus_transport: str = "tcp",
+               **world: object) -> SimConfig:
+    """A simulator config on free ports (RTU: a fast 115 200 baud line)."""
     base = SimConfig()
     return replace(base, world=replace(WorldParams(time_scale=time_scale), **world),
-                   servers=replace(base.servers, modbus_slow_delay_s=slow_delay_s))
+                   servers=replace(base.servers, modbus_slow_delay_s=slow_delay_s, modbus_transport=modbus_transport,
+                                   modbus_baudrate=115200))
+
+
+def controller_for(rig: SimulatedRig, **kwargs: object) -> ValveController:
+    """A (not connected) driver for the rig's simulated controller, over its transport;
+    `unit_id` overrides the unit."""
+    a = rig.addresses
+    target = ModbusTarget(a.modbus_transport, host=a.modbus_host, port=a.modbus_port,
+                          serial_port=a.modbus_serial_port, baudrate=a.modbus_baudrate, parity=a.modbus_parity,
+                          stopbits=a.modbus_stopbits, unit_id=int(kwargs.pop("unit_id", a.modbus_unit_id)))
+    return ValveController(target, **kwargs)  # type: ignore[arg-type]
 
 
 def _sim_threads() -> list[str]:

@@ -19,7 +19,7 @@ from tests.drivers.conftest import FakeClock
 
 def controller(rig: SimulatedRig, timeout_s: float = 2.0) -> ValveController:
     a = rig.addresses
-    return ValveController(a.modbus_host, a.modbus_port, timeout_s=timeout_s)
+    return ValveController.tcp(a.modbus_host, a.modbus_port, timeout_s=timeout_s)
 
 
 def charge(vc: ValveController, clock: FakeClock, pressure_bar: float = 3.0) -> None:

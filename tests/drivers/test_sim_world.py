@@ -270,7 +270,7 @@ def test_two_rigs_run_side_by_side_on_free_ports_and_stop_cleanly() -> None:
         ports = {a.modbus_port, b.modbus_port, int(a.visa_resource.split("::")[2]), int(b.visa_resource.split("::")[2])}
         assert len(ports) == 4 and 0 not in ports
         assert a.serial_port != b.serial_port
-        with ValveController(a.modbus_host, a.modbus_port) as vc, Digitizer(b.visa_resource, timeout_s=2.0) as dig:
+        with ValveController.tcp(a.modbus_host, a.modbus_port) as vc, Digitizer(b.visa_resource, timeout_s=2.0) as dig:
             assert vc.identity().startswith("Hopkinson-Sim")
             assert dig.identity().startswith("Hopkinson-Sim")
     for addr in (a, b):
@@ -281,7 +281,7 @@ def test_two_rigs_run_side_by_side_on_free_ports_and_stop_cleanly() -> None:
 
 def test_fire_over_modbus_is_captured_by_the_digitizer(rig: SimulatedRig, clock: FakeClock) -> None:
     a = rig.addresses
-    with ValveController(a.modbus_host, a.modbus_port, timeout_s=2.0) as vc, \
+    with ValveController.tcp(a.modbus_host, a.modbus_port, timeout_s=2.0) as vc, \
             Digitizer(a.visa_resource, timeout_s=5.0) as dig:
         dig.configure(sample_rate_hz=100e6, record_length=100_000, pre_trigger_fraction=0.1,
                       ch1_range_v=1.0, ch2_range_v=10.0)

@@ -1,13 +1,18 @@
-"""The valve/vacuum controller driver against the simulated controller, over Modbus TCP."""
+"""The valve/vacuum controller driver against the simulated controller, over Modbus TCP and
+Modbus RTU on a simulated serial line (the simulator implements its side of the register
+protocol on its own, drivers/sim/controller_map.py)."""
 
 from __future__ import annotations
 
 import math
 import socket
+import time
 from dataclasses import replace
 
 import pytest
-from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.registers import Register
+from hopkinson.drivers.sim.controller_map import Point, default_map
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 from hopkinson.drivers.valve_controller import (
     CoilMap,
@@ -15,22 +20,35 @@ from hopkinson.drivers.valve_controller import (
     HoldingRegisterMap,
     InputRegisterMap,
     RegisterMap,
-    ScaleMap,
     ValveController,
 )
+from pymodbus.client import ModbusTcpClient
 
-from tests.drivers.conftest import FakeClock, sim_config
+from tests.drivers.conftest import FakeClock, controller_for, sim_config
 
 
 def controller(rig: SimulatedRig, **kwargs: object) -> ValveController:
-    a = rig.addresses
     kwargs.setdefault("timeout_s", 2.0)
-    return ValveController(a.modbus_host, a.modbus_port, register_map=rig.config.register_map, **kwargs)
+    return controller_for(rig, **kwargs)
 
 
-def test_identity_names_the_simulated_controller(rig: SimulatedRig) -> None:
-    with controller(rig) as vc:
+def charge(vc: ValveController, clock: FakeClock, pressure_bar: float) -> None:
+    vc.set_pressure_setpoint_bar(pressure_bar)
+    vc.set_fill_valve(True)
+    clock.advance(4.0 * pressure_bar)
+    vc.set_fill_valve(False)
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_identity_and_coils_over_both_transports(transport: str, clock: FakeClock) -> None:
+    with SimulatedRig(sim_config(modbus_transport=transport), clock=clock) as rig, controller(rig) as vc:
+        a = rig.addresses
         assert vc.identity() == "Hopkinson-Sim,SIMVAC-1,1.0"
+        assert vc.name == "valve controller " + (f"{a.modbus_host}:{a.modbus_port}" if transport == "tcp"
+                                                  else f"{a.modbus_serial_port} unit 1")
+        vc.set_vent_valve(True)
+        assert rig.world.coils()["vent"] is True and vc.valves().vent_valve is True
+        assert vc.valves().vent_valve_position is True
 
 
 @pytest.mark.parametrize("actuator", ["fill_valve", "vent_valve", "vacuum_pump", "fire_valve"])
@@ -54,7 +72,7 @@ def test_setpoint_round_trips_through_the_scaled_register(rig: SimulatedRig) -> 
         vc.set_pressure_setpoint_bar(4.321)
         assert vc.pressure_setpoint_bar() == pytest.approx(4.321, abs=1e-9)
         assert rig.world.pressure_setpoint_bar() == pytest.approx(4.321, abs=1e-9)
-        with pytest.raises(ValueError, match="outside the register range"):
+        with pytest.raises(ValueError, match=r"pressure set-point 70 bar: .*uint16 register holds \(0 .. 65.535\)"):
             vc.set_pressure_setpoint_bar(70.0)  # 70 000 counts do not fit 16 bits
         with pytest.raises(ValueError):
             vc.set_pressure_setpoint_bar(-1.0)
@@ -71,16 +89,16 @@ def test_fill_ramps_at_the_fill_rate_and_the_controller_stops_at_the_setpoint(
         assert vc.reservoir_pressure_bar() == pytest.approx(2.0 * rate, abs=1e-3)
         clock.advance(20.0)  # long past the set-point
         assert vc.reservoir_pressure_bar() == pytest.approx(3.0, abs=1e-3)
-        assert vc.valves().fill_valve is True  # the coil stays as commanded
+        states = vc.valves()
+        assert states.fill_valve is True  # the coil stays as commanded ...
+        assert states.fill_valve_position is False  # ... the regulating controller shut the valve
+        assert states.mismatches() == []  # open-while-told-shut is what counts
 
 
 def test_vent_decays_exponentially_to_ambient(rig: SimulatedRig, clock: FakeClock) -> None:
     tau = rig.config.world.pneumatics.vent_time_constant_s
     with controller(rig) as vc:
-        vc.set_pressure_setpoint_bar(5.0)
-        vc.set_fill_valve(True)
-        clock.advance(30.0)
-        vc.set_fill_valve(False)
+        charge(vc, clock, 5.0)
         p0 = vc.reservoir_pressure_bar()
         assert p0 == pytest.approx(5.0, abs=1e-3)
         vc.set_vent_valve(True)
@@ -122,10 +140,7 @@ def test_opening_the_fire_valve_launches_a_shot_from_the_reservoir_pressure(
         rig: SimulatedRig, clock: FakeClock) -> None:
     launcher = rig.config.world.launcher
     with controller(rig) as vc:
-        vc.set_pressure_setpoint_bar(4.0)
-        vc.set_fill_valve(True)
-        clock.advance(30.0)
-        vc.set_fill_valve(False)
+        charge(vc, clock, 4.0)
         vc.set_fire_valve(True)
         truth = rig.world.last_shot_truth
         assert truth is not None and truth["shot_number"] == 1
@@ -143,9 +158,7 @@ def test_opening_the_fire_valve_launches_a_shot_from_the_reservoir_pressure(
 
 def test_the_hardware_interlock_keeps_the_fire_valve_shut(rig: SimulatedRig, clock: FakeClock) -> None:
     with controller(rig) as vc:
-        vc.set_pressure_setpoint_bar(2.0)
-        vc.set_fill_valve(True)
-        clock.advance(10.0)
+        charge(vc, clock, 2.0)
         rig.world.set_inputs(estop_healthy=False)
         vc.set_fire_valve(True)
         assert vc.valves().fire_valve is False
@@ -155,62 +168,115 @@ def test_the_hardware_interlock_keeps_the_fire_valve_shut(rig: SimulatedRig, clo
 
 def test_projectile_register_selects_the_pulse_width(rig: SimulatedRig, clock: FakeClock) -> None:
     with controller(rig) as vc:
+        assert vc.has_projectile_register
         vc.set_projectile(1)
         assert rig.world.projectile() == 1
         with pytest.raises(ValueError):
             vc.set_projectile(4)
-        vc.set_pressure_setpoint_bar(1.0)
-        vc.set_fill_valve(True)
-        clock.advance(10.0)
+        charge(vc, clock, 1.0)
         vc.set_fire_valve(True)
     assert rig.world.last_shot_truth["pulse_width_s"] == pytest.approx(120e-6)
     no_register = RegisterMap(holding_registers=HoldingRegisterMap(projectile=-1))
+    vc = ValveController.tcp("127.0.0.1", 1, register_map=no_register)
+    assert not vc.has_projectile_register
     with pytest.raises(InstrumentError, match="no projectile register"):
-        ValveController("127.0.0.1", 1, register_map=no_register).set_projectile(2)
+        vc.set_projectile(2)
 
 
-def test_register_numbers_and_scales_come_from_the_map(clock: FakeClock) -> None:
-    custom = RegisterMap(
+# -- the register map: addresses, gaps, types, word orders, scales, offsets -----------------------
+def test_every_register_type_and_word_order_round_trips_through_the_simulator(clock: FakeClock) -> None:
+    # Both sides written by hand: the driver's Register and the simulator's Point say the same.
+    driver = RegisterMap(
         coils=CoilMap(fire_valve=40, fill_valve=17, vent_valve=3, vacuum_pump=0),
-        discrete_inputs=DiscreteInputMap(door_closed=9, fixture_clamped=2, estop_healthy=30),
-        holding_registers=HoldingRegisterMap(pressure_setpoint=100, projectile=7),
-        input_registers=InputRegisterMap(reservoir_pressure=205, fixture_vacuum=12),
-        scales=ScaleMap(pressure_bar_per_count=0.01, vacuum_mbar_per_count=1.0),
-    )
-    config = replace(sim_config(), register_map=custom)
-    with SimulatedRig(config, clock=clock) as sim:
-        a = sim.addresses
-        with ValveController(a.modbus_host, a.modbus_port, register_map=custom, timeout_s=2.0) as vc:
-            vc.set_pressure_setpoint_bar(2.5)
-            vc.set_fill_valve(True)
-            clock.advance(3.0)
-            assert vc.reservoir_pressure_bar() == pytest.approx(1.5, abs=0.01)
-            assert sim.world.coils() == {"fire": False, "fill": True, "vent": False, "pump": False}
-            sim.world.set_inputs(estop_healthy=False)
-            assert vc.interlocks().problems() == ["e-stop tripped"]
-            assert vc.fixture_vacuum_mbar() == pytest.approx(1013.0, abs=1.0)
-        # The default map reads input register 0 of this controller: not the gauge.
-        with ValveController(a.modbus_host, a.modbus_port, timeout_s=2.0) as wrong:
-            assert wrong.reservoir_pressure_bar() == 0.0
+        discrete_inputs=DiscreteInputMap(door_closed=9, fixture_clamped=2, estop_healthy=30,
+                                         fire_valve_open=-1, fill_valve_open=100, vent_valve_open=-1),
+        holding_registers=HoldingRegisterMap(
+            pressure_setpoint=Register(100, "float32", "little"), projectile=7, heartbeat=20,
+            watchdog_ms=Register(21, "uint32", "little"), fire_pulse_ms=Register(30, "int16", scale=10.0)),
+        input_registers=InputRegisterMap(
+            reservoir_pressure=Register(205, "int32", "big", scale=1e-4, offset=-1.0),
+            fixture_vacuum=Register(12, "float32", "big", scale=0.5), watchdog_state=50,
+            fire_pulse_count=Register(60, "uint32", "big")))
+    sim = {
+        "coils": {"fire_valve": Point(40), "fill_valve": Point(17), "vent_valve": Point(3), "vacuum_pump": Point(0)},
+        "discrete_inputs": {"door_closed": Point(9), "fixture_clamped": Point(2), "estop_healthy": Point(30),
+                            "fill_valve_open": Point(100)},
+        "holding_registers": {"pressure_setpoint": Point(100, "float32", "little"), "projectile": Point(7),
+                              "heartbeat": Point(20), "watchdog_ms": Point(21, "uint32", "little"),
+                              "fire_pulse_ms": Point(30, "int16", scale=10.0)},
+        "input_registers": {"reservoir_pressure": Point(205, "int32", "big", scale=1e-4, offset=-1.0),
+                            "fixture_vacuum": Point(12, "float32", "big", scale=0.5), "watchdog_state": Point(50),
+                            "fire_pulse_count": Point(60, "uint32", "big")},
+    }
+    with SimulatedRig(replace(sim_config(), register_map=sim), clock=clock) as rig, \
+            controller(rig, register_map=driver, watchdog_s=70_000.0 / 1000) as vc:
+        vc.set_pressure_setpoint_bar(2.5)
+        assert rig.world.pressure_setpoint_bar() == pytest.approx(2.5)  # float32 little word order
+        vc.set_fill_valve(True)
+        clock.advance(3.0)
+        assert vc.reservoir_pressure_bar() == pytest.approx(1.5, abs=1e-4)  # int32 with offset -1 bar
+        assert rig.world.coils() == {"fire": False, "fill": True, "vent": False, "pump": False}
+        assert vc.valves().fill_valve_position is True
+        rig.world.set_inputs(estop_healthy=False)
+        assert vc.interlocks().problems() == ["e-stop tripped"]
+        assert vc.fixture_vacuum_mbar() == pytest.approx(1013.25, abs=0.5)
+        vc.start_heartbeat()  # uint32 watchdog time of 70 000 ms: beyond 16 bits
+        assert rig.world.watchdog_s() == pytest.approx(70.0)
+        rig.world.set_inputs(estop_healthy=True)
+        vc.fire_pulse(0.25)  # int16 in 10 ms steps: 25
+        assert rig.world.fire_pulses == 1 and vc.fire_pulse_count() == 1
+        vc.stop_heartbeat()
+
+
+def test_a_map_with_gaps_reads_only_mapped_addresses(rig: SimulatedRig) -> None:
+    # The simulator maps discrete inputs 0, 1, 2, 8, 9, 10: a read of the gap is refused ...
+    a = rig.addresses
+    with ModbusTcpClient(a.modbus_host, port=a.modbus_port, timeout=2.0) as plain:
+        assert plain.read_discrete_inputs(0, count=3, device_id=1).bits[:3] == [True, True, True]
+        assert plain.read_discrete_inputs(0, count=11, device_id=1).exception_code == 2
+        assert plain.read_discrete_inputs(3, count=1, device_id=1).exception_code == 2
+        assert plain.read_coils(4, count=1, device_id=1).exception_code == 2  # beyond the map
+        assert plain.read_input_registers(3, count=1, device_id=1).exception_code == 2
+        assert plain.read_input_registers(4, count=1, device_id=1).exception_code == 2  # half a uint32
+        assert plain.write_coil(4, True, device_id=1).exception_code == 2
+    # ... and the driver reads each run on its own.
+    with controller(rig) as vc:
+        states = vc.valves()
+        assert states.vent_valve_position is False and states.fill_valve_position is False
 
 
 def test_a_refused_request_names_the_controller_the_command_and_the_exception(rig: SimulatedRig) -> None:
-    beyond = RegisterMap(input_registers=InputRegisterMap(reservoir_pressure=500, fixture_vacuum=1))
-    a = rig.addresses
-    with ValveController(a.modbus_host, a.modbus_port, register_map=beyond, timeout_s=2.0) as vc:
+    beyond = RegisterMap(input_registers=InputRegisterMap(reservoir_pressure=Register(500)))
+    with controller(rig, register_map=beyond) as vc:
         with pytest.raises(InstrumentError) as caught:
             vc.reservoir_pressure_bar()
-        assert caught.value.instrument == f"valve controller {a.modbus_host}:{a.modbus_port}"
+        assert caught.value.instrument == vc.name == f"valve controller {vc.target.host}:{vc.target.port}"
         assert caught.value.command == "read input registers 500"
-        assert "Modbus exception code 2" in caught.value.problem  # illegal data address
-        assert vc.fixture_vacuum_mbar() > 1000.0  # the connection is still good
+        assert "Modbus exception 2: illegal data address" in caught.value.problem
+        assert vc.fixture_vacuum_mbar() > 1000.0  # the link is still good
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_the_simulator_answers_only_its_unit_id(transport: str, clock: FakeClock) -> None:
+    with SimulatedRig(sim_config(modbus_transport=transport), clock=clock) as rig:
+        a = rig.addresses
+        with controller(rig, unit_id=7, timeout_s=0.3) as stranger:
+            if transport == "tcp":  # a TCP device says the target did not answer
+                with pytest.raises(InstrumentError, match="Modbus exception 11"):
+                    stranger.reservoir_pressure_bar()
+            else:  # an RS-485 device keeps silent for another unit
+                with pytest.raises(InstrumentTimeout, match="no reply within 0.3 s"):
+                    stranger.reservoir_pressure_bar()
+        assert a.modbus_unit_id == 1
+        with controller(rig) as right:
+            assert right.reservoir_pressure_bar() == 0.0
 
 
 def test_unreachable_controller_names_itself() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # bound, never listening: connections are refused
-        vc = ValveController("127.0.0.1", port, timeout_s=0.5, name="valve controller (test)")
+        vc = ValveController.tcp("127.0.0.1", port, timeout_s=0.5, name="valve controller (test)")
         with pytest.raises(InstrumentConnectionError, match=r"valve controller \(test\): 'connect'"):
             vc.connect()
     with pytest.raises(InstrumentConnectionError, match="not connected"):
@@ -230,3 +296,127 @@ def test_status_reads_everything_at_once(rig: SimulatedRig, clock: FakeClock) ->
     assert status.fixture_vacuum_mbar == pytest.approx(rig.world.fixture_vacuum_mbar(), abs=0.1)
     assert (status.valves.fill_valve, status.valves.vacuum_pump, status.valves.fire_valve) == (True, True, False)
     assert status.interlocks.problems() == ["fixture not clamped"]
+    assert status.watchdog == "off" and status.fire_pulse_count == 0
+
+
+def test_a_stuck_fill_valve_reads_open_while_commanded_shut(rig: SimulatedRig, clock: FakeClock) -> None:
+    with controller(rig) as vc:
+        rig.faults.inject("stuck-fill-valve")
+        vc.set_pressure_setpoint_bar(2.0)
+        vc.set_fill_valve(True)
+        clock.advance(1.0)
+        vc.set_fill_valve(False)
+        states = vc.valves()
+        assert states.fill_valve is False and states.fill_valve_position is True
+        assert states.mismatches() == ["fill valve commanded shut but open"]
+        assert states.is_open("fill_valve")
+
+
+# -- the link watchdog and the fire pulse, timed by the controller --------------------------------
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_the_watchdog_vents_when_the_heartbeat_stops_and_stays_tripped(transport: str, clock: FakeClock) -> None:
+    with SimulatedRig(sim_config(modbus_transport=transport), clock=clock) as rig, \
+            controller(rig, watchdog_s=2.0) as vc:
+        charge(vc, clock, 3.0)
+        vc.set_vacuum_pump(True)
+        vc.set_fill_valve(True)
+        vc.start_heartbeat()
+        assert rig.world.watchdog_s() == 2.0 and vc.watchdog_state() == "armed"
+        vc.stop_heartbeat_thread()  # the host freezes: no more beats, nobody disarms
+        clock.advance(1.9)
+        assert not vc.watchdog_tripped() and rig.world.coils()["fill"] is True
+        clock.advance(0.2)  # 2.1 s of silence
+        assert vc.watchdog_tripped()
+        assert rig.world.coils() == {"fire": False, "fill": False, "vent": True, "pump": False}
+        clock.advance(10.0)
+        assert vc.reservoir_pressure_bar() < 0.01  # vented
+        with pytest.raises(InstrumentError, match="refused by the controller: link watchdog tripped"):
+            vc.set_fill_valve(True)
+        with pytest.raises(InstrumentError, match="link watchdog tripped"):
+            vc.fire_pulse(0.2)
+        vc.write_word(vc.map.holding_registers.heartbeat, 5, "a late beat")
+        assert vc.watchdog_tripped()  # a late beat does not clear the trip: only a new session
+        vc.start_heartbeat()
+        assert vc.watchdog_state() == "armed"
+        vc.set_fill_valve(True)
+        vc.stop_heartbeat()
+        assert vc.watchdog_state() == "off"
+        clock.advance(60.0)
+        assert rig.world.watchdog_state() == "off" and rig.world.coils()["fill"] is True  # disarmed
+
+
+def test_the_heartbeat_thread_keeps_the_watchdog_fed_in_real_time() -> None:
+    with SimulatedRig(sim_config()) as rig, controller(rig, watchdog_s=0.4) as vc:  # the wall clock
+        vc.start_heartbeat()
+        time.sleep(1.2)  # three watchdog times: fed by the driver's thread
+        assert vc.heartbeat_running and vc.watchdog_state() == "armed"
+        vc.stop_heartbeat_thread()
+        deadline = time.monotonic() + 10.0
+        while rig.world.watchdog_state() != "tripped" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert rig.world.watchdog_state() == "tripped" and rig.world.coils()["vent"] is True
+        vc.start_heartbeat()
+        vc.stop_heartbeat()
+        assert not vc.heartbeat_running and vc.watchdog_state() == "off"
+
+
+def test_a_read_only_client_neither_arms_nor_feeds_the_watchdog(rig: SimulatedRig, clock: FakeClock) -> None:
+    with controller(rig, watchdog_s=1.0) as shot, controller(rig) as status:
+        status.status()
+        clock.advance(5.0)
+        assert rig.world.watchdog_state() == "off"  # never armed by reads
+        shot.start_heartbeat()
+        shot.stop_heartbeat_thread()
+        for _ in range(5):  # the status client polls through the silence
+            clock.advance(0.3)
+            status.status()
+        assert status.watchdog_tripped()
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_the_controller_times_the_fire_pulse_and_counts_it(transport: str, clock: FakeClock) -> None:
+    with SimulatedRig(sim_config(modbus_transport=transport), clock=clock) as rig, controller(rig) as vc:
+        charge(vc, clock, 2.0)
+        before = vc.fire_pulse_count()
+        vc.fire_pulse(0.2)
+        assert vc.fire_pulse_count() == before + 1 and rig.world.shots_fired == 1
+        assert vc.valves().fire_valve is True  # open for the pulse ...
+        clock.advance(0.19)
+        assert vc.valves().fire_valve_position is True
+        clock.advance(0.02)
+        assert vc.valves().fire_valve is False  # ... and shut by the controller itself
+        rig.world.set_inputs(door_closed=False)
+        with pytest.raises(InstrumentError) as caught:
+            vc.fire_pulse(0.2)
+        assert "fire pulse refused by the controller: door/guard open" in str(caught.value)
+        assert caught.value.command == "write register 4 (fire pulse) = [200]"
+        assert vc.fire_pulse_count() == before + 1
+
+
+def test_the_heartbeat_and_pulse_need_their_registers() -> None:
+    bare = RegisterMap(holding_registers=HoldingRegisterMap(heartbeat=-1, fire_pulse_ms=Register()))
+    vc = ValveController.tcp("127.0.0.1", 1, register_map=bare)
+    with pytest.raises(InstrumentError, match="no heartbeat register"):
+        vc.start_heartbeat()
+    with pytest.raises(InstrumentError, match="no fire_pulse_ms register"):
+        vc.fire_pulse(0.2)
+
+
+def test_the_default_map_matches_the_simulators_own() -> None:
+    driver = RegisterMap().blocks()
+    sim = default_map()
+    for table, points in sim.items():
+        assert set(points) == set(driver[table])
+        for name, point in points.items():
+            entry = driver[table][name]
+            address = entry.address if isinstance(entry, Register) else entry
+            assert address == point.address, f"{table}.{name}"
+
+
+def test_every_exchange_is_traced(rig: SimulatedRig) -> None:
+    records = []
+    with controller(rig, trace=records.append) as vc:
+        vc.reservoir_pressure_bar()
+    assert [r.direction for r in records] == ["->", "<-"]
+    assert "ReadInputRegistersRequest" in records[0].text and "address=0" in records[0].text
+    assert all(r.instrument == vc.name and r.utc.endswith("+00:00") for r in records)

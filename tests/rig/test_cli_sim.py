@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+import serial
 from hopkinson.drivers.sim.faults import FAULTS
 from hopkinson.drivers.sim.simulated_rig import SimAddresses, SimulatedRig
 from hopkinson.rig.cli.main import main
@@ -27,7 +28,7 @@ def rig_toml_for(addresses: SimAddresses | dict, tmp_path: Path, name: str = "ri
     replacements = {
         "port = 5020\n": f"port = {a['modbus_port']}\n",
         'resource = "TCPIP0::127.0.0.1::5025::SOCKET"': f'resource = "{a["visa_resource"]}"',
-        'port = "/tmp/hopkinson-sim-amplifier"': f'port = "{a["serial_port"]}"',
+        'port = "sim:amplifier"': f'port = "{a["serial_port"]}"',
     }
     for old, new in replacements.items():
         assert old in text, old
@@ -57,16 +58,20 @@ def test_unknown_fault_and_bad_config_are_one_line_errors(tmp_path: Path, capsys
 
 
 def test_sim_process_serves_status_and_stops_cleanly_on_ctrl_c(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    runtime = tmp_path / "runtime"  # this test's own private runtime folder (xdist-safe)
+    runtime.mkdir(mode=0o700)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
     sim_toml = tmp_path / "sim.toml"
-    link = tmp_path / "amplifier-link"
-    sim_toml.write_text(f'[servers]\nmodbus_port = 0\ndigitizer_port = 0\nserial_link = "{link}"\n')
+    sim_toml.write_text("[servers]\nmodbus_port = 0\ndigitizer_port = 0\n")
     addresses_json = tmp_path / "addresses.json"
     process = subprocess.Popen(
         [sys.executable, "-m", "hopkinson", "sim", "--config", str(sim_toml), "--fault", "door-open",
          "--addresses-json", str(addresses_json)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
+    folder = runtime / "hopkinson"
+    link = folder / f"sim-{process.pid}-amplifier"
     try:
         deadline = time.monotonic() + 30.0
         while not addresses_json.exists():
@@ -75,15 +80,21 @@ def test_sim_process_serves_status_and_stops_cleanly_on_ctrl_c(
             time.sleep(0.05)
         addresses = json.loads(addresses_json.read_text())
         assert addresses["pid"] == process.pid
+        assert json.loads((folder / "sim-addresses.json").read_text()) == addresses
         assert os.path.realpath(link) == addresses["serial_port"]
-        config = rig_toml_for(addresses, tmp_path)
+        assert (folder.stat().st_mode & 0o777) == 0o700
+        state = json.loads(Path(addresses["state_file"]).read_text())
+        assert state["fill_valve_open"] is False and state["watchdog"] == "off"
+        # config/rig-sim.toml's "sim:amplifier" is found through the runtime folder's addresses
+        config = rig_toml_for({**addresses, "serial_port": "sim:amplifier"}, tmp_path)
         assert main(["status", "--config", str(config), "--json"]) == 0
         report = json.loads(capsys.readouterr().out)
-        assert report["ok"] is True
+        assert report["ok"] is True and report["held_by"] is None
         assert report["valve_controller"]["identity"] == "Hopkinson-Sim,SIMVAC-1,1.0"
         assert report["valve_controller"]["interlock_problems"] == ["door/guard open"]  # --fault door-open
         assert report["digitizer"]["identity"].startswith("Hopkinson-Sim,SIMDIG")
         assert report["amplifier"]["identity"].startswith("Hopkinson-Sim,SIMAMP")
+        assert report["amplifier"]["address"] == "sim:amplifier"
         process.send_signal(signal.SIGINT)
         out, err = process.communicate(timeout=15)
     finally:
@@ -91,15 +102,27 @@ def test_sim_process_serves_status_and_stops_cleanly_on_ctrl_c(
             process.kill()
             process.communicate()
     assert process.returncode == 0, err
-    assert f"modbus  {addresses['modbus']}\n" in out
+    assert f"modbus  tcp {addresses['modbus']} (unit 1)\n" in out
     assert f"visa    {addresses['visa_resource']}\n" in out
     assert f"serial  {addresses['serial_port']} (link {link})\n" in out
     assert "faults  door-open" in out and out.endswith("simulated rig stopped\n")
     assert "Traceback" not in err
-    assert not link.exists()
+    assert not link.exists() and not (folder / "sim-addresses.json").exists()
+    assert not Path(addresses["state_file"]).exists()
     for port in (addresses["modbus_port"], int(addresses["visa_resource"].split("::")[2])):
         with socket.socket() as s:
             assert s.connect_ex(("127.0.0.1", port)) != 0
+
+
+def test_a_sim_port_without_a_running_simulator_is_a_clear_error(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    with SimulatedRig() as sim:
+        config = rig_toml_for({**sim.addresses.as_dict(), "serial_port": "sim:amplifier"}, tmp_path)
+        assert main(["status", "--config", str(config), "--json"]) == 1
+    report = json.loads(capsys.readouterr().out)
+    assert report["valve_controller"]["ok"] and report["digitizer"]["ok"]
+    assert "no `hopkinson sim` is running for this user" in report["amplifier"]["error"]
 
 
 def test_status_reports_every_instrument_of_an_in_process_rig(
@@ -115,10 +138,94 @@ def test_status_reports_every_instrument_of_an_in_process_rig(
     assert "interlocks         all safe" in text and "all instruments answered" in text
     assert report["valve_controller"]["pressure_setpoint_bar"] == pytest.approx(2.5)
     assert report["valve_controller"]["fixture_vacuum_mbar"] == pytest.approx(1013.2, abs=0.1)
-    assert report["valve_controller"]["valves"] == {"fire_valve": False, "fill_valve": False,
-                                                    "vent_valve": False, "vacuum_pump": False}
+    assert report["valve_controller"]["valves"] == {
+        "fire_valve": False, "fill_valve": False, "vent_valve": False, "vacuum_pump": False,
+        "fire_valve_position": False, "fill_valve_position": False, "vent_valve_position": False}
+    assert report["valve_controller"]["watchdog"] == "off" and report["valve_controller"]["fire_pulse_count"] == 0
     assert report["digitizer"]["state"] == "IDLE"
     assert report["amplifier"]["gain"] == 10.0 and report["amplifier"]["overloaded"] is False
+    assert report["amplifier"]["source"] == "read back"
+
+
+def test_status_shows_a_stuck_valve_and_a_tripped_watchdog(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with SimulatedRig(faults=["stuck-fill-valve"]) as sim:
+        sim.world.set_pressure_setpoint_bar(2.0)
+        sim.world.set_fill_valve(True)
+        sim.world.set_fill_valve(False)  # stuck: stays open
+        sim.world.heartbeat(1)
+        sim.world.set_watchdog_s(0.2)
+        time.sleep(0.3)
+        config = rig_toml_for(sim.addresses, tmp_path)
+        assert main(["status", "--config", str(config)]) == 0
+    text = capsys.readouterr().out
+    assert "fill shut (really open)" in text
+    assert "link watchdog      tripped, 0 fire pulses" in text
+    assert "WARNING            fill valve commanded shut but open" in text
+
+
+def test_status_while_the_rig_is_held_reads_only_the_shared_controller(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    holder = {"pid": 4242, "command": "hopkinson shot --sim", "since": "2025-01-01T00:00:00+00:00"}
+    monkeypatch.setattr("hopkinson.rig.cli.sim.lock_holder", lambda config: holder)  # rig/lock.py's answer
+    with SimulatedRig() as sim:
+        config = rig_toml_for(sim.addresses, tmp_path)
+        with serial.Serial(sim.addresses.serial_port, exclusive=True):  # the shot's amplifier line
+            assert main(["status", "--config", str(config)]) == 0
+            text = capsys.readouterr().out
+            assert main(["status", "--config", str(config), "--json"]) == 0
+            report = json.loads(capsys.readouterr().out)
+        served = sim.amplifier.lines_served
+    assert report["held_by"] == holder and report["valve_controller"]["identity"].startswith("Hopkinson-Sim")
+    assert report["amplifier"]["skipped"].startswith("not asked: the rig is held by pid 4242")
+    assert "skipped" in report["digitizer"]
+    assert served == 0  # the held serial line was never touched
+    assert "the rig is held by pid 4242 (hopkinson shot --sim" in text
+
+
+def test_probe_reads_every_signal_and_says_what_to_fix(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    with SimulatedRig() as sim:
+        good = rig_toml_for(sim.addresses, tmp_path)
+        assert main(["probe", "--config", str(good)]) == 0
+        text = capsys.readouterr().out
+        monkeypatch.setattr("hopkinson.rig.cli.probe.visa_resources", lambda library: {"library": library,
+                                                                                       "resources": []})
+        wrong = tmp_path / "wrong.toml"
+        wrong.write_text(good.read_text().replace('fire_pulse_count = { address = 4, type = "uint32" }',
+                                                  'fire_pulse_count = { address = 6, type = "uint32" }'))
+        assert main(["probe", "--config", str(wrong), "--json"]) == 1
+        report = json.loads(capsys.readouterr().out)
+    assert "VISA resources (@py):" in text and "serial ports:" in text
+    assert "  ok    input_registers.fixture_vacuum (input registers 1, uint16 big, x0.1): 1013.2" in text
+    assert "  ok    discrete_inputs.fill_valve_open (discrete input 9): False" in text
+    assert "  ok    holding_registers.projectile (holding register 1): 3" in text
+    assert "  ok    identity: Hopkinson-Sim,SIMAMP-1" in text
+    assert "FAIL" not in text and text.rstrip().endswith("failed: the rig answers as configured")
+    steps = report["instruments"]["valve_controller"]["steps"]
+    (failed,) = [s for s in steps if not s["ok"]]
+    assert failed["step"] == "input_registers.fire_pulse_count (input registers 6..7, uint32 big)"
+    assert "'read input registers 6..7': Modbus exception 2: illegal data address" in failed["error"]
+    assert "register map" in failed["fix"]
+    assert all(s["ok"] for s in report["instruments"]["amplifier"]["steps"])
+
+
+def test_probe_names_the_fix_for_an_unreachable_rig(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("hopkinson.rig.cli.probe.visa_resources", lambda library: {"library": library,
+                                                                                   "error": "no VISA here"})
+    with socket.socket() as a, socket.socket() as b:
+        a.bind(("127.0.0.1", 0))
+        b.bind(("127.0.0.1", 0))
+        addresses = {"modbus_port": a.getsockname()[1],
+                     "visa_resource": f"TCPIP0::127.0.0.1::{b.getsockname()[1]}::SOCKET",
+                     "serial_port": str(tmp_path / "no-such-tty")}
+        assert main(["probe", "--config", str(rig_toml_for(addresses, tmp_path))]) == 1
+    text = capsys.readouterr().out
+    assert "VISA resources (@py): cannot list: no VISA here" in text
+    assert "  FAIL  open: valve controller 127.0.0.1:" in text
+    assert "fix: check host and port in rig.toml" in text
+    assert f"  FAIL  open: bridge amplifier {tmp_path / 'no-such-tty'}: 'open': cannot open serial port" in text
+    assert "fix: the port does not exist" in text
 
 
 def test_status_reports_missing_instruments_without_crashing(
@@ -148,6 +255,12 @@ def test_status_with_a_bad_config_is_exit_2(tmp_path: Path, capsys: pytest.Captu
     assert main(["status", "--config", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"hopkinson: error: {bad}: not valid TOML") and err.count("\n") == 1
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(bytes(range(256)) * 4)
+    for command in ("status", "probe"):
+        assert main([command, "--config", str(binary)]) == 2
+        err = capsys.readouterr().err
+        assert err == f"hopkinson: error: {binary}: not UTF-8 text (byte 128): is it a binary file?\n"
 
 
 def test_sim_on_a_busy_port_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -156,7 +269,7 @@ def test_sim_on_a_busy_port_is_a_clear_error(tmp_path: Path, capsys: pytest.Capt
         busy.listen()
         port = busy.getsockname()[1]
         sim_toml = tmp_path / "sim.toml"
-        sim_toml.write_text(f'[servers]\nmodbus_port = 0\ndigitizer_port = {port}\nserial_link = ""\n')
+        sim_toml.write_text(f'[servers]\nmodbus_port = 0\ndigitizer_port = {port}\n')
         assert main(["sim", "--config", str(sim_toml)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"hopkinson: error: cannot start the simulated rig ({sim_toml}):")

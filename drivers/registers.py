@@ -1,0 +1,228 @@
+"""Modbus register map of the valve/vacuum controller: where each signal lives and how it scales.
+
+A lab's PLC decides its own layout, so every address, type, word order, scale and offset comes
+from `config/rig.toml`:
+
+- coils (True = open / running) and discrete inputs (each True when its name says so) are bit
+  addresses; -1 = the controller has no such bit. Bit maps may have gaps: the driver reads
+  each contiguous run of mapped addresses on its own, never the span between them.
+- a value in holding or input registers is a `Register`: address, type (int16, uint16, int32,
+  uint32, float32), word order of 32-bit values ("big": high word first, the Modicon
+  convention; "little": low word first), and engineering value = raw * scale + offset.
+  address -1 = absent. A plain integer in the config is a uint16 at that address, scale 1.
+
+Encoding refuses what a register cannot hold (RegisterRangeError, a ValueError): a value is
+never clipped or wrapped on its way to the controller. The byte packing is pymodbus's own
+(`convert_to_registers` / `convert_from_registers`).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Literal
+
+from pymodbus.client.mixin import ModbusClientMixin
+
+_DT = ModbusClientMixin.DATATYPE
+REGISTER_TYPES: dict[str, tuple[_DT, int, float, float]] = {
+    # type: (pymodbus data type, words, lowest raw, highest raw)
+    "int16": (_DT.INT16, 1, -(2**15), 2**15 - 1),
+    "uint16": (_DT.UINT16, 1, 0, 2**16 - 1),
+    "int32": (_DT.INT32, 2, -(2**31), 2**31 - 1),
+    "uint32": (_DT.UINT32, 2, 0, 2**32 - 1),
+    "float32": (_DT.FLOAT32, 2, -3.4028234663852886e38, 3.4028234663852886e38),
+}
+WORD_ORDERS = ("big", "little")
+
+
+class RegisterRangeError(ValueError):
+    """A value the register cannot hold (out of range, or not a finite number)."""
+
+
+@dataclass(frozen=True)
+class Register:
+    """One value in holding or input registers (module docstring); address -1 = absent."""
+
+    address: int = -1
+    type: str = "uint16"
+    word_order: str = "big"
+    scale: float = 1.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.type not in REGISTER_TYPES:
+            raise ValueError(f"register type must be one of {', '.join(REGISTER_TYPES)}, got {self.type!r}")
+        if self.word_order not in WORD_ORDERS:
+            raise ValueError(f"word order must be 'big' or 'little', got {self.word_order!r}")
+        if not (math.isfinite(self.scale) and self.scale != 0 and math.isfinite(self.offset)):
+            raise ValueError(f"register scale must be finite and non-zero, offset finite "
+                             f"(got {self.scale!r}, {self.offset!r})")
+
+    @property
+    def present(self) -> bool:
+        return self.address >= 0
+
+    @property
+    def words(self) -> int:
+        """16-bit registers the value takes (1 or 2)."""
+        return REGISTER_TYPES[self.type][1]
+
+    @property
+    def addresses(self) -> range:
+        return range(self.address, self.address + self.words)
+
+    @property
+    def is_float(self) -> bool:
+        return self.type == "float32"
+
+    @property
+    def resolution(self) -> float:
+        """Engineering units per count (0 for float32: no fixed step)."""
+        return 0.0 if self.is_float else abs(self.scale)
+
+    def value_range(self) -> tuple[float, float]:
+        """Lowest and highest engineering value the register can hold."""
+        _, _, low, high = REGISTER_TYPES[self.type]
+        ends = (low * self.scale + self.offset, high * self.scale + self.offset)
+        return min(ends), max(ends)
+
+    def holds(self, value: float) -> bool:
+        low, high = self.value_range()
+        return math.isfinite(value) and low <= value <= high
+
+    def encode(self, value: float) -> list[int]:
+        """The register words for engineering `value` (rounded to a count for integer types)."""
+        if not math.isfinite(value):
+            raise RegisterRangeError(f"{value!r} is not a finite number")
+        data_type, _, low, high = REGISTER_TYPES[self.type]
+        raw: float = (value - self.offset) / self.scale
+        if not self.is_float:
+            raw = round(raw)
+        if not low <= raw <= high:
+            lo, hi = self.value_range()
+            raise RegisterRangeError(f"{value:g} outside what the {self.type} register holds ({lo:g} .. {hi:g})")
+        try:
+            return ModbusClientMixin.convert_to_registers(raw, data_type, word_order=self._order)
+        except (struct.error, OverflowError) as exc:  # float32 rounding at the very edge
+            raise RegisterRangeError(f"{value:g} cannot be packed as {self.type}: {exc}") from None
+
+    def decode(self, words: Sequence[int]) -> float:
+        """Engineering value of the register words."""
+        if len(words) != self.words:
+            raise ValueError(f"{self.type} needs {self.words} words, got {len(words)}")
+        data_type = REGISTER_TYPES[self.type][0]
+        raw = ModbusClientMixin.convert_from_registers(list(words), data_type, word_order=self._order)
+        return float(raw) * self.scale + self.offset  # type: ignore[arg-type]
+
+    @property
+    def _order(self) -> Literal["big", "little"]:
+        return "little" if self.word_order == "little" else "big"
+
+
+def _reg(address: int, scale: float = 1.0, type_: str = "uint16") -> Register:
+    return Register(address, type=type_, scale=scale)
+
+
+@dataclass(frozen=True)
+class CoilMap:
+    """Coil addresses of the four actuators (True = open / running)."""
+
+    fire_valve: int = 0
+    fill_valve: int = 1
+    vent_valve: int = 2
+    vacuum_pump: int = 3
+
+
+@dataclass(frozen=True)
+class DiscreteInputMap:
+    """Discrete-input addresses: interlocks (True = safe) and valve positions (True = open;
+    -1 = the controller reports no position)."""
+
+    door_closed: int = 0
+    fixture_clamped: int = 1
+    estop_healthy: int = 2
+    fire_valve_open: int = 8
+    fill_valve_open: int = 9
+    vent_valve_open: int = 10
+
+
+@dataclass(frozen=True)
+class HoldingRegisterMap:
+    """Holding registers the host writes.
+
+    pressure_setpoint: reservoir set-point (bar). projectile: the projectile type loaded
+    (1..3; -1 = none). heartbeat: link-watchdog register (0 = stop, 1 = start a session and
+    clear a trip, 2..65535 = beats). watchdog_ms: the watchdog time the controller applies
+    (absent: the controller's own setting). fire_pulse_ms: writing N opens the fire valve for
+    N ms, timed by the controller.
+    """
+
+    pressure_setpoint: Register = field(default_factory=lambda: _reg(0, 0.001))
+    projectile: int = 1
+    heartbeat: int = 2
+    watchdog_ms: Register = field(default_factory=lambda: _reg(3))
+    fire_pulse_ms: Register = field(default_factory=lambda: _reg(4))
+
+
+@dataclass(frozen=True)
+class InputRegisterMap:
+    """Input registers the host reads.
+
+    reservoir_pressure (gauge bar), fixture_vacuum (absolute mbar), watchdog_state (0 off,
+    1 armed, 2 tripped; -1 = not reported), fire_pulse_count (pulses fired).
+    """
+
+    reservoir_pressure: Register = field(default_factory=lambda: _reg(0, 0.001))
+    fixture_vacuum: Register = field(default_factory=lambda: _reg(1, 0.1))
+    watchdog_state: int = 2
+    fire_pulse_count: Register = field(default_factory=lambda: _reg(4, type_="uint32"))
+
+
+@dataclass(frozen=True)
+class RegisterMap:
+    """Where every signal of the controller lives, and how its values scale.
+
+    The defaults are the reference layout (config/rig.toml's, and the simulator's): valve
+    positions after a gap in the discrete inputs, a 32-bit pulse counter after a gap in the
+    input registers."""
+
+    coils: CoilMap = field(default_factory=CoilMap)
+    discrete_inputs: DiscreteInputMap = field(default_factory=DiscreteInputMap)
+    holding_registers: HoldingRegisterMap = field(default_factory=HoldingRegisterMap)
+    input_registers: InputRegisterMap = field(default_factory=InputRegisterMap)
+
+    def blocks(self) -> dict[str, dict[str, int | Register]]:
+        """{table name: {signal: address or Register}} for every mapped signal."""
+        out: dict[str, dict[str, int | Register]] = {}
+        for block in fields(self):
+            table = getattr(self, block.name)
+            entries = {f.name: getattr(table, f.name) for f in fields(table)}
+            out[block.name] = {k: v for k, v in entries.items()
+                               if (v.present if isinstance(v, Register) else v >= 0)}
+        return out
+
+    def overlaps(self) -> list[str]:
+        """Signals that share an address in one table ("holding_registers.a and .b at 3")."""
+        problems = []
+        for block, entries in self.blocks().items():
+            seen: dict[int, str] = {}
+            for name, entry in entries.items():
+                for address in (entry.addresses if isinstance(entry, Register) else [entry]):
+                    if address in seen:
+                        problems.append(f"{block}.{seen[address]} and {block}.{name} both use address {address}")
+                    seen.setdefault(address, name)
+        return problems
+
+
+def contiguous_runs(addresses: Iterable[int]) -> list[tuple[int, int]]:
+    """(start, count) of each run of consecutive addresses, sorted; duplicates merged."""
+    runs: list[tuple[int, int]] = []
+    for address in sorted(set(addresses)):
+        if runs and runs[-1][0] + runs[-1][1] == address:
+            runs[-1] = (runs[-1][0], runs[-1][1] + 1)
+        else:
+            runs.append((address, 1))
+    return runs

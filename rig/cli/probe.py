@@ -1,0 +1,291 @@
+"""`hopkinson probe`: bring up a rig step by step, and say what works and what to fix.
+
+    hopkinson probe [--config config/rig.toml] [--json]
+
+1. lists the VISA resources the configured VISA library sees and the serial ports of this
+   computer (the names rig.toml wants);
+2. opens each configured instrument;
+3. reads every mapped signal of the controller one by one (each coil, discrete input and
+   register, with its address and type), its identity and watchdog; the digitizer's identity
+   and every acquisition and channel setting; the amplifier's identity, settings and
+   overload flag;
+4. prints each step as ok or FAIL; every failure names the instrument, the command and the
+   reply, and a line "fix:" says what to check.
+
+It only reads (never the heartbeat, never a coil). While another process holds the rig, it
+asks only what can be shared (as `status` does). Exit code 0 when everything answered, 1
+when something failed, 2 for a bad configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import threading
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG, emit_json
+
+if TYPE_CHECKING:
+    from hopkinson.rig.config import RigConfig
+
+VISA_SCAN_S = 10.0  # a VISA library's resource scan may broadcast on the network: bounded
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `probe` sub-command."""
+    probe = subparsers.add_parser(
+        "probe", help="bring up a rig: list ports, open each instrument, read every signal, say what to fix",
+        description="List VISA resources and serial ports, open each configured instrument, read every mapped "
+                    "register and channel setting, and print what works and what does not, with the fix.")
+    probe.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG, help="rig TOML (default %(default)s)")
+    probe.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    probe.set_defaults(func=run_probe)
+
+
+def run_probe(args: argparse.Namespace) -> int:
+    from hopkinson.rig.config import load_rig_config
+
+    config = load_rig_config(args.config)
+    report = probe_rig(config)
+    if args.json:
+        emit_json(report)
+    else:
+        print(format_probe(report))
+    return 0 if report["ok"] else 1
+
+
+class _Steps:
+    """The steps of one instrument: each ok with a value, or failed with the error and the fix."""
+
+    def __init__(self) -> None:
+        self.steps: list[dict[str, Any]] = []
+
+    def run(self, step: str, action: Callable[[], Any]) -> Any:
+        from hopkinson.drivers.errors import InstrumentError
+        from hopkinson.rig.errors import ConfigError
+
+        try:
+            value = action()
+        except (InstrumentError, ConfigError, OSError, ValueError) as exc:
+            self.steps.append({"step": step, "ok": False, "error": str(exc), "fix": fix_for(exc)})
+            return None
+        self.steps.append({"step": step, "ok": True, "value": _shown(value)})
+        return value
+
+
+def probe_rig(config: RigConfig) -> dict[str, Any]:
+    """Every step's outcome (module docstring), as a JSON-ready dict."""
+    from hopkinson.rig.cli.sim import instrument_address, lock_holder, shareable
+
+    holder = lock_holder(config)
+    report: dict[str, Any] = {"config": config.path, "held_by": holder,
+                              "visa_resources": visa_resources(getattr(config.digitizer, "visa_library", "@py")),
+                              "serial_ports": serial_ports(), "instruments": {}}
+    probes = {"valve_controller": _probe_controller, "digitizer": _probe_digitizer, "amplifier": _probe_amplifier}
+    for role, probe in probes.items():
+        entry: dict[str, Any] = {"address": instrument_address(config, role)}
+        if holder is not None and not shareable(config, role):
+            entry["skipped"] = f"not asked: the rig is held by pid {holder['pid']} ({holder['command']})"
+            entry["steps"] = []
+        else:
+            entry["steps"] = probe(config).steps
+        report["instruments"][role] = entry
+    report["ok"] = all(s["ok"] for e in report["instruments"].values() for s in e["steps"])
+    return report
+
+
+def _open(steps: _Steps, config: RigConfig, role: str) -> Any:
+    from hopkinson.rig.instruments import make_instrument
+
+    instrument = steps.run("configure the driver", lambda: make_instrument(config, role))
+    if instrument is None:
+        return None
+    steps.steps[-1]["value"] = type(instrument).__name__
+    steps.run("open", instrument.connect)
+    return instrument if steps.steps[-1]["ok"] else None
+
+
+def _probe_controller(config: RigConfig) -> _Steps:
+    steps = _Steps()
+    vc = _open(steps, config, "valve_controller")
+    if vc is None:
+        return steps
+    try:
+        steps.run("identity (read device identification)", vc.identity)
+        register_map = getattr(vc, "map", None)
+        if register_map is None or not hasattr(vc, "read_bits"):  # a lab's driver: its role's reads
+            steps.run("status", vc.status)
+            return steps
+        for table, entries in register_map.blocks().items():
+            for name, entry in entries.items():
+                steps.run(_signal_step(table, name, entry), lambda t=table, e=entry: _read_signal(vc, t, e))
+    finally:
+        vc.close()
+    return steps
+
+
+def _signal_step(table: str, name: str, entry: Any) -> str:
+    from hopkinson.drivers.registers import Register
+
+    if isinstance(entry, Register):
+        span = f"{entry.address}" if entry.words == 1 else f"{entry.address}..{entry.address + 1}"
+        scaled = f", x{entry.scale:g}" if entry.scale != 1.0 else ""
+        scaled += f" {entry.offset:+g}" if entry.offset else ""
+        return f"{table}.{name} ({table.replace('_', ' ')} {span}, {entry.type} {entry.word_order}{scaled})"
+    return f"{table}.{name} ({table.replace('_', ' ').rstrip('s')} {entry})"
+
+
+def _read_signal(vc: Any, table: str, entry: Any) -> Any:
+    from hopkinson.drivers.registers import Register
+
+    function = table.replace("_", " ")
+    if table in ("coils", "discrete_inputs"):
+        return vc.read_bits(function, [entry])[entry]
+    if isinstance(entry, Register):
+        return vc.read_values(function, {"value": entry})["value"]
+    return vc.read_words(function, [entry])[entry]
+
+
+def _probe_digitizer(config: RigConfig) -> _Steps:
+    steps = _Steps()
+    dig = _open(steps, config, "digitizer")
+    if dig is None:
+        return steps
+    try:
+        steps.run("identity (*IDN?)", dig.identity)
+        settings = steps.run("acquisition and channel settings", dig.settings) if hasattr(dig, "settings") else None
+        if settings is not None and dataclasses.is_dataclass(settings):
+            configured = getattr(config.digitizer, "settings", None)
+            if callable(configured) and hasattr(settings, "differences"):
+                steps.run("settings as configured", lambda: _same(settings.differences(configured())))
+        steps.run("acquisition state", dig.acquisition_state)
+    finally:
+        dig.close()
+    return steps
+
+
+def _same(differences: list[str]) -> str:
+    if differences:
+        raise ValueError("differs from rig.toml (the sequencer sets it before a shot): " + "; ".join(differences))
+    return "as in rig.toml"
+
+
+def _probe_amplifier(config: RigConfig) -> _Steps:
+    steps = _Steps()
+    amp = _open(steps, config, "amplifier")
+    if amp is None:
+        return steps
+    try:
+        steps.run("identity", amp.identity)
+        steps.run("settings", amp.settings)
+        steps.run("overload flag", amp.overloaded)
+    finally:
+        amp.close()
+    return steps
+
+
+def visa_resources(library: str) -> dict[str, Any]:
+    """The VISA resources `library` lists (bounded in time), or why it could not."""
+    result: dict[str, Any] = {"library": library}
+
+    def scan() -> None:
+        try:
+            import pyvisa
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # pyvisa-py's notes on optional discovery packages
+                manager = pyvisa.ResourceManager(library)
+                try:
+                    result["resources"] = list(manager.list_resources())
+                finally:
+                    manager.close()
+        except Exception as exc:  # a missing or broken VISA library: reported, not raised
+            result["error"] = f"{type(exc).__name__}: {exc}"
+
+    thread = threading.Thread(target=scan, name="probe-visa", daemon=True)
+    thread.start()
+    thread.join(VISA_SCAN_S)
+    if thread.is_alive():
+        result["error"] = f"the VISA library did not list its resources within {VISA_SCAN_S:g} s"
+    return result
+
+
+def serial_ports() -> list[dict[str, str]]:
+    """This computer's serial ports (device, description)."""
+    from serial.tools import list_ports
+
+    return [{"device": p.device, "description": p.description or ""} for p in list_ports.comports()]
+
+
+FIXES: list[tuple[str, str]] = [  # (text in the error, what to check), first match wins
+    ("not running for this user", "start the simulator: `hopkinson sim` (or use --config with real addresses)"),
+    ("could not connect", "check host and port in rig.toml, that the device is powered and on this network "
+                          "(ping it), and that no firewall blocks the port"),
+    ("lock", "another process holds the port: `hopkinson status` names it; stop it or wait"),
+    ("No such file", "the port does not exist: pick one from the serial ports listed above"),
+    ("Permission denied", "this user may not open the port: add it to the port's group (e.g. dialout)"),
+    ("exception 11", "wrong unit id: set valve_controller.unit_id to the controller's Modbus address"),
+    ("exception 2", "the address is not mapped in the device: compare rig.toml's register map with the "
+                    "PLC's documentation (0-based protocol addresses, not 4xxxx numbers)"),
+    ("exception 1", "the device does not support this function: is the signal in the right table "
+                    "(coil, discrete input, holding or input register)?"),
+    ("no reply within", "nothing answered: check the unit id, baud rate, parity and stop bits, the wiring "
+                        "(RS-485 A/B swapped?) and the termination"),
+    ("longer than", "the reply is not this protocol: is another device or protocol on this port?"),
+    ("cannot import", "install the lab's driver package in this environment, or put it on PYTHONPATH"),
+    ("VISA", "check the resource string against the VISA resources listed above, and the VISA library"),
+    ("differs from rig.toml", "nothing to do before a shot: the sequencer sets and reads back these settings"),
+]
+
+
+def fix_for(exc: BaseException) -> str:
+    """What to check for this failure (FIXES), or the general advice."""
+    text = str(exc)
+    for needle, fix in FIXES:
+        if needle.lower() in text.lower():
+            return fix
+    return "check the instrument's settings against rig.toml and its manual"
+
+
+def _shown(value: Any) -> Any:
+    if isinstance(value, bool | int | float | str) or value is None:
+        return value
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {k: v for k, v in dataclasses.asdict(value).items() if v is not None}
+    return str(value)
+
+
+def format_probe(report: dict[str, Any]) -> str:
+    """The probe report as lines for a person."""
+    lines = [f"probe: {report['config']}"]
+    visa = report["visa_resources"]
+    found = ", ".join(visa.get("resources", [])) or "none"
+    lines.append(f"VISA resources ({visa['library']}): {found}" if "error" not in visa
+                 else f"VISA resources ({visa['library']}): cannot list: {visa['error']}")
+    ports = ", ".join(f"{p['device']} ({p['description']})" if p["description"] and p["description"] != "n/a"
+                      else p["device"] for p in report["serial_ports"]) or "none"
+    lines.append(f"serial ports: {ports}")
+    if report.get("held_by"):
+        h = report["held_by"]
+        lines.append(f"the rig is held by pid {h['pid']} ({h['command']}): probing only what can be shared")
+    failed = passed = 0
+    titles = {"valve_controller": "valve/vacuum controller", "digitizer": "digitizer", "amplifier": "amplifier"}
+    for role, entry in report["instruments"].items():
+        lines.append(f"{titles[role]} ({entry['address']}):")
+        if "skipped" in entry:
+            lines.append(f"  --    {entry['skipped']}")
+        for step in entry["steps"]:
+            if step["ok"]:
+                passed += 1
+                shown = "" if step["value"] is None else f": {step['value']}"
+                lines.append(f"  ok    {step['step']}{shown}")
+            else:
+                failed += 1
+                lines.append(f"  FAIL  {step['step']}: {step['error']}")
+                lines.append(f"        fix: {step['fix']}")
+    lines.append(f"{passed} ok, {failed} failed" + ("" if failed else ": the rig answers as configured"))
+    return "\n".join(lines)
