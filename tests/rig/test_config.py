@@ -256,3 +256,15 @@ def test_sim_register_map_override(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="input_registers.fixture_vacuum and input_registers.watchdog_state both "
                                           "use address 2"):
         load_sim_config(overlap)
+
+
+def test_the_readmes_instruments_example_loads(tmp_path: Path) -> None:
+    readme = (CONFIG.parent / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("## Instruments"):readme.index("## Files and formats")]
+    example = section[section.index("```toml\n") + 8:section.index("```\n", section.index("```toml"))]
+    text = (CONFIG / "rig.toml").read_text()
+    path = tmp_path / "rig.toml"
+    path.write_text(example + text[text.index("[digitizer]"):])
+    vc = load_rig_config(path).valve_controller
+    assert vc.address == "modbus-rtu:///dev/ttyUSB1/17"
+    assert vc.register_map.input_registers.reservoir_pressure == Register(0, "int32", "little", 1e-4)
