@@ -201,15 +201,15 @@ def to_rate(record: Record, sample_rate_hz: float) -> tuple[Record, str | None]:
     if abs(source - sample_rate_hz) <= 1e-3 * sample_rate_hz:
         return record, None
     if source > sample_rate_hz:
-        out = resample_to_rate(record, sample_rate_hz)
+        out = replace(resample_to_rate(record, sample_rate_hz), response_unit=record.response_unit)
         how = "low-pass filtered and resampled"
     else:
         up, down = resampling_factors(source, sample_rate_hz)
-        out = Record(
-            record.sample_interval_s * down / up,
-            signal.resample_poly(record.reference, up, down, padtype="line"),
-            signal.resample_poly(record.response, up, down, padtype="line"),
-            record.start_time_s,
+        out = replace(
+            record,
+            sample_interval_s=record.sample_interval_s * down / up,
+            reference=signal.resample_poly(record.reference, up, down, padtype="line"),
+            response=signal.resample_poly(record.response, up, down, padtype="line"),
         )
         how = "interpolated (band-limited)"
     if abs(out.sample_rate_hz - sample_rate_hz) > 1e-3 * sample_rate_hz:

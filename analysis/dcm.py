@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel, complex_pairs, from_pairs, load_json_object
+from hopkinson.analysis.records import MAX_ABS_VALUE
 from hopkinson.analysis.response import (
     DEFAULT_LEVELS,
     BandEdge,
@@ -176,7 +177,9 @@ class DCM:
         object.__setattr__(self, "zeros", z)
         object.__setattr__(self, "poles", p)
         object.__setattr__(self, "gain", float(self.gain))
-        if not (np.all(np.isfinite(self.num)) and math.isfinite(self.dc_gain)):
+        with np.errstate(over="ignore", invalid="ignore"):
+            finite = bool(np.all(np.isfinite(self.num)) and math.isfinite(self.dc_gain))
+        if not finite:
             raise AnalysisError(
                 f"DCM: gain {self.gain:g} with these zeros gives coefficients that are not finite numbers (overflow)"
             )
@@ -630,11 +633,13 @@ class DcmStream:
                 level = y[0] if self.initial == "steady" else 0.0
                 self._fir_zi = signal.lfilter_zi(self._fir, [1.0]) * level
             y, self._fir_zi = signal.lfilter(self._fir, [1.0], y, zi=self._fir_zi)
-        if not np.all(np.isfinite(y)):
-            bad = self.samples_processed + int(np.flatnonzero(~np.isfinite(y))[0])
+        bad = ~(np.abs(y) <= MAX_ABS_VALUE)  # NaN and ±inf are bad too
+        if np.any(bad):
+            at = self.samples_processed + int(np.flatnonzero(bad)[0])
             raise AnalysisError(
-                f"the DCM's output is not a finite number from input sample {bad} on (it overflows: gain "
-                f"{self.dcm.gain:g}, DC gain {self.dcm.dc_gain:g}); this DCM cannot compensate this record"
+                f"the DCM's output is not a finite number within ±{MAX_ABS_VALUE:g} from input sample {at} on (it "
+                f"overflows: gain {self.dcm.gain:g}, DC gain {self.dcm.dc_gain:g}); this DCM cannot compensate "
+                "this record"
             )
         return y
 

@@ -21,7 +21,10 @@ noise-gain bound and the latency (issue 11). analysis.dcm holds the paper's desi
   designed as asked and reported.
 - **Latency.** The identified channel delay plus the low-frequency group delay of model × DCM
   (the cancelled poles' delays cancel; what is left is the designed poles', the band limit's,
-  and the model's uncancelled zeros and poles): what `hopkinson compensate` removes.
+  and the model's uncancelled zeros and poles), taken as the phase slope over the compensated
+  ±5 % band, where a pulse's content lies (analysis.dcm.passband_delay_samples; exactly at DC
+  a slow spare pole-zero pair would move it by tens of samples while changing nothing a shock
+  pulse contains): what `hopkinson compensate` removes.
 """
 
 from __future__ import annotations
@@ -159,7 +162,7 @@ def _modes(poles: np.ndarray, sample_interval_s: float) -> list[dict[str, Any]]:
     for p in poles:
         if p.imag < 0:
             continue
-        f_n = float(abs(np.log(p)) / (2 * np.pi * sample_interval_s)) if p != 0 else None
+        f_n = float(abs(np.log(complex(p))) / (2 * np.pi * sample_interval_s)) if p != 0 else None
         out.append({"kind": "complex" if p.imag > 0 else "real", "pole": [p.real, p.imag],
                     "natural_frequency_hz": f_n, "supported": True})
     return out
@@ -175,7 +178,8 @@ def _why_not_cancelled(p: complex, mode: dict[str, Any], zeros: np.ndarray, nyqu
         where = f" (f_n = {f_n / 1e3:.4g} kHz)" if f_n is not None else ""
         return f"outside the band the excitation supports{where}: the shot cannot vouch for it"
     if f_n is not None and f_n >= NEAR_NYQUIST * nyquist_hz:
-        return f"f_n = {f_n / 1e3:.4g} kHz lies within {1 - NEAR_NYQUIST:.0%} of Nyquist: not resolved by the record"
+        return (f"f_n = {f_n / 1e3:.4g} kHz lies within {100 * (1 - NEAR_NYQUIST):.0f} % of Nyquist: not resolved by "
+                "the record")
     if zeros.size:
         near = zeros[int(np.argmin(np.abs(zeros - p)))]
         if abs(near - p) <= DOUBLET * (1 - abs(p)):
@@ -231,6 +235,8 @@ class DcmOptions:
     def __post_init__(self) -> None:
         if self.ratio is not None and not (math.isfinite(self.ratio) and self.ratio > 0):
             raise AnalysisError(f"DCM: the response-time ratio must be a positive number, got {self.ratio}")
+        if not (math.isfinite(self.damping) and 0 < self.damping <= 1):
+            raise AnalysisError(f"DCM: the damping ratio ζ_e must be in (0, 1], got {self.damping}")
         if not (math.isfinite(self.widening) and self.widening > 1):
             raise AnalysisError(f"DCM: the band widening must be a number above 1, got {self.widening}")
         if not (self.noise_gain_limit > 0):  # inf: no bound
@@ -383,7 +389,7 @@ def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit
     reached = after["5"] / before["5"] if before["5"] > 0 else None
     noise = dcm.noise_gain()
     dt = model.sample_interval_s
-    fit_band = min(max(after["5"], before["5"]), 0.4 / dt)
+    fit_band = min(max(after["5"], before["5"]), 0.4 / dt)  # the band it passes flat
     in_band = passband_delay_samples(lambda f: frequency_response(model, f) * dcm.frequency_response(f), fit_band, dt)
     latency = support.channel_delay_samples + in_band
     figures = {
@@ -395,7 +401,7 @@ def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit
             "compensated_delay_s": in_band * dt,
             "fitted_up_to_hz": fit_band,
             "dcm_dc_group_delay_s": dcm.group_delay_samples * dt,
-            "how": "channel delay + the delay of model × DCM over its flat band (phase slope, least squares)",
+            "how": "channel delay + the delay of model × DCM over its ±5 % band (phase slope, least squares)",
         },
     }
     dcm = replace(dcm, design={**dcm.design, **figures}, latency_samples=latency)

@@ -1,8 +1,16 @@
 """`hopkinson dcm` (design a dynamic compensation model) and `hopkinson compensate` (apply one).
 
-    hopkinson dcm (--model model.json | --poles P,P,… --sample-interval S) --ratio R --damping Z
-                  [--extra-poles P,…] [--json] [-o dcm.json]
-    hopkinson compensate RECORD --dcm dcm.json -o out.csv [--block-samples N] [--initial steady|rest] [--json]
+    hopkinson dcm (--model model.json | --poles P,P,… --sample-interval S) [--ratio auto|R]
+                  [--damping Z] [--widening W] [--noise-gain-limit G] [--band-limit auto|off|HZ]
+                  [--extra-poles P,…] [--record RECORD] [--json] [-o dcm.json]
+    hopkinson compensate RECORD --dcm dcm.json -o out.csv [--causal] [--force]
+                  [--block-samples N] [--initial steady|rest] [--json]
+
+The design (analysis.dcm_design) cancels only the modes the shot supports, chooses r for the
+band widening within the noise-gain limit (or takes --ratio), band-limits at the top of the
+supported band and reports the latency; --record checks it on the shot it came from
+(analysis.compensation). `compensate` brings the record to the DCM's rate, removes the
+latency (unless --causal) and refuses a DCM marked not recommended (unless --force).
 
 Poles are written like 0.974+0.1396j (or …i), every pole listed, both members of a
 conjugate pair. A list that starts with a minus sign needs the = form: --poles=-0.5,0.3.
@@ -20,81 +28,74 @@ from typing import TYPE_CHECKING, Any
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.rig.cli.main import emit_json
 
+from hopkinson.fileio import UnsafeOutputError, atomic_open, atomic_write, check_output_path
+
 if TYPE_CHECKING:
     import numpy as np
     from hopkinson.analysis.dcm import DCM
+    from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport
     from hopkinson.analysis.model import DiscreteModel
 
 DEFAULT_BLOCK_SAMPLES = 65_536
 
 
-def parse_complex(text: str, option: str) -> complex:
-    """One pole such as 0.974+0.1396j, 0.974-0.1396i or 0.5; clear error otherwise."""
-    raw = text.strip().replace(" ", "")
-    if not raw:
-        raise AnalysisError(f"{option}: empty pole in the list (write poles like 0.974+0.1396j, comma-separated)")
+def _checked_output(output: str | None, inputs: list[str]) -> Path | None:
+    """check_output_path as one clear AnalysisError (exit 2) before any work."""
+    if output is None:
+        return None
     try:
-        value = complex(raw.replace("i", "j").replace("I", "j").replace("J", "j"))
-    except ValueError:
-        raise AnalysisError(f"{option}: {text.strip()!r} is not a complex number (write poles like 0.974+0.1396j)") from None
-    if not (math.isfinite(value.real) and math.isfinite(value.imag)):
-        raise AnalysisError(f"{option}: {text.strip()!r} is not a finite number")
-    return value
+        return check_output_path(output, [i for i in inputs if i])
+    except UnsafeOutputError as exc:
+        raise AnalysisError(str(exc)) from None
 
 
-def parse_poles(text: str, option: str) -> np.ndarray:
-    """A comma-separated list of poles."""
-    import numpy as np
+def _load_support(path: str) -> tuple[DiscreteModel, ShotSupport]:
+    """The model of a model JSON (`identify -o`, a shot's results) and what it says the shot
+    supports; any malformed content is one clear message."""
+    from hopkinson.analysis.dcm_design import ShotSupport
+    from hopkinson.analysis.model import DiscreteModel, load_json_object
 
-    return np.array([parse_complex(part, option) for part in text.split(",")], dtype=complex)
-
-
-def _load_model_checked(path: str) -> DiscreteModel:
-    """load_model, with any malformed content turned into one clear message."""
-    from hopkinson.analysis.model import load_model
-
+    data = load_json_object(path, "model")
     try:
-        model = load_model(path)
+        model = DiscreteModel.from_dict(data.get("model", data), source=str(path))
+        ident = data.get("identification", data)
+        support = ShotSupport.from_dict(ident if isinstance(ident, dict) else {}, model)
     except AnalysisError:
         raise
-    except (TypeError, ValueError, IndexError) as exc:
+    except (TypeError, ValueError, IndexError, KeyError) as exc:
         raise AnalysisError(f"{path}: not a valid model file ({exc})") from None
     if model.a.ndim != 1 or model.b.ndim != 1:
         raise AnalysisError(f"{path}: 'a' and 'b' must be flat lists of numbers")
     if model.order < 1:
         raise AnalysisError(f"{path}: the model has no poles (a = {list(model.a)}); nothing to compensate")
-    return model
+    return model, support
 
 
-def design_report(
-    poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, source: str
-) -> dict[str, Any]:
-    """The JSON result of `hopkinson dcm` (also what -o writes)."""
-    from hopkinson.analysis.dcm import compare_steps, compensated_fbsd_edges
-    from hopkinson.analysis.response import fbsd_edges, pole_analysis
+def _ratio(text: str) -> float | None:
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise AnalysisError(f"--ratio: 'auto' or a positive number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise AnalysisError(f"--ratio: 'auto' or a positive number, got {text!r}")
+    return value
 
-    result: dict[str, Any] = {
-        "source": source,
-        "sample_interval_s": dcm.sample_interval_s,
-        "pole_analysis": pole_analysis(poles),
-        "dcm": dcm.to_dict(),
-    }
-    if model is not None:
-        before = fbsd_edges(model)
-        after = compensated_fbsd_edges(model, dcm)
-        steps = compare_steps(model, dcm)  # one step-response simulation for both times
-        rt_before, rt_after = steps.rise_times_samples()
-        result["fbsd_hz"] = {k: e.frequency_hz for k, e in before.items()}
-        result["compensated_fbsd_hz"] = {k: e.frequency_hz for k, e in after.items()}
-        result["fbsd_detail"] = {k: e.to_dict() for k, e in before.items()}
-        result["compensated_fbsd_detail"] = {k: e.to_dict() for k, e in after.items()}
-        result["fbsd_widening"] = {k: after[k].frequency_hz / before[k].frequency_hz for k in before}
-        result["rise_time_samples"] = {"uncompensated": rt_before, "compensated": rt_after}
-        result["rise_time_ratio"] = rt_before / rt_after if rt_after > 0 else None
-        st_before, st_after = steps.settling_times_samples()
-        result["settling_time_samples"] = {"uncompensated": st_before, "compensated": st_after}
-        result["settling_time_ratio"] = steps.settling_time_ratio()
-    return result
+
+def _band_limit(text: str) -> float | None:
+    word = text.strip().lower()
+    if word == "auto":
+        return None
+    if word == "off":
+        return 0.0
+    try:
+        value = float(text)
+    except ValueError:
+        raise AnalysisError(f"--band-limit: 'auto', 'off' or a frequency in Hz, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise AnalysisError(f"--band-limit: 'auto', 'off' or a positive frequency in Hz, got {text!r}")
+    return value
 
 
 def _poly_text(coeffs: np.ndarray) -> str:
@@ -118,18 +119,39 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
         ratio = "-" if row["ratio"] is None else f"{row['ratio']:.2f}"
         out.write(f"  {format_complex(complex(*row['pole'])):<26}{row['response_time_samples']:>12.2f}{ratio:>10}\n")
     d = dcm.design
-    out.write(
-        f"DCM: r = {d['ratio']:g}, zeta_e = {d['damping']:g}: target response time {d['target_response_time_samples']:.3f} "
-        f"samples; designed poles {', '.join(format_complex(complex(*p)) for p in d['designed_poles'])}\n"
-    )
-    if d["extra_poles"]:
-        out.write(f"  extra poles: {', '.join(format_complex(complex(*p)) for p in d['extra_poles'])}\n")
-    if d["origin_poles"]:
+    for skipped in d.get("skipped_poles", []):
+        out.write(f"  not cancelled: {format_complex(complex(*skipped['pole']))}: {skipped['reason']}\n")
+    if "ratio" in d:
         out.write(
-            f"  {d['origin_poles']} pole(s) placed at z = 0 to make the DCM causal: "
-            f"its output lags by {d['origin_poles']} sample(s); the magnitude is as designed\n"
+            f"DCM: r = {d['ratio']:g}, zeta_e = {d['damping']:g}: target response time "
+            f"{d['target_response_time_samples']:.3f} samples; designed poles "
+            f"{', '.join(format_complex(complex(*p)) for p in d['designed_poles'])}\n"
         )
+        if d["extra_poles"]:
+            out.write(f"  extra poles: {', '.join(format_complex(complex(*p)) for p in d['extra_poles'])}\n")
+        if d["origin_poles"]:
+            out.write(
+                f"  {d['origin_poles']} pole(s) placed at z = 0 to make the DCM causal: "
+                f"its output lags by {d['origin_poles']} sample(s); the magnitude is as designed\n"
+            )
+    r = result["dcm"]
+    band = r.get("band_limit_hz")
+    out.write("  band limit: " + (f"{band / 1e3:.4g} kHz (2nd-order Butterworth; {r.get('band_limit_reason')})\n"
+                                  if band else f"none ({r.get('band_limit_reason', 'not asked')})\n"))
     out.write(f"  num: {_poly_text(dcm.num)}\n  den: {_poly_text(dcm.den)}\n  gain K = {dcm.gain:.6g} (G(1) = 1)\n")
+    limit = r.get("noise_gain_limit")
+    out.write(f"  noise gain {r['noise_gain']:.3g} (white-noise RMS at the analysis rate"
+              + (f"; limit {limit:g})\n" if limit is not None else ")\n"))
+    out.write(f"  latency {r['latency_s'] * 1e6:.3f} µs (removed by `hopkinson compensate` unless --causal)\n")
+    target, reached = r.get("target_widening"), r.get("reached_widening")
+    if reached is not None:
+        aim = f"aimed for ×{target:g}, " if target is not None else ""
+        out.write(f"  widening of the ±5 % band: {aim}reached ×{reached:.2f}\n")
+    if r.get("widening_note"):
+        out.write(f"  note: {r['widening_note']}\n")
+    for note in r.get("notes", []):
+        if note != r.get("widening_note"):
+            out.write(f"  note: {note}\n")
     if "fbsd_hz" in result:
         for key in result["fbsd_hz"]:
             before, after = result["fbsd_detail"][key], result["compensated_fbsd_detail"][key]
@@ -145,89 +167,167 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
         verdict = "shorter" if sratio > 1 else "NOT shorter"
         out.write(f"Settling time to ±5 %: {st['uncompensated']:.0f} -> {st['compensated']:.0f} samples "
                   f"(ratio {sratio:.2f}: {verdict})\n")
+    check = r.get("check")
+    if check:
+        rms, peak = check["rms_error_pct"], check["peak_error_pct"]
+        out.write(f"Check on {result.get('record')}: RMS error over the pulse {rms['uncompensated']:.3g} % -> "
+                  f"{rms['compensated']:.3g} %, peak error {peak['uncompensated']:+.3g} % -> "
+                  f"{peak['compensated']:+.3g} % (of the reference peak)\n")
+    if r.get("recommended") is False:
+        out.write(f"NOT RECOMMENDED: {r.get('not_recommended_reason')}\n")
+    elif r.get("recommended") is True:
+        out.write("Recommended: compensation improves the record it was checked on\n")
 
 
-def run_dcm(args: argparse.Namespace) -> int:
-    """Design the DCM and report it (text or --json); -o writes the DCM file."""
-    from hopkinson.analysis.dcm import design_dcm
+def _design(args: argparse.Namespace) -> tuple[np.ndarray, DcmDesign, DiscreteModel | None, str, list[str]]:
+    """(poles shown in the pole analysis, the design, the model to report or None, source, inputs)."""
+    from hopkinson.analysis.dcm import check_conjugate_pairs, parse_poles
+    from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, poles_only_model
 
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
-    model: DiscreteModel | None = None
+    options = DcmOptions(
+        ratio=_ratio(args.ratio),
+        damping=args.damping,
+        widening=args.widening,
+        noise_gain_limit=args.noise_gain_limit,
+        band_limit_hz=_band_limit(args.band_limit),
+        extra_poles=tuple(parse_poles(args.extra_poles, "--extra-poles")) if args.extra_poles else (),
+    )
     if args.model is not None:
         if args.sample_interval is not None:
             raise AnalysisError("dcm: --sample-interval goes with --poles; a model file carries its own")
-        model = _load_model_checked(args.model)
-        poles, dt, source = model.poles, model.sample_interval_s, str(args.model)
-    else:
-        if args.sample_interval is None:
-            raise AnalysisError("dcm: --poles needs --sample-interval S (seconds, e.g. 1e-6)")
-        if not args.sample_interval > 0:
-            raise AnalysisError(f"dcm: --sample-interval must be positive, got {args.sample_interval}")
-        poles, dt, source = parse_poles(args.poles, "--poles"), args.sample_interval, "--poles"
-    extra = parse_poles(args.extra_poles, "--extra-poles") if args.extra_poles else ()
-    dcm = design_dcm(poles, dt, args.ratio, args.damping, extra)
-    result = design_report(poles, dcm, model, source)
-    if args.output:
-        path = Path(args.output)
+        model, support = _load_support(args.model)
+        return model.poles, _designed(support, options, args.model), model, str(args.model), [args.model]
+    if args.sample_interval is None:
+        raise AnalysisError("dcm: --poles needs --sample-interval S (seconds, e.g. 1e-6)")
+    if not (math.isfinite(args.sample_interval) and args.sample_interval > 0):
+        raise AnalysisError(f"dcm: --sample-interval must be a positive number of seconds, got {args.sample_interval}")
+    poles = parse_poles(args.poles, "--poles")
+    check_conjugate_pairs(poles, "--poles")
+    support = ShotSupport(poles_only_model(poles, args.sample_interval))
+    return poles, _designed(support, options, "--poles"), None, "--poles", []
+
+
+def _designed(support: ShotSupport, options: DcmOptions, source: str) -> DcmDesign:
+    """design_compensation, refusing a DCM with nothing to cancel (one line naming why)."""
+    from hopkinson.analysis.dcm_design import design_compensation
+
+    result = design_compensation(support, options)
+    if result.poles.cancelled.size == 0:
+        why = "; ".join(f"{complex(*s['pole']):.6g}: {s['reason']}" for s in result.poles.skipped)
+        raise AnalysisError(f"{source}: nothing to compensate (no pole the DCM may cancel: {why})")
+    return result
+
+
+def run_dcm(args: argparse.Namespace) -> int:
+    """Design the DCM and report it (text or --json); -o writes the DCM file atomically."""
+    from hopkinson.analysis.compensation import check_compensation, recommendation, to_rate
+    from hopkinson.analysis.dcm_design import design_report
+    from hopkinson.analysis.records import read_record
+
+    poles, design, model, source, inputs = _design(args)
+    output = _checked_output(args.output, [*inputs, args.record])
+    result = design_report(poles, design.dcm, model, source, design)
+    check = None
+    if args.record is not None:
+        if model is None:
+            raise AnalysisError("dcm: --record needs --model (the check compares the model's compensation with the record)")
+        record, resampled = to_rate(read_record(args.record), 1.0 / model.sample_interval_s)
         try:
-            path.write_text(json.dumps(result, indent=2, allow_nan=False) + "\n")
-        except OSError as exc:
-            raise AnalysisError(f"{path}: cannot write the DCM file ({exc.strerror})") from None
-        result["output"] = str(path)
+            check = check_compensation(record, model, design.dcm, model.delay_samples)
+        except AnalysisError as exc:
+            raise AnalysisError(f"{args.record}: {exc}") from None
+        result["record"] = str(args.record)
+        result["record_resampled"] = resampled
+    recommended, reason = recommendation(design, check)
+    result["dcm"].update({"recommended": recommended, "not_recommended_reason": reason,
+                          "check": None if check is None else check.to_dict()})
+    if output is not None:
+        atomic_write(output, json.dumps(result, indent=2, allow_nan=False) + "\n")
+        result["output"] = str(output)
     if args.json:
         emit_json(result)
     else:
-        _print_design(result, dcm)
-        if args.output:
-            sys.stdout.write(f"wrote {args.output}\n")
+        _print_design(result, design.dcm)
+        if output is not None:
+            sys.stdout.write(f"wrote {output}\n")
     return 0
 
 
 def run_compensate(args: argparse.Namespace) -> int:
-    """Apply a DCM to a record's response, block by block, and write the compensated record."""
-    from hopkinson.analysis.dcm import apply, load_dcm
-    from hopkinson.analysis.records import read_record, write_record
+    """Apply a DCM to a record's response, streamed block by block, and write the result."""
+    from hopkinson.analysis.compensation import to_rate
+    from hopkinson.analysis.dcm import DCM, DcmStream
+    from hopkinson.analysis.model import load_json_object
+    from hopkinson.analysis.records import read_record
 
     if args.block_samples < 1:
         raise AnalysisError(f"compensate: --block-samples must be at least 1, got {args.block_samples}")
-    dcm = load_dcm(args.dcm)
-    record = read_record(args.record)
-    if abs(record.sample_interval_s - dcm.sample_interval_s) > 1e-3 * dcm.sample_interval_s:
+    output = _checked_output(args.output, [args.record, args.dcm])
+    data = load_json_object(args.dcm, "DCM")
+    fields = data.get("dcm", data)
+    dcm = DCM.from_dict(fields, source=str(args.dcm))
+    if isinstance(fields, dict) and fields.get("recommended") is False and not args.force:
         raise AnalysisError(
-            f"{args.record}: sampled every {record.sample_interval_s:g} s but the DCM in {args.dcm} was designed "
-            f"for {dcm.sample_interval_s:g} s; resample the record first"
+            f"{args.dcm}: this DCM is marked not recommended ({fields.get('not_recommended_reason')}); "
+            "--force applies it anyway"
         )
-    compensated = apply(dcm, record.response, args.initial, args.block_samples)
-    n_blocks = -(-record.n_samples // args.block_samples)
-    out = type(record)(record.sample_interval_s, record.reference, compensated, record.start_time_s)
-    try:
-        write_record(args.output, out)
-    except OSError as exc:
-        raise AnalysisError(f"{args.output}: cannot write the record ({exc.strerror})") from None
+    record, resampled = to_rate(read_record(args.record), 1.0 / dcm.sample_interval_s)
+    stream = DcmStream(dcm, args.initial, align=not args.causal)
+    n, step = record.n_samples, args.block_samples
+    blocks = -(-n // step)
+    _write_stream(output, record, (stream.process(record.response[i : i + step]) for i in range(0, n, step)),
+                  stream.flush)
+    latency = dcm.latency_s
+    timing = (f"latency {latency * 1e6:.3f} µs kept (--causal: the output lags the reference)" if args.causal
+              else f"latency {latency * 1e6:.3f} µs removed (time-aligned with the reference)")
     what = (
-        f"compensated the response column of {args.record} ({record.n_samples} samples) with the order-{dcm.order} "
-        f"DCM of {args.dcm}, streamed in {n_blocks} block(s) of up to {args.block_samples} samples with carried "
-        f"filter state (start: {args.initial}); reference and time unchanged; wrote {args.output}"
+        f"compensated the response column of {args.record} ({n} samples"
+        + (f", {resampled}" if resampled else "")
+        + f") with the order-{dcm.order} DCM of {args.dcm}, streamed in {blocks} block(s) of up to {step} samples "
+        f"with carried filter state (start: {args.initial}); {timing}; reference and time unchanged; wrote {output}"
     )
     if args.json:
-        emit_json(
-            {
-                "record": str(args.record),
-                "dcm": str(args.dcm),
-                "output": str(args.output),
-                "samples": record.n_samples,
-                "blocks": n_blocks,
-                "block_samples": args.block_samples,
-                "initial": args.initial,
-                "sample_interval_s": record.sample_interval_s,
-                "dcm_order": dcm.order,
-                "what": what,
-            }
-        )
+        emit_json({
+            "record": str(args.record), "dcm": str(args.dcm), "output": str(output), "samples": n,
+            "blocks": blocks, "block_samples": step, "initial": args.initial,
+            "sample_interval_s": record.sample_interval_s, "resampled": resampled, "dcm_order": dcm.order,
+            "latency_s": latency, "latency_removed": not args.causal,
+            "recommended": fields.get("recommended") if isinstance(fields, dict) else None, "what": what,
+        })
     else:
         sys.stdout.write(what + "\n")
     return 0
+
+
+def _write_stream(output: Path, record: Any, parts: Any, flush: Any) -> None:
+    """Write time, reference and the compensated response as the blocks come (CSV rows block
+    by block; NPZ at the end), atomically: an error leaves no file."""
+    import numpy as np
+    from hopkinson.analysis.records import RECORD_KEYS, header_cell
+
+    units = {"time_s": "s", "reference": "m/s^2", "response": getattr(record, "response_unit", None)}
+    if output.suffix.lower() == ".npz":
+        response = np.concatenate([*parts, flush()])
+        with atomic_open(output, "wb") as fh:
+            np.savez(fh, time_s=record.time_s, reference=record.reference, response=response,
+                     **{f"{k}_unit": np.array(u) for k, u in units.items() if u})
+        return
+    with atomic_open(output, "w", newline="") as fh:
+        fh.write(",".join(header_cell(k, units[k]) for k in RECORD_KEYS) + "\n")
+        done = 0
+        for block in _chain(parts, flush):
+            rows = np.column_stack([record.start_time_s + record.sample_interval_s * np.arange(done, done + block.size),
+                                    record.reference[done : done + block.size], block])
+            np.savetxt(fh, rows, delimiter=",", fmt="%.10g")
+            done += block.size
+
+
+def _chain(parts: Any, flush: Any) -> Any:
+    """The blocks, then the stream's held-back tail."""
+    yield from parts
+    yield flush()
 
 
 def register(subparsers: Any) -> None:
@@ -235,17 +335,28 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "dcm",
         help="design a dynamic compensation model (DCM) from a model or its poles",
-        description="Design the DCM of the paper's Eqs. (13)-(25): zeros at the model poles, new poles "
-        "from the response-time ratio r and damping zeta_e, unit DC gain. Poles as 0.974+0.1396j, both "
-        "members of each conjugate pair; a list starting with '-' needs --poles=-0.5,…",
+        description="Design the DCM of the paper's Eqs. (13)-(25) from what the shot supports: zeros at the "
+        "supported model poles, new poles from the response-time ratio r (auto: the r that widens the ±5 %% band "
+        "by --widening within --noise-gain-limit) and damping zeta_e, a band limit at the top of the supported "
+        "band, unit DC gain; reports noise gain and latency. Poles as 0.974+0.1396j, both members of each "
+        "conjugate pair; a list starting with '-' needs --poles=-0.5,…",
     )
     src = p.add_argument_group("model (one of)")
     src.add_argument("--model", metavar="MODEL.json", help="model file from `hopkinson identify -o`")
     src.add_argument("--poles", metavar="P,P,...", help="the model's discrete poles, comma-separated")
     p.add_argument("--sample-interval", type=float, metavar="S", help="sample interval in s (with --poles)")
-    p.add_argument("--ratio", type=float, required=True, metavar="R", help="response-time ratio r (> 0)")
-    p.add_argument("--damping", type=float, required=True, metavar="Z", help="damping ratio zeta_e of the new poles, (0, 1]")
+    p.add_argument("--ratio", default="auto", metavar="auto|R",
+                   help="response-time ratio r (> 0), or 'auto' (default): the r that reaches --widening")
+    p.add_argument("--damping", type=float, default=0.707, metavar="Z",
+                   help="damping ratio zeta_e of the new poles, (0, 1] (default %(default)s)")
+    p.add_argument("--widening", type=float, default=3.0, metavar="W",
+                   help="auto ratio: widen the ±5 %% band this many times (default %(default)s)")
+    p.add_argument("--noise-gain-limit", type=float, default=4.0, metavar="G",
+                   help="auto ratio: largest white-noise RMS gain allowed (default %(default)s)")
+    p.add_argument("--band-limit", default="auto", metavar="auto|off|HZ",
+                   help="low-pass cut-off: 'auto' (default: the top of the band the shot supports), 'off' or Hz")
     p.add_argument("--extra-poles", metavar="P,...", help="additional DCM poles (e.g. 0.6+0.1j,0.6-0.1j)")
+    p.add_argument("--record", metavar="RECORD", help="check the DCM on this record (the shot of the model)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", metavar="DCM.json", help="write the DCM (and the analysis) to this file")
     p.set_defaults(func=run_dcm)
@@ -254,11 +365,15 @@ def register(subparsers: Any) -> None:
         "compensate",
         help="apply a DCM to a record's response column (streaming)",
         description="Filter the response column of RECORD with the DCM, block by block with carried "
-        "state, and write a record with the same time and reference columns.",
+        "state, and write a record with the same time and reference columns. A record at another rate is "
+        "brought to the DCM's first; the DCM's latency is removed (time-aligned with the reference) unless "
+        "--causal. A DCM marked not recommended is refused unless --force.",
     )
     c.add_argument("record", metavar="RECORD", help="two-channel record (CSV or NPZ)")
     c.add_argument("--dcm", required=True, metavar="DCM.json", help="DCM file from `hopkinson dcm -o`")
     c.add_argument("-o", "--output", required=True, metavar="OUT", help="output record (.csv or .npz)")
+    c.add_argument("--causal", action="store_true", help="keep the latency (a causal, real-time output)")
+    c.add_argument("--force", action="store_true", help="apply a DCM even if it is marked not recommended")
     c.add_argument("--block-samples", type=int, default=DEFAULT_BLOCK_SAMPLES, metavar="N", help="samples per block")
     c.add_argument(
         "--initial",

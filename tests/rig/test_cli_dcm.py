@@ -37,6 +37,11 @@ def run_error(capsys, argv: list[str]) -> str:
     return lines[0]
 
 
+def run_text(capsys, argv: list[str]) -> str:
+    assert main(argv) == 0
+    return capsys.readouterr().out
+
+
 def write_model(path: Path, model: DiscreteModel) -> Path:
     path.write_text(json.dumps({"model": model.to_dict()}))
     return path
@@ -89,33 +94,66 @@ def test_text_output_says_what_was_done(tmp_path, capsys):
     assert "2 pole(s) placed at z = 0" in text
 
 
-def test_compensate_streams_the_response(tmp_path, capsys):
-    dt = 1e-6
+def shock_record(tmp_path: Path, dt: float = 1e-6, n: int = 3000, start_s: float = 200e-6):
+    """A 27 kHz, ζ = 0.05 sensor hit by the paper's 38.6 µs half-sine, with a zero offset; its
+    exact model and the record's path."""
     truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))
     b, a = truth.discrete_tf(dt)
-    model = DiscreteModel(dt, a, b)
-    t = np.arange(3000) * dt
-    reference = half_sine_m_s2(t, 38.6e-6, 1e6, start_s=200e-6)
-    response = truth.respond(reference, dt) + 0.5  # with a zero offset
-    rec_path = write_record(tmp_path / "shot.npz", record_from_arrays(t, reference, response))
+    t = np.arange(n) * dt
+    reference = half_sine_m_s2(t, 38.6e-6, 1e6, start_s=start_s)
+    response = truth.respond(reference, dt) + 0.5
+    path = write_record(tmp_path / "shot.npz", record_from_arrays(t, reference, response))
+    return DiscreteModel(dt, a, b), path, reference, response
+
+
+def test_compensate_streams_the_response_aligned_with_the_reference(tmp_path, capsys):
+    model, rec_path, reference, response = shock_record(tmp_path)
+    model_path = tmp_path / "m.json"
+    model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
     dcm_path = tmp_path / "dcm.json"
-    # r scales the decay envelope ζω_n: with ζ = 0.05 the new poles (ζ_e = 0.707) are only
-    # faster than the resonance for r > ζ_e/ζ ≈ 14; r = 40 puts them near 77 kHz.
-    main(["dcm", "--model", str(write_model(tmp_path / "m.json", model)), "--ratio", "40", "--damping", "0.707",
-          "-o", str(dcm_path), "--json"])
-    capsys.readouterr()
+    design = run_json(capsys, ["dcm", "--model", str(model_path), "--json", "-o", str(dcm_path)])
+    assert design["dcm"]["band_limit_hz"] == 36_000.0 and design["dcm"]["latency_s"] > 0
     out = tmp_path / "out.csv"
     info = run_json(capsys, ["compensate", str(rec_path), "--dcm", str(dcm_path), "-o", str(out),
                              "--block-samples", "257", "--json"])
     assert info["blocks"] == 12 and info["initial"] == "steady" and "reference" in info["what"]
+    assert info["latency_removed"] and info["latency_s"] == pytest.approx(design["dcm"]["latency_s"])
+    assert info["resampled"] is None
     result = read_record(out)
     np.testing.assert_allclose(result.reference, reference, rtol=1e-9, atol=1e-3)
     dcm = load_dcm(dcm_path)
-    np.testing.assert_allclose(result.response, apply(dcm, response, "steady"), rtol=1e-8, atol=1e-6)
-    # the compensated response follows the true acceleration far better than the raw one
+    np.testing.assert_allclose(result.response, apply(dcm, response, "steady", align=True), rtol=1e-8, atol=1e-6)
+    # aligned: the compensated pulse peaks where the reference does (within a sample), and it
+    # follows the true acceleration far better than the raw response
+    assert abs(int(np.argmax(result.response)) - int(np.argmax(reference))) <= 1
     raw_error = np.max(np.abs(response - 0.5 - reference))
     comp_error = np.max(np.abs(result.response - 0.5 - reference))
-    assert comp_error < 0.5 * raw_error
+    assert comp_error < 0.2 * raw_error
+    # --causal keeps the latency: the plain causal filter, its peak later by about the latency
+    causal = tmp_path / "causal.npz"
+    info = run_json(capsys, ["compensate", str(rec_path), "--dcm", str(dcm_path), "-o", str(causal), "--causal",
+                             "--json"])
+    assert not info["latency_removed"]
+    lagging = read_record(causal).response
+    np.testing.assert_allclose(lagging, apply(dcm, response, "steady"), rtol=1e-8, atol=1e-6)
+    lag = int(np.argmax(lagging)) - int(np.argmax(reference))
+    assert lag == pytest.approx(dcm.latency_s / 1e-6, abs=1.5)
+
+
+def test_compensate_brings_a_record_to_the_dcm_rate_and_says_so(tmp_path, capsys):
+    model, rec_path, reference, _ = shock_record(tmp_path)
+    model_path = tmp_path / "m.json"
+    model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
+    dcm_path = tmp_path / "dcm.json"
+    run_json(capsys, ["dcm", "--model", str(model_path), "--json", "-o", str(dcm_path)])
+    # the same shot recorded at 4 MS/s
+    fine_model, fine_path, fine_reference, _ = shock_record(tmp_path / "..", dt=0.25e-6, n=12_000)
+    out = tmp_path / "out.csv"
+    info = run_json(capsys, ["compensate", str(fine_path), "--dcm", str(dcm_path), "-o", str(out), "--json"])
+    assert "from 4e+06 Hz to 1e+06 Hz" in info["resampled"] and "resampled" in info["what"]
+    result = read_record(out)
+    assert result.sample_interval_s == pytest.approx(1e-6) and result.n_samples == 3000
+    assert np.max(np.abs(result.response - 0.5 - reference)) < 0.2 * np.max(reference)
 
 
 @pytest.mark.parametrize(
@@ -149,15 +187,84 @@ def test_bad_model_files_and_arguments(tmp_path, capsys):
     assert "damping" in run_error(capsys, ["dcm", "--poles", "0.5", "--sample-interval", "1e-6", "--ratio", "2", "--damping", "2"])
 
 
+def test_auto_is_the_default_and_reports_the_widening(tmp_path, capsys):
+    model, rec_path, _, _ = shock_record(tmp_path)
+    model_path = tmp_path / "m.json"
+    model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
+    result = run_json(capsys, ["dcm", "--model", str(model_path), "--record", str(rec_path), "--json"])
+    dcm = result["dcm"]
+    assert dcm["target_widening"] == 3.0 and dcm["widening_note"] is None
+    assert dcm["reached_widening"] == pytest.approx(3.0, rel=2e-3)
+    assert result["compensated_fbsd_hz"]["5"] == pytest.approx(3.0 * result["fbsd_hz"]["5"], rel=2e-3)
+    assert 0 < dcm["noise_gain"] <= dcm["noise_gain_limit"] == 4.0
+    # checked on its own shot: far better than the raw response, so recommended
+    check = dcm["check"]
+    assert check["rms_error_pct"]["compensated"] < 0.2 * check["rms_error_pct"]["uncompensated"]
+    assert dcm["recommended"] is True and dcm["not_recommended_reason"] is None
+    # asking for more than the band limit allows: reached, aimed for, and why not
+    text = run_text(capsys, ["dcm", "--model", str(model_path), "--widening", "10"])
+    assert "aimed for ×10, reached ×" in text and "band limit at 36 kHz" in text
+
+
+def test_dcm_file_is_written_atomically_and_never_over_an_input(tmp_path, capsys):
+    model_path = write_model(tmp_path / "model.json", table1_model())
+    before = model_path.read_text()
+    line = run_error(capsys, ["dcm", "--model", str(model_path), "-o", str(model_path)])
+    assert "is the input" in line and model_path.read_text() == before
+    assert "does not exist" in run_error(capsys, ["dcm", "--model", str(model_path), "-o", str(tmp_path / "no" / "d.json")])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json"]  # nothing half-written
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--poles", "0,0", "--sample-interval", "1e-6"], "nothing to compensate"),
+        (["--poles=-0.98,0.5", "--sample-interval", "1e-6", "--ratio", "2"], None),
+        (["--poles", "0.9,0.5", "--sample-interval", "nan"], "--sample-interval"),
+        (["--poles", "0.9,0.5", "--sample-interval", "1e-6", "--ratio", "-3"], "--ratio"),
+        (["--poles", "0.9,0.5", "--sample-interval", "1e-6", "--band-limit", "fast"], "--band-limit"),
+    ],
+)
+def test_degenerate_designs_are_one_line_errors(capsys, argv, expected):
+    if expected is None:  # a Nyquist artefact among the poles is left alone, the rest designed
+        result = run_json(capsys, ["dcm", *argv, "--json"])
+        assert result["dcm"]["zeros"] == [[0.5, 0.0]]
+        assert "Nyquist" in result["dcm"]["design"]["skipped_poles"][0]["reason"]
+        return
+    assert expected in run_error(capsys, ["dcm", *argv])
+
+
 def test_compensate_errors(tmp_path, capsys):
-    t = np.arange(100) * 2e-6
-    rec = write_record(tmp_path / "r.csv", record_from_arrays(t, np.zeros(100), np.zeros(100)))
+    t = np.arange(100) * 1e-6
+    rec = write_record(tmp_path / "r.csv", record_from_arrays(t, np.zeros(100), np.ones(100)))
     dcm_path = tmp_path / "dcm.json"
     main(["dcm", "--poles", "0.9,0.5", "--sample-interval", "1e-6", "--ratio", "2", "--damping", "0.7", "-o", str(dcm_path)])
     capsys.readouterr()
-    assert "resample" in run_error(capsys, ["compensate", str(rec), "--dcm", str(dcm_path), "-o", str(tmp_path / "o.csv")])
-    assert "no such file" in run_error(capsys, ["compensate", str(tmp_path / "x.csv"), "--dcm", str(dcm_path), "-o", "o.csv"])
-    assert "no such file" in run_error(capsys, ["compensate", str(rec), "--dcm", str(tmp_path / "x.json"), "-o", "o.csv"])
+    out = tmp_path / "o.csv"
+    assert "no such file" in run_error(capsys, ["compensate", str(tmp_path / "x.csv"), "--dcm", str(dcm_path), "-o", str(out)])
+    assert "no such file" in run_error(capsys, ["compensate", str(rec), "--dcm", str(tmp_path / "x.json"), "-o", str(out)])
+    # never over an input or a shot file
+    assert "is the input" in run_error(capsys, ["compensate", str(rec), "--dcm", str(dcm_path), "-o", str(rec)])
+    assert "is the input" in run_error(capsys, ["compensate", str(rec), "--dcm", str(dcm_path), "-o", str(dcm_path)])
+    shot = tmp_path / "shot.h5"
+    shot.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(64))
+    assert "shot file" in run_error(capsys, ["compensate", str(rec), "--dcm", str(dcm_path), "-o", str(shot)])
+    # a DCM whose output overflows is an error, and leaves no output behind
+    huge = tmp_path / "huge.json"
+    huge.write_text(json.dumps({"sample_interval_s": 1e-6, "zeros": [[0.5, 0]], "poles": [[0.2, 0]], "gain": 1e308}))
+    assert "not a finite number" in run_error(capsys, ["compensate", str(rec), "--dcm", str(huge), "-o", str(out)])
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["dcm.json", "huge.json", "r.csv", "shot.h5"]
+    huge.write_text(json.dumps({"sample_interval_s": 1e-6, "zeros": [[-0.9, 0], [-0.9, 0]],
+                                "poles": [[0.2, 0], [0.1, 0]], "gain": 1e308}))
+    assert "not finite" in run_error(capsys, ["compensate", str(rec), "--dcm", str(huge), "-o", str(out)])
+    # a DCM its shot marked not recommended is refused unless forced
+    data = json.loads(dcm_path.read_text())
+    data["dcm"].update(recommended=False, not_recommended_reason="it raises the RMS error")
+    worse = tmp_path / "worse.json"
+    worse.write_text(json.dumps(data))
+    line = run_error(capsys, ["compensate", str(rec), "--dcm", str(worse), "-o", str(out)])
+    assert "not recommended (it raises the RMS error)" in line and "--force" in line
+    assert main(["compensate", str(rec), "--dcm", str(worse), "-o", str(out), "--force"]) == 0
 
 
 def test_console_entry_point_has_no_traceback(tmp_path):

@@ -1,0 +1,184 @@
+"""analysis.dcm_design: the DCM designed only from what a shot supports, the honest automatic
+ratio, the band limit and the noise-gain bound, against closed forms and constructed models."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hopkinson.analysis.dcm import compensated_fbsd_hz
+from hopkinson.analysis.dcm_design import (
+    DcmOptions,
+    ShotSupport,
+    band_limit_poles,
+    choose_poles,
+    design_compensation,
+)
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.response import fbsd_hz, response_times_samples
+from scipy import signal
+
+DT = 1e-6
+
+
+def pair(fn_hz: float, zeta: float, dt: float = DT) -> np.ndarray:
+    s = 2 * np.pi * fn_hz * (-zeta + 1j * math.sqrt(1 - zeta**2))
+    return np.exp(np.array([s, np.conj(s)]) * dt)
+
+
+def model_of(poles: np.ndarray, zeros: np.ndarray | None = None) -> DiscreteModel:
+    """Unit-DC-gain model with these poles and zeros (b in powers of z⁻¹, causal)."""
+    a = np.real(np.poly(poles))
+    num = np.real(np.poly(zeros)) if zeros is not None and zeros.size else np.array([1.0])
+    b = np.concatenate([np.zeros(a.size - num.size), num])
+    return DiscreteModel(DT, a, b * np.sum(a) / np.sum(b))
+
+
+def mode(p: complex, supported: bool = True) -> dict:
+    f_n = abs(np.log(p)) / (2 * np.pi * DT) if p != 0 else None
+    return {"kind": "complex" if p.imag > 0 else "real", "pole": [p.real, p.imag], "natural_frequency_hz": f_n,
+            "nyquist": bool(p.imag == 0 and p.real < 0), "supported": supported}
+
+
+MAIN = pair(27_000.0, 0.05)
+FAINT = pair(150_000.0, 0.003)  # a lightly damped mode beyond the excitation's band
+
+
+def artefact_model() -> tuple[DiscreteModel, list[dict]]:
+    """The main mode, a real pole at −0.98 (Nyquist), an unsupported ζ = 0.003 mode, and a
+    non-minimum-phase zero at 1.5."""
+    poles = np.concatenate([MAIN, FAINT, [-0.98]])
+    model = model_of(poles, np.array([1.5, -0.5]))
+    modes = [mode(MAIN[0]), mode(FAINT[0], supported=False), mode(-0.98 + 0j, supported=False)]
+    return model, modes
+
+
+def test_only_supported_modes_are_cancelled_and_zeros_never_inverted():
+    model, modes = artefact_model()
+    support = ShotSupport(model, modes, supported_band_hz=(0.0, 40_000.0))
+    design = design_compensation(support)
+    dcm = design.dcm
+    np.testing.assert_allclose(np.sort_complex(dcm.zeros), np.sort_complex(MAIN), atol=1e-12)
+    reasons = {tuple(np.round(s["pole"], 6)): s["reason"] for s in dcm.design["skipped_poles"]}
+    assert "Nyquist" in reasons[(-0.98, 0.0)]
+    assert "outside the band the excitation supports" in reasons[tuple(np.round([FAINT[0].real, FAINT[0].imag], 6))]
+    # the ratio rule uses the supported main mode: the ζ = 0.003 mode (slower) is not its basis
+    assert dcm.design["slowest_response_time_samples"] == pytest.approx(response_times_samples(MAIN)[0])
+    assert response_times_samples(FAINT)[0] > 2 * dcm.design["slowest_response_time_samples"]
+    # stable; the non-minimum-phase zero (1.5) is neither inverted nor mirrored (1/1.5)
+    assert np.all(np.abs(dcm.poles) < 1)
+    for z in (1.5, 1 / 1.5, -0.5):
+        assert np.min(np.abs(dcm.poles - z)) > 0.05
+    assert dcm.design["nonminimum_phase_zeros"] == [[1.5, 0.0]] and dcm.design["zeros_inverted"] is False
+
+
+def test_bare_model_still_refuses_artefacts_and_spare_pole_zero_pairs():
+    """Without an identification: a negative real pole, a mode near Nyquist and a pole a zero
+    nearly cancels (a spare pair of the fit) are left alone."""
+    spare_pole, spare_zero = 0.99897, 0.99899
+    near_nyquist = pair(450_000.0, 0.05)
+    model = model_of(np.concatenate([MAIN, [-0.98, spare_pole], near_nyquist]), np.array([spare_zero]))
+    choice = choose_poles(ShotSupport(model))
+    np.testing.assert_allclose(np.sort_complex(choice.cancelled), np.sort_complex(MAIN), atol=1e-9)
+    reasons = " | ".join(s["reason"] for s in choice.skipped)
+    assert "Nyquist" in reasons and "within 20 % of Nyquist" in reasons and "spare pole-zero pair" in reasons
+    with pytest.raises(AnalysisError, match="outside the unit circle"):
+        choose_poles(ShotSupport(model_of(np.array([1.02, 0.5]))))
+
+
+def test_automatic_ratio_reaches_the_target_and_says_so():
+    model = model_of(MAIN)
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)))
+    assert design.target_widening == 3.0 and design.widening_note is None
+    assert design.compensated_fbsd_hz["5"] == pytest.approx(3.0 * fbsd_hz(model)["5"], rel=2e-3)
+    assert design.reached_widening == pytest.approx(3.0, rel=2e-3)
+    assert design.noise_gain <= design.options.noise_gain_limit
+    # the figures travel with the DCM (its JSON) and in the results' "dcm" keys
+    assert design.dcm.design["reached_widening"] == design.reached_widening
+    assert set(design.to_dict()) >= {"target_widening", "reached_widening", "widening_note", "noise_gain",
+                                     "noise_gain_limit", "band_limit_hz", "latency_s"}
+
+
+def test_a_target_beyond_the_band_limit_is_not_reached_and_the_note_says_why():
+    model = model_of(MAIN)
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 36_000.0)), DcmOptions(widening=10))
+    assert design.reached_widening < 10
+    assert "band limit at 36 kHz" in design.widening_note and "the top of the band the excitation supports" in design.widening_note
+    # the widest band a 2nd-order Butterworth at 36 kHz lets through within ±5 %: 0.573 × 36 kHz
+    assert design.compensated_fbsd_hz["5"] <= 0.5733 * 36_000.0 * 1.02
+
+
+def test_the_noise_gain_limit_bounds_the_automatic_ratio():
+    model = model_of(MAIN)
+    support = ShotSupport(model)  # no band known: no band limit, the noise gain grows with r
+    free = design_compensation(support, DcmOptions(widening=8, noise_gain_limit=math.inf))
+    assert free.widening_note is None and free.noise_gain > 3.0
+    bounded = design_compensation(support, DcmOptions(widening=8, noise_gain_limit=3.0))
+    assert bounded.noise_gain <= 3.0 and bounded.noise_gain > 2.9  # at the limit, not far below it
+    assert "noise gain limit 3" in bounded.widening_note
+    assert bounded.reached_widening < free.reached_widening
+    # an explicit ratio is designed as asked and flagged when it exceeds the limit
+    asked = design_compensation(support, DcmOptions(ratio=free.dcm.design["ratio"], noise_gain_limit=3.0))
+    assert asked.noise_gain_exceeded and "exceeds the limit" in asked.notes[-1]
+
+
+def test_noise_gain_is_the_white_noise_rms_gain():
+    """Measured on white noise through the designed DCM (an independent estimate)."""
+    design = design_compensation(ShotSupport(model_of(MAIN), supported_band_hz=(0.0, 60_000.0)))
+    x = np.random.default_rng(3).standard_normal(400_000)
+    y = signal.sosfilt(design.dcm.sos(), x)
+    assert np.std(y[1000:]) / np.std(x) == pytest.approx(design.noise_gain, rel=0.01)
+
+
+def test_band_limit_choice():
+    model = model_of(MAIN)
+    auto = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0), response_band_top_hz=42_000.0))
+    assert auto.band_limit.cutoff_hz == 42_000.0 and "noise" in auto.band_limit.reason
+    asked = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), DcmOptions(band_limit_hz=30e3))
+    assert asked.band_limit.cutoff_hz == 30e3 and asked.dcm.design["band_limit"]["order"] == 2
+    off = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), DcmOptions(band_limit_hz=0))
+    assert off.band_limit.cutoff_hz is None and off.dcm.order == 2
+    # the band-limit poles are the analog Butterworth's mapped by z = exp(sT): −3 dB at the cut-off
+    p = band_limit_poles(30e3, DT)
+    _, h = signal.freqz_zpk([], p, np.real(np.prod(1 - p)), worN=[0.0, 30e3], fs=1 / DT)
+    assert abs(h[0]) == pytest.approx(1.0) and abs(h[1]) == pytest.approx(1 / math.sqrt(2), rel=0.02)
+    with pytest.raises(AnalysisError, match="below Nyquist"):
+        design_compensation(ShotSupport(model), DcmOptions(band_limit_hz=600e3))
+
+
+def test_latency_lines_the_compensated_output_up_with_the_input():
+    """A pulse through the exact model, delayed 2.4 samples on the way (a channel skew), then the
+    DCM with its latency removed: the input comes back in place; the latency is the shift that
+    minimises the mismatch (half a sample either way is worse)."""
+    from hopkinson.analysis.dcm import apply
+    from hopkinson.analysis.resample import shift_samples
+    from hopkinson.analysis.response import model_output
+
+    model = model_of(MAIN)
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0), channel_delay_samples=2.4))
+    t = np.arange(3000)
+    pulse = np.exp(-0.5 * ((t - 1000) / 12.0) ** 2)  # Gaussian, σ = 12 µs: inside the compensated band
+    measured = shift_samples(model_output(model, pulse), 2.4)
+
+    def mismatch(extra_samples: float) -> float:
+        out = shift_samples(apply(design.dcm, measured, align=True), -extra_samples)
+        return float(np.sqrt(np.mean((out - pulse) ** 2)))
+
+    assert mismatch(0.0) < 0.01
+    assert mismatch(0.0) < mismatch(0.5) and mismatch(0.0) < mismatch(-0.5)
+    assert design.dcm.latency_s == design.latency_s
+    assert design.dcm.design["latency"]["channel_delay_s"] == pytest.approx(2.4e-6)
+
+
+def test_dc_group_delay_closed_form_agrees_with_scipy():
+    design = design_compensation(ShotSupport(model_of(MAIN), supported_band_hz=(0.0, 60_000.0)))
+    _, numeric = signal.group_delay((design.dcm.b, design.dcm.a), w=[1e-5])
+    assert design.dcm.group_delay_samples == pytest.approx(float(numeric[0]), rel=1e-4)
+
+
+def test_compensated_fbsd_of_the_true_sensor_matches_the_prediction_for_an_exact_model():
+    model = model_of(MAIN)
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)))
+    assert compensated_fbsd_hz(model, design.dcm)["5"] == pytest.approx(design.compensated_fbsd_hz["5"])
