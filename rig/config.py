@@ -13,7 +13,8 @@ one per section:
                          gain, excitation_v, lowpass_hz, sensitivity_v_per_m_s2, identity
     [limits]             max_pressure_bar, min_pressure_bar, fixture_vacuum_max_mbar, ...
     [timeouts]           check_s, evacuate_s, charge_s, arm_s, fire_s, capture_s, safe_s, store_s, analyse_s
-    [analysis]           grating_pitch_m, orders, sensitivity_v_per_m_s2, sample_rate_hz
+    [analysis]           grating_pitch_m, orders, sensitivity_v_per_m_s2, sample_rate_hz,
+                         dcm_widening, dcm_noise_gain_limit
 
 `load_sim_config(path) -> SimConfig` does the same for the simulator's file ([servers],
 [world] with its sub-tables, [register_map]).
@@ -188,6 +189,8 @@ class AnalysisConfig:
     orders: tuple[int, int] = (1, -1)
     sensitivity_v_per_m_s2: float = 2.0e-7
     sample_rate_hz: float = 1e6
+    dcm_widening: float = 3.0  # automatic DCM: widen the ±5 % band this many times
+    dcm_noise_gain_limit: float = 4.0  # DCM white-noise RMS gain allowed at the analysis rate
 
 
 @dataclass(frozen=True)
@@ -286,6 +289,8 @@ RULES: dict[str, _Rule] = {
     "analysis.orders": _Rule(-10, 10),
     "analysis.sensitivity_v_per_m_s2": _Rule(above=0.0),
     "analysis.sample_rate_hz": _Rule(1e3, 1e9),
+    "analysis.dcm_widening": _Rule(above=1.0, max=1e3),
+    "analysis.dcm_noise_gain_limit": _Rule(above=0.0, max=1e6),
     # config/sim.toml
     "servers.modbus_transport": _Rule(choices=("tcp", "rtu")),
     "servers.modbus_port": _Rule(0, 65535),
