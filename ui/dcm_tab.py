@@ -3,10 +3,12 @@ controls; the compensated magnitude (with FBSD), the step responses and the shot
 compensated record follow every change. Export of the DCM (JSON, the `hopkinson dcm -o`
 format that `hopkinson compensate --dcm` reads) and of the shot's calibration report.
 
-The design and the figures come from analysis.dcm through rig.cli.dcm.design_report
-(the same numbers `hopkinson dcm` prints); this tab only draws them. A change is applied
-after a short pause (DEBOUNCE_MS) so that dragging the slider stays smooth; one redesign
-takes a few milliseconds.
+The design and the figures come from analysis.dcm_design (`design_compensation` for the shot's
+support: the poles it may cancel, its band limit; `design_report`: the same numbers `hopkinson
+dcm` prints); this tab only draws them. With the shot's own ratio, damping and band limit it
+designs the shot's own DCM. The shot compensated is drawn with the DCM's latency removed
+(aligned with the reference). A change is applied after a short pause (DEBOUNCE_MS) so that
+dragging the slider stays smooth; one redesign takes a few milliseconds.
 """
 
 from __future__ import annotations
@@ -20,12 +22,17 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from hopkinson.analysis.dcm import DCM, apply, design_dcm, format_complex, step_responses
+from hopkinson.analysis.dcm import DCM, apply, format_complex, parse_poles, step_responses
+from hopkinson.analysis.dcm_design import (
+    DcmOptions,
+    ShotSupport,
+    design_compensation,
+    design_report,
+)
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
-from hopkinson.rig.cli.dcm import design_report, parse_poles
 from hopkinson.ui.plots import (
     COMP_PEN,
     KILO,
@@ -57,6 +64,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from hopkinson.fileio import atomic_write
+
 DEBOUNCE_MS = 60
 RATIO_RANGE = (0.1, 200.0)
 SLIDER_STEPS = 1000
@@ -79,10 +88,16 @@ class DcmDesign:
 
 
 def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_poles: np.ndarray,
-                   record: Record | None = None) -> DcmDesign:
-    """Design the DCM and sample what the plots show (AnalysisError for an impossible design)."""
-    dcm = design_dcm(model.poles, model.sample_interval_s, ratio, damping, extra_poles)
-    report = design_report(model.poles, dcm, model, "panel")
+                   record: Record | None = None, support: ShotSupport | None = None,
+                   band_limit_hz: float | None = None) -> DcmDesign:
+    """Design the DCM for the shot's support (the model alone when None: every stable mode
+    counts as supported) and sample what the plots show (AnalysisError for an impossible design).
+    band_limit_hz: the band limit (None: chosen from the support; 0: none)."""
+    options = DcmOptions(ratio=ratio, damping=damping, band_limit_hz=band_limit_hz,
+                         extra_poles=tuple(complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel()))
+    design = design_compensation(support or ShotSupport(model), options)
+    dcm = design.dcm
+    report = design_report(design.poles.cancelled, dcm, model, "panel", design)
     f = frequency_grid_hz(model.sample_interval_s)
     mag, comp = magnitudes(model, dcm, f)
     slowest = float(np.max(response_times_samples(np.concatenate([model.poles, dcm.poles]))))
@@ -91,7 +106,7 @@ def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_pol
     compensated = None
     if record is not None and record.n_samples > 0 and abs(record.sample_interval_s - model.sample_interval_s) <= \
             1e-9 * model.sample_interval_s:
-        compensated = apply(dcm, np.asarray(record.response, dtype=float), initial="steady")
+        compensated = apply(dcm, np.asarray(record.response, dtype=float), initial="steady", align=True)
     return DcmDesign(dcm, report, f, mag, comp, np.arange(n) * model.sample_interval_s, alone, both, compensated)
 
 
@@ -102,6 +117,8 @@ class DcmTab(QWidget):
                  export_report: Callable[[Path], None] | None = None) -> None:
         super().__init__(parent)
         self.model: DiscreteModel | None = None
+        self.support: ShotSupport | None = None
+        self.band_limit_hz: float | None = None
         self.record: Record | None = None
         self.source = ""
         self.shot_path: Path | None = None
@@ -242,9 +259,12 @@ class DcmTab(QWidget):
 
     # -- input ----------------------------------------------------------------------------------
     def set_model(self, model: DiscreteModel, ratio: float, damping: float, extra_poles: np.ndarray | list = (),
-                  record: Record | None = None, source: str = "", shot_path: Path | None = None) -> None:
-        """Design for `model`, starting from the shot's own DCM settings."""
+                  record: Record | None = None, source: str = "", shot_path: Path | None = None,
+                  support: ShotSupport | None = None, band_limit_hz: float | None = None) -> None:
+        """Design for `model`, starting from the shot's own DCM settings (its support and band
+        limit when given: the shot's own DCM is then designed again)."""
         self.model, self.record, self.source, self.shot_path = model, record, source, shot_path
+        self.support, self.band_limit_hz = support, band_limit_hz
         extra_text = ", ".join(format_complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel())
         self._initial = (float(ratio), float(damping), extra_text)
         self.source_label.setText(f"Model of {source or 'the shot'}: order {model.order}, "
@@ -326,7 +346,8 @@ class DcmTab(QWidget):
             return
         try:
             extra = parse_poles(self.extra.text(), "extra poles") if self.extra.text().strip() else np.array([])
-            design = compute_design(self.model, self.ratio.value(), self.damping.value(), extra, self.record)
+            design = compute_design(self.model, self.ratio.value(), self.damping.value(), extra, self.record,
+                                    self.support, self.band_limit_hz)
         except AnalysisError as exc:
             self.error = str(exc)
             self.message.setText(f"Cannot design this DCM: {exc}")
@@ -386,8 +407,7 @@ class DcmTab(QWidget):
         data = dict(self.design.report)
         data["source"] = str(self.shot_path or self.source or "panel")
         data["model"] = self.model.to_dict()
-        Path(path).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-        return Path(path)
+        return atomic_write(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
 
     def _export_dcm_clicked(self) -> None:
         name, _ = QFileDialog.getSaveFileName(self, "Export the DCM", str(_default_name(self.shot_path, "-dcm.json")),

@@ -442,7 +442,8 @@ class MainWindow(QMainWindow):
             design = view.dcm.design or {}
             self.dcm_tab.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
                                    [complex(*p) for p in design.get("extra_poles", [])], view.record,
-                                   source=view.path.name if view.path else "", shot_path=view.path)
+                                   source=view.path.name if view.path else "", shot_path=view.path,
+                                   support=view.support, band_limit_hz=view.band_limit_hz)
         self.shot_view_shown.emit(view)
 
     def export_report(self, path: Path) -> None:

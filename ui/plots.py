@@ -31,9 +31,12 @@ from typing import Any
 import numpy as np
 import pyqtgraph as pg
 from hopkinson.analysis.dcm import DCM
+from hopkinson.analysis.dcm_design import ShotSupport
+from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import normalised_gain_function
+from hopkinson.reports.data import CompensationCheck
 from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
@@ -87,7 +90,10 @@ class ShotView:
     magnitude: np.ndarray | None = None
     compensated_magnitude: np.ndarray | None = None
     true_poles: np.ndarray | None = None
-    summary: dict[str, Any] = field(default_factory=dict)
+    support: ShotSupport | None = None  # what the shot tells a DCM design (its modes, band)
+    band_limit_hz: float | None = None  # the shot's DCM band limit (0: none)
+    figures: KeyFigures | None = None  # the shot's key figures (analysis.key_figures)
+    compensation: CompensationCheck | None = None  # the DCM's check on the shot, when stored
     analysis_error: str | None = None
 
 
@@ -107,25 +113,23 @@ def magnitudes(model: DiscreteModel, dcm: DCM | None, frequency_hz: np.ndarray) 
 
 
 def summary_of(results: dict[str, Any]) -> dict[str, Any]:
-    """The numbers the results strip shows, from an analysis results dict (shot file form)."""
-    ident = results.get("identification", {}) or {}
-    reduction = results.get("reduction") or {}
-    excitation = results.get("excitation") or {}
-    dcm = results.get("dcm") or {}
-    pairs = [m for m in ident.get("modes", []) if m.get("kind") in ("complex", "pair")]
-    main = pairs[0] if pairs else None
+    """The campaign table's numbers of a results dict, read from its KeyFigures."""
+    kf = KeyFigures.from_results(results)
+
+    def value(figure: Figure | None) -> float | None:
+        return figure.value if figure is not None else None
+
     return {
-        "order": ident.get("order"),
-        "fit_percent": ident.get("fit_percent"),
-        "natural_frequency_hz": main.get("natural_frequency_hz") if main else None,
-        "damping_ratio": main.get("damping_ratio") if main else None,
-        "fbsd_hz": dict(results.get("fbsd_hz", {})),
-        "compensated_fbsd_hz": dict(dcm.get("compensated_fbsd_hz", {})),
-        "dcm_ratio": (dcm.get("design") or {}).get("ratio"),
-        "shock_sensitivity": reduction.get("shock_sensitivity"),
-        "peak_acceleration_m_s2": reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")),
-        "pulse_width_s": reduction.get("pulse_width_s", excitation.get("pulse_width_s")),
-        "warnings": list(results.get("warnings", [])),
+        "order": kf.order,
+        "fit_percent": kf.fit_percent,
+        "natural_frequency_hz": value(kf.natural_frequency_hz),
+        "damping_ratio": value(kf.damping_ratio),
+        "fbsd_hz": {k: f.value for k, f in kf.fbsd_hz.items()},
+        "compensated_fbsd_hz": dict(kf.compensated_fbsd_hz),
+        "shock_sensitivity": value(kf.shock_sensitivity),
+        "peak_acceleration_m_s2": value(kf.peak_acceleration_m_s2),
+        "pulse_width_s": value(kf.pulse_width_s),
+        "warnings": list(kf.warnings),
     }
 
 
@@ -138,12 +142,17 @@ def view_from_results(results: dict[str, Any], record: Record | None = None) -> 
     model, dcm = analysis.model, analysis.dcm
     f = frequency_grid_hz(model.sample_interval_s)
     mag, comp = magnitudes(model, dcm, f)
+    stored_dcm = results.get("dcm") or {}
+    # the shot's own band limit (0: it had none); None for results from before band limits
+    band_limit_hz = float(stored_dcm["band_limit_hz"] or 0.0) if "band_limit_hz" in stored_dcm else None
     return ShotView(
+        support=ShotSupport.from_dict(ident, model), band_limit_hz=band_limit_hz,
         loss_by_order=list(ident.get("loss_by_order", [])),
         arx_loss_by_order=list(ident.get("arx_loss_by_order", [])),
         order=ident.get("order", model.order),
         model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz),
-        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, summary=summary_of(results), record=record,
+        frequency_hz=f, magnitude=mag, compensated_magnitude=comp, record=record,
+        figures=KeyFigures.from_results(results), compensation=CompensationCheck.of(results.get("dcm") or {}),
     )
 
 
@@ -238,6 +247,25 @@ def format_khz(value: float | None) -> str:
     return f"{value / KILO:.2f} kHz"
 
 
+def format_figure(figure: Figure | None, scale: float = 1.0, unit: str = "", decimals: int = 2) -> str:
+    """value ± U (k ≈ 2, U to two significant digits) when the figure has its uncertainty, else
+    the value with `decimals` decimals; "—" when unknown."""
+    if figure is None or figure.value is None or not math.isfinite(figure.value):
+        return "—"
+    if figure.expanded is not None:
+        return figure.format(scale, unit=unit)
+    return f"{figure.value / scale:.{decimals}f}" + (f" {unit}" if unit else "")
+
+
+def figure_tooltip(figure: Figure | None, scale: float = 1.0, unit: str = "") -> str:
+    """The standard uncertainty and the 95 % interval, for a tooltip ("" without them)."""
+    if figure is None or figure.u is None or figure.interval is None:
+        return ""
+    lo, hi = figure.interval
+    return (f"u = {figure.u / scale:.3g} {unit}, 95 % interval [{lo / scale:.6g}, {hi / scale:.6g}] {unit}; "
+            "U = half the interval (k ≈ 2)")
+
+
 class MagnitudePlot(pg.PlotWidget):
     """Normalised magnitude on a log-frequency axis (kHz), linear gain 0 … 2 so the ±5 % and
     ±10 % bands (shaded) are readable; FBSD edges as labelled vertical lines; a resonance peak
@@ -300,7 +328,9 @@ class MagnitudePlot(pg.PlotWidget):
 
 
 class ResultsStrip(QFrame):
-    """One row of the shot's key figures (FBSD, model, shock quantities)."""
+    """The shot's key figures (analysis.key_figures): FBSD before and with the DCM, model,
+    resonance, sensitivities and pulse, each as value ± U (k ≈ 2) when the shot carries its
+    uncertainty; the DCM's check on the shot and, when it is not recommended, why."""
 
     FIELDS = (
         ("fbsd_5", "FBSD ±5 %"),
@@ -309,9 +339,14 @@ class ResultsStrip(QFrame):
         ("comp_10", "DCM ±10 %"),
         ("model", "Model"),
         ("resonance", "Resonance"),
-        ("shock", "Shock sens."),
+        ("damping", "Damping ζ"),
         ("pulse", "Pulse"),
+        ("sensitivity", "Sensitivity"),
+        ("shock", "Shock sens."),
+        ("check", "DCM check"),
+        ("band_limit", "DCM band"),
     )
+    COLUMNS = 4
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -323,7 +358,7 @@ class ResultsStrip(QFrame):
         layout.setVerticalSpacing(1)
         self.values: dict[str, QLabel] = {}
         for i, (key, caption) in enumerate(self.FIELDS):
-            row, col = divmod(i, 4)
+            row, col = divmod(i, self.COLUMNS)
             title = QLabel(caption)
             title.setStyleSheet("color: #5f6368; font-size: 9pt;")
             title.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
@@ -334,46 +369,94 @@ class ResultsStrip(QFrame):
             layout.addWidget(value, row, 2 * col + 1)
             layout.setColumnStretch(2 * col + 1, 1)
             self.values[key] = value
+        rows = -(-len(self.FIELDS) // self.COLUMNS)
+        self.verdict = QLabel("")
+        self.verdict.setWordWrap(True)
+        self.verdict.setStyleSheet("color: #b3261e; font-size: 9pt; font-weight: 700;")
+        self.verdict.setVisible(False)
+        layout.addWidget(self.verdict, rows, 0, 1, 2 * self.COLUMNS)
         self.warnings = QLabel("")
         self.warnings.setWordWrap(True)
         self.warnings.setStyleSheet("color: #8a5a00; font-size: 9pt;")
         self.warnings.setVisible(False)
-        layout.addWidget(self.warnings, 2, 0, 1, 8)
+        layout.addWidget(self.warnings, rows + 1, 0, 1, 2 * self.COLUMNS)
 
     def clear(self) -> None:
         for label in self.values.values():
             label.setText("—")
             label.setToolTip("")
-        self.warnings.setText("")
-        self.warnings.setVisible(False)
+        for label in (self.verdict, self.warnings):
+            label.setText("")
+            label.setVisible(False)
 
-    def show_summary(self, s: dict[str, Any]) -> None:
-        fbsd, comp = s.get("fbsd_hz", {}), s.get("compensated_fbsd_hz", {})
-        self.values["fbsd_5"].setText(format_khz(fbsd.get("5")))
-        self.values["fbsd_10"].setText(format_khz(fbsd.get("10")))
-        self.values["comp_5"].setText(format_khz(comp.get("5")))
-        self.values["comp_10"].setText(format_khz(comp.get("10")))
-        ratio = s.get("dcm_ratio")
-        self.values["comp_5"].setToolTip(f"DCM r = {ratio:.3g}" if ratio else "")
-        order, fit = s.get("order"), s.get("fit_percent")
-        self.values["model"].setText(f"order {order}" + (f", fit {fit:.1f} %" if fit is not None else "")
-                                     if order is not None else "—")
-        self.values["model"].setToolTip("model order; fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)")
-        fn, zeta = s.get("natural_frequency_hz"), s.get("damping_ratio")
-        self.values["resonance"].setText(f"{fn / KILO:.2f} kHz, ζ {zeta:.3f}" if fn and zeta is not None else "—")
-        shock = s.get("shock_sensitivity")
-        self.values["shock"].setText(f"{shock:.4g}" if shock is not None else "—")
-        peak, width = s.get("peak_acceleration_m_s2"), s.get("pulse_width_s")
-        text = []
-        if peak is not None:
-            text.append(f"{peak / KILO:,.0f}·10³ m/s²")
-        if width is not None:
-            text.append(f"{width * 1e6:.1f} µs")
-        self.values["pulse"].setText(", ".join(text) or "—")
-        self.values["pulse"].setToolTip("peak acceleration, pulse width at 10 % of the peak (ISO 16063-22)")
-        warnings = s.get("warnings") or []
+    def _set(self, key: str, text: str, tooltip: str = "") -> None:
+        self.values[key].setText(text)
+        self.values[key].setToolTip(tooltip)
+
+    def show_figures(self, kf: KeyFigures | None, check: CompensationCheck | None = None,
+                     dcm_ratio: float | None = None) -> None:
+        """Show a shot's key figures (and the DCM's check on it, when stored)."""
+        self.clear()
+        if kf is None:
+            return
+        for level in LEVEL_KEYS:
+            bound = kf.fbsd_bounds.get(level)
+            figure = kf.fbsd_hz.get(level)
+            if bound is not None:
+                self._set(f"fbsd_{level}", f"> {bound.lower_bound_hz / KILO:.1f} kHz", bound.reason)
+            else:
+                self._set(f"fbsd_{level}", format_figure(figure, KILO, "kHz"), figure_tooltip(figure, KILO, "kHz"))
+            self._set(f"comp_{level}", format_khz(kf.compensated_fbsd_hz.get(level)),
+                      f"DCM r = {dcm_ratio:.3g}" if dcm_ratio else "")
+        self._set("model", f"order {kf.order}" + (f", fit {kf.fit_percent:.1f} %" if kf.fit_percent is not None else "")
+                  if kf.order is not None else "—", "model order; fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)")
+        self._set("resonance", format_figure(kf.natural_frequency_hz, KILO, "kHz"),
+                  "main mode: the lowest supported complex pole pair; "
+                  + figure_tooltip(kf.natural_frequency_hz, KILO, "kHz"))
+        self._set("damping", format_figure(kf.damping_ratio, decimals=3), figure_tooltip(kf.damping_ratio))
+        per = "× nominal" if kf.response_unit == "m/s^2" else f"{kf.response_unit}/(m/s²)"
+        self._set("sensitivity", format_figure(kf.sensitivity, unit=per, decimals=4),
+                  "DC gain of the model; " + figure_tooltip(kf.sensitivity, unit=per))
+        self._set("shock", format_figure(kf.shock_sensitivity, unit=per, decimals=4),
+                  "ISO 16063-13 peak ratio; " + figure_tooltip(kf.shock_sensitivity, unit=per))
+        pulse = []
+        if kf.peak_acceleration_m_s2 is not None and kf.peak_acceleration_m_s2.value is not None:
+            pulse.append(f"{kf.peak_acceleration_m_s2.value / KILO:,.0f}·10³ m/s²")
+        if kf.pulse_width_s is not None and kf.pulse_width_s.value is not None:
+            pulse.append(f"{kf.pulse_width_s.value * 1e6:.1f} µs")
+        self._set("pulse", ", ".join(pulse) or "—", "peak acceleration, pulse width at 10 % of the peak (ISO 16063-22)")
+        if check is not None:
+            self._show_check(check)
+        warnings = list(kf.warnings)
         self.warnings.setText("⚠ " + "; ".join(warnings) if warnings else "")
         self.warnings.setVisible(bool(warnings))
+
+    def _show_check(self, check: CompensationCheck) -> None:
+        parts = []
+        if check.rms_error_pct is not None:
+            before, after = check.rms_error_pct
+            parts.append(f"RMS {_pct(before)} → {_pct(after)}")
+        if check.peak_error_pct is not None:
+            before, after = check.peak_error_pct
+            parts.append(f"peak {_pct(before)} → {_pct(after)}")
+        self._set("check", ", ".join(parts) or "—",
+                  "error over the pulse relative to its peak: without → with the DCM, on this shot itself")
+        band = []
+        if check.band_limit_hz is not None:
+            band.append(f"≤ {check.band_limit_hz / KILO:.1f} kHz")
+        if check.noise_gain is not None:
+            band.append(f"noise ×{check.noise_gain:.2g}")
+        self._set("band_limit", ", ".join(band) or "—",
+                  "band limit of the compensation (low-pass) and its noise gain (RMS)"
+                  + (f"; limit ×{check.noise_gain_limit:.3g}" if check.noise_gain_limit else ""))
+        if check.recommended is False:
+            self.verdict.setText("DCM NOT RECOMMENDED: " + (check.not_recommended_reason or
+                                                             "compensation does not improve this shot"))
+            self.verdict.setVisible(True)
+
+
+def _pct(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3g} %"
 
 
 class ShotPlots(QWidget):
@@ -496,7 +579,8 @@ class ShotPlots(QWidget):
         self._show_losses(view)
         self._show_magnitude(view)
         self._show_poles(view)
-        self.strip.show_summary(view.summary)
+        design = view.dcm.design if view.dcm is not None else None
+        self.strip.show_figures(view.figures, view.compensation, (design or {}).get("ratio"))
 
     def _show_losses(self, view: ShotView) -> None:
         def finite(values: list[float | None]) -> tuple[np.ndarray, np.ndarray]:
