@@ -1,0 +1,179 @@
+"""A shock-identified model checked against a sinusoidal calibration (ISO 16063-11/-21) of the
+same sensor, and what the DCM would make of the sensor the sine data describe (issue 11).
+
+The sine file is a CSV with a header: frequency_hz, magnitude, phase_deg, and optionally
+u_magnitude_rel (relative standard uncertainty of the magnitude) and u_phase_deg. Magnitudes
+are compared normalised at a reference frequency (default the lowest in the file; ISO
+16063-21 calibrates at e.g. 160 Hz), so the units of the sine data do not matter; the ratio
+of the absolute values is reported beside (meaningful when both are in the same units).
+
+At each frequency:
+- magnitude error = |H(f)|/|H(f_ref)| ÷ (sine(f)/sine(f_ref)) − 1 (per cent);
+- phase error = arg H(f) − sine phase (degrees, wrapped to ±180), the model's phase without
+  the identified channel delay; the delay that best explains the phase error (least-squares
+  slope through the origin) is reported beside it, as a channel skew would show;
+- consistent: |magnitude error| ≤ 2 × u_magnitude_rel (k = 2) when the file gives u;
+- compensated magnitude = sine(f) × |G(f)|, normalised at f_ref: how flat the DCM would make
+  the sensor the sine calibration measured (its ±5 % / ±10 % band from the sine points,
+  interpolated, as far as the points reach).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.dcm import DCM
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.records import parse_header_cell, read_table
+from hopkinson.analysis.response import fbsd_from_response, frequency_response
+
+SINE_KEYS = ("frequency_hz", "magnitude", "phase_deg")
+SINE_UNCERTAINTY_KEYS = ("u_magnitude_rel", "u_phase_deg")
+
+
+@dataclass(frozen=True)
+class SineCalibration:
+    """The points of a sinusoidal calibration, sorted by frequency."""
+
+    frequency_hz: np.ndarray
+    magnitude: np.ndarray
+    phase_deg: np.ndarray
+    u_magnitude_rel: np.ndarray | None = None
+    u_phase_deg: np.ndarray | None = None
+    source: str = "sine calibration"
+
+
+def read_sine_calibration(path: str | Path) -> SineCalibration:
+    """Read the sine CSV (module docstring); one clear AnalysisError naming the file otherwise."""
+    path = Path(path)
+    try:
+        with path.open(encoding="utf-8-sig") as fh:
+            header = fh.readline(64 * 1024)
+    except FileNotFoundError:
+        raise AnalysisError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AnalysisError(f"{path}: cannot be read as a sine calibration CSV ({exc})") from None
+    names = {parse_header_cell(cell)[0] for cell in header.strip().split(",")}
+    optional = tuple(k for k in SINE_UNCERTAINTY_KEYS if k in names)
+    table = read_table(path, SINE_KEYS + optional, what="sine calibration")
+    columns = dict(zip(SINE_KEYS + optional, table.columns, strict=True))
+    for key, values in columns.items():
+        if not np.all(np.isfinite(values)):
+            raise AnalysisError(f"{path}: column '{key}' has a NaN or infinite value")
+    f = columns["frequency_hz"]
+    if f.size < 1 or np.any(f <= 0):
+        raise AnalysisError(f"{path}: frequencies must be positive (Hz)")
+    if np.unique(f).size != f.size:
+        raise AnalysisError(f"{path}: a frequency is listed twice")
+    if np.any(columns["magnitude"] <= 0):
+        raise AnalysisError(f"{path}: magnitudes must be positive")
+    for key in optional:
+        if np.any(columns[key] < 0):
+            raise AnalysisError(f"{path}: {key} must not be negative")
+    order = np.argsort(f)
+    pick = {k: v[order] for k, v in columns.items()}
+    return SineCalibration(pick["frequency_hz"], pick["magnitude"], pick["phase_deg"],
+                           pick.get("u_magnitude_rel"), pick.get("u_phase_deg"), str(path))
+
+
+@dataclass(frozen=True)
+class SineComparison:
+    """The model (and DCM) against the sine points; see the module docstring."""
+
+    frequency_hz: np.ndarray
+    reference_frequency_hz: float
+    sine_magnitude: np.ndarray  # normalised at the reference frequency
+    model_magnitude: np.ndarray  # normalised at the reference frequency
+    magnitude_error_pct: np.ndarray
+    phase_error_deg: np.ndarray
+    phase_delay_s: float
+    consistent: np.ndarray | None  # |error| ≤ 2u per point, None without u
+    compensated_magnitude: np.ndarray | None  # sine × |G|, normalised
+    compensated_fbsd_hz: dict[str, float | None] | None
+    sensitivity_ratio: float  # |H(f_ref)| / sine(f_ref): model over sine, same units assumed
+    u_magnitude_rel: np.ndarray | None
+    source: str
+
+    @property
+    def max_magnitude_error_pct(self) -> float:
+        return float(np.max(np.abs(self.magnitude_error_pct)))
+
+    def max_magnitude_error_below_pct(self, frequency_hz: float) -> float | None:
+        """Largest |magnitude error| at the points up to `frequency_hz` (None if there are none)."""
+        pick = self.frequency_hz <= frequency_hz
+        return float(np.max(np.abs(self.magnitude_error_pct[pick]))) if np.any(pick) else None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (`hopkinson compare-sine --json`, a campaign report)."""
+        def floats(x: np.ndarray | None) -> list[float] | None:
+            return None if x is None else [float(v) for v in x]
+
+        return {
+            "source": self.source,
+            "reference_frequency_hz": self.reference_frequency_hz,
+            "frequency_hz": floats(self.frequency_hz),
+            "sine_magnitude": floats(self.sine_magnitude),
+            "model_magnitude": floats(self.model_magnitude),
+            "magnitude_error_pct": floats(self.magnitude_error_pct),
+            "phase_error_deg": floats(self.phase_error_deg),
+            "phase_delay_s": self.phase_delay_s,
+            "u_magnitude_rel": floats(self.u_magnitude_rel),
+            "consistent": None if self.consistent is None else [bool(v) for v in self.consistent],
+            "compensated_magnitude": floats(self.compensated_magnitude),
+            "compensated_fbsd_hz": self.compensated_fbsd_hz,
+            "sensitivity_ratio": self.sensitivity_ratio,
+            "max_magnitude_error_pct": self.max_magnitude_error_pct,
+        }
+
+
+def compare_sine(model: DiscreteModel, sine: SineCalibration, dcm: DCM | None = None,
+                 reference_frequency_hz: float | None = None) -> SineComparison:
+    """Compare the model (and the DCM applied to the sine-measured sensor) with the sine points."""
+    f = sine.frequency_hz
+    nyquist = 0.5 / model.sample_interval_s
+    if np.any(f >= nyquist):
+        raise AnalysisError(f"{sine.source}: points at or above the model's Nyquist frequency ({nyquist:g} Hz)")
+    f_ref = float(f[0]) if reference_frequency_hz is None else float(reference_frequency_hz)
+    if not (math.isfinite(f_ref) and f_ref > 0):
+        raise AnalysisError(f"reference frequency must be a positive number of Hz, got {reference_frequency_hz}")
+    sine_ref = float(np.interp(f_ref, f, sine.magnitude)) if f[0] <= f_ref <= f[-1] else None
+    if sine_ref is None:
+        raise AnalysisError(f"{sine.source}: the reference frequency {f_ref:g} Hz lies outside the points "
+                            f"({f[0]:g} … {f[-1]:g} Hz)")
+    h = frequency_response(model, np.concatenate([[f_ref], f]))
+    h_ref, h = h[0], h[1:]
+    if h_ref == 0:
+        raise AnalysisError("the model's response is zero at the reference frequency")
+    sine_norm = sine.magnitude / sine_ref
+    model_norm = np.abs(h) / abs(h_ref)
+    error = 100.0 * (model_norm / sine_norm - 1.0)
+    phase_error = (np.degrees(np.angle(h)) - sine.phase_deg + 180.0) % 360.0 - 180.0
+    w = 2 * np.pi * f
+    delay = float(-np.dot(w, np.radians(phase_error)) / np.dot(w, w))
+    consistent = None if sine.u_magnitude_rel is None else np.abs(error) <= 2 * 100.0 * sine.u_magnitude_rel
+    compensated = band = None
+    if dcm is not None:
+        if abs(dcm.sample_interval_s - model.sample_interval_s) > 1e-9 * model.sample_interval_s:
+            raise AnalysisError("the DCM and the model have different sample intervals")
+        g = dcm.frequency_response(np.concatenate([[f_ref], f]))
+        compensated = sine_norm * np.abs(g[1:]) / abs(g[0])
+        band = _band_of_points(f, compensated)
+    return SineComparison(f, f_ref, sine_norm, model_norm, error, phase_error, delay, consistent, compensated,
+                          band, float(abs(h_ref) / sine_ref), sine.u_magnitude_rel, sine.source)
+
+
+def _band_of_points(f: np.ndarray, magnitude: np.ndarray) -> dict[str, float | None] | None:
+    """±5 % / ±10 % edges of sampled magnitudes (from the first point up); None for an edge the
+    points never leave (it lies beyond the last point)."""
+    if f.size < 2:
+        return None
+    try:
+        edges = fbsd_from_response(f, magnitude)
+    except AnalysisError:  # the first point already outside the band (normalised elsewhere)
+        return None
+    return {k: (e.frequency_hz if e.reached else None) for k, e in edges.items()}
