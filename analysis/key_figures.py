@@ -114,6 +114,15 @@ class KeyFigures:
     coverage_probability: float | None
     budget: tuple[dict[str, Any], ...]
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    # The DCM's design figures (issue 11; analysis.dcm_design): the ±5 % band widening aimed for
+    # and reached (and why not), its white-noise gain and limit, its band limit, its latency.
+    dcm_target_widening: float | None = None
+    dcm_reached_widening: float | None = None
+    dcm_widening_note: str | None = None
+    dcm_noise_gain: float | None = None
+    dcm_noise_gain_limit: float | None = None
+    dcm_band_limit_hz: float | None = None
+    dcm_latency_s: float | None = None
 
     @property
     def has_uncertainty(self) -> bool:
@@ -209,6 +218,13 @@ class KeyFigures:
             dcm_not_recommended_reason=dcm.get("not_recommended_reason"),
             compensation_check=dcm.get("check"),
             compensated_peak=Figure.of(dcm.get("compensated_peak")),
+            dcm_target_widening=_number(dcm.get("target_widening")),
+            dcm_reached_widening=_number(dcm.get("reached_widening")),
+            dcm_widening_note=dcm.get("widening_note"),
+            dcm_noise_gain=_number(dcm.get("noise_gain")),
+            dcm_noise_gain_limit=_number(dcm.get("noise_gain_limit")),
+            dcm_band_limit_hz=_number(dcm.get("band_limit_hz")),
+            dcm_latency_s=_number(dcm.get("latency_s")),
             uncertainty_method=unc.get("method"),
             draws=_int(unc.get("draws")),
             coverage_probability=_number(unc.get("coverage_probability")),

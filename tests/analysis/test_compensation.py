@@ -140,3 +140,26 @@ def test_records_are_brought_to_the_dcm_rate_either_way():
     assert back.sample_interval_s == pytest.approx(2e-6) and "resampled" in note
     same, note = to_rate(slow, 5e5)
     assert same is slow and note is None
+
+
+def test_the_shot_analysis_carries_the_compensation_into_results_and_key_figures():
+    from hopkinson.analysis.key_figures import KeyFigures
+    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.shot_analysis import ShotAnalysis, analyse_record
+
+    truth, width_s = TRUTHS[0]
+    analysis = analyse_record(shot(truth, width_s, seed=11), AnalysisParams(uncertainty=False))
+    results = analysis.to_dict()
+    dcm = results["dcm"]
+    assert dcm["recommended"] is True and dcm["not_recommended_reason"] is None
+    assert dcm["target_widening"] == 3.0 and dcm["reached_widening"] == pytest.approx(3.0, rel=2e-3)
+    assert 0 < dcm["noise_gain"] <= dcm["noise_gain_limit"] == 4.0
+    assert dcm["band_limit_hz"] > dcm["compensated_fbsd_hz"]["5"]
+    rms = dcm["check"]["rms_error_pct"]
+    assert rms["compensated"] < rms["uncompensated"]
+    figures = KeyFigures.from_results(results)
+    assert figures.dcm_recommended is True and figures.compensation_check == dcm["check"]
+    assert figures.dcm_latency_s == dcm["latency_s"] > 0 and figures.dcm_band_limit_hz == dcm["band_limit_hz"]
+    assert figures.dcm_reached_widening == dcm["reached_widening"]
+    again = ShotAnalysis.from_dict(results).to_dict()["dcm"]
+    assert again["check"] == dcm["check"] and again["latency_s"] == pytest.approx(dcm["latency_s"])
