@@ -202,29 +202,23 @@ class ModbusDriver(InstrumentDriver):
     def read_bits(self, table: str, addresses: Iterable[int]) -> dict[int, bool]:
         """Bits of "coils" or "discrete inputs" at `addresses`, read run by run."""
         function = {"coils": "read_coils", "discrete inputs": "read_discrete_inputs"}[table]
-        out: dict[int, bool] = {}
-        for start, count in _split(contiguous_runs(addresses), MAX_RUN_BITS):
-            command = f"read {table} {_span(start, count)}"
-            response = self.call(command, lambda c, s=start, n=count: getattr(c, function)(
-                s, count=n, device_id=self.unit_id))
-            bits = list(response.bits)
-            if len(bits) < count:
-                raise InstrumentError(self.name, command, "short reply", str(bits))
-            out.update({start + i: bool(bits[i]) for i in range(count)})
-        return out
+        return {a: bool(v) for a, v in self._read_runs(table, function, addresses, MAX_RUN_BITS, "bits").items()}
 
     def read_words(self, table: str, addresses: Iterable[int]) -> dict[int, int]:
         """16-bit words of "holding registers" or "input registers", read run by run."""
         function = {"holding registers": "read_holding_registers", "input registers": "read_input_registers"}[table]
-        out: dict[int, int] = {}
-        for start, count in _split(contiguous_runs(addresses), MAX_RUN_WORDS):
+        return {a: int(v) for a, v in self._read_runs(table, function, addresses, MAX_RUN_WORDS, "registers").items()}
+
+    def _read_runs(self, table: str, function: str, addresses: Iterable[int], limit: int, field: str) -> dict[int, Any]:
+        out: dict[int, Any] = {}
+        for start, count in _split(contiguous_runs(addresses), limit):
             command = f"read {table} {_span(start, count)}"
             response = self.call(command, lambda c, s=start, n=count: getattr(c, function)(
                 s, count=n, device_id=self.unit_id))
-            words = list(response.registers)
-            if len(words) != count:
-                raise InstrumentError(self.name, command, "short reply", str(words))
-            out.update({start + i: int(words[i]) for i in range(count)})
+            values = list(getattr(response, field))
+            if len(values) < count:  # bits come in whole bytes: never fewer than asked
+                raise InstrumentError(self.name, command, "short reply", str(values))
+            out.update({start + i: values[i] for i in range(count)})
         return out
 
     def read_values(self, table: str, registers: dict[str, Register]) -> dict[str, float]:

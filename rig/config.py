@@ -453,16 +453,14 @@ def _check_thresholds(config: RigConfig, path: Path) -> None:
         raise ConfigError(f"{path}: limits.vent_done_bar: {limits.vent_done_bar:g} bar must be below "
                           f"limits.min_pressure_bar ({limits.min_pressure_bar:g} bar): a reservoir this full "
                           "is not vented")
-    if limits.vent_done_bar < resolution:
-        raise ConfigError(f"{path}: limits.vent_done_bar: {limits.vent_done_bar:g} bar is finer than the "
-                          f"reservoir gauge resolves ({resolution:g} bar per count)")
     if limits.pressure_tolerance_bar > limits.min_pressure_bar / 2:
         raise ConfigError(f"{path}: limits.pressure_tolerance_bar: {limits.pressure_tolerance_bar:g} bar is more "
                           f"than half of limits.min_pressure_bar ({limits.min_pressure_bar:g} bar): a shot could "
                           "count as charged far below its pressure")
-    if limits.pressure_tolerance_bar < resolution:
-        raise ConfigError(f"{path}: limits.pressure_tolerance_bar: {limits.pressure_tolerance_bar:g} bar is finer "
-                          f"than the reservoir gauge resolves ({resolution:g} bar per count)")
+    for key in ("vent_done_bar", "pressure_tolerance_bar"):
+        if getattr(limits, key) < resolution:
+            raise ConfigError(f"{path}: limits.{key}: {getattr(limits, key):g} bar is finer than the "
+                              f"reservoir gauge resolves ({resolution:g} bar per count)")
 
 
 def _check_fits(register: Register, value: float, unit: str, path: Path, key: str, setting: str) -> None:

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG, emit_json
+from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG
 
 if TYPE_CHECKING:
     from hopkinson.rig.config import RigConfig
@@ -47,15 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_probe(args: argparse.Namespace) -> int:
-    from hopkinson.rig.config import load_rig_config
+    from hopkinson.rig.cli.sim import run_report
 
-    config = load_rig_config(args.config)
-    report = probe_rig(config)
-    if args.json:
-        emit_json(report)
-    else:
-        print(format_probe(report))
-    return 0 if report["ok"] else 1
+    return run_report(args, probe_rig, format_probe)
 
 
 class _Steps:
@@ -98,34 +92,36 @@ def probe_rig(config: RigConfig) -> dict[str, Any]:
     return report
 
 
-def _open(steps: _Steps, config: RigConfig, role: str) -> Any:
+def _probe(config: RigConfig, role: str, body: Callable[[_Steps, Any], None]) -> _Steps:
+    """Build and open the role's instrument, run `body(steps, instrument)`, close it."""
     from hopkinson.rig.instruments import make_instrument
 
+    steps = _Steps()
     instrument = steps.run("configure the driver", lambda: make_instrument(config, role))
     if instrument is None:
-        return None
+        return steps
     steps.steps[-1]["value"] = type(instrument).__name__
     steps.run("open", instrument.connect)
-    return instrument if steps.steps[-1]["ok"] else None
+    if steps.steps[-1]["ok"]:
+        try:
+            body(steps, instrument)
+        finally:
+            instrument.close()
+    return steps
 
 
 def _probe_controller(config: RigConfig) -> _Steps:
-    steps = _Steps()
-    vc = _open(steps, config, "valve_controller")
-    if vc is None:
-        return steps
-    try:
+    def body(steps: _Steps, vc: Any) -> None:
         steps.run("identity (read device identification)", vc.identity)
         register_map = getattr(vc, "map", None)
         if register_map is None or not hasattr(vc, "read_bits"):  # a lab's driver: its role's reads
             steps.run("status", vc.status)
-            return steps
+            return
         for table, entries in register_map.blocks().items():
             for name, entry in entries.items():
                 steps.run(_signal_step(table, name, entry), lambda t=table, e=entry: _read_signal(vc, t, e))
-    finally:
-        vc.close()
-    return steps
+
+    return _probe(config, "valve_controller", body)
 
 
 def _signal_step(table: str, name: str, entry: Any) -> str:
@@ -151,21 +147,15 @@ def _read_signal(vc: Any, table: str, entry: Any) -> Any:
 
 
 def _probe_digitizer(config: RigConfig) -> _Steps:
-    steps = _Steps()
-    dig = _open(steps, config, "digitizer")
-    if dig is None:
-        return steps
-    try:
+    def body(steps: _Steps, dig: Any) -> None:
         steps.run("identity (*IDN?)", dig.identity)
         settings = steps.run("acquisition and channel settings", dig.settings) if hasattr(dig, "settings") else None
-        if settings is not None and dataclasses.is_dataclass(settings):
-            configured = getattr(config.digitizer, "settings", None)
-            if callable(configured) and hasattr(settings, "differences"):
-                steps.run("settings as configured", lambda: _same(settings.differences(configured())))
+        configured = getattr(config.digitizer, "settings", None)
+        if settings is not None and callable(configured) and hasattr(settings, "differences"):
+            steps.run("settings as configured", lambda: _same(settings.differences(configured())))
         steps.run("acquisition state", dig.acquisition_state)
-    finally:
-        dig.close()
-    return steps
+
+    return _probe(config, "digitizer", body)
 
 
 def _same(differences: list[str]) -> str:
@@ -175,17 +165,12 @@ def _same(differences: list[str]) -> str:
 
 
 def _probe_amplifier(config: RigConfig) -> _Steps:
-    steps = _Steps()
-    amp = _open(steps, config, "amplifier")
-    if amp is None:
-        return steps
-    try:
+    def body(steps: _Steps, amp: Any) -> None:
         steps.run("identity", amp.identity)
         steps.run("settings", amp.settings)
         steps.run("overload flag", amp.overloaded)
-    finally:
-        amp.close()
-    return steps
+
+    return _probe(config, "amplifier", body)
 
 
 def visa_resources(library: str) -> dict[str, Any]:

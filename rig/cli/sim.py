@@ -82,14 +82,19 @@ def run_sim(args: argparse.Namespace) -> int:
 
 # -- status ---------------------------------------------------------------------------------------
 def run_status(args: argparse.Namespace) -> int:
+    return run_report(args, rig_status, format_status)
+
+
+def run_report(args: argparse.Namespace, build: Any, text: Any) -> int:
+    """Load --config, build a report (a dict with "ok"), print it (--json or as text);
+    exit 0 when ok, else 1 (status and probe)."""
     from hopkinson.rig.config import load_rig_config
 
-    config = load_rig_config(args.config)
-    report = rig_status(config)
+    report = build(load_rig_config(args.config))
     if args.json:
         emit_json(report)
     else:
-        print(format_status(report))
+        print(text(report))
     return 0 if report["ok"] else 1
 
 
