@@ -1,0 +1,85 @@
+"""Streaming DCM compensation throughput against scipy.signal.lfilter on the whole record.
+
+One record (default 10 000 000 samples of a noisy shock response at 1 MS/s) is compensated with
+a shot's DCM (the automatic design for a 27 kHz, ζ = 0.05 sensor with its band limit: order 4)
+four ways in the same run:
+    lfilter whole    scipy.signal.lfilter(b, a, x) on the whole record (the baseline)
+    apply whole      analysis.dcm.apply: second-order sections, one call
+    stream           analysis.dcm.DcmStream, blocks of --block samples with carried state (what
+                     `hopkinson compensate` does), latency kept (--causal)
+    stream aligned   the same with the latency removed (fractional-delay FIR, held-back tail)
+The stream's output equals the whole-record filter (checked). Figures are samples per second
+(best of the repeats) and ratios to the baseline. The last line of output is one JSON object.
+
+Usage: .venv/bin/python benchmarks/bench_compensate.py [--samples N] [--block B] [--repeats R]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+
+import numpy as np
+from hopkinson.analysis.dcm import DcmStream, apply
+from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+from scipy import signal
+
+
+def best_rate(run: Callable[[], np.ndarray], samples: int, repeats: int) -> tuple[float, np.ndarray]:
+    best, out = float("inf"), np.zeros(0)
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = run()
+        best = min(best, time.perf_counter() - start)
+    return samples / best, out
+
+
+def streamed(stream: DcmStream, x: np.ndarray, block: int) -> np.ndarray:
+    parts = [stream.process(x[i : i + block]) for i in range(0, x.size, block)]
+    parts.append(stream.flush())
+    return np.concatenate(parts)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=10_000_000)
+    parser.add_argument("--block", type=int, default=65_536)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+
+    dt = 1e-6
+    b, a = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),)).discrete_tf(dt)
+    design = design_compensation(ShotSupport(DiscreteModel(dt, a, b), supported_band_hz=(0.0, 38_000.0)))
+    dcm = design.dcm
+    rng = np.random.default_rng(0)
+    x = signal.lfilter(b, a, rng.standard_normal(args.samples)) + 1e-3 * rng.standard_normal(args.samples)
+    n, block = args.samples, args.block
+
+    rates: dict[str, float] = {}
+    rates["lfilter_whole"], baseline = best_rate(lambda: signal.lfilter(dcm.b, dcm.a, x), n, args.repeats)
+    rates["apply_whole"], whole = best_rate(lambda: apply(dcm, x), n, args.repeats)
+    rates["stream"], stream_out = best_rate(lambda: streamed(DcmStream(dcm), x, block), n, args.repeats)
+    rates["stream_aligned"], aligned = best_rate(lambda: streamed(DcmStream(dcm, align=True), x, block), n,
+                                                 args.repeats)
+    scale = float(np.max(np.abs(baseline)))
+    assert np.max(np.abs(stream_out - baseline)) <= 1e-9 * scale, "stream differs from lfilter"
+    assert np.max(np.abs(whole - baseline)) <= 1e-9 * scale, "apply differs from lfilter"
+    assert aligned.size == n
+    for name, rate in rates.items():
+        print(f"{name:<15} {rate / 1e6:9.1f} Msamples/s   x{rate / rates['lfilter_whole']:.2f} of lfilter whole")
+    print(json.dumps({
+        "benchmark": "compensate",
+        "samples": n,
+        "block_samples": block,
+        "dcm_order": dcm.order,
+        "samples_per_s": {k: round(v) for k, v in rates.items()},
+        "ratio_to_lfilter_whole": {k: round(v / rates["lfilter_whole"], 3) for k, v in rates.items()},
+    }))
+
+
+if __name__ == "__main__":
+    main()
