@@ -9,7 +9,7 @@ from __future__ import annotations
 import threading
 
 FAULTS: dict[str, str] = {
-    "modbus-disconnect": "the valve/vacuum controller drops every Modbus TCP connection at its next request",
+    "modbus-disconnect": "the valve/vacuum controller drops every Modbus TCP connection at its next request (RTU: stops answering)",
     "modbus-slow": "the valve/vacuum controller answers each Modbus request after a long delay (sim.toml modbus_slow_delay_s)",
     "visa-garbled-block": "the digitizer sends a waveform block with a corrupt length header",
     "no-trigger": "the digitizer never triggers: the shot is fired but nothing is captured",

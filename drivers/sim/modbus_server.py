@@ -249,8 +249,9 @@ class SimModbusServer:
     ) -> ExcCodes | None:
         """pymodbus calls this before serving each request (see the module docstring)."""
         if self.faults.active("modbus-disconnect"):
-            self._close_clients()
-            return ExcCodes.DEVICE_FAILURE  # TCP: never sent, the connection is gone
+            if self.line is None:
+                self._close_clients()
+            return ExcCodes.DEVICE_FAILURE  # never sent: the TCP connection is gone, RTU stays silent
         if self.faults.active("modbus-slow"):
             await asyncio.sleep(self.slow_delay_s)
         table, _ = _FUNCTIONS.get(function_code, ("", False))

@@ -272,6 +272,15 @@ def test_the_simulator_answers_only_its_unit_id(transport: str, clock: FakeClock
             assert right.reservoir_pressure_bar() == 0.0
 
 
+def test_a_dead_rtu_controller_is_a_timeout_and_the_next_request_works_again(clock: FakeClock) -> None:
+    with SimulatedRig(sim_config(modbus_transport="rtu"), clock=clock) as rig, controller(rig, timeout_s=0.3) as vc:
+        rig.faults.inject("modbus-disconnect")  # RTU: the controller stops answering
+        with pytest.raises(InstrumentTimeout, match="'read input registers 1': no reply within 0.3 s"):
+            vc.fixture_vacuum_mbar()
+        rig.faults.clear("modbus-disconnect")
+        assert vc.fixture_vacuum_mbar() == pytest.approx(1013.2, abs=0.1)  # the port reopens by itself
+
+
 def test_unreachable_controller_names_itself() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
