@@ -27,16 +27,24 @@ class ManualConditioner(InstrumentDriver):
                  sensitivity_v_per_m_s2: float | None = None, identity: str = "",
                  name: str = "manual conditioner", trace: TraceHook | None = None) -> None:
         super().__init__(name, trace=trace)
-        for key, value in (("gain", gain), ("excitation_v", excitation_v), ("lowpass_hz", lowpass_hz)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name}: {key} must be a finite number >= 0, got {value!r}")
+        self._open_now = False
+        self.enter(gain=gain, excitation_v=excitation_v, lowpass_hz=lowpass_hz,
+                   sensitivity_v_per_m_s2=sensitivity_v_per_m_s2, identity=identity)
+
+    def enter(self, *, gain: float, excitation_v: float = 0.0, lowpass_hz: float = 0.0,
+              sensitivity_v_per_m_s2: float | None = None, identity: str = "") -> None:
+        """The technician's values (from rig.toml, the plan or the panel); ValueError naming a
+        value that cannot be a setting."""
+        for key, value in (("gain", gain), ("excitation_v", excitation_v), ("lowpass_hz", lowpass_hz),
+                           ("sensitivity_v_per_m_s2", sensitivity_v_per_m_s2 or 0.0)):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{self.name}: {key} must be a finite number >= 0, got {value!r}")
         if gain <= 0:
-            raise ValueError(f"{name}: gain must be > 0, got {gain!r}")
+            raise ValueError(f"{self.name}: gain must be > 0, got {gain!r}")
         self._settings = AmplifierSettings(gain=float(gain), excitation_v=float(excitation_v),
                                            lowpass_hz=float(lowpass_hz), source="entered",
                                            sensitivity_v_per_m_s2=sensitivity_v_per_m_s2 or None,
                                            identity=identity)
-        self._open_now = False
 
     def _open(self) -> None:
         self._open_now = True

@@ -92,8 +92,8 @@ class ValveControllerConfig:
     @property
     def address(self) -> str:
         """The rig's identity for its lock, e.g. "modbus-tcp://127.0.0.1:5020/1"."""
-        if self.driver != "modbus" and self.options:
-            return f"{self.driver}:{sorted(self.options.items())}"
+        if self.driver != "modbus":  # a lab's driver: its class and where its options point
+            return f"{self.driver}?" + "&".join(f"{k}={v}" for k, v in sorted(self.options.items()))
         return self.target.address
 
     @property

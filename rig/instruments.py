@@ -205,7 +205,7 @@ def sim_rig_config(base: RigConfig, rig: SimulatedRig) -> RigConfig:
         stopbits=a.modbus_stopbits, unit_id=a.modbus_unit_id,
         register_map=register_map_of(rig.config.register_map))
     amp: AmplifierConfig = base.amplifier
-    if amp.driver == "serial-bridge" or amp.driver not in ("manual",):
+    if amp.driver != "manual":  # a manual conditioner stays as entered; anything else: the simulated one
         amp = dataclasses.replace(amp, driver="serial-bridge", options={}, port=a.serial_port,
                                   baudrate=a.amplifier_baudrate)
     return dataclasses.replace(

@@ -28,8 +28,13 @@ def test_the_entered_values_are_the_settings_and_nothing_can_be_set() -> None:
         amp.set_shunt(False)
         with pytest.raises(InstrumentError, match="switch the shunt on at the conditioner"):
             amp.set_shunt(True)
+    amp.enter(gain=10.0, lowpass_hz=30e3, identity="Kistler 5015A SN 7")  # the technician changed the gain
+    assert amp.settings().gain == 10.0 and amp.settings().sensitivity_v_per_m_s2 is None
+    amp.configure(gain=10.0, excitation_v=0.0, lowpass_hz=30e3)
     with pytest.raises(ValueError, match="gain must be > 0"):
         ManualConditioner(gain=0.0)
+    with pytest.raises(ValueError, match="lowpass_hz must be a finite number >= 0, got nan"):
+        amp.enter(gain=1.0, lowpass_hz=float("nan"))
 
 
 def test_rig_toml_selects_the_manual_conditioner(tmp_path: Path) -> None:
