@@ -1,145 +1,393 @@
-"""The digitizer's SCPI dialect in one place: command text out, replies parsed in.
+"""Digitizer dialects: each vendor's command set and reply parsing, one class per dialect.
 
-The driver (drivers/digitizer.py) never spells a SCPI header itself; it asks a dialect. A
-second vendor is one subclass overriding the commands that differ (e.g. ":TIMebase:SRATe"
-instead of ":ACQuire:SRATe", a different state word or preamble layout).
+The driver (drivers/digitizer.py) owns the VISA session (bounded reads, deadlines, tracing,
+errors naming the instrument); a dialect owns the words. It gets a `ScpiLink` to talk through
+and the configured `DigitizerSettings` as context (which channels, record length, trigger),
+and does each job the way its instruments want it:
 
-`GenericScpiDialect` is the dialect of the simulated digitizer (drivers/sim/scpi_digitizer.py):
-    :ACQuire:SRATe/POINts/PRETrigger, :CHANnel<n>:RANGe (full scale, +-v), :TRIGger:SOURce/LEVel/
-    SLOPe, :SINGle, :ABORt, :ACQuire:STATe? (IDLE|ARMED|TRIGGERED), :WAVeform:SOURce/PREamble?/
-    DATA? (IEEE 488.2 block of little-endian int16), errors from :SYSTem:ERRor?.
+    prepare(link)                        once per session: reply format, waveform encoding
+    apply(link, settings)                send every acquisition setting (refusals raise)
+    read_settings(link, context)         read them back as DigitizerSettings
+    arm(link) / abort(link) / state(link) -> "IDLE" | "ARMED" | "TRIGGERED"
+    fetch(link, channel, context)        one channel's record as a Waveform
+
+Dialects here: `GenericScpiDialect` (below; the project's own SCPI digitizer),
+`KeysightDialect` (drivers/digitizer_keysight.py), `TektronixDialect`
+(drivers/digitizer_tektronix.py), `LeCroyDialect` (drivers/digitizer_lecroy.py). A lab's own is a
+subclass of `DigitizerDialect` in its own package, named in rig.toml as
+`[digitizer] dialect = "package.module:Class"` (see `resolve_dialect`).
+
+A dialect raises `DialectError` (with the command and the reply); the driver turns it into an
+InstrumentError naming the instrument. The transfer format (`TransferFormat`: int8, uint8,
+int16, uint16 or float32, little or big endian) is the dialect's constructor argument; each
+dialect lists the formats its instruments can send.
+
+Generic SCPI (`GenericScpiDialect`, the simulator drivers/sim/scpi_digitizer.py's dialect):
+    :ACQuire:SRATe/POINts/PRETrigger (samples), :CHANnel<n>:RANGe (full scale, ±V),
+    :TRIGger:SOURce CH<n>|EXT, :TRIGger:LEVel, :TRIGger:SLOPe POS|NEG, :SINGle, :ABORt,
+    :ACQuire:STATe? (IDLE|ARMED|TRIGGERED), :WAVeform:SOURce, :WAVeform:FORMat
+    INT8|UINT8|INT16|UINT16|FLOAT32, :WAVeform:BYTeorder LSBF|MSBF, :WAVeform:PREamble?
+    ("<format>,<order>,<points>,<x_increment_s>,<trigger_index>,<y_scale_v>,<y_offset_v>"),
+    :WAVeform:DATA? (IEEE 488.2 block), errors from :SYSTem:ERRor?.
 """
 
 from __future__ import annotations
 
+import importlib
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar, Protocol
 
-import numpy as np
+from hopkinson.drivers.digitizer_settings import DigitizerSettings
+from hopkinson.drivers.digitizer_waveform import (
+    BYTE_ORDERS,
+    SAMPLE_FORMATS,
+    SampleFormatError,
+    Waveform,
+    decode_samples,
+    integer_rails,
+    sample_dtype,
+)
 
 ACQUISITION_STATES = ("IDLE", "ARMED", "TRIGGERED")
+BLOCK_SLACK_BYTES = 65536  # a block may carry this much beyond its samples (descriptors, text)
 
 
-class ReplyFormatError(ValueError):
-    """A reply that the dialect cannot parse (the driver adds instrument and command)."""
+class DialectError(Exception):
+    """A reply the dialect cannot use, or a command the instrument refused."""
+
+    def __init__(self, command: str, problem: str, reply: str | bytes = "") -> None:
+        super().__init__(problem)
+        self.command = command
+        self.problem = problem
+        self.reply = reply
+
+
+class ReplyFormatError(DialectError):
+    """A reply that does not parse."""
+
+
+class CommandRefused(DialectError):
+    """The instrument reported an error for a command."""
+
+
+class ScpiLink(Protocol):
+    """What a dialect talks through (the driver's VISA session). Every call is bounded in
+    size and time and raises InstrumentError on a transport failure."""
+
+    def write(self, command: str) -> None: ...
+
+    def query(self, command: str) -> str: ...
+
+    def query_block(self, command: str, max_bytes: int, header_max: int = 0) -> tuple[str, memoryview]:
+        """Send `command`; read one IEEE 488.2 definite-length block of at most `max_bytes`
+        (and the read terminator after it). `header_max` > 0 allows that many bytes of text
+        (a response header) before the '#'; it is returned with the payload."""
+        ...
 
 
 @dataclass(frozen=True)
-class Preamble:
-    """How to read one channel's waveform block: volts = code * scale_v + offset_v."""
+class TransferFormat:
+    """How waveform samples travel: sample format and byte order."""
 
-    points: int
-    sample_interval_s: float
-    trigger_index: int
-    scale_v: float
-    offset_v: float
-    dtype: np.dtype
+    sample_format: str = "int16"
+    byte_order: str = "little"
 
 
-class GenericScpiDialect:
-    """Commands and reply parsers of a generic two-channel SCPI digitizer."""
+class DigitizerDialect:
+    """Base of every dialect: naming, the transfer format and shared parsing helpers.
 
-    name = "generic"
-    channels: tuple[int, ...] = (1, 2)
-    trigger_sources: tuple[str, ...] = ("CH1", "CH2", "EXT")
-    trigger_slopes: tuple[str, ...] = ("POS", "NEG")
+    Subclasses set the class attributes and implement the job methods (module docstring).
+    """
 
-    # -- common ------------------------------------------------------------------------
-    identity_query = "*IDN?"
-    clear_status = "*CLS"
-    error_query = ":SYSTem:ERRor?"
-    unit_separator = ";"
+    name: ClassVar[str] = ""
+    channel_names: ClassVar[tuple[str, ...]] = ()
+    external_trigger: ClassVar[str] = "EXT"
+    sample_formats: ClassVar[tuple[str, ...]] = SAMPLE_FORMATS
+    identity_query: ClassVar[str] = "*IDN?"
+    separator: ClassVar[str] = ";"
+
+    def __init__(self, transfer: TransferFormat | None = None) -> None:
+        self.transfer = transfer or TransferFormat()
+        fmt, order = self.transfer.sample_format, self.transfer.byte_order
+        if fmt not in self.sample_formats:
+            raise ValueError(f"the {self.name} dialect cannot transfer {fmt!r} samples "
+                             f"(it can: {', '.join(self.sample_formats)})")
+        if order not in BYTE_ORDERS:
+            raise ValueError(f"byte order must be little or big, got {order!r}")
+
+    # -- naming ------------------------------------------------------------------------
+    def channel_name(self, name: str) -> str:
+        """The instrument's spelling of a channel name; ValueError listing the valid ones."""
+        canonical = self._canonical_channel(name.strip().upper()) if isinstance(name, str) else None
+        if canonical not in self.channel_names:
+            raise ValueError(f"{name!r} is not a channel of a {self.name} digitizer "
+                             f"(channels: {', '.join(self.channel_names)})")
+        return canonical
+
+    def trigger_source_name(self, name: str) -> str:
+        """A channel name or the external trigger input, as the instrument spells it."""
+        text = name.strip().upper() if isinstance(name, str) else ""
+        if text in ("EXT", "EXTERNAL", self.external_trigger):
+            return self.external_trigger
+        try:
+            return self.channel_name(name)
+        except ValueError:
+            raise ValueError(f"{name!r} is not a trigger source of a {self.name} digitizer (sources: "
+                             f"{', '.join(self.channel_names + (self.external_trigger,))})") from None
+
+    def _canonical_channel(self, text: str) -> str | None:
+        """Override to accept other spellings (e.g. "CH1" for "C1")."""
+        return text
+
+    def channel_number(self, channel: str) -> int:
+        """1 for "CH1"/"CHAN1"/"C1"."""
+        return int(re.sub(r"\D", "", channel))
 
     def join(self, *units: str) -> str:
         """Several message units as one message (one round trip)."""
-        return self.unit_separator.join(units)
+        return self.separator.join(units)
 
-    def parse_error(self, reply: str) -> tuple[int, str]:
+    # -- the jobs (subclasses implement) ---------------------------------------------------
+    def prepare(self, link: ScpiLink) -> None:
+        raise NotImplementedError
+
+    def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
+        raise NotImplementedError
+
+    def read_settings(self, link: ScpiLink, context: DigitizerSettings) -> DigitizerSettings:
+        raise NotImplementedError
+
+    def arm(self, link: ScpiLink) -> None:
+        raise NotImplementedError
+
+    def abort(self, link: ScpiLink) -> None:
+        raise NotImplementedError
+
+    def state(self, link: ScpiLink) -> str:
+        raise NotImplementedError
+
+    def fetch(self, link: ScpiLink, channel: str, context: DigitizerSettings) -> Waveform:
+        raise NotImplementedError
+
+    # -- helpers for subclasses --------------------------------------------------------------
+    def query_fields(self, link: ScpiLink, units: Sequence[str], count: int | None = None) -> list[str]:
+        """Send the query units in one message; their replies, split at the separator."""
+        command = self.join(*units)
+        reply = link.query(command)
+        fields = split_outside_quotes(reply, self.separator)
+        expected = len(units) if count is None else count
+        if len(fields) != expected:
+            raise ReplyFormatError(command, f"expected {expected} replies, got {len(fields)}", reply)
+        return fields
+
+    @staticmethod
+    def number(command: str, text: str, reply: str = "") -> float:
+        """A numeric reply field (NR1/NR2/NR3, optional unit suffix such as "V" or "S")."""
+        match = re.fullmatch(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*[A-Za-z%]*\s*", text)
+        if match is None:
+            raise ReplyFormatError(command, f"expected a number, got {text.strip()!r}", reply or text)
+        return float(match.group(1))
+
+    def integer(self, command: str, text: str, reply: str = "") -> int:
+        value = self.number(command, text, reply)
+        if value != int(value):
+            raise ReplyFormatError(command, f"expected an integer, got {text.strip()!r}", reply or text)
+        return int(value)
+
+    def waveform(self, command: str, channel: str, payload: memoryview, *, points: int, dtype: object,
+                 scale_v: float, offset_v: float, sample_interval_s: float, trigger_index: int,
+                 range_v: float | None = None) -> Waveform:
+        """Decode the samples and build the Waveform (full scale from the format, or for
+        float samples from the channel's range)."""
+        try:
+            codes = decode_samples(payload, dtype, points)  # type: ignore[arg-type]
+        except SampleFormatError as exc:
+            raise ReplyFormatError(command, str(exc)) from None
+        if codes.dtype.kind == "f":
+            if range_v is None:
+                raise ReplyFormatError(command, "float samples need the channel's range for their full scale")
+            rails = sorted(((-range_v - offset_v) / scale_v, (range_v - offset_v) / scale_v))
+            code_range = (rails[0], rails[1])
+        else:
+            code_range = integer_rails(codes.dtype)
+        codes.flags.writeable = False
+        return Waveform(channel=channel, codes=codes, scale_v=scale_v, offset_v=offset_v,
+                        sample_interval_s=sample_interval_s, trigger_index=trigger_index,
+                        code_range=code_range)
+
+    @staticmethod
+    def block_limit(context: DigitizerSettings, points: int, itemsize: int) -> int:
+        """Largest block a fetch accepts: the announced samples plus a little slack."""
+        return max(points, context.record_length) * itemsize + BLOCK_SLACK_BYTES
+
+
+def split_outside_quotes(text: str, separator: str = ";") -> list[str]:
+    """Split a reply at `separator` except inside "..." strings."""
+    fields, current, quoted = [], [], False
+    for char in text:
+        if char == '"':
+            quoted = not quoted
+        if char == separator and not quoted:
+            fields.append("".join(current))
+            current = []
+        else:
+            current.append(char)
+    fields.append("".join(current))
+    return [f.strip() for f in fields]
+
+
+def check_preamble(command: str, reply: str, *, points: int, interval_s: float, scale_v: float,
+                   offset_v: float) -> None:
+    """Refuse preamble values no record can have."""
+    if points < 0 or not interval_s > 0 or not scale_v != 0 or offset_v != offset_v:
+        raise ReplyFormatError(command, "preamble values out of range", reply)
+
+
+# -- the generic SCPI dialect ------------------------------------------------------------------
+
+_GENERIC_FORMATS = {"int8": "INT8", "uint8": "UINT8", "int16": "INT16", "uint16": "UINT16", "float32": "FLOAT32"}
+_GENERIC_ORDERS = {"little": "LSBF", "big": "MSBF"}
+
+
+class ScpiErrorQueueDialect(DigitizerDialect):
+    """Shared by SCPI instruments with an error queue (:SYSTem:ERRor?): a command is sent with
+    *CLS before and the error query after, in one message."""
+
+    error_query: ClassVar[str] = ":SYSTem:ERRor?"
+
+    def command(self, link: ScpiLink, *units: str) -> None:
+        """Send setting commands with the error query in one message; raise if refused."""
+        command = self.join(*units)
+        reply = link.query(self.join("*CLS", command, self.error_query))
+        code, message = self.parse_error(command, reply)
+        if code != 0:
+            raise CommandRefused(command, f"refused by the instrument (error {code}: {message})", reply)
+
+    @staticmethod
+    def parse_error(command: str, reply: str) -> tuple[int, str]:
         """'<code>,"<message>"' -> (code, message); code 0 means no error."""
         code_text, _, message = reply.strip().partition(",")
         try:
             code = int(code_text)
         except ValueError:
-            raise ReplyFormatError(f"not an error-queue reply: {reply!r}") from None
+            raise ReplyFormatError(command, f"not an error-queue reply: {reply!r}", reply) from None
         return code, message.strip().strip('"')
 
-    # -- acquisition settings ----------------------------------------------------------
-    def set_sample_rate(self, sample_rate_hz: float) -> str:
-        return f":ACQuire:SRATe {sample_rate_hz!r}"
 
-    sample_rate_query = ":ACQuire:SRATe?"
+class GenericScpiDialect(ScpiErrorQueueDialect):
+    """The generic SCPI digitizer (module docstring)."""
 
-    def set_record_length(self, samples: int) -> str:
-        return f":ACQuire:POINts {samples:d}"
+    name = "generic"
+    channel_names = ("CH1", "CH2", "CH3", "CH4")
+    external_trigger = "EXT"
 
-    record_length_query = ":ACQuire:POINts?"
+    def _canonical_channel(self, text: str) -> str | None:
+        match = re.fullmatch(r"(?:CH|CHAN|CHANNEL)?([1-9])", text)
+        return f"CH{match.group(1)}" if match else text
 
-    def set_pre_trigger(self, samples: int) -> str:
-        return f":ACQuire:PRETrigger {samples:d}"
+    def prepare(self, link: ScpiLink) -> None:
+        self.command(link, f":WAVeform:FORMat {_GENERIC_FORMATS[self.transfer.sample_format]}",
+                     f":WAVeform:BYTeorder {_GENERIC_ORDERS[self.transfer.byte_order]}")
 
-    pre_trigger_query = ":ACQuire:PRETrigger?"
+    def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
+        units = [f":ACQuire:SRATe {settings.sample_rate_hz!r}", f":ACQuire:POINts {settings.record_length:d}",
+                 f":ACQuire:PRETrigger {settings.pre_trigger_samples:d}"]
+        units += [f":CHANnel{self.channel_number(ch):d}:RANGe {float(r)!r}" for ch, r in settings.ranges_v.items()]
+        units += [f":TRIGger:SOURce {settings.trigger_source}", f":TRIGger:LEVel {float(settings.trigger_level_v)!r}",
+                  f":TRIGger:SLOPe {settings.trigger_slope}"]
+        self.command(link, *units)
 
-    def set_channel_range(self, channel: int, full_scale_v: float) -> str:
-        return f":CHANnel{channel:d}:RANGe {full_scale_v!r}"
+    def read_settings(self, link: ScpiLink, context: DigitizerSettings) -> DigitizerSettings:
+        channels = context.channels
+        units = [":ACQuire:SRATe?", ":ACQuire:POINts?", ":ACQuire:PRETrigger?"]
+        units += [f":CHANnel{self.channel_number(ch):d}:RANGe?" for ch in channels]
+        units += [":TRIGger:SOURce?", ":TRIGger:LEVel?", ":TRIGger:SLOPe?"]
+        fields = self.query_fields(link, units)
+        command = self.join(*units)
+        n = len(channels)
+        return DigitizerSettings(
+            sample_rate_hz=self.number(command, fields[0]),
+            record_length=self.integer(command, fields[1]),
+            pre_trigger_samples=self.integer(command, fields[2]),
+            ranges_v={ch: self.number(command, f) for ch, f in zip(channels, fields[3:3 + n], strict=True)},
+            trigger_source=fields[3 + n].upper(),
+            trigger_level_v=self.number(command, fields[4 + n]),
+            trigger_slope=fields[5 + n].upper(),
+        )
 
-    def channel_range_query(self, channel: int) -> str:
-        return f":CHANnel{channel:d}:RANGe?"
+    def arm(self, link: ScpiLink) -> None:
+        self.command(link, ":SINGle")
 
-    def set_trigger_source(self, source: str) -> str:
-        return f":TRIGger:SOURce {source}"
+    def abort(self, link: ScpiLink) -> None:
+        self.command(link, ":ABORt")
 
-    trigger_source_query = ":TRIGger:SOURce?"
-
-    def set_trigger_level(self, level_v: float) -> str:
-        return f":TRIGger:LEVel {level_v!r}"
-
-    trigger_level_query = ":TRIGger:LEVel?"
-
-    def set_trigger_slope(self, slope: str) -> str:
-        return f":TRIGger:SLOPe {slope}"
-
-    trigger_slope_query = ":TRIGger:SLOPe?"
-
-    # -- acquisition control -----------------------------------------------------------
-    arm_single = ":SINGle"
-    abort = ":ABORt"
-    state_query = ":ACQuire:STATe?"
-
-    def parse_state(self, reply: str) -> str:
-        """The vendor's state word -> one of ACQUISITION_STATES."""
+    def state(self, link: ScpiLink) -> str:
+        command = ":ACQuire:STATe?"
+        reply = link.query(command)
         state = reply.strip().upper()
         if state not in ACQUISITION_STATES:
-            raise ReplyFormatError(f"unknown acquisition state {reply!r}")
+            raise ReplyFormatError(command, f"unknown acquisition state {reply!r}", reply)
         return state
 
-    # -- waveform transfer -------------------------------------------------------------
-    def select_waveform(self, channel: int) -> str:
-        return f":WAVeform:SOURce CH{channel:d}"
-
-    preamble_query = ":WAVeform:PREamble?"
-    data_query = ":WAVeform:DATA?"
-
-    def parse_preamble(self, reply: str) -> Preamble:
-        """'INT16,LSBF,<points>,<x_increment_s>,<trigger_index>,<y_scale_v>,<y_offset_v>'."""
-        fields = [f.strip() for f in reply.strip().split(",")]
+    def fetch(self, link: ScpiLink, channel: str, context: DigitizerSettings) -> Waveform:
+        n = self.channel_number(channel)
+        units = [f":WAVeform:SOURce CH{n:d}", ":WAVeform:PREamble?", f":CHANnel{n:d}:RANGe?"]
+        command = self.join(*units)
+        preamble, range_text = self.query_fields(link, units, count=2)
+        reply = self.join(preamble, range_text)
+        fields = [f.strip() for f in preamble.split(",")]
         if len(fields) != 7:
-            raise ReplyFormatError(f"preamble has {len(fields)} fields, expected 7: {reply!r}")
-        fmt, order = fields[0].upper(), fields[1].upper()
-        if fmt != "INT16":
-            raise ReplyFormatError(f"unsupported sample format {fields[0]!r} (expected INT16)")
-        if order not in ("LSBF", "MSBF"):
-            raise ReplyFormatError(f"unknown byte order {fields[1]!r} (expected LSBF or MSBF)")
+            raise ReplyFormatError(command, f"preamble has {len(fields)} fields, expected 7", reply)
+        formats = {v: k for k, v in _GENERIC_FORMATS.items()}
+        orders = {v: k for k, v in _GENERIC_ORDERS.items()}
+        fmt, order = formats.get(fields[0].upper()), orders.get(fields[1].upper())
+        if fmt is None:
+            raise ReplyFormatError(command, f"unsupported sample format {fields[0]!r}", reply)
+        if order is None:
+            raise ReplyFormatError(command, f"unknown byte order {fields[1]!r} (expected LSBF or MSBF)", reply)
         try:
             points, trigger_index = int(fields[2]), int(fields[4])
             interval_s, scale_v, offset_v = float(fields[3]), float(fields[5]), float(fields[6])
+            range_v = float(range_text)
         except ValueError:
-            raise ReplyFormatError(f"preamble has a non-numeric field: {reply!r}") from None
-        if points < 0 or not interval_s > 0 or not scale_v > 0 or not np.isfinite(offset_v):
-            raise ReplyFormatError(f"preamble values out of range: {reply!r}")
-        return Preamble(
-            points=points,
-            sample_interval_s=interval_s,
-            trigger_index=trigger_index,
-            scale_v=scale_v,
-            offset_v=offset_v,
-            dtype=np.dtype("<i2" if order == "LSBF" else ">i2"),
-        )
+            raise ReplyFormatError(command, "preamble has a non-numeric field", reply) from None
+        check_preamble(command, reply, points=points, interval_s=interval_s, scale_v=scale_v, offset_v=offset_v)
+        if points == 0:
+            raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
+        dtype = sample_dtype(fmt, order)
+        _, payload = link.query_block(":WAVeform:DATA?", self.block_limit(context, points, dtype.itemsize))
+        return self.waveform(":WAVeform:DATA?", channel, payload, points=points, dtype=dtype, scale_v=scale_v,
+                             offset_v=offset_v, sample_interval_s=interval_s, trigger_index=trigger_index,
+                             range_v=range_v)
+
+
+DIALECTS: dict[str, str] = {
+    "generic": "hopkinson.drivers.scpi_dialect:GenericScpiDialect",
+    "keysight": "hopkinson.drivers.digitizer_keysight:KeysightDialect",
+    "tektronix": "hopkinson.drivers.digitizer_tektronix:TektronixDialect",
+    "lecroy": "hopkinson.drivers.digitizer_lecroy:LeCroyDialect",
+}
+
+
+def resolve_dialect(name: str) -> type[DigitizerDialect]:
+    """The dialect class for a configured name: one of DIALECTS, or "package.module:Class".
+
+    Raises ValueError (one line: what was wrong) for an unknown name, a module that does not
+    import, or a class that is not a DigitizerDialect.
+    """
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"dialect must be a name ({', '.join(DIALECTS)}) or 'package.module:Class', got {name!r}")
+    target = DIALECTS.get(name.strip().lower(), name.strip())
+    module_name, _, class_name = target.partition(":")
+    if not class_name:
+        raise ValueError(f"unknown dialect {name!r}: use one of {', '.join(DIALECTS)} or 'package.module:Class'")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ValueError(f"dialect {name!r}: cannot import {module_name}: {exc}") from None
+    cls = getattr(module, class_name, None)
+    if not (isinstance(cls, type) and issubclass(cls, DigitizerDialect)):
+        raise ValueError(f"dialect {name!r}: {class_name} in {module_name} is not a DigitizerDialect subclass")
+    return cls

@@ -1,42 +1,56 @@
-"""Simulated two-channel digitizer: a SCPI server on a raw TCP socket (VISA `...::SOCKET`).
+"""Simulated digitizer: a message-based instrument on a raw TCP socket (VISA `...::SOCKET`).
 
-The server speaks the dialect the real driver uses (drivers/scpi_dialect.py), but parses it
-independently here so that tests over loopback check the driver against a second reading of
-the protocol, not against itself (the block header is drivers/ieee488_block.block_header,
-pinned to known bytes by its own tests). Messages end with "\\n"; message units are separated by
-";" (e.g. ":ACQuire:SRATe 1E8;:SYSTem:ERRor?"); headers take the SCPI short or long form in
-any case. Replies to the queries of one message are joined by ";" and end with "\\n".
+One socket server (`SimDigitizerServer`) hosts one simulated instrument, in the dialect asked
+for: "generic" (below), "keysight" (drivers/sim/digitizer_keysight.py), "tektronix"
+(drivers/sim/digitizer_tektronix.py) or "lecroy" (drivers/sim/digitizer_lecroy.py). Each
+implements its side of its protocol from the vendor's documentation, independently of the
+drivers (drivers/sim imports no driver module), so the tests over loopback check a driver
+against a second reading of the protocol.
 
-Commands (short form in capitals):
-    *IDN?  *RST  *CLS  *OPC?  :SYSTem:ERRor?
-    :ACQuire:SRATe <hz> | ?          sample rate
-    :ACQuire:POINts <n> | ?          record length (samples per channel)
-    :ACQuire:PRETrigger <n> | ?      samples recorded before the trigger
-    :CHANnel<1|2>:RANGe <v> | ?      full scale: the channel reads -v .. +v volts
-    :TRIGger:SOURce CH1|CH2|EXT | ?  :TRIGger:LEVel <v> | ?  :TRIGger:SLOPe POS|NEG | ?
-    :SINGle                          arm one acquisition
-    :ABORt                           disarm (state IDLE, acquired data discarded)
-    :ACQuire:STATe?                  IDLE | ARMED | TRIGGERED
-    :WAVeform:SOURce CH1|CH2 | ?
-    :WAVeform:PREamble?              INT16,LSBF,<points>,<x_increment_s>,<trigger_index>,
-                                     <y_scale_v>,<y_offset_v>    (volts = code*scale + offset)
-    :WAVeform:DATA?                  IEEE 488.2 definite-length block of int16 little-endian
+What every dialect shares (this module):
 
-Errors go to the SCPI error queue (read with :SYSTem:ERRor?), as a real instrument does.
+- Messages end with "\\n"; message units are separated by ";" (outside quoted strings);
+  headers take the short or the long form in any case; the replies of one message are joined
+  by ";" in order (binary blocks included) and end with "\\n".
+- IEEE 488.2 common commands, as the standard says: *IDN?, *RST, *CLS, *ESE/*ESE?, *ESR?
+  (the standard event status register: bit 0 operation complete, 2 query error, 3
+  device-dependent error, 4 execution error, 5 command error; read clears), *SRE/*SRE?, *STB?
+  (bit 2 error/event queue not empty, 4 message available, 5 event status summary, 6 master
+  summary), *OPC (sets ESR bit 0 once the acquisition in progress is complete), *OPC? (answers
+  1 once it is complete: it does not answer while the instrument is armed), *WAI (holds the
+  rest of the message until then), *TST? (0: self-test passed).
+- An acquisition that honours its trigger: while ARMED, the instrument polls
+  `capture(settings)`. The world (drivers/sim/world.py) returns None (no shot) or the channels'
+  signals in volts; given `settings.trigger_index`, it serves one record's length before the
+  shot too, and the instrument keeps the record around the first real crossing of the trigger
+  level, with the configured slope, on the configured source. A wrong source, level or slope
+  means no capture: the instrument stays ARMED and the shot is lost, as on the real rig. The
+  external input ("EXT") has nothing connected in the simulated rig.
+- The record is kept in volts and converted at transfer to the format asked for (int8, uint8,
+  int16, uint16, float32, either byte order), clipped at the format's full-scale codes (or,
+  for float32, at the channel's range) as a converter clips, never wrapped.
 
-While ARMED the server polls `capture(settings)` whenever the client asks the acquisition
-state or the waveform: None = not triggered yet; otherwise {channel: volts} (float arrays of
-settings.record_length samples, trigger at index settings.pre_trigger_samples), which the
-server quantises to int16 with each channel's range and keeps until the next :SINGle.
+Generic SCPI dialect (short form in capitals):
+    :SYSTem:ERRor? (<code>,"<text>"; 0,"No error"), :SYSTem:ERRor:COUNt?
+    :ACQuire:SRATe <hz> | ?, :ACQuire:POINts <n> | ?, :ACQuire:PRETrigger <n> | ? (samples)
+    :CHANnel<1-4>:RANGe <v> | ?       full scale: the channel reads -v .. +v volts
+    :TRIGger:SOURce CH<n>|EXT | ?, :TRIGger:LEVel <v> | ?, :TRIGger:SLOPe POS|NEG | ?
+    :SINGle, :ABORt, :ACQuire:STATe? (IDLE|ARMED|TRIGGERED)
+    :WAVeform:SOURce CH<n> | ?, :WAVeform:FORMat INT8|UINT8|INT16|UINT16|FLOAT32 | ?,
+    :WAVeform:BYTeorder LSBF|MSBF | ?
+    :WAVeform:PREamble?   <format>,<order>,<points>,<x_increment_s>,<trigger_index>,<y_scale_v>,<y_offset_v>
+    :WAVeform:DATA?       IEEE 488.2 definite-length block
 
 Faults (drivers/sim/faults.py): `visa-garbled-block` sends the waveform block with a corrupt
-length header (the payload follows, so the client's stream is out of step afterwards).
-A client that drops its connection (even mid-transfer) only ends its own handler thread.
+length header (the payload follows, so the client's stream is out of step afterwards);
+`no-trigger` (the world's) fires without a capture. A client that drops its connection (even
+mid-transfer) only ends its own handler thread.
 """
 
 from __future__ import annotations
 
 import copy
+import importlib
 import re
 import socket
 import socketserver
@@ -45,42 +59,60 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from hopkinson.drivers.ieee488_block import block_header
 from hopkinson.drivers.sim.faults import FaultSet
 
-IDENTITY = "Hopkinson-Sim,SIMDIG-2CH,SIM0001,1.0"
-CHANNELS = (1, 2)
-TRIGGER_SOURCES = ("CH1", "CH2", "EXT")
-TRIGGER_SLOPES = ("POS", "NEG")
-SAMPLE_RATE_LIMITS_HZ = (1e3, 1e9)
+CHANNELS = (1, 2, 3, 4)
+SAMPLE_RATE_LIMITS_HZ = (1e3, 1e10)
 RECORD_LENGTH_LIMITS = (16, 100_000_000)
-RANGE_LIMITS_V = (0.01, 50.0)
-INT16_FULL_SCALE = 32767
+RANGE_LIMITS_V = (0.001, 100.0)
 MAX_LINE_BYTES = 65536
+OPC_POLL_S = 0.002
+SIM_FORMATS = ("int8", "uint8", "int16", "uint16", "float32")
+
+# IEEE 488.2 standard event status register bits
+ESR_OPC, ESR_QYE, ESR_DDE, ESR_EXE, ESR_CME = 0x01, 0x04, 0x08, 0x10, 0x20
 
 
 @dataclass
 class AcquisitionSettings:
-    """The digitizer's acquisition settings as the instrument holds them.
+    """The acquisition settings as the instrument holds them (dialect-neutral).
 
-    ch_range_v: full scale per channel (the channel reads -range .. +range volts).
-    trigger_source: "CH1" | "CH2" | "EXT"; trigger_slope: "POS" | "NEG".
+    ch_range_v: full scale per channel number (the channel reads -range .. +range volts).
+    trigger_source: "CH1".."CH4" or "EXT"; trigger_slope: "POS" | "NEG".
     """
 
     sample_rate_hz: float = 100e6
     record_length: int = 1_000_000
     pre_trigger_samples: int = 100_000
-    ch_range_v: dict[int, float] = field(default_factory=lambda: {1: 1.0, 2: 10.0})
+    ch_range_v: dict[int, float] = field(default_factory=lambda: {1: 1.0, 2: 10.0, 3: 1.0, 4: 10.0})
     trigger_source: str = "CH2"
     trigger_level_v: float = 0.1
     trigger_slope: str = "POS"
+
+    def trigger_index(self, channels: dict[int, np.ndarray], first: int, last: int) -> int | None:
+        """The first sample in first..last where the source crosses the level with the slope
+        (the sample after the crossing), or None: no trigger."""
+        if not self.trigger_source.startswith("CH"):
+            return None  # nothing is connected to the external input of the simulated rig
+        signal = channels.get(int(self.trigger_source[2:]))
+        if signal is None:
+            return None
+        first = max(first, 1)
+        window = np.asarray(signal[first - 1:last + 1], dtype=float)
+        before, after = window[:-1], window[1:]
+        level = self.trigger_level_v
+        crossed = (before < level) & (after >= level) if self.trigger_slope == "POS" else \
+            (before > level) & (after <= level)
+        hits = np.flatnonzero(crossed)
+        return first + int(hits[0]) if hits.size else None
 
 
 CaptureFn = Callable[[AcquisitionSettings], "dict[int, np.ndarray] | None"]
 
 
-class _ScpiError(Exception):
-    """A SCPI error to queue: code and message as in IEEE 488.2 / SCPI-99."""
+class SimError(Exception):
+    """An error to report, numbered as in SCPI-99 (-1xx command, -2xx execution, -3xx device,
+    -4xx query); each dialect reports it its own way."""
 
     def __init__(self, code: int, message: str) -> None:
         super().__init__(message)
@@ -89,113 +121,383 @@ class _ScpiError(Exception):
 
 
 @dataclass
-class _Block:
-    """A binary block reply: sent raw (not joined with text replies)."""
+class Block:
+    """A binary block reply (sent as an IEEE 488.2 definite-length block)."""
 
-    payload: memoryview
+    payload: memoryview | bytes
+    prefix: str = ""  # response header text before the '#'
+    digits: int = 0  # length digits (0: as few as needed; 9 for a LeCroy DEF9 block)
+    lead: bytes = b""  # bytes of the block before `payload` (a descriptor), sent without a copy
+
+    @property
+    def length(self) -> int:
+        return len(self.lead) + len(self.payload)
 
 
-def _header_matches(node: str, pattern: str) -> bool:
-    """SCPI header node match: the short form (capitals of pattern) or the long form."""
-    short = "".join(c for c in pattern if c.isupper() or c.isdigit())
-    return node.upper() in (short.upper(), pattern.upper())
+@dataclass
+class Call:
+    """One message unit as a handler sees it."""
+
+    suffixes: tuple[int, ...]  # the numeric suffixes of the "<n>" nodes, in order
+    query: bool
+    arg: str
+    nodes: tuple[str, ...] = ()  # the matched patterns (for reply headers)
+    node_suffixes: tuple[int | None, ...] = ()  # aligned with nodes
+
+    @property
+    def suffix(self) -> int:
+        return self.suffixes[-1] if self.suffixes else 1
+
+    @property
+    def args(self) -> list[str]:
+        return [a.strip() for a in self.arg.split(",")] if self.arg else []
 
 
-class _Instrument:
-    """The instrument's state and command interpreter (shared by all connections)."""
+Reply = str | Block | None
+Handler = Callable[[Call], Reply]
+
+
+def block_bytes(block: Block) -> bytes:
+    """`<prefix>#<d><length><payload>` (IEEE 488.2 definite length, written here: the simulator
+    does not share the driver's framing code)."""
+    digits = str(block.length).zfill(block.digits).encode("ascii")
+    return block.prefix.encode("ascii") + b"#" + str(len(digits)).encode("ascii") + digits
+
+
+def split_units(message: str) -> list[str]:
+    """Message units at ';' outside "..." strings."""
+    units, current, quoted = [], [], False
+    for char in message:
+        if char == '"':
+            quoted = not quoted
+        if char == ";" and not quoted:
+            units.append("".join(current))
+            current = []
+        else:
+            current.append(char)
+    units.append("".join(current))
+    return [u.strip() for u in units if u.strip()]
+
+
+def _node_matches(node: str, pattern: str) -> tuple[bool, int | None]:
+    """Does a header node match a pattern ("SRATe", "CHANnel<n>", "VDIV|VOLT_DIV")? With the
+    node's numeric suffix for a "<n>" pattern."""
+    for alternative in pattern.split("|"):
+        numbered = alternative.endswith("<n>")
+        stem = alternative[:-3] if numbered else alternative
+        text, suffix = node, None
+        if numbered:
+            m = re.fullmatch(r"([A-Za-z_]*?)(\d*)", node)
+            if m is None:
+                continue
+            text, suffix = m.group(1), int(m.group(2)) if m.group(2) else 1
+        short = "".join(c for c in stem if c.isupper() or c.isdigit() or c == "_")
+        if text.upper() in (short.upper(), stem.upper()):
+            return True, suffix
+    return False, None
+
+
+def long_header(call: Call) -> str:
+    """The long form of a matched header, e.g. ":HORIZONTAL:MODE:SAMPLERATE" or ":CH1:SCALE"."""
+    parts = []
+    for pattern, suffix in zip(call.nodes, call.node_suffixes, strict=True):
+        first = pattern.split("|")[-1]
+        stem = first[:-3] if first.endswith("<n>") else first
+        parts.append(stem.upper() + ("" if suffix is None else str(suffix)))
+    return ":" + ":".join(parts)
+
+
+def quantise(volts: np.ndarray, range_v: float, sample_format: str) -> tuple[np.ndarray, float, float]:
+    """(codes, scale_v, zero_code): volts = (code - zero_code) * scale_v, clipped to the
+    format's rails (float32: to ±range_v), never wrapped."""
+    if sample_format == "float32":
+        return np.clip(volts, -range_v, range_v).astype(np.float32), 1.0, 0.0
+    info = np.iinfo(np.dtype(sample_format))
+    half = (int(info.max) - int(info.min)) // 2  # 127 or 32767 codes per range
+    zero = 0 if info.min < 0 else half + 1
+    scale = range_v / half
+    codes = np.clip(np.rint(volts / scale) + zero, info.min, info.max).astype(sample_format)
+    return codes, scale, float(zero)
+
+
+class SimDigitizer:
+    """A simulated digitizer's state, IEEE 488.2 core and acquisition (module docstring).
+
+    Dialects subclass it: `table()` lists their commands; `record_error` reports an error
+    their way; `identity` names them. Shared by all connections; `lock` guards the state.
+    """
+
+    identity = "Hopkinson-Sim,SIMDIG-4CH,SIM0001,1.0"
+    channel_names: dict[str, int] = {"CH1": 1, "CH2": 2, "CH3": 3, "CH4": 4}
 
     def __init__(self, capture: CaptureFn, faults: FaultSet) -> None:
         self._capture = capture
         self.faults = faults
         self.lock = threading.RLock()
+        self._table = self.table()
+        self.esr, self.ese, self.sre = 0, 0, 0  # status: kept by *RST, cleared by *CLS
+        self.errors: list[tuple[int, str]] = []
+        self.opc_armed = False
         self.reset()
 
+    # -- state ---------------------------------------------------------------------------
     def reset(self) -> None:
+        """*RST: settings to their defaults, acquisition stopped (status kept, as *RST does)."""
         with self.lock:
             self.settings = AcquisitionSettings()
             self.state = "IDLE"
-            self.codes: dict[int, np.ndarray] = {}
-            self.scale_v: dict[int, float] = {}
+            self.volts: dict[int, np.ndarray] = {}
+            self.acquisitions = 0  # completed since the last arm
+            self.sample_format, self.byte_order = "int16", "little"
             self.waveform_source = 1
-            self.errors: list[tuple[int, str]] = []
+            self._encoded: dict[tuple[int, str, str], tuple[bytes, float, float]] = {}
 
-    # -- acquisition -------------------------------------------------------------------
+    def table(self) -> list[tuple[tuple[str, ...], Handler]]:
+        """The dialect's commands: (header node patterns, handler)."""
+        return []
+
+    @staticmethod
+    def esr_bit(code: int) -> int:
+        """The standard event status bit of an error's class (-1xx command, -2xx execution, ...)."""
+        return {1: ESR_CME, 2: ESR_EXE, 3: ESR_DDE, 4: ESR_QYE}.get(abs(code) // 100, ESR_DDE)
+
+    def record_error(self, code: int, message: str) -> None:
+        """Report an error: set the event status bit of its class and queue it."""
+        self.esr |= self.esr_bit(code)
+        if len(self.errors) < 32:
+            self.errors.append((code, message.replace('"', "'")))
+
+    def pending(self) -> bool:
+        """An operation in progress (the armed acquisition): *OPC?, *OPC and *WAI wait for it."""
+        return self.state == "ARMED"
+
+    # -- acquisition ---------------------------------------------------------------------
+    def arm(self) -> None:
+        self.volts, self._encoded, self.state, self.acquisitions = {}, {}, "ARMED", 0
+
+    def stop(self) -> None:
+        self.state = "IDLE" if self.state == "ARMED" else self.state
+
     def poll_capture(self) -> None:
-        """While ARMED, ask the world whether the trigger came; quantise what it returns."""
+        """While ARMED, ask the world whether a triggered record is there."""
         if self.state != "ARMED":
             return
         try:
             volts = self._capture(copy.deepcopy(self.settings))
         except Exception as exc:  # the world failed: report it as the instrument would
-            raise _ScpiError(-240, f"Hardware error; simulated capture failed: {exc}") from None
+            raise SimError(-240, f"Hardware error; simulated capture failed: {exc}") from None
         if volts is None:
             return
         n = self.settings.record_length
-        codes: dict[int, np.ndarray] = {}
-        scales: dict[int, float] = {}
+        record = {}
         for ch in CHANNELS:
             data = np.asarray(volts.get(ch, np.zeros(n)), dtype=float)
             if data.shape != (n,):
-                raise _ScpiError(-240, f"simulated capture gave {data.shape} samples on CH{ch}, expected {n}")
-            scale = self.settings.ch_range_v[ch] / INT16_FULL_SCALE
-            q = np.clip(np.rint(data / scale), -INT16_FULL_SCALE - 1, INT16_FULL_SCALE)
-            codes[ch] = q.astype("<i2")
-            scales[ch] = scale
-        self.codes, self.scale_v, self.state = codes, scales, "TRIGGERED"
+                raise SimError(-240, f"simulated capture gave {data.shape} samples on channel {ch}, expected {n}")
+            record[ch] = data
+        self.volts, self._encoded, self.state = record, {}, "TRIGGERED"
+        self.acquisitions += 1
+        if self.opc_armed:
+            self.esr |= ESR_OPC
+            self.opc_armed = False
 
-    # -- interpreter ---------------------------------------------------------------------
-    def execute(self, message: str) -> list[str | _Block]:
-        """Run one message (units separated by ';'); return the query replies in order."""
-        replies: list[str | _Block] = []
-        with self.lock:
-            for unit in message.split(";"):
-                unit = unit.strip()
-                if not unit:
-                    continue
+    def encoded(self, channel: int) -> tuple[bytes, float, float] | None:
+        """(payload bytes, scale_v, zero_code) of a channel in the current transfer format."""
+        if channel not in self.volts:
+            return None
+        key = (channel, self.sample_format, self.byte_order)
+        if key not in self._encoded:
+            codes, scale, zero = quantise(self.volts[channel], self.settings.ch_range_v[channel], self.sample_format)
+            order = "<" if self.byte_order == "little" else ">"
+            self._encoded[key] = (codes.astype(codes.dtype.newbyteorder(order)).tobytes(), scale, zero)
+        return self._encoded[key]
+
+    # -- the interpreter -------------------------------------------------------------------
+    def execute(self, message: str, stopping: threading.Event) -> list[str | Block]:
+        """Run one message; the replies of its queries in order."""
+        replies: list[str | Block] = []
+        for unit in split_units(message):
+            if unit.upper() in ("*OPC?", "*WAI") and not self._wait_complete(stopping):
+                return replies  # the server stops: nothing more is answered
+            with self.lock:
                 try:
-                    reply = self._execute_unit(unit)
-                except _ScpiError as exc:
-                    self._queue_error(exc.code, f"{exc.message}; {unit}")
+                    self.poll_capture()  # the instrument acquires on its own, whatever is asked
+                    reply = self._execute_unit(unit, replies)
+                except SimError as exc:
+                    self.record_error(exc.code, f"{exc.message}; {unit}")
                     continue
-                if reply is not None:
-                    replies.append(reply)
+            if reply is not None:
+                replies.append(reply)
         return replies
 
-    def _queue_error(self, code: int, message: str) -> None:
-        if len(self.errors) < 32:
-            self.errors.append((code, message.replace('"', "'")))
+    def _wait_complete(self, stopping: threading.Event) -> bool:
+        """Hold until no operation is pending (polling the acquisition); False if stopping."""
+        while True:
+            with self.lock:
+                try:
+                    self.poll_capture()
+                except SimError as exc:
+                    self.record_error(exc.code, exc.message)
+                    self.state = "IDLE"
+                if not self.pending():
+                    return True
+            if stopping.wait(OPC_POLL_S):
+                return False
 
-    def _execute_unit(self, unit: str) -> str | _Block | None:
+    def _execute_unit(self, unit: str, replies: list[str | Block]) -> Reply:
         header, _, arg = unit.partition(" ")
         arg = arg.strip()
         query = header.endswith("?")
-        header = header.rstrip("?")
+        header = header.rstrip("?").lstrip(":")
         if header.startswith("*"):
-            return self._common(header.upper(), query)
-        nodes = header.lstrip(":").split(":")
-        for patterns, handler in self._table():
-            if len(patterns) == len(nodes):
-                suffix = self._match(nodes, patterns)
-                if suffix is not None:
-                    return handler(suffix, query, arg)
-        raise _ScpiError(-113, "Undefined header")
+            return self._common(header.upper(), query, arg, replies)
+        nodes = header.split(":")
+        for patterns, handler in self._table:
+            if len(patterns) != len(nodes):
+                continue
+            suffixes: list[int | None] = []
+            for node, pattern in zip(nodes, patterns, strict=True):
+                ok, suffix = _node_matches(node, pattern)
+                if not ok:
+                    break
+                suffixes.append(suffix)
+            else:
+                numbered = tuple(x for x in suffixes if x is not None)
+                return handler(Call(numbered, query, arg, patterns, tuple(suffixes)))
+        raise SimError(-113, "Undefined header")
+
+    def _common(self, header: str, query: bool, arg: str, replies: list[str | Block]) -> Reply:
+        if header == "*IDN" and query:
+            return self.identity
+        if header == "*RST" and not query:
+            self.reset()
+            return None
+        if header == "*CLS" and not query:
+            self.esr, self.errors, self.opc_armed = 0, [], False
+            self.clear_status()
+            return None
+        if header == "*ESR" and query:
+            value, self.esr = self.esr, 0
+            return str(value)
+        if header in ("*ESE", "*SRE"):
+            attr = header[1:].lower()
+            if query:
+                return str(getattr(self, attr))
+            setattr(self, attr, int(self.number(arg)) & 0xFF)
+            return None
+        if header == "*STB" and query:
+            return str(self.status_byte(bool(replies)))
+        if header == "*OPC":
+            if query:
+                return "1"  # execute() held it until nothing was pending
+            if self.pending():
+                self.opc_armed = True
+            else:
+                self.esr |= ESR_OPC
+            return None
+        if header == "*WAI" and not query:
+            return None  # execute() held the message until nothing was pending
+        if header == "*TST" and query:
+            return "0"
+        raise SimError(-113, "Undefined header")
+
+    def clear_status(self) -> None:
+        """*CLS of a dialect's own status registers (override)."""
+
+    def status_byte(self, message_available: bool) -> int:
+        """IEEE 488.2 status byte: bit 2 queue not empty, 4 MAV, 5 ESB, 6 MSS."""
+        stb = (0x04 if self.errors else 0) | (0x10 if message_available else 0) | (0x20 if self.esr & self.ese else 0)
+        return stb | (0x40 if stb & self.sre else 0)
+
+    # -- parameter helpers ---------------------------------------------------------------
+    @staticmethod
+    def number(arg: str) -> float:
+        """A numeric parameter (an optional unit suffix such as V, S or PCT is allowed)."""
+        if not arg:
+            raise SimError(-109, "Missing parameter")
+        m = re.fullmatch(r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z%]*)", arg.strip())
+        if m is None:
+            raise SimError(-104, "Data type error")
+        value = float(m.group(1))
+        if not np.isfinite(value):
+            raise SimError(-224, "Illegal parameter value")
+        return value
+
+    def integer(self, arg: str) -> int:
+        value = self.number(arg)
+        if value != int(value):
+            raise SimError(-224, "Illegal parameter value")
+        return int(value)
 
     @staticmethod
-    def _match(nodes: list[str], patterns: tuple[str, ...]) -> int | None:
-        """Match header nodes against patterns; return the numeric suffix (0 if none)."""
-        suffix = 0
-        for node, pattern in zip(nodes, patterns, strict=True):
-            if pattern.endswith("<n>"):
-                m = re.fullmatch(r"([A-Za-z]+)(\d*)", node)
-                if m is None or not _header_matches(m.group(1), pattern[:-3]):
-                    return None
-                suffix = int(m.group(2) or 1)
-            elif not _header_matches(node, pattern):
-                return None
-        return suffix
+    def choice(arg: str, choices: dict[str, str] | tuple[str, ...]) -> str:
+        """A keyword parameter: one of `choices` (or a key of the mapping, by any form)."""
+        if not arg:
+            raise SimError(-109, "Missing parameter")
+        options = choices if isinstance(choices, dict) else {c: c for c in choices}
+        for spelling, value in options.items():
+            ok, _ = _node_matches(arg.strip(), spelling)
+            if ok:
+                return value
+        raise SimError(-224, "Illegal parameter value")
 
-    def _table(self) -> list[tuple[tuple[str, ...], Callable[[int, bool, str], str | _Block | None]]]:
+    @staticmethod
+    def in_range(value: float, limits: tuple[float, float]) -> None:
+        if not limits[0] <= value <= limits[1]:
+            raise SimError(-222, "Data out of range")
+
+    def not_while_armed(self) -> None:
+        if self.state == "ARMED":
+            raise SimError(-221, "Settings conflict; acquisition armed")
+
+    def channel(self, number: int) -> int:
+        if number not in CHANNELS:
+            raise SimError(-114, "Header suffix out of range")
+        return number
+
+    # shared setters (each dialect converts its own units first)
+    def set_sample_rate(self, value: float) -> None:
+        self.in_range(value, SAMPLE_RATE_LIMITS_HZ)
+        self.not_while_armed()
+        self.settings.sample_rate_hz = value
+
+    def set_record_length(self, value: int) -> None:
+        self.in_range(value, RECORD_LENGTH_LIMITS)
+        self.not_while_armed()
+        self.settings.record_length = value
+        self.settings.pre_trigger_samples = min(self.settings.pre_trigger_samples, value - 1)
+
+    def set_pre_trigger(self, samples: int) -> None:
+        if not 0 <= samples < self.settings.record_length:
+            raise SimError(-221, "Settings conflict; pre-trigger must be below the record length")
+        self.not_while_armed()
+        self.settings.pre_trigger_samples = samples
+
+    def set_range(self, channel: int, range_v: float) -> None:
+        self.in_range(range_v, RANGE_LIMITS_V)
+        self.not_while_armed()
+        self.settings.ch_range_v[self.channel(channel)] = range_v
+
+    def set_trigger(self, *, source: str | None = None, level_v: float | None = None, slope: str | None = None) -> None:
+        self.not_while_armed()
+        if level_v is not None:
+            self.in_range(abs(level_v), (0.0, RANGE_LIMITS_V[1]))
+            self.settings.trigger_level_v = level_v
+        if source is not None:
+            self.settings.trigger_source = source
+        if slope is not None:
+            self.settings.trigger_slope = slope
+
+
+class GenericSimDigitizer(SimDigitizer):
+    """The generic SCPI dialect (module docstring)."""
+
+    _FORMATS = {"INT8": "int8", "UINT8": "uint8", "INT16": "int16", "UINT16": "uint16", "FLOAT32": "float32"}
+    _ORDERS = {"LSBF": "little", "MSBF": "big"}
+
+    def table(self) -> list[tuple[tuple[str, ...], Handler]]:
         return [
+            (("SYSTem", "ERRor", "COUNt"), self._error_count),
             (("SYSTem", "ERRor"), self._system_error),
             (("ACQuire", "SRATe"), self._sample_rate),
             (("ACQuire", "POINts"), self._points),
@@ -208,183 +510,136 @@ class _Instrument:
             (("SINGle",), self._single),
             (("ABORt",), self._abort),
             (("WAVeform", "SOURce"), self._waveform_source),
+            (("WAVeform", "FORMat"), self._format),
+            (("WAVeform", "BYTeorder"), self._byte_order),
             (("WAVeform", "PREamble"), self._preamble),
             (("WAVeform", "DATA"), self._data),
         ]
 
-    def _common(self, header: str, query: bool) -> str | None:
-        if header == "*IDN" and query:
-            return IDENTITY
-        if header == "*OPC" and query:
-            return "1"
-        if header == "*RST" and not query:
-            errors = self.errors
-            self.reset()
-            self.errors = errors
-            return None
-        if header == "*CLS" and not query:
-            self.errors.clear()
-            return None
-        raise _ScpiError(-113, "Undefined header")
-
-    # -- parameter helpers ---------------------------------------------------------------
-    @staticmethod
-    def _number(arg: str) -> float:
-        if not arg:
-            raise _ScpiError(-109, "Missing parameter")
-        try:
-            value = float(arg)
-        except ValueError:
-            raise _ScpiError(-104, "Data type error") from None
-        if not np.isfinite(value):
-            raise _ScpiError(-224, "Illegal parameter value")
-        return value
-
-    def _integer(self, arg: str) -> int:
-        value = self._number(arg)
-        if value != int(value):
-            raise _ScpiError(-224, "Illegal parameter value")
-        return int(value)
-
-    @staticmethod
-    def _choice(arg: str, choices: tuple[str, ...]) -> str:
-        if not arg:
-            raise _ScpiError(-109, "Missing parameter")
-        value = arg.upper()
-        if value not in choices:
-            raise _ScpiError(-224, "Illegal parameter value")
-        return value
-
-    @staticmethod
-    def _in_range(value: float, limits: tuple[float, float]) -> None:
-        if not limits[0] <= value <= limits[1]:
-            raise _ScpiError(-222, "Data out of range")
-
-    def _no_change_while_armed(self) -> None:
-        if self.state == "ARMED":
-            raise _ScpiError(-221, "Settings conflict; acquisition armed")
-
-    # -- handlers: (suffix, query, arg) -> reply -----------------------------------------
-    def _system_error(self, _s: int, query: bool, _a: str) -> str:
-        if not query:
-            raise _ScpiError(-113, "Undefined header")
+    def _system_error(self, c: Call) -> Reply:
+        if not c.query:
+            raise SimError(-113, "Undefined header")
         if not self.errors:
             return '0,"No error"'
         code, message = self.errors.pop(0)
         return f'{code},"{message}"'
 
-    def _sample_rate(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _error_count(self, c: Call) -> Reply:
+        if not c.query:
+            raise SimError(-113, "Undefined header")
+        return str(len(self.errors))
+
+    def _sample_rate(self, c: Call) -> Reply:
+        if c.query:
             return repr(float(self.settings.sample_rate_hz))
-        value = self._number(arg)
-        self._in_range(value, SAMPLE_RATE_LIMITS_HZ)
-        self._no_change_while_armed()
-        self.settings.sample_rate_hz = value
-        return None
+        return self.set_sample_rate(self.number(c.arg))
 
-    def _points(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _points(self, c: Call) -> Reply:
+        if c.query:
             return str(self.settings.record_length)
-        value = self._integer(arg)
-        self._in_range(value, RECORD_LENGTH_LIMITS)
-        self._no_change_while_armed()
-        self.settings.record_length = value
-        self.settings.pre_trigger_samples = min(self.settings.pre_trigger_samples, value - 1)
-        return None
+        return self.set_record_length(self.integer(c.arg))
 
-    def _pretrigger(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _pretrigger(self, c: Call) -> Reply:
+        if c.query:
             return str(self.settings.pre_trigger_samples)
-        value = self._integer(arg)
-        if not 0 <= value < self.settings.record_length:
-            raise _ScpiError(-221, "Settings conflict; pre-trigger must be below the record length")
-        self._no_change_while_armed()
-        self.settings.pre_trigger_samples = value
-        return None
+        return self.set_pre_trigger(self.integer(c.arg))
 
-    def _state(self, _s: int, query: bool, _a: str) -> str:
-        if not query:
-            raise _ScpiError(-113, "Undefined header")
+    def _state(self, c: Call) -> Reply:
+        if not c.query:
+            raise SimError(-113, "Undefined header")
         self.poll_capture()
         return self.state
 
-    def _range(self, channel: int, query: bool, arg: str) -> str | None:
-        if channel not in CHANNELS:
-            raise _ScpiError(-114, "Header suffix out of range")
-        if query:
+    def _range(self, c: Call) -> Reply:
+        channel = self.channel(c.suffix)
+        if c.query:
             return repr(float(self.settings.ch_range_v[channel]))
-        value = self._number(arg)
-        self._in_range(value, RANGE_LIMITS_V)
-        self._no_change_while_armed()
-        self.settings.ch_range_v[channel] = value
-        return None
+        return self.set_range(channel, self.number(c.arg))
 
-    def _trigger_source(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _trigger_source(self, c: Call) -> Reply:
+        if c.query:
             return self.settings.trigger_source
-        value = self._choice(arg, TRIGGER_SOURCES)
-        self._no_change_while_armed()
-        self.settings.trigger_source = value
-        return None
+        return self.set_trigger(source=self.choice(c.arg, (*self.channel_names, "EXT")))
 
-    def _trigger_level(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _trigger_level(self, c: Call) -> Reply:
+        if c.query:
             return repr(float(self.settings.trigger_level_v))
-        value = self._number(arg)
-        self._in_range(abs(value), (0.0, RANGE_LIMITS_V[1]))
-        self._no_change_while_armed()
-        self.settings.trigger_level_v = value
-        return None
+        return self.set_trigger(level_v=self.number(c.arg))
 
-    def _trigger_slope(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _trigger_slope(self, c: Call) -> Reply:
+        if c.query:
             return self.settings.trigger_slope
-        value = self._choice(arg, TRIGGER_SLOPES)
-        self._no_change_while_armed()
-        self.settings.trigger_slope = value
+        return self.set_trigger(slope=self.choice(c.arg, ("POS", "NEG")))
+
+    def _single(self, c: Call) -> Reply:
+        if c.query:
+            raise SimError(-113, "Undefined header")
+        return self.arm()
+
+    def _abort(self, c: Call) -> Reply:
+        if c.query:
+            raise SimError(-113, "Undefined header")
+        self.volts, self._encoded, self.state = {}, {}, "IDLE"
         return None
 
-    def _single(self, _s: int, query: bool, _a: str) -> None:
-        if query:
-            raise _ScpiError(-113, "Undefined header")
-        self.codes, self.scale_v, self.state = {}, {}, "ARMED"
-        return None
-
-    def _abort(self, _s: int, query: bool, _a: str) -> None:
-        if query:
-            raise _ScpiError(-113, "Undefined header")
-        self.codes, self.scale_v, self.state = {}, {}, "IDLE"
-        return None
-
-    def _waveform_source(self, _s: int, query: bool, arg: str) -> str | None:
-        if query:
+    def _waveform_source(self, c: Call) -> Reply:
+        if c.query:
             return f"CH{self.waveform_source}"
-        self.waveform_source = int(self._choice(arg, ("CH1", "CH2"))[2:])
+        self.waveform_source = self.channel_names[self.choice(c.arg, tuple(self.channel_names))]
         return None
 
-    def _preamble(self, _s: int, query: bool, _a: str) -> str:
-        if not query:
-            raise _ScpiError(-113, "Undefined header")
+    def _format(self, c: Call) -> Reply:
+        if c.query:
+            return {v: k for k, v in self._FORMATS.items()}[self.sample_format]
+        self.sample_format = self.choice(c.arg, self._FORMATS)
+        return None
+
+    def _byte_order(self, c: Call) -> Reply:
+        if c.query:
+            return {v: k for k, v in self._ORDERS.items()}[self.byte_order]
+        self.byte_order = self.choice(c.arg, self._ORDERS)
+        return None
+
+    def _preamble(self, c: Call) -> Reply:
+        if not c.query:
+            raise SimError(-113, "Undefined header")
         self.poll_capture()
         ch = self.waveform_source
-        codes = self.codes.get(ch)
-        points = 0 if codes is None else codes.size
-        scale = self.scale_v.get(ch, self.settings.ch_range_v[ch] / INT16_FULL_SCALE)
-        x_increment_s = 1.0 / self.settings.sample_rate_hz
-        return (
-            f"INT16,LSBF,{points},{x_increment_s!r},{self.settings.pre_trigger_samples},"
-            f"{scale!r},0.0"
-        )
+        fmt = {v: k for k, v in self._FORMATS.items()}[self.sample_format]
+        order = {v: k for k, v in self._ORDERS.items()}[self.byte_order]
+        encoded = self.encoded(ch)
+        points = 0 if encoded is None else self.settings.record_length
+        scale, zero = (encoded[1], encoded[2]) if encoded else (self.settings.ch_range_v[ch] / 32767, 0.0)
+        return (f"{fmt},{order},{points},{1.0 / self.settings.sample_rate_hz!r},"
+                f"{self.settings.pre_trigger_samples},{scale!r},{-zero * scale!r}")
 
-    def _data(self, _s: int, query: bool, _a: str) -> _Block:
-        if not query:
-            raise _ScpiError(-113, "Undefined header")
+    def _data(self, c: Call) -> Reply:
+        if not c.query:
+            raise SimError(-113, "Undefined header")
         self.poll_capture()
-        codes = self.codes.get(self.waveform_source)
-        if codes is None:
-            self._queue_error(-230, "Data corrupt or stale; no acquisition")
-            return _Block(memoryview(b""))
-        return _Block(memoryview(codes).cast("B"))
+        encoded = self.encoded(self.waveform_source)
+        if encoded is None:
+            raise SimError(-230, "Data corrupt or stale; no acquisition")
+        return Block(encoded[0])
+
+
+# -- the socket server ---------------------------------------------------------------------------
+
+SIM_DIALECTS = {
+    "generic": "hopkinson.drivers.sim.scpi_digitizer:GenericSimDigitizer",
+    "keysight": "hopkinson.drivers.sim.digitizer_keysight:KeysightSimDigitizer",
+    "tektronix": "hopkinson.drivers.sim.digitizer_tektronix:TektronixSimDigitizer",
+    "lecroy": "hopkinson.drivers.sim.digitizer_lecroy:LeCroySimDigitizer",
+}
+
+
+def sim_instrument_class(dialect: str) -> type[SimDigitizer]:
+    """The simulated instrument of a dialect name (ValueError naming the known ones)."""
+    target = SIM_DIALECTS.get(dialect)
+    if target is None:
+        raise ValueError(f"no simulated digitizer speaks {dialect!r} (known: {', '.join(SIM_DIALECTS)})")
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)
 
 
 class _Handler(socketserver.BaseRequestHandler):
@@ -404,9 +659,9 @@ class _Handler(socketserver.BaseRequestHandler):
                     return
                 buffer.extend(data)
                 while (end := buffer.find(b"\n")) >= 0:
-                    line = bytes(buffer[:end]).decode("ascii", "replace")
+                    line = bytes(buffer[:end]).decode("ascii", "replace").rstrip("\r")
                     del buffer[: end + 1]
-                    self._answer(sock, self.server.instrument.execute(line))
+                    self._answer(sock, self.server.instrument.execute(line, self.server.stopping))
                 if len(buffer) > MAX_LINE_BYTES:  # garbage without newline: drop it
                     buffer.clear()
         except OSError:
@@ -414,21 +669,26 @@ class _Handler(socketserver.BaseRequestHandler):
         finally:
             self.server.track(sock, add=False)
 
-    def _answer(self, sock: socket.socket, replies: list[str | _Block]) -> None:
+    def _answer(self, sock: socket.socket, replies: list[str | Block]) -> None:
         if not replies:
             return
-        text = [r for r in replies if isinstance(r, str)]
-        blocks = [r for r in replies if isinstance(r, _Block)]
-        if text:
-            sock.sendall((";".join(text) + "\n").encode("ascii"))
-        for block in blocks:
-            header = block_header(len(block.payload))
+        text: list[bytes] = []
+        for i, reply in enumerate(replies):
+            if i:
+                text.append(b";")
+            if isinstance(reply, str):
+                text.append(reply.encode("ascii"))
+                continue
+            header = block_bytes(reply)
             if self.server.instrument.faults.active("visa-garbled-block"):
                 # Corrupt length header: the digit count survives, the length digits do not.
-                header = header[:2] + b"?\x0a" + b"X" * max(len(header) - 4, 0)
-            sock.sendall(header)
-            sock.sendall(block.payload)  # sent from the array's memory: no 20 MB copy
-            sock.sendall(b"\n")
+                cut = len(reply.prefix) + 2
+                header = header[:cut] + b"?\x0a" + b"X" * max(len(header) - cut - 2, 0)
+            sock.sendall(b"".join(text) + header + reply.lead)
+            text = []
+            sock.sendall(reply.payload)  # sent from the record's memory: no 20 MB copy
+        text.append(b"\n")
+        sock.sendall(b"".join(text))
 
 
 class _ThreadingServer(socketserver.ThreadingTCPServer):
@@ -436,11 +696,11 @@ class _ThreadingServer(socketserver.ThreadingTCPServer):
     daemon_threads = False  # stop() joins every handler thread
     block_on_close = True
 
-    def __init__(self, address: tuple[str, int], instrument: _Instrument) -> None:
+    def __init__(self, address: tuple[str, int], instrument: SimDigitizer) -> None:
         self.instrument = instrument
+        self.stopping = threading.Event()
         self._clients: set[socket.socket] = set()
         self._clients_lock = threading.Lock()
-        self._stopping = False
         super().__init__(address, _Handler)
 
     def track(self, sock: socket.socket, add: bool) -> None:
@@ -449,14 +709,15 @@ class _ThreadingServer(socketserver.ThreadingTCPServer):
                 self._clients.discard(sock)
                 return
             self._clients.add(sock)
-            stopping = self._stopping
+            stopping = self.stopping.is_set()
         if stopping:  # accepted just as stop() began: end it like the others
             sock.shutdown(socket.SHUT_RDWR)
 
     def drop_clients(self, stopping: bool = False) -> int:
         """Shut every client connection down (unblocks their handler threads)."""
         with self._clients_lock:
-            self._stopping = self._stopping or stopping
+            if stopping:
+                self.stopping.set()
             clients = list(self._clients)
         for sock in clients:
             try:
@@ -467,7 +728,7 @@ class _ThreadingServer(socketserver.ThreadingTCPServer):
 
 
 class SimDigitizerServer:
-    """The simulated digitizer's SCPI socket server on loopback.
+    """The simulated digitizer's socket server on loopback, in one dialect.
 
     capture(settings) -> {channel: volts} | None is polled while the instrument is armed.
     port=0 picks a free port; `port` and `resource` are valid after start().
@@ -479,11 +740,13 @@ class SimDigitizerServer:
         faults: FaultSet,
         host: str = "127.0.0.1",
         port: int = 0,
+        dialect: str = "generic",
     ) -> None:
         self.host = host
         self.port = port
         self.faults = faults
-        self._instrument = _Instrument(capture, faults)
+        self.dialect = dialect
+        self._instrument = sim_instrument_class(dialect)(capture, faults)
         self._server: _ThreadingServer | None = None
         self._thread: threading.Thread | None = None
 

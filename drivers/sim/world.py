@@ -25,9 +25,10 @@ pulse of the projectile's width δ (No. 3: 38.6 µs; wider for No. 1 and 2) and 
 π·Δv/(2δ); then the object flies off at constant speed. The hardware interlock chain of the
 controller keeps the fire valve shut while the door is open or the e-stop is tripped.
 If the digitizer is armed at that moment, the next `capture(settings)` returns the
-two channels (trigger source, level and slope are not modelled: an armed acquisition always
-triggers at the start of the pulse, which sits at settings.pre_trigger_samples): PM beat (drivers/sim/doppler_beat.pm_beat) and amplifier output (the true
-accelerometer model with the amplifier's gain, low-pass, offset and noise). The truth of
+two channels around the digitizer's own trigger (a real crossing of its level, with its slope,
+on its source; none, and the shot passes unrecorded): PM beat (drivers/sim/doppler_beat.pm_beat)
+and amplifier output (the true accelerometer model with the amplifier's gain, low-pass, offset
+and noise). The truth of
 the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
 `launch_listeners` is called with it at each launch (a witness such as a fire log).
 
@@ -584,8 +585,12 @@ class World:
         """The digitizer's view: None until a shot fired while armed, then its two channels.
 
         `settings` has sample_rate_hz, record_length and pre_trigger_samples (the simulated
-        digitizer's AcquisitionSettings); the pulse starts at the trigger index. A shot is
-        delivered once.
+        digitizer's AcquisitionSettings). Without a `trigger_index` method the pulse starts at
+        the trigger index. With one (the simulated digitizer triggers on a real crossing), the
+        world serves two records' length with the pulse half a record after the pre-trigger,
+        and `settings.trigger_index(channels, first, last)` picks the record around the first
+        crossing in first..last, or returns None: then the shot passes unrecorded (truth
+        "capture": {"triggered": false}). A shot is delivered once.
         """
         with self._lock:
             if self.faults.active("no-trigger") or self._pending is None:
@@ -594,7 +599,9 @@ class World:
         fs = float(settings.sample_rate_hz)
         n = int(settings.record_length)
         pre = int(settings.pre_trigger_samples)
-        time_s = (np.arange(n) - pre) / fs
+        locate = getattr(settings, "trigger_index", None)
+        lead = n // 2 if callable(locate) else 0  # served before and after: the trigger may fall there
+        time_s = (np.arange(n + 2 * lead) - pre - lead) / fs
         rng = np.random.default_rng([self.params.seed, shot.number])
         velocity = _half_sine_velocity_m_s(time_s, shot.width_s, shot.peak_m_s2)
         sig = self.params.signals
@@ -602,11 +609,22 @@ class World:
                           amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
                           fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
         response = self._response_v(shot, time_s, fs, rng)
+        first = 0
+        if callable(locate):
+            k = locate({1: doppler, 2: response}, pre, pre + 2 * lead)
+            if k is None:
+                with self._lock:
+                    if self.last_shot_truth is not None and self.last_shot_truth["shot_number"] == shot.number:
+                        self.last_shot_truth["capture"] = {"triggered": False}
+                return None
+            first = k - pre
+            time_s, velocity = time_s[first:first + n], velocity[first:first + n]
+            doppler, response = doppler[first:first + n], response[first:first + n]
         with self._lock:
             if self.last_shot_truth is not None and self.last_shot_truth["shot_number"] == shot.number:
                 self.last_shot_truth["capture"] = {
-                    "sample_rate_hz": fs, "record_length": n, "pre_trigger_samples": pre,
-                    "pulse_start_index": pre,
+                    "triggered": True, "sample_rate_hz": fs, "record_length": n, "pre_trigger_samples": pre,
+                    "pulse_start_index": pre + lead - first,
                 }
                 self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot)
             if np.any(np.abs(response) >= self.params.amplifier.output_limit_v):

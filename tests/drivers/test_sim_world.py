@@ -303,6 +303,10 @@ def test_fire_over_modbus_is_captured_by_the_digitizer(rig: SimulatedRig, clock:
     truth = rig.world.last_shot_truth
     assert truth["shot_number"] == 2 and truth["capture"]["record_length"] == 100_000
     assert beat.volts().size == response.volts().size == 100_000
-    assert beat.trigger_index == truth["capture"]["pulse_start_index"] == 10_000
+    # the digitizer triggered where the response crossed its level (0.1 V, rising), shortly
+    # after the pulse began
+    assert beat.trigger_index == response.trigger_index == 10_000
+    assert response.volts()[9_999] < 0.1 <= response.volts()[10_000]
+    assert 0 < 10_000 - truth["capture"]["pulse_start_index"] < 0.5 * truth["pulse_width_s"] * 100e6
     peak_v = truth["amplifier_gain"] * truth["sensitivity_v_per_m_s2"] * truth["peak_acceleration_m_s2"]
     assert 0.9 * peak_v < np.max(response.volts()) < 2.0 * peak_v  # resonance overshoot stays below 2x

@@ -1,0 +1,151 @@
+"""Keysight InfiniiVision/Infiniium-style oscilloscopes as the rig's digitizer.
+
+Commands (Keysight programmer's guides; short forms in capitals):
+    :ACQuire:SRATe <rate>, :ACQuire:POINts <n>        sample rate and memory depth (Infiniium-style)
+    :TIMebase:REFerence LEFT, :TIMebase:POSition <s>  the trigger sits <s> after the left edge when
+                                                      <s> is negative: pre-trigger = −position·rate
+    :CHANnel<n>:RANGe <v>                             the FULL vertical span (8 divisions): a ±10 V
+                                                      channel is RANGe 20
+    :TRIGger:MODE EDGE, :TRIGger:EDGE:SOURce CHANnel<n>|EXTernal, :TRIGger:EDGE:LEVel <v>,
+    :TRIGger:EDGE:SLOPe POSitive|NEGative
+    :SINGle (arm one acquisition), :STOP, :RSTate? (RUN|STOP|SING), :TER? (trigger event
+    register: 1 once after a trigger, cleared by reading)
+    :WAVeform:SOURce CHANnel<n>, :WAVeform:FORMat BYTE|WORD, :WAVeform:UNSigned 0|1,
+    :WAVeform:BYTeorder LSBFirst|MSBFirst, :WAVeform:POINts:MODE RAW, :WAVeform:DATA? (block)
+    :WAVeform:PREamble? -> format (0 BYTE, 1 WORD, 4 ASCii), type, points, count, xincrement,
+                           xorigin, xreference, yincrement, yorigin, yreference
+                           time = (i − xreference)·xincrement + xorigin
+                           volts = (code − yreference)·yincrement + yorigin
+    errors: :SYSTem:ERRor? -> +0,"No error"
+
+State: :RSTate? says SING while the single acquisition waits and STOP once done (or stopped);
+:TER? tells the two apart. Because reading :TER? clears it, the dialect latches a trigger it
+has seen until the next :SINGle or :STOP.
+"""
+
+from __future__ import annotations
+
+import re
+
+from hopkinson.drivers.digitizer_settings import DigitizerSettings, pre_trigger_samples
+from hopkinson.drivers.digitizer_waveform import Waveform, sample_dtype
+from hopkinson.drivers.scpi_dialect import (
+    ReplyFormatError,
+    ScpiErrorQueueDialect,
+    ScpiLink,
+    TransferFormat,
+    check_preamble,
+)
+
+_FORMATS = {"int8": ("BYTE", 0), "uint8": ("BYTE", 1), "int16": ("WORD", 0), "uint16": ("WORD", 1)}
+_ORDERS = {"little": "LSBFirst", "big": "MSBFirst"}
+_SLOPES = {"POS": "POSitive", "NEG": "NEGative"}
+
+
+class KeysightDialect(ScpiErrorQueueDialect):
+    """Keysight-style commands and replies (module docstring)."""
+
+    name = "keysight"
+    channel_names = ("CHAN1", "CHAN2", "CHAN3", "CHAN4")
+    external_trigger = "EXT"
+    sample_formats = tuple(_FORMATS)
+
+    def __init__(self, transfer: TransferFormat | None = None) -> None:
+        super().__init__(transfer)
+        self._triggered = False  # a :TER? of 1 seen since the last :SINGle/:STOP
+
+    def _canonical_channel(self, text: str) -> str | None:
+        match = re.fullmatch(r"(?:CH|CHAN|CHANNEL)?([1-9])", text)
+        return f"CHAN{match.group(1)}" if match else text
+
+    def _source(self, name: str) -> str:
+        return "EXTernal" if name == self.external_trigger else f"CHANnel{self.channel_number(name):d}"
+
+    def prepare(self, link: ScpiLink) -> None:
+        word, unsigned = _FORMATS[self.transfer.sample_format]
+        self.command(link, ":WAVeform:POINts:MODE RAW", f":WAVeform:FORMat {word}",
+                     f":WAVeform:UNSigned {unsigned:d}", f":WAVeform:BYTeorder {_ORDERS[self.transfer.byte_order]}")
+
+    def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
+        position_s = -settings.pre_trigger_samples / settings.sample_rate_hz
+        units = [f":ACQuire:SRATe {settings.sample_rate_hz:.6E}", f":ACQuire:POINts {settings.record_length:d}",
+                 ":TIMebase:REFerence LEFT", f":TIMebase:POSition {position_s:.9E}"]
+        units += [f":CHANnel{self.channel_number(ch):d}:RANGe {2.0 * float(r):.6E}"
+                  for ch, r in settings.ranges_v.items()]
+        units += [":TRIGger:MODE EDGE", f":TRIGger:EDGE:SOURce {self._source(settings.trigger_source)}",
+                  f":TRIGger:EDGE:LEVel {float(settings.trigger_level_v):.6E}",
+                  f":TRIGger:EDGE:SLOPe {_SLOPES[settings.trigger_slope]}"]
+        self.command(link, *units)
+
+    def read_settings(self, link: ScpiLink, context: DigitizerSettings) -> DigitizerSettings:
+        channels = context.channels
+        units = [":ACQuire:SRATe?", ":ACQuire:POINts?", ":TIMebase:REFerence?", ":TIMebase:POSition?"]
+        units += [f":CHANnel{self.channel_number(ch):d}:RANGe?" for ch in channels]
+        units += [":TRIGger:EDGE:SOURce?", ":TRIGger:EDGE:LEVel?", ":TRIGger:EDGE:SLOPe?"]
+        command = self.join(*units)
+        fields = self.query_fields(link, units)
+        rate = self.number(command, fields[0])
+        points = self.integer(command, fields[1])
+        if fields[2].upper() != "LEFT":
+            raise ReplyFormatError(command, f"the timebase reference is {fields[2]!r}, not LEFT: the pre-trigger "
+                                            "cannot be read from the position", self.join(*fields))
+        pre = pre_trigger_samples(max(0.0, -self.number(command, fields[3]) * rate / points), points)
+        n = len(channels)
+        spans = [self.number(command, f) for f in fields[4:4 + n]]
+        source = fields[4 + n].upper()
+        source = self.external_trigger if source.startswith("EXT") else self.channel_name(source)
+        slope = {"POS": "POS", "NEG": "NEG"}.get(fields[6 + n].upper()[:3], fields[6 + n].upper())
+        return DigitizerSettings(
+            sample_rate_hz=rate, record_length=points, pre_trigger_samples=pre,
+            ranges_v={ch: span / 2.0 for ch, span in zip(channels, spans, strict=True)},  # span -> ±range
+            trigger_source=source, trigger_level_v=self.number(command, fields[5 + n]), trigger_slope=slope,
+        )
+
+    def arm(self, link: ScpiLink) -> None:
+        self._triggered = False
+        self.command(link, ":SINGle")
+
+    def abort(self, link: ScpiLink) -> None:
+        self._triggered = False
+        self.command(link, ":STOP")
+
+    def state(self, link: ScpiLink) -> str:
+        units = [":RSTate?", ":TER?"]
+        command = self.join(*units)
+        run_state, event = self.query_fields(link, units)
+        if self.integer(command, event) == 1:
+            self._triggered = True
+        run_state = run_state.upper()
+        if run_state in ("SING", "RUN"):
+            return "ARMED"
+        if run_state == "STOP":
+            return "TRIGGERED" if self._triggered else "IDLE"
+        raise ReplyFormatError(command, f"unknown run state {run_state!r}", self.join(run_state, event))
+
+    def fetch(self, link: ScpiLink, channel: str, context: DigitizerSettings) -> Waveform:
+        units = [f":WAVeform:SOURce CHANnel{self.channel_number(channel):d}", ":WAVeform:PREamble?",
+                 ":WAVeform:UNSigned?", ":WAVeform:BYTeorder?"]
+        command = self.join(*units)
+        preamble, unsigned, order = self.query_fields(link, units, count=3)
+        reply = self.join(preamble, unsigned, order)
+        f = [x.strip() for x in preamble.split(",")]
+        if len(f) < 10:
+            raise ReplyFormatError(command, f"preamble has {len(f)} fields, expected 10", reply)
+        fmt_code, points = self.integer(command, f[0], reply), self.integer(command, f[2], reply)
+        x_inc, x_origin, x_ref = (self.number(command, v, reply) for v in f[4:7])
+        y_inc, y_origin, y_ref = (self.number(command, v, reply) for v in f[7:10])
+        signed = {"0": True, "1": False}.get(unsigned.strip())
+        byte_order = {"LSBF": "little", "MSBF": "big"}.get(order.strip().upper()[:4])
+        if fmt_code not in (0, 1) or signed is None or byte_order is None:
+            raise ReplyFormatError(command, f"unsupported waveform format (format {fmt_code}, unsigned "
+                                            f"{unsigned!r}, byte order {order!r}): BYTE or WORD binary only", reply)
+        sample_format = ("int" if signed else "uint") + ("8" if fmt_code == 0 else "16")
+        offset_v = y_origin - y_ref * y_inc
+        check_preamble(command, reply, points=points, interval_s=x_inc, scale_v=y_inc, offset_v=offset_v)
+        if points == 0:
+            raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
+        dtype = sample_dtype(sample_format, byte_order)
+        _, payload = link.query_block(":WAVeform:DATA?", self.block_limit(context, points, dtype.itemsize))
+        return self.waveform(":WAVeform:DATA?", channel, payload, points=points, dtype=dtype, scale_v=y_inc,
+                             offset_v=offset_v, sample_interval_s=x_inc,
+                             trigger_index=int(round(x_ref - x_origin / x_inc)))
