@@ -18,7 +18,8 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import remove_input_delay
 from hopkinson.analysis.key_figures import Figure, KeyFigures
-from hopkinson.analysis.resample import resample_to_rate
+from hopkinson.analysis.resample import resample_to_rate, shift_samples
+from hopkinson.analysis.response import model_output
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 
 G_M_S2 = 9.80665  # standard gravity: accelerations are also shown in g
@@ -207,19 +208,43 @@ def truth_comparison(entry: ShotEntry) -> dict[str, float] | None:
     }
 
 
+@dataclass(frozen=True)
+class PreparedShot:
+    """A shot's reference and response as its identification fitted them (see `prepared`)."""
+
+    time_s: np.ndarray
+    reference: np.ndarray  # u: baseline removed
+    response: np.ndarray  # y: baseline removed (legacy results: also the fitted offset, delay removed)
+    windowed: bool  # the identification's fitted window (results with `window_start_s`)
+
+    def model_response(self, analysis: ShotAnalysis) -> np.ndarray:
+        """ŷ of `analysis`' model on this shot's reference, with that model's own input delay:
+        fractional (shifted in, as the identification simulates it) or, for legacy results
+        whose channels were prepared with the delay removed, none."""
+        if not self.windowed:
+            return model_output(analysis.model, self.reference)
+        delay = float(analysis.model.delay_samples or 0.0)
+        u = shift_samples(self.reference, delay) if delay else self.reference
+        return model_output(analysis.model, u)
+
+
 def model_delay_samples(analysis: ShotAnalysis) -> int:
-    """The integer input delay the identification removed before fitting the model."""
+    """The integer input delay a legacy identification removed before fitting the model."""
     ident = identification_dict(analysis)
     return int(round(float(ident.get("delay_samples", analysis.model.delay_samples) or 0.0)))
 
 
-def prepared_channels(analysis: ShotAnalysis, delay_samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(u, y): the shot's reference and response as its identification fitted them.
+def prepared(analysis: ShotAnalysis, legacy_delay_samples: int | None = None) -> PreparedShot:
+    """The shot's channels as its identification fitted them: the record at the model's rate,
+    each channel's lead-in baseline removed (the values the identification stored) and, when
+    the results name it, only the fitted window (`window_start_s`, `window_samples`); there the
+    model's response is simulated from rest at the window's start with the model's fractional
+    delay, as the identification does, so a shot's own fit % comes out as it reported it (to
+    the drift line it may also have removed, which the results do not store).
 
-    The record at the model's rate, each channel's lead-in baseline and the response offset
-    fitted with the model subtracted (the values the identification stored), an input delay removed: y(k) = response(k + d), d = the shot's
-    own delay unless `delay_samples` is given. A model is its (b, a) together with the delay it
-    was fitted with, so another shot's model is tried with that model's delay.
+    Legacy results (no window): the response offset fitted with the model is also removed and
+    the integer input delay taken out of the response, y(k) = response(k + d), d = the shot's
+    own delay unless `legacy_delay_samples` (another shot's model is tried with its delay).
     """
     record = analysis.record
     if record is None:
@@ -229,9 +254,14 @@ def prepared_channels(analysis: ShotAnalysis, delay_samples: int | None = None) 
         record = resample_to_rate(record, 1.0 / dt)
     pre = identification_dict(analysis).get("preprocessing") or {}
     u = np.asarray(record.reference, dtype=float) - float(pre.get("reference_baseline", 0.0) or 0.0)
-    # The response's lead-in baseline, and the constant offset the identification fitted with
-    # the model (a property of this shot's data, not of the model).
-    y = (np.asarray(record.response, dtype=float) - float(pre.get("response_baseline", 0.0) or 0.0)
-         - float(pre.get("response_offset_fitted", 0.0) or 0.0))
-    d = model_delay_samples(analysis) if delay_samples is None else int(delay_samples)
-    return remove_input_delay(u, y, d)
+    y = np.asarray(record.response, dtype=float) - float(pre.get("response_baseline", 0.0) or 0.0)
+    t = record.time_s
+    if pre.get("window_start_s") is not None and pre.get("window_samples"):
+        i0 = max(0, int(round((float(pre["window_start_s"]) - record.start_time_s) / dt)))
+        i1 = min(u.size, i0 + int(pre["window_samples"]))
+        return PreparedShot(t[i0:i1], u[i0:i1], y[i0:i1], True)
+    # The constant offset the identification fitted with the model (a property of this shot's data).
+    y = y - float(pre.get("response_offset_fitted", 0.0) or 0.0)
+    d = model_delay_samples(analysis) if legacy_delay_samples is None else int(legacy_delay_samples)
+    u, y = remove_input_delay(u, y, d)
+    return PreparedShot(t[: u.size], u, y, False)

@@ -16,7 +16,6 @@ from hopkinson.analysis.excitation import amplitude_spectrum, pulse_width, pulse
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import (
     frequency_response,
-    model_output,
     nyquist_hz,
     response_times_samples,
 )
@@ -27,7 +26,7 @@ from hopkinson.reports.data import (
     excitation_dict,
     identification_dict,
     model_delay_samples,
-    prepared_channels,
+    prepared,
 )
 from hopkinson.reports.layout import plot_page, table_in_axes, wrap_chars, wrap_to_width
 from hopkinson.reports.tables import compensation_rows, dcm_rows, fmt, pole_rows
@@ -53,15 +52,17 @@ def excitation_page(entry: ShotEntry) -> Figure:
 
     rec = a.record
     if rec is not None:
-        u, y = prepared_channels(a)
-        d = model_delay_samples(a)
-        t_us = (np.arange(u.size) * rec.sample_interval_s + rec.start_time_s) * 1e6
-        y_hat = model_output(a.model, u)
+        shot = prepared(a)
+        u, y, y_hat = shot.reference, shot.response, shot.model_response(a)
+        delay = float(a.model.delay_samples or 0.0) if shot.windowed else float(model_delay_samples(a))
+        t_us = shot.time_s * 1e6
         ax_t.plot(t_us, u / G_M_S2, color="0.2", lw=1.2, label="reference (laser interferometer)")
         ax_t.plot(t_us, y / G_M_S2, color="tab:blue", lw=1.0,
-                  label=f"accelerometer response (shifted by its delay, {d} samples)")
+                  label=("accelerometer response" if shot.windowed else
+                         f"accelerometer response (shifted by its delay, {delay:.0f} samples)"))
         ax_t.plot(t_us, y_hat / G_M_S2, color="tab:red", lw=1.0, ls="--",
-                  label=f"model response (fit {fmt(ident.get('fit_percent'), digits=4)} %)")
+                  label=f"model response (fit {fmt(ident.get('fit_percent'), digits=4)} %"
+                        + (f", input delay {delay:.2f} samples)" if shot.windowed else ")"))
         width = float(exc.get("pulse_width_s") or 0.0)
         t_peak = float(exc.get("peak_time_s") or 0.0)
         if width > 0:

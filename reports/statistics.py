@@ -22,14 +22,13 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import fit_percent
 from hopkinson.analysis.key_figures import Figure, KeyFigures
-from hopkinson.analysis.response import model_output
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.reports.data import (
     QUANTITIES,
     ShotEntry,
     figures_of_merit,
     model_delay_samples,
-    prepared_channels,
+    prepared,
 )
 
 
@@ -46,7 +45,8 @@ def spread(values: Iterable[float | None]) -> dict[str, float | int | None]:
 
 
 def cross_validation(analyses: Sequence[ShotAnalysis]) -> np.ndarray:
-    """Fit % of model i (with its delay) on shot j's record: matrix [i, j]; NaN where it cannot be computed."""
+    """Fit % of model i (with its own delay) on shot j's prepared channels (data.prepared): matrix
+    [i, j]; NaN where it cannot be computed."""
     n = len(analyses)
     out = np.full((n, n), np.nan)
     for i, a in enumerate(analyses):
@@ -55,8 +55,8 @@ def cross_validation(analyses: Sequence[ShotAnalysis]) -> np.ndarray:
             if not math.isclose(a.model.sample_interval_s, b.model.sample_interval_s, rel_tol=1e-6):
                 continue
             try:
-                u, y = prepared_channels(b, d)
-                out[i, j] = fit_percent(y, model_output(a.model, u))
+                shot = prepared(b, legacy_delay_samples=d)
+                out[i, j] = fit_percent(shot.response, shot.model_response(a))
             except AnalysisError:
                 pass
     return out

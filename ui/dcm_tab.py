@@ -159,6 +159,11 @@ class DcmTab(QWidget):
         self.compensated_fbsd = {k: QLabel("—") for k in LEVEL_KEYS}
         self.widening = {k: QLabel("—") for k in LEVEL_KEYS}
         self.rise_label = QLabel("—")
+        self.noise_label = QLabel("—")
+        self.noise_label.setWordWrap(True)
+        self.noise_label.setToolTip("noise gain: RMS amplification of white noise at the analysis rate; band limit: "
+                                    "the low-pass at the top of what the shot vouches for; latency: removed when "
+                                    "compensating (`hopkinson compensate`, the plot on the right)")
         self.poles_label = QLabel("—")
         self.poles_label.setWordWrap(True)
         self.poles_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
@@ -201,6 +206,8 @@ class DcmTab(QWidget):
         controls.addLayout(figures)
         controls.addWidget(QLabel("Step response rise time (10–90 %):"))
         controls.addWidget(self.rise_label)
+        controls.addWidget(QLabel("Noise gain, band limit, latency:"))
+        controls.addWidget(self.noise_label)
         controls.addSpacing(4)
         controls.addWidget(QLabel("DCM poles:"))
         controls.addWidget(self.poles_label)
@@ -379,6 +386,13 @@ class DcmTab(QWidget):
         self.rise_label.setText(f"{rt['uncompensated'] * dt_us:.1f} µs → {rt['compensated'] * dt_us:.1f} µs{verdict}; "
                                 f"±5 % settling {st['uncompensated'] * dt_us:.0f} µs → {st['compensated'] * dt_us:.0f} µs")
         self.poles_label.setText(", ".join(format_complex(p) for p in d.dcm.poles))
+        figures = rep["dcm"]
+        noise, limit = figures.get("noise_gain"), figures.get("noise_gain_limit")
+        band, latency = figures.get("band_limit_hz"), figures.get("latency_s")
+        self.noise_label.setText(
+            ("—" if noise is None else f"×{noise:.3g}" + (f" (limit ×{limit:.3g})" if limit else ""))
+            + "; " + ("no band limit" if band is None else f"≤ {band / KILO:.1f} kHz")
+            + ("" if latency is None else f"; {latency * 1e6:.1f} µs"))
         self.mag_plot.show_curves(d.frequency_hz, d.magnitude, d.compensated_magnitude, rep["compensated_fbsd_hz"])
         self.step_model_curve.setData(d.step_time_s, d.step_model)
         self.step_comp_curve.setData(d.step_time_s, d.step_compensated)

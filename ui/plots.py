@@ -335,18 +335,20 @@ class ResultsStrip(QFrame):
     FIELDS = (
         ("fbsd_5", "FBSD ±5 %"),
         ("fbsd_10", "FBSD ±10 %"),
+        ("resonance", "Resonance"),
         ("comp_5", "DCM ±5 %"),
         ("comp_10", "DCM ±10 %"),
-        ("model", "Model"),
-        ("resonance", "Resonance"),
         ("damping", "Damping ζ"),
-        ("pulse", "Pulse"),
+        ("model", "Model"),
         ("sensitivity", "Sensitivity"),
         ("shock", "Shock sens."),
-        ("check", "DCM check"),
+        ("pulse", "Pulse"),
+        ("check_rms", "DCM RMS error"),
+        ("check_peak", "DCM peak error"),
         ("band_limit", "DCM band"),
+        ("noise_gain", "DCM noise gain"),
     )
-    COLUMNS = 4
+    COLUMNS = 3
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -414,7 +416,7 @@ class ResultsStrip(QFrame):
                   "main mode: the lowest supported complex pole pair; "
                   + figure_tooltip(kf.natural_frequency_hz, KILO, "kHz"))
         self._set("damping", format_figure(kf.damping_ratio, decimals=3), figure_tooltip(kf.damping_ratio))
-        per = "× nominal" if kf.response_unit == "m/s^2" else f"{kf.response_unit}/(m/s²)"
+        per = "× nominal" if kf.response_unit == "m/s^2" else "V/(m/s²)" if kf.response_unit == "V" else ""
         self._set("sensitivity", format_figure(kf.sensitivity, unit=per, decimals=4),
                   "DC gain of the model; " + figure_tooltip(kf.sensitivity, unit=per))
         self._set("shock", format_figure(kf.shock_sensitivity, unit=per, decimals=4),
@@ -432,23 +434,15 @@ class ResultsStrip(QFrame):
         self.warnings.setVisible(bool(warnings))
 
     def _show_check(self, check: CompensationCheck) -> None:
-        parts = []
-        if check.rms_error_pct is not None:
-            before, after = check.rms_error_pct
-            parts.append(f"RMS {_pct(before)} → {_pct(after)}")
-        if check.peak_error_pct is not None:
-            before, after = check.peak_error_pct
-            parts.append(f"peak {_pct(before)} → {_pct(after)}")
-        self._set("check", ", ".join(parts) or "—",
-                  "error over the pulse relative to its peak: without → with the DCM, on this shot itself")
-        band = []
-        if check.band_limit_hz is not None:
-            band.append(f"≤ {check.band_limit_hz / KILO:.1f} kHz")
+        tip = "error over the pulse relative to its peak: without → with the DCM, on this shot itself"
+        for key, pair in (("check_rms", check.rms_error_pct), ("check_peak", check.peak_error_pct)):
+            self._set(key, "—" if pair is None else f"{_pct(pair[0])} → {_pct(pair[1])}", tip)
+        self._set("band_limit", "—" if check.band_limit_hz is None else f"≤ {check.band_limit_hz / KILO:.1f} kHz",
+                  "band limit of the compensation (low-pass): the top of what the shot vouches for")
         if check.noise_gain is not None:
-            band.append(f"noise ×{check.noise_gain:.2g}")
-        self._set("band_limit", ", ".join(band) or "—",
-                  "band limit of the compensation (low-pass) and its noise gain (RMS)"
-                  + (f"; limit ×{check.noise_gain_limit:.3g}" if check.noise_gain_limit else ""))
+            self._set("noise_gain", f"×{check.noise_gain:.3g}" + (f" (limit ×{check.noise_gain_limit:.3g})"
+                                                                  if check.noise_gain_limit else ""),
+                      "RMS amplification of white noise by the DCM at the analysis rate")
         if check.recommended is False:
             self.verdict.setText("DCM NOT RECOMMENDED: " + (check.not_recommended_reason or
                                                              "compensation does not improve this shot"))

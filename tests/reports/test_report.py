@@ -29,6 +29,8 @@ from hopkinson.reports.writers import write_pngs, write_report
 from matplotlib.lines import Line2D
 from matplotlib.text import Text
 
+from tests.reports.contract import contract_results
+
 DT = 1e-6
 SENSOR_A = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))
 SENSOR_B = AccelerometerTruth(modes=(Mode(40_000.0, 0.03),))
@@ -50,42 +52,6 @@ def entry(label: str, analysis: ShotAnalysis | None, truth: AccelerometerTruth |
     return ShotEntry(label, {"Accelerometer": "SIM-ACC, serial T1", "Fired (UTC)": "2026-01-01T00:00:00Z"},
                      analysis, error=error, state="ANALYSED" if analysis else "ANALYSIS_FAILED",
                      truth_modes=modes, nominal_sensitivity_v_per_m_s2=2e-7, pressure_bar=2.0, results=results)
-
-
-def contract_figure(value: float, u_rel: float) -> dict:
-    """{"value", "u", "interval"} as issue 10's JSON contract has it (a normal 95 % interval)."""
-    u = abs(value) * u_rel
-    return {"value": value, "u": u, "interval": [value - 1.96 * u, value + 1.96 * u]}
-
-
-BUDGET = [{"source": "response channel noise", "u_rel": 0.0021}, {"source": "grating pitch", "u_rel": 0.0005},
-          {"source": "amplifier gain", "u_rel": 0.0030}, {"source": "order choice", "u_rel": 0.0008}]
-
-
-def contract_results(analysis: ShotAnalysis, u_rel: float = 0.004, recommended: bool = True) -> dict:
-    """The shot's results dict with the uncertainty (issue 10) and the compensation check (issue 11)
-    shaped as the JSON contracts (CONTRACTS.md) have them, for the display of both."""
-    results = analysis.to_dict()
-    kf = KeyFigures.from_results(results)
-    results["uncertainty"] = {
-        "method": "monte-carlo", "draws": 200, "coverage_probability": 0.95,
-        "dc_gain": contract_figure(kf.sensitivity.value, u_rel),
-        "main_mode": {"natural_frequency_hz": contract_figure(kf.natural_frequency_hz.value, u_rel),
-                      "damping_ratio": contract_figure(kf.damping_ratio.value, 10 * u_rel)},
-        "fbsd_hz": {k: contract_figure(kf.fbsd_hz[k].value, 2 * u_rel) for k in ("5", "10")},
-        "budget": BUDGET,
-    }
-    results["dcm"].update({
-        "recommended": recommended,
-        "not_recommended_reason": None if recommended else "the compensated RMS error (6.1 %) exceeds the "
-                                                           "uncompensated one (4.9 %): noise gain too high",
-        "target_widening": 3.0, "reached_widening": 2.6, "widening_note": "the noise-gain limit stops r at 12",
-        "noise_gain": 3.2, "noise_gain_limit": 10.0, "band_limit_hz": 40_000.0, "latency_s": 4.2e-6,
-        "check": {"rms_error_pct": {"uncompensated": 4.95, "compensated": 1.8 if recommended else 6.1},
-                  "peak_error_pct": {"uncompensated": 60.7, "compensated": -0.7}},
-        "compensated_peak": contract_figure(2.94e5, 0.006),
-    })
-    return results
 
 
 @pytest.fixture(scope="module")
@@ -113,9 +79,10 @@ def test_spread_closed_form() -> None:
 def test_cross_validation_of_known_systems(analyses: dict[str, ShotAnalysis]) -> None:
     order = ["a1", "a2", "b1"]
     m = cross_validation([analyses[k] for k in order])
-    # The diagonal is each shot's own fit, as the identification reported it.
+    # The diagonal is each shot's own fit, as the identification reported it (to the drift line the
+    # identification also removes from its window, which its results do not store: 0.01 points).
     for i, k in enumerate(order):
-        assert m[i, i] == pytest.approx(analyses[k].identification.fit_percent, abs=1e-9)
+        assert m[i, i] == pytest.approx(analyses[k].identification.fit_percent, abs=0.01)
         assert m[i, i] > 99.0
     # Same sensor at another shock level: the model predicts the other shot as well as its own.
     assert m[0, 1] > 99.0 and m[1, 0] > 99.0

@@ -32,6 +32,17 @@ def true_fbsd_hz(truth: dict, level: float) -> float:
         f"{round(level * 100)}"].frequency_hz
 
 
+def expected_khz(value_hz: float, results: dict, level: str) -> str:
+    """The strip's FBSD text, computed here: "5.91 kHz", or value ± U to U's two significant
+    digits when the results carry the uncertainty (issue 10's JSON contract)."""
+    u = ((results.get("uncertainty") or {}).get("fbsd_hz") or {}).get(level)
+    if not u:
+        return f"{value_hz / 1e3:.2f} kHz"
+    big = (u["interval"][1] - u["interval"][0]) / 2 / 1e3
+    decimals = max(0, 1 - math.floor(math.log10(big)))
+    return f"{value_hz / 1e3:.{decimals}f} ± {big:.{decimals}f} kHz"
+
+
 def fire_one_shot(qtbot, panel, confirm: bool = True):
     """Press ARM, wait for FIRE to light, press FIRE (confirmation answered), wait for the end."""
     w = panel.window
@@ -97,8 +108,8 @@ def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_d
     fbsd = shot.results["fbsd_hz"]
     comp = shot.results["dcm"]["compensated_fbsd_hz"]
     strip = plots.strip.values
-    assert strip["fbsd_5"].text() == f"{fbsd['5'] / 1e3:.2f} kHz"
-    assert strip["fbsd_10"].text() == f"{fbsd['10'] / 1e3:.2f} kHz"
+    for key in ("5", "10"):  # value ± U (two significant digits of U) once the shot carries its uncertainty
+        assert strip[f"fbsd_{key}"].text() == expected_khz(fbsd[key], shot.results, key)
     assert strip["comp_5"].text() == f"{comp['5'] / 1e3:.2f} kHz"
     for key in ("5", "10"):
         line = plots.fbsd_lines[key]
@@ -121,6 +132,8 @@ def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_d
     save_shot(w, artifacts_dir / "panel-dcm.png")
     w.tabs.setCurrentWidget(w.log_tab)
     save_shot(w, artifacts_dir / "panel-log.png")
+    w.tabs.setCurrentWidget(w.campaign_tab)
+    save_shot(w, artifacts_dir / "panel-campaign-idle.png")
 
     # the Log tab can be saved: JSON lines, one object per row, oldest first, with full UTC times
     w.log_tab.save(tmp_path / "panel.log.jsonl")
@@ -184,3 +197,37 @@ def test_export_report_of_the_shot_shown(qtbot, make_panel, tmp_path):
     shot = read_shot(w.last_view.path, load_raw=False)
     assert w.last_view.path.stem in html  # the report of this shot, with its analysed FBSD
     assert f"{shot.results['fbsd_hz']['5'] / 1e3:.3f} kHz" in html
+
+
+def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel, tmp_path, artifacts_dir):
+    """A shot whose results carry the uncertainty and the DCM's check (the JSON contracts of
+    issues 10 and 11): the strip shows value ± U and a DCM not recommended with its reason."""
+    from hopkinson.analysis.shot_analysis import AnalysisParams, analyse_record
+    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+
+    from tests.reports.contract import contract_results
+    from tests.reports.test_report import SENSOR_A, simulated_record
+
+    record = simulated_record(SENSOR_A, 30_000, 1)
+    results = contract_results(analyse_record(record, AnalysisParams(max_order=6)), recommended=False)
+    n = record.n_samples
+    codes = (1000 * np.sin(np.arange(n) / 7)).astype(np.int16)
+    path = write_raw_shot(tmp_path / "u.h5", RawShot({"doppler": RawChannel(codes, 1e-4, 0.0),
+                                                      "response": RawChannel(codes, 1e-3, 0.0)}, 1e-6, 200),
+                          ShotMeta("t", "SIM-ACC", "U1", 2.0, 3))
+    add_analysis(path, results, record=record)
+    w = make_panel(simulate=False, connect=False, config=unreachable_config(tmp_path)).window
+    with qtbot.waitSignal(w.shot_view_shown, timeout=20_000):
+        w.load_shot(path)
+    strip = w.plots.strip
+    u = results["uncertainty"]["main_mode"]["natural_frequency_hz"]
+    big = 1.96 * u["u"] / 1e3
+    decimals = max(0, 1 - math.floor(math.log10(big)))
+    assert strip.values["resonance"].text() == f"{u['value'] / 1e3:.{decimals}f} ± {big:.{decimals}f} kHz"
+    assert strip.values["fbsd_5"].text() == expected_khz(results["fbsd_hz"]["5"], results, "5")
+    assert strip.verdict.text().startswith("DCM NOT RECOMMENDED: the compensated RMS error (6.1 %)")
+    assert strip.values["check_rms"].text() == "4.95 % → 6.1 %"
+    save_shot(w, artifacts_dir / "panel-shot-uncertainty.png")
+    w.tabs.setCurrentWidget(w.dcm_tab)
+    save_shot(w, artifacts_dir / "panel-dcm-uncertainty.png")
+
