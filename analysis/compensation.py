@@ -16,11 +16,14 @@ model was fitted to this shot): it catches a compensation that makes the shot wo
 not prove one that makes it better on other records.
 
 Compensated peak uncertainty: each Monte Carlo model draw H_i (analysis.uncertainty) is a
-sensor the shot cannot rule out. Had it been the sensor, the compensated peak read with the
-nominal DCM and DC gain S would be off by q_i = peak(G·H_i·u) / (S·peak(u)) (u the
-reference); the true peak is then (â + e_i)/q_i, e_i the white response noise after the DCM
-(noise gain × response noise ÷ S, drawn normally). The value stays â; u and the 95 %
-interval (2.5 and 97.5 percentiles, GUM-S1) come from the draws.
+sensor the shot cannot rule out. Read with the nominal DCM G and DC gain S, a pulse u gives
+the compensated peak q_i·peak(u), q_i = peak(G·H_i·u) / (S·peak(u)) (u the reference); with
+the nominal model it is q_0. Had the sensor been H_i, the reading â would stand for a peak
+q_0/q_i times the nominal model's: the draws (â + e_i)·q_0/q_i, e_i the white response noise
+after the DCM (noise gain × response noise ÷ S, drawn normally), give u and the 95 % interval
+(2.5 and 97.5 percentiles, GUM-S1); the value is â, the compensated record's peak. What the
+compensation itself leaves of the true peak on this shot (q_0 − 1) is the check's peak error,
+reported beside it, not folded into the interval.
 """
 
 from __future__ import annotations
@@ -159,7 +162,7 @@ def recommendation(design: DcmDesign, check: CompensationCheck | None) -> tuple[
     return reason is None, reason
 
 
-def compensated_peak(record: Record, dcm: DCM, gain: float, channel_delay_samples: float,
+def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float,
                      draws: Sequence[DiscreteModel], response_noise_rms: float | None,
                      seed: int | None = None) -> dict[str, Any] | None:
     """The compensated peak (m/s²) of the shot with the uncertainty of the model draws
@@ -168,6 +171,7 @@ def compensated_peak(record: Record, dcm: DCM, gain: float, channel_delay_sample
         return None
     _same_rate(record, dcm)
     p = _pulse_of(record)
+    gain = model.dc_gain
     reference = np.asarray(record.reference, dtype=float)
     sign = 1.0 if p.pulse.peak_m_s2 > 0 else -1.0
     peak_ref = sign * float(np.max(sign * reference[p.window]))
@@ -175,16 +179,17 @@ def compensated_peak(record: Record, dcm: DCM, gain: float, channel_delay_sample
     value = sign * float(np.max(sign * measured[p.window]))
     # a draw's simulated response has no channel delay: remove only the rest of the latency
     simulated_dcm = replace(dcm, latency_samples=dcm.latency_s / dcm.sample_interval_s - channel_delay_samples)
-    ratios = np.array([
-        sign * float(np.max(sign * apply(simulated_dcm, model_output(m, reference), align=True)[p.window]))
-        / (gain * peak_ref)
-        for m in draws
-    ])
-    if not np.all(np.isfinite(ratios)) or np.any(ratios * np.sign(value) <= 0):
+    def ratio(m: DiscreteModel) -> float:
+        out = apply(simulated_dcm, model_output(m, reference), align=True)[p.window]
+        return sign * float(np.max(sign * out)) / (gain * peak_ref)
+
+    nominal = ratio(model)
+    ratios = np.array([ratio(m) for m in draws])
+    if not np.all(np.isfinite(ratios)) or np.any(ratios <= 0) or not nominal > 0:
         raise AnalysisError("compensated peak: a model draw gives no peak of the reference's polarity")
     rng = np.random.default_rng(seed)
     noise = (dcm.noise_gain() * response_noise_rms / abs(gain)) if response_noise_rms else 0.0
-    truths = (value + noise * rng.standard_normal(ratios.size)) / ratios
+    truths = (value + noise * rng.standard_normal(ratios.size)) * nominal / ratios
     tail = 100 * (1 - COVERAGE) / 2
     lo, hi = np.percentile(truths, [tail, 100 - tail])
     return {"value": value, "u": float(np.std(truths, ddof=1)), "interval": [float(lo), float(hi)]}
@@ -250,6 +255,23 @@ class ShotCompensation:
         }
 
 
+    def with_draws(self, identification: Any, record: Record, draws: Sequence[DiscreteModel],
+                   seed: int | None = None) -> ShotCompensation:
+        """The same, with the compensated peak's interval from the uncertainty's model draws
+        (UncertaintyResult.model_draws); a failure is a warning, never a failed shot."""
+        if not draws:
+            return self
+        model = identification.model
+        rec, _ = to_rate(record, 1.0 / model.sample_interval_s)
+        noise = (getattr(identification, "noise", None) or {}).get("response_rms")
+        try:
+            peak = compensated_peak(rec, model, self.design.dcm, float(identification.delay_samples),
+                                    draws, noise, seed)
+        except AnalysisError as exc:
+            return replace(self, warnings=(*self.warnings, f"DCM: no interval for the compensated peak ({exc})"))
+        return replace(self, compensated_peak=peak)
+
+
 def compensate_shot(identification: Any, record: Record, options: DcmOptions,
                     draws: Sequence[DiscreteModel] = (), seed: int | None = None) -> ShotCompensation:
     """Design the DCM the shot supports, check it on the shot, judge it, and (with model draws)
@@ -261,7 +283,7 @@ def compensate_shot(identification: Any, record: Record, options: DcmOptions,
     warnings: list[str] = []
     if design.widening_note and options.ratio is None:
         warnings.append(f"DCM: the band widening {design.widening_note}")
-    check = peak = None
+    check = None
     try:
         check = check_compensation(rec, model, design.dcm, support.channel_delay_samples)
     except AnalysisError as exc:
@@ -269,10 +291,5 @@ def compensate_shot(identification: Any, record: Record, options: DcmOptions,
     recommended, reason = recommendation(design, check)
     if recommended is False:
         warnings.append(f"DCM not recommended for this shot: {reason}")
-    if draws:
-        noise = (getattr(identification, "noise", None) or {}).get("response_rms")
-        try:
-            peak = compensated_peak(rec, design.dcm, model.dc_gain, support.channel_delay_samples, draws, noise, seed)
-        except AnalysisError as exc:
-            warnings.append(f"DCM: no interval for the compensated peak ({exc})")
-    return ShotCompensation(design, check, recommended, reason, peak, tuple(warnings))
+    result = ShotCompensation(design, check, recommended, reason, None, tuple(warnings))
+    return result.with_draws(identification, record, draws, seed)

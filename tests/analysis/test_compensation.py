@@ -80,7 +80,14 @@ def test_default_compensation_improves_the_shot_and_predicts_the_true_band(truth
     # the second mode, beyond the excitation, is not compensated
     f_cancelled = np.abs(np.log(result.design.dcm.zeros)) / (2 * np.pi * DT)
     assert np.all(f_cancelled < 0.6 * truth.modes[1].natural_frequency_hz)
+    # the uncertainty's model draws give the compensated peak its interval (here: the nominal
+    # model only, so the interval is the response noise through the DCM)
+    peak = result.with_draws(ident, record, [ident.model] * 60, seed=1).to_dict()["compensated_peak"]
+    assert peak["value"] == pytest.approx(4e5, rel=0.12) and peak["interval"][0] < peak["value"] < peak["interval"][1]
+    assert 0 < peak["u"] < 0.01 * abs(peak["value"])
+    assert peak["value"] == pytest.approx(check.compensated_peak_m_s2)
     out = result.to_dict()
+    assert out["compensated_peak"] is None  # without draws
     for key in ("recommended", "not_recommended_reason", "target_widening", "reached_widening", "widening_note",
                 "noise_gain", "noise_gain_limit", "band_limit_hz", "latency_s", "check", "compensated_peak"):
         assert key in out
@@ -114,18 +121,21 @@ def test_nothing_supported_means_nothing_compensated_and_not_recommended():
 
 def test_compensated_peak_interval_from_model_draws():
     """Draws that differ only in sensitivity (relative standard deviation 1 %): the compensated
-    peak's relative u is 1 % and its 95 % interval holds the true peak."""
+    peak's relative u is 1 %, and its 95 % interval, once the compensation's own residual on the
+    shot (the check's peak error) is taken out, holds the true peak."""
     truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), sensitivity=2e-3)
     record = shot(truth, 38.6e-6, seed=9, snr_db=60.0)
     model = true_model(truth)
     design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 38_000.0), channel_delay_samples=0.37))
     rng = np.random.default_rng(2)
     draws = [DiscreteModel(DT, model.a, model.b * (1 + 0.01 * rng.standard_normal())) for _ in range(300)]
-    peak = compensated_peak(record, design.dcm, model.dc_gain, 0.37, draws, None, seed=1)
+    peak = compensated_peak(record, model, design.dcm, 0.37, draws, None, seed=1)
     assert peak["u"] / abs(peak["value"]) == pytest.approx(0.01, rel=0.15)
     lo, hi = peak["interval"]
-    assert lo < 4e5 < hi and (hi - lo) / abs(peak["value"]) == pytest.approx(2 * 1.96 * 0.01, rel=0.2)
-    assert compensated_peak(record, design.dcm, model.dc_gain, 0.37, [], None) is None
+    assert lo < peak["value"] < hi and (hi - lo) / abs(peak["value"]) == pytest.approx(2 * 1.96 * 0.01, rel=0.2)
+    residual = 1 + check_compensation(record, model, design.dcm, 0.37).peak_error_pct[1] / 100
+    assert lo / residual < 4e5 < hi / residual
+    assert compensated_peak(record, model, design.dcm, 0.37, [], None) is None
 
 
 def test_records_are_brought_to_the_dcm_rate_either_way():
