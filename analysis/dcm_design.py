@@ -109,7 +109,9 @@ class ShotSupport:
     def from_dict(cls, data: dict[str, Any], model: DiscreteModel) -> ShotSupport:
         """From a model JSON (`hopkinson identify -o`) or a results dict's identification."""
         modes = data.get("modes")
-        valid = isinstance(modes, list) and all(isinstance(m, dict) and "pole" in m for m in modes)
+        valid = isinstance(modes, list) and all(isinstance(m, dict) and _is_pair(m.get("pole")) for m in modes)
+        if modes is not None and not valid:
+            raise AnalysisError("'modes' must be a list of objects with a 'pole': [re, im] of numbers")
         band = data.get("supported_band_hz")
         pair = (float(band[0]), float(band[1])) if isinstance(band, (list, tuple)) and len(band) == 2 else None
         return cls(
@@ -420,32 +422,40 @@ def _automatic_ratio(model: DiscreteModel, choice: PoleChoice, limit: BandLimit,
                        "poles cannot be made faster at this sample rate")
 
     def evaluate(r: float) -> tuple[float, float]:
-        dcm = _assemble(model, choice, limit, r, options, 0.0)
-        return compensated_fbsd_edges(model, dcm, (0.05,))["5"].frequency_hz, dcm.noise_gain()
+        """(compensated ±5 % edge, noise gain) at r; NaN noise for a design that cannot be
+        evaluated (new poles too slow to integrate, say): skipped."""
+        try:
+            dcm = _assemble(model, choice, limit, r, options, 0.0)
+            return compensated_fbsd_edges(model, dcm, (0.05,))["5"].frequency_hz, dcm.noise_gain()
+        except AnalysisError:
+            return 0.0, math.nan
 
-    grid = np.geomspace(1.0, r_max, _SEARCH_POINTS)
+    limit_ng = options.noise_gain_limit
+    rs: list[float] = []  # evaluable ratios below the target, within the noise limit
     bands: list[float] = []
     noisy_from: float | None = None
-    for r in grid:
-        band, noise = evaluate(float(r))
-        if noise > options.noise_gain_limit:
-            noisy_from = float(r)
+    for r in map(float, np.geomspace(1.0, r_max, _SEARCH_POINTS)):
+        band, noise = evaluate(r)
+        if math.isnan(noise):
+            continue
+        if noise > limit_ng:
+            noisy_from = r
             break
-        bands.append(band)
         if band >= target:
-            lo = float(grid[len(bands) - 2]) if len(bands) > 1 else None
-            return (float(r) if lo is None else _bisect(lambda x: evaluate(x)[0] >= target, lo, float(r))), None
-    feasible = grid[: len(bands)]
+            return (r if not rs else _bisect(lambda x: evaluate(x)[0] >= target, rs[-1], r)), None
+        rs.append(r)
+        bands.append(band)
     if noisy_from is not None:
-        if not bands:
-            return float(grid[0]), (f"even r = 1 has a noise gain above the limit {options.noise_gain_limit:g}; "
-                                    "the DCM is designed at r = 1")
-        edge = _bisect(lambda x: evaluate(x)[1] > options.noise_gain_limit, float(feasible[-1]), noisy_from)
-        lo_edge = edge / 1.0005
-        feasible = np.append(feasible, lo_edge)
-        bands.append(evaluate(lo_edge)[0])
+        if not rs:
+            return noisy_from, (f"even the smallest ratio tried (r = {noisy_from:.3g}) has a noise gain above the "
+                                f"limit {limit_ng:g}; the DCM is designed there")
+        edge = _bisect(lambda x: evaluate(x)[1] > limit_ng, rs[-1], noisy_from) / 1.0005
+        rs.append(edge)
+        bands.append(evaluate(edge)[0])
+    if not rs:
+        raise AnalysisError("DCM: no response-time ratio gives a design that can be evaluated (a pole too slow?)")
     best = max(bands)
-    r = float(feasible[int(np.flatnonzero(np.asarray(bands) >= 0.99 * best)[0])])
+    r = rs[int(np.flatnonzero(np.asarray(bands) >= 0.99 * best)[0])]
     return r, _why_short(best, target, model_fbsd5_hz, limit, noisy_from is not None, options)
 
 
@@ -500,6 +510,10 @@ def design_report(poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, sour
         result["settling_time_samples"] = {"uncompensated": st_before, "compensated": st_after}
         result["settling_time_ratio"] = steps.settling_time_ratio()
     return result
+
+
+def _is_pair(value: Any) -> bool:
+    return isinstance(value, (list, tuple)) and len(value) == 2 and all(_number(v) is not None for v in value)
 
 
 def _number(value: Any) -> float | None:

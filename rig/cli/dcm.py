@@ -60,8 +60,8 @@ def _load_support(path: str) -> tuple[DiscreteModel, ShotSupport]:
         model = DiscreteModel.from_dict(data.get("model", data), source=str(path))
         ident = data.get("identification", data)
         support = ShotSupport.from_dict(ident if isinstance(ident, dict) else {}, model)
-    except AnalysisError:
-        raise
+    except AnalysisError as exc:
+        raise AnalysisError(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None
     except (TypeError, ValueError, IndexError, KeyError) as exc:
         raise AnalysisError(f"{path}: not a valid model file ({exc})") from None
     if model.a.ndim != 1 or model.b.ndim != 1:
@@ -243,8 +243,13 @@ def run_dcm(args: argparse.Namespace) -> int:
     recommended, reason = recommendation(design, check)
     result["dcm"].update({"recommended": recommended, "not_recommended_reason": reason,
                           "check": None if check is None else check.to_dict()})
+    try:
+        text = json.dumps(result, indent=2, allow_nan=False) + "\n"
+    except ValueError:
+        raise AnalysisError(f"{source}: the DCM's figures are not all finite numbers (a pole on the unit circle?); "
+                            "nothing written") from None
     if output is not None:
-        atomic_write(output, json.dumps(result, indent=2, allow_nan=False) + "\n")
+        atomic_write(output, text)
         result["output"] = str(output)
     if args.json:
         emit_json(result)
