@@ -8,13 +8,18 @@
 
 How a shot moves through the journal (rig/journal.py has the rules):
 
-- the sequencer's "state" event FIRE (published before the fire valve opens) -> FIRING is
-  committed; if that commit fails, the runner aborts the shot before the valve opens;
-- the STORE "progress" event carrying the shot file's path (the raw file has its final name)
-  -> RECORDED, with the file's uuid;
+- the sequencer's before-fire hook (called after every check, immediately before the fire
+  pulse is commanded) -> FIRING is committed; if that commit fails, the hook raises and the
+  shot is aborted unfired;
+- the sequencer's after-store hook (the raw file has its final name) -> RECORDED, with the
+  file's uuid;
 - the shot's end -> ANALYSED / ANALYSIS_FAILED when it was analysed; ABORTED when the
   sequencer is sure nothing was fired; UNKNOWN when the fire command went out but no raw
   file exists (an operator decides: `hopkinson campaign decide`).
+
+Every event of the run (each shot's and the runner's own) goes into the run folder's
+`campaign.log.jsonl` (rig/logbook.py), appended to by every resume; each shot also has its own
+log beside its shot file.
 
 On start (and on `--resume`) the journal settles what a dead process left (leftover *.tmp
 removed, FIRING shots matched to their raw files). Shots recorded but not analysed are then
@@ -23,7 +28,8 @@ analysed from their files (no instrument needed) before the next shot is fired.
 The runner stops at the first shot that does not end DONE (aborted to the safe state, or a
 FAULT): the operator looks at the rig before anything else is fired; `--resume` continues.
 `stop_after_shot()` (a pause) stops after the current shot; `abort(reason)` aborts the
-current shot (SAFE runs) and stops. Outcome exit codes: 0 every planned shot is done
+current shot (SAFE runs) and stops; an abort asked for between shots is held by the sequencer
+and stops the campaign before the next shot moves anything. Outcome exit codes: 0 every planned shot is done
 (analysed, analysis failed, or skipped); 3 the campaign stopped with shots left (aborted,
 paused, or waiting for an operator decision).
 
@@ -34,6 +40,8 @@ witness that no shot was fired twice across kills and resumes.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
 import os
 import threading
@@ -43,16 +51,26 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hopkinson.rig.errors import ConfigError
-from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.events import (
+    CAMPAIGN_STATE,
+    CampaignFinished,
+    CampaignShotEnded,
+    CampaignShotStarted,
+    EventBus,
+    Note,
+    RigWarning,
+)
 from hopkinson.rig.journal import Journal, ShotState, ShotStatus
+from hopkinson.rig.lock import command_line
+from hopkinson.rig.logbook import CAMPAIGN_LOG_NAME, Logbook
 from hopkinson.rig.plan import CampaignPlan, PlannedShot, load_plan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, create_run_folder, open_run_folder
 from hopkinson.rig.shot import (
-    AnalysisResult,
+    AnalyseFn,
     ShotOutcome,
     ShotRequest,
+    analyse_and_record,
     analyse_raw,
-    analysis_error_text,
     analysis_params,
     record_analysis,
 )
@@ -66,7 +84,6 @@ if TYPE_CHECKING:
 DEFAULT_RUNS_DIR = Path("runs")
 EXIT_COMPLETE = 0
 EXIT_STOPPED = 3
-CAMPAIGN_STATE = "CAMPAIGN"  # the `state` of the runner's own events (the sequencer's are its states)
 
 S = ShotState
 
@@ -190,25 +207,38 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder) -> ShotR
         pressure_bar=shot.pressure_bar, projectile=shot.projectile, operator=plan.operator,
         accelerometer_model=plan.accelerometer.model, accelerometer_serial=plan.accelerometer.serial,
         sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
-        sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
+        order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0,
     )
+
+
+def check_plan(plan: CampaignPlan, config: RigConfig) -> None:
+    """The whole plan against the rig, before anything moves: every shot's request (pressure
+    within the rig's limits, projectile, every analysis option) is checked; ConfigError (exit
+    2) names the plan, the entry and the reason."""
+    for shot in plan.shots:
+        request = dataclasses.replace(shot_request(plan, shot, RunFolder(Path("."))), out_dir=Path("."))
+        try:
+            request.check(config)
+        except ConfigError as exc:
+            raise ConfigError(f"{plan.path}: shots[{shot.entry}] ({shot.id}): {exc}") from None
 
 
 class CampaignRunner:
     """Runs a campaign's remaining shots; see the module docstring.
 
     instruments: the connected rig (rig.instruments); the runner's `sequencer` fires on them
-    and publishes on `bus`. The runner subscribes to journal each shot and publishes its own
-    events with state "CAMPAIGN" (kind "progress" for a new shot, "log" for resume findings
-    and shot ends, "error" when it stops) whose data hold "shot_id", "index", "total".
-    analyse: the analysis computation (default rig.shot.analyse_raw); on_shot_start: called
-    with the shot about to be fired (None after it), e.g. to tag a simulation fire log.
+    and publishes on `bus`. The runner journals each shot through the sequencer's before-fire
+    and after-store hooks and publishes its own events (state "CAMPAIGN"):
+    CampaignShotStarted, CampaignShotEnded (the journal state at a shot's end), Note, and
+    CampaignFinished. analyse: the analysis computation (default rig.shot.analyse_raw);
+    on_shot_start: called with the shot about to be fired (None after it), e.g. to tag a
+    simulation fire log.
     """
 
     def __init__(self, run: RunFolder, plan: CampaignPlan, instruments: Instruments, config: RigConfig,
-                 bus: EventBus, *, analyse: Callable[[Any, dict[str, Any]], AnalysisResult] | None = None,
+                 bus: EventBus, *, analyse: AnalyseFn | None = None,
                  max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None) -> None:
         from hopkinson.rig.sequencer import Sequencer  # the drivers load only when shots are fired
 
@@ -218,8 +248,7 @@ class CampaignRunner:
         self.bus = bus
         self.max_aborts = max_aborts
         self._analyse = analyse or analyse_raw
-        self._order: int | None = None  # the fixed model order of the shot being analysed
-        self.sequencer = Sequencer(instruments, config, bus, analyse=self._analyse_with_order)
+        self.sequencer = Sequencer(instruments, config, bus, analyse=self._analyse)
         self._on_shot_start = on_shot_start
         self._journal: Journal | None = None
         self._current: CampaignProgress | None = None
@@ -242,21 +271,28 @@ class CampaignRunner:
                 self._stop.set()
 
     def abort(self, reason: str = "aborted by the operator") -> None:
-        """Abort the current shot (the sequencer makes the rig safe) and stop the campaign."""
+        """Abort the current shot (the sequencer makes the rig safe) and stop the campaign; held
+        by the sequencer when it comes between shots."""
         self.stop_after_shot(reason)
         self.sequencer.abort(reason)
 
     # -- the run -----------------------------------------------------------------------------
     def run(self) -> CampaignOutcome:
-        """Open (or resume) the journal, analyse what is pending, fire what is left."""
+        """Check the plan, open (or resume) the journal, analyse what is pending, fire what is left."""
+        check_plan(self.plan, self.config)
         journal = Journal.open(self.run_folder, self.plan, max_aborts=self.max_aborts)
         self._journal = journal
         fired: list[str] = []
         last: ShotOutcome | None = None
-        unsubscribe = self.bus.subscribe(self._on_event)
+        logbook: Logbook | None = None
+        try:
+            logbook = Logbook(self.run_folder.path / CAMPAIGN_LOG_NAME, command=command_line(),
+                              what=f"campaign {self.run_folder.campaign_id}").attach(self.bus)
+        except OSError as exc:  # the journal is the record that matters: say so, go on
+            self.bus.publish(RigWarning(state=CAMPAIGN_STATE, message=f"the campaign log cannot be written: {exc}"))
         try:
             for item in journal.resume_report:
-                self._log(_resume_text(item), resume=item)
+                self._note(_resume_text(item))
             for shot in journal.pending_analysis():
                 self._analyse_from_file(shot)
             stop_message = ""
@@ -274,17 +310,16 @@ class CampaignRunner:
                 stop_message = self._stop_reason
             summary = journal.summary()
             exit_code, message = self._conclusion(summary, stop_message)
-            if exit_code != EXIT_COMPLETE:
-                self.bus.emit("error", CAMPAIGN_STATE, message, campaign_stopped=True)
-            else:
-                self._log(message)
+            self.bus.publish(CampaignFinished(state=CAMPAIGN_STATE, message=message, exit_code=exit_code,
+                                              run_folder=str(self.run_folder.path)))
             return CampaignOutcome(self.run_folder.path, exit_code, message, summary, fired,
                                    list(journal.resume_report), last)
         finally:
-            unsubscribe()
             self._current = None
             self._journal = None
             journal.close()
+            if logbook is not None:
+                logbook.close()
 
     def _conclusion(self, summary: dict[str, Any], stop_message: str) -> tuple[int, str]:
         counts = summary["by_state"]
@@ -309,20 +344,23 @@ class CampaignRunner:
         return CampaignProgress(shot.index + 1, len(self.plan.shots), shot.id, shot.pressure_bar, shot.projectile)
 
     def _fire(self, shot: PlannedShot) -> ShotOutcome:
-        """One shot through the sequencer, journaled by `_on_event`, settled at its end."""
+        """One shot through the sequencer, journaled by its hooks, settled at its end."""
         assert self._journal is not None
-        self._current = self._progress(shot)
+        current = self._current = self._progress(shot)
         self._mark_failure = None
         if self._on_shot_start is not None:
             self._on_shot_start(shot)
-        self.bus.emit("progress", CAMPAIGN_STATE, f"shot {shot.id}: {shot.pressure_bar:g} bar, projectile "
-                      f"No. {shot.projectile}", **self._data())
+        self.bus.publish(CampaignShotStarted(
+            state=CAMPAIGN_STATE, message=f"shot {shot.id}: {shot.pressure_bar:g} bar, projectile No. {shot.projectile}",
+            shot_id=shot.id, index=current.index, total=current.total, pressure_bar=shot.pressure_bar,
+            projectile=shot.projectile))
         from hopkinson.rig.sequencer import FireAuthorisation
 
-        self._order = shot.analysis.order
         try:
             outcome = self.sequencer.run_shot(shot_request(self.plan, shot, self.run_folder),
-                                              FireAuthorisation.pre_given())
+                                              FireAuthorisation.pre_given(),
+                                              before_fire=lambda _ctx: self._mark_firing(shot.id),
+                                              after_store=lambda _ctx, path: self._on_stored(shot.id, Path(path)))
             self._settle(shot, outcome)
             return outcome
         finally:
@@ -330,35 +368,21 @@ class CampaignRunner:
                 self._on_shot_start(None)
             self._current = None
 
-    def _analyse_with_order(self, raw: Any, params: dict[str, Any]) -> AnalysisResult:
-        """The analysis, with the plan's fixed model order of the shot (when there is one) added
-        to its parameters: ShotRequest has no `order`, the plan's [analysis] may have."""
-        if self._order is not None:
-            params = {**params, "order": self._order}
-        return self._analyse(raw, params)
+    def _mark_firing(self, sid: str) -> None:
+        """The before-fire hook: FIRING on disk before the pulse is commanded, or no shot."""
+        assert self._journal is not None
+        try:
+            self._journal.mark(sid, S.FIRING)
+        except Exception as exc:  # never fire a shot the journal does not know is firing
+            self._mark_failure = f"campaign journal: FIRING of {sid} could not be recorded ({exc})"
+            raise RuntimeError(self._mark_failure) from exc
 
-    def _data(self, **extra: Any) -> dict[str, Any]:
-        c = self._current
-        base = {"shot_id": c.shot_id, "index": c.index, "total": c.total} if c is not None else {}
-        return {**base, **extra}
-
-    def _on_event(self, event: RigEvent) -> None:
-        """Journal the current shot from the sequencer's events (runs in the sequencer's thread)."""
-        current, journal = self._current, self._journal
-        if current is None or journal is None or event.state == CAMPAIGN_STATE:
-            return
-        sid = current.shot_id
-        if event.kind == "state" and event.state == "FIRE":
-            try:
-                journal.mark(sid, S.FIRING)
-            except Exception as exc:  # never fire a shot the journal does not know is firing
-                self._mark_failure = f"campaign journal: FIRING of {sid} could not be recorded ({exc})"
-                self.sequencer.abort(self._mark_failure + "; not fired")
-        elif event.kind == "progress" and event.state == "STORE" and event.data.get("shot_path"):
-            try:
-                self._mark_recorded(sid, Path(event.data["shot_path"]))
-            except Exception as exc:  # settled again when the shot ends
-                self._mark_failure = f"campaign journal: RECORDED of {sid} could not be recorded ({exc})"
+    def _on_stored(self, sid: str, path: Path) -> None:
+        """The after-store hook: RECORDED once the raw file has its final name."""
+        try:
+            self._mark_recorded(sid, path)
+        except Exception as exc:  # settled again when the shot ends
+            self._mark_failure = f"campaign journal: RECORDED of {sid} could not be recorded ({exc})"
 
     def _mark_recorded(self, sid: str, path: Path) -> None:
         assert self._journal is not None
@@ -385,6 +409,7 @@ class CampaignRunner:
                 journal.mark(sid, S.ANALYSIS_FAILED, error=outcome.analysis_error)
             elif outcome.final_state != "FAULT":  # recorded, then aborted: analyse the stored data
                 self._analyse_from_file(shot)
+                return
         elif state == S.FIRING:
             if outcome.fired:
                 journal.mark(sid, S.UNKNOWN, reason=outcome.error or "fired, but no raw file was stored")
@@ -392,49 +417,53 @@ class CampaignRunner:
                 journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted")
         elif state in (S.PLANNED, S.ABORTED):
             journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted before FIRE")
-        status = journal.status(sid)
-        self._log(_shot_end_text(status, outcome), journal_state=status.state.value, final_state=outcome.final_state)
+        self._shot_ended(shot, _shot_end_text(journal.status(sid), outcome), outcome.final_state)
+
+    def _shot_ended(self, shot: PlannedShot, message: str, final_state: str | None) -> None:
+        assert self._journal is not None
+        progress = self._current or self._progress(shot)
+        self.bus.publish(CampaignShotEnded(
+            state=CAMPAIGN_STATE, message=message, shot_id=shot.id, index=progress.index, total=progress.total,
+            journal_state=self._journal.status(shot.id).state.value, final_state=final_state))
 
     def _analyse_from_file(self, shot: PlannedShot) -> None:
-        """Analyse a RECORDED shot from its raw file and store the result (or the failure)."""
+        """Analyse a RECORDED shot from its raw file and store the result (or the failure), with
+        the sequencer's own ANALYSE code (rig.shot.analyse_and_record)."""
         assert self._journal is not None
         self._current = self._progress(shot)
         path = self.run_folder.shot_path(shot.id)
-        self._log(f"analysing the recorded shot {path.name}")
-        result: AnalysisResult | None = None
-        error: str | None = None
+        self._note(f"analysing the recorded shot {path.name}")
+        results: dict[str, Any] | None = None
         try:
             stored = read_shot(path)
-            assert stored.raw is not None
+            if stored.raw is None:
+                raise ShotFileError(f"{path}: holds no raw data")
+        except ShotFileError as exc:
+            error: str | None = str(exc)
+            with contextlib.suppress(Exception):
+                record_analysis(path, None, error)  # the journal still says why
+        else:
             # The rig constants of this run's configuration; the amplifier gain read back at
             # the shot (stored in the file) wins, as in the sequencer's own analysis.
             settings = dict(stored.meta.config.get("shot_settings", {}))
-            params = analysis_params(shot_request(self.plan, shot, self.run_folder), self.config, settings)
-            self._order = shot.analysis.order
-            result = self._analyse_with_order(stored.raw, params)
-        except ShotFileError as exc:
-            error = str(exc)
-        except Exception as exc:  # the analysis failed: the shot stays recorded, the failure is noted
-            error = analysis_error_text(exc)
-        if error is None:
             try:
-                record_analysis(path, result, None)
+                params = analysis_params(shot_request(self.plan, shot, self.run_folder), self.config, settings)
             except Exception as exc:
-                error = f"the analysis could not be stored in {path}: {exc}"
-        else:
-            try:
-                record_analysis(path, None, error)
-            except Exception:
-                pass  # the journal still says why
+                results, error = None, f"analysis not started: {exc}"
+                with contextlib.suppress(Exception):
+                    record_analysis(path, None, error)
+            else:
+                results, error = analyse_and_record(path, stored.raw, params, self._analyse,
+                                                    amplifier_overloaded=bool(settings.get("amplifier_overloaded")))
         if error is None:
-            self._journal.mark(shot.id, S.ANALYSED, **_result_info(result.results if result else None))
+            self._journal.mark(shot.id, S.ANALYSED, **_result_info(results))
         else:
             self._journal.mark(shot.id, S.ANALYSIS_FAILED, error=error)
-        self._log("ANALYSED" if error is None else f"ANALYSIS_FAILED: {error}")
+        self._shot_ended(shot, "ANALYSED" if error is None else f"ANALYSIS_FAILED: {error}", None)
         self._current = None
 
-    def _log(self, message: str, **data: Any) -> None:
-        self.bus.emit("log", CAMPAIGN_STATE, message, **self._data(**data))
+    def _note(self, message: str) -> None:
+        self.bus.publish(Note(state=CAMPAIGN_STATE, message=message))
 
 
 def _result_info(results: dict[str, Any] | None) -> dict[str, Any]:

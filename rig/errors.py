@@ -1,13 +1,55 @@
-"""Errors of the rig layer, with the exit code the command line gives each."""
+"""Errors of the rig layer, with the exit code the command line gives each, and the operator's
+hint for a failure (chosen from the error's type, never from the words of its message)."""
+
+from __future__ import annotations
+
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+
+EXIT_BAD_INPUT = 2
+EXIT_ABORTED = 3
 
 
 class ConfigError(ValueError):
     """A configuration or plan file that is wrong: names the file, the key and the reason."""
 
-    exit_code = 2
+    exit_code = EXIT_BAD_INPUT
 
 
 class ShotAborted(RuntimeError):
     """A shot that ended in the safe state before completing (exit code 3)."""
 
-    exit_code = 3
+    exit_code = EXIT_ABORTED
+
+
+class Interrupted(BaseException):
+    """A termination signal (SIGTERM, SIGHUP) in a command that drives no rig: unwinds like
+    KeyboardInterrupt, so that half-written files are removed on the way out."""
+
+    def __init__(self, signal_name: str, exit_code: int) -> None:
+        super().__init__(f"interrupted ({signal_name})")
+        self.exit_code = exit_code
+
+
+HINT_TIMEOUT = "An instrument did not answer in time: check its cable and power."
+HINT_CONNECTION = ("Check the instrument's cable/network and power, and its address in the rig configuration; "
+                   "it is retried automatically.")
+HINT_INSTRUMENT = "The instrument refused or answered badly: check its settings and its front panel."
+HINT_NOT_CONFIRMED = "The shot was not confirmed in time; ARM again when ready."
+HINT_SAFE_NOT_CONFIRMED = "Check the rig by hand: valves and reservoir pressure."
+HINT_OPERATOR_ABORT = "The rig is safe; ARM again when ready."
+
+
+def instrument_hint(exc: BaseException) -> str:
+    """What the operator does about an instrument error, by its type ("" for other errors)."""
+    if isinstance(exc, InstrumentTimeout):
+        return HINT_TIMEOUT
+    if isinstance(exc, InstrumentConnectionError):
+        return HINT_CONNECTION
+    if isinstance(exc, InstrumentError):
+        return HINT_INSTRUMENT
+    return ""
+
+
+def with_hint(message: str, hint: str) -> str:
+    """A message and its hint as the operator reads them ("text\\n→ hint")."""
+    return f"{message}\n→ {hint}" if hint else message

@@ -1,18 +1,27 @@
-"""The event bus: how the sequencer tells the command line, the campaign runner and the panel
-what it is doing. The core never prints; it publishes RigEvents.
+"""The event bus: how the sequencer tells the command line, the campaign runner, the panel and
+the logbook what it is doing. The core never prints; it publishes typed events.
 
-Kinds of event (RigEvent.kind):
+Every event is a small frozen dataclass deriving from `RigEvent`, with `state` (the sequencer
+state it happened in, or "CAMPAIGN"), `message` (one line for people), `utc` (ISO 8601, Z) and
+`to_dict()` (JSON-ready, with a `"type"` field naming the class). Consumers dispatch on the
+class (`isinstance(event, Fired)`), never on the text of a message.
 
-- "state":    the sequencer entered `state` (published before the state's first action, so a
-              subscriber that journals the FIRE state has written it before the fire valve opens);
-- "progress": a step inside a state ("charging 0.62 of 1.00 bar", "armed: waiting for the fire
-              confirmation" with data {"awaiting_confirmation": True, "timeout_s": ...});
-- "reading":  {"reservoir_pressure_bar", "fixture_vacuum_mbar", "interlocks": {name: bool}, ...}
-              at up to ~10 Hz while a shot runs;
-- "log":      a note for the operator (data may hold {"level": "warning"});
-- "error":    why the shot is being aborted (published before SAFE runs);
-- "result":   the end of a shot: {"shot_path", "results" (analysis dict or None), "error",
-              "final_state", "exit_code", "fired", ...}.
+Shot events (rig.sequencer):
+
+- `StateEntered`: the sequencer entered `state` (published before the state's first action);
+- `StepProgress`: a step inside a state ("charging 0.62 of 1.00 bar"), with its figures;
+- `Identified`: the instruments' identities (CHECK);
+- `AwaitingConfirmation`: armed, the sequencer waits up to `timeout_s` for the fire confirmation;
+- `Fired`: the controller confirmed the fire pulse (`pulse_count` from the controller);
+- `Stored`: the raw shot file has its final name; `Analysed`: the analysis (or its failure)
+  is stored in it;
+- `Reading`: gauges and interlocks (up to ~10 Hz while a shot runs, ~2 Hz idle in the panel);
+- `Note`, `RigWarning`, `RigError`: a note, a warning, and why the shot is being aborted (with
+  an operator `hint` and the failing interlocks' `codes`);
+- `ShotFinished`: how the shot ended (the ShotOutcome's fields, without the results dict).
+
+Campaign events (rig.campaign): `CampaignShotStarted`, `CampaignShotEnded` (with the journal
+state), `CampaignFinished`.
 
 Subscribers are called synchronously in the publishing thread (the sequencer's), in the order
 they subscribed; they must return quickly (the panel hands events to its GUI thread through a
@@ -27,14 +36,14 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
-from typing import Any
-
-EVENT_KINDS = ("state", "progress", "reading", "log", "error", "result")
+from typing import Any, ClassVar
 
 _log = logging.getLogger(__name__)
+
+CAMPAIGN_STATE = "CAMPAIGN"  # the `state` of the campaign runner's own events
 
 
 def utc_now_iso() -> str:
@@ -42,20 +51,242 @@ def utc_now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
 
 
-@dataclass(frozen=True)
-class RigEvent:
-    """One thing the rig did or saw; `state` is the sequencer state it happened in."""
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return str(value)
 
-    kind: str
+
+@dataclass(frozen=True, kw_only=True)
+class RigEvent:
+    """One thing the rig did or saw; `state` is the sequencer state it happened in.
+
+    LEVEL: "info", "warning" or "error"; LABEL: a word for a log's "kind" column (display
+    only: consumers dispatch on the class).
+    """
+
+    LEVEL: ClassVar[str] = "info"
+    LABEL: ClassVar[str] = "event"
+
     state: str
     message: str
-    data: dict[str, Any] = field(default_factory=dict)
     utc: str = field(default_factory=utc_now_iso)
 
-    def __post_init__(self) -> None:
-        if self.kind not in EVENT_KINDS:
-            raise ValueError(f"event kind must be one of {', '.join(EVENT_KINDS)}, got {self.kind!r}")
+    @property
+    def type(self) -> str:
+        """The event's type name (its class name): the `"type"` of `to_dict()`."""
+        return type(self).__name__
 
+    @property
+    def level(self) -> str:
+        return self.LEVEL
+
+    @property
+    def label(self) -> str:
+        """"state", "progress", "warning", "error", ...: the level when it is not "info"."""
+        return self.level if self.level != "info" else self.LABEL
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: {"type": ..., "utc": ..., "state": ..., "message": ..., fields...}."""
+        out: dict[str, Any] = {"type": self.type, "level": self.level}
+        for f in fields(self):
+            out[f.name] = _jsonable(getattr(self, f.name))
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class StateEntered(RigEvent):
+    """The sequencer entered `state`; `timeout_s` is the state's limit (None: none)."""
+
+    LABEL: ClassVar[str] = "state"
+
+    timeout_s: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepProgress(RigEvent):
+    """A step inside a state; the figures that apply are set, the others None."""
+
+    LABEL: ClassVar[str] = "progress"
+
+    reservoir_pressure_bar: float | None = None
+    target_bar: float | None = None
+    fixture_vacuum_mbar: float | None = None
+    samples: int | None = None
+    sample_rate_hz: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Identified(RigEvent):
+    """The instruments' identities (name -> what each says it is), read in CHECK."""
+
+    LABEL: ClassVar[str] = "identity"
+
+    identities: Mapping[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, kw_only=True)
+class AwaitingConfirmation(RigEvent):
+    """Armed: the sequencer waits up to `timeout_s` for the fire confirmation."""
+
+    LABEL: ClassVar[str] = "progress"
+
+    timeout_s: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class Fired(RigEvent):
+    """The controller fired the pulse (confirmed by its pulse counter where it has one)."""
+
+    LABEL: ClassVar[str] = "fired"
+
+    reservoir_pressure_bar: float
+    pulse_s: float
+    pulse_count: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Stored(RigEvent):
+    """The raw shot file is on disk under its final name."""
+
+    LABEL: ClassVar[str] = "stored"
+
+    shot_path: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class Analysed(RigEvent):
+    """The analysis of `shot_path` is stored in it (`error` set when it failed)."""
+
+    LABEL: ClassVar[str] = "analysed"
+
+    shot_path: str
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Reading(RigEvent):
+    """Gauges and interlocks. interlocks: name -> holds (only those judged); details: name ->
+    what it is in words; problems: the failing ones' words, in order."""
+
+    LABEL: ClassVar[str] = "reading"
+
+    reservoir_pressure_bar: float
+    fixture_vacuum_mbar: float
+    interlocks: Mapping[str, bool] = field(default_factory=dict)
+    details: Mapping[str, str] = field(default_factory=dict)
+    amplifier_overloaded: bool | None = None
+    digitizer_state: str | None = None
+    idle: bool = False  # read by the panel between shots, not by a running shot
+
+    @property
+    def problems(self) -> list[str]:
+        return [self.details.get(name, name) for name, ok in self.interlocks.items() if not ok]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Note(RigEvent):
+    """A note for the operator."""
+
+    LABEL: ClassVar[str] = "note"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RigWarning(RigEvent):
+    """Something the operator should know; the shot goes on."""
+
+    LEVEL: ClassVar[str] = "warning"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RigError(RigEvent):
+    """Why the shot is being aborted (published before SAFE runs), or SAFE/STORE failing.
+
+    source: the instrument (or "operator", "sequencer"); hint: what the operator should do;
+    codes: the failing interlocks (rig.interlocks.InterlockCode values), if that is why.
+    """
+
+    LEVEL: ClassVar[str] = "error"
+
+    source: str = ""
+    hint: str = ""
+    codes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ShotFinished(RigEvent):
+    """The end of a shot (rig.shot.ShotOutcome's fields; the results stay in the outcome)."""
+
+    LABEL: ClassVar[str] = "result"
+
+    final_state: str
+    exit_code: int
+    fired: bool
+    safe_confirmed: bool
+    shot_path: str | None = None
+    error: str | None = None
+    hint: str = ""
+    analysis_error: str | None = None
+    aborted_in: str | None = None
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def level(self) -> str:
+        return "info" if self.final_state == "DONE" and not self.analysis_error else (
+            "warning" if self.final_state == "DONE" else "error")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CampaignShotStarted(RigEvent):
+    """The campaign is about to fire shot `shot_id` (`index` of `total`, 1-based)."""
+
+    LABEL: ClassVar[str] = "campaign"
+
+    shot_id: str
+    index: int
+    total: int
+    pressure_bar: float
+    projectile: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class CampaignShotEnded(RigEvent):
+    """A campaign shot's journal state changed at its end (or after its analysis from file)."""
+
+    LABEL: ClassVar[str] = "campaign"
+
+    shot_id: str
+    index: int
+    total: int
+    journal_state: str
+    final_state: str | None = None  # the sequencer's, when the shot was fired in this run
+
+
+@dataclass(frozen=True, kw_only=True)
+class CampaignFinished(RigEvent):
+    """The campaign run ended: exit code 0 (complete) or 3 (stopped with shots left)."""
+
+    LABEL: ClassVar[str] = "campaign"
+
+    exit_code: int
+    run_folder: str
+
+    @property
+    def level(self) -> str:
+        return "info" if self.exit_code == 0 else "error"
+
+
+EVENT_TYPES: dict[str, type[RigEvent]] = {cls.__name__: cls for cls in (
+    StateEntered, StepProgress, Identified, AwaitingConfirmation, Fired, Stored, Analysed, Reading, Note, RigWarning,
+    RigError, ShotFinished, CampaignShotStarted, CampaignShotEnded, CampaignFinished)}
 
 Subscriber = Callable[[RigEvent], None]
 
@@ -79,38 +310,34 @@ class EventBus:
 
         return unsubscribe
 
-    def publish(self, event: RigEvent) -> None:
-        """Hand `event` to every subscriber; a subscriber's Exception is logged, not raised."""
+    def publish(self, event: RigEvent) -> RigEvent:
+        """Hand `event` to every subscriber (a subscriber's Exception is logged, not raised);
+        returns the event."""
         with self._lock:
             subscribers = list(self._subscribers)  # a callback may (un)subscribe while called
         for callback in subscribers:
             try:
                 callback(event)
             except Exception:  # a broken display must not stop the rig
-                _log.exception("event subscriber %r failed on %s event", callback, event.kind)
-
-    def emit(self, kind: str, state: str, message: str, **data: Any) -> RigEvent:
-        """Build a RigEvent (UTC time now) and publish it; returns the event."""
-        event = RigEvent(kind, str(state), message, dict(data))
-        self.publish(event)
+                _log.exception("event subscriber %r failed on a %s event", callback, event.type)
         return event
 
 
 class EventQueue:
     """A subscriber that keeps events in a queue.Queue, for consumers in another thread.
 
-        events = EventQueue(bus)
+        events = EventQueue(bus, types=(RigError,))
         ...
         for event in events.drain(): ...
     """
 
-    def __init__(self, bus: EventBus, kinds: tuple[str, ...] | None = None) -> None:
+    def __init__(self, bus: EventBus, types: tuple[type[RigEvent], ...] | None = None) -> None:
         self.queue: queue.Queue[RigEvent] = queue.Queue()
-        self._kinds = kinds
+        self._types = types
         self.unsubscribe = bus.subscribe(self._put)
 
     def _put(self, event: RigEvent) -> None:
-        if self._kinds is None or event.kind in self._kinds:
+        if self._types is None or isinstance(event, self._types):
             self.queue.put(event)
 
     def drain(self) -> list[RigEvent]:

@@ -11,6 +11,9 @@ Example (config/campaigns/example.toml is the documented one)::
     model = "AYZ-3"
     serial = "SN0001"
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
+    sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,
+                                      # magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]; relative to
+                                      # the plan's folder); the report compares the model with it
 
     [defaults]                        # every key optional; per-shot keys override
     pressure_bar = 2.0
@@ -32,7 +35,14 @@ Example (config/campaigns/example.toml is the documented one)::
 Entries expand in order into planned shots with stable ids "s<entry>-r<repeat>"
 (s001-r1, s001-r2, s002-r1, ...). Entry numbers in ids and in error messages count from 1:
 "shots[2].pressure_bar" is the pressure of the second [[shots]] table, whose ids are s002-*.
-Pressure upper limits belong to the rig (config/rig.toml [limits]); the sequencer checks them.
+Pressure upper limits belong to the rig (config/rig.toml [limits]): `rig.campaign.check_plan`
+checks every entry against them before the first shot moves anything.
+
+Shot counts. A plan may hold at most MAX_TOTAL_SHOTS shots (checked from the repeats before any
+shot is expanded: 10⁹ repeats are a clear error, never a MemoryError). A plan of more than
+`confirm_above` shots (default CONFIRM_ABOVE_SHOTS; `hopkinson campaign run --confirm-above N`)
+fires only when the operator confirms its exact number (`--shots N`, or the panel's dialog):
+`check_shot_count`.
 """
 
 from __future__ import annotations
@@ -48,6 +58,8 @@ from typing import Any
 from hopkinson.rig.errors import ConfigError
 
 MAX_ORDER_LIMIT = 40
+MAX_TOTAL_SHOTS = 10_000  # more is a typing error, not a campaign (a shot takes minutes)
+CONFIRM_ABOVE_SHOTS = 50  # a plan of more shots needs its number confirmed
 
 
 @dataclass(frozen=True)
@@ -57,6 +69,7 @@ class Accelerometer:
     model: str
     serial: str
     sensitivity_v_per_m_s2: float | None = None  # nominal, at the amplifier output
+    sine_calibration: str | None = None  # sine calibration CSV (analysis.sine_comparison), resolved path
 
 
 @dataclass(frozen=True)
@@ -113,7 +126,7 @@ class CampaignPlan:
 
 
 _TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "defaults", "shots"}
-_ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2"}
+_ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2", "sine_calibration"}
 _SHOT_KEYS = {"pressure_bar", "projectile", "analysis"}
 _ENTRY_KEYS = _SHOT_KEYS | {"repeats"}
 _ANALYSIS_KEYS = set(AnalysisOptions.__dataclass_fields__)
@@ -216,6 +229,8 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         c.text(acc["serial"], "accelerometer.serial"),
         None if sensitivity is None
         else c.number(sensitivity, "accelerometer.sensitivity_v_per_m_s2", 0.0),
+        None if acc.get("sine_calibration") is None
+        else str(path.parent / c.text(acc["sine_calibration"], "accelerometer.sine_calibration")),
     )
 
     defaults = c.table(doc.get("defaults", {}), "defaults", _SHOT_KEYS)
@@ -226,6 +241,8 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         raise c.fail("shots", "must be one or more [[shots]] tables")
     width = max(3, len(str(len(entries))))
     shots: list[PlannedShot] = []
+    expanded: list[tuple[int, dict[str, Any], int]] = []
+    total = 0
     for number, entry in enumerate(entries, start=1):
         key = f"shots[{number}]"
         entry = c.table(entry, key, _ENTRY_KEYS)
@@ -233,7 +250,13 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         for name_ in ("pressure_bar", "projectile"):
             if name_ not in settings:
                 raise c.fail(f"{key}.{name_}", "missing (and no default in [defaults])")
-        repeats = c.integer(entry.get("repeats", 1), f"{key}.repeats", 1)
+        repeats = c.integer(entry.get("repeats", 1), f"{key}.repeats", 1, MAX_TOTAL_SHOTS)
+        total += repeats
+        if total > MAX_TOTAL_SHOTS:
+            raise c.fail(f"{key}.repeats", f"the plan would fire more than {MAX_TOTAL_SHOTS} shots "
+                                           f"({total} up to this entry): split it into several campaigns")
+        expanded.append((number, settings, repeats))
+    for number, settings, repeats in expanded:
         for repeat in range(1, repeats + 1):
             shots.append(
                 PlannedShot(
@@ -291,3 +314,15 @@ def _shot_settings(
             )
     out["analysis"] = AnalysisOptions(**options)
     return out
+
+
+def check_shot_count(plan: CampaignPlan, confirm_above: int = CONFIRM_ABOVE_SHOTS,
+                     confirmed_shots: int | None = None) -> None:
+    """ConfigError (exit 2, nothing fired) when the plan has more than `confirm_above` shots and
+    `confirmed_shots` is not exactly its number of shots (module docstring)."""
+    total = len(plan.shots)
+    if total <= confirm_above or confirmed_shots == total:
+        return
+    given = "" if confirmed_shots is None else f" (--shots {confirmed_shots} was given)"
+    raise ConfigError(f"{plan.path}: the plan fires {total} shots, more than {confirm_above}: confirm the number "
+                      f"with --shots {total}{given}; nothing was fired")

@@ -8,8 +8,14 @@ file and never loses the shot.
 - ShotOutcome: how it ended (final state, file, results, error, exit code, the state it was
   aborted in, whether the fire command was sent). `raise_for_outcome()` raises ShotAborted
   with the one-line message for exit code 3.
-- store_raw_shot / analyse_raw / record_analysis: the STORE and ANALYSE steps of the sequencer
-  (and of a campaign analysing a recorded shot from its file).
+- CapturedShot: what the digitizer recorded, by role (doppler, response, optional
+  doppler_quadrature, response_2), codes in their native type.
+- store_raw_shot / analyse_and_record: the STORE and ANALYSE steps, shared by the sequencer
+  and a campaign analysing a recorded shot from its file.
+- clipping_problems: a channel is clipped only when samples reach the digitizer's full-scale
+  codes (the format's rails, `Waveform.code_range`, stored with the shot), or the amplifier
+  reported an overload; never judged from the record's own extremes. A clipped channel is not
+  analysed (the shot is kept, its analysis recorded as failed with the reason).
 
 Analysis failures. When the analysis raises (bad data, a fit the data cannot support, a
 bug), the shot file keeps its raw data and gets an /analysis group with status "failed" and
@@ -28,6 +34,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import RigConfig
@@ -60,6 +68,7 @@ class ShotRequest:
     accelerometer_serial: str = ""
     sensitivity_v_per_m_s2: float | None = None  # None -> config [analysis]
     max_order: int | None = None  # analysis options; None -> the analysis' defaults
+    order: int | None = None  # a fixed model order (a campaign plan's); None -> chosen by the analysis
     sample_rate_hz: float | None = None  # analysis rate; None -> config [analysis]
     dcm_ratio: float | None = None
     dcm_damping: float | None = None
@@ -82,12 +91,10 @@ class ShotRequest:
                                    f"({config.path or 'configuration'} [limits])")
         if self.projectile not in (1, 2, 3) or isinstance(self.projectile, bool):
             raise ShotRequestError(f"projectile: must be 1, 2 or 3, got {self.projectile!r}")
-        for name in ("sensitivity_v_per_m_s2", "sample_rate_hz", "dcm_ratio", "dcm_damping"):
-            value = getattr(self, name)
-            if value is not None and not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ShotRequestError(f"{name}: must be a positive number, got {value!r}")
-        if self.max_order is not None and not (isinstance(self.max_order, int) and 1 <= self.max_order <= 60):
-            raise ShotRequestError(f"max_order: must be an integer 1..60, got {self.max_order!r}")
+        try:  # every analysis option, before anything moves (the amplifier gain is read back later)
+            analysis_params(self, config, {})
+        except AnalysisError as exc:
+            raise ShotRequestError(str(exc)) from None
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")
@@ -108,7 +115,7 @@ class ShotRequest:
 
     def analysis_options(self) -> dict[str, Any]:
         """The analysis options given (None left out)."""
-        keys = ("max_order", "sample_rate_hz", "dcm_ratio", "dcm_damping")
+        keys = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping")
         return {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
 
 
@@ -127,6 +134,7 @@ class ShotOutcome:
     analysis_error: set when the shot was recorded but its analysis failed (still DONE).
     fired: the fire command was sent (the projectile may have been launched).
     aborted_in: the state in which the abort began (None when DONE).
+    hint: what the operator does about it.
     """
 
     final_state: str
@@ -139,6 +147,8 @@ class ShotOutcome:
     analysis_error: str | None = None
     safe_confirmed: bool = True
     warnings: tuple[str, ...] = ()
+    hint: str = ""  # what the operator does about `error` (from its cause, never from its words)
+    log_path: Path | None = None  # the shot's JSON-lines log (rig/logbook.py)
 
     @property
     def done(self) -> bool:
@@ -153,33 +163,69 @@ class ShotOutcome:
         """JSON-ready form (the `--json` output of `hopkinson shot`)."""
         out = asdict(self)
         out["shot_path"] = str(self.shot_path) if self.shot_path is not None else None
+        out["log_path"] = str(self.log_path) if self.log_path is not None else None
         out["warnings"] = list(self.warnings)
         return out
 
 
+def digitizer_channels(config: RigConfig) -> dict[str, Any]:
+    """role -> the digitizer's channel for each role the rig records (doppler and response first)."""
+    roles = getattr(config.digitizer, "channels", None)
+    if roles:
+        return dict(roles)
+    return {"doppler": 1, "response": 2}  # a configuration without [digitizer.channels]
+
+
 @dataclass(frozen=True)
 class CapturedShot:
-    """What the digitizer recorded, with the settings it was recorded under."""
+    """What the digitizer recorded, by role, with the settings it was recorded under."""
 
-    doppler: Waveform
-    response: Waveform
+    channels: dict[str, Waveform]  # "doppler", "response", optional "doppler_quadrature", "response_2"
     settings: dict[str, Any] = field(default_factory=dict)  # amplifier read-back, pressure at fire, ...
     truth: dict[str, Any] | None = None  # simulated truth (simulation only)
 
     def raw_shot(self) -> RawShot:
-        """The two channels as a RawShot (int16 codes exactly as recorded, with their scaling)."""
-        d, r = self.doppler, self.response
-        if d.codes.size != r.codes.size or d.trigger_index != r.trigger_index or not math.isclose(
-                d.sample_interval_s, r.sample_interval_s, rel_tol=1e-9):
-            raise ValueError("the two channels differ in length, trigger index or sample interval")
+        """The channels as a RawShot: codes exactly as recorded (their native type, never
+        converted), their scaling and the format's full-scale codes."""
+        waves = list(self.channels.values())
+        first = waves[0]
+        for w in waves[1:]:
+            if w.codes.size != first.codes.size or w.trigger_index != first.trigger_index or not math.isclose(
+                    w.sample_interval_s, first.sample_interval_s, rel_tol=1e-9):
+                raise ValueError("the channels differ in length, trigger index or sample interval")
         return RawShot(
-            channels={
-                "doppler": RawChannel(np.asarray(d.codes, dtype=np.int16), d.scale_v, d.offset_v),
-                "response": RawChannel(np.asarray(r.codes, dtype=np.int16), r.scale_v, r.offset_v),
-            },
-            sample_interval_s=d.sample_interval_s,
-            trigger_index=d.trigger_index,
+            channels={role: RawChannel(np.asarray(w.codes), float(w.scale_v), float(w.offset_v),
+                                       code_range=_code_range(w))
+                      for role, w in self.channels.items()},
+            sample_interval_s=first.sample_interval_s,
+            trigger_index=first.trigger_index,
         )
+
+
+def _code_range(w: Any) -> tuple[float, float] | None:
+    code_range = getattr(w, "code_range", None)
+    return (float(code_range[0]), float(code_range[1])) if code_range is not None else None
+
+
+def clipping_problems(raw: RawShot, amplifier_overloaded: bool = False) -> list[str]:
+    """Why the shot's channels cannot be trusted (module docstring), one phrase each; empty
+    when none reached the digitizer's full scale and the amplifier did not overload."""
+    problems = []
+    for role, channel in raw.channels.items():
+        code_range = getattr(channel, "code_range", None)
+        if code_range is None:
+            continue  # the format's rails are unknown (an old file): never guessed from the data
+        low, high = code_range
+        codes = channel.codes
+        at_rails = int(np.count_nonzero((codes <= low) | (codes >= high)))
+        if at_rails:
+            ends = sorted((low * channel.scale_v + channel.offset_v, high * channel.scale_v + channel.offset_v))
+            problems.append(f"{role} channel clipped: {at_rails} samples at the digitizer's full scale "
+                            f"({ends[0]:.4g} .. {ends[1]:.4g} V): widen the range or lower the gain")
+    if amplifier_overloaded:
+        problems.append("the amplifier overloaded during the shot: the response is clipped "
+                        "(check the accelerometer cable and the amplifier range)")
+    return problems
 
 
 def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str],
@@ -218,32 +264,30 @@ class AnalysisResult:
     record: Record | None = None
 
 
-def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> dict[str, Any]:
-    """Everything the analysis needs besides the two channels: the rig's constants and the
-    request's options, keyed as analysis.shot_analysis.AnalysisParams (None = its default)."""
+def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> AnalysisParams:
+    """Everything the analysis needs besides the channels: the rig's constants, the request's
+    options and the amplifier gain read back at the shot (in `settings`), checked
+    (AnalysisError naming the option)."""
     a = config.analysis
-    return {
-        "grating_pitch_m": a.grating_pitch_m,
-        "orders": tuple(a.orders),
-        "amp_gain": float(settings.get("amplifier_gain", config.amplifier.gain)),
-        "sensitivity_v_per_m_s2": request.sensitivity(config),
-        "sample_rate_hz": request.sample_rate_hz or a.sample_rate_hz,
-        "max_order": request.max_order,
-        "dcm_ratio": request.dcm_ratio,
-        "dcm_damping": request.dcm_damping,
-    }
-
-
-def analyse_raw(raw: RawShot, params: dict[str, Any]) -> AnalysisResult:
-    """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
-    analysis (analysis.shot_analysis) of the raw channels in volts."""
-    from hopkinson.analysis.shot_analysis import (  # heavy: loaded when needed
-        AnalysisParams,
-        analyse_raw_shot,
+    return AnalysisParams.from_options(
+        grating_pitch_m=a.grating_pitch_m,
+        orders=tuple(a.orders),
+        amp_gain=float(settings.get("amplifier_gain", config.amplifier.gain)),
+        sensitivity_v_per_m_s2=request.sensitivity(config),
+        sample_rate_hz=request.sample_rate_hz or a.sample_rate_hz,
+        max_order=request.max_order,
+        order=request.order,
+        dcm_ratio=request.dcm_ratio,
+        dcm_damping=request.dcm_damping,
     )
 
-    analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s,
-                                AnalysisParams.from_options(**params))
+
+def analyse_raw(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+    """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
+    analysis (analysis.shot_analysis) of the raw channels in volts."""
+    from hopkinson.analysis.shot_analysis import analyse_raw_shot  # heavy: loaded when needed
+
+    analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s, params)
     return AnalysisResult(analysis.to_dict(), analysis.record)
 
 
@@ -264,4 +308,54 @@ def record_analysis(path: Path, outcome: AnalysisResult | None, error: str | Non
         add_analysis(path, outcome.results, record=outcome.record)
 
 
-AnalyseFn = Callable[[RawShot, dict[str, Any]], AnalysisResult]
+AnalyseFn = Callable[[RawShot, AnalysisParams], AnalysisResult]
+
+
+@dataclass(frozen=True)
+class WorkResult:
+    """How a piece of work ran: finished (with its value or exception), or why it did not."""
+
+    finished: bool
+    value: Any = None
+    error: BaseException | None = None
+    why_not: str = ""
+
+
+Runner = Callable[[Callable[[], Any]], WorkResult]
+
+
+def run_here(work: Callable[[], Any]) -> WorkResult:
+    """Run `work` in this thread (a campaign re-analysing a stored shot)."""
+    try:
+        return WorkResult(True, work())
+    except Exception as exc:
+        return WorkResult(True, error=exc)
+
+
+def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse: AnalyseFn, *,
+                       amplifier_overloaded: bool = False, run: Runner = run_here
+                       ) -> tuple[dict[str, Any] | None, str | None]:
+    """ANALYSE a stored shot and record the result (or why there is none) in its file; returns
+    (results, error). Never raises for the analysis' sake: a clipped channel, a failing or
+    unfinished analysis, or a file that cannot take the result become the error text. `run`
+    runs the computation (the sequencer: a worker thread with a timeout, abandoned on abort)."""
+    result: AnalysisResult | None = None
+    problems = clipping_problems(raw, amplifier_overloaded)
+    if problems:
+        error: str | None = "not analysed: " + "; ".join(problems)
+    else:
+        done = run(lambda: analyse(raw, params))
+        if not done.finished:
+            error = done.why_not
+        elif done.error is not None:
+            error = analysis_error_text(done.error)
+        elif not isinstance(done.value, AnalysisResult):
+            error = f"analysis failed: the analysis returned {type(done.value).__name__}, not an AnalysisResult"
+        else:
+            result, error = done.value, None
+    try:
+        record_analysis(path, result, error)
+    except Exception as store_exc:
+        error = f"{error + '; ' if error else ''}the analysis could not be stored in {path}: {store_exc}"
+        result = None
+    return (result.results if result is not None else None), error

@@ -96,6 +96,9 @@ def run_panel(args: argparse.Namespace) -> int:
 
                 QTimer.singleShot(1500, lambda: (_save_screenshot(window, Path(args.screenshot)), window.close()))
             app.exec()
+            if window.link.interrupted_reason:  # a signal: the link aborted (or ran SAFE) before closing
+                sys.stderr.write(f"hopkinson: error: {window.link.interrupted_reason}: {window.link.safe_summary()}\n")
+                return 3
             return 0
         finally:
             sys.excepthook = previous_hook

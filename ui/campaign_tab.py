@@ -18,7 +18,13 @@ from typing import Any
 
 from hopkinson.rig.campaign import CAMPAIGN_STATE, check_authorisation, prepare_run
 from hopkinson.rig.errors import ConfigError
-from hopkinson.rig.events import RigEvent
+from hopkinson.rig.events import (
+    CampaignShotEnded,
+    CampaignShotStarted,
+    Reading,
+    RigEvent,
+    StateEntered,
+)
 from hopkinson.rig.journal import DONE_STATES, Journal
 from hopkinson.rig.plan import CampaignPlan, load_plan
 from hopkinson.rig.run_folder import RunFolder, open_run_folder
@@ -288,29 +294,21 @@ class CampaignTab(QWidget):
         """Every rig event (GUI thread): campaign progress, shot ends, the current state."""
         if not self.running:
             return
-        data = event.data
-        if event.state == CAMPAIGN_STATE:
-            sid = data.get("shot_id")
-            if event.kind == "progress" and sid:
-                self._current = sid
-                self._set_state(sid, "FIRING…")
-                self.current_label.setText(f"[{data.get('index')}/{data.get('total')}] {sid}: {event.message}")
-            elif event.kind == "log" and sid and data.get("journal_state"):
-                self._set_state(sid, data["journal_state"])
-                if data["journal_state"] in ("ANALYSED", "ANALYSIS_FAILED") and self.run_folder is not None:
-                    self._load_results(sid, self.run_folder.shot_path(sid))
-            elif event.kind == "log" and sid and event.message.startswith(("ANALYSED", "ANALYSIS_FAILED")):
-                state = event.message.split(":")[0]
-                self._set_state(sid, state)
-                if self.run_folder is not None:
-                    self._load_results(sid, self.run_folder.shot_path(sid))
+        if isinstance(event, CampaignShotStarted):
+            self._current = event.shot_id
+            self._set_state(event.shot_id, "FIRING…")
+            self.current_label.setText(f"[{event.index}/{event.total}] {event.shot_id}: {event.message}")
+        elif isinstance(event, CampaignShotEnded):
+            self._set_state(event.shot_id, event.journal_state)
+            if event.journal_state in ("ANALYSED", "ANALYSIS_FAILED") and self.run_folder is not None:
+                self._load_results(event.shot_id, self.run_folder.shot_path(event.shot_id))
+        elif event.state == CAMPAIGN_STATE:
             return
-        if self._current and event.kind == "state":
+        elif self._current and isinstance(event, StateEntered):
             self.current_label.setText(f"{self._prefix()} {event.state}: {event.message}")
-        elif self._current and event.kind == "reading" and event.state in ("CHARGE", "EVACUATE"):
-            p, v = data.get("reservoir_pressure_bar"), data.get("fixture_vacuum_mbar")
-            if p is not None and v is not None:
-                self.current_label.setText(f"{self._prefix()} {event.state} {p:.2f} bar, {v:.0f} mbar")
+        elif self._current and isinstance(event, Reading) and event.state in ("CHARGE", "EVACUATE"):
+            p, v = event.reservoir_pressure_bar, event.fixture_vacuum_mbar
+            self.current_label.setText(f"{self._prefix()} {event.state} {p:.2f} bar, {v:.0f} mbar")
 
     def _prefix(self) -> str:
         row = self.rows.get(self._current or "", -1)

@@ -10,7 +10,7 @@ import json
 from collections import deque
 from pathlib import Path
 
-from hopkinson.rig.events import RigEvent, utc_now_iso
+from hopkinson.rig.events import Reading, RigEvent, utc_now_iso
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -54,11 +54,9 @@ class LogView(QTableWidget):
 
     def add_event(self, event: RigEvent) -> None:
         """Log a rig event (readings are skipped)."""
-        if event.kind == "reading":
+        if isinstance(event, Reading):
             return
-        level = event.data.get("level", "")
-        kind = "warning" if level == "warning" else event.kind
-        self.add_row(event.utc, event.state, kind, event.message)
+        self.add_row(event.utc, event.state, event.label, event.message)
 
     def add_message(self, level: str, text: str, state: str = "") -> None:
         """Log a panel message ("info", "warning", "error")."""

@@ -24,8 +24,17 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.errors import ConfigError
-from hopkinson.rig.events import RigEvent
+from hopkinson.rig.errors import ConfigError, with_hint
+from hopkinson.rig.events import (
+    AwaitingConfirmation,
+    Fired,
+    Reading,
+    RigError,
+    RigEvent,
+    ShotFinished,
+    StateEntered,
+    StepProgress,
+)
 from hopkinson.rig.interlocks import INTERLOCKS
 from hopkinson.rig.sequencer import State
 from hopkinson.rig.shot import ShotOutcome, ShotRequest
@@ -100,7 +109,7 @@ class MainWindow(QMainWindow):
         self.request: ShotRequest | None = None
         self.busy = False  # a shot or a campaign runs (from ARM / Run until its end is reported)
         self.awaiting_confirmation = False
-        self.last_reading: RigEvent | None = None
+        self.last_reading: Reading | None = None
         self.last_outcome: ShotOutcome | None = None
         self.last_view: ShotView | None = None
         self._setup_enabled: bool | None = None
@@ -303,8 +312,7 @@ class MainWindow(QMainWindow):
         reading = self.last_reading
         if reading is None:
             return False
-        interlocks = reading.data.get("interlocks", {})
-        return all(interlocks.get(name) is True for name in INTERLOCKS)
+        return all(reading.interlocks.get(name) is True for name in INTERLOCKS)
 
     def update_buttons(self) -> None:
         connected = self.link.all_connected
@@ -333,33 +341,28 @@ class MainWindow(QMainWindow):
     def _on_event(self, event: RigEvent) -> None:
         self.log_view.add_event(event)
         self.campaign_tab.on_event(event)
-        kind = event.kind
-        if kind == "reading":
+        if isinstance(event, Reading):
             self.last_reading = event
             self.status_panel.show_reading(event)
-            self.plots.trend.add_reading(event.data.get("reservoir_pressure_bar"),
-                                         event.data.get("fixture_vacuum_mbar"))
-        elif kind == "state":
+            self.plots.trend.add_reading(event.reservoir_pressure_bar, event.fixture_vacuum_mbar)
+        elif isinstance(event, StateEntered):
             if event.state in State.__members__:
                 self.state_bar.set_state(event.state, event.message)
             if event.state != State.ARM:
                 self.awaiting_confirmation = False
             self.statusBar().showMessage(f"{event.state}: {event.message}")
-        elif kind == "progress":
-            if "awaiting_confirmation" in event.data:
-                self.awaiting_confirmation = bool(event.data["awaiting_confirmation"])
-                if self.awaiting_confirmation:
-                    self.show_banner("info", "ARMED — every interlock is watched. Press FIRE to fire the shot "
-                                             "(you will be asked to confirm), or ABORT to stand down.")
+        elif isinstance(event, AwaitingConfirmation | StepProgress | Fired):
+            if isinstance(event, AwaitingConfirmation):
+                self.awaiting_confirmation = True
+                self.show_banner("info", "ARMED — every interlock is watched. Press FIRE to fire the shot "
+                                         "(you will be asked to confirm), or ABORT to stand down.")
             if event.state in State.__members__:
                 self.state_bar.set_text(event.message)
             self.statusBar().showMessage(f"{event.state}: {event.message}")
-        elif kind == "error":
-            self.show_banner("error", _actionable(event.message))
-        elif kind == "result":
-            path = event.data.get("shot_path")
-            if path:
-                self.load_shot(Path(path))
+        elif isinstance(event, RigError):
+            self.show_banner("error", with_hint(event.message, event.hint))
+        elif isinstance(event, ShotFinished) and event.shot_path:
+            self.load_shot(Path(event.shot_path))
         self.update_buttons()
 
     def _on_links(self, links: dict[str, InstrumentLink]) -> None:
@@ -376,7 +379,7 @@ class MainWindow(QMainWindow):
     def _on_message(self, level: str, text: str) -> None:
         self.log_view.add_message(level, text)
         if level == "error":
-            self.show_banner("error", _actionable(text))
+            self.show_banner("error", text)
 
     def _on_safe_done(self, ok: bool, text: str) -> None:
         self.log_view.add_message("info" if ok else "error", text)
@@ -392,7 +395,7 @@ class MainWindow(QMainWindow):
         elif outcome.final_state == State.FAULT:
             self.show_banner("error", f"FAULT — {outcome.error}. Check the rig by hand before anything else.")
         else:
-            self.show_banner("error", _actionable(outcome.error or f"shot ended in {outcome.final_state}"))
+            self.show_banner("error", with_hint(outcome.error or f"shot ended in {outcome.final_state}", outcome.hint))
         for warning in outcome.warnings:
             self.log_view.add_message("warning", warning)
 
@@ -421,7 +424,8 @@ class MainWindow(QMainWindow):
         elif outcome.exit_code == 0:
             self.show_banner("ok", f"Campaign: {outcome.message} ({outcome.run_folder})")
         else:
-            self.show_banner("error", _actionable(f"Campaign: {outcome.message}"))
+            last = outcome.last_shot
+            self.show_banner("error", with_hint(f"Campaign: {outcome.message}", last.hint if last is not None else ""))
         self.update_buttons()
 
     # -- shots ----------------------------------------------------------------------------------------
@@ -462,23 +466,3 @@ class MainWindow(QMainWindow):
 
         self.background.run(write, lambda p: self.show_banner("ok", f"Report written to {p}"),
                             lambda exc: self.show_banner("error", f"Report not written: {exc}"))
-
-
-def _actionable(message: str) -> str:
-    """An instrument or shot error as a line a technician can act on: what happened and what to do."""
-    text = message.strip()
-    hints = (
-        ("door/guard open", "Close the door/guard, then ARM again."),
-        ("e-stop tripped", "Clear the cause, reset the e-stop, then ARM again."),
-        ("fixture not clamped", "Clamp the fixture, then ARM again."),
-        ("amplifier overloaded", "Check the accelerometer cable and the amplifier range; clear the overload."),
-        ("not confirmed", "The shot was not confirmed in time; ARM again when ready."),
-        ("timed out", "An instrument did not answer in time: check its cable and power."),
-        ("connection lost", "Check the instrument's cable/network and power; it is retried automatically."),
-        ("could not connect", "Check that the instrument is on and its address in the rig configuration."),
-        ("SAFE NOT CONFIRMED", "Check the rig by hand: valves and reservoir pressure."),
-    )
-    for needle, hint in hints:
-        if needle.lower() in text.lower():
-            return f"{text}\n→ {hint}"
-    return text

@@ -9,10 +9,8 @@ ARM); grey = not read in this state. The tooltip says what the rig reported.
 
 from __future__ import annotations
 
-from typing import Any
-
 from hopkinson.rig.config import LimitsConfig
-from hopkinson.rig.events import RigEvent
+from hopkinson.rig.events import Reading
 from hopkinson.rig.interlocks import INTERLOCKS
 from hopkinson.ui.widgets import LampLabel, section_title
 from hopkinson.ui.worker import INSTRUMENT_KEYS, INSTRUMENT_LABELS, InstrumentLink
@@ -125,19 +123,16 @@ class StatusPanel(QWidget):
             detail.setToolTip(link.address)
             lamp.set_state(levels[link.status], f"{link.label}: {link.status}\n{link.address}\n{link.problem}")
 
-    def show_reading(self, event: RigEvent) -> None:
-        """Update the gauges and lamps from a "reading" event."""
-        data: dict[str, Any] = event.data
-        self.reservoir_pressure_bar = data.get("reservoir_pressure_bar")
-        self.fixture_vacuum_mbar = data.get("fixture_vacuum_mbar")
-        interlocks: dict[str, bool] = dict(data.get("interlocks", {}))
+    def show_reading(self, event: Reading) -> None:
+        """Update the gauges and lamps from a Reading event."""
+        self.reservoir_pressure_bar = event.reservoir_pressure_bar
+        self.fixture_vacuum_mbar = event.fixture_vacuum_mbar
+        interlocks: dict[str, bool] = dict(event.interlocks)
         self.interlocks = interlocks
-        problems = list(data.get("problems", []))
-        failing = [name for name, ok in interlocks.items() if not ok]
-        detail = dict(zip(failing, problems, strict=False))
         for name, lamp in self.interlock_lamps.items():
             ok = interlocks.get(name)
-            text = detail.get(name, "holds") if ok is not None else _NOT_CHECKED.get(name, "not read in this state")
+            text = ("holds" if ok else event.details.get(name, "does not hold")) if ok is not None \
+                else _NOT_CHECKED.get(name, "not read in this state")
             lamp.set_state(interlock_level(name, ok, event.state), f"{INTERLOCK_CAPTIONS[name]}: {text}")
         self._show_gauges()
 

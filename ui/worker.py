@@ -7,14 +7,24 @@ shot runs, the idle poll is skipped: the sequencer publishes its own "reading" e
 `abort()` is the one call made from the GUI thread straight into the rig layer
 (`Sequencer.abort` is thread-safe). Nothing here touches a widget.
 
+Control of the rig. `start()` takes the rig's lock (rig/lock.py) before anything is connected:
+a rig held by another shot, campaign or panel raises RigLockError (the command exits 2 naming
+the holder). Once the valve controller is connected, its driver feeds the controller's link
+watchdog (a heartbeat session) until `shutdown()`: a panel that dies or hangs leaves a rig
+that vents itself.
+
+Signals. `start()` also catches SIGINT, SIGTERM and SIGHUP (rig/signals.py; main thread only):
+a signal aborts a running shot or campaign (or, idle, runs SAFE), then `interrupted` closes
+the window; `shutdown()` waits for SAFE, and the command exits 3 (`interrupted_reason`).
+
 Events. The sequencer publishes RigEvents on an EventBus in the I/O thread; `RigLink.event`
 (a Qt signal) carries them to the GUI thread: a signal emitted in another thread reaches a
 receiver living in the GUI thread through Qt's queued connection. The other signals
 (`links_changed`, `shot_finished`, `message`) work the same way.
 
 ABORT always reaches the safe state:
-- a shot is running (or about to start): `Sequencer.abort`, and the request is remembered so
-  an abort pressed before the sequencer left IDLE is re-sent at its first state change;
+- a shot is running (or queued on the I/O thread): `Sequencer.abort`, which holds the abort
+  until the shot honours it (before anything moves, when pressed before the shot began);
 - no shot is running: `Sequencer.make_safe` does SAFE's work (fire and fill closed, vent
   open, pump off, read back until confirmed and vented, within timeouts.safe_s) on the I/O thread.
 
@@ -24,6 +34,7 @@ separate worker thread and hands the result to a callback in the GUI thread.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -35,11 +46,14 @@ from typing import Any
 
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
 from hopkinson.rig.config import RigConfig
+from hopkinson.rig.errors import instrument_hint, with_hint
 from hopkinson.rig.events import EventBus, RigEvent
 from hopkinson.rig.instruments import Instruments, make_instruments
 from hopkinson.rig.interlocks import REQUIRED, evaluate, read_readings
-from hopkinson.rig.sequencer import FINAL_STATES, FireAuthorisation, Sequencer, State
+from hopkinson.rig.lock import RigLock, command_line, rig_address
+from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.shot import ShotOutcome, ShotRequest
+from hopkinson.rig.signals import SignalLatch
 from PySide6.QtCore import QObject, QTimer, Signal, Slot
 
 _log = logging.getLogger(__name__)
@@ -93,12 +107,20 @@ class RigLink(QObject):
     campaign_failed = Signal(str)  # a campaign that could not start or crashed: one line
     message = Signal(str, str)  # level ("info" | "warning" | "error"), text
     safe_done = Signal(bool, str)  # idle ABORT: confirmed?, what was done
+    interrupted = Signal(str)  # a termination signal came: the reason ("interrupted (SIGTERM)")
 
     def __init__(self, config: RigConfig,
                  simulated_truth: Callable[[], dict[str, Any] | None] | None = None,
-                 parent: QObject | None = None, poll_interval_ms: int = POLL_INTERVAL_MS) -> None:
+                 parent: QObject | None = None, poll_interval_ms: int = POLL_INTERVAL_MS,
+                 take_lock: bool = True, catch_signals: bool = True) -> None:
         super().__init__(parent)
         self.config = config
+        self.take_lock = take_lock
+        self.catch_signals = catch_signals
+        self.rig_lock: RigLock | None = None
+        self.interrupted_reason = ""
+        self.last_safe: tuple[bool, str] | None = None  # how the last SAFE ended: confirmed?, text
+        self._latch: SignalLatch | None = None
         self.bus = EventBus()
         self.instruments: Instruments = make_instruments(config)
         self.instruments.simulated_truth = simulated_truth
@@ -107,8 +129,7 @@ class RigLink(QObject):
         self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rig-io")
         self._lock = threading.Lock()
         self._links = {
-            "valve_controller": InstrumentLink("valve_controller", f"Modbus TCP {config.valve_controller.host}:"
-                                                                   f"{config.valve_controller.port}"),
+            "valve_controller": InstrumentLink("valve_controller", rig_address(config)),
             "digitizer": InstrumentLink("digitizer", config.digitizer.resource),
             "amplifier": InstrumentLink("amplifier", f"serial {config.amplifier.port}"),
         }
@@ -118,18 +139,52 @@ class RigLink(QObject):
         self._shot_future: Future[None] | None = None  # a shot or a campaign
         self._active_sequencer: Sequencer = self.sequencer
         self.campaign_runner: Any = None  # rig.campaign.CampaignRunner while a campaign runs
-        self._abort_requested = threading.Event()
-        self._abort_reason = ""
         self._closed = False
         self._timer = QTimer(self)
         self._timer.setInterval(poll_interval_ms)
         self._timer.timeout.connect(self.poll)
+        self.interrupted.connect(self._close_on_signal)
 
     # -- public (GUI thread) ----------------------------------------------------------------
     def start(self) -> None:
-        """Connect the instruments and start the idle readings."""
+        """Take the rig's lock (RigLockError when another process holds it), catch the
+        termination signals, connect the instruments and start the idle readings."""
+        if self.take_lock and self.rig_lock is None:
+            self.rig_lock = RigLock.acquire(self.config, command_line())
+            if self.rig_lock.reclaimed is not None:
+                self.message.emit("warning", f"took over the rig lock left by {self.rig_lock.reclaimed.describe()}, "
+                                             "which is no longer running")
+        if self.catch_signals and self._latch is None:
+            self._latch = SignalLatch().__enter__()
+            self._latch.on_signal(self.on_os_signal)
         self.poll()
         self._timer.start()
+
+    def on_os_signal(self, reason: str) -> None:
+        """A termination signal (any thread): abort (or SAFE when idle), then close the window."""
+        self.interrupted_reason = reason
+        if not self._closed:
+            if self.shot_running:
+                self.abort(reason)  # the shot (or campaign) goes SAFE and stops
+            # then SAFE once more, confirmed by reading back: queued after the shot on the I/O thread
+            with contextlib.suppress(RuntimeError):  # the panel closed meanwhile (its SAFE has run)
+                self._io.submit(self._guarded, self._make_safe_task)
+        self.interrupted.emit(reason)
+
+    def safe_summary(self) -> str:
+        """How the last SAFE ended, in words (for the exit line after a signal)."""
+        if self.last_safe is None:
+            return "nothing was running; the rig was left as it was"
+        return self.last_safe[1]
+
+    @Slot(str)
+    def _close_on_signal(self, reason: str) -> None:
+        self.message.emit("error", f"{reason}: making the rig safe and closing the panel")
+        window = self.parent()
+        if window is not None and hasattr(window, "close"):
+            window.close()
+        else:
+            self.shutdown()
 
     @property
     def links(self) -> dict[str, InstrumentLink]:
@@ -167,8 +222,7 @@ class RigLink(QObject):
         disables ARM while one runs).
         """
         authorisation = FireAuthorisation()
-        self._abort_requested.clear()
-        self._abort_reason = ""
+        self.sequencer.clear_abort()  # a new shot: an abort left from an earlier one is forgotten
         self._active_sequencer = self.sequencer
         self._shot_future = self._io.submit(self._guarded, lambda: self._shot_task(request, authorisation))
         return authorisation
@@ -179,8 +233,6 @@ class RigLink(QObject):
         have been authorised by the caller (rig.campaign.check_authorisation)."""
         from hopkinson.rig.campaign import CampaignRunner
 
-        self._abort_requested.clear()
-        self._abort_reason = ""
         runner = CampaignRunner(run, plan, self.instruments, self.config, self.bus)
         self.campaign_runner = runner
         self._active_sequencer = runner.sequencer
@@ -195,13 +247,11 @@ class RigLink(QObject):
     def abort(self, reason: str = "ABORT pressed on the panel") -> None:
         """Stop the running shot and go SAFE; with no shot running, command the valves safe."""
         if self.shot_running:
-            self._abort_reason = reason
-            self._abort_requested.set()
             runner = self.campaign_runner
             if runner is not None:
                 runner.abort(reason)  # aborts its shot and stops the campaign
             else:
-                self._active_sequencer.abort(reason)  # thread-safe; before CHECK a no-op: re-sent below
+                self._active_sequencer.abort(reason)  # thread-safe; held until the shot honours it
             return
         self._io.submit(self._guarded, self._make_safe_task)
 
@@ -213,9 +263,14 @@ class RigLink(QObject):
         self._timer.stop()
         if self.shot_running:
             self.abort("the panel is closing")
-        wait([self._io.submit(self.instruments.close)], timeout=timeout_s)
+        wait([self._io.submit(self.instruments.close)], timeout=timeout_s)  # after any SAFE queued before it
         self._unsubscribe()
         self._io.shutdown(wait=False, cancel_futures=True)
+        if self.rig_lock is not None:
+            self.rig_lock.release()
+        if self._latch is not None:
+            self._latch.__exit__(None, None, None)
+            self._latch = None
 
     # -- I/O thread -----------------------------------------------------------------------------
     def _guarded(self, task: Callable[[], None]) -> None:
@@ -228,10 +283,7 @@ class RigLink(QObject):
                                        f"({traceback.format_exc(limit=1).strip().splitlines()[-1]})")
 
     def _on_bus_event(self, event: RigEvent) -> None:
-        """Bus subscriber (sequencer's thread): re-send an early abort, forward to the GUI."""
-        if event.kind == "state" and self._abort_requested.is_set() and event.state not in (
-                State.SAFE, State.STORE, State.ANALYSE, *FINAL_STATES):
-            self._active_sequencer.abort(self._abort_reason or "ABORT pressed on the panel")
+        """Bus subscriber (sequencer's thread): forward to the GUI thread."""
         self.event.emit(event)
 
     def _set_link(self, key: str, **changes: Any) -> None:
@@ -256,7 +308,7 @@ class RigLink(QObject):
     def _instrument_failed(self, exc: InstrumentError) -> None:
         key = self._key_of(exc)
         if key is None:
-            self.message.emit("error", str(exc))
+            self.message.emit("error", with_hint(str(exc), instrument_hint(exc)))
             return
         was = self.links[key].status
         if isinstance(exc, InstrumentConnectionError):
@@ -267,7 +319,8 @@ class RigLink(QObject):
         else:
             self._set_link(key, status="error", problem=f"{exc.command!r}: {exc.problem}")
         if was != self.links[key].status or was == "connected":
-            self.message.emit("warning" if key != "valve_controller" else "error", str(exc))
+            level = "warning" if key != "valve_controller" else "error"
+            self.message.emit(level, with_hint(str(exc), instrument_hint(exc)) if level == "error" else str(exc))
 
     def _connect(self, key: str) -> None:
         device = self._device(key)
@@ -281,6 +334,11 @@ class RigLink(QObject):
             if status_before != "disconnected":
                 self.message.emit("warning", f"{INSTRUMENT_LABELS[key]} not connected: {exc}")
             return
+        if key == "valve_controller":
+            try:  # this panel controls the rig: feed the controller's link watchdog
+                device.start_heartbeat()
+            except InstrumentError as exc:
+                self.message.emit("error", f"the controller's link watchdog could not be started: {exc}")
         try:
             identity = device.identity()
         except InstrumentError as exc:  # identification is optional (e.g. Modbus device id)
@@ -306,7 +364,7 @@ class RigLink(QObject):
                         self._set_link(key, status="connected", problem="")
                 required = [n for n in REQUIRED["ARM"] if n != "digitizer" and (amp_ok or n != "amplifier")]
                 report = evaluate(readings, self.config.limits, required)
-                self.bus.emit("reading", self.sequencer.state, "readings", idle=True, **report.event_data())
+                self.bus.publish(report.reading(self.sequencer.state, idle=True))
         if links["digitizer"].usable and now - self._last_digitizer_check >= DIGITIZER_CHECK_INTERVAL_S:
             self._last_digitizer_check = now
             try:
@@ -325,9 +383,6 @@ class RigLink(QObject):
         if missing:
             self.shot_failed.emit(f"cannot start the shot: not connected: {', '.join(missing)}")
             return
-        if self._abort_requested.is_set():
-            self.shot_failed.emit("shot not started: ABORT pressed")
-            return
         try:
             outcome: ShotOutcome = self.sequencer.run_shot(request, authorisation)
         except Exception as exc:  # ShotRequestError (bad request) or a bug: one line for the operator
@@ -335,6 +390,8 @@ class RigLink(QObject):
             self.shot_failed.emit(str(exc) if str(exc) else type(exc).__name__)
             return
         self._after_shot()
+        self.last_safe = (outcome.safe_confirmed, "the shot was aborted and the rig made safe" if outcome.safe_confirmed
+                          else f"SAFE NOT CONFIRMED: {outcome.error}; check the rig by hand")
         self.shot_finished.emit(outcome)
 
     def _campaign_task(self, runner: Any) -> None:
@@ -367,6 +424,7 @@ class RigLink(QObject):
         confirmed, problem = self.sequencer.make_safe()
         text = ("rig safe: fire and fill valves closed, vent open, pump off" if confirmed else
                 f"SAFE NOT CONFIRMED: {problem}; check the rig by hand")
+        self.last_safe = (confirmed, text)
         self.safe_done.emit(confirmed, text)
 
 

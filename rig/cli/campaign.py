@@ -31,17 +31,16 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import signal
 import sys
-import threading
 from pathlib import Path
 from typing import Any
 
-from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path, signals_abort
-from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
+from hopkinson.rig.cli.shot import add_log_arguments
+from hopkinson.rig.errors import EXIT_ABORTED, ConfigError
+from hopkinson.rig.plan import CONFIRM_ABOVE_SHOTS
 
 REPORT_FORMATS = ("pdf", "html")
-EXIT_INTERRUPTED = 130
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -65,7 +64,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--report", default="pdf,html", metavar="FORMATS",
                      help="report formats written into the run folder's report/ (default %(default)s)")
     run.add_argument("--no-report", action="store_true", help="do not write the report at the end")
-    run.add_argument("--json", action="store_true", help="one JSON object on stdout at the end (the outcome)")
+    run.add_argument("--confirm-above", type=int, default=CONFIRM_ABOVE_SHOTS, metavar="N",
+                     help="a plan of more than N shots needs --shots N_TOTAL (default %(default)s)")
+    run.add_argument("--shots", type=int, metavar="N",
+                     help="confirm the number of shots of a plan larger than --confirm-above")
+    add_log_arguments(run)
+    out = run.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="one JSON object on stdout at the end (the outcome)")
+    out.add_argument("--json-events", action="store_true",
+                     help="every event as one JSON line on stdout as it happens (for scripts)")
     run.set_defaults(func=run_campaign_command)
 
     status = sub.add_parser("status", help="the journal summary of a run folder")
@@ -91,17 +98,27 @@ def report_formats(text: str) -> list[str]:
 
 
 def run_campaign_command(args: argparse.Namespace) -> int:
+    from hopkinson.rig.signals import SignalLatch
+
+    with SignalLatch() as latch:  # from here on, every signal goes SAFE (exit 3)
+        return _run_campaign(args, latch)
+
+
+def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.campaign import (
         CampaignRunner,
         FireLog,
         attach_fire_log,
         check_authorisation,
+        check_plan,
         prepare_run,
     )
+    from hopkinson.rig.cli.shot import report_reclaimed, subscribe_outputs
     from hopkinson.rig.config import load_rig_config, load_sim_config
+    from hopkinson.rig.control import controlled_rig
     from hopkinson.rig.events import EventBus
-    from hopkinson.rig.instruments import open_instruments
-    from hopkinson.rig.plan import load_plan
+    from hopkinson.rig.lock import command_line
+    from hopkinson.rig.plan import check_shot_count, load_plan
 
     if not args.sim and (args.sim_fault or args.sim_fire_log):
         raise ConfigError("--sim-fault and --sim-fire-log need --sim")
@@ -109,14 +126,13 @@ def run_campaign_command(args: argparse.Namespace) -> int:
     config = load_rig_config(rig_config_path(args))
     plan = load_plan(args.plan)
     check_authorisation(plan, args.yes)  # exit 2 before anything is created or fired
+    check_plan(plan, config)  # every entry against the rig's limits, every analysis option
+    check_shot_count(plan, args.confirm_above, args.shots)
     sim_config = load_sim_config(args.sim_config) if args.sim else None
     fire_log = FireLog(args.sim_fire_log) if args.sim_fire_log else None
-    run, plan = prepare_run(args.plan, args.out, args.resume)
 
     bus = EventBus()
-    printer = ProgressPrinter()
-    bus.subscribe(printer)
-    interrupted = threading.Event()
+    printer = ProgressPrinter(verbose=args.verbose) if not (args.json or args.json_events) else None
     with contextlib.ExitStack() as stack:
         truth = None
         if sim_config is not None:
@@ -126,26 +142,38 @@ def run_campaign_command(args: argparse.Namespace) -> int:
             config, truth = session.config, session.simulated_truth
             if fire_log is not None:
                 attach_fire_log(session.world, fire_log)
-        instruments = stack.enter_context(open_instruments(config, truth))
-        runner = CampaignRunner(run, plan, instruments, config, bus,
+        control = stack.enter_context(controlled_rig(config, command_line(), truth))
+        run, plan = prepare_run(args.plan, args.out, args.resume)
+        if printer is not None:
+            bus.subscribe(printer)
+        subscribe_outputs(stack, bus, args, what=f"campaign {run.path.name}", lines=False)
+        report_reclaimed(control)
+        runner = CampaignRunner(run, plan, control.instruments, config, bus,
                                 on_shot_start=fire_log.set_shot if fire_log is not None else None)
-        printer.runner = runner
-        with signals_abort(runner.abort, interrupted, {sig: f"interrupted ({sig.name})"
-                                                       for sig in (signal.SIGINT, signal.SIGTERM)}):
-            outcome = runner.run()
+        runner.sequencer.trace = args.trace
+        if printer is not None:
+            printer.runner = runner
+        latch.on_signal(runner.abort)  # aborts the shot in progress, or holds the abort for the next
+        outcome = runner.run()
+        safe_again = None
+        if latch.received is not None and (outcome.last_shot is None or outcome.last_shot.done):
+            safe_again = runner.sequencer.make_safe()  # the signal came between shots: SAFE all the same
 
     reports: list[str] = []
     if formats:
         reports = _write_report(run.path, formats)
     if args.json:
-        emit_json({**outcome.to_dict(), "reports": reports})
-    else:
+        emit_json({**outcome.to_dict(), "reports": reports,
+                   "interrupted": latch.reason if latch.received is not None else None})
+    elif not args.json_events:
         print(f"run folder: {run.path}", flush=True)
         for path in reports:
             print(f"report: {path}", flush=True)
-    if interrupted.is_set():
-        sys.stderr.write("hopkinson: error: interrupted; the current shot was aborted to the safe state\n")
-        return EXIT_INTERRUPTED
+    if latch.received is not None:
+        rig = ("SAFE NOT CONFIRMED: check the rig by hand" if safe_again is not None and not safe_again[0]
+               else "the current shot was aborted and the rig made safe")
+        sys.stderr.write(f"hopkinson: error: {latch.reason}: {rig}; {outcome.message}\n")
+        return EXIT_ABORTED
     if outcome.exit_code != 0:
         sys.stderr.write(f"hopkinson: error: {outcome.message}\n")
     return outcome.exit_code
@@ -163,37 +191,61 @@ def _write_report(run_folder: Path, formats: list[str]) -> list[str]:
 
 
 class ProgressPrinter:
-    """Prints the campaign's progress on stderr as plain lines (works without a terminal).
+    """Prints the campaign's progress on stderr as plain lines with their UTC time (works without
+    a terminal):
 
-    "[3/8] s002-r1 CHARGE", "[3/8] s002-r1 CHARGE 1.20 bar", "[3/8] s002-r1 ANALYSED order 4, ...".
+        21:16:26.123 [3/8] s002-r1 START 1.2 bar, projectile No. 3
+        21:16:26.301 [3/8] s002-r1 CHARGE
+        21:16:26.802 [3/8] s002-r1 CHARGE 1.20 bar
+        21:16:29.417 [3/8] s002-r1 ANALYSED order 4, ...
     """
 
-    def __init__(self, stream: Any = None) -> None:
+    def __init__(self, stream: Any = None, verbose: bool = False) -> None:
         self.stream = stream
+        self.verbose = verbose
         self.runner: Any = None
 
     def __call__(self, event: Any) -> None:
-        stream = self.stream or sys.stderr
+        from hopkinson.rig.cli.output import clock, write_line
+        from hopkinson.rig.events import (
+            CampaignFinished,
+            CampaignShotEnded,
+            CampaignShotStarted,
+            Note,
+            Reading,
+            RigError,
+            RigWarning,
+            StateEntered,
+            StepProgress,
+        )
+
         current = self.runner.current if self.runner is not None else None
         prefix = current.prefix if current is not None else "campaign:"
         line = None
-        if event.kind == "state":
+        if isinstance(event, CampaignShotStarted):
+            line = f"[{event.index}/{event.total}] {event.shot_id} START {event.pressure_bar:g} bar, " \
+                   f"projectile No. {event.projectile}"
+        elif isinstance(event, CampaignShotEnded):
+            line = f"[{event.index}/{event.total}] {event.shot_id} {event.message}"
+        elif isinstance(event, CampaignFinished):
+            line = f"campaign: {event.message}" if event.exit_code == 0 else f"campaign: ! {event.message}"
+        elif isinstance(event, StateEntered):
             line = f"{prefix} {event.state}"
-        elif event.kind == "progress":
-            data = event.data
-            if event.state == "CHARGE" and "reservoir_pressure_bar" in data:
-                line = f"{prefix} CHARGE {data['reservoir_pressure_bar']:.2f} bar"
-            elif event.state == "CAMPAIGN":
-                line = f"{prefix} START {event.message.split(': ', 1)[-1]}"
+        elif isinstance(event, StepProgress):
+            if event.state == "CHARGE" and event.reservoir_pressure_bar is not None:
+                line = f"{prefix} CHARGE {event.reservoir_pressure_bar:.2f} bar"
             else:
                 line = f"{prefix} {event.state} {event.message}"
-        elif event.kind == "log":
+        elif isinstance(event, RigError):
+            line = f"{prefix} {event.state} ! {event.message}" + (f" → {event.hint}" if event.hint else "")
+        elif isinstance(event, RigWarning):
+            line = f"{prefix} {event.state} warning: {event.message}"
+        elif isinstance(event, Note):
             line = f"{prefix} {event.message}" if event.state == "CAMPAIGN" else f"{prefix} {event.state}   {event.message}"
-        elif event.kind == "error":
-            line = f"{prefix} {event.state} ! {event.message}"
+        elif self.verbose and isinstance(event, Reading):
+            line = f"{prefix} {event.state} {event.reservoir_pressure_bar:.3f} bar, {event.fixture_vacuum_mbar:.1f} mbar"
         if line is not None:
-            stream.write(line + "\n")
-            stream.flush()
+            write_line(self.stream or sys.stderr, f"{clock(event)} {line}")
 
 
 def status_command(args: argparse.Namespace) -> int:

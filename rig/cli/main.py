@@ -2,19 +2,22 @@
 
 Each command module has `register(subparsers)`, which adds its parser(s) and sets
 `func(args) -> int` as the default. Known errors become one line on stderr and an exit
-code (2: bad input or configuration; 3: shot aborted to the safe state); no traceback.
+code (2: bad input or configuration, an output that would destroy an input, a file that
+cannot be read or written; 3: shot aborted to the safe state); no traceback.
+
+Signals. The commands that drive the rig (shot, campaign run, panel, safe) catch SIGINT,
+SIGTERM and SIGHUP themselves (rig/signals.py: every way out goes SAFE, exit code 3). Every
+other command ends cleanly on SIGTERM and SIGHUP (the `with` blocks unwind, so an atomic write
+in progress removes its temporary file) with exit code 128 + the signal's number, and on
+Ctrl-C with 130.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import json
-import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -32,9 +35,11 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.shot",
     "hopkinson.rig.cli.campaign",
     "hopkinson.rig.cli.panel",
+    "hopkinson.rig.cli.safe",
     "hopkinson.rig.cli.sim",
     "hopkinson.rig.cli.identify",
     "hopkinson.rig.cli.dcm",
+    "hopkinson.rig.cli.compare_sine",
     "hopkinson.rig.cli.reduce",
     "hopkinson.rig.cli.report",
     "hopkinson.rig.cli.demo",
@@ -65,7 +70,9 @@ def _known_errors() -> tuple[type[BaseException], ...]:
     from hopkinson.analysis.errors import AnalysisError
     from hopkinson.rig.errors import ConfigError, ShotAborted
 
-    errors: list[type[BaseException]] = [AnalysisError, ConfigError, ShotAborted]
+    from hopkinson.fileio import UnsafeOutputError
+
+    errors: list[type[BaseException]] = [AnalysisError, ConfigError, ShotAborted, UnsafeOutputError]
     try:
         from hopkinson.drivers.errors import InstrumentError
 
@@ -101,60 +108,36 @@ def fail(message: str, exit_code: int = 2) -> int:
     return exit_code
 
 
-@contextlib.contextmanager
-def signals_abort(abort: Callable[[str], None], interrupted: threading.Event,
-                  reasons: dict[signal.Signals, str]) -> Iterator[None]:
-    """While the block runs, each signal in `reasons` calls `abort(reason)` (the shot goes SAFE)
-    instead of raising KeyboardInterrupt at a random point, and sets `interrupted`; the caller
-    reports the interruption once the block is done. Only in the main thread (signal handlers).
-
-    The handler only notes the signal: it runs in the main thread between two bytecodes, where
-    taking a lock the interrupted code holds would deadlock and printing would re-enter the
-    stream. A watcher thread calls `abort` (again every 20 ms: an abort asked for before the
-    sequencer left IDLE is a no-op; `abort` must be idempotent).
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    hit: list[signal.Signals] = []
-    done = threading.Event()
-
-    def handler(signum: int, _frame: object) -> None:
-        hit.append(signal.Signals(signum))
-
-    def watch() -> None:
-        while not done.wait(0.02):
-            if hit:
-                interrupted.set()
-                abort(reasons[hit[0]])
-
-    previous = {sig: signal.signal(sig, handler) for sig in reasons}
-    watcher = threading.Thread(target=watch, name="signals-abort", daemon=True)
-    watcher.start()
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-        done.set()
-        watcher.join()
-        if hit:
-            interrupted.set()
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `hopkinson` console command."""
+    from hopkinson.rig.errors import Interrupted
+    from hopkinson.rig.signals import exit_cleanly_on_termination
+
     parser = build_parser()
     args = parser.parse_args(argv)
     known = _known_errors()
     try:
-        return int(args.func(args) or 0)
+        with exit_cleanly_on_termination():
+            return int(args.func(args) or 0)
     except known as exc:
         return fail(str(exc), getattr(exc, "exit_code", 2))
-    except FileNotFoundError as exc:
-        return fail(f"{exc.filename}: no such file")
+    except OSError as exc:  # a missing or unreadable input, an unwritable output, a folder for a file
+        return fail(os_error_text(exc))
+    except Interrupted as exc:
+        return fail(str(exc), exc.exit_code)
     except KeyboardInterrupt:
         return fail("interrupted", 130)
+
+
+def os_error_text(exc: OSError) -> str:
+    """One line for an operating-system error: the file, and what is wrong with it."""
+    if isinstance(exc, FileNotFoundError):
+        return f"{exc.filename}: no such file"
+    what = exc.strerror or str(exc)
+    if exc.filename is not None:
+        target = f"{exc.filename} -> {exc.filename2}" if exc.filename2 is not None else str(exc.filename)
+        return f"{target}: {what}"
+    return what
 
 
 if __name__ == "__main__":

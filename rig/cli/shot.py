@@ -4,37 +4,52 @@
                    [--sim-state-file PATH]] [--pressure-bar P] [--projectile N] [--yes]
                    [--out DIR] [--operator NAME] [--accelerometer-model M]
                    [--accelerometer-serial S] [--sensitivity-v-per-m-s2 S] [--max-order N]
-                   [--sample-rate HZ] [--dcm-ratio R] [--dcm-damping Z] [--shot-name NAME] [--json]
+                   [--sample-rate HZ] [--dcm-ratio R] [--dcm-damping Z] [--shot-name NAME]
+                   [-v] [--log-file PATH] [--trace] [--json | --json-events]
 
 --config: the rig configuration (default config/rig.toml; with --sim config/rig-sim.toml, of
 which only limits, timeouts and analysis constants are used: the addresses are those of an
 in-process simulated rig started on free ports from --sim-config, default config/sim.toml).
+
+Before anything moves: the request and every analysis option are checked, the shot file's
+name is fixed (an existing shot file is refused) and the rig's lock is taken (rig/lock.py: a
+rig held by another shot, campaign or panel is refused at once, exit 2, naming the holder).
+While the command controls the rig it feeds the controller's link watchdog (rig/control.py).
 
 Confirmation. The shot is fired only with --yes, or when standard input is a terminal and the
 operator types "yes" at the prompt shown once the rig is armed (60 s to answer). Otherwise the
 sequencer runs up to ARM, reports, goes SAFE, and the command exits 3 saying the shot was not
 confirmed.
 
-Output: the state changes and progress as lines on stdout (or, with --json, one JSON object:
-the outcome, plus the simulator's final state with --sim). Exit codes: 0 done (also when the
-analysis failed: the shot is recorded, the analysis error is printed on stderr); 2 bad input
-or configuration (nothing was moved); 3 the shot was aborted to the safe state (one line on
-stderr: which state, which instrument, why); 130 Ctrl-C, after SAFE has run (Ctrl-C asks the
-sequencer to abort; it never interrupts SAFE).
+Signals. SIGINT (Ctrl-C), SIGTERM and SIGHUP, whenever they come, abort the shot: the
+sequencer goes SAFE (fire and fill closed, reservoir vented, read back) and the command exits
+3. One that comes after the shot (during its analysis or later) runs SAFE again before the
+exit. A signal never interrupts SAFE itself.
+
+Output: the state changes and progress as lines on stdout, each with its UTC time (-v adds the
+readings and identities); with --json one JSON object at the end (the outcome, plus the
+simulator's final state with --sim); with --json-events every event as one JSON line as it
+happens (the last one is the outcome). The shot's JSON-lines log is written beside the shot
+file (<name>.log.jsonl, rig/logbook.py), also for a shot aborted before anything was recorded;
+--log-file writes a copy elsewhere; --trace adds every instrument command and reply to the logs.
+
+Exit codes: 0 done (also when the analysis failed: the shot is recorded, the analysis error is
+printed on stderr); 2 bad input or configuration, or the rig held by another process (nothing
+was moved); 3 the shot was aborted to the safe state or interrupted by a signal (one line on
+stderr: which state, which instrument, why).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import signal
 import sys
 import threading
 from pathlib import Path
 from typing import Any
 
-from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path, signals_abort
-from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
+from hopkinson.rig.errors import EXIT_ABORTED, ConfigError
 
 PROMPT_TIMEOUT_S = 60.0
 
@@ -61,17 +76,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--sample-rate", type=float, dest="sample_rate_hz", help="analysis sample rate, Hz")
     p.add_argument("--dcm-ratio", type=float, help="DCM response-time ratio r")
     p.add_argument("--dcm-damping", type=float, help="DCM damping of the new poles")
-    p.add_argument("--json", action="store_true", help="one JSON object on stdout (the outcome)")
+    add_log_arguments(p)
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="one JSON object on stdout (the outcome)")
+    out.add_argument("--json-events", action="store_true",
+                     help="every event as one JSON line on stdout as it happens (for scripts)")
     p.set_defaults(func=run_shot_command)
 
 
+def add_log_arguments(p: argparse.ArgumentParser) -> None:
+    """-v, --log-file, --trace: shared by the commands that drive the rig."""
+    p.add_argument("-v", "--verbose", action="store_true", help="also print the readings and instrument identities")
+    p.add_argument("--log-file", type=Path, metavar="PATH",
+                   help="also write the JSON-lines log of every event here (appended)")
+    p.add_argument("--trace", action="store_true",
+                   help="record every instrument command and reply in the logs (binary blocks summarised)")
+
+
 def run_shot_command(args: argparse.Namespace) -> int:
+    from hopkinson.rig.signals import SignalLatch
+
+    with SignalLatch() as latch:  # from here on, every signal goes SAFE (exit 3)
+        return _run_shot(args, latch)
+
+
+def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     # Imported here: the drivers (pymodbus, pyvisa, pyserial) load only when a shot runs.
     from hopkinson.rig.config import load_rig_config, load_sim_config
-    from hopkinson.rig.events import EventBus, RigEvent
-    from hopkinson.rig.instruments import open_instruments
+    from hopkinson.rig.control import controlled_rig
+    from hopkinson.rig.events import AwaitingConfirmation, EventBus
+    from hopkinson.rig.lock import command_line
     from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
-    from hopkinson.rig.shot import ShotRequest
+    from hopkinson.rig.shot import ShotRequest, generated_shot_name
 
     if not args.sim and (args.sim_fault or args.sim_state_file):
         raise ConfigError("--sim-fault and --sim-state-file need --sim")
@@ -83,19 +119,19 @@ def run_shot_command(args: argparse.Namespace) -> int:
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
         sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
         sample_rate_hz=args.sample_rate_hz, dcm_ratio=args.dcm_ratio, dcm_damping=args.dcm_damping,
-        out_dir=args.out, shot_name=args.shot_name,
+        out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
         # Without --yes and without a terminal nobody can confirm: do not wait in ARM.
         confirm_timeout_s=None if args.yes else (PROMPT_TIMEOUT_S if interactive else 0.0),
     )
-    request.check(config)  # bad input: exit 2 before anything starts
+    request.check(config)  # bad input (the analysis options too): exit 2 before anything starts
+    if request.shot_path().exists():
+        raise ConfigError(f"--shot-name: {request.shot_path()} exists already: a shot file is never written over")
     authorisation = FireAuthorisation.pre_given() if args.yes else FireAuthorisation()
 
     bus = EventBus()
-    if not args.json:
-        bus.subscribe(_print_event)
     sim_state: dict[str, Any] | None = None
-    interrupted = threading.Event()
     with contextlib.ExitStack() as stack:
+        subscribe_outputs(stack, bus, args, what=f"shot {request.shot_path().name}")
         truth = None
         if args.sim:
             from hopkinson.rig.sim_session import sim_session
@@ -103,30 +139,66 @@ def run_shot_command(args: argparse.Namespace) -> int:
             session = stack.enter_context(sim_session(config, load_sim_config(args.sim_config), args.sim_fault,
                                                       args.sim_state_file))
             config, truth = session.config, session.simulated_truth
-        instruments = stack.enter_context(open_instruments(config, truth))
-        sequencer = Sequencer(instruments, config, bus)
+        control = stack.enter_context(controlled_rig(config, command_line(), truth))
+        report_reclaimed(control)
+        sequencer = Sequencer(control.instruments, config, bus, trace=args.trace)
+        latch.on_signal(sequencer.abort)  # held by the sequencer: honoured whenever it came
 
-        def on_event(event: RigEvent) -> None:
-            if event.kind == "state" and interrupted.is_set():
-                sequencer.abort("interrupted (Ctrl-C)")  # a Ctrl-C that came before the shot began
-            if interactive and event.kind == "progress" and event.data.get("awaiting_confirmation"):
-                threading.Thread(target=_prompt, args=(request, authorisation, sequencer),
-                                 name="shot-prompt", daemon=True).start()
-
-        bus.subscribe(on_event)
-        with signals_abort(sequencer.abort, interrupted, {signal.SIGINT: "interrupted (Ctrl-C)"}):
-            outcome = sequencer.run_shot(request, authorisation)
+        if interactive:
+            def on_event(event: Any) -> None:
+                if isinstance(event, AwaitingConfirmation):
+                    threading.Thread(target=_prompt, args=(request, authorisation, sequencer),
+                                     name="shot-prompt", daemon=True).start()
+            bus.subscribe(on_event)
+        outcome = sequencer.run_shot(request, authorisation)
+        safe_again = None
+        if latch.received is not None and outcome.done:  # the signal came after SAFE: once more
+            safe_again = sequencer.make_safe()
         if args.sim:
             sim_state = session.state()
-    if interrupted.is_set():
-        raise KeyboardInterrupt
+    return _report(args, outcome, sim_state, latch, safe_again)
+
+
+def subscribe_outputs(stack: contextlib.ExitStack, bus: Any, args: argparse.Namespace, what: str,
+                      lines: bool = True) -> None:
+    """The command's outputs on the bus: event lines (unless `lines` is False: a campaign
+    prints its own) or JSON lines, and the --log-file copy."""
+    from hopkinson.rig.cli.output import EventPrinter, JsonEventStream
+    from hopkinson.rig.lock import command_line
+    from hopkinson.rig.logbook import Logbook
+
+    if getattr(args, "json_events", False):
+        bus.subscribe(JsonEventStream())
+    elif lines and not getattr(args, "json", False):
+        bus.subscribe(EventPrinter(verbose=args.verbose))
+    if args.log_file is not None:
+        try:
+            logbook = Logbook(args.log_file, command=command_line(), what=what)
+        except OSError as exc:
+            raise ConfigError(f"--log-file: {args.log_file}: cannot be written ({exc.strerror or exc})") from None
+        stack.callback(logbook.close)
+        logbook.attach(bus)
+
+
+def report_reclaimed(control: Any) -> None:
+    if control.reclaimed is not None:
+        sys.stderr.write(f"hopkinson: warning: took over the rig lock left by {control.reclaimed.describe()}, "
+                         "which is no longer running\n")
+
+
+def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | None, latch: Any,
+            safe_again: tuple[bool, str | None] | None) -> int:
     if args.json:
         out = outcome.to_dict()
         if sim_state is not None:
             out["sim_state"] = sim_state
+        if latch.received is not None:
+            out["interrupted"] = latch.reason
         emit_json(out)
-    elif outcome.shot_path is not None:
+    elif outcome.shot_path is not None and not args.json_events:
         print(f"shot file: {outcome.shot_path}", flush=True)
+        if outcome.log_path is not None:
+            print(f"log:       {outcome.log_path}", flush=True)
         if outcome.results:
             from hopkinson.rig.campaign import (
                 result_line,  # the campaign's one-line summary of the figures
@@ -139,6 +211,15 @@ def run_shot_command(args: argparse.Namespace) -> int:
         sys.stderr.write(f"hopkinson: warning: the shot is recorded but its {outcome.analysis_error}\n"
                          if outcome.analysis_error.startswith("analysis")
                          else f"hopkinson: warning: {outcome.analysis_error}\n")
+    if latch.received is not None:
+        if not outcome.done:
+            line = outcome.error or f"shot ended in {outcome.final_state}"
+        elif safe_again is not None and not safe_again[0]:
+            line = f"SAFE NOT CONFIRMED: {safe_again[1]}; check the rig by hand"
+        else:
+            line = "the shot had ended; the rig was made safe again and confirmed"
+        sys.stderr.write(f"hopkinson: error: {latch.reason}: {line}\n")
+        return EXIT_ABORTED
     outcome.raise_for_outcome()
     return 0
 
@@ -148,13 +229,6 @@ def _make_out_dir(out: Path) -> None:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"--out: cannot create the folder {out}: {exc.strerror or exc}") from None
-
-
-def _print_event(event: Any) -> None:
-    if event.kind in ("state", "progress", "log", "error"):
-        marker = {"error": "! ", "log": "  "}.get(event.kind, "")
-        sys.stdout.write(f"{event.state:<9} {marker}{event.message}\n")  # one write: one whole line
-        sys.stdout.flush()
 
 
 def _prompt(request: Any, authorisation: Any, sequencer: Any) -> None:

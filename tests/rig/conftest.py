@@ -13,10 +13,11 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from hopkinson.analysis.params import AnalysisParams
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import WorldParams
 from hopkinson.rig.config import RigConfig, load_rig_config
-from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.events import EventBus, RigEvent, StateEntered
 from hopkinson.rig.instruments import Instruments, open_instruments
 from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.shot import AnalysisResult, ShotRequest
@@ -60,17 +61,17 @@ class Recorder:
         with self._lock:
             self.events.append(event)
 
-    def of(self, kind: str) -> list[RigEvent]:
+    def of(self, *types: type[RigEvent]) -> list[RigEvent]:
         with self._lock:
-            return [e for e in self.events if e.kind == kind]
+            return [e for e in self.events if isinstance(e, types)]
 
     def states(self) -> list[str]:
-        return [e.state for e in self.of("state")]
+        return [e.state for e in self.of(StateEntered)]
 
 
-def quick_analysis(raw: RawShot, params: dict) -> AnalysisResult:
+def quick_analysis(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
     """A stand-in for the shot analysis where a test is not about it (the real one takes ~1 s)."""
-    return AnalysisResult({"peak_response_v": float(raw.volts("response").max()), "params": dict(params)})
+    return AnalysisResult({"peak_response_v": float(raw.volts("response").max()), "params": params.to_dict()})
 
 
 class Rig:
@@ -96,7 +97,7 @@ class Rig:
     def on_state(self, state: str, action: Callable[[], None]) -> None:
         """Run `action` (in the sequencer's thread) when the sequencer enters `state`."""
         def callback(event: RigEvent) -> None:
-            if event.kind == "state" and event.state == state:
+            if isinstance(event, StateEntered) and event.state == state:
                 action()
         self.bus.subscribe(callback)
 
@@ -109,6 +110,14 @@ class Rig:
         assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True, coils
         if vented:
             assert self.world.reservoir_pressure_bar() <= self.config.limits.vent_done_bar
+
+
+@pytest.fixture(autouse=True)
+def private_lock_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Rig locks (rig/lock.py) of this test in a folder of its own, never the system's."""
+    folder = tmp_path_factory.mktemp("locks")
+    monkeypatch.setenv("HOPKINSON_LOCK_DIR", str(folder))
+    return folder
 
 
 @pytest.fixture

@@ -24,7 +24,15 @@ from hopkinson.rig.campaign import (
 )
 from hopkinson.rig.cli.campaign import ProgressPrinter
 from hopkinson.rig.cli.main import main
-from hopkinson.rig.events import EventBus, RigEvent
+from hopkinson.rig.events import (
+    CampaignShotStarted,
+    EventBus,
+    Reading,
+    RigError,
+    RigEvent,
+    StateEntered,
+    StepProgress,
+)
 from hopkinson.rig.instruments import open_instruments
 from hopkinson.rig.journal import Journal, ShotState
 from hopkinson.rig.plan import load_plan
@@ -36,6 +44,7 @@ from hopkinson.rig.sim_session import SimSession, sim_session
 from tests.rig.conftest import fast_sim_config, short_timeouts_config
 
 S = ShotState
+TIME = r"\d\d:\d\d:\d\d\.\d\d\d "  # every progress line starts with its UTC time
 
 PLAN = """
 name = "camp"
@@ -134,8 +143,8 @@ def test_every_planned_shot_is_fired_once_journaled_and_analysed(tmp_path: Path,
     pairs = [m for m in shot.results["identification"]["modes"] if m["kind"] in ("complex", "pair")]
     fn = min(pairs, key=lambda m: m["natural_frequency_hz"])["natural_frequency_hz"]
     assert fn == pytest.approx(truth["natural_frequency_hz"], rel=0.01)
-    starts = [e for e in events if e.state == "CAMPAIGN" and e.kind == "progress"]
-    assert [(e.data["index"], e.data["total"], e.data["shot_id"]) for e in starts] == [
+    starts = [e for e in events if isinstance(e, CampaignShotStarted)]
+    assert [(e.index, e.total, e.shot_id) for e in starts] == [
         (1, 3, "s001-r1"), (2, 3, "s001-r2"), (3, 3, "s002-r1")]
 
 
@@ -266,7 +275,7 @@ def test_cli_runs_a_campaign_with_progress_lines(tmp_path: Path, sim_files, caps
     lines = captured.err.splitlines()
     for pattern in (r"\[1/2\] s001-r1 START 1.5 bar, projectile No. 3", r"\[1/2\] s001-r1 CHARGE \d+\.\d\d bar",
                     r"\[1/2\] s001-r1 FIRE", r"\[2/2\] s001-r2 ANALYSED order \d", r"campaign: campaign complete"):
-        assert any(re.match(pattern, ln) for ln in lines), pattern
+        assert any(re.match(TIME + pattern, ln) for ln in lines), pattern
     assert f"run folder: {out}" in captured.out
     assert [e["shot_id"] for e in read_fire_log(sim_files["log"])] == ["s001-r1", "s001-r2"]
 
@@ -309,10 +318,11 @@ def test_progress_lines_are_plain_text() -> None:
     stream = io.StringIO()
     printer = ProgressPrinter(stream)
     printer.runner = Runner()
-    printer(RigEvent("state", "CHARGE", "charging the reservoir"))
-    printer(RigEvent("progress", "CHARGE", "charging: 4.100 of 4.1 bar", {"reservoir_pressure_bar": 4.1}))
-    printer(RigEvent("error", "CHARGE", "aborting: door open"))
-    printer(RigEvent("reading", "CHARGE", "readings", {"reservoir_pressure_bar": 4.0}))
-    assert stream.getvalue().splitlines() == ["[3/8] s002-r1 CHARGE", "[3/8] s002-r1 CHARGE 4.10 bar",
-                                              "[3/8] s002-r1 CHARGE ! aborting: door open"]
+    utc = "2025-01-01T12:00:01.250000Z"
+    printer(StateEntered(state="CHARGE", message="charging the reservoir", utc=utc))
+    printer(StepProgress(state="CHARGE", message="charging: 4.100 of 4.1 bar", reservoir_pressure_bar=4.1, utc=utc))
+    printer(RigError(state="CHARGE", message="aborting: door open", utc=utc))
+    printer(Reading(state="CHARGE", message="readings", reservoir_pressure_bar=4.0, fixture_vacuum_mbar=50.0, utc=utc))
+    assert stream.getvalue().splitlines() == ["12:00:01.250 [3/8] s002-r1 CHARGE", "12:00:01.250 [3/8] s002-r1 CHARGE 4.10 bar",
+                                              "12:00:01.250 [3/8] s002-r1 CHARGE ! aborting: door open"]
     assert "\r" not in stream.getvalue() and "\x1b" not in stream.getvalue()

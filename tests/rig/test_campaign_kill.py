@@ -9,6 +9,7 @@ journal's fire count is the world's.
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -18,6 +19,7 @@ from pathlib import Path
 from hopkinson.rig.campaign import read_fire_log
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.journal import Journal
+from hopkinson.rig.logbook import read_log
 from hopkinson.rig.run_folder import open_run_folder
 from hopkinson.rig.shotfile import read_shot
 
@@ -41,6 +43,11 @@ pressure_bar = 1.8
 repeats = 2
 """
 IDS = ["s001-r1", "s001-r2", "s002-r1", "s002-r2"]
+TIME = re.compile(r"^\d\d:\d\d:\d\d\.\d\d\d ")  # progress lines start with their UTC time
+
+
+def _untimed(line: str) -> str:
+    return TIME.sub("", line, count=1)
 
 
 class Campaign:
@@ -64,13 +71,14 @@ class Campaign:
         lines: list[str] = []
         assert proc.stderr is not None
         for line in proc.stderr:
-            lines.append(line.rstrip("\n"))
+            line = _untimed(line.rstrip("\n"))
+            lines.append(line)
             if kill_at is not None and line.startswith(kill_at):
                 proc.send_signal(sig)
                 if sig == signal.SIGKILL:
                     break
                 kill_at = None
-        lines += proc.stderr.read().splitlines()
+        lines += [_untimed(ln) for ln in proc.stderr.read().splitlines()]
         return proc.wait(timeout=60), lines
 
     def fired(self) -> Counter[str]:
@@ -117,7 +125,11 @@ def test_killed_at_several_points_and_resumed_ends_with_exactly_the_planned_shot
 
     run = open_run_folder(c.run)
     assert not run.find_leftovers()  # no *.tmp anywhere
-    assert sorted(p.name for p in run.shots_dir.iterdir()) == [f"{sid}.h5" for sid in IDS]
+    assert sorted(p.name for p in run.shots_dir.glob("*.h5")) == [f"{sid}.h5" for sid in IDS]
+    # Every shot kept its log, and the campaign's log holds every run, resumes included.
+    assert sorted(p.name for p in run.shots_dir.glob("*.log.jsonl")) == [f"{sid}.log.jsonl" for sid in IDS]
+    opened = [e for e in read_log(run.path / "campaign.log.jsonl") if e["type"] == "LogOpened"]
+    assert len(opened) == c.started
     fired = c.fired()
     launches = read_fire_log(c.log)
     with Journal.open(run) as journal:
@@ -145,8 +157,9 @@ def test_killed_at_several_points_and_resumed_ends_with_exactly_the_planned_shot
 def test_ctrl_c_aborts_the_shot_to_the_safe_state_and_a_resume_fires_it_once(tmp_path: Path) -> None:
     c = Campaign(tmp_path, PLAN.split("[[shots]]")[0] + "[[shots]]\npressure_bar = 1.2\n")
     rc, lines = c.start("[1/1] s001-r1 CHARGE", sig=signal.SIGINT)
-    assert rc == 130, lines[-5:]
-    assert lines[-1] == "hopkinson: error: interrupted; the current shot was aborted to the safe state"
+    assert rc == 3, lines[-5:]
+    assert lines[-1].startswith("hopkinson: error: interrupted (SIGINT): the current shot was aborted and the rig "
+                                "made safe; campaign stopped")
     assert any(ln.startswith("[1/1] s001-r1 SAFE") and "rig safe: fire and fill closed, vent open" in ln for ln in lines)
     assert not c.fired()  # interrupted before FIRE: nothing left the barrel
     with Journal.open(c.run) as journal:

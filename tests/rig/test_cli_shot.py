@@ -15,9 +15,15 @@ from pathlib import Path
 
 import pytest
 from hopkinson.rig.cli.main import main
+from hopkinson.rig.logbook import read_log
 from hopkinson.rig.shotfile import read_shot
 
 REPO = Path(__file__).resolve().parents[2]
+LINE = re.compile(r"^(\d\d:\d\d:\d\d\.\d\d\d) (\S+)")  # every event line: its UTC time, then the state
+
+
+def _states(out: str) -> list[str]:
+    return [m.group(2) for m in map(LINE.match, out.splitlines()) if m]
 
 
 @pytest.fixture
@@ -83,7 +89,7 @@ def test_analysis_failure_still_exits_0_and_says_why(configs, capsys) -> None:
 def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
     assert main(_args(configs, "--yes")) == 0
     out = capsys.readouterr().out
-    states = [line.split()[0] for line in out.splitlines() if not line.startswith(("shot file:", "results:"))]
+    states = _states(out)
     assert [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s] == [
         "CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE", "CAPTURE", "SAFE", "STORE", "ANALYSE", "DONE"]
     assert re.search(r"^results: .*f_n 2\d\.\d\d kHz.*FBSD", out, flags=re.M)
@@ -96,12 +102,17 @@ def test_without_yes_it_runs_to_arm_goes_safe_and_exits_3(configs, capsys) -> No
     assert err.count("\n") == 1
     assert err.startswith("hopkinson: error: shot aborted in ARM: operator: shot not confirmed")
     assert "rig safe" in err
-    lines = [line.split()[0] for line in out.splitlines()]
+    lines = _states(out)
     assert "ARM" in lines and "FIRE" not in lines and lines[-1] == "ABORTED"
     state = _state(configs)
     assert state["shots_fired"] == 0 and state["fire_refusals"] == []
     _assert_safe(state)
-    assert not list(configs["out"].iterdir())
+    assert not list(configs["out"].glob("*.h5"))  # nothing recorded; the shot's log tells what happened
+    (log,) = configs["out"].glob("*.log.jsonl")
+    entries = read_log(log)
+    assert entries[0]["type"] == "LogOpened" and entries[-1]["type"] == "ShotFinished"
+    assert entries[-1]["final_state"] == "ABORTED" and entries[-1]["hint"].startswith("The shot was not confirmed")
+    assert all(e["utc"].endswith("Z") for e in entries)
 
 
 @pytest.mark.parametrize("fault, where, reason", [
@@ -157,7 +168,7 @@ def _read_until(stream, needle: str, proc: subprocess.Popen, timeout_s: float = 
     raise AssertionError(f"{needle!r} never came; got {''.join(seen)!r}")
 
 
-def test_ctrl_c_during_charge_goes_safe_then_exits_130(configs) -> None:
+def test_ctrl_c_during_charge_goes_safe_then_exits_3(configs) -> None:
     args = _args(configs, "--yes", sim="sim10")
     args[args.index("1.0")] = "6.0"  # 6 bar take ~1.2 s to charge at 10x: time to press Ctrl-C
     proc = subprocess.Popen([sys.executable, "-m", "hopkinson", *args], cwd=REPO, text=True,
@@ -166,11 +177,12 @@ def test_ctrl_c_during_charge_goes_safe_then_exits_130(configs) -> None:
     proc.send_signal(signal.SIGINT)
     rest, err = proc.communicate(timeout=60)
     out = head + rest
-    assert proc.returncode == 130, (out, err)
-    assert err.strip() == "hopkinson: error: interrupted"
-    states = [line.split()[0] for line in out.splitlines()]
+    assert proc.returncode == 3, (out, err)
+    assert err.startswith("hopkinson: error: interrupted (SIGINT): shot aborted in CHARGE: operator: aborted: "
+                          "interrupted (SIGINT)") and err.count("\n") == 1
+    states = _states(out)
     assert states.index("SAFE") > states.index("CHARGE") and "FIRE" not in states
-    assert "rig safe" in out and "aborted: interrupted (Ctrl-C)" in out
+    assert "rig safe" in out
     state = _state(configs)
     _assert_safe(state)
     assert state["shots_fired"] == 0

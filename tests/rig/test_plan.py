@@ -86,7 +86,7 @@ def test_wide_plans_keep_ids_sortable(tmp_path: Path) -> None:
          "shots[2].pressure_bar", "must be > 0"),
         ("[[shots]]\npressure_bar = 1.0\nprojectile = 4\n", "shots[1].projectile", "must be 1..3"),
         ("[[shots]]\npressure_bar = 1.0\nprojectile = 2.0\n", "shots[1].projectile", "must be an integer"),
-        ("[[shots]]\npressure_bar = 1.0\nprojectile = 3\nrepeats = 0\n", "shots[1].repeats", "must be >= 1"),
+        ("[[shots]]\npressure_bar = 1.0\nprojectile = 3\nrepeats = 0\n", "shots[1].repeats", "must be 1..10000"),
         ("[[shots]]\npressure_bar = \"2\"\nprojectile = 3\n", "shots[1].pressure_bar",
          "must be a number, got a string"),
         ("[[shots]]\npressure_bar = true\nprojectile = 3\n", "shots[1].pressure_bar",

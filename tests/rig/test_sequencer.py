@@ -6,14 +6,27 @@ from what the sequencer says about itself.
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from pathlib import Path
 
 import pytest
+from hopkinson.analysis.params import AnalysisParams
 from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.errors import ShotAborted
-from hopkinson.rig.events import EventBus, EventQueue, RigEvent
+from hopkinson.rig.events import (
+    AwaitingConfirmation,
+    EventBus,
+    EventQueue,
+    Note,
+    Reading,
+    RigError,
+    RigEvent,
+    ShotFinished,
+    StateEntered,
+    StepProgress,
+)
 from hopkinson.rig.interlocks import INTERLOCKS, REQUIRED, RigReadings, evaluate
 from hopkinson.rig.sequencer import FINAL_STATES, TRANSITIONS, FireAuthorisation, Sequencer, State
 from hopkinson.rig.shot import AnalysisResult, ShotRequestError
@@ -43,7 +56,7 @@ def test_transition_table_every_active_state_can_only_go_on_or_to_safe() -> None
 # -- a whole shot ----------------------------------------------------------------------------------
 def _peak_analysis(seen: dict):
     """An analysis that records what it was given and whether the raw file existed already."""
-    def analyse(raw: RawShot, params: dict) -> AnalysisResult:
+    def analyse(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
         path = seen["path"]
         seen["file_state_during_analysis"] = read_shot(path, load_raw=False).state if path.exists() else None
         seen["params"] = params
@@ -80,17 +93,18 @@ def test_complete_shot_stores_raw_before_analysis_and_ends_safe(rig) -> None:
     assert shot.meta.config["shot_settings"]["amplifier_gain"] == rig.config.amplifier.gain
     assert shot.meta.config["limits"]["max_pressure_bar"] == rig.config.limits.max_pressure_bar
     assert "SIMDIG" in shot.meta.instruments["digitizer"]
-    assert seen["params"]["amp_gain"] == rig.config.amplifier.gain
-    assert seen["params"]["sensitivity_v_per_m_s2"] == rig.config.analysis.sensitivity_v_per_m_s2
+    assert seen["params"].amp_gain == rig.config.amplifier.gain
+    assert seen["params"].sensitivity_v_per_m_s2 == rig.config.analysis.sensitivity_v_per_m_s2
 
-    # Events: readings with the agreed keys, a result event with the file and the results.
-    readings = rig.recorder.of("reading")
+    # Events: readings in every watched state, one ShotFinished with the file; every event JSON-ready.
+    readings = rig.recorder.of(Reading)
     assert {"EVACUATE", "CHARGE", "ARM", "FIRE"} <= {e.state for e in readings}
-    for event in readings:
-        assert {"reservoir_pressure_bar", "fixture_vacuum_mbar", "interlocks"} <= set(event.data)
-    (result,) = rig.recorder.of("result")
-    assert result.data["shot_path"] == str(outcome.shot_path)
-    assert result.data["results"] == outcome.results and result.data["error"] is None
+    assert all(e.interlocks and e.reservoir_pressure_bar is not None for e in readings)
+    (result,) = rig.recorder.of(ShotFinished)
+    assert result.shot_path == str(outcome.shot_path) and result.error is None and result.final_state == "DONE"
+    for event in rig.recorder.events:
+        d = event.to_dict()
+        assert d["type"] == type(event).__name__ and d["utc"].endswith("Z") and json.dumps(d)
 
 
 def test_real_analysis_identifies_the_simulated_accelerometer(rig) -> None:
@@ -114,7 +128,7 @@ def test_real_analysis_identifies_the_simulated_accelerometer(rig) -> None:
 
 
 def test_analysis_failure_is_recorded_and_the_shot_kept(rig) -> None:
-    def broken(raw: RawShot, params: dict) -> AnalysisResult:
+    def broken(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
         raise ValueError("no beat found in the Doppler channel")
 
     rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus, analyse=broken)
@@ -155,14 +169,14 @@ def test_confirmation_given_from_another_thread_fires(rig) -> None:
     authorisation = FireAuthorisation()
 
     def on_event(event: RigEvent) -> None:  # the panel: the operator clicks FIRE a little later
-        if event.data.get("awaiting_confirmation"):
+        if isinstance(event, AwaitingConfirmation):
             threading.Timer(0.2, authorisation.give).start()
 
     rig.bus.subscribe(on_event)
     outcome = rig.run(authorisation, confirm_timeout_s=10.0)
     assert outcome.final_state == "DONE" and outcome.fired
     assert rig.world.shots_fired == 1
-    progress = [e.message for e in rig.recorder.of("progress") if e.state == "ARM"]
+    progress = [e.message for e in rig.recorder.of(StepProgress, AwaitingConfirmation) if e.state == "ARM"]
     assert progress == ["armed: waiting for the fire confirmation", "fire confirmed"]
 
 
@@ -182,7 +196,7 @@ def test_abort_from_another_thread_reaches_safe(make_rig, state: str) -> None:
     started = threading.Event()
 
     def on_event(event: RigEvent) -> None:
-        if event.state == state and event.kind in ("progress", "reading"):
+        if event.state == state and isinstance(event, StepProgress | Reading):
             started.set()
 
     rig.bus.subscribe(on_event)
@@ -233,9 +247,9 @@ def test_keyboard_interrupt_in_charge_is_deferred_until_safe(rig) -> None:
     # By the time the interrupt reaches the caller, SAFE has run and the rig is safe.
     rig.assert_safe()
     assert rig.recorder.states()[-3:] == ["CHARGE", "SAFE", "ABORTED"]
-    (result,) = rig.recorder.of("result")
-    assert result.data["aborted_in"] == "CHARGE" and "interrupted (KeyboardInterrupt)" in result.data["error"]
-    assert any(e.message.startswith("rig safe") for e in rig.recorder.of("log"))
+    (result,) = rig.recorder.of(ShotFinished)
+    assert result.aborted_in == "CHARGE" and "interrupted (KeyboardInterrupt)" in result.error
+    assert any(e.message.startswith("rig safe") for e in rig.recorder.of(Note))
     assert rig.world.shots_fired == 0
 
 
@@ -243,7 +257,7 @@ def test_door_opened_mid_arm_aborts(rig) -> None:
     armed_readings = []
 
     def on_event(event: RigEvent) -> None:
-        if event.kind == "reading" and event.state == "ARM":
+        if isinstance(event, Reading) and event.state == "ARM":
             armed_readings.append(event)
             if len(armed_readings) == 2:  # the rig is armed and waiting: now someone opens the door
                 rig.faults.inject("door-open")
@@ -252,8 +266,11 @@ def test_door_opened_mid_arm_aborts(rig) -> None:
     outcome = rig.run(FireAuthorisation(), confirm_timeout_s=10.0)
     assert outcome.aborted_in == "ARM" and outcome.final_state == "ABORTED"
     assert "interlock lost: door/guard open" in outcome.error
-    assert any(e.data.get("awaiting_confirmation") for e in rig.recorder.of("progress"))
-    assert armed_readings[0].data["interlocks"]["door"] is True
+    assert rig.recorder.of(AwaitingConfirmation)
+    assert armed_readings[0].interlocks["door"] is True
+    (error,) = rig.recorder.of(RigError)  # the operator's hint comes from the interlock's code
+    assert error.codes == ("door",) and error.hint == "Close the door/guard, then ARM again."
+    assert outcome.hint == error.hint
     assert rig.world.shots_fired == 0
     rig.assert_safe()
     assert rig.sequencer.interlocks_ok is False
@@ -281,7 +298,7 @@ def test_make_safe_when_idle_vents_the_rig_and_leaves_the_state_alone(rig) -> No
     rig.assert_safe()
     assert rig.world.coils()["pump"] is False
     assert rig.sequencer.state == State.IDLE and rig.recorder.states() == []
-    assert any(e.message.startswith("rig safe") for e in rig.recorder.of("log"))
+    assert any(e.message.startswith("rig safe") for e in rig.recorder.of(Note))
 
 
 def test_make_safe_reports_what_it_could_not_confirm(make_rig) -> None:
@@ -289,7 +306,7 @@ def test_make_safe_reports_what_it_could_not_confirm(make_rig) -> None:
     _leave_the_rig_charged(rig, stuck_fill_valve=True)
     confirmed, problem = rig.sequencer.make_safe()
     assert confirmed is False and "fill valve stuck open?" in problem
-    assert any("SAFE NOT CONFIRMED" in e.message for e in rig.recorder.of("error"))
+    assert [e.hint for e in rig.recorder.of(RigError)] == ["Check the rig by hand: valves and reservoir pressure."]
     rig.assert_safe(vented=False)
 
 
@@ -330,13 +347,13 @@ def test_a_failing_subscriber_does_not_break_the_shot(rig) -> None:
 
 def test_event_bus_subscribe_unsubscribe_and_threads() -> None:
     bus = EventBus()
-    queue = EventQueue(bus, kinds=("log",))
+    queue = EventQueue(bus, types=(Note,))
     got: list[RigEvent] = []
     unsubscribe = bus.subscribe(got.append)
 
     def publish_many() -> None:
         for i in range(200):
-            bus.emit("log", "IDLE", f"n{i}")
+            bus.publish(Note(state="IDLE", message=f"n{i}"))
 
     threads = [threading.Thread(target=publish_many) for _ in range(4)]
     for t in threads:
@@ -345,11 +362,9 @@ def test_event_bus_subscribe_unsubscribe_and_threads() -> None:
         t.join()
     assert len(got) == 800 and len(queue.drain()) == 800
     unsubscribe()
-    bus.emit("state", "CHECK", "after")
+    bus.publish(StateEntered(state="CHECK", message="after"))
     assert len(got) == 800
-    assert [e.message for e in queue.drain()] == []  # "state" is not a kind the queue keeps
-    with pytest.raises(ValueError, match="event kind"):
-        RigEvent("bogus", "IDLE", "x")
+    assert [e.message for e in queue.drain()] == []  # a StateEntered is not a type the queue keeps
 
 
 # -- interlock rules (pure) ------------------------------------------------------------------------------

@@ -25,7 +25,8 @@ import time
 
 import pytest
 from hopkinson.drivers.sim.faults import FAULTS
-from hopkinson.rig.events import RigEvent
+from hopkinson.rig.events import Reading, RigEvent
+from hopkinson.rig.logbook import read_log
 from hopkinson.rig.sequencer import FireAuthorisation
 from hopkinson.rig.shotfile import read_shot
 
@@ -81,7 +82,7 @@ def _human_confirmation(rig: Rig, authorisation: FireAuthorisation, after_readin
     count = [0]
 
     def on_event(event: RigEvent) -> None:
-        if event.kind == "reading" and event.state == "ARM":
+        if isinstance(event, Reading) and event.state == "ARM":
             count[0] += 1
             if count[0] == after_readings:
                 authorisation.give()
@@ -124,7 +125,10 @@ def test_fault_in_state_ends_safe(make_rig, fault: str, state: str) -> None:
     fired = fault in ("no-trigger", "visa-garbled-block")  # the only faults that bite after the fire command
     assert outcome.fired is fired
     assert rig.world.shots_fired == (1 if fired else 0)
-    assert outcome.shot_path is None and not list(rig.out_dir.iterdir())  # nothing was recorded
+    assert outcome.shot_path is None and not list(rig.out_dir.glob("*.h5"))  # nothing was recorded
+    log = read_log(outcome.log_path)  # but the shot's log tells the story, the fault included
+    errors = [e for e in log if e["type"] == "RigError"]
+    assert errors and REASON[fault] in errors[0]["message"] and log[-1]["type"] == "ShotFinished"
     if fired:
         assert "the shot was fired but nothing was recorded" in outcome.error
 
@@ -193,5 +197,9 @@ def test_amplifier_overload_during_the_shot_is_a_warning_not_a_loss(make_rig) ->
     outcome = rig.run(pressure_bar=1.0)
     assert outcome.final_state == "DONE" and outcome.shot_path is not None
     assert any("overloaded during the shot" in w for w in outcome.warnings)
-    assert read_shot(outcome.shot_path).meta.config["shot_settings"]["amplifier_overloaded"] is True
+    shot = read_shot(outcome.shot_path)
+    assert shot.meta.config["shot_settings"]["amplifier_overloaded"] is True
+    # The response is clipped: kept, but not analysed, and the file says why.
+    assert outcome.analysis_error.startswith("not analysed: the amplifier overloaded")
+    assert shot.state == "analysis_failed" and "amplifier overloaded" in shot.analysis_error
     rig.assert_safe()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hopkinson.rig.events import CampaignShotStarted, Reading
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import Qt
@@ -59,7 +60,7 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
 
     # Run, and Pause while the first shot runs: the campaign stops after that shot
     def pause_on_first_shot(event):
-        if event.state == "CAMPAIGN" and event.kind == "progress" and event.data.get("shot_id") == "s001-r1":
+        if isinstance(event, CampaignShotStarted) and event.shot_id == "s001-r1":
             tab.pause_button.click()
     w.link.event.connect(pause_on_first_shot)
     with qtbot.waitSignal(tab.ended, timeout=CAMPAIGN_TIMEOUT_MS):
@@ -76,11 +77,11 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     filling_when_pressed: list[bool] = []
 
     def abort_in_charge(event):
-        if event.state == "CAMPAIGN" and event.kind == "progress":
-            current.append(event.data["shot_id"])
+        if isinstance(event, CampaignShotStarted):
+            current.append(event.shot_id)
         # on the first CHARGE reading (the sequencer reads only after opening the fill valve), not
         # on entering CHARGE: that state event can reach the GUI before the valve has opened
-        if (event.kind == "reading" and event.state == "CHARGE" and current[-1:] == ["s001-r2"]
+        if (isinstance(event, Reading) and event.state == "CHARGE" and current[-1:] == ["s001-r2"]
                 and not filling_when_pressed):
             filling_when_pressed.append(panel.world.coils()["fill"])
             tab.abort_button.click()

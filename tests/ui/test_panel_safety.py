@@ -4,7 +4,7 @@ through the real widgets, against the simulated rig with its faults."""
 from __future__ import annotations
 
 import pytest
-from hopkinson.rig.events import RigEvent
+from hopkinson.rig.events import Reading
 from hopkinson.rig.interlocks import INTERLOCKS
 from hopkinson.rig.sequencer import FireAuthorisation
 from PySide6.QtCore import Qt
@@ -33,21 +33,26 @@ class FireWatch:
         self.ever_enabled |= self.window.fire_button.isEnabled()
 
 
+def _reading(interlocks: dict) -> Reading:
+    return Reading(state="ARM", message="readings", reservoir_pressure_bar=1.0, fixture_vacuum_mbar=50.0,
+                   interlocks=interlocks)
+
+
 def test_fire_rule_needs_armed_waiting_and_every_interlock(make_panel, tmp_path):
     """The rule itself, on synthetic readings (no timing involved)."""
     w = make_panel(simulate=False, connect=False, config=unreachable_config(tmp_path)).window
     all_ok = dict.fromkeys(INTERLOCKS, True)
     w.busy, w.awaiting_confirmation, w.authorisation = True, True, FireAuthorisation()
     w.state_bar.set_state("ARM")
-    w.last_reading = RigEvent("reading", "ARM", "readings", {"interlocks": all_ok})
+    w.last_reading = _reading(all_ok)
     assert w.fire_allowed()
     for name in INTERLOCKS:
-        w.last_reading = RigEvent("reading", "ARM", "readings", {"interlocks": {**all_ok, name: False}})
+        w.last_reading = _reading({**all_ok, name: False})
         assert not w.fire_allowed(), name
     idle = {k: v for k, v in all_ok.items() if k != "digitizer"}  # an idle reading never judges the digitizer
-    w.last_reading = RigEvent("reading", "ARM", "readings", {"interlocks": idle})
+    w.last_reading = _reading(idle)
     assert not w.fire_allowed()
-    w.last_reading = RigEvent("reading", "ARM", "readings", {"interlocks": all_ok})
+    w.last_reading = _reading(all_ok)
     w.awaiting_confirmation = False
     assert not w.fire_allowed()
     w.awaiting_confirmation = True

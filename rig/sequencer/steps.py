@@ -1,0 +1,324 @@
+"""The steps of a shot, CHECK to CAPTURE: each a function of the shot's context.
+
+- CHECK: a held abort stops here before anything moves; identities; fire and fill closed; a
+  tripped link watchdog gets a new heartbeat session; pressure left in the reservoir is vented
+  first (and said so); the amplifier configured (read back) and zeroed; the digitizer
+  configured; the projectile set where the controller has a register; door, clamp, e-stop and
+  amplifier must hold.
+- EVACUATE: vacuum pump on until the fixture vacuum is at or below limits.fixture_vacuum_max_mbar.
+- CHARGE: vent closed, set-point, fill open until the reservoir is within the tolerance of the
+  set-point, fill closed. Interlocks watched (incl. vacuum and overpressure).
+- ARM: the digitizer armed and seen ARMED, every interlock holds; then the fire confirmation
+  (FireAuthorisation) is awaited while the interlocks are watched; last, immediately before
+  FIRE, the digitizer's, the amplifier's and the controller's settings are read back and
+  compared with what this shot needs (another client may have changed them).
+- FIRE: confirmation still given, every interlock holds (read again), the `before_fire` hook
+  (a campaign journals FIRING), then the controller is told to fire a pulse of
+  `valve_controller.fire_pulse_s`: the controller opens the fire valve and closes it itself.
+  Its pulse counter, read before and after, confirms the shot.
+- CAPTURE: the digitizer's trigger, then every configured channel fetched by role (one retry on
+  a fresh session), an amplifier overload noted, the simulated truth taken (simulation). An
+  abort asked for after the fire command does not stop CAPTURE (still bounded by
+  timeouts.capture_s): the projectile is on its way, and its record is worth keeping.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from typing import Any
+
+from hopkinson.drivers.errors import InstrumentError
+from hopkinson.rig.errors import HINT_NOT_CONFIRMED
+from hopkinson.rig.events import AwaitingConfirmation, Fired, Identified
+from hopkinson.rig.sequencer.context import Abort, ShotContext
+from hopkinson.rig.sequencer.states import State
+from hopkinson.rig.shot import CapturedShot, digitizer_channels
+
+HINT_SETTINGS_CHANGED = ("Another program may be using the instrument: close it (hopkinson status only reads), "
+                         "then ARM again.")
+HINT_NOT_FIRED = "The controller refused the fire pulse: read why above, fix it, then ARM again."
+PULSE_COUNT_WAIT_S = 1.0  # how long FIRE waits for the controller to count the pulse
+
+
+def check(ctx: ShotContext) -> None:
+    inst, cfg = ctx.instruments, ctx.config
+    valves = inst.valves
+    ctx.checkpoint(valves.name, "starting the shot")  # an abort held before the shot: nothing moves
+    if not inst.digitizer.connected:  # a session closed by an earlier failure: start afresh
+        inst.digitizer.connect()
+    ctx.identities = inst.identities()
+    ctx.events.publish(Identified(state=ctx.state, message="instruments: " + "; ".join(
+        f"{k}: {v}" for k, v in ctx.identities.items()), identities=dict(ctx.identities)))
+    valves.set_fire_valve(False)
+    valves.set_fill_valve(False)
+    ctx.checkpoint(valves.name, "closing the valves")
+    _restart_tripped_watchdog(ctx)
+    _vent_leftover_pressure(ctx)
+    amp = cfg.amplifier
+    inst.amplifier.configure(gain=amp.gain, excitation_v=amp.excitation_v, lowpass_hz=amp.lowpass_hz)
+    inst.amplifier.set_shunt(False)
+    inst.amplifier.auto_zero()
+    held = inst.amplifier.settings()
+    ctx.settings["amplifier_gain"] = float(held.gain)
+    ctx.settings["amplifier_excitation_v"] = float(held.excitation_v)
+    ctx.settings["amplifier_lowpass_hz"] = float(held.lowpass_hz)
+    ctx.checkpoint(inst.amplifier.name, "configuring the amplifier")
+    inst.digitizer.abort()
+    _configure_digitizer(ctx)
+    ctx.checkpoint(inst.digitizer.instrument, "configuring the digitizer")
+    projectile = ctx.request.projectile
+    if _has_projectile_register(ctx):
+        valves.set_projectile(projectile)
+    else:
+        ctx.events.note(f"the controller has no projectile register: make sure projectile No. {projectile} is loaded")
+    ctx.watch(State.CHECK)
+    ctx.checkpoint(valves.name, "checking the interlocks")
+
+
+def _has_projectile_register(ctx: ShotContext) -> bool:
+    valves = ctx.instruments.valves
+    has = getattr(valves, "has_projectile_register", None)
+    if has is None:  # a driver without the property: the configuration's map says
+        return ctx.config.valve_controller.holding_registers.projectile >= 0
+    return bool(has)
+
+
+def _restart_tripped_watchdog(ctx: ShotContext) -> None:
+    """A controller whose link watchdog tripped (an earlier session lost its link) refuses to
+    energise anything: it has vented already; a new heartbeat session re-arms it."""
+    valves = ctx.instruments.valves
+    if not getattr(valves, "heartbeat_running", False):
+        return  # no heartbeat session in this process (a test rig): nothing to restart
+    if valves.watchdog_tripped():
+        ctx.warn("the controller's link watchdog had tripped (a heartbeat was missed): it de-energised "
+                 "the outputs and vented; starting a new heartbeat session")
+        valves.start_heartbeat()
+
+
+def _vent_leftover_pressure(ctx: ShotContext) -> None:
+    """CHECK does not start with pressure in the reservoir: it vents first, and says so.
+    Venting may take longer than CHECK itself, so it has timeouts.safe_s."""
+    valves, limits = ctx.instruments.valves, ctx.config.limits
+    p = valves.reservoir_pressure_bar()
+    if p <= limits.vent_done_bar:
+        return
+    ctx.warn(f"the reservoir holds {p:.3f} bar before the shot (above {limits.vent_done_bar:g} bar): "
+             "venting it first")
+    valves.set_fill_valve(False)
+    valves.set_vent_valve(True)
+    deadline = time.monotonic() + ctx.config.timeouts.safe_s
+    while p > limits.vent_done_bar:
+        if time.monotonic() > deadline:
+            raise Abort(valves.name, f"the reservoir did not vent below {limits.vent_done_bar:g} bar within "
+                                     f"{ctx.config.timeouts.safe_s:g} s (still {p:.3f} bar; fill valve stuck open?)",
+                        "Check the fill and vent valves by hand before anything else.")
+        ctx.abort.wait(ctx.poll_s)
+        if ctx.abort.requested:
+            ctx.checkpoint(valves.name, "venting")
+        p = valves.reservoir_pressure_bar()
+    ctx.events.progress(f"vented: {p:.3f} bar", force=True, reservoir_pressure_bar=p)
+    ctx.start_clock(State.CHECK)  # CHECK's own time starts after the venting
+
+
+def _configure_digitizer(ctx: ShotContext) -> None:
+    d = ctx.config.digitizer
+    dig = ctx.instruments.digitizer
+    wanted = getattr(d, "settings", None)
+    if callable(wanted):  # the role's form: the configured DigitizerSettings
+        dig.configure(wanted())
+        return
+    dig.configure(sample_rate_hz=d.sample_rate_hz, record_length=d.record_length,
+                  pre_trigger_fraction=d.pre_trigger_fraction, ch1_range_v=d.ch1_range_v,
+                  ch2_range_v=d.ch2_range_v, trigger_source=d.trigger_source,
+                  trigger_level_v=d.trigger_level_v, trigger_slope=d.trigger_slope)
+
+
+def evacuate(ctx: ShotContext) -> None:
+    valves, limit = ctx.instruments.valves, ctx.config.limits.fixture_vacuum_max_mbar
+    valves.set_vacuum_pump(True)
+    while True:
+        report = ctx.watch(State.EVACUATE)
+        vacuum = report.readings.fixture_vacuum_mbar
+        if vacuum <= limit:
+            ctx.events.progress(f"fixture vacuum {vacuum:.1f} mbar", force=True, fixture_vacuum_mbar=vacuum)
+            return
+        ctx.events.progress(f"evacuating: {vacuum:.1f} mbar, needs {limit:g} mbar", fixture_vacuum_mbar=vacuum)
+        ctx.pause(valves.name, f"waiting for the fixture vacuum ({vacuum:.1f} mbar, needs {limit:g} mbar)")
+
+
+def charge(ctx: ShotContext) -> None:
+    valves, limits = ctx.instruments.valves, ctx.config.limits
+    target = float(ctx.request.pressure_bar)
+    valves.set_vent_valve(False)
+    valves.set_pressure_setpoint_bar(target)
+    ctx.setpoint_bar = target
+    valves.set_fill_valve(True)
+    while True:
+        report = ctx.watch(State.CHARGE, charging=True)
+        p = report.readings.reservoir_pressure_bar
+        if p >= target - limits.pressure_tolerance_bar:
+            break
+        ctx.events.progress(f"charging: {p:.3f} of {target:g} bar", reservoir_pressure_bar=p, target_bar=target)
+        ctx.pause(valves.name, f"charging the reservoir ({p:.3f} of {target:g} bar)")
+    valves.set_fill_valve(False)
+    ctx.events.progress(f"charged: {p:.3f} bar", force=True, reservoir_pressure_bar=p, target_bar=target)
+
+
+def arm(ctx: ShotContext) -> None:
+    dig = ctx.instruments.digitizer
+    dig.arm_single()
+    ctx.watch(State.ARM, digitizer=True)
+    ctx.checkpoint(dig.instrument, "arming")
+    if not ctx.authorisation.given:
+        wait_s = ctx.request.confirm_timeout_s
+        if wait_s is None:
+            wait_s = ctx.config.timeouts.arm_s
+        ctx.set_deadline(wait_s)  # the wait has its own limit
+        ctx.events.publish(AwaitingConfirmation(state=ctx.state, message="armed: waiting for the fire confirmation",
+                                                timeout_s=wait_s))
+        while not ctx.authorisation.given:
+            if time.monotonic() >= ctx.deadline:
+                raise Abort("operator", f"shot not confirmed (no fire confirmation within {wait_s:g} s: "
+                                        "give --yes, the panel's confirmation or a campaign authorisation)",
+                            HINT_NOT_CONFIRMED)
+            ctx.abort.wait(ctx.poll_s)
+            ctx.checkpoint("operator", "waiting for the fire confirmation")
+            ctx.watch(State.ARM, digitizer=True)
+        ctx.events.progress("fire confirmed", force=True)
+    compare_settings(ctx)
+
+
+def compare_settings(ctx: ShotContext) -> None:
+    """Read back the digitizer's, the amplifier's and the controller's settings and compare
+    them with what this shot needs; Abort (nothing fired) naming every difference."""
+    inst, cfg = ctx.instruments, ctx.config
+    problems: list[tuple[str, str]] = []
+    wanted = getattr(cfg.digitizer, "settings", None)
+    read_back = getattr(inst.digitizer, "settings", None)
+    if callable(wanted) and callable(read_back):
+        problems += [(inst.digitizer.instrument, d) for d in wanted().differences(read_back())]
+    amp = inst.amplifier.settings()
+    for name, value in (("gain", cfg.amplifier.gain), ("excitation_v", cfg.amplifier.excitation_v),
+                        ("lowpass_hz", cfg.amplifier.lowpass_hz)):
+        held = float(getattr(amp, name))
+        if not math.isclose(held, value, rel_tol=1e-6, abs_tol=1e-9):
+            problems.append((inst.amplifier.name, f"{name}: {value:g} configured, {held:g} on the amplifier"))
+    if float(amp.gain) != ctx.settings.get("amplifier_gain", float(amp.gain)):
+        problems.append((inst.amplifier.name, "gain changed since CHECK"))
+    valves = inst.valves
+    setpoint = valves.pressure_setpoint_bar()
+    resolution = float(getattr(valves, "pressure_resolution_bar", 0.0) or 0.0)
+    if ctx.setpoint_bar is not None and abs(setpoint - ctx.setpoint_bar) > max(resolution, 1e-6):
+        problems.append((valves.name, f"pressure set-point: {ctx.setpoint_bar:g} bar wanted, {setpoint:g} bar "
+                                      "on the controller"))
+    if problems:
+        source = problems[0][0]
+        raise Abort(source, "settings changed before FIRE: " + "; ".join(f"{s}: {p}" for s, p in problems),
+                    HINT_SETTINGS_CHANGED)
+    ctx.checkpoint(inst.digitizer.instrument, "reading back the settings")
+
+
+def fire(ctx: ShotContext) -> None:
+    valves = ctx.instruments.valves
+    if not ctx.authorisation.given:
+        raise Abort("operator", "fire confirmation withdrawn", HINT_NOT_CONFIRMED)
+    report = ctx.watch(State.FIRE, digitizer=True)
+    ctx.checkpoint(valves.name, "before firing")
+    ctx.settings["pressure_at_fire_bar"] = report.readings.reservoir_pressure_bar
+    ctx.settings["fixture_vacuum_at_fire_mbar"] = report.readings.fixture_vacuum_mbar
+    pulse_s = float(ctx.config.valve_controller.fire_pulse_s)
+    count_before = valves.fire_pulse_count()
+    if ctx.before_fire is not None:
+        try:
+            ctx.before_fire(ctx)
+        except Abort:
+            raise
+        except Exception as exc:  # never fire what could not be recorded as firing
+            raise Abort("sequencer", f"before firing: {exc}; not fired") from exc
+    ctx.checkpoint(valves.name, "before firing")
+    ctx.fired = True  # from here on the projectile may be on its way
+    try:
+        valves.fire_pulse(pulse_s)
+    except InstrumentError:
+        ctx.fired = _pulse_count_rose(ctx, count_before) is not False  # unknown counts as fired
+        raise
+    count = _wait_for_pulse_count(ctx, count_before)
+    ctx.pulse_count = count
+    if count is None:
+        ctx.warn(f"the controller did not count the fire pulse (count stayed {count_before}): the shot may not "
+                 "have been fired; the digitizer's trigger decides")
+    ctx.settings["fire_pulse_s"] = pulse_s
+    p = report.readings.reservoir_pressure_bar
+    ctx.events.publish(Fired(state=ctx.state, message=f"fired at {p:.3f} bar (pulse {pulse_s * 1e3:g} ms, timed by "
+                                                      "the controller)",
+                             reservoir_pressure_bar=p, pulse_s=pulse_s, pulse_count=count))
+
+
+def _pulse_count_rose(ctx: ShotContext, before: int) -> bool | None:
+    """Did the controller count a pulse since `before`? None when it cannot be read."""
+    try:
+        return ctx.instruments.valves.fire_pulse_count() > before
+    except InstrumentError:
+        return None
+
+
+def _wait_for_pulse_count(ctx: ShotContext, before: int) -> int | None:
+    """The controller's pulse count once it passed `before` (None: not within the wait)."""
+    valves = ctx.instruments.valves
+    deadline = time.monotonic() + PULSE_COUNT_WAIT_S
+    while True:
+        count = valves.fire_pulse_count()
+        if count > before:
+            return count
+        if time.monotonic() >= deadline:
+            return None
+        time.sleep(min(ctx.poll_s, 0.01))
+
+
+def capture(ctx: ShotContext) -> None:
+    dig = ctx.instruments.digitizer
+    while True:
+        state = dig.acquisition_state()
+        if state == "TRIGGERED":
+            break
+        if state != "ARMED":
+            raise Abort(dig.instrument, f"the digitizer left the armed state before a trigger (state {state})")
+        time.sleep(min(ctx.poll_s, 0.01))
+        ctx.checkpoint(dig.instrument, "waiting for the trigger (the shot was fired; nothing recorded)",
+                       honour_abort=False)
+    channels = {role: _fetch(ctx, channel) for role, channel in digitizer_channels(ctx.config).items()}
+    ctx.checkpoint(dig.instrument, "fetching the record", honour_abort=False)
+    overloaded = False
+    try:
+        overloaded = bool(ctx.instruments.amplifier.overloaded())
+    except InstrumentError as exc:
+        ctx.warn(f"amplifier overload status not read after the shot: {exc}")
+    if overloaded:
+        ctx.warn("the amplifier overloaded during the shot: the response is clipped")
+    truth = None
+    if ctx.instruments.simulated_truth is not None:
+        raw_truth = ctx.instruments.simulated_truth()
+        truth = json.loads(json.dumps(raw_truth)) if raw_truth is not None else None
+    ctx.settings["amplifier_overloaded"] = overloaded
+    ctx.captured = CapturedShot(channels, dict(ctx.settings), truth)
+    first = next(iter(channels.values()))
+    ctx.events.progress(f"captured {first.codes.size} samples per channel ({', '.join(channels)})", force=True,
+                        samples=int(first.codes.size), sample_rate_hz=first.sample_rate_hz)
+
+
+def _fetch(ctx: ShotContext, channel: Any) -> Any:
+    """One channel's waveform; one retry on a fresh session (the record stays in the digitizer)."""
+    dig = ctx.instruments.digitizer
+    try:
+        return dig.fetch_waveform(channel)
+    except InstrumentError as exc:
+        ctx.events.warn(f"fetching channel {channel} failed, retrying once: {exc}")
+        ctx.checkpoint(dig.instrument, "fetching the record", honour_abort=False)
+        dig.connect()
+        return dig.fetch_waveform(channel)
+
+
+STEPS = ((State.CHECK, check), (State.EVACUATE, evacuate), (State.CHARGE, charge), (State.ARM, arm),
+         (State.FIRE, fire), (State.CAPTURE, capture))
