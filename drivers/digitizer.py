@@ -241,12 +241,13 @@ class Digitizer(InstrumentDriver):
         return held.with_changes(ranges_v=merged, **changes)
 
     def _checked(self, settings: DigitizerSettings) -> DigitizerSettings:
-        """The settings with channel, trigger and slope names in the instrument's spelling;
-        raise InstrumentError (nothing sent) when they cannot be sent."""
+        """The settings with channel, trigger and slope names in the instrument's spelling
+        (roles resolved); raise InstrumentError (nothing sent) when they cannot be sent."""
         problems = []
         try:
-            ranges = {self.dialect.channel_name(ch): r for ch, r in settings.ranges_v.items()}
-            source = self.dialect.trigger_source_name(settings.trigger_source)
+            ranges = {self.dialect.channel_name(self.channels.get(ch, ch)): r for ch, r in settings.ranges_v.items()}
+            source = self.dialect.trigger_source_name(self.channels.get(settings.trigger_source,
+                                                                        settings.trigger_source))
         except ValueError as exc:
             problems.append(str(exc))
             ranges, source = dict(settings.ranges_v), settings.trigger_source

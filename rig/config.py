@@ -7,8 +7,12 @@ one per section:
                          stopbits, unit_id, timeout_s, retries, watchdog_s, fire_pulse_s
       [valve_controller.coils | .discrete_inputs | .holding_registers | .input_registers]
       [valve_controller.options]  (a lab's own driver: keyword arguments of its class)
-    [digitizer]          resource, timeout_s, sample_rate_hz, record_length, pre_trigger_fraction,
-                         ch1_range_v, ch2_range_v, trigger_source, trigger_level_v, trigger_slope
+    [digitizer]          resource, dialect (generic | keysight | tektronix | lecroy | package.module:Class),
+                         visa_library, read_termination, write_termination, max_reply_bytes,
+                         sample_format, byte_order, timeout_s, sample_rate_hz, record_length,
+                         pre_trigger_fraction, trigger_source, trigger_level_v, trigger_slope
+      [digitizer.channels]  role -> channel: doppler, response, doppler_quadrature, response_2
+      [digitizer.ranges_v]  role -> full scale (±V); older form: ch1_range_v, ch2_range_v
     [amplifier]          driver (serial-bridge | manual | ...), port, baudrate, timeout_s, retries,
                          gain, excitation_v, lowpass_hz, sensitivity_v_per_m_s2, identity
     [limits]             max_pressure_bar, min_pressure_bar, fixture_vacuum_max_mbar, ...
@@ -49,6 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.drivers.amplifier import EXCITATION_RANGE_V, GAINS, LOWPASS_HZ
+from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.modbus_link import ModbusTarget
 from hopkinson.drivers.registers import REGISTER_TYPES, WORD_ORDERS, Register, RegisterMap
 from hopkinson.rig.errors import ConfigError
@@ -112,24 +117,137 @@ class ValveControllerConfig:
         return types.SimpleNamespace(pressure_bar_per_count=self.gauge_resolution_bar)
 
 
+DIGITIZER_ROLES = ("doppler", "response", "doppler_quadrature", "response_2")
+
+
 @dataclass(frozen=True)
 class DigitizerConfig:
-    """[digitizer]: VISA resource and acquisition settings (channel 1 PM beat, 2 amplifier)."""
+    """[digitizer]: the digitizer's VISA link, dialect, channels by role and acquisition settings.
 
-    resource: str
+    dialect: the instrument's command set, "generic" | "keysight" | "tektronix" | "lecroy", or a
+    lab's own "package.module:Class" (a drivers.scpi_dialect.DigitizerDialect). visa_library:
+    "@py" (pyvisa-py), a system VISA's path, or "@ivi". sample_format / byte_order: how the
+    samples travel (int8 uint8 int16 uint16 float32; little, big). channels: role -> the
+    instrument's channel name, doppler and response required. ranges_v: role -> full scale
+    (the channel reads ±range); a role without one takes ch1_range_v / ch2_range_v when it is
+    on the dialect's channel 1 / 2 (the older keys). trigger_source: a role, a channel or the
+    external input ("EXT"). driver "scpi" (drivers/digitizer.py) or a lab's own class with
+    [digitizer.options]; channel names are then taken as written.
+    """
+
+    resource: str = ""
+    driver: str = "scpi"
+    options: dict[str, Any] = field(default_factory=dict)
+    dialect: str = "generic"
+    visa_library: str = "@py"
+    read_termination: str = "\n"
+    write_termination: str = "\n"
+    max_reply_bytes: int = 65536
+    sample_format: str = "int16"
+    byte_order: str = "little"
     timeout_s: float = 5.0
     sample_rate_hz: float = 100e6
     record_length: int = 200_000
     pre_trigger_fraction: float = 0.1
+    channels: dict[str, str] = field(default_factory=lambda: {"doppler": "CH1", "response": "CH2"})
+    ranges_v: dict[str, float] = field(default_factory=dict)
     ch1_range_v: float = 1.0
     ch2_range_v: float = 10.0
     trigger_source: str = "CH2"
     trigger_level_v: float = 0.2
     trigger_slope: str = "POS"
 
+    def __post_init__(self) -> None:
+        """Check the keys that depend on each other; ValueError names the key (the loader
+        prefixes file and section)."""
+        from hopkinson.drivers.digitizer_waveform import BYTE_ORDERS, SAMPLE_FORMATS
+        from hopkinson.drivers.scpi_dialect import resolve_dialect
+
+        scpi = self.driver == "scpi"
+        if scpi and not self.resource:
+            raise ValueError("resource: missing key (the digitizer's VISA resource)")
+        if scpi and self.options:
+            raise ValueError("options: only for a lab's own driver (driver = \"package.module:Class\")")
+        try:
+            dialect = resolve_dialect(self.dialect)
+        except ValueError as exc:
+            raise ValueError(f"dialect: {exc}") from None
+        if self.sample_format not in SAMPLE_FORMATS or (scpi and self.sample_format not in dialect.sample_formats):
+            known = dialect.sample_formats if scpi else SAMPLE_FORMATS
+            raise ValueError(f"sample_format: must be one of {', '.join(known)} for the {dialect.name} dialect, "
+                             f"got {self.sample_format!r}")
+        if self.byte_order not in BYTE_ORDERS:
+            raise ValueError(f"byte_order: must be little or big, got {self.byte_order!r}")
+        for key in ("read_termination", "write_termination"):
+            value = getattr(self, key)
+            if not (value and value.isascii() and len(value) <= 2):
+                raise ValueError(f"{key}: must be one or two ASCII characters (e.g. \"\\n\"), got {value!r}")
+        for role in self.channels:
+            if role not in DIGITIZER_ROLES:
+                raise ValueError(f"channels.{role}: not a role (roles: {', '.join(DIGITIZER_ROLES)})")
+        for role in self.ranges_v:
+            if role not in self.channels:
+                raise ValueError(f"ranges_v.{role}: no such role in [digitizer.channels] ({', '.join(self.channels)})")
+        for role in ("doppler", "response"):
+            if role not in self.channels:
+                raise ValueError(f"channels.{role}: missing key (the {role} channel's name)")
+        named = {}
+        for role, channel in self.channels.items():
+            try:
+                named[role] = dialect().channel_name(channel) if scpi else str(channel)
+            except ValueError as exc:
+                raise ValueError(f"channels.{role}: {exc}") from None
+        if len(set(named.values())) != len(named):
+            raise ValueError(f"channels: two roles on one channel ({named})")
+        object.__setattr__(self, "channels", named)
+        for role in named:
+            range_v = self.range_v(role)
+            if isinstance(range_v, bool) or not isinstance(range_v, int | float) or not 0 < range_v <= 100:
+                raise ValueError(f"ranges_v.{role}: must be above 0 and at most 100 V, got {range_v!r}")
+        self.trigger_channel  # noqa: B018  (checks trigger_source)
+
+    def range_v(self, role: str) -> float:
+        """Full scale (±V) of a role's channel."""
+        if role in self.ranges_v:
+            return self.ranges_v[role]
+        number = "".join(c for c in self.channels[role] if c.isdigit())
+        if number in ("1", "2"):
+            return self.ch1_range_v if number == "1" else self.ch2_range_v
+        raise ValueError(f"ranges_v.{role}: missing key (the range of {self.channels[role]})")
+
+    @property
+    def trigger_channel(self) -> str:
+        """The trigger source as the instrument names it (a role resolved to its channel)."""
+        from hopkinson.drivers.scpi_dialect import resolve_dialect
+
+        source = self.channels.get(self.trigger_source, self.trigger_source)
+        if self.driver != "scpi":
+            return source
+        try:
+            return resolve_dialect(self.dialect)().trigger_source_name(source)
+        except ValueError as exc:
+            raise ValueError(f"trigger_source: {exc}; or a role ({', '.join(self.channels)})") from None
+
     @property
     def pre_trigger_samples(self) -> int:
         return min(int(round(self.pre_trigger_fraction * self.record_length)), self.record_length - 1)
+
+    def settings(self) -> DigitizerSettings:
+        """The acquisition settings this configuration asks for (ARM compares the read-back)."""
+        return DigitizerSettings(
+            sample_rate_hz=self.sample_rate_hz, record_length=self.record_length,
+            pre_trigger_samples=self.pre_trigger_samples,
+            ranges_v={channel: float(self.range_v(role)) for role, channel in self.channels.items()},
+            trigger_source=self.trigger_channel, trigger_level_v=self.trigger_level_v,
+            trigger_slope=self.trigger_slope)
+
+    def driver_options(self) -> dict[str, Any]:
+        """Keyword arguments of drivers.digitizer.Digitizer for this configuration."""
+        return {"resource": self.resource, "timeout_s": self.timeout_s, "dialect": self.dialect,
+                "channels": dict(self.channels), "visa_library": self.visa_library,
+                "read_termination": self.read_termination, "write_termination": self.write_termination,
+                "max_reply_bytes": self.max_reply_bytes, "sample_format": self.sample_format,
+                "byte_order": self.byte_order}
 
 
 @dataclass(frozen=True)
@@ -270,8 +388,10 @@ RULES: dict[str, _Rule] = {
     "digitizer.pre_trigger_fraction": _Rule(0.0, 0.95),
     "digitizer.ch1_range_v": _Rule(above=0.0, max=100.0),
     "digitizer.ch2_range_v": _Rule(above=0.0, max=100.0),
-    "digitizer.trigger_source": _Rule(choices=("CH1", "CH2", "EXT")),
     "digitizer.trigger_slope": _Rule(choices=("POS", "NEG")),
+    "digitizer.sample_format": _Rule(choices=("int8", "uint8", "int16", "uint16", "float32")),
+    "digitizer.byte_order": _Rule(choices=("little", "big")),
+    "digitizer.max_reply_bytes": _Rule(64, 1 << 24),
     "amplifier.baudrate": _BAUD,
     "amplifier.timeout_s": _TIMEOUT,
     "amplifier.retries": _Rule(0, 10),
