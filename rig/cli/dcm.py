@@ -279,6 +279,11 @@ def run_compensate(args: argparse.Namespace) -> int:
             "--force applies it anyway"
         )
     record, resampled = to_rate(read_record(args.record), 1.0 / dcm.sample_interval_s)
+    if not args.causal and abs(dcm.latency_s) >= record.n_samples * record.sample_interval_s:
+        raise AnalysisError(
+            f"{args.dcm}: the DCM's latency ({dcm.latency_s:g} s) is as long as the record {args.record} "
+            f"({record.n_samples * record.sample_interval_s:g} s): nothing of it would remain once aligned"
+        )
     stream = DcmStream(dcm, args.initial, align=not args.causal)
     n, step = record.n_samples, args.block_samples
     blocks = -(-n // step)
