@@ -71,30 +71,17 @@ def _load_support(path: str) -> tuple[DiscreteModel, ShotSupport]:
     return model, support
 
 
-def _ratio(text: str) -> float | None:
-    if text.strip().lower() == "auto":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise AnalysisError(f"--ratio: 'auto' or a positive number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise AnalysisError(f"--ratio: 'auto' or a positive number, got {text!r}")
-    return value
-
-
-def _band_limit(text: str) -> float | None:
+def _number_or_word(text: str, option: str, words: dict[str, float | None], what: str) -> float | None:
+    """A positive finite number, or one of `words` (its value); AnalysisError naming the option."""
     word = text.strip().lower()
-    if word == "auto":
-        return None
-    if word == "off":
-        return 0.0
+    if word in words:
+        return words[word]
     try:
         value = float(text)
     except ValueError:
-        raise AnalysisError(f"--band-limit: 'auto', 'off' or a frequency in Hz, got {text!r}") from None
+        value = math.nan
     if not (math.isfinite(value) and value > 0):
-        raise AnalysisError(f"--band-limit: 'auto', 'off' or a positive frequency in Hz, got {text!r}")
+        raise AnalysisError(f"{option}: {' or '.join(repr(w) for w in words)} or {what}, got {text!r}")
     return value
 
 
@@ -187,11 +174,12 @@ def _design(args: argparse.Namespace) -> tuple[np.ndarray, DcmDesign, DiscreteMo
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
     options = DcmOptions(
-        ratio=_ratio(args.ratio),
+        ratio=_number_or_word(args.ratio, "--ratio", {"auto": None}, "a positive number"),
         damping=args.damping,
         widening=args.widening,
         noise_gain_limit=args.noise_gain_limit,
-        band_limit_hz=_band_limit(args.band_limit),
+        band_limit_hz=_number_or_word(args.band_limit, "--band-limit", {"auto": None, "off": 0.0},
+                                      "a positive frequency in Hz"),
         extra_poles=tuple(parse_poles(args.extra_poles, "--extra-poles")) if args.extra_poles else (),
     )
     if args.model is not None:
