@@ -23,7 +23,7 @@ Example (config/campaigns/example.toml is the documented one)::
     order = 4                         # optional: a fixed order instead of the knee rule
     sample_rate_hz = 1.0e6
     dcm_ratio = "auto"                # response-time ratio r of the DCM; "auto" (default): r that
-                                      # widens the ±5 % band 3× (analysis.dcm.ratio_for_widening)
+                                      # widens the ±5 % band 3× (analysis.dcm_design)
     dcm_damping = 0.707               # damping ζ_e of the DCM's new poles
 
     [[shots]]
