@@ -294,3 +294,26 @@ def test_ieee488_status_registers(scope: tuple[str, SimDigitizerServer]) -> None
             assert client.ask(":SYST:ERR:COUN?") in ("0", "+0")
     finally:
         client.close()
+
+
+def test_lecroy_reads_a_block_behind_a_response_header(world: World) -> None:
+    """Another client switched the response headers back on (CHDR SHORT): the waveform then
+    comes as "C2:WF ALL,#9..." and the dialect reads the descriptor and samples behind it."""
+    server = serve("lecroy", world)
+    try:
+        with driver("lecroy", server) as dig:
+            dig.configure(configured("lecroy"))
+            dig.arm_single()
+            world.fire()
+            assert dig.wait_for_trigger(2.0)
+            other = Raw(server.port)
+            other.send("CHDR SHORT")
+            assert other.ask("TDIV?").startswith("TDIV ")
+            other.close()
+            seen: list[str] = []
+            dig.trace = lambda record: seen.append(record.text)
+            wave = dig.fetch_waveform("response")
+    finally:
+        server.stop()
+    assert f"C2:WF ALL,<binary block: {346 + 2 * N} bytes>" in seen
+    np.testing.assert_array_equal(wave.codes, expected_codes(world.record(world.seen[-1])[2], 10.0, "int16"))
