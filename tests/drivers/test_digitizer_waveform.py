@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
-from hopkinson.drivers.digitizer_waveform import SampleFormatError, Waveform, decode_samples, sample_dtype
+from hopkinson.drivers.digitizer_waveform import (
+    SampleFormatError,
+    Waveform,
+    decode_samples,
+    sample_dtype,
+)
 
 
 @pytest.mark.parametrize("order", ["little", "big"])
