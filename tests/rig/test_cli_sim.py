@@ -200,6 +200,8 @@ def test_probe_reads_every_signal_and_says_what_to_fix(
     assert "  ok    discrete_inputs.fill_valve_open (discrete input 9): False" in text
     assert "  ok    holding_registers.projectile (holding register 1): 3" in text
     assert "  ok    identity: Hopkinson-Sim,SIMAMP-1" in text
+    assert "  ok    acquisition and channel settings: {'sample_rate_hz'" in text
+    assert "  ok    settings against rig.toml: " in text
     assert "FAIL" not in text and text.rstrip().endswith("failed: the rig answers as configured")
     steps = report["instruments"]["valve_controller"]["steps"]
     (failed,) = [s for s in steps if not s["ok"]]
