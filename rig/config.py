@@ -516,6 +516,7 @@ def _check_rig(config: RigConfig, path: Path) -> None:
     _check_valve_controller(config.valve_controller, path)
     _check_thresholds(config, path)
     _check_amplifier(config.amplifier, path)
+    _check_driver(config.digitizer.driver, ("scpi",), path, "digitizer")
 
 
 def _check_valve_controller(vc: ValveControllerConfig, path: Path) -> None:

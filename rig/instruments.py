@@ -116,7 +116,7 @@ def _manual(config: RigConfig) -> AmplifierRole:
 def _scpi_digitizer(config: RigConfig) -> DigitizerRole:
     from hopkinson.drivers.digitizer import Digitizer
 
-    return Digitizer(config.digitizer.resource, timeout_s=config.digitizer.timeout_s)  # type: ignore[return-value]
+    return Digitizer(**config.digitizer.driver_options())  # type: ignore[return-value]
 
 
 BUILT_IN: dict[str, dict[str, Callable[[RigConfig], Any]]] = {
