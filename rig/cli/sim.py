@@ -119,15 +119,12 @@ def rig_status(config: RigConfig) -> dict[str, Any]:
 
 def lock_holder(config: RigConfig) -> dict[str, Any] | None:
     """Who holds the rig (rig/lock.py: pid, command, since), or None."""
-    try:
-        from hopkinson.rig.lock import current_holder
-    except ImportError:  # the rig lock is not there yet
-        return None
+    from hopkinson.rig.lock import current_holder
+
     holder = current_holder(config)
     if holder is None:
         return None
-    return {"pid": getattr(holder, "pid", None), "command": getattr(holder, "command", ""),
-            "since": str(getattr(holder, "since", ""))}
+    return {"pid": holder.pid, "command": holder.command, "since": holder.since}
 
 
 def shareable(config: RigConfig, role: str) -> bool:

@@ -165,21 +165,25 @@ def test_status_shows_a_stuck_valve_and_a_tripped_watchdog(tmp_path: Path, capsy
 
 def test_status_while_the_rig_is_held_reads_only_the_shared_controller(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    holder = {"pid": 4242, "command": "hopkinson shot --sim", "since": "2025-01-01T00:00:00+00:00"}
-    monkeypatch.setattr("hopkinson.rig.cli.sim.lock_holder", lambda config: holder)  # rig/lock.py's answer
+    from hopkinson.rig.config import load_rig_config
+    from hopkinson.rig.lock import LOCK_DIR_ENV, RigLock
+
+    monkeypatch.setenv(LOCK_DIR_ENV, str(tmp_path / "locks"))
     with SimulatedRig() as sim:
         config = rig_toml_for(sim.addresses, tmp_path)
-        with serial.Serial(sim.addresses.serial_port, exclusive=True):  # the shot's amplifier line
+        with RigLock.acquire(load_rig_config(config), "hopkinson shot --sim"), \
+                serial.Serial(sim.addresses.serial_port, exclusive=True):  # the shot's amplifier line
             assert main(["status", "--config", str(config)]) == 0
             text = capsys.readouterr().out
             assert main(["status", "--config", str(config), "--json"]) == 0
             report = json.loads(capsys.readouterr().out)
         served = sim.amplifier.lines_served
-    assert report["held_by"] == holder and report["valve_controller"]["identity"].startswith("Hopkinson-Sim")
-    assert report["amplifier"]["skipped"].startswith("not asked: the rig is held by pid 4242")
+    assert report["held_by"]["pid"] == os.getpid() and report["held_by"]["command"] == "hopkinson shot --sim"
+    assert report["valve_controller"]["identity"].startswith("Hopkinson-Sim")  # Modbus TCP: shared
+    assert report["amplifier"]["skipped"].startswith(f"not asked: the rig is held by pid {os.getpid()}")
     assert "skipped" in report["digitizer"]
     assert served == 0  # the held serial line was never touched
-    assert "the rig is held by pid 4242 (hopkinson shot --sim" in text
+    assert f"the rig is held by pid {os.getpid()} (hopkinson shot --sim" in text
 
 
 def test_probe_reads_every_signal_and_says_what_to_fix(
