@@ -106,15 +106,11 @@ class ValveControllerConfig:
         """One count of the reservoir gauge, bar (0 for a float32 gauge)."""
         return self.register_map.input_registers.reservoir_pressure.resolution
 
-    # Transitional, for rig/sequencer.py until it asks the driver (has_projectile_register,
-    # pressure_resolution_bar) or gauge_resolution_bar: remove then.
+    # Transitional, for rig/sequencer/steps.py's fallback (a driver without
+    # has_projectile_register, which the role now requires): remove with that fallback.
     @property
     def holding_registers(self) -> Any:
         return self.register_map.holding_registers
-
-    @property
-    def scales(self) -> Any:
-        return types.SimpleNamespace(pressure_bar_per_count=self.gauge_resolution_bar)
 
 
 DIGITIZER_ROLES = ("doppler", "response", "doppler_quadrature", "response_2")
