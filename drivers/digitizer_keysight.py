@@ -20,22 +20,14 @@ Commands (Keysight programmer's guides; short forms in capitals):
 
 State: :RSTate? says SING while the single acquisition waits and STOP once done (or stopped);
 :TER? tells the two apart. Because reading :TER? clears it, the dialect latches a trigger it
-has seen until the next :SINGle or :STOP.
+has seen until the next :SINGle or :STOP (DigitizerDialect.latched_state).
 """
 
 from __future__ import annotations
 
-import re
-
 from hopkinson.drivers.digitizer_settings import DigitizerSettings, pre_trigger_samples
 from hopkinson.drivers.digitizer_waveform import Waveform, sample_dtype
-from hopkinson.drivers.scpi_dialect import (
-    ReplyFormatError,
-    ScpiErrorQueueDialect,
-    ScpiLink,
-    TransferFormat,
-    check_preamble,
-)
+from hopkinson.drivers.scpi_dialect import ReplyFormatError, ScpiErrorQueueDialect, ScpiLink
 
 _FORMATS = {"int8": ("BYTE", 0), "uint8": ("BYTE", 1), "int16": ("WORD", 0), "uint16": ("WORD", 1)}
 _ORDERS = {"little": "LSBFirst", "big": "MSBFirst"}
@@ -50,13 +42,7 @@ class KeysightDialect(ScpiErrorQueueDialect):
     external_trigger = "EXT"
     sample_formats = tuple(_FORMATS)
 
-    def __init__(self, transfer: TransferFormat | None = None) -> None:
-        super().__init__(transfer)
-        self._triggered = False  # a :TER? of 1 seen since the last :SINGle/:STOP
-
-    def _canonical_channel(self, text: str) -> str | None:
-        match = re.fullmatch(r"(?:CH|CHAN|CHANNEL)?([1-9])", text)
-        return f"CHAN{match.group(1)}" if match else text
+    channel_prefix = "CHAN"
 
     def _source(self, name: str) -> str:
         return "EXTernal" if name == self.external_trigger else f"CHANnel{self.channel_number(name):d}"
@@ -102,25 +88,15 @@ class KeysightDialect(ScpiErrorQueueDialect):
         )
 
     def arm(self, link: ScpiLink) -> None:
-        self._triggered = False
+        self.forget_completion()
         self.command(link, ":SINGle")
 
     def abort(self, link: ScpiLink) -> None:
-        self._triggered = False
+        self.forget_completion()
         self.command(link, ":STOP")
 
     def state(self, link: ScpiLink) -> str:
-        units = [":RSTate?", ":TER?"]
-        command = self.join(*units)
-        run_state, event = self.query_fields(link, units)
-        if self.integer(command, event) == 1:
-            self._triggered = True
-        run_state = run_state.upper()
-        if run_state in ("SING", "RUN"):
-            return "ARMED"
-        if run_state == "STOP":
-            return "TRIGGERED" if self._triggered else "IDLE"
-        raise ReplyFormatError(command, f"unknown run state {run_state!r}", self.join(run_state, event))
+        return self.latched_state(link, ":RSTate?", ":TER?", armed=("SING", "RUN"), stopped="STOP", completed=1)
 
     def fetch(self, link: ScpiLink, channel: str, context: DigitizerSettings) -> Waveform:
         units = [f":WAVeform:SOURce CHANnel{self.channel_number(channel):d}", ":WAVeform:PREamble?",
@@ -140,12 +116,7 @@ class KeysightDialect(ScpiErrorQueueDialect):
             raise ReplyFormatError(command, f"unsupported waveform format (format {fmt_code}, unsigned "
                                             f"{unsigned!r}, byte order {order!r}): BYTE or WORD binary only", reply)
         sample_format = ("int" if signed else "uint") + ("8" if fmt_code == 0 else "16")
-        offset_v = y_origin - y_ref * y_inc
-        check_preamble(command, reply, points=points, interval_s=x_inc, scale_v=y_inc, offset_v=offset_v)
-        if points == 0:
-            raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
-        dtype = sample_dtype(sample_format, byte_order)
-        _, payload = link.query_block(":WAVeform:DATA?", self.block_limit(context, points, dtype.itemsize))
-        return self.waveform(":WAVeform:DATA?", channel, payload, points=points, dtype=dtype, scale_v=y_inc,
-                             offset_v=offset_v, sample_interval_s=x_inc,
-                             trigger_index=int(round(x_ref - x_origin / x_inc)))
+        return self.fetch_samples(link, ":WAVeform:DATA?", channel, context, preamble=(command, reply), points=points,
+                                  dtype=sample_dtype(sample_format, byte_order), scale_v=y_inc,
+                                  offset_v=y_origin - y_ref * y_inc, sample_interval_s=x_inc,
+                                  trigger_index=int(round(x_ref - x_origin / x_inc)))

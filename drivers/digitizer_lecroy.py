@@ -33,7 +33,6 @@ until the next arm or stop.
 
 from __future__ import annotations
 
-import re
 import struct
 from dataclasses import dataclass
 
@@ -44,7 +43,6 @@ from hopkinson.drivers.scpi_dialect import (
     DigitizerDialect,
     ReplyFormatError,
     ScpiLink,
-    TransferFormat,
     check_preamble,
     split_outside_quotes,
 )
@@ -73,13 +71,7 @@ class LeCroyDialect(DigitizerDialect):
     external_trigger = "EX"
     sample_formats = ("int8", "int16")
 
-    def __init__(self, transfer: TransferFormat | None = None) -> None:
-        super().__init__(transfer)
-        self._acquired = False  # an INR? new-signal bit seen since the last arm/stop
-
-    def _canonical_channel(self, text: str) -> str | None:
-        match = re.fullmatch(r"(?:C|CH|CHAN|CHANNEL)?([1-9])", text)
-        return f"C{match.group(1)}" if match else text
+    channel_prefix = "C"
 
     def command(self, link: ScpiLink, *units: str) -> None:
         """Send commands, then CMR? and EXR? in the same message; raise if either is set."""
@@ -136,25 +128,16 @@ class LeCroyDialect(DigitizerDialect):
         )
 
     def arm(self, link: ScpiLink) -> None:
-        self._acquired = False
+        self.forget_completion()
         self.command(link, "TRMD SINGLE")
 
     def abort(self, link: ScpiLink) -> None:
-        self._acquired = False
+        self.forget_completion()
         self.command(link, "TRMD STOP")
 
     def state(self, link: ScpiLink) -> str:
-        units = ["TRMD?", "INR?"]
-        command = self.join(*units)
-        mode, register = self.query_fields(link, units)
-        if self.integer(command, register) & _NEW_SIGNAL:
-            self._acquired = True
-        mode = mode.upper()
-        if mode in ("SINGLE", "NORM", "NORMAL", "AUTO"):
-            return "ARMED"
-        if mode == "STOP":
-            return "TRIGGERED" if self._acquired else "IDLE"
-        raise ReplyFormatError(command, f"unknown trigger mode {mode!r}", self.join(mode, register))
+        return self.latched_state(link, "TRMD?", "INR?", armed=("SINGLE", "NORM", "NORMAL", "AUTO"), stopped="STOP",
+                                  completed=_NEW_SIGNAL)
 
     def fetch(self, link: ScpiLink, channel: str, context: DigitizerSettings) -> Waveform:
         command = f"{channel}:WF? ALL"

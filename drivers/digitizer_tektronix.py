@@ -23,17 +23,13 @@ Message units after the first start with ':' (a new root), as Tektronix concaten
 
 from __future__ import annotations
 
-import re
-
 from hopkinson.drivers.digitizer_settings import DigitizerSettings, pre_trigger_samples
 from hopkinson.drivers.digitizer_waveform import Waveform, sample_dtype
 from hopkinson.drivers.scpi_dialect import (
-    ACQUISITION_STATES,
     CommandRefused,
     DigitizerDialect,
     ReplyFormatError,
     ScpiLink,
-    check_preamble,
     split_outside_quotes,
 )
 
@@ -55,10 +51,6 @@ class TektronixDialect(DigitizerDialect):
     name = "tektronix"
     channel_names = ("CH1", "CH2", "CH3", "CH4")
     external_trigger = "AUX"
-
-    def _canonical_channel(self, text: str) -> str | None:
-        match = re.fullmatch(r"(?:CH|CHAN|CHANNEL)?([1-9])", text)
-        return f"CH{match.group(1)}" if match else text
 
     def join(self, *units: str) -> str:
         return ";".join(u if i == 0 or u.startswith((":", "*")) else ":" + u for i, u in enumerate(units))
@@ -130,9 +122,7 @@ class TektronixDialect(DigitizerDialect):
         units = ["ACQuire:STATE?", "ACQuire:NUMACq?"]
         command = self.join(*units)
         running, count = (self.integer(command, f) for f in self.query_fields(link, units))
-        state = "ARMED" if running else ("TRIGGERED" if count > 0 else "IDLE")
-        assert state in ACQUISITION_STATES
-        return state
+        return "ARMED" if running else ("TRIGGERED" if count > 0 else "IDLE")
 
     def fetch(self, link: ScpiLink, channel: str, context: DigitizerSettings) -> Waveform:
         units = [f"DATa:SOUrce {channel}", "HEADer ON", "WFMOutpre?", "HEADer OFF", f"{channel}:SCAle?"]
@@ -156,16 +146,11 @@ class TektronixDialect(DigitizerDialect):
         x_inc, x_zero = self.number(command, value("XINCR"), reply), self.number(command, value("XZERO"), reply)
         pt_off = self.number(command, value("PT_OFF"), reply)
         y_mult, y_off, y_zero = (self.number(command, value(k), reply) for k in ("YMULT", "YOFF", "YZERO"))
-        offset_v = y_zero - y_off * y_mult
-        check_preamble(command, reply, points=points, interval_s=x_inc, scale_v=y_mult, offset_v=offset_v)
-        if points == 0:
-            raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
-        dtype = sample_dtype(sample_format, "little" if order == "LSB" else "big")
-        _, payload = link.query_block("CURVe?", self.block_limit(context, points, dtype.itemsize))
-        return self.waveform("CURVe?", channel, payload, points=points, dtype=dtype, scale_v=y_mult,
-                             offset_v=offset_v, sample_interval_s=x_inc,
-                             trigger_index=int(round(pt_off - x_zero / x_inc)),
-                             range_v=scale_per_div * DIVISIONS / 2)
+        return self.fetch_samples(link, "CURVe?", channel, context, preamble=(command, reply), points=points,
+                                  dtype=sample_dtype(sample_format, "little" if order == "LSB" else "big"),
+                                  scale_v=y_mult, offset_v=y_zero - y_off * y_mult, sample_interval_s=x_inc,
+                                  trigger_index=int(round(pt_off - x_zero / x_inc)),
+                                  range_v=scale_per_div * DIVISIONS / 2)
 
     @staticmethod
     def _preamble_fields(command: str, reply: str, fields: list[str]) -> dict[str, str]:

@@ -39,6 +39,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
+import numpy as np
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.digitizer_waveform import (
     BYTE_ORDERS,
@@ -137,9 +138,12 @@ class DigitizerDialect:
             raise ValueError(f"{name!r} is not a trigger source of a {self.name} digitizer (sources: "
                              f"{', '.join(self.channel_names + (self.external_trigger,))})") from None
 
+    channel_prefix: ClassVar[str] = "CH"  # "CH" + number is the instrument's channel name
+
     def _canonical_channel(self, text: str) -> str | None:
-        """Override to accept other spellings (e.g. "CH1" for "C1")."""
-        return text
+        """The instrument's spelling of "1", "CH1", "CHAN1", "CHANNEL1" or "C1"."""
+        match = re.fullmatch(r"(?:C|CH|CHAN|CHANNEL)?([1-9])", text)
+        return f"{self.channel_prefix}{match.group(1)}" if match else text
 
     def channel_number(self, channel: str) -> int:
         """1 for "CH1"/"CHAN1"/"C1"."""
@@ -172,6 +176,28 @@ class DigitizerDialect:
         raise NotImplementedError
 
     # -- helpers for subclasses --------------------------------------------------------------
+    _completed = False  # an acquisition seen completed since the last arm or stop (latched_state)
+
+    def latched_state(self, link: ScpiLink, run_query: str, event_query: str, armed: tuple[str, ...],
+                      stopped: str, completed: int) -> str:
+        """The state from a run-mode query and an event register that reading clears: the
+        instrument says it is armed (a word in `armed`) or `stopped`; the register's
+        `completed` bit, once seen, tells a stop after an acquisition from one without."""
+        command = self.join(run_query, event_query)
+        mode, register = self.query_fields(link, [run_query, event_query])
+        if self.integer(command, register) & completed:
+            self._completed = True
+        mode = mode.upper()
+        if mode in armed:
+            return "ARMED"
+        if mode == stopped:
+            return "TRIGGERED" if self._completed else "IDLE"
+        raise ReplyFormatError(command, f"unknown run state {mode!r}", self.join(mode, register))
+
+    def forget_completion(self) -> None:
+        """A new arm or a stop: no acquisition completed since."""
+        self._completed = False
+
     def query_fields(self, link: ScpiLink, units: Sequence[str], count: int | None = None) -> list[str]:
         """Send the query units in one message; their replies, split at the separator."""
         command = self.join(*units)
@@ -216,6 +242,22 @@ class DigitizerDialect:
         return Waveform(channel=channel, codes=codes, scale_v=scale_v, offset_v=offset_v,
                         sample_interval_s=sample_interval_s, trigger_index=trigger_index,
                         code_range=code_range)
+
+    def fetch_samples(self, link: ScpiLink, data_query: str, channel: str, context: DigitizerSettings, *,
+                      preamble: tuple[str, str], points: int, dtype: object, scale_v: float, offset_v: float,
+                      sample_interval_s: float, trigger_index: int, range_v: float | None = None) -> Waveform:
+        """Check the preamble's values, read the data block and build the Waveform.
+        preamble: (the command that asked for it, its reply), for errors."""
+        command, reply = preamble
+        check_preamble(command, reply, points=points, interval_s=sample_interval_s, scale_v=scale_v,
+                       offset_v=offset_v)
+        if points == 0:
+            raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
+        itemsize = np.dtype(dtype).itemsize  # type: ignore[call-overload]
+        _, payload = link.query_block(data_query, self.block_limit(context, points, itemsize))
+        return self.waveform(data_query, channel, payload, points=points, dtype=dtype, scale_v=scale_v,
+                             offset_v=offset_v, sample_interval_s=sample_interval_s, trigger_index=trigger_index,
+                             range_v=range_v)
 
     @staticmethod
     def block_limit(context: DigitizerSettings, points: int, itemsize: int) -> int:
@@ -283,10 +325,6 @@ class GenericScpiDialect(ScpiErrorQueueDialect):
     channel_names = ("CH1", "CH2", "CH3", "CH4")
     external_trigger = "EXT"
 
-    def _canonical_channel(self, text: str) -> str | None:
-        match = re.fullmatch(r"(?:CH|CHAN|CHANNEL)?([1-9])", text)
-        return f"CH{match.group(1)}" if match else text
-
     def prepare(self, link: ScpiLink) -> None:
         self.command(link, f":WAVeform:FORMat {_GENERIC_FORMATS[self.transfer.sample_format]}",
                      f":WAVeform:BYTeorder {_GENERIC_ORDERS[self.transfer.byte_order]}")
@@ -353,14 +391,9 @@ class GenericScpiDialect(ScpiErrorQueueDialect):
             range_v = float(range_text)
         except ValueError:
             raise ReplyFormatError(command, "preamble has a non-numeric field", reply) from None
-        check_preamble(command, reply, points=points, interval_s=interval_s, scale_v=scale_v, offset_v=offset_v)
-        if points == 0:
-            raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
-        dtype = sample_dtype(fmt, order)
-        _, payload = link.query_block(":WAVeform:DATA?", self.block_limit(context, points, dtype.itemsize))
-        return self.waveform(":WAVeform:DATA?", channel, payload, points=points, dtype=dtype, scale_v=scale_v,
-                             offset_v=offset_v, sample_interval_s=interval_s, trigger_index=trigger_index,
-                             range_v=range_v)
+        return self.fetch_samples(link, ":WAVeform:DATA?", channel, context, preamble=(command, reply),
+                                  points=points, dtype=sample_dtype(fmt, order), scale_v=scale_v, offset_v=offset_v,
+                                  sample_interval_s=interval_s, trigger_index=trigger_index, range_v=range_v)
 
 
 DIALECTS: dict[str, str] = {

@@ -32,6 +32,7 @@ class KeysightSimDigitizer(SimDigitizer):
     """The simulated Keysight-style instrument (module docstring)."""
 
     identity = "KEYSIGHT TECHNOLOGIES,HOPKINSON-SIM-KS,SIM0002,1.0"
+    signed_numbers = True
 
     def reset(self) -> None:
         with self.lock:
@@ -44,15 +45,15 @@ class KeysightSimDigitizer(SimDigitizer):
 
     def table(self) -> list[tuple[tuple[str, ...], Handler]]:
         return [
-            (("SYSTem", "ERRor", "COUNt"), self._error_count),
-            (("SYSTem", "ERRor"), self._system_error),
+            (("SYSTem", "ERRor", "COUNt"), self.system_error_count),
+            (("SYSTem", "ERRor"), self.system_error),
             (("ACQuire", "SRATe"), self._sample_rate),
             (("ACQuire", "POINts"), self._points),
             (("TIMebase", "REFerence"), self._reference),
             (("TIMebase", "POSition"), self._position),
             (("CHANnel<n>", "RANGe"), self._range),
-            (("CHANnel<n>", "OFFSet"), self._offset),
-            (("TRIGger", "MODE"), self._trigger_mode),
+            (("CHANnel<n>", "OFFSet"), lambda c: self.zero_only(c, "+0.00000E+00")),
+            (("TRIGger", "MODE"), self.edge_only),
             (("TRIGger", "EDGE", "SOURce"), self._trigger_source),
             (("TRIGger", "EDGE", "LEVel"), self._trigger_level),
             (("TRIGger", "EDGE", "SLOPe"), self._trigger_slope),
@@ -68,20 +69,6 @@ class KeysightSimDigitizer(SimDigitizer):
             (("WAVeform", "PREamble"), self._preamble),
             (("WAVeform", "DATA"), self._data),
         ]
-
-    # -- status ---------------------------------------------------------------------------
-    def _system_error(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
-        if not self.errors:
-            return '+0,"No error"'
-        code, message = self.errors.pop(0)
-        return f'{code:+d},"{message}"'
-
-    def _error_count(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
-        return f"{len(self.errors):+d}"
 
     def poll_capture(self) -> None:
         before = self.acquisitions
@@ -138,20 +125,6 @@ class KeysightSimDigitizer(SimDigitizer):
         self.set_range(channel, self.number(c.arg) / 2.0)  # span of 8 divisions -> ±half
         return None
 
-    def _offset(self, c: Call) -> Reply:
-        self.channel(c.suffix)
-        if c.query:
-            return "+0.00000E+00"
-        if self.number(c.arg) != 0.0:
-            raise SimError(-221, "Settings conflict; only offset 0 is simulated")
-        return None
-
-    def _trigger_mode(self, c: Call) -> Reply:
-        if c.query:
-            return "EDGE"
-        self.choice(c.arg, ("EDGE",))
-        return None
-
     def _trigger_source(self, c: Call) -> Reply:
         source = self.settings.trigger_source
         if c.query:
@@ -170,25 +143,21 @@ class KeysightSimDigitizer(SimDigitizer):
         return self.set_trigger(slope=self.choice(c.arg, {"POSitive": "POS", "NEGative": "NEG"}))
 
     def _single(self, c: Call) -> Reply:
-        if c.query:
-            raise SimError(-113, "Undefined header")
+        c.command_only()
         self.trigger_event = False
         return self.arm()
 
     def _stop(self, c: Call) -> Reply:
-        if c.query:
-            raise SimError(-113, "Undefined header")
+        c.command_only()
         return self.stop()
 
     def _run_state(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         return "SING" if self.state == "ARMED" else "STOP"
 
     def _trigger_event_register(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         event, self.trigger_event = self.trigger_event, False
         return "+1" if event else "+0"
@@ -230,8 +199,7 @@ class KeysightSimDigitizer(SimDigitizer):
         return None
 
     def _preamble(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         s = self.settings
         encoded = self.encoded(self.waveform_source)
@@ -244,8 +212,7 @@ class KeysightSimDigitizer(SimDigitizer):
         return ",".join(fields)
 
     def _data(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         encoded = self.encoded(self.waveform_source)
         if encoded is None:

@@ -84,7 +84,7 @@ class LeCroySimDigitizer(SimDigitizer):
             (("SAMPLE_RATE|SARA",), h(self._sample_rate)),
             (("TRIG_DELAY|TRDL",), h(self._trigger_delay)),
             (("C<n>", "VOLT_DIV|VDIV"), h(self._volt_div)),
-            (("C<n>", "OFFSET|OFST"), h(self._offset)),
+            (("C<n>", "OFFSET|OFST"), h(lambda c: self.zero_only(c, "0.000E+00"))),
             (("TRIG_SELECT|TRSE",), h(self._trigger_select)),
             (("C<n>|EX", "TRIG_LEVEL|TRLV"), h(self._trigger_level)),
             (("C<n>|EX", "TRIG_SLOPE|TRSL"), h(self._trigger_slope)),
@@ -124,8 +124,7 @@ class LeCroySimDigitizer(SimDigitizer):
         self.cmr = self.exr = self.inr = 0
 
     def _register(self, c: Call, name: str) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         value = getattr(self, name)
         setattr(self, name, 0)
         return str(value)
@@ -225,8 +224,7 @@ class LeCroySimDigitizer(SimDigitizer):
         return None
 
     def _sample_rate(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         return f"{self.settings.sample_rate_hz:.6E}"
 
     def _trigger_delay(self, c: Call) -> Reply:
@@ -246,14 +244,6 @@ class LeCroySimDigitizer(SimDigitizer):
         if c.query:
             return f"{self.settings.ch_range_v[channel] / 4:.6E}"
         self.set_range(channel, lecroy_number(c.arg) * 4)
-        return None
-
-    def _offset(self, c: Call) -> Reply:
-        self.channel(c.suffix)
-        if c.query:
-            return "0.000E+00"
-        if lecroy_number(c.arg) != 0.0:
-            raise SimError(-221, "Settings conflict; only offset 0 is simulated")
         return None
 
     # -- trigger --------------------------------------------------------------------------------
@@ -319,19 +309,16 @@ class LeCroySimDigitizer(SimDigitizer):
         return None
 
     def _arm(self, c: Call) -> Reply:
-        if c.query:
-            raise SimError(-113, "Undefined header")
+        c.command_only()
         return self._arm_now()
 
     def _stop(self, c: Call) -> Reply:
-        if c.query:
-            raise SimError(-113, "Undefined header")
+        c.command_only()
         return self.stop()
 
     # -- the waveform ---------------------------------------------------------------------------
     def _waveform(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         part = (c.arg or "ALL").upper()
         if part not in ("ALL", "DESC", "DAT1"):
             raise SimError(-224, "Illegal parameter value")

@@ -84,9 +84,9 @@ class TektronixSimDigitizer(SimDigitizer):
             (("HORizontal", "DELay", "MODe"), h(self._delay_mode)),
             (("HORizontal", "POSition"), h(self._position)),
             (("CH<n>", "SCAle"), h(self._scale)),
-            (("CH<n>", "OFFSet"), h(self._zero_only)),
-            (("CH<n>", "POSition"), h(self._zero_only)),
-            (("TRIGger", "A", "TYPe"), h(self._trigger_type)),
+            (("CH<n>", "OFFSet"), h(lambda c: self.zero_only(c, "0.0E+0"))),
+            (("CH<n>", "POSition"), h(lambda c: self.zero_only(c, "0.0E+0"))),
+            (("TRIGger", "A", "TYPe"), h(self.edge_only)),
             (("TRIGger", "A", "EDGE", "SOUrce"), h(self._trigger_source)),
             (("TRIGger", "A", "LEVel", "CH<n>"), h(self._level)),
             (("TRIGger", "A", "LEVel", "AUXiliary"), h(self._level)),
@@ -146,22 +146,21 @@ class TektronixSimDigitizer(SimDigitizer):
         return '0,"No events to report - queue empty"'
 
     def _event(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         return str(self.events.pop(0)[0]) if self.events else self._no_events().partition(",")[0]
 
     def _evmsg(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         return self._event_text(*self.events.pop(0)) if self.events else self._no_events()
 
     def _allev(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         events, self.events = self.events, []
         return ",".join(self._event_text(*e) for e in events) if events else self._no_events()
 
     @staticmethod
     def _query_only(c: Call) -> None:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
 
     # -- settings -----------------------------------------------------------------------------
     def _on_off(self, c: Call, attr: str) -> Reply:
@@ -224,20 +223,6 @@ class TektronixSimDigitizer(SimDigitizer):
         self.set_range(channel, self.number(c.arg) * DIVISIONS / 2)
         return None
 
-    def _zero_only(self, c: Call) -> Reply:
-        self.channel(c.suffix)
-        if c.query:
-            return "0.0E+0"
-        if self.number(c.arg) != 0.0:
-            raise SimError(-221, "Settings conflict; only 0 is simulated")
-        return None
-
-    def _trigger_type(self, c: Call) -> Reply:
-        if c.query:
-            return "EDGE"
-        self.choice(c.arg, ("EDGE",))
-        return None
-
     def _trigger_source(self, c: Call) -> Reply:
         source = self.settings.trigger_source
         if c.query:
@@ -264,7 +249,7 @@ class TektronixSimDigitizer(SimDigitizer):
         return self.set_trigger(slope=self.choice(c.arg, {"RISe": "POS", "FALL": "NEG"}))
 
     def _trigger_state(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         self.poll_capture()
         return "ARMED" if self.state == "ARMED" else "SAVE"
 
@@ -282,7 +267,7 @@ class TektronixSimDigitizer(SimDigitizer):
         return self.arm() if run else self.stop()
 
     def _numacq(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         self.poll_capture()
         return str(self.acquisitions)
 
@@ -352,7 +337,7 @@ class TektronixSimDigitizer(SimDigitizer):
         }
 
     def _preamble(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         values = self._preamble_values()
         if not self.header:
             return ";".join(values.values())
@@ -360,11 +345,11 @@ class TektronixSimDigitizer(SimDigitizer):
         return ":WFMOUTPRE:" + ";".join(parts)
 
     def _preamble_field(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         return self._preamble_values()[_FIELDS[c.nodes[1]]]
 
     def _curve(self, c: Call) -> Reply:
-        self._query_only(c)
+        c.query_only()
         self.poll_capture()
         fmt, _, order = self._format()
         self.sample_format, self.byte_order = fmt, order

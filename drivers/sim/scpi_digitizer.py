@@ -152,6 +152,16 @@ class Call:
     def args(self) -> list[str]:
         return [a.strip() for a in self.arg.split(",")] if self.arg else []
 
+    def query_only(self) -> None:
+        """A header that exists only as a query: its command form is undefined."""
+        if not self.query:
+            raise SimError(-113, "Undefined header")
+
+    def command_only(self) -> None:
+        """A header that exists only as a command: its query form is undefined."""
+        if self.query:
+            raise SimError(-113, "Undefined header")
+
 
 Reply = str | Block | None
 Handler = Callable[[Call], Reply]
@@ -404,6 +414,37 @@ class SimDigitizer:
     def clear_status(self) -> None:
         """*CLS of a dialect's own status registers (override)."""
 
+    # -- the SCPI error queue (:SYSTem:ERRor?, :SYSTem:ERRor:COUNt?) --------------------------
+    signed_numbers = False  # Keysight answers "+0"
+
+    def system_error(self, c: Call) -> Reply:
+        """The oldest error, '<code>,"<text>"' (0,"No error" when there is none)."""
+        c.query_only()
+        code, message = self.errors.pop(0) if self.errors else (0, "No error")
+        return f'{code:+d},"{message}"' if self.signed_numbers else f'{code},"{message}"'
+
+    def system_error_count(self, c: Call) -> Reply:
+        c.query_only()
+        return f"{len(self.errors):+d}" if self.signed_numbers else str(len(self.errors))
+
+    # -- settings a simulator keeps fixed --------------------------------------------------
+    def zero_only(self, c: Call, reply: str) -> Reply:
+        """A channel's offset or position: only 0 is simulated."""
+        self.channel(c.suffix)
+        if c.query:
+            return reply
+        if self.number(c.arg) != 0.0:
+            raise SimError(-221, "Settings conflict; only 0 is simulated")
+        return None
+
+    @staticmethod
+    def edge_only(c: Call) -> Reply:
+        """The trigger type: only an edge trigger is simulated."""
+        if c.query:
+            return "EDGE"
+        SimDigitizer.choice(c.arg, ("EDGE",))
+        return None
+
     def status_byte(self, message_available: bool) -> int:
         """IEEE 488.2 status byte: bit 2 queue not empty, 4 MAV, 5 ESB, 6 MSS."""
         stb = (0x04 if self.errors else 0) | (0x10 if message_available else 0) | (0x20 if self.esr & self.ese else 0)
@@ -497,8 +538,8 @@ class GenericSimDigitizer(SimDigitizer):
 
     def table(self) -> list[tuple[tuple[str, ...], Handler]]:
         return [
-            (("SYSTem", "ERRor", "COUNt"), self._error_count),
-            (("SYSTem", "ERRor"), self._system_error),
+            (("SYSTem", "ERRor", "COUNt"), self.system_error_count),
+            (("SYSTem", "ERRor"), self.system_error),
             (("ACQuire", "SRATe"), self._sample_rate),
             (("ACQuire", "POINts"), self._points),
             (("ACQuire", "PRETrigger"), self._pretrigger),
@@ -516,19 +557,6 @@ class GenericSimDigitizer(SimDigitizer):
             (("WAVeform", "DATA"), self._data),
         ]
 
-    def _system_error(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
-        if not self.errors:
-            return '0,"No error"'
-        code, message = self.errors.pop(0)
-        return f'{code},"{message}"'
-
-    def _error_count(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
-        return str(len(self.errors))
-
     def _sample_rate(self, c: Call) -> Reply:
         if c.query:
             return repr(float(self.settings.sample_rate_hz))
@@ -545,8 +573,7 @@ class GenericSimDigitizer(SimDigitizer):
         return self.set_pre_trigger(self.integer(c.arg))
 
     def _state(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         return self.state
 
@@ -572,13 +599,11 @@ class GenericSimDigitizer(SimDigitizer):
         return self.set_trigger(slope=self.choice(c.arg, ("POS", "NEG")))
 
     def _single(self, c: Call) -> Reply:
-        if c.query:
-            raise SimError(-113, "Undefined header")
+        c.command_only()
         return self.arm()
 
     def _abort(self, c: Call) -> Reply:
-        if c.query:
-            raise SimError(-113, "Undefined header")
+        c.command_only()
         self.volts, self._encoded, self.state = {}, {}, "IDLE"
         return None
 
@@ -601,8 +626,7 @@ class GenericSimDigitizer(SimDigitizer):
         return None
 
     def _preamble(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         ch = self.waveform_source
         fmt = {v: k for k, v in self._FORMATS.items()}[self.sample_format]
@@ -614,8 +638,7 @@ class GenericSimDigitizer(SimDigitizer):
                 f"{self.settings.pre_trigger_samples},{scale!r},{-zero * scale!r}")
 
     def _data(self, c: Call) -> Reply:
-        if not c.query:
-            raise SimError(-113, "Undefined header")
+        c.query_only()
         self.poll_capture()
         encoded = self.encoded(self.waveform_source)
         if encoded is None:
