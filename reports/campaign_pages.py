@@ -1,18 +1,21 @@
 """The campaign's own pages: the cross-validation matrix with the spread of f_n and S_sh
-against the shock level, and every shot's identified response on one plot."""
+against the shock level, every shot's identified response on one plot and, when the plan names
+one, every shot's model against the sensor's sinusoidal calibration."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from hopkinson.analysis.response import frequency_response, nyquist_hz
+from hopkinson.analysis.sine_comparison import SineCalibration, SineComparison
 from hopkinson.reports.data import G_M_S2, ShotEntry
-from hopkinson.reports.layout import plot_page
+from hopkinson.reports.layout import plot_page, table_in_axes
 from hopkinson.reports.shot_pages import BAND_LEVELS, frequency_grid, normalised
 from hopkinson.reports.statistics import CampaignStatistics
-from hopkinson.reports.tables import fmt
+from hopkinson.reports.tables import fmt, sine_rows
 from matplotlib.figure import Figure
 
 
@@ -115,4 +118,44 @@ def campaign_responses_page(entries: Sequence[ShotEntry]) -> Figure:
     ax_band.set_title("Around the bands (dashed: each shot's FBSD ±5 %)", fontsize=9)
     ax_band.grid(alpha=0.3)
     ax_band.legend(fontsize=6.5, ncol=3, loc="lower left")
+    return fig
+
+
+def sine_page(comparisons: Sequence[tuple[str, SineComparison]], sine: SineCalibration) -> Figure:
+    """The sine calibration's points against each shot's model (normalised magnitudes), the
+    magnitude errors with the calibration's ±2u, the phase errors and the table of sine_rows."""
+    fig = plot_page("Campaign: the shock models against the sinusoidal calibration",
+                    f"{Path(sine.source).name}: {sine.frequency_hz.size} points, "
+                    f"{fmt(sine.frequency_hz[0], 1e3)}–{fmt(sine.frequency_hz[-1], 1e3)} kHz")
+    ax_m, ax_e, ax_p, ax_t = fig.subplots(4, 1, height_ratios=[1.1, 0.9, 0.7, 0.3 + 0.07 * len(comparisons)])
+    first = comparisons[0][1]
+    f_khz = first.frequency_hz / 1e3
+    ax_m.semilogx(f_khz, first.sine_magnitude, "o", color="0.2", ms=4, label="sine calibration", zorder=5)
+    for n, (label, c) in enumerate(comparisons):
+        colour = f"C{n % 10}"
+        ax_m.semilogx(f_khz, c.model_magnitude, "-", color=colour, lw=1, label=f"model of {label}")
+        if c.compensated_magnitude is not None:
+            ax_m.semilogx(f_khz, c.compensated_magnitude, "--", color=colour, lw=0.9,
+                          label=f"sine × DCM of {label}")
+        ax_e.semilogx(f_khz, c.magnitude_error_pct, "o-", color=colour, ms=3, lw=0.9, label=label)
+        ax_p.semilogx(f_khz, c.phase_error_deg, "o-", color=colour, ms=3, lw=0.9, label=label)
+    for level in (0.95, 1.05):
+        ax_m.axhline(level, color="tab:green", ls=":", lw=0.8)
+    if first.u_magnitude_rel is not None:
+        band = 2 * 100.0 * first.u_magnitude_rel
+        ax_e.fill_between(f_khz, -band, band, color="0.5", alpha=0.2, label="±2u of the sine calibration")
+    ax_e.axhline(0.0, color="0.4", lw=0.7)
+    ax_m.set_ylabel(f"|H| / |H({fmt(first.reference_frequency_hz)} Hz)|")
+    ax_m.set_title("Normalised magnitude (±5 % dotted)", fontsize=9)
+    ax_m.legend(fontsize=6.5, ncol=2)
+    ax_e.set_ylabel("model − sine (%)")
+    ax_e.set_title("Magnitude error of each shot's model", fontsize=9)
+    ax_e.legend(fontsize=6.5, ncol=3)
+    ax_p.set_ylabel("phase error (°)")
+    ax_p.set_xlabel("frequency (kHz)")
+    ax_p.set_title("Phase error (model without its channel delay)", fontsize=9)
+    for ax in (ax_m, ax_e, ax_p):
+        ax.grid(True, which="both", alpha=0.3)
+    header, rows = sine_rows(comparisons)
+    table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
     return fig

@@ -21,6 +21,7 @@ from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.resample import resample_to_rate, shift_samples
 from hopkinson.analysis.response import model_output
 from hopkinson.analysis.shot_analysis import ShotAnalysis
+from hopkinson.analysis.sine_comparison import SineCalibration
 
 G_M_S2 = 9.80665  # standard gravity: accelerations are also shown in g
 
@@ -119,13 +120,15 @@ def _number(value: Any) -> float | None:
 
 @dataclass
 class CalibrationReport:
-    """A whole report: one shot, or a campaign of shots."""
+    """A whole report: one shot, or a campaign of shots (with, when its plan names one, the
+    sensor's sinusoidal calibration to compare each shot's model with)."""
 
     title: str
     identity: dict[str, str]
     shots: list[ShotEntry]
     campaign: bool = False
     notes: list[str] = field(default_factory=list)
+    sine_calibration: SineCalibration | None = None
 
 
 def identification_dict(analysis: ShotAnalysis) -> dict[str, Any]:

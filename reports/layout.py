@@ -268,11 +268,10 @@ def table_in_axes(ax: Any, header: list[str] | None, rows: list[list[str]], font
     t.set_fontsize(fontsize)
     t.scale(1.0, 1.25)
     if line_heights:
-        offset = 1 if header is not None else 0
+        table_rows = ([header] if header is not None else []) + rows
         for (r, _c), cell in t.get_celld().items():
-            if r >= offset:
-                lines = max(str(c).count("\n") + 1 for c in rows[r - offset])
-                cell.set_height(cell.get_height() * lines)
+            lines = max(str(c).count("\n") + 1 for c in table_rows[r])
+            cell.set_height(cell.get_height() * lines)
     for (r, _c), cell in t.get_celld().items():
         cell.set_edgecolor("0.75")
         if header is not None and r == 0:

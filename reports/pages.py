@@ -8,7 +8,11 @@ laid out by `layout.TextPages`, so it continues on a second page rather than run
 from __future__ import annotations
 
 import numpy as np
-from hopkinson.reports.campaign_pages import campaign_responses_page, cross_validation_page
+from hopkinson.reports.campaign_pages import (
+    campaign_responses_page,
+    cross_validation_page,
+    sine_page,
+)
 from hopkinson.reports.data import CalibrationReport
 from hopkinson.reports.layout import TextPages, freeze_layout, new_figure
 from hopkinson.reports.shot_pages import shot_pages
@@ -19,6 +23,7 @@ from hopkinson.reports.tables import (
     compensation_rows,
     per_shot_rows,
     results_rows,
+    sine_rows,
     spread_rows,
     uncertainty_method,
     uncertainty_rows,
@@ -28,6 +33,7 @@ from matplotlib.figure import Figure
 SUBTITLE = ("Hopkinson-bar shock calibration: dynamic model, band of small distortion (FBSD) and dynamic "
             "compensation model (DCM)")
 SUMMARY = "Summary"
+SINE_CAPTION = "Campaign: the shock models against the sinusoidal calibration"
 
 
 def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> list[Figure]:
@@ -63,6 +69,11 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
             for label, check in flagged:
                 page.paragraph(f"{label}: {check.not_recommended_reason or 'compensation does not improve the shot'}",
                                colour="#a00000")
+        if stats.sine:
+            page.heading("Each shot's model against the sinusoidal calibration")
+            page.table(*sine_rows(stats.sine), size=7.5)
+        for note in stats.sine_notes:
+            page.paragraph(note, colour="#a00000")
         text = cross_validation_summary(stats)
         if text:
             page.heading("Cross-validation (each shot's model on every other shot)")
@@ -110,12 +121,14 @@ def cross_validation_summary(stats: CampaignStatistics) -> str:
 def report_pages(report: CalibrationReport, stats: CampaignStatistics | None = None) -> list[tuple[str, Figure]]:
     """Every page of the report in order: summary, campaign pages (if any), then each shot's."""
     if report.campaign and stats is None:
-        stats = campaign_statistics(report.shots)
+        stats = campaign_statistics(report.shots, report.sine_calibration)
     summary = title_pages(report, stats)
     pages = [(SUMMARY if i == 0 else f"{SUMMARY} (continued)", fig) for i, fig in enumerate(summary)]
     if report.campaign and stats is not None and stats.labels:
         pages.append(("Campaign: cross-validation and spread", cross_validation_page(stats, report.shots)))
         pages.append(("Campaign: responses of all shots", campaign_responses_page(report.shots)))
+        if stats.sine:
+            pages.append((SINE_CAPTION, sine_page(stats.sine, report.sine_calibration)))
     for entry in report.shots:
         pages.extend(shot_pages(entry))
     for _caption, fig in pages:

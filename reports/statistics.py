@@ -23,6 +23,7 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import fit_percent
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.shot_analysis import ShotAnalysis
+from hopkinson.analysis.sine_comparison import SineCalibration, SineComparison, compare_sine
 from hopkinson.reports.data import (
     QUANTITIES,
     ShotEntry,
@@ -161,12 +162,15 @@ class CampaignStatistics:
     spread: dict[str, dict[str, float | int | None]]  # quantity key -> spread()
     cross_validation_percent: np.ndarray  # [i, j]: model i on shot j
     combined: dict[str, Combined] = field(default_factory=dict)  # COMBINED key -> combination
+    sine: list[tuple[str, SineComparison]] = field(default_factory=list)  # shot -> against the sine calibration
+    sine_notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (strict JSON: a NaN or infinite figure becomes None)."""
         return json_safe({"shots": self.labels, "figures": self.figures, "spread": self.spread,
                           "combined": {k: c.to_dict() for k, c in self.combined.items()},
                           "combination_note": COMBINATION_NOTE,
+                          "sine_comparison": {label: c.to_dict() for label, c in self.sine} or None,
                           "cross_validation_percent": self.cross_validation_percent.tolist(),
                           "cross_validation_note": "row i: model of shot i; column j: simulated on shot j's "
                                                    "reference; fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)"})
@@ -184,12 +188,30 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-def campaign_statistics(entries: Sequence[ShotEntry]) -> CampaignStatistics:
-    """Spread and cross-validation over the entries that have an analysis."""
+def sine_comparisons(entries: Sequence[ShotEntry], sine: SineCalibration
+                     ) -> tuple[list[tuple[str, SineComparison]], list[str]]:
+    """Each analysed shot's model (and its DCM) against the sine calibration
+    (analysis.sine_comparison.compare_sine); the comparisons and, for shots it cannot be done
+    for, why (a note each)."""
+    out, notes = [], []
+    for e in entries:
+        if e.analysis is None:
+            continue
+        try:
+            out.append((e.label, compare_sine(e.analysis.model, sine, e.analysis.dcm)))
+        except AnalysisError as exc:
+            notes.append(f"{e.label}: not compared with the sine calibration: {exc}")
+    return out, notes
+
+
+def campaign_statistics(entries: Sequence[ShotEntry], sine: SineCalibration | None = None) -> CampaignStatistics:
+    """Spread, combined key figures and cross-validation over the entries that have an analysis
+    (and each one's model against the sine calibration, when there is one)."""
     analysed = [e for e in entries if e.analysis is not None]
     figures = [figures_of_merit(e) for e in analysed]
     keys = [k for k, *_ in QUANTITIES] + ["sensitivity_v_per_m_s2", "peak_acceleration_m_s2", "pulse_width_s"]
     stats = {k: spread(f[k] for f in figures) for k in keys}
     matrix = cross_validation([e.analysis for e in analysed])  # type: ignore[misc]
     combined = combined_figures([e.key_figures for e in analysed if e.key_figures is not None])
-    return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined)
+    comparisons, notes = sine_comparisons(analysed, sine) if sine is not None else ([], [])
+    return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined, comparisons, notes)

@@ -14,6 +14,7 @@ import numpy as np
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.response import natural_frequency_damping
 from hopkinson.analysis.shot_analysis import ShotAnalysis
+from hopkinson.analysis.sine_comparison import SineComparison
 from hopkinson.reports.data import (
     G_M_S2,
     QUANTITIES,
@@ -154,16 +155,24 @@ def uncertainty_cells(figure: Figure, scale: float) -> list[str]:
     """value, u, U, [interval], u_rel: u and U to two significant digits, the value and the
     interval to the decimals of U (GUM 7.2.6)."""
     big = figure.expanded
-    decimals = 1 - math.floor(math.log10(big / scale)) if big and big > 0 else None
 
     def fixed(x: float | None) -> str:
-        if x is None:
-            return "—"
-        return f"{x / scale:.{max(decimals, 0)}f}" if decimals is not None else fmt(x, scale)
+        return to_decimals_of(x, big, scale)
 
     lo, hi = figure.interval if figure.interval is not None else (None, None)
     return [fixed(figure.value), fmt(figure.u, scale, 2), fmt(big, scale, 2), f"[{fixed(lo)}, {fixed(hi)}]",
             f"{fmt(100 * figure.u_rel, digits=2)} %" if figure.u_rel is not None else "—"]
+
+
+def to_decimals_of(value: float | None, expanded: float | None, scale: float = 1.0) -> str:
+    """`value` / scale to the decimals that show `expanded` / scale to two significant digits
+    (GUM 7.2.6); as `fmt` without an expanded uncertainty."""
+    if value is None:
+        return "—"
+    if not expanded or expanded <= 0 or not math.isfinite(expanded):
+        return fmt(value, scale)
+    decimals = max(0, 1 - math.floor(math.log10(expanded / scale)))
+    return f"{value / scale:.{decimals}f}"
 
 
 def uncertainty_method(entry: ShotEntry) -> str:
@@ -237,9 +246,11 @@ def combined_rows(stats: CampaignStatistics) -> tuple[list[str], list[list[str]]
         c = stats.combined.get(key)
         if c is None or c.n == 0:
             continue
-        dof = "∞" if c.dof is not None and math.isinf(c.dof) else fmt(c.dof, digits=2)
+        dof = ("∞" if c.dof is not None and math.isinf(c.dof) else "> 1000" if c.dof is not None and c.dof > 1000
+               else fmt(c.dof, digits=2))
         n_text = str(c.n) + (f" (+{c.excluded_bounds} bound)" if c.excluded_bounds else "")
-        rows.append([label + unit_suffix(unit), n_text, fmt(c.mean, scale, 5), fmt(c.repeatability, scale, 2),
+        rows.append([label + unit_suffix(unit), n_text, to_decimals_of(c.mean, c.expanded, scale),
+                     fmt(c.repeatability, scale, 2),
                      fmt(c.u_shots, scale, 2), fmt(c.u_combined, scale, 2), dof, fmt(c.k, digits=3),
                      fmt(c.expanded, scale, 2)])
     return header, rows
@@ -299,4 +310,28 @@ def per_shot_rows(entries: Sequence[ShotEntry]) -> tuple[list[str], list[list[st
                      fmt(f["order"]), fmt(f["natural_frequency_hz"], 1e3, 5), fmt(f["damping_ratio"], digits=3),
                      fmt(f["fbsd_5_hz"], 1e3), fmt(f["fbsd_10_hz"], 1e3), fmt(f["shock_sensitivity"], digits=4),
                      fmt(f["fit_percent"], digits=4)])
+    return header, rows
+
+
+SINE_CHECK_HZ = (10e3, 20e3)  # where a lab's sine calibrators stop (ISO 16063-11/-21)
+
+
+def sine_rows(comparisons: Sequence[tuple[str, SineComparison]]) -> tuple[list[str], list[list[str]]]:
+    """Per shot: the model's largest magnitude error against the sine points (all, and up to 10
+    and 20 kHz), the delay its phase error amounts to, and the ±5 % band of sine × DCM."""
+    header = ["shot", "max |error|\n(%)", "≤ 10 kHz\n(%)", "≤ 20 kHz\n(%)", "phase as a\ndelay (µs)",
+              "sine × DCM\n±5 % (kHz)", "within\n2u"]
+    rows = []
+    for label, c in comparisons:
+        band = (c.compensated_fbsd_hz or {}).get("5")
+        if c.compensated_magnitude is None:
+            band_text = "—"
+        elif band is None:
+            band_text = f"> {c.frequency_hz[-1] / 1e3:.3g} (last point)"
+        else:
+            band_text = fmt(band, 1e3)
+        within = "—" if c.consistent is None else f"{int(np.sum(c.consistent))} of {c.consistent.size}"
+        rows.append([label, fmt(c.max_magnitude_error_pct, digits=3)]
+                    + [fmt(c.max_magnitude_error_below_pct(f), digits=3) for f in SINE_CHECK_HZ]
+                    + [fmt(c.phase_delay_s, 1e-6, 3), band_text, within])
     return header, rows

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.reports.data import CalibrationReport
-from hopkinson.reports.pages import report_pages
+from hopkinson.reports.pages import SINE_CAPTION, report_pages
 from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
 from hopkinson.reports.tables import (
     budget_rows,
@@ -24,6 +24,7 @@ from hopkinson.reports.tables import (
     per_shot_rows,
     pole_rows,
     results_rows,
+    sine_rows,
     spread_rows,
     uncertainty_method,
     uncertainty_rows,
@@ -94,13 +95,17 @@ def _write_html(path: Path, report: CalibrationReport, pages: list[tuple[str, Fi
         if rows:
             parts.append("<h2>Key figures of the campaign</h2>" + _html_table(header, rows)
                          + f"<p class='note'>{e(COMBINATION_NOTE)}</p>")
+        if stats.sine:
+            parts.append("<h2>Against the sinusoidal calibration</h2>" + _html_table(*sine_rows(stats.sine)))
+        for note in stats.sine_notes:
+            parts.append(f"<p class='error'>{e(note)}</p>")
         parts.append("<h2>Cross-validation</h2><p>Row i: the model identified on shot i; column j: its response "
                      "simulated on shot j's reference, compared with shot j's measured response: fit % = "
                      "100·(1 − ‖y − ŷ‖/‖y − ȳ‖).</p>")
         m = stats.cross_validation_percent
         rows = [[stats.labels[i]] + [fmt(v, digits=5) for v in m[i]] for i in range(len(stats.labels))]
         parts.append(_html_table(["model \\ shot"] + stats.labels, rows, "cv"))
-        for caption in ("Campaign: cross-validation and spread", "Campaign: responses of all shots"):
+        for caption in ("Campaign: cross-validation and spread", "Campaign: responses of all shots", SINE_CAPTION):
             if caption in by_caption:
                 parts.append(_html_figure(caption, by_caption[caption]))
     for entry in report.shots:
@@ -142,14 +147,15 @@ def _html_figure(caption: str, fig: Figure) -> str:
             f"<figcaption>{html.escape(caption)}</figcaption></figure>")
 
 
-def write_report(report: CalibrationReport, paths: Sequence[str | Path],
-                 inputs: Sequence[str | Path] = (), pages: list[tuple[str, Figure]] | None = None) -> list[Path]:
+def write_report(report: CalibrationReport, paths: Sequence[str | Path], inputs: Sequence[str | Path] = (),
+                 pages: list[tuple[str, Figure]] | None = None, stats: CampaignStatistics | None = None) -> list[Path]:
     """Write the report to each path; the format comes from the suffix (.pdf or .html).
 
     The pages are drawn once for all formats. Each file is written atomically (module doc).
     AnalysisError for an unknown suffix, a missing folder, an output that is one of `inputs`
     or an existing shot file, or a report without shots (checked before anything is drawn).
-    `pages`: the report's pages when already drawn (`report_pages`), else they are drawn here.
+    `pages`, `stats`: the report's pages (`report_pages`) and campaign statistics when already
+    made, else they are made here.
     """
     targets = [Path(p) for p in paths]
     for p in targets:
@@ -161,7 +167,8 @@ def write_report(report: CalibrationReport, paths: Sequence[str | Path],
             raise AnalysisError(str(exc)) from None
     if not report.shots:
         raise AnalysisError(f"report {report.title!r}: no shots to report")
-    stats = campaign_statistics(report.shots) if report.campaign else None
+    if stats is None and report.campaign:
+        stats = campaign_statistics(report.shots, report.sine_calibration)
     if pages is None:
         pages = report_pages(report, stats)
     for p in targets:

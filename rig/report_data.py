@@ -19,6 +19,7 @@ from typing import Any
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.shot_analysis import ShotAnalysis
+from hopkinson.analysis.sine_comparison import read_sine_calibration
 from hopkinson.reports.data import G_M_S2, CalibrationReport, ShotEntry
 from hopkinson.reports.writers import write_report
 from hopkinson.rig.errors import ConfigError
@@ -168,8 +169,17 @@ def run_report(run_folder: str | Path) -> CalibrationReport:
             identity[key] = first.identity[key]
     identity["Fired (UTC)"] = f"{entries[0].identity['Fired (UTC)']} … {entries[-1].identity['Fired (UTC)']}"
     notes = [f"Shots without a shot file: {', '.join(missing)}."] if missing else []
+    sine = None
+    sine_path = getattr(plan.accelerometer, "sine_calibration", None)
+    if sine_path:
+        try:
+            sine = read_sine_calibration(sine_path)
+            identity["Sine calibration"] = f"{sine_path} ({sine.frequency_hz.size} points)"
+        except AnalysisError as exc:  # the shots are still reported; the note says why not compared
+            notes.append(f"The plan's sine calibration is not compared: {exc}")
     title = f"Calibration report: {identity['Accelerometer']}, campaign {run.campaign_id}"
-    return CalibrationReport(title=title, identity=identity, shots=entries, campaign=True, notes=notes)
+    return CalibrationReport(title=title, identity=identity, shots=entries, campaign=True, notes=notes,
+                             sine_calibration=sine)
 
 
 def report_for(path: str | Path) -> CalibrationReport:

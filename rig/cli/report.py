@@ -59,9 +59,9 @@ def report_command(args: argparse.Namespace) -> int:
             else:
                 raise ConfigError(f"-o {out}: folder {out.parent} does not exist")
     report = report_for(args.source)
-    written = write_report(report, outputs, inputs=[args.source])
+    stats = campaign_statistics(report.shots, report.sine_calibration) if report.campaign else None
+    written = write_report(report, outputs, inputs=[args.source], stats=stats)
     if args.json:
-        stats = campaign_statistics(report.shots) if report.campaign else None
         emit_json({
             "reports": [str(p) for p in written],
             "shots": [{"id": e.label, "state": e.state, "analysed": e.analysis is not None, "error": e.error,

@@ -17,6 +17,7 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_record
+from hopkinson.analysis.sine_comparison import SineCalibration
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
 from hopkinson.reports.data import CalibrationReport, ShotEntry, truth_comparison
@@ -197,6 +198,14 @@ def pdf_pages(data: bytes) -> int:
     return len(re.findall(rb"/Type\s*/Page\b", data))
 
 
+def true_sine_calibration(truth: AccelerometerTruth) -> SineCalibration:
+    """A sine calibration of the true sensor (0.5–20 kHz, ±0.5 % standard uncertainty): what a lab's
+    sine calibrator would measure, independent of any identification."""
+    f = np.geomspace(500.0, 20e3, 12)
+    h = truth.frequency_response(f)
+    return SineCalibration(f, np.abs(h), np.degrees(np.angle(h)), np.full(f.size, 0.005), None, "sine-T1.csv")
+
+
 @pytest.fixture(scope="module")
 def single_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> tuple[CalibrationReport, list]:
     """One shot's report, drawn once for the module; every page saved as a PNG for people to look at."""
@@ -214,9 +223,10 @@ def campaign_report(analyses: dict[str, ShotAnalysis], artifacts_dir: Path) -> t
                entry("s003-r1", None, error="analysis failed: no beat in the Doppler channel")]
     report = CalibrationReport("Calibration report: SIM-ACC, serial SIM0001, campaign 20260101T000000Z-example",
                                {"Campaign": "c-1"}, entries, campaign=True,
-                               notes=["Shots without a shot file: s004-r1 (UNKNOWN)."])
+                               notes=["Shots without a shot file: s004-r1 (UNKNOWN)."],
+                               sine_calibration=true_sine_calibration(SENSOR_A))
     pages = report_pages(report)
-    write_pngs(pages[:3], artifacts_dir, "report-campaign", dpi=80)  # the shots' pages are as above
+    write_pngs(pages[:4], artifacts_dir, "report-campaign", dpi=80)  # the shots' pages are as above
     return report, pages
 
 
@@ -245,9 +255,9 @@ def test_campaign_report_pdf(tmp_path: Path, campaign_report) -> None:
     entries = report.shots
     (pdf,) = write_report(report, [tmp_path / "c.pdf"], pages=pages)
     data = pdf.read_bytes()
-    assert pdf_pages(data) == 1 + 2 + 4 * 2 + 1  # summary, 2 campaign pages, 2 analysed shots, 1 failed
+    assert pdf_pages(data) == 1 + 3 + 4 * 2 + 1  # summary, 3 campaign pages (one the sine), 2 shots, 1 failed
     text = pdf_text(data)
-    stats = campaign_statistics(entries)
+    stats = campaign_statistics(entries, report.sine_calibration)
     for needle in ("Cross-validation", "Spread across 2 analysed shots", "s004-r1 (UNKNOWN)",
                    "no beat in the Doppler channel", "s003-r1: no analysis",
                    f"{stats.spread['natural_frequency_hz']['mean'] / 1e3:.5g}",  # the spread table's mean f_n
@@ -258,7 +268,14 @@ def test_campaign_report_pdf(tmp_path: Path, campaign_report) -> None:
     combined = stats.combined["natural_frequency_hz"]
     values = [KeyFigures.from_results(e.results).natural_frequency_hz for e in entries[:2]]
     assert combined.n == 2 and combined.mean == pytest.approx(np.mean([v.value for v in values]))
-    assert f"{combined.mean / 1e3:.5g}" in text
+    decimals = 1 - int(np.floor(np.log10(combined.expanded / 1e3)))  # to the decimals of its U
+    assert f"{combined.mean / 1e3:.{decimals}f}" in text
+    # each shot's model against the true sensor's sine calibration: within 1 % up to 10 kHz
+    assert [label for label, _ in stats.sine] == ["s001-r1", "s002-r1"]
+    for _label, c in stats.sine:
+        assert c.max_magnitude_error_below_pct(10e3) < 1.0
+        assert c.compensated_magnitude is not None
+    assert "against the sinusoidal calibration" in text and "sine-T1.csv" in text
 
 
 @pytest.fixture(scope="module")

@@ -97,7 +97,7 @@ def test_run_folder_report_with_spread_and_cross_validation(run_folder: Path, ca
     assert campaign["combined"]["natural_frequency_hz"]["mean"] == pytest.approx(sum(means) / 2)
     page = out.read_text(encoding="utf-8")
     for needle in ("campaign run", "SIM-ACC, serial R1", "<h2>Cross-validation</h2>", "Shot s002-r1",
-                   "Spread across 2 analysed shots", "SIMULATED", "Hopkinson-Sim,SIMDIG-2CH"):
+                   "Spread across 2 analysed shots", "SIMULATED", "Hopkinson-Sim,SIMDIG-"):  # the digitizer's identity
         assert needle in page, needle
     assert page.count("<img ") == 2 + 4 * 2
     assert not list(run_folder.rglob("*.tmp"))
