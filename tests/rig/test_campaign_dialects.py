@@ -52,9 +52,6 @@ def test_a_campaign_runs_on_each_digitizer_dialect(tmp_path: Path, dialect: str)
             config.digitizer, dialect=dialect, channels={"doppler": names[0], "response": names[1]},
             ranges_v={"doppler": 1.0, "response": 10.0}, trigger_source="response", record_length=40_000,
             sample_format=FORMAT[dialect], byte_order="big" if dialect == "tektronix" else "little")
-        # the driver with this configuration's dialect, channels and transfer format
-        digitizer = dataclasses.replace(digitizer, driver="hopkinson.drivers.digitizer:Digitizer",
-                                        options=digitizer.driver_options())
         config = dataclasses.replace(config, digitizer=digitizer)
         plan_path = tmp_path / "plan.toml"
         plan_path.write_text(PLAN, encoding="utf-8")
