@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import pytest
 import serial
 from hopkinson.drivers.amplifier import BridgeAmplifier
-from hopkinson.drivers.base import read_bounded
+from hopkinson.drivers.base import read_bounded, trace_text
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.modbus_link import ModbusDriver, ModbusTarget
 from hopkinson.drivers.registers import Register
@@ -45,6 +45,13 @@ def test_read_bounded_keeps_one_deadline_over_a_trickle() -> None:
         read_bounded(trickle, terminator=b"\n", max_bytes=10_000, timeout_s=0.2, instrument="gauge", command="P?")
     assert read_bounded(lambda n, w: b"ok\nmore", terminator=b"\n", max_bytes=10, timeout_s=1.0,
                         instrument="g", command="c") == b"ok\n"
+
+
+def test_traces_keep_text_and_summarise_binary_blocks() -> None:
+    assert trace_text(b"*IDN?\n") == "*IDN?" and trace_text("GAIN 20*23\r\n") == "GAIN 20*23"
+    assert trace_text(b"#6400000" + bytes(range(256)) * 1563) == "<binary block: 400136 bytes>"
+    assert trace_text(b"\x01\x03\x00") == "<binary: 01 03 00>"
+    assert trace_text("x" * 500) == "x" * 200 + "... (500 chars)"
 
 
 @pytest.fixture
