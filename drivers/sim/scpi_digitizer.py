@@ -300,26 +300,31 @@ class SimDigitizer:
             return
         n = self.settings.record_length
         record = {}
-        for ch in CHANNELS:
-            data = np.asarray(volts.get(ch, np.zeros(n)), dtype=float)
-            if data.shape != (n,):
-                raise SimError(-240, f"simulated capture gave {data.shape} samples on channel {ch}, expected {n}")
-            record[ch] = data
+        for ch, data in volts.items():  # a channel the world leaves out has nothing connected: 0 V
+            record[ch] = np.asarray(data, dtype=float)
+            if ch not in CHANNELS or record[ch].shape != (n,):
+                raise SimError(-240, f"simulated capture gave {record[ch].shape} samples on channel {ch}, "
+                                     f"expected {n} on one of {CHANNELS}")
         self.volts, self._encoded, self.state = record, {}, "TRIGGERED"
         self.acquisitions += 1
         if self.opc_armed:
             self.esr |= ESR_OPC
             self.opc_armed = False
 
-    def encoded(self, channel: int) -> tuple[bytes, float, float] | None:
-        """(payload bytes, scale_v, zero_code) of a channel in the current transfer format."""
-        if channel not in self.volts:
+    def encoded(self, channel: int) -> tuple[memoryview, float, float] | None:
+        """(payload bytes, scale_v, zero_code) of a channel in the current transfer format;
+        None without a record."""
+        if self.state != "TRIGGERED":
             return None
         key = (channel, self.sample_format, self.byte_order)
         if key not in self._encoded:
-            codes, scale, zero = quantise(self.volts[channel], self.settings.ch_range_v[channel], self.sample_format)
+            volts = self.volts.get(channel)
+            if volts is None:
+                volts = np.zeros(self.settings.record_length)
+            codes, scale, zero = quantise(volts, self.settings.ch_range_v[channel], self.sample_format)
             order = "<" if self.byte_order == "little" else ">"
-            self._encoded[key] = (codes.astype(codes.dtype.newbyteorder(order)).tobytes(), scale, zero)
+            codes = np.ascontiguousarray(codes.astype(codes.dtype.newbyteorder(order), copy=False))
+            self._encoded[key] = (memoryview(codes).cast("B"), scale, zero)
         return self._encoded[key]
 
     # -- the interpreter -------------------------------------------------------------------
