@@ -101,6 +101,9 @@ def check_stuck_fill_valve(rig: SimulatedRig, clock: FakeClock) -> None:
         vc.set_fill_valve(True)
         clock.advance(2.0)
         vc.set_fill_valve(False)  # the valve does not obey
+        states = vc.valves()  # and its limit switch says so
+        assert states.fill_valve is False and states.fill_valve_position is True
+        assert states.mismatches() == ["fill valve commanded shut but open"] and states.is_open("fill_valve")
         clock.advance(8.0)
         assert vc.valves().fill_valve is False
         assert vc.reservoir_pressure_bar() == pytest.approx(5.0, abs=1e-3)  # 10 s at 0.5 bar/s

@@ -308,19 +308,6 @@ def test_status_reads_everything_at_once(rig: SimulatedRig, clock: FakeClock) ->
     assert status.watchdog == "off" and status.fire_pulse_count == 0
 
 
-def test_a_stuck_fill_valve_reads_open_while_commanded_shut(rig: SimulatedRig, clock: FakeClock) -> None:
-    with controller(rig) as vc:
-        rig.faults.inject("stuck-fill-valve")
-        vc.set_pressure_setpoint_bar(2.0)
-        vc.set_fill_valve(True)
-        clock.advance(1.0)
-        vc.set_fill_valve(False)
-        states = vc.valves()
-        assert states.fill_valve is False and states.fill_valve_position is True
-        assert states.mismatches() == ["fill valve commanded shut but open"]
-        assert states.is_open("fill_valve")
-
-
 # -- the link watchdog and the fire pulse, timed by the controller --------------------------------
 @pytest.mark.parametrize("transport", ["tcp", "rtu"])
 def test_the_watchdog_vents_when_the_heartbeat_stops_and_stays_tripped(transport: str, clock: FakeClock) -> None:

@@ -19,20 +19,7 @@ from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder
 
 from tests.rig.conftest import quick_analysis, short_timeouts_config
-
-PLAN = """
-name = "transports"
-operator = "tester"
-authorise_firing = true
-[accelerometer]
-model = "SIM-ACC"
-serial = "T1"
-[defaults]
-projectile = 3
-[[shots]]
-pressure_bar = 1.5
-repeats = 2
-"""
+from tests.rig.test_campaign_dialects import PLAN  # two shots at 1.5 bar, firing authorised
 
 
 @pytest.mark.parametrize("transport", ["rtu", "tcp"])
