@@ -47,16 +47,18 @@ Layout (format "hopkinson-shot", format_version 1)::
 
 Units are spelled one way everywhere: "V", "s", "m/s^2", "m/s", "Hz" (UDUNITS).
 
-Durability. `write_raw_shot` writes `<name>.h5.tmp` in the same folder, flushes, fsyncs,
-renames it over the final name with os.replace and fsyncs the folder: a crash leaves either
-no file or a complete one under the final name, plus possibly a `*.tmp` leftover that
-rig.run_folder removes on resume. `add_analysis` never opens the shot file for writing:
-HDF5 has no journal, so an append that dies half-way can damage the file's metadata and
-with it the raw data. Instead it copies the file byte for byte to `<name>.h5.analysis.tmp`,
-replaces /derived, /analysis and /entry/record in the copy (every reference inside the file,
-such as the dimension scales, stays valid in a byte copy), fsyncs it and renames it over the
-old one. Until that rename the old file is untouched; after it the new file is complete. The
-cost is one copy of the file per analysis (tens of ms for 2 × 10 M samples).
+Durability. Every write goes through hopkinson.fileio.atomic_write: the file is built under an
+exclusively created temporary name beside the target (`.<name>.h5.<random>.tmp`, never
+through a symlink), fsynced and renamed over the final name, and the folder fsynced; a crash
+leaves either no file or a complete one under the final name, plus possibly a `*.tmp`
+leftover that rig.run_folder removes on resume. `write_raw_shot` never replaces an existing
+shot file. `add_analysis` never opens the shot file for writing: HDF5 has no journal, so an
+append that dies half-way can damage the file's metadata and with it the raw data. Instead it
+copies the file byte for byte to the temporary, replaces /derived, /analysis and /entry/record
+in the copy (every reference inside the file, such as the dimension scales, stays valid in a
+byte copy) and renames it over the old one. Until that rename the old file is untouched; after
+it the new file is complete. The cost is one copy of the file per analysis (tens of ms for
+2 × 10 M samples).
 """
 
 from __future__ import annotations
@@ -65,7 +67,6 @@ import dataclasses
 import importlib.metadata
 import json
 import math
-import os
 import re
 import shutil
 import uuid as uuid_module
@@ -82,6 +83,8 @@ from hopkinson.analysis.errors import RecordError
 from hopkinson.analysis.records import Record
 from hopkinson.rig.events import utc_now_iso
 
+from hopkinson.fileio import UnsafeOutputError, atomic_write
+
 FORMAT = "hopkinson-shot"
 FORMAT_VERSION = 1
 REQUIRED_CHANNELS = ("doppler", "response")
@@ -95,9 +98,7 @@ ROLE_NAMES = {  # long names for viewers
 }
 UNIT_SUFFIXES = (("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_hz", "Hz"), ("_s", "s"), ("_v", "V"), ("_m", "m"),
                  ("_bar", "bar"), ("_mbar", "mbar"))
-RAW_TMP_SUFFIX = ".tmp"  # <name>.h5.tmp: an unfinished raw write
-ANALYSIS_TMP_SUFFIX = ".analysis.tmp"  # <name>.h5.analysis.tmp: an unfinished analysis write
-TMP_SUFFIXES = (ANALYSIS_TMP_SUFFIX, RAW_TMP_SUFFIX)
+TMP_SUFFIX = ".tmp"  # hopkinson.fileio's temporaries (.<name>.h5.<random>.tmp): an unfinished write
 _CHUNK_SAMPLES = 1 << 20  # 2 MiB chunks of int16: checksummed without slowing the write
 PLAIN_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
@@ -252,7 +253,7 @@ def write_raw_shot(path: str | Path, raw: RawShot, meta: ShotMeta) -> Path:
             ds.dims[0].attach_scale(time_s)
         _nexus_signals(f, channels, time_s)
 
-    _atomic_write(path, path.with_name(path.name + RAW_TMP_SUFFIX), build)
+    _atomic_write(path, build)
     return path
 
 
@@ -322,7 +323,7 @@ def add_analysis(
         analysis.attrs["results_json"] = results_json
         _mirror(analysis, results)
 
-    _atomic_write(path, path.with_name(path.name + ANALYSIS_TMP_SUFFIX), build, seed=path)
+    _atomic_write(path, build, seed=path)
     return path
 
 
@@ -382,45 +383,23 @@ def _nexus_record(f: h5py.File, record_group: h5py.Group) -> None:
         data[name] = record_group[name]
 
 
-def _atomic_write(final: Path, tmp: Path, build: Callable[[h5py.File], None], seed: Path | None = None) -> None:
-    """Build an HDF5 file under `tmp` (new, or a byte copy of `seed` opened for update), fsync
-    it, rename it to `final`, fsync the folder."""
-    if not final.parent.is_dir():
-        raise ShotFileError(f"{final}: folder {final.parent} does not exist")
-    tmp.unlink(missing_ok=True)  # our own leftover from an earlier interrupted attempt
-    try:
+def _atomic_write(final: Path, build: Callable[[h5py.File], None], seed: Path | None = None) -> None:
+    """Build an HDF5 file and publish it as `final` through hopkinson.fileio.atomic_write (an
+    exclusive temporary beside it, fsynced, renamed, the folder fsynced): new, or a byte copy of
+    `seed` opened for update."""
+    def write(tmp: Path) -> None:
         if seed is not None:
             shutil.copyfile(seed, tmp)
         with h5py.File(tmp, "r+" if seed is not None else "w", track_order=True) as f:
             build(f)
             f.flush()
-        _fsync_path(tmp)
-        os.replace(tmp, final)
-    except BaseException as exc:
-        tmp.unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise ShotFileError(f"{final}: could not be written ({exc})") from exc
-        raise
-    _fsync_dir(final.parent)
 
-
-def _fsync_path(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
     try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _fsync_dir(folder: Path) -> None:
-    """Make a rename durable (POSIX); folders cannot be opened for fsync on Windows."""
-    if os.name != "posix":
-        return
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+        atomic_write(final, write)
+    except UnsafeOutputError as exc:
+        raise ShotFileError(str(exc)) from None
+    except OSError as exc:
+        raise ShotFileError(f"{final}: could not be written ({exc})") from exc
 
 
 def _checked_channels(path: Path, raw: RawShot) -> dict[str, RawChannel]:
@@ -562,7 +541,7 @@ def _numeric_array(value: Any) -> np.ndarray | None:
 
 def _open_shot(path: Path) -> h5py.File:
     """Open a shot file read-only, or raise ShotFileError naming the file and the problem."""
-    if path.name.endswith(TMP_SUFFIXES):
+    if path.name.endswith(TMP_SUFFIX):
         raise ShotFileError(f"{path}: an unfinished temporary file (an interrupted write), not a shot")
     if not path.exists():
         raise ShotFileError(f"{path}: no such file")

@@ -88,11 +88,12 @@ CHILD = textwrap.dedent(
     real_replace = os.replace
     def replace(src, dst):
         src = str(src)
-        if src.endswith(".h5.tmp") or src.endswith(".h5.analysis.tmp"):
-            step = "before_analysis_rename" if src.endswith(".analysis.tmp") else "before_rename"
+        if Path(src).name.startswith(".") and ".h5." in src and src.endswith(".tmp"):  # a shot file's
+            # temporary (hopkinson.fileio): an analysis replaces the file, a raw write creates it
+            step = "before_analysis_rename" if Path(dst).exists() else "before_rename"
             maybe_die(step, Path(dst).stem)
         real_replace(src, dst)
-    sf.os.replace = replace
+    os.replace = replace
 
     def fire(shot_id):
         fd = os.open(folder / "fires.log", os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
