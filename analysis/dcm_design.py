@@ -345,11 +345,11 @@ def design_compensation(support: ShotSupport, options: DcmOptions | None = None)
     before = {k: e.frequency_hz for k, e in fbsd_edges(model).items()}
     notes: list[str] = []
     if choice.cancelled.size == 0:
-        dcm = _assemble(model, choice, limit, None, options, support.channel_delay_samples)
+        dcm = _assemble(model, choice, limit, None, options)
         note = "nothing to compensate: no pole of the model is one the shot supports"
         return _finish(dcm, model, choice, limit, options, before, None, note, support, [note])
     if options.ratio is not None:
-        dcm = _assemble(model, choice, limit, options.ratio, options, support.channel_delay_samples)
+        dcm = _assemble(model, choice, limit, options.ratio, options)
         note = f"ratio r = {options.ratio:g} given: no widening was aimed for"
         design = _finish(dcm, model, choice, limit, options, before, None, note, support, notes)
         if design.noise_gain_exceeded:
@@ -358,14 +358,14 @@ def design_compensation(support: ShotSupport, options: DcmOptions | None = None)
             )
         return design
     ratio, note = _automatic_ratio(model, choice, limit, options, before["5"])
-    dcm = _assemble(model, choice, limit, ratio, options, support.channel_delay_samples)
+    dcm = _assemble(model, choice, limit, ratio, options)
     return _finish(dcm, model, choice, limit, options, before, options.widening, note, support, notes)
 
 
 def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio: float | None,
-              options: DcmOptions, channel_delay_samples: float) -> DCM:
-    """Paper DCM for the cancelled poles at ratio r, cascaded with the band limit, unit DC gain,
-    with the total latency (channel delay + DC group delay of model × DCM)."""
+              options: DcmOptions) -> DCM:
+    """Paper DCM for the cancelled poles at ratio r (None: nothing cancelled), cascaded with the
+    band limit, unit DC gain (its latency is set by _finish)."""
     dt = model.sample_interval_s
     lp = limit.poles(dt)
     if ratio is None:
@@ -425,7 +425,7 @@ def _automatic_ratio(model: DiscreteModel, choice: PoleChoice, limit: BandLimit,
         """(compensated ±5 % edge, noise gain) at r; NaN noise for a design that cannot be
         evaluated (new poles too slow to integrate, say): skipped."""
         try:
-            dcm = _assemble(model, choice, limit, r, options, 0.0)
+            dcm = _assemble(model, choice, limit, r, options)
             return compensated_fbsd_edges(model, dcm, (0.05,))["5"].frequency_hz, dcm.noise_gain()
         except AnalysisError:
             return 0.0, math.nan
