@@ -21,13 +21,14 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    causal fractional delay τ ≥ 0 fitted with the model. Each order starts from the order
    below (embedded with a cancelling pole and zero, so V never rises with the order) and from
    a Sanathanan–Koerner linear start, and keeps the better optimum.
-6. Order: the smallest n that no higher order beats both on frequency bins it was not fitted
-   on (two-fold validation over interleaved bins: fit on the even bins, cost on the odd ones
-   and back) and in the frequency response where the pulse has energy (by more than 0.1 %
-   RMS: at high SNR a rational discrete model shows its own small mismatch with a continuous
-   sensor, and a parasitic pole pair that mends it is no mode). The evidence (V, validation
-   costs, response changes) is reported; the stability of the choice across resampled noise
-   is measured by analysis.uncertainty, which also draws the order.
+6. Order: the smallest n that no higher order beats both beyond chance (an F test on V,
+   Bonferroni-corrected over the fitted bins: an extra pole pair can sit on the largest chance
+   peak of the noise anywhere in the band) and in the frequency response where the pulse has
+   energy (by more than 0.1 % RMS: at high SNR a rational discrete model shows its own small
+   mismatch with a continuous sensor, and a parasitic pole pair that mends it is no mode).
+   The evidence (V, the F statistics, the response changes) is reported; the stability of the
+   choice across resampled noise is measured by analysis.uncertainty, which also draws the
+   order.
 7. Claims stay inside the band: modes outside it are flagged `supported: False` (a DCM may
    only cancel supported poles; the main mode is the lowest supported complex pair); the
    response leading the reference, zeros outside the unit circle, a model that leaves far
@@ -51,12 +52,22 @@ from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
     SpectralData,
-    is_stable,
-    response,
 )
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.noise import NoiseSpectrum, active_end
+from hopkinson.analysis.order_choice import (
+    FRF_TOLERANCE,
+    SIGNIFICANCE,
+    NoiseDraws,
+    Refitter,
+    candidates_around,
+    choose_order,
+    fractions_text,
+    modal_order,
+    order_stability,
+    response_change,
+)
 from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate, shift_samples
@@ -68,15 +79,12 @@ MIN_SAMPLES_PER_PARAMETER = 10
 MARGINAL_POLE = 1e-6
 # Below this fit percentage the model is reported as explaining little of the response.
 POOR_FIT_PERCENT = 50.0
-# The order test: a higher order must be significant at this level (F test on V) ...
-SIGNIFICANCE = 0.01
-# ... and lower V by more than this fraction (DEFAULT knee_tolerance) to be preferred.
+# (kept for the API: the relative tolerance of the old knee rule, reported)
 KNEE_TOLERANCE = 0.01
-# Chance level of a validation cost difference (V units: half a χ² of a few degrees of freedom).
-CHANCE_COST = 2.0
-# A higher order must change the excitation-weighted frequency response by more than this (RMS,
-# relative) to be preferred: below it, it only mends the discrete model's own approximation.
-FRF_TOLERANCE = 1e-3
+# Noise draws that re-run the order choice (its stability), from a fixed seed: the same record
+# always gives the same order.
+STABILITY_DRAWS = 20
+STABILITY_SEED = 16_063
 # More bins than this are summed in groups of adjacent bins (same cost while G is flat there).
 MAX_BINS = 2048
 # A response leading the reference by more than this (samples, significant) is reported.
@@ -110,7 +118,9 @@ class FitContext:
     delay_mode: str | float
     significance: float
     knee_tolerance: float
+    max_delay: int
     asked_order: int | None
+    record: Record  # the record at the analysis rate
     model_error_ratio: float  # V / degrees of freedom of the chosen order (≈ 1: noise explains it)
 
 
@@ -261,60 +271,6 @@ def main_mode(modes: list[dict[str, Any]]) -> dict[str, Any] | None:
     return min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else None
 
 
-# ------------------------------------------------------------------------------ the order test
-def choose_order(
-    validation: dict[int, float],
-    change: dict[tuple[int, int], float],
-    tolerance: float = KNEE_TOLERANCE,
-    chance: float = CHANCE_COST,
-    frf_tolerance: float = FRF_TOLERANCE,
-) -> int | None:
-    """The smallest order no higher order beats; m beats n when both
-    - on held-out bins it predicts better: validation cost below (1 − `tolerance`) × n's
-      less `chance` (an extra pole pair can always sit on a chance peak of the noise in the
-      bins it was fitted on; on bins it never saw that only costs), and
-    - it changes the response where the pulse has energy: `change[(n, m)]`, the excitation-
-      weighted RMS of the difference of the two frequency responses relative to n's, above
-      `frf_tolerance` (a high-SNR record shows even the tiny mismatch between a rational
-      discrete model and a continuous sensor; a pole pair that only mends that is parasitic).
-    """
-    finite = sorted(n for n, v in validation.items() if math.isfinite(v))
-    for n in finite:
-        if not any(
-            validation[m] < validation[n] * (1.0 - tolerance) - chance and change.get((n, m), math.inf) > frf_tolerance
-            for m in finite if m > n
-        ):
-            return n
-    return None
-
-
-def response_change(fits: dict[int, OrderFit], data: SpectralData) -> dict[tuple[int, int], float]:
-    """Excitation-weighted RMS relative difference of the frequency responses of every pair of
-    evaluated orders (see choose_order)."""
-    weight = data.suu
-    responses = {n: response(f, data.omega) for n, f in fits.items()}
-    out = {}
-    for n, hn in responses.items():
-        norm = float(np.sum(weight * np.abs(hn) ** 2))
-        for m, hm in responses.items():
-            if m > n:
-                out[(n, m)] = math.sqrt(float(np.sum(weight * np.abs(hm - hn) ** 2)) / norm) if norm > 0 else math.inf
-    return out
-
-
-def validation_cost(data_halves: tuple[SpectralData, SpectralData], fit: OrderFit, delay_mode: str | float,
-                    max_delay: int, max_evaluations: int) -> float:
-    """Two-fold validation over interleaved bins: fit on the even bins (from `fit`), cost on
-    the odd ones, and the other way round; the sum."""
-    total = 0.0
-    for train, test in (data_halves, data_halves[::-1]):
-        trained = OrderProblem(train, fit.order, delay_mode, max_delay).solve(replace(fit, cost=math.nan),
-                                                                              max_evaluations)
-        checker = OrderProblem(test, fit.order, delay_mode, max_delay)
-        total += checker.cost(checker.pack(trained)) if is_stable(trained.a) else math.inf
-    return total
-
-
 # ------------------------------------------------------------------------------ identify
 def identify(
     record: Record,
@@ -403,8 +359,6 @@ def identify(
     fits: dict[int, OrderFit] = {}
     parameters: dict[int, int] = {}
     costs: dict[int, float] = {}
-    validation: dict[int, float] = {}
-    halves = data.halves()
     tau = tau0
     previous: OrderFit | None = None
     for n in range(1, n_max + 1):
@@ -420,38 +374,60 @@ def identify(
             if best is None or fitted.cost < best.cost:
                 best = fitted
         assert best is not None
-        fits[n], parameters[n], costs[n] = best, problem.size, best.cost
-        validation[n] = (validation_cost(halves, best, delay_mode, max_delay_samples, max_evaluations // 3)
-                         if _acceptable(best) else math.inf)  # an unstable or marginal order is no candidate
+        fits[n], parameters[n] = best, problem.size
+        costs[n] = best.cost if _acceptable(best) else math.inf  # an unstable or marginal order is no candidate
         previous, tau = best, best.delay
         if patience is not None:
-            chosen_so_far = choose_order(validation, response_change(fits, data), knee_tolerance)
+            chosen_so_far, _ = choose_order(costs, parameters, data.bins, response_change(fits, data), significance)
             if chosen_so_far is not None and n >= max(chosen_so_far + patience, order or 0):
                 break
     changes = response_change(fits, data)
-    chosen_auto = choose_order(validation, changes, knee_tolerance)
-    evidence: dict[str, Any] = {}
+    chosen_auto, comparisons = choose_order(costs, parameters, data.bins, changes, significance)
+    evidence: dict[str, Any] = {"comparisons": comparisons}
     if chosen_auto is None:
         raise AnalysisError(f"no stable model of order 1 … {n_max} fits this record (every fit was unstable)")
+    noise_draws = NoiseDraws(data, prep.u_bins, prep.y_bins, prep.var_u, prep.var_y,
+                             2.0 * np.pi * prep.bin_hz * dt, prep.group, STABILITY_SEED)
+    if order is None:
+        # Stability across resampled noise: the test re-run on fresh noise of the record's own
+        # level; the order chosen most often (the record's own choice counts once) is kept.
+        refitter = Refitter(data, fits, delay_mode, max_delay_samples)
+        candidates = [m for m in candidates_around(chosen_auto, fits) if math.isfinite(costs[m])]
+        fractions, choices, _ = order_stability(noise_draws, refitter, candidates, STABILITY_DRAWS, significance)
+        votes = [c for c in choices if c is not None] + [chosen_auto]
+        shares = {m: votes.count(m) / len(votes) for m in sorted(set(votes))}
+        evidence["stability"] = {"draws": STABILITY_DRAWS, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
+        modal = modal_order(shares, chosen_auto)
+        if modal != chosen_auto:
+            evidence["record_alone_chose"] = chosen_auto
+            warnings.append(
+                f"the order test on the record alone chose order {chosen_auto}, but with fresh noise of the record's "
+                f"own level it chooses {fractions_text(fractions)}: order {modal}, the stable choice, is used"
+            )
+            chosen_auto = modal
+
+    polished_orders: set[int] = set()
 
     def polished(n: int) -> OrderFit:
-        """The order-n fit iterated to convergence (the search gave each order a short budget)."""
-        if not fits[n].converged:
-            done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 8 * max_evaluations)
+        """The order-n fit iterated to tight convergence (the search gave each order a short budget
+        and a loose tolerance): the optimum, whatever path led to it, so rescaled channels give
+        the same model to ~1e-9."""
+        if n not in polished_orders:
+            done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 8 * max_evaluations, 1e-13)
             fits[n] = replace(done, start_unstable=fits[n].start_unstable)
+            polished_orders.add(n)
         return fits[n]
 
     if order is None:
         chosen, selection = chosen_auto, "knee"
         if not _acceptable(polished(chosen)):
-            others = sorted((n for n in fits if n != chosen and math.isfinite(validation[n])),
-                            key=lambda n: (validation[n], n))
+            others = sorted((n for n in fits if n != chosen and math.isfinite(costs[n])), key=lambda n: (costs[n], n))
             fallback = next((n for n in others if _acceptable(polished(n))), None)
             if fallback is None:
                 raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
                                     "or outside the unit circle)")
             warnings.append(f"the order-{chosen} fit became unstable when iterated to convergence; order {fallback} "
-                            "(next best on held-out bins) is used")
+                            "(next lowest cost) is used")
             chosen = fallback
     else:
         chosen, selection = order, "asked"
@@ -463,11 +439,11 @@ def identify(
                 f"circle ({why})"
             )
         if chosen_auto < order:
+            drop = (costs[chosen_auto] - costs[order]) / costs[chosen_auto] if costs[chosen_auto] > 0 else 0.0
             warnings.append(
-                f"order {order} was asked but the data support only order {chosen_auto}: on frequency bins not "
-                f"used for the fit, order {order} predicts no better (validation cost {validation[order]:.4g} "
-                f"against {validation[chosen_auto]:.4g}); the extra poles are not determined by this record (a "
-                "mode beyond the excitation's band?)"
+                f"order {order} was asked but the data support only order {chosen_auto}: V falls by {drop:.2%} from "
+                f"order {chosen_auto} to {order}, within chance or without changing the response where the pulse has "
+                "energy; the extra poles are not determined by this record (a mode beyond the excitation's band?)"
             )
     final = fits[chosen]
     if not final.converged:
@@ -518,15 +494,14 @@ def identify(
         "v_per_degree_of_freedom": ratio,
     }
     evidence.update({
-        "criterion": "the smallest order no higher order beats, both on held-out frequency bins (two-fold "
-                     f"validation, by more than {knee_tolerance:.0%} + {CHANCE_COST:g}) and in the excitation-weighted "
-                     f"frequency response (by more than {FRF_TOLERANCE:.1%} RMS)",
-        "chosen_by_validation": chosen_auto,
+        "criterion": "the smallest order no higher order beats, both beyond chance (F test on the "
+                     f"errors-in-variables cost V at {significance:.0%}, Bonferroni-corrected over the fitted bins) "
+                     f"and in the excitation-weighted frequency response (by more than {FRF_TOLERANCE:.1%} RMS)",
+        "chosen": chosen_auto,
         "selection": selection,
         "bins": data.bins,
         "parameters_by_order": {str(n): parameters[n] for n in sorted(parameters)},
         "cost_by_order": {str(n): fits[n].cost for n in sorted(fits)},
-        "validation_cost_by_order": {str(n): validation[n] for n in sorted(validation)},
         "response_change_to_next_order": {str(n): changes[(n, n + 1)] for n in sorted(fits) if (n, n + 1) in changes},
     })
     context = FitContext(
@@ -534,7 +509,7 @@ def identify(
         bin_frequency_hz=prep.bin_hz, u_bins=prep.u_bins, y_bins=prep.y_bins, var_u=prep.var_u,
         var_y=prep.var_y, group=prep.group, spectral=data, noise_u=prep.noise_u, noise_y=prep.noise_y,
         fits=fits, delay_mode=delay_mode, significance=significance, knee_tolerance=knee_tolerance,
-        asked_order=order, model_error_ratio=ratio,
+        max_delay=max_delay_samples, asked_order=order, record=rec, model_error_ratio=ratio,
     )
     return Identification(
         model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,

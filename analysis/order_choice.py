@@ -1,0 +1,182 @@
+"""The model order: the test that chooses it, and its stability across resampled noise.
+
+- `choose_order`: the smallest order no higher order beats both beyond chance and in the
+  frequency response where the pulse has energy (see its docstring).
+- `NoiseDraws`: fresh noise on the fitted DFT bins of both channels (circular complex Gaussian
+  of the measured variance per bin) and a channel skew, reproducible from (seed, draw):
+  the draws of analysis.identify's stability check and of analysis.uncertainty's Monte Carlo.
+- `Refitter`: each order refitted on a draw from its nominal fit (frequency_fit.QuickRefit).
+- `order_stability`: the whole order choice re-run on draws; the fraction choosing each order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.frequency_fit import OrderFit, QuickRefit, SpectralData, is_stable, response
+from scipy import special
+
+# The order test: a higher order must be significant at this level (F test on V, corrected for
+# the number of bins a pole pair could be placed at) ...
+SIGNIFICANCE = 0.01
+# ... and change the excitation-weighted frequency response by more than this (RMS, relative):
+# below it, it only mends the discrete model's own approximation of a continuous sensor.
+FRF_TOLERANCE = 1e-3
+
+
+def choose_order(
+    costs: dict[int, float],
+    parameters: dict[int, int],
+    bins: int,
+    change: dict[tuple[int, int], float],
+    significance: float = SIGNIFICANCE,
+    frf_tolerance: float = FRF_TOLERANCE,
+) -> tuple[int | None, list[dict[str, Any]]]:
+    """The smallest order no higher order beats, and the comparisons made. m beats n when both
+    - its gain in V is beyond chance: the F statistic of the nested comparison,
+      [(V_n − V_m)/(Δp/2)] / [V_m/(K − p_m/2)], exceeds F(Δp, 2K − p_m) at 1 − α/K. The
+      nominal F test is Bonferroni-corrected over the K bins: an extra pole pair can sit
+      anywhere in the band, on the largest chance peak of the noise among K (the nominal
+      degrees of freedom do not count that freedom of place); V_m as the yardstick keeps the
+      test honest when the noise level was measured a constant factor off;
+    - it changes the response where the pulse has energy: `change[(n, m)]`, the excitation-
+      weighted RMS of the difference of the two frequency responses relative to n's, above
+      `frf_tolerance` (a high-SNR record shows even the small mismatch between a rational
+      discrete model and a continuous sensor; a pole pair that only mends that is parasitic).
+    An order whose cost is not finite (unstable) is no candidate.
+    """
+    ordered = sorted(n for n, v in costs.items() if math.isfinite(v))
+    level = 1.0 - significance / max(bins, 1)
+    comparisons: list[dict[str, Any]] = []
+    for n in ordered:
+        beaten = False
+        for m in ordered:
+            if m <= n:
+                continue
+            dp = parameters[m] - parameters[n]
+            dof = 2 * bins - parameters[m]
+            if dp <= 0 or dof <= 0:
+                continue
+            gain = costs[n] - costs[m]
+            f_stat = (gain / (dp / 2.0)) / (costs[m] / (dof / 2.0)) if costs[m] > 0 else math.inf
+            critical = float(special.fdtri(dp, dof, level))
+            moved = change.get((n, m), math.inf)
+            better = f_stat > critical and moved > frf_tolerance
+            comparisons.append({"order": n, "against": m, "f": f_stat, "f_critical": critical,
+                                "response_change": moved, "beaten": bool(better)})
+            if better:
+                beaten = True
+                break
+        if not beaten:
+            return n, comparisons
+    return None, comparisons
+
+
+def response_change(fits: dict[int, OrderFit], data: SpectralData) -> dict[tuple[int, int], float]:
+    """Excitation-weighted RMS relative difference of the frequency responses of every pair of
+    evaluated orders (see choose_order)."""
+    weight = data.suu
+    responses = {n: response(f, data.omega) for n, f in fits.items()}
+    out = {}
+    for n, hn in responses.items():
+        norm = float(np.sum(weight * np.abs(hn) ** 2))
+        for m, hm in responses.items():
+            if m > n:
+                out[(n, m)] = math.sqrt(float(np.sum(weight * np.abs(hm - hn) ** 2)) / norm) if norm > 0 else math.inf
+    return out
+
+
+@dataclass(frozen=True)
+class NoiseDraws:
+    """Perturbed copies of the fitted spectra: the data of one noise draw each."""
+
+    spectral: SpectralData
+    u_bins: np.ndarray  # DFT of the reference at the fitted bins
+    y_bins: np.ndarray
+    var_u: np.ndarray  # noise variance per bin
+    var_y: np.ndarray
+    omega: np.ndarray  # rad/sample of each bin
+    group: int
+    seed: int
+    inflate: float = 1.0  # noise variances × this (model error beyond the noise)
+    skew_sd: float = 0.0  # channel skew, samples
+
+    def data(self, r: int) -> tuple[SpectralData, float]:
+        """Draw r's perturbed spectra and its skew (samples)."""
+        rng = np.random.default_rng([self.seed, 1, r])
+        k = self.u_bins.size
+
+        def cn(var: np.ndarray) -> np.ndarray:
+            return np.sqrt(var * self.inflate / 2.0) * (rng.standard_normal(k) + 1j * rng.standard_normal(k))
+
+        noise_u, noise_y = cn(self.var_u), cn(self.var_y)
+        skew = self.skew_sd * rng.standard_normal() if self.skew_sd > 0 else 0.0
+        u = (self.u_bins + noise_u) * np.exp(-1j * self.omega * skew)
+        return self.spectral.perturbed(u, self.y_bins + noise_y, self.group), skew
+
+
+class Refitter:
+    """Quick refits of each order on a draw, each prepared once at its nominal fit."""
+
+    def __init__(self, spectral: SpectralData, fits: dict[int, OrderFit], delay: str | float, max_delay: float) -> None:
+        self.spectral = spectral
+        self.fits = fits
+        self.delay = delay
+        self.max_delay = max_delay
+        self._quick: dict[int, QuickRefit] = {}
+
+    def fit(self, data: SpectralData, order: int) -> OrderFit | None:
+        """The order's optimum on `data` (None: not fitted nominally, or unstable)."""
+        if order not in self.fits:
+            return None
+        if order not in self._quick:
+            self._quick[order] = QuickRefit(self.spectral, self.fits[order], self.delay, self.max_delay)
+        fit = self._quick[order].refit(data)
+        return fit if is_stable(fit.a) else None
+
+
+def decide(refitter: Refitter, data: SpectralData, candidates: list[int], significance: float
+           ) -> tuple[int | None, dict[int, OrderFit]]:
+    """The order test on one draw over `candidates` (each refitted); and the refits."""
+    fits = {m: f for m in candidates if (f := refitter.fit(data, m)) is not None}
+    costs = {m: f.cost for m, f in fits.items()}
+    parameters = {m: f.parameters for m, f in fits.items()}
+    chosen, _ = choose_order(costs, parameters, data.bins, response_change(fits, data), significance)
+    return chosen, fits
+
+
+def candidates_around(order: int, fits: dict[int, OrderFit]) -> list[int]:
+    """The orders a choice of `order` weighed: two either side (a choice may skip one)."""
+    return [m for m in range(max(1, order - 2), order + 3) if m in fits]
+
+
+def order_stability(
+    draws: NoiseDraws, refitter: Refitter, candidates: list[int], count: int, significance: float = SIGNIFICANCE,
+) -> tuple[dict[int, float], list[int | None], list[dict[int, OrderFit]]]:
+    """The order test re-run on `count` draws: fraction per order, each draw's choice and refits."""
+    choices: list[int | None] = []
+    refits: list[dict[int, OrderFit]] = []
+    for r in range(count):
+        data, _ = draws.data(r)
+        chosen, fits = decide(refitter, data, candidates, significance)
+        choices.append(chosen)
+        refits.append(fits)
+    made = [c for c in choices if c is not None]
+    fractions = {m: made.count(m) / len(made) for m in sorted(set(made))} if made else {}
+    return fractions, choices, refits
+
+
+def modal_order(fractions: dict[int, float], fallback: int) -> int:
+    """The order chosen most often (the lower one on a tie); `fallback` without draws."""
+    if not fractions:
+        return fallback
+    best = max(fractions.values())
+    return min(m for m, f in fractions.items() if f == best)
+
+
+def fractions_text(fractions: dict[Any, float]) -> str:
+    return ", ".join(f"order {k}: {v:.0%}" for k, v in sorted(fractions.items(), key=lambda kv: int(kv[0])))
+

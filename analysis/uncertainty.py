@@ -1,0 +1,549 @@
+"""Uncertainty of a shot's key figures after GUM Supplement 1 (Monte Carlo).
+
+Measurand: the figures `analysis.identify` and the reduction report — the DC gain (the
+sensitivity), the ISO 16063-13 peak-ratio shock sensitivity, the main mode's natural frequency
+and damping ratio, both FBSD edges, the input delay, and the reference's peak acceleration,
+pulse width and peak velocity. Input quantities and the PDFs assigned to them (GUM-S1 §6):
+
+- the noise of both channels: Gaussian, with the spectra measured on the record's quiet
+  stretches (analysis.noise) — each draw adds a fresh noise realisation to the DFT bins the
+  fit uses (circular complex Gaussian of the measured variance per bin) and, for the peak
+  figures, to the samples around each peak; when the model leaves significantly more residual
+  than that noise explains, the variances are widened by the ratio (a Birge-ratio correction
+  for model error, reported as a warning by identify);
+- the channel skew: Gaussian, standard deviation `channel_skew_s`, a fractional delay of the
+  reference in each draw (the fitted causal delay absorbs it unless it sits at zero);
+- the reference chain, each Gaussian with the relative standard uncertainty from rig.toml
+  [uncertainty]: grating pitch and interferometer (scale the reference), amplifier gain and
+  digitizer gain (scale the response);
+- the order choice: discrete. On a subset of the draws the whole order choice is re-run on the
+  perturbed data (the neighbouring orders refitted, the same validation rule applied); the
+  fractions give its PDF, and every draw is refitted at an order drawn from it. The fractions
+  are reported as the order's stability.
+
+Each draw refits the model by the same estimator (analysis.frequency_fit, Levenberg–Marquardt
+started from the nominal fit, which it is close to) — a full non-linear re-estimation, not a
+linearisation. The standard uncertainty is the draws' standard deviation; the 95 % coverage
+interval the probabilistically symmetric one (2.5 % and 97.5 % quantiles, GUM-S1 §7.7). The
+value is the figure reported everywhere (the nominal analysis), not the draws' mean.
+
+The budget is the linear decomposition GUM's uncertainty table is (its sum of squares is the
+GUM-framework variance, reported beside the Monte Carlo one): the noise of each channel and
+the skew propagated through the fit's Jacobian (sensitivity of each figure by finite
+differences), the reference chain exactly (the figures are proportional to it), and the order
+choice as the variance the order draws add to the fixed-order ones.
+
+Validated by tests/analysis/test_uncertainty.py: on simulated sensors with a known truth, the
+95 % intervals contain it in about 95 % of shots, and their width matches the spread of the
+estimates over the shots.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import peak_estimate, pulse_width
+from hopkinson.analysis.frequency_fit import (
+    OrderFit,
+    OrderProblem,
+    SpectralData,
+    is_stable,
+)
+from hopkinson.analysis.identify import (
+    FitContext,
+    Identification,
+)
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.order_choice import (
+    NoiseDraws,
+    Refitter,
+    candidates_around,
+    fractions_text,
+    order_stability,
+)
+from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
+from hopkinson.analysis.response import fbsd_edges
+
+METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
+COVERAGE = 0.95
+ORDER_DRAWS = 40  # draws that re-run the whole order choice (its PDF's resolution: 2.5 %)
+FBSD_GRID = 2000
+PEAK_SEGMENT = 256  # samples around a peak that get fresh noise for the peak figures
+# Below this share of stable refits the draws cannot stand for the estimator.
+MIN_GOOD_FRACTION = 0.9
+# Stability of the order choice below which a warning is given.
+ORDER_STABILITY_WARNING = 0.7
+
+
+@dataclass(frozen=True)
+class UncertaintyOptions:
+    """What the Monte Carlo draws and from what PDFs (see the module docstring)."""
+
+    draws: int = DEFAULT_DRAWS
+    seed: int | None = None
+    u_grating_pitch_rel: float = 1e-4
+    u_interferometer_rel: float = 5e-4
+    u_amp_gain_rel: float = 2e-3
+    u_digitizer_gain_rel: float = 2e-3
+    channel_skew_s: float = 1e-9
+    order_draws: int = ORDER_DRAWS
+
+    @classmethod
+    def from_params(cls, params: AnalysisParams) -> UncertaintyOptions:
+        return cls(draws=params.draws, seed=params.seed, u_grating_pitch_rel=params.u_grating_pitch_rel,
+                   u_interferometer_rel=params.u_interferometer_rel, u_amp_gain_rel=params.u_amp_gain_rel,
+                   u_digitizer_gain_rel=params.u_digitizer_gain_rel, channel_skew_s=params.u_channel_skew_s)
+
+    def chain(self) -> dict[str, tuple[float, str]]:
+        """Reference-chain sources: (relative standard uncertainty, channel it scales)."""
+        return {
+            "grating pitch": (self.u_grating_pitch_rel, "reference"),
+            "interferometer": (self.u_interferometer_rel, "reference"),
+            "amplifier gain": (self.u_amp_gain_rel, "response"),
+            "digitizer gain": (self.u_digitizer_gain_rel, "response"),
+        }
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One figure: the reported value, its standard uncertainty and 95 % coverage interval."""
+
+    value: float
+    u: float
+    interval: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"value": _finite(self.value), "u": _finite(self.u),
+                "interval": [_finite(self.interval[0]), _finite(self.interval[1])]}
+
+    @classmethod
+    def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE) -> Estimate:
+        d = np.asarray(draws, dtype=float)
+        d = d[np.isfinite(d)]
+        if d.size < 2:
+            return cls(value, math.nan, (math.nan, math.nan))
+        tail = 50.0 * (1.0 - coverage)
+        lo, hi = np.percentile(d, [tail, 100.0 - tail])
+        return cls(float(value), float(np.std(d, ddof=1)), (float(lo), float(hi)))
+
+    @classmethod
+    def normal(cls, value: float, u: float) -> Estimate:
+        """A normal PDF's 95 % interval (k = 1.96)."""
+        k = 1.959963984540054
+        return cls(float(value), float(u), (float(value - k * u), float(value + k * u)))
+
+
+@dataclass
+class UncertaintyResult:
+    """The Monte Carlo result: figures, budget, order stability; `to_dict()` is the JSON
+    contract of issue 10 (plus the reference figures, the delay and the order evidence)."""
+
+    draws: int
+    coverage_probability: float
+    seed: int
+    dc_gain: Estimate
+    shock_sensitivity: Estimate | None
+    natural_frequency_hz: Estimate | None
+    damping_ratio: Estimate | None
+    fbsd_hz: dict[str, Estimate]
+    delay_s: Estimate
+    reference: dict[str, Estimate]
+    budget: list[dict[str, Any]]
+    order: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+    failed_draws: int = 0
+    model_draws: list[DiscreteModel] = field(default_factory=list, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        main = None
+        if self.natural_frequency_hz is not None and self.damping_ratio is not None:
+            main = {"natural_frequency_hz": self.natural_frequency_hz.to_dict(),
+                    "damping_ratio": self.damping_ratio.to_dict()}
+        return {
+            "method": METHOD,
+            "draws": self.draws,
+            "coverage_probability": self.coverage_probability,
+            "dc_gain": self.dc_gain.to_dict(),
+            "shock_sensitivity": self.shock_sensitivity.to_dict() if self.shock_sensitivity else None,
+            "main_mode": main,
+            "fbsd_hz": {k: e.to_dict() for k, e in self.fbsd_hz.items()},
+            "budget": [dict(b) for b in self.budget],
+            "delay_s": self.delay_s.to_dict(),
+            "reference": {k: e.to_dict() for k, e in self.reference.items()},
+            "order": dict(self.order),
+            "seed": self.seed,
+            "failed_draws": self.failed_draws,
+            "warnings": list(self.warnings),
+        }
+
+
+def evaluate(
+    ident: Identification,
+    options: UncertaintyOptions | None = None,
+    reduction: dict[str, Any] | None = None,
+) -> UncertaintyResult:
+    """Monte Carlo uncertainty of `ident`'s figures (and of `reduction`'s, when given)."""
+    options = UncertaintyOptions() if options is None else options
+    ctx = ident.context
+    if ctx is None:
+        raise AnalysisError("uncertainty: the identification carries no fit context (rebuilt from a file?)")
+    if options.draws < 2:
+        raise AnalysisError(f"uncertainty: at least 2 draws are needed, got {options.draws}")
+    seed = options.seed if options.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
+    rng = np.random.default_rng(seed)
+    warnings: list[str] = []
+    n_hat = ident.order
+    dt = ctx.sample_interval_s
+    inflate = _noise_inflation(ctx, n_hat)
+    chain = _chain_draws(options, options.draws, rng)
+    response_factor, reference_factor = chain["response"], chain["reference"]
+    gain_factor = response_factor / reference_factor
+
+    # -- the model figures: refit per draw ------------------------------------------------
+    draws = NoiseDraws(ctx.spectral, ctx.u_bins, ctx.y_bins, ctx.var_u, ctx.var_y,
+                       2.0 * np.pi * ctx.bin_frequency_hz * dt, ctx.group, seed, inflate, options.channel_skew_s / dt)
+    refitter = Refitter(ctx.spectral, ctx.fits, ctx.delay_mode, ctx.max_delay)
+    orders = _order_assignment(ident, draws, refitter, options, rng)
+    fits, skews = _refits(draws, refitter, orders["per_draw"], orders["subset_fits"])
+    good = np.array([f is not None and is_stable(f.a) for f in fits])
+    failed = int(np.sum(~good))
+    if good.mean() < MIN_GOOD_FRACTION:
+        warnings.append(f"{failed} of {len(fits)} draws gave no stable refit: the uncertainty stands for the "
+                        "draws that did and may understate it")
+    scale = ctx.scale_y / ctx.scale_u
+    model = ident.model
+    dc_draws = np.full(len(fits), np.nan)
+    delay_draws = np.full(len(fits), np.nan)
+    main = ident.main_mode
+    main_pole = complex(*main["pole"]) if main else None
+    fn_draws = np.full(len(fits), np.nan)
+    zeta_draws = np.full(len(fits), np.nan)
+    model_draws: list[DiscreteModel] = []
+    for r, f in enumerate(fits):
+        if f is None or not good[r]:
+            continue
+        b = f.b * scale * gain_factor[r]
+        dc_draws[r] = float(np.sum(b) / np.sum(f.a))
+        delay_draws[r] = (f.delay - skews[r]) * dt
+        model_draws.append(DiscreteModel(dt, f.a, b, float(f.delay)))
+        if main_pole is not None:
+            fn_draws[r], zeta_draws[r] = _nearest_mode(f.a, main_pole, dt)
+    nominal_edges = fbsd_edges(model)
+    fbsd_values = {k: e.frequency_hz for k, e in nominal_edges.items()}
+    fbsd_draws = _fbsd_draws(fits, good, nominal_edges, dt)
+
+    dc = Estimate.of_draws(model.dc_gain, dc_draws)
+    fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws) if main else None
+    zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws) if main else None
+    fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k]) for k in fbsd_values}
+    delay = Estimate.of_draws(ident.delay_samples * dt, delay_draws)
+
+    # -- the peak figures: fresh noise around the peaks ---------------------------------------
+    peaks = _peak_figures(ctx, reduction, options, rng, inflate, reference_factor, gain_factor)
+
+    # -- budget -------------------------------------------------------------------------------
+    nominal = {"dc_gain": model.dc_gain, "natural_frequency_hz": main["natural_frequency_hz"] if main else None,
+               "damping_ratio": main["damping_ratio"] if main else None,
+               **{f"fbsd_{k}_hz": v for k, v in fbsd_values.items()}}
+    draws_by_figure = {"dc_gain": dc_draws, "natural_frequency_hz": fn_draws, "damping_ratio": zeta_draws,
+                       **{f"fbsd_{k}_hz": fbsd_draws[k] for k in fbsd_values}}
+    budget = _budget(ident, ctx, options, inflate, nominal, draws_by_figure, orders["per_draw"], good,
+                     peaks.get("shares", {}))
+    order_info = {"chosen": n_hat, "selection": ident.order_selection, "fraction_by_order": orders["fractions"],
+                  "draws": orders["decided"]}
+    stability = orders["fractions"].get(str(n_hat))
+    if stability is not None and orders["decided"] and stability < ORDER_STABILITY_WARNING:
+        warnings.append(
+            f"the order choice is not stable under the record's own noise: order {n_hat} is chosen in only "
+            f"{stability:.0%} of {orders['decided']} noise draws ({fractions_text(orders['fractions'])}); the "
+            "intervals include the other orders"
+        )
+    return UncertaintyResult(
+        draws=int(np.sum(good)), coverage_probability=COVERAGE, seed=seed, dc_gain=dc,
+        shock_sensitivity=peaks.get("shock_sensitivity"), natural_frequency_hz=fn, damping_ratio=zeta,
+        fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=budget, order=order_info,
+        warnings=warnings, failed_draws=failed, model_draws=model_draws,
+    )
+
+
+# ------------------------------------------------------------------------------ noise
+def _noise_inflation(ctx: FitContext, order: int) -> float:
+    """V per degree of freedom when significantly above 1 (model error), else 1."""
+    dof = 2 * ctx.spectral.bins - ctx.fits[order].parameters
+    ratio = ctx.model_error_ratio
+    if dof > 0 and ratio > 1.0 + 3.0 * math.sqrt(2.0 / dof):
+        return float(ratio)
+    return 1.0
+
+
+def _chain_draws(options: UncertaintyOptions, count: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Scale factors of each channel per draw: Π (1 + δ_source), δ ~ N(0, u_rel²)."""
+    out = {"reference": np.ones(count), "response": np.ones(count)}
+    for u_rel, channel in options.chain().values():
+        out[channel] = out[channel] * (1.0 + u_rel * rng.standard_normal(count))
+    return out
+
+
+# ------------------------------------------------------------------------------ refits
+def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitter, options: UncertaintyOptions,
+                      rng: np.random.Generator) -> dict[str, Any]:
+    """The order of each draw: re-decided on a subset (the whole order choice on the perturbed
+    data), the rest drawn from the subset's fractions. An asked order is kept in every draw."""
+    ctx = ident.context
+    assert ctx is not None
+    n_hat = ident.order
+    count = options.draws
+    candidates = [m for m in candidates_around(n_hat, ctx.fits) if math.isfinite(ctx.fits[m].cost)]
+    if ident.order_selection != "knee" or len(candidates) < 2:
+        return {"per_draw": [n_hat] * count, "fractions": {}, "decided": 0, "subset_fits": {}}
+    subset = min(options.order_draws, count)
+    fractions, choices, refits = order_stability(draws, refitter, candidates, subset, ctx.significance)
+    decided = [c if c is not None else n_hat for c in choices]
+    subset_fits = {r: refits[r].get(m) for r, m in enumerate(decided)}
+    values = np.array(sorted(set(decided)))
+    weights = np.array([decided.count(int(v)) for v in values], dtype=float)
+    rest = rng.choice(values, size=count - subset, p=weights / weights.sum())
+    return {"per_draw": decided + [int(m) for m in rest],
+            "fractions": {str(m): f for m, f in fractions.items()}, "decided": subset, "subset_fits": subset_fits}
+
+
+def _refits(draws: NoiseDraws, refitter: Refitter, orders: list[int], subset_fits: dict[int, OrderFit | None]
+            ) -> tuple[list[OrderFit | None], np.ndarray]:
+    """One refit per draw at its order (the subset's order choice already made some)."""
+    fits: list[OrderFit | None] = []
+    skews = np.zeros(len(orders))
+    for r, order in enumerate(orders):
+        data, skews[r] = draws.data(r)
+        fits.append(subset_fits[r] if r in subset_fits else refitter.fit(data, order))
+    return fits, skews
+
+
+def _nearest_mode(a: np.ndarray, pole: complex, dt: float) -> tuple[float, float]:
+    """(f_n, ζ) of the draw's pole nearest (s-plane) to the nominal main pole: the same mode."""
+    roots = np.roots(a)
+    roots = roots[roots.imag > 0]
+    if roots.size == 0:
+        return math.nan, math.nan
+    s = np.log(roots) / dt
+    target = np.log(pole) / dt
+    nearest = s[int(np.argmin(np.abs(s - target)))]
+    wn = abs(nearest)
+    return float(wn / (2 * np.pi)), float(-nearest.real / wn)
+
+
+def _fbsd_draws(fits: list[OrderFit | None], good: np.ndarray, nominal: dict, dt: float) -> dict[str, np.ndarray]:
+    """Each draw's first crossing of 1 ± level by |H/H(0)| on a common grid (linear interpolation)."""
+    reached = [e.frequency_hz for e in nominal.values() if e.reached]
+    nyquist = 0.5 / dt
+    f_max = min(nyquist, 2.5 * max(reached)) if reached else nyquist
+    freq = np.linspace(0.0, f_max, FBSD_GRID)
+    omega = 2.0 * np.pi * freq * dt
+    powers: dict[int, np.ndarray] = {}
+    out = {key: np.full(len(fits), np.nan) for key in nominal}
+    for r, f in enumerate(fits):
+        if f is None or not good[r]:
+            continue
+        if f.a.size not in powers:
+            powers[f.a.size] = np.exp(-1j * np.outer(omega, np.arange(f.a.size)))
+        z = powers[f.a.size]
+        h = (z[:, : f.b.size] @ f.b) / (z @ f.a)
+        g = np.abs(h / h[0])
+        for key, edge in nominal.items():
+            outside = np.flatnonzero(np.abs(g - 1.0) > edge.level)
+            if outside.size == 0 or outside[0] == 0:
+                out[key][r] = f_max
+                continue
+            i = int(outside[0])
+            target = 1.0 + edge.level if g[i] > 1.0 else 1.0 - edge.level
+            frac = (target - g[i - 1]) / (g[i] - g[i - 1])
+            out[key][r] = freq[i - 1] + frac * (freq[i] - freq[i - 1])
+    return out
+
+
+# ------------------------------------------------------------------------------ peak figures
+def _peak_figures(
+    ctx: FitContext, reduction: dict[str, Any] | None, options: UncertaintyOptions, rng: np.random.Generator,
+    inflate: float, reference_factor: np.ndarray, gain_factor: np.ndarray,
+) -> dict[str, Any]:
+    """Shock sensitivity, peak acceleration and pulse width: the same estimators on the record
+    with fresh noise around the peaks; peak velocity from the reduction's plateau fit."""
+    record = ctx.record
+    ref = np.asarray(record.reference, dtype=float)
+    resp = np.asarray(record.response, dtype=float)
+    count = options.draws
+    noise_u = ctx.noise_u.scaled(ctx.scale_u)
+    noise_y = ctx.noise_y.scaled(ctx.scale_y)
+    dt = record.sample_interval_s
+    try:
+        pulse = pulse_width(ref, dt)
+    except AnalysisError:
+        return {}
+    i_ref = int(np.argmax(np.abs(ref)))
+    i_resp = int(np.argmax(np.abs(resp)))
+    width = max(1, int(round(pulse.width_s / dt)))
+    half = max(PEAK_SEGMENT // 2, 3 * width)
+    seg_u = slice(max(0, i_ref - half), min(ref.size, i_ref + half))
+    seg_y = slice(max(0, i_resp - PEAK_SEGMENT // 2), min(resp.size, i_resp + PEAK_SEGMENT // 2))
+    scale_n = math.sqrt(inflate)
+    nu = noise_u.draw(seg_u.stop - seg_u.start, rng, count) * scale_n
+    ny = noise_y.draw(seg_y.stop - seg_y.start, rng, count) * scale_n
+    u0, y0 = ref[seg_u], resp[seg_y]
+    pu0, py0 = peak_estimate(u0)[0], peak_estimate(y0)[0]
+    peak_u = np.array([peak_estimate(u0 + nu[r])[0] for r in range(count)])
+    peak_y = np.array([peak_estimate(y0 + ny[r])[0] for r in range(count)])
+    widths = np.full(count, np.nan)
+    for r in range(count):
+        try:
+            widths[r] = pulse_width(u0 + nu[r], dt).width_s
+        except AnalysisError:
+            pass
+    reduction = reduction or {}
+    ss_value = reduction.get("shock_sensitivity", py0 / pu0)
+    ss = peak_y / peak_u * gain_factor
+    out: dict[str, Any] = {"shock_sensitivity": Estimate.of_draws(ss_value, ss / (py0 / pu0) * ss_value)}
+    acc_value = reduction.get("peak_acceleration_m_s2", pu0)
+    reference = {
+        "peak_acceleration_m_s2": Estimate.of_draws(acc_value, peak_u * reference_factor / pu0 * acc_value),
+        "pulse_width_s": Estimate.of_draws(reduction.get("pulse_width_s", pulse.width_s),
+                                           widths / pulse.width_s * reduction.get("pulse_width_s", pulse.width_s)),
+    }
+    velocity = reduction.get("peak_velocity_m_s")
+    if velocity is not None:
+        u_noise = float(reduction.get("peak_velocity_noise_u_m_s") or 0.0)
+        u_chain = abs(velocity) * math.hypot(options.u_grating_pitch_rel, options.u_interferometer_rel)
+        reference["peak_velocity_m_s"] = Estimate.normal(velocity, math.hypot(u_noise, u_chain))
+    out["reference"] = reference
+    # Shares of each channel's noise in the shock sensitivity (for the budget).
+    only_u = py0 / peak_u
+    only_y = peak_y / pu0
+    out["shares"] = {"shock_sensitivity": {
+        "reference noise": float(np.nanstd(only_u) / abs(py0 / pu0)),
+        "response noise": float(np.nanstd(only_y) / abs(py0 / pu0)),
+    }}
+    return out
+
+
+# ------------------------------------------------------------------------------ budget
+def _budget(
+    ident: Identification, ctx: FitContext, options: UncertaintyOptions, inflate: float,
+    nominal: dict[str, float | None], draws: dict[str, np.ndarray], orders: list[int], good: np.ndarray,
+    peak_shares: dict[str, dict[str, float]],
+) -> list[dict[str, Any]]:
+    """Relative standard uncertainty of each figure by source (see the module docstring)."""
+    shares = _linear_noise_shares(ident, ctx, options, inflate, nominal)
+    for figure, by_source in peak_shares.items():
+        for source, u_rel in by_source.items():
+            shares.setdefault(source, {})[figure] = u_rel
+    n_hat = ident.order
+    fixed = np.array([m == n_hat for m in orders]) & good
+    order_share: dict[str, float] = {}
+    for figure, values in draws.items():
+        ref = nominal.get(figure)
+        if ref is None or not ref or fixed.sum() < 2:
+            continue
+        total = np.nanvar(values[good])
+        within = np.nanvar(values[fixed])
+        order_share[figure] = math.sqrt(max(total - within, 0.0)) / abs(ref) if np.isfinite(total) else math.nan
+    shares["order choice"] = order_share
+    for source, (u_rel, channel) in options.chain().items():
+        figures = {"dc_gain": u_rel, "shock_sensitivity": u_rel}
+        if channel == "reference":
+            figures["peak_acceleration_m_s2"] = u_rel
+        shares[source] = figures
+    out = []
+    for source in ("response noise", "reference noise", "channel skew", "order choice", "grating pitch",
+                   "interferometer", "amplifier gain", "digitizer gain"):
+        figures = {k: _finite(v) for k, v in shares.get(source, {}).items()}
+        out.append({"source": source, "u_rel": figures.get("dc_gain"), "u_rel_by_figure": figures})
+    return out
+
+
+def _linear_noise_shares(
+    ident: Identification, ctx: FitContext, options: UncertaintyOptions, inflate: float,
+    nominal: dict[str, float | None],
+) -> dict[str, dict[str, float]]:
+    """Each noise source and the skew through the fit's Jacobian: Cov_i = H⁻¹ Jᵀ D_i J H⁻¹ with
+    D_i the share of source i in each residual's variance; u = |∂figure/∂θ|_Cov."""
+    n = ident.order
+    fit = ctx.fits[n]
+    data = ctx.spectral
+    problem = OrderProblem(data, n, ctx.delay_mode, ctx.max_delay)
+    theta = problem.pack(fit)
+    jac = problem.jacobian(theta)
+    pieces = problem._pieces(theta)
+    s2 = pieces["s2"]
+    share_u = np.abs(pieces["G"]) ** 2 * data.var_u / s2
+    rows = 3 if data.grouped else 2
+    d_u = np.tile(share_u, rows)
+    d_y = 1.0 - d_u
+    h_inv = np.linalg.pinv(jac.T @ jac)
+    proj = h_inv @ jac.T
+    cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T}
+    # The skew: the residual's change per sample of reference delay, through the same projection.
+    eps = 1e-3
+    shifted = _shift_data(data, eps)
+    dr = (OrderProblem(shifted, n, ctx.delay_mode, ctx.max_delay).residual(theta) - problem.residual(theta)) / eps
+    skew_step = -(proj @ dr) * (options.channel_skew_s / ctx.sample_interval_s)
+    gradients = _figure_gradients(problem, theta, ctx, ident, nominal)
+    out: dict[str, dict[str, float]] = {"reference noise": {}, "response noise": {}, "channel skew": {}}
+    for figure, g in gradients.items():
+        ref = nominal.get(figure)
+        if ref is None or not ref or g is None:
+            continue
+        for source, c in cov.items():
+            out[source][figure] = math.sqrt(max(float(g @ c @ g), 0.0)) / abs(ref)
+        out["channel skew"][figure] = abs(float(g @ skew_step)) / abs(ref)
+    return out
+
+
+def _shift_data(data: SpectralData, samples: float) -> SpectralData:
+    """The same data with the reference delayed by `samples` (per-bin or grouped)."""
+    phase = np.exp(-1j * data.omega * samples)
+    if data.grouped:
+        return replace(data, syu=data.syu * np.conj(phase))
+    assert data.u is not None
+    u = data.u * phase
+    return replace(data, u=u, syu=data.y * np.conj(u))
+
+
+def _figure_gradients(
+    problem: OrderProblem, theta: np.ndarray, ctx: FitContext, ident: Identification,
+    nominal: dict[str, float | None],
+) -> dict[str, np.ndarray | None]:
+    """∂figure/∂θ by central differences (figures of the model built from θ)."""
+    main = ident.main_mode
+    pole = complex(*main["pole"]) if main else None
+    dt = ctx.sample_interval_s
+    scale = ctx.scale_y / ctx.scale_u
+
+    def figures(th: np.ndarray) -> dict[str, float]:
+        a, b, tau, _, _ = problem.unpack(th)
+        out = {"dc_gain": float(np.sum(b) * scale / np.sum(a))}
+        if pole is not None:
+            out["natural_frequency_hz"], out["damping_ratio"] = _nearest_mode(a, pole, dt)
+        try:
+            for key, edge in fbsd_edges(DiscreteModel(dt, a, b * scale, tau)).items():
+                out[f"fbsd_{key}_hz"] = edge.frequency_hz
+        except AnalysisError:
+            pass
+        return out
+
+    grads: dict[str, list[float]] = {k: [] for k in nominal}
+    for i in range(theta.size):
+        h = 1e-6 * max(abs(theta[i]), 1e-3)
+        up, down = theta.copy(), theta.copy()
+        up[i] += h
+        down[i] -= h
+        fu, fd = figures(up), figures(down)
+        for k in grads:
+            grads[k].append((fu.get(k, math.nan) - fd.get(k, math.nan)) / (2 * h))
+    return {k: (np.array(v) if np.all(np.isfinite(v)) else None) for k, v in grads.items()}
+
+
+# ------------------------------------------------------------------------------ helpers
+def _finite(value: float | None) -> float | None:
+    return float(value) if value is not None and math.isfinite(value) else None
