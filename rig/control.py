@@ -19,11 +19,16 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.instruments import Instruments, open_instruments
 from hopkinson.rig.lock import LockHolder, RigLock
+
+if TYPE_CHECKING:
+    from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
+    from hopkinson.rig.shot import ShotOutcome, ShotRequest
+    from hopkinson.rig.signals import SignalLatch
 
 
 @dataclass
@@ -65,3 +70,30 @@ def controlled_rig(config: RigConfig, command: str | None = None,
             if heartbeat:
                 with contextlib.suppress(Exception):  # closing stops it too; never mask the real error
                     instruments.valves.stop_heartbeat()
+
+
+@dataclass(frozen=True)
+class SignalledShot:
+    """A shot run under a SignalLatch: its outcome, and the second SAFE a late signal ran."""
+
+    outcome: ShotOutcome
+    safe_again: tuple[bool, str | None] | None = None  # (confirmed, problem) when SAFE ran again
+
+    @property
+    def safe_confirmed(self) -> bool:
+        """Was the rig confirmed safe at the end (by the shot's SAFE, or the second one)?"""
+        return self.safe_again[0] if self.safe_again is not None else self.outcome.safe_confirmed
+
+
+def run_shot_under_signals(sequencer: Sequencer, request: ShotRequest, authorisation: FireAuthorisation,
+                           latch: SignalLatch) -> SignalledShot:
+    """Run one shot with every termination signal going SAFE: a signal before or during the
+    shot aborts it (the abort is held, so one that came before the shot starts aborts it in
+    CHECK before anything moves); one that comes once the shot was past its own SAFE (during
+    ANALYSE, or after the shot) runs SAFE again, confirmed by reading back."""
+    latch.on_signal(sequencer.abort)
+    outcome = sequencer.run_shot(request, authorisation)
+    safe_again = None
+    if latch.received is not None and outcome.done:
+        safe_again = sequencer.make_safe()
+    return SignalledShot(outcome, safe_again)

@@ -103,7 +103,7 @@ def run_shot_command(args: argparse.Namespace) -> int:
 def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     # Imported here: the drivers (pymodbus, pyvisa, pyserial) load only when a shot runs.
     from hopkinson.rig.config import load_rig_config, load_sim_config
-    from hopkinson.rig.control import controlled_rig
+    from hopkinson.rig.control import controlled_rig, run_shot_under_signals
     from hopkinson.rig.events import AwaitingConfirmation, EventBus
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
@@ -142,21 +142,16 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         control = stack.enter_context(controlled_rig(config, command_line(), truth))
         report_reclaimed(control)
         sequencer = Sequencer(control.instruments, config, bus, trace=args.trace)
-        latch.on_signal(sequencer.abort)  # held by the sequencer: honoured whenever it came
-
         if interactive:
             def on_event(event: Any) -> None:
                 if isinstance(event, AwaitingConfirmation):
                     threading.Thread(target=_prompt, args=(request, authorisation, sequencer),
                                      name="shot-prompt", daemon=True).start()
             bus.subscribe(on_event)
-        outcome = sequencer.run_shot(request, authorisation)
-        safe_again = None
-        if latch.received is not None and outcome.done:  # the signal came after SAFE: once more
-            safe_again = sequencer.make_safe()
+        shot = run_shot_under_signals(sequencer, request, authorisation, latch)
         if args.sim:
             sim_state = session.state()
-    return _report(args, outcome, sim_state, latch, safe_again)
+    return _report(args, shot.outcome, sim_state, latch, shot.safe_again)
 
 
 def subscribe_outputs(stack: contextlib.ExitStack, bus: Any, args: argparse.Namespace, what: str,
@@ -217,7 +212,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         elif safe_again is not None and not safe_again[0]:
             line = f"SAFE NOT CONFIRMED: {safe_again[1]}; check the rig by hand"
         else:
-            line = "the shot had ended; the rig was made safe again and confirmed"
+            line = "the shot was recorded before it; SAFE ran again and was confirmed"
         sys.stderr.write(f"hopkinson: error: {latch.reason}: {line}\n")
         return EXIT_ABORTED
     outcome.raise_for_outcome()

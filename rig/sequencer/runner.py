@@ -210,7 +210,13 @@ class Sequencer:
         try:
             for state, step in STEPS:
                 self._enter(ctx, state)
+                # A held abort is honoured before a state's first action and after its last (up to
+                # ARM: once the pulse is commanded, the record is worth keeping and CAPTURE runs).
+                ctx.checkpoint(self.instruments.valves.name, f"starting {state.value}",
+                               honour_abort=state != State.CAPTURE)
                 step(ctx)
+                if state in (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM):
+                    ctx.checkpoint(self.instruments.valves.name, f"finishing {state.value}")
         except Abort as exc:
             failure = _Failure(self._state, f"{exc.source}: {exc.reason}", exc.hint, exc.source, exc.codes)
         except InstrumentError as exc:

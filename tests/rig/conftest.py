@@ -49,6 +49,26 @@ def short_timeouts_config(**timeouts: float) -> RigConfig:
     )
 
 
+SHORT_TIMEOUTS = {"check_s": 5.0, "evacuate_s": 2.0, "charge_s": 3.0, "arm_s": 1.0, "capture_s": 2.0, "safe_s": 3.0}
+
+
+def rig_toml(session: SimSession, path: Path, **timeouts: float) -> Path:
+    """A rig TOML file (config/rig-sim.toml with short timeouts) that reaches a running in-process
+    simulated rig: for a command line, or another process, to drive the test's own simulator."""
+    import re
+
+    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    c = session.config
+    for pattern, value in ((r"^port = 5020\b.*$", f"port = {c.valve_controller.port}"),
+                           (r"^resource = .*$", f'resource = "{c.digitizer.resource}"'),
+                           (r'^port = "sim:amplifier".*$', f'port = "{c.amplifier.port}"'),
+                           *((rf"^{k} = .*$", f"{k} = {v}") for k, v in {**SHORT_TIMEOUTS, **timeouts}.items())):
+        text, n = re.subn(pattern, value, text, count=1, flags=re.M)
+        assert n == 1, pattern
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
 class Recorder:
     """Keeps every event; `states()` lists the state changes in order."""
 

@@ -1,0 +1,93 @@
+"""A dead control PC leaves a safe rig: `hopkinson shot` killed with SIGKILL while it charges, or
+just after it fired, against a simulator in this test's process (the simulated controller
+outlives the killed shot, as a PLC outlives its PC). The controller's link watchdog lapses and
+the controller itself closes fill and fire, stops the pump and vents; the fire pulse was timed
+by the controller, so the fire valve is shut whatever the moment of the kill. Then the next
+shot's CHECK finds the reservoir vented, or vents it first and says so.
+"""
+
+from __future__ import annotations
+
+import re
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from hopkinson.rig.events import RigWarning
+from hopkinson.rig.sim_session import sim_session
+
+from tests.rig.conftest import REPO, fast_sim_config, rig_toml, short_timeouts_config
+
+WATCHDOG_S = 2.0  # the heartbeat beats every watchdog_s / 4: 4x margin for a loaded machine
+TIME_SCALE = 10.0  # charging 6 bar takes ~1.2 s: time to kill the process while the fill is open
+
+
+def _read_until(proc: subprocess.Popen, pattern: str, timeout_s: float = 60.0) -> str:
+    seen = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if not select.select([proc.stdout], [], [], 0.2)[0]:
+            continue
+        line = proc.stdout.readline()
+        if not line:
+            break
+        seen.append(line)
+        if re.search(pattern, line):
+            return "".join(seen)
+    proc.kill()
+    raise AssertionError(f"{pattern!r} never came: {''.join(seen)!r}")
+
+
+def _wait_for(condition, timeout_s: float) -> float:
+    """Seconds until condition() held (AssertionError after timeout_s)."""
+    start = time.monotonic()
+    while not condition():
+        assert time.monotonic() - start < timeout_s, "timed out"
+        time.sleep(0.005)
+    return time.monotonic() - start
+
+
+@pytest.mark.parametrize("kill_when", ["charging", "fired"])
+def test_a_killed_shot_leaves_the_controller_to_vent_the_rig(tmp_path: Path, kill_when: str) -> None:
+    with sim_session(short_timeouts_config(), fast_sim_config(TIME_SCALE)) as session:
+        world = session.world
+        toml = rig_toml(session, tmp_path / "rig.toml", evacuate_s=10.0, charge_s=20.0)
+        text = toml.read_text(encoding="utf-8")
+        toml.write_text(re.sub(r"^watchdog_s = .*$", f"watchdog_s = {WATCHDOG_S}", text, count=1, flags=re.M))
+        proc = subprocess.Popen([sys.executable, "-m", "hopkinson", "shot", "--config", str(toml), "--yes",
+                                 "--pressure-bar", "6.0", "--out", str(tmp_path)], cwd=REPO, text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        _read_until(proc, r" CHARGE +charging:" if kill_when == "charging" else r" FIRE +fired at")
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        if kill_when == "charging":
+            assert world.coils()["fill"] is True and world.watchdog_state() == "armed"  # left filling
+        # The controller trips once the heartbeat has been silent for watchdog_s ...
+        trip_s = _wait_for(lambda: world.watchdog_state() == "tripped", WATCHDOG_S + 2.0)
+        coils = world.coils()
+        assert coils == {"fire": False, "fill": False, "vent": True, "pump": False}, coils
+        assert world.valve_positions()["fill"] is False
+        # ... and the reservoir vents (simulated physics at TIME_SCALE).
+        vented_s = _wait_for(lambda: world.reservoir_pressure_bar() <= session.config.limits.vent_done_bar, 10.0)
+        print(f"\nkilled while {kill_when}: watchdog tripped {trip_s:.2f} s after SIGKILL "
+              f"(watchdog_s {WATCHDOG_S:g}), vented {vented_s:.2f} s later (sim {TIME_SCALE:g}x)")
+        assert trip_s <= WATCHDOG_S + 1.0  # the last beat came before the kill
+        if kill_when == "fired":
+            assert world.shots_fired == 1 and world.fire_pulses == 1
+
+
+def test_check_vents_pressure_left_in_the_reservoir_first_and_says_so(rig) -> None:
+    from tests.rig.test_sequencer import _leave_the_rig_charged
+
+    _leave_the_rig_charged(rig)  # as a dead PC without a watchdog would have left it
+    rig.world.set_fill_valve(False)
+    outcome = rig.run(pressure_bar=1.0)
+    assert outcome.final_state == "DONE" and rig.world.shots_fired == 1
+    (warning,) = [e for e in rig.recorder.of(RigWarning) if "venting it first" in e.message]
+    assert warning.state == "CHECK" and "before the shot" in warning.message
+    assert any("venting it first" in w for w in outcome.warnings)
+    rig.assert_safe()
