@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 
-MAX_FIT_POINTS = 100_000  # the ellipse is fitted on at most this many evenly strided samples
+MAX_FIT_POINTS = 100_000  # the ellipse is fitted on at most this many samples (a random subset)
 MIN_COVERAGE_DEG = 270.0  # the samples must cover at least this much of the ellipse
 _COVERAGE_BINS = 36
 
@@ -107,8 +107,9 @@ def fit_ellipse(u1: np.ndarray, u2: np.ndarray, max_points: int = MAX_FIT_POINTS
     Raises AnalysisError when the points do not define an ellipse (too few, a line, a point).
     """
     x, y = _checked_pair(u1, u2)
-    step = max(1, x.size // max_points)
-    x, y = x[::step], y[::step]
+    if x.size > max_points:  # a random subset: a regular stride can alias with the fringes
+        pick = np.random.default_rng(0).integers(0, x.size, max_points)
+        x, y = x[pick], y[pick]
     if x.size < 6:
         raise AnalysisError(f"{x.size} samples cannot define an ellipse (at least 6 needed)")
     mx, my = float(np.mean(x)), float(np.mean(y))
@@ -190,8 +191,7 @@ def demodulate_quadrature(
     if coverage < MIN_COVERAGE_DEG:
         raise AnalysisError(f"the quadrature signals cover {coverage:.0f}° of their ellipse; the Heydemann "
                             f"correction needs at least {MIN_COVERAGE_DEG:.0f}° (about one fringe of motion)")
-    phase = np.unwrap(wrapped)
-    phase -= phase[0]
+    phase = _unwrapped_from_first(wrapped)
     displacement = phase * float(displacement_per_radian_m)
     velocity = _derivative(displacement, float(sample_interval_s), velocity_window_samples)
     radius = np.hypot(c, s) / ellipse.amplitude_v
@@ -202,6 +202,19 @@ def demodulate_quadrature(
         ellipse=ellipse,
         radius_spread=float(np.sqrt(np.mean((radius - 1.0) ** 2))),
     )
+
+
+def _unwrapped_from_first(wrapped: np.ndarray) -> np.ndarray:
+    """The phase from sample to sample (each step taken into (-π, π]), 0 at the first sample:
+    np.unwrap's result less its first value, in fewer passes over a long record."""
+    steps = np.diff(wrapped)
+    steps += math.pi
+    np.mod(steps, 2.0 * math.pi, out=steps)
+    steps -= math.pi
+    phase = np.empty_like(wrapped)
+    phase[0] = 0.0
+    np.cumsum(steps, out=phase[1:])
+    return phase
 
 
 def _derivative(values: np.ndarray, dt_s: float, window: int | None) -> np.ndarray:
@@ -218,9 +231,9 @@ def _derivative(values: np.ndarray, dt_s: float, window: int | None) -> np.ndarr
 
 def _coverage_deg(wrapped: np.ndarray) -> float:
     """How much of the circle the corrected samples visit, in degrees (10° bins)."""
-    bins = np.floor((wrapped + math.pi) / (2.0 * math.pi) * _COVERAGE_BINS).astype(int)
-    visited = np.unique(np.clip(bins, 0, _COVERAGE_BINS - 1)).size
-    return 360.0 * visited / _COVERAGE_BINS
+    bins = ((wrapped + math.pi) * (_COVERAGE_BINS / (2.0 * math.pi))).astype(np.intp)
+    counts = np.bincount(np.clip(bins, 0, _COVERAGE_BINS - 1), minlength=_COVERAGE_BINS)
+    return 360.0 * np.count_nonzero(counts) / _COVERAGE_BINS
 
 
 def _checked_pair(u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -132,3 +132,12 @@ def test_ellipse_correct_is_the_inverse_of_the_model() -> None:
     c, s = e.correct(u1, u2)
     np.testing.assert_allclose(c, 2.0 * np.cos(phase), atol=1e-12)
     np.testing.assert_allclose(s, 2.0 * np.sin(phase), atol=1e-12)
+
+
+def test_a_fringe_rate_commensurate_with_the_sampling_does_not_fool_the_fit() -> None:
+    # exactly 20 samples per fringe: any regular subset of every 20th sample sits at one phase
+    phase = 2 * np.pi * np.arange(40_000) / 20.0
+    u1, u2 = signals(phase, 0.2, -0.1, 1.0, 1.25, 0.2, noise=1e-3)
+    result = demodulate_quadrature(u1, u2, 1e-8, K_M_PER_RAD, max_fit_points=1_000)
+    assert result.ellipse.amplitude_ratio == pytest.approx(1.25, rel=0.01)
+    assert np.max(np.abs(result.phase_rad - phase)) < 0.02
