@@ -44,7 +44,7 @@ from hopkinson.analysis.errors import AnalysisError
 
 MAX_FIT_POINTS = 100_000  # the ellipse is fitted on at most this many samples (a random subset)
 MIN_COVERAGE_DEG = 270.0  # the samples must cover at least this much of the ellipse
-_COVERAGE_BINS = 36
+_COVERAGE_BINS = 72
 
 
 @dataclass(frozen=True)
@@ -230,10 +230,12 @@ def _derivative(values: np.ndarray, dt_s: float, window: int | None) -> np.ndarr
 
 
 def _coverage_deg(wrapped: np.ndarray) -> float:
-    """How much of the circle the corrected samples visit, in degrees (10° bins)."""
+    """How much of the circle the corrected samples span: 360° less the widest gap between
+    visited 5° bins (discrete phases a few degrees apart still span it all)."""
     bins = ((wrapped + math.pi) * (_COVERAGE_BINS / (2.0 * math.pi))).astype(np.intp)
-    counts = np.bincount(np.clip(bins, 0, _COVERAGE_BINS - 1), minlength=_COVERAGE_BINS)
-    return 360.0 * np.count_nonzero(counts) / _COVERAGE_BINS
+    visited = np.flatnonzero(np.bincount(np.clip(bins, 0, _COVERAGE_BINS - 1), minlength=_COVERAGE_BINS))
+    gaps = np.diff(visited, append=visited[0] + _COVERAGE_BINS)
+    return 360.0 * (_COVERAGE_BINS - int(gaps.max()) + 1) / _COVERAGE_BINS
 
 
 def _checked_pair(u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
