@@ -113,9 +113,9 @@ class CompensationCheck:
 
 
 def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    return float(value) if math.isfinite(value) else None
+    """A finite number, else None (the key figures' own reading of a stored number)."""
+    figure = Figure.of(value) if not isinstance(value, dict) else None
+    return figure.value if figure is not None else None
 
 
 @dataclass

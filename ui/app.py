@@ -30,6 +30,8 @@ from hopkinson.rig.config import load_rig_config, load_sim_config
 from hopkinson.rig.config_paths import DEFAULT_SIM_RIG_CONFIG, default_rig_config
 from hopkinson.rig.errors import ConfigError
 
+from hopkinson.fileio import atomic_write
+
 SCREENSHOT_SIZE = (1280, 800)
 DEMO_TIMEOUT_S = 180.0
 EXIT_DEMO_FAILED = 3
@@ -132,16 +134,22 @@ def _excepthook(window: Any, errors: list[str]) -> Any:
 
 
 def _save_screenshot(window: Any, path: Path) -> Path:
-    """Grab the whole window (at least 1280 × 800) into a PNG."""
+    """Grab the whole window (at least 1280 × 800) into a PNG, written atomically (hopkinson.fileio)."""
     from PySide6.QtWidgets import QApplication
 
     if window.width() < SCREENSHOT_SIZE[0] or window.height() < SCREENSHOT_SIZE[1]:
         window.resize(max(window.width(), SCREENSHOT_SIZE[0]), max(window.height(), SCREENSHOT_SIZE[1]))
     QApplication.processEvents()
     pixmap = window.grab()
-    if not pixmap.save(str(path)):
-        raise ConfigError(f"--screenshot: could not write {path}")
-    return path
+
+    def save(tmp: Path) -> None:
+        if not pixmap.save(str(tmp), "PNG"):
+            raise OSError("Qt could not encode the picture")
+
+    try:
+        return atomic_write(path, save)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"--screenshot: could not write {path}: {exc}") from None
 
 
 def _demo_shot(app: Any, window: Any, screenshot: str | None, errors: list[str]) -> int:

@@ -16,6 +16,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from hopkinson.analysis.key_figures import KeyFigures
+from hopkinson.reports.data import CompensationCheck
 from hopkinson.rig.campaign import CAMPAIGN_STATE, check_authorisation, prepare_run
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import (
@@ -28,7 +30,7 @@ from hopkinson.rig.events import (
 from hopkinson.rig.journal import DONE_STATES, Journal
 from hopkinson.rig.plan import CampaignPlan, load_plan
 from hopkinson.rig.run_folder import RunFolder, open_run_folder
-from hopkinson.ui.plots import format_khz, summary_of
+from hopkinson.ui.plots import KILO, figure_tooltip, format_figure
 from hopkinson.ui.widgets import section_title
 from hopkinson.ui.worker import Background, RigLink
 from PySide6.QtCore import Signal
@@ -50,7 +52,7 @@ from PySide6.QtWidgets import (
 )
 
 COLUMNS = ("#", "Shot", "Pressure", "Proj.", "State", "Order", "f_n", "ζ", "FBSD ±5 %", "FBSD ±10 %",
-           "Shock sens.", "Shot file")
+           "Shock sens.", "Shot file", "DCM")
 _STATE_COLOURS = {"ANALYSED": "#1e6b2e", "ANALYSIS_FAILED": "#8a5a00", "ABORTED": "#b3261e", "UNKNOWN": "#b3261e",
                   "SKIPPED": "#5f6368", "FIRING": "#1f6fd1", "RECORDED": "#1f6fd1"}
 _DONE = frozenset(state.value for state in DONE_STATES)
@@ -346,19 +348,27 @@ class CampaignTab(QWidget):
         self.table.setItem(row, 11, QTableWidgetItem(path.name))
         if not results or "model" not in results:
             return
-        s = summary_of(results)
-        fn, zeta = s.get("natural_frequency_hz"), s.get("damping_ratio")
-        fbsd, shock = s.get("fbsd_hz", {}), s.get("shock_sensitivity")
+        kf = KeyFigures.from_results(results)  # the shot's key figures, as the Shot tab and the report show them
         cells = {
-            5: str(s.get("order") or "—"),
-            6: format_khz(fn),
-            7: f"{zeta:.4f}" if zeta is not None else "—",
-            8: format_khz(fbsd.get("5")),
-            9: format_khz(fbsd.get("10")),
-            10: f"{shock:.4g}" if shock is not None else "—",
+            5: (str(kf.order) if kf.order is not None else "—", ""),
+            6: (format_figure(kf.natural_frequency_hz, KILO, "kHz"), figure_tooltip(kf.natural_frequency_hz, KILO, "kHz")),
+            7: (format_figure(kf.damping_ratio, decimals=4), figure_tooltip(kf.damping_ratio)),
+            8: (kf.fbsd_text("5", KILO) if "5" in kf.fbsd_bounds else format_figure(kf.fbsd_hz.get("5"), KILO, "kHz"),
+                figure_tooltip(kf.fbsd_hz.get("5"), KILO, "kHz")),
+            9: (kf.fbsd_text("10", KILO) if "10" in kf.fbsd_bounds else format_figure(kf.fbsd_hz.get("10"), KILO, "kHz"),
+                figure_tooltip(kf.fbsd_hz.get("10"), KILO, "kHz")),
+            10: (format_figure(kf.shock_sensitivity, decimals=4), figure_tooltip(kf.shock_sensitivity)),
         }
-        for col, text in cells.items():
-            self.table.setItem(row, col, QTableWidgetItem(text))
+        check = CompensationCheck.of(results.get("dcm") or {})
+        if check is not None and check.recommended is not None:
+            reason = check.not_recommended_reason or "compensation does not improve this shot"
+            cells[12] = ("recommended", "") if check.recommended else ("NOT recommended", reason)
+        for col, (text, tip) in cells.items():
+            item = QTableWidgetItem(text)
+            item.setToolTip(tip)
+            if col == 12 and check is not None and check.recommended is False:
+                item.setForeground(QBrush(QColor("#b3261e")))
+            self.table.setItem(row, col, item)
 
     def _show_summary(self, summary: dict[str, Any]) -> None:
         for shot in summary.get("shots", []):

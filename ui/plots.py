@@ -112,27 +112,6 @@ def magnitudes(model: DiscreteModel, dcm: DCM | None, frequency_hz: np.ndarray) 
     return model_mag, model_mag * np.abs(dcm.frequency_response(frequency_hz)) / abs(dcm.dc_gain)
 
 
-def summary_of(results: dict[str, Any]) -> dict[str, Any]:
-    """The campaign table's numbers of a results dict, read from its KeyFigures."""
-    kf = KeyFigures.from_results(results)
-
-    def value(figure: Figure | None) -> float | None:
-        return figure.value if figure is not None else None
-
-    return {
-        "order": kf.order,
-        "fit_percent": kf.fit_percent,
-        "natural_frequency_hz": value(kf.natural_frequency_hz),
-        "damping_ratio": value(kf.damping_ratio),
-        "fbsd_hz": {k: f.value for k, f in kf.fbsd_hz.items()},
-        "compensated_fbsd_hz": dict(kf.compensated_fbsd_hz),
-        "shock_sensitivity": value(kf.shock_sensitivity),
-        "peak_acceleration_m_s2": value(kf.peak_acceleration_m_s2),
-        "pulse_width_s": value(kf.pulse_width_s),
-        "warnings": list(kf.warnings),
-    }
-
-
 def view_from_results(results: dict[str, Any], record: Record | None = None) -> ShotView:
     """A ShotView of an analysis results dict (and its record, when known); no raw channels."""
     from hopkinson.analysis.shot_analysis import ShotAnalysis

@@ -11,6 +11,7 @@ from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import Qt
 
 from tests.ui.conftest import save_shot
+from tests.ui.test_panel_shot import expected_khz
 
 CAMPAIGN_TIMEOUT_MS = 120_000
 PLAN = """
@@ -106,7 +107,10 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     run = tab.run_folder
     for row, sid in enumerate(("s001-r1", "s001-r2", "s002-r1")):
         results = read_shot(run.shot_path(sid), load_raw=False).results
-        assert tab.table.item(row, 8).text() == f"{results['fbsd_hz']['5'] / 1e3:.2f} kHz"
+        assert tab.table.item(row, 8).text() == expected_khz(results["fbsd_hz"]["5"], results, "5")
+        verdict = results["dcm"].get("recommended")  # the DCM's check on the shot (issue 11)
+        if verdict is not None:
+            assert tab.table.item(row, 12).text() == ("recommended" if verdict else "NOT recommended")
         assert tab.table.item(row, 5).text() == str(results["identification"]["order"])
         assert tab.table.item(row, 11).text() == f"{sid}.h5"
     with Journal.open(run) as journal:
