@@ -78,6 +78,8 @@ def demo_command(args: argparse.Namespace) -> int:
     from hopkinson.rig.report_data import run_report, write_run_report
     from hopkinson.rig.sim_session import sim_session
 
+    from hopkinson.fileio import atomic_write
+
     if not 1 <= args.shots <= MAX_SHOTS:
         raise ConfigError(f"--shots: must be 1..{MAX_SHOTS}, got {args.shots}")
     formats = report_formats(args.report)
@@ -85,8 +87,7 @@ def demo_command(args: argparse.Namespace) -> int:
     sim_config = load_sim_config(args.sim_config)
     try:
         args.out.mkdir(parents=True, exist_ok=True)
-        plan_path = args.out / "demo-plan.toml"
-        plan_path.write_text(demo_plan_text(args.shots), encoding="utf-8")
+        plan_path = atomic_write(args.out / "demo-plan.toml", demo_plan_text(args.shots))
     except OSError as exc:
         raise ConfigError(f"--out: cannot write into {args.out}: {exc.strerror or exc}") from None
     run, plan = prepare_run(plan_path, runs_dir=args.out)
@@ -109,7 +110,9 @@ def demo_command(args: argparse.Namespace) -> int:
         if cmp is None:
             print(f"  {entry.label}: {entry.error or 'no analysis'}", flush=True)
             continue
-        print(f"  {entry.label}: f_n {cmp['natural_frequency_hz'] / 1e3:.3f} kHz (truth "
+        f_n = entry.key_figures.natural_frequency_hz  # value ± U when the shot carries its uncertainty
+        f_n_text = f_n.format(1e3, unit="kHz") if f_n.expanded is not None else f"{f_n.value / 1e3:.3f} kHz"
+        print(f"  {entry.label}: f_n {f_n_text} (truth "
               f"{cmp['truth_natural_frequency_hz'] / 1e3:.3f}), zeta {cmp['damping_ratio']:.4f} (truth "
               f"{cmp['truth_damping_ratio']:.4f}), pole error {cmp['pole_error_percent']:.3f} %", flush=True)
     for path in write_run_report(run.path, formats, report):

@@ -44,7 +44,8 @@ def test_demo_fires_a_short_campaign_and_its_models_match_the_truth(tmp_path: Pa
             error = np.min(np.abs(s_id - s_true)) / abs(s_true)
             assert error < 0.01, (sid, error)
         fn_truth = truth.modes[0].natural_frequency_hz / 1e3
-        assert re.search(rf"{sid}: f_n [\d.]+ kHz \(truth {fn_truth:.3f}\), .*, pole error [\d.]+ %", stdout)
+        assert re.search(rf"{sid}: f_n [\d.]+( ± [\d.]+)? kHz \(truth {fn_truth:.3f}\), .*, pole error [\d.]+ %",
+                         stdout)
     page = Path(report.group(1)).read_text(encoding="utf-8")
     assert "pole error" in page and "SIMULATED" in page
 
