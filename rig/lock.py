@@ -203,7 +203,8 @@ def _same_file(fd: int, path: Path) -> bool:
 
 def command_line() -> str:
     """This process's command, for the lock's holder details."""
-    name = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else "python"
+    program = Path(sys.argv[0]) if sys.argv and sys.argv[0] else Path("python")
+    name = program.parent.name if program.name == "__main__.py" else program.name  # python -m hopkinson
     return " ".join([name, *sys.argv[1:]])[:300]
 
 

@@ -122,7 +122,8 @@ def _run_safe(args: argparse.Namespace) -> int:
     if not result.confirmed:
         sys.stderr.write(f"hopkinson: error: SAFE NOT CONFIRMED: {result.problem}; check the rig by hand\n")
         return EXIT_ABORTED
-    print(f"rig safe: confirmed by reading back in {result.elapsed_s:.2f} s", flush=True)
+    if not args.json:
+        print(f"rig safe: confirmed by reading back in {result.elapsed_s:.2f} s", flush=True)
     return 0
 
 
