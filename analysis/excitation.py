@@ -22,6 +22,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -65,55 +66,79 @@ def peak_estimate(x: np.ndarray) -> tuple[float, float]:
     stays above PEAK_LOBE of its maximum: chosen on the smoothed signal so that no single noisy
     sample picks the window), centred again on the first fit's vertex and fitted once more:
     degree 4 with nine or more samples (the curvature's own change then biases it < 1e-5 for a
-    half-sine), degree 2 with fewer (at least five). Falls back to the largest sample when the
-    fit has no maximum inside the window.
+    half-sine), degree 2 with fewer (at least five). The maximum of a noisy fit is biased up by
+    Var(p'(v))/(2|p''(v)|) (the vertex moves to where the noise lifts the curve): estimated from
+    the fit's own residual and removed. Falls back to the largest sample when the fit has no
+    maximum inside the window.
     """
     x = np.asarray(x, dtype=float)
     i_max = int(np.argmax(np.abs(x)))
     sign = 1.0 if x[i_max] >= 0 else -1.0
     s = x * sign
-    smooth = np.convolve(s, np.full(5, 0.2), mode="same") if s.size >= 5 else s
+    lo_s, hi_s = max(0, i_max - PEAK_MAX_HALF - 2), min(s.size, i_max + PEAK_MAX_HALF + 3)
+    local = s[lo_s:hi_s]
+    smooth = np.convolve(local, np.full(5, 0.2), mode="same") if local.size >= 5 else local
     i = int(np.argmax(smooth))
-    level = PEAK_LOBE * smooth[i]
-    lo = i
-    while lo > 0 and i - lo < PEAK_MAX_HALF and smooth[lo - 1] >= level:
-        lo -= 1
-    hi = i
-    while hi < s.size - 1 and hi - i < PEAK_MAX_HALF and smooth[hi + 1] >= level:
-        hi += 1
+    above = smooth >= PEAK_LOBE * smooth[i]
+    lo = i - (np.flatnonzero(~above[: i + 1][::-1])[:1].tolist() or [i + 1])[0] + 1
+    hi = i + (np.flatnonzero(~above[i:])[:1].tolist() or [above.size - i])[0] - 1
     half = max(PEAK_MIN_HALF, (hi - lo) // 2)
-    centre = float(i)
+    centre = float(i + lo_s)
     value = None
     for _ in range(2):
         c = int(round(centre))
         lo, hi = max(0, c - half), min(s.size - 1, c + half)
-        k = np.arange(lo, hi + 1) - c
-        degree = 4 if k.size >= 9 else 2
-        if k.size < 5:
+        if hi - lo + 1 < 5:
             break
-        basis = np.vander(k.astype(float), degree + 1, increasing=True)
-        coef, *_ = np.linalg.lstsq(basis, s[lo : hi + 1], rcond=None)
-        stationary = np.polynomial.polynomial.polyroots(np.polynomial.polynomial.polyder(coef))
-        real = stationary[np.abs(stationary.imag) < 1e-9].real
-        inside = real[(real >= k[0]) & (real <= k[-1])]
-        if inside.size == 0:
+        fit = _peak_fit(lo - c, hi - c, s[lo : hi + 1])
+        if fit is None:
             break
-        values = np.polynomial.polynomial.polyval(inside, coef)
-        j = int(np.argmax(values))
-        v = float(inside[j])
-        centre, value = c + v, float(values[j])
-        # The maximum of a noisy fit is biased up by Var(p'(v)) / (2|p''(v)|) (the vertex moves to
-        # where the noise lifts the curve): estimated from the fit's own residual and removed.
-        dof = k.size - degree - 1
-        curvature = float(np.polynomial.polynomial.polyval(v, np.polynomial.polynomial.polyder(coef, 2)))
-        if dof > 0 and curvature < 0:
-            residual = s[lo : hi + 1] - basis @ coef
-            covariance = np.linalg.pinv(basis.T @ basis) * float(residual @ residual) / dof
-            g = np.array([0.0] + [m * v ** (m - 1) for m in range(1, degree + 1)])
-            value -= float(g @ covariance @ g) / (2.0 * abs(curvature))
+        v, value = fit
+        centre = c + v
     if value is None or value < 0.5 * s[i_max]:  # no usable fit: the largest sample
         return float(x[i_max]), float(i_max)
     return float(sign * value), centre
+
+
+@functools.lru_cache(maxsize=256)
+def _peak_design(k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares operator, coefficient covariance per unit noise and basis of the peak
+    polynomial on the offsets k0 … k1 (degree 4 with ≥ 9 samples, else 2)."""
+    k = np.arange(k0, k1 + 1, dtype=float)
+    degree = 4 if k.size >= 9 else 2
+    basis = np.vander(k, degree + 1, increasing=True)
+    normal_inv = np.linalg.inv(basis.T @ basis)
+    return normal_inv @ basis.T, normal_inv, basis
+
+
+def _peak_fit(k0: int, k1: int, values: np.ndarray) -> tuple[float, float] | None:
+    """(vertex offset, bias-corrected maximum) of the peak polynomial, or None without one."""
+    operator, normal_inv, basis = _peak_design(k0, k1)
+    coef = operator @ values
+    degree = coef.size - 1
+    powers = np.arange(degree + 1)
+    if degree == 2:
+        if coef[2] >= 0:
+            return None
+        v = -coef[1] / (2.0 * coef[2])
+    else:  # the highest maximum of the quartic inside the window
+        stationary = np.roots((powers[1:] * coef[1:])[::-1])
+        real = stationary[np.abs(stationary.imag) < 1e-9].real
+        real = real[(real >= k0) & (real <= k1)]
+        if real.size == 0:
+            return None
+        v = float(real[int(np.argmax([np.sum(coef * r ** powers) for r in real]))])
+    if not k0 <= v <= k1:
+        return None
+    value = float(np.sum(coef * v ** powers))
+    curvature = float(np.sum(powers[2:] * (powers[2:] - 1) * coef[2:] * v ** (powers[2:] - 2)))
+    dof = values.size - degree - 1
+    if dof > 0 and curvature < 0:
+        residual = values - basis @ coef
+        g = np.concatenate(([0.0], powers[1:] * v ** (powers[1:] - 1)))
+        var_slope = float(g @ normal_inv @ g) * float(residual @ residual) / dof
+        value -= var_slope / (2.0 * abs(curvature))
+    return float(v), value
 
 
 def shock_sensitivity(reference: np.ndarray, response: np.ndarray) -> float:

@@ -41,7 +41,7 @@ from scipy import linalg, optimize
 # A pole this close to the unit circle is on the stability boundary (treated as unstable).
 STABILITY_MARGIN = 1e-8
 CAUSAL_START = 1e-4  # samples: a causal delay starts at least this far from zero
-RCOND = 1e-7  # singular values below this × the largest are ignored by the quick refits
+RCOND = 1e-4  # singular values below this × the largest are ignored by the quick refits (the delay–zeros valley)
 SK_ITERATIONS = 6
 
 
@@ -408,6 +408,10 @@ class QuickRefit:
     where it does not contract, the draw falls back to Levenberg–Marquardt.
     """
 
+    # Levenberg–Marquardt evaluations a draw that the quick iteration cannot settle may take: a
+    # draw needs the optimum to the precision its noise sets, not to the last digit.
+    fallback_evaluations = 20
+
     def __init__(self, data: SpectralData, fit: OrderFit, delay: str | float, max_delay: float) -> None:
         self.order = fit.order
         self.delay = delay
@@ -418,10 +422,12 @@ class QuickRefit:
         # Directions the data hardly determine (a spare pole against a zero) are left alone.
         self.step = np.linalg.pinv(problem.jacobian(self.theta0), rcond=RCOND)
 
-    def refit(self, data: SpectralData, iterations: int = 20) -> OrderFit:
+    def refit(self, data: SpectralData, iterations: int = 20, exact: bool = True) -> OrderFit:
         """The optimum of `data`: fixed-Jacobian steps (halved while they do not lower the cost)
         until the cost settles, then Gauss–Newton steps with the draw's own Jacobian (the
-        fixed-Jacobian iteration alone stops where J₀ᵀr = 0, a hair off the optimum Jᵀr = 0)."""
+        fixed-Jacobian iteration alone stops where J₀ᵀr = 0, a hair off the optimum Jᵀr = 0).
+        `exact` False returns the best point reached instead of handing an unsettled draw to
+        Levenberg–Marquardt (enough to compare costs with an order that fits far better)."""
         problem = OrderProblem(data, self.order, self.delay, self.max_delay)
         theta = self.theta0
         r = problem.residual(theta)
@@ -464,4 +470,6 @@ class QuickRefit:
                 return problem.fit_of(theta, cost, 0, True)
         # Not settled: Levenberg–Marquardt takes over from the best point reached.
         start = problem.fit_of(theta, cost, 0, False) if np.isfinite(cost) and cost < 1e15 else self.start
-        return problem.solve(start, 60, 1e-8)
+        if not exact:
+            return start
+        return problem.solve(start, self.fallback_evaluations, 1e-8)

@@ -91,6 +91,9 @@ MAX_BINS = 2048
 LEAD_WARNING_SAMPLES = 0.2
 # V per degree of freedom above this: the model, not the noise, dominates the residual.
 MODEL_ERROR_RATIO = 2.0
+# A fit whose linear start was unstable and that leaves this many times the residual the noise
+# explains is taken as the data calling for an unstable model.
+UNSTABLE_MODEL_ERROR = 100.0
 # Quiet stretches shorter than this are not used for a noise spectrum.
 MIN_QUIET = 32
 
@@ -283,7 +286,7 @@ def identify(
     max_delay_samples: int = 32,
     remove_delay: bool = True,
     patience: int | None = 3,
-    max_evaluations: int = 60,
+    max_evaluations: int = 40,
 ) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record.
 
@@ -375,7 +378,7 @@ def identify(
                 best = fitted
         assert best is not None
         fits[n], parameters[n] = best, problem.size
-        costs[n] = best.cost if _acceptable(best) else math.inf  # an unstable or marginal order is no candidate
+        costs[n] = best.cost if _acceptable(best, data.bins) else math.inf  # an unstable or marginal order is no candidate
         previous, tau = best, best.delay
         if patience is not None:
             chosen_so_far, _ = choose_order(costs, parameters, data.bins, response_change(fits, data), significance)
@@ -420,9 +423,9 @@ def identify(
 
     if order is None:
         chosen, selection = chosen_auto, "knee"
-        if not _acceptable(polished(chosen)):
+        if not _acceptable(polished(chosen), data.bins):
             others = sorted((n for n in fits if n != chosen and math.isfinite(costs[n])), key=lambda n: (costs[n], n))
-            fallback = next((n for n in others if _acceptable(polished(n))), None)
+            fallback = next((n for n in others if _acceptable(polished(n), data.bins)), None)
             if fallback is None:
                 raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
                                     "or outside the unit circle)")
@@ -431,7 +434,7 @@ def identify(
             chosen = fallback
     else:
         chosen, selection = order, "asked"
-        if not _acceptable(polished(order)):
+        if not _acceptable(polished(order), data.bins):
             why = (f"the data support only order {chosen_auto}" if chosen_auto < order
                    else "is the response really the sensor's answer to this reference?")
             raise AnalysisError(
@@ -657,15 +660,20 @@ def _initial_delay(data: SpectralData, prep: _Prepared, order: int, max_delay: i
 
 
 # ------------------------------------------------------------------------------ checks
-def _acceptable(fit: OrderFit) -> bool:
+def _acceptable(fit: OrderFit, bins: int) -> bool:
     """Stable with a margin, and not a fit whose linear start called for an unstable model
-    while the optimum presses against the unit circle."""
+    while the stable optimum presses against the unit circle or leaves the data unexplained
+    (a residual far beyond the noise: a growing response no stable model can follow)."""
     if fit.order == 0:
         return True
     radius = float(np.max(np.abs(np.roots(fit.a))))
     if radius >= 1.0 - MARGINAL_POLE:
         return False
-    return not (fit.start_unstable and radius > 1.0 - 1e-3)
+    if not fit.start_unstable:
+        return True
+    dof = 2 * bins - fit.parameters
+    unexplained = dof > 0 and 2.0 * fit.cost / dof > UNSTABLE_MODEL_ERROR
+    return not (radius > 1.0 - 1e-3 or unexplained)
 
 
 def _claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], model: DiscreteModel) -> list[str]:

@@ -188,7 +188,7 @@ class KeyFigures:
 
         dt = _number(model.get("sample_interval_s"))
         delay = _number(model.get("delay_samples", ident.get("delay_samples")))
-        ref_unc = reduction.get("uncertainty") or {}
+        ref_unc = unc.get("reference") or {}
         pulse_width = _number(reduction.get("pulse_width_s", excitation.get("pulse_width_s")))
         peak_acc = _number(reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")))
         peak_vel = _number(reduction.get("peak_velocity_m_s"))

@@ -128,20 +128,24 @@ class Refitter:
         self.max_delay = max_delay
         self._quick: dict[int, QuickRefit] = {}
 
-    def fit(self, data: SpectralData, order: int) -> OrderFit | None:
-        """The order's optimum on `data` (None: not fitted nominally, or unstable)."""
+    def fit(self, data: SpectralData, order: int, exact: bool = True) -> OrderFit | None:
+        """The order's optimum on `data` (None: not fitted nominally, or unstable); `exact`
+        False may stop short of it where the quick iteration does not settle."""
         if order not in self.fits:
             return None
         if order not in self._quick:
             self._quick[order] = QuickRefit(self.spectral, self.fits[order], self.delay, self.max_delay)
-        fit = self._quick[order].refit(data)
+        fit = self._quick[order].refit(data, exact=exact)
         return fit if is_stable(fit.a) else None
 
 
 def decide(refitter: Refitter, data: SpectralData, candidates: list[int], significance: float
            ) -> tuple[int | None, dict[int, OrderFit]]:
-    """The order test on one draw over `candidates` (each refitted); and the refits."""
-    fits = {m: f for m in candidates if (f := refitter.fit(data, m)) is not None}
+    """The order test on one draw over `candidates` (each refitted); and the refits.
+
+    Orders the quick refit cannot settle keep the best cost it reached (an upper bound): such
+    an order is far from the data (an under-fit one) and loses the comparison anyway."""
+    fits = {m: f for m in candidates if (f := refitter.fit(data, m, exact=False)) is not None}
     costs = {m: f.cost for m, f in fits.items()}
     parameters = {m: f.parameters for m, f in fits.items()}
     chosen, _ = choose_order(costs, parameters, data.bins, response_change(fits, data), significance)

@@ -30,6 +30,7 @@ those keys. The HDF5 shot file is read by the command (rig.shotfile), which pass
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,7 +48,7 @@ from hopkinson.analysis.doppler import (
     metres_per_radian,
 )
 from hopkinson.analysis.errors import AnalysisError, RecordError
-from hopkinson.analysis.excitation import pulse_width
+from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width
 from hopkinson.analysis.params import DEFAULT_GRATING_PITCH_M
 from hopkinson.analysis.records import Record, read_columns, validated_columns
 from hopkinson.analysis.resample import (
@@ -78,7 +79,8 @@ class Reduction:
 
     record: Record  # time_s, reference (m/s²), response (m/s² or V), at the analysis rate
     velocity_m_s: np.ndarray  # grating velocity on the record's time axis
-    peak_velocity_m_s: float
+    peak_velocity_m_s: float  # by `peak_velocity` (unbiased by noise)
+    peak_velocity_noise_u_m_s: float  # its standard uncertainty from the velocity's noise
     peak_acceleration_m_s2: float
     pulse_width_s: float
     delay_s: float
@@ -95,6 +97,7 @@ class Reduction:
         """JSON-ready shock quantities and reduction diagnostics."""
         return {
             "peak_velocity_m_s": self.peak_velocity_m_s,
+            "peak_velocity_noise_u_m_s": self.peak_velocity_noise_u_m_s,
             "peak_acceleration_m_s2": self.peak_acceleration_m_s2,
             "pulse_width_s": self.pulse_width_s,
             "delay_s": self.delay_s,
@@ -181,13 +184,13 @@ def reduce_raw(
     record = Record(at_rate.sample_interval_s, reference, response_out, at_rate.start_time_s)
 
     pulse = pulse_width(reference, record.sample_interval_s, record.start_time_s)
-    extreme = int(np.argmax(np.abs(response_out)))
-    peak_response = float(response_out[extreme])
-    shock_sensitivity = peak_response / pulse.peak_m_s2
+    shock_sensitivity = peak_estimate(response_out)[0] / pulse.peak_m_s2
+    velocity, velocity_u = peak_velocity(demod.velocity_m_s, record.sample_interval_s, pulse, record.start_time_s)
     return Reduction(
         record=record,
         velocity_m_s=demod.velocity_m_s,
-        peak_velocity_m_s=float(np.max(demod.velocity_m_s)),
+        peak_velocity_m_s=velocity,
+        peak_velocity_noise_u_m_s=velocity_u,
         peak_acceleration_m_s2=float(pulse.peak_m_s2),
         pulse_width_s=float(pulse.width_s),
         delay_s=float(delay_samples * record.sample_interval_s),
@@ -201,6 +204,61 @@ def reduce_raw(
         onset_time_s=start_time_s + beat.onset_time_s,
         beat=beat,
     )
+
+
+# A velocity after the pulse that stays within this fraction of its peak is a flight plateau.
+PLATEAU_FRACTION = 0.02
+
+
+def peak_velocity(
+    velocity_m_s: np.ndarray, sample_interval_s: float, pulse: PulseWidth, start_time_s: float = 0.0
+) -> tuple[float, float]:
+    """The velocity change the pulse imparts, by an estimator noise does not bias, and its
+    standard uncertainty from the noise.
+
+    After a unipolar pulse the object flies off: a straight line fitted over that plateau (from
+    two pulse widths after the pulse to the record's end) and read at the pulse's end averages
+    the noise out (the maximum of a noisy velocity is biased high: +0.16 % on a 5 MHz beat at
+    30 dB). Its uncertainty is the line's standard error, widened by the integrated
+    autocorrelation time of the residual (the velocity's noise is low-passed, so neighbouring
+    samples are not independent). Without a plateau (a bipolar pulse brings the object back),
+    the velocity's extreme by `peak_estimate`, with the scatter of its residual as uncertainty.
+    """
+    v = np.asarray(velocity_m_s, dtype=float)
+    dt = sample_interval_s
+    width = max(1, int(round(pulse.width_s / dt)))
+    end = int(round((pulse.end_s - start_time_s) / dt))
+    first = min(v.size, end + 2 * width)
+    plateau = v[first:]
+    top = float(np.max(np.abs(v)))
+    if plateau.size >= 16 and top > 0 and abs(np.mean(plateau)) >= (1 - PLATEAU_FRACTION) * top:
+        t = (np.arange(first, v.size) - end).astype(float)
+        slope, intercept = np.polyfit(t, plateau, 1)
+        residual = plateau - (slope * t + intercept)
+        sigma = float(np.std(residual, ddof=2))
+        design = np.column_stack((np.ones(t.size), t))
+        se = sigma * math.sqrt(float(np.linalg.inv(design.T @ design)[0, 0]))
+        return float(intercept), se * math.sqrt(_correlation_time(residual))
+    value, _ = peak_estimate(v)
+    i = int(np.argmax(np.abs(v)))
+    window = v[max(0, i - width) : i + width + 1]
+    scatter = float(np.std(np.diff(window))) / math.sqrt(2.0) if window.size > 2 else 0.0
+    return float(value), scatter / math.sqrt(max(window.size, 1))
+
+
+def _correlation_time(x: np.ndarray) -> float:
+    """Integrated autocorrelation time 1 + 2 Σ ρ_k of a residual, summed up to the first
+    negative ρ (samples; 1 for white noise)."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    n = x.size
+    spec = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(np.abs(spec) ** 2)[:n]
+    if acf[0] <= 0:
+        return 1.0
+    rho = acf / acf[0]
+    negative = np.flatnonzero(rho[1:] < 0)
+    stop = int(negative[0]) + 1 if negative.size else n
+    return float(max(1.0, 1.0 + 2.0 * np.sum(rho[1:stop])))
 
 
 # ------------------------------------------------------------------------------ raw tables

@@ -195,6 +195,23 @@ def fbsd_hz(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> d
     return {k: e.frequency_hz for k, e in fbsd_edges(model, levels).items()}
 
 
+def fbsd_bounds(edges_hz: dict[str, float], supported_band_hz: tuple[float, float] | None) -> dict[str, dict[str, Any]]:
+    """FBSD edges beyond what the shot supports, as bounds: {level: {"lower_bound_hz", "reason"}}.
+
+    Above the band the excitation supports, the model's response is an extrapolation: all the
+    shot shows is that the gain stays within the band up to the band's top, so the edge is
+    reported as "> that frequency" (the model's own figure stays in fbsd_hz)."""
+    if supported_band_hz is None:
+        return {}
+    top = float(supported_band_hz[1])
+    return {
+        key: {"lower_bound_hz": top,
+              "reason": f"unsupported by the excitation (the pulse supports up to {top / 1e3:.3g} kHz; the model "
+                        f"puts the edge at {f / 1e3:.3g} kHz)"}
+        for key, f in edges_hz.items() if f > top
+    }
+
+
 def fbsd_report(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, dict[str, Any]]:
     """JSON-safe band edges with the side crossed and whether Nyquist limited them."""
     return {k: e.to_dict() for k, e in fbsd_edges(model, levels).items()}

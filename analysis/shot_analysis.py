@@ -29,7 +29,7 @@ from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.reduce import reduce_raw
 from hopkinson.analysis.resample import resample_to_rate
-from hopkinson.analysis.response import fbsd_hz, model_output, pole_analysis
+from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 
 # Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
 COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "noise_gain", "noise_gain_limit",
@@ -57,6 +57,9 @@ class ShotAnalysis:
     warnings: list[str] = field(default_factory=list)
     # the DCM's design figures, its check on the shot and the verdict (ShotCompensation.to_dict)
     compensation: dict[str, Any] = field(default_factory=dict)
+    # analysis.uncertainty's JSON (None: switched off or failed, with a warning)
+    uncertainty: dict[str, Any] | None = None
+    fbsd_bounds: dict[str, dict[str, Any]] = field(default_factory=dict)  # edges beyond the supported band
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready results (stored in shot files, printed by --json)."""
@@ -71,6 +74,8 @@ class ShotAnalysis:
             "identification": ident if isinstance(ident, dict) else ident.to_dict(),
             "model": self.model.to_dict(),
             "fbsd_hz": dict(self.fbsd_hz),
+            "fbsd_bounds": {k: dict(v) for k, v in self.fbsd_bounds.items()},
+            "uncertainty": self.uncertainty,
             "pole_analysis": self.pole_analysis,
             "dcm": {
                 **self.dcm.to_dict(),
@@ -99,6 +104,7 @@ class ShotAnalysis:
                 settling_time_ratio=data["dcm"].get("settling_time_ratio"),
                 peak_overshoot=data.get("peak_overshoot"), warnings=list(data.get("warnings", [])),
                 compensation={k: data["dcm"][k] for k in COMPENSATION_KEYS if k in data["dcm"]},
+                uncertainty=data.get("uncertainty"), fbsd_bounds=dict(data.get("fbsd_bounds") or {}),
             )
         except (KeyError, TypeError) as exc:
             raise AnalysisError(f"shot analysis results are incomplete: missing {exc}") from None
@@ -113,12 +119,15 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
                    reduction: dict[str, Any] | None = None) -> ShotAnalysis:
     """Analyse a two-channel record (reference m/s², response in any unit)."""
     params = AnalysisParams() if params is None else params
+    params.check()
     ident = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz)
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
     warnings = list(ident.warnings)
+    uncertainty, model_draws = shot_uncertainty(ident, params, reduction, warnings)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
-    compensation = compensate_shot(ident, record, DcmOptions.from_params(params))
+    compensation = compensate_shot(ident, record, DcmOptions.from_params(params), draws=model_draws,
+                                   seed=params.seed)
     warnings += compensation.warnings
     dcm, comp = compensation.design.dcm, compensation.design.compensated_fbsd_hz
     steps = compare_steps(model, dcm)  # one simulation for both ratios
@@ -135,12 +144,33 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
             "the peak reference, so a peak-ratio shock sensitivity (ISO 16063-13) reads that much high; the "
             "model's DC gain is the sensitivity without the overshoot (or use a longer pulse)"
         )
+    edges = fbsd_hz(model)
     return ShotAnalysis(
         params=params, record=record, reduction=reduction, excitation=exc, identification=ident, model=model,
-        fbsd_hz=fbsd_hz(model), pole_analysis=pole_analysis(model.poles), dcm=dcm, compensated_fbsd_hz=comp,
+        fbsd_hz=edges, pole_analysis=pole_analysis(model.poles), dcm=dcm, compensated_fbsd_hz=comp,
         rise_time_ratio=float(rtr), settling_time_ratio=float(settling), peak_overshoot=overshoot,
-        warnings=warnings, compensation=compensation.to_dict(),
+        warnings=warnings, compensation=compensation.to_dict(), uncertainty=uncertainty,
+        fbsd_bounds=fbsd_bounds(edges, ident.supported_band_hz),
     )
+
+
+def shot_uncertainty(
+    ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None, warnings: list[str]
+) -> tuple[dict[str, Any] | None, list[DiscreteModel]]:
+    """The Monte Carlo uncertainty (analysis.uncertainty) as its JSON and its model draws; off,
+    or failed, it is None with a warning: the values stand, never silently without it."""
+    if not params.uncertainty:
+        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
+        return None, []
+    from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
+
+    try:
+        result = evaluate(ident, UncertaintyOptions.from_params(params), reduction)
+    except (AnalysisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        warnings.append(f"the uncertainty could not be evaluated ({exc}): the figures are reported without it")
+        return None, []
+    warnings += [w for w in result.warnings if w not in warnings]
+    return result.to_dict(), result.model_draws
 
 
 def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:

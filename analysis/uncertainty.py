@@ -303,7 +303,8 @@ def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitt
     subset = min(options.order_draws, count)
     fractions, choices, refits = order_stability(draws, refitter, candidates, subset, ctx.significance)
     decided = [c if c is not None else n_hat for c in choices]
-    subset_fits = {r: refits[r].get(m) for r, m in enumerate(decided)}
+    # A subset draw's refit serves its figures only when it settled (else it is redone exactly).
+    subset_fits = {r: f for r, m in enumerate(decided) if (f := refits[r].get(m)) is not None and f.converged}
     values = np.array(sorted(set(decided)))
     weights = np.array([decided.count(int(v)) for v in values], dtype=float)
     rest = rng.choice(values, size=count - subset, p=weights / weights.sum())
@@ -336,31 +337,35 @@ def _nearest_mode(a: np.ndarray, pole: complex, dt: float) -> tuple[float, float
 
 
 def _fbsd_draws(fits: list[OrderFit | None], good: np.ndarray, nominal: dict, dt: float) -> dict[str, np.ndarray]:
-    """Each draw's first crossing of 1 ± level by |H/H(0)| on a common grid (linear interpolation)."""
+    """Each draw's first crossing of 1 ± level by |H/H(0)| on a common grid (linear interpolation
+    between grid points); the draws of one order are evaluated together."""
     reached = [e.frequency_hz for e in nominal.values() if e.reached]
     nyquist = 0.5 / dt
     f_max = min(nyquist, 2.5 * max(reached)) if reached else nyquist
     freq = np.linspace(0.0, f_max, FBSD_GRID)
     omega = 2.0 * np.pi * freq * dt
-    powers: dict[int, np.ndarray] = {}
     out = {key: np.full(len(fits), np.nan) for key in nominal}
+    by_size: dict[int, list[int]] = {}
     for r, f in enumerate(fits):
-        if f is None or not good[r]:
-            continue
-        if f.a.size not in powers:
-            powers[f.a.size] = np.exp(-1j * np.outer(omega, np.arange(f.a.size)))
-        z = powers[f.a.size]
-        h = (z[:, : f.b.size] @ f.b) / (z @ f.a)
-        g = np.abs(h / h[0])
+        if f is not None and good[r]:
+            by_size.setdefault(f.a.size, []).append(r)
+    for size, rows in by_size.items():
+        z = np.exp(-1j * np.outer(omega, np.arange(size)))
+        a = np.array([fits[r].a for r in rows]).T  # type: ignore[union-attr]
+        b = np.array([np.pad(fits[r].b, (0, size - fits[r].b.size)) for r in rows]).T  # type: ignore[union-attr]
+        h = (z @ b) / (z @ a)
+        g = np.abs(h / h[0])  # (grid, draws)
         for key, edge in nominal.items():
-            outside = np.flatnonzero(np.abs(g - 1.0) > edge.level)
-            if outside.size == 0 or outside[0] == 0:
-                out[key][r] = f_max
-                continue
-            i = int(outside[0])
-            target = 1.0 + edge.level if g[i] > 1.0 else 1.0 - edge.level
-            frac = (target - g[i - 1]) / (g[i] - g[i - 1])
-            out[key][r] = freq[i - 1] + frac * (freq[i] - freq[i - 1])
+            outside = np.abs(g - 1.0) > edge.level
+            first = np.argmax(outside, axis=0)
+            none = ~outside[first, np.arange(len(rows))] | (first == 0)
+            i = np.maximum(first, 1)
+            cols = np.arange(len(rows))
+            gi, gp = g[i, cols], g[i - 1, cols]
+            target = np.where(gi > 1.0, 1.0 + edge.level, 1.0 - edge.level)
+            frac = (target - gp) / (gi - gp)
+            crossing = freq[i - 1] + frac * (freq[1] - freq[0])
+            out[key][rows] = np.where(none, f_max, crossing)
     return out
 
 
