@@ -130,7 +130,7 @@ def check_compensation(record: Record, model: DiscreteModel, dcm: DCM, channel_d
     """Compensate the shot's own response and compare with its reference (module docstring)."""
     window, uncompensated, compensated = estimates(record, model, dcm, channel_delay_samples)
     ref = np.asarray(record.reference, dtype=float)[window]
-    peak = ref[int(np.argmax(np.abs(ref)))]
+    peak = float(ref[int(np.argmax(np.abs(ref)))])
     sign = 1.0 if peak > 0 else -1.0
 
     def figures(est: np.ndarray) -> tuple[float, float, float]:
