@@ -22,6 +22,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
     from hopkinson.analysis.dcm import DCM
     from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport
     from hopkinson.analysis.model import DiscreteModel
+    from hopkinson.analysis.records import Record
 
 DEFAULT_BLOCK_SAMPLES = 65_536
 
@@ -49,17 +51,23 @@ def _checked_output(output: str | None, inputs: list[str]) -> Path | None:
         raise AnalysisError(str(exc)) from None
 
 
-def _load_support(path: str) -> tuple[DiscreteModel, ShotSupport]:
+def _load_support(path: str, record: Record | None) -> tuple[DiscreteModel, ShotSupport]:
     """The model of a model JSON (`identify -o`, a shot's results) and what it says the shot
-    supports; any malformed content is one clear message."""
-    from hopkinson.analysis.dcm_design import ShotSupport
+    supports (with its record: also where the response stands above its noise, as the shot
+    analysis judges it); any malformed content is one clear message."""
+    from hopkinson.analysis.dcm_design import ShotSupport, response_band_top_hz
     from hopkinson.analysis.model import DiscreteModel, load_json_object
 
     data = load_json_object(path, "model")
     try:
         model = DiscreteModel.from_dict(data.get("model", data), source=str(path))
         ident = data.get("identification", data)
-        support = ShotSupport.from_dict(ident if isinstance(ident, dict) else {}, model)
+        ident = ident if isinstance(ident, dict) else {}
+        support = ShotSupport.from_dict(ident, model)
+        rms = (ident.get("noise") or {}).get("response_rms")
+        if record is not None and isinstance(rms, (int, float)) and rms > 0:
+            record = _at_rate(record, model)
+            support = replace(support, response_band_top_hz=response_band_top_hz(record, model, float(rms)))
     except AnalysisError as exc:
         raise AnalysisError(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None
     except (TypeError, ValueError, IndexError, KeyError) as exc:
@@ -166,8 +174,15 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
         out.write("Recommended: compensation improves the record it was checked on\n")
 
 
-def _design(args: argparse.Namespace) -> tuple[np.ndarray, DcmDesign, DiscreteModel | None, str, list[str]]:
-    """(poles shown in the pole analysis, the design, the model to report or None, source, inputs)."""
+def _at_rate(record: Record, model: DiscreteModel) -> Record:
+    from hopkinson.analysis.compensation import to_rate
+
+    return to_rate(record, 1.0 / model.sample_interval_s)[0]
+
+
+def _design(args: argparse.Namespace, record: Record | None
+            ) -> tuple[np.ndarray, DcmDesign, DiscreteModel | None, str]:
+    """(poles shown in the pole analysis, the design, the model to report or None, source)."""
     from hopkinson.analysis.dcm import check_conjugate_pairs, parse_poles
     from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, poles_only_model
 
@@ -185,8 +200,8 @@ def _design(args: argparse.Namespace) -> tuple[np.ndarray, DcmDesign, DiscreteMo
     if args.model is not None:
         if args.sample_interval is not None:
             raise AnalysisError("dcm: --sample-interval goes with --poles; a model file carries its own")
-        model, support = _load_support(args.model)
-        return model.poles, _designed(support, options, args.model), model, str(args.model), [args.model]
+        model, support = _load_support(args.model, record)
+        return model.poles, _designed(support, options, args.model), model, str(args.model)
     if args.sample_interval is None:
         raise AnalysisError("dcm: --poles needs --sample-interval S (seconds, e.g. 1e-6)")
     if not (math.isfinite(args.sample_interval) and args.sample_interval > 0):
@@ -194,7 +209,7 @@ def _design(args: argparse.Namespace) -> tuple[np.ndarray, DcmDesign, DiscreteMo
     poles = parse_poles(args.poles, "--poles")
     check_conjugate_pairs(poles, "--poles")
     support = ShotSupport(poles_only_model(poles, args.sample_interval))
-    return poles, _designed(support, options, "--poles"), None, "--poles", []
+    return poles, _designed(support, options, "--poles"), None, "--poles"
 
 
 def _designed(support: ShotSupport, options: DcmOptions, source: str) -> DcmDesign:
@@ -214,14 +229,15 @@ def run_dcm(args: argparse.Namespace) -> int:
     from hopkinson.analysis.dcm_design import design_report
     from hopkinson.analysis.records import read_record
 
-    poles, design, model, source, inputs = _design(args)
-    output = _checked_output(args.output, [*inputs, args.record])
+    if args.record is not None and args.model is None:
+        raise AnalysisError("dcm: --record needs --model (the check compares the model's compensation with the record)")
+    output = _checked_output(args.output, [args.model, args.record])
+    raw = None if args.record is None else read_record(args.record)
+    poles, design, model, source = _design(args, raw)
     result = design_report(poles, design.dcm, model, source, design)
     check = None
-    if args.record is not None:
-        if model is None:
-            raise AnalysisError("dcm: --record needs --model (the check compares the model's compensation with the record)")
-        record, resampled = to_rate(read_record(args.record), 1.0 / model.sample_interval_s)
+    if raw is not None and model is not None:
+        record, resampled = to_rate(raw, 1.0 / model.sample_interval_s)
         try:
             check = check_compensation(record, model, design.dcm, model.delay_samples)
         except AnalysisError as exc:

@@ -275,3 +275,32 @@ def test_console_entry_point_has_no_traceback(tmp_path):
     )
     assert proc.returncode == 2
     assert proc.stderr.strip() == "hopkinson: error: --poles: '0.9+' is not a complex number (write poles like 0.974+0.1396j)"
+
+
+def test_dcm_of_an_identified_model_with_its_record_is_the_shot_analysis_dcm(tmp_path, capsys):
+    """identify -o, then dcm --model --record: the same design (poles cancelled, band limit from
+    the excitation and the response's noise, ratio, latency) and check as the shot analysis."""
+    from hopkinson.analysis.compensation import compensate_shot
+    from hopkinson.analysis.dcm_design import DcmOptions
+    from hopkinson.analysis.identify import identify
+    from hopkinson.drivers.sim.accelerometer import white_noise
+
+    dt, n = 1e-6, 4000
+    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05), Mode(95_000.0, 0.02)), sensitivity=2e-3)
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(4)
+    reference = half_sine_m_s2(t, 38.6e-6, 4e5, start_s=400e-6)
+    response = truth.respond(reference, dt)
+    record = record_from_arrays(t, reference + white_noise(reference, 40, rng), response + white_noise(response, 40, rng))
+    rec_path = write_record(tmp_path / "shot.csv", record)
+    model_path = tmp_path / "model.json"
+    assert main(["identify", str(rec_path), "-o", str(model_path), "--json"]) == 0
+    capsys.readouterr()
+    result = run_json(capsys, ["dcm", "--model", str(model_path), "--record", str(rec_path), "--json"])
+    shot = compensate_shot(identify(read_record(rec_path)), read_record(rec_path), DcmOptions())
+    assert result["dcm"]["band_limit_hz"] == pytest.approx(shot.design.band_limit.cutoff_hz, rel=1e-6)
+    assert result["dcm"]["design"]["ratio"] == pytest.approx(shot.design.dcm.design["ratio"], rel=1e-3)
+    np.testing.assert_allclose(result["dcm"]["num"], shot.design.dcm.num, rtol=1e-4)
+    assert result["dcm"]["latency_s"] == pytest.approx(shot.design.latency_s, rel=1e-3)
+    assert result["dcm"]["check"]["rms_error_pct"]["compensated"] == pytest.approx(shot.check.rms_error_pct[1], rel=1e-3)
+    assert result["dcm"]["recommended"] is True
