@@ -30,6 +30,7 @@ from hopkinson.analysis.records import Record
 from hopkinson.analysis.reduce import reduce_raw
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
+from hopkinson.analysis.uncertainty import shot_uncertainty
 
 # Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
 COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "noise_gain", "noise_gain_limit",
@@ -152,25 +153,6 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
         warnings=warnings, compensation=compensation.to_dict(), uncertainty=uncertainty,
         fbsd_bounds=fbsd_bounds(edges, ident.supported_band_hz),
     )
-
-
-def shot_uncertainty(
-    ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None, warnings: list[str]
-) -> tuple[dict[str, Any] | None, list[DiscreteModel]]:
-    """The Monte Carlo uncertainty (analysis.uncertainty) as its JSON and its model draws; off,
-    or failed, it is None with a warning: the values stand, never silently without it."""
-    if not params.uncertainty:
-        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
-        return None, []
-    from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
-
-    try:
-        result = evaluate(ident, UncertaintyOptions.from_params(params), reduction)
-    except (AnalysisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-        warnings.append(f"the uncertainty could not be evaluated ({exc}): the figures are reported without it")
-        return None, []
-    warnings += [w for w in result.warnings if w not in warnings]
-    return result.to_dict(), result.model_draws
 
 
 def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:

@@ -122,13 +122,19 @@ class Estimate:
 
     @classmethod
     def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE) -> Estimate:
+        """u: the draws' standard deviation. Interval: the probabilistically symmetric one of
+        the draws (GUM-S1 §7.7), reflected about `value`: each draw perturbs data that already
+        carry noise, so the draws sit around the estimate as the estimate sits around the
+        truth — with the estimator's own (second-order) bias once more; reflecting puts the
+        interval where the truth lies (the basic bootstrap interval; identical for a
+        symmetric distribution)."""
         d = np.asarray(draws, dtype=float)
         d = d[np.isfinite(d)]
         if d.size < 2:
             return cls(value, math.nan, (math.nan, math.nan))
         tail = 50.0 * (1.0 - coverage)
         lo, hi = np.percentile(d, [tail, 100.0 - tail])
-        return cls(float(value), float(np.std(d, ddof=1)), (float(lo), float(hi)))
+        return cls(float(value), float(np.std(d, ddof=1)), (float(2.0 * value - hi), float(2.0 * value - lo)))
 
     @classmethod
     def normal(cls, value: float, u: float) -> Estimate:
@@ -268,6 +274,23 @@ def evaluate(
         fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=budget, order=order_info,
         warnings=warnings, failed_draws=failed, model_draws=model_draws,
     )
+
+
+def shot_uncertainty(
+    ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None, warnings: list[str]
+) -> tuple[dict[str, Any] | None, list[DiscreteModel]]:
+    """The uncertainty of a shot as its JSON and its model draws; switched off, or failed, it is
+    None with a warning in `warnings`: the values stand, never silently without it."""
+    if not params.uncertainty:
+        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
+        return None, []
+    try:
+        result = evaluate(ident, UncertaintyOptions.from_params(params), reduction)
+    except (AnalysisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        warnings.append(f"the uncertainty could not be evaluated ({exc}): the figures are reported without it")
+        return None, []
+    warnings += [w for w in result.warnings if w not in warnings]
+    return result.to_dict(), result.model_draws
 
 
 # ------------------------------------------------------------------------------ noise

@@ -1,11 +1,16 @@
-"""`hopkinson identify`: the accelerometer's dynamic model from a two-channel record.
+"""`hopkinson identify`: the accelerometer's dynamic model from a two-channel record, with its
+uncertainty.
 
-    hopkinson identify RECORD [--max-order N] [--order n] [--sample-rate HZ] [--json] [-o model.json]
+    hopkinson identify RECORD [--max-order N] [--order n] [--sample-rate HZ]
+                      [--draws N] [--no-uncertainty] [--seed N] [--json] [-o model.json]
 
 RECORD is a CSV (time_s,reference,response) or NPZ with the same keys. The JSON (printed
 with --json, written by -o) is the model file `hopkinson dcm --model` reads: sample interval,
 order, a, b, poles and zeros as [re, im] pairs, DC gain, loss by order, FBSD (Hz) and the
-paper's Table-1 pole analysis, plus the fit details.
+paper's Table-1 pole analysis, the fit details, FBSD edges beyond the supported band as
+bounds (`fbsd_bounds`), and the Monte Carlo uncertainty (`uncertainty`, analysis.uncertainty).
+The text output shows each uncertain figure as value ± U, U the half-width of its 95 %
+coverage interval (k ≈ 2).
 """
 
 from __future__ import annotations
@@ -14,7 +19,6 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hopkinson.analysis.errors import AnalysisError
@@ -23,73 +27,138 @@ from hopkinson.rig.cli.main import emit_json
 if TYPE_CHECKING:
     from hopkinson.analysis.identify import Identification
 
+# The command's flags by AnalysisParams option, so a bad value is named as it was typed.
+FLAGS = {"max_order": "--max-order", "order": "--order", "sample_rate_hz": "--sample-rate", "draws": "--draws",
+         "seed": "--seed"}
 
-def identification_report(result: Identification, source: str) -> dict[str, Any]:
+
+def identification_report(result: Identification, source: str, uncertainty: dict[str, Any] | None = None,
+                          warnings: list[str] | None = None) -> dict[str, Any]:
     """The JSON object of `hopkinson identify` (also what -o writes)."""
-    from hopkinson.analysis.response import fbsd_hz, pole_analysis
+    from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, pole_analysis
 
     report = {"source": source, **result.to_dict()}
     report["fbsd_hz"] = fbsd_hz(result.model)
+    report["fbsd_bounds"] = fbsd_bounds(report["fbsd_hz"], result.supported_band_hz)
     report["pole_analysis"] = pole_analysis(result.poles)
+    report["uncertainty"] = uncertainty
+    report["warnings"] = list(warnings if warnings is not None else result.warnings)
     return report
 
 
+def _figure_text(data: Any, scale: float = 1.0, unit: str = "", digits: int = 6) -> str:
+    from hopkinson.analysis.key_figures import Figure
+
+    figure = Figure.of(data)
+    return figure.format(scale, digits, unit) if figure is not None else "—"
+
+
 def _summary(report: dict[str, Any], result: Identification) -> str:
-    """A short human-readable account of the identification."""
+    """A short human-readable account of the identification and its uncertainty."""
+    from hopkinson.analysis.key_figures import KeyFigures
+
+    unc = report.get("uncertainty") or {}
+    figures = KeyFigures.from_results({"model": report, "identification": report, "fbsd_hz": report["fbsd_hz"],
+                                       "fbsd_bounds": report["fbsd_bounds"], "uncertainty": unc})
+    how = "chosen by the order test" if result.order_selection == "knee" else "as asked"
+    stability = (result.order_evidence.get("stability") or {}).get("fraction_by_order") or {}
+    if str(result.order) in stability:
+        how += f", chosen in {stability[str(result.order)]:.0%} of {result.order_evidence['stability']['draws']} " \
+               "noise draws"
+    dt = result.sample_interval_s
     lines = [
-        f"{report['source']}: order {result.order} ({'chosen at the knee of the loss' if result.order_selection == 'knee' else 'as asked'}), "
-        f"fit {result.fit_percent:.2f} %, sample interval {result.sample_interval_s:g} s, "
-        f"delay {result.delay_samples:g} samples",
+        f"{report['source']}: order {result.order} ({how}), fit {result.fit_percent:.2f} %, sample interval "
+        f"{dt:g} s, delay {result.delay_samples:.3g} samples ({result.delay_samples * dt * 1e6:.3g} µs)",
     ]
+    if result.supported_band_hz:
+        lo, hi = result.supported_band_hz
+        lines.append(f"  supported band (the excitation's): {lo / 1e3:.4g}–{hi / 1e3:.4g} kHz")
+    main = result.main_mode
     for mode in result.modes:
         pole = complex(*mode["pole"])
         sign = "±" if mode["kind"] == "complex" else ""
         f_n, zeta = mode["natural_frequency_hz"], mode["damping_ratio"]
-        where = f"f_n = {f_n / 1e3:.4g} kHz, ζ = {zeta:.4g}" if f_n is not None and zeta is not None else "at the origin"
-        lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode['kind']}): {where}")
-    fbsd = report["fbsd_hz"]
-    lines.append(f"  FBSD: ±5 % up to {fbsd['5'] / 1e3:.4g} kHz, ±10 % up to {fbsd['10'] / 1e3:.4g} kHz")
-    lines.append(f"  DC gain {result.model.dc_gain:.6g} (response units per m/s²)")
-    losses = ", ".join(
-        f"{n}: {v:.4g}" for n, v in enumerate(result.loss_by_order, start=1) if math.isfinite(v)
-    )
-    lines.append(f"  bias-corrected loss by order: {losses}")
-    for warning in result.warnings:
+        if f_n is None or zeta is None:
+            where = "at the origin"
+        elif main is not None and mode["pole"] == main["pole"] and figures.natural_frequency_hz is not None:
+            where = (f"f_n = {figures.natural_frequency_hz.format(1e3, unit='kHz')}, "
+                     f"ζ = {figures.damping_ratio.format() if figures.damping_ratio else zeta}  (main mode)")
+        else:
+            where = f"f_n = {f_n / 1e3:.4g} kHz, ζ = {zeta:.4g}"
+        note = "" if mode["supported"] else ", outside the supported band: not claimed"
+        lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode['kind']}{note}): {where}")
+    lines.append(f"  FBSD: ±5 % up to {figures.fbsd_text('5')}, ±10 % up to {figures.fbsd_text('10')}")
+    lines.append(f"  DC gain {figures.sensitivity.format()} (response units per m/s²)")
+    if unc.get("shock_sensitivity"):
+        lines.append(f"  shock sensitivity (ISO 16063-13 peak ratio) {_figure_text(unc['shock_sensitivity'])}")
+    nmp = report.get("nonminimum_phase_zeros") or []
+    if nmp:
+        zeros = ", ".join(f"{re:.4g}{im:+.4g}j" for re, im in nmp)
+        lines.append(f"  zeros outside the unit circle (non-minimum phase: never inverted by a DCM): {zeros}")
+    if unc:
+        top = sorted((b for b in unc.get("budget", []) if b.get("u_rel")), key=lambda b: -b["u_rel"])[:4]
+        parts = ", ".join(f"{b['source']} {100 * b['u_rel']:.2g} %" for b in top)
+        lines.append(f"  uncertainty: {unc['method']}, {unc['draws']} draws, ± = half-width of the 95 % interval "
+                     f"(k ≈ 2); DC gain budget: {parts}")
+    losses = ", ".join(f"{n}: {v:.4g}" for n, v in enumerate(result.loss_by_order, start=1) if math.isfinite(v))
+    lines.append(f"  cost V by order (errors-in-variables, ≈ bins when right): {losses}")
+    for warning in report["warnings"]:
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)
 
 
+def _checked_params(args: argparse.Namespace) -> Any:
+    """The analysis options of the command line, checked; a bad one is named by its flag."""
+    from hopkinson.analysis.params import AnalysisParams
+
+    values: dict[str, Any] = {"max_order": args.max_order, "order": args.order, "draws": args.draws,
+                              "seed": args.seed, "uncertainty": not args.no_uncertainty}
+    if args.sample_rate is not None:
+        values["sample_rate_hz"] = args.sample_rate
+    try:
+        return AnalysisParams.from_options(**values)
+    except AnalysisError as exc:
+        text = str(exc)
+        for option, flag in FLAGS.items():
+            text = text.replace(f"analysis option {option}:", f"{flag}:")
+        raise AnalysisError(text) from None
+
+
 def run_identify(args: argparse.Namespace) -> int:
-    """Identify the model of RECORD; print a summary or the JSON; optionally write the JSON."""
+    """Identify the model of RECORD with its uncertainty; print a summary or the JSON; optionally
+    write the JSON (never over the record or a shot file; atomically)."""
     from hopkinson.analysis.identify import identify
     from hopkinson.analysis.records import read_record
-    from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 
-    if args.max_order < 1:
-        raise AnalysisError(f"--max-order must be at least 1, got {args.max_order}")
-    if args.order is not None and args.order < 1:
-        raise AnalysisError(f"--order must be at least 1, got {args.order}")
-    if args.sample_rate is not None and not (math.isfinite(args.sample_rate) and args.sample_rate > 0):
-        raise AnalysisError(f"--sample-rate must be a positive number of Hz, got {args.sample_rate}")
+    from hopkinson.fileio import atomic_write, check_output_path
+
+    params = _checked_params(args)
+    out = check_output_path(args.output, [args.record], what="model file") if args.output else None
     record = read_record(args.record)
-    sample_rate_hz = DEFAULT_ANALYSIS_RATE_HZ if args.sample_rate is None else args.sample_rate
     try:
-        result = identify(record, max_order=args.max_order, order=args.order, sample_rate_hz=sample_rate_hz)
+        result = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}: {exc}") from None
-    report = identification_report(result, str(args.record))
-    if args.output:
-        out = Path(args.output)
+    warnings = list(result.warnings)
+    uncertainty = None
+    if params.uncertainty:
+        from hopkinson.analysis.uncertainty import shot_uncertainty
+
+        uncertainty, _ = shot_uncertainty(result, params, None, warnings)
+    else:
+        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
+    report = identification_report(result, str(args.record), uncertainty, warnings)
+    if out is not None:
         try:
-            out.write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
+            atomic_write(out, json.dumps(report, indent=2, allow_nan=False) + "\n")
         except OSError as exc:
             raise AnalysisError(f"{out}: cannot write the model file ({exc.strerror})") from None
     if args.json:
         emit_json(report)
     else:
         sys.stdout.write(_summary(report, result) + "\n")
-        if args.output:
-            sys.stdout.write(f"model written to {args.output}\n")
+        if out is not None:
+            sys.stdout.write(f"model written to {out}\n")
     return 0
 
 
@@ -97,11 +166,12 @@ def register(subparsers: Any) -> None:
     """Add the `identify` sub-command."""
     p = subparsers.add_parser(
         "identify",
-        help="identify the accelerometer's discrete model from a two-channel record",
-        description="Identify A(d^-1) y = B(d^-1) u from RECORD (CSV time_s,reference,response or NPZ): "
-        "resample to the analysis rate, remove the channel delay, compute the loss of every order from one "
-        "factorisation, correct the bias (refined instrumental variables, prefilter 1/A) and choose the "
-        "order where the bias-corrected loss stops falling.",
+        help="identify the accelerometer's discrete model, with its uncertainty, from a two-channel record",
+        description="Identify A(d^-1) y = B(d^-1) u(k - delay) from RECORD (CSV time_s,reference,response or NPZ): "
+        "resample to the analysis rate, normalise both channels, measure their noise, fit every order by an "
+        "errors-in-variables output-error fit weighted to the band the excitation supports (causal fractional "
+        "delay fitted with it), choose the order by a test that is stable under the record's own noise, and give "
+        "every key figure its GUM Supplement 1 (Monte Carlo) uncertainty.",
     )
     p.add_argument("record", metavar="RECORD", help="two-channel record (CSV or NPZ)")
     p.add_argument("--max-order", type=int, default=12, metavar="N", help="largest order tried (default 12)")
@@ -110,9 +180,13 @@ def register(subparsers: Any) -> None:
         "--sample-rate",
         type=float,
         metavar="HZ",
-        # None: analysis.resample.DEFAULT_ANALYSIS_RATE_HZ, resolved in run_identify (scipy loads there)
+        # None: analysis.params.DEFAULT_ANALYSIS_RATE_HZ (resolved by AnalysisParams)
         help="analysis rate: a record sampled faster is low-pass filtered and resampled (default 1e6)",
     )
+    p.add_argument("--draws", type=int, metavar="N",
+                   help="Monte Carlo draws of the uncertainty (default 400: stable 95 %% intervals)")
+    p.add_argument("--no-uncertainty", action="store_true", help="skip the uncertainty (the figures alone)")
+    p.add_argument("--seed", type=int, metavar="N", help="seed of the Monte Carlo draws (default: fresh)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", metavar="MODEL.json", help="write the model JSON (read by `hopkinson dcm --model`)")
     p.set_defaults(func=run_identify)

@@ -101,12 +101,41 @@ def parse_orders(text: str) -> tuple[int, int]:
     return orders
 
 
+# The command's flags by AnalysisParams option, so a bad value is named as it was typed.
+FLAGS = {"grating_pitch_m": "--grating-pitch-m", "amp_gain": "--amp-gain",
+         "sensitivity_v_per_m_s2": "--sensitivity-v-per-m-s2", "sample_rate_hz": "--sample-rate"}
+
+
+def _check_numbers(args: argparse.Namespace) -> None:
+    """Every numeric option finite and sensible (AnalysisParams.check), named by its flag."""
+    import math
+
+    from hopkinson.analysis.params import AnalysisParams
+
+    values = {key: getattr(args, flag[2:].replace("-", "_")) for key, flag in FLAGS.items()}
+    values = {k: v for k, v in values.items() if v is not None}
+    try:
+        AnalysisParams.from_options(**values)
+    except AnalysisError as exc:
+        text = str(exc)
+        for option, flag in FLAGS.items():
+            text = text.replace(f"analysis option {option}:", f"{flag}:")
+        raise AnalysisError(text) from None
+    if args.bandwidth_hz is not None and not (math.isfinite(args.bandwidth_hz) and 0 < args.bandwidth_hz <= 1e10):
+        raise AnalysisError(f"--bandwidth-hz: a finite number of Hz above 0 (at most 1e10), got {args.bandwidth_hz!r}")
+
+
 def run_reduce(args: argparse.Namespace) -> int:
-    """Reduce RAW, write the record, print the shock quantities."""
+    """Reduce RAW, write the record (never over RAW or a shot file; atomically), print the
+    shock quantities."""
     from hopkinson.analysis.records import write_record
     from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
     from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 
+    from hopkinson.fileio import check_output_path
+
+    _check_numbers(args)
+    check_output_path(args.output, [args.raw], what="record")
     raw = read_raw(args.raw)
     settings = dict(raw.settings)
     for key, value in (("grating_pitch_m", args.grating_pitch_m), ("amp_gain", args.amp_gain),

@@ -133,3 +133,71 @@ def test_unstable_model_is_one_clear_line(tmp_path, capsys) -> None:
     path = write_record(tmp_path / "growing.csv", Record(T, u, y))
     line = _one_line_error(*_run(["identify", str(path), "--order", "2"], capsys))
     assert "growing.csv" in line and "unstable" in line
+
+
+# --- uncertainty, safe outputs, bad numbers -----------------------------------------------------
+
+
+def test_uncertainty_follows_the_json_contract_and_the_text_shows_value_plus_minus_u(files, capsys) -> None:
+    code, out, err = _run(["identify", str(files["csv"]), "--json", "--draws", "60", "--seed", "4"], capsys)
+    assert code == 0, err
+    data = json.loads(out)
+    unc = data["uncertainty"]
+    assert unc["draws"] == 60 and unc["coverage_probability"] == 0.95 and "Monte Carlo" in unc["method"]
+    figures = {"dc_gain": (unc["dc_gain"], data["dc_gain"]),
+               "f_n": (unc["main_mode"]["natural_frequency_hz"], data["main_mode"]["natural_frequency_hz"]),
+               "zeta": (unc["main_mode"]["damping_ratio"], data["main_mode"]["damping_ratio"]),
+               "fbsd5": (unc["fbsd_hz"]["5"], data["fbsd_hz"]["5"]),
+               "fbsd10": (unc["fbsd_hz"]["10"], data["fbsd_hz"]["10"]),
+               "shock": (unc["shock_sensitivity"], unc["shock_sensitivity"]["value"])}
+    for name, (figure, reported) in figures.items():
+        assert set(figure) == {"value", "u", "interval"}, name
+        assert figure["value"] == reported, name  # `value` is the figure reported elsewhere
+        lo, hi = figure["interval"]
+        assert figure["u"] > 0 and lo < hi, name
+    # The main mode is the truth's 27 kHz pair, and its interval is tight around it.
+    assert unc["main_mode"]["natural_frequency_hz"]["interval"][0] < 27_000 * 1.001
+    assert unc["main_mode"]["natural_frequency_hz"]["interval"][1] > 27_000 * 0.999
+    sources = [b["source"] for b in unc["budget"]]
+    assert {"response noise", "reference noise", "order choice", "grating pitch", "amplifier gain"} <= set(sources)
+    assert all(set(b) >= {"source", "u_rel"} for b in unc["budget"])
+
+    code, out, err = _run(["identify", str(files["csv"]), "--draws", "60", "--seed", "4"], capsys)
+    assert code == 0, err
+    assert "f_n = 26.99" in out and "±" in out.split("f_n =")[1].split("\n")[0]
+    assert "DC gain" in out and "±" in out.split("DC gain")[1].split("\n")[0]
+    assert "±5 % up to" in out and "±" in out.split("±5 % up to")[1].split("kHz")[0]
+
+
+def test_no_uncertainty_keeps_the_values_and_says_so(files, capsys) -> None:
+    code, out, err = _run(["identify", str(files["csv"]), "--json", "--no-uncertainty"], capsys)
+    assert code == 0, err
+    data = json.loads(out)
+    assert data["uncertainty"] is None and data["order"] == 4
+    assert any("uncertainty switched off" in w for w in data["warnings"])
+
+
+def test_outputs_never_overwrite_the_input_or_a_shot_file(files, tmp_path, capsys) -> None:
+    record = files["csv"]
+    before = record.read_bytes()
+    line = _one_line_error(*_run(["identify", str(record), "-o", str(record), "--no-uncertainty"], capsys))
+    assert "input" in line and record.read_bytes() == before
+    shot = tmp_path / "shot.h5"
+    shot.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(64))  # an HDF5 signature: a shot file
+    line = _one_line_error(*_run(["identify", str(record), "-o", str(shot), "--no-uncertainty"], capsys))
+    assert "shot file" in line and shot.read_bytes().startswith(b"\x89HDF")
+    line = _one_line_error(*_run(["identify", str(record), "-o", str(tmp_path / "no" / "m.json")], capsys))
+    assert "does not exist" in line
+    out = tmp_path / "model.json"
+    out.write_text("old")
+    code, _, err = _run(["identify", str(record), "-o", str(out), "--no-uncertainty"], capsys)
+    assert code == 0, err
+    assert json.loads(out.read_text())["order"] == 4  # replaced whole
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary left
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--sample-rate", "inf"), ("--sample-rate", "1e300"),
+                                             ("--sample-rate", "nan"), ("--draws", "3"), ("--order", "1000")])
+def test_bad_numbers_are_one_line(files, capsys, flag: str, value: str) -> None:
+    line = _one_line_error(*_run(["identify", str(files["csv"]), flag, value], capsys))
+    assert flag in line
