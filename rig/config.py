@@ -308,6 +308,26 @@ class AnalysisConfig:
 
 
 @dataclass(frozen=True)
+class UncertaintyConfig:
+    """[uncertainty]: the reference chain's relative standard uncertainties (k = 1, from the
+    lab's calibration certificates; the defaults are typical values, analysis.params) and the
+    Monte Carlo draws per shot (analysis.uncertainty)."""
+
+    grating_pitch_rel: float = 1e-4
+    interferometer_rel: float = 5e-4
+    amplifier_gain_rel: float = 2e-3
+    digitizer_gain_rel: float = 2e-3
+    channel_skew_s: float = 1e-9
+    draws: int = 400
+
+    def analysis_options(self) -> dict[str, Any]:
+        """The same values keyed as analysis.params.AnalysisParams options."""
+        return {"u_grating_pitch_rel": self.grating_pitch_rel, "u_interferometer_rel": self.interferometer_rel,
+                "u_amp_gain_rel": self.amplifier_gain_rel, "u_digitizer_gain_rel": self.digitizer_gain_rel,
+                "u_channel_skew_s": self.channel_skew_s, "draws": self.draws}
+
+
+@dataclass(frozen=True)
 class RigConfig:
     """The whole of config/rig.toml, validated."""
 
@@ -317,6 +337,7 @@ class RigConfig:
     limits: LimitsConfig = field(default_factory=LimitsConfig)
     timeouts: TimeoutsConfig = field(default_factory=TimeoutsConfig)
     analysis: AnalysisConfig = field(default_factory=AnalysisConfig)
+    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
     path: str = ""  # where it was loaded from (not a TOML key)
 
     def snapshot(self) -> dict[str, Any]:
@@ -407,6 +428,9 @@ RULES: dict[str, _Rule] = {
     "analysis.sample_rate_hz": _Rule(1e3, 1e9),
     "analysis.dcm_widening": _Rule(above=1.0, max=1e3),
     "analysis.dcm_noise_gain_limit": _Rule(above=0.0, max=1e6),
+    "uncertainty.*_rel": _Rule(0.0, 0.5),
+    "uncertainty.channel_skew_s": _Rule(0.0, 1e-3),
+    "uncertainty.draws": _Rule(50, 1_000_000),
     # config/sim.toml
     "servers.modbus_transport": _Rule(choices=("tcp", "rtu")),
     "servers.modbus_port": _Rule(0, 65535),
