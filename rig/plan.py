@@ -25,6 +25,8 @@ Example (config/campaigns/example.toml is the documented one)::
     dcm_ratio = "auto"                # response-time ratio r of the DCM; "auto" (default): r that
                                       # widens the ±5 % band 3× (analysis.dcm_design)
     dcm_damping = 0.707               # damping ζ_e of the DCM's new poles
+    uncertainty = true                # Monte Carlo uncertainty of the key figures (GUM-S1)
+    draws = 400                       # its number of draws (default: the analysis' own)
 
     [[shots]]
     pressure_bar = 1.5
@@ -58,6 +60,8 @@ from typing import Any
 from hopkinson.rig.errors import ConfigError
 
 MAX_ORDER_LIMIT = 40
+MIN_DRAWS, MAX_DRAWS = 50, 1_000_000  # as analysis.params checks them
+LATER_OPTIONS = {"uncertainty": True, "draws": None}  # analysis options added after plans were in use
 MAX_TOTAL_SHOTS = 10_000  # more is a typing error, not a campaign (a shot takes minutes)
 CONFIRM_ABOVE_SHOTS = 50  # a plan of more shots needs its number confirmed
 
@@ -81,6 +85,8 @@ class AnalysisOptions:
     sample_rate_hz: float = 1.0e6
     dcm_ratio: float | None = None  # None ("auto"): the r that widens the ±5 % band 3×
     dcm_damping: float = 0.707
+    uncertainty: bool = True  # the Monte Carlo uncertainty of the key figures
+    draws: int | None = None  # its draws; None: the analysis' default
 
 
 @dataclass(frozen=True)
@@ -96,7 +102,13 @@ class PlannedShot:
     analysis: AnalysisOptions
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The shot as a dict (the plan's fingerprint is made of these). Options added later
+        appear only when set, so a run started before them still resumes."""
+        out = asdict(self)
+        for key, default in LATER_OPTIONS.items():
+            if out["analysis"][key] == default:
+                del out["analysis"][key]
+        return out
 
 
 @dataclass(frozen=True)
@@ -306,6 +318,12 @@ def _shot_settings(
             options["dcm_ratio"] = c.number(given["dcm_ratio"], f"{akey}.dcm_ratio", 1.0, low_open=False)
         if "dcm_damping" in given:
             options["dcm_damping"] = c.number(given["dcm_damping"], f"{akey}.dcm_damping", 0.0, high=1.0)
+        if "uncertainty" in given:
+            if not isinstance(given["uncertainty"], bool):
+                raise c.fail(f"{akey}.uncertainty", f"must be true or false, got {_kind(given['uncertainty'])}")
+            options["uncertainty"] = given["uncertainty"]
+        if "draws" in given:
+            options["draws"] = c.integer(given["draws"], f"{akey}.draws", MIN_DRAWS, MAX_DRAWS)
         if options["order"] is not None and options["order"] > options["max_order"]:
             bad = "order" if "order" in given else "max_order"
             raise c.fail(

@@ -19,13 +19,14 @@ other process can be in the middle of writing them.
 from __future__ import annotations
 
 import os
-import shutil
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan, load_plan
+
+from hopkinson.fileio import atomic_write
 
 PLAN_NAME = "plan.toml"
 JOURNAL_NAME = "journal.sqlite"
@@ -163,12 +164,8 @@ def create_run_folder(plan_path: str | Path, parent: str | Path, name: str | Non
     run = RunFolder(folder)
     run.shots_dir.mkdir()
     run.report_dir.mkdir()
-    # Plan copy: written under a tmp name and renamed, so plan.toml is whole or absent.
-    tmp = run.plan_path.with_name(PLAN_NAME + LEFTOVER_SUFFIX)
-    shutil.copyfile(plan_path, tmp)
-    with open(tmp, "rb") as fh:
-        os.fsync(fh.fileno())
-    os.replace(tmp, run.plan_path)
+    # Plan copy: an exclusive temporary, fsynced and renamed (hopkinson.fileio): whole or absent.
+    atomic_write(run.plan_path, plan_path.read_bytes())
     return run
 
 

@@ -72,6 +72,8 @@ class ShotRequest:
     sample_rate_hz: float | None = None  # analysis rate; None -> config [analysis]
     dcm_ratio: float | None = None
     dcm_damping: float | None = None
+    uncertainty: bool | None = None  # the Monte Carlo uncertainty; None -> the analysis' default (on)
+    draws: int | None = None  # its draws; None -> the analysis' default
     out_dir: Path = Path("shots")
     shot_name: str | None = None  # None -> "shot-<UTC time>-<8 hex>"
     campaign_id: str | None = None
@@ -115,7 +117,7 @@ class ShotRequest:
 
     def analysis_options(self) -> dict[str, Any]:
         """The analysis options given (None left out)."""
-        keys = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping")
+        keys = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
         return {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
 
 
@@ -279,6 +281,8 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
         order=request.order,
         dcm_ratio=request.dcm_ratio,
         dcm_damping=request.dcm_damping,
+        uncertainty=request.uncertainty,
+        draws=request.draws,
     )
 
 

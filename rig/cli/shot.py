@@ -4,7 +4,8 @@
                    [--sim-state-file PATH]] [--pressure-bar P] [--projectile N] [--yes]
                    [--out DIR] [--operator NAME] [--accelerometer-model M]
                    [--accelerometer-serial S] [--sensitivity-v-per-m-s2 S] [--max-order N]
-                   [--sample-rate HZ] [--dcm-ratio R] [--dcm-damping Z] [--shot-name NAME]
+                   [--sample-rate HZ] [--dcm-ratio R] [--dcm-damping Z] [--draws N]
+                   [--no-uncertainty] [--shot-name NAME]
                    [-v] [--log-file PATH] [--trace] [--json | --json-events]
 
 --config: the rig configuration (default config/rig.toml; with --sim config/rig-sim.toml, of
@@ -76,6 +77,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--sample-rate", type=float, dest="sample_rate_hz", help="analysis sample rate, Hz")
     p.add_argument("--dcm-ratio", type=float, help="DCM response-time ratio r")
     p.add_argument("--dcm-damping", type=float, help="DCM damping of the new poles")
+    p.add_argument("--draws", type=int, help="Monte Carlo draws of the uncertainty (default: the analysis' own)")
+    p.add_argument("--no-uncertainty", dest="uncertainty", action="store_false", default=None,
+                   help="no Monte Carlo uncertainty of the key figures (faster; the figures carry none)")
     add_log_arguments(p)
     out = p.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="one JSON object on stdout (the outcome)")
@@ -119,7 +123,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
         sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
         sample_rate_hz=args.sample_rate_hz, dcm_ratio=args.dcm_ratio, dcm_damping=args.dcm_damping,
-        out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
+        uncertainty=args.uncertainty, draws=args.draws, out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
         # Without --yes and without a terminal nobody can confirm: do not wait in ARM.
         confirm_timeout_s=None if args.yes else (PROMPT_TIMEOUT_S if interactive else 0.0),
     )

@@ -57,6 +57,7 @@ serial = "T1"
 projectile = 3
 [defaults.analysis]
 max_order = 6
+uncertainty = false  # not what these tests are about (analysis.uncertainty has its own)
 {entries}
 """
 TWO_LEVELS = "[[shots]]\npressure_bar = 1.2\nrepeats = 2\n[[shots]]\npressure_bar = 2.0\n[shots.analysis]\norder = 2\n"

@@ -35,6 +35,7 @@ serial = "K1"
 projectile = 3
 [defaults.analysis]
 max_order = 6
+uncertainty = false
 [[shots]]
 pressure_bar = 1.2
 repeats = 2

@@ -42,9 +42,11 @@ def configs(tmp_path: Path) -> dict[str, Path]:
     return {"rig": rig, "sim": fast, "sim10": slow, "out": tmp_path / "shots", "state": tmp_path / "state.json"}
 
 
-def _args(c: dict[str, Path], *extra: str, sim: str = "sim") -> list[str]:
+def _args(c: dict[str, Path], *extra: str, sim: str = "sim", uncertainty: bool = False) -> list[str]:
+    """The shot's arguments; the Monte Carlo uncertainty only where a test is about the figures."""
     return ["shot", "--sim", "--config", str(c["rig"]), "--sim-config", str(c[sim]), "--out", str(c["out"]),
-            "--pressure-bar", "1.0", "--sim-state-file", str(c["state"]), *extra]
+            "--pressure-bar", "1.0", "--sim-state-file", str(c["state"]), *extra,
+            *(() if uncertainty else ("--no-uncertainty",))]
 
 
 def _state(c: dict[str, Path]) -> dict:
@@ -87,7 +89,7 @@ def test_analysis_failure_still_exits_0_and_says_why(configs, capsys) -> None:
 
 
 def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
-    assert main(_args(configs, "--yes")) == 0
+    assert main(_args(configs, "--yes", uncertainty=True)) == 0
     out = capsys.readouterr().out
     states = _states(out)
     assert [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s] == [
