@@ -469,6 +469,9 @@ RULES: dict[str, _Rule] = {
     "world.signals.pm_fluctuation": _Rule(0.0, 1.0),
     "world.signals.response_coloured_pole": _Rule(0.0, 0.999),
     "world.signals.*_snr_db": _Rule(0.0, 200.0, text="0 (no noise) .. 200 dB"),
+    "world.signals.pulse_bipolar_ratio": _Rule(0.0, 0.95),
+    "world.signals.channel_skew_s": _Rule(-1e-6, 1e-6),
+    "world.signals.response_drift_v_per_s": _Rule(-1e3, 1e3),
     "world.signals.*": _POSITIVE,
     **{f"register_map.{k}": r for k, r in _REGISTER_RULES.items()},
 }

@@ -137,3 +137,35 @@ def coloured_noise(
     raw = signal.lfilter([1.0], [1.0, -pole], rng.standard_normal(clean.shape))
     power = float(np.mean(np.square(clean)))
     return raw * np.sqrt(power / 10 ** (snr_db / 10) / float(np.mean(np.square(raw))))
+
+
+def fractional_delay(x: np.ndarray, delay_samples: float) -> np.ndarray:
+    """`x` delayed by `delay_samples` (any sign, fractional): a channel skew of the digitizer.
+
+    A linear phase on the FFT of `x` padded with its edge values (records start and end at
+    rest, so the circular wrap carries nothing); exact for a band-limited signal.
+    """
+    x = np.asarray(x, dtype=float)
+    pad = int(np.ceil(abs(delay_samples))) + 64
+    ext = np.concatenate((np.full(pad, x[0]), x, np.full(pad, x[-1])))
+    spec = np.fft.rfft(ext)
+    k = np.arange(spec.size)
+    spec *= np.exp(-2j * np.pi * k * delay_samples / ext.size)
+    if ext.size % 2 == 0:
+        spec[-1] = spec[-1].real * np.cos(np.pi * delay_samples)
+    return np.fft.irfft(spec, ext.size)[pad : pad + x.size]
+
+
+def baseline_drift(n: int, sample_interval_s: float, slope_per_s: float, wander_rms: float = 0.0,
+                   wander_hz: float = 200.0, rng: np.random.Generator | None = None) -> np.ndarray:
+    """A baseline that drifts: a straight line of `slope_per_s` (units per second) plus a slow
+    random wander of `wander_rms` (white noise low-passed at `wander_hz`), e.g. thermal drift
+    of a bridge or the discharge of a charge amplifier."""
+    t = np.arange(n) * sample_interval_s
+    out = slope_per_s * t
+    if wander_rms > 0:
+        rng = np.random.default_rng() if rng is None else rng
+        sos = signal.butter(2, wander_hz, fs=1.0 / sample_interval_s, output="sos")
+        wander = signal.sosfilt(sos, rng.standard_normal(n))
+        out = out + wander * (wander_rms / max(float(np.std(wander)), 1e-300))
+    return out

@@ -139,3 +139,16 @@ def raw_shot(
         response = response + white_noise(response, response_snr_db, rng)
     return RawShot(sample_interval_s, doppler, response, acc, vel, grating_pitch_m, tuple(orders),
                    amp_gain, sensitivity_v_per_m_s2, truth)
+
+
+def interferometer_noise_m_s2(n: int, sample_interval_s: float, rms_m_s2: float, bandwidth_hz: float,
+                              rng: np.random.Generator | None = None) -> np.ndarray:
+    """The noise an interferometer reference carries in acceleration: white phase (displacement)
+    noise differentiated twice — its spectrum rises as f² — up to the demodulation low-pass of
+    `bandwidth_hz` (brick-wall), scaled to `rms_m_s2`."""
+    rng = np.random.default_rng() if rng is None else rng
+    spec = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, sample_interval_s)
+    spec *= (f / bandwidth_hz) ** 2 * (f <= bandwidth_hz)
+    x = np.fft.irfft(spec, n)
+    return x * (rms_m_s2 / max(float(np.std(x)), 1e-300))

@@ -45,3 +45,28 @@ def velocity_m_s(acceleration_m_s2: np.ndarray, sample_interval_s: float) -> np.
     v[0] = 0.0
     np.cumsum(0.5 * (a[1:] + a[:-1]) * sample_interval_s, out=v[1:])
     return v
+
+
+def bipolar_m_s2(time_s: np.ndarray, width_s: float, peak_m_s2: float, start_s: float = 0.0,
+                 ratio: float = 0.6, second_width_s: float | None = None) -> np.ndarray:
+    """A bipolar pulse: a half-sine of `peak_m_s2` and base width `width_s`, then at once a
+    negative half-sine of `ratio`·peak and base width `second_width_s` (default `width_s`).
+
+    The object gains peak·width·2/π of velocity and gives back ratio·peak·second_width·2/π; with
+    ratio·second_width < width it keeps moving forwards (one PM channel can follow it).
+    """
+    second = width_s if second_width_s is None else second_width_s
+    first = half_sine_m_s2(time_s, width_s, peak_m_s2, start_s)
+    return first - half_sine_m_s2(time_s, second, ratio * peak_m_s2, start_s + width_s)
+
+
+def bipolar_velocity_m_s(time_s: np.ndarray, width_s: float, peak_m_s2: float, start_s: float = 0.0,
+                         ratio: float = 0.6, second_width_s: float | None = None) -> np.ndarray:
+    """Exact integral of `bipolar_m_s2` from rest: the object's velocity (m/s)."""
+    second = width_s if second_width_s is None else second_width_s
+
+    def lobe(width: float, peak: float, start: float) -> np.ndarray:
+        t = np.clip(np.asarray(time_s, dtype=float) - start, 0.0, width)
+        return peak * width / np.pi * (1.0 - np.cos(np.pi * t / width))
+
+    return lobe(width_s, peak_m_s2, start_s) - lobe(second, ratio * peak_m_s2, start_s + width_s)

@@ -70,7 +70,7 @@ from hopkinson.drivers.sim.accelerometer import (
 )
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, pm_beat
 from hopkinson.drivers.sim.faults import FaultSet
-from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
+from hopkinson.drivers.sim.shock import G_M_S2, bipolar_m_s2, bipolar_velocity_m_s
 
 PROJECTILES = (1, 2, 3)
 
@@ -144,6 +144,12 @@ class SignalParams:
     response_coloured_snr_db: float = 50.0
     response_coloured_pole: float = 0.9
     response_rate_hz: float = 10e6  # internal rate of the response model (see _response_v)
+    # Hard parts of real records (issue 10): a bipolar pulse (a negative half-sine of this ratio
+    # of the peak follows at once; 0 = a half-sine), the response channel's skew against the
+    # Doppler channel (s; negative: it leads) and a drift of the amplifier output (V/s).
+    pulse_bipolar_ratio: float = 0.0
+    channel_skew_s: float = 0.0
+    response_drift_v_per_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -603,8 +609,8 @@ class World:
         lead = n // 2 if callable(locate) else 0  # served before and after: the trigger may fall there
         time_s = (np.arange(n + 2 * lead) - pre - lead) / fs
         rng = np.random.default_rng([self.params.seed, shot.number])
-        velocity = _half_sine_velocity_m_s(time_s, shot.width_s, shot.peak_m_s2)
         sig = self.params.signals
+        velocity = bipolar_velocity_m_s(time_s, shot.width_s, shot.peak_m_s2, 0.0, sig.pulse_bipolar_ratio)
         doppler = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders),
                           amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
                           fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
@@ -626,7 +632,7 @@ class World:
                     "triggered": True, "sample_rate_hz": fs, "record_length": n, "pre_trigger_samples": pre,
                     "pulse_start_index": pre + lead - first,
                 }
-                self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot)
+                self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot, sig.pulse_bipolar_ratio)
             if np.any(np.abs(response) >= self.params.amplifier.output_limit_v):
                 self.amplifier.overload_latched = True
         return {1: doppler, 2: response}
@@ -644,22 +650,18 @@ class World:
         rate = min(fs, sig.response_rate_hz)
         n_int = int(np.ceil((time_s[-1] - time_s[0]) * rate)) + 2
         t_int = time_s[0] + np.arange(n_int) / rate
-        accel = half_sine_m_s2(t_int, shot.width_s, shot.peak_m_s2, start_s=0.0)
+        accel = bipolar_m_s2(t_int, shot.width_s, shot.peak_m_s2, 0.0, sig.pulse_bipolar_ratio)
         scale = shot.gain * shot.bridge_sensitivity_v_per_m_s2
         clean = shot.truth.respond(accel, 1.0 / rate) * scale
         if sig.response_coloured_snr_db > 0:
             clean = clean + coloured_noise(clean, sig.response_coloured_snr_db, rng, sig.response_coloured_pole)
-        out = np.interp(time_s, t_int, clean) + shot.output_offset_v
+        # A skew shifts the response channel's sampling instants against the Doppler channel's.
+        out = np.interp(time_s - sig.channel_skew_s, t_int, clean) + shot.output_offset_v
+        out = out + sig.response_drift_v_per_s * (time_s - time_s[0])
         if sig.response_white_snr_db > 0:
             out = out + white_noise(out - shot.output_offset_v, sig.response_white_snr_db, rng)
         limit = self.params.amplifier.output_limit_v
         return np.clip(out, -limit, limit)
-
-
-def _half_sine_velocity_m_s(time_s: np.ndarray, width_s: float, peak_m_s2: float) -> np.ndarray:
-    """Exact integral of the half-sine pulse starting at t = 0: the object's velocity."""
-    t = np.clip(time_s, 0.0, width_s)
-    return peak_m_s2 * width_s / math.pi * (1.0 - np.cos(math.pi * t / width_s))
 
 
 def _truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
@@ -670,8 +672,10 @@ def _truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
         "pressure_bar": shot.pressure_bar,
         "projectile": shot.projectile,
         "projectile_speed_m_s": shot.speed_m_s,
-        "pulse": {"shape": "half_sine", "peak_m_s2": shot.peak_m_s2, "width_s": shot.width_s,
-                  "start_s": 0.0},
+        "pulse": {"shape": "bipolar" if signals.pulse_bipolar_ratio else "half_sine", "peak_m_s2": shot.peak_m_s2,
+                  "width_s": shot.width_s, "start_s": 0.0, "bipolar_ratio": signals.pulse_bipolar_ratio},
+        "channel_skew_s": signals.channel_skew_s,
+        "response_drift_v_per_s": signals.response_drift_v_per_s,
         "peak_acceleration_m_s2": shot.peak_m_s2,
         "peak_g": shot.peak_m_s2 / G_M_S2,
         "pulse_width_s": shot.width_s,
@@ -693,7 +697,8 @@ def _truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
     }
 
 
-def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot) -> dict[str, list[float]]:
+def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot, ratio: float = 0.0
+                    ) -> dict[str, list[float]]:
     """The true reference decimated to at most ~1 MS/s (JSON-sized)."""
     fs = 1.0 / (time_s[1] - time_s[0]) if time_s.size > 1 else 1.0
     step = max(1, int(round(fs / 1e6)))
@@ -701,7 +706,7 @@ def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot) -> di
     return {
         "time_s": t.tolist(),
         "velocity_m_s": velocity[::step].tolist(),
-        "acceleration_m_s2": half_sine_m_s2(t, shot.width_s, shot.peak_m_s2).tolist(),
+        "acceleration_m_s2": bipolar_m_s2(t, shot.width_s, shot.peak_m_s2, 0.0, ratio).tolist(),
     }
 
 
