@@ -39,7 +39,7 @@ def short_timeouts_config(**timeouts: float) -> RigConfig:
     """config/rig-sim.toml with short timeouts (wall seconds) for a 100x simulator."""
     base = load_rig_config(REPO / "config" / "rig-sim.toml")
     t = dataclasses.replace(base.timeouts, check_s=5.0, evacuate_s=1.0, charge_s=2.0, arm_s=2.0, fire_s=2.0,
-                            capture_s=3.0, safe_s=3.0, store_s=20.0, analyse_s=60.0)
+                            capture_s=3.0, safe_s=2.0, store_s=20.0, analyse_s=60.0)
     t = dataclasses.replace(t, **timeouts)
     return dataclasses.replace(
         base, timeouts=t,
