@@ -81,3 +81,17 @@ def test_a_campaign_runs_on_each_digitizer_dialect(tmp_path: Path, dialect: str)
                                                                 np.iinfo(response.codes.dtype).max)))
         peak_v = truth[1]["amplifier_gain"] * truth[1]["sensitivity_v_per_m_s2"] * truth[1]["peak_acceleration_m_s2"]
         assert 0.9 * peak_v < volts.max() < 2.0 * peak_v
+
+
+@pytest.mark.parametrize("wrong", [{"trigger_level_v": 9.5}, {"trigger_slope": "NEG", "trigger_level_v": -2.0},
+                                   {"trigger_source": "CH3"}])
+def test_a_shot_with_a_wrong_trigger_fires_but_captures_nothing(make_rig, wrong: dict) -> None:
+    """No fault injected: the simulated digitizer looks for the configured crossing in the
+    world's signals and finds none, so the sequencer's no-trigger path ends the shot safe."""
+    base = short_timeouts_config(capture_s=0.5)
+    rig = make_rig(config=dataclasses.replace(base, digitizer=dataclasses.replace(base.digitizer, **wrong)))
+    outcome = rig.run()
+    assert outcome.final_state == "ABORTED" and outcome.aborted_in == "CAPTURE" and outcome.fired
+    assert "trigger" in outcome.error
+    assert rig.world.shots_fired == 1 and rig.world.last_shot_truth["capture"] == {"triggered": False}
+    rig.assert_safe()
