@@ -91,6 +91,9 @@ def excitation_page(entry: ShotEntry) -> Figure:
         lo_hz, hi_hz = float(exc.get("band_low_hz") or 0.0), float(exc.get("band_high_hz") or 0.0)
         ax_f.axvspan(lo_hz / 1e3, hi_hz / 1e3, color="tab:green", alpha=0.15,
                      label=f"band covered (−3 dB): {fmt(lo_hz, 1e3)}–{fmt(hi_hz, 1e3)} kHz")
+        if kf is not None and kf.supported_band_hz is not None:
+            ax_f.axvline(kf.supported_band_hz[1] / 1e3, color="tab:green", ls="--", lw=1.2,
+                         label=f"band the excitation supports: up to {fmt(kf.supported_band_hz[1], 1e3)} kHz")
         rule = exc.get("paper_rule_max_natural_frequency_hz")
         if rule:
             ax_f.axvline(rule / 1e3, color="tab:purple", ls="--", lw=1,
@@ -147,14 +150,20 @@ def normalised(h: np.ndarray, dc: float) -> np.ndarray:
 
 
 def draw_bands(ax: Any, fbsd: dict[str, float], label_prefix: str = "FBSD", linestyle: str = "--",
-           shade: bool = True) -> None:
+           shade: bool = True, bounds: dict[str, Any] | None = None) -> None:
+    """The ±5 %/±10 % bands (shaded) and the FBSD edges; an edge the shot reports only as a
+    bound (KeyFigures.fbsd_bounds) says so in its label."""
     for key, level, colour in BAND_LEVELS:
         if shade:
             ax.axhspan(1 - level, 1 + level, color=colour, alpha=0.08 if key == "10" else 0.12,
                        label=f"±{key} % band")
         f = fbsd.get(key)
         if f:
-            ax.axvline(f / 1e3, color=colour, ls=linestyle, lw=1.3, label=f"{label_prefix} ±{key} % = {fmt(f, 1e3)} kHz")
+            label = f"{label_prefix} ±{key} % = {fmt(f, 1e3)} kHz"
+            bound = (bounds or {}).get(key)
+            if bound is not None:
+                label += f": the shot supports only > {fmt(bound.lower_bound_hz, 1e3)} kHz"
+            ax.axvline(f / 1e3, color=colour, ls=linestyle, lw=1.3, label=label)
 
 
 def model_page(entry: ShotEntry) -> Figure:
@@ -187,7 +196,7 @@ def model_page(entry: ShotEntry) -> Figure:
     fl = np.linspace(0.0, min(nyquist_hz(model), 2.5 * f10), 800)
     ml = normalised(frequency_response(model, fl), dc)
     ax_band.plot(fl / 1e3, ml, color="tab:blue", lw=1.5, label="model")
-    draw_bands(ax_band, a.fbsd_hz)
+    draw_bands(ax_band, a.fbsd_hz, bounds=kf.fbsd_bounds if kf is not None else None)
     ax_band.set_ylim(0.8, 1.2)
     ax_band.set_xlim(0, fl[-1] / 1e3)
     ax_band.set_xlabel("frequency (kHz)")

@@ -45,6 +45,9 @@ def unit_suffix(unit: str) -> str:
     return f" ({unit})" if unit else ""
 
 
+NOT_RECOMMENDED = "compensation does not improve this shot"
+
+
 def sensitivity_text(figure: Figure | None, kf: KeyFigures, nominal_v_per_m_s2: float | None) -> str:
     """A sensitivity (response units per m/s²) as value ± U, with V/(m/s²) and mV/g when the
     response was scaled by a nominal sensitivity ("× nominal")."""
@@ -101,9 +104,8 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         ("settling-time ratio (±5 %, without ÷ with DCM)", fmt(a.settling_time_ratio)),
     ]
     check = entry.compensation
-    if check is not None and check.recommended is not None:
-        rows.append(("DCM", "recommended" if check.recommended else
-                     f"NOT RECOMMENDED: {check.not_recommended_reason or 'compensation does not improve this shot'}"))
+    if check is not None and check.recommended is False:  # (the compensation check says it either way)
+        rows.append(("DCM", f"NOT RECOMMENDED: {check.not_recommended_reason or NOT_RECOMMENDED}"))
     cmp = truth_comparison(entry)
     if cmp is not None:
         rows.append(("simulated truth f_n, ζ", f"{fmt(cmp['truth_natural_frequency_hz'], 1e3, 5)} kHz, "
@@ -185,7 +187,8 @@ def uncertainty_method(entry: ShotEntry) -> str:
     p = kf.coverage_probability or 0.95
     method = (kf.uncertainty_method or "Monte Carlo").replace("-", " ").replace("_", " ")
     method = "Monte Carlo" if method.lower() == "monte carlo" else method
-    return (f"Method: {method} after GUM Supplement 1, {kf.draws or '—'} draws. "
+    method += "" if "GUM" in method else " after GUM Supplement 1"
+    return (f"Method: {method}, {kf.draws or '—'} draws. "
             f"u is the standard uncertainty, the interval the {100 * p:.0f} % coverage interval of the draws, "
             f"U its half-width (k ≈ 2); the value is the figure reported everywhere else.")
 
@@ -210,7 +213,7 @@ def compensation_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     rows = []
     if check.recommended is not None:
         rows.append(("verdict", "DCM recommended" if check.recommended else
-                     f"DCM NOT RECOMMENDED: {check.not_recommended_reason or 'it does not improve this shot'}"))
+                     f"DCM NOT RECOMMENDED: {check.not_recommended_reason or NOT_RECOMMENDED}"))
 
     def before_after(pair: tuple[float | None, float | None] | None) -> str:
         if pair is None:

@@ -109,7 +109,7 @@ def test_shot_file_report_beside_the_shot(run_folder: Path, tmp_path: Path, caps
     assert main(["report", str(shot)]) == 0
     assert capsys.readouterr().out.strip() == f"report: {tmp_path / 's001-r1.pdf'}"
     data = (tmp_path / "s001-r1.pdf").read_bytes()
-    assert pdf_pages(data) == 5
+    assert pdf_pages(data) in (5, 6)  # a summary of one or two pages (with the uncertainty), the shot's 4 pages
     text = pdf_text(data)
     fbsd = read_shot(shot, load_raw=False).results["fbsd_hz"]
     for needle in ("SIM-ACC, serial R1", "shot s001-r1", "SIMULATED", "Results", f"{fbsd['5'] / 1e3:.4g} kHz",

@@ -196,7 +196,9 @@ def test_export_report_of_the_shot_shown(qtbot, make_panel, tmp_path):
     html = target.read_text(encoding="utf-8")
     shot = read_shot(w.last_view.path, load_raw=False)
     assert w.last_view.path.stem in html  # the report of this shot, with its analysed FBSD
-    assert f"{shot.results['fbsd_hz']['5'] / 1e3:.3f} kHz" in html
+    fbsd5 = shot.results["fbsd_hz"]["5"]
+    u5 = ((shot.results.get("uncertainty") or {}).get("fbsd_hz") or {}).get("5")
+    assert (expected_khz(fbsd5, shot.results, "5") if u5 else f"{fbsd5 / 1e3:.4g} kHz") in html
 
 
 def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel, tmp_path, artifacts_dir):
