@@ -138,6 +138,16 @@ class OrderFit:
                        transient=np.append(self.transient, 0.0) if self.transient.size else self.transient)
 
 
+def predicted_bins(fit: OrderFit, data: SpectralData, omega: np.ndarray, u_bins: np.ndarray) -> np.ndarray:
+    """The model's response spectrum at the fitted bins (before any grouping): e^{−jωτ}·B/A·U,
+    plus the transient and drift terms where the per-bin fit has them."""
+    if not data.grouped:
+        problem = OrderProblem(data, fit.order, fit.delay)
+        theta = problem.pack(replace(fit, transient=fit.transient if fit.transient.size else np.zeros(0)))
+        return data.y - problem._error(problem._pieces(theta))
+    return response(fit, omega) * u_bins
+
+
 def response(fit: OrderFit, omega: np.ndarray) -> np.ndarray:
     """e^{−jωτ}·B/A of a fit at `omega` (rad/sample)."""
     z = np.exp(-1j * np.outer(omega, np.arange(fit.a.size)))

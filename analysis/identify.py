@@ -48,11 +48,7 @@ from typing import Any
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import pulse_width, supported_band_hz
-from hopkinson.analysis.frequency_fit import (
-    OrderFit,
-    OrderProblem,
-    SpectralData,
-)
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, predicted_bins
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.noise import NoiseSpectrum, active_end
@@ -64,7 +60,6 @@ from hopkinson.analysis.order_choice import (
     candidates_around,
     choose_order,
     fractions_text,
-    modal_order,
     order_stability,
     response_change,
 )
@@ -389,34 +384,37 @@ def identify(
     evidence: dict[str, Any] = {"comparisons": comparisons}
     if chosen_auto is None:
         raise AnalysisError(f"no stable model of order 1 … {n_max} fits this record (every fit was unstable)")
-    noise_draws = NoiseDraws(data, prep.u_bins, prep.y_bins, prep.var_u, prep.var_y,
-                             2.0 * np.pi * prep.bin_hz * dt, prep.group, STABILITY_SEED)
     if order is None:
-        # Stability across resampled noise: the test re-run on fresh noise of the record's own
-        # level; the order chosen most often (the record's own choice counts once) is kept.
+        # Stability across resampled noise: the test re-run on the chosen model's response with
+        # fresh noise of the record's own level (a parametric bootstrap; analysis.uncertainty
+        # draws the order the same way). Reported as evidence; below 50 % a warning.
+        omega_bins = 2.0 * np.pi * prep.bin_hz * dt
+        noise_draws = NoiseDraws(data, prep.u_bins, prep.y_bins, prep.var_u, prep.var_y, omega_bins, prep.group,
+                                 STABILITY_SEED,
+                                 centre_y=predicted_bins(fits[chosen_auto], data, omega_bins, prep.u_bins))
         refitter = Refitter(data, fits, delay_mode, max_delay_samples)
         candidates = [m for m in candidates_around(chosen_auto, fits) if math.isfinite(costs[m])]
-        fractions, choices, _ = order_stability(noise_draws, refitter, candidates, STABILITY_DRAWS, significance)
-        votes = [c for c in choices if c is not None] + [chosen_auto]
-        shares = {m: votes.count(m) / len(votes) for m in sorted(set(votes))}
+        fractions, _, _ = order_stability(noise_draws, refitter, candidates, STABILITY_DRAWS, significance)
         evidence["stability"] = {"draws": STABILITY_DRAWS, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
-        modal = modal_order(shares, chosen_auto)
-        if modal != chosen_auto:
-            evidence["record_alone_chose"] = chosen_auto
+        if fractions.get(chosen_auto, 0.0) < 0.5:
             warnings.append(
-                f"the order test on the record alone chose order {chosen_auto}, but with fresh noise of the record's "
-                f"own level it chooses {fractions_text(fractions)}: order {modal}, the stable choice, is used"
+                f"the order choice is not stable under the record's own noise: the test chose order {chosen_auto}, "
+                f"fresh noise of the same level gives {fractions_text(fractions)}; the uncertainty includes the "
+                "other orders"
             )
-            chosen_auto = modal
-
     polished_orders: set[int] = set()
 
     def polished(n: int) -> OrderFit:
         """The order-n fit iterated to tight convergence (the search gave each order a short budget
         and a loose tolerance): the optimum, whatever path led to it, so rescaled channels give
-        the same model to ~1e-9."""
+        the same model to ~1e-9. A delay pressed against zero converges slowly in its bounded
+        parameter: there the fit with the delay held at zero is taken when it is as good."""
         if n not in polished_orders:
             done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 8 * max_evaluations, 1e-13)
+            if delay_mode == "causal" and done.delay < 1e-2 and not done.converged:
+                at_zero = OrderProblem(data, n, 0.0, max_delay_samples).solve(done, 8 * max_evaluations, 1e-13)
+                if at_zero.cost <= done.cost * (1 + 1e-9):
+                    done = at_zero
             fits[n] = replace(done, start_unstable=fits[n].start_unstable)
             polished_orders.add(n)
         return fits[n]

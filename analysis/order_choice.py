@@ -4,7 +4,9 @@
   frequency response where the pulse has energy (see its docstring).
 - `NoiseDraws`: fresh noise on the fitted DFT bins of both channels (circular complex Gaussian
   of the measured variance per bin) and a channel skew, reproducible from (seed, draw):
-  the draws of analysis.identify's stability check and of analysis.uncertainty's Monte Carlo.
+  added to the record (analysis.uncertainty's Monte Carlo draws of the figures) or, for the
+  order's stability, to the chosen model's response (a parametric bootstrap: noise added to a
+  noisy record doubles it and would favour the lowest orders).
 - `Refitter`: each order refitted on a draw from its nominal fit (frequency_fit.QuickRefit).
 - `order_stability`: the whole order choice re-run on draws; the fraction choosing each order.
 """
@@ -103,6 +105,7 @@ class NoiseDraws:
     seed: int
     inflate: float = 1.0  # noise variances × this (model error beyond the noise)
     skew_sd: float = 0.0  # channel skew, samples
+    centre_y: np.ndarray | None = None  # response spectrum the noise is added to (None: the record's)
 
     def data(self, r: int) -> tuple[SpectralData, float]:
         """Draw r's perturbed spectra and its skew (samples)."""
@@ -115,7 +118,8 @@ class NoiseDraws:
         noise_u, noise_y = cn(self.var_u), cn(self.var_y)
         skew = self.skew_sd * rng.standard_normal() if self.skew_sd > 0 else 0.0
         u = (self.u_bins + noise_u) * np.exp(-1j * self.omega * skew)
-        return self.spectral.perturbed(u, self.y_bins + noise_y, self.group), skew
+        y = (self.y_bins if self.centre_y is None else self.centre_y) + noise_y
+        return self.spectral.perturbed(u, y, self.group), skew
 
 
 class Refitter:

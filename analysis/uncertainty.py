@@ -52,6 +52,7 @@ from hopkinson.analysis.frequency_fit import (
     OrderProblem,
     SpectralData,
     is_stable,
+    predicted_bins,
 )
 from hopkinson.analysis.identify import (
     FitContext,
@@ -214,7 +215,7 @@ def evaluate(
                        2.0 * np.pi * ctx.bin_frequency_hz * dt, ctx.group, seed, inflate, options.channel_skew_s / dt)
     refitter = Refitter(ctx.spectral, ctx.fits, ctx.delay_mode, ctx.max_delay)
     orders = _order_assignment(ident, draws, refitter, options, rng)
-    fits, skews = _refits(draws, refitter, orders["per_draw"], orders["subset_fits"])
+    fits, skews = _refits(draws, refitter, orders["per_draw"])
     good = np.array([f is not None and is_stable(f.a) for f in fits])
     failed = int(np.sum(~good))
     if good.mean() < MIN_GOOD_FRACTION:
@@ -262,7 +263,8 @@ def evaluate(
     order_info = {"chosen": n_hat, "selection": ident.order_selection, "fraction_by_order": orders["fractions"],
                   "draws": orders["decided"]}
     stability = orders["fractions"].get(str(n_hat))
-    if stability is not None and orders["decided"] and stability < ORDER_STABILITY_WARNING:
+    flagged = any("order choice is not stable" in w for w in ident.warnings)
+    if stability is not None and orders["decided"] and stability < ORDER_STABILITY_WARNING and not flagged:
         warnings.append(
             f"the order choice is not stable under the record's own noise: order {n_hat} is chosen in only "
             f"{stability:.0%} of {orders['decided']} noise draws ({fractions_text(orders['fractions'])}); the "
@@ -314,35 +316,35 @@ def _chain_draws(options: UncertaintyOptions, count: int, rng: np.random.Generat
 # ------------------------------------------------------------------------------ refits
 def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitter, options: UncertaintyOptions,
                       rng: np.random.Generator) -> dict[str, Any]:
-    """The order of each draw: re-decided on a subset (the whole order choice on the perturbed
-    data), the rest drawn from the subset's fractions. An asked order is kept in every draw."""
+    """The order of each draw, drawn from the order choice's own PDF: the whole choice re-run on
+    `order_draws` parametric-bootstrap draws (the chosen model's response with fresh noise of
+    the record's level). An asked order is kept in every draw."""
     ctx = ident.context
     assert ctx is not None
     n_hat = ident.order
     count = options.draws
     candidates = [m for m in candidates_around(n_hat, ctx.fits) if math.isfinite(ctx.fits[m].cost)]
     if ident.order_selection != "knee" or len(candidates) < 2:
-        return {"per_draw": [n_hat] * count, "fractions": {}, "decided": 0, "subset_fits": {}}
+        return {"per_draw": [n_hat] * count, "fractions": {}, "decided": 0}
+    bootstrap = replace(draws, seed=draws.seed + 1, skew_sd=0.0,
+                        centre_y=predicted_bins(ctx.fits[n_hat], ctx.spectral, draws.omega, ctx.u_bins))
     subset = min(options.order_draws, count)
-    fractions, choices, refits = order_stability(draws, refitter, candidates, subset, ctx.significance)
+    fractions, choices, _ = order_stability(bootstrap, refitter, candidates, subset, ctx.significance)
     decided = [c if c is not None else n_hat for c in choices]
-    # A subset draw's refit serves its figures only when it settled (else it is redone exactly).
-    subset_fits = {r: f for r, m in enumerate(decided) if (f := refits[r].get(m)) is not None and f.converged}
     values = np.array(sorted(set(decided)))
     weights = np.array([decided.count(int(v)) for v in values], dtype=float)
-    rest = rng.choice(values, size=count - subset, p=weights / weights.sum())
-    return {"per_draw": decided + [int(m) for m in rest],
-            "fractions": {str(m): f for m, f in fractions.items()}, "decided": subset, "subset_fits": subset_fits}
+    per_draw = rng.choice(values, size=count, p=weights / weights.sum())
+    return {"per_draw": [int(m) for m in per_draw], "fractions": {str(m): f for m, f in fractions.items()},
+            "decided": subset}
 
 
-def _refits(draws: NoiseDraws, refitter: Refitter, orders: list[int], subset_fits: dict[int, OrderFit | None]
-            ) -> tuple[list[OrderFit | None], np.ndarray]:
-    """One refit per draw at its order (the subset's order choice already made some)."""
+def _refits(draws: NoiseDraws, refitter: Refitter, orders: list[int]) -> tuple[list[OrderFit | None], np.ndarray]:
+    """One refit per draw at its order, on the record with fresh noise and a skew."""
     fits: list[OrderFit | None] = []
     skews = np.zeros(len(orders))
     for r, order in enumerate(orders):
         data, skews[r] = draws.data(r)
-        fits.append(subset_fits[r] if r in subset_fits else refitter.fit(data, order))
+        fits.append(refitter.fit(data, order))
     return fits, skews
 
 
