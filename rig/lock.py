@@ -247,7 +247,7 @@ class RigLock:
             break
         previous = _read_holder(fd)
         reclaimed = previous if previous is not None and previous.pid != os.getpid() else None
-        holder = LockHolder(os.getpid(), command or command_line(), utc_now_iso(), _user(), socket.gethostname(),
+        holder = LockHolder(os.getpid(), command or command_line(), utc_now_iso(), current_user(), socket.gethostname(),
                             address)
         try:
             os.ftruncate(fd, 0)
@@ -276,7 +276,8 @@ class RigLock:
         self.release()
 
 
-def _user() -> str:
+def current_user() -> str:
+    """This process's user name (its uid when there is none)."""
     try:
         return getpass.getuser()
     except Exception:  # no user name (a container): the uid will do

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.events import EventBus, RigEvent, RigWarning, utc_now_iso
+from hopkinson.rig.lock import current_user
 
 LOG_SUFFIX = ".log.jsonl"
 CAMPAIGN_LOG_NAME = "campaign.log.jsonl"
@@ -70,7 +71,7 @@ class Logbook:
 
         self.write({"type": "LogOpened", "utc": utc_now_iso(), "level": "info",
                     "message": f"log of {what or 'the rig'} opened", "software_version": __version__,
-                    "pid": os.getpid(), "user": _user(), "host": socket.gethostname(), "command": command})
+                    "pid": os.getpid(), "user": current_user(), "host": socket.gethostname(), "command": command})
 
     def write(self, obj: dict[str, Any]) -> None:
         """One object as one line (never raises: a failure is reported once, then the log closes)."""
@@ -135,15 +136,6 @@ class Logbook:
 def _z(utc: str) -> str:
     """ISO 8601 UTC with a "Z" (drivers stamp "+00:00")."""
     return utc.replace("+00:00", "Z")
-
-
-def _user() -> str:
-    import getpass
-
-    try:
-        return getpass.getuser()
-    except Exception:  # no user name (a container): the uid will do
-        return str(os.getuid())
 
 
 def read_log(path: str | os.PathLike[str]) -> list[dict[str, Any]]:

@@ -69,10 +69,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--shots", type=int, metavar="N",
                      help="confirm the number of shots of a plan larger than --confirm-above")
     add_log_arguments(run)
-    out = run.add_mutually_exclusive_group()
-    out.add_argument("--json", action="store_true", help="one JSON object on stdout at the end (the outcome)")
-    out.add_argument("--json-events", action="store_true",
-                     help="every event as one JSON line on stdout as it happens (for scripts)")
     run.set_defaults(func=run_campaign_command)
 
     status = sub.add_parser("status", help="the journal summary of a run folder")

@@ -81,15 +81,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-uncertainty", dest="uncertainty", action="store_false", default=None,
                    help="no Monte Carlo uncertainty of the key figures (faster; the figures carry none)")
     add_log_arguments(p)
-    out = p.add_mutually_exclusive_group()
-    out.add_argument("--json", action="store_true", help="one JSON object on stdout (the outcome)")
-    out.add_argument("--json-events", action="store_true",
-                     help="every event as one JSON line on stdout as it happens (for scripts)")
     p.set_defaults(func=run_shot_command)
 
 
 def add_log_arguments(p: argparse.ArgumentParser) -> None:
-    """-v, --log-file, --trace: shared by the commands that drive the rig."""
+    """-v, --log-file, --trace, and --json | --json-events: shared by the commands that drive the rig."""
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="one JSON object on stdout at the end (the outcome)")
+    out.add_argument("--json-events", action="store_true",
+                     help="every event as one JSON line on stdout as it happens (for scripts)")
     p.add_argument("-v", "--verbose", action="store_true", help="also print the readings and instrument identities")
     p.add_argument("--log-file", type=Path, metavar="PATH",
                    help="also write the JSON-lines log of every event here (appended)")

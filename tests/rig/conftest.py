@@ -11,6 +11,7 @@ import dataclasses
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hopkinson.analysis.params import AnalysisParams
@@ -67,6 +68,28 @@ def rig_toml(session: SimSession, path: Path, **timeouts: float) -> Path:
         assert n == 1, pattern
     path.write_text(text, encoding="utf-8")
     return path
+
+
+def read_until(proc: Any, stream: Any, pattern: str, timeout_s: float = 60.0) -> str:
+    """The lines a process writes on `stream` up to one matching `pattern` (regular expression);
+    the process is killed and the test fails when none comes in time."""
+    import re
+    import select
+    import time
+
+    seen: list[str] = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if not select.select([stream], [], [], 0.2)[0]:
+            continue
+        line = stream.readline()
+        if not line:
+            break
+        seen.append(line)
+        if re.search(pattern, line):
+            return "".join(seen)
+    proc.kill()
+    raise AssertionError(f"{pattern!r} never came; got {''.join(seen)!r}")
 
 
 class Recorder:

@@ -6,17 +6,17 @@ from __future__ import annotations
 import json
 import os
 import re
-import select
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.logbook import read_log
 from hopkinson.rig.shotfile import read_shot
+
+from tests.rig.conftest import read_until
 
 REPO = Path(__file__).resolve().parents[2]
 LINE = re.compile(r"^(\d\d:\d\d:\d\d\.\d\d\d) (\S+)")  # every event line: its UTC time, then the state
@@ -152,30 +152,12 @@ def test_sim_options_need_sim_and_config_must_exist(configs, capsys, tmp_path) -
 
 
 # -- real processes: Ctrl-C and the terminal prompt ---------------------------------------------------
-def _read_until(stream, needle: str, proc: subprocess.Popen, timeout_s: float = 60.0) -> str:
-    """Lines of `stream` up to one containing `needle` (fails if the process ends first)."""
-    seen = []
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([stream], [], [], 0.5)
-        if not ready:
-            continue
-        line = stream.readline()
-        if not line:
-            break
-        seen.append(line)
-        if needle in line:
-            return "".join(seen)
-    proc.kill()
-    raise AssertionError(f"{needle!r} never came; got {''.join(seen)!r}")
-
-
 def test_ctrl_c_during_charge_goes_safe_then_exits_3(configs) -> None:
     args = _args(configs, "--yes", sim="sim10")
     args[args.index("1.0")] = "6.0"  # 6 bar take ~1.2 s to charge at 10x: time to press Ctrl-C
     proc = subprocess.Popen([sys.executable, "-m", "hopkinson", *args], cwd=REPO, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    head = _read_until(proc.stdout, "CHARGE", proc)
+    head = read_until(proc, proc.stdout, "CHARGE")
     proc.send_signal(signal.SIGINT)
     rest, err = proc.communicate(timeout=60)
     out = head + rest
@@ -196,7 +178,7 @@ def test_yes_typed_at_the_terminal_prompt_fires(configs) -> None:
                             stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     os.close(slave)
     try:
-        _read_until(proc.stdout, "waiting for the fire confirmation", proc)
+        read_until(proc, proc.stdout, "waiting for the fire confirmation")
         os.write(master, b"yes\n")
         out, err = proc.communicate(timeout=60)
     finally:

@@ -8,8 +8,6 @@ representative set per command and signal.
 from __future__ import annotations
 
 import os
-import re
-import select
 import signal
 import subprocess
 import sys
@@ -22,7 +20,7 @@ from hopkinson.rig.lock import current_holder
 from hopkinson.rig.logbook import read_log
 from hopkinson.rig.sim_session import sim_session
 
-from tests.rig.conftest import REPO, fast_sim_config, rig_toml, short_timeouts_config
+from tests.rig.conftest import REPO, fast_sim_config, read_until, rig_toml, short_timeouts_config
 
 TIME_SCALE = 10.0  # charging 4 bar takes ~0.8 s: a signal can land while the fill is open
 
@@ -39,22 +37,6 @@ def _start(*argv: str, stream: str = "stdout") -> subprocess.Popen:
                             env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
 
 
-def _read_until(proc: subprocess.Popen, stream, pattern: str, timeout_s: float = 60.0) -> str:
-    seen = []
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if not select.select([stream], [], [], 0.2)[0]:
-            continue
-        line = stream.readline()
-        if not line:
-            break
-        seen.append(line)
-        if re.search(pattern, line):
-            return "".join(seen)
-    proc.kill()
-    raise AssertionError(f"{pattern!r} never came: {''.join(seen)!r}")
-
-
 def _assert_safe(session) -> None:
     world = session.world
     assert world.coils() == {"fire": False, "fill": False, "vent": True, "pump": False}, world.coils()
@@ -68,7 +50,7 @@ def _assert_safe(session) -> None:
 def test_shot_gets_a_signal_goes_safe_and_exits_3(sim, tmp_path: Path, sig: signal.Signals, at: str) -> None:
     session, toml = sim
     proc = _start("shot", "--config", str(toml), "--yes", "--pressure-bar", "4.0", "--out", str(tmp_path / "shots"))
-    head = _read_until(proc, proc.stdout, at)
+    head = read_until(proc, proc.stdout, at)
     proc.send_signal(sig)
     rest, err = proc.communicate(timeout=60)
     assert proc.returncode == 3, (head + rest, err)
@@ -107,7 +89,7 @@ def test_campaign_gets_a_signal_aborts_the_shot_goes_safe_and_exits_3(sim, tmp_p
                     'serial = "S"\n[[shots]]\npressure_bar = 4.0\nprojectile = 3\nrepeats = 2\n', encoding="utf-8")
     run = tmp_path / "run"
     proc = _start("campaign", "run", str(plan), "--config", str(toml), "--out", str(run), "--no-report")
-    _read_until(proc, proc.stderr, r"\[1/2\] s001-r1 CHARGE \d")
+    read_until(proc, proc.stderr, r"\[1/2\] s001-r1 CHARGE \d")
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 3, err

@@ -9,7 +9,6 @@ shot's CHECK finds the reservoir vented, or vents it first and says so.
 from __future__ import annotations
 
 import re
-import select
 import signal
 import subprocess
 import sys
@@ -20,26 +19,10 @@ import pytest
 from hopkinson.rig.events import RigWarning
 from hopkinson.rig.sim_session import sim_session
 
-from tests.rig.conftest import REPO, fast_sim_config, rig_toml, short_timeouts_config
+from tests.rig.conftest import REPO, fast_sim_config, read_until, rig_toml, short_timeouts_config
 
 WATCHDOG_S = 2.0  # the heartbeat beats every watchdog_s / 4: 4x margin for a loaded machine
 TIME_SCALE = 10.0  # charging 6 bar takes ~1.2 s: time to kill the process while the fill is open
-
-
-def _read_until(proc: subprocess.Popen, pattern: str, timeout_s: float = 60.0) -> str:
-    seen = []
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if not select.select([proc.stdout], [], [], 0.2)[0]:
-            continue
-        line = proc.stdout.readline()
-        if not line:
-            break
-        seen.append(line)
-        if re.search(pattern, line):
-            return "".join(seen)
-    proc.kill()
-    raise AssertionError(f"{pattern!r} never came: {''.join(seen)!r}")
 
 
 def _wait_for(condition, timeout_s: float) -> float:
@@ -61,7 +44,7 @@ def test_a_killed_shot_leaves_the_controller_to_vent_the_rig(tmp_path: Path, kil
         proc = subprocess.Popen([sys.executable, "-m", "hopkinson", "shot", "--config", str(toml), "--yes",
                                  "--pressure-bar", "6.0", "--out", str(tmp_path)], cwd=REPO, text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-        _read_until(proc, r" CHARGE +charging:" if kill_when == "charging" else r" FIRE +fired at")
+        read_until(proc, proc.stdout, r" CHARGE +charging:" if kill_when == "charging" else r" FIRE +fired at")
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
         if kill_when == "charging":
