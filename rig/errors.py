@@ -37,6 +37,8 @@ HINT_INSTRUMENT = "The instrument refused or answered badly: check its settings 
 HINT_NOT_CONFIRMED = "The shot was not confirmed in time; ARM again when ready."
 HINT_SAFE_NOT_CONFIRMED = "Check the rig by hand: valves and reservoir pressure."
 HINT_OPERATOR_ABORT = "The rig is safe; ARM again when ready."
+HINT_WATCHDOG = ("The PC missed the controller's heartbeat (overloaded, or the network to the controller "
+                 "dropped): check the link, then ARM again.")
 
 
 def instrument_hint(exc: BaseException) -> str:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from hopkinson.rig.errors import HINT_OPERATOR_ABORT, HINT_TIMEOUT
+from hopkinson.rig.errors import HINT_OPERATOR_ABORT, HINT_TIMEOUT, HINT_WATCHDOG
 from hopkinson.rig.events import EventBus, Note, RigEvent, RigWarning, StepProgress
 from hopkinson.rig.interlocks import REQUIRED, InterlockReport, evaluate, read_readings
 from hopkinson.rig.sequencer.states import State, state_timeout_s
@@ -215,10 +215,23 @@ class ShotContext:
         self.last_report = report
         self.events.reading(report)
         if not report.all_ok:
+            self._raise_if_watchdog_tripped()
             failing = report.failing()
             raise Abort(self.source_of(failing[0]), f"interlock lost: {'; '.join(report.problems())}",
                         " ".join(dict.fromkeys(report.hints())), tuple(code.value for code in failing))
         return report
+
+    def _raise_if_watchdog_tripped(self) -> None:
+        """An interlock lost because the controller's link watchdog tripped (this process's
+        heartbeat was missed: it de-energised and vented) is said as such."""
+        valves = self.instruments.valves
+        try:
+            tripped = valves.watchdog_tripped()
+        except Exception:  # noqa: BLE001 - only a better reason: the interlock's own stands otherwise
+            return
+        if tripped:
+            raise Abort(valves.name, "the controller's link watchdog tripped (a heartbeat was missed): it closed fill "
+                                     "and fire and vented the rig", HINT_WATCHDOG)
 
     def source_of(self, interlock: str) -> str:
         """The instrument an interlock is read from."""

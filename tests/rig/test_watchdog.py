@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 
 import pytest
-from hopkinson.rig.events import RigWarning
+from hopkinson.rig.events import AwaitingConfirmation, RigWarning
+from hopkinson.rig.sequencer import FireAuthorisation
 from hopkinson.rig.sim_session import sim_session
 
 from tests.rig.conftest import REPO, fast_sim_config, read_until, rig_toml, short_timeouts_config
@@ -73,4 +74,22 @@ def test_check_vents_pressure_left_in_the_reservoir_first_and_says_so(rig) -> No
     (warning,) = [e for e in rig.recorder.of(RigWarning) if "venting it first" in e.message]
     assert warning.state == "CHECK" and "before the shot" in warning.message
     assert any("venting it first" in w for w in outcome.warnings)
+    rig.assert_safe()
+
+
+def test_a_missed_heartbeat_while_armed_is_named_as_such(rig) -> None:
+    """The PC stalls while the rig waits armed: the controller trips, vents, and the shot is
+    aborted with that reason (not as a mysterious leak)."""
+    valves = rig.instruments.valves
+    valves.start_heartbeat()
+    rig.world.set_watchdog_s(0.3)  # a short watchdog for the test (wall seconds)
+    rig.bus.subscribe(lambda e: valves.stop_heartbeat_thread() if isinstance(e, AwaitingConfirmation) else None)
+    try:
+        outcome = rig.run(FireAuthorisation(), pressure_bar=2.0, confirm_timeout_s=10.0)
+    finally:
+        valves.stop_heartbeat()
+    assert outcome.aborted_in == "ARM" and not outcome.fired and rig.world.shots_fired == 0
+    assert "link watchdog tripped (a heartbeat was missed)" in outcome.error
+    assert outcome.hint.startswith("The PC missed the controller's heartbeat")
+    assert rig.world.watchdog_trips == 1
     rig.assert_safe()
