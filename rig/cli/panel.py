@@ -3,6 +3,11 @@
     hopkinson panel [--config PATH | --sim [--sim-config PATH] [--sim-fault NAME ...]]
                     [--out DIR] [--runs DIR] [--demo-shot] [--screenshot PATH]
 
+The panel controls the rig like a shot does (ui/worker.py's RigLink): it takes the rig's lock
+before connecting (a rig held by a shot, a campaign or another panel is refused, exit 2, naming
+the holder), feeds the controller's link watchdog while connected, and on SIGINT, SIGTERM or
+SIGHUP aborts what runs, runs SAFE (confirmed by reading back), closes and exits 3.
+
 The ui package is imported inside the command's function only: rig never imports ui at module
 level (ui imports rig, not the other way round), and the other commands never load Qt.
 """
