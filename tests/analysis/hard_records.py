@@ -12,7 +12,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import band_edges
-from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, baseline_drift, fractional_delay
+from hopkinson.drivers.sim.accelerometer import (
+    AccelerometerTruth,
+    Mode,
+    baseline_drift,
+    fractional_delay,
+)
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.shock import bipolar_m_s2, half_sine_m_s2
 
