@@ -60,7 +60,7 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
         header, rows = combined_rows(stats)
         if rows:
             page.heading("Key figures of the campaign: mean of the shots with its expanded uncertainty")
-            page.table(header, rows, size=7.5)
+            page.table(header, rows, size=7.5, widths=[3.0, 0.4, 1.0, 1.4, 0.9, 0.9, 0.8, 0.5, 0.9])
             page.paragraph(COMBINATION_NOTE, size=6.5, colour="0.25")
         flagged = [(e.label, e.compensation) for e in report.shots
                    if e.compensation is not None and e.compensation.recommended is False]

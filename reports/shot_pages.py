@@ -121,19 +121,21 @@ def excitation_page(entry: ShotEntry) -> Figure:
         ax_l.semilogy(np.arange(1, len(arx) + 1), arr(arx), "s--", color="0.5", ms=3, label="plain least squares")
     ax_l.axvline(chosen, color="tab:red", lw=1.2, label=f"chosen order {chosen}")
     ax_l.set_xlabel("model order n")
-    ax_l.set_ylabel("loss (response units²)")
+    ax_l.set_ylabel("loss (as the identification reports it)")
     ax_l.set_title("Loss by order", fontsize=9)
     ax_l.legend(fontsize=6.5)
     ax_l.grid(alpha=0.3)
 
-    aic, bic = ident.get("aic_by_order") or [], ident.get("bic_by_order") or []
-    if aic:
-        ax_c.plot(np.arange(1, len(aic) + 1), arr(aic), "o-", ms=3, color="tab:blue", label="AIC")
-    if bic:
-        ax_c.plot(np.arange(1, len(bic) + 1), arr(bic), "s-", ms=3, color="tab:orange", label="BIC")
+    # Each criterion above its own minimum, on a log scale: order 1 is often orders of magnitude
+    # worse, and a linear axis would hide the knee.
+    for values, marker, colour, name in ((ident.get("aic_by_order") or [], "o-", "tab:blue", "AIC"),
+                                         (ident.get("bic_by_order") or [], "s-", "tab:orange", "BIC")):
+        y = arr(values)
+        if y.size and np.any(np.isfinite(y)):
+            ax_c.semilogy(np.arange(1, y.size + 1), y - np.nanmin(y) + 1.0, marker, ms=3, color=colour, label=name)
     ax_c.axvline(chosen, color="tab:red", lw=1.2, label=f"chosen order {chosen}")
     ax_c.set_xlabel("model order n")
-    ax_c.set_ylabel("criterion (dimensionless)")
+    ax_c.set_ylabel("criterion − its minimum + 1")
     ax_c.set_title("AIC / BIC (on the bias-corrected loss)", fontsize=9)
     ax_c.legend(fontsize=6.5)
     ax_c.grid(alpha=0.3)
