@@ -152,9 +152,10 @@ def normalised(h: np.ndarray, dc: float) -> np.ndarray:
 
 
 def draw_bands(ax: Any, fbsd: dict[str, float], label_prefix: str = "FBSD", linestyle: str = "--",
-           shade: bool = True, bounds: dict[str, Any] | None = None) -> None:
-    """The ±5 %/±10 % bands (shaded) and the FBSD edges; an edge the shot reports only as a
-    bound (KeyFigures.fbsd_bounds) says so in its label."""
+           shade: bool = True, bounds: dict[str, Any] | None = None,
+           intervals: dict[str, tuple[float, float] | None] | None = None) -> None:
+    """The ±5 %/±10 % bands (shaded) and the FBSD edges with their 95 % intervals (when known);
+    an edge the shot reports only as a bound (KeyFigures.fbsd_bounds) says so in its label."""
     for key, level, colour in BAND_LEVELS:
         if shade:
             ax.axhspan(1 - level, 1 + level, color=colour, alpha=0.08 if key == "10" else 0.12,
@@ -166,6 +167,10 @@ def draw_bands(ax: Any, fbsd: dict[str, float], label_prefix: str = "FBSD", line
             if bound is not None:
                 label += f": the shot supports only > {fmt(bound.lower_bound_hz, 1e3)} kHz"
             ax.axvline(f / 1e3, color=colour, ls=linestyle, lw=1.3, label=label)
+            interval = (intervals or {}).get(key)
+            if interval is not None:
+                ax.axvspan(interval[0] / 1e3, interval[1] / 1e3, color=colour, alpha=0.25, lw=0,
+                           label=f"95 % interval of FBSD ±{key} %")
 
 
 def model_page(entry: ShotEntry) -> Figure:
@@ -198,7 +203,8 @@ def model_page(entry: ShotEntry) -> Figure:
     fl = np.linspace(0.0, min(nyquist_hz(model), 2.5 * f10), 800)
     ml = normalised(frequency_response(model, fl), dc)
     ax_band.plot(fl / 1e3, ml, color="tab:blue", lw=1.5, label="model")
-    draw_bands(ax_band, a.fbsd_hz, bounds=kf.fbsd_bounds if kf is not None else None)
+    draw_bands(ax_band, a.fbsd_hz, bounds=kf.fbsd_bounds if kf is not None else None,
+               intervals={k: f.interval for k, f in kf.fbsd_hz.items()} if kf is not None else None)
     ax_band.set_ylim(0.8, 1.2)
     ax_band.set_xlim(0, fl[-1] / 1e3)
     ax_band.set_xlabel("frequency (kHz)")
