@@ -152,3 +152,29 @@ def test_bad_input_is_one_line_exit_2(run_folder: Path, tmp_path: Path, capsys) 
     shutil.copyfile(run_folder / "plan.toml", empty / "plan.toml")
     assert main(["report", str(empty)]) == 2
     assert "no shot files yet" in one_error_line(capsys)
+
+
+def test_a_plan_naming_a_sine_calibration_gets_the_comparison(run_folder: Path, tmp_path: Path, capsys) -> None:
+    """The plan copy names the sensor's sine calibration (here: the simulated sensor's true
+    response, as a lab's sine calibrator would measure it): the report compares every shot's model."""
+    import numpy as np
+    from hopkinson.drivers.sim.world import accelerometer_truth
+
+    run = tmp_path / "run"
+    shutil.copytree(run_folder, run)
+    truth = read_shot(run / "shots" / "s001-r1.h5", load_raw=False).meta.simulated_truth
+    f = np.geomspace(500.0, 15e3, 10)
+    h = accelerometer_truth(truth).frequency_response(f)
+    rows = "".join(f"{fi:.10g},{abs(hi):.10g},{np.degrees(np.angle(hi)):.10g},0.005\n" for fi, hi in zip(f, h, strict=True))
+    (run / "sine.csv").write_text("frequency_hz,magnitude,phase_deg,u_magnitude_rel\n" + rows)
+    plan = (run / "plan.toml").read_text().replace('serial = "R1"', 'serial = "R1"\nsine_calibration = "sine.csv"')
+    (run / "plan.toml").write_text(plan)
+    out = tmp_path / "r.html"
+    assert main(["report", str(run), "-o", str(out), "--json"]) == 0
+    sine = json.loads(capsys.readouterr().out)["campaign"]["sine_comparison"]
+    assert sorted(sine) == ["s001-r1", "s002-r1"]
+    for comparison in sine.values():  # each shot's model against the true sensor, up to 15 kHz
+        assert max(abs(e) for e in comparison["magnitude_error_pct"]) < 1.0
+    page = out.read_text(encoding="utf-8")
+    assert "Against the sinusoidal calibration" in page and "sine.csv (10 points)" in page
+    assert page.count("<img ") == 3 + 4 * 2
