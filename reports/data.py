@@ -59,14 +59,15 @@ class ShotEntry:
     @cached_property
     def compensation(self) -> CompensationCheck | None:
         """How the DCM did on the shot itself (issue 11), None when the results do not say."""
-        return CompensationCheck.of(self.stored.get("dcm") or {}) if self.analysis is not None else None
+        return CompensationCheck.of(self.key_figures) if self.key_figures is not None else None
 
 
 @dataclass(frozen=True)
 class CompensationCheck:
-    """The DCM's check on its own shot, as the analysis stored it (results["dcm"]): errors over
-    the pulse before and with compensation, the widening aimed for and reached, the noise gain
-    and its limit, the band-limiting low-pass, the latency, and whether a DCM is recommended."""
+    """The DCM's check on its own shot, read from its KeyFigures (the results' "dcm" object):
+    errors over the pulse before and with compensation, the widening aimed for and reached, the
+    noise gain and its limit, the band-limiting low-pass, the latency, and whether a DCM is
+    recommended."""
 
     recommended: bool | None
     not_recommended_reason: str | None
@@ -82,12 +83,13 @@ class CompensationCheck:
     compensated_peak: Figure | None
 
     @classmethod
-    def of(cls, dcm: dict[str, Any]) -> CompensationCheck | None:
-        """From the results' "dcm" object; None when it holds none of the check's figures."""
-        keys = ("recommended", "check", "noise_gain", "band_limit_hz", "reached_widening", "latency_s")
-        if not any(dcm.get(k) is not None for k in keys):
+    def of(cls, kf: KeyFigures) -> CompensationCheck | None:
+        """From a shot's KeyFigures (its DCM figures); None when the results hold none of them."""
+        present = (kf.dcm_recommended, kf.compensation_check, kf.dcm_noise_gain, kf.dcm_band_limit_hz,
+                   kf.dcm_reached_widening, kf.dcm_latency_s)
+        if all(v is None for v in present):
             return None
-        check = dcm.get("check") or {}
+        check = kf.compensation_check or {}
 
         def pair(name: str) -> tuple[float | None, float | None] | None:
             d = check.get(name)
@@ -95,20 +97,19 @@ class CompensationCheck:
                 return None
             return _number(d.get("uncompensated")), _number(d.get("compensated"))
 
-        recommended = dcm.get("recommended")
         return cls(
-            recommended=bool(recommended) if recommended is not None else None,
-            not_recommended_reason=dcm.get("not_recommended_reason"),
+            recommended=bool(kf.dcm_recommended) if kf.dcm_recommended is not None else None,
+            not_recommended_reason=kf.dcm_not_recommended_reason,
             rms_error_pct=pair("rms_error_pct"),
             peak_error_pct=pair("peak_error_pct"),
-            target_widening=_number(dcm.get("target_widening")),
-            reached_widening=_number(dcm.get("reached_widening")),
-            widening_note=dcm.get("widening_note"),
-            noise_gain=_number(dcm.get("noise_gain")),
-            noise_gain_limit=_number(dcm.get("noise_gain_limit")),
-            band_limit_hz=_number(dcm.get("band_limit_hz")),
-            latency_s=_number(dcm.get("latency_s")),
-            compensated_peak=Figure.of(dcm.get("compensated_peak")),
+            target_widening=kf.dcm_target_widening,
+            reached_widening=kf.dcm_reached_widening,
+            widening_note=kf.dcm_widening_note,
+            noise_gain=kf.dcm_noise_gain,
+            noise_gain_limit=kf.dcm_noise_gain_limit,
+            band_limit_hz=kf.dcm_band_limit_hz,
+            latency_s=kf.dcm_latency_s,
+            compensated_peak=kf.compensated_peak,
         )
 
 

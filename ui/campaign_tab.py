@@ -359,7 +359,7 @@ class CampaignTab(QWidget):
                 figure_tooltip(kf.fbsd_hz.get("10"), KILO, "kHz")),
             10: (format_figure(kf.shock_sensitivity, decimals=4), figure_tooltip(kf.shock_sensitivity)),
         }
-        check = CompensationCheck.of(results.get("dcm") or {})
+        check = CompensationCheck.of(kf)
         if check is not None and check.recommended is not None:
             reason = check.not_recommended_reason or "compensation does not improve this shot"
             cells[12] = ("recommended", "") if check.recommended else ("NOT recommended", reason)

@@ -121,6 +121,7 @@ def view_from_results(results: dict[str, Any], record: Record | None = None) -> 
     model, dcm = analysis.model, analysis.dcm
     f = frequency_grid_hz(model.sample_interval_s)
     mag, comp = magnitudes(model, dcm, f)
+    figures = KeyFigures.from_results(results)
     stored_dcm = results.get("dcm") or {}
     # the shot's own band limit (0: it had none); None for results from before band limits
     band_limit_hz = float(stored_dcm["band_limit_hz"] or 0.0) if "band_limit_hz" in stored_dcm else None
@@ -131,7 +132,7 @@ def view_from_results(results: dict[str, Any], record: Record | None = None) -> 
         order=ident.get("order", model.order),
         model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz),
         frequency_hz=f, magnitude=mag, compensated_magnitude=comp, record=record,
-        figures=KeyFigures.from_results(results), compensation=CompensationCheck.of(results.get("dcm") or {}),
+        figures=figures, compensation=CompensationCheck.of(figures),
     )
 
 

@@ -56,7 +56,8 @@ def test_the_strip_shows_value_plus_minus_u_and_the_dcm_verdict(qtbot):
     }
     strip = ResultsStrip()
     qtbot.addWidget(strip)
-    strip.show_figures(KeyFigures.from_results(results), CompensationCheck.of(results["dcm"]))
+    kf = KeyFigures.from_results(results)
+    strip.show_figures(kf, CompensationCheck.of(kf))
     v = strip.values
     assert v["resonance"].text() == "27.00 ± 0.21 kHz"  # value to the decimals of U (GUM 7.2.6)
     assert v["fbsd_5"].text() == "5.911 ± 0.093 kHz"
