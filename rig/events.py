@@ -171,6 +171,10 @@ class Analysed(RigEvent):
     def ok(self) -> bool:
         return self.error is None
 
+    @property
+    def level(self) -> str:
+        return "info" if self.error is None else "warning"
+
 
 @dataclass(frozen=True, kw_only=True)
 class Reading(RigEvent):
