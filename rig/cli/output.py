@@ -17,6 +17,7 @@ import threading
 from typing import IO, Any
 
 from hopkinson.rig.events import (
+    Analysed,
     AwaitingConfirmation,
     Fired,
     Identified,
@@ -30,7 +31,7 @@ from hopkinson.rig.events import (
     Stored,
 )
 
-_SHOWN = (StateEntered, StepProgress, AwaitingConfirmation, Fired, Stored, Note, RigWarning, RigError)
+_SHOWN = (StateEntered, StepProgress, AwaitingConfirmation, Fired, Stored, Analysed, Note, RigWarning, RigError)
 _VERBOSE = (Identified, Reading)
 
 

@@ -406,8 +406,6 @@ class Sequencer:
                                                 run=run)
         self._shielded(ctx, lambda: self.bus.publish(Analysed(
             state=State.ANALYSE.value, message=error or f"analysed: {path}", shot_path=str(path), error=error)))
-        if error is not None:
-            self._shielded(ctx, lambda: self._events.warn(error))
         return results, error
 
 
