@@ -186,15 +186,19 @@ class VisaLink:
         self._reader = _SocketReader(session) if _SocketReader.fits(session) else _VisaReader(inst)
 
     def close(self) -> None:
-        """Close the session and the resource manager (idempotent; never raises)."""
-        inst, rm = self._inst, self._rm
+        """Close this session (idempotent; never raises).
+
+        The resource manager is left open: pyvisa keeps one per VISA library and process, and
+        closing it would close every other session of that library in this process (another
+        digitizer, the panel's and a command's sessions).
+        """
+        inst = self._inst
         self._inst, self._rm, self._reader = None, None, None
-        for thing in (inst, rm):
-            if thing is not None:
-                try:
-                    thing.close()
-                except Exception:  # closing a broken session must not hide the first error
-                    pass
+        if inst is not None:
+            try:
+                inst.close()
+            except Exception:  # closing a broken session must not hide the first error
+                pass
 
     # -- ScpiLink ---------------------------------------------------------------------------
     def write(self, command: str) -> None:

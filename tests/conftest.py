@@ -17,6 +17,17 @@ import pytest  # noqa: E402
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 
 
+@pytest.fixture(autouse=True)
+def private_rig_folders(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test keeps rig locks (rig/lock.py) and the simulator's runtime files (pty links,
+    addresses, state) in folders of its own: never the machine's shared ones, and no clash
+    between tests running in parallel."""
+    monkeypatch.setenv("HOPKINSON_LOCK_DIR", str(tmp_path_factory.mktemp("locks")))
+    runtime = tmp_path_factory.mktemp("runtime")
+    runtime.chmod(0o700)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
+
+
 @pytest.fixture(scope="session")
 def artifacts_dir() -> Path:
     """A folder (git-ignored) where tests save screenshots and plots for people to look at."""

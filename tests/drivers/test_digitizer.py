@@ -533,3 +533,19 @@ def test_transfer_benchmark_smoke() -> None:
         assert row["bytes"] == 200_000 and row["newline_bytes"] > 100
         for key in ("raw_socket_mb_s", "driver_mb_s", "pyvisa_default_mb_s"):
             assert row[key] > 0
+
+
+def test_closing_one_digitizer_leaves_another_session_of_the_process_open(world: World, faults: FaultSet,
+                                                                          server: SimDigitizerServer) -> None:
+    # pyvisa keeps one resource manager per VISA library and process: closing it would close
+    # every other session (the panel's and a command's, a second digitizer).
+    second = SimDigitizerServer(world, FaultSet())
+    second.start()
+    try:
+        with Digitizer(server.resource, timeout_s=2.0, name="first") as first, \
+                Digitizer(second.resource, timeout_s=2.0, name="second") as other:
+            assert first.identity() and other.identity()
+            first.close()
+            assert other.identity()  # still answers
+    finally:
+        second.stop()

@@ -155,14 +155,6 @@ class Rig:
             assert self.world.reservoir_pressure_bar() <= self.config.limits.vent_done_bar
 
 
-@pytest.fixture(autouse=True)
-def private_lock_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """Rig locks (rig/lock.py) of this test in a folder of its own, never the system's."""
-    folder = tmp_path_factory.mktemp("locks")
-    monkeypatch.setenv("HOPKINSON_LOCK_DIR", str(folder))
-    return folder
-
-
 @pytest.fixture
 def make_rig(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     """make_rig(faults=(), config=None, time_scale=100) -> Rig; everything stopped after the test."""
