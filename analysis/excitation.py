@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
-from scipy import fft, optimize
+from hopkinson.analysis.numerics import bracketed_root, next_fast_len
+from numpy import fft
 
 WIDTH_FRACTION = 0.10  # ISO 16063-22: pulse duration at 10 % of the peak
 MINUS_3DB = 10 ** (-3 / 20)  # amplitude ratio at −3 dB (0.7079)
@@ -197,7 +198,7 @@ def amplitude_spectrum(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(frequency_hz, |F(f)|) from DC to Nyquist, zero-padded to at least `min_points` bins."""
     a = np.asarray(acceleration_m_s2, dtype=float)
-    n = fft.next_fast_len(max(2 * min_points, 8 * a.size), real=True)
+    n = next_fast_len(max(2 * min_points, 8 * a.size))
     spectrum = np.abs(fft.rfft(a, n)) * sample_interval_s
     return fft.rfftfreq(n, sample_interval_s), spectrum
 
@@ -222,13 +223,13 @@ def _band_around_peak(
     below_hi = np.flatnonzero(mag[i_max:] < threshold)
     if below_hi.size:
         j = i_max + int(below_hi[0])
-        high = optimize.brentq(excess, freq[j - 1], freq[j], xtol=1e-9 * freq[j])
+        high = bracketed_root(excess, freq[j - 1], freq[j], 1e-9 * freq[j])
     else:
         high = float(freq[-1])
     below_lo = np.flatnonzero(mag[: i_max + 1] < threshold)
     if below_lo.size:
         j = int(below_lo[-1])
-        low = optimize.brentq(excess, freq[j], freq[j + 1], xtol=1e-9 * freq[j + 1])
+        low = bracketed_root(excess, freq[j], freq[j + 1], 1e-9 * freq[j + 1])
     else:
         low = 0.0
     return float(low), float(high)

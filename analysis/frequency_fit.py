@@ -24,7 +24,7 @@ the group (the groups are far narrower than any resonance the band can resolve).
 
 Starting values: Sanathanan–Koerner iterations (the linearised cost re-weighted by the last
 1/|A|², the frequency-domain Steiglitz–McBride) from a linear least-squares fit; then
-Levenberg–Marquardt (scipy.optimize.least_squares, MINPACK) on V with its analytic Jacobian.
+Levenberg–Marquardt (analysis.numerics, Marquardt's scaling) on V with its analytic Jacobian.
 Unstable trial steps are rejected. numpy/scipy have no errors-in-variables transfer-function
 estimator, hence this module.
 """
@@ -35,8 +35,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from hopkinson.analysis.refined_iv import stabilised
-from scipy import linalg, optimize
+from hopkinson.analysis.numerics import levenberg_marquardt
 
 # A pole this close to the unit circle is on the stability boundary (treated as unstable).
 STABILITY_MARGIN = 1e-8
@@ -146,6 +145,19 @@ def predicted_bins(fit: OrderFit, data: SpectralData, omega: np.ndarray, u_bins:
         theta = problem.pack(replace(fit, transient=fit.transient if fit.transient.size else np.zeros(0)))
         return data.y - problem._error(problem._pieces(theta))
     return response(fit, omega) * u_bins
+
+
+def stabilised(a: np.ndarray) -> np.ndarray:
+    """A(d⁻¹) with every root on or outside the unit circle reflected inside (p → 0.999/p̄): a
+    linear start that wandered unstable is brought back before the fit takes over."""
+    if a.size <= 1:
+        return a
+    roots = np.roots(a)
+    outside = np.abs(roots) >= 1.0 - STABILITY_MARGIN
+    if not np.any(outside):
+        return a
+    roots[outside] = 0.999 / np.conj(roots[outside])
+    return np.real(np.poly(roots))
 
 
 def response(fit: OrderFit, omega: np.ndarray) -> np.ndarray:
@@ -339,16 +351,13 @@ class OrderProblem:
         if self.residual_size() < self.size:
             return fallback
         try:
-            result = optimize.least_squares(
-                self.residual, theta0, jac=self.jacobian, method="lm", x_scale="jac",
-                xtol=tolerance, ftol=tolerance, gtol=tolerance, max_nfev=max_evaluations,
-            )
+            result = levenberg_marquardt(self.residual, self.jacobian, theta0, max_evaluations, tolerance)
         except (ValueError, np.linalg.LinAlgError):
             return fallback
         cost = self.cost(result.x)
         if not (np.isfinite(cost) and cost <= fallback.cost):
-            return replace(fallback, evaluations=int(result.nfev))
-        return self.fit_of(result.x, cost, int(result.nfev), result.status > 0)
+            return replace(fallback, evaluations=result.evaluations)
+        return self.fit_of(result.x, cost, result.evaluations, result.converged)
 
     def residual_size(self) -> int:
         return (3 if self.data.grouped else 2) * self.data.omega.size
@@ -369,9 +378,9 @@ class OrderProblem:
             weight = 1.0 / (np.abs(big_a) * np.sqrt(d.var_y + np.abs(g) ** 2 * d.var_u))
             rows, rhs = self._linear_rows(dl, weight)
             try:
-                x, *_ = linalg.lstsq(np.vstack((rows.real, rows.imag)), np.concatenate((rhs.real, rhs.imag)),
-                                     check_finite=False, lapack_driver="gelsy")
-            except (linalg.LinAlgError, ValueError):
+                x, *_ = np.linalg.lstsq(np.vstack((rows.real, rows.imag)), np.concatenate((rhs.real, rhs.imag)),
+                                        rcond=None)
+            except (np.linalg.LinAlgError, ValueError):
                 break
             raw = np.concatenate(([1.0], x[:n]))
             raw_unstable = not is_stable(raw)

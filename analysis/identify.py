@@ -51,7 +51,8 @@ from hopkinson.analysis.excitation import pulse_width, supported_band_hz
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, predicted_bins
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
-from hopkinson.analysis.noise import NoiseSpectrum, active_end
+from hopkinson.analysis.noise import NoiseSpectrum
+from hopkinson.analysis.numerics import f_quantile, next_fast_len
 from hopkinson.analysis.order_choice import (
     FRF_TOLERANCE,
     SIGNIFICANCE,
@@ -65,8 +66,8 @@ from hopkinson.analysis.order_choice import (
 )
 from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate, shift_samples
-from scipy import fft, signal, special
+from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
+from numpy import fft
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10
@@ -76,12 +77,14 @@ MARGINAL_POLE = 1e-6
 POOR_FIT_PERCENT = 50.0
 # (kept for the API: the relative tolerance of the old knee rule, reported)
 KNEE_TOLERANCE = 0.01
-# Noise draws that re-run the order choice (its stability), from a fixed seed: the same record
-# always gives the same order.
-STABILITY_DRAWS = 20
+# identify(stability_draws=…): noise draws that re-run the order choice to measure its
+# stability, from a fixed seed (the same record always gives the same evidence); the
+# uncertainty's Monte Carlo measures it anyway, so identify alone does not by default. Below
+# this share of draws choosing it, the choice is reported as unstable.
 STABILITY_SEED = 16_063
+ORDER_STABILITY_WARNING = 0.5
 # More bins than this are summed in groups of adjacent bins (same cost while G is flat there).
-MAX_BINS = 2048
+MAX_BINS = 512
 # A response leading the reference by more than this (samples, significant) is reported.
 LEAD_WARNING_SAMPLES = 0.2
 # V per degree of freedom above this: the model, not the noise, dominates the residual.
@@ -281,7 +284,8 @@ def identify(
     max_delay_samples: int = 32,
     remove_delay: bool = True,
     patience: int | None = 3,
-    max_evaluations: int = 40,
+    max_evaluations: int = 60,
+    stability_draws: int = 0,
 ) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record.
 
@@ -294,6 +298,8 @@ def identify(
     remove_delay: False fixes the delay at 0.
     patience: stop trying higher orders once this many past the current choice gave no gain
         (their losses are NaN: not evaluated); None tries every order up to max_order.
+    stability_draws: re-run the order choice on this many noise draws and report how often
+        each order wins (analysis.uncertainty does so in any case).
     """
     if max_order < 1:
         raise AnalysisError(f"max_order must be at least 1, got {max_order}")
@@ -368,7 +374,7 @@ def identify(
             starts.append(previous.embedded())
         best = None
         for start in starts:
-            fitted = replace(problem.solve(start, max_evaluations), start_unstable=starts[0].start_unstable)
+            fitted = replace(problem.solve(start, max_evaluations, 1e-6), start_unstable=starts[0].start_unstable)
             if best is None or fitted.cost < best.cost:
                 best = fitted
         assert best is not None
@@ -384,19 +390,20 @@ def identify(
     evidence: dict[str, Any] = {"comparisons": comparisons}
     if chosen_auto is None:
         raise AnalysisError(f"no stable model of order 1 … {n_max} fits this record (every fit was unstable)")
-    if order is None:
+    if order is None and stability_draws > 0:
         # Stability across resampled noise: the test re-run on the chosen model's response with
         # fresh noise of the record's own level (a parametric bootstrap; analysis.uncertainty
-        # draws the order the same way). Reported as evidence; below 50 % a warning.
+        # does the same for the order's PDF and reports it). Reported as evidence; below 50 %
+        # a warning.
         omega_bins = 2.0 * np.pi * prep.bin_hz * dt
         noise_draws = NoiseDraws(data, prep.u_bins, prep.y_bins, prep.var_u, prep.var_y, omega_bins, prep.group,
                                  STABILITY_SEED,
                                  centre_y=predicted_bins(fits[chosen_auto], data, omega_bins, prep.u_bins))
         refitter = Refitter(data, fits, delay_mode, max_delay_samples)
         candidates = [m for m in candidates_around(chosen_auto, fits) if math.isfinite(costs[m])]
-        fractions, _, _ = order_stability(noise_draws, refitter, candidates, STABILITY_DRAWS, significance)
-        evidence["stability"] = {"draws": STABILITY_DRAWS, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
-        if fractions.get(chosen_auto, 0.0) < 0.5:
+        fractions, _, _ = order_stability(noise_draws, refitter, candidates, stability_draws, significance)
+        evidence["stability"] = {"draws": stability_draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
+        if fractions.get(chosen_auto, 0.0) < ORDER_STABILITY_WARNING:
             warnings.append(
                 f"the order choice is not stable under the record's own noise: the test chose order {chosen_auto}, "
                 f"fresh noise of the same level gives {fractions_text(fractions)}; the uncertainty includes the "
@@ -410,9 +417,9 @@ def identify(
         the same model to ~1e-9. A delay pressed against zero converges slowly in its bounded
         parameter: there the fit with the delay held at zero is taken when it is as good."""
         if n not in polished_orders:
-            done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 8 * max_evaluations, 1e-13)
+            done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 200, 1e-11)
             if delay_mode == "causal" and done.delay < 1e-2 and not done.converged:
-                at_zero = OrderProblem(data, n, 0.0, max_delay_samples).solve(done, 8 * max_evaluations, 1e-13)
+                at_zero = OrderProblem(data, n, 0.0, max_delay_samples).solve(done, 200, 1e-11)
                 if at_zero.cost <= done.cost * (1 + 1e-9):
                     done = at_zero
             fits[n] = replace(done, start_unstable=fits[n].start_unstable)
@@ -557,10 +564,14 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
         raise AnalysisError(f"the reference has no pulse to identify from: {exc}") from None
     width = max(1, int(round(pulse.width_s / dt)))
     i_start = int(math.floor(pulse.start_s / dt))
-    i_end = int(math.ceil(pulse.end_s / dt))
-    margin = max(4, width // 2)
-    pre_end = max(i_start - margin, 0)
-    # Baselines: the mean before the pulse.
+    # Where each channel is busy: the reference above 2 % of its peak and 4× its noise floor
+    # (every pulse of a train, not only the largest), the response above 4 noise RMS until it
+    # stays quiet; each widened by the margins the filters and the delay need. The rest is
+    # quiet: there the noise is measured.
+    floor = float(np.median(np.convolve(np.abs(u), np.full(5, 0.2), mode="same")))  # the noise's level
+    ref_busy = _busy(u, max(0.02 * float(np.max(np.abs(u))), 4.0 * floor), 2 * width + max_delay)
+    first = int(np.argmax(ref_busy)) if np.any(ref_busy) else i_start
+    pre_end = max(first, 0)
     base_u = float(np.mean(u[:pre_end])) if pre_end >= 16 else 0.0
     base_y = float(np.mean(y[:pre_end])) if pre_end >= 16 else 0.0
     u = u - base_u
@@ -569,22 +580,26 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
     if noise_y0 == 0.0:  # no lead-in: a robust level from the record's last tenth
         tail = y[-max(n // 10, 16):]
         noise_y0 = float(1.4826 * np.median(np.abs(tail - np.median(tail))))
-    quiet_from = active_end(y, noise_y0, i_end)
-    post_margin = max(20, 2 * width, (quiet_from - i_start) // 4)
-    end = min(n, quiet_from + post_margin)
-    truncated = quiet_from + post_margin > n
+    resp_busy = ref_busy.copy()
+    loud = _busy(y, 4.0 * noise_y0, 0)
+    for run in _runs(ref_busy):  # the response rings after each pulse until it stays quiet
+        resp_busy[run.start : _settles(loud, run.start, max(50, 10 * width))] = True
+    last_runs = _runs(resp_busy)
+    last = last_runs[-1] if last_runs else slice(i_start, i_start + width)
+    post_margin = max(20, 2 * width, (last.stop - last.start) // 4)
+    end = min(n, last.stop + post_margin)
+    truncated = last.stop + post_margin > n
     pre_window = max(3 * width, 32) + max_delay
-    start = max(0, i_start - pre_window)
-    cold_start = i_start - start < min(pre_window, 16)
-    # Noise: the reference before the pulse and in flight after it; the response before the
-    # pulse and after its ringing. A drift: the line through the quiet stretches before and after.
-    ref_after = min(n, i_end + 2 * width + max_delay)
-    u_segments = [slice(0, pre_end), slice(ref_after, n)]
-    y_segments = [slice(0, pre_end), slice(end, n)]
+    start = max(0, first - pre_window + 2 * width + max_delay) if np.any(ref_busy) else max(0, i_start - pre_window)
+    cold_start = first < 16
+    u_segments = [r for r in _runs(~ref_busy) if r.stop - r.start >= MIN_QUIET]
+    y_segments = [r for r in _runs(~resp_busy) if r.stop - r.start >= MIN_QUIET]
+    # A drift: the line through the quiet samples, when quiet stretches before the first and
+    # after the last activity pin it.
     drift = False
     for x, segs in ((u, u_segments), (y, y_segments)):
-        if all(s.stop - s.start >= MIN_QUIET for s in segs):
-            idx = np.concatenate([np.arange(s.start, s.stop) for s in segs])
+        if len(segs) >= 2 and segs[0].start == 0 and segs[-1].stop == n:
+            idx = np.concatenate([np.arange(r.start, r.stop) for r in segs])
             slope, intercept = np.polyfit(idx, x[idx], 1)
             x -= slope * np.arange(n) + intercept
             drift = True
@@ -594,6 +609,10 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
     if noise_u.samples == 0:
         warnings.append("the reference has no quiet stretch (before the pulse or in flight after it) to measure "
                         "its noise: it is taken as noise-free, which understates the uncertainty")
+    if not truncated and not cold_start:  # a window the FFT likes, from real (quiet) samples
+        fast = next_fast_len(end - start)
+        if start + fast <= n:
+            end = start + fast
     uw, yw = u[start:end], y[start:end]
     try:
         band = supported_band_hz(u, dt, noise_psd=noise_u.at if noise_u.samples else None)
@@ -637,24 +656,51 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
 
 
 def _initial_delay(data: SpectralData, prep: _Prepared, order: int, max_delay: int) -> float:
-    """A start for the causal delay: on a half-sample grid up to just past the cross-correlation
-    lag, the three best linear starts of `order` are refined and the best refined delay kept."""
+    """A start for the causal delay: on a grid (half a sample, or 1/8 of the span) up to just past
+    the cross-correlation lag, the two best linear starts of `order` are refined and the best
+    refined delay kept."""
     try:
         xcorr = estimate_delay_samples(prep.u, prep.y, max(1, min(max_delay, prep.u.size // 4)))
     except AnalysisError:
         xcorr = 0.0
     top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
     problem = OrderProblem(data, order, "causal", max_delay)
-    starts = sorted((problem.linear_start(float(tau)) for tau in np.arange(0.0, top + 0.25, 0.5)),
+    step = max(0.5, top / 8.0)  # at most ~9 starts
+    starts = sorted((problem.linear_start(float(tau)) for tau in np.arange(0.0, top + 0.25 * step, step)),
                     key=lambda f: f.cost)
     picked: list[OrderFit] = []
     for start in starts:
         if all(abs(start.delay - p.delay) >= 1.0 for p in picked):
             picked.append(start)
-        if len(picked) == 3:
+        if len(picked) == 2:
             break
     refined = [problem.solve(start, 40) for start in picked]
     return min(refined, key=lambda f: f.cost).delay if refined else 0.0
+
+
+def _busy(x: np.ndarray, level: float, widen: int) -> np.ndarray:
+    """Samples where a 5-sample box-car of |x| exceeds `level`, widened by `widen` each side."""
+    loud = np.convolve(np.abs(x), np.full(5, 0.2), mode="same") > level
+    if widen > 0 and np.any(loud):
+        loud = np.convolve(loud.astype(float), np.ones(2 * widen + 1), mode="same") > 0
+    return loud
+
+
+def _settles(loud: np.ndarray, start: int, quiet: int) -> int:
+    """One past the last loud sample after `start` that is followed by `quiet` quiet samples (a
+    stray loud sample of the noise further on does not count)."""
+    idx = np.flatnonzero(loud[start:])
+    if idx.size == 0:
+        return start
+    gaps = np.flatnonzero(np.diff(idx) > quiet)
+    last = idx[gaps[0]] if gaps.size else idx[-1]
+    return int(start + last + 1)
+
+
+def _runs(mask: np.ndarray) -> list[slice]:
+    """The contiguous runs of True in `mask`, as slices."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 # ------------------------------------------------------------------------------ checks
@@ -704,7 +750,7 @@ def _lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: fl
     dof = 2 * data.bins - problem.size
     if free.delay >= -LEAD_WARNING_SAMPLES or dof <= 0 or gain <= 0:
         return []
-    critical = float(special.fdtri(1, dof, 1.0 - significance))
+    critical = f_quantile(1.0 - significance, 1, dof)
     if (2.0 * gain) / (2.0 * free.cost / dof) <= critical:
         return []
     lead = -free.delay
@@ -717,9 +763,18 @@ def _lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: fl
 
 # ------------------------------------------------------------------------------ helpers
 def _simulate(u: np.ndarray, fit: OrderFit) -> np.ndarray:
-    """Model output (B/A)·u(k − τ) from rest (the fractional delay by shift_samples)."""
-    shifted = shift_samples(u, fit.delay) if fit.delay else u
-    return signal.lfilter(fit.b, fit.a, shifted)
+    """Model output (B/A)·u(k − τ) from rest, in the frequency domain: the record padded with
+    zeros past the slowest pole's decay (to 1e-12, at most four record lengths), so the
+    circular convolution is the linear one; the fractional delay is the same linear phase
+    identify fits. (scipy.signal.lfilter would load scipy.signal, ~0.4 s, for this alone.)"""
+    n = u.size
+    radius = float(np.max(np.abs(np.roots(fit.a)))) if fit.a.size > 1 else 0.0
+    decay = int(min(4 * n, 27.7 / max(-math.log(max(radius, 1e-300)), 1e-12))) if radius > 0 else 0
+    size = next_fast_len(n + decay + int(math.ceil(fit.delay)) + 1)
+    omega = 2.0 * np.pi * fft.rfftfreq(size)
+    z = np.exp(-1j * omega)
+    h = np.polyval(fit.b[::-1], z) / np.polyval(fit.a[::-1], z) * np.exp(-1j * omega * fit.delay)
+    return fft.irfft(fft.rfft(u, size) * h, size)[:n]
 
 
 def _information_criteria(losses: list[float], parameters: list[int], bins: int) -> tuple[list[float], list[float]]:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy import linalg
 
 # Below this ratio of residual to column energy a Cholesky pivot has lost too many digits
 # (its relative error is ~ eps / ratio); the QR path is then used.
@@ -123,11 +122,11 @@ def _triangular_factor(u: np.ndarray, y: np.ndarray, max_order: int, method: str
     if method in ("auto", "cholesky"):
         gram = augmented_gram(u, y, max_order)
         try:
-            r = linalg.cholesky(gram, lower=False, check_finite=False)
+            r = np.linalg.cholesky(gram).T
             ratio = np.diag(r) ** 2 / np.maximum(np.diag(gram), np.finfo(float).tiny)
             if method == "cholesky" or np.min(ratio) > _CHOLESKY_MIN_PIVOT_RATIO:
                 return r, "cholesky"
-        except linalg.LinAlgError:
+        except np.linalg.LinAlgError:
             if method == "cholesky":
                 raise AnalysisError(
                     "the information matrix is numerically singular (noise-free or rank-deficient "
@@ -149,7 +148,7 @@ def _blocked_qr_r(u: np.ndarray, y: np.ndarray, max_order: int) -> np.ndarray:
         for lag in range(n_max + 1):
             block[:, 2 * lag] = u[start + lag : stop + lag]
             block[:, 2 * lag + 1] = -y[start + lag : stop + lag]
-        r = linalg.qr(np.vstack([r, block]), mode="r", check_finite=False)[0][:size]
+        r = np.linalg.qr(np.vstack([r, block]), mode="r")[:size]
     # Signs of R's rows are arbitrary in QR; make the diagonal non-negative like Cholesky.
     signs = np.where(np.diag(r) < 0, -1.0, 1.0)
     return r * signs[:, None]
@@ -176,7 +175,7 @@ def arx_coefficients_by_order(
     for n in range(1, max_order + 1):
         j = 2 * n + 1
         # R[:j,:j]·θ' = −R[:j, j] gives θ' = [b_n, a_n, …, a_1, b_0] (coefficient of column j is 1).
-        theta = linalg.solve_triangular(r[:j, :j], -r[:j, j], check_finite=False)
+        theta = np.linalg.solve(r[:j, :j], -r[:j, j])
         b = theta[0::2][::-1]
         a = np.concatenate(([1.0], theta[1::2][::-1]))
         models.append((a, b))

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import fft, signal
+from numpy import fft
 
 # Shortest quiet stretch worth a spectrum, and the Welch segment length (frequency resolution
 # f_s / WELCH_SEGMENT: 4 kHz at 1 MS/s); at most MAX_QUIET_SAMPLES of a stretch are used (the
@@ -47,7 +47,7 @@ def welch(x: np.ndarray, sample_rate_hz: float, segment: int) -> tuple[np.ndarra
     t = np.arange(segment) - (segment - 1) / 2.0
     blocks = blocks - blocks.mean(axis=1, keepdims=True)
     blocks = blocks - np.outer(blocks @ t / (t @ t), t)
-    window = signal.get_window("hann", segment)
+    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(segment) / segment)  # periodic Hann
     spectra = np.abs(fft.rfft(blocks * window, axis=1)) ** 2
     psd = spectra.mean(axis=0) / (sample_rate_hz * float(window @ window))
     psd[1:-1] *= 2.0  # one-sided (the segment is even: DC and Nyquist once)
@@ -105,48 +105,32 @@ class NoiseSpectrum:
 
     @classmethod
     def measure(cls, x: np.ndarray, sample_rate_hz: float, segments: Sequence[slice]) -> NoiseSpectrum:
-        """Welch spectrum over the quiet `segments` of `x`; the larger where segments disagree.
+        """Welch spectrum over the quiet `segments` of `x`.
 
-        Segments shorter than MIN_QUIET_SAMPLES are skipped; with none left the spectrum is
-        zero and `samples` is 0 (the caller falls back on residuals)."""
+        The stretch at the record's start (before any activity) and the others (after the pulse,
+        between the pulses of a train) are averaged apart, each weighted by length, and the
+        larger level is kept where they disagree: an interferometer is quiet at rest (no beat,
+        no phase noise) but noisy in flight, and the flight is what the pulse sees. Segments
+        shorter than MIN_QUIET_SAMPLES are skipped, and at most MAX_QUIET_SAMPLES are used per
+        group; with none left the spectrum is zero and `samples` is 0."""
         x = np.asarray(x, dtype=float)
-        spectra = []
+        groups: dict[bool, list[tuple[np.ndarray, np.ndarray, int]]] = {True: [], False: []}
+        budget = {True: MAX_QUIET_SAMPLES, False: MAX_QUIET_SAMPLES}
         used = 0
         for seg in segments:
             piece = x[seg]
-            if piece.size < MIN_QUIET_SAMPLES:
+            lead = seg.start == 0
+            take = min(piece.size, budget[lead])
+            if take < MIN_QUIET_SAMPLES:
                 continue
-            f, p = welch(piece[-MAX_QUIET_SAMPLES:], sample_rate_hz, min(WELCH_SEGMENT, piece.size))
-            spectra.append((f, p, piece.size))
-            used += piece.size
+            f, p = welch(piece[-take:], sample_rate_hz, min(WELCH_SEGMENT, take))
+            groups[lead].append((f, p, take))
+            budget[lead] -= take
+            used += take
+        spectra = [s for s in groups.values() if s]
         if not spectra:
             return cls(np.array([0.0, sample_rate_hz / 2]), np.zeros(2), sample_rate_hz, 0, "none")
-        grid = max(spectra, key=lambda s: s[0].size)[0]
-        levels = np.array([np.interp(grid, f, p) for f, p, _ in spectra])
+        grid = max((f for group in spectra for f, _, _ in group), key=lambda f: f.size)
+        levels = [sum(np.interp(grid, f, p) * w for f, p, w in group) / sum(w for _, _, w in group)
+                  for group in spectra]
         return cls(grid, np.max(levels, axis=0), sample_rate_hz, used, "quiet segments")
-
-
-def quiet_segments(
-    reference: np.ndarray,
-    response: np.ndarray,
-    pulse_start: int,
-    active_end: int,
-    margin: int,
-) -> tuple[list[slice], list[slice]]:
-    """Quiet stretches of each channel: before the pulse (less a margin) and after the active
-    part of the record (where the response has died away) — (reference's, response's)."""
-    n = min(reference.size, response.size)
-    before = slice(0, max(pulse_start - margin, 0))
-    after = slice(min(active_end, n), n)
-    return [before, after], [before, after]
-
-
-def active_end(y: np.ndarray, noise_rms: float, start: int, threshold: float = 4.0) -> int:
-    """One past the last sample after `start` where |y| (box-car smoothed over 5 samples)
-    exceeds `threshold` noise RMS: the response has died away into its noise after it."""
-    if y.size == 0:
-        return 0
-    smooth = np.convolve(np.abs(y), np.full(5, 0.2), mode="same")
-    level = threshold * noise_rms if noise_rms > 0 else 1e-3 * float(np.max(smooth))
-    loud = np.flatnonzero(smooth[start:] > level)
-    return int(start + loud[-1] + 1) if loud.size else int(start)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.frequency_fit import OrderFit, QuickRefit, SpectralData, is_stable, response
-from scipy import special
+from hopkinson.analysis.numerics import f_quantile
 
 # The order test: a higher order must be significant at this level (F test on V, corrected for
 # the number of bins a pole pair could be placed at) ...
@@ -64,7 +64,7 @@ def choose_order(
                 continue
             gain = costs[n] - costs[m]
             f_stat = (gain / (dp / 2.0)) / (costs[m] / (dof / 2.0)) if costs[m] > 0 else math.inf
-            critical = float(special.fdtri(dp, dof, level))
+            critical = f_quantile(level, dp, dof)
             moved = change.get((n, m), math.inf)
             better = f_stat > critical and moved > frf_tolerance
             comparisons.append({"order": n, "against": m, "f": f_stat, "f_critical": critical,

@@ -77,7 +77,7 @@ PEAK_SEGMENT = 256  # samples around a peak that get fresh noise for the peak fi
 # Below this share of stable refits the draws cannot stand for the estimator.
 MIN_GOOD_FRACTION = 0.9
 # Stability of the order choice below which a warning is given.
-ORDER_STABILITY_WARNING = 0.7
+ORDER_STABILITY_WARNING = 0.5
 
 
 @dataclass(frozen=True)

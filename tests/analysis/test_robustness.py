@@ -96,11 +96,12 @@ def test_hard_case_is_within_its_interval_or_says_why(name: str) -> None:
 
 def test_reference_noise_does_not_bias_the_model() -> None:
     """Errors-in-variables: a reference with strong interferometer noise (f² spectrum up to
-    100 kHz, 20 % of the peak) and a clean response; over shots the estimates scatter around the
+    100 kHz, 15 % of the peak) and a clean response; over shots the estimates scatter around the
     truth, within their uncertainty. A fit that trusts the reference (its noise weight set to
-    zero) gives, on the same shots, f_n −1.2 % (mean −1.2 u) and FBSD ±5 % +7.9 % (+2.1 u);
-    this one +0.07 % (+0.2 u) and +1 % (+0.2 u)."""
-    case = BASE.scaled(reference_noise=0.0, interferometer_noise=0.2, interferometer_band_hz=100e3,
+    zero) gives, on the same shots, FBSD ±5 % +2.8 % (mean +1.7 u); this one +0.7 % (+0.3 u).
+    (The supported band, cut where the reference's SNR falls below 20 dB, already keeps most
+    of the attenuation bias out; the weighting removes the rest.)"""
+    case = BASE.scaled(reference_noise=0.0, interferometer_noise=0.15, interferometer_band_hz=100e3,
                        response_noise=0.002)
     truth = truth_figures(case)
     z = {k: [] for k in ("dc_gain", "natural_frequency_hz", "fbsd_5")}
@@ -108,6 +109,7 @@ def test_reference_noise_does_not_bias_the_model() -> None:
         result = evaluate(identify(record(case, 40 + seed)), UncertaintyOptions(draws=60, seed=seed, **NO_CHAIN))
         for k, e in (("dc_gain", result.dc_gain), ("natural_frequency_hz", result.natural_frequency_hz),
                      ("fbsd_5", result.fbsd_hz["5"])):
-            z[k].append((e.value - truth[k]) / e.u)
+            if e is not None:  # a noisy reference may not support the resonance: then it is not claimed
+                z[k].append((e.value - truth[k]) / e.u)
     for k, values in z.items():
-        assert abs(np.mean(values)) < 1.0, (k, values)  # no systematic offset beyond the uncertainty
+        assert len(values) >= 4 and abs(np.mean(values)) < 1.0, (k, values)  # no systematic offset beyond the uncertainty
