@@ -292,6 +292,9 @@ def shot_uncertainty(
         warnings.append(f"the uncertainty could not be evaluated ({exc}): the figures are reported without it")
         return None, []
     warnings += [w for w in result.warnings if w not in warnings]
+    if result.order.get("draws"):  # the order choice's stability, measured by the draws
+        ident.order_evidence.setdefault("stability", {"draws": result.order["draws"],
+                                                      "fraction_by_order": dict(result.order["fraction_by_order"])})
     return result.to_dict(), result.model_draws
 
 
