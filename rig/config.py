@@ -106,12 +106,6 @@ class ValveControllerConfig:
         """One count of the reservoir gauge, bar (0 for a float32 gauge)."""
         return self.register_map.input_registers.reservoir_pressure.resolution
 
-    # Transitional, for rig/sequencer/steps.py's fallback (a driver without
-    # has_projectile_register, which the role now requires): remove with that fallback.
-    @property
-    def holding_registers(self) -> Any:
-        return self.register_map.holding_registers
-
 
 DIGITIZER_ROLES = ("doppler", "response", "doppler_quadrature", "response_2")
 

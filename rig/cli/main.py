@@ -37,6 +37,7 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.panel",
     "hopkinson.rig.cli.safe",
     "hopkinson.rig.cli.sim",
+    "hopkinson.rig.cli.probe",
     "hopkinson.rig.cli.identify",
     "hopkinson.rig.cli.dcm",
     "hopkinson.rig.cli.compare_sine",

@@ -16,8 +16,6 @@ shared without disturbing it: the controller over Modbus TCP (a second connectio
 held serial line or the digitizer's session. An instrument that cannot be reached is
 reported with the reason and the others are still asked. Exit code 0 when every instrument
 asked answered, 1 when one did not, 2 for a bad configuration.
-
-`probe` (rig/cli/probe.py) is registered here too: bringing up a rig, step by step.
 """
 
 from __future__ import annotations
@@ -55,10 +53,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     status.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG, help="rig TOML (default %(default)s)")
     status.add_argument("--json", action="store_true", help="one JSON object on stdout")
     status.set_defaults(func=run_status)
-
-    from hopkinson.rig.cli import probe
-
-    probe.register(subparsers)
 
 
 # -- sim ------------------------------------------------------------------------------------------

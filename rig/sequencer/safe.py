@@ -9,7 +9,11 @@ Run by the sequencer after every shot (done, aborted, timed out, interrupted, fa
    positions where the controller reports them, else the coils) and any that is wrong is
    commanded again; the gauges are read. Confirmed when a whole round had no instrument
    error, every valve is as wanted and the reservoir (plus half a gauge count: the gauge rounds
-   to the nearest count) is at or below `limits.vent_done_bar`.
+   to the nearest count) is at or below `limits.vent_done_bar`. Not confirmed in time: the
+   problem names every valve not as wanted (a stuck one: its real position against its
+   command) and the reservoir pressure; when the last round failed with an instrument error,
+   that error and the valves last read in a position other than their command
+   (`ValveStates.mismatches`).
 3. After a Modbus timeout the controller may still carry out a request it did not answer in
    time (a late "fill open" after SAFE closed it), so SAFE then keeps re-checking for
    `safe_hold_s` before it confirms.
@@ -111,10 +115,11 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
 
     half_count = gauge_half_count_bar(valves, config)
     confirmed = False
-    states = readings = None
+    states = readings = last_states = None
     while True:
         errors_before = errors
         states = attempt(valves.valves)
+        last_states = states if states is not None else last_states
         wrong = [] if states is None else [n for n, want in WANTED.items() if _is(states, n) != want]
         for name in wrong:  # not as wanted (or changed late): command it again
             attempt(lambda name=name: setters[name](WANTED[name]))
@@ -132,6 +137,8 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
         if now >= deadline:
             if clean_round:
                 problem = _what_is_wrong(valves.name, states, wrong, readings.reservoir_pressure_bar, vented, config)
+            elif last_states is not None and last_states.mismatches():  # a stuck valve seen before the error
+                problem = f"{problem}; last read back: {'; '.join(last_states.mismatches())}"
             break
         try:
             time.sleep(poll_s)

@@ -69,20 +69,12 @@ def check(ctx: ShotContext) -> None:
     _configure_digitizer(ctx)
     ctx.checkpoint(inst.digitizer.instrument, "configuring the digitizer")
     projectile = ctx.request.projectile
-    if _has_projectile_register(ctx):
+    if valves.has_projectile_register:
         valves.set_projectile(projectile)
     else:
         ctx.events.note(f"the controller has no projectile register: make sure projectile No. {projectile} is loaded")
     ctx.watch(State.CHECK)
     ctx.checkpoint(valves.name, "checking the interlocks")
-
-
-def _has_projectile_register(ctx: ShotContext) -> bool:
-    valves = ctx.instruments.valves
-    has = getattr(valves, "has_projectile_register", None)
-    if has is None:  # a driver without the property: the configuration's map says
-        return ctx.config.valve_controller.holding_registers.projectile >= 0
-    return bool(has)
 
 
 def _restart_tripped_watchdog(ctx: ShotContext) -> None:
