@@ -23,11 +23,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from bench_identify import best_time  # the same timing rule (best of N)
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
 from hopkinson.analysis.reduce import reduce_raw
@@ -49,15 +48,6 @@ def simulated_shot(seed: int = 1) -> Any:
     acc = half_sine_m_s2(t, 38.6e-6, 50_000 * G_M_S2, PRE_TRIGGER * DT)
     return raw_shot(acc, truth, DT, amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY,
                     rng=np.random.default_rng(seed))
-
-
-def best_time(fn: Callable[[], Any], repeats: int) -> tuple[float, Any]:
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def run(draws: int, repeats: int) -> dict[str, Any]:

@@ -118,10 +118,15 @@ def _checked_params(args: argparse.Namespace) -> Any:
     try:
         return AnalysisParams.from_options(**values)
     except AnalysisError as exc:
-        text = str(exc)
-        for option, flag in FLAGS.items():
-            text = text.replace(f"analysis option {option}:", f"{flag}:")
-        raise AnalysisError(text) from None
+        raise named_by_flag(exc, FLAGS) from None
+
+
+def named_by_flag(exc: AnalysisError, flags: dict[str, str]) -> AnalysisError:
+    """The AnalysisParams check's error with each option named by the command's flag."""
+    text = str(exc)
+    for option, flag in flags.items():
+        text = text.replace(f"analysis option {option}:", f"{flag}:")
+    return AnalysisError(text)
 
 
 def run_identify(args: argparse.Namespace) -> int:

@@ -117,10 +117,9 @@ def _check_numbers(args: argparse.Namespace) -> None:
     try:
         AnalysisParams.from_options(**values)
     except AnalysisError as exc:
-        text = str(exc)
-        for option, flag in FLAGS.items():
-            text = text.replace(f"analysis option {option}:", f"{flag}:")
-        raise AnalysisError(text) from None
+        from hopkinson.rig.cli.identify import named_by_flag
+
+        raise named_by_flag(exc, FLAGS) from None
     if args.bandwidth_hz is not None and not (math.isfinite(args.bandwidth_hz) and 0 < args.bandwidth_hz <= 1e10):
         raise AnalysisError(f"--bandwidth-hz: a finite number of Hz above 0 (at most 1e10), got {args.bandwidth_hz!r}")
 
