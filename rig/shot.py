@@ -267,11 +267,15 @@ class AnalysisResult:
 
 
 def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> AnalysisParams:
-    """Everything the analysis needs besides the channels: the rig's constants, the request's
-    options and the amplifier gain read back at the shot (in `settings`), checked
-    (AnalysisError naming the option)."""
+    """Everything the analysis needs besides the channels: the rig's constants (its [analysis]
+    DCM limits and [uncertainty] reference chain too), the request's options and the amplifier
+    gain read back at the shot (in `settings`), checked (AnalysisError naming the option)."""
     a = config.analysis
+    chain = config.uncertainty.analysis_options()  # the reference chain and the rig's draws
     return AnalysisParams.from_options(
+        **chain | {"draws": request.draws if request.draws is not None else chain["draws"]},
+        dcm_widening=a.dcm_widening,
+        dcm_noise_gain_limit=a.dcm_noise_gain_limit,
         grating_pitch_m=a.grating_pitch_m,
         orders=tuple(a.orders),
         amp_gain=float(settings.get("amplifier_gain", config.amplifier.gain)),
@@ -282,7 +286,6 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
         dcm_ratio=request.dcm_ratio,
         dcm_damping=request.dcm_damping,
         uncertainty=request.uncertainty,
-        draws=request.draws,
     )
 
 

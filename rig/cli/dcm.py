@@ -79,7 +79,7 @@ def _load_support(path: str, record: Record | None) -> tuple[DiscreteModel, Shot
     return model, support
 
 
-def _number_or_word(text: str, option: str, words: dict[str, float | None], what: str) -> float | None:
+def number_or_word(text: str, option: str, words: dict[str, float | None], what: str) -> float | None:
     """A positive finite number, or one of `words` (its value); AnalysisError naming the option."""
     word = text.strip().lower()
     if word in words:
@@ -189,11 +189,11 @@ def _design(args: argparse.Namespace, record: Record | None
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
     options = DcmOptions(
-        ratio=_number_or_word(args.ratio, "--ratio", {"auto": None}, "a positive number"),
+        ratio=number_or_word(args.ratio, "--ratio", {"auto": None}, "a positive number"),
         damping=args.damping,
         widening=args.widening,
         noise_gain_limit=args.noise_gain_limit,
-        band_limit_hz=_number_or_word(args.band_limit, "--band-limit", {"auto": None, "off": 0.0},
+        band_limit_hz=number_or_word(args.band_limit, "--band-limit", {"auto": None, "off": 0.0},
                                       "a positive frequency in Hz"),
         extra_poles=tuple(parse_poles(args.extra_poles, "--extra-poles")) if args.extra_poles else (),
     )

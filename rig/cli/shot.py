@@ -4,7 +4,7 @@
                    [--sim-state-file PATH]] [--pressure-bar P] [--projectile N] [--yes]
                    [--out DIR] [--operator NAME] [--accelerometer-model M]
                    [--accelerometer-serial S] [--sensitivity-v-per-m-s2 S] [--max-order N]
-                   [--sample-rate HZ] [--dcm-ratio R] [--dcm-damping Z] [--draws N]
+                   [--sample-rate HZ] [--dcm-ratio auto|R] [--dcm-damping Z] [--draws N]
                    [--no-uncertainty] [--shot-name NAME]
                    [-v] [--log-file PATH] [--trace] [--json | --json-events]
 
@@ -75,7 +75,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--sensitivity-v-per-m-s2", type=float, help="nominal sensitivity (default: config [analysis])")
     p.add_argument("--max-order", type=int, help="highest model order tried by the identification")
     p.add_argument("--sample-rate", type=float, dest="sample_rate_hz", help="analysis sample rate, Hz")
-    p.add_argument("--dcm-ratio", type=float, help="DCM response-time ratio r")
+    p.add_argument("--dcm-ratio", default="auto", metavar="auto|R",
+                   help="DCM response-time ratio r (> 0), or 'auto' (default): the r that widens the ±5 %% band "
+                        "[analysis] dcm_widening times within dcm_noise_gain_limit (rig config)")
     p.add_argument("--dcm-damping", type=float, help="DCM damping of the new poles")
     p.add_argument("--draws", type=int, help="Monte Carlo draws of the uncertainty (default: the analysis' own)")
     p.add_argument("--no-uncertainty", dest="uncertainty", action="store_false", default=None,
@@ -106,6 +108,7 @@ def run_shot_command(args: argparse.Namespace) -> int:
 
 def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     # Imported here: the drivers (pymodbus, pyvisa, pyserial) load only when a shot runs.
+    from hopkinson.rig.cli.dcm import number_or_word
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig, run_shot_under_signals
     from hopkinson.rig.events import AwaitingConfirmation, EventBus
@@ -122,7 +125,8 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         pressure_bar=args.pressure_bar, projectile=args.projectile, operator=args.operator,
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
         sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
-        sample_rate_hz=args.sample_rate_hz, dcm_ratio=args.dcm_ratio, dcm_damping=args.dcm_damping,
+        sample_rate_hz=args.sample_rate_hz, dcm_damping=args.dcm_damping,
+        dcm_ratio=number_or_word(args.dcm_ratio, "--dcm-ratio", {"auto": None}, "a positive number"),
         uncertainty=args.uncertainty, draws=args.draws, out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
         # Without --yes and without a terminal nobody can confirm: do not wait in ARM.
         confirm_timeout_s=None if args.yes else (PROMPT_TIMEOUT_S if interactive else 0.0),
