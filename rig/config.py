@@ -484,6 +484,7 @@ def load_rig_config(path: str | Path) -> RigConfig:
 def load_sim_config(path: str | Path) -> SimConfig:
     """Read and validate config/sim.toml; ConfigError on anything wrong."""
     # Imported here: the simulator's servers are only loaded by the commands that run them.
+    from hopkinson.drivers.sim.scpi_digitizer import SIM_DIALECTS
     from hopkinson.drivers.sim.simulated_rig import SimConfig
 
     path = Path(path)
@@ -491,6 +492,9 @@ def load_sim_config(path: str | Path) -> SimConfig:
     register_map = _build(RegisterMap, data.pop("register_map", {}), path, "register_map")
     _check_register_map(register_map, path, "register_map")
     config = _build(SimConfig, data, path, "", skip=("register_map",))
+    if config.servers.digitizer_dialect not in SIM_DIALECTS:
+        raise ConfigError(f"{path}: servers.digitizer_dialect: must be one of {', '.join(SIM_DIALECTS)}, "
+                          f"got {config.servers.digitizer_dialect!r}")
     if not config.world.accelerometer.modes:
         raise ConfigError(f"{path}: world.accelerometer.modes: at least one mode is needed")
     _check_orders(config.world.signals.orders, path, "world.signals.orders")

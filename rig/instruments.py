@@ -17,7 +17,8 @@ if one cannot be reached, the ones already open are closed again and the Instrum
 (naming the instrument) propagates. On leaving the context every instrument is closed.
 
 `sim_rig_config` makes a RigConfig that reaches a running SimulatedRig (in-process, on free
-ports): its addresses and register map, everything else from the given base configuration.
+ports): its addresses, register map and digitizer dialect and channels, everything else from
+the given base configuration.
 """
 
 from __future__ import annotations
@@ -37,7 +38,13 @@ from hopkinson.drivers.roles import (
     ValveControllerRole,
     missing_members,
 )
-from hopkinson.rig.config import AmplifierConfig, RigConfig, ValveControllerConfig, register_map_of
+from hopkinson.rig.config import (
+    AmplifierConfig,
+    DigitizerConfig,
+    RigConfig,
+    ValveControllerConfig,
+    register_map_of,
+)
 from hopkinson.rig.driver_classes import driver_class
 from hopkinson.rig.errors import ConfigError
 
@@ -211,6 +218,40 @@ def sim_rig_config(base: RigConfig, rig: SimulatedRig) -> RigConfig:
     return dataclasses.replace(
         base,
         valve_controller=vc,
-        digitizer=dataclasses.replace(base.digitizer, resource=a.visa_resource),
+        digitizer=sim_digitizer_config(base.digitizer, a.visa_resource, a.digitizer_dialect, a.digitizer_channels),
         amplifier=amp,
     )
+
+
+def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
+                         channels: dict[str, int]) -> DigitizerConfig:
+    """`base` with the simulated digitizer's resource, dialect and channels: each role of
+    `channels` (role -> channel number) named as the dialect names it; a role of `base` on
+    another channel kept (renamed for the dialect), one on a simulator's channel dropped; the
+    sample format kept where the dialect can send it (else int16, which every dialect can);
+    the driver the project's SCPI one."""
+    from hopkinson.drivers.scpi_dialect import resolve_dialect
+
+    cls = resolve_dialect(dialect)
+    spelled = {role: cls.channel_names[number - 1] for role, number in channels.items()}
+    for role, name in base.channels.items():
+        try:
+            renamed = cls().channel_name(name)
+        except ValueError:  # a lab's own naming: not a channel of the simulator
+            continue
+        if role not in spelled and renamed not in spelled.values():
+            spelled[role] = renamed
+    fmt = base.sample_format if base.sample_format in cls.sample_formats else "int16"
+    return dataclasses.replace(base, driver="scpi", options={}, resource=resource, dialect=dialect,
+                               channels=spelled, sample_format=fmt,
+                               ranges_v={role: v for role, v in base.ranges_v.items() if role in spelled})
+
+
+def sim_digitizer_lines(dialect: str, channels: dict[str, int]) -> list[str]:
+    """What a rig config needs to reach a simulated digitizer of this dialect (printed by
+    `hopkinson sim`)."""
+    from hopkinson.drivers.scpi_dialect import resolve_dialect
+
+    cls = resolve_dialect(dialect)
+    named = ", ".join(f'{role} = "{cls.channel_names[n - 1]}"' for role, n in channels.items())
+    return [f'rig config: [digitizer] dialect = "{dialect}"; [digitizer.channels] {named}']

@@ -12,6 +12,7 @@ FAULTS: dict[str, str] = {
     "modbus-disconnect": "the valve/vacuum controller drops every Modbus TCP connection at its next request (RTU: stops answering)",
     "modbus-slow": "the valve/vacuum controller answers each Modbus request after a long delay (sim.toml modbus_slow_delay_s)",
     "visa-garbled-block": "the digitizer sends a waveform block with a corrupt length header",
+    "visa-endless-reply": "the digitizer, once armed, streams every text reply without its terminator (a hung instrument)",
     "no-trigger": "the digitizer never triggers: the shot is fired but nothing is captured",
     "stuck-fill-valve": "the fill valve, once open, stays open when told to close and past the set-point; pressure climbs to the supply",
     "vacuum-leak": "the fixture vacuum cannot be pulled below the leak level (sim.toml fault_leak_floor_mbar, 500 mbar)",

@@ -43,6 +43,9 @@ Generic SCPI dialect (short form in capitals):
 
 Faults (drivers/sim/faults.py): `visa-garbled-block` sends the waveform block with a corrupt
 length header (the payload follows, so the client's stream is out of step afterwards);
+`visa-endless-reply`, while the instrument is armed or holds a record, answers a query's text
+and then streams digits and commas with no terminator until the client hangs up (in every
+dialect: the reply never ends, so only the client's size limit or deadline can end the read);
 `no-trigger` (the world's) fires without a capture. A client that drops its connection (even
 mid-transfer) only ends its own handler thread.
 """
@@ -66,6 +69,7 @@ SAMPLE_RATE_LIMITS_HZ = (1e3, 1e10)
 RECORD_LENGTH_LIMITS = (16, 100_000_000)
 RANGE_LIMITS_V = (0.001, 100.0)
 MAX_LINE_BYTES = 65536
+ENDLESS_CHUNK = b"1," * 4096  # the `visa-endless-reply` fault's stream: never a terminator
 OPC_POLL_S = 0.002
 SIM_FORMATS = ("int8", "uint8", "int16", "uint16", "float32")
 
@@ -699,6 +703,13 @@ class _Handler(socketserver.BaseRequestHandler):
 
     def _answer(self, sock: socket.socket, replies: list[str | Block]) -> None:
         if not replies:
+            return
+        instrument = self.server.instrument
+        if (isinstance(replies[0], str) and instrument.faults.active("visa-endless-reply")
+                and instrument.state != "IDLE"):
+            sock.sendall(replies[0].encode("ascii"))
+            while not self.server.stopping.is_set():  # until the client hangs up (OSError) or stop()
+                sock.sendall(ENDLESS_CHUNK)
             return
         text: list[bytes] = []
         for i, reply in enumerate(replies):

@@ -5,7 +5,9 @@ SimulatedRig starts, on loopback and pseudo-terminals,
 - the valve/vacuum controller: pymodbus server, Modbus TCP or Modbus RTU on a simulated serial
   line (drivers/sim/modbus_server.py),
 - the digitizer: SCPI socket server (drivers/sim/scpi_digitizer.py), VISA resource
-  ``TCPIP0::host::port::SOCKET``,
+  ``TCPIP0::host::port::SOCKET``, in the dialect of `ServerParams.digitizer_dialect` (generic,
+  keysight, tektronix or lecroy); the world's Doppler beat is on its channel 1, the response
+  on channel 2 (`DIGITIZER_CHANNELS`),
 - the bridge amplifier: serial device on a simulated line at its baud rate
   (drivers/sim/serial_amplifier.py),
 
@@ -46,6 +48,7 @@ from hopkinson.fileio import atomic_write, private_runtime_dir
 
 ADDRESSES_FILE = "sim-addresses.json"  # in the runtime folder: the running `hopkinson sim`
 STATE_PERIOD_S = 0.2
+DIGITIZER_CHANNELS = {"doppler": 1, "response": 2}  # role -> channel number (World.capture)
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,7 @@ class ServerParams:
     modbus_parity: str = "N"
     modbus_stopbits: int = 1
     digitizer_port: int = 0
+    digitizer_dialect: str = "generic"  # generic | keysight | tektronix | lecroy (scpi_digitizer.SIM_DIALECTS)
     amplifier_baudrate: int = 115200
     modbus_slow_delay_s: float = 2.0
 
@@ -77,7 +81,9 @@ class SimConfig:
 class SimAddresses:
     """How to reach the three simulated instruments.
 
-    modbus: "host:port" (TCP) or the pty path (RTU); serial_port: the amplifier's pty."""
+    modbus: "host:port" (TCP) or the pty path (RTU); serial_port: the amplifier's pty;
+    digitizer_dialect and digitizer_channels (role -> channel number): how the digitizer speaks
+    and where it has each signal."""
 
     modbus_host: str
     modbus_port: int
@@ -90,6 +96,8 @@ class SimAddresses:
     modbus_parity: str = "N"
     modbus_stopbits: int = 1
     amplifier_baudrate: int = 115200
+    digitizer_dialect: str = "generic"
+    digitizer_channels: dict[str, int] = field(default_factory=lambda: dict(DIGITIZER_CHANNELS))
 
     @property
     def modbus(self) -> str:
@@ -109,6 +117,8 @@ class SimAddresses:
             "modbus_parity": self.modbus_parity,
             "modbus_stopbits": self.modbus_stopbits,
             "visa_resource": self.visa_resource,
+            "digitizer_dialect": self.digitizer_dialect,
+            "digitizer_channels": dict(self.digitizer_channels),
             "serial_port": self.serial_port,
             "amplifier_baudrate": self.amplifier_baudrate,
         }
@@ -135,7 +145,8 @@ class SimulatedRig:
             unit_id=s.modbus_unit_id, host=s.host, port=s.modbus_port, baudrate=s.modbus_baudrate,
             parity=s.modbus_parity, stopbits=s.modbus_stopbits,
             serial_link=f"{link_prefix}controller" if link_prefix else "", slow_delay_s=s.modbus_slow_delay_s)
-        self.digitizer = SimDigitizerServer(self.world.capture, self.faults, host=s.host, port=s.digitizer_port)
+        self.digitizer = SimDigitizerServer(self.world.capture, self.faults, host=s.host, port=s.digitizer_port,
+                                            dialect=s.digitizer_dialect)
         self.amplifier = SimSerialAmplifier(self.world, self.faults, baudrate=s.amplifier_baudrate,
                                             link_path=f"{link_prefix}amplifier" if link_prefix else None)
 
@@ -179,6 +190,7 @@ class SimulatedRig:
             modbus_parity=s.modbus_parity,
             modbus_stopbits=s.modbus_stopbits,
             amplifier_baudrate=s.amplifier_baudrate,
+            digitizer_dialect=self.digitizer.dialect,
         )
 
     def state(self) -> dict[str, Any]:
@@ -262,8 +274,10 @@ def run_simulator(
     addresses_json: Path | None = None,
     out: TextIO = sys.stdout,
     runtime_dir: Path | None = None,
+    notes: Callable[[SimAddresses], list[str]] | None = None,
 ) -> int:
-    """Body of the `hopkinson sim` process (module docstring): serve until SIGINT/SIGTERM."""
+    """Body of the `hopkinson sim` process (module docstring): serve until SIGINT/SIGTERM.
+    `notes(addresses)`: lines printed under the digitizer's address (the rig config it needs)."""
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     runtime = runtime_dir or private_runtime_dir()
@@ -278,7 +292,11 @@ def run_simulator(
         if a.modbus_transport == "rtu":
             modbus += f", link {prefix}controller"
         out.write(modbus + "\n")
+        channels = ", ".join(f"{role} on channel {n}" for role, n in a.digitizer_channels.items())
         out.write(f"visa    {a.visa_resource}\n")
+        out.write(f"        {a.digitizer_dialect} dialect: {channels}\n")
+        for line in notes(a) if notes is not None else ():
+            out.write(f"        {line}\n")
         out.write(f"serial  {a.serial_port} (link {prefix}amplifier)\n")
         out.write(f"state   {state_path}\n")
         out.write(f"faults  {', '.join(rig.faults.names()) or 'none'}\n")

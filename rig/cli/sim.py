@@ -1,12 +1,15 @@
 """`hopkinson sim` (run the simulated rig) and `hopkinson status` (ask every instrument).
 
-    hopkinson sim [--config config/sim.toml] [--fault NAME ...] [--addresses-json PATH]
+    hopkinson sim [--config config/sim.toml] [--fault NAME ...] [--digitizer-dialect NAME]
+                  [--addresses-json PATH]
     hopkinson sim --list-faults
     hopkinson status [--config config/rig.toml] [--json]
 
 `sim` prints the addresses (Modbus, VISA resource, serial ports) and runs until Ctrl-C or
 SIGTERM, then stops its servers and exits 0; its ptys, addresses and state live in the
-per-user runtime folder (drivers/sim/simulated_rig.py).
+per-user runtime folder (drivers/sim/simulated_rig.py). The digitizer speaks the dialect of
+sim.toml's `servers.digitizer_dialect` or --digitizer-dialect; `sim` prints the [digitizer]
+dialect and channels a rig config needs to reach it.
 
 `status` asks each instrument through its role (drivers/roles.py) and reports identity,
 pressures, vacuum, valves (commanded and real), interlocks, watchdog, the amplifier's
@@ -21,7 +24,7 @@ asked answered, 1 when one did not, 2 for a bad configuration.
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -43,6 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--config", type=Path, default=DEFAULT_SIM_CONFIG, help="simulator TOML (default %(default)s)")
     sim.add_argument("--fault", action="append", default=[], metavar="NAME",
                      help="inject a named fault (repeatable; see --list-faults)")
+    sim.add_argument("--digitizer-dialect", metavar="NAME",
+                     help="the simulated digitizer's command set: generic, keysight, tektronix or lecroy "
+                          "(default: the simulator TOML's servers.digitizer_dialect)")
     sim.add_argument("--addresses-json", type=Path, metavar="PATH", help="also write the addresses as JSON here")
     sim.add_argument("--list-faults", action="store_true", help="list the fault names, one line each, and exit")
     sim.set_defaults(func=run_sim)
@@ -58,8 +64,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 # -- sim ------------------------------------------------------------------------------------------
 def run_sim(args: argparse.Namespace) -> int:
     from hopkinson.drivers.sim.faults import FAULTS
+    from hopkinson.drivers.sim.scpi_digitizer import SIM_DIALECTS
     from hopkinson.drivers.sim.simulated_rig import fault_list_text, run_simulator
     from hopkinson.rig.config import load_sim_config
+    from hopkinson.rig.instruments import sim_digitizer_lines
 
     if args.list_faults:
         print(fault_list_text())
@@ -67,9 +75,14 @@ def run_sim(args: argparse.Namespace) -> int:
     unknown = [name for name in args.fault if name not in FAULTS]
     if unknown:
         return fail(f"unknown fault {unknown[0]!r}; known: {', '.join(FAULTS)}")
+    if args.digitizer_dialect is not None and args.digitizer_dialect not in SIM_DIALECTS:
+        return fail(f"--digitizer-dialect: unknown dialect {args.digitizer_dialect!r}; known: {', '.join(SIM_DIALECTS)}")
     config = load_sim_config(args.config)
+    if args.digitizer_dialect is not None:
+        config = replace(config, servers=replace(config.servers, digitizer_dialect=args.digitizer_dialect))
     try:
-        return run_simulator(config, args.fault, args.addresses_json)
+        return run_simulator(config, args.fault, args.addresses_json,
+                             notes=lambda a: sim_digitizer_lines(a.digitizer_dialect, a.digitizer_channels))
     except (OSError, RuntimeError) as exc:
         return fail(f"cannot start the simulated rig ({args.config}): {exc}")
 

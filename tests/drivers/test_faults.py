@@ -80,6 +80,18 @@ def check_visa_garbled_block(rig: SimulatedRig, clock: FakeClock) -> None:
         assert dig.fetch_waveform(2).volts().size == 20_000
 
 
+def check_visa_endless_reply(rig: SimulatedRig, clock: FakeClock) -> None:
+    with Digitizer(rig.addresses.visa_resource, timeout_s=1.0) as dig:
+        rig.faults.inject("visa-endless-reply")
+        assert dig.acquisition_state() == "IDLE"  # idle: it still answers
+        with pytest.raises(InstrumentError, match="reply longer than 65536 bytes") as caught:
+            dig.arm_single()  # armed by it, the reply to its error check streams without end: the read stops
+        assert "digitizer" in str(caught.value) and not dig.connected  # the session is closed
+        rig.faults.clear("visa-endless-reply")
+        dig.connect()
+        assert dig.acquisition_state() == "ARMED"
+
+
 def check_no_trigger(rig: SimulatedRig, clock: FakeClock) -> None:
     with controller(rig) as vc, Digitizer(rig.addresses.visa_resource, timeout_s=1.0) as dig:
         dig.configure(record_length=20_000, pre_trigger_fraction=0.1)
@@ -175,6 +187,7 @@ CHECKS: dict[str, Callable[[SimulatedRig, FakeClock], None]] = {
     "modbus-disconnect": check_modbus_disconnect,
     "modbus-slow": check_modbus_slow,
     "visa-garbled-block": check_visa_garbled_block,
+    "visa-endless-reply": check_visa_endless_reply,
     "no-trigger": check_no_trigger,
     "stuck-fill-valve": check_stuck_fill_valve,
     "vacuum-leak": check_vacuum_leak,

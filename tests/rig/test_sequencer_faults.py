@@ -47,6 +47,7 @@ WHERE: dict[str, tuple[str, ...]] = {
     "stuck-fill-valve": ("CHARGE",),
     "no-trigger": ("FIRE", "CAPTURE"),
     "visa-garbled-block": ("CAPTURE",),
+    "visa-endless-reply": ("ARM", "CAPTURE"),  # it bites once the digitizer is armed
 }
 CASES = [(fault, state) for fault, states in WHERE.items() for state in states]
 
@@ -54,7 +55,7 @@ CASES = [(fault, state) for fault, states in WHERE.items() for state in states]
 def _instrument(rig: Rig, fault: str) -> str:
     if fault in ("amp-overload", "serial-noise"):
         return rig.instruments.amplifier.name
-    if fault in ("no-trigger", "visa-garbled-block"):
+    if fault in ("no-trigger", "visa-garbled-block", "visa-endless-reply"):
         return rig.instruments.digitizer.instrument
     return rig.instruments.valves.name
 
@@ -71,6 +72,7 @@ REASON = {
     "stuck-fill-valve": "above the set-point",
     "no-trigger": "waiting for the trigger",
     "visa-garbled-block": "garbled binary block",
+    "visa-endless-reply": "reply longer than",
 }
 
 
@@ -122,7 +124,7 @@ def test_fault_in_state_ends_safe(make_rig, fault: str, state: str) -> None:
         assert "rig safe" in outcome.error
         rig.assert_safe()
 
-    fired = fault in ("no-trigger", "visa-garbled-block")  # the only faults that bite after the fire command
+    fired = fault == "no-trigger" or state == "CAPTURE"  # the only faults that bite after the fire command
     assert outcome.fired is fired
     assert rig.world.shots_fired == (1 if fired else 0)
     assert outcome.shot_path is None and not list(rig.out_dir.glob("*.h5"))  # nothing was recorded
