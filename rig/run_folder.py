@@ -3,7 +3,10 @@
 Layout::
 
     <parent>/<plan name>-<UTC yyyymmddTHHMMSSZ>/   the campaign id is the folder name
-        plan.toml           byte copy of the plan as it was when the run started
+        plan.toml           copy of the plan as it was when the run started (byte for byte, but
+                            for its [accelerometer] sine_calibration, which names the copy below)
+        <sine>.csv          copy of the plan's sine calibration, when it names one (its file
+                            name; sine_calibration.csv if that is one of the run folder's own)
         journal.sqlite      the shot journal (rig.journal), with SQLite's -wal/-shm files
         run.lock            held (flock) by the one process running or resuming the campaign
         shots/<shot id>.h5  one shot file per fired shot (rig.shotfile)
@@ -19,6 +22,8 @@ other process can be in the middle of writing them.
 from __future__ import annotations
 
 import os
+import re
+import tomllib
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -143,6 +148,7 @@ def create_run_folder(plan_path: str | Path, parent: str | Path, name: str | Non
     """
     plan_path = Path(plan_path)
     plan = load_plan(plan_path)
+    sine = _sine_calibration(plan)  # read and checked before anything is created
     parent = Path(parent)
     parent.mkdir(parents=True, exist_ok=True)
     if name is not None:
@@ -164,9 +170,60 @@ def create_run_folder(plan_path: str | Path, parent: str | Path, name: str | Non
     run = RunFolder(folder)
     run.shots_dir.mkdir()
     run.report_dir.mkdir()
-    # Plan copy: an exclusive temporary, fsynced and renamed (hopkinson.fileio): whole or absent.
-    atomic_write(run.plan_path, plan_path.read_bytes())
+    # Copies: each an exclusive temporary, fsynced and renamed (hopkinson.fileio): whole or absent.
+    plan_text = plan_path.read_bytes()
+    if sine is not None:
+        name, data = sine
+        atomic_write(run.path / name, data)
+        plan_text = plan_naming_sine_calibration(plan_text.decode("utf-8"), name).encode("utf-8")
+    atomic_write(run.plan_path, plan_text)
     return run
+
+
+RUN_FOLDER_NAMES = (PLAN_NAME, JOURNAL_NAME, LOCK_NAME, SHOTS_DIR, REPORT_DIR)
+
+
+def _sine_calibration(plan: CampaignPlan) -> tuple[str, bytes] | None:
+    """(name of its copy in the run folder, its bytes) for the plan's sine calibration, or None;
+    ConfigError naming the plan's key when it cannot be read as a sine calibration."""
+    path = plan.accelerometer.sine_calibration
+    if not path:
+        return None
+    from hopkinson.analysis.errors import AnalysisError
+    from hopkinson.analysis.sine_comparison import read_sine_calibration
+
+    try:
+        read_sine_calibration(path)  # a regular file of bounded size, as a sine calibration
+        data = Path(path).read_bytes()
+    except (AnalysisError, OSError) as exc:
+        raise ConfigError(f"{plan.path}: accelerometer.sine_calibration: {exc}") from None
+    name = Path(path).name
+    if name in RUN_FOLDER_NAMES or name.startswith(JOURNAL_NAME) or name.endswith(LEFTOVER_SUFFIX):
+        name = "sine_calibration.csv"  # never one of the run folder's own files, nor a leftover
+    return name, data
+
+
+_SINE_KEY = re.compile(r"""^([ \t]*(?:accelerometer[ \t]*\.[ \t]*)?sine_calibration[ \t]*=[ \t]*)"""
+                       r"""("(?:[^"\\\n]|\\.)*"|'[^'\n]*')""", re.M)
+
+
+def plan_naming_sine_calibration(text: str, name: str) -> str:
+    """The plan's TOML text with [accelerometer] sine_calibration set to `name` (a file beside
+    it). Only that value changes, comments and layout are kept; where the key is written in a
+    way this does not recognise (an inline table, a multi-line string), the plan is written
+    out again with tomli_w (same content, without its comments)."""
+    wanted = tomllib.loads(text)
+    wanted["accelerometer"]["sine_calibration"] = name
+    value = '"' + name.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    changed, count = _SINE_KEY.subn(lambda m: m.group(1) + value, text)
+    try:
+        if count == 1 and tomllib.loads(changed) == wanted:
+            return changed
+    except tomllib.TOMLDecodeError:
+        pass
+    import tomli_w
+
+    return tomli_w.dumps(wanted)
 
 
 def open_run_folder(path: str | Path) -> RunFolder:
