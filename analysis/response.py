@@ -330,6 +330,15 @@ def model_output(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
     return signal.sosfilt(model_sos(model), np.asarray(u, dtype=float))
 
 
+def delayed_model_output(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
+    """The model's response to u from rest with its input delay (fractional: a linear phase,
+    analysis.resample.shift_samples): what the model predicts on the record it was fitted to."""
+    from hopkinson.analysis.resample import shift_samples
+
+    shifted = shift_samples(np.asarray(u, dtype=float), model.delay_samples) if model.delay_samples else u
+    return model_output(model, shifted)
+
+
 def to_continuous(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray, float]:
     """Continuous zeros, poles (rad/s) and gain matching the discrete model.
 
