@@ -8,11 +8,16 @@ panel's rig I/O thread (ui.worker.RigLink.start_campaign), journaled in the run 
 - Resume: the same run folder again (the journal's resume rules: no shot lost or fired twice);
 - Abort: the shot now running is aborted (the sequencer makes the rig safe) and the campaign stops.
 Firing needs the plan's `authorise_firing = true` or the operator's explicit confirmation
-(`confirm_campaign`, a dialog; tests replace it), exactly as `--yes` on the command line.
+(`confirm_campaign`, a dialog; tests replace it), exactly as `--yes` on the command line. A plan
+of more than `confirm_above` shots (rig.plan.CONFIRM_ABOVE_SHOTS, as `hopkinson campaign run
+--confirm-above`) also needs its number of shots typed (`confirm_shot_count`, a dialog; tests
+replace it), as `--shots N` (rig.plan.check_shot_count). `conditioner_entry` (set by the window)
+gives a hand-set conditioner's values, entered before the campaign starts.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +33,13 @@ from hopkinson.rig.events import (
     StateEntered,
 )
 from hopkinson.rig.journal import DONE_STATES, Journal
-from hopkinson.rig.plan import CampaignPlan, load_plan
+from hopkinson.rig.plan import (
+    CONFIRM_ABOVE_SHOTS,
+    MAX_TOTAL_SHOTS,
+    CampaignPlan,
+    check_shot_count,
+    load_plan,
+)
 from hopkinson.rig.run_folder import RunFolder, open_run_folder
 from hopkinson.ui.plots import KILO, figure_tooltip, format_figure
 from hopkinson.ui.widgets import section_title
@@ -40,6 +51,7 @@ from PySide6.QtWidgets import (
     QFileDialog,
     QHBoxLayout,
     QHeaderView,
+    QInputDialog,
     QLabel,
     QLineEdit,
     QMessageBox,
@@ -77,6 +89,8 @@ class CampaignTab(QWidget):
         self.states: dict[str, str] = {}
         self.last_outcome: Any = None
         self._current: str | None = None
+        self.confirm_above = CONFIRM_ABOVE_SHOTS
+        self.conditioner_entry: Callable[[], dict[str, Any] | None] = lambda: None
 
         self.load_button = QPushButton("Load plan…")
         self.open_button = QPushButton("Open run folder…")
@@ -157,6 +171,15 @@ class CampaignTab(QWidget):
             "without asking before each one?",
             QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
         return answer == QMessageBox.StandardButton.Yes
+
+    def confirm_shot_count(self, plan: CampaignPlan) -> int | None:
+        """Ask the operator to type the number of shots of a large plan (None: cancelled)."""
+        total = len(plan.shots)
+        value, ok = QInputDialog.getInt(
+            self, "Confirm the number of shots",
+            f"The plan {plan.name!r} fires {total} shots, more than {self.confirm_above}.\n\n"
+            "Type its number of shots to fire them:", 0, 0, MAX_TOTAL_SHOTS)
+        return value if ok else None
 
     # -- plan and run folder ----------------------------------------------------------------------
     def load_plan(self, path: Path) -> None:
@@ -263,6 +286,15 @@ class CampaignTab(QWidget):
         except ConfigError as exc:
             self._say(str(exc), error=True)
             return False
+        total = len(self.plan.shots)
+        typed = self.confirm_shot_count(self.plan) if total > self.confirm_above else None
+        try:
+            check_shot_count(self.plan, self.confirm_above, typed)
+        except ConfigError:
+            given = "" if typed is None else f" ({typed} was typed)"
+            self._say(f"Not started: the plan fires {total} shots, more than {self.confirm_above}, and that number "
+                      f"was not confirmed{given}; nothing was fired.", error=True)
+            return False
         return True
 
     def _start(self, run: RunFolder, plan: CampaignPlan) -> None:
@@ -271,7 +303,7 @@ class CampaignTab(QWidget):
         self._say(f"Campaign running in {run.path}")
         self.started.emit()
         self.update_buttons()
-        self.link.start_campaign(run, plan)
+        self.link.start_campaign(run, plan, self.conditioner_entry())
 
     def update_buttons(self) -> None:
         connected = self.link.all_connected

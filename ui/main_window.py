@@ -174,6 +174,7 @@ class MainWindow(QMainWindow):
         self.plots = ShotPlots()
         self.dcm_tab = DcmTab(export_report=self.export_report)
         self.campaign_tab = CampaignTab(self.link, self.background, runs_dir)
+        self.campaign_tab.conditioner_entry = self.setup.conditioner_entry  # a hand-set conditioner's values
         self.log_view = LogView()
         self.log_tab = LogTab(self.log_view, default_folder=out_dir)
         self.tabs = QTabWidget()
@@ -270,7 +271,7 @@ class MainWindow(QMainWindow):
         what = f"{request.accelerometer_model} {request.accelerometer_serial}".strip()
         self.log_view.add_message("info", f"ARM: {request.pressure_bar:g} bar, projectile No. {request.projectile}"
                                           + (f", {what}" if what else ""))
-        self.authorisation = self.link.start_shot(request)
+        self.authorisation = self.link.start_shot(request, self.setup.conditioner_entry())
         self.update_buttons()
 
     def fire(self) -> None:

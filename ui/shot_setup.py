@@ -3,11 +3,18 @@ shot file goes; remembered between runs (QSettings, group "shot").
 
 `ShotSetup.request(confirm_timeout_s)` turns the form into a rig.shot.ShotRequest; the
 sequencer checks it again (`ShotRequest.check`) before anything moves.
+
+With a conditioner set by hand (`[amplifier] driver = "manual"`, drivers/manual_conditioner.py)
+the form also asks for what its front panel shows: gain, excitation, low-pass, the sensitivity
+set on it and its identity (first from rig.toml, then remembered). `conditioner_entry()` gives
+them as `ManualConditioner.enter` takes them; the rig link enters them before the shot (or
+campaign) starts, so they are the settings the shot file records.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.shot import ShotRequest
@@ -19,14 +26,17 @@ from PySide6.QtWidgets import (
     QFileDialog,
     QFormLayout,
     QHBoxLayout,
+    QLabel,
     QLineEdit,
     QPushButton,
+    QSpacerItem,
     QSpinBox,
     QVBoxLayout,
     QWidget,
 )
 
 MICRO = 1e-6
+KILO = 1e3
 DEFAULT_MAX_ORDER = 12
 
 
@@ -86,6 +96,8 @@ class ShotSetup(QWidget):
         out_row.addWidget(self.out_dir, 1)
         out_row.addWidget(browse)
 
+        self.conditioner = _ConditionerFields(config) if config.amplifier.driver == "manual" else None
+
         for spin in (self.sensitivity, self.pressure, self.sample_rate, self.dcm_ratio, self.dcm_damping,
                      self.max_order):
             spin.setKeyboardTracking(False)
@@ -107,6 +119,10 @@ class ShotSetup(QWidget):
         form.addRow("DCM ratio r", self.dcm_ratio)
         form.addRow("DCM damping ζₑ", self.dcm_damping)
         form.addRow("Shot folder", out_row)
+        if self.conditioner is not None:  # in the same form: its fields line up with the others
+            form.addItem(QSpacerItem(0, 4))
+            form.addRow(section_title("Conditioner (set by hand)"))
+            self.conditioner.add_rows(form)
         layout.addLayout(form)
 
     # -- the request ---------------------------------------------------------------------------
@@ -127,6 +143,11 @@ class ShotSetup(QWidget):
             out_dir=Path(self.out_dir.text().strip() or "."),
             confirm_timeout_s=confirm_timeout_s,
         )
+
+    def conditioner_entry(self) -> dict[str, Any] | None:
+        """The hand-set conditioner's values as ManualConditioner.enter takes them (None: the
+        amplifier is not set by hand)."""
+        return self.conditioner.entry() if self.conditioner is not None else None
 
     def set_enabled_for_shot(self, idle: bool) -> None:
         """The form is read-only while a shot runs."""
@@ -169,15 +190,67 @@ class ShotSetup(QWidget):
             settings.endGroup()
 
     def _texts(self) -> dict[str, QLineEdit]:
-        return {"operator": self.operator, "accelerometer_model": self.accelerometer_model,
-                "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir}
+        texts = {"operator": self.operator, "accelerometer_model": self.accelerometer_model,
+                 "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir}
+        return texts | ({"conditioner_identity": self.conditioner.identity} if self.conditioner else {})
 
     def _numbers(self) -> dict[str, QDoubleSpinBox | QSpinBox]:
-        return {"sensitivity_uv_per_m_s2": self.sensitivity, "pressure_bar": self.pressure,
-                "max_order": self.max_order, "sample_rate_khz": self.sample_rate,
-                "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping}
+        numbers: dict[str, QDoubleSpinBox | QSpinBox] = {
+            "sensitivity_uv_per_m_s2": self.sensitivity, "pressure_bar": self.pressure,
+            "max_order": self.max_order, "sample_rate_khz": self.sample_rate,
+            "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping}
+        return numbers | (self.conditioner.numbers() if self.conditioner else {})
 
     def _browse(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Folder for shot files", self.out_dir.text())
         if folder:
             self.out_dir.setText(folder)
+
+
+class _ConditionerFields:
+    """The entry fields of a conditioner set by hand (module docstring), first from rig.toml."""
+
+    def __init__(self, config: RigConfig) -> None:
+        amp = config.amplifier
+        self.gain = _spin(3, (0.001, 1e6), amp.gain, "", "gain: output volts per input volt")
+        self.excitation = _spin(2, (0.0, 20.0), amp.excitation_v, " V", "bridge excitation; none for IEPE or charge",
+                                special="none")
+        self.lowpass = _spin(1, (0.0, 1e5), amp.lowpass_hz / KILO, " kHz", "the filter corner", special="off")
+        self.sensitivity = _spin(4, (0.0, 1e6), amp.sensitivity_v_per_m_s2 / MICRO, " µV/(m/s²)",
+                                 "the sensor sensitivity set on the conditioner, if it has one",
+                                 special="not entered")
+        self.identity = QLineEdit(amp.identity)
+        self.identity.setPlaceholderText("make, model, serial")
+
+    def add_rows(self, form: QFormLayout) -> None:
+        note = QLabel("as set on its front panel; recorded in the shot file")
+        note.setStyleSheet("color: #5f6368;")
+        form.addRow(note)
+        for label, field in (("Gain", self.gain), ("Excitation", self.excitation), ("Low-pass", self.lowpass),
+                             ("Sensitivity", self.sensitivity), ("Identity", self.identity)):
+            form.addRow(label, field)
+
+    def numbers(self) -> dict[str, QDoubleSpinBox]:
+        return {"conditioner_gain": self.gain, "conditioner_excitation_v": self.excitation,
+                "conditioner_lowpass_khz": self.lowpass, "conditioner_sensitivity_uv_per_m_s2": self.sensitivity}
+
+    def entry(self) -> dict[str, Any]:
+        sensitivity = self.sensitivity.value() * MICRO
+        return {"gain": self.gain.value(), "excitation_v": self.excitation.value(),
+                "lowpass_hz": self.lowpass.value() * KILO, "sensitivity_v_per_m_s2": sensitivity or None,
+                "identity": self.identity.text().strip()}
+
+
+def _spin(decimals: int, limits: tuple[float, float], value: float, suffix: str, tip: str,
+          special: str = "") -> QDoubleSpinBox:
+    """A number field (its lowest value shown as `special`, when given)."""
+    spin = QDoubleSpinBox()
+    spin.setDecimals(decimals)
+    spin.setRange(*limits)
+    spin.setSuffix(suffix)
+    spin.setToolTip(tip)
+    if special:
+        spin.setSpecialValueText(special)
+    spin.setValue(value)
+    spin.setKeyboardTracking(False)
+    return spin

@@ -17,6 +17,12 @@ Signals. `start()` also catches SIGINT, SIGTERM and SIGHUP (rig/signals.py; main
 a signal aborts a running shot or campaign (or, idle, runs SAFE), then `interrupted` closes
 the window; `shutdown()` waits for SAFE, and the command exits 3 (`interrupted_reason`).
 
+A conditioner set by hand (`[amplifier] driver = "manual"`): `start_shot` and `start_campaign`
+take the values the technician entered (ui.shot_setup); they become the link's rig config's
+[amplifier] settings (what CHECK asks of the conditioner and ARM compares, what the shot file's
+configuration records) and, first thing on the I/O thread, the conditioner's own
+(`ManualConditioner.enter`), so `settings()` gives them to the shot file.
+
 Events. The sequencer publishes RigEvents on an EventBus in the I/O thread; `RigLink.event`
 (a Qt signal) carries them to the GUI thread: a signal emitted in another thread reaches a
 receiver living in the GUI thread through Qt's queued connection. The other signals
@@ -131,7 +137,8 @@ class RigLink(QObject):
         self._links = {
             "valve_controller": InstrumentLink("valve_controller", rig_address(config)),
             "digitizer": InstrumentLink("digitizer", config.digitizer.resource),
-            "amplifier": InstrumentLink("amplifier", f"serial {config.amplifier.port}"),
+            "amplifier": InstrumentLink("amplifier", "set by hand (no link)" if config.amplifier.driver == "manual"
+                                        else f"serial {config.amplifier.port}"),
         }
         self._last_try = dict.fromkeys(INSTRUMENT_KEYS, -1e9)
         self._last_digitizer_check = -1e9
@@ -215,8 +222,9 @@ class RigLink(QObject):
             return
         self._poll_future = self._io.submit(self._guarded, self._poll_task)
 
-    def start_shot(self, request: ShotRequest) -> FireAuthorisation:
-        """Run `request` on the I/O thread; returns the authorisation FIRE gives.
+    def start_shot(self, request: ShotRequest, conditioner: dict[str, Any] | None = None) -> FireAuthorisation:
+        """Run `request` on the I/O thread; returns the authorisation FIRE gives. `conditioner`:
+        the values of a conditioner set by hand (module docstring), entered first.
 
         Shots and campaigns queue on the one I/O thread: they never overlap (the panel
         disables ARM while one runs).
@@ -224,19 +232,23 @@ class RigLink(QObject):
         authorisation = FireAuthorisation()
         self.sequencer.clear_abort()  # a new shot: an abort left from an earlier one is forgotten
         self._active_sequencer = self.sequencer
-        self._shot_future = self._io.submit(self._guarded, lambda: self._shot_task(request, authorisation))
+        self._use_conditioner(conditioner)
+        self._shot_future = self._io.submit(self._guarded,
+                                            lambda: self._shot_task(request, authorisation, conditioner))
         return authorisation
 
-    def start_campaign(self, run: Any, plan: Any) -> None:
+    def start_campaign(self, run: Any, plan: Any, conditioner: dict[str, Any] | None = None) -> None:
         """Run a campaign (rig.campaign.CampaignRunner on `run`, a RunFolder, and `plan`) on the
         I/O thread; `campaign_finished` or `campaign_failed` tells how it ended. Firing must
-        have been authorised by the caller (rig.campaign.check_authorisation)."""
+        have been authorised by the caller (rig.campaign.check_authorisation). `conditioner`:
+        as for start_shot."""
         from hopkinson.rig.campaign import CampaignRunner
 
+        self._use_conditioner(conditioner)
         runner = CampaignRunner(run, plan, self.instruments, self.config, self.bus)
         self.campaign_runner = runner
         self._active_sequencer = runner.sequencer
-        self._shot_future = self._io.submit(self._guarded, lambda: self._campaign_task(runner))
+        self._shot_future = self._io.submit(self._guarded, lambda: self._campaign_task(runner, conditioner))
 
     def pause_campaign(self) -> None:
         """Stop the campaign after the shot now running (resume later)."""
@@ -378,10 +390,38 @@ class RigLink(QObject):
     def _missing_instruments(self) -> list[str]:
         return [link.label for link in self.links.values() if not link.usable]
 
-    def _shot_task(self, request: ShotRequest, authorisation: FireAuthorisation) -> None:
+    def _use_conditioner(self, values: dict[str, Any] | None) -> None:
+        """The hand-set conditioner's values become the rig config's [amplifier] settings for
+        the shots that follow (GUI thread; no instrument call)."""
+        if values is None:
+            return
+        amp = replace(self.config.amplifier, gain=values["gain"], excitation_v=values["excitation_v"],
+                      lowpass_hz=values["lowpass_hz"], sensitivity_v_per_m_s2=values["sensitivity_v_per_m_s2"] or 0.0,
+                      identity=values["identity"])
+        self.config = replace(self.config, amplifier=amp)
+        self.sequencer.config = self.config
+
+    def _enter_conditioner(self, values: dict[str, Any] | None) -> str | None:
+        """Enter the values into the hand-set conditioner (I/O thread); what went wrong, or None."""
+        if values is None:
+            return None
+        amplifier = self.instruments.amplifier
+        try:
+            amplifier.enter(**values)  # type: ignore[attr-defined]  (a ManualConditioner)
+        except (ValueError, TypeError, AttributeError) as exc:
+            return f"the conditioner's values were not taken: {exc}"
+        self._set_link("amplifier", identity=amplifier.identity())  # the lamp shows what was entered
+        return None
+
+    def _shot_task(self, request: ShotRequest, authorisation: FireAuthorisation,
+                   conditioner: dict[str, Any] | None = None) -> None:
         missing = self._missing_instruments()
         if missing:
             self.shot_failed.emit(f"cannot start the shot: not connected: {', '.join(missing)}")
+            return
+        problem = self._enter_conditioner(conditioner)
+        if problem is not None:
+            self.shot_failed.emit(f"cannot start the shot: {problem}")
             return
         try:
             outcome: ShotOutcome = self.sequencer.run_shot(request, authorisation)
@@ -394,11 +434,13 @@ class RigLink(QObject):
                           else f"SAFE NOT CONFIRMED: {outcome.error}; check the rig by hand")
         self.shot_finished.emit(outcome)
 
-    def _campaign_task(self, runner: Any) -> None:
+    def _campaign_task(self, runner: Any, conditioner: dict[str, Any] | None = None) -> None:
         missing = self._missing_instruments()
         outcome, failure = None, None
         if missing:
             failure = f"cannot start the campaign: not connected: {', '.join(missing)}"
+        elif (problem := self._enter_conditioner(conditioner)) is not None:
+            failure = f"cannot start the campaign: {problem}"
         else:
             try:
                 outcome = runner.run()

@@ -60,10 +60,9 @@ def check(ctx: ShotContext) -> None:
     inst.amplifier.configure(gain=amp.gain, excitation_v=amp.excitation_v, lowpass_hz=amp.lowpass_hz)
     inst.amplifier.set_shunt(False)
     inst.amplifier.auto_zero()
-    held = inst.amplifier.settings()
-    ctx.settings["amplifier_gain"] = float(held.gain)
-    ctx.settings["amplifier_excitation_v"] = float(held.excitation_v)
-    ctx.settings["amplifier_lowpass_hz"] = float(held.lowpass_hz)
+    held = inst.amplifier.settings()  # into the shot file: gain, excitation, low-pass, source ("read back" or
+    for key, value in held.to_dict().items():  # "entered"), a hand-set conditioner's sensitivity and identity
+        ctx.settings[f"amplifier_{key}"] = float(value) if isinstance(value, int | float) else value
     ctx.checkpoint(inst.amplifier.name, "configuring the amplifier")
     inst.digitizer.abort()
     _configure_digitizer(ctx)
