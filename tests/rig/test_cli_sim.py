@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -9,7 +10,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import serial
@@ -36,6 +39,31 @@ def rig_toml_for(addresses: SimAddresses | dict, tmp_path: Path, name: str = "ri
     path = tmp_path / name
     path.write_text(text)
     return path
+
+
+@contextlib.contextmanager
+def sim_process(args: list[str], addresses_json: Path) -> Iterator[tuple[subprocess.Popen[str], dict[str, Any]]]:
+    """`hopkinson sim ARGS --addresses-json PATH` as its own process, with its addresses once it
+    has written them; a process still running when the block ends is killed."""
+    process = subprocess.Popen([sys.executable, "-m", "hopkinson", "sim", *args, "--addresses-json", str(addresses_json)],
+                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30.0
+        while not addresses_json.exists():
+            assert process.poll() is None, process.communicate()
+            assert time.monotonic() < deadline, "the simulator did not write its addresses"
+            time.sleep(0.05)
+        yield process, json.loads(addresses_json.read_text())
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+
+
+def stop_with_ctrl_c(process: subprocess.Popen[str]) -> tuple[str, str]:
+    """SIGINT, then the process's stdout and stderr once it has ended."""
+    process.send_signal(signal.SIGINT)
+    return process.communicate(timeout=15)
 
 
 def test_list_faults_prints_one_line_per_fault(capsys: pytest.CaptureFixture[str]) -> None:
@@ -65,20 +93,9 @@ def test_sim_process_serves_status_and_stops_cleanly_on_ctrl_c(
     sim_toml = tmp_path / "sim.toml"
     sim_toml.write_text("[servers]\nmodbus_port = 0\ndigitizer_port = 0\n")
     addresses_json = tmp_path / "addresses.json"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hopkinson", "sim", "--config", str(sim_toml), "--fault", "door-open",
-         "--addresses-json", str(addresses_json)],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
     folder = runtime / "hopkinson"
-    link = folder / f"sim-{process.pid}-amplifier"
-    try:
-        deadline = time.monotonic() + 30.0
-        while not addresses_json.exists():
-            assert process.poll() is None, process.communicate()
-            assert time.monotonic() < deadline, "the simulator did not write its addresses"
-            time.sleep(0.05)
-        addresses = json.loads(addresses_json.read_text())
+    with sim_process(["--config", str(sim_toml), "--fault", "door-open"], addresses_json) as (process, addresses):
+        link = folder / f"sim-{process.pid}-amplifier"
         assert addresses["pid"] == process.pid
         assert json.loads((folder / "sim-addresses.json").read_text()) == addresses
         assert os.path.realpath(link) == addresses["serial_port"]
@@ -95,12 +112,7 @@ def test_sim_process_serves_status_and_stops_cleanly_on_ctrl_c(
         assert report["digitizer"]["identity"].startswith("Hopkinson-Sim,SIMDIG")
         assert report["amplifier"]["identity"].startswith("Hopkinson-Sim,SIMAMP")
         assert report["amplifier"]["address"] == "sim:amplifier"
-        process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=15)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+        out, err = stop_with_ctrl_c(process)
     assert process.returncode == 0, err
     assert f"modbus  tcp {addresses['modbus']} (unit 1)\n" in out
     assert f"visa    {addresses['visa_resource']}\n" in out

@@ -10,10 +10,8 @@ import contextlib
 import dataclasses
 import json
 import re
-import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
@@ -31,7 +29,7 @@ from hopkinson.rig.shotfile import read_shot
 from hopkinson.rig.sim_session import sim_session
 
 from tests.rig.conftest import TIME_SCALE, Rig, short_timeouts_config
-from tests.rig.test_cli_sim import rig_toml_for
+from tests.rig.test_cli_sim import rig_toml_for, sim_process, stop_with_ctrl_c
 
 REPO = Path(__file__).resolve().parents[2]
 IDENTITY = {"generic": "Hopkinson-Sim", "keysight": "KEYSIGHT", "tektronix": "TEKTRONIX", "lecroy": "LECROY"}
@@ -131,16 +129,8 @@ def test_hopkinson_sim_in_a_dialect_prints_the_rig_config_that_reaches_it(tmp_pa
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
     sim = tmp_path / "sim.toml"
     sim.write_text("[servers]\nmodbus_port = 0\ndigitizer_port = 0\n", encoding="utf-8")
-    addresses_json = tmp_path / "addresses.json"
-    process = subprocess.Popen([sys.executable, "-m", "hopkinson", "sim", "--config", str(sim), "--digitizer-dialect",
-                                "lecroy", "--addresses-json", str(addresses_json)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 30.0
-        while not addresses_json.exists():
-            assert process.poll() is None and time.monotonic() < deadline, "the simulator did not start"
-            time.sleep(0.05)
-        addresses = json.loads(addresses_json.read_text())
+    with sim_process(["--config", str(sim), "--digitizer-dialect", "lecroy"], tmp_path / "addresses.json") \
+            as (process, addresses):
         assert addresses["digitizer_dialect"] == "lecroy" and addresses["digitizer_channels"] == {"doppler": 1,
                                                                                                   "response": 2}
         rig = rig_toml_for(addresses, tmp_path)
@@ -149,12 +139,7 @@ def test_hopkinson_sim_in_a_dialect_prints_the_rig_config_that_reaches_it(tmp_pa
         rig.write_text(re.sub(r'^response = "CH2"', 'response = "C2"', text, count=1, flags=re.M))
         assert main(["status", "--config", str(rig), "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["digitizer"]["identity"].startswith("LECROY")
-        process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=15)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+        out, err = stop_with_ctrl_c(process)
     assert process.returncode == 0, err
     assert "        lecroy dialect: doppler on channel 1, response on channel 2\n" in out
     assert ('        rig config: [digitizer] dialect = "lecroy"; [digitizer.channels] doppler = "C1", '
