@@ -217,7 +217,9 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
     if latch.received is not None:
         if not outcome.done:
             line = outcome.error or f"shot ended in {outcome.final_state}"
-        elif safe_again is not None and not safe_again[0]:
+        elif safe_again is None:  # the signal came once the shot had ended: nothing moved since
+            line = "it came after the shot had ended with the rig confirmed safe; nothing was moved after that"
+        elif not safe_again[0]:
             line = f"SAFE NOT CONFIRMED: {safe_again[1]}; check the rig by hand"
         else:
             line = "the shot was recorded before it; SAFE ran again and was confirmed"

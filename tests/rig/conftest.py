@@ -71,25 +71,34 @@ def rig_toml(session: SimSession, path: Path, **timeouts: float) -> Path:
 
 
 def read_until(proc: Any, stream: Any, pattern: str, timeout_s: float = 60.0) -> str:
-    """The lines a process writes on `stream` up to one matching `pattern` (regular expression);
-    the process is killed and the test fails when none comes in time."""
+    """What a process writes on `stream` up to (at least) the first text matching `pattern`
+    (regular expression, multi-line); the process is killed and the test fails when none comes
+    in time.
+
+    Reads the pipe's file descriptor itself: `select` on a buffered text stream misses lines
+    that `readline` already pulled into Python's buffer, so a line that arrived together with
+    the one before would only be seen with the next write (a signal meant for ANALYSE then
+    came after the analysis)."""
+    import os
     import re
     import select
     import time
 
-    seen: list[str] = []
+    fd = stream.fileno()
+    received = b""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if not select.select([stream], [], [], 0.2)[0]:
+        if not select.select([fd], [], [], 0.2)[0]:
             continue
-        line = stream.readline()
-        if not line:
+        chunk = os.read(fd, 65536)
+        if not chunk:
             break
-        seen.append(line)
-        if re.search(pattern, line):
-            return "".join(seen)
+        received += chunk
+        text = received.decode("utf-8", errors="replace")
+        if re.search(pattern, text, re.MULTILINE):
+            return text
     proc.kill()
-    raise AssertionError(f"{pattern!r} never came; got {''.join(seen)!r}")
+    raise AssertionError(f"{pattern!r} never came; got {received.decode('utf-8', errors='replace')!r}")
 
 
 class Recorder:

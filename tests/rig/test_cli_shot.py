@@ -189,3 +189,22 @@ def test_yes_typed_at_the_terminal_prompt_fires(configs) -> None:
     state = _state(configs)
     assert state["shots_fired"] == 1
     _assert_safe(state)
+
+
+@pytest.mark.parametrize("safe_again, expected", [
+    (None, "it came after the shot had ended with the rig confirmed safe; nothing was moved after that"),
+    ((True, None), "the shot was recorded before it; SAFE ran again and was confirmed"),
+    ((False, "vent valve stuck"), "SAFE NOT CONFIRMED: vent valve stuck; check the rig by hand"),
+])
+def test_a_late_signal_is_reported_as_what_happened(safe_again, expected, capsys) -> None:
+    # A signal that lands after the shot's own end (past the check for a second SAFE) must not
+    # be reported as a second SAFE that never ran.
+    import argparse
+
+    from hopkinson.rig.cli.shot import _report
+    from hopkinson.rig.shot import EXIT_ABORTED, ShotOutcome
+
+    latch = argparse.Namespace(received=signal.SIGHUP, reason="interrupted (SIGHUP)")
+    args = argparse.Namespace(json=False, json_events=True)
+    assert _report(args, ShotOutcome(final_state="DONE"), None, latch, safe_again) == EXIT_ABORTED
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"hopkinson: error: interrupted (SIGHUP): {expected}"
