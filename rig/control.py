@@ -95,5 +95,14 @@ def run_shot_under_signals(sequencer: Sequencer, request: ShotRequest, authorisa
     outcome = sequencer.run_shot(request, authorisation)
     safe_again = None
     if latch.received is not None and outcome.done:
-        safe_again = sequencer.make_safe()
+        with contextlib.ExitStack() as stack:
+            if outcome.log_path is not None:  # the second SAFE belongs in the shot's record too
+                from hopkinson.rig.lock import command_line
+                from hopkinson.rig.logbook import Logbook
+
+                with contextlib.suppress(OSError):  # a log that cannot be opened never stops SAFE
+                    logbook = stack.enter_context(Logbook(outcome.log_path, command=command_line(),
+                                                          what=f"SAFE again after {latch.reason}"))
+                    logbook.attach(sequencer.bus)
+            safe_again = sequencer.make_safe()
     return SignalledShot(outcome, safe_again)
