@@ -18,7 +18,7 @@ one per section:
     [limits]             max_pressure_bar, min_pressure_bar, fixture_vacuum_max_mbar, ...
     [timeouts]           check_s, evacuate_s, charge_s, arm_s, fire_s, capture_s, safe_s, store_s, analyse_s
     [analysis]           grating_pitch_m, orders, sensitivity_v_per_m_s2, sample_rate_hz,
-                         dcm_widening, dcm_noise_gain_limit
+                         dcm_widening, dcm_noise_gain_limit, amp_gain_2, sensitivity_2_v_per_m_s2
 
 `load_sim_config(path) -> SimConfig` does the same for the simulator's file ([servers],
 [world] with its sub-tables, [register_map]).
@@ -299,6 +299,10 @@ class AnalysisConfig:
     sample_rate_hz: float = 1e6
     dcm_widening: float = 3.0  # automatic DCM: widen the ±5 % band this many times
     dcm_noise_gain_limit: float = 4.0  # DCM white-noise RMS gain allowed at the analysis rate
+    # A second sensor (digitizer role response_2): its conditioner's gain (set by hand) and its
+    # nominal sensitivity at the conditioner input; both 1 leave its response in volts.
+    amp_gain_2: float = 1.0
+    sensitivity_2_v_per_m_s2: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -419,6 +423,8 @@ RULES: dict[str, _Rule] = {
     "analysis.grating_pitch_m": _Rule(above=0.0, max=1e-3),
     "analysis.orders": _Rule(-10, 10),
     "analysis.sensitivity_v_per_m_s2": _Rule(above=0.0),
+    "analysis.sensitivity_2_v_per_m_s2": _Rule(above=0.0),
+    "analysis.amp_gain_2": _Rule(above=0.0, max=1e6),
     "analysis.sample_rate_hz": _Rule(1e3, 1e9),
     "analysis.dcm_widening": _Rule(above=1.0, max=1e3),
     "analysis.dcm_noise_gain_limit": _Rule(above=0.0, max=1e6),
@@ -466,7 +472,16 @@ RULES: dict[str, _Rule] = {
     "world.signals.pulse_bipolar_ratio": _Rule(0.0, 0.95),
     "world.signals.channel_skew_s": _Rule(-1e-6, 1e-6),
     "world.signals.response_drift_v_per_s": _Rule(-1e3, 1e3),
+    "world.signals.quadrature_offset_v": _Rule(-10.0, 10.0),
+    "world.signals.quadrature_error_deg": _Rule(-45.0, 45.0),
+    "world.signals.quadrature_gain_ratio": _Rule(above=0.0, max=10.0),
     "world.signals.*": _POSITIVE,
+    "world.accelerometer_2.modes.natural_frequency_hz": _Rule(above=0.0, max=1e7),
+    "world.accelerometer_2.modes.damping_ratio": _Rule(above=0.0, max=10.0),
+    "world.accelerometer_2.zero_shift_m_s2": _Rule(),
+    "world.accelerometer_2.lowpass_hz": _Rule(0.0, 1e8, text="0 (off) or the filter corner"),
+    "world.accelerometer_2.lowpass_order": _Rule(1, 8),
+    "world.accelerometer_2.*": _POSITIVE,
     **{f"register_map.{k}": r for k, r in _REGISTER_RULES.items()},
 }
 
@@ -497,6 +512,8 @@ def load_sim_config(path: str | Path) -> SimConfig:
                           f"got {config.servers.digitizer_dialect!r}")
     if not config.world.accelerometer.modes:
         raise ConfigError(f"{path}: world.accelerometer.modes: at least one mode is needed")
+    if config.world.accelerometer_2.enabled and not config.world.accelerometer_2.modes:
+        raise ConfigError(f"{path}: world.accelerometer_2.modes: at least one mode is needed")
     _check_orders(config.world.signals.orders, path, "world.signals.orders")
     return dataclasses.replace(config, register_map=controller_map_of(register_map))
 

@@ -227,7 +227,8 @@ def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
                          channels: dict[str, int]) -> DigitizerConfig:
     """`base` with the simulated digitizer's resource, dialect and channels: each role of
     `channels` (role -> channel number) named as the dialect names it; a role of `base` on
-    another channel kept (renamed for the dialect), one on a simulator's channel dropped; the
+    another channel kept (renamed for the dialect), one on a simulator's channel dropped; a
+    quadrature or second-sensor channel without a range takes the doppler's or response's; the
     sample format kept where the dialect can send it (else int16, which every dialect can);
     the driver the project's SCPI one."""
     from hopkinson.drivers.scpi_dialect import resolve_dialect
@@ -242,9 +243,12 @@ def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
         if role not in spelled and renamed not in spelled.values():
             spelled[role] = renamed
     fmt = base.sample_format if base.sample_format in cls.sample_formats else "int16"
+    ranges = {role: v for role, v in base.ranges_v.items() if role in spelled}
+    for role, like in (("doppler_quadrature", "doppler"), ("response_2", "response")):
+        if role in spelled and role not in ranges:  # a partner channel takes its first's range
+            ranges[role] = ranges.get(like, base.ch1_range_v if like == "doppler" else base.ch2_range_v)
     return dataclasses.replace(base, driver="scpi", options={}, resource=resource, dialect=dialect,
-                               channels=spelled, sample_format=fmt,
-                               ranges_v={role: v for role, v in base.ranges_v.items() if role in spelled})
+                               channels=spelled, sample_format=fmt, ranges_v=ranges)
 
 
 def sim_digitizer_lines(dialect: str, channels: dict[str, int]) -> list[str]:

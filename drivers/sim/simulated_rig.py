@@ -7,7 +7,8 @@ SimulatedRig starts, on loopback and pseudo-terminals,
 - the digitizer: SCPI socket server (drivers/sim/scpi_digitizer.py), VISA resource
   ``TCPIP0::host::port::SOCKET``, in the dialect of `ServerParams.digitizer_dialect` (generic,
   keysight, tektronix or lecroy); the world's Doppler beat is on its channel 1, the response
-  on channel 2 (`DIGITIZER_CHANNELS`),
+  on channel 2 (`DIGITIZER_CHANNELS`), and when the world makes them the quadrature
+  photodetector on 3 and a second sensor on 4 (`WorldParams.channels()`, in the addresses),
 - the bridge amplifier: serial device on a simulated line at its baud rate
   (drivers/sim/serial_amplifier.py),
 
@@ -191,6 +192,7 @@ class SimulatedRig:
             modbus_stopbits=s.modbus_stopbits,
             amplifier_baudrate=s.amplifier_baudrate,
             digitizer_dialect=self.digitizer.dialect,
+            digitizer_channels=self.config.world.channels(),
         )
 
     def state(self) -> dict[str, Any]:

@@ -28,8 +28,10 @@ If the digitizer is armed at that moment, the next `capture(settings)` returns t
 two channels around the digitizer's own trigger (a real crossing of its level, with its slope,
 on its source; none, and the shot passes unrecorded): PM beat (drivers/sim/doppler_beat.pm_beat)
 and amplifier output (the true accelerometer model with the amplifier's gain, low-pass, offset
-and noise). The truth of
-the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
+and noise) on channels 1 and 2; with [world.signals] quadrature, the quadrature interferometer's
+second photodetector on channel 3 (drivers/sim/doppler_beat.quadrature_pair); with
+[world.accelerometer_2] enabled, a second sensor's conditioner output on channel 4 (`CHANNELS`,
+`WorldParams.channels()`). The truth of the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
 `launch_listeners` is called with it at each launch (a witness such as a fire log).
 
 Controller. Like a real PLC, the controller keeps a link watchdog and times the fire pulse:
@@ -68,11 +70,19 @@ from hopkinson.drivers.sim.accelerometer import (
     coloured_noise,
     white_noise,
 )
-from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, pm_beat
+from hopkinson.drivers.sim.doppler_beat import (
+    DEFAULT_GRATING_PITCH_M,
+    QuadratureOutput,
+    pm_beat,
+    quadrature_pair,
+)
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.shock import G_M_S2, bipolar_m_s2, bipolar_velocity_m_s
 
 PROJECTILES = (1, 2, 3)
+# The digitizer's channel of each signal (World.capture's keys): the PM beat, the amplifier
+# output, and when configured the quadrature photodetector and the second sensor.
+CHANNELS = {"doppler": 1, "response": 2, "doppler_quadrature": 3, "response_2": 4}
 
 
 @dataclass(frozen=True)
@@ -150,6 +160,36 @@ class SignalParams:
     pulse_bipolar_ratio: float = 0.0
     channel_skew_s: float = 0.0
     response_drift_v_per_s: float = 0.0
+    # A quadrature interferometer (ISO 16063-11 method 3): a second photodetector 90° from the
+    # PM beat on channel 3 (role doppler_quadrature), with its own offset (V), amplitude ÷ the
+    # first's and departure from 90° (degrees): the ellipse the analysis' Heydemann fit undoes.
+    quadrature: bool = False
+    quadrature_offset_v: float = 0.12
+    quadrature_gain_ratio: float = 0.85
+    quadrature_error_deg: float = 4.0
+
+    def quadrature_output(self) -> QuadratureOutput:
+        return QuadratureOutput(self.quadrature_offset_v, self.quadrature_gain_ratio,
+                                math.radians(self.quadrature_error_deg))
+
+
+@dataclass(frozen=True)
+class SecondSensorParams:
+    """An optional second accelerometer beside the first, on channel 4 (role response_2), with
+    its own conditioner set by hand (fixed gain and low-pass): its own true model, recorded
+    with every shot as simulation truth. Its noise follows [world.signals] like the first's."""
+
+    enabled: bool = False
+    modes: tuple[Mode, ...] = (Mode(33_000.0, 0.03),)
+    zero_shift_m_s2: float = 0.0
+    sensitivity_v_per_m_s2: float = 1.0e-7  # output at the conditioner's input per m/s2
+    conditioner_gain: float = 20.0
+    lowpass_hz: float = 200_000.0  # the conditioner's Butterworth low-pass; 0 = off
+    lowpass_order: int = 2
+
+    def truth(self) -> AccelerometerTruth:
+        return AccelerometerTruth(modes=tuple(self.modes), lowpass_hz=self.lowpass_hz,
+                                  lowpass_order=self.lowpass_order, sensitivity=1.0, zero_shift=self.zero_shift_m_s2)
 
 
 @dataclass(frozen=True)
@@ -163,6 +203,16 @@ class WorldParams:
     accelerometer: AccelerometerParams = field(default_factory=AccelerometerParams)
     amplifier: AmplifierParams = field(default_factory=AmplifierParams)
     signals: SignalParams = field(default_factory=SignalParams)
+    accelerometer_2: SecondSensorParams = field(default_factory=SecondSensorParams)
+
+    def channels(self) -> dict[str, int]:
+        """role -> the simulated digitizer's channel, for the signals this world makes."""
+        roles = ["doppler", "response"]
+        if self.signals.quadrature:
+            roles.append("doppler_quadrature")
+        if self.accelerometer_2.enabled:
+            roles.append("response_2")
+        return {role: CHANNELS[role] for role in roles}
 
 
 @dataclass
@@ -192,6 +242,7 @@ class _Shot:
     excitation_v: float
     bridge_sensitivity_v_per_m_s2: float
     output_offset_v: float
+    truth_2: AccelerometerTruth | None = None  # the second sensor's, when there is one
 
 
 class World:
@@ -577,8 +628,9 @@ class World:
             peak_m_s2=peak, truth=truth, gain=a.gain, excitation_v=a.excitation_v,
             bridge_sensitivity_v_per_m_s2=self._bridge_sensitivity(),
             output_offset_v=a.gain * (a.bridge_offset_v + shunt),
+            truth_2=self.params.accelerometer_2.truth() if self.params.accelerometer_2.enabled else None,
         )
-        shot_truth = self.last_shot_truth = _truth_dict(shot, self.params.signals)
+        shot_truth = self.last_shot_truth = _truth_dict(shot, self.params)
         # The static peak output latches the overload even when nobody records the shot;
         # capture() checks the actual waveform (resonance overshoot included).
         peak_out = abs(shot.output_offset_v) + shot.gain * shot.bridge_sensitivity_v_per_m_s2 * peak
@@ -588,7 +640,7 @@ class World:
         return shot_truth
 
     def capture(self, settings: Any) -> dict[int, np.ndarray] | None:
-        """The digitizer's view: None until a shot fired while armed, then its two channels.
+        """The digitizer's view: None until a shot fired while armed, then its channels (by number).
 
         `settings` has sample_rate_hz, record_length and pre_trigger_samples (the simulated
         digitizer's AcquisitionSettings). Without a `trigger_index` method the pulse starts at
@@ -611,13 +663,21 @@ class World:
         rng = np.random.default_rng([self.params.seed, shot.number])
         sig = self.params.signals
         velocity = bipolar_velocity_m_s(time_s, shot.width_s, shot.peak_m_s2, 0.0, sig.pulse_bipolar_ratio)
-        doppler = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders),
-                          amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
-                          fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
-        response = self._response_v(shot, time_s, fs, rng)
+        beat_options: dict[str, Any] = dict(amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
+                                            fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
+        channels: dict[int, np.ndarray] = {}
+        if sig.quadrature:  # the extra channels draw from their own generators: channels 1, 2 stay as they were
+            channels[1], channels[3] = quadrature_pair(
+                velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders), quadrature=sig.quadrature_output(),
+                quadrature_rng=np.random.default_rng([self.params.seed, shot.number, 1]), **beat_options)
+        else:
+            channels[1] = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders), **beat_options)
+        channels[2] = self._response_v(shot, time_s, fs, rng)
+        if shot.truth_2 is not None:
+            channels[4] = self._response_2_v(shot, time_s, fs, np.random.default_rng([self.params.seed, shot.number, 2]))
         first = 0
         if callable(locate):
-            k = locate({1: doppler, 2: response}, pre, pre + 2 * lead)
+            k = locate(channels, pre, pre + 2 * lead)
             if k is None:
                 with self._lock:
                     if self.last_shot_truth is not None and self.last_shot_truth["shot_number"] == shot.number:
@@ -625,7 +685,8 @@ class World:
                 return None
             first = k - pre
             time_s, velocity = time_s[first:first + n], velocity[first:first + n]
-            doppler, response = doppler[first:first + n], response[first:first + n]
+            channels = {ch: x[first:first + n] for ch, x in channels.items()}
+        response = channels[2]
         with self._lock:
             if self.last_shot_truth is not None and self.last_shot_truth["shot_number"] == shot.number:
                 self.last_shot_truth["capture"] = {
@@ -635,10 +696,27 @@ class World:
                 self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot, sig.pulse_bipolar_ratio)
             if np.any(np.abs(response) >= self.params.amplifier.output_limit_v):
                 self.amplifier.overload_latched = True
-        return {1: doppler, 2: response}
+        return channels
 
     def _response_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator) -> np.ndarray:
-        """Amplifier output (V) at the digitizer's times.
+        """Amplifier output (V) at the digitizer's times (`_sensor_output_v` of the first sensor)."""
+        sig = self.params.signals
+        return self._sensor_output_v(shot, shot.truth, shot.gain * shot.bridge_sensitivity_v_per_m_s2, time_s, fs,
+                                     rng, offset_v=shot.output_offset_v, skew_s=sig.channel_skew_s,
+                                     drift_v_per_s=sig.response_drift_v_per_s)
+
+    def _response_2_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator) -> np.ndarray:
+        """The second sensor's conditioner output (V): its own model, gain and sensitivity."""
+        s2 = self.params.accelerometer_2
+        assert shot.truth_2 is not None
+        return self._sensor_output_v(shot, shot.truth_2, s2.conditioner_gain * s2.sensitivity_v_per_m_s2, time_s,
+                                     fs, rng)
+
+    def _sensor_output_v(self, shot: _Shot, truth: AccelerometerTruth, scale_v_per_m_s2: float,
+                         time_s: np.ndarray, fs: float, rng: np.random.Generator, *, offset_v: float = 0.0,
+                         skew_s: float = 0.0, drift_v_per_s: float = 0.0) -> np.ndarray:
+        """A sensor's conditioned output (V) at the digitizer's times: `truth` applied to the
+        shot's acceleration, times `scale_v_per_m_s2`, with the noise of [world.signals].
 
         The accelerometer + low-pass model is run at `response_rate_hz` (≤ fs) and linearly
         interpolated to the digitizer's grid: its transfer-function form loses precision for
@@ -651,21 +729,45 @@ class World:
         n_int = int(np.ceil((time_s[-1] - time_s[0]) * rate)) + 2
         t_int = time_s[0] + np.arange(n_int) / rate
         accel = bipolar_m_s2(t_int, shot.width_s, shot.peak_m_s2, 0.0, sig.pulse_bipolar_ratio)
-        scale = shot.gain * shot.bridge_sensitivity_v_per_m_s2
-        clean = shot.truth.respond(accel, 1.0 / rate) * scale
+        clean = truth.respond(accel, 1.0 / rate) * scale_v_per_m_s2
         if sig.response_coloured_snr_db > 0:
             clean = clean + coloured_noise(clean, sig.response_coloured_snr_db, rng, sig.response_coloured_pole)
         # A skew shifts the response channel's sampling instants against the Doppler channel's.
-        out = np.interp(time_s - sig.channel_skew_s, t_int, clean) + shot.output_offset_v
-        out = out + sig.response_drift_v_per_s * (time_s - time_s[0])
+        out = np.interp(time_s - skew_s, t_int, clean) + offset_v
+        out = out + drift_v_per_s * (time_s - time_s[0])
         if sig.response_white_snr_db > 0:
-            out = out + white_noise(out - shot.output_offset_v, sig.response_white_snr_db, rng)
+            out = out + white_noise(out - offset_v, sig.response_white_snr_db, rng)
         limit = self.params.amplifier.output_limit_v
         return np.clip(out, -limit, limit)
 
 
-def _truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
-    truth = shot.truth
+def _truth_dict(shot: _Shot, params: WorldParams) -> dict[str, Any]:
+    signals = params.signals
+    out = _shot_truth_dict(shot, signals)
+    if signals.quadrature:  # the Heydemann parameters of the (doppler, doppler_quadrature) ellipse
+        q = signals.quadrature_output()
+        out["quadrature"] = {"offset_1_v": signals.pm_dc_offset_v, "offset_2_v": q.offset_v,
+                             "amplitude_v": signals.pm_amplitude_v, "amplitude_ratio": 1.0 / q.gain_ratio,
+                             "phase_error_rad": q.phase_error_rad}
+    if shot.truth_2 is not None:
+        s2 = params.accelerometer_2
+        out["accelerometer_2"] = {**_model_dict(shot.truth_2), "sensitivity_v_per_m_s2": s2.sensitivity_v_per_m_s2,
+                                  "conditioner_gain": s2.conditioner_gain}
+    return out
+
+
+def _model_dict(truth: AccelerometerTruth) -> dict[str, Any]:
+    return {
+        "modes": [{"natural_frequency_hz": m.natural_frequency_hz, "damping_ratio": m.damping_ratio}
+                  for m in truth.modes],
+        "lowpass_hz": truth.lowpass_hz,
+        "lowpass_order": truth.lowpass_order,
+        "sensitivity": truth.sensitivity,
+        "zero_shift": truth.zero_shift,
+    }
+
+
+def _shot_truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
     return {
         "shot_number": shot.number,
         "fired_at_sim_s": shot.fired_at_s,
@@ -680,14 +782,7 @@ def _truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
         "peak_g": shot.peak_m_s2 / G_M_S2,
         "pulse_width_s": shot.width_s,
         "delta_velocity_m_s": shot.delta_v_m_s,
-        "accelerometer": {
-            "modes": [{"natural_frequency_hz": m.natural_frequency_hz, "damping_ratio": m.damping_ratio}
-                      for m in truth.modes],
-            "lowpass_hz": truth.lowpass_hz,
-            "lowpass_order": truth.lowpass_order,
-            "sensitivity": truth.sensitivity,
-            "zero_shift": truth.zero_shift,
-        },
+        "accelerometer": _model_dict(shot.truth),
         "amplifier_gain": shot.gain,
         "excitation_v": shot.excitation_v,
         "sensitivity_v_per_m_s2": shot.bridge_sensitivity_v_per_m_s2,
@@ -710,9 +805,10 @@ def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot, ratio
     }
 
 
-def accelerometer_truth(truth: dict[str, Any]) -> AccelerometerTruth:
-    """The AccelerometerTruth of a shot from its `last_shot_truth` dict (round trip)."""
-    acc = truth["accelerometer"]
+def accelerometer_truth(truth: dict[str, Any], key: str = "accelerometer") -> AccelerometerTruth:
+    """The AccelerometerTruth of a shot from its `last_shot_truth` dict (round trip); key
+    "accelerometer_2" for the second sensor."""
+    acc = truth[key]
     return AccelerometerTruth(
         modes=tuple(Mode(m["natural_frequency_hz"], m["damping_ratio"]) for m in acc["modes"]),
         lowpass_hz=acc["lowpass_hz"],
