@@ -5,7 +5,7 @@ The grating on the calibrated object moves at velocity v(t); two beams diffracte
 orders ±1 give Δf = 2v/d). The phase of the beat is therefore 2π·(φ − ξ)/d times the
 displacement of the grating. On top of the beat the PM shows a DC offset, a slow amplitude
 fluctuation (speckle, alignment) and white noise. A quadrature interferometer has a second
-photodetector 90° from the first (`quadrature_pair`, ISO 16063-11 method 3): same phase and
+photodetector 90° from the first (`pm_beat(..., quadrature=...)`, ISO 16063-11 method 3): same phase and
 fluctuation, its own offset, gain and a few degrees of quadrature error (the ellipse the
 Heydemann correction undoes).
 
@@ -18,7 +18,6 @@ Pure NumPy/SciPy: this module is part of "the world" and imports nothing of anal
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from hopkinson.drivers.sim import shock
@@ -39,6 +38,21 @@ def beat_frequency_hz(velocity_m_s: np.ndarray | float, grating_pitch_m: float =
     return np.asarray(velocity_m_s) * (orders[0] - orders[1]) / grating_pitch_m
 
 
+@dataclass(frozen=True)
+class QuadratureOutput:
+    """The second photodetector of a quadrature interferometer, against the first (the PM beat).
+
+    u1 = p + r·e(t)·cos φ (the PM beat), u2 = q + gain_ratio·r·e(t)·sin(φ − α): offset_v = q,
+    gain_ratio = its amplitude ÷ the first's (Heydemann's G = 1/gain_ratio), phase_error_rad = α
+    (0: exactly 90° apart). Real detectors: offsets of 0.1 V, gains a few to 15 % apart, a few
+    degrees of quadrature error (ISO 16063-11, method 3).
+    """
+
+    offset_v: float = 0.12
+    gain_ratio: float = 0.85
+    phase_error_rad: float = float(np.deg2rad(4.0))
+
+
 def pm_beat(
     velocity_m_s: np.ndarray,
     sample_interval_s: float,
@@ -52,6 +66,8 @@ def pm_beat(
     snr_db: float | None = 30.0,
     initial_phase_rad: float | None = None,
     rng: np.random.Generator | None = None,
+    quadrature: QuadratureOutput | None = None,
+    quadrature_rng: np.random.Generator | None = None,
 ) -> np.ndarray:
     """The PM signal in volts for a sampled velocity history (m/s) of the grating.
 
@@ -60,64 +76,12 @@ def pm_beat(
     plus white noise `snr_db` below the power of the beat (None: no noise).
     `initial_phase_rad` is the beat's phase at rest (None: drawn uniformly from `rng`);
     θ is drawn from `rng` too. `rng` None uses a fresh unseeded generator.
+
+    With `quadrature` (a quadrature interferometer): a (2, n) array, the PM signal (the same as
+    without, for the same `rng`) and its quadrature partner (`QuadratureOutput`): same phase
+    and fluctuation, its own white noise at the same SNR against its own beat power, drawn
+    from `quadrature_rng` (None: a fresh generator). `u1, u2 = pm_beat(..., quadrature=...)`.
     """
-    return _photodetectors(velocity_m_s, sample_interval_s, grating_pitch_m, orders, amplitude_v=amplitude_v,
-                           dc_offset_v=dc_offset_v, fluctuation=fluctuation, fluctuation_hz=fluctuation_hz,
-                           snr_db=snr_db, initial_phase_rad=initial_phase_rad, rng=rng)[0]
-
-
-@dataclass(frozen=True)
-class QuadratureOutput:
-    """The second photodetector of a quadrature interferometer, against the first (the PM beat).
-
-    u1 = p + r·e(t)·cos φ (the PM beat of `pm_beat`), u2 = q + gain_ratio·r·e(t)·sin(φ − α):
-    offset_v = q, gain_ratio = its amplitude ÷ the first's (Heydemann's G = 1/gain_ratio),
-    phase_error_rad = α (0: exactly 90° apart). Real detectors: offsets of 0.1 V, gains a few to
-    15 % apart, a few degrees of quadrature error (ISO 16063-11, method 3).
-    """
-
-    offset_v: float = 0.12
-    gain_ratio: float = 0.85
-    phase_error_rad: float = float(np.deg2rad(4.0))
-
-
-def quadrature_pair(
-    velocity_m_s: np.ndarray,
-    sample_interval_s: float,
-    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M,
-    orders: tuple[int, int] = DEFAULT_ORDERS,
-    *,
-    quadrature: QuadratureOutput | None = None,
-    quadrature_rng: np.random.Generator | None = None,
-    **beat_options: Any,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(u1, u2) in volts: the PM beat (`pm_beat` with `beat_options`, identical for the same
-    `rng`) and its quadrature partner (`quadrature`, default QuadratureOutput()): same phase and
-    amplitude fluctuation, its own white noise at the same SNR against its own beat power,
-    drawn from `quadrature_rng` (None: a fresh generator), so u1 does not depend on u2."""
-    out = _photodetectors(velocity_m_s, sample_interval_s, grating_pitch_m, orders,
-                          quadrature=quadrature or QuadratureOutput(),
-                          quadrature_rng=quadrature_rng or np.random.default_rng(), **beat_options)
-    assert out[1] is not None
-    return out[0], out[1]
-
-
-def _photodetectors(
-    velocity_m_s: np.ndarray,
-    sample_interval_s: float,
-    grating_pitch_m: float,
-    orders: tuple[int, int],
-    *,
-    amplitude_v: float = 0.4,
-    dc_offset_v: float = 0.15,
-    fluctuation: float = 0.1,
-    fluctuation_hz: float = 1_000.0,
-    snr_db: float | None = 30.0,
-    initial_phase_rad: float | None = None,
-    rng: np.random.Generator | None = None,
-    quadrature: QuadratureOutput | None = None,
-    quadrature_rng: np.random.Generator | None = None,
-) -> tuple[np.ndarray, np.ndarray | None]:
     if sample_interval_s <= 0:
         raise ValueError("sample_interval_s must be positive")
     if grating_pitch_m <= 0:
@@ -139,12 +103,12 @@ def _photodetectors(
     if snr_db is not None:
         beat = beat + rng.standard_normal(v.size) * noise_rms
     if quadrature is None:
-        return dc_offset_v + beat, None
+        return dc_offset_v + beat
     second = quadrature.gain_ratio * envelope * np.sin(phase - quadrature.phase_error_rad)
     if snr_db is not None:
         q_rng = np.random.default_rng() if quadrature_rng is None else quadrature_rng
         second = second + q_rng.standard_normal(v.size) * (noise_rms * quadrature.gain_ratio)
-    return dc_offset_v + beat, quadrature.offset_v + second
+    return np.stack((dc_offset_v + beat, quadrature.offset_v + second))
 
 
 def velocity_m_s_to_displacement_m(velocity_m_s: np.ndarray, sample_interval_s: float) -> np.ndarray:

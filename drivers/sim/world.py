@@ -29,7 +29,7 @@ two channels around the digitizer's own trigger (a real crossing of its level, w
 on its source; none, and the shot passes unrecorded): PM beat (drivers/sim/doppler_beat.pm_beat)
 and amplifier output (the true accelerometer model with the amplifier's gain, low-pass, offset
 and noise) on channels 1 and 2; with [world.signals] quadrature, the quadrature interferometer's
-second photodetector on channel 3 (drivers/sim/doppler_beat.quadrature_pair); with
+second photodetector on channel 3 (drivers/sim/doppler_beat.pm_beat with `quadrature`); with
 [world.accelerometer_2] enabled, a second sensor's conditioner output on channel 4 (`CHANNELS`,
 `WorldParams.channels()`). The truth of the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
 `launch_listeners` is called with it at each launch (a witness such as a fire log).
@@ -70,12 +70,7 @@ from hopkinson.drivers.sim.accelerometer import (
     coloured_noise,
     white_noise,
 )
-from hopkinson.drivers.sim.doppler_beat import (
-    DEFAULT_GRATING_PITCH_M,
-    QuadratureOutput,
-    pm_beat,
-    quadrature_pair,
-)
+from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput, pm_beat
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.shock import G_M_S2, bipolar_m_s2, bipolar_velocity_m_s
 
@@ -667,7 +662,7 @@ class World:
                                             fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
         channels: dict[int, np.ndarray] = {}
         if sig.quadrature:  # the extra channels draw from their own generators: channels 1, 2 stay as they were
-            channels[1], channels[3] = quadrature_pair(
+            channels[1], channels[3] = pm_beat(
                 velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders), quadrature=sig.quadrature_output(),
                 quadrature_rng=np.random.default_rng([self.params.seed, shot.number, 1]), **beat_options)
         else:
