@@ -258,4 +258,9 @@ def sim_digitizer_lines(dialect: str, channels: dict[str, int]) -> list[str]:
 
     cls = resolve_dialect(dialect)
     named = ", ".join(f'{role} = "{cls.channel_names[n - 1]}"' for role, n in channels.items())
-    return [f'rig config: [digitizer] dialect = "{dialect}"; [digitizer.channels] {named}']
+    lines = [f'rig config: [digitizer] dialect = "{dialect}"; [digitizer.channels] {named}']
+    partners = [role for role in ("doppler_quadrature", "response_2") if role in channels]
+    if partners:  # channels beyond 1 and 2 need their range (the simulator's: 1 V and 10 V)
+        ranges = ", ".join(f"{role} = {1.0 if role == 'doppler_quadrature' else 10.0}" for role in partners)
+        lines.append(f"            [digitizer.ranges_v] {ranges}")
+    return lines
