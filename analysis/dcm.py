@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel, complex_pairs, from_pairs, load_json_object
+from hopkinson.analysis.params import CONJUGATE_TOLERANCE
 from hopkinson.analysis.records import MAX_ABS_VALUE
 from hopkinson.analysis.response import (
     DEFAULT_LEVELS,
@@ -48,7 +49,7 @@ from hopkinson.analysis.response import (
 )
 from scipy import signal
 
-_CONJ_TOL = 1e-9
+_CONJ_TOL = CONJUGATE_TOLERANCE  # the rule AnalysisParams.check() applies to extra poles too
 _MAX_STEP_SAMPLES = 4_000_000  # longest step response simulated for a rise time
 
 

@@ -45,8 +45,12 @@ from hopkinson.analysis.dcm import (
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SUPPORT_SNR, amplitude_spectrum, pulse_width, pulse_window
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
-from hopkinson.analysis.params import DEFAULT_DCM_NOISE_GAIN_LIMIT as DEFAULT_NOISE_GAIN_LIMIT
-from hopkinson.analysis.params import DEFAULT_DCM_WIDENING as DEFAULT_WIDENING
+from hopkinson.analysis.params import (
+    DEFAULT_DCM_DAMPING,
+    DEFAULT_DCM_NOISE_GAIN_LIMIT,
+    DEFAULT_DCM_WIDENING,
+    dcm_option_problem,
+)
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import (
     fbsd_edges,
@@ -56,9 +60,9 @@ from hopkinson.analysis.response import (
 )
 from scipy import signal
 
-DEFAULT_DAMPING = 0.707
 # The automatic design keeps the DCM's white-noise RMS gain at the analysis rate below
-# DEFAULT_NOISE_GAIN_LIMIT: a compensated record at most 4× (12 dB) as noisy as the raw one.
+# DEFAULT_DCM_NOISE_GAIN_LIMIT (analysis.params, with the other defaults and the options'
+# rules): a compensated record at most 4× (12 dB) as noisy as the raw one.
 BAND_LIMIT_ORDER = 2
 # |H| of a 2nd-order Butterworth is 0.95 at this fraction of its cut-off: the widest ±5 % band
 # the band limit allows ((1/0.95² − 1)^(1/4)).
@@ -222,29 +226,31 @@ def response_band_top_hz(record: Record, model: DiscreteModel, noise_rms: float,
     return float(freq[i_max + below[0] - 1]) if below.size else float(freq[-1])
 
 
+_OPTION_FIELDS = {"dcm_ratio": "ratio", "dcm_damping": "damping", "dcm_widening": "widening",
+                  "dcm_noise_gain_limit": "noise_gain_limit", "dcm_band_limit_hz": "band_limit_hz",
+                  "extra_poles": "extra_poles"}
+
+
 @dataclass(frozen=True)
 class DcmOptions:
     """How to design: ratio None = automatic (for `widening`); band_limit_hz None = automatic,
     0 = none; noise_gain_limit bounds the automatic design."""
 
     ratio: float | None = None
-    damping: float = DEFAULT_DAMPING
-    widening: float = DEFAULT_WIDENING
-    noise_gain_limit: float = DEFAULT_NOISE_GAIN_LIMIT
+    damping: float = DEFAULT_DCM_DAMPING
+    widening: float = DEFAULT_DCM_WIDENING
+    noise_gain_limit: float = DEFAULT_DCM_NOISE_GAIN_LIMIT
     band_limit_hz: float | None = None
     extra_poles: tuple[complex, ...] = ()
 
     def __post_init__(self) -> None:
-        if self.ratio is not None and not (math.isfinite(self.ratio) and self.ratio > 0):
-            raise AnalysisError(f"DCM: the response-time ratio must be a positive number, got {self.ratio}")
-        if not (math.isfinite(self.damping) and 0 < self.damping <= 1):
-            raise AnalysisError(f"DCM: the damping ratio ζ_e must be in (0, 1], got {self.damping}")
-        if not (math.isfinite(self.widening) and self.widening > 1):
-            raise AnalysisError(f"DCM: the band widening must be a number above 1, got {self.widening}")
-        if not (self.noise_gain_limit > 0):  # inf: no bound
-            raise AnalysisError(f"DCM: the noise gain limit must be a positive number, got {self.noise_gain_limit}")
-        if self.band_limit_hz is not None and not (math.isfinite(self.band_limit_hz) and self.band_limit_hz >= 0):
-            raise AnalysisError(f"DCM: the band limit must be a frequency ≥ 0 Hz (0: none), got {self.band_limit_hz}")
+        """The rules AnalysisParams.check() applies before FIRE (analysis.params.dcm_option_problem)."""
+        problem = dcm_option_problem(self.ratio, self.damping, self.widening, self.noise_gain_limit,
+                                     self.band_limit_hz, self.extra_poles)
+        if problem is not None:
+            option, need = problem
+            value = getattr(self, _OPTION_FIELDS[option])
+            raise AnalysisError(f"DCM: {option} must be {need}, got {value!r}")
 
     @classmethod
     def from_params(cls, params: Any) -> DcmOptions:
@@ -531,8 +537,8 @@ def poles_only_model(poles: Sequence[complex] | np.ndarray, sample_interval_s: f
 
 def ratio_for_widening(
     model: DiscreteModel,
-    damping: float = DEFAULT_DAMPING,
-    widening: float = DEFAULT_WIDENING,
+    damping: float = DEFAULT_DCM_DAMPING,
+    widening: float = DEFAULT_DCM_WIDENING,
     extra_poles: Sequence[complex] | np.ndarray = (),
 ) -> float:
     """The automatic r for a bare model: every stable pole cancelled, no band limit, no noise

@@ -25,8 +25,14 @@ from hopkinson.analysis.errors import AnalysisError
 
 DEFAULT_ANALYSIS_RATE_HZ = 1e6
 DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/doppler_beat.py)
+# The DCM's defaults and the rules its options obey live here, once: analysis.dcm_design's
+# DcmOptions and AnalysisParams.check() both apply `dcm_option_problem`, so the rig's check
+# before FIRE refuses exactly what the design would refuse after it.
 DEFAULT_DCM_WIDENING = 3.0  # DCM: compensated ±5 % band this many times the model's (analysis.dcm_design)
 DEFAULT_DCM_NOISE_GAIN_LIMIT = 4.0  # DCM white-noise RMS gain allowed (12 dB; analysis.dcm_design)
+DEFAULT_DCM_DAMPING = 0.707  # ζ_e of the DCM's new poles
+# Two poles closer than this (relative) are one conjugate pair (analysis.dcm.check_conjugate_pairs).
+CONJUGATE_TOLERANCE = 1e-9
 # Monte Carlo draws per shot (GUM-S1 §7.9: enough for the 95 % interval's ends to be stable
 # to about one significant digit of the standard uncertainty; see analysis.uncertainty).
 DEFAULT_DRAWS = 400
@@ -47,7 +53,7 @@ class AnalysisParams:
     max_order: int = 12
     order: int | None = None  # None: chosen by analysis.identify's order test
     dcm_ratio: float | None = None  # None: chosen for `dcm_widening`
-    dcm_damping: float = 0.707
+    dcm_damping: float = DEFAULT_DCM_DAMPING
     dcm_widening: float = DEFAULT_DCM_WIDENING
     extra_poles: tuple[complex, ...] = ()
     # DCM noise gain (white-noise RMS gain at the analysis rate) allowed in the automatic design
@@ -110,17 +116,11 @@ class AnalysisParams:
         _integer(self.max_order, "max_order", 1, MAX_ORDER_LIMIT)
         if self.order is not None:
             _integer(self.order, "order", 1, MAX_ORDER_LIMIT)
-        if self.dcm_ratio is not None:
-            _finite(self.dcm_ratio, "dcm_ratio", above=0.0, at_most=1e4)
-        _finite(self.dcm_damping, "dcm_damping", above=0.0, at_most=10.0)
-        _finite(self.dcm_widening, "dcm_widening", above=1.0, at_most=1e3)
-        _finite(self.dcm_noise_gain_limit, "dcm_noise_gain_limit", above=0.0, at_most=1e6)
-        if self.dcm_band_limit_hz is not None:
-            _finite(self.dcm_band_limit_hz, "dcm_band_limit_hz", at_least=0.0, at_most=1e10)
-        for p in self.extra_poles:
-            if not (isinstance(p, complex) and math.isfinite(p.real) and math.isfinite(p.imag) and abs(p) < 1.0):
-                raise AnalysisError(f"analysis option extra_poles: {p!r} must be a finite complex number inside "
-                                    "the unit circle")
+        problem = dcm_option_problem(self.dcm_ratio, self.dcm_damping, self.dcm_widening, self.dcm_noise_gain_limit,
+                                     self.dcm_band_limit_hz, self.extra_poles, 0.5 * self.sample_rate_hz)
+        if problem is not None:
+            option, need = problem
+            raise AnalysisError(f"analysis option {option}: {need}, got {_shown(getattr(self, option))}")
         if not isinstance(self.uncertainty, bool):
             raise AnalysisError(f"analysis option uncertainty: true or false, got {self.uncertainty!r}")
         _integer(self.draws, "draws", MIN_DRAWS, MAX_DRAWS)
@@ -138,6 +138,58 @@ class AnalysisParams:
             "amplifier gain": self.u_amp_gain_rel,
             "digitizer gain": self.u_digitizer_gain_rel,
         }
+
+
+def dcm_option_problem(
+    ratio: Any, damping: Any, widening: Any, noise_gain_limit: Any, band_limit_hz: Any, extra_poles: Any,
+    nyquist_hz: float | None = None,
+) -> tuple[str, str] | None:
+    """The first DCM option the design refuses, as (AnalysisParams field, what it must be), or None.
+
+    The rules of analysis.dcm.design_dcm and analysis.dcm_design (DcmOptions, the band limit):
+    ratio None (automatic) or a finite number > 0; damping ζ_e in (0, 1]; widening a finite
+    number > 1; noise gain limit > 0 (inf: no bound); band limit None (from the shot), 0
+    (none) or a finite frequency below Nyquist (`nyquist_hz`, when known); extra poles
+    finite, inside the unit circle, each complex one with its conjugate. (How many extra
+    poles fit depends on the model's poles: only the design can tell.)"""
+    if ratio is not None and not (_real(ratio) and math.isfinite(ratio) and ratio > 0):
+        return "dcm_ratio", "a finite number above 0 (or none: automatic)"
+    if not (_real(damping) and 0 < damping <= 1):
+        return "dcm_damping", "the damping ratio ζ_e, a number above 0 and at most 1"
+    if not (_real(widening) and math.isfinite(widening) and widening > 1):
+        return "dcm_widening", "a finite number above 1"
+    if not (_real(noise_gain_limit) and noise_gain_limit > 0):
+        return "dcm_noise_gain_limit", "a number above 0 (inf: no bound)"
+    if band_limit_hz is not None:
+        if not (_real(band_limit_hz) and math.isfinite(band_limit_hz) and band_limit_hz >= 0):
+            return "dcm_band_limit_hz", "a frequency of at least 0 Hz (0: none; none: from the shot)"
+        if nyquist_hz is not None and band_limit_hz > 0 and not band_limit_hz < nyquist_hz:
+            return "dcm_band_limit_hz", f"a frequency below Nyquist ({nyquist_hz:g} Hz at the analysis rate)"
+    poles = list(extra_poles)
+    for p in poles:
+        if not (isinstance(p, (complex, float, int)) and not isinstance(p, bool)
+                and math.isfinite(complex(p).real) and math.isfinite(complex(p).imag) and abs(p) < 1.0):
+            return "extra_poles", f"finite poles inside the unit circle ({p!r} is not)"
+    unmatched = [complex(p) for p in poles if abs(complex(p).imag) > CONJUGATE_TOLERANCE * max(1.0, abs(p))]
+    while unmatched:
+        x = unmatched.pop(0)
+        partner = next((i for i, y in enumerate(unmatched)
+                        if abs(y - x.conjugate()) <= CONJUGATE_TOLERANCE * max(1.0, abs(x))), None)
+        if partner is None:
+            return "extra_poles", f"both members of every complex pair ({x!r} has no conjugate partner)"
+        unmatched.pop(partner)
+    return None
+
+
+def _real(value: Any) -> bool:
+    """An int or float that is not NaN (bool is not a number here)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and not math.isnan(value)
+
+
+def _shown(value: Any) -> str:
+    if isinstance(value, tuple):
+        return "[" + ", ".join(repr(v) for v in value) + "]"
+    return repr(value)
 
 
 def _complex(p: Any) -> complex:
