@@ -8,9 +8,12 @@ uncertainty draws noise records with these spectra, so a single RMS is not enoug
 
 - `quiet_segments`: the stretches of a record before the pulse and after the signal has
   died away (the response's ringing below a few noise RMS).
-- `NoiseSpectrum.measure`: Welch's averaged periodogram (`welch`, linear detrend per segment,
-  so a slow drift does not pass for noise) over those stretches; where they
-  disagree (an interferometer is quiet at rest but noisy in flight) the larger level is kept.
+- `NoiseSpectrum.measure`: Welch's averaged periodogram (`welch`) over those stretches, the
+  record's baseline and drift line having been removed first (analysis.identify), so no
+  segment is detrended again: that would empty the lowest bins, where the DC gain is decided.
+  The stretch before the pulse and those after it are pooled unless their levels differ
+  beyond chance (an interferometer is quiet at rest but noisy in flight): then the louder is
+  kept.
 - `NoiseSpectrum.bin_variance`: E|N_k|² of the DFT N_k = Σ n(t)·e^{−jω_k t} of a window of
   L samples: L·S(f_k)·f_s/2 with S the one-sided PSD.
 - `NoiseSpectrum.draw`: noise records with the measured spectrum (white Gaussian noise shaped
@@ -19,39 +22,52 @@ uncertainty draws noise records with these spectra, so a single RMS is not enoug
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy import fft
 
-# Shortest quiet stretch worth a spectrum, and the Welch segment length (frequency resolution
+# Shortest quiet stretch worth a spectrum, and the longest Welch segment (frequency resolution
 # f_s / WELCH_SEGMENT: 4 kHz at 1 MS/s); at most MAX_QUIET_SAMPLES of a stretch are used (the
 # spectrum's scatter is then ~3 %: more adds time, not knowledge).
 MIN_QUIET_SAMPLES = 32
 WELCH_SEGMENT = 256
 MAX_QUIET_SAMPLES = 32_768
+# Segments are made shorter (coarser in frequency, down to MIN_QUIET_SAMPLES) until the quiet
+# samples give about this many half-overlapping segments: with 3 (500 quiet samples in 256-
+# sample segments) each frequency's level scattered by ±60 %, and an interval resting on a
+# few bins' levels was too narrow as often as not.
+MIN_WELCH_AVERAGES = 16
+# Equivalent degrees of freedom of a Welch average of K Hann segments at 50 % overlap:
+# 2K / (1 + 2·0.167²) for large K (Percival & Walden 1993, §6.17).
+HANN_OVERLAP_DOF = 2.0 / (1.0 + 2.0 * 0.167**2)
 
 
-def welch(x: np.ndarray, sample_rate_hz: float, segment: int) -> tuple[np.ndarray, np.ndarray]:
-    """One-sided PSD by Welch's method: Hann-windowed segments, half overlapping, each with its
-    least-squares line removed (a drift is not noise); the DC bin, which that empties, takes its
-    neighbour's level. Written out with NumPy because scipy.signal.welch (ShortTimeFFT since
-    SciPy 1.15) costs tens of milliseconds per call on these short records, NumPy ~1 ms."""
+def welch(x: np.ndarray, sample_rate_hz: float, segment: int, detrend: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided PSD by Welch's method: Hann-windowed segments, half overlapping. Not detrended
+    by default (the caller removes the record's baseline and drift: removing each segment's
+    own mean and line as well takes the noise's own low-frequency content with it, −29 % at
+    the first bin for white noise, and the lowest fitted bins decide the DC gain); `detrend`
+    removes each segment's line (the conservative look, see NoiseSpectrum.measure). Written
+    out with NumPy because scipy.signal.welch (ShortTimeFFT since SciPy 1.15) costs tens of
+    milliseconds per call on these short records, NumPy ~1 ms."""
     x = np.asarray(x, dtype=float)
     segment = max(4, min(segment, x.size))
     segment -= segment % 2
     step = max(1, segment // 2)
     starts = np.arange(0, x.size - segment + 1, step)
     blocks = x[starts[:, None] + np.arange(segment)[None, :]]
-    t = np.arange(segment) - (segment - 1) / 2.0
-    blocks = blocks - blocks.mean(axis=1, keepdims=True)
-    blocks = blocks - np.outer(blocks @ t / (t @ t), t)
+    if detrend:
+        t = np.arange(segment) - (segment - 1) / 2.0
+        blocks = blocks - blocks.mean(axis=1, keepdims=True)
+        blocks = blocks - np.outer(blocks @ t / (t @ t), t)
     window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(segment) / segment)  # periodic Hann
     spectra = np.abs(fft.rfft(blocks * window, axis=1)) ** 2
     psd = spectra.mean(axis=0) / (sample_rate_hz * float(window @ window))
     psd[1:-1] *= 2.0  # one-sided (the segment is even: DC and Nyquist once)
-    if psd.size > 1:
+    if psd.size > 1:  # the DC bin measures the segments' means, which the baseline and drift took
         psd[0] = psd[1]
     return fft.rfftfreq(segment, 1.0 / sample_rate_hz), psd
 
@@ -65,6 +81,7 @@ class NoiseSpectrum:
     sample_rate_hz: float
     samples: int  # quiet samples it was estimated from (0: not measured)
     source: str  # "quiet segments", "residual", "none"
+    dof: float = math.inf  # equivalent degrees of freedom of each frequency's level (inf: taken as known)
 
     @property
     def rms(self) -> float:
@@ -84,18 +101,45 @@ class NoiseSpectrum:
     def scaled(self, factor: float) -> NoiseSpectrum:
         """The same spectrum for the channel multiplied by `factor` (PSD by factor²)."""
         return NoiseSpectrum(self.frequency_hz, self.psd * factor * factor, self.sample_rate_hz, self.samples,
-                             self.source)
+                             self.source, self.dof)
 
-    def draw(self, n: int, rng: np.random.Generator, count: int | None = None) -> np.ndarray:
-        """Noise records of `n` samples with this spectrum: shape (n,) or (count, n)."""
+    def level_factors(self, frequency_hz: np.ndarray, rng: np.random.Generator, count: int | None = None
+                      ) -> np.ndarray:
+        """Draws of the true level over the measured one at `frequency_hz`: ν/χ²_ν at each
+        frequency of the spectrum (ν = `dof`; independent from one to the next), interpolated.
+        The level is itself estimated from a few quiet samples; drawing it as well (GUM-S1
+        6.4.9: the variance of a Type A quantity from ν degrees of freedom) turns each
+        figure's PDF into the Student-t-like one an estimated noise level calls for. Ones when
+        the level is taken as known. Shape (len(frequency_hz),) or (count, len(...))."""
+        shape = (self.frequency_hz.size,) if count is None else (count, self.frequency_hz.size)
+        if not math.isfinite(self.dof):
+            return np.ones(shape[:-1] + (np.size(frequency_hz),))
+        factors = self.dof / rng.chisquare(self.dof, shape)
+        f = np.abs(np.asarray(frequency_hz, dtype=float))
+        if count is None:
+            return np.interp(f, self.frequency_hz, factors)
+        return np.array([np.interp(f, self.frequency_hz, row) for row in factors])
+
+    def draw(self, n: int, rng: np.random.Generator, count: int | None = None, *, uncertain_level: bool = False
+             ) -> np.ndarray:
+        """Noise records of `n` samples with this spectrum: shape (n,) or (count, n).
+        `uncertain_level`: each record's spectrum drawn as well (`level_factors`)."""
         shape = (n,) if count is None else (count, n)
         white = rng.standard_normal(shape)
         if not np.any(self.psd > 0):
             return np.zeros(shape)
         spec = fft.rfft(white, axis=-1)
         f = fft.rfftfreq(n, 1.0 / self.sample_rate_hz)
-        spec *= np.sqrt(self.at(f) * self.sample_rate_hz / 2.0)
+        level = self.at(f) * self.sample_rate_hz / 2.0
+        if uncertain_level:
+            level = level * self.level_factors(f, rng, count)
+        spec *= np.sqrt(level)
         return fft.irfft(spec, n, axis=-1)
+
+    def lower_of(self, other: NoiseSpectrum) -> NoiseSpectrum:
+        """Frequency by frequency the lower of this spectrum and `other` (on this one's grid)."""
+        return NoiseSpectrum(self.frequency_hz, np.minimum(self.psd, other.at(self.frequency_hz)), self.sample_rate_hz,
+                             self.samples, self.source, self.dof)
 
     @classmethod
     def white(cls, rms: float, sample_rate_hz: float, source: str, samples: int = 0) -> NoiseSpectrum:
@@ -104,16 +148,67 @@ class NoiseSpectrum:
         return cls(np.array([0.0, sample_rate_hz / 2]), np.array([level, level]), sample_rate_hz, samples, source)
 
     @classmethod
-    def measure(cls, x: np.ndarray, sample_rate_hz: float, segments: Sequence[slice]) -> NoiseSpectrum:
+    def measure(cls, x: np.ndarray, sample_rate_hz: float, segments: Sequence[slice], *, conservative: bool = False
+                ) -> NoiseSpectrum:
         """Welch spectrum over the quiet `segments` of `x`.
 
+        `conservative`: the look the identification weighs its fit by (unchanged since the fit
+        was validated with it): 256-sample segments each detrended, the two groups' larger
+        level frequency by frequency. It errs high where a short stretch scatters and low in
+        the lowest bins, so the uncertainty's draws use the unbiased look described next.
+
         The stretch at the record's start (before any activity) and the others (after the pulse,
-        between the pulses of a train) are averaged apart, each weighted by length, and the
-        larger level is kept where they disagree: an interferometer is quiet at rest (no beat,
-        no phase noise) but noisy in flight, and the flight is what the pulse sees. Segments
-        shorter than MIN_QUIET_SAMPLES are skipped, and at most MAX_QUIET_SAMPLES are used per
-        group; with none left the spectrum is zero and `samples` is 0."""
+        between the pulses of a train) are averaged apart, each weighted by length. Where their
+        mean levels differ beyond chance (`_levels_differ`) the louder is kept: an
+        interferometer is quiet at rest (no beat, no phase noise) but noisy in flight, and the
+        flight is what the pulse sees. Otherwise they are pooled: the larger of two estimates of
+        one level, taken frequency by frequency, is biased upwards (by ~16 % in RMS with a short
+        lead-in). Segments shorter than MIN_QUIET_SAMPLES are skipped, and at most
+        MAX_QUIET_SAMPLES are used per group; with none left the spectrum is zero and `samples`
+        is 0. The segment length is the longest (up to WELCH_SEGMENT) that still gives about
+        MIN_WELCH_AVERAGES segments; `dof` is the level's equivalent degrees of freedom."""
         x = np.asarray(x, dtype=float)
+        if conservative:
+            return cls._conservative(x, sample_rate_hz, segments)
+        budget = {True: MAX_QUIET_SAMPLES, False: MAX_QUIET_SAMPLES}
+        pieces: list[tuple[bool, np.ndarray]] = []
+        for seg in segments:
+            piece = x[seg]
+            lead = seg.start == 0
+            take = min(piece.size, budget[lead])
+            if take < MIN_QUIET_SAMPLES:
+                continue
+            pieces.append((lead, piece[-take:]))
+            budget[lead] -= take
+        if not pieces:
+            return cls(np.array([0.0, sample_rate_hz / 2]), np.zeros(2), sample_rate_hz, 0, "none")
+        used = sum(p.size for _, p in pieces)
+        segment = int(np.clip(2 * used // (MIN_WELCH_AVERAGES + 1), MIN_QUIET_SAMPLES, WELCH_SEGMENT))
+        groups: dict[bool, list[tuple[np.ndarray, np.ndarray, int, int]]] = {True: [], False: []}
+        for lead, piece in pieces:
+            f, p = welch(piece, sample_rate_hz, min(segment, piece.size))
+            length = min(segment, piece.size) - min(segment, piece.size) % 2
+            averages = (piece.size - length) // max(1, length // 2) + 1
+            groups[lead].append((f, p, piece.size, averages))
+        spectra = [s for s in groups.values() if s]
+        grid = max((f for group in spectra for f, _, _, _ in group), key=lambda f: f.size)
+        weights = [sum(w for _, _, w, _ in group) for group in spectra]
+        dofs = [sum(max(2.0, k * HANN_OVERLAP_DOF) for _, _, _, k in group) for group in spectra]
+        levels = [sum(np.interp(grid, f, p) * w for f, p, w, _ in group) / total
+                  for group, total in zip(spectra, weights, strict=True)]
+        if len(levels) == 1:
+            psd, dof = levels[0], dofs[0]
+        elif _levels_differ(float(np.mean(levels[0])), float(np.mean(levels[1])), dofs[0], dofs[1]):
+            louder = int(np.argmax([float(np.mean(p)) for p in levels]))
+            psd, dof = levels[louder], dofs[louder]
+        else:
+            psd = (levels[0] * weights[0] + levels[1] * weights[1]) / (weights[0] + weights[1])
+            dof = dofs[0] + dofs[1]
+        return cls(grid, psd, sample_rate_hz, used, "quiet segments", float(dof))
+
+    @classmethod
+    def _conservative(cls, x: np.ndarray, sample_rate_hz: float, segments: Sequence[slice]) -> NoiseSpectrum:
+        """The fit's weighting look (see `measure`)."""
         groups: dict[bool, list[tuple[np.ndarray, np.ndarray, int]]] = {True: [], False: []}
         budget = {True: MAX_QUIET_SAMPLES, False: MAX_QUIET_SAMPLES}
         used = 0
@@ -123,7 +218,7 @@ class NoiseSpectrum:
             take = min(piece.size, budget[lead])
             if take < MIN_QUIET_SAMPLES:
                 continue
-            f, p = welch(piece[-take:], sample_rate_hz, min(WELCH_SEGMENT, take))
+            f, p = welch(piece[-take:], sample_rate_hz, min(WELCH_SEGMENT, take), detrend=True)
             groups[lead].append((f, p, take))
             budget[lead] -= take
             used += take
@@ -133,4 +228,16 @@ class NoiseSpectrum:
         grid = max((f for group in spectra for f, _, _ in group), key=lambda f: f.size)
         levels = [sum(np.interp(grid, f, p) * w for f, p, w in group) / sum(w for _, _, w in group)
                   for group in spectra]
-        return cls(grid, np.max(levels, axis=0), sample_rate_hz, used, "quiet segments")
+        return cls(grid, np.max(levels, axis=0), sample_rate_hz, used, "quiet segments (conservative)")
+
+
+def _levels_differ(p1: float, p2: float, dof1: float, dof2: float) -> bool:
+    """Two mean noise levels, each from a Welch average of dof1 / dof2 degrees of freedom per
+    frequency, differ beyond chance: |ln(p1/p2)| above four standard deviations of the log of
+    such estimates (√(2/ν) each). Counting one frequency's degrees of freedom (not the band's)
+    keeps a short lead-in of strongly coloured noise — a few independent samples — from
+    passing for a different level; pooling such a stretch moves the level by its small weight
+    only."""
+    if p1 <= 0.0 or p2 <= 0.0:
+        return p1 != p2
+    return abs(math.log(p1 / p2)) > 4.0 * math.sqrt(2.0 / dof1 + 2.0 / dof2)

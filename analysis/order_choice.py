@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.frequency_fit import OrderFit, QuickRefit, SpectralData, is_stable, response
+from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
 
 # The order test: a higher order must be significant at this level (F test on V, corrected for
@@ -106,16 +107,28 @@ class NoiseDraws:
     inflate: float = 1.0  # noise variances × this (model error beyond the noise)
     skew_sd: float = 0.0  # channel skew, samples
     centre_y: np.ndarray | None = None  # response spectrum the noise is added to (None: the record's)
+    # The measured spectra (their frequency grids and degrees of freedom) and each bin's
+    # frequency: when given, each draw also draws the noise levels (NoiseSpectrum.level_factors).
+    level_u: NoiseSpectrum | None = None
+    level_y: NoiseSpectrum | None = None
+    bin_hz: np.ndarray | None = None
 
     def data(self, r: int) -> tuple[SpectralData, float]:
         """Draw r's perturbed spectra and its skew (samples)."""
         rng = np.random.default_rng([self.seed, 1, r])
         k = self.u_bins.size
+        gauss = rng.standard_normal((4, k))
+        var_u, var_y = self.var_u, self.var_y
+        if self.bin_hz is not None:
+            if self.level_u is not None:
+                var_u = var_u * self.level_u.level_factors(self.bin_hz, rng)
+            if self.level_y is not None:
+                var_y = var_y * self.level_y.level_factors(self.bin_hz, rng)
 
-        def cn(var: np.ndarray) -> np.ndarray:
-            return np.sqrt(var * self.inflate / 2.0) * (rng.standard_normal(k) + 1j * rng.standard_normal(k))
+        def cn(var: np.ndarray, re: np.ndarray, im: np.ndarray) -> np.ndarray:
+            return np.sqrt(var * self.inflate / 2.0) * (re + 1j * im)
 
-        noise_u, noise_y = cn(self.var_u), cn(self.var_y)
+        noise_u, noise_y = cn(var_u, gauss[0], gauss[1]), cn(var_y, gauss[2], gauss[3])
         skew = self.skew_sd * rng.standard_normal() if self.skew_sd > 0 else 0.0
         u = (self.u_bins + noise_u) * np.exp(-1j * self.omega * skew)
         y = (self.y_bins if self.centre_y is None else self.centre_y) + noise_y

@@ -212,7 +212,8 @@ def evaluate(
 
     # -- the model figures: refit per draw ------------------------------------------------
     draws = NoiseDraws(ctx.spectral, ctx.u_bins, ctx.y_bins, ctx.var_u, ctx.var_y,
-                       2.0 * np.pi * ctx.bin_frequency_hz * dt, ctx.group, seed, inflate, options.channel_skew_s / dt)
+                       2.0 * np.pi * ctx.bin_frequency_hz * dt, ctx.group, seed, inflate, options.channel_skew_s / dt,
+                       level_u=ctx.noise_u, level_y=ctx.noise_y, bin_hz=ctx.bin_frequency_hz)
     refitter = Refitter(ctx.spectral, ctx.fits, ctx.delay_mode, ctx.max_delay)
     orders = _order_assignment(ident, draws, refitter, options, rng)
     fits, skews = _refits(draws, refitter, orders["per_draw"])
@@ -422,8 +423,8 @@ def _peak_figures(
     seg_u = slice(max(0, i_ref - half), min(ref.size, i_ref + half))
     seg_y = slice(max(0, i_resp - PEAK_SEGMENT // 2), min(resp.size, i_resp + PEAK_SEGMENT // 2))
     scale_n = math.sqrt(inflate)
-    nu = noise_u.draw(seg_u.stop - seg_u.start, rng, count) * scale_n
-    ny = noise_y.draw(seg_y.stop - seg_y.start, rng, count) * scale_n
+    nu = noise_u.draw(seg_u.stop - seg_u.start, rng, count, uncertain_level=True) * scale_n
+    ny = noise_y.draw(seg_y.stop - seg_y.start, rng, count, uncertain_level=True) * scale_n
     u0, y0 = ref[seg_u], resp[seg_y]
     pu0, py0 = peak_estimate(u0)[0], peak_estimate(y0)[0]
     peak_u = np.array([peak_estimate(u0 + nu[r])[0] for r in range(count)])
@@ -508,11 +509,13 @@ def _linear_noise_shares(
     theta = problem.pack(fit)
     jac = problem.jacobian(theta)
     pieces = problem._pieces(theta)
-    s2 = pieces["s2"]
-    share_u = np.abs(pieces["G"]) ** 2 * data.var_u / s2
+    s2 = pieces["s2"]  # each residual's variance as the fit weighs it (the conservative look)
+    # The variance each source really gives each residual, over the weight: the noise measured
+    # without bias (what the draws add), in the fit's layout (per bin or per group of bins).
+    var_u, var_y = _in_layout(ctx.var_u, data, ctx.group), _in_layout(ctx.var_y, data, ctx.group)
     rows = 3 if data.grouped else 2
-    d_u = np.tile(share_u, rows)
-    d_y = 1.0 - d_u
+    d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
+    d_y = np.tile(var_y / s2, rows)
     h_inv = np.linalg.pinv(jac.T @ jac)
     proj = h_inv @ jac.T
     cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T}
@@ -531,6 +534,14 @@ def _linear_noise_shares(
             out[source][figure] = math.sqrt(max(float(g @ c @ g), 0.0)) / abs(ref)
         out["channel skew"][figure] = abs(float(g @ skew_step)) / abs(ref)
     return out
+
+
+def _in_layout(var: np.ndarray, data: SpectralData, group: int) -> np.ndarray:
+    """Per-bin variances averaged over each group of bins, as SpectralData.grouped_from does."""
+    if not data.grouped:
+        return var
+    edges = np.arange(0, var.size, group)
+    return np.add.reduceat(var, edges) / data.count
 
 
 def _shift_data(data: SpectralData, samples: float) -> SpectralData:

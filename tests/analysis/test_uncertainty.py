@@ -3,8 +3,19 @@
 The coverage study: many shots of one simulated sensor (27 kHz, ζ = 0.05; a 20 µs half-sine at
 10 MS/s, 2 % noise on both channels, analysed at 1 MS/s), each with its own noise; about 95 %
 of the 95 % intervals must contain the truth, and the intervals must not be needlessly wide:
-their mean width is compared with 2 × 1.96 × the spread of the estimates over the shots.
-The reference chain is set to zero there (its contribution is exact and is tested apart).
+their width is compared with 2 × 1.96 × the spread of the estimates over the shots (robust:
+1.4826 × the median absolute deviation, as a few shots choose another order). The reference
+chain is set to zero there (its contribution is exact and is tested apart).
+
+What 140 shots can tell: the two-sided 99 % Clopper–Pearson interval of an observed rate spans
+about ±5 points. Every figure's coverage must be consistent with 95 % (that interval holds
+0.95); the DC gain's, the certificate's headline, must also not be below 85 % (its lower end;
+a bound of 0.90 would need some 250 shots, beyond the suite's time budget). The finer figures
+come from a 300-shot, 200-draw run of the same study (README "Calibrated"): DC gain 94.0 % (it
+was 92.3 % before the noise the draws add was measured without bias), f_n 95.3 %, ζ 93.7 %,
+FBSD 92.3 %, shock sensitivity 94.7 % (f_n, ζ and the shock sensitivity were 99.3–99.7 %:
+too wide). On the 140 shots here: DC gain 133/140 = 0.950 (99 % interval 0.882–0.985; mean width
+1.06 × 3.92 × the spread of the estimates), ζ 127/140 = 0.907 (0.826–0.959).
 """
 
 from __future__ import annotations
@@ -22,8 +33,12 @@ from tests.analysis.hard_records import Case, record, truth_figures
 NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0,
                 channel_skew_s=0.0)
 CASE = Case(reference_noise=0.02, response_noise=0.02, samples=10_000)
-SHOTS = 36
-DRAWS = 100
+SHOTS = 140
+# 150 draws per shot (a 95 % interval's ends from 100 draws scatter by ~0.27 u and cost ~1.5
+# points of coverage), of which 20 re-run the order choice (its PDF; 40 by default): the
+# study's time goes into shots.
+DRAWS = 150
+ORDER_DRAWS = 20
 
 
 def _figures(result) -> dict[str, object]:
@@ -37,7 +52,7 @@ def study() -> dict[str, dict[str, list[float]]]:
     out: dict[str, dict[str, list[float]]] = {}
     for shot in range(SHOTS):
         ident = identify(record(CASE, 1000 + shot))
-        result = evaluate(ident, UncertaintyOptions(draws=DRAWS, seed=shot, **NO_CHAIN))
+        result = evaluate(ident, UncertaintyOptions(draws=DRAWS, order_draws=ORDER_DRAWS, seed=shot, **NO_CHAIN))
         for name, e in _figures(result).items():
             row = out.setdefault(name, {"value": [], "lo": [], "hi": [], "u": []})
             row["value"].append(e.value)
@@ -47,23 +62,46 @@ def study() -> dict[str, dict[str, list[float]]]:
     return out
 
 
+def _clopper_pearson(inside: int, shots: int, level: float = 0.99) -> tuple[float, float]:
+    """Two-sided `level` Clopper–Pearson interval of a binomial rate (scipy.stats.beta)."""
+    from scipy.stats import beta
+
+    tail = 0.5 * (1.0 - level)
+    lo = float(beta.ppf(tail, inside, shots - inside + 1)) if inside > 0 else 0.0
+    hi = float(beta.ppf(1.0 - tail, inside + 1, shots - inside)) if inside < shots else 1.0
+    return lo, hi
+
+
+def _robust_spread(values: list[float]) -> float:
+    v = np.asarray(values, dtype=float)
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+
+
 def test_about_95_percent_of_the_intervals_contain_the_truth(study) -> None:
+    """Each figure's coverage is consistent with 95 % (the two-sided 99 % binomial interval of
+    the observed rate holds 0.95); the sensitivity (DC gain), the certificate's headline, is
+    also not far below it (that interval's lower end ≥ 0.85) nor above 99 % (too wide)."""
     truth = truth_figures(CASE)
-    inside = {name: np.mean([lo <= truth[name] <= hi for lo, hi in zip(row["lo"], row["hi"], strict=True)])
-              for name, row in study.items()}
-    overall = float(np.mean(list(inside.values())))
-    assert 0.90 <= overall <= 0.99, inside  # measured 0.96 (100 shots: 0.94–1.00 per figure)
-    assert min(inside.values()) >= 0.80, inside
+    rates = {}
+    for name, row in study.items():
+        inside = sum(lo <= truth[name] <= hi for lo, hi in zip(row["lo"], row["hi"], strict=True))
+        lo, hi = _clopper_pearson(inside, SHOTS)
+        rates[name] = (inside / SHOTS, round(lo, 3), round(hi, 3))
+        assert lo <= 0.95 <= hi, (name, rates[name])
+    assert rates["dc_gain"][1] >= 0.85 and rates["dc_gain"][0] <= 0.99, rates
 
 
 def test_the_intervals_are_not_needlessly_wide(study) -> None:
     """The typical (median) interval width against the width the spread of the estimates over the
-    shots calls for (2 × 1.96 sd), and the median u against that sd: both near 1."""
+    shots calls for (2 × 1.96 × the robust spread), and the median u against that spread: near
+    1 for every figure, within ±20 % for the DC gain (measured 0.96 on 300 shots)."""
     for name, row in study.items():
-        spread = float(np.std(row["value"], ddof=1))
-        width = float(np.median(np.array(row["hi"]) - np.array(row["lo"])))
-        assert 0.6 < width / (2 * 1.96 * spread) < 1.7, (name, width / (2 * 1.96 * spread))
-        assert 0.6 < float(np.median(row["u"])) / spread < 1.7, name
+        spread = _robust_spread(row["value"])
+        width = float(np.median(np.array(row["hi"]) - np.array(row["lo"]))) / (2 * 1.96 * spread)
+        u = float(np.median(row["u"])) / spread
+        bounds = (0.8, 1.2) if name == "dc_gain" else (0.6, 1.7)
+        assert bounds[0] < width < bounds[1], (name, width)
+        assert bounds[0] < u < bounds[1], (name, u)
 
 
 def test_reference_chain_adds_in_quadrature_to_the_dc_gain() -> None:
