@@ -67,6 +67,7 @@ from hopkinson.analysis.order_choice import (
 from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
+from hopkinson.analysis.response import simulate_from_rest
 from numpy import fft
 
 # Samples per model parameter below which a record is too short for an order.
@@ -331,6 +332,11 @@ def identify(
             "response_baseline": float(np.median(resp) + prep.baseline_y * scale_y),
             "baseline_removed": True,
             "drift_removed": prep.drift_removed,
+            # What was taken off each channel, in its own units, at time t of the record:
+            # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
+            **{f"{name}_drift": {"intercept": line[1] * scale, "slope_per_s": line[0] * scale / dt,
+                                 "origin_s": rec.start_time_s}
+               for (name, line), scale in zip(prep.drift_lines.items(), (scale_u, scale_y), strict=True)},
             "window_start_s": rec.start_time_s + prep.start * dt,
             "window_samples": int(prep.u.size),
             "fitted_bins": prep.spectral.bins,
@@ -559,6 +565,7 @@ class _Prepared:
     draw_noise_y: NoiseSpectrum
     draw_var_u: np.ndarray
     draw_var_y: np.ndarray
+    drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed, normalised
 
 
 def _scale(x: np.ndarray) -> float:
@@ -608,11 +615,13 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
     # A drift: the line through the quiet samples, when quiet stretches before the first and
     # after the last activity pin it.
     drift = False
-    for x, segs in ((u, u_segments), (y, y_segments)):
+    lines = {"reference": (0.0, 0.0), "response": (0.0, 0.0)}  # (slope per sample, intercept), removed
+    for name, x, segs in (("reference", u, u_segments), ("response", y, y_segments)):
         if len(segs) >= 2 and segs[0].start == 0 and segs[-1].stop == n:
             idx = np.concatenate([np.arange(r.start, r.stop) for r in segs])
             slope, intercept = np.polyfit(idx, x[idx], 1)
             x -= slope * np.arange(n) + intercept
+            lines[name] = (float(slope), float(intercept))
             drift = True
     rate = 1.0 / dt
     # Two looks at the noise (analysis.noise): the conservative one weighs the fit and the
@@ -670,7 +679,7 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
             spectral = SpectralData.grouped_from(omega, u_spec, y_spec, var_u, var_y, group)
     return _Prepared(uw, yw, start, base_u, base_y, drift, noise_u, noise_y, band, bin_hz, u_spec, y_spec,
                      var_u, var_y, group, spectral, i_start, u, y, y_segments, ref_busy, draw_noise_u, draw_noise_y,
-                     draw_var_u, draw_var_y)
+                     draw_var_u, draw_var_y, lines)
 
 
 def _response_noise_on_residual(prep: _Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:
@@ -803,18 +812,9 @@ def _lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: fl
 
 # ------------------------------------------------------------------------------ helpers
 def _simulate(u: np.ndarray, fit: OrderFit) -> np.ndarray:
-    """Model output (B/A)·u(k − τ) from rest, in the frequency domain: the record padded with
-    zeros past the slowest pole's decay (to 1e-12, at most four record lengths), so the
-    circular convolution is the linear one; the fractional delay is the same linear phase
-    identify fits. (scipy.signal.lfilter would load scipy.signal, ~0.4 s, for this alone.)"""
-    n = u.size
-    radius = float(np.max(np.abs(np.roots(fit.a)))) if fit.a.size > 1 else 0.0
-    decay = int(min(4 * n, 27.7 / max(-math.log(max(radius, 1e-300)), 1e-12))) if radius > 0 else 0
-    size = next_fast_len(n + decay + int(math.ceil(fit.delay)) + 1)
-    omega = 2.0 * np.pi * fft.rfftfreq(size)
-    z = np.exp(-1j * omega)
-    h = np.polyval(fit.b[::-1], z) / np.polyval(fit.a[::-1], z) * np.exp(-1j * omega * fit.delay)
-    return fft.irfft(fft.rfft(u, size) * h, size)[:n]
+    """Model output (B/A)·u(k − τ) from rest (analysis.response.simulate_from_rest: the same
+    prediction the report and delayed_model_output make)."""
+    return simulate_from_rest(fit.a, fit.b, fit.delay, u)
 
 
 def _information_criteria(losses: list[float], parameters: list[int], bins: int) -> tuple[list[float], list[float]]:

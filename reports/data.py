@@ -18,8 +18,8 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import remove_input_delay
 from hopkinson.analysis.key_figures import Figure, KeyFigures
-from hopkinson.analysis.resample import resample_to_rate, shift_samples
-from hopkinson.analysis.response import model_output
+from hopkinson.analysis.resample import resample_to_rate
+from hopkinson.analysis.response import delayed_model_output, model_output
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.analysis.sine_comparison import SineCalibration
 
@@ -222,14 +222,13 @@ class PreparedShot:
     windowed: bool  # the identification's fitted window (results with `window_start_s`)
 
     def model_response(self, analysis: ShotAnalysis) -> np.ndarray:
-        """ŷ of `analysis`' model on this shot's reference, with that model's own input delay:
-        fractional (shifted in, as the identification simulates it) or, for legacy results
-        whose channels were prepared with the delay removed, none."""
+        """ŷ of `analysis`' model on this shot's reference, with that model's own fractional
+        input delay, computed as the identification computes its fit
+        (analysis.response.delayed_model_output); for legacy results, whose channels were
+        prepared with an integer delay removed, without it."""
         if not self.windowed:
             return model_output(analysis.model, self.reference)
-        delay = float(analysis.model.delay_samples or 0.0)
-        u = shift_samples(self.reference, delay) if delay else self.reference
-        return model_output(analysis.model, u)
+        return delayed_model_output(analysis.model, self.reference)
 
 
 def model_delay_samples(analysis: ShotAnalysis) -> int:
@@ -240,11 +239,11 @@ def model_delay_samples(analysis: ShotAnalysis) -> int:
 
 def prepared(analysis: ShotAnalysis, legacy_delay_samples: int | None = None) -> PreparedShot:
     """The shot's channels as its identification fitted them: the record at the model's rate,
-    each channel's lead-in baseline removed (the values the identification stored) and, when
-    the results name it, only the fitted window (`window_start_s`, `window_samples`); there the
-    model's response is simulated from rest at the window's start with the model's fractional
-    delay, as the identification does, so a shot's own fit % comes out as it reported it (to
-    the drift line it may also have removed, which the results do not store).
+    each channel's baseline and drift line removed (the values the identification stored in
+    its preprocessing: `<channel>_baseline`, `<channel>_drift`) and, when the results name it,
+    only the fitted window (`window_start_s`, `window_samples`); there the model's response is
+    simulated from rest at the window's start with the model's fractional delay, as the
+    identification does, so a shot's own fit % comes out as it reported it (to rounding).
 
     Legacy results (no window): the response offset fitted with the model is also removed and
     the integer input delay taken out of the response, y(k) = response(k + d), d = the shot's
@@ -257,9 +256,9 @@ def prepared(analysis: ShotAnalysis, legacy_delay_samples: int | None = None) ->
     if not math.isclose(record.sample_interval_s, dt, rel_tol=1e-6):
         record = resample_to_rate(record, 1.0 / dt)
     pre = identification_dict(analysis).get("preprocessing") or {}
-    u = np.asarray(record.reference, dtype=float) - float(pre.get("reference_baseline", 0.0) or 0.0)
-    y = np.asarray(record.response, dtype=float) - float(pre.get("response_baseline", 0.0) or 0.0)
     t = record.time_s
+    u = np.asarray(record.reference, dtype=float) - _removed_line(pre, "reference", t)
+    y = np.asarray(record.response, dtype=float) - _removed_line(pre, "response", t)
     if pre.get("window_start_s") is not None and pre.get("window_samples"):
         i0 = max(0, int(round((float(pre["window_start_s"]) - record.start_time_s) / dt)))
         i1 = min(u.size, i0 + int(pre["window_samples"]))
@@ -269,3 +268,17 @@ def prepared(analysis: ShotAnalysis, legacy_delay_samples: int | None = None) ->
     d = model_delay_samples(analysis) if legacy_delay_samples is None else int(legacy_delay_samples)
     u, y = remove_input_delay(u, y, d)
     return PreparedShot(t[: u.size], u, y, False)
+
+
+def _removed_line(pre: dict[str, Any], channel: str, time_s: np.ndarray) -> np.ndarray | float:
+    """What the identification took off `channel` at each time: its baseline and, when results
+    store it, its drift line (intercept + slope_per_s · (t − origin_s)); the baseline alone
+    for results written before the drift was stored."""
+    baseline = float(pre.get(f"{channel}_baseline", 0.0) or 0.0)
+    drift = pre.get(f"{channel}_drift")
+    if not isinstance(drift, dict):
+        return baseline
+    slope = float(drift.get("slope_per_s", 0.0) or 0.0)
+    intercept = float(drift.get("intercept", 0.0) or 0.0)
+    origin = float(drift.get("origin_s", 0.0) or 0.0)
+    return baseline + intercept + slope * (time_s - origin)
