@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from hopkinson.analysis.dcm import DCM, apply, passband_delay_samples
+from hopkinson.analysis.dcm import DCM, apply, apply_rows, passband_delay_samples
 from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport, design_compensation
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import PulseWidth, pulse_width, pulse_window
@@ -48,6 +48,8 @@ from scipy import signal
 # counts as worse: below it the difference is within what the reference's own noise moves.
 PEAK_TOLERANCE_PCT = 0.5
 COVERAGE = 0.95
+# Model draws up to this order are simulated through their direct form (see _model_response).
+DIRECT_FORM_MAX_ORDER = 4
 
 
 @dataclass(frozen=True)
@@ -179,12 +181,12 @@ def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_del
     value = sign * float(np.max(sign * measured[p.window]))
     # a draw's simulated response has no channel delay: remove only the rest of the latency
     simulated_dcm = replace(dcm, latency_samples=dcm.latency_s / dcm.sample_interval_s - channel_delay_samples)
-    def ratio(m: DiscreteModel) -> float:
-        out = apply(simulated_dcm, model_output(m, reference), align=True)[p.window]
-        return sign * float(np.max(sign * out)) / (gain * peak_ref)
-
-    nominal = ratio(model)
-    ratios = np.array([ratio(m) for m in draws])
+    # Every model's response to the reference, then the DCM on all of them at once (apply_rows:
+    # the numbers apply gives record by record, without rebuilding its sections per draw).
+    responses = np.array([_model_response(m, reference) for m in (model, *draws)])
+    outputs = apply_rows(simulated_dcm, responses, align=True)[:, p.window]
+    peaks = sign * np.max(sign * outputs, axis=1) / (gain * peak_ref)
+    nominal, ratios = float(peaks[0]), peaks[1:]
     if not np.all(np.isfinite(ratios)) or np.any(ratios <= 0) or not nominal > 0:
         raise AnalysisError("compensated peak: a model draw gives no peak of the reference's polarity")
     rng = np.random.default_rng(seed)
@@ -193,6 +195,16 @@ def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_del
     tail = 100 * (1 - COVERAGE) / 2
     lo, hi = np.percentile(truths, [tail, 100 - tail])
     return {"value": value, "u": float(np.std(truths, ddof=1)), "interval": [float(lo), float(hi)]}
+
+
+def _model_response(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
+    """The model's response to u from rest (no input delay, as model_output): a low order
+    through its direct form (lfilter; equal to the sections' output to rounding and ~40× faster
+    than building the sections, which is most of a draw's cost), a higher one through its
+    second-order sections (model_output: better conditioned there)."""
+    if model.a.size - 1 <= DIRECT_FORM_MAX_ORDER:
+        return signal.lfilter(model.b, model.a, u)
+    return model_output(model, u)
 
 
 def to_rate(record: Record, sample_rate_hz: float) -> tuple[Record, str | None]:

@@ -173,3 +173,50 @@ def test_the_shot_analysis_carries_the_compensation_into_results_and_key_figures
     assert figures.dcm_reached_widening == dcm["reached_widening"]
     again = ShotAnalysis.from_dict(results).to_dict()["dcm"]
     assert again["check"] == dcm["check"] and again["latency_s"] == pytest.approx(dcm["latency_s"])
+
+
+def _compensated_peak_one_draw_at_a_time(record, model, dcm, channel_delay_samples, draws, noise_rms, seed):
+    """The compensated peak as first written: each draw simulated through its sections and
+    compensated by its own DcmStream (dcm.apply), one record at a time — the slow reference."""
+    import dataclasses
+
+    from hopkinson.analysis.compensation import COVERAGE, _pulse_of
+    from hopkinson.analysis.dcm import apply
+    from hopkinson.analysis.response import model_output
+
+    p = _pulse_of(record)
+    reference = np.asarray(record.reference, dtype=float)
+    sign = 1.0 if p.pulse.peak_m_s2 > 0 else -1.0
+    peak_ref = sign * float(np.max(sign * reference[p.window]))
+    value = sign * float(np.max(sign * (apply(dcm, p.response, initial="steady", align=True) / model.dc_gain)[p.window]))
+    simulated = dataclasses.replace(dcm, latency_samples=dcm.latency_s / dcm.sample_interval_s - channel_delay_samples)
+
+    def ratio(m):
+        out = apply(simulated, model_output(m, reference), align=True)[p.window]
+        return sign * float(np.max(sign * out)) / (model.dc_gain * peak_ref)
+
+    ratios = np.array([ratio(m) for m in draws])
+    noise = dcm.noise_gain() * noise_rms / abs(model.dc_gain) if noise_rms else 0.0
+    truths = (value + noise * np.random.default_rng(seed).standard_normal(ratios.size)) * ratio(model) / ratios
+    tail = 100 * (1 - COVERAGE) / 2
+    return value, float(np.std(truths, ddof=1)), np.percentile(truths, [tail, 100 - tail])
+
+
+def test_compensated_peak_draws_at_once_equal_one_at_a_time():
+    """The fast path (every draw's response, then the DCM on all at once) gives the numbers of
+    the slow one to rounding, for low-order draws (direct form) and higher ones (sections)."""
+    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05), Mode(95_000.0, 0.02)), lowpass_hz=200_000.0,
+                               sensitivity=2e-3)
+    record = shot(truth, 38.6e-6, seed=4, snr_db=50.0)
+    model = true_model(truth)
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 38_000.0), channel_delay_samples=0.37))
+    main = true_model(AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), sensitivity=2e-3))
+    rng = np.random.default_rng(3)
+    draws = [DiscreteModel(DT, base.a, base.b * (1 + 0.01 * rng.standard_normal()))
+             for base in [main] * 10 + [model] * 10]  # orders 2 (direct form) and 6 (sections)
+    assert {d.a.size - 1 for d in draws} == {2, 6}
+    fast = compensated_peak(record, model, design.dcm, 0.37, draws, 1e-4, seed=5)
+    value, u, interval = _compensated_peak_one_draw_at_a_time(record, model, design.dcm, 0.37, draws, 1e-4, 5)
+    assert fast["value"] == pytest.approx(value, rel=1e-12)
+    assert fast["u"] == pytest.approx(u, rel=1e-9)
+    assert fast["interval"] == pytest.approx(list(interval), rel=1e-11)
