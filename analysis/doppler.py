@@ -62,6 +62,7 @@ A velocity history that reverses (the object comes back) cannot be demodulated f
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,12 +136,14 @@ def metres_per_radian(grating_pitch_m: float, orders: tuple[int, int]) -> float:
 
 # --- stage 1-3: the beat's phase -------------------------------------------------------------
 def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rate_hz: float = DECIMATED_RATE_HZ,
-               source: str = "doppler channel") -> BeatPhase:
+               source: str = "doppler channel", full_scale_v: FullScale | None = None) -> BeatPhase:
     """Unwrapped phase (rad) of a single-channel PM beat, box-car decimated to ~`decimated_rate_hz`.
 
     Raises AnalysisError (naming `source`) when the record is too short, sampled too slowly,
-    clipped, or carries no beat.
+    clipped (samples at the digitizer's full scale `full_scale_v`, when given: see
+    `check_not_clipped`), or carries no beat.
     """
+    check_not_clipped(doppler_v, full_scale_v, source, "reduce the digitizer's gain or widen its range")
     x = np.asarray(doppler_v, dtype=np.float32).ravel()
     fs = _check_record(x, sample_interval_s, source)
     m = max(1, int(fs // decimated_rate_hz))
@@ -195,31 +198,47 @@ def _check_record(x: np.ndarray, sample_interval_s: float, source: str) -> float
     lo = float(np.min(x))
     if float(np.max(x)) == lo:
         raise AnalysisError(f"{source}: the signal is constant ({lo:g} V): no Doppler beat")
-    clipped = clipped_rail(x)
-    if clipped is not None:
-        raise AnalysisError(
-            f"{source}: clipped at {clipped[0]:g} V ({clipped[1]} samples on the rail): "
-            f"reduce the digitizer's gain or widen its range"
-        )
     return fs
 
 
-def clipped_rail(x: np.ndarray) -> tuple[float, int] | None:
-    """(rail in V, samples on it) when a digitizer channel is clipped, else None.
+# The volts of a channel's lowest and highest digitizer codes (its full scale).
+FullScale = tuple[float, float]
+# A sample within this fraction of the span from a full-scale end sits on it (volts rebuilt
+# from codes, possibly through float32: far below half a code step of any format ≤ 19 bits).
+_FULL_SCALE_TOLERANCE = 1e-6
 
-    A digitizer at full scale sits on its rail (the channel's lowest or highest value) for runs
-    of samples: clipped when at least max(8, n/10⁴) neighbouring pairs share the rail value. A
-    clean signal touches its extremes only for single samples at any frequency that matters.
-    A constant channel has no rail (None).
-    """
-    lo, hi = float(np.min(x)), float(np.max(x))
-    if hi == lo:
-        return None
-    for rail in (lo, hi):
-        at_rail = x == rail
-        if np.count_nonzero(at_rail[1:] & at_rail[:-1]) >= max(8, x.size // 10000):
-            return rail, int(np.count_nonzero(at_rail))
-    return None
+
+def full_scale_volts(code_range: tuple[float, float], scale_v: float, offset_v: float) -> FullScale:
+    """The full scale in volts of a channel stored as codes (the shot file's /raw/<role>
+    attributes code_min, code_max, scale_v, offset_v: volts = codes · scale_v + offset_v)."""
+    ends = sorted((code_range[0] * scale_v + offset_v, code_range[1] * scale_v + offset_v))
+    return float(ends[0]), float(ends[1])
+
+
+def samples_at_full_scale(x: np.ndarray, full_scale_v: FullScale) -> int:
+    """How many samples of `x` (volts) reach the digitizer's full scale (either end or beyond)."""
+    lo, hi = full_scale_v
+    tol = _FULL_SCALE_TOLERANCE * abs(hi - lo)
+    v = np.asarray(x, dtype=float)
+    return int(np.count_nonzero((v <= lo + tol) | (v >= hi - tol)))
+
+
+def check_not_clipped(x: np.ndarray, full_scale_v: FullScale | None, what: str, remedy: str) -> None:
+    """Raise AnalysisError naming `what` when samples of `x` sit at the digitizer's full scale.
+
+    Clipping is judged against the instrument, never against the record itself: a quantised
+    record whose extreme code repeats (a wide pulse, a slow digitizer) is not clipped. Without
+    `full_scale_v` (a table file, an old shot file) nothing is judged here: the rig judged the
+    shot when it was recorded (rig.shot.clipping_problems)."""
+    if full_scale_v is None:
+        return
+    lo, hi = full_scale_v
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise AnalysisError(f"{what}: the digitizer's full scale must be two finite volts, low < high; got {full_scale_v!r}")
+    count = samples_at_full_scale(x, full_scale_v)
+    if count:
+        raise AnalysisError(f"{what}: clipped: {count} samples at the digitizer's full scale ({lo:.4g} .. {hi:.4g} V): "
+                            f"{remedy}")
 
 
 def _phase_increments(x: np.ndarray, sample_interval_s: float, m: int

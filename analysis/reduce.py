@@ -31,6 +31,7 @@ those keys. The HDF5 shot file is read by the command (rig.shotfile), which pass
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,8 +40,9 @@ import numpy as np
 from hopkinson.analysis.doppler import (
     BeatPhase,
     Demodulated,
+    FullScale,
     beat_phase,
-    clipped_rail,
+    check_not_clipped,
     decimated_rate_for,
     differentiate,
     displacement_to_rate,
@@ -128,9 +130,14 @@ def reduce_raw(
     align: bool = False,
     start_time_s: float = 0.0,
     source: str = "raw shot",
+    full_scale_v: Mapping[str, FullScale] | None = None,
 ) -> Reduction:
     """Reduce a raw shot (PM beat and amplifier output in volts, sampled together) to the
-    two-channel record at `sample_rate_hz`; see the module docstring for the steps."""
+    two-channel record at `sample_rate_hz`; see the module docstring for the steps.
+    `full_scale_v`: role ("doppler", "response") -> the digitizer's full scale in volts
+    (analysis.doppler.full_scale_volts): a channel with samples there is clipped and refused;
+    a role not given is not judged (never from the record's own extremes)."""
+    full_scale_v = full_scale_v or {}
     doppler = np.asarray(doppler_v).ravel()  # beat_phase takes it to float32 itself
     response = np.asarray(response_v, dtype=float).ravel()
     if doppler.size != response.size:
@@ -143,14 +150,10 @@ def reduce_raw(
     if not np.all(np.isfinite(response)):
         raise AnalysisError(f"{source}: response channel has a NaN or infinite sample at index "
                             f"{int(np.flatnonzero(~np.isfinite(response))[0])}")
-    clipped = clipped_rail(response)
-    if clipped is not None:
-        raise AnalysisError(
-            f"{source}: response channel clipped at {clipped[0]:g} V ({clipped[1]} samples on the rail): "
-            f"lower the amplifier gain or widen the digitizer's range"
-        )
+    check_not_clipped(response, full_scale_v.get("response"), f"{source}: response channel",
+                      "lower the amplifier gain or widen the digitizer's range")
     beat = beat_phase(doppler, sample_interval_s, decimated_rate_hz=decimated_rate_for(sample_rate_hz),
-                      source=f"{source}: doppler channel")
+                      source=f"{source}: doppler channel", full_scale_v=full_scale_v.get("doppler"))
     m = beat.decimation
 
     # Response: zero offset from the pre-trigger part, then volts → m/s².

@@ -13,6 +13,7 @@ marked not recommended where it does not improve it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -169,12 +170,17 @@ def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:
 
 
 def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_interval_s: float,
-                     params: AnalysisParams | None = None) -> ShotAnalysis:
-    """Reduce the raw channels (PM beat, amplifier volts) to a record, then analyse it."""
+                     params: AnalysisParams | None = None, *,
+                     full_scale_v: Mapping[str, tuple[float, float]] | None = None) -> ShotAnalysis:
+    """Reduce the raw channels (PM beat, amplifier volts) to a record, then analyse it.
+    `full_scale_v`: role -> the digitizer's full scale in volts (analysis.doppler.
+    full_scale_volts from the shot file's code_min/code_max): a channel with samples there is
+    refused as clipped; without it clipping is not judged here (the rig judged the shot)."""
     params = AnalysisParams() if params is None else params
     reduced = reduce_raw(
         doppler_v, response_v, sample_interval_s,
         grating_pitch_m=params.grating_pitch_m, orders=params.orders, amp_gain=params.amp_gain,
         sensitivity_v_per_m_s2=params.sensitivity_v_per_m_s2, sample_rate_hz=params.sample_rate_hz,
+        full_scale_v=full_scale_v,
     )
     return analyse_record(reduced.record, params, reduction=reduced.quantities())

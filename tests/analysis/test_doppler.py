@@ -176,9 +176,12 @@ def test_no_beat_is_a_clear_error() -> None:
 
 
 def test_clipped_signal_is_a_clear_error() -> None:
+    """Clipped = samples at the digitizer's full scale (given), never the record's own extremes."""
     t, acc, vel, beat = half_sine_shot(100_000, 38.6e-6, 30.0, 1.0)
-    with pytest.raises(AnalysisError, match="clipped at 0.4"):
-        doppler.beat_phase(np.clip(beat, -0.5, 0.4), DT)
+    with pytest.raises(AnalysisError, match=r"clipped: \d+ samples at the digitizer's full scale \(-0.5 .. 0.4 V\)"):
+        doppler.beat_phase(np.clip(beat, -0.5, 0.4), DT, full_scale_v=(-0.5, 0.4))
+    # The same beat inside a wider full scale is demodulated.
+    assert doppler.beat_phase(beat, DT, full_scale_v=(-2.0, 2.0)).phase_rad.size > 0
 
 
 def test_wrong_sample_rate_is_a_clear_error() -> None:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hopkinson.analysis.errors import AnalysisError, RecordError
 from hopkinson.analysis.identify import identify
+from hopkinson.analysis.doppler import full_scale_volts
 from hopkinson.analysis.reduce import read_raw_table, reduce_raw, write_raw_table
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.doppler_beat import raw_shot
@@ -104,9 +105,10 @@ def test_bad_raw_shots_are_clear_errors() -> None:
         reduce_raw(s.doppler_v, s.response_v[:-5], DT)
     with pytest.raises(AnalysisError, match="record more pre-trigger"):
         reduce_raw(s.doppler_v[19_950:], s.response_v[19_950:], DT)
-    with pytest.raises(AnalysisError, match="response channel clipped"):
+    with pytest.raises(AnalysisError, match="response channel: clipped"):
         peak = np.max(s.response_v)
-        reduce_raw(s.doppler_v, np.minimum(s.response_v, 0.5 * peak), DT)
+        reduce_raw(s.doppler_v, np.minimum(s.response_v, 0.5 * peak), DT,
+                   full_scale_v={"response": (-0.5 * peak, 0.5 * peak)})
     with pytest.raises(AnalysisError, match="amplifier gain"):
         reduce_raw(s.doppler_v, s.response_v, DT, amp_gain=0.0)
 
@@ -156,3 +158,33 @@ def test_peak_velocity_is_not_biased_by_the_beat_noise() -> None:
     assert abs(np.mean(new)) < 5e-5  # measured −4e-6
     assert np.mean(old) > 5e-4  # the maximum's bias, for contrast
     assert np.std(new) <= 2 * np.mean(u)
+
+
+def _quantised(volts: np.ndarray, bits: int, full_scale_v: tuple[float, float]) -> tuple[np.ndarray, tuple]:
+    """The channel as a `bits`-bit digitizer records it over `full_scale_v`: codes clipped at the
+    format's ends, back in volts (volts = codes · scale + offset), and that full scale."""
+    lo, hi = full_scale_v
+    code_min, code_max = -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
+    scale = (hi - lo) / (code_max - code_min)
+    offset = lo - code_min * scale
+    codes = np.clip(np.round((volts - offset) / scale), code_min, code_max)
+    return codes * scale + offset, full_scale_volts((code_min, code_max), scale, offset)
+
+
+def test_clipping_is_judged_against_the_digitizers_full_scale_not_the_record() -> None:
+    """A wide pulse on a coarse (8-bit) digitizer: its peak code repeats for many samples well
+    below full scale — analysed, with the truth's shock sensitivity; the same pulse with the
+    range set too low sits at full scale — refused, naming the channel and the full scale."""
+    t, s = shot(FLAT, n=150_000, peak_g=30_000, width_s=100e-6, response_snr_db=60.0)
+    peak = float(np.max(s.response_v))
+    wide, wide_scale = _quantised(s.response_v, 8, (-1.6 * peak, 1.6 * peak))
+    at_peak = int(np.count_nonzero(wide == np.max(wide)))
+    assert at_peak > 100  # the record's own maximum repeats: a rail detector would call it clipped
+    r = reduce_raw(s.doppler_v, wide, DT, amp_gain=GAIN, sensitivity_v_per_m_s2=SENS,
+                   full_scale_v={"response": wide_scale, "doppler": (-5.0, 5.0)})
+    assert r.shock_sensitivity == pytest.approx(1.0, abs=0.02)  # a flat sensor: 1 within the 8-bit step
+    low, low_scale = _quantised(s.response_v, 8, (-0.8 * peak, 0.8 * peak))
+    with pytest.raises(AnalysisError, match=r"raw shot: response channel: clipped: \d+ samples at the digitizer's "
+                                            r"full scale .* lower the amplifier gain or widen the digitizer's range"):
+        reduce_raw(s.doppler_v, low, DT, amp_gain=GAIN, sensitivity_v_per_m_s2=SENS,
+                   full_scale_v={"response": low_scale})
