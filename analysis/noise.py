@@ -168,18 +168,9 @@ class NoiseSpectrum:
         is 0. The segment length is the longest (up to WELCH_SEGMENT) that still gives about
         MIN_WELCH_AVERAGES segments; `dof` is the level's equivalent degrees of freedom."""
         x = np.asarray(x, dtype=float)
+        pieces = _quiet_pieces(x, segments)
         if conservative:
-            return cls._conservative(x, sample_rate_hz, segments)
-        budget = {True: MAX_QUIET_SAMPLES, False: MAX_QUIET_SAMPLES}
-        pieces: list[tuple[bool, np.ndarray]] = []
-        for seg in segments:
-            piece = x[seg]
-            lead = seg.start == 0
-            take = min(piece.size, budget[lead])
-            if take < MIN_QUIET_SAMPLES:
-                continue
-            pieces.append((lead, piece[-take:]))
-            budget[lead] -= take
+            return cls._conservative(pieces, sample_rate_hz)
         if not pieces:
             return cls(np.array([0.0, sample_rate_hz / 2]), np.zeros(2), sample_rate_hz, 0, "none")
         used = sum(p.size for _, p in pieces)
@@ -207,21 +198,14 @@ class NoiseSpectrum:
         return cls(grid, psd, sample_rate_hz, used, "quiet segments", float(dof))
 
     @classmethod
-    def _conservative(cls, x: np.ndarray, sample_rate_hz: float, segments: Sequence[slice]) -> NoiseSpectrum:
+    def _conservative(cls, pieces: list[tuple[bool, np.ndarray]], sample_rate_hz: float) -> NoiseSpectrum:
         """The fit's weighting look (see `measure`)."""
         groups: dict[bool, list[tuple[np.ndarray, np.ndarray, int]]] = {True: [], False: []}
-        budget = {True: MAX_QUIET_SAMPLES, False: MAX_QUIET_SAMPLES}
         used = 0
-        for seg in segments:
-            piece = x[seg]
-            lead = seg.start == 0
-            take = min(piece.size, budget[lead])
-            if take < MIN_QUIET_SAMPLES:
-                continue
-            f, p = welch(piece[-take:], sample_rate_hz, min(WELCH_SEGMENT, take), detrend=True)
-            groups[lead].append((f, p, take))
-            budget[lead] -= take
-            used += take
+        for lead, piece in pieces:
+            f, p = welch(piece, sample_rate_hz, min(WELCH_SEGMENT, piece.size), detrend=True)
+            groups[lead].append((f, p, piece.size))
+            used += piece.size
         spectra = [s for s in groups.values() if s]
         if not spectra:
             return cls(np.array([0.0, sample_rate_hz / 2]), np.zeros(2), sample_rate_hz, 0, "none")
@@ -229,6 +213,22 @@ class NoiseSpectrum:
         levels = [sum(np.interp(grid, f, p) * w for f, p, w in group) / sum(w for _, _, w in group)
                   for group in spectra]
         return cls(grid, np.max(levels, axis=0), sample_rate_hz, used, "quiet segments (conservative)")
+
+
+def _quiet_pieces(x: np.ndarray, segments: Sequence[slice]) -> list[tuple[bool, np.ndarray]]:
+    """(starts the record, samples) of each quiet stretch long enough for a spectrum: at most
+    MAX_QUIET_SAMPLES per group (the lead-in; the rest), the latest samples of a stretch kept."""
+    budget = {True: MAX_QUIET_SAMPLES, False: MAX_QUIET_SAMPLES}
+    pieces: list[tuple[bool, np.ndarray]] = []
+    for seg in segments:
+        piece = x[seg]
+        lead = seg.start == 0
+        take = min(piece.size, budget[lead])
+        if take < MIN_QUIET_SAMPLES:
+            continue
+        pieces.append((lead, piece[-take:]))
+        budget[lead] -= take
+    return pieces
 
 
 def _levels_differ(p1: float, p2: float, dof1: float, dof2: float) -> bool:
