@@ -117,7 +117,7 @@ class Demodulated:
     velocity_m_s: np.ndarray
     acceleration_m_s2: np.ndarray
     bandwidth_hz: float  # −6 dB bandwidth of the differentiating low-pass
-    beat: BeatPhase
+    beat: BeatPhase | None  # None: the phase came from elsewhere (a quadrature interferometer)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -805,8 +805,8 @@ def displacement_to_rate(displacement_m: np.ndarray, companion: np.ndarray, samp
                   out.start_time_s + cut * out.sample_interval_s)
 
 
-def differentiate(displacement_m: np.ndarray, sample_interval_s: float, start_time_s: float, beat: BeatPhase,
-                  bandwidth_hz: float | None = None) -> Demodulated:
+def differentiate(displacement_m: np.ndarray, sample_interval_s: float, start_time_s: float,
+                  beat: BeatPhase | None, bandwidth_hz: float | None = None) -> Demodulated:
     """Velocity and acceleration from displacement at the analysis rate by the differentiating
     low-pass; bandwidth chosen from the pulse when None."""
     rate = 1.0 / sample_interval_s

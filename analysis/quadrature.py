@@ -114,7 +114,7 @@ def fit_ellipse(u1: np.ndarray, u2: np.ndarray, max_points: int = MAX_FIT_POINTS
         raise AnalysisError(f"{x.size} samples cannot define an ellipse (at least 6 needed)")
     mx, my = float(np.mean(x)), float(np.mean(y))
     sx, sy = float(np.std(x)), float(np.std(y))
-    if not (sx > 0 and sy > 0):
+    if not (sx > 0 and sy > 0) or np.ptp(x) == 0 or np.ptp(y) == 0:  # (std of a constant can round above 0)
         raise AnalysisError("a quadrature channel is constant: no fringes to fit an ellipse to")
     xn, yn = (x - mx) / sx, (y - my) / sy
     a, b, c, d, e, f = _direct_ellipse_fit(xn, yn)
@@ -143,7 +143,10 @@ def _direct_ellipse_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, ...]:
     d1 = np.column_stack((x * x, x * y, y * y))
     d2 = np.column_stack((x, y, np.ones_like(x)))
     s1, s2, s3 = d1.T @ d1, d1.T @ d2, d2.T @ d2
-    t = -np.linalg.solve(s3, s2.T)
+    try:
+        t = -np.linalg.solve(s3, s2.T)
+    except np.linalg.LinAlgError:  # the points lie on a line or a point
+        raise AnalysisError("the quadrature signals do not trace an ellipse") from None
     m = s1 + s2 @ t
     m = np.array([m[2] / 2.0, -m[1], m[0] / 2.0])  # C1⁻¹·M for the constraint 4ac − b² = 1
     eigenvalues, vectors = np.linalg.eig(m)
@@ -167,6 +170,7 @@ def demodulate_quadrature(
     *,
     velocity_window_samples: int | None = None,
     max_fit_points: int = MAX_FIT_POINTS,
+    fit_samples: np.ndarray | None = None,
 ) -> QuadratureResult:
     """Displacement and velocity from the two quadrature signals (Heydemann-corrected arctangent).
 
@@ -174,7 +178,10 @@ def demodulate_quadrature(
     sample_interval_s: their sample interval. displacement_per_radian_m: phase → displacement
     (see the helpers above). velocity_window_samples: None = central differences; an odd
     number ≥ 5 = Savitzky–Golay derivative (quadratic) over that many samples, a low-pass
-    against the noise that differencing amplifies.
+    against the noise that differencing amplifies. fit_samples: fit the ellipse on these
+    samples only (a boolean mask or indices; None: all), e.g. those in motion: a still grating
+    piles its samples on one spot of the ellipse, and a slow amplitude drift meanwhile smears
+    that spot along the radius, which pulls the fit (offsets and quadrature error by ~1 %).
     Raises AnalysisError for bad input or signals that cover less than MIN_COVERAGE_DEG of
     their ellipse (a motion of under about one fringe cannot be corrected).
     """
@@ -184,7 +191,8 @@ def demodulate_quadrature(
         raise AnalysisError(f"displacement_per_radian_m must be a finite non-zero number, "
                             f"got {displacement_per_radian_m!r}")
     x, y = _checked_pair(u1, u2)
-    ellipse = fit_ellipse(x, y, max_fit_points)
+    ellipse = fit_ellipse(x, y, max_fit_points) if fit_samples is None else \
+        fit_ellipse(x[fit_samples], y[fit_samples], max_fit_points)
     c, s = ellipse.correct(x, y)
     wrapped = np.arctan2(s, c)
     coverage = _coverage_deg(wrapped)

@@ -132,6 +132,20 @@ def read_table(path: str | Path, keys: tuple[str, ...], what: str = "record") ->
     return _read_csv_table(path, keys, what)
 
 
+def column_names(path: str | Path, what: str = "record") -> list[str]:
+    """The column names a table file holds: an NPZ's keys, a CSV header's names (units
+    dropped); for optional columns. RecordError when the file cannot be read."""
+    path = Path(path)
+    _check_regular_file(path, what)
+    if path.suffix.lower() == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return list(data.files)
+        except (OSError, ValueError, EOFError) as exc:
+            raise RecordError(f"{path}: not a readable NPZ file ({exc})") from None
+    return [parse_header_cell(h)[0] for h in _read_header(path)]
+
+
 def _check_regular_file(path: Path, what: str) -> None:
     """A readable regular file, or RecordError naming what it is instead."""
     try:

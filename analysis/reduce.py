@@ -1,11 +1,22 @@
 """Raw shot → two-channel record: the interferometer reduction and the shock quantities.
 
-A raw shot is two channels sampled together by the digitizer (~100 MS/s): the photomultiplier
-beat of the Doppler interferometer and the bridge amplifier's output (V). `reduce_raw` gives
-the record `identify` reads (time_s, reference in m/s², response) at the analysis rate:
+A raw shot is channels sampled together by the digitizer (~100 MS/s): the interferometer's
+photodetector(s) and one or more sensors' amplifier outputs (V). `reduce_raw` gives the
+record `identify` reads (time_s, reference in m/s², response) at the analysis rate:
 
-1. Reference: `analysis.doppler` demodulates the beat into the grating's phase (displacement),
-   box-car decimated by M raw samples.
+1. Reference phase (`reference_phase`), box-car decimated by M raw samples, from either
+   - the photomultiplier beat of the differential Doppler interferometer alone (method
+     "pm_beat", `analysis.doppler.beat_phase`), or
+   - a quadrature interferometer's two photodetectors 90° apart (method "quadrature", ISO
+     16063-11 method 3 / 16063-13): `analysis.quadrature.demodulate_quadrature`, the
+     arctangent after the Heydemann ellipse correction (offsets, unequal gains, quadrature
+     error fitted on the record's samples in motion), at the raw rate, then the same M-sample
+     box-car.
+     The doppler channel is the first detector (∝ cos φ), doppler_quadrature the second
+     (∝ sin φ). A quadrature pair tells the direction of motion; the reduction reports the
+     motion positive in the direction the object leaves rest, as the single-channel beat does.
+   Both give the same phase (2π·(φ − ξ)/d per metre of grating displacement), so everything
+   after this step is shared.
 2. Response: zero offset removed (mean of the pre-trigger part, before the motion begins),
    scaled from volts to m/s² by 1/(amplifier gain × nominal sensitivity) (both 1: stays in
    V), and box-car decimated by the same M samples as the phase.
@@ -19,13 +30,19 @@ the record `identify` reads (time_s, reference in m/s², response) at the analys
    amplifier's) own group delay, which belongs to the model `identify` fits: the response is
    shifted only when `align=True` (e.g. channels from two instruments with a known skew).
 
+Several sensors recorded with one reference (`reduce_sensors`, e.g. roles response and
+response_2) share step 1 and the low-pass of step 3 (the first sensor's bandwidth), so their
+records have one reference acceleration and one time axis.
+
 Shock quantities: peak reference acceleration and pulse width at 10 % of peak (ISO 16063-22,
 `analysis.excitation.pulse_width`), peak velocity change (flight velocity minus rest, 0), and
 the shock sensitivity (ISO 16063-13): the response's peak ÷ the reference's peak, in the
-response's units per m/s²; also in V/(m/s²) at the amplifier input.
+response's units per m/s²; also in V/(m/s²) at the amplifier input. The quantities name the
+interferometer method and, for a quadrature pair, the fitted ellipse.
 
-Raw input files (`read_raw_table`): CSV with header `time_s,doppler,response` or NPZ with
-those keys. The HDF5 shot file is read by the command (rig.shotfile), which passes arrays.
+Raw input files (`read_raw_table`): CSV with header `time_s,doppler,response` (and optionally
+`doppler_quadrature`) or NPZ with those keys. The HDF5 shot file is read by the command
+(rig.shotfile), which passes arrays.
 """
 
 from __future__ import annotations
@@ -38,6 +55,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.doppler import (
+    DECIMATED_RATE_HZ,
     BeatPhase,
     Demodulated,
     FullScale,
@@ -52,7 +70,8 @@ from hopkinson.analysis.doppler import (
 from hopkinson.analysis.errors import AnalysisError, RecordError
 from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width
 from hopkinson.analysis.params import DEFAULT_GRATING_PITCH_M
-from hopkinson.analysis.records import Record, read_columns, validated_columns
+from hopkinson.analysis.quadrature import demodulate_quadrature
+from hopkinson.analysis.records import Record, column_names, read_columns, validated_columns
 from hopkinson.analysis.resample import (
     DEFAULT_ANALYSIS_RATE_HZ,
     estimate_delay_samples,
@@ -60,9 +79,21 @@ from hopkinson.analysis.resample import (
 )
 
 RAW_KEYS = ("time_s", "doppler", "response")
+QUADRATURE_KEY = "doppler_quadrature"  # the optional column of a quadrature interferometer
 PRE_TRIGGER_MARGIN_S = 2e-6  # the zero offset is taken up to this long before the motion
 MIN_PRE_TRIGGER_SAMPLES = 100  # fewer pre-trigger samples cannot give a zero offset
 MAX_DELAY_S = 50e-6  # the delay search spans ±this
+PM_BEAT, QUADRATURE = "pm_beat", "quadrature"  # the interferometer methods
+# Quadrature onset: the phase has certainly left rest once it is half a fringe away; it left
+# rest after the last block within max(ONSET_NOISE_FACTOR × its rest noise, ONSET_MIN_RAD).
+ONSET_NOISE_FACTOR = 5.0
+ONSET_MIN_RAD = 0.05
+MAX_PHASE_STEP_RAD = 0.75 * math.pi  # mean phase step per raw sample a quadrature record may reach
+# The ellipse is fitted again on the samples in motion (the phase moves more than MOTION_MIN_RAD
+# over MOTION_WINDOW_SAMPLES), when there are at least MIN_FIT_SAMPLES of them.
+MOTION_WINDOW_SAMPLES = 64
+MOTION_MIN_RAD = math.pi / 4
+MIN_FIT_SAMPLES = 1000
 
 
 @dataclass(frozen=True)
@@ -73,6 +104,52 @@ class RawTable:
     start_time_s: float
     doppler_v: np.ndarray
     response_v: np.ndarray
+    quadrature_v: np.ndarray | None = None  # a quadrature interferometer's second photodetector
+
+
+@dataclass(frozen=True)
+class ReferencePhase:
+    """The interferometer's phase, box-car decimated by `decimation` raw samples, and how it
+    was found. phase_rad[k] is the mean over raw samples k·M … k·M + M − 1 (0 at rest,
+    increasing with the motion), at start_time_s + k·sample_interval_s relative to the raw
+    record's first sample."""
+
+    method: str  # PM_BEAT or QUADRATURE
+    sample_interval_s: float
+    start_time_s: float
+    phase_rad: np.ndarray
+    decimation: int
+    onset_time_s: float  # where the motion leaves rest, relative to the raw record's first sample
+    peak_fringe_hz: float  # highest fringe (beat) frequency of the record
+    beat: BeatPhase | None = None  # PM_BEAT: the beat's demodulation
+    quadrature: dict[str, Any] | None = None  # QUADRATURE: the fitted ellipse (JSON-ready)
+
+    def quantities(self) -> dict[str, Any]:
+        return {
+            "interferometer": self.method,
+            "beat_peak_hz": self.peak_fringe_hz,
+            "beat_snr_db": self.beat.snr_db if self.beat is not None else None,
+            "quadrature": dict(self.quadrature) if self.quadrature is not None else None,
+        }
+
+
+def interferometer_text(quantities: dict[str, Any]) -> str:
+    """How a reduction's reference was demodulated, in words (from its `quantities()`): the
+    method and, for a quadrature pair, the ellipse the Heydemann correction fitted."""
+    q = quantities.get("quadrature")
+    if quantities.get("interferometer") != QUADRATURE or not isinstance(q, dict):
+        return "PM beat (single channel)"
+    return (f"quadrature pair, Heydemann ellipse: offsets {q['offset_1_v']:.4g} / {q['offset_2_v']:.4g} V, "
+            f"amplitude ratio {q['amplitude_ratio']:.4g}, quadrature error {q['phase_error_deg']:.3g} deg")
+
+
+@dataclass(frozen=True)
+class SensorChannel:
+    """One sensor's amplifier output (V) and how to scale it to m/s² (both 1: stays in V)."""
+
+    response_v: np.ndarray
+    amp_gain: float = 1.0
+    sensitivity_v_per_m_s2: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -93,7 +170,12 @@ class Reduction:
     response_offset_v: float
     demodulation_bandwidth_hz: float
     onset_time_s: float  # where the grating leaves rest, on the record's time axis
-    beat: BeatPhase
+    reference: ReferencePhase
+
+    @property
+    def beat(self) -> BeatPhase | None:
+        """The PM beat's demodulation (None for a quadrature interferometer)."""
+        return self.reference.beat
 
     def quantities(self) -> dict[str, Any]:
         """JSON-ready shock quantities and reduction diagnostics."""
@@ -110,8 +192,7 @@ class Reduction:
             "response_offset_v": self.response_offset_v,
             "demodulation_bandwidth_hz": self.demodulation_bandwidth_hz,
             "analysis_rate_hz": self.record.sample_rate_hz,
-            "beat_peak_hz": self.beat.beat_peak_hz,
-            "beat_snr_db": self.beat.snr_db,
+            **self.reference.quantities(),
             "onset_time_s": self.onset_time_s,
         }
 
@@ -121,6 +202,7 @@ def reduce_raw(
     response_v: np.ndarray,
     sample_interval_s: float,
     *,
+    quadrature_v: np.ndarray | None = None,
     grating_pitch_m: float = DEFAULT_GRATING_PITCH_M,
     orders: tuple[int, int] = (1, -1),
     amp_gain: float = 1.0,
@@ -132,61 +214,119 @@ def reduce_raw(
     source: str = "raw shot",
     full_scale_v: Mapping[str, FullScale] | None = None,
 ) -> Reduction:
-    """Reduce a raw shot (PM beat and amplifier output in volts, sampled together) to the
+    """Reduce a raw shot (interferometer and amplifier output in volts, sampled together) to the
     two-channel record at `sample_rate_hz`; see the module docstring for the steps.
-    `full_scale_v`: role ("doppler", "response") -> the digitizer's full scale in volts
-    (analysis.doppler.full_scale_volts): a channel with samples there is clipped and refused;
-    a role not given is not judged (never from the record's own extremes)."""
-    full_scale_v = full_scale_v or {}
-    doppler = np.asarray(doppler_v).ravel()  # beat_phase takes it to float32 itself
-    response = np.asarray(response_v, dtype=float).ravel()
-    if doppler.size != response.size:
-        raise AnalysisError(f"{source}: the doppler and response channels differ in length "
-                            f"({doppler.size} and {response.size} samples)")
-    for name, value in (("amplifier gain", amp_gain), ("sensitivity", sensitivity_v_per_m_s2),
-                        ("analysis sample rate", sample_rate_hz)):
-        if not (np.isfinite(value) and value != 0):
-            raise AnalysisError(f"{source}: {name} must be a finite non-zero number, got {value!r}")
-    if not np.all(np.isfinite(response)):
-        raise AnalysisError(f"{source}: response channel has a NaN or infinite sample at index "
-                            f"{int(np.flatnonzero(~np.isfinite(response))[0])}")
-    check_not_clipped(response, full_scale_v.get("response"), f"{source}: response channel",
-                      "lower the amplifier gain or widen the digitizer's range")
-    beat = beat_phase(doppler, sample_interval_s, decimated_rate_hz=decimated_rate_for(sample_rate_hz),
-                      source=f"{source}: doppler channel", full_scale_v=full_scale_v.get("doppler"))
-    m = beat.decimation
+    `quadrature_v`: a quadrature interferometer's second photodetector (None: `doppler_v` is a
+    single-channel PM beat). `full_scale_v`: role ("doppler", "doppler_quadrature",
+    "response") -> the digitizer's full scale in volts (analysis.doppler.full_scale_volts):
+    a channel with samples there is clipped and refused; a role not given is not judged."""
+    return reduce_sensors(
+        doppler_v, {"response": SensorChannel(response_v, amp_gain, sensitivity_v_per_m_s2)}, sample_interval_s,
+        quadrature_v=quadrature_v, grating_pitch_m=grating_pitch_m, orders=orders, sample_rate_hz=sample_rate_hz,
+        bandwidth_hz=bandwidth_hz, align=align, start_time_s=start_time_s, source=source, full_scale_v=full_scale_v,
+    )["response"]
 
+
+def reduce_sensors(
+    doppler_v: np.ndarray,
+    sensors: Mapping[str, SensorChannel],
+    sample_interval_s: float,
+    *,
+    quadrature_v: np.ndarray | None = None,
+    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M,
+    orders: tuple[int, int] = (1, -1),
+    sample_rate_hz: float = DEFAULT_ANALYSIS_RATE_HZ,
+    bandwidth_hz: float | None = None,
+    align: bool = False,
+    start_time_s: float = 0.0,
+    source: str = "raw shot",
+    full_scale_v: Mapping[str, FullScale] | None = None,
+) -> dict[str, Reduction]:
+    """Reduce one reference and several sensors recorded with it (role -> SensorChannel) to one
+    record per sensor; the reference is demodulated once and every record gets the first
+    sensor's low-pass (module docstring). `full_scale_v` as in `reduce_raw`, by role."""
+    full_scale_v = full_scale_v or {}
+    if not sensors:
+        raise AnalysisError(f"{source}: no sensor channel to reduce")
+    n = np.asarray(doppler_v).size
+    if quadrature_v is not None and np.asarray(quadrature_v).size != n:
+        raise AnalysisError(f"{source}: the doppler and doppler_quadrature channels differ in length "
+                            f"({n} and {np.asarray(quadrature_v).size} samples)")
+    if not (np.isfinite(sample_rate_hz) and sample_rate_hz != 0):
+        raise AnalysisError(f"{source}: analysis sample rate must be a finite non-zero number, got {sample_rate_hz!r}")
+    responses = {role: check_sensor_channel(role, channel, n, source, full_scale_v.get(role))
+                 for role, channel in sensors.items()}
+    reference = reference_phase(doppler_v, sample_interval_s, quadrature_v=quadrature_v,
+                                decimated_rate_hz=decimated_rate_for(sample_rate_hz), source=source,
+                                full_scale_v=full_scale_v)
+    out: dict[str, Reduction] = {}
+    for role, channel in sensors.items():
+        out[role] = _reduce_sensor(reference, responses[role], channel, sample_interval_s,
+                                   grating_pitch_m=grating_pitch_m, orders=orders, sample_rate_hz=sample_rate_hz,
+                                   bandwidth_hz=bandwidth_hz, align=align, start_time_s=start_time_s, source=source)
+        bandwidth_hz = out[role].demodulation_bandwidth_hz  # the other sensors share the first's low-pass
+    return out
+
+
+def check_sensor_channel(role: str, channel: SensorChannel, n: int, source: str,
+                         full_scale_v: FullScale | None = None) -> np.ndarray:
+    """The channel's volts as floats, or AnalysisError naming the role: a length other than the
+    reference's `n`, a zero or non-finite gain or sensitivity, a non-finite sample, a sample at
+    the digitizer's full scale (`full_scale_v`, when given; never judged from the record)."""
+    response = np.asarray(channel.response_v, dtype=float).ravel()
+    name = "" if role == "response" else f"{role} "
+    if response.size != n:
+        raise AnalysisError(f"{source}: the doppler and {role} channels differ in length "
+                            f"({n} and {response.size} samples)")
+    for what, value in (("amplifier gain", channel.amp_gain), ("sensitivity", channel.sensitivity_v_per_m_s2)):
+        if not (np.isfinite(value) and value != 0):
+            raise AnalysisError(f"{source}: {name}{what} must be a finite non-zero number, got {value!r}")
+    if not np.all(np.isfinite(response)):
+        raise AnalysisError(f"{source}: {role} channel has a NaN or infinite sample at index "
+                            f"{int(np.flatnonzero(~np.isfinite(response))[0])}")
+    check_not_clipped(response, full_scale_v, f"{source}: {role} channel",
+                      "lower the amplifier gain or widen the digitizer's range")
+    return response
+
+
+def _reduce_sensor(reference: ReferencePhase, response: np.ndarray, channel: SensorChannel,
+                   sample_interval_s: float, *, grating_pitch_m: float, orders: tuple[int, int],
+                   sample_rate_hz: float, bandwidth_hz: float | None, align: bool, start_time_s: float,
+                   source: str) -> Reduction:
+    """Steps 2–4 of the module docstring for one sensor against the reference's phase."""
+    m = reference.decimation
+    amp_gain, sensitivity = channel.amp_gain, channel.sensitivity_v_per_m_s2
     # Response: zero offset from the pre-trigger part, then volts → m/s².
-    pre_end = int((beat.onset_time_s - PRE_TRIGGER_MARGIN_S) / sample_interval_s)
+    pre_end = int((reference.onset_time_s - PRE_TRIGGER_MARGIN_S) / sample_interval_s)
     if pre_end < MIN_PRE_TRIGGER_SAMPLES:
         raise AnalysisError(
             f"{source}: only {max(pre_end, 0)} samples before the pulse (need ≥ {MIN_PRE_TRIGGER_SAMPLES} "
             f"for the response's zero offset): record more pre-trigger"
         )
     offset_v = float(np.mean(response[:pre_end]))
-    scale = 1.0 / (amp_gain * sensitivity_v_per_m_s2)
-    unit = "V" if amp_gain == 1.0 and sensitivity_v_per_m_s2 == 1.0 else "m/s^2"
-    n_blocks = beat.phase_rad.size
+    scale = 1.0 / (amp_gain * sensitivity)
+    unit = "V" if amp_gain == 1.0 and sensitivity == 1.0 else "m/s^2"
+    n_blocks = reference.phase_rad.size
     block_mean = response[: n_blocks * m].reshape(n_blocks, m) @ np.full(m, 1.0 / m)
     response_blocks = (block_mean - offset_v) * scale
 
     # Both channels to the analysis rate with one anti-alias filter.
-    displacement = beat.phase_rad * metres_per_radian(grating_pitch_m, orders)
-    at_rate = displacement_to_rate(displacement, response_blocks, beat.sample_interval_s,
-                                   start_time_s + beat.start_time_s, sample_rate_hz)
+    displacement = reference.phase_rad * metres_per_radian(grating_pitch_m, orders)
+    at_rate = displacement_to_rate(displacement, response_blocks, reference.sample_interval_s,
+                                   start_time_s + reference.start_time_s, sample_rate_hz)
     demod: Demodulated = differentiate(at_rate.reference, at_rate.sample_interval_s, at_rate.start_time_s,
-                                       beat, bandwidth_hz)
+                                       reference.beat, bandwidth_hz)
     rate = 1.0 / at_rate.sample_interval_s
     response_out = lowpass(at_rate.response, demod.bandwidth_hz, rate)
-    reference = demod.acceleration_m_s2
+    acceleration = demod.acceleration_m_s2
 
     max_lag = max(1, int(MAX_DELAY_S * rate))
-    delay_samples = estimate_delay_samples(reference, response_out, max_lag)
+    delay_samples = estimate_delay_samples(acceleration, response_out, max_lag)
     if align:
         response_out = shift_samples(response_out, -delay_samples)
-    record = Record(at_rate.sample_interval_s, reference, response_out, at_rate.start_time_s)
+    record = Record(at_rate.sample_interval_s, acceleration, response_out, at_rate.start_time_s)
 
-    pulse = pulse_width(reference, record.sample_interval_s, record.start_time_s)
+    pulse = pulse_width(acceleration, record.sample_interval_s, record.start_time_s)
     shock_sensitivity = peak_estimate(response_out)[0] / pulse.peak_m_s2
     velocity, velocity_u = peak_velocity(demod.velocity_m_s, record.sample_interval_s, pulse, record.start_time_s)
     return Reduction(
@@ -200,13 +340,106 @@ def reduce_raw(
         aligned=align,
         shock_sensitivity=float(shock_sensitivity),
         # response = V / (gain · S): volts at the amplifier input = response · S
-        shock_sensitivity_v_per_m_s2=float(shock_sensitivity * sensitivity_v_per_m_s2),
+        shock_sensitivity_v_per_m_s2=float(shock_sensitivity * sensitivity),
         response_unit=unit,
         response_offset_v=offset_v,
         demodulation_bandwidth_hz=demod.bandwidth_hz,
-        onset_time_s=start_time_s + beat.onset_time_s,
-        beat=beat,
+        onset_time_s=start_time_s + reference.onset_time_s,
+        reference=reference,
     )
+
+
+# ------------------------------------------------------------------------------ the reference
+def reference_phase(doppler_v: np.ndarray, sample_interval_s: float, *, quadrature_v: np.ndarray | None = None,
+                    decimated_rate_hz: float = DECIMATED_RATE_HZ, source: str = "raw shot",
+                    full_scale_v: Mapping[str, FullScale] | None = None) -> ReferencePhase:
+    """The interferometer's phase, box-car decimated to ~`decimated_rate_hz`: from the PM beat
+    alone, or from the quadrature pair when `quadrature_v` is given (module docstring, step 1).
+    `full_scale_v`: role -> the digitizer's full scale (see `reduce_raw`)."""
+    full_scale_v = full_scale_v or {}
+    if quadrature_v is not None:
+        return quadrature_phase(doppler_v, quadrature_v, sample_interval_s, decimated_rate_hz=decimated_rate_hz,
+                                source=f"{source}: quadrature interferometer", full_scale_v=full_scale_v)
+    beat = beat_phase(np.asarray(doppler_v).ravel(), sample_interval_s,  # beat_phase takes it to float32 itself
+                      decimated_rate_hz=decimated_rate_hz, source=f"{source}: doppler channel",
+                      full_scale_v=full_scale_v.get("doppler"))
+    return ReferencePhase(PM_BEAT, beat.sample_interval_s, beat.start_time_s, beat.phase_rad, beat.decimation,
+                          beat.onset_time_s, beat.beat_peak_hz, beat=beat)
+
+
+def quadrature_phase(u1_v: np.ndarray, u2_v: np.ndarray, sample_interval_s: float, *,
+                     decimated_rate_hz: float = DECIMATED_RATE_HZ,
+                     source: str = "quadrature interferometer",
+                     full_scale_v: Mapping[str, FullScale] | None = None) -> ReferencePhase:
+    """The phase of a quadrature interferometer (u1 ∝ cos φ on the doppler channel, u2 ∝ sin φ on
+    doppler_quadrature): Heydemann-corrected arctangent at the raw rate, then box-car decimated.
+
+    Raises AnalysisError (naming `source`) for a clipped record (samples at the full scale
+    `full_scale_v` gives for role doppler / doppler_quadrature) or a too short one, fringes close to
+    half a fringe per sample (beyond that they alias, which no check on the record can see: the
+    digitizer's rate must exceed twice the highest fringe frequency), a pair that traces no
+    ellipse, or no motion."""
+    if not (np.isfinite(sample_interval_s) and sample_interval_s > 0):
+        raise AnalysisError(f"{source}: sample interval must be positive, got {sample_interval_s!r} s")
+    for role, u in (("doppler", u1_v), (QUADRATURE_KEY, u2_v)):
+        check_not_clipped(u, (full_scale_v or {}).get(role), f"{source}: {role} channel",
+                          "reduce the digitizer's gain or widen its range")
+    m = max(1, int((1.0 / sample_interval_s) // decimated_rate_hz))
+    n_blocks = np.asarray(u1_v).size // m
+    if n_blocks < 64:
+        raise AnalysisError(f"{source}: {np.asarray(u1_v).size} samples is too short to demodulate "
+                            f"(needs ≥ {64 * m})")
+    try:
+        q = demodulate_quadrature(u1_v, u2_v, sample_interval_s, 1.0)  # phase in radians
+        moving = _moving_samples(q.phase_rad)
+        if MIN_FIT_SAMPLES <= np.count_nonzero(moving) < moving.size:  # the rest's spot left out of the fit
+            q = demodulate_quadrature(u1_v, u2_v, sample_interval_s, 1.0, fit_samples=moving)
+    except AnalysisError as exc:
+        raise AnalysisError(f"{source}: {exc}") from None
+    steps = np.abs(np.diff(q.phase_rad))
+    window = min(16, steps.size)
+    fastest = float(np.max(np.convolve(steps, np.full(window, 1.0 / window), mode="valid"))) if window else 0.0
+    if fastest > MAX_PHASE_STEP_RAD:
+        raise AnalysisError(f"{source}: the fringes move {fastest / (2 * math.pi):.2f} of a fringe per sample "
+                            f"(at most {MAX_PHASE_STEP_RAD / (2 * math.pi):.3g} is followed safely): sample faster")
+    dt_m = m * sample_interval_s
+    phase = q.phase_rad[: n_blocks * m].reshape(n_blocks, m) @ np.full(m, 1.0 / m)
+    k_on, rest_rad, direction = _quadrature_onset(phase, source)
+    phase = direction * (phase - rest_rad)
+    fringe_hz = np.convolve(np.diff(phase), np.full(11, 1.0 / 11), mode="same") / (2.0 * math.pi * dt_m)
+    ellipse = q.ellipse
+    details = {"offset_1_v": ellipse.offset_1_v, "offset_2_v": ellipse.offset_2_v,
+               "amplitude_v": ellipse.amplitude_v, "amplitude_ratio": ellipse.amplitude_ratio,
+               "phase_error_deg": math.degrees(ellipse.phase_error_rad), "radius_spread": q.radius_spread,
+               "direction": direction}
+    return ReferencePhase(QUADRATURE, dt_m, 0.5 * (m - 1) * sample_interval_s, phase, m, (k_on + 0.5) * dt_m,
+                          float(np.max(np.abs(fringe_hz))), quadrature=details)
+
+
+def _moving_samples(phase_rad: np.ndarray) -> np.ndarray:
+    """Samples after which the phase moves more than MOTION_MIN_RAD within MOTION_WINDOW_SAMPLES."""
+    w = min(MOTION_WINDOW_SAMPLES, phase_rad.size - 1)
+    moving = np.zeros(phase_rad.size, dtype=bool)
+    if w > 0:
+        moving[:-w] = np.abs(phase_rad[w:] - phase_rad[:-w]) > MOTION_MIN_RAD
+    return moving
+
+
+def _quadrature_onset(phase: np.ndarray, source: str) -> tuple[int, float, int]:
+    """(first block in motion, rest phase, direction ±1) of a block-mean quadrature phase: the
+    motion certainly began before the phase is half a fringe (π) from its start; it began after
+    the last block within the rest's noise band (ONSET_* constants)."""
+    moved = np.flatnonzero(np.abs(phase - phase[0]) > math.pi)
+    if moved.size == 0:
+        raise AnalysisError(f"{source}: the phase never moves half a fringe: no motion in the record")
+    k1 = int(moved[0])
+    rest = phase[: max(k1 // 2, 1)]
+    rest_rad = float(np.median(rest))
+    noise = 1.4826 * float(np.median(np.abs(rest - rest_rad)))
+    direction = 1 if phase[k1] > rest_rad else -1
+    away = direction * (phase[:k1] - rest_rad) > max(ONSET_NOISE_FACTOR * noise, ONSET_MIN_RAD)
+    still = np.flatnonzero(~away)
+    return (int(still[-1]) + 1 if still.size else 0), rest_rad, direction
 
 
 # A velocity after the pulse that stays within this fraction of its peak is a flight plateau.
@@ -266,7 +499,8 @@ def _correlation_time(x: np.ndarray) -> float:
 
 # ------------------------------------------------------------------------------ raw tables
 def read_raw_table(path: str | Path) -> RawTable:
-    """Read a raw shot from CSV (header time_s,doppler,response) or NPZ (same keys).
+    """Read a raw shot from CSV (header time_s,doppler,response[,doppler_quadrature]) or NPZ
+    (same keys); the doppler_quadrature column is a quadrature interferometer's second detector.
 
     Raises RecordError naming the file and the problem (missing key, ragged or non-uniform
     time axis, non-finite values).
@@ -274,20 +508,24 @@ def read_raw_table(path: str | Path) -> RawTable:
     path = Path(path)
     if path.suffix.lower() not in (".csv", ".npz"):
         raise RecordError(f"{path}: unknown raw shot format '{path.suffix}' (use .csv, .npz or an .h5 shot file)")
-    columns = read_columns(path, RAW_KEYS, what="raw shot")
-    step, (time_s, doppler, response) = validated_columns(columns, RAW_KEYS, str(path), min_samples=2)
-    return RawTable(step, float(time_s[0]), doppler, response)
+    keys = RAW_KEYS + ((QUADRATURE_KEY,) if QUADRATURE_KEY in column_names(path) else ())
+    columns = read_columns(path, keys, what="raw shot")
+    step, (time_s, doppler, response, *quadrature) = validated_columns(columns, keys, str(path), min_samples=2)
+    return RawTable(step, float(time_s[0]), doppler, response, quadrature[0] if quadrature else None)
 
 
-def write_raw_table(path: str | Path, time_s: np.ndarray, doppler_v: np.ndarray, response_v: np.ndarray) -> Path:
-    """Write a raw shot as NPZ or CSV (by suffix) with the keys time_s, doppler, response."""
+def write_raw_table(path: str | Path, time_s: np.ndarray, doppler_v: np.ndarray, response_v: np.ndarray,
+                    quadrature_v: np.ndarray | None = None) -> Path:
+    """Write a raw shot as NPZ or CSV (by suffix) with the keys time_s, doppler, response (and
+    doppler_quadrature when given)."""
     path = Path(path)
-    arrays = dict(zip(RAW_KEYS, (np.asarray(time_s, float), np.asarray(doppler_v, float),
-                                 np.asarray(response_v, float)), strict=True))
+    keys = RAW_KEYS + ((QUADRATURE_KEY,) if quadrature_v is not None else ())
+    values = (time_s, doppler_v, response_v) + ((quadrature_v,) if quadrature_v is not None else ())
+    arrays = {k: np.asarray(v, float) for k, v in zip(keys, values, strict=True)}
     if path.suffix.lower() == ".npz":
         np.savez(path, **arrays)
     elif path.suffix.lower() == ".csv":
-        np.savetxt(path, np.column_stack(list(arrays.values())), delimiter=",", header=",".join(RAW_KEYS),
+        np.savetxt(path, np.column_stack(list(arrays.values())), delimiter=",", header=",".join(keys),
                    comments="", fmt="%.10g")
     else:
         raise RecordError(f"{path}: unknown raw shot format '{path.suffix}' (use .csv or .npz)")

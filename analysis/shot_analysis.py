@@ -9,10 +9,21 @@ the automatic ratio (`dcm_ratio=None`: the r that widens the ±5 % band `dcm_wid
 because the paper's r acts on the decay envelope and a fixed r can narrow a lightly damped
 sensor's band), the noise-gain bound and the band limit; checked on the shot itself, and
 marked not recommended where it does not improve it.
+
+Interferometer and sensors. `analyse_raw_shot` reduces the reference from the PM beat, or from
+a quadrature interferometer's pair when its second photodetector is given (analysis.reduce);
+the reduction's quantities name the method and the fitted ellipse. Further sensors recorded
+with the same reference (e.g. role response_2) are each analysed like the first, against the
+same reference acceleration, with their own gain and sensitivity: `ShotAnalysis.sensors`
+(role -> ShotAnalysis), stored as the results' "sensors" object, while the top-level keys
+stay the first sensor's, so every reader of one sensor keeps working. A further sensor whose
+channel or analysis fails does not fail the first: its entry is {"error": why} and the first
+sensor's warnings say so.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,7 +39,7 @@ from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.reduce import reduce_raw
+from hopkinson.analysis.reduce import SensorChannel, check_sensor_channel, reduce_sensors
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 from hopkinson.analysis.uncertainty import shot_uncertainty
@@ -62,9 +73,20 @@ class ShotAnalysis:
     # analysis.uncertainty's JSON (None: switched off or failed, with a warning)
     uncertainty: dict[str, Any] | None = None
     fbsd_bounds: dict[str, dict[str, Any]] = field(default_factory=dict)  # edges beyond the supported band
+    # further sensors against the same reference (role -> their analysis), and why one has none
+    sensors: dict[str, ShotAnalysis] = field(default_factory=dict)
+    sensor_errors: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready results (stored in shot files, printed by --json)."""
+        """JSON-ready results (stored in shot files, printed by --json); a "sensors" object
+        (role -> results, or {"error": why}) only when further sensors were analysed."""
+        out = self._own_dict()
+        if self.sensors or self.sensor_errors:
+            out["sensors"] = {**{role: a.to_dict() for role, a in self.sensors.items()},
+                              **{role: {"error": why} for role, why in self.sensor_errors.items()}}
+        return out
+
+    def _own_dict(self) -> dict[str, Any]:
         ident = self.identification
         exc = self.excitation
         main = main_mode_of(ident) if isinstance(ident, dict) else ident.main_mode
@@ -91,8 +113,17 @@ class ShotAnalysis:
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], record: Record | None = None) -> ShotAnalysis:
-        """Rebuild from `to_dict()` output (e.g. a shot file): model and DCM become objects again."""
+    def from_dict(cls, data: dict[str, Any], record: Record | None = None,
+                  sensor_records: Mapping[str, Record] | None = None) -> ShotAnalysis:
+        """Rebuild from `to_dict()` output (e.g. a shot file): model and DCM become objects again;
+        further sensors too (their records from `sensor_records`, by role, when given)."""
+        sensors: dict[str, ShotAnalysis] = {}
+        sensor_errors: dict[str, str] = {}
+        for role, results in (data.get("sensors") or {}).items():
+            if isinstance(results, dict) and "error" in results and "model" not in results:
+                sensor_errors[role] = str(results["error"])
+            else:
+                sensors[role] = cls.from_dict(results, (sensor_records or {}).get(role))
         try:
             params = AnalysisParams.from_dict(data["params"], ignore_unknown=True)
             model = DiscreteModel.from_dict(data["model"], source="shot analysis")
@@ -107,6 +138,7 @@ class ShotAnalysis:
                 peak_overshoot=data.get("peak_overshoot"), warnings=list(data.get("warnings", [])),
                 compensation={k: data["dcm"][k] for k in COMPENSATION_KEYS if k in data["dcm"]},
                 uncertainty=data.get("uncertainty"), fbsd_bounds=dict(data.get("fbsd_bounds") or {}),
+                sensors=sensors, sensor_errors=sensor_errors,
             )
         except (KeyError, TypeError) as exc:
             raise AnalysisError(f"shot analysis results are incomplete: missing {exc}") from None
@@ -170,17 +202,43 @@ def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:
 
 
 def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_interval_s: float,
-                     params: AnalysisParams | None = None, *,
+                     params: AnalysisParams | None = None, *, quadrature_v: np.ndarray | None = None,
+                     more_sensors: Mapping[str, tuple[np.ndarray, AnalysisParams]] | None = None,
                      full_scale_v: Mapping[str, tuple[float, float]] | None = None) -> ShotAnalysis:
-    """Reduce the raw channels (PM beat, amplifier volts) to a record, then analyse it.
+    """Reduce the raw channels (PM beat, or the quadrature pair with `quadrature_v`; amplifier
+    volts) to a record, then analyse it. `more_sensors`: role -> (volts, that sensor's
+    AnalysisParams: its amp_gain and sensitivity; the reference's constants are `params`'),
+    each analysed like the first against the same reference (module docstring).
     `full_scale_v`: role -> the digitizer's full scale in volts (analysis.doppler.
     full_scale_volts from the shot file's code_min/code_max): a channel with samples there is
     refused as clipped; without it clipping is not judged here (the rig judged the shot)."""
     params = AnalysisParams() if params is None else params
-    reduced = reduce_raw(
-        doppler_v, response_v, sample_interval_s,
-        grating_pitch_m=params.grating_pitch_m, orders=params.orders, amp_gain=params.amp_gain,
-        sensitivity_v_per_m_s2=params.sensitivity_v_per_m_s2, sample_rate_hz=params.sample_rate_hz,
-        full_scale_v=full_scale_v,
-    )
-    return analyse_record(reduced.record, params, reduction=reduced.quantities())
+    source = "raw shot"
+    channels = {"response": SensorChannel(response_v, params.amp_gain, params.sensitivity_v_per_m_s2)}
+    errors: dict[str, str] = {}
+    own_params: dict[str, AnalysisParams] = {}
+    for role, (volts, own) in (more_sensors or {}).items():
+        channel = SensorChannel(volts, own.amp_gain, own.sensitivity_v_per_m_s2)
+        try:
+            own.check()
+            check_sensor_channel(role, channel, np.asarray(doppler_v).size, source, (full_scale_v or {}).get(role))
+        except AnalysisError as exc:
+            errors[role] = str(exc)
+        else:  # the reference's constants are the first sensor's
+            channels[role] = channel
+            own_params[role] = dataclasses.replace(own, grating_pitch_m=params.grating_pitch_m, orders=params.orders,
+                                                   sample_rate_hz=params.sample_rate_hz)
+    reduced = reduce_sensors(doppler_v, channels, sample_interval_s, quadrature_v=quadrature_v,
+                             grating_pitch_m=params.grating_pitch_m, orders=params.orders,
+                             sample_rate_hz=params.sample_rate_hz, source=source, full_scale_v=full_scale_v)
+    first = reduced.pop("response")
+    analysis = analyse_record(first.record, params, reduction=first.quantities())
+    for role, reduction in reduced.items():
+        try:
+            analysis.sensors[role] = analyse_record(reduction.record, own_params[role],
+                                                    reduction=reduction.quantities())
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            errors[role] = f"analysis failed: {exc}"
+    analysis.sensor_errors.update(errors)
+    analysis.warnings.extend(f"sensor {role} not analysed: {why}" for role, why in errors.items())
+    return analysis

@@ -1,7 +1,7 @@
 """Every page of a report in order: the summary (title page), the campaign pages, each shot's.
 
 The summary page holds the identity of the accelerometer and the rig and either the shot's key
-results or (a campaign) the per-shot table, the spread and the cross-validation summary; it is
+results (a section per sensor when the shot recorded a second one) or (a campaign) the per-shot table, the spread and the cross-validation summary; it is
 laid out by `layout.TextPages`, so it continues on a second page rather than run off the first.
 """
 
@@ -13,7 +13,7 @@ from hopkinson.reports.campaign_pages import (
     cross_validation_page,
     sine_page,
 )
-from hopkinson.reports.data import CalibrationReport
+from hopkinson.reports.data import CalibrationReport, ShotEntry
 from hopkinson.reports.layout import TextPages, freeze_layout, new_figure
 from hopkinson.reports.shot_pages import shot_pages
 from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
@@ -78,30 +78,40 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
         if text:
             page.heading("Cross-validation (each shot's model on every other shot)")
             page.paragraph(text)
-    else:
-        entry = report.shots[0]
-        page.heading("Results")
-        page.table(None, [list(row) for row in results_rows(entry)], widths=[0.38, 0.62])
-        header, rows = uncertainty_rows(entry)
-        if rows:
-            page.heading("Measurement uncertainty")
-            page.table(header, rows, size=7.5)
-            page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
-            header, rows = budget_rows(entry)
-            if rows:
-                page.heading("Uncertainty budget", size=9.5)
-                page.table(header, rows, size=7.5, widths=[0.7, 0.3])
-        elif entry.key_figures is not None:
-            page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
-        rows = compensation_rows(entry)
-        if rows:
-            page.heading("Compensation checked on the shot itself")
-            page.table(None, [list(r) for r in rows], widths=[0.45, 0.55])
+    else:  # one shot: a results section per sensor (a shot with a second sensor has two entries)
+        for i, entry in enumerate(report.shots):
+            sensor_results(page, entry, "" if i == 0 else entry.label)
     if report.notes:
         page.heading("Notes")
         for note in report.notes:
             page.paragraph(note)
     return page.pages
+
+
+def sensor_results(page: TextPages, entry: ShotEntry, sensor: str = "") -> None:
+    """One sensor's results, uncertainty and compensation check; `sensor` names a further
+    sensor in the headings and shows its own identity first."""
+    suffix = f": {sensor}" if sensor else ""
+    page.heading(f"Results{suffix}")
+    if sensor:
+        page.table(None, [[k, v] for k, v in entry.identity.items() if k in ("Accelerometer", "Nominal sensitivity")],
+                   widths=[0.38, 0.62])
+    page.table(None, [list(row) for row in results_rows(entry)], widths=[0.38, 0.62])
+    header, rows = uncertainty_rows(entry)
+    if rows:
+        page.heading(f"Measurement uncertainty{suffix}")
+        page.table(header, rows, size=7.5)
+        page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
+        header, rows = budget_rows(entry)
+        if rows:
+            page.heading(f"Uncertainty budget{suffix}", size=9.5)
+            page.table(header, rows, size=7.5, widths=[0.7, 0.3])
+    elif entry.key_figures is not None:
+        page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
+    rows = compensation_rows(entry)
+    if rows:
+        page.heading(f"Compensation checked on the shot itself{suffix}")
+        page.table(None, [list(r) for r in rows], widths=[0.45, 0.55])
 
 
 def cross_validation_summary(stats: CampaignStatistics) -> str:

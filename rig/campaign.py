@@ -70,9 +70,9 @@ from hopkinson.rig.shot import (
     ShotOutcome,
     ShotRequest,
     analyse_and_record,
-    analyse_raw,
     analysis_params,
     record_analysis,
+    shot_analyser,
 )
 from hopkinson.rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
 
@@ -233,7 +233,7 @@ class CampaignRunner:
     and publishes on `bus`. The runner journals each shot through the sequencer's before-fire
     and after-store hooks and publishes its own events (state "CAMPAIGN"):
     CampaignShotStarted, CampaignShotEnded (the journal state at a shot's end), Note, and
-    CampaignFinished. analyse: the analysis computation (default rig.shot.analyse_raw);
+    CampaignFinished. analyse: the analysis computation (default rig.shot.shot_analyser(config));
     on_shot_start: called with the shot about to be fired (None after it), e.g. to tag a
     simulation fire log.
     """
@@ -248,7 +248,7 @@ class CampaignRunner:
         self.config = config
         self.bus = bus
         self.max_aborts = max_aborts
-        self._analyse = analyse or analyse_raw
+        self._analyse = analyse or shot_analyser(config)
         self.sequencer = Sequencer(instruments, config, bus, analyse=self._analyse)
         self._on_shot_start = on_shot_start
         self._journal: Journal | None = None

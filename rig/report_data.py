@@ -6,7 +6,9 @@
 
 A shot's analysis is rebuilt from its shot file (`/analysis` results and `/derived/record`)
 with `ShotAnalysis.from_dict`; a shot whose analysis failed or is missing is reported with
-its error. A run folder's shots are listed in the plan's order with their journal state,
+its error. A shot with further sensors (the results' "sensors", e.g. response_2) gives one
+entry per sensor (`shot_entries`), each analysed against the same reference; the first keeps
+the shot's label. A run folder's shots are listed in the plan's order with their journal state,
 read from the journal without taking the run lock (read-only SQLite), so a report can be
 made while a campaign still runs.
 """
@@ -18,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.reduce import interferometer_text
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.analysis.sine_comparison import read_sine_calibration
 from hopkinson.reports.data import G_M_S2, CalibrationReport, ShotEntry
@@ -25,7 +28,7 @@ from hopkinson.reports.writers import write_report
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
-from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot
+from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, sensor_records
 
 REPORT_NAME = "report"
 
@@ -95,9 +98,13 @@ def shot_entry(path: str | Path, state: str | None = None, label: str | None = N
         error = shot.analysis_error or "the analysis failed"
     else:
         error = "not analysed yet (raw data only)"
+    identity = shot_identity(shot)
+    reduction = (shot.results or {}).get("reduction")
+    if isinstance(reduction, dict) and reduction.get("interferometer"):
+        identity["Interferometer"] = interferometer_text(reduction)
     return ShotEntry(
         label=label or shot.meta.shot_id or path.stem,
-        identity=shot_identity(shot),
+        identity=identity,
         analysis=analysis,
         error=error,
         state=state or shot.state,
@@ -108,11 +115,61 @@ def shot_entry(path: str | Path, state: str | None = None, label: str | None = N
     )
 
 
+# role -> (what the report calls the sensor, its key in the simulated truth)
+SENSORS = {"response_2": ("second sensor", "accelerometer_2")}
+
+
+def sensor_label(label: str, role: str) -> str:
+    """The label of a further sensor's entry: "<shot label>, second sensor (response_2)"."""
+    return f"{label}, {SENSORS.get(role, ('sensor',))[0]} ({role})"
+
+
+def shot_entries(path: str | Path, state: str | None = None, label: str | None = None) -> list[ShotEntry]:
+    """The entries of a shot file: its first sensor's (`shot_entry`), then one per further
+    sensor in its results, with that sensor's analysis, record, truth and nominal sensitivity."""
+    first = shot_entry(path, state, label)
+    if first.results is None or not first.results.get("sensors"):
+        return [first]
+    shot = read_shot(path, load_raw=False)
+    records = sensor_records(shot)
+    truth = shot.meta.simulated_truth or {}
+    entries = [first]
+    for role, results in first.results["sensors"].items():
+        name, truth_key = SENSORS.get(role, ("sensor", ""))
+        results = results if isinstance(results, dict) else {"error": "no results stored"}
+        analysis: ShotAnalysis | None = None
+        error = str(results["error"]) if "error" in results and "model" not in results else None
+        if error is None:
+            try:
+                analysis = ShotAnalysis.from_dict(results, record=records.get(role))
+            except AnalysisError as exc:
+                error = f"{path}: {role}: {exc}"
+        identity = {"Accelerometer": f"{name.capitalize()}, digitizer role {role}",
+                    **{k: v for k, v in first.identity.items() if k not in ("Accelerometer", "Nominal sensitivity")}}
+        params = results.get("params") or {}
+        scaled = (results.get("reduction") or {}).get("response_unit") == "m/s^2"
+        nominal = float(params["sensitivity_v_per_m_s2"]) if scaled and "sensitivity_v_per_m_s2" in params else None
+        if nominal is not None:
+            identity = {"Accelerometer": identity.pop("Accelerometer"),
+                        "Nominal sensitivity": f"{nominal:.4g} V/(m/s²) = {nominal * G_M_S2 * 1e3:.4g} mV/g "
+                                               f"(conditioner input; conditioner gain {params.get('amp_gain', 1):g})",
+                        **identity}
+        modes = (truth.get(truth_key) or {}).get("modes")
+        entries.append(ShotEntry(
+            label=sensor_label(first.label, role), identity=identity, analysis=analysis, error=error,
+            state=first.state, truth_modes=[dict(m) for m in modes] if modes else None,
+            nominal_sensitivity_v_per_m_s2=nominal, pressure_bar=first.pressure_bar,
+            results=results if analysis is not None else None,
+        ))
+    return entries
+
+
 def shot_report(path: str | Path) -> CalibrationReport:
-    """The report of one shot file."""
-    entry = shot_entry(path)
+    """The report of one shot file: a section and pages per sensor."""
+    entries = shot_entries(path)
+    entry = entries[0]
     title = f"Calibration report: {entry.identity['Accelerometer']}, shot {entry.label}"
-    return CalibrationReport(title=title, identity=dict(entry.identity), shots=[entry], campaign=False)
+    return CalibrationReport(title=title, identity=dict(entry.identity), shots=entries, campaign=False)
 
 
 def journal_states(run: RunFolder) -> dict[str, dict[str, Any]]:

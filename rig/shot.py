@@ -10,6 +10,10 @@ file and never loses the shot.
   with the one-line message for exit code 3.
 - CapturedShot: what the digitizer recorded, by role (doppler, response, optional
   doppler_quadrature, response_2), codes in their native type.
+- analyse_raw / shot_analyser: the channels by role to the shared shot analysis: the reference
+  from the quadrature pair when there is a doppler_quadrature channel (else the PM beat), and a
+  response_2 channel analysed like the first sensor with the rig's [analysis] amp_gain_2 and
+  sensitivity_2_v_per_m_s2; its record's response is stored as /derived/response_2_<unit>.
 - store_raw_shot / analyse_and_record: the STORE and ANALYSE steps, shared by the sequencer
   and a campaign analysing a recorded shot from its file.
 - clipping_problems: a channel is clipped only when samples reach the digitizer's full-scale
@@ -25,9 +29,10 @@ the error text; the shot still ends DONE (it was fired and recorded) with
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -46,11 +51,14 @@ from hopkinson.rig.shotfile import (
     RawShot,
     ShotMeta,
     add_analysis,
+    sensor_response_name,
     write_raw_shot,
 )
 
 EXIT_DONE = 0
 EXIT_ABORTED = 3
+QUADRATURE_ROLE = "doppler_quadrature"
+MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("response"), in this order
 
 
 class ShotRequestError(ConfigError):
@@ -264,6 +272,7 @@ class AnalysisResult:
 
     results: dict[str, Any]
     record: Record | None = None
+    derived: dict[str, np.ndarray] = field(default_factory=dict)  # e.g. a further sensor's record response
 
 
 def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> AnalysisParams:
@@ -289,13 +298,44 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
     )
 
 
-def analyse_raw(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+def sensor_params(params: AnalysisParams, config: RigConfig) -> dict[str, AnalysisParams]:
+    """role -> the analysis parameters of each further sensor: the first sensor's, with that
+    sensor's conditioner gain and nominal sensitivity ([analysis] amp_gain_2,
+    sensitivity_2_v_per_m_s2)."""
+    a = config.analysis
+    return {"response_2": dataclasses.replace(params, amp_gain=a.amp_gain_2,
+                                              sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2)}
+
+
+def analyse_raw(raw: RawShot, params: AnalysisParams,
+                more_params: Mapping[str, AnalysisParams] | None = None) -> AnalysisResult:
     """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
-    analysis (analysis.shot_analysis) of the raw channels in volts."""
+    analysis (analysis.shot_analysis) of the raw channels in volts, by role: the quadrature
+    pair when recorded, and each further sensor with its parameters from `more_params` (one
+    not given there: `params` with gain and sensitivity 1, i.e. its results in volts)."""
     from hopkinson.analysis.shot_analysis import analyse_raw_shot  # heavy: loaded when needed
 
-    analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s, params)
-    return AnalysisResult(analysis.to_dict(), analysis.record)
+    given = dict(more_params or {})
+    in_volts = dataclasses.replace(params, amp_gain=1.0, sensitivity_v_per_m_s2=1.0)
+    more = {role: (raw.volts(role), given.get(role, in_volts)) for role in MORE_SENSOR_ROLES if role in raw.channels}
+    quadrature = raw.volts(QUADRATURE_ROLE) if QUADRATURE_ROLE in raw.channels else None
+    analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s, params,
+                                quadrature_v=quadrature, more_sensors=more)
+    derived = {}
+    for role, sensor in analysis.sensors.items():
+        if sensor.record is not None:
+            unit = (sensor.reduction or {}).get("response_unit") or "V"
+            derived[sensor_response_name(role, unit)] = np.asarray(sensor.record.response, dtype=float)
+    return AnalysisResult(analysis.to_dict(), analysis.record, derived)
+
+
+def shot_analyser(config: RigConfig) -> AnalyseFn:
+    """The analysis of a shot on this rig: `analyse_raw` with the further sensors' parameters
+    from its configuration (`sensor_params`)."""
+    def analyse(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+        return analyse_raw(raw, params, sensor_params(params, config))
+
+    return analyse
 
 
 def analysis_error_text(exc: BaseException) -> str:
@@ -312,7 +352,7 @@ def record_analysis(path: Path, outcome: AnalysisResult | None, error: str | Non
         add_analysis(path, outcome.results if outcome is not None else {}, error=error)
     else:
         assert outcome is not None
-        add_analysis(path, outcome.results, record=outcome.record)
+        add_analysis(path, outcome.results, record=outcome.record, derived=outcome.derived or None)
 
 
 AnalyseFn = Callable[[RawShot, AnalysisParams], AnalysisResult]

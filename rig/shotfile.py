@@ -327,6 +327,27 @@ def add_analysis(
     return path
 
 
+def sensor_response_name(role: str, unit: str) -> str:
+    """The /derived name of a further sensor's record response (e.g. "response_2_m_s2"): it
+    shares /derived/record's time axis and reference; the suffix states its unit."""
+    return f"{role}_m_s2" if unit in ("m/s^2", "m/s2", "m/s²") else f"{role}_v"
+
+
+def sensor_records(shot: Shot) -> dict[str, Record]:
+    """role -> the record of each further sensor (the results' "sensors") whose response the
+    shot file keeps in /derived, on /derived/record's time axis and reference."""
+    record = shot.record
+    out: dict[str, Record] = {}
+    if record is None:
+        return out
+    for role in ((shot.results or {}).get("sensors") or {}):
+        for unit in ("m/s^2", "V"):
+            response = shot.derived.get(sensor_response_name(role, unit))
+            if response is not None and response.shape == record.response.shape:
+                out[role] = Record(record.sample_interval_s, record.reference, response, record.start_time_s)
+    return out
+
+
 def units_of_name(name: str) -> str:
     """The unit a name's suffix states (`velocity_m_s` -> "m/s"); "1" (a plain number) without one."""
     for suffix, unit in UNIT_SUFFIXES:

@@ -5,7 +5,9 @@
                      [--align] -o record.csv [--json]
 
 RAW is a raw shot: an HDF5 shot file (.h5/.hdf5, rig.shotfile) or a table, CSV (header
-time_s,doppler,response) or NPZ (same keys), channels in volts. Readers are looked up by the
+time_s,doppler,response) or NPZ (same keys), channels in volts. With a doppler_quadrature
+channel (a column, or the shot file's channel) the reference comes from the quadrature
+interferometer's pair (Heydemann-corrected arctangent, analysis.reduce), else from the PM beat. Readers are looked up by the
 file's suffix in RAW_READERS, so another format is one function and one entry. The options
 override what a shot file records (its analysis parameters, else its configuration
 snapshot); without either, the defaults of analysis.reduce apply (gain and sensitivity 1:
@@ -33,13 +35,15 @@ class RawInput:
     sample_interval_s: float
     start_time_s: float
     settings: dict[str, Any] = field(default_factory=dict)  # keys as reduce_raw's options
+    quadrature_v: Any = None  # a quadrature interferometer's second photodetector, when recorded
 
 
 def _read_table(path: Path) -> RawInput:
     from hopkinson.analysis.reduce import read_raw_table
 
     table = read_raw_table(path)
-    return RawInput(table.doppler_v, table.response_v, table.sample_interval_s, table.start_time_s)
+    return RawInput(table.doppler_v, table.response_v, table.sample_interval_s, table.start_time_s,
+                    quadrature_v=table.quadrature_v)
 
 
 def _read_shot_file(path: Path) -> RawInput:
@@ -64,8 +68,9 @@ def _read_shot_file(path: Path) -> RawInput:
     for key in ("grating_pitch_m", "orders", "amp_gain", "sensitivity_v_per_m_s2", "sample_rate_hz"):
         if params.get(key) is not None:
             settings[key] = params[key]
+    quadrature = raw.volts("doppler_quadrature") if "doppler_quadrature" in raw.channels else None
     return RawInput(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s,
-                    -raw.trigger_index * raw.sample_interval_s, settings)
+                    -raw.trigger_index * raw.sample_interval_s, settings, quadrature)
 
 
 RAW_READERS: dict[str, Callable[[Path], RawInput]] = {
@@ -128,7 +133,7 @@ def run_reduce(args: argparse.Namespace) -> int:
     """Reduce RAW, write the record (never over RAW or a shot file; atomically), print the
     shock quantities."""
     from hopkinson.analysis.records import write_record
-    from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, reduce_raw
+    from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, interferometer_text, reduce_raw
     from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
 
     from hopkinson.fileio import check_output_path
@@ -147,7 +152,7 @@ def run_reduce(args: argparse.Namespace) -> int:
     orders = settings.get("orders", "1,-1")
     orders = parse_orders(orders if isinstance(orders, str) else ",".join(str(o) for o in orders))
     reduction = reduce_raw(
-        raw.doppler_v, raw.response_v, raw.sample_interval_s,
+        raw.doppler_v, raw.response_v, raw.sample_interval_s, quadrature_v=raw.quadrature_v,
         grating_pitch_m=float(settings.get("grating_pitch_m", DEFAULT_GRATING_PITCH_M)),
         orders=orders,
         amp_gain=float(settings.get("amp_gain", 1.0)),
@@ -165,6 +170,7 @@ def run_reduce(args: argparse.Namespace) -> int:
         emit_json(result)
     else:
         print(f"{out}: {reduction.record.n_samples} samples at {reduction.record.sample_rate_hz / 1e6:g} MS/s")
+        print(f"  interferometer     {interferometer_text(result)}")
         print(f"  peak acceleration  {result['peak_acceleration_m_s2']:.6g} m/s^2")
         print(f"  pulse width (10 %) {result['pulse_width_s'] * 1e6:.4g} us")
         print(f"  peak velocity      {result['peak_velocity_m_s']:.6g} m/s")
@@ -178,10 +184,12 @@ def register(subparsers: Any) -> None:
     """Add the `reduce` sub-command."""
     p = subparsers.add_parser(
         "reduce",
-        help="reduce a raw shot (PM Doppler beat + amplifier volts) to a two-channel record",
-        description="Demodulate the photomultiplier beat of the Doppler interferometer into the reference "
-        "acceleration, scale the amplifier output to m/s^2, bring both to the analysis rate and write the "
-        "record time_s,reference,response. RAW: .h5 shot file, or .csv/.npz with time_s,doppler,response.",
+        help="reduce a raw shot (PM Doppler beat or quadrature pair + amplifier volts) to a two-channel record",
+        description="Demodulate the photomultiplier beat of the Doppler interferometer (or a quadrature "
+        "interferometer's pair, doppler + doppler_quadrature) into the reference acceleration, scale the "
+        "amplifier output to m/s^2, bring both to the analysis rate and write the record "
+        "time_s,reference,response. RAW: .h5 shot file, or .csv/.npz with time_s,doppler,response "
+        "(and optionally doppler_quadrature).",
     )
     p.add_argument("raw", metavar="RAW", help="raw shot (.h5/.hdf5 shot file, .csv or .npz)")
     p.add_argument("--grating-pitch-m", type=float, metavar="D", help="grating pitch d in m (default 2e-6)")

@@ -208,6 +208,9 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
             )
 
             print(f"results:   {result_line(outcome.results)}", flush=True)
+            for role, sensor in (outcome.results.get("sensors") or {}).items():  # further sensors, by role
+                text = result_line(sensor) if "model" in sensor else f"not analysed: {sensor.get('error')}"
+                print(f"{role}: {text}", flush=True)
     for warning in outcome.warnings:
         sys.stderr.write(f"hopkinson: warning: {warning}\n")
     if outcome.done and outcome.analysis_error:

@@ -64,9 +64,9 @@ from hopkinson.rig.shot import (
     ShotRequestError,
     WorkResult,
     analyse_and_record,
-    analyse_raw,
     analysis_params,
     generated_shot_name,
+    shot_analyser,
     shot_meta,
     store_raw_shot,
 )
@@ -88,7 +88,8 @@ class Sequencer:
 
     instruments: the connected drivers (rig/instruments.py); used only by the thread in
     run_shot while a shot runs. bus: where events go. analyse: the analysis computation
-    (default: rig.shot.analyse_raw); tests may pass another.
+    (default: rig.shot.shot_analyser of the sequencer's configuration at the shot); tests may
+    pass another.
     """
 
     def __init__(self, instruments: Instruments, config: RigConfig, bus: EventBus, *,
@@ -99,7 +100,7 @@ class Sequencer:
         self.trace = trace  # and every instrument exchange in it
         self.config = config
         self.bus = bus
-        self._analyse = analyse or analyse_raw
+        self._analyse = analyse  # None: rig.shot.shot_analyser(self.config) at the shot
         self._poll_s = poll_interval_s
         self._lock = threading.Lock()
         self._run_lock = threading.Lock()
@@ -401,7 +402,7 @@ class Sequencer:
                     return WorkResult(False, why_not=f"{done.why_not} (re-analyse the stored shot)")
                 return done
 
-            results, error = analyse_and_record(path, raw, params, self._analyse,
+            results, error = analyse_and_record(path, raw, params, self._analyse or shot_analyser(self.config),
                                                 amplifier_overloaded=bool(ctx.settings.get("amplifier_overloaded")),
                                                 run=run)
         self._shielded(ctx, lambda: self.bus.publish(Analysed(
