@@ -20,6 +20,7 @@ interlocks' codes, never from the words of their detail text.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Collection
 from dataclasses import dataclass
 from enum import StrEnum
@@ -145,11 +146,15 @@ def pressure_check(pressure_bar: float, limits: LimitsConfig, setpoint_bar: floa
                    charging: bool) -> Interlock:
     """The pressure interlock.
 
-    Always: pressure at most limits.max_pressure_bar. With a set-point, while charging: at
-    most set-point + tolerance (the fill must not overshoot); charged (ARM, FIRE): within the
+    Always: a finite reading (a gauge or register fault reads NaN, which no comparison would
+    catch), at most limits.max_pressure_bar. With a set-point, while charging: at most
+    set-point + tolerance (the fill must not overshoot); charged (ARM, FIRE): within the
     tolerance of the set-point.
     """
     p = pressure_bar
+    if not math.isfinite(p):
+        return Interlock(C.PRESSURE, False, f"reservoir gauge reads {p} (not a number: check the gauge and its "
+                                            "register)")
     if p > limits.max_pressure_bar:
         return Interlock(C.PRESSURE, False, f"reservoir {p:.3f} bar above the limit {limits.max_pressure_bar:g} bar")
     if setpoint_bar is None:
@@ -185,6 +190,9 @@ def _judge(code: InterlockCode, r: RigReadings, limits: LimitsConfig, setpoint_b
     if code == C.ESTOP:
         return Interlock(code, r.estop_healthy, "e-stop healthy" if r.estop_healthy else "e-stop tripped")
     if code == C.VACUUM:
+        if not math.isfinite(r.fixture_vacuum_mbar):
+            return Interlock(code, False, f"fixture vacuum gauge reads {r.fixture_vacuum_mbar} (not a number: check "
+                                          "the gauge and its register)")
         ok = r.fixture_vacuum_mbar <= limits.fixture_vacuum_max_mbar
         relation = "at or below" if ok else "above"
         return Interlock(code, ok, f"fixture vacuum {r.fixture_vacuum_mbar:.1f} mbar {relation} "

@@ -92,7 +92,7 @@ def _vent_leftover_pressure(ctx: ShotContext) -> None:
     """CHECK does not start with pressure in the reservoir: it vents first, and says so.
     Venting may take longer than CHECK itself, so it has timeouts.safe_s."""
     valves, limits = ctx.instruments.valves, ctx.config.limits
-    p = valves.reservoir_pressure_bar()
+    p = _gauge_bar(valves)
     if p <= limits.vent_done_bar:
         return
     ctx.warn(f"the reservoir holds {p:.3f} bar before the shot (above {limits.vent_done_bar:g} bar): "
@@ -108,9 +108,18 @@ def _vent_leftover_pressure(ctx: ShotContext) -> None:
         ctx.abort.wait(ctx.poll_s)
         if ctx.abort.requested:
             ctx.checkpoint(valves.name, "venting")
-        p = valves.reservoir_pressure_bar()
+        p = _gauge_bar(valves)
     ctx.events.progress(f"vented: {p:.3f} bar", force=True, reservoir_pressure_bar=p)
     ctx.start_clock(State.CHECK)  # CHECK's own time starts after the venting
+
+
+def _gauge_bar(valves: Any) -> float:
+    """The reservoir gauge; Abort when it reads no number (NaN would pass every comparison)."""
+    p = valves.reservoir_pressure_bar()
+    if not math.isfinite(p):
+        raise Abort(valves.name, f"the reservoir gauge reads {p} (not a number): the pressure is unknown",
+                    "Check the reservoir gauge and its register; vent the rig by hand if in doubt.")
+    return p
 
 
 def _configure_digitizer(ctx: ShotContext) -> None:

@@ -382,6 +382,7 @@ LIMITS = LimitsConfig(max_pressure_bar=8.0, min_pressure_bar=0.2, pressure_toler
 @pytest.mark.parametrize("pressure, charging, ok", [
     (2.0, False, True), (2.049, False, True), (2.051, False, False), (1.949, False, False),
     (1.0, True, True), (2.049, True, True), (2.051, True, False), (8.01, True, False),
+    (float("nan"), True, False), (float("nan"), False, False), (float("inf"), True, False),
 ])
 def test_pressure_interlock_bounds(pressure: float, charging: bool, ok: bool) -> None:
     report = evaluate(_readings(reservoir_pressure_bar=pressure), LIMITS, ("pressure",), setpoint_bar=2.0,
@@ -391,7 +392,8 @@ def test_pressure_interlock_bounds(pressure: float, charging: bool, ok: bool) ->
 
 @pytest.mark.parametrize("field, value, name", [
     ("door_closed", False, "door"), ("fixture_clamped", False, "clamp"), ("estop_healthy", False, "estop"),
-    ("fixture_vacuum_mbar", 100.1, "vacuum"), ("amplifier_overloaded", True, "amplifier"),
+    ("fixture_vacuum_mbar", 100.1, "vacuum"), ("fixture_vacuum_mbar", float("nan"), "vacuum"),
+    ("reservoir_pressure_bar", float("nan"), "pressure"), ("amplifier_overloaded", True, "amplifier"),
     ("amplifier_overloaded", None, "amplifier"), ("digitizer_state", "IDLE", "digitizer"),
 ])
 def test_each_interlock_fails_alone(field: str, value: object, name: str) -> None:

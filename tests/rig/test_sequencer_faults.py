@@ -205,3 +205,26 @@ def test_amplifier_overload_during_the_shot_is_a_warning_not_a_loss(make_rig) ->
     assert outcome.analysis_error.startswith("not analysed: the amplifier overloaded")
     assert shot.state == "analysis_failed" and "amplifier overloaded" in shot.analysis_error
     rig.assert_safe()
+
+
+def test_a_gauge_reading_nan_stops_the_charge_at_once_and_safe_does_not_claim_vented(rig) -> None:
+    """A float32 gauge register (or a lab's driver) may read NaN, which passes every comparison:
+    the pressure interlock must fail on it (not charge with the fill open until CHARGE times out),
+    and SAFE must not call an unknown pressure vented."""
+    valves = rig.instruments.valves
+    rig.on_state("CHARGE", lambda: setattr(valves, "reservoir_pressure_bar", lambda: float("nan")))
+    outcome = rig.run(pressure_bar=2.0)
+    assert outcome.aborted_in == "CHARGE" and not outcome.fired and rig.world.shots_fired == 0
+    assert "interlock lost: reservoir gauge reads nan (not a number" in outcome.error
+    assert outcome.final_state == "FAULT" and not outcome.safe_confirmed  # the pressure is unknown
+    assert "SAFE NOT CONFIRMED" in outcome.error and "reservoir still at nan bar" in outcome.error
+    coils = rig.world.coils()
+    assert coils["fill"] is False and coils["fire"] is False and coils["vent"] is True, coils
+
+
+def test_check_refuses_a_gauge_reading_nan_before_anything_moves(rig) -> None:
+    valves = rig.instruments.valves
+    rig.on_state("CHECK", lambda: setattr(valves, "reservoir_pressure_bar", lambda: float("nan")))
+    outcome = rig.run(pressure_bar=2.0)
+    assert outcome.aborted_in == "CHECK" and "the reservoir gauge reads nan" in outcome.error
+    assert rig.world.coils()["fill"] is False and rig.world.coils()["pump"] is False
