@@ -89,7 +89,9 @@ class ValveController(ModbusDriver):
             raise ValueError(f"{self.name}: watchdog_s must be in (0, 3600] s, got {watchdog_s!r}")
         self.map = register_map or RegisterMap()
         self.watchdog_s = float(watchdog_s)
-        self.last_heartbeat_error: InstrumentError | None = None  # set by the heartbeat thread
+        # One stop event per heartbeat session: a thread that outlived its stop (its join timed
+        # out while it waited for a slow transaction) ends as soon as it looks, and a new
+        # session can never revive it.
         self._beat_stop = threading.Event()
         self._beat_thread: threading.Thread | None = None
 
@@ -210,21 +212,19 @@ class ValveController(ModbusDriver):
         if watchdog.present:
             self.write_value(watchdog, self.watchdog_s * 1000.0, "watchdog time", "ms")
         self.write_word(address, HEARTBEAT_START, "heartbeat: start a session")
-        self.last_heartbeat_error = None
-        self._beat_stop.clear()
-        self._beat_thread = threading.Thread(target=self._beat, args=(address,), daemon=True,
+        self._beat_stop = threading.Event()
+        self._beat_thread = threading.Thread(target=self._beat, args=(address, self._beat_stop), daemon=True,
                                              name=f"heartbeat {self.name}")
         self._beat_thread.start()
 
-    def _beat(self, address: int) -> None:
+    def _beat(self, address: int, stop: threading.Event) -> None:
         period_s = max(0.02, self.watchdog_s / 4.0)
         beat = HEARTBEAT_FIRST_BEAT
-        while not self._beat_stop.wait(period_s):
-            try:
-                self.write_word(address, beat, "heartbeat")
-                self.last_heartbeat_error = None
-            except InstrumentError as exc:  # keep trying: if the link stays down, the controller trips
-                self.last_heartbeat_error = exc
+        while not stop.wait(period_s):
+            with contextlib.suppress(InstrumentError):  # keep trying: if the link stays down, the controller trips
+                with self.lock:
+                    if not stop.is_set():  # stopped while this beat waited for the link: never beat late
+                        self.write_word(address, beat, "heartbeat")
             beat = beat + 1 if beat < 0xFFFF else HEARTBEAT_FIRST_BEAT
 
     def stop_heartbeat_thread(self) -> None:
@@ -236,10 +236,12 @@ class ValveController(ModbusDriver):
 
     def stop_heartbeat(self) -> None:
         """Stop the beats and disarm the watchdog (0). Never raises: if the disarm cannot be
-        written, the watchdog lapses and the controller vents, which is safe."""
+        written, the watchdog lapses and the controller vents, which is safe. A link that a
+        failure closed is reopened for the disarm (a transient error must not leave the
+        controller to trip and vent after a good shot)."""
         running = self._beat_thread is not None
         self.stop_heartbeat_thread()
-        if running and self.connected:
+        if running and self._wanted:
             with contextlib.suppress(InstrumentError):
                 self.write_word(self.map.holding_registers.heartbeat, HEARTBEAT_STOP, "heartbeat: stop")
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import socket
+import threading
 import time
 from dataclasses import replace
 
@@ -354,6 +355,72 @@ def test_the_heartbeat_thread_keeps_the_watchdog_fed_in_real_time() -> None:
         vc.start_heartbeat()
         vc.stop_heartbeat()
         assert not vc.heartbeat_running and vc.watchdog_state() == "off"
+
+
+def test_stop_heartbeat_disarms_even_after_a_failure_closed_the_link(rig: SimulatedRig) -> None:
+    # A long watchdog: the beat thread (every 15 s) never runs during the test.
+    with controller(rig, watchdog_s=60.0) as vc:
+        vc.start_heartbeat()
+        assert rig.world.watchdog_state() == "armed"
+        rig.faults.inject("modbus-disconnect")
+        with pytest.raises(InstrumentConnectionError):
+            vc.reservoir_pressure_bar()
+        rig.faults.clear("modbus-disconnect")
+        assert not vc.connected  # the failure closed the link ...
+        vc.stop_heartbeat()
+        assert rig.world.watchdog_state() == "off"  # ... and the disarm reopened it
+
+
+class _WatchedLock:
+    """The driver's re-entrant lock, telling which threads wait for it."""
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self.waiting: set[str] = set()
+
+    def __enter__(self) -> None:
+        name = threading.current_thread().name
+        self.waiting.add(name)
+        self._lock.acquire()
+        self.waiting.discard(name)
+
+    def __exit__(self, *exc: object) -> None:
+        self._lock.release()
+
+
+def _hold_until_waiting(lock: _WatchedLock, thread: threading.Thread) -> None:
+    deadline = time.monotonic() + 10.0
+    while thread.name not in lock.waiting and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert thread.name in lock.waiting
+
+
+def test_a_beat_held_up_past_its_session_s_end_is_never_written(rig: SimulatedRig) -> None:
+    # The beat thread waits for the link while another transaction holds it; the session ends
+    # (the join gives up) and a new one starts. The old thread must neither beat on in the new
+    # session nor write its late beat after the stop (a beat re-arms a disarmed controller).
+    with controller(rig, watchdog_s=0.4, timeout_s=0.3) as vc:
+        vc.lock = _WatchedLock()  # type: ignore[assignment]
+        vc.start_heartbeat()
+        first = vc._beat_thread
+        assert first is not None
+        with vc.lock:  # a slow transaction: the next beat waits for it
+            _hold_until_waiting(vc.lock, first)
+            vc.stop_heartbeat()  # the join gives up after 1 s; the disarm is written
+            assert first.is_alive() and rig.world.watchdog_state() == "off"
+        first.join(5.0)
+        assert not first.is_alive()  # it ended instead of beating on
+        assert rig.world.watchdog_state() == "off"  # and its late beat did not re-arm the controller
+        vc.start_heartbeat()
+        second = vc._beat_thread
+        assert second is not None
+        with vc.lock:
+            _hold_until_waiting(vc.lock, second)
+            vc.start_heartbeat()  # a new session while the old thread still waits
+        second.join(5.0)
+        assert not second.is_alive()
+        assert [t for t in threading.enumerate() if t.name == f"heartbeat {vc.name}"] == [vc._beat_thread]
+        vc.stop_heartbeat()
 
 
 def test_a_read_only_client_neither_arms_nor_feeds_the_watchdog(rig: SimulatedRig, clock: FakeClock) -> None:
