@@ -11,7 +11,6 @@ wraps, so a title page of tables is laid out here instead).
 
 from __future__ import annotations
 
-import textwrap
 from collections.abc import Callable, Sequence
 from functools import lru_cache
 from typing import Any
@@ -46,6 +45,10 @@ def plot_page(title: str, subtitle: str = "") -> Figure:
     fig.suptitle("\n".join(lines), fontsize=12, fontweight="bold")
     return fig
 
+
+# The width a full-width axes of a plot page keeps for a table (constrained layout leaves
+# room for the other axes' y labels on the left): on the safe side of what it draws.
+TABLE_WIDTH_PT = A4_PORTRAIT_IN[0] * POINTS_PER_INCH * 0.84
 
 MEASURE_DPI = 720.0  # fine enough for the outline's own width
 HINTING_MARGIN = 1.09  # hinted text in an 80–100 dpi PNG renders up to 8 % wider than its outline
@@ -255,13 +258,20 @@ class TextPages:
 
 
 def table_in_axes(ax: Any, header: list[str] | None, rows: list[list[str]], fontsize: float = 8.0,
-                  col_widths: list[float] | None = None, line_heights: bool = False) -> None:
+                  col_widths: list[float] | None = None, line_heights: bool = False,
+                  width_pt: float | None = None) -> None:
     """A small table at the top of an axes (matplotlib's table). Every row is one line high,
-    unless `line_heights`: then a row is as high as its cells' wrapped lines (`wrap_chars`)."""
+    unless `line_heights`: then a row is as high as its cells' lines. With `width_pt` (the
+    axes' width on the page, points) and `col_widths`, each cell is first wrapped to its
+    column's measured width (`wrap_cells`), so no text runs under its neighbour."""
     ax.axis("off")
     if not rows:
         ax.text(0.0, 1.0, "—", va="top", transform=ax.transAxes)
         return
+    if width_pt is not None and col_widths is not None:
+        header = wrap_cells([header], col_widths, width_pt, fontsize, bold=True)[0] if header else header
+        rows = wrap_cells(rows, col_widths, width_pt, fontsize)
+        line_heights = True
     t = ax.table(cellText=rows, colLabels=header, loc="upper center", cellLoc="left", colLoc="left",
                  colWidths=col_widths)
     t.auto_set_font_size(False)
@@ -279,9 +289,17 @@ def table_in_axes(ax: Any, header: list[str] | None, rows: list[list[str]], font
             cell.set_text_props(fontweight="bold")
 
 
-def wrap_chars(text: str, width: int = 95) -> str:
-    """`text` wrapped at `width` characters per line (for cells of `table_in_axes`)."""
-    return "\n".join(textwrap.fill(line, width) for line in text.splitlines())
+TABLE_CELL_PAD = 0.1  # matplotlib's Cell.PAD: a cell's text is inset by this fraction of the cell's width on each side
+
+
+def wrap_cells(rows: Sequence[Sequence[str]], col_widths: Sequence[float], width_pt: float, fontsize: float,
+               bold: bool = False) -> list[list[str]]:
+    """Each cell wrapped at spaces (`wrap_to_width`) to what its column of `table_in_axes` leaves
+    for text: the column's share of `width_pt` less matplotlib's padding on both sides."""
+    total = float(sum(col_widths))
+    room = [width_pt * w / total * (1.0 - 2 * TABLE_CELL_PAD) for w in col_widths]
+    return [["\n".join(wrap_to_width(str(c), fontsize, r, bold)) for c, r in zip(row, room, strict=True)]
+            for row in rows]
 
 
 def freeze_layout(fig: Figure) -> None:

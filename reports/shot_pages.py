@@ -28,11 +28,18 @@ from hopkinson.reports.data import (
     model_delay_samples,
     prepared,
 )
-from hopkinson.reports.layout import plot_page, table_in_axes, wrap_chars, wrap_to_width
+from hopkinson.reports.layout import (
+    TABLE_WIDTH_PT,
+    plot_page,
+    table_in_axes,
+    wrap_cells,
+    wrap_to_width,
+)
 from hopkinson.reports.tables import compensation_rows, dcm_rows, fmt, pole_rows
 from matplotlib.figure import Figure
 
 BAND_LEVELS = (("5", 0.05, "tab:green"), ("10", 0.10, "tab:orange"))
+DCM_TABLE_COLUMNS = (0.36, 0.64)  # the DCM page's table: label, value
 
 
 def excitation_page(entry: ShotEntry) -> Figure:
@@ -296,7 +303,7 @@ def dcm_page(entry: ShotEntry) -> Figure:
     model, dcm = a.model, a.dcm
     fig = plot_page(f"{entry.label}: dynamic compensation model (DCM)")
     check = entry.compensation
-    rows = [[wrap_chars(k, 46), wrap_chars(v, 80)] for k, v in dcm_rows(a) + compensation_rows(entry)[1:]]
+    rows = wrap_cells(dcm_rows(a) + compensation_rows(entry)[1:], DCM_TABLE_COLUMNS, TABLE_WIDTH_PT, 7.5)
     lines = sum(max(r[0].count("\n"), r[1].count("\n")) + 1 for r in rows)
     ax_m, ax_s, ax_tab = fig.subplots(3, 1, height_ratios=[1.3, 1.0, 0.15 + 0.075 * lines])
     comp = a.compensated_fbsd_hz
@@ -341,7 +348,7 @@ def dcm_page(entry: ShotEntry) -> Figure:
     ax_s.set_title("Step responses (10 % and 90 % marked)", fontsize=9)
     ax_s.legend(fontsize=7)
     ax_s.grid(alpha=0.3)
-    table_in_axes(ax_tab, None, rows, fontsize=7.5, col_widths=[0.36, 0.64], line_heights=True)
+    table_in_axes(ax_tab, None, rows, fontsize=7.5, col_widths=list(DCM_TABLE_COLUMNS), line_heights=True)
     ax_tab.set_title("DCM design (Eqs. 13–25) and its check on this shot", loc="left", fontsize=9)
     return fig
 
@@ -349,10 +356,10 @@ def dcm_page(entry: ShotEntry) -> Figure:
 def failed_shot_page(entry: ShotEntry) -> Figure:
     fig = plot_page(f"{entry.label}: no analysis")
     ax = fig.subplots(1, 1)
-    rows = [[k, wrap_chars(v, 70)] for k, v in entry.identity.items()]
+    rows = [[k, v] for k, v in entry.identity.items()]
     rows.append(["state", entry.state or "—"])
-    rows.append(["analysis", wrap_chars(entry.error or "no analysis stored", 70)])
-    table_in_axes(ax, None, rows, col_widths=[0.3, 0.7])
+    rows.append(["analysis", entry.error or "no analysis stored"])
+    table_in_axes(ax, None, rows, col_widths=[0.3, 0.7], width_pt=TABLE_WIDTH_PT)
     return fig
 
 

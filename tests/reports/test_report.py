@@ -410,6 +410,35 @@ def test_summary_pages_stay_on_the_page_and_never_overlap(which: str, request) -
             assert box.x0 >= 0 and box.x1 <= width, f"{caption}: {title.get_text()!r} runs off the page"
 
 
+@pytest.mark.parametrize("which", ["single_report", "campaign_report", "uncertain_report"])
+def test_plot_page_tables_keep_each_text_inside_its_cell(which: str, request) -> None:
+    # A cell's text that runs past its cell's right edge is hidden under the next cell (the DCM
+    # table's "latency removed (channel delay + DCM group delay)" lost its last word).
+    _report, pages = request.getfixturevalue(which)
+    checked = 0
+    for caption, fig in pages:
+        if caption.startswith("Summary"):
+            continue  # laid out by TextPages (the test above)
+        for dpi in (80, 100):
+            fig.set_dpi(dpi)
+            fig.canvas.draw()
+            renderer = fig.canvas.get_renderer()
+            for ax in fig.axes:
+                for table in ax.tables:
+                    for (_r, _c), cell in table.get_celld().items():
+                        text = cell.get_text()
+                        if not text.get_text().strip():
+                            continue
+                        box, inner = cell.get_window_extent(renderer), text.get_window_extent(renderer)
+                        assert box.x0 - 0.5 <= inner.x0 and inner.x1 <= box.x1 + 0.5, \
+                            f"{caption}: {text.get_text()!r} runs out of its cell at {dpi} dpi"
+                        assert box.y0 - 0.5 <= inner.y0 and inner.y1 <= box.y1 + 0.5, \
+                            f"{caption}: {text.get_text()!r} is taller than its cell at {dpi} dpi"
+                        checked += 1
+        fig.set_dpi(100)
+    assert checked > 10
+
+
 def test_report_input_errors(tmp_path: Path, analyses: dict[str, ShotAnalysis]) -> None:
     report = CalibrationReport("r", {}, [entry("s", analyses["a1"])])
     with pytest.raises(AnalysisError, match=r"r\.txt: a report is \.pdf or \.html"):
