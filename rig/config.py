@@ -42,9 +42,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
-import stat
-import tomllib
 import types
 import typing
 from dataclasses import dataclass, field
@@ -57,6 +54,7 @@ from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.modbus_link import ModbusTarget
 from hopkinson.drivers.registers import REGISTER_TYPES, WORD_ORDERS, Register, RegisterMap
 from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.toml_file import read_toml
 
 if typing.TYPE_CHECKING:
     from hopkinson.drivers.sim.simulated_rig import SimConfig
@@ -490,7 +488,7 @@ RULES: dict[str, _Rule] = {
 def load_rig_config(path: str | Path) -> RigConfig:
     """Read and validate config/rig.toml (or a variant); ConfigError on anything wrong."""
     path = Path(path)
-    data = _read_toml(path)
+    data, _ = read_toml(path)
     config = _build(RigConfig, data, path, "", skip=("path",))
     _check_rig(config, path)
     return dataclasses.replace(config, path=str(path))
@@ -503,7 +501,7 @@ def load_sim_config(path: str | Path) -> SimConfig:
     from hopkinson.drivers.sim.simulated_rig import SimConfig
 
     path = Path(path)
-    data = _read_toml(path)
+    data, _ = read_toml(path)
     register_map = _build(RegisterMap, data.pop("register_map", {}), path, "register_map")
     _check_register_map(register_map, path, "register_map")
     config = _build(SimConfig, data, path, "", skip=("register_map",))
@@ -666,33 +664,6 @@ def _check_orders(orders: tuple[int, int], path: Path, key: str) -> None:
 
 
 # -- the generic reader ---------------------------------------------------------------------------
-MAX_CONFIG_BYTES = 1 << 20  # a configuration is a few kB; more is not one (e.g. /dev/zero)
-
-
-def _read_toml(path: Path) -> dict[str, Any]:
-    try:
-        with path.open("rb") as fh:
-            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
-                raise ConfigError(f"{path}: not a regular file")
-            data = fh.read(MAX_CONFIG_BYTES + 1)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a folder, not a configuration file") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
-    if len(data) > MAX_CONFIG_BYTES:
-        raise ConfigError(f"{path}: larger than {MAX_CONFIG_BYTES // 1024} KiB: not a configuration file")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): is it a binary file?") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-
-
 def _build(cls: type, table: Any, path: Path, prefix: str, skip: tuple[str, ...] = ()) -> Any:
     """Make dataclass `cls` from a TOML table, checking keys, types and RULES.
 

@@ -52,12 +52,12 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.toml_file import read_toml
 
 MAX_ORDER_LIMIT = 40
 MIN_DRAWS, MAX_DRAWS = 50, 1_000_000  # as analysis.params checks them
@@ -202,16 +202,7 @@ def _kind(value: Any) -> str:
 def load_plan(path: str | Path) -> CampaignPlan:
     """Read and validate a campaign plan; ConfigError names the file, the key and the reason."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such plan file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot be read as UTF-8 text ({exc})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    doc, text = read_toml(path, "plan file", missing="no such plan file")  # bounded: /dev/zero is one line
     return plan_from_dict(doc, path, text)
 
 

@@ -171,12 +171,12 @@ def create_run_folder(plan_path: str | Path, parent: str | Path, name: str | Non
     run.shots_dir.mkdir()
     run.report_dir.mkdir()
     # Copies: each an exclusive temporary, fsynced and renamed (hopkinson.fileio): whole or absent.
-    plan_text = plan_path.read_bytes()
+    plan_text = plan.text  # the text that was validated (read once: an edit meanwhile cannot slip in)
     if sine is not None:
         name, data = sine
         atomic_write(run.path / name, data)
-        plan_text = plan_naming_sine_calibration(plan_text.decode("utf-8"), name).encode("utf-8")
-    atomic_write(run.plan_path, plan_text)
+        plan_text = plan_naming_sine_calibration(plan_text, name)
+    atomic_write(run.plan_path, plan_text.encode("utf-8"))
     return run
 
 

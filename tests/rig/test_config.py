@@ -215,6 +215,28 @@ def test_a_folder_or_a_device_is_not_a_config(tmp_path: Path) -> None:
         load_rig_config("/dev/zero")
 
 
+def test_a_named_pipe_is_refused_without_waiting_for_a_writer(tmp_path: Path) -> None:
+    import os
+    import threading
+
+    fifo = tmp_path / "rig.toml"
+    os.mkfifo(fifo)
+    errors: list[str] = []
+    reader = threading.Thread(target=lambda: errors.append(_config_error(fifo)), daemon=True)
+    reader.start()
+    reader.join(30.0)  # opening a pipe for reading would block until a writer came: it must not
+    assert not reader.is_alive(), "load_rig_config waited on a named pipe"
+    assert errors == [f"{fifo}: not a regular file (a device, pipe or socket), not a configuration file"]
+
+
+def _config_error(path: Path) -> str:
+    try:
+        load_rig_config(path)
+    except ConfigError as exc:
+        return str(exc)
+    return "no error"
+
+
 @pytest.mark.parametrize(
     ("old", "new", "key", "reason"),
     [

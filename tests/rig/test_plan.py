@@ -148,6 +148,18 @@ def test_bad_toml_and_missing_file(tmp_path: Path) -> None:
         load_plan(tmp_path / "absent.toml")
 
 
+def test_a_device_a_folder_or_a_binary_file_is_not_a_plan(tmp_path: Path) -> None:
+    """/dev/zero was read to the end (a MemoryError traceback); now one line, nothing read."""
+    with pytest.raises(ConfigError, match=r"^/dev/zero: not a regular file .*not a plan file$"):
+        load_plan("/dev/zero")
+    with pytest.raises(ConfigError, match=rf"^{tmp_path}: is a folder, not a plan file$"):
+        load_plan(tmp_path)
+    binary = tmp_path / "plan.toml"
+    binary.write_bytes(b"name = 1\n\xff\xfe")
+    with pytest.raises(ConfigError, match=r"plan\.toml: not UTF-8 text \(byte 9\): is it a binary file\?$"):
+        load_plan(binary)
+
+
 def test_dcm_ratio_auto_is_the_default_and_can_be_written(tmp_path):
     from hopkinson.rig.plan import load_plan
 
