@@ -11,12 +11,21 @@ Commands (Keysight programmer's guides; short forms in capitals):
     :SINGle (arm one acquisition), :STOP, :RSTate? (RUN|STOP|SING), :TER? (trigger event
     register: 1 once after a trigger, cleared by reading)
     :WAVeform:SOURce CHANnel<n>, :WAVeform:FORMat BYTE|WORD, :WAVeform:UNSigned 0|1,
-    :WAVeform:BYTeorder LSBFirst|MSBFirst, :WAVeform:POINts:MODE RAW, :WAVeform:DATA? (block)
+    :WAVeform:BYTeorder LSBFirst|MSBFirst, :WAVeform:POINts:MODE RAW, :WAVeform:POINts MAXimum
+    (the whole record: the instrument's default sends the screen's 1000 points), :WAVeform:DATA?
+    (block; codes 0x00/0x0000 a hole, 0x01/0x0001 clipped low, 0xFF/0xFFFF clipped high, each
+    shifted by half the range when signed: the full-scale codes are one above the format's lowest)
     :WAVeform:PREamble? -> format (0 BYTE, 1 WORD, 4 ASCii), type, points, count, xincrement,
                            xorigin, xreference, yincrement, yorigin, yreference
                            time = (i − xreference)·xincrement + xorigin
                            volts = (code − yreference)·yincrement + yorigin
     errors: :SYSTem:ERRor? -> +0,"No error"
+
+Families. The acquisition commands are Infiniium's (:ACQuire:SRATe and :ACQuire:POINts set the
+rate and memory depth); the trigger and transfer commands are InfiniiVision's (:TRIGger:EDGE:LEVel,
+:WAVeform:POINts:MODE, :WAVeform:UNSigned). An instrument that lacks one answers with an error in
+its queue, which the driver reports naming the command (nothing is silently ignored); a lab with
+such an instrument derives its own dialect from this class and overrides `apply`/`prepare`.
 
 State: :RSTate? says SING while the single acquisition waits and STOP once done (or stopped);
 :TER? tells the two apart. Because reading :TER? clears it, the dialect latches a trigger it
@@ -26,7 +35,7 @@ has seen until the next :SINGle or :STOP (DigitizerDialect.latched_state).
 from __future__ import annotations
 
 from hopkinson.drivers.digitizer_settings import DigitizerSettings, pre_trigger_samples
-from hopkinson.drivers.digitizer_waveform import Waveform, sample_dtype
+from hopkinson.drivers.digitizer_waveform import Waveform, integer_rails, sample_dtype
 from hopkinson.drivers.scpi_dialect import ReplyFormatError, ScpiErrorQueueDialect, ScpiLink
 
 _FORMATS = {"int8": ("BYTE", 0), "uint8": ("BYTE", 1), "int16": ("WORD", 0), "uint16": ("WORD", 1)}
@@ -49,7 +58,7 @@ class KeysightDialect(ScpiErrorQueueDialect):
 
     def prepare(self, link: ScpiLink) -> None:
         word, unsigned = _FORMATS[self.transfer.sample_format]
-        self.command(link, ":WAVeform:POINts:MODE RAW", f":WAVeform:FORMat {word}",
+        self.command(link, ":WAVeform:POINts:MODE RAW", ":WAVeform:POINts MAXimum", f":WAVeform:FORMat {word}",
                      f":WAVeform:UNSigned {unsigned:d}", f":WAVeform:BYTeorder {_ORDERS[self.transfer.byte_order]}")
 
     def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
@@ -116,7 +125,9 @@ class KeysightDialect(ScpiErrorQueueDialect):
             raise ReplyFormatError(command, f"unsupported waveform format (format {fmt_code}, unsigned "
                                             f"{unsigned!r}, byte order {order!r}): BYTE or WORD binary only", reply)
         sample_format = ("int" if signed else "uint") + ("8" if fmt_code == 0 else "16")
+        dtype = sample_dtype(sample_format, byte_order)
+        lowest, highest = integer_rails(dtype)  # lowest: a hole; one above it: clipped low
         return self.fetch_samples(link, ":WAVeform:DATA?", channel, context, preamble=(command, reply), points=points,
-                                  dtype=sample_dtype(sample_format, byte_order), scale_v=y_inc,
-                                  offset_v=y_origin - y_ref * y_inc, sample_interval_s=x_inc,
-                                  trigger_index=int(round(x_ref - x_origin / x_inc)))
+                                  dtype=dtype, scale_v=y_inc, offset_v=y_origin - y_ref * y_inc,
+                                  sample_interval_s=x_inc, trigger_index=int(round(x_ref - x_origin / x_inc)),
+                                  code_range=(lowest + 1, highest))

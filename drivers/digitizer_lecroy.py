@@ -43,6 +43,7 @@ from hopkinson.drivers.scpi_dialect import (
     DigitizerDialect,
     ReplyFormatError,
     ScpiLink,
+    check_points,
     check_preamble,
     split_outside_quotes,
 )
@@ -147,6 +148,7 @@ class LeCroyDialect(DigitizerDialect):
         desc = parse_wavedesc(command, block)
         if desc.points == 0:
             raise ReplyFormatError(command, f"no acquired record on {channel}")
+        check_points(command, "", desc.points, context)
         start = desc.data_offset
         payload = block[start:start + desc.data_bytes]
         if len(payload) != desc.data_bytes or start + desc.data_bytes != len(block):

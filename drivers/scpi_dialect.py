@@ -224,9 +224,10 @@ class DigitizerDialect:
 
     def waveform(self, command: str, channel: str, payload: memoryview, *, points: int, dtype: object,
                  scale_v: float, offset_v: float, sample_interval_s: float, trigger_index: int,
-                 range_v: float | None = None) -> Waveform:
-        """Decode the samples and build the Waveform (full scale from the format, or for
-        float samples from the channel's range)."""
+                 range_v: float | None = None, code_range: tuple[float, float] | None = None) -> Waveform:
+        """Decode the samples and build the Waveform (full scale: `code_range` where the
+        instrument clips at codes of its own, else the format's, or for float samples the
+        channel's range)."""
         try:
             codes = decode_samples(payload, dtype, points)  # type: ignore[arg-type]
         except SampleFormatError as exc:
@@ -236,7 +237,7 @@ class DigitizerDialect:
                 raise ReplyFormatError(command, "float samples need the channel's range for their full scale")
             rails = sorted(((-range_v - offset_v) / scale_v, (range_v - offset_v) / scale_v))
             code_range = (rails[0], rails[1])
-        else:
+        elif code_range is None:
             code_range = integer_rails(codes.dtype)
         codes.flags.writeable = False
         return Waveform(channel=channel, codes=codes, scale_v=scale_v, offset_v=offset_v,
@@ -245,7 +246,8 @@ class DigitizerDialect:
 
     def fetch_samples(self, link: ScpiLink, data_query: str, channel: str, context: DigitizerSettings, *,
                       preamble: tuple[str, str], points: int, dtype: object, scale_v: float, offset_v: float,
-                      sample_interval_s: float, trigger_index: int, range_v: float | None = None) -> Waveform:
+                      sample_interval_s: float, trigger_index: int, range_v: float | None = None,
+                      code_range: tuple[float, float] | None = None) -> Waveform:
         """Check the preamble's values, read the data block and build the Waveform.
         preamble: (the command that asked for it, its reply), for errors."""
         command, reply = preamble
@@ -253,11 +255,12 @@ class DigitizerDialect:
                        offset_v=offset_v)
         if points == 0:
             raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
+        check_points(command, reply, points, context)
         itemsize = np.dtype(dtype).itemsize  # type: ignore[call-overload]
         _, payload = link.query_block(data_query, self.block_limit(context, points, itemsize))
         return self.waveform(data_query, channel, payload, points=points, dtype=dtype, scale_v=scale_v,
                              offset_v=offset_v, sample_interval_s=sample_interval_s, trigger_index=trigger_index,
-                             range_v=range_v)
+                             range_v=range_v, code_range=code_range)
 
     @staticmethod
     def block_limit(context: DigitizerSettings, points: int, itemsize: int) -> int:
@@ -285,6 +288,14 @@ def check_preamble(command: str, reply: str, *, points: int, interval_s: float, 
     """Refuse preamble values no record can have."""
     if points < 0 or not interval_s > 0 or not scale_v != 0 or offset_v != offset_v:
         raise ReplyFormatError(command, "preamble values out of range", reply)
+
+
+def check_points(command: str, reply: str, points: int, context: DigitizerSettings) -> None:
+    """Refuse a record shorter than the configured one: a decimated or partial transfer (e.g.
+    an oscilloscope's default of sending the screen's 1000 points) is not the shot's record."""
+    if points < context.record_length:
+        raise ReplyFormatError(command, f"the instrument sends {points} points of the {context.record_length} "
+                                        "configured (a decimated or partial transfer)", reply)
 
 
 # -- the generic SCPI dialect ------------------------------------------------------------------

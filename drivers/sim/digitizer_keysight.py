@@ -17,13 +17,25 @@ their short form ("CHAN1", "POS", "LSBF").
     :SINGle, :STOP, :RSTate? (SING while armed, STOP otherwise), :TER? (1 once per trigger)
     :WAVeform:SOURce CHANnel<n> | ?, :WAVeform:FORMat BYTE|WORD | ?, :WAVeform:UNSigned 0|1 | ?,
     :WAVeform:BYTeorder LSBFirst|MSBFirst | ?, :WAVeform:POINts:MODE NORMal|MAXimum|RAW | ?,
+    :WAVeform:POINts <n>|MAXimum | ?            points sent; *RST: 1000 (fewer than the record:
+                                                every k-th sample, the x increment k times longer)
     :WAVeform:PREamble? (format 0 BYTE / 1 WORD, type, points, count, xincrement, xorigin,
-    xreference, yincrement, yorigin, yreference), :WAVeform:DATA? (block)
+    xreference, yincrement, yorigin, yreference), :WAVeform:DATA? (block; 0x00/0x0000 is a hole,
+    the converter clips at 0x01 and 0xFF/0xFFFF, shifted by half the range when signed)
 """
 
 from __future__ import annotations
 
-from hopkinson.drivers.sim.scpi_digitizer import Block, Call, Handler, Reply, SimDigitizer, SimError
+import numpy as np
+from hopkinson.drivers.sim.scpi_digitizer import (
+    RECORD_LENGTH_LIMITS,
+    Block,
+    Call,
+    Handler,
+    Reply,
+    SimDigitizer,
+    SimError,
+)
 
 _REFERENCES = {"LEFT": 0.0, "CENTer": 0.5, "RIGHt": 1.0}
 
@@ -33,12 +45,14 @@ class KeysightSimDigitizer(SimDigitizer):
 
     identity = "KEYSIGHT TECHNOLOGIES,HOPKINSON-SIM-KS,SIM0002,1.0"
     signed_numbers = True
+    hole_code = True
 
     def reset(self) -> None:
         with self.lock:
             super().reset()
             self.reference, self.position_s = "CENTer", 0.0
             self.word, self.unsigned, self.points_mode = "BYTE", False, "NORMal"
+            self.transfer_points: int | None = 1000  # None: MAXimum
             self.trigger_event = False
             self._transfer_format()
             self._place_trigger()
@@ -66,6 +80,7 @@ class KeysightSimDigitizer(SimDigitizer):
             (("WAVeform", "UNSigned"), self._unsigned),
             (("WAVeform", "BYTeorder"), self._byte_order),
             (("WAVeform", "POINts", "MODE"), self._points_mode),
+            (("WAVeform", "POINts"), self._transfer_points),
             (("WAVeform", "PREamble"), self._preamble),
             (("WAVeform", "DATA"), self._data),
         ]
@@ -198,16 +213,35 @@ class KeysightSimDigitizer(SimDigitizer):
         self.points_mode = self.choice(c.arg, {"NORMal": "NORMal", "MAXimum": "MAXimum", "RAW": "RAW"})
         return None
 
+    def _transfer_points(self, c: Call) -> Reply:
+        if c.query:
+            return f"{self._sent()[1]:+d}"
+        if c.arg.strip().upper() in ("MAX", "MAXIMUM"):
+            self.transfer_points = None
+        else:
+            points = self.integer(c.arg)
+            self.in_range(points, (100, RECORD_LENGTH_LIMITS[1]))
+            self.transfer_points = points
+        return None
+
+    def _sent(self) -> tuple[int, int]:
+        """(every k-th sample, how many) of the record a transfer sends."""
+        n = self.settings.record_length
+        if self.transfer_points is None or self.transfer_points >= n:
+            return 1, n
+        return n // self.transfer_points, self.transfer_points
+
     def _preamble(self, c: Call) -> Reply:
         c.query_only()
         self.poll_capture()
         s = self.settings
         encoded = self.encoded(self.waveform_source)
-        points = s.record_length if encoded else 0
+        step, sent = self._sent()
+        points = sent if encoded else 0
         scale, zero = (encoded[1], encoded[2]) if encoded else (s.ch_range_v[self.waveform_source] / 127, 0.0)
-        x_inc = 1.0 / s.sample_rate_hz
+        x_inc = step / s.sample_rate_hz
         fields = [f"{0 if self.word == 'BYTE' else 1:+d}", "+0", f"{points:+d}", "+1", f"{x_inc:+.15E}",
-                  f"{-s.pre_trigger_samples * x_inc:+.15E}", "+0", f"{scale:+.9E}", "+0.000000E+00",
+                  f"{-s.pre_trigger_samples / s.sample_rate_hz:+.15E}", "+0", f"{scale:+.9E}", "+0.000000E+00",
                   f"{int(zero):+d}"]
         return ",".join(fields)
 
@@ -218,4 +252,9 @@ class KeysightSimDigitizer(SimDigitizer):
         if encoded is None:
             self.record_error(-230, "Data corrupt or stale; no acquisition")
             return Block(b"")
-        return Block(encoded[0])
+        step, sent = self._sent()
+        if step == 1:
+            return Block(encoded[0])
+        width = 1 if self.word == "BYTE" else 2
+        codes = np.frombuffer(encoded[0], dtype=f"u{width}")  # raw words: the byte order is kept
+        return Block(codes[::step][:sent].tobytes())

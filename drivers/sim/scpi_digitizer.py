@@ -221,16 +221,19 @@ def long_header(call: Call) -> str:
     return ":" + ":".join(parts)
 
 
-def quantise(volts: np.ndarray, range_v: float, sample_format: str) -> tuple[np.ndarray, float, float]:
+def quantise(volts: np.ndarray, range_v: float, sample_format: str,
+             reserved_lowest: bool = False) -> tuple[np.ndarray, float, float]:
     """(codes, scale_v, zero_code): volts = (code - zero_code) * scale_v, clipped to the
-    format's rails (float32: to ±range_v), never wrapped."""
+    format's rails (float32: to ±range_v), never wrapped. `reserved_lowest`: the format's
+    lowest code means "no data" (a hole), so the converter clips one code above it."""
     if sample_format == "float32":
         return np.clip(volts, -range_v, range_v).astype(np.float32), 1.0, 0.0
     info = np.iinfo(np.dtype(sample_format))
     half = (int(info.max) - int(info.min)) // 2  # 127 or 32767 codes per range
     zero = 0 if info.min < 0 else half + 1
     scale = range_v / half
-    codes = np.clip(np.rint(volts / scale) + zero, info.min, info.max).astype(sample_format)
+    low = int(info.min) + (1 if reserved_lowest else 0)
+    codes = np.clip(np.rint(volts / scale) + zero, low, info.max).astype(sample_format)
     return codes, scale, float(zero)
 
 
@@ -243,6 +246,7 @@ class SimDigitizer:
 
     identity = "Hopkinson-Sim,SIMDIG-4CH,SIM0001,1.0"
     channel_names: dict[str, int] = {"CH1": 1, "CH2": 2, "CH3": 3, "CH4": 4}
+    hole_code = False  # True: the format's lowest code is a hole, the converter clips above it
 
     def __init__(self, capture: CaptureFn, faults: FaultSet) -> None:
         self._capture = capture
@@ -325,7 +329,8 @@ class SimDigitizer:
             volts = self.volts.get(channel)
             if volts is None:
                 volts = np.zeros(self.settings.record_length)
-            codes, scale, zero = quantise(volts, self.settings.ch_range_v[channel], self.sample_format)
+            codes, scale, zero = quantise(volts, self.settings.ch_range_v[channel], self.sample_format,
+                                          self.hole_code)
             order = "<" if self.byte_order == "little" else ">"
             codes = np.ascontiguousarray(codes.astype(codes.dtype.newbyteorder(order), copy=False))
             self._encoded[key] = (memoryview(codes).cast("B"), scale, zero)

@@ -78,7 +78,19 @@ class World:
         return {ch: v[k - pre:k - pre + n] for ch, v in wide.items()}
 
 
-def expected_codes(volts: np.ndarray, range_v: float, sample_format: str) -> np.ndarray:
+# Keysight: the format's lowest code is a hole (no data); the converter clips one code above it
+# (0x01 clipped low, 0xFF clipped high; shifted by half the range when signed).
+HOLE_CODE = {"keysight": True}
+
+
+def rails(sample_format: str, dialect: str = "generic") -> tuple[int, int]:
+    """The codes at which a dialect's converter clips, low and high."""
+    bits = 8 if sample_format.endswith("8") else 16
+    low, high = (-(2 ** (bits - 1)), 2 ** (bits - 1) - 1) if sample_format.startswith("int") else (0, 2 ** bits - 1)
+    return low + int(HOLE_CODE.get(dialect, False)), high
+
+
+def expected_codes(volts: np.ndarray, range_v: float, sample_format: str, dialect: str = "generic") -> np.ndarray:
     """What an ideal converter sends: ±range over the format's codes (zero at mid-scale for
     the unsigned formats), clipped at the rails; float32: the volts clipped at ±range."""
     if sample_format == "float32":
@@ -86,5 +98,5 @@ def expected_codes(volts: np.ndarray, range_v: float, sample_format: str) -> np.
     bits = 8 if sample_format.endswith("8") else 16
     half = 2 ** (bits - 1) - 1
     zero = 0 if sample_format.startswith("int") else half + 1
-    low, high = (-half - 1, half) if zero == 0 else (0, 2 * half + 1)
+    low, high = rails(sample_format, dialect)
     return np.clip(np.rint(volts / (range_v / half)) + zero, low, high).astype(sample_format)

@@ -429,7 +429,7 @@ def test_block_shorter_than_the_preamble_says(scripted: Callable[..., ScriptedSe
 
 
 def test_block_without_its_terminator(scripted: Callable[..., ScriptedServer]) -> None:
-    srv = scripted({PRE: b"INT16,LSBF,2,1e-08,0,0.001,0.0;1\n", ":WAVeform:DATA?": b"#14\n\n\n\nX"})
+    srv = scripted({PRE: b"INT16,LSBF,6,1e-08,0,0.001,0.0;1\n", ":WAVeform:DATA?": b"#212" + b"\n" * 12 + b"X"})
     with connected(srv) as d, pytest.raises(InstrumentError, match="garbled binary block.*terminator"):
         d.fetch_waveform(1)
 

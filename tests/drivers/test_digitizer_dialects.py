@@ -19,7 +19,7 @@ from hopkinson.drivers.errors import InstrumentError
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
 
-from tests.drivers.digitizer_world import CHANNELS, FORMATS, STEP_V, World, expected_codes
+from tests.drivers.digitizer_world import CHANNELS, FORMATS, STEP_V, World, expected_codes, rails
 
 N = 4_000
 DIALECTS = tuple(CHANNELS)
@@ -101,7 +101,7 @@ def test_every_sample_format_in_both_byte_orders(world: World, dialect: str, sam
         server.stop()
     truth = world.record(world.seen[-1])
     for wave, volts, range_v in ((doppler, truth[1], 1.0), (response, truth[2], 10.0)):
-        codes = expected_codes(volts, range_v, sample_format)
+        codes = expected_codes(volts, range_v, sample_format, dialect)
         assert wave.codes.dtype == np.dtype(sample_format)  # native dtype, native byte order
         np.testing.assert_array_equal(wave.codes, codes)
         assert wave.trigger_index == N // 10
@@ -112,8 +112,11 @@ def test_every_sample_format_in_both_byte_orders(world: World, dialect: str, sam
         if sample_format == "float32":
             assert wave.clipped_samples() == beyond
         else:  # ... and those that round onto a rail (within half a code of full scale)
-            info = np.iinfo(np.dtype(sample_format))
-            assert wave.clipped_samples() == np.count_nonzero((codes == info.min) | (codes == info.max)) >= beyond
+            low, high = rails(sample_format, dialect)
+            assert wave.code_range == (low, high)
+            assert wave.clipped_samples() == np.count_nonzero((codes == low) | (codes == high)) >= beyond
+            if wave is doppler:  # the sine clips low as well as high
+                assert np.count_nonzero(codes == low) > 0 and np.count_nonzero(codes == high) > 0
     assert doppler.clipped_samples() > 0 and response.clipped_samples() == 0
     if sample_format == "uint16":
         assert response.codes.max() > 40_000  # never wrapped to a negative number
@@ -175,7 +178,8 @@ PLAIN = {  # set-up, arm, the data query, pyvisa datatype / byte order of the bl
     "generic": ([":ACQ:POIN 4000", ":ACQ:PRET 400", ":TRIG:SOUR CH2", ":TRIG:LEV 0.5", ":WAV:FORM INT16",
                  ":WAV:BYT LSBF", ":WAV:SOUR CH2"], ":SING", ":WAV:DATA?", "h", False),
     "keysight": ([":ACQ:POIN 4000", ":TIM:REF LEFT", ":TIM:POS -4E-6", ":TRIG:EDGE:SOUR CHAN2",
-                  ":TRIG:EDGE:LEV 0.5", ":WAV:FORM WORD", ":WAV:UNS 0", ":WAV:BYT MSBF", ":WAV:SOUR CHAN2"],
+                  ":TRIG:EDGE:LEV 0.5", ":WAV:FORM WORD", ":WAV:UNS 0", ":WAV:BYT MSBF", ":WAV:SOUR CHAN2",
+                  ":WAV:POIN:MODE RAW", ":WAV:POIN MAX"],  # *RST sends the screen's 1000 points
                  ":SING", ":WAV:DATA?", "h", True),
     "tektronix": (["HOR:MODE:RECO 4000", "HOR:POS 10", "TRIG:A:EDGE:SOU CH2", "TRIG:A:LEV:CH2 0.5",
                    "DATA:ENC SRI", "DATA:WID 2", "DATA:START 1", "DATA:STOP 4000", "DATA:SOU CH2"],
@@ -205,7 +209,30 @@ def test_a_plain_pyvisa_client_reads_each_simulator(scope: tuple[str, SimDigitiz
         rm.close()
     state = world.seen[-1]
     assert state.record_length == 4000 and state.pre_trigger_samples == 400 and state.trigger_level_v == 0.5
-    np.testing.assert_array_equal(codes, expected_codes(world.record(state)[2], state.ch_range_v[2], "int16"))
+    np.testing.assert_array_equal(codes, expected_codes(world.record(state)[2], state.ch_range_v[2], "int16",
+                                                        dialect))
+
+
+def test_a_decimated_keysight_transfer_is_refused(world: World) -> None:
+    # A Keysight scope sends :WAVeform:POINts points (1000 after *RST), every k-th sample of a
+    # longer record: the driver asks for them all, and a transfer of fewer is not the shot.
+    server = serve("keysight", world)
+    try:
+        with driver("keysight", server) as dig:
+            dig.configure(configured("keysight"))
+            dig.arm_single()
+            world.fire()
+            assert dig.wait_for_trigger(2.0)
+            assert dig.fetch_waveform("response").codes.size == N  # MAXimum: the whole record
+            with pyvisa.ResourceManager("@py").open_resource(server.resource, read_termination="\n",
+                                                             write_termination="\n") as other:
+                other.write(":WAVeform:POINts 1000")  # another client, or a dialect that forgot
+                assert other.query(":WAVeform:POINts?") == "+1000"
+            with pytest.raises(InstrumentError, match="sends 1000 points of the 4000 configured") as info:
+                dig.fetch_waveform("response")
+            assert info.value.command.endswith(":WAVeform:PREamble?;:WAVeform:UNSigned?;:WAVeform:BYTeorder?")
+    finally:
+        server.stop()
 
 
 # -- IEEE 488.2 --------------------------------------------------------------------------------
