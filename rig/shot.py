@@ -16,10 +16,13 @@ file and never loses the shot.
   sensitivity_2_v_per_m_s2; its record's response is stored as /derived/response_2_<unit>.
 - store_raw_shot / analyse_and_record: the STORE and ANALYSE steps, shared by the sequencer
   and a campaign analysing a recorded shot from its file.
-- clipping_problems: a channel is clipped only when samples reach the digitizer's full-scale
-  codes (the format's rails, `Waveform.code_range`, stored with the shot), or the amplifier
-  reported an overload; never judged from the record's own extremes. A clipped channel is not
-  analysed (the shot is kept, its analysis recorded as failed with the reason).
+- Clipping: a channel is clipped only when samples reach the digitizer's full scale (the
+  format's full-scale codes, `Waveform.code_range`, stored with the shot as code_min/code_max),
+  never judged from the record's own extremes. The analysis judges it (`RawShot.full_scale_v`
+  passed as analysis.shot_analysis's `full_scale_v`), the same way for a shot just fired and
+  for one re-analysed from its file: a clipped reference or response fails the analysis
+  naming the channel (the shot is kept), a clipped further sensor is that sensor's error. An
+  amplifier that reported an overload during the shot: not analysed, with the reason.
 
 Analysis failures. When the analysis raises (bad data, a fit the data cannot support, a
 bug), the shot file keeps its raw data and gets an /analysis group with status "failed" and
@@ -217,27 +220,6 @@ def _code_range(w: Any) -> tuple[float, float] | None:
     return (float(code_range[0]), float(code_range[1])) if code_range is not None else None
 
 
-def clipping_problems(raw: RawShot, amplifier_overloaded: bool = False) -> list[str]:
-    """Why the shot's channels cannot be trusted (module docstring), one phrase each; empty
-    when none reached the digitizer's full scale and the amplifier did not overload."""
-    problems = []
-    for role, channel in raw.channels.items():
-        code_range = getattr(channel, "code_range", None)
-        if code_range is None:
-            continue  # the format's rails are unknown (an old file): never guessed from the data
-        low, high = code_range
-        codes = channel.codes
-        at_rails = int(np.count_nonzero((codes <= low) | (codes >= high)))
-        if at_rails:
-            ends = sorted((low * channel.scale_v + channel.offset_v, high * channel.scale_v + channel.offset_v))
-            problems.append(f"{role} channel clipped: {at_rails} samples at the digitizer's full scale "
-                            f"({ends[0]:.4g} .. {ends[1]:.4g} V): widen the range or lower the gain")
-    if amplifier_overloaded:
-        problems.append("the amplifier overloaded during the shot: the response is clipped "
-                        "(check the accelerometer cable and the amplifier range)")
-    return problems
-
-
 def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str],
               captured: CapturedShot) -> ShotMeta:
     """The shot file's meta: the request's who/what, a full configuration snapshot plus the
@@ -312,7 +294,8 @@ def analyse_raw(raw: RawShot, params: AnalysisParams,
     """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
     analysis (analysis.shot_analysis) of the raw channels in volts, by role: the quadrature
     pair when recorded, and each further sensor with its parameters from `more_params` (one
-    not given there: `params` with gain and sensitivity 1, i.e. its results in volts)."""
+    not given there: `params` with gain and sensitivity 1, i.e. its results in volts);
+    clipping judged against each channel's digitizer full scale (module docstring)."""
     from hopkinson.analysis.shot_analysis import analyse_raw_shot  # heavy: loaded when needed
 
     given = dict(more_params or {})
@@ -320,7 +303,7 @@ def analyse_raw(raw: RawShot, params: AnalysisParams,
     more = {role: (raw.volts(role), given.get(role, in_volts)) for role in MORE_SENSOR_ROLES if role in raw.channels}
     quadrature = raw.volts(QUADRATURE_ROLE) if QUADRATURE_ROLE in raw.channels else None
     analysis = analyse_raw_shot(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s, params,
-                                quadrature_v=quadrature, more_sensors=more)
+                                quadrature_v=quadrature, more_sensors=more, full_scale_v=raw.full_scale_v())
     derived = {}
     for role, sensor in analysis.sensors.items():
         if sensor.record is not None:
@@ -383,13 +366,14 @@ def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse
                        amplifier_overloaded: bool = False, run: Runner = run_here
                        ) -> tuple[dict[str, Any] | None, str | None]:
     """ANALYSE a stored shot and record the result (or why there is none) in its file; returns
-    (results, error). Never raises for the analysis' sake: a clipped channel, a failing or
-    unfinished analysis, or a file that cannot take the result become the error text. `run`
+    (results, error). Never raises for the analysis' sake: an amplifier overload, a failing
+    (a clipped channel among the reasons) or unfinished analysis, or a file that cannot take
+    the result become the error text. `run`
     runs the computation (the sequencer: a worker thread with a timeout, abandoned on abort)."""
     result: AnalysisResult | None = None
-    problems = clipping_problems(raw, amplifier_overloaded)
-    if problems:
-        error: str | None = "not analysed: " + "; ".join(problems)
+    if amplifier_overloaded:  # the channels' clipping is the analysis' to judge (analyse_raw)
+        error: str | None = ("not analysed: the amplifier overloaded during the shot: the response is clipped "
+                             "(check the accelerometer cable and the amplifier range)")
     else:
         done = run(lambda: analyse(raw, params))
         if not done.finished:

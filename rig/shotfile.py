@@ -119,6 +119,16 @@ class RawChannel(NamedTuple):
     def volts(self) -> np.ndarray:
         return self.codes.astype(np.float64) * self.scale_v + self.offset_v
 
+    @property
+    def full_scale_v(self) -> tuple[float, float] | None:
+        """The digitizer's full scale in volts (low, high), from the format's full-scale codes;
+        None when they are not known (a file written before they were stored)."""
+        if self.code_range is None:
+            return None
+        from hopkinson.analysis.doppler import full_scale_volts  # SciPy: loaded when asked
+
+        return full_scale_volts(self.code_range, self.scale_v, self.offset_v)
+
 
 @dataclass(frozen=True)
 class RawShot:
@@ -131,6 +141,12 @@ class RawShot:
     def volts(self, name: str) -> np.ndarray:
         """Channel `name` converted to volts."""
         return RawChannel(*self.channels[name]).volts
+
+    def full_scale_v(self) -> dict[str, tuple[float, float]]:
+        """role -> the digitizer's full scale in volts, for each channel whose full-scale codes
+        are known: what the analysis judges clipping against (never the record's own extremes)."""
+        scales = {role: RawChannel(*channel).full_scale_v for role, channel in self.channels.items()}
+        return {role: scale for role, scale in scales.items() if scale is not None}
 
     @property
     def time_s(self) -> np.ndarray:

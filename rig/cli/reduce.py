@@ -2,7 +2,7 @@
 
     hopkinson reduce RAW [--grating-pitch-m D] [--orders 1,-1] [--amp-gain G]
                      [--sensitivity-v-per-m-s2 S] [--sample-rate HZ] [--bandwidth-hz B]
-                     [--align] -o record.csv [--json]
+                     [--full-scale-v [ROLE=]RANGE ...] [--align] -o record.csv [--json]
 
 RAW is a raw shot: an HDF5 shot file (.h5/.hdf5, rig.shotfile) or a table, CSV (header
 time_s,doppler,response) or NPZ (same keys), channels in volts. With a doppler_quadrature
@@ -12,11 +12,19 @@ file's suffix in RAW_READERS, so another format is one function and one entry. T
 override what a shot file records (its analysis parameters, else its configuration
 snapshot); without either, the defaults of analysis.reduce apply (gain and sensitivity 1:
 the response stays in volts).
+
+Clipping is judged against the digitizer's full scale, never against the record's own
+extremes: a shot file gives each channel's (its code_min/code_max, rig.shotfile
+`RawShot.full_scale_v`); for a table, --full-scale-v gives it (a channel with samples there is
+refused, naming it). RANGE is R (the channel reads ±R V) or LO,HI in volts; ROLE= (doppler,
+doppler_quadrature, response) gives one channel's, without it every channel's; repeatable,
+and over what a shot file records.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +44,7 @@ class RawInput:
     start_time_s: float
     settings: dict[str, Any] = field(default_factory=dict)  # keys as reduce_raw's options
     quadrature_v: Any = None  # a quadrature interferometer's second photodetector, when recorded
+    full_scale_v: dict[str, tuple[float, float]] = field(default_factory=dict)  # role -> digitizer full scale, V
 
 
 def _read_table(path: Path) -> RawInput:
@@ -70,7 +79,7 @@ def _read_shot_file(path: Path) -> RawInput:
             settings[key] = params[key]
     quadrature = raw.volts("doppler_quadrature") if "doppler_quadrature" in raw.channels else None
     return RawInput(raw.volts("doppler"), raw.volts("response"), raw.sample_interval_s,
-                    -raw.trigger_index * raw.sample_interval_s, settings, quadrature)
+                    -raw.trigger_index * raw.sample_interval_s, settings, quadrature, raw.full_scale_v())
 
 
 RAW_READERS: dict[str, Callable[[Path], RawInput]] = {
@@ -90,6 +99,37 @@ def read_raw(path: str | Path) -> RawInput:
     if reader is None:
         raise AnalysisError(f"{path}: unknown raw shot format '{path.suffix}' (known: {', '.join(RAW_READERS)})")
     return reader(path)
+
+
+FULL_SCALE_ROLES = ("doppler", "doppler_quadrature", "response")
+
+
+def parse_full_scale(texts: list[str]) -> dict[str, tuple[float, float]]:
+    """--full-scale-v values ("[ROLE=]R" or "[ROLE=]LO,HI") -> role -> (low, high) volts; one
+    without a role is every channel's, a role's own wins."""
+    every: tuple[float, float] | None = None
+    own: dict[str, tuple[float, float]] = {}
+    for text in texts:
+        role, _, value = text.rpartition("=")
+        role = role.strip()
+        if role and role not in FULL_SCALE_ROLES:
+            raise AnalysisError(f"--full-scale-v: {text!r}: unknown channel {role!r} (channels: "
+                                f"{', '.join(FULL_SCALE_ROLES)})")
+        try:
+            numbers = [float(part) for part in value.split(",")]
+        except ValueError:
+            numbers = []
+        if len(numbers) == 1:
+            numbers = [-abs(numbers[0]), abs(numbers[0])]
+        if len(numbers) != 2 or not all(math.isfinite(x) and abs(x) <= 1e4 for x in numbers) \
+                or not numbers[0] < numbers[1]:
+            raise AnalysisError(f"--full-scale-v: {text!r}: expected R (±R V) or LO,HI in volts, finite, LO < HI "
+                                "(at most 10 kV), optionally after ROLE=")
+        if role:
+            own[role] = (numbers[0], numbers[1])
+        else:
+            every = (numbers[0], numbers[1])
+    return {**({role: every for role in FULL_SCALE_ROLES} if every is not None else {}), **own}
 
 
 def parse_orders(text: str) -> tuple[int, int]:
@@ -113,8 +153,6 @@ FLAGS = {"grating_pitch_m": "--grating-pitch-m", "amp_gain": "--amp-gain",
 
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every numeric option finite and sensible (AnalysisParams.check), named by its flag."""
-    import math
-
     from hopkinson.analysis.params import AnalysisParams
 
     values = {key: getattr(args, flag[2:].replace("-", "_")) for key, flag in FLAGS.items()}
@@ -139,6 +177,7 @@ def run_reduce(args: argparse.Namespace) -> int:
     from hopkinson.fileio import check_output_path
 
     _check_numbers(args)
+    full_scale_v = parse_full_scale(args.full_scale_v)
     check_output_path(args.output, [args.raw], what="record")
     raw = read_raw(args.raw)
     settings = dict(raw.settings)
@@ -162,6 +201,7 @@ def run_reduce(args: argparse.Namespace) -> int:
         align=args.align,
         start_time_s=raw.start_time_s,
         source=str(args.raw),
+        full_scale_v={**raw.full_scale_v, **full_scale_v},
     )
     out = write_record(args.output, reduction.record)
     result = {"raw": str(args.raw), "output": str(out), "samples": reduction.record.n_samples,
@@ -201,6 +241,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--sample-rate", type=float, metavar="HZ", help="analysis rate in Hz (default 1e6)")
     p.add_argument("--bandwidth-hz", type=float, metavar="B",
                    help="bandwidth of the differentiating low-pass (default: chosen from the pulse)")
+    p.add_argument("--full-scale-v", action="append", default=[], metavar="[ROLE=]RANGE",
+                   help="the digitizer's full scale, to judge clipping against: R (±R V) or LO,HI volts, for "
+                        "every channel or ROLE= doppler, doppler_quadrature, response (repeatable; a shot file "
+                        "records its own)")
     p.add_argument("--align", action="store_true",
                    help="shift the response by the estimated delay (default: report it only)")
     p.add_argument("-o", "--output", required=True, metavar="RECORD", help="output record (.csv or .npz)")

@@ -151,3 +151,42 @@ def test_reduce_never_writes_over_its_input_or_a_shot_file_and_refuses_bad_numbe
         assert len(lines) == 1 and message in lines[0] and "Traceback" not in stderr, (argv, stderr)
     assert raw.read_bytes() == before and shot.read_bytes().startswith(b"\x89HDF")
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_clipping_is_judged_against_the_digitizers_full_scale(tmp_path: Path, simulated, capsys) -> None:
+    """A shot file's channels carry their digitizer's full-scale codes: `reduce` judges clipping
+    against them (as the rig does); a table gets them from --full-scale-v."""
+    time_s, s = simulated
+    scale = float(np.max(np.abs(s.response_v))) / 30000.0  # the pulse's top at code 30000 of ±32767
+    response = np.round(s.response_v / scale).astype(np.int16)
+    doppler_scale = float(np.max(np.abs(s.doppler_v))) / 30000.0
+    doppler = RawChannel(np.round(s.doppler_v / doppler_scale).astype(np.int16), doppler_scale, 0.0,
+                         (-32768.0, 32767.0))
+    meta = ShotMeta(operator="t", accelerometer_model="M", accelerometer_serial="1", pressure_bar=2.0, projectile=3)
+
+    def shot(name: str, codes: np.ndarray) -> Path:
+        channels = {"doppler": doppler, "response": RawChannel(codes, scale, 0.0, (-32768.0, 32767.0))}
+        return write_raw_shot(tmp_path / name, RawShot(channels, DT, TRIGGER), meta)
+
+    code, _, stderr = run(["reduce", str(shot("ok.h5", response)), "-o", str(tmp_path / "ok.csv")], capsys)
+    assert code == 0, stderr  # below the full scale: reduced
+    railed = response.copy()
+    railed[np.argmax(response):][:7] = 32767  # seven samples on the top code
+    code, _, stderr = run(["reduce", str(shot("railed.h5", railed)), "-o", str(tmp_path / "r.csv")], capsys)
+    assert code == 2 and stderr.count("\n") == 1, stderr
+    top = 32767 * scale
+    assert f"response channel: clipped: 7 samples at the digitizer's full scale ({-32768 * scale:.4g} .. {top:.4g} V)" \
+        in stderr
+    assert not (tmp_path / "r.csv").exists()
+
+    table = write_raw_table(tmp_path / "raw.npz", time_s, s.doppler_v, s.response_v)
+    peak = float(np.max(s.response_v))
+    code, _, stderr = run(["reduce", str(table), "--full-scale-v", "20", "--full-scale-v", f"response={-peak},{peak}",
+                           "-o", str(tmp_path / "t.csv")], capsys)
+    assert code == 2 and "response channel: clipped: 1 samples" in stderr, stderr  # its peak is at the given top
+    code, _, stderr = run(["reduce", str(table), "--full-scale-v", f"{2 * peak}", "-o", str(tmp_path / "t.csv")],
+                          capsys)
+    assert code == 0, stderr
+    for bad in ("x", "1,2,3", "5,-5", "inf", "velocity=10", "0"):
+        code, _, stderr = run(["reduce", str(table), "--full-scale-v", bad, "-o", str(tmp_path / "b.csv")], capsys)
+        assert code == 2 and stderr.count("\n") == 1 and "--full-scale-v" in stderr, (bad, stderr)

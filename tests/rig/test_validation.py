@@ -16,8 +16,9 @@ from hopkinson.rig.events import AwaitingConfirmation, RigEvent
 from hopkinson.rig.instruments import make_instrument
 from hopkinson.rig.plan import check_shot_count, load_plan
 from hopkinson.rig.sequencer import FireAuthorisation
-from hopkinson.rig.shot import clipping_problems
-from hopkinson.rig.shotfile import RawChannel, RawShot
+from hopkinson.analysis.params import AnalysisParams
+from hopkinson.rig.shot import analyse_and_record, analyse_raw
+from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, read_shot, write_raw_shot
 from hopkinson.rig.sim_session import sim_session
 
 from tests.rig.conftest import fast_sim_config, rig_toml, short_timeouts_config
@@ -129,25 +130,57 @@ def test_a_changed_pressure_set_point_aborts_before_fire(rig) -> None:
 
 
 # -- clipping: the instrument's rails, never the record's own extremes --------------------------------
-def _raw(codes: np.ndarray, code_range: tuple[float, float] | None) -> RawShot:
-    doppler = RawChannel(np.full(codes.size, 1000, dtype=codes.dtype), 1e-4, 0.0, code_range)
+def _raw(codes: np.ndarray, code_range: tuple[float, float] | None, doppler_range=None) -> RawShot:
+    doppler = RawChannel(np.full(codes.size, 1000, dtype=codes.dtype), 1e-4, 0.0,
+                         doppler_range if doppler_range is not None else code_range)
     return RawShot({"doppler": doppler, "response": RawChannel(codes, 10.0 / 32768, 0.0, code_range)}, 1e-8, 100)
 
 
-def test_clipping_is_judged_against_the_digitizers_full_scale() -> None:
+def test_the_full_scale_is_the_formats_full_scale_codes_in_volts() -> None:
+    codes = np.zeros(16, dtype=np.int16)
+    raw = _raw(codes, (-32768.0, 32767.0))
+    assert raw.full_scale_v() == {"doppler": (-3.2768, 3.2767),
+                                  "response": (-10.0, pytest.approx(10.0 * 32767 / 32768, abs=1e-12))}
+    unsigned = RawShot({"doppler": RawChannel(codes.astype(np.uint16), -2e-4, 6.5536, (0.0, 65535.0)),
+                        "response": RawChannel(codes.astype(np.uint16), 1e-3, -32.768, None)}, 1e-8, 0)
+    # volts = codes * scale + offset: a negative scale turns the ends round; an unknown range is no range
+    assert unsigned.full_scale_v() == {"doppler": (pytest.approx(6.5536 - 65535 * 2e-4), 6.5536)}
+
+
+def _analysed(tmp_path: Path, raw: RawShot, overloaded: bool = False) -> str | None:
+    """The rig's ANALYSE of a stored shot (as a campaign re-analyses one): its error text."""
+    meta = ShotMeta(operator="t", accelerometer_model="M", accelerometer_serial="S", pressure_bar=1.0, projectile=3)
+    path = write_raw_shot(tmp_path / f"shot-{len(list(tmp_path.glob('*.h5')))}.h5", raw, meta)
+    results, error = analyse_and_record(path, read_shot(path).raw, AnalysisParams(uncertainty=False),
+                                        lambda stored, params: analyse_raw(stored, params),
+                                        amplifier_overloaded=overloaded)
+    assert results is None and read_shot(path, load_raw=False).analysis_error == error  # the file says why
+    return error
+
+
+def test_clipping_is_judged_against_the_digitizers_full_scale(tmp_path: Path) -> None:
     t = np.linspace(0.0, 1.0, 100_000)
     wide = np.round(3000 * np.sin(np.pi * t) ** 8).astype(np.int16)  # a wide pulse: its top stays on one code
     assert np.count_nonzero(wide == wide.max()) > 100  # the old own-extreme rule called this "clipped"
-    assert clipping_problems(_raw(wide, (-32768.0, 32767.0))) == []
+    # Not clipped: the response passes its checks and the analysis goes on to the reference's
+    # beat, where it stops (the stand-in beat is flat).
+    past_the_response = "analysis failed: raw shot: doppler channel: the signal is constant (0.1 V): no Doppler beat"
+    assert _analysed(tmp_path, _raw(wide, (-32768.0, 32767.0))) == past_the_response
+    unsigned = (wide.astype(np.int32) + 32768).astype(np.uint16)  # native uint16: never wrapped to int16
+    assert _analysed(tmp_path, _raw(unsigned, (0.0, 65535.0))) == past_the_response
+    assert _analysed(tmp_path, _raw(wide, None)) == past_the_response  # rails unknown (an old file): never guessed
     rails = wide.copy()
     rails[40_000:40_010] = 32767
-    (problem,) = clipping_problems(_raw(rails, (-32768.0, 32767.0)))
-    assert problem.startswith("response channel clipped: 10 samples at the digitizer's full scale (-10 .. 10 V)")
-    unsigned = (wide.astype(np.int32) + 32768).astype(np.uint16)  # native uint16: never wrapped to int16
-    assert clipping_problems(_raw(unsigned, (0.0, 65535.0))) == []
-    assert clipping_problems(_raw(wide, None)) == []  # rails unknown (an old file): never guessed from the data
-    (overload,) = clipping_problems(_raw(wide, (-32768.0, 32767.0)), amplifier_overloaded=True)
-    assert "amplifier overloaded" in overload
+    error = _analysed(tmp_path, _raw(rails, (-32768.0, 32767.0)))
+    assert error.startswith("analysis failed: raw shot: response channel: clipped: 10 samples at the digitizer's "
+                            "full scale (-10 .. 10 V)"), error
+    low = wide.copy()
+    low[50_000:50_003] = -32768
+    assert "response channel: clipped: 3 samples" in _analysed(tmp_path, _raw(low, (-32768.0, 32767.0)))
+    beat = _raw(wide, (-32768.0, 32767.0), doppler_range=(-1000.0, 1000.0))  # the doppler's 1000 is its top code
+    assert "doppler channel: clipped: 100000 samples at the digitizer's full scale" in _analysed(tmp_path, beat)
+    overload = _analysed(tmp_path, _raw(wide, (-32768.0, 32767.0)), overloaded=True)
+    assert overload.startswith("not analysed: the amplifier overloaded")
 
 
 def test_a_wide_pulse_is_analysed_not_rejected_as_clipped(make_rig) -> None:
