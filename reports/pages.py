@@ -18,6 +18,7 @@ from hopkinson.reports.layout import TextPages, freeze_layout, new_figure
 from hopkinson.reports.shot_pages import shot_pages
 from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
 from hopkinson.reports.tables import (
+    BUDGET_NOTE,
     budget_rows,
     combined_rows,
     compensation_rows,
@@ -104,8 +105,9 @@ def sensor_results(page: TextPages, entry: ShotEntry, sensor: str = "") -> None:
         page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
         header, rows = budget_rows(entry)
         if rows:
-            page.heading(f"Uncertainty budget{suffix}", size=9.5)
-            page.table(header, rows, size=7.5, widths=[0.7, 0.3])
+            page.heading(f"Uncertainty budget{suffix}: relative standard uncertainty (%)", size=9.5)
+            page.table(header, rows, size=7.5)
+            page.paragraph(BUDGET_NOTE, size=7.0, colour="0.25")
     elif entry.key_figures is not None:
         page.paragraph(uncertainty_method(entry), size=7.0, colour="0.25")
     rows = compensation_rows(entry)

@@ -48,20 +48,42 @@ def unit_suffix(unit: str) -> str:
 NOT_RECOMMENDED = "compensation does not improve this shot"
 
 
+VOLT_PREFIXES = ((1.0, "V"), (1e-3, "mV"), (1e-6, "µV"), (1e-9, "nV"))
+
+
+def volt_scale(value: float) -> tuple[float, str]:
+    """The largest of V, mV, µV, nV in which |value| (volts) reads at least 0.1: (scale, unit)."""
+    for scale, unit in VOLT_PREFIXES:
+        if abs(value) / scale >= 0.1:
+            return scale, unit
+    return VOLT_PREFIXES[-1]
+
+
+def nominal_sensitivity_text(v_per_m_s2: float) -> str:
+    """A nominal sensitivity in V/(m/s²) and V/g, SI-prefixed: '0.2 µV/(m/s²) = 1.961 µV/g'."""
+    parts = []
+    for value, per in ((v_per_m_s2, "(m/s²)"), (v_per_m_s2 * G_M_S2, "g")):
+        scale, unit = volt_scale(value)
+        parts.append(f"{value / scale:.4g} {unit}/{per}")
+    return " = ".join(parts)
+
+
 def sensitivity_text(figure: Figure | None, kf: KeyFigures, nominal_v_per_m_s2: float | None) -> str:
-    """A sensitivity (response units per m/s²) as value ± U, with V/(m/s²) and mV/g when the
-    response was scaled by a nominal sensitivity ("× nominal")."""
+    """A sensitivity (response units per m/s²) as value ± U, with V/(m/s²) and V/g (SI-prefixed:
+    0.2000 ± 0.0011 µV/(m/s²), not 0.0000002000) when the response was scaled by a nominal
+    sensitivity ("× nominal")."""
     if figure is None or figure.value is None:
         return "—"
     if kf.response_unit != "m/s^2":
         return f"{figure.format(digits=5)} {kf.response_unit}/(m/s²)"
     text = f"{figure.format(digits=5)} × nominal"
     if nominal_v_per_m_s2:
-        volts = Figure(figure.value * nominal_v_per_m_s2, None,
-                       None if figure.interval is None else tuple(v * nominal_v_per_m_s2 for v in figure.interval))
-        milli_g = Figure(volts.value * G_M_S2 * 1e3, None,
-                         None if volts.interval is None else tuple(v * G_M_S2 * 1e3 for v in volts.interval))
-        text += f" = {volts.format(digits=5)} V/(m/s²) = {milli_g.format(digits=5)} mV/g"
+        for factor, per in ((nominal_v_per_m_s2, "(m/s²)"), (nominal_v_per_m_s2 * G_M_S2, "g")):
+            volts = Figure(figure.value * factor, None,
+                           None if figure.interval is None else (figure.interval[0] * factor,
+                                                                 figure.interval[1] * factor))
+            scale, unit = volt_scale(volts.value)
+            text += f" = {volts.format(scale, digits=5)} {unit}/{per}"
     return text
 
 
@@ -88,7 +110,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         ("FBSD ±5 %", kf.fbsd_text("5")),
         ("FBSD ±10 %", kf.fbsd_text("10")),
         ("fit (measured vs model)", f"{fmt(kf.fit_percent, digits=5)} %"),
-        ("peak acceleration", f"{figure_text(peak, unit='m/s²')} ({figure_text(peak, G_M_S2, 'g')})"
+        ("peak acceleration", f"{figure_text(peak, 1e3, 'km/s²')} ({figure_text(peak, G_M_S2, 'g')})"
          if peak is not None else "—"),
         ("pulse width (10 % of peak)", figure_text(kf.pulse_width_s, 1e-6, "µs")),
     ]
@@ -193,15 +215,49 @@ def uncertainty_method(entry: ShotEntry) -> str:
             f"U its half-width (k ≈ 2); the value is the figure reported everywhere else.")
 
 
+# The budget's columns: (results key in u_rel_by_figure, header, the KeyFigures figure's name)
+BUDGET_FIGURES: tuple[tuple[str, str, str], ...] = (
+    ("dc_gain", "sensitivity", "sensitivity"),
+    ("shock_sensitivity", "S_sh", "shock_sensitivity"),
+    ("natural_frequency_hz", "f_n", "natural_frequency_hz"),
+    ("damping_ratio", "ζ", "damping_ratio"),
+    ("fbsd_5_hz", "FBSD ±5 %", "5"),
+    ("fbsd_10_hz", "FBSD ±10 %", "10"),
+    ("peak_acceleration_m_s2", "peak acc.", "peak_acceleration_m_s2"),
+)
+BUDGET_NOTE = ("Relative standard uncertainty (%) of each figure from each source alone (the GUM's linear "
+               "propagation); the last row is each figure's own u from the Monte Carlo, all sources together.")
+
+
 def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
-    """The uncertainty budget: each source's relative standard uncertainty, largest first."""
-    header = ["source", "relative standard uncertainty"]
+    """The uncertainty budget: each source's relative standard uncertainty (%) of each figure
+    (the results' `u_rel_by_figure`; a budget with only `u_rel` gives the sensitivity's), the
+    largest source of the sensitivity first; the last row the Monte Carlo's u of each figure."""
     kf = entry.key_figures
     if kf is None or not kf.budget:
-        return header, []
-    items = sorted(kf.budget, key=lambda b: -(b.get("u_rel") or 0.0))
-    return header, [[str(b.get("source", "—")), f"{fmt(100 * b['u_rel'], digits=2)} %"
-                     if isinstance(b.get("u_rel"), int | float) else "—"] for b in items]
+        return ["source", "sensitivity"], []
+    items = sorted(kf.budget, key=lambda b: -(_budget_share(b, "dc_gain") or 0.0))
+    columns = [c for c in BUDGET_FIGURES if any(_budget_share(b, c[0]) is not None for b in items)]
+    header = ["source"] + [label for _key, label, _attr in columns]
+
+    def pct(value: float | None) -> str:
+        return "—" if value is None else f"{fmt(100 * value, digits=2)}"
+
+    rows = [[str(b.get("source", "—"))] + [pct(_budget_share(b, key)) for key, _l, _a in columns] for b in items]
+    combined = []
+    for _key, _label, attr in columns:
+        figure = kf.fbsd_hz.get(attr) if attr in ("5", "10") else getattr(kf, attr)
+        combined.append(pct(figure.u_rel if figure is not None and attr not in kf.fbsd_bounds else None))
+    rows.append(["all sources (Monte Carlo)"] + combined)
+    return header, rows
+
+
+def _budget_share(item: dict[str, Any], key: str) -> float | None:
+    """A budget item's relative standard uncertainty of one figure (None when not given)."""
+    by_figure = item.get("u_rel_by_figure")
+    value = by_figure.get(key) if isinstance(by_figure, dict) else (item.get("u_rel") if key == "dc_gain" else None)
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) \
+        else None
 
 
 def compensation_rows(entry: ShotEntry) -> list[tuple[str, str]]:

@@ -16,6 +16,7 @@ from hopkinson.reports.data import CalibrationReport
 from hopkinson.reports.pages import SINE_CAPTION, report_pages
 from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
 from hopkinson.reports.tables import (
+    BUDGET_NOTE,
     budget_rows,
     combined_rows,
     compensation_rows,
@@ -125,7 +126,8 @@ def _write_html(path: Path, report: CalibrationReport, pages: list[tuple[str, Fi
                          + f"<p class='note'>{e(uncertainty_method(entry))}</p>")
             header, rows = budget_rows(entry)
             if rows:
-                parts.append("<h4>Uncertainty budget</h4>" + _html_table(header, rows))
+                parts.append("<h4>Uncertainty budget: relative standard uncertainty (%)</h4>" + _html_table(header, rows)
+                             + f"<p class='note'>{e(BUDGET_NOTE)}</p>")
         rows = compensation_rows(entry)
         if rows:
             parts.append("<h3>Compensation checked on the shot itself</h3>" + _html_table(None, rows, "kv"))

@@ -23,7 +23,8 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.reduce import interferometer_text
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.analysis.sine_comparison import read_sine_calibration
-from hopkinson.reports.data import G_M_S2, CalibrationReport, ShotEntry
+from hopkinson.reports.data import CalibrationReport, ShotEntry
+from hopkinson.reports.tables import nominal_sensitivity_text
 from hopkinson.reports.writers import write_report
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan
@@ -54,7 +55,7 @@ def shot_identity(shot: Shot) -> dict[str, str]:
     }
     s = _sensitivity(shot)
     if s is not None:
-        rows["Nominal sensitivity"] = f"{s:.4g} V/(m/s²) = {s * G_M_S2 * 1e3:.4g} mV/g (amplifier input)"
+        rows["Nominal sensitivity"] = f"{nominal_sensitivity_text(s)} (amplifier input)"
     rows["Shot"] = (m.shot_id or shot.path.stem) + (f" of campaign {m.campaign_id}" if m.campaign_id else "")
     rows["Fired (UTC)"] = m.utc_time
     rows["Operator"] = m.operator or "—"
@@ -151,7 +152,7 @@ def shot_entries(path: str | Path, state: str | None = None, label: str | None =
         nominal = float(params["sensitivity_v_per_m_s2"]) if scaled and "sensitivity_v_per_m_s2" in params else None
         if nominal is not None:
             identity = {"Accelerometer": identity.pop("Accelerometer"),
-                        "Nominal sensitivity": f"{nominal:.4g} V/(m/s²) = {nominal * G_M_S2 * 1e3:.4g} mV/g "
+                        "Nominal sensitivity": f"{nominal_sensitivity_text(nominal)} "
                                                f"(conditioner input; conditioner gain {params.get('amp_gain', 1):g})",
                         **identity}
         modes = (truth.get(truth_key) or {}).get("modes")

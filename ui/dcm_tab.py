@@ -229,7 +229,7 @@ class DcmTab(QWidget):
             self.step_plot.addItem(pg.InfiniteLine(pos=level, angle=0, pen=pg.mkPen("#bdc1c6", width=1,
                                                                                     style=Qt.PenStyle.DotLine)))
 
-        self.record_plot = _plot("The shot, compensated", "acceleration (10³ m/s²)", "time", None, "s")
+        self.record_plot = _plot("The shot, compensated", "acceleration (km/s²)", "time", None, "s")
         self.record_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
         self.resp_curve = self.record_plot.plot([], [], pen=RESP_PEN, name="response")
         self.ref_curve = self.record_plot.plot([], [], pen=REF_PEN, name="reference")

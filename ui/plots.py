@@ -36,7 +36,7 @@ from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import normalised_gain_function
-from hopkinson.reports.data import CompensationCheck
+from hopkinson.reports.data import G_M_S2, CompensationCheck
 from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
@@ -403,7 +403,8 @@ class ResultsStrip(QFrame):
                   "ISO 16063-13 peak ratio; " + figure_tooltip(kf.shock_sensitivity, unit=per))
         pulse = []
         if kf.peak_acceleration_m_s2 is not None and kf.peak_acceleration_m_s2.value is not None:
-            pulse.append(f"{kf.peak_acceleration_m_s2.value / KILO:,.0f}·10³ m/s²")
+            peak = kf.peak_acceleration_m_s2.value  # as the report: km/s² and g
+            pulse.append(f"{peak / KILO:.0f} km/s² ({peak / G_M_S2:.0f} g)")
         if kf.pulse_width_s is not None and kf.pulse_width_s.value is not None:
             pulse.append(f"{kf.pulse_width_s.value * 1e6:.1f} µs")
         self._set("pulse", ", ".join(pulse) or "—", "peak acceleration, pulse width at 10 % of the peak (ISO 16063-22)")
@@ -450,7 +451,7 @@ class ShotPlots(QWidget):
         self.pm_curve.setClipToView(True)
         self.pm_plot.setMouseEnabled(x=True, y=False)
 
-        self.accel_plot = _plot("Reference and response", "acceleration (10³ m/s²)", "time", None, "s")
+        self.accel_plot = _plot("Reference and response", "acceleration (km/s²)", "time", None, "s")
         self.accel_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
         self.response_curve = self.accel_plot.plot([], [], pen=RESP_PEN, name="accelerometer response")
         self.reference_curve = self.accel_plot.plot([], [], pen=REF_PEN, name="reference (interferometer)")
@@ -536,7 +537,7 @@ class ShotPlots(QWidget):
         record = view.record
         if record is not None:
             t, reference, response = record.time_s, np.asarray(record.reference), np.asarray(record.response)
-            self.accel_plot.setLabel("left", "acceleration (10³ m/s²)")
+            self.accel_plot.setLabel("left", "acceleration (km/s²)")
             self.reference_curve.setData(t, reference / KILO)
             self.response_curve.setData(t, response / KILO)
             window = pulse_window_s(t, reference, response)

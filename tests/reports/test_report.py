@@ -313,9 +313,12 @@ def test_the_uncertainty_and_the_compensation_check_are_shown(tmp_path: Path, un
     assert float(row[3]) == pytest.approx(1.96 * f_n["u"] / 1e3, rel=0.05)  # U = half the 95 % interval
     assert row[5] == "0.4 %"
     assert header[3] == "U (k ≈ 2)" and "FBSD ±5 % (kHz)" in by_label and "main mode damping ζ" in by_label
-    # the budget, largest source first
-    assert [r[0] for r in budget_rows(e)[1]] == ["amplifier gain", "response channel noise", "order choice",
-                                                 "grating pitch"]
+    # the budget, largest source first, then the Monte Carlo's own u (the contract's budget gives
+    # each source's share of the sensitivity only: one column)
+    header, rows = budget_rows(e)
+    assert [r[0] for r in rows] == ["amplifier gain", "response channel noise", "order choice", "grating pitch",
+                                    "all sources (Monte Carlo)"]
+    assert header == ["source", "sensitivity"] and rows[0][1] == "0.3" and rows[-1][1] == "0.4"
     check = dict(compensation_rows(e))
     assert check["verdict"].startswith("DCM NOT RECOMMENDED: the compensated RMS error (6.1 %)")
     assert check["RMS error over the pulse (of the peak), without → with DCM"] == "4.95 % → 6.1 %"
@@ -331,6 +334,26 @@ def test_the_uncertainty_and_the_compensation_check_are_shown(tmp_path: Path, un
     page = page_html.read_text(encoding="utf-8")
     for needle in ("Measurement uncertainty", "U (k ≈ 2)", "DCM not recommended", "noise gain too high"):
         assert needle in page, needle
+
+
+def test_the_budget_gives_each_sources_share_of_each_figure(analyses: dict[str, ShotAnalysis]) -> None:
+    # A metrologist reads the budget per figure: a source that dominates the sensitivity (the
+    # reference chain) may be nothing for f_n, where the response noise dominates.
+    results = contract_results(analyses["a1"], check=False)
+    results["uncertainty"]["budget"] = [
+        {"source": "response noise", "u_rel": 0.0001,
+         "u_rel_by_figure": {"dc_gain": 0.0001, "natural_frequency_hz": 0.0003, "fbsd_5_hz": 0.0002}},
+        {"source": "amplifier gain", "u_rel": 0.002, "u_rel_by_figure": {"dc_gain": 0.002, "shock_sensitivity": 0.002}},
+    ]
+    header, rows = budget_rows(entry("s", analyses["a1"], results=results))
+    assert header == ["source", "sensitivity", "S_sh", "f_n", "FBSD ±5 %"]
+    assert rows[0] == ["amplifier gain", "0.2", "0.2", "—", "—"]
+    assert rows[1] == ["response noise", "0.01", "—", "0.03", "0.02"]
+    u = results["uncertainty"]  # the last row: each figure's u / value from its Monte Carlo figure
+    assert rows[2][0] == "all sources (Monte Carlo)"
+    assert float(rows[2][1]) == pytest.approx(100 * u["dc_gain"]["u"] / u["dc_gain"]["value"], rel=0.05)
+    assert float(rows[2][3]) == pytest.approx(100 * u["main_mode"]["natural_frequency_hz"]["u"]
+                                              / u["main_mode"]["natural_frequency_hz"]["value"], rel=0.05)
 
 
 def test_combination_across_shots_closed_form() -> None:

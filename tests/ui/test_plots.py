@@ -27,7 +27,7 @@ def test_pulse_figures_come_from_the_excitation_without_a_reduction(qtbot):
     strip = ResultsStrip()
     qtbot.addWidget(strip)
     strip.show_figures(kf)
-    assert strip.values["pulse"].text() == f"{peak / 1e3:,.0f}·10³ m/s², {width_10 * 1e6:.1f} µs"
+    assert strip.values["pulse"].text() == f"{peak / 1e3:.0f} km/s² ({peak / 9.80665:.0f} g), {width_10 * 1e6:.1f} µs"
 
 
 def test_the_strip_shows_value_plus_minus_u_and_the_dcm_verdict(qtbot):
