@@ -60,6 +60,7 @@ from hopkinson.analysis.order_choice import (
     Refitter,
     candidates_around,
     choose_order,
+    choose_stable_order,
     fractions_text,
     order_stability,
     response_change,
@@ -435,13 +436,15 @@ def identify(
     if order is None:
         chosen, selection = chosen_auto, "knee"
         if not _acceptable(polished(chosen), data.bins):
-            others = sorted((n for n in fits if n != chosen and math.isfinite(costs[n])), key=lambda n: (costs[n], n))
-            fallback = next((n for n in others if _acceptable(polished(n), data.bins)), None)
+            fallback, dropped = choose_stable_order(
+                costs, parameters, data.bins, changes, lambda n: _acceptable(polished(n), data.bins), significance)
             if fallback is None:
                 raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
                                     "or outside the unit circle)")
-            warnings.append(f"the order-{chosen} fit became unstable when iterated to convergence; order {fallback} "
-                            "(next lowest cost) is used")
+            unstable = ", ".join(str(n) for n in dropped)
+            warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
+                            f"{fallback} (the order test's choice among the stable orders) is used")
+            evidence["unstable_when_converged"] = dropped
             chosen = fallback
     else:
         chosen, selection = order, "asked"
@@ -599,7 +602,7 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
         tail = y[-max(n // 10, 16):]
         noise_y0 = float(1.4826 * np.median(np.abs(tail - np.median(tail))))
     resp_busy = ref_busy.copy()
-    loud = _busy(y, 4.0 * noise_y0, 0)
+    loud = _busy(y - _provisional_drift(y, pre_end, ref_busy), 4.0 * noise_y0, 0)
     for run in _runs(ref_busy):  # the response rings after each pulse until it stays quiet
         resp_busy[run.start : _settles(loud, run.start, max(50, 10 * width))] = True
     last_runs = _runs(resp_busy)
@@ -733,6 +736,25 @@ def _busy(x: np.ndarray, level: float, widen: int) -> np.ndarray:
     if widen > 0 and np.any(loud):
         loud = np.convolve(loud.astype(float), np.ones(2 * widen + 1), mode="same") > 0
     return loud
+
+
+def _provisional_drift(y: np.ndarray, pre_end: int, ref_busy: np.ndarray) -> np.ndarray:
+    """The line through the response's pre-pulse stretch and the record's last tenth (when both
+    are clear of the reference's activity), against which its loudness is judged. A drifting
+    response (a charge amplifier's drift, a zero shift after the shock) never returns to its
+    pre-pulse level: judged against that level it stays loud to the record's end, the record is
+    taken as cut short, its drift is never removed, and the fit chases the drift with a spare
+    low-frequency pole-zero pair that moves the DC gain and the FBSD. Where the response still
+    rings at the end, the ringing averages to the baseline: the line stays flat and the
+    ringing stays loud."""
+    n = y.size
+    tail = max(n // 10, MIN_QUIET)
+    busy = np.flatnonzero(ref_busy)
+    if pre_end < 16 or busy.size == 0 or n - tail <= busy[-1]:
+        return np.zeros(n)
+    idx = np.concatenate((np.arange(pre_end), np.arange(n - tail, n)))
+    slope, intercept = np.polyfit(idx, y[idx], 1)
+    return slope * np.arange(n) + intercept
 
 
 def _settles(loud: np.ndarray, start: int, quiet: int) -> int:

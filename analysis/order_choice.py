@@ -1,7 +1,8 @@
 """The model order: the test that chooses it, and its stability across resampled noise.
 
 - `choose_order`: the smallest order no higher order beats both beyond chance and in the
-  frequency response where the pulse has energy (see its docstring).
+  frequency response where the pulse has energy (see its docstring); `choose_stable_order`:
+  the same among the orders whose converged fit is stable.
 - `NoiseDraws`: fresh noise on the fitted DFT bins of both channels (circular complex Gaussian
   of the measured variance per bin) and a channel skew, reproducible from (seed, draw):
   added to the record (analysis.uncertainty's Monte Carlo draws of the figures) or, for the
@@ -14,6 +15,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -76,6 +78,29 @@ def choose_order(
         if not beaten:
             return n, comparisons
     return None, comparisons
+
+
+def choose_stable_order(
+    costs: dict[int, float],
+    parameters: dict[int, int],
+    bins: int,
+    change: dict[tuple[int, int], float],
+    stable: Callable[[int], bool],
+    significance: float = SIGNIFICANCE,
+) -> tuple[int | None, list[int]]:
+    """`choose_order`'s choice among the orders whose converged fit is `stable`, and the orders
+    dropped on the way. An order that turns out unstable is no candidate, neither to be chosen
+    nor to beat a lower one, and the test is re-run without it. (Taking the stable order of
+    lowest cost instead takes the highest stable one whatever the test says of it: on a real
+    record, a spare low-frequency pole-zero pair that only moves the DC gain and the FBSD.)"""
+    remaining = dict(costs)
+    dropped: list[int] = []
+    chosen, _ = choose_order(remaining, parameters, bins, change, significance)
+    while chosen is not None and not stable(chosen):
+        dropped.append(chosen)
+        remaining[chosen] = math.inf
+        chosen, _ = choose_order(remaining, parameters, bins, change, significance)
+    return chosen, dropped
 
 
 def response_change(fits: dict[int, OrderFit], data: SpectralData) -> dict[tuple[int, int], float]:

@@ -1,0 +1,58 @@
+"""Issue 10's real record, rehearsed on a simulated truth: a piezoelectric reference
+accelerometer (main mode 51.4 kHz, ζ = 0.03, a second mode at 140 kHz beyond the excitation)
+on a 10 MS/s record of a bipolar pulse that leaves the resonance nearly unexcited, a
+differentiated-interferometer reference, a fractional skew and a response that drifts (a
+charge amplifier's drift, a zero shift after the shock). Truth: the continuous model."""
+
+from __future__ import annotations
+
+import pytest
+from hopkinson.analysis.identify import identify
+from hopkinson.analysis.order_choice import choose_stable_order
+from hopkinson.analysis.response import fbsd_hz
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
+
+from tests.analysis.hard_records import Case, record, truth_figures
+
+PIEZO = Case(
+    truth=AccelerometerTruth(modes=(Mode(51_400.0, 0.03), Mode(140_000.0, 0.05)), sensitivity=1e-4),
+    width_s=40e-6, bipolar_ratio=0.55, samples=20_000, start_s=300e-6,
+    reference_noise=0.003, interferometer_noise=0.012, interferometer_band_hz=2e6, response_noise=0.004,
+    skew_samples=0.04, drift_per_s=30.0,
+)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_drifting_response_is_detrended_not_fitted_with_spare_low_frequency_poles(seed: int) -> None:
+    # The drift (6 % of the peak by the record's end) kept the response 'loud' against its
+    # pre-pulse level to the end: the record was taken as cut short, the drift stayed in, and
+    # the fit chased it with a real pole near DC (a negative DC gain, FBSD at 1 Hz) or a 'main
+    # mode' at a few hundred hertz.
+    truth = truth_figures(PIEZO)
+    ident = identify(record(PIEZO, seed))
+    assert not any("record ends before" in w for w in ident.warnings)
+    assert ident.preprocessing["response_drift"]["slope_per_s"] != 0.0
+    assert all(m["natural_frequency_hz"] > 20_000.0 for m in ident.modes)
+    # The pulse leaves the resonance nearly unexcited: claimed only as what it is, or flagged.
+    main = ident.main_mode
+    assert main is None or main["natural_frequency_hz"] == pytest.approx(truth["natural_frequency_hz"], rel=5e-3)
+    assert main is not None or any(not m["supported"] and abs(m["natural_frequency_hz"] / 51_400.0 - 1) < 0.05
+                                   for m in ident.modes)
+    assert ident.model.dc_gain == pytest.approx(truth["dc_gain"], rel=5e-3)
+    edges = fbsd_hz(ident.model)
+    assert edges["5"] == pytest.approx(truth["fbsd_5"], rel=0.03)
+    assert edges["10"] == pytest.approx(truth["fbsd_10"], rel=0.03)
+
+
+def test_an_order_unstable_when_converged_is_replaced_by_the_tests_choice_not_the_lowest_cost() -> None:
+    # Orders 3 and 4 both beat order 2 in the search; order 4 turns out unstable once converged.
+    # Order 3 must then be weighed by the test against order 2 (it barely gains: order 2), not
+    # taken for having the lowest cost of the stable orders.
+    costs = {1: 5000.0, 2: 100.0, 3: 99.9, 4: 40.0}
+    parameters = {n: 3 * n + 3 for n in costs}
+    change = {(n, m): 0.05 for n in costs for m in costs if m > n}
+    chosen, dropped = choose_stable_order(costs, parameters, 116, change, lambda n: n != 4)
+    assert (chosen, dropped) == (2, [4])
+    chosen, dropped = choose_stable_order(costs, parameters, 116, change, lambda n: n not in (2, 4))
+    assert (chosen, dropped) == (3, [4, 2])
+    assert choose_stable_order(costs, parameters, 116, change, lambda n: False)[0] is None
