@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import (
     CAMPAIGN_STATE,
@@ -500,23 +501,22 @@ def _shot_end_text(status: ShotStatus, outcome: ShotOutcome) -> str:
 
 
 def result_line(results: dict[str, Any]) -> str:
-    """One line of an analysis' key figures: order, f_n, ζ, FBSD ±5 %/±10 %."""
-    parts = []
-    model = results.get("model") or {}
-    if "order" in model:
-        parts.append(f"order {model['order']}")
-    ident = results.get("identification") or {}
-    modes = ident.get("modes") or []
-    pairs = [m for m in modes if m.get("kind") in ("complex", "pair") and m.get("natural_frequency_hz")]
-    if pairs or modes:  # the main resonance: the lowest complex pair (else the lowest mode)
-        m = min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else modes[0]
-        if m.get("natural_frequency_hz") is not None:
-            parts.append(f"f_n {m['natural_frequency_hz'] / 1e3:.2f} kHz")
-        if m.get("damping_ratio") is not None:
-            parts.append(f"zeta {m['damping_ratio']:.4f}")
-    fbsd = results.get("fbsd_hz") or {}
-    if "5" in fbsd and "10" in fbsd:
-        parts.append(f"FBSD {fbsd['5'] / 1e3:.2f}/{fbsd['10'] / 1e3:.2f} kHz (±5/±10 %)")
+    """One line of an analysis' key figures (analysis.key_figures, as the report and the panel
+    show them): order, f_n and ζ of the main mode as value ± U (k ≈ 2), or why there is none,
+    FBSD ±5 %/±10 % (a bound where the excitation does not support the edge)."""
+    kf = KeyFigures.from_results(results)
+    parts = [f"order {kf.order}"] if kf.order is not None else []
+    f_n = kf.natural_frequency_hz
+    if f_n is not None and f_n.value is not None:
+        parts.append(f"f_n {f_n.format(1e3, unit='kHz')}")
+        if kf.damping_ratio is not None and kf.damping_ratio.value is not None:
+            parts.append(f"zeta {kf.damping_ratio.format()}")
+    else:
+        band = kf.supported_band_hz
+        parts.append("no resonance in the supported band"
+                     + (f" ({band[0] / 1e3:.3g}-{band[1] / 1e3:.3g} kHz): f_n not claimed" if band else ""))
+    if kf.fbsd_hz or kf.fbsd_bounds:
+        parts.append(f"FBSD ±5 % {kf.fbsd_text('5')}, ±10 % {kf.fbsd_text('10')}")
     return ", ".join(parts)
 
 

@@ -94,7 +94,7 @@ def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
     states = _states(out)
     assert [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s] == [
         "CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE", "CAPTURE", "SAFE", "STORE", "ANALYSE", "DONE"]
-    assert re.search(r"^results: .*f_n 2\d\.\d\d kHz.*FBSD", out, flags=re.M)
+    assert re.search(r"^results: .*f_n 2\d\.\d+ ± 0\.\d+ kHz, zeta 0\.0\d+ ± 0\.\d+, FBSD ±5 % \d\.\d+ ± 0\.\d+ kHz", out, flags=re.M)
 
 
 def test_without_yes_it_runs_to_arm_goes_safe_and_exits_3(configs, capsys) -> None:

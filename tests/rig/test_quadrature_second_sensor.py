@@ -70,8 +70,8 @@ def fired(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
 def test_the_shot_records_four_channels_and_summarises_both_sensors(fired) -> None:
     assert fired.rc == 0 and "error" not in fired.err, fired.err
     assert set(fired.shot.raw.channels) == {"doppler", "response", "doppler_quadrature", "response_2"}
-    assert re.search(r"^results: .*f_n 2[67]\.\d\d kHz.*FBSD", fired.out, flags=re.M), fired.out
-    assert re.search(r"^response_2: .*f_n 3[23]\.\d\d kHz.*FBSD", fired.out, flags=re.M), fired.out
+    assert re.search(r"^results: .*f_n 2[67]\.\d+ ± 0\.\d+ kHz.*FBSD ±5 % \d", fired.out, flags=re.M), fired.out
+    assert re.search(r"^response_2: .*f_n 3[23]\.\d+ ± 0\.\d+ kHz.*FBSD ±5 % \d", fired.out, flags=re.M), fired.out
 
 
 def _reference_errors(record, truth: dict, dt: float, peak_estimate: float) -> tuple[float, float]:
