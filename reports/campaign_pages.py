@@ -12,7 +12,7 @@ import numpy as np
 from hopkinson.analysis.response import frequency_response, nyquist_hz
 from hopkinson.analysis.sine_comparison import SineCalibration, SineComparison
 from hopkinson.reports.data import G_M_S2, ShotEntry
-from hopkinson.reports.layout import plot_page, table_in_axes
+from hopkinson.reports.layout import plain_log_ticks, plot_page, table_in_axes
 from hopkinson.reports.shot_pages import BAND_LEVELS, frequency_grid, normalised
 from hopkinson.reports.statistics import CampaignStatistics
 from hopkinson.reports.tables import fmt, sine_rows
@@ -101,6 +101,7 @@ def campaign_responses_page(entries: Sequence[ShotEntry]) -> Figure:
     ax_db.set_title("Normalised magnitude of each shot's model", fontsize=9)
     ax_db.grid(alpha=0.3)
     ax_db.legend(fontsize=6.5, ncol=3)
+    plain_log_ticks(ax_db)
     for e, c in zip(analysed, colours, strict=True):
         a = e.analysis
         assert a is not None
@@ -156,6 +157,7 @@ def sine_page(comparisons: Sequence[tuple[str, SineComparison]], sine: SineCalib
     ax_p.set_title("Phase error (model without its channel delay)", fontsize=9)
     for ax in (ax_m, ax_e, ax_p):
         ax.grid(True, which="both", alpha=0.3)
+        plain_log_ticks(ax)
     header, rows = sine_rows(comparisons)
     table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
     return fig

@@ -11,6 +11,7 @@ wraps, so a title page of tables is laid out here instead).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from functools import lru_cache
 from typing import Any
@@ -44,6 +45,26 @@ def plot_page(title: str, subtitle: str = "") -> Figure:
         lines += wrap_to_width(subtitle, 12.0, width_pt, bold=True)
     fig.suptitle("\n".join(lines), fontsize=12, fontweight="bold")
     return fig
+
+
+def plain_log_ticks(ax: Any) -> None:
+    """Label a logarithmic frequency axis in plain numbers (0.1, 1, 10, 100 kHz, not 10⁻¹, 10⁰,
+    10¹), and, when it spans at most two decades, at 2 and 5 between them too (a 0.5–20 kHz axis
+    would otherwise carry only "1" and "10")."""
+    from matplotlib.ticker import FuncFormatter
+
+    def major(x: float, _pos: int) -> str:
+        return f"{x:g}"
+
+    def minor(x: float, _pos: int) -> str:
+        lo, hi = sorted(ax.get_xlim())
+        if lo <= 0 or hi / lo > 10 ** 2.05:
+            return ""
+        mantissa = x / 10 ** math.floor(math.log10(x) + 1e-9)
+        return f"{x:g}" if round(mantissa, 6) in (2.0, 5.0) else ""
+
+    ax.xaxis.set_major_formatter(FuncFormatter(major))
+    ax.xaxis.set_minor_formatter(FuncFormatter(minor))
 
 
 # The width a full-width axes of a plot page keeps for a table (constrained layout leaves

@@ -30,6 +30,7 @@ from hopkinson.reports.data import (
 )
 from hopkinson.reports.layout import (
     TABLE_WIDTH_PT,
+    plain_log_ticks,
     plot_page,
     table_in_axes,
     wrap_cells,
@@ -232,6 +233,8 @@ def model_page(entry: ShotEntry) -> Figure:
     ax_ph.set_title("Phase (input delay not included)", fontsize=9)
     ax_ph.grid(alpha=0.3)
     ax_ph.legend(fontsize=7)
+    for ax in (ax_db, ax_ph):
+        plain_log_ticks(ax)
     return fig
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 from hopkinson.analysis.sine_comparison import SineComparison
+from hopkinson.reports.layout import plain_log_ticks
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -49,6 +50,7 @@ def sine_figure(comparison: SineComparison, title: str = "") -> Figure:
     phase.legend(loc="best", fontsize=8)
     for ax in (mag, err, phase):
         ax.grid(True, which="both", linewidth=0.3)
+        plain_log_ticks(ax)
     return fig
 
 

@@ -41,6 +41,26 @@ def fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:
     return f"{x:.{digits}g}"
 
 
+def sig(value: Any, scale: float = 1.0, digits: int = 2) -> str:
+    """`value` / scale to `digits` significant digits in plain notation, trailing zeros kept
+    (an uncertainty 0.0030 stays 0.0030, a std 4.5e-05 reads 0.000045); as `fmt` otherwise."""
+    if value is None or isinstance(value, str):
+        return fmt(value, scale, digits)
+    x = float(value) / scale
+    if not math.isfinite(x) or x == 0:
+        return fmt(value, scale, digits)
+    decimals = digits - 1 - math.floor(math.log10(abs(x)))
+    if decimals <= 0:
+        return f"{round(x, decimals):.0f}"
+    text = f"{x:.{decimals}f}"
+    if abs(float(text)) >= 10 ** (digits - decimals):  # rounding carried a digit up: 0.00996 -> 0.010
+        text = f"{x:.{decimals - 1}f}"
+    return text
+
+
+BUDGET_FLOOR_PCT = 1e-3  # a source below 0.001 % (10 ppm) of a figure reads "< 0.001", not 3.9e-09
+
+
 def unit_suffix(unit: str) -> str:
     return f" ({unit})" if unit else ""
 
@@ -82,7 +102,7 @@ def sensitivity_text(figure: Figure | None, kf: KeyFigures, nominal_v_per_m_s2: 
             volts = Figure(figure.value * factor, None,
                            None if figure.interval is None else (figure.interval[0] * factor,
                                                                  figure.interval[1] * factor))
-            scale, unit = volt_scale(volts.value)
+            scale, unit = volt_scale(factor)  # the nominal's prefix: 0.1 µV nominal -> 0.09998 µV, not 99.98 nV
             text += f" = {volts.format(scale, digits=5)} {unit}/{per}"
     return text
 
@@ -121,7 +141,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     comp = kf.compensated_fbsd_hz
     rows += [
         ("DCM ratio r, damping ζ_e", f"{fmt(design.get('ratio'))}, {fmt(design.get('damping'))}"),
-        ("FBSD ±5 % / ±10 % with DCM", f"{fmt(comp.get('5'), 1e3)} / {fmt(comp.get('10'), 1e3)} kHz"),
+        ("FBSD ±5 % / ±10 % with DCM", f"{sig(comp.get('5'), 1e3, 4)} / {sig(comp.get('10'), 1e3, 4)} kHz"),
         ("rise-time ratio (10–90 %, without ÷ with DCM)", fmt(a.rise_time_ratio)),
         ("settling-time ratio (±5 %, without ÷ with DCM)", fmt(a.settling_time_ratio)),
     ]
@@ -184,8 +204,8 @@ def uncertainty_cells(figure: Figure, scale: float) -> list[str]:
         return to_decimals_of(x, big, scale)
 
     lo, hi = figure.interval if figure.interval is not None else (None, None)
-    return [fixed(figure.value), fmt(figure.u, scale, 2), fmt(big, scale, 2), f"[{fixed(lo)}, {fixed(hi)}]",
-            f"{fmt(100 * figure.u_rel, digits=2)} %" if figure.u_rel is not None else "—"]
+    return [fixed(figure.value), sig(figure.u, scale), sig(big, scale), f"[{fixed(lo)}, {fixed(hi)}]",
+            f"{sig(100 * figure.u_rel)} %" if figure.u_rel is not None else "—"]
 
 
 def to_decimals_of(value: float | None, expanded: float | None, scale: float = 1.0) -> str:
@@ -241,7 +261,11 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
     header = ["source"] + [label for _key, label, _attr in columns]
 
     def pct(value: float | None) -> str:
-        return "—" if value is None else f"{fmt(100 * value, digits=2)}"
+        if value is None:
+            return "—"
+        if 0 < abs(100 * value) < BUDGET_FLOOR_PCT:
+            return f"< {BUDGET_FLOOR_PCT:g}"
+        return sig(100 * value)
 
     rows = [[str(b.get("source", "—"))] + [pct(_budget_share(b, key)) for key, _l, _a in columns] for b in items]
     combined = []
@@ -279,9 +303,10 @@ def compensation_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     rows.append(("RMS error over the pulse (of the peak), without → with DCM", before_after(check.rms_error_pct)))
     rows.append(("peak error, without → with DCM", before_after(check.peak_error_pct)))
     comp = kf.compensated_fbsd_hz
-    rows.append(("compensated FBSD ±5 % / ±10 % (model)", f"{fmt(comp.get('5'), 1e3)} / {fmt(comp.get('10'), 1e3)} kHz"))
+    rows.append(("compensated FBSD ±5 % / ±10 % (model)", f"{sig(comp.get('5'), 1e3, 4)} / {sig(comp.get('10'), 1e3, 4)} kHz"))
     if check.target_widening is not None or check.reached_widening is not None:
-        text = f"aimed ×{fmt(check.target_widening, digits=3)}, reached ×{fmt(check.reached_widening, digits=3)}"
+        aimed = "no target" if check.target_widening is None else f"aimed ×{fmt(check.target_widening, digits=3)}"
+        text = f"{aimed}, reached ×{fmt(check.reached_widening, digits=3)}"
         if check.widening_note:
             text += f" ({check.widening_note})"
         rows.append(("widening of the ±5 % band", text))
@@ -309,9 +334,9 @@ def combined_rows(stats: CampaignStatistics) -> tuple[list[str], list[list[str]]
                else fmt(c.dof, digits=2))
         n_text = str(c.n) + (f" (+{c.excluded_bounds} bound)" if c.excluded_bounds else "")
         rows.append([label + unit_suffix(unit), n_text, to_decimals_of(c.mean, c.expanded, scale),
-                     fmt(c.repeatability, scale, 2),
-                     fmt(c.u_shots, scale, 2), fmt(c.u_combined, scale, 2), dof, fmt(c.k, digits=3),
-                     fmt(c.expanded, scale, 2)])
+                     sig(c.repeatability, scale),
+                     sig(c.u_shots, scale), sig(c.u_combined, scale), dof, sig(c.k, digits=3),
+                     sig(c.expanded, scale)])
     return header, rows
 
 
@@ -353,8 +378,13 @@ def spread_rows(stats: CampaignStatistics) -> tuple[list[str], list[list[str]]]:
     rows = []
     for key, label, unit, scale in QUANTITIES:
         s = stats.spread[key]
-        rows.append([label + unit_suffix(unit), str(s["n"]), fmt(s["mean"], scale, 5), fmt(s["std"], scale, 3),
-                     fmt(s["cv_percent"], digits=3), fmt(s["min"], scale, 5), fmt(s["max"], scale, 5)])
+        std = s["std"] if s["std"] else None  # the mean, min and max to the decimals of the std
+
+        def fixed(x: float | None, std: float | None = std, scale: float = scale) -> str:
+            return to_decimals_of(x, std, scale) if std else fmt(x, scale, 5)
+
+        rows.append([label + unit_suffix(unit), str(s["n"]), fixed(s["mean"]), sig(s["std"], scale),
+                     sig(s["cv_percent"]), fixed(s["min"]), fixed(s["max"])])
     return header, rows
 
 
@@ -365,10 +395,10 @@ def per_shot_rows(entries: Sequence[ShotEntry]) -> tuple[list[str], list[list[st
     for e in entries:
         f = figures_of_merit(e)
         rows.append([e.label, e.state or ("analysed" if e.analysis else "—"), fmt(e.pressure_bar, digits=3),
-                     fmt(f["peak_acceleration_m_s2"], G_M_S2, 4), fmt(f["pulse_width_s"], 1e-6, 3),
-                     fmt(f["order"]), fmt(f["natural_frequency_hz"], 1e3, 5), fmt(f["damping_ratio"], digits=3),
-                     fmt(f["fbsd_5_hz"], 1e3), fmt(f["fbsd_10_hz"], 1e3), fmt(f["shock_sensitivity"], digits=4),
-                     fmt(f["fit_percent"], digits=4)])
+                     fmt(f["peak_acceleration_m_s2"], G_M_S2, 4), sig(f["pulse_width_s"], 1e-6, 3),
+                     fmt(f["order"]), sig(f["natural_frequency_hz"], 1e3, 5), sig(f["damping_ratio"], digits=3),
+                     sig(f["fbsd_5_hz"], 1e3, 4), sig(f["fbsd_10_hz"], 1e3, 4), sig(f["shock_sensitivity"], digits=4),
+                     sig(f["fit_percent"], digits=4)])
     return header, rows
 
 

@@ -25,7 +25,17 @@ from hopkinson.reports.layout import freeze_layout
 from hopkinson.reports.pages import report_pages, title_pages
 from hopkinson.reports.shot_pages import dcm_page, excitation_page, model_page, step_responses
 from hopkinson.reports.statistics import campaign_statistics, combine, cross_validation, spread
-from hopkinson.reports.tables import budget_rows, compensation_rows, uncertainty_rows
+from hopkinson.reports.tables import (
+    budget_rows,
+    combined_rows,
+    compensation_rows,
+    per_shot_rows,
+    results_rows,
+    sensitivity_text,
+    sig,
+    spread_rows,
+    uncertainty_rows,
+)
 from hopkinson.reports.writers import write_pngs, write_report
 from matplotlib.lines import Line2D
 from matplotlib.text import Text
@@ -311,14 +321,14 @@ def test_the_uncertainty_and_the_compensation_check_are_shown(tmp_path: Path, un
     assert float(row[1]) == pytest.approx(f_n["value"] / 1e3, abs=0.005)  # to the decimals of U (0.21)
     assert float(row[2]) == pytest.approx(f_n["u"] / 1e3, rel=0.05)
     assert float(row[3]) == pytest.approx(1.96 * f_n["u"] / 1e3, rel=0.05)  # U = half the 95 % interval
-    assert row[5] == "0.4 %"
+    assert row[5] == "0.40 %"  # two significant digits, the trailing zero kept
     assert header[3] == "U (k ≈ 2)" and "FBSD ±5 % (kHz)" in by_label and "main mode damping ζ" in by_label
     # the budget, largest source first, then the Monte Carlo's own u (the contract's budget gives
     # each source's share of the sensitivity only: one column)
     header, rows = budget_rows(e)
     assert [r[0] for r in rows] == ["amplifier gain", "response channel noise", "order choice", "grating pitch",
                                     "all sources (Monte Carlo)"]
-    assert header == ["source", "sensitivity"] and rows[0][1] == "0.3" and rows[-1][1] == "0.4"
+    assert header == ["source", "sensitivity"] and rows[0][1] == "0.30" and rows[-1][1] == "0.40"
     check = dict(compensation_rows(e))
     assert check["verdict"].startswith("DCM NOT RECOMMENDED: the compensated RMS error (6.1 %)")
     assert check["RMS error over the pulse (of the peak), without → with DCM"] == "4.95 % → 6.1 %"
@@ -344,15 +354,18 @@ def test_the_budget_gives_each_sources_share_of_each_figure(analyses: dict[str, 
         {"source": "response noise", "u_rel": 0.0001,
          "u_rel_by_figure": {"dc_gain": 0.0001, "natural_frequency_hz": 0.0003, "fbsd_5_hz": 0.0002}},
         {"source": "amplifier gain", "u_rel": 0.002, "u_rel_by_figure": {"dc_gain": 0.002, "shock_sensitivity": 0.002}},
+        {"source": "channel skew", "u_rel": 3.9e-11,  # 3.9e-09 % read as a number is noise, not a share
+         "u_rel_by_figure": {"dc_gain": 3.9e-11, "natural_frequency_hz": 0.0, "fbsd_5_hz": 7.3e-9}},
     ]
     header, rows = budget_rows(entry("s", analyses["a1"], results=results))
     assert header == ["source", "sensitivity", "S_sh", "f_n", "FBSD ±5 %"]
-    assert rows[0] == ["amplifier gain", "0.2", "0.2", "—", "—"]
-    assert rows[1] == ["response noise", "0.01", "—", "0.03", "0.02"]
+    assert rows[0] == ["amplifier gain", "0.20", "0.20", "—", "—"]  # two significant digits, as u
+    assert rows[1] == ["response noise", "0.010", "—", "0.030", "0.020"]
+    assert rows[2] == ["channel skew", "< 0.001", "—", "0", "< 0.001"]  # no 3.9e-09, no 0.0000000039
     u = results["uncertainty"]  # the last row: each figure's u / value from its Monte Carlo figure
-    assert rows[2][0] == "all sources (Monte Carlo)"
-    assert float(rows[2][1]) == pytest.approx(100 * u["dc_gain"]["u"] / u["dc_gain"]["value"], rel=0.05)
-    assert float(rows[2][3]) == pytest.approx(100 * u["main_mode"]["natural_frequency_hz"]["u"]
+    assert rows[3][0] == "all sources (Monte Carlo)"
+    assert float(rows[3][1]) == pytest.approx(100 * u["dc_gain"]["u"] / u["dc_gain"]["value"], rel=0.05)
+    assert float(rows[3][3]) == pytest.approx(100 * u["main_mode"]["natural_frequency_hz"]["u"]
                                               / u["main_mode"]["natural_frequency_hz"]["value"], rel=0.05)
 
 
@@ -460,6 +473,60 @@ def test_plot_page_tables_keep_each_text_inside_its_cell(which: str, request) ->
                         checked += 1
         fig.set_dpi(100)
     assert checked > 10
+
+
+SCIENTIFIC = re.compile(r"\d[eE][+-]?\d")
+
+
+@pytest.mark.parametrize("which", ["single_report", "campaign_report", "uncertain_report"])
+def test_tables_print_no_scientific_notation_and_keep_significant_zeros(which: str, request) -> None:
+    # A technician read "std 4.53e-05", "channel skew 3.9e-09" and "u 0.003" (for 0.0030) in
+    # the report: every table cell in plain notation, a below-0.001 % budget share as "< 0.001".
+    report, _pages = request.getfixturevalue(which)
+    tables = [per_shot_rows(report.shots)] if report.campaign else []
+    if report.campaign:
+        stats = campaign_statistics(report.shots, None)
+        tables += [spread_rows(stats), combined_rows(stats)]
+    for e in report.shots:
+        if e.analysis is not None:
+            tables += [uncertainty_rows(e), budget_rows(e), (None, compensation_rows(e)), (None, results_rows(e))]
+    cells = [str(c) for _header, rows in tables for row in rows for c in row]
+    assert len(cells) > 20
+    assert [c for c in cells if SCIENTIFIC.search(c)] == []
+    assert sig(0.0030) == "0.0030" and sig(4.53e-5) == "0.000045" and sig(0.00996) == "0.010"
+    assert sig(26999.9, 1e3, 5) == "27.000" and sig(0.05, digits=3) == "0.0500" and sig(123456.0, 1.0, 2) == "120000"
+
+
+def test_sensitivity_keeps_the_nominals_si_prefix() -> None:
+    # A nominal 0.1 µV/(m/s²) and an identified 0.99998 × nominal read "99.998 nV/(m/s²)" beside it.
+    kf = KeyFigures.from_results({"reduction": {"response_unit": "m/s^2"}})
+    text = sensitivity_text(Figure(0.99998, 0.0024, (0.9953, 1.0047)), kf, 1e-7)
+    assert "µV/(m/s²)" in text and "nV" not in text, text
+    assert "0.1000" in text
+
+
+def test_log_frequency_axes_read_in_plain_numbers(single_report, campaign_report) -> None:
+    # "10⁰, 10¹ kHz" (and only two labels on the 0.5–20 kHz sine axes) become 0.5, 1, 2, 5, 10, 20.
+    checked = 0
+    for caption, fig in single_report[1][:4] + campaign_report[1][:4]:
+        fig.canvas.draw()
+        for ax in fig.axes:
+            if ax.get_xscale() != "log":
+                continue
+            labels = [t.get_text() for t in ax.get_xticklabels() + ax.get_xticklabels(minor=True)
+                      if t.get_text() and t.get_visible()]
+            lo, hi = ax.get_xlim()
+            shown = [float(x) for x in labels if lo <= float(x) <= hi]
+            assert "$" not in "".join(labels) and len(shown) >= 3, f"{caption}: {labels}"
+            checked += 1
+    assert checked >= 5
+
+
+def test_compensation_without_a_target_widening_says_so(analyses: dict[str, ShotAnalysis]) -> None:
+    results = contract_results(analyses["a1"])
+    results["dcm"].update(target_widening=None, reached_widening=1.78, widening_note="nothing to compensate")
+    rows = dict(compensation_rows(entry("s", analyses["a1"], results=results)))
+    assert rows["widening of the ±5 % band"] == "no target, reached ×1.78 (nothing to compensate)"
 
 
 def test_report_input_errors(tmp_path: Path, analyses: dict[str, ShotAnalysis]) -> None:
