@@ -51,7 +51,7 @@ from hopkinson.analysis.excitation import pulse_width, supported_band_hz
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, predicted_bins
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
-from hopkinson.analysis.noise import NoiseSpectrum
+from hopkinson.analysis.noise import WELCH_SEGMENT, NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile, next_fast_len
 from hopkinson.analysis.order_choice import (
     FRF_TOLERANCE,
@@ -665,6 +665,13 @@ def _prepare(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int, warnings: 
     var_y = np.maximum(var_y, floor)
     draw_var_u = draw_noise_u.bin_variance(bin_hz, length) if draw_noise_u.samples else np.zeros(bin_hz.size)
     draw_var_y = np.maximum(draw_noise_y.bin_variance(bin_hz, length), floor)
+    # The conservative look detrends each Welch segment, which empties its lowest bins: a slow
+    # baseline wander (cable, thermal; below its first bins) was then weighed as if absent, and
+    # a spare pole near DC 'explained' it beyond chance (DC gain off by 5 %, FBSD at 1 kHz).
+    # Below the detrended segments' second bin the fit takes the larger of the two looks.
+    low = bin_hz < 2.0 * rate / WELCH_SEGMENT
+    var_u = np.where(low, np.maximum(var_u, draw_var_u), var_u)
+    var_y = np.where(low, np.maximum(var_y, draw_var_y), var_y)
     transient = truncated or cold_start
     if truncated:
         warnings.append("the record ends before the response has died away: a transient term is fitted with the "
