@@ -207,6 +207,7 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder) -> ShotR
     return ShotRequest(
         pressure_bar=shot.pressure_bar, projectile=shot.projectile, operator=plan.operator,
         accelerometer_model=plan.accelerometer.model, accelerometer_serial=plan.accelerometer.serial,
+        sensor_identities=plan.sensor_identities(),
         sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
         order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
         uncertainty=a.uncertainty, draws=a.draws,

@@ -49,7 +49,7 @@ from hopkinson.rig.driver_classes import driver_class
 from hopkinson.rig.errors import ConfigError
 
 if TYPE_CHECKING:
-    from hopkinson.drivers.sim.simulated_rig import SimulatedRig
+    from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
 
 SIM_PORT_PREFIX = "sim:"
 SIM_PORTS = {"sim:amplifier": "serial_port", "sim:controller": "modbus_serial_port"}
@@ -249,6 +249,14 @@ def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
             ranges[role] = ranges.get(like, base.ch1_range_v if like == "doppler" else base.ch2_range_v)
     return dataclasses.replace(base, driver="scpi", options={}, resource=resource, dialect=dialect,
                                channels=spelled, sample_format=fmt, ranges_v=ranges)
+
+
+def with_sim_channels(base: RigConfig, sim: SimConfig) -> RigConfig:
+    """`base` with the digitizer channels a simulated rig of `sim` will give it (what
+    sim_rig_config sets once it runs): to check a request or a plan against before it starts."""
+    digitizer = sim_digitizer_config(base.digitizer, base.digitizer.resource, sim.servers.digitizer_dialect,
+                                     sim.world.channels())
+    return dataclasses.replace(base, digitizer=digitizer)
 
 
 def sim_digitizer_lines(dialect: str, channels: dict[str, int]) -> list[str]:

@@ -15,6 +15,10 @@ Example (config/campaigns/example.toml is the documented one)::
                                       # magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]; relative to
                                       # the plan's folder); the report compares the model with it
 
+    [accelerometer_2]                 # optional: a second accelerometer recorded on the rig's
+    model = "AYZ-3"                   # response_2 channel (its gain and nominal sensitivity:
+    serial = "SN0002"                 # the rig config's [analysis] amp_gain_2, sensitivity_2_...)
+
     [defaults]                        # every key optional; per-shot keys override
     pressure_bar = 2.0
     projectile = 3                    # 1, 2 or 3 (No. 3 gives the shortest pulse)
@@ -77,6 +81,14 @@ class Accelerometer:
 
 
 @dataclass(frozen=True)
+class FurtherAccelerometer:
+    """A further accelerometer recorded in the same shots (the rig's response_2 channel)."""
+
+    model: str
+    serial: str
+
+
+@dataclass(frozen=True)
 class AnalysisOptions:
     """Analysis settings of a shot (defaults from DESIGN.md and the paper's example)."""
 
@@ -123,6 +135,12 @@ class CampaignPlan:
     description: str = ""
     authorise_firing: bool = False
     text: str = ""  # the TOML text as loaded (copied into the run folder)
+    accelerometer_2: FurtherAccelerometer | None = None  # recorded on response_2
+
+    def sensor_identities(self) -> dict[str, dict[str, str]]:
+        """role -> {"model", "serial"} of the further accelerometers (ShotRequest.sensor_identities)."""
+        a = self.accelerometer_2
+        return {"response_2": {"model": a.model, "serial": a.serial}} if a is not None else {}
 
     def shot(self, shot_id: str) -> PlannedShot:
         for s in self.shots:
@@ -137,7 +155,8 @@ class CampaignPlan:
         return hashlib.sha256(canonical.encode()).hexdigest()
 
 
-_TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "defaults", "shots"}
+_TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "accelerometer_2", "defaults",
+             "shots"}
 _ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2", "sine_calibration"}
 _SHOT_KEYS = {"pressure_bar", "projectile", "analysis"}
 _ENTRY_KEYS = _SHOT_KEYS | {"repeats"}
@@ -236,6 +255,15 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         else str(path.parent / c.text(acc["sine_calibration"], "accelerometer.sine_calibration")),
     )
 
+    accelerometer_2 = None
+    if "accelerometer_2" in doc:
+        acc2 = c.table(doc["accelerometer_2"], "accelerometer_2", {"model", "serial"})
+        for key in ("model", "serial"):
+            if key not in acc2:
+                raise c.fail(f"accelerometer_2.{key}", "missing (required)")
+        accelerometer_2 = FurtherAccelerometer(c.text(acc2["model"], "accelerometer_2.model"),
+                                               c.text(acc2["serial"], "accelerometer_2.serial"))
+
     defaults = c.table(doc.get("defaults", {}), "defaults", _SHOT_KEYS)
     base = _shot_settings(c, defaults, "defaults", {}, AnalysisOptions())
 
@@ -281,6 +309,7 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         description=description,
         authorise_firing=authorise,
         text=text,
+        accelerometer_2=accelerometer_2,
     )
 
 

@@ -145,7 +145,10 @@ def shot_entries(path: str | Path, state: str | None = None, label: str | None =
                 analysis = ShotAnalysis.from_dict(results, record=records.get(role))
             except AnalysisError as exc:
                 error = f"{path}: {role}: {exc}"
-        identity = {"Accelerometer": f"{name.capitalize()}, digitizer role {role}",
+        named = shot.meta.sensor_identities.get(role)
+        what = accelerometer_text(named.get("model", ""), named.get("serial", "")) + ", " if named else ""
+        identity = {"Accelerometer": f"{what}{name}, digitizer role {role}" if named
+                    else f"{name.capitalize()}, digitizer role {role}",
                     **{k: v for k, v in first.identity.items() if k not in ("Accelerometer", "Nominal sensitivity")}}
         params = results.get("params") or {}
         scaled = (results.get("reduction") or {}).get("response_unit") == "m/s^2"

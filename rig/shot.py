@@ -77,6 +77,8 @@ class ShotRequest:
     operator: str = ""
     accelerometer_model: str = ""
     accelerometer_serial: str = ""
+    # further sensors' identities, recorded with the shot: role (MORE_SENSOR_ROLES) -> {"model", "serial"}
+    sensor_identities: dict[str, dict[str, str]] = field(default_factory=dict)
     sensitivity_v_per_m_s2: float | None = None  # None -> config [analysis]
     max_order: int | None = None  # analysis options; None -> the analysis' defaults
     order: int | None = None  # a fixed model order (a campaign plan's); None -> chosen by the analysis
@@ -108,6 +110,15 @@ class ShotRequest:
             analysis_params(self, config, {})
         except AnalysisError as exc:
             raise ShotRequestError(str(exc)) from None
+        for role, identity in self.sensor_identities.items():
+            if role not in MORE_SENSOR_ROLES:
+                raise ShotRequestError(f"sensor_identities: {role!r} is not a further sensor's role "
+                                       f"({', '.join(MORE_SENSOR_ROLES)})")
+            if role not in config.digitizer.channels:
+                raise ShotRequestError(f"{role}: an accelerometer is named for it, but the rig records no {role} "
+                                       f"channel ({config.path or 'configuration'} [digitizer.channels])")
+            if set(identity) - {"model", "serial"} or not all(isinstance(v, str) for v in identity.values()):
+                raise ShotRequestError(f"{role}: an accelerometer is given by its model and serial (text)")
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")
@@ -232,6 +243,7 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
         operator=request.operator,
         accelerometer_model=request.accelerometer_model,
         accelerometer_serial=request.accelerometer_serial,
+        sensor_identities={role: dict(identity) for role, identity in request.sensor_identities.items()},
         pressure_bar=float(request.pressure_bar),
         projectile=int(request.projectile),
         instruments=dict(identities),

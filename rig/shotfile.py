@@ -6,8 +6,10 @@ Layout (format "hopkinson-shot", format_version 1)::
                            "analysis_failed"), uuid, utc_time (ISO 8601, UTC), operator,
                            accelerometer_model, accelerometer_serial, software_version,
                            pressure_bar, projectile, simulated (bool), and when known shot_id,
-                           shot_index, campaign_id; config_json, instruments_json and (in
-                           simulation) truth_json: the exact JSON text of those dicts;
+                           shot_index, campaign_id; config_json, instruments_json,
+                           sensors_json (with further sensors: role -> {"model", "serial"}
+                           of each, e.g. response_2's) and (in simulation) truth_json: the
+                           exact JSON text of those dicts;
                            NX_class = "NXroot", default = "entry" (NeXus: where a viewer's
                            default plot is)
     /meta/config           the configuration snapshot mirrored as groups/attributes/datasets
@@ -173,6 +175,8 @@ class ShotMeta:
     pressure_bar: float
     projectile: int
     instruments: dict[str, str] = field(default_factory=dict)  # name -> identity (*IDN? ...)
+    # further sensors' identities: role (e.g. "response_2") -> {"model", "serial"}
+    sensor_identities: dict[str, dict[str, str]] = field(default_factory=dict)
     config: dict[str, Any] = field(default_factory=dict)  # full rig configuration snapshot
     shot_id: str | None = None
     shot_index: int | None = None
@@ -217,6 +221,8 @@ def write_raw_shot(path: str | Path, raw: RawShot, meta: ShotMeta) -> Path:
         "config_json": _dumps(path, "config", meta.config),
         "instruments_json": _dumps(path, "instruments", meta.instruments),
     }
+    if meta.sensor_identities:
+        texts["sensors_json"] = _dumps(path, "further sensors' identities", meta.sensor_identities)
     if meta.simulated_truth is not None:
         texts["truth_json"] = _dumps(path, "simulated truth", meta.simulated_truth)
 
@@ -482,6 +488,15 @@ def _checked_channels(path: Path, raw: RawShot) -> dict[str, RawChannel]:
     return out
 
 
+def _sensor_identities(text: str) -> dict[str, dict[str, str]]:
+    """sensors_json read back: role -> {"model", "serial"} (ValueError when not that shape)."""
+    data = json.loads(text)
+    if not isinstance(data, dict) or not all(
+            isinstance(v, dict) and all(isinstance(x, str) for x in v.values()) for v in data.values()):
+        raise ValueError("sensors_json is not role -> {model, serial}")
+    return {str(role): {str(k): v for k, v in ident.items()} for role, ident in data.items()}
+
+
 def _check_meta(path: Path, meta: ShotMeta) -> None:
     try:
         uuid_module.UUID(meta.uuid)
@@ -619,6 +634,7 @@ def _meta(attrs: Any) -> ShotMeta:
         pressure_bar=float(attrs["pressure_bar"]),
         projectile=int(attrs["projectile"]),
         instruments=json.loads(attrs["instruments_json"]),
+        sensor_identities=_sensor_identities(attrs["sensors_json"]) if "sensors_json" in attrs else {},
         config=json.loads(attrs["config_json"]),
         shot_id=str(attrs["shot_id"]) if "shot_id" in attrs else None,
         shot_index=int(attrs["shot_index"]) if "shot_index" in attrs else None,

@@ -113,6 +113,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig
     from hopkinson.rig.events import EventBus
+    from hopkinson.rig.instruments import with_sim_channels
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.plan import check_shot_count, load_plan
 
@@ -122,9 +123,11 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     config = load_rig_config(rig_config_path(args))
     plan = load_plan(args.plan)
     check_authorisation(plan, args.yes)  # exit 2 before anything is created or fired
-    check_plan(plan, config)  # every entry against the rig's limits, every analysis option
-    check_shot_count(plan, args.confirm_above, args.shots)
     sim_config = load_sim_config(args.sim_config) if args.sim else None
+    # every entry against the rig's limits and channels (with --sim: those the simulator will give), every
+    # analysis option
+    check_plan(plan, with_sim_channels(config, sim_config) if sim_config is not None else config)
+    check_shot_count(plan, args.confirm_above, args.shots)
     fire_log = FireLog(args.sim_fire_log) if args.sim_fire_log else None
 
     bus = EventBus()

@@ -3,7 +3,8 @@
     hopkinson shot [--config PATH] [--sim [--sim-config PATH] [--sim-fault NAME ...]
                    [--sim-state-file PATH]] [--pressure-bar P] [--projectile N] [--yes]
                    [--out DIR] [--operator NAME] [--accelerometer-model M]
-                   [--accelerometer-serial S] [--sensitivity-v-per-m-s2 S] [--max-order N]
+                   [--accelerometer-serial S] [--accelerometer-2-model M --accelerometer-2-serial S]
+                   [--sensitivity-v-per-m-s2 S] [--max-order N]
                    [--sample-rate HZ] [--dcm-ratio auto|R] [--dcm-damping Z] [--draws N]
                    [--no-uncertainty] [--shot-name NAME]
                    [-v] [--log-file PATH] [--trace] [--json | --json-events]
@@ -72,6 +73,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--operator", default="", help="who fires the shot")
     p.add_argument("--accelerometer-model", default="", help="model of the accelerometer under test")
     p.add_argument("--accelerometer-serial", default="", help="serial number of the accelerometer under test")
+    p.add_argument("--accelerometer-2-model", metavar="M",
+                   help="model of a second accelerometer, recorded on the rig's response_2 channel")
+    p.add_argument("--accelerometer-2-serial", metavar="S", help="its serial number")
     p.add_argument("--sensitivity-v-per-m-s2", type=float, help="nominal sensitivity (default: config [analysis])")
     p.add_argument("--max-order", type=int, help="highest model order tried by the identification")
     p.add_argument("--sample-rate", type=float, dest="sample_rate_hz", help="analysis sample rate, Hz")
@@ -112,6 +116,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig, run_shot_under_signals
     from hopkinson.rig.events import AwaitingConfirmation, EventBus
+    from hopkinson.rig.instruments import with_sim_channels
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
     from hopkinson.rig.shot import ShotRequest, generated_shot_name
@@ -124,6 +129,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     request = ShotRequest(
         pressure_bar=args.pressure_bar, projectile=args.projectile, operator=args.operator,
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
+        sensor_identities=_second_accelerometer(args),
         sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
         sample_rate_hz=args.sample_rate_hz, dcm_damping=args.dcm_damping,
         dcm_ratio=number_or_word(args.dcm_ratio, "--dcm-ratio", {"auto": None}, "a positive number"),
@@ -131,7 +137,9 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         # Without --yes and without a terminal nobody can confirm: do not wait in ARM.
         confirm_timeout_s=None if args.yes else (PROMPT_TIMEOUT_S if interactive else 0.0),
     )
-    request.check(config)  # bad input (the analysis options too): exit 2 before anything starts
+    sim_config = load_sim_config(args.sim_config) if args.sim else None
+    # bad input (the analysis options, a sensor on a channel the rig lacks): exit 2 before anything starts
+    request.check(with_sim_channels(config, sim_config) if sim_config is not None else config)
     if request.shot_path().exists():
         raise ConfigError(f"--shot-name: {request.shot_path()} exists already: a shot file is never written over")
     authorisation = FireAuthorisation.pre_given() if args.yes else FireAuthorisation()
@@ -144,7 +152,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         if args.sim:
             from hopkinson.rig.sim_session import sim_session
 
-            session = stack.enter_context(sim_session(config, load_sim_config(args.sim_config), args.sim_fault,
+            session = stack.enter_context(sim_session(config, sim_config, args.sim_fault,
                                                       args.sim_state_file))
             config, truth = session.config, session.simulated_truth
         control = stack.enter_context(controlled_rig(config, command_line(), truth))
@@ -230,6 +238,17 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         return EXIT_ABORTED
     outcome.raise_for_outcome()
     return 0
+
+
+def _second_accelerometer(args: argparse.Namespace) -> dict[str, dict[str, str]]:
+    """--accelerometer-2-model/-serial -> ShotRequest.sensor_identities (both or neither)."""
+    model, serial = args.accelerometer_2_model, args.accelerometer_2_serial
+    if model is None and serial is None:
+        return {}
+    if not (model or "").strip() or not (serial or "").strip():
+        raise ConfigError("--accelerometer-2-model and --accelerometer-2-serial: give both (the second "
+                          "accelerometer's model and serial number)")
+    return {"response_2": {"model": model.strip(), "serial": serial.strip()}}
 
 
 def _make_out_dir(out: Path) -> None:

@@ -170,3 +170,27 @@ def test_dcm_ratio_auto_is_the_default_and_can_be_written(tmp_path):
                     '[[shots]]\npressure_bar = 1.0\nprojectile = 3\n[shots.analysis]\ndcm_ratio = 12.5\n')
     plan = load_plan(path)
     assert [s.analysis.dcm_ratio for s in plan.shots] == [None, None, 12.5]
+
+
+def test_a_second_accelerometer_is_named_in_the_plan_and_checked_against_the_rigs_channels(tmp_path: Path) -> None:
+    import dataclasses
+
+    from hopkinson.rig.campaign import check_plan
+    from hopkinson.rig.config import load_rig_config
+
+    shots = "[[shots]]\npressure_bar = 2.0\nprojectile = 3\n"
+    plan = load_plan(write(tmp_path, BASE + '[accelerometer_2]\nmodel = "AYZ-3"\nserial = "SN0002"\n' + shots))
+    assert plan.sensor_identities() == {"response_2": {"model": "AYZ-3", "serial": "SN0002"}}
+    assert load_plan(write(tmp_path, BASE + shots)).sensor_identities() == {}
+    with pytest.raises(ConfigError, match=r"accelerometer_2\.serial: missing"):
+        load_plan(write(tmp_path, BASE + '[accelerometer_2]\nmodel = "AYZ-3"\n' + shots))
+    with pytest.raises(ConfigError, match=r"accelerometer_2.*sensitivity"):
+        load_plan(write(tmp_path, BASE + '[accelerometer_2]\nmodel = "A"\nserial = "B"\nsensitivity = 1\n' + shots))
+    config = load_rig_config(REPO / "config" / "rig-sim.toml")
+    assert "response_2" not in config.digitizer.channels
+    with pytest.raises(ConfigError, match=r"response_2: an accelerometer is named for it, but the rig records no "
+                                          r"response_2 channel"):
+        check_plan(plan, config)  # before anything is created or fired
+    digitizer = dataclasses.replace(config.digitizer, channels={**config.digitizer.channels, "response_2": "CH4"},
+                                    ranges_v={**config.digitizer.ranges_v, "response_2": 10.0})
+    check_plan(plan, dataclasses.replace(config, digitizer=digitizer))

@@ -62,7 +62,8 @@ def fired(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
         mp.setenv("XDG_RUNTIME_DIR", str(runtime))
         with redirect_stdout(out), redirect_stderr(err):
             rc = main(["shot", "--sim", "--config", str(folder / "rig.toml"), "--sim-config", str(folder / "sim.toml"),
-                       "--out", str(folder), "--pressure-bar", "2.0", "--yes", "--shot-name", "q1", "--draws", "50"])
+                       "--out", str(folder), "--pressure-bar", "2.0", "--yes", "--shot-name", "q1", "--draws", "50",
+                       "--accelerometer-2-model", "AYZ-3", "--accelerometer-2-serial", "SN0002"])
     shot = read_shot(folder / "q1.h5")
     return SimpleNamespace(rc=rc, out=out.getvalue(), err=err.getvalue(), shot=shot, truth=shot.meta.simulated_truth)
 
@@ -70,6 +71,7 @@ def fired(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
 def test_the_shot_records_four_channels_and_summarises_both_sensors(fired) -> None:
     assert fired.rc == 0 and "error" not in fired.err, fired.err
     assert set(fired.shot.raw.channels) == {"doppler", "response", "doppler_quadrature", "response_2"}
+    assert fired.shot.meta.sensor_identities == {"response_2": {"model": "AYZ-3", "serial": "SN0002"}}
     assert re.search(r"^results: .*f_n 2[67]\.\d+ ± 0\.\d+ kHz.*FBSD ±5 % \d", fired.out, flags=re.M), fired.out
     assert re.search(r"^response_2: .*f_n 3[23]\.\d+ ± 0\.\d+ kHz.*FBSD ±5 % \d", fired.out, flags=re.M), fired.out
 
@@ -153,7 +155,21 @@ def test_the_report_has_a_section_and_pages_per_sensor(fired, tmp_path: Path, ar
                artifacts_dir, "report-second-sensor", dpi=80)
     (html,) = write_report(report, [tmp_path / "q1.html"], pages=pages)
     text = html.read_text(encoding="utf-8")
-    assert "Shot q1, second sensor (response_2)" in text and "Second sensor, digitizer role response_2" in text
+    assert "Shot q1, second sensor (response_2)" in text
+    assert "AYZ-3, serial SN0002, second sensor, digitizer role response_2" in text  # the sensor recorded
+
+
+@pytest.mark.parametrize("argv", [
+    ["--accelerometer-2-model", "AYZ-3", "--accelerometer-2-serial", "SN0002"],  # the rig has no response_2
+    ["--accelerometer-2-model", "AYZ-3"],  # its serial missing
+])
+def test_a_second_accelerometer_the_rig_cannot_record_is_refused_before_anything_moves(
+        tmp_path: Path, argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    state = tmp_path / "state.json"
+    rc = main(["shot", "--sim", "--out", str(tmp_path), "--yes", "--sim-state-file", str(state), *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and ("response_2" in err or "--accelerometer-2" in err), err
+    assert not state.exists() and not list(tmp_path.glob("*.h5"))  # the simulator never started
 
 
 @pytest.mark.parametrize(("toml", "message"), [
