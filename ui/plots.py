@@ -246,6 +246,14 @@ def figure_tooltip(figure: Figure | None, scale: float = 1.0, unit: str = "") ->
             "U = half the interval (k ≈ 2)")
 
 
+class PlainLogAxis(pg.AxisItem):
+    """A logarithmic axis labelled in plain numbers: 0.1, 1, 10, 100 (kHz) and 20, 50 between
+    them, where pyqtgraph's own labels mix "1" with "10¹", "10²" and "2·10¹"."""
+
+    def logTickStrings(self, values: list[float], scale: float, spacing: float) -> list[str]:  # noqa: N802 (pyqtgraph's name)
+        return [f"{float(f'{10 ** float(v) * scale:.3g}'):f}".rstrip("0").rstrip(".") for v in values]
+
+
 class MagnitudePlot(pg.PlotWidget):
     """Normalised magnitude on a log-frequency axis (kHz), linear gain 0 … 2 so the ±5 % and
     ±10 % bands (shaded) are readable; FBSD edges as labelled vertical lines; a resonance peak
@@ -254,7 +262,7 @@ class MagnitudePlot(pg.PlotWidget):
     Y_MAX = 2.0
 
     def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "") -> None:
-        super().__init__()
+        super().__init__(axisItems={"bottom": PlainLogAxis("bottom")})
         configure_plot(self, title, "normalised magnitude", "frequency (kHz)")
         self.setLogMode(x=True, y=False)
         self.addLegend(offset=(5, -5), labelTextSize="8pt")
@@ -322,12 +330,13 @@ class ResultsStrip(QFrame):
         ("model", "Model"),
         ("sensitivity", "Sensitivity"),
         ("shock", "Shock sens."),
-        ("pulse", "Pulse"),
+        ("peak", "Peak"),
+        ("pulse", "Pulse width"),
+        ("band_limit", "DCM band"),
         ("check_rms", "DCM RMS error"),
         ("check_peak", "DCM peak error"),
-        ("band_limit", "DCM band"),
         ("noise_gain", "DCM noise gain"),
-    )
+    )  # peak and width apart: "489 km/s² (49904 g), 36.0 µs" in one cell was cut off at 1280 × 800
     COLUMNS = 3
 
     def __init__(self, parent: QWidget | None = None) -> None:
@@ -346,11 +355,13 @@ class ResultsStrip(QFrame):
             title.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
             value = QLabel("—")
             value.setStyleSheet("font-size: 10pt; font-weight: 600;")
+            value.setWordWrap(True)  # a figure wider than its column wraps at a space instead of being cut off
             value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
             layout.addWidget(title, row, 2 * col)
             layout.addWidget(value, row, 2 * col + 1)
             layout.setColumnStretch(2 * col + 1, 1)
             self.values[key] = value
+        self.grid = layout
         rows = -(-len(self.FIELDS) // self.COLUMNS)
         self.verdict = QLabel("")
         self.verdict.setWordWrap(True)
@@ -401,18 +412,31 @@ class ResultsStrip(QFrame):
                   "DC gain of the model; " + figure_tooltip(kf.sensitivity, unit=per))
         self._set("shock", format_figure(kf.shock_sensitivity, unit=per, decimals=4),
                   "ISO 16063-13 peak ratio; " + figure_tooltip(kf.shock_sensitivity, unit=per))
-        pulse = []
         if kf.peak_acceleration_m_s2 is not None and kf.peak_acceleration_m_s2.value is not None:
             peak = kf.peak_acceleration_m_s2.value  # as the report: km/s² and g
-            pulse.append(f"{peak / KILO:.0f} km/s² ({peak / G_M_S2:.0f} g)")
+            self._set("peak", f"{peak / KILO:.0f} km/s² ({peak / G_M_S2:.0f} g)",
+                      "peak acceleration of the reference pulse")
         if kf.pulse_width_s is not None and kf.pulse_width_s.value is not None:
-            pulse.append(f"{kf.pulse_width_s.value * 1e6:.1f} µs")
-        self._set("pulse", ", ".join(pulse) or "—", "peak acceleration, pulse width at 10 % of the peak (ISO 16063-22)")
+            self._set("pulse", f"{kf.pulse_width_s.value * 1e6:.1f} µs",
+                      "pulse width at 10 % of the peak (ISO 16063-22)")
         if check is not None:
             self._show_check(check)
         warnings = list(kf.warnings)
         self.warnings.setText("⚠ " + "; ".join(warnings) if warnings else "")
         self.warnings.setVisible(bool(warnings))
+        self._share_width()
+
+    def _share_width(self) -> None:
+        """Give each column of figures a share of the width in proportion to its longest figure
+        (equal shares wrapped "1.6073 ± 0.0091 × nominal" beside a half-empty column)."""
+        keys = [key for key, _caption in self.FIELDS]
+        for col in range(self.COLUMNS):
+            widths = []
+            for key in keys[col::self.COLUMNS]:
+                label = self.values[key]
+                label.ensurePolished()  # the style sheet's font
+                widths.append(label.fontMetrics().horizontalAdvance(label.text()))
+            self.grid.setColumnStretch(2 * col + 1, max(1, *widths))
 
     def _show_check(self, check: CompensationCheck) -> None:
         tip = "error over the pulse relative to its peak: without → with the DCM, on this shot itself"
@@ -613,7 +637,7 @@ class LiveTrend(pg.PlotWidget):
     last `span_s` seconds, fed by reading events."""
 
     def __init__(self, span_s: float = 60.0, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
+        super().__init__(parent, axisItems={"right": PlainLogAxis("right")})  # 10, 100, 1000 mbar, not 10¹, 10², 10³
         self.span_s = span_s
         self._t0 = time.monotonic()
         self.samples: deque[tuple[float, float, float]] = deque(maxlen=4000)

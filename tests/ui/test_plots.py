@@ -27,7 +27,8 @@ def test_pulse_figures_come_from_the_excitation_without_a_reduction(qtbot):
     strip = ResultsStrip()
     qtbot.addWidget(strip)
     strip.show_figures(kf)
-    assert strip.values["pulse"].text() == f"{peak / 1e3:.0f} km/s² ({peak / 9.80665:.0f} g), {width_10 * 1e6:.1f} µs"
+    assert strip.values["peak"].text() == f"{peak / 1e3:.0f} km/s² ({peak / 9.80665:.0f} g)"
+    assert strip.values["pulse"].text() == f"{width_10 * 1e6:.1f} µs"
 
 
 def test_the_strip_shows_value_plus_minus_u_and_the_dcm_verdict(qtbot):
@@ -69,3 +70,88 @@ def test_the_strip_shows_value_plus_minus_u_and_the_dcm_verdict(qtbot):
     assert v["band_limit"].text() == "≤ 40.0 kHz" and v["noise_gain"].text() == "×3.2"
     assert not strip.verdict.isHidden()
     assert strip.verdict.text() == "DCM NOT RECOMMENDED: the compensated RMS error exceeds the uncompensated one"
+
+
+def test_every_figure_of_the_strip_shows_whole_in_the_smallest_window(qtbot, make_panel, tmp_path, artifacts_dir):
+    """At the panel's smallest size (1280 × 800) a long shot's figures, each with its
+    uncertainty, fit their cells: "489 km/s² (49904 g), 36.0 µs" lost its unit under the next
+    column when peak and width shared one cell."""
+    from hopkinson.analysis.key_figures import KeyFigures
+    from hopkinson.reports.data import CompensationCheck
+    from PySide6.QtCore import QCoreApplication
+
+    from tests.ui.conftest import save_shot, unreachable_config
+
+    def fig(value: float, u: float) -> dict:
+        return {"value": value, "u": u, "interval": [value - 1.96 * u, value + 1.96 * u]}
+
+    results = {  # the widest figures a shot of a 100 000 g sensor gives (five-digit values ± U)
+        "model": {"order": 12, "dc_gain": 0.99993, "sample_interval_s": 1e-6},
+        "identification": {"fit_percent": 99.871, "main_mode": {"natural_frequency_hz": 126999.91,
+                                                                "damping_ratio": 0.050027}},
+        "reduction": {"response_unit": "m/s^2", "shock_sensitivity": 1.60731},
+        "excitation": {"peak_m_s2": 1.23456e6, "pulse_width_s": 111.8e-6},
+        "fbsd_hz": {"5": 25906.7, "10": 38162.3},
+        "uncertainty": {"method": "monte-carlo", "draws": 400, "coverage_probability": 0.95,
+                        "dc_gain": fig(0.99993, 0.00265), "shock_sensitivity": fig(1.60731, 0.00424),
+                        "main_mode": {"natural_frequency_hz": fig(126999.91, 0.2554),
+                                      "damping_ratio": fig(0.050027, 0.0000092)},
+                        "fbsd_hz": {"5": fig(25906.7, 0.714), "10": fig(38162.3, 0.918)}},
+        "dcm": {"compensated_fbsd_hz": {"5": 117720.0, "10": 121330.0}, "recommended": True,
+                "noise_gain": 0.241, "noise_gain_limit": 4.0, "band_limit_hz": 138200.0,
+                "check": {"rms_error_pct": {"uncompensated": 41.2, "compensated": 2.91},
+                          "peak_error_pct": {"uncompensated": 160.7, "compensated": -12.69}}},
+    }
+    window = make_panel(simulate=False, connect=False, config=unreachable_config(tmp_path)).window
+    strip = window.plots.strip
+    kf = KeyFigures.from_results(results)
+    strip.show_figures(kf, CompensationCheck.of(kf))
+    window.resize(1280, 800)
+    QCoreApplication.processEvents()
+    assert window.width() == 1280 and strip.isVisible()
+    assert "km/s²" in strip.values["peak"].text() and "µs" in strip.values["pulse"].text()
+    save_shot(window, artifacts_dir / "panel-strip-widest.png")
+    for key, label in strip.values.items():
+        assert label.text() != "—", key
+        assert_shows_whole(label, key)
+    # the simulated demo shot's figures (docs/panel.png) each on one line
+    results["identification"]["main_mode"]["natural_frequency_hz"] = 26999.91
+    results["uncertainty"]["main_mode"]["natural_frequency_hz"] = fig(26999.91, 0.23)
+    results["excitation"]["peak_m_s2"] = 4.894e5
+    results["dcm"]["check"]["peak_error_pct"]["uncompensated"] = 60.7
+    kf = KeyFigures.from_results(results)
+    strip.show_figures(kf, CompensationCheck.of(kf))
+    QCoreApplication.processEvents()
+    for key, label in strip.values.items():
+        assert_shows_whole(label, key, one_line=True)
+
+
+def assert_shows_whole(label, key: str, one_line: bool = False) -> None:
+    """The label's text, wrapped at spaces as the label wraps it, fits the label's rectangle
+    (`one_line`: without wrapping)."""
+    from PySide6.QtCore import QRect, Qt
+
+    room = label.contentsRect()
+    flags = int(Qt.AlignmentFlag.AlignLeft) | (int(Qt.TextFlag.TextWordWrap) if label.wordWrap() else 0)
+    need = label.fontMetrics().boundingRect(QRect(0, 0, room.width(), 10_000), flags, label.text())
+    assert need.width() <= room.width() and need.height() <= room.height(), \
+        f"{key}: {label.text()!r} needs {need.width()} × {need.height()} px, has {room.width()} × {room.height()}"
+    if one_line:
+        assert need.height() <= label.fontMetrics().lineSpacing() + 1, f"{key}: {label.text()!r} wraps"
+
+
+def test_log_axes_are_labelled_in_plain_numbers(qtbot):
+    """The magnitude plots' kHz axis read "1, 10¹, 10²" (pyqtgraph's mixed labels) and the
+    vacuum axis "10¹, 10², 10³ mbar": plain numbers throughout."""
+    from hopkinson.ui.plots import LiveTrend, MagnitudePlot
+
+    plot, trend = MagnitudePlot("m", "model", "with DCM"), LiveTrend()
+    for widget in (plot, trend):
+        qtbot.addWidget(widget)
+    f_hz = np.geomspace(50.0, 5e5, 200)
+    plot.show_curves(f_hz, 1 / np.abs(1 - (f_hz / 27e3) ** 2 + 0.1j * f_hz / 27e3), None, {"5": 5.9e3})
+    axis = plot.getAxis("bottom")
+    assert axis.logMode
+    assert axis.tickStrings([-1.0, 0.0, 1.0, 2.0, np.log10(20.0)], 1.0, 1.0) == ["0.1", "1", "10", "100", "20"]
+    vacuum = trend.getPlotItem().getAxis("right")
+    assert vacuum.logMode and vacuum.tickStrings([1.0, 2.0, 3.0], 1.0, 1.0) == ["10", "100", "1000"]
