@@ -10,7 +10,9 @@
    and every acquisition and channel setting; the amplifier's identity, settings and
    overload flag;
 4. prints each step as ok or FAIL; every failure names the instrument, the command and the
-   reply, and a line "fix:" says what to check.
+   reply, and a line "fix:" says what to check. A digitizer that does not answer its dialect's
+   commands is asked a plain *IDN? (IEEE 488.2, which every dialect answers): its maker then
+   names the dialect to set in rig.toml.
 
 It only reads (never the heartbeat, never a coil). While another process holds the rig, it
 asks only what can be shared (as `status` does). Exit code 0 when everything answered, 1
@@ -33,6 +35,10 @@ if TYPE_CHECKING:
     from hopkinson.rig.config import RigConfig
 
 VISA_SCAN_S = 10.0  # a VISA library's resource scan may broadcast on the network: bounded
+PLAIN_IDN_S = 3.0  # the plain *IDN? of a digitizer that did not answer its dialect: bounded
+# The maker in an *IDN? reply -> the dialect (drivers/scpi_dialect.py) that speaks its commands.
+DIALECT_BY_MAKER = (("KEYSIGHT", "keysight"), ("AGILENT", "keysight"), ("TEKTRONIX", "tektronix"),
+                    ("LECROY", "lecroy"), ("TELEDYNE", "lecroy"))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -155,7 +161,57 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
             steps.run("settings against rig.toml", lambda: _same(configured().differences(settings)))
         steps.run("acquisition state", dig.acquisition_state)
 
-    return _probe(config, "digitizer", body)
+    steps = _probe(config, "digitizer", body)
+    opened = [s for s in steps.steps if s["step"] == "open"]
+    if opened and not opened[0]["ok"]:  # reached or not: a plain *IDN? tells what answers there
+        identity = plain_identity(config)
+        if identity:
+            steps.steps.append({"step": "identity by a plain *IDN? (IEEE 488.2)", "ok": True, "value": identity})
+            dialect = dialect_for(identity)
+            current = str(getattr(config.digitizer, "dialect", ""))
+            if dialect is not None and dialect != current:
+                opened[0]["fix"] = (f"the instrument is a {identity.split(',')[0].strip()}: set [digitizer] dialect = "
+                                    f"\"{dialect}\" in rig.toml (it is \"{current}\") and name its channels as "
+                                    "that dialect does")
+    return steps
+
+
+def dialect_for(identity: str) -> str | None:
+    """The dialect that speaks to an instrument of this *IDN? reply's maker, if one does."""
+    maker = identity.split(",")[0].upper()
+    return next((dialect for name, dialect in DIALECT_BY_MAKER if name in maker), None)
+
+
+def plain_identity(config: RigConfig) -> str | None:
+    """The digitizer's reply to a plain *IDN? through pyvisa (the configured library, resource
+    and terminations), or None when nothing answers within PLAIN_IDN_S."""
+    d = config.digitizer
+    found: list[str] = []
+
+    def ask() -> None:
+        try:
+            import pyvisa
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                manager = pyvisa.ResourceManager(d.visa_library)
+            try:
+                instrument = manager.open_resource(d.resource, read_termination=d.read_termination,
+                                                   write_termination=d.write_termination,
+                                                   timeout=int(1000 * PLAIN_IDN_S))
+                try:
+                    found.append(str(instrument.query("*IDN?")).strip()[:200])
+                finally:
+                    instrument.close()
+            finally:
+                manager.close()
+        except Exception:  # nothing (sensible) answers: the open step's failure already says why
+            return
+
+    thread = threading.Thread(target=ask, name="probe-idn", daemon=True)
+    thread.start()
+    thread.join(PLAIN_IDN_S + 1.0)
+    return found[0] if found and found[0] else None
 
 
 def _same(differences: list[str]) -> str:

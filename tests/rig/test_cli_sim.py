@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import signal
@@ -292,3 +293,29 @@ def test_sim_on_a_busy_port_is_a_clear_error(tmp_path: Path, capsys: pytest.Capt
     err = capsys.readouterr().err
     assert err.startswith(f"hopkinson: error: cannot start the simulated rig ({sim_toml}):")
     assert err.count("\n") == 1 and "Address already in use" in err
+
+
+@pytest.mark.parametrize(("dialect", "maker"), [("lecroy", "LECROY"), ("keysight", "KEYSIGHT TECHNOLOGIES")])
+def test_probe_names_the_dialect_of_a_digitizer_that_does_not_speak_the_configured_one(
+        tmp_path: Path, dialect: str, maker: str) -> None:
+    # A rig.toml left at the generic dialect, wired to another maker's scope: the open fails on
+    # the generic commands; a plain *IDN? (which every dialect answers) names the dialect to set.
+    from hopkinson.drivers.sim.faults import FaultSet
+    from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
+    from hopkinson.rig.cli.probe import _probe_digitizer
+    from hopkinson.rig.config import load_rig_config
+
+    server = SimDigitizerServer(lambda settings: None, FaultSet(), dialect=dialect)
+    server.start()
+    try:
+        path = rig_toml_for({"modbus_port": 1, "visa_resource": server.resource, "serial_port": "/dev/null"}, tmp_path)
+        config = load_rig_config(path)
+        config = dataclasses.replace(config, digitizer=dataclasses.replace(config.digitizer, timeout_s=0.5))
+        assert config.digitizer.dialect == "generic"
+        steps = _probe_digitizer(config).steps
+    finally:
+        server.stop()
+    opened = next(s for s in steps if s["step"] == "open")
+    assert not opened["ok"] and f'set [digitizer] dialect = "{dialect}" in rig.toml (it is "generic")' in opened["fix"]
+    plain = steps[-1]
+    assert plain["ok"] and plain["step"].startswith("identity by a plain *IDN?") and plain["value"].startswith(maker)
