@@ -10,6 +10,7 @@ identification fitted them, and (in simulation) its error against the true accel
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -111,6 +112,16 @@ class CompensationCheck:
             latency_s=kf.dcm_latency_s,
             compensated_peak=kf.compensated_peak,
         )
+
+
+    def other_warnings(self, warnings: Sequence[str]) -> list[str]:
+        """The shot's warnings less those that only repeat the not-recommended verdict, which
+        the report and the panel show on a line of its own (the analysis words it up to three
+        times: the verdict, "DCM not recommended for this shot: …", "DCM: the band widening …")."""
+        reason = (self.not_recommended_reason or "").strip()
+        if self.recommended is not False or not reason:
+            return list(warnings)
+        return [w for w in warnings if not (w.startswith("DCM") and reason in w)]
 
 
 def _number(value: Any) -> float | None:

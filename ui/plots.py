@@ -421,7 +421,7 @@ class ResultsStrip(QFrame):
                       "pulse width at 10 % of the peak (ISO 16063-22)")
         if check is not None:
             self._show_check(check)
-        warnings = list(kf.warnings)
+        warnings = check.other_warnings(kf.warnings) if check is not None else list(kf.warnings)
         self.warnings.setText("⚠ " + "; ".join(warnings) if warnings else "")
         self.warnings.setVisible(bool(warnings))
         self._share_width()

@@ -537,3 +537,17 @@ def test_report_input_errors(tmp_path: Path, analyses: dict[str, ShotAnalysis]) 
         write_report(report, [tmp_path / "missing" / "r.pdf"])
     with pytest.raises(AnalysisError, match="no shots"):
         write_report(CalibrationReport("r", {}, []), [tmp_path / "r.pdf"])
+
+
+def test_the_dcm_verdict_is_said_once_not_repeated_as_warnings(analyses: dict[str, ShotAnalysis]) -> None:
+    # A shot the DCM cannot help listed "NOT RECOMMENDED: nothing to compensate: …", then the
+    # same words twice more as warnings ("DCM: the band widening nothing to compensate: …").
+    reason = "nothing to compensate: no pole of the model is one the shot supports"
+    results = contract_results(analyses["a1"], recommended=False)
+    results["dcm"]["not_recommended_reason"] = reason
+    results["warnings"] = [f"DCM: the band widening {reason}", f"DCM not recommended for this shot: {reason}",
+                           "orders above 7 were not tried: the supported band holds only 13 frequency bins"]
+    rows = results_rows(entry("s", analyses["a1"], results=results))
+    assert sum(reason in text for _label, text in rows) == 1
+    assert ("DCM", f"NOT RECOMMENDED: {reason}") in rows
+    assert [text for label, text in rows if label == "warning"][-1].startswith("orders above 7")

@@ -155,3 +155,21 @@ def test_log_axes_are_labelled_in_plain_numbers(qtbot):
     assert axis.tickStrings([-1.0, 0.0, 1.0, 2.0, np.log10(20.0)], 1.0, 1.0) == ["0.1", "1", "10", "100", "20"]
     vacuum = trend.getPlotItem().getAxis("right")
     assert vacuum.logMode and vacuum.tickStrings([1.0, 2.0, 3.0], 1.0, 1.0) == ["10", "100", "1000"]
+
+
+def test_the_strip_says_the_dcm_verdict_once(qtbot):
+    from hopkinson.analysis.key_figures import KeyFigures
+    from hopkinson.reports.data import CompensationCheck
+    from hopkinson.ui.plots import ResultsStrip
+
+    reason = "nothing to compensate: no pole of the model is one the shot supports"
+    results = {"model": {"order": 2, "dc_gain": 1.0, "sample_interval_s": 1e-6},
+               "warnings": [f"DCM: the band widening {reason}", f"DCM not recommended for this shot: {reason}",
+                            "the pulse excites the sensor's resonance"],
+               "dcm": {"recommended": False, "not_recommended_reason": reason, "noise_gain": 0.2}}
+    strip = ResultsStrip()
+    qtbot.addWidget(strip)
+    kf = KeyFigures.from_results(results)
+    strip.show_figures(kf, CompensationCheck.of(kf))
+    assert strip.verdict.text() == f"DCM NOT RECOMMENDED: {reason}"
+    assert strip.warnings.text() == "⚠ the pulse excites the sensor's resonance"
