@@ -818,25 +818,46 @@ def _claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], mod
 
 
 def _lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: float) -> list[str]:
-    """Whether the response leads the reference: the same order with the delay free to go
-    negative, when that fits significantly better (the causal model cannot follow a lead)."""
-    if fit.delay > LEAD_WARNING_SAMPLES:
+    """Whether the response leads the reference. Two looks: the same order with the delay free
+    to go negative fits significantly better (the causal model cannot follow the lead); or the
+    causal model's whole group delay at low frequencies (delay + B's − A's) is negative. The
+    second catches what the first misses: the delay and the zeros share a flat valley of the
+    cost, so B's zeros take up the lead (a phase advance) as well as the free delay would,
+    and the fitted delay alone says nothing. A sensor (modes above the band) lags at low
+    frequencies by Σ 2ζ/ω_n: a whole lead is the channels' skew. (A lead smaller than the
+    sensor's own lag cannot be told from it.)"""
+    lead = _low_frequency_lead(fit)
+    if fit.delay <= LEAD_WARNING_SAMPLES:
+        problem = OrderProblem(data, fit.order, "free")
+        free = problem.solve(replace(fit, cost=math.nan), 60)
+        gain = fit.cost - free.cost
+        dof = 2 * data.bins - problem.size
+        if free.delay < -LEAD_WARNING_SAMPLES and dof > 0 and gain > 0:
+            critical = f_quantile(1.0 - significance, 1, dof)
+            if (2.0 * gain) / (2.0 * free.cost / dof) > critical:
+                lead = max(lead, -free.delay)
+    if lead <= LEAD_WARNING_SAMPLES:
         return []
-    problem = OrderProblem(data, fit.order, "free")
-    free = problem.solve(replace(fit, cost=math.nan), 60)
-    gain = fit.cost - free.cost
-    dof = 2 * data.bins - problem.size
-    if free.delay >= -LEAD_WARNING_SAMPLES or dof <= 0 or gain <= 0:
-        return []
-    critical = f_quantile(1.0 - significance, 1, dof)
-    if (2.0 * gain) / (2.0 * free.cost / dof) <= critical:
-        return []
-    lead = -free.delay
     return [
         f"the response leads the reference by about {lead:.2g} samples ({lead * dt * 1e6:.3g} µs): no sensor answers "
         "before it is excited, so the channels are skewed (digitizer deskew, cable lengths, trigger alignment); the "
         "model is kept causal (delay ≥ 0) and absorbs the lead into its zeros, which biases it — correct the skew"
     ]
+
+
+def _low_frequency_lead(fit: OrderFit) -> float:
+    """The causal model's lead at low frequencies, samples (0 when it lags): minus its group
+    delay at DC, τ + Σk·b_k/Σb_k − Σk·a_k/Σa_k. 0 when B or A nearly vanishes at DC (a
+    differentiating model: no DC group delay to judge by)."""
+    def group_delay(p: np.ndarray) -> float | None:
+        total = float(np.sum(p))
+        if abs(total) <= 1e-6 * float(np.sum(np.abs(p))):
+            return None
+        return float(np.dot(np.arange(p.size), p)) / total
+    gd_b, gd_a = group_delay(np.asarray(fit.b, dtype=float)), group_delay(np.asarray(fit.a, dtype=float))
+    if gd_b is None or gd_a is None:
+        return 0.0
+    return max(0.0, -(fit.delay + gd_b - gd_a))
 
 
 # ------------------------------------------------------------------------------ helpers
