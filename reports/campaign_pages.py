@@ -15,7 +15,7 @@ from hopkinson.reports.data import G_M_S2, ShotEntry
 from hopkinson.reports.layout import plain_log_ticks, plot_page, table_in_axes
 from hopkinson.reports.shot_pages import BAND_LEVELS, frequency_grid, normalised
 from hopkinson.reports.statistics import CampaignStatistics
-from hopkinson.reports.tables import fmt, sine_rows
+from hopkinson.reports.tables import fmt, sig, sine_rows, to_decimals_of
 from matplotlib.figure import Figure
 
 
@@ -32,9 +32,9 @@ def cross_validation_page(stats: CampaignStatistics, entries: Sequence[ShotEntry
         im = ax_cv.imshow(m, cmap="viridis", vmin=min(low, 99.0), vmax=100.0)
         for i in range(m.shape[0]):
             for j in range(m.shape[1]):
-                if np.isfinite(m[i, j]):
+                if np.isfinite(m[i, j]):  # black on the light end of the scale, white on the dark end
                     ax_cv.text(j, i, f"{m[i, j]:.2f}", ha="center", va="center", fontsize=7,
-                               color="white" if m[i, j] < (low + 100) / 2 else "black")
+                               color="black" if luminance(im.cmap(im.norm(m[i, j]))) > 0.45 else "white")
         ax_cv.set_xticks(range(len(labels)), labels, rotation=45, ha="right", fontsize=7)
         ax_cv.set_yticks(range(len(labels)), labels, fontsize=7)
         fig.colorbar(im, ax=ax_cv, label="fit (%)", shrink=0.8)
@@ -48,7 +48,7 @@ def cross_validation_page(stats: CampaignStatistics, entries: Sequence[ShotEntry
     def series(key: str, scale: float) -> np.ndarray:
         return np.array([np.nan if f[key] is None else f[key] / scale for f in stats.figures])
 
-    def with_spread(ax: Any, key: str, scale: float, colour: str, label: str) -> None:
+    def with_spread(ax: Any, key: str, scale: float, colour: str, label: str, unit: str) -> None:
         y = series(key, scale)
         s = stats.spread[key]
         if s["mean"] is None:
@@ -57,26 +57,33 @@ def cross_validation_page(stats: CampaignStatistics, entries: Sequence[ShotEntry
         ax.plot(peaks, y, "o", color=colour, label=label)
         mean = s["mean"] / scale
         std = (s["std"] or 0.0) / scale
-        ax.axhline(mean, color=colour, lw=1, label=f"mean {fmt(mean, digits=5)}")
+        # the mean to the decimals of the std, both with the unit ("mean 27, ± 1 std (4.53e-05)" before)
+        ax.axhline(mean, color=colour, lw=1, label=f"mean {to_decimals_of(mean, std or None)} {unit}")
         if s["std"] is not None:
-            ax.axhspan(mean - std, mean + std, color=colour, alpha=0.12, label=f"± 1 std ({fmt(std, digits=3)})")
+            ax.axhspan(mean - std, mean + std, color=colour, alpha=0.12, label=f"± 1 std ({sig(std)} {unit})")
         # At least ±1 % of the mean in view, so a tiny spread looks tiny.
         half = max(3.0 * std, 0.01 * abs(mean), float(np.nanmax(np.abs(y - mean))) * 1.2)
         ax.set_ylim(mean - half, mean + half)
         ax.ticklabel_format(axis="y", useOffset=False)
         ax.legend(fontsize=7)
 
-    with_spread(ax_fn, "natural_frequency_hz", 1e3, "tab:blue", "f_n per shot")
+    with_spread(ax_fn, "natural_frequency_hz", 1e3, "tab:blue", "f_n per shot", "kHz")
     ax_fn.set_xlabel("peak acceleration (g)")
     ax_fn.set_ylabel("natural frequency f_n (kHz)")
     ax_fn.set_title("Main resonance against the shock level", fontsize=9)
     ax_fn.grid(alpha=0.3)
-    with_spread(ax_s, "shock_sensitivity", 1.0, "tab:green", "S_sh per shot")
+    with_spread(ax_s, "shock_sensitivity", 1.0, "tab:green", "S_sh per shot", "× nominal")
     ax_s.set_xlabel("peak acceleration (g)")
     ax_s.set_ylabel("shock sensitivity (× nominal)")
     ax_s.set_title("Shock sensitivity (ISO 16063-13) against the shock level: linearity", fontsize=9)
     ax_s.grid(alpha=0.3)
     return fig
+
+
+def luminance(rgba: Sequence[float]) -> float:
+    """Relative luminance (ITU-R BT.709 weights) of a colour, 0 (black) … 1 (white)."""
+    r, g, b = rgba[:3]
+    return 0.2126 * r + 0.7152 * g + 0.0722 * b
 
 
 def campaign_responses_page(entries: Sequence[ShotEntry]) -> Figure:

@@ -551,3 +551,29 @@ def test_the_dcm_verdict_is_said_once_not_repeated_as_warnings(analyses: dict[st
     assert sum(reason in text for _label, text in rows) == 1
     assert ("DCM", f"NOT RECOMMENDED: {reason}") in rows
     assert [text for label, text in rows if label == "warning"][-1].startswith("orders above 7")
+
+
+def test_the_spread_plots_give_mean_and_std_with_their_unit(campaign_report) -> None:
+    # The legend read "mean 27" and "± 1 std (4.53e-05)": no unit, scientific notation.
+    _report, pages = campaign_report
+    fig = dict(pages)["Campaign: cross-validation and spread"]
+    texts = [t.get_text() for ax in fig.axes if ax.get_legend() is not None for t in ax.get_legend().get_texts()]
+    mean = next(t for t in texts if t.startswith("mean "))
+    std = next(t for t in texts if t.startswith("± 1 std"))
+    assert mean.endswith(" kHz") and std.endswith(" kHz)") and not SCIENTIFIC.search(mean + std), (mean, std)
+    assert len(mean.split()[1].split(".")[1]) == len(std.split()[3].split(".")[1])  # to the decimals of the std
+
+
+def test_the_cross_validation_numbers_contrast_with_their_cells(campaign_report) -> None:
+    # Fits of 99.7-99.9 % on a 99-100 % scale sit on its light green-yellow end: the numbers were
+    # white on it (the switch was at the midpoint of the data, not of the colour scale).
+    _report, pages = campaign_report
+    ax = dict(pages)["Campaign: cross-validation and spread"].axes[0]
+    (image,) = ax.get_images()
+    checked = 0
+    for text in ax.texts:
+        rgb = image.cmap(image.norm(float(text.get_text())))[:3]
+        light = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2] > 0.45
+        assert text.get_color() == ("black" if light else "white"), text.get_text()
+        checked += 1
+    assert checked == 4
