@@ -111,7 +111,7 @@ class CampaignTab(QWidget):
         for b in (self.run_button, self.pause_button, self.resume_button):
             b.setMinimumWidth(80)
         self.progress = QProgressBar()
-        self.progress.setFormat("%v of %m shots done")
+        self.progress.setFormat("no plan loaded")  # not "0 of 1 shots done" before there is a plan
         self.progress.setRange(0, 1)
         self.progress.setValue(0)
         self.current_label = QLabel("")
@@ -233,6 +233,7 @@ class CampaignTab(QWidget):
                                         f"No. {shot.projectile}", "PLANNED")):
                 self.table.setItem(row, col, QTableWidgetItem(text))
             self.states[shot.id] = "PLANNED"
+        self.progress.setFormat("%v of %m shots done")
         self.progress.setRange(0, max(1, len(plan.shots)))
         self._update_progress()
 

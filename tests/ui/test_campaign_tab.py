@@ -55,8 +55,10 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     w = panel.window
     tab = w.campaign_tab
     w.tabs.setCurrentWidget(tab)
+    assert tab.progress.text() == "no plan loaded"  # it read "0 of 1 shots done" without a plan
     tab.load_plan(write_plan(tmp_path))
     assert column(tab, 1) == ["s001-r1", "s001-r2", "s002-r1"] and set(column(tab, 4)) == {"PLANNED"}
+    assert tab.progress.text() == "0 of 3 shots done"
     assert tab.run_button.isEnabled() and not tab.pause_button.isEnabled()
 
     # Run, and Pause while the first shot runs: the campaign stops after that shot
