@@ -257,7 +257,8 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
     if kf is None or not kf.budget:
         return ["source", "sensitivity"], []
     items = sorted(kf.budget, key=lambda b: -(_budget_share(b, "dc_gain") or 0.0))
-    columns = [c for c in BUDGET_FIGURES if any(_budget_share(b, c[0]) is not None for b in items)]
+    columns = [c for c in BUDGET_FIGURES if any(_budget_share(b, c[0]) is not None for b in items)
+               and _reported(kf, c[2])]  # no column for a figure the shot does not report (an S_sh without S_sh)
     header = ["source"] + [label for _key, label, _attr in columns]
 
     def pct(value: float | None) -> str:
@@ -274,6 +275,12 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
         combined.append(pct(figure.u_rel if figure is not None and attr not in kf.fbsd_bounds else None))
     rows.append(["all sources (Monte Carlo)"] + combined)
     return header, rows
+
+
+def _reported(kf: KeyFigures, attr: str) -> bool:
+    """Whether the shot reports the figure (a KeyFigures field, or an FBSD level key)."""
+    figure = kf.fbsd_hz.get(attr) if attr in ("5", "10") else getattr(kf, attr)
+    return figure is not None and figure.value is not None
 
 
 def _budget_share(item: dict[str, Any], key: str) -> float | None:

@@ -350,6 +350,7 @@ def test_the_budget_gives_each_sources_share_of_each_figure(analyses: dict[str, 
     # A metrologist reads the budget per figure: a source that dominates the sensitivity (the
     # reference chain) may be nothing for f_n, where the response noise dominates.
     results = contract_results(analyses["a1"], check=False)
+    results["reduction"] = {**(results.get("reduction") or {}), "shock_sensitivity": 1.6}
     results["uncertainty"]["budget"] = [
         {"source": "response noise", "u_rel": 0.0001,
          "u_rel_by_figure": {"dc_gain": 0.0001, "natural_frequency_hz": 0.0003, "fbsd_5_hz": 0.0002}},
@@ -367,6 +368,10 @@ def test_the_budget_gives_each_sources_share_of_each_figure(analyses: dict[str, 
     assert float(rows[3][1]) == pytest.approx(100 * u["dc_gain"]["u"] / u["dc_gain"]["value"], rel=0.05)
     assert float(rows[3][3]) == pytest.approx(100 * u["main_mode"]["natural_frequency_hz"]["u"]
                                               / u["main_mode"]["natural_frequency_hz"]["value"], rel=0.05)
+    # a figure the shot does not report (no S_sh without a shock sensitivity) gets no column
+    del results["reduction"]["shock_sensitivity"]
+    header, rows = budget_rows(entry("s", analyses["a1"], results=results))
+    assert header == ["source", "sensitivity", "f_n", "FBSD ±5 %"] and rows[0] == ["amplifier gain", "0.20", "—", "—"]
 
 
 def test_combination_across_shots_closed_form() -> None:
