@@ -283,7 +283,9 @@ class MagnitudePlot(pg.PlotWidget):
             line.setVisible(False)
             self.addItem(line)
             self.fbsd_lines[key] = line
-        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 1))
+        # on a white ground: the resonance's rising curve runs through the note's corner of the plot
+        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 1), fill=(255, 255, 255, 220))
+        self.peak_note.setZValue(20)
         self.addItem(self.peak_note, ignoreBounds=True)
         self.setYRange(0, self.Y_MAX, padding=0)
 

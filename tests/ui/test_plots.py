@@ -150,6 +150,8 @@ def test_log_axes_are_labelled_in_plain_numbers(qtbot):
         qtbot.addWidget(widget)
     f_hz = np.geomspace(50.0, 5e5, 200)
     plot.show_curves(f_hz, 1 / np.abs(1 - (f_hz / 27e3) ** 2 + 0.1j * f_hz / 27e3), None, {"5": 5.9e3})
+    assert plot.peak_note.toPlainText().startswith("peak ×")  # above the scale: said in words,
+    assert plot.peak_note.fill.color().alpha() > 200  # on a white ground the curve does not cross out
     axis = plot.getAxis("bottom")
     assert axis.logMode
     assert axis.tickStrings([-1.0, 0.0, 1.0, 2.0, np.log10(20.0)], 1.0, 1.0) == ["0.1", "1", "10", "100", "20"]
