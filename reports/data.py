@@ -114,6 +114,14 @@ class CompensationCheck:
         )
 
 
+    @property
+    def not_recommended_text(self) -> str | None:
+        """Why the DCM is not recommended (a general reason when the analysis gave none); None
+        when it is recommended or the results do not say."""
+        if self.recommended is not False:
+            return None
+        return self.not_recommended_reason or "compensation does not improve this shot"
+
     def other_warnings(self, warnings: Sequence[str]) -> list[str]:
         """The shot's warnings less those that only repeat the not-recommended verdict, which
         the report and the panel show on a line of its own (the analysis words it up to three

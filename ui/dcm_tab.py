@@ -154,6 +154,10 @@ class DcmTab(QWidget):
         self.message = QLabel("")
         self.message.setWordWrap(True)
         self.message.setStyleSheet("color: #b3261e;")
+        self.verdict = QLabel("")  # the analysis' verdict on the shot's own DCM (the Shot tab says it too)
+        self.verdict.setWordWrap(True)
+        self.verdict.setStyleSheet("color: #b3261e; font-weight: 700;")
+        self.verdict.setVisible(False)
 
         self.model_fbsd = {k: QLabel("—") for k in LEVEL_KEYS}
         self.compensated_fbsd = {k: QLabel("—") for k in LEVEL_KEYS}
@@ -181,6 +185,7 @@ class DcmTab(QWidget):
         self.source_label.setStyleSheet("color: #3c4043;")
         controls.addWidget(section_title("Design"))
         controls.addWidget(self.source_label)
+        controls.addWidget(self.verdict)
         form = QFormLayout()
         form.addRow("Ratio r", self.ratio)
         form.addRow("", self.ratio_slider)
@@ -267,10 +272,16 @@ class DcmTab(QWidget):
     # -- input ----------------------------------------------------------------------------------
     def set_model(self, model: DiscreteModel, ratio: float, damping: float, extra_poles: np.ndarray | list = (),
                   record: Record | None = None, source: str = "", shot_path: Path | None = None,
-                  support: ShotSupport | None = None, band_limit_hz: float | None = None) -> None:
+                  support: ShotSupport | None = None, band_limit_hz: float | None = None,
+                  not_recommended_reason: str | None = None) -> None:
         """Design for `model`, starting from the shot's own DCM settings (its support and band
-        limit when given: the shot's own DCM is then designed again)."""
+        limit when given: the shot's own DCM is then designed again). `not_recommended_reason`:
+        the analysis found the shot's DCM not recommended, and why (shown above the design, where
+        the DCM is exported)."""
         self.model, self.record, self.source, self.shot_path = model, record, source, shot_path
+        self.verdict.setText("" if not_recommended_reason is None else
+                             f"The shot's DCM is NOT RECOMMENDED: {not_recommended_reason}")
+        self.verdict.setVisible(not_recommended_reason is not None)
         self.support, self.band_limit_hz = support, band_limit_hz
         extra_text = ", ".join(format_complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel())
         self._initial = (float(ratio), float(damping), extra_text)

@@ -448,7 +448,9 @@ class MainWindow(QMainWindow):
             self.dcm_tab.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
                                    [complex(*p) for p in design.get("extra_poles", [])], view.record,
                                    source=view.path.name if view.path else "", shot_path=view.path,
-                                   support=view.support, band_limit_hz=view.band_limit_hz)
+                                   support=view.support, band_limit_hz=view.band_limit_hz,
+                                   not_recommended_reason=(view.compensation.not_recommended_text
+                                                           if view.compensation else None))
         self.shot_view_shown.emit(view)
 
     def export_report(self, path: Path) -> None:

@@ -450,9 +450,8 @@ class ResultsStrip(QFrame):
             self._set("noise_gain", f"×{check.noise_gain:.3g}" + (f" (limit ×{check.noise_gain_limit:.3g})"
                                                                   if check.noise_gain_limit else ""),
                       "RMS amplification of white noise by the DCM at the analysis rate")
-        if check.recommended is False:
-            self.verdict.setText("DCM NOT RECOMMENDED: " + (check.not_recommended_reason or
-                                                             "compensation does not improve this shot"))
+        if check.not_recommended_text is not None:
+            self.verdict.setText(f"DCM NOT RECOMMENDED: {check.not_recommended_text}")
             self.verdict.setVisible(True)
 
 

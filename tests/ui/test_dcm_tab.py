@@ -121,3 +121,11 @@ def test_no_model_means_no_design(qtbot, tab):
     assert tab.model is None and not tab.ratio.isEnabled() and not tab.export_dcm_button.isEnabled()
     qtbot.mouseClick(tab.reset_button, Qt.MouseButton.LeftButton)  # disabled: nothing happens
     assert tab.design is None
+
+
+def test_the_shots_verdict_shows_only_for_a_dcm_not_recommended(qtbot, tab):
+    model = second_order_model(FN_HZ, ZETA)
+    tab.set_model(model, 3.0, 0.707, not_recommended_reason="nothing to compensate")
+    assert tab.verdict.isVisible() and tab.verdict.text() == "The shot's DCM is NOT RECOMMENDED: nothing to compensate"
+    tab.set_model(model, 3.0, 0.707)  # the next shot's DCM is recommended: no stale verdict
+    assert not tab.verdict.isVisible() and tab.verdict.text() == ""

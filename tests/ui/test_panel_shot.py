@@ -231,5 +231,8 @@ def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel,
     assert strip.values["check_rms"].text() == "4.95 % → 6.1 %"
     save_shot(w, artifacts_dir / "panel-shot-uncertainty.png")
     w.tabs.setCurrentWidget(w.dcm_tab)
+    # the DCM tab, where the DCM is exported, says the shot's DCM is not recommended (it said nothing)
+    assert w.dcm_tab.verdict.isVisible()
+    assert w.dcm_tab.verdict.text().startswith("The shot's DCM is NOT RECOMMENDED: the compensated RMS error (6.1 %)")
     save_shot(w, artifacts_dir / "panel-dcm-uncertainty.png")
 
