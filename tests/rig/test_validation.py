@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hopkinson.analysis.params import AnalysisParams
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import AwaitingConfirmation, RigEvent
 from hopkinson.rig.instruments import make_instrument
 from hopkinson.rig.plan import check_shot_count, load_plan
 from hopkinson.rig.sequencer import FireAuthorisation
-from hopkinson.analysis.params import AnalysisParams
 from hopkinson.rig.shot import analyse_and_record, analyse_raw
 from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, read_shot, write_raw_shot
 from hopkinson.rig.sim_session import sim_session
