@@ -63,8 +63,11 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-COLUMNS = ("#", "Shot", "Pressure", "Proj.", "State", "Order", "f_n", "ζ", "FBSD ±5 %", "FBSD ±10 %",
-           "Shock sens.", "Shot file", "DCM")
+# units in the headers, the DCM's verdict before the (long) file name, a figure's ± U under its
+# value (_show_results): at 1280 × 800 the verdict was off the right edge, behind a scroll bar
+COLUMNS = ("#", "Shot", "p (bar)", "Proj.", "State", "Order", "f_n (kHz)", "ζ", "FBSD ±5 %\n(kHz)",
+           "FBSD ±10 %\n(kHz)", "Shock\nsens.", "DCM", "Shot file")
+DCM_COLUMN, FILE_COLUMN = COLUMNS.index("DCM"), COLUMNS.index("Shot file")
 _STATE_COLOURS = {"ANALYSED": "#1e6b2e", "ANALYSIS_FAILED": "#8a5a00", "ABORTED": "#b3261e", "UNKNOWN": "#b3261e",
                   "SKIPPED": "#5f6368", "FIRING": "#1f6fd1", "RECORDED": "#1f6fd1"}
 _DONE = frozenset(state.value for state in DONE_STATES)
@@ -122,6 +125,7 @@ class CampaignTab(QWidget):
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)
         self.table.verticalHeader().setVisible(False)
+        self.table.verticalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.table.setAlternatingRowColors(True)
@@ -229,7 +233,7 @@ class CampaignTab(QWidget):
             row = self.table.rowCount()
             self.table.insertRow(row)
             self.rows[shot.id] = row
-            for col, text in enumerate((str(shot.index + 1), shot.id, f"{shot.pressure_bar:g} bar",
+            for col, text in enumerate((str(shot.index + 1), shot.id, f"{shot.pressure_bar:g}",
                                         f"No. {shot.projectile}", "PLANNED")):
                 self.table.setItem(row, col, QTableWidgetItem(text))
             self.states[shot.id] = "PLANNED"
@@ -378,28 +382,27 @@ class CampaignTab(QWidget):
         row = self.rows.get(sid)
         if row is None:
             return
-        self.table.setItem(row, 11, QTableWidgetItem(path.name))
+        self.table.setItem(row, FILE_COLUMN, QTableWidgetItem(path.name))
         if not results or "model" not in results:
             return
         kf = KeyFigures.from_results(results)  # the shot's key figures, as the Shot tab and the report show them
         cells = {
             5: (str(kf.order) if kf.order is not None else "—", ""),
-            6: (format_figure(kf.natural_frequency_hz, KILO, "kHz"), figure_tooltip(kf.natural_frequency_hz, KILO, "kHz")),
+            6: (format_figure(kf.natural_frequency_hz, KILO), figure_tooltip(kf.natural_frequency_hz, KILO, "kHz")),
             7: (format_figure(kf.damping_ratio, decimals=4), figure_tooltip(kf.damping_ratio)),
-            8: (kf.fbsd_text("5", KILO) if "5" in kf.fbsd_bounds else format_figure(kf.fbsd_hz.get("5"), KILO, "kHz"),
-                figure_tooltip(kf.fbsd_hz.get("5"), KILO, "kHz")),
-            9: (kf.fbsd_text("10", KILO) if "10" in kf.fbsd_bounds else format_figure(kf.fbsd_hz.get("10"), KILO, "kHz"),
-                figure_tooltip(kf.fbsd_hz.get("10"), KILO, "kHz")),
+            8: _fbsd_cell(kf, "5"),
+            9: _fbsd_cell(kf, "10"),
             10: (format_figure(kf.shock_sensitivity, decimals=4), figure_tooltip(kf.shock_sensitivity)),
         }
         check = CompensationCheck.of(kf)
         if check is not None and check.recommended is not None:
             reason = check.not_recommended_reason or "compensation does not improve this shot"
-            cells[12] = ("recommended", "") if check.recommended else ("NOT recommended", reason)
+            cells[DCM_COLUMN] = ("recommended", "") if check.recommended else ("NOT recommended", reason)
         for col, (text, tip) in cells.items():
-            item = QTableWidgetItem(text)
+            # value over ± U: in one line the figures pushed the DCM's verdict out of view
+            item = QTableWidgetItem(text.replace(" ± ", "\n± "))
             item.setToolTip(tip)
-            if col == 12 and check is not None and check.recommended is False:
+            if col == DCM_COLUMN and check is not None and check.recommended is False:
                 item.setForeground(QBrush(QColor("#b3261e")))
             self.table.setItem(row, col, item)
 
@@ -453,3 +456,13 @@ def _journal_summary(run: RunFolder, plan: CampaignPlan) -> dict[str, Any]:
         return journal.summary()
     finally:
         journal.close()
+
+
+def _fbsd_cell(kf: KeyFigures, level: str) -> tuple[str, str]:
+    """An FBSD in kHz without the unit (the header has it) and its tooltip; a bound as '> 18'
+    with the reason in the tooltip."""
+    bound = kf.fbsd_bounds.get(level)
+    if bound is not None:
+        return f"> {bound.lower_bound_hz / KILO:.3g}", kf.fbsd_text(level, KILO)
+    figure = kf.fbsd_hz.get(level)
+    return format_figure(figure, KILO), figure_tooltip(figure, KILO, "kHz")

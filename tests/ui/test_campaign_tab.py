@@ -109,12 +109,17 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     run = tab.run_folder
     for row, sid in enumerate(("s001-r1", "s001-r2", "s002-r1")):
         results = read_shot(run.shot_path(sid), load_raw=False).results
-        assert tab.table.item(row, 8).text() == expected_khz(results["fbsd_hz"]["5"], results, "5")
+        assert tab.table.item(row, 8).text().replace("\n", " ") + " kHz" == expected_khz(results["fbsd_hz"]["5"],
+                                                                                     results, "5")
         verdict = results["dcm"].get("recommended")  # the DCM's check on the shot (issue 11)
         if verdict is not None:
-            assert tab.table.item(row, 12).text() == ("recommended" if verdict else "NOT recommended")
+            assert tab.table.item(row, 11).text() == ("recommended" if verdict else "NOT recommended")
         assert tab.table.item(row, 5).text() == str(results["identification"]["order"])
-        assert tab.table.item(row, 11).text() == f"{sid}.h5"
+        assert tab.table.item(row, 12).text() == f"{sid}.h5"
+    header = [tab.table.horizontalHeaderItem(c).text() for c in range(tab.table.columnCount())]
+    assert header[6] == "f_n (kHz)" and header[11] == "DCM" and "kHz" not in tab.table.item(0, 6).text()
+    # the DCM's verdict in view at the panel's 1280 × 800, no scrolling (it was behind the scroll bar)
+    assert tab.table.columnViewportPosition(11) + tab.table.columnWidth(11) <= tab.table.viewport().width()
     with Journal.open(run) as journal:
         assert [s.fire_count for s in journal.statuses()] == [1, 1, 1]
     assert not tab.resume_button.isEnabled()  # nothing left to do
