@@ -58,7 +58,7 @@ def sig(value: Any, scale: float = 1.0, digits: int = 2) -> str:
     return text
 
 
-BUDGET_FLOOR_PCT = 1e-3  # a source below 0.001 % (10 ppm) of a figure reads "< 0.001", not 3.9e-09
+BUDGET_NEGLIGIBLE = 1e-3  # a source below 1/1000 of its column's largest u reads "≈ 0", not 3.9e-09
 
 
 def unit_suffix(unit: str) -> str:
@@ -261,19 +261,22 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
                and _reported(kf, c[2])]  # no column for a figure the shot does not report (an S_sh without S_sh)
     header = ["source"] + [label for _key, label, _attr in columns]
 
-    def pct(value: float | None) -> str:
+    def pct(value: float | None, largest: float = 0.0) -> str:
         if value is None:
             return "—"
-        if 0 < abs(100 * value) < BUDGET_FLOOR_PCT:
-            return f"< {BUDGET_FLOOR_PCT:g}"
+        if 0 < abs(value) < BUDGET_NEGLIGIBLE * largest:
+            return "≈ 0"
         return sig(100 * value)
 
-    rows = [[str(b.get("source", "—"))] + [pct(_budget_share(b, key)) for key, _l, _a in columns] for b in items]
-    combined = []
+    combined: list[float | None] = []
     for _key, _label, attr in columns:
         figure = kf.fbsd_hz.get(attr) if attr in ("5", "10") else getattr(kf, attr)
-        combined.append(pct(figure.u_rel if figure is not None and attr not in kf.fbsd_bounds else None))
-    rows.append(["all sources (Monte Carlo)"] + combined)
+        combined.append(figure.u_rel if figure is not None and attr not in kf.fbsd_bounds else None)
+    largest = [max([abs(v) for v in [total] + [_budget_share(b, key) for b in items] if v is not None], default=0.0)
+               for (key, _l, _a), total in zip(columns, combined, strict=True)]
+    rows = [[str(b.get("source", "—"))] + [pct(_budget_share(b, key), top) for (key, _l, _a), top
+                                           in zip(columns, largest, strict=True)] for b in items]
+    rows.append(["all sources (Monte Carlo)"] + [pct(total) for total in combined])
     return header, rows
 
 

@@ -362,16 +362,25 @@ def test_the_budget_gives_each_sources_share_of_each_figure(analyses: dict[str, 
     assert header == ["source", "sensitivity", "S_sh", "f_n", "FBSD ±5 %"]
     assert rows[0] == ["amplifier gain", "0.20", "0.20", "—", "—"]  # two significant digits, as u
     assert rows[1] == ["response noise", "0.010", "—", "0.030", "0.020"]
-    assert rows[2] == ["channel skew", "< 0.001", "—", "0", "< 0.001"]  # no 3.9e-09, no 0.0000000039
+    assert rows[2] == ["channel skew", "≈ 0", "—", "0", "≈ 0"]  # no 3.9e-09, no 0.0000000039
     u = results["uncertainty"]  # the last row: each figure's u / value from its Monte Carlo figure
     assert rows[3][0] == "all sources (Monte Carlo)"
     assert float(rows[3][1]) == pytest.approx(100 * u["dc_gain"]["u"] / u["dc_gain"]["value"], rel=0.05)
     assert float(rows[3][3]) == pytest.approx(100 * u["main_mode"]["natural_frequency_hz"]["u"]
                                               / u["main_mode"]["natural_frequency_hz"]["value"], rel=0.05)
+    # "≈ 0" is relative to the column: in a column whose u is itself small, a small share is shown
+    results["uncertainty"]["budget"][0]["u_rel_by_figure"]["natural_frequency_hz"] = 3e-6
+    results["uncertainty"]["main_mode"]["natural_frequency_hz"]["u"] = 8.5e-6 * kf_fn(results)
+    header, rows = budget_rows(entry("s", analyses["a1"], results=results))
+    assert rows[1][3] == "0.00030" and rows[2][3] == "0" and rows[3][3] == "0.00085", rows
     # a figure the shot does not report (no S_sh without a shock sensitivity) gets no column
     del results["reduction"]["shock_sensitivity"]
     header, rows = budget_rows(entry("s", analyses["a1"], results=results))
     assert header == ["source", "sensitivity", "f_n", "FBSD ±5 %"] and rows[0] == ["amplifier gain", "0.20", "—", "—"]
+
+
+def kf_fn(results: dict) -> float:
+    return KeyFigures.from_results(results).natural_frequency_hz.value
 
 
 def test_combination_across_shots_closed_form() -> None:
