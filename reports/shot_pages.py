@@ -64,11 +64,11 @@ def excitation_page(entry: ShotEntry) -> Figure:
         u, y, y_hat = shot.reference, shot.response, shot.model_response(a)
         delay = float(a.model.delay_samples or 0.0) if shot.windowed else float(model_delay_samples(a))
         t_us = shot.time_s * 1e6
-        ax_t.plot(t_us, u / G_M_S2, color="0.2", lw=1.2, label="reference (laser interferometer)")
-        ax_t.plot(t_us, y / G_M_S2, color="tab:blue", lw=1.0,
+        ax_t.plot(t_us, u / 1e3, color="0.2", lw=1.2, label="reference (laser interferometer)")
+        ax_t.plot(t_us, y / 1e3, color="tab:blue", lw=1.0,
                   label=("accelerometer response" if shot.windowed else
                          f"accelerometer response (shifted by its delay, {delay:.0f} samples)"))
-        ax_t.plot(t_us, y_hat / G_M_S2, color="tab:red", lw=1.0, ls="--",
+        ax_t.plot(t_us, y_hat / 1e3, color="tab:red", lw=1.0, ls="--",
                   label=f"model response (fit {fmt(ident.get('fit_percent'), digits=4)} %"
                         + (f", input delay {delay:.2f} samples)" if shot.windowed else ")"))
         width = float(exc.get("pulse_width_s") or 0.0)
@@ -81,9 +81,12 @@ def excitation_page(entry: ShotEntry) -> Figure:
     else:
         ax_t.text(0.5, 0.5, "record not stored", ha="center", transform=ax_t.transAxes)
     ax_t.set_xlabel("time (µs)")
-    ax_t.set_ylabel("acceleration (g)")
-    ax_t.set_title(f"Shock pulse: peak {fmt(exc.get('peak_m_s2'), G_M_S2)} g, width "
-                   f"{fmt(exc.get('pulse_width_s'), 1e-6)} µs at 10 % of peak", fontsize=9)
+    # km/s² as the results, the panel's plot and strip give it, with g on the right
+    ax_t.set_ylabel("acceleration (km/s²)")
+    ax_g = ax_t.secondary_yaxis("right", functions=(lambda k: k * 1e3 / G_M_S2, lambda g: g * G_M_S2 / 1e3))
+    ax_g.set_ylabel("(g)")
+    ax_t.set_title(f"Shock pulse: peak {fmt(exc.get('peak_m_s2'), 1e3)} km/s² ({fmt(exc.get('peak_m_s2'), G_M_S2)} g),"
+                   f" width {fmt(exc.get('pulse_width_s'), 1e-6)} µs at 10 % of peak", fontsize=9)
     ax_t.grid(alpha=0.3)
 
     if rec is not None:

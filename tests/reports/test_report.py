@@ -184,7 +184,14 @@ def test_excitation_page_shows_the_loss_by_order_and_the_chosen_order(analyses: 
     corrected = next(ln for ln in ax_loss.get_lines() if ln.get_label().startswith("bias-corrected"))
     np.testing.assert_allclose(corrected.get_ydata(), a.identification.loss_by_order)
     assert ax_loss.get_xlabel() == "model order n"
-    assert "(g)" in fig.axes[0].get_ylabel() and "(µs)" in fig.axes[0].get_xlabel()
+    # the pulse in km/s² as the results and the panel give it (it was in g only), g on the right
+    ax_t = fig.axes[0]
+    assert ax_t.get_ylabel() == "acceleration (km/s²)" and "(µs)" in ax_t.get_xlabel()
+    reference = next(ln for ln in ax_t.get_lines() if ln.get_label().startswith("reference"))
+    peak_m_s2 = a.to_dict()["excitation"]["peak_m_s2"]
+    assert np.max(reference.get_ydata()) == pytest.approx(peak_m_s2 / 1e3, rel=0.03)
+    (g_axis,) = ax_t.child_axes
+    assert g_axis.get_ylabel() == "(g)"
 
 
 # ------------------------------------------------------------------ files
