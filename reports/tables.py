@@ -359,7 +359,7 @@ def pole_rows(analysis: ShotAnalysis) -> tuple[list[str], list[list[str]]]:
         p = complex(*item["pole"])
         if p != 0:
             fn, zeta = natural_frequency_damping(np.array([p]), dt)
-            fn_text, z_text = fmt(fn[0], 1e3, 5), fmt(zeta[0])
+            fn_text, z_text = sig(fn[0], 1e3, 5), sig(zeta[0], digits=4)  # 33.000 and 0.03000, not 33 and 0.03
         else:
             fn_text = z_text = "—"
         rows.append([f"{p.real:.5f} {'+' if p.imag >= 0 else '−'} {abs(p.imag):.5f}j", f"{abs(p):.5f}",

@@ -30,6 +30,7 @@ from hopkinson.reports.tables import (
     combined_rows,
     compensation_rows,
     per_shot_rows,
+    pole_rows,
     results_rows,
     sensitivity_text,
     sig,
@@ -511,6 +512,11 @@ def test_tables_print_no_scientific_notation_and_keep_significant_zeros(which: s
     for e in report.shots:
         if e.analysis is not None:
             tables += [uncertainty_rows(e), budget_rows(e), (None, compensation_rows(e)), (None, results_rows(e))]
+    for e in report.shots:  # the pole table (the paper's Table 1) keeps its significant zeros too
+        if e.analysis is not None:
+            tables.append(pole_rows(e.analysis))
+            fn_cells = [row[2] for row in pole_rows(e.analysis)[1] if row[2] != "—"]
+            assert fn_cells and all(len(c.replace(".", "")) == 5 for c in fn_cells), fn_cells
     cells = [str(c) for _header, rows in tables for row in rows for c in row]
     assert len(cells) > 20
     assert [c for c in cells if SCIENTIFIC.search(c)] == []
