@@ -492,3 +492,32 @@ class QuickRefit:
         if not exact:
             return start
         return problem.solve(start, self.fallback_evaluations, 1e-8)
+
+
+# A delay branch whose optimum costs more than this above the best is left out: V is half a
+# χ² sum, so a difference of 8 is beyond what a fresh noise draw of the record's level can
+# overturn (half χ²₁ at 10⁻⁴); nearer branches are ties the data cannot settle.
+BRANCH_COST = 8.0
+BRANCH_STARTS = 8  # linear starts on the delay grid (at most; a sample apart at least: the basins are wider)
+
+
+def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[OrderFit]:
+    """Other local optima of the causal-delay fit of `fit`'s order whose cost is within
+    BRANCH_COST of `fit`'s: the delay and B's zeros share a flat valley of the cost (a phase
+    lag taken up by τ or by the zeros), and on a record whose excitation barely reaches the
+    phase that tells them apart the valley holds separate minima a few samples apart (issue
+    10's rehearsed piezo record: τ ≈ 0.4 and ≈ 3.1 samples, costs within 1). Found from linear
+    starts on a grid of delays from 0 to a few samples past `fit`'s, each refined; optima
+    whose delay lies within a sample of one already kept are the same branch. Sorted by cost
+    (the best may beat `fit`: the order search started each order from one delay)."""
+    problem = OrderProblem(data, fit.order, "causal", max_delay)
+    top = min(float(max_delay) - CAUSAL_START, math.ceil(fit.delay) + 4.0)
+    step = max(1.0, top / BRANCH_STARTS)
+    found: list[OrderFit] = []
+    for tau in np.arange(0.0, top + 0.25 * step, step):
+        refined = problem.solve(problem.linear_start(float(tau)), 40, 1e-6)
+        if not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
+            continue
+        if all(abs(refined.delay - f.delay) >= 1.0 for f in (fit, *found)):
+            found.append(problem.solve(refined, 200, 1e-11))
+    return sorted(found, key=lambda f: f.cost)

@@ -20,7 +20,13 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    output-error cost V_n (each bin's error over its noise, reference noise included), with a
    causal fractional delay τ ≥ 0 fitted with the model. Each order starts from the order
    below (embedded with a cancelling pole and zero, so V never rises with the order) and from
-   a Sanathanan–Koerner linear start, and keeps the better optimum.
+   a Sanathanan–Koerner linear start, and keeps the better optimum. The chosen order's delay
+   is then searched again on a grid (frequency_fit.delay_branches): the delay and B's zeros
+   share a flat valley of the cost that can hold separate optima a few samples apart; the
+   lowest is the estimate, the others within chance are kept for the Monte Carlo
+   (analysis.uncertainty), whose draws re-run that choice. `delay_samples` is therefore the
+   delay of the best branch, not a measured channel skew: what the record determines is the
+   model's whole phase (delay and zeros together), which analysis.sine_comparison compares.
 6. Order: the smallest n that no higher order beats both beyond chance (an F test on V,
    Bonferroni-corrected over the fitted bins: an extra pole pair can sit on the largest chance
    peak of the noise anywhere in the band) and in the frequency response where the pulse has
@@ -48,7 +54,13 @@ from typing import Any
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import pulse_width, supported_band_hz
-from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, predicted_bins
+from hopkinson.analysis.frequency_fit import (
+    OrderFit,
+    OrderProblem,
+    SpectralData,
+    delay_branches,
+    predicted_bins,
+)
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.noise import WELCH_SEGMENT, NoiseSpectrum
@@ -125,6 +137,9 @@ class FitContext:
     asked_order: int | None
     record: Record  # the record at the analysis rate
     model_error_ratio: float  # V / degrees of freedom of the chosen order (≈ 1: noise explains it)
+    # Other near-equal optima of the chosen order's delay–zeros valley (frequency_fit.delay_branches):
+    # the Monte Carlo refits each draw from every branch and keeps the lowest cost.
+    branches: dict[int, list[OrderFit]] = field(default_factory=dict)
 
 
 @dataclass
@@ -463,6 +478,17 @@ def identify(
                 "energy; the extra poles are not determined by this record (a mode beyond the excitation's band?)"
             )
     final = fits[chosen]
+    # The delay–zeros valley may hold other optima (frequency_fit.delay_branches): the estimate
+    # is the lowest of them (the search started each order from one delay and can miss it);
+    # the others are kept for the Monte Carlo, whose draws re-run this choice.
+    others = delay_branches(data, final, max_delay_samples) if delay_mode == "causal" else []
+    if others and others[0].cost < final.cost and _acceptable(others[0], data.bins):
+        final, others = replace(others[0], start_unstable=final.start_unstable), sorted(
+            [final, *others[1:]], key=lambda f: f.cost)
+        fits[chosen] = final
+    branches = {chosen: others} if others else {}
+    if others:
+        evidence["delay_branches"] = [{"delay_samples": f.delay, "cost": f.cost} for f in [final, *others]]
     if not final.converged:
         warnings.append(f"the order-{chosen} fit stopped before converging in {final.evaluations} evaluations "
                         "(its cost was the lowest reached)")
@@ -527,7 +553,7 @@ def identify(
         bin_frequency_hz=prep.bin_hz, u_bins=prep.u_bins, y_bins=prep.y_bins, var_u=prep.draw_var_u,
         var_y=var_y, group=prep.group, spectral=data, noise_u=prep.draw_noise_u, noise_y=noise_y,
         fits=fits, delay_mode=delay_mode, significance=significance, knee_tolerance=knee_tolerance,
-        max_delay=max_delay_samples, asked_order=order, record=rec, model_error_ratio=ratio,
+        max_delay=max_delay_samples, asked_order=order, record=rec, model_error_ratio=ratio, branches=branches,
     )
     return Identification(
         model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,

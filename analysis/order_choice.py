@@ -161,24 +161,38 @@ class NoiseDraws:
 
 
 class Refitter:
-    """Quick refits of each order on a draw, each prepared once at its nominal fit."""
+    """Quick refits of each order on a draw, each prepared once at its nominal fit. Where the
+    nominal search found other delay branches of an order (`branches`, frequency_fit.
+    delay_branches: near-equal optima of the delay–zeros valley), each draw is refitted from
+    every branch and keeps the lowest cost: the draw re-runs the delay search as the nominal
+    fit ran it (GUM-S1: each draw re-runs the estimator), so it can land on either branch."""
 
-    def __init__(self, spectral: SpectralData, fits: dict[int, OrderFit], delay: str | float, max_delay: float) -> None:
+    def __init__(self, spectral: SpectralData, fits: dict[int, OrderFit], delay: str | float, max_delay: float,
+                 branches: dict[int, list[OrderFit]] | None = None) -> None:
         self.spectral = spectral
         self.fits = fits
         self.delay = delay
         self.max_delay = max_delay
-        self._quick: dict[int, QuickRefit] = {}
+        self.branches = branches or {}
+        self._quick: dict[tuple[int, int], QuickRefit] = {}
 
     def fit(self, data: SpectralData, order: int, exact: bool = True) -> OrderFit | None:
         """The order's optimum on `data` (None: not fitted nominally, or unstable); `exact`
         False may stop short of it where the quick iteration does not settle."""
+        return self.fit_branch(data, order, exact)[0]
+
+    def fit_branch(self, data: SpectralData, order: int, exact: bool = True) -> tuple[OrderFit | None, int]:
+        """`fit`, and the branch it landed on (0: the nominal fit's, i: `branches[order][i − 1]`)."""
         if order not in self.fits:
-            return None
-        if order not in self._quick:
-            self._quick[order] = QuickRefit(self.spectral, self.fits[order], self.delay, self.max_delay)
-        fit = self._quick[order].refit(data, exact=exact)
-        return fit if is_stable(fit.a) else None
+            return None, 0
+        best: tuple[OrderFit | None, int] = (None, 0)
+        for i, start in enumerate([self.fits[order], *self.branches.get(order, [])]):
+            if (order, i) not in self._quick:
+                self._quick[(order, i)] = QuickRefit(self.spectral, start, self.delay, self.max_delay)
+            fit = self._quick[(order, i)].refit(data, exact=exact)
+            if is_stable(fit.a) and (best[0] is None or fit.cost < best[0].cost):
+                best = (fit, i)
+        return best
 
 
 def decide(refitter: Refitter, data: SpectralData, candidates: list[int], significance: float

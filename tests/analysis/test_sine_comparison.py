@@ -78,3 +78,16 @@ def test_reading_the_sine_file(tmp_path):
         read_sine_calibration(tmp_path / "none.csv")
     with pytest.raises(AnalysisError, match="Nyquist"):
         compare_sine(DiscreteModel(1e-4, [1, -0.5], [0.5]), sine_of(TRUTH))
+
+
+def test_the_phase_error_is_the_whole_models_fitted_delay_included():
+    """A model that splits its lag into a fitted delay of 3 samples: the phase error and its
+    delay are the whole model's (3 samples and the hold's half), the phase without the fitted
+    delay beside it (the hold's half sample only)."""
+    b, a = TRUTH.discrete_tf(DT)
+    c = compare_sine(DiscreteModel(DT, a, b, 3.0), sine_of(TRUTH))
+    assert c.phase_delay_s == pytest.approx(3.5 * DT, rel=0.02)
+    expected = -np.degrees(2 * np.pi * F * 3.0 * DT)
+    np.testing.assert_allclose(c.phase_error_deg - c.phase_error_without_delay_deg, expected, atol=1e-9)
+    assert c.fitted_delay_s == pytest.approx(3.0 * DT)
+    assert c.to_dict()["fitted_delay_s"] == pytest.approx(3.0 * DT)
