@@ -117,8 +117,9 @@ class ShotRequest:
             if role not in config.digitizer.channels:
                 raise ShotRequestError(f"{role}: an accelerometer is named for it, but the rig records no {role} "
                                        f"channel ({config.path or 'configuration'} [digitizer.channels])")
-            if set(identity) - {"model", "serial"} or not all(isinstance(v, str) for v in identity.values()):
-                raise ShotRequestError(f"{role}: an accelerometer is given by its model and serial (text)")
+            if set(identity) != {"model", "serial"} or not all(isinstance(v, str) and v.strip()
+                                                               for v in identity.values()):
+                raise ShotRequestError(f"{role}: the accelerometer on it needs both its model and its serial number")
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")

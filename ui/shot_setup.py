@@ -52,6 +52,14 @@ class ShotSetup(QWidget):
         self.accelerometer_model.setPlaceholderText("e.g. AYZ-3")
         self.accelerometer_serial = QLineEdit()
         self.accelerometer_serial.setPlaceholderText("serial number")
+        # A second accelerometer: only where the rig records a response_2 channel.
+        self.accelerometer_2_model: QLineEdit | None = None
+        self.accelerometer_2_serial: QLineEdit | None = None
+        if "response_2" in config.digitizer.channels:
+            self.accelerometer_2_model = QLineEdit()
+            self.accelerometer_2_model.setPlaceholderText("on the response_2 channel (optional)")
+            self.accelerometer_2_serial = QLineEdit()
+            self.accelerometer_2_serial.setPlaceholderText("serial number")
         self.sensitivity = QDoubleSpinBox()
         self.sensitivity.setDecimals(4)
         self.sensitivity.setRange(1e-4, 1e6)
@@ -112,6 +120,9 @@ class ShotSetup(QWidget):
         form.addRow("Accelerometer", self.accelerometer_model)
         form.addRow("Serial No.", self.accelerometer_serial)
         form.addRow("Sensitivity", self.sensitivity)
+        if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
+            form.addRow("2nd accelerometer", self.accelerometer_2_model)
+            form.addRow("its serial No.", self.accelerometer_2_serial)
         form.addRow("Pressure", self.pressure)
         form.addRow("Projectile", self.projectile)
         form.addRow("Max. order", self.max_order)
@@ -135,6 +146,7 @@ class ShotSetup(QWidget):
             operator=self.operator.text().strip(),
             accelerometer_model=self.accelerometer_model.text().strip(),
             accelerometer_serial=self.accelerometer_serial.text().strip(),
+            sensor_identities=self._second_accelerometer(),
             sensitivity_v_per_m_s2=self.sensitivity.value() * MICRO,
             max_order=self.max_order.value(),
             sample_rate_hz=self.sample_rate.value() * 1e3,
@@ -143,6 +155,14 @@ class ShotSetup(QWidget):
             out_dir=Path(self.out_dir.text().strip() or "."),
             confirm_timeout_s=confirm_timeout_s,
         )
+
+    def _second_accelerometer(self) -> dict[str, dict[str, str]]:
+        """The second accelerometer's model and serial, when either is entered (ShotRequest.check
+        asks for both)."""
+        if self.accelerometer_2_model is None or self.accelerometer_2_serial is None:
+            return {}
+        model, serial = self.accelerometer_2_model.text().strip(), self.accelerometer_2_serial.text().strip()
+        return {"response_2": {"model": model, "serial": serial}} if model or serial else {}
 
     def conditioner_entry(self) -> dict[str, Any] | None:
         """The hand-set conditioner's values as ManualConditioner.enter takes them (None: the
@@ -192,6 +212,9 @@ class ShotSetup(QWidget):
     def _texts(self) -> dict[str, QLineEdit]:
         texts = {"operator": self.operator, "accelerometer_model": self.accelerometer_model,
                  "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir}
+        if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
+            texts |= {"accelerometer_2_model": self.accelerometer_2_model,
+                      "accelerometer_2_serial": self.accelerometer_2_serial}
         return texts | ({"conditioner_identity": self.conditioner.identity} if self.conditioner else {})
 
     def _numbers(self) -> dict[str, QDoubleSpinBox | QSpinBox]:

@@ -131,3 +131,32 @@ def test_instrument_errors_show_on_the_lamps_and_recover(qtbot, make_panel):
     assert "bridge amplifier" in " ".join(text for _, text in w.log_view.messages())
     panel.faults.clear("serial-noise")
     qtbot.waitUntil(lambda: lamps["amplifier"].level == "ok", timeout=15_000)
+
+
+def test_a_second_accelerometer_is_asked_for_only_where_the_rig_records_one(qtbot, tmp_path):
+    from hopkinson.rig.shot import ShotRequestError
+    from hopkinson.ui.shot_setup import ShotSetup
+
+    plain = rig_config_for_tests()
+    setup = ShotSetup(plain, tmp_path)
+    assert setup.accelerometer_2_model is None and setup.request(1.0).sensor_identities == {}
+    dispose(setup)
+
+    d = plain.digitizer
+    config = dataclasses.replace(plain, digitizer=dataclasses.replace(
+        d, channels={**d.channels, "response_2": "CH4"}, ranges_v={**d.ranges_v, "response_2": 10.0}))
+    settings_file = str(tmp_path / "panel.ini")
+    first = ShotSetup(config, tmp_path)
+    first.accelerometer_2_model.setText("AYZ-3")
+    first.accelerometer_2_serial.setText("SN0002")
+    first.save(QSettings(settings_file, QSettings.Format.IniFormat))
+    dispose(first)
+    second = ShotSetup(config, tmp_path)  # remembered between runs, like the first accelerometer
+    second.load(QSettings(settings_file, QSettings.Format.IniFormat))
+    request = second.request(1.0)
+    assert request.sensor_identities == {"response_2": {"model": "AYZ-3", "serial": "SN0002"}}
+    request.check(config)
+    second.accelerometer_2_serial.setText("")  # half entered: refused, naming what is missing
+    with pytest.raises(ShotRequestError, match="response_2: the accelerometer on it needs both its model and its serial"):
+        second.request(1.0).check(config)
+    dispose(second)
