@@ -294,7 +294,7 @@ def compensate_shot(identification: Any, record: Record, options: DcmOptions,
     design = design_compensation(support, options)
     warnings: list[str] = []
     if design.widening_note and options.ratio is None:
-        warnings.append(f"DCM: the band widening {design.widening_note}")
+        warnings.append(f"DCM widening: {design.widening_note}")
     check = None
     try:
         check = check_compensation(rec, model, design.dcm, support.channel_delay_samples)

@@ -125,7 +125,7 @@ class CompensationCheck:
     def other_warnings(self, warnings: Sequence[str]) -> list[str]:
         """The shot's warnings less those that only repeat the not-recommended verdict, which
         the report and the panel show on a line of its own (the analysis words it up to three
-        times: the verdict, "DCM not recommended for this shot: …", "DCM: the band widening …")."""
+        times: the verdict, "DCM not recommended for this shot: …", "DCM widening: …")."""
         reason = (self.not_recommended_reason or "").strip()
         if self.recommended is not False or not reason:
             return list(warnings)
