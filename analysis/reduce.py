@@ -139,8 +139,8 @@ def interferometer_text(quantities: dict[str, Any]) -> str:
     q = quantities.get("quadrature")
     if quantities.get("interferometer") != QUADRATURE or not isinstance(q, dict):
         return "PM beat (single channel)"
-    return (f"quadrature pair, Heydemann ellipse: offsets {q['offset_1_v']:.4g} / {q['offset_2_v']:.4g} V, "
-            f"amplitude ratio {q['amplitude_ratio']:.4g}, quadrature error {q['phase_error_deg']:.3g} deg")
+    return (f"quadrature pair, Heydemann ellipse: offsets {1e3 * q['offset_1_v']:.1f} / {1e3 * q['offset_2_v']:.1f} mV, "
+            f"amplitude ratio {q['amplitude_ratio']:.4f}, quadrature error {q['phase_error_deg']:.2f} deg")
 
 
 @dataclass(frozen=True)
