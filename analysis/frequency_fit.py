@@ -515,6 +515,8 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
     step = max(1.0, top / BRANCH_STARTS)
     found: list[OrderFit] = []
     for tau in np.arange(0.0, top + 0.25 * step, step):
+        if abs(tau - fit.delay) < 1.0:  # a start this near falls back into `fit`'s basin
+            continue
         refined = problem.solve(problem.linear_start(float(tau)), 40, 1e-6)
         if not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
             continue
