@@ -521,5 +521,8 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
         if not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
             continue
         if all(abs(refined.delay - f.delay) >= 1.0 for f in (fit, *found)):
-            found.append(problem.solve(refined, 200, 1e-11))
+            # iterated to convergence; the valley is flat, so it may slide back to a kept optimum
+            refined = problem.solve(refined, 200, 1e-11)
+            if all(abs(refined.delay - f.delay) >= 1.0 for f in (fit, *found)):
+                found.append(refined)
     return sorted(found, key=lambda f: f.cost)
