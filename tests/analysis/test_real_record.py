@@ -159,3 +159,15 @@ def test_compare_sine_judges_the_models_whole_phase_not_the_part_left_by_an_unde
     assert np.max(np.abs(c.phase_error_deg)) < 0.3
     assert abs(c.phase_delay_s) < 0.03e-6
     assert c.fitted_delay_s == pytest.approx(ident.delay_samples * 1e-6)
+
+
+def test_each_delay_branch_is_a_distinct_optimum_of_the_cost() -> None:
+    # A branch found a sample away and iterated to convergence slid back onto the fit's own
+    # optimum (the valley is flat): a duplicate at the same delay and cost, whose draws the
+    # interval then took unreflected as another branch's.
+    ident = identify(record(PIEZO, 2))
+    ctx = ident.context
+    fit = ctx.fits[ident.order]
+    for branch in ctx.branches.get(ident.order, []):
+        assert abs(branch.delay - fit.delay) >= 1.0, (branch.delay, fit.delay)
+        assert branch.cost >= fit.cost

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import AnalysisParams
-from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate, shot_uncertainty
+from hopkinson.analysis.uncertainty import Estimate, UncertaintyOptions, evaluate, shot_uncertainty
 
 from tests.analysis.hard_records import Case, record, truth_figures
 
@@ -134,3 +134,21 @@ def test_a_failed_uncertainty_keeps_the_values_and_warns() -> None:
     warnings.clear()
     assert shot_uncertainty(ident, AnalysisParams(uncertainty=False), None, warnings) == (None, [])
     assert "switched off" in warnings[0]
+
+
+def test_draws_on_another_delay_branch_are_taken_as_they_are_not_reflected() -> None:
+    """A quarter of the draws on another branch of the delay–zeros valley, 10 u above the
+    estimate: those are the other estimate of such data, not scatter about this one, so the
+    interval reaches up to them (reflected they would land 10 u below, where no fit lies); the
+    nominal branch's draws are reflected as before (symmetric here: the normal's quantiles)."""
+    from scipy.stats import norm
+
+    nominal = norm.ppf((np.arange(150) + 0.5) / 150)
+    draws = np.concatenate([nominal, np.full(50, 10.0)])
+    flags = np.concatenate([np.ones(150, dtype=bool), np.zeros(50, dtype=bool)])
+    e = Estimate.of_draws(0.0, draws, reflect=flags)
+    assert e.interval[1] == pytest.approx(10.0)
+    assert e.interval[0] == pytest.approx(norm.ppf(0.025 / 0.75), abs=0.05)
+    assert e.u == pytest.approx(np.std(draws, ddof=1))
+    plain = Estimate.of_draws(0.0, nominal)
+    assert plain.interval == pytest.approx((-norm.ppf(0.975 - 0.5 / 150), norm.ppf(0.975 - 0.5 / 150)), abs=0.02)
