@@ -68,8 +68,10 @@ def run_compare_sine(args: argparse.Namespace) -> int:
         out.write(f"  {f / 1e3:>9.4g} {comparison.sine_magnitude[i]:>8.4f} {comparison.model_magnitude[i]:>8.4f} "
                   f"{comparison.magnitude_error_pct[i]:>+8.2f} {u:>7} {comparison.phase_error_deg[i]:>+11.2f} "
                   f"{comp:>9}{flag}\n")
-    out.write(f"largest magnitude error {comparison.max_magnitude_error_pct:.2f} %; the phase error is that of a "
-              f"delay of {comparison.phase_delay_s * 1e6:.3g} µs; model ÷ sine sensitivity at the reference "
+    out.write(f"largest magnitude error {comparison.max_magnitude_error_pct:.2f} %; the phase error (the whole "
+              f"model's, its fitted delay τ = {comparison.fitted_delay_s * 1e6:.3g} µs included) is that of a delay "
+              f"of {comparison.phase_delay_s * 1e6:.3g} µs, the shock record's channel skew; model ÷ sine "
+              f"sensitivity at the reference "
               f"frequency {comparison.sensitivity_ratio:.6g} (same units assumed)\n")
     if comparison.compensated_fbsd_hz:
         parts = [f"±{k} %: " + ("beyond the last point" if v is None else f"{v / 1e3:.4g} kHz")
