@@ -32,6 +32,7 @@ estimator, hence this module.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -339,9 +340,11 @@ class OrderProblem:
         return 0.5 * float(r @ r)
 
     # -- solving -----------------------------------------------------------------------------
-    def solve(self, start: OrderFit, max_evaluations: int = 60, tolerance: float = 1e-8) -> OrderFit:
+    def solve(self, start: OrderFit, max_evaluations: int = 60, tolerance: float = 1e-8,
+              stop_at_delay: Callable[[float], bool] | None = None) -> OrderFit:
         """Levenberg–Marquardt from `start`; never returns a higher cost than the start's
-        (`start.cost`, when it was evaluated on these data, else its cost here)."""
+        (`start.cost`, when it was evaluated on these data, else its cost here).
+        `stop_at_delay(τ)` true after a step ends the search there."""
         theta0 = self.pack(start)
         cost0 = self.cost(theta0)
         if math.isfinite(start.cost) and start.cost < cost0 and start.a.size == self.n + 1:
@@ -351,7 +354,8 @@ class OrderProblem:
         if self.residual_size() < self.size:
             return fallback
         try:
-            result = levenberg_marquardt(self.residual, self.jacobian, theta0, max_evaluations, tolerance)
+            stop = None if stop_at_delay is None else (lambda theta: stop_at_delay(self.unpack(theta)[2]))
+            result = levenberg_marquardt(self.residual, self.jacobian, theta0, max_evaluations, tolerance, stop)
         except (ValueError, np.linalg.LinAlgError):
             return fallback
         cost = self.cost(result.x)
@@ -517,12 +521,18 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
     for tau in np.arange(0.0, top + 0.25 * step, step):
         if abs(tau - fit.delay) < 1.0:  # a start this near falls back into `fit`'s basin
             continue
-        refined = problem.solve(problem.linear_start(float(tau)), 40, 1e-6)
-        if not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
+        kept = (fit, *found)
+
+        def near_kept(delay: float, kept: tuple[OrderFit, ...] = kept) -> bool:
+            """Within a sample of a kept optimum: that branch (a fit on its way there is
+            stopped at once instead of iterated all the way)."""
+            return any(abs(delay - f.delay) < 1.0 for f in kept)
+
+        refined = problem.solve(problem.linear_start(float(tau)), 40, 1e-6, near_kept)
+        if near_kept(refined.delay) or not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
             continue
-        if all(abs(refined.delay - f.delay) >= 1.0 for f in (fit, *found)):
-            # iterated to convergence; the valley is flat, so it may slide back to a kept optimum
-            refined = problem.solve(refined, 200, 1e-11)
-            if all(abs(refined.delay - f.delay) >= 1.0 for f in (fit, *found)):
-                found.append(refined)
+        # iterated to convergence; the valley is flat, so it may slide back to a kept optimum
+        refined = problem.solve(refined, 200, 1e-11, near_kept)
+        if not near_kept(refined.delay):
+            found.append(refined)
     return sorted(found, key=lambda f: f.cost)

@@ -36,12 +36,14 @@ def levenberg_marquardt(
     x0: np.ndarray,
     max_evaluations: int = 100,
     tolerance: float = 1e-8,
+    stop: Callable[[np.ndarray], bool] | None = None,
 ) -> LeastSquaresResult:
     """Minimise ½‖fun(x)‖² from x0. Each step solves the damped system [J; √μ·D]·h = [−r; 0]
     (D the Jacobian's column norms: scale invariance) by least squares; a step that lowers the
     cost is taken and μ relaxed by Nielsen's rule, else μ grows. Converged when a taken step
     lowered the cost, or moved x, by less than `tolerance` (relative), or when the step's
-    predicted gain is below 1 % of that."""
+    predicted gain is below 1 % of that. `stop(x)`, checked after each step taken, ends the
+    search there (not converged): the caller has seen where it is going."""
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
     cost = 0.5 * float(r @ r)
@@ -71,6 +73,8 @@ def levenberg_marquardt(
             relative = (cost - cost_trial) / max(cost, 1e-300)
             small_step = float(np.linalg.norm(step * scale)) <= tolerance * float(np.linalg.norm(x * scale))
             x, r, cost = trial, r_trial, cost_trial
+            if stop is not None and stop(x):
+                return LeastSquaresResult(x, cost, evaluations, False)
             if relative < tolerance or small_step:
                 return LeastSquaresResult(x, cost, evaluations, True)
             j = jac(x)
