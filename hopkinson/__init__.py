@@ -6,9 +6,19 @@ The installed package maps the repository's top-level folders into one import na
 package data, `hopkinson.config` (config/).
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
-try:
-    __version__ = version("hopkinson")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0+unknown"
+
+def __getattr__(name: str) -> Any:
+    """`__version__` read from the installed metadata when first asked (importlib.metadata
+    costs ~30 ms of every command's start, and most never print the version)."""
+    if name != "__version__":
+        raise AttributeError(f"module 'hopkinson' has no attribute {name!r}")
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        value = version("hopkinson")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        value = "0+unknown"
+    globals()["__version__"] = value
+    return value

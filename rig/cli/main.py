@@ -27,8 +27,6 @@ from hopkinson.rig.config_paths import (
     default_rig_config,
 )
 
-from hopkinson import __version__
-
 # Modules that provide sub-commands, in the order `hopkinson --help` lists them. Each keeps
 # its heavy imports (Qt, pymodbus, matplotlib) inside the functions that need them.
 COMMAND_MODULES = [
@@ -83,13 +81,28 @@ def _known_errors() -> tuple[type[BaseException], ...]:
     return tuple(errors)
 
 
+class _VersionAction(argparse.Action):
+    """--version: the installed version, looked up only when asked."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS,
+                 default: str = argparse.SUPPRESS, help: str = "show the program's version and exit") -> None:
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        from hopkinson import __version__
+
+        sys.stdout.write(f"{parser.prog} {__version__}\n")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every registered sub-command."""
     parser = argparse.ArgumentParser(
         prog="hopkinson",
         description="Hopkinson-bar shock calibration of high-g accelerometers.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
