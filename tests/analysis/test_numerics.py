@@ -40,3 +40,18 @@ def test_root_and_least_squares_agree_with_scipy() -> None:
     ours = levenberg_marquardt(fun, jac, np.array([1.0, 1.0, 0.0]), 200, 1e-12)
     theirs = optimize.least_squares(fun, [1.0, 1.0, 0.0], jac=jac, method="lm", xtol=1e-12)
     assert ours.converged and np.allclose(ours.x, theirs.x, rtol=1e-8) and np.allclose(ours.x, [2.0, 3.0, 0.5])
+
+
+def test_levenberg_marquardt_stops_where_the_caller_says() -> None:
+    # Rosenbrock from (-1.2, 1): the search crosses x0 = 0 on its way to (1, 1); a stop there
+    # ends it at the first step taken past it, not converged, with fewer evaluations.
+    def residual(x: np.ndarray) -> np.ndarray:
+        return np.array([10.0 * (x[1] - x[0] ** 2), 1.0 - x[0]])
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        return np.array([[-20.0 * x[0], 10.0], [-1.0, 0.0]])
+
+    full = levenberg_marquardt(residual, jacobian, np.array([-1.2, 1.0]), 200, 1e-12)
+    assert full.converged and np.allclose(full.x, 1.0, atol=1e-6)
+    stopped = levenberg_marquardt(residual, jacobian, np.array([-1.2, 1.0]), 200, 1e-12, stop=lambda x: x[0] > 0.0)
+    assert not stopped.converged and stopped.x[0] > 0.0 and stopped.evaluations < full.evaluations
