@@ -82,8 +82,15 @@ def test_a_missed_heartbeat_while_armed_is_named_as_such(rig) -> None:
     aborted with that reason (not as a mysterious leak)."""
     valves = rig.instruments.valves
     valves.start_heartbeat()
-    rig.world.set_watchdog_s(0.3)  # a short watchdog for the test (wall seconds)
-    rig.bus.subscribe(lambda e: valves.stop_heartbeat_thread() if isinstance(e, AwaitingConfirmation) else None)
+
+    def stall(event: object) -> None:
+        if isinstance(event, AwaitingConfirmation):
+            # a short watchdog (wall seconds) from here on only: set from the start, a beat delayed
+            # on a loaded machine could trip it before ARM, a second trip the test did not stage
+            rig.world.set_watchdog_s(0.3)
+            valves.stop_heartbeat_thread()
+
+    rig.bus.subscribe(stall)
     try:
         outcome = rig.run(FireAuthorisation(), pressure_bar=2.0, confirm_timeout_s=10.0)
     finally:
