@@ -18,6 +18,9 @@ if TYPE_CHECKING:
     from hopkinson.analysis.shot_analysis import ShotAnalysis
 
 LEVELS = ("5", "10")  # FBSD band levels in per cent (keys of fbsd_hz)
+# How the order was chosen, in words (results' order_selection: "knee" is the order test's
+# stored name, kept for the files' sake)
+ORDER_SELECTION_TEXT = {"knee": "chosen by the order test", "asked": "as asked"}
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,12 @@ class KeyFigures:
     dcm_noise_gain_limit: float | None = None
     dcm_band_limit_hz: float | None = None
     dcm_latency_s: float | None = None
+
+    @property
+    def order_how(self) -> str:
+        """How the order was chosen, in words."""
+        selection = self.order_selection or "knee"
+        return ORDER_SELECTION_TEXT.get(selection, selection)
 
     @property
     def has_uncertainty(self) -> bool:

@@ -123,7 +123,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         return [("analysis", entry.error or "no analysis")]
     peak = kf.peak_acceleration_m_s2
     rows = [
-        ("model order", f"{kf.order} ({kf.order_selection or 'knee'})"),
+        ("model order", f"{kf.order} ({kf.order_how})"),
         ("sensitivity (model DC gain)", sensitivity_text(kf.sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)),
         ("main mode f_n", figure_text(kf.natural_frequency_hz, 1e3, "kHz", 5)),
         ("main mode damping ζ", figure_text(kf.damping_ratio)),

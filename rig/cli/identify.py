@@ -55,12 +55,12 @@ def _figure_text(data: Any, scale: float = 1.0, unit: str = "", digits: int = 6)
 
 def _summary(report: dict[str, Any], result: Identification) -> str:
     """A short human-readable account of the identification and its uncertainty."""
-    from hopkinson.analysis.key_figures import KeyFigures
+    from hopkinson.analysis.key_figures import ORDER_SELECTION_TEXT, KeyFigures
 
     unc = report.get("uncertainty") or {}
     figures = KeyFigures.from_results({"model": report, "identification": report, "fbsd_hz": report["fbsd_hz"],
                                        "fbsd_bounds": report["fbsd_bounds"], "uncertainty": unc})
-    how = "chosen by the order test" if result.order_selection == "knee" else "as asked"
+    how = ORDER_SELECTION_TEXT.get(result.order_selection, result.order_selection)
     stability = (result.order_evidence.get("stability") or {}).get("fraction_by_order") or {}
     if str(result.order) in stability:
         how += f", chosen in {stability[str(result.order)]:.0%} of {result.order_evidence['stability']['draws']} " \

@@ -145,6 +145,7 @@ def test_the_report_has_a_section_and_pages_per_sensor(fired, tmp_path: Path, ar
     truth_row = re.fullmatch(r"33 kHz, 0\.03: pole error (\S+) %", rows["simulated truth f_n, ζ"])
     assert truth_row is not None and float(truth_row.group(1)) < 0.5, rows["simulated truth f_n, ζ"]
     assert "× nominal = " in rows["sensitivity (model DC gain)"]  # 1.0 × 1e-7 V/(m/s²)
+    assert rows["model order"] == "2 (chosen by the order test)"  # the stored "knee" in words
     pages = report_pages(report)
     captions = [c for c, _ in pages]
     assert sum(c.startswith(f"{second.label}: ") for c in captions) == 4
