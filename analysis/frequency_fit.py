@@ -518,16 +518,15 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
     top = min(float(max_delay) - CAUSAL_START, math.ceil(fit.delay) + 4.0)
     step = max(1.0, top / BRANCH_STARTS)
     found: list[OrderFit] = []
+
+    def near_kept(delay: float) -> bool:
+        """Within a sample of a kept optimum: that branch (a fit on its way there is stopped
+        at once instead of iterated all the way)."""
+        return any(abs(delay - f.delay) < 1.0 for f in (fit, *found))
+
     for tau in np.arange(0.0, top + 0.25 * step, step):
         if abs(tau - fit.delay) < 1.0:  # a start this near falls back into `fit`'s basin
             continue
-        kept = (fit, *found)
-
-        def near_kept(delay: float, kept: tuple[OrderFit, ...] = kept) -> bool:
-            """Within a sample of a kept optimum: that branch (a fit on its way there is
-            stopped at once instead of iterated all the way)."""
-            return any(abs(delay - f.delay) < 1.0 for f in kept)
-
         refined = problem.solve(problem.linear_start(float(tau)), 40, 1e-6, near_kept)
         if near_kept(refined.delay) or not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
             continue

@@ -114,12 +114,12 @@ class ShotRequest:
             if role not in MORE_SENSOR_ROLES:
                 raise ShotRequestError(f"sensor_identities: {role!r} is not a further sensor's role "
                                        f"({', '.join(MORE_SENSOR_ROLES)})")
-            if role not in config.digitizer.channels:
-                raise ShotRequestError(f"{role}: an accelerometer is named for it, but the rig records no {role} "
-                                       f"channel ({config.path or 'configuration'} [digitizer.channels])")
             if set(identity) != {"model", "serial"} or not all(isinstance(v, str) and v.strip()
                                                                for v in identity.values()):
                 raise ShotRequestError(f"{role}: the accelerometer on it needs both its model and its serial number")
+            if role not in config.digitizer.channels:
+                raise ShotRequestError(f"{role}: an accelerometer is named for it, but the rig records no {role} "
+                                       f"channel ({config.path or 'configuration'} [digitizer.channels])")
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")
@@ -142,6 +142,13 @@ class ShotRequest:
         """The analysis options given (None left out)."""
         keys = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
         return {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
+
+
+def second_accelerometer(model: str | None, serial: str | None) -> dict[str, dict[str, str]]:
+    """A second accelerometer's model and serial as ShotRequest.sensor_identities: empty when
+    neither is given; one given without the other is left for ShotRequest.check to refuse."""
+    model, serial = (model or "").strip(), (serial or "").strip()
+    return {"response_2": {"model": model, "serial": serial}} if model or serial else {}
 
 
 def generated_shot_name(now: datetime | None = None) -> str:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.shot import ShotRequest
+from hopkinson.rig.shot import ShotRequest, second_accelerometer
 from hopkinson.ui.widgets import section_title
 from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import (
@@ -157,12 +157,10 @@ class ShotSetup(QWidget):
         )
 
     def _second_accelerometer(self) -> dict[str, dict[str, str]]:
-        """The second accelerometer's model and serial, when either is entered (ShotRequest.check
-        asks for both)."""
+        """The second accelerometer's model and serial (ShotRequest.check asks for both)."""
         if self.accelerometer_2_model is None or self.accelerometer_2_serial is None:
             return {}
-        model, serial = self.accelerometer_2_model.text().strip(), self.accelerometer_2_serial.text().strip()
-        return {"response_2": {"model": model, "serial": serial}} if model or serial else {}
+        return second_accelerometer(self.accelerometer_2_model.text(), self.accelerometer_2_serial.text())
 
     def conditioner_entry(self) -> dict[str, Any] | None:
         """The hand-set conditioner's values as ManualConditioner.enter takes them (None: the

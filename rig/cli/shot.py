@@ -119,7 +119,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.instruments import with_sim_channels
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
-    from hopkinson.rig.shot import ShotRequest, generated_shot_name
+    from hopkinson.rig.shot import ShotRequest, generated_shot_name, second_accelerometer
 
     if not args.sim and (args.sim_fault or args.sim_state_file):
         raise ConfigError("--sim-fault and --sim-state-file need --sim")
@@ -129,7 +129,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     request = ShotRequest(
         pressure_bar=args.pressure_bar, projectile=args.projectile, operator=args.operator,
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
-        sensor_identities=_second_accelerometer(args),
+        sensor_identities=second_accelerometer(args.accelerometer_2_model, args.accelerometer_2_serial),
         sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
         sample_rate_hz=args.sample_rate_hz, dcm_damping=args.dcm_damping,
         dcm_ratio=number_or_word(args.dcm_ratio, "--dcm-ratio", {"auto": None}, "a positive number"),
@@ -238,17 +238,6 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         return EXIT_ABORTED
     outcome.raise_for_outcome()
     return 0
-
-
-def _second_accelerometer(args: argparse.Namespace) -> dict[str, dict[str, str]]:
-    """--accelerometer-2-model/-serial -> ShotRequest.sensor_identities (both or neither)."""
-    model, serial = args.accelerometer_2_model, args.accelerometer_2_serial
-    if model is None and serial is None:
-        return {}
-    if not (model or "").strip() or not (serial or "").strip():
-        raise ConfigError("--accelerometer-2-model and --accelerometer-2-serial: give both (the second "
-                          "accelerometer's model and serial number)")
-    return {"response_2": {"model": model.strip(), "serial": serial.strip()}}
 
 
 def _make_out_dir(out: Path) -> None:

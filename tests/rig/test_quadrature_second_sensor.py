@@ -160,16 +160,18 @@ def test_the_report_has_a_section_and_pages_per_sensor(fired, tmp_path: Path, ar
     assert "AYZ-3, serial SN0002, second sensor, digitizer role response_2" in text  # the sensor recorded
 
 
-@pytest.mark.parametrize("argv", [
-    ["--accelerometer-2-model", "AYZ-3", "--accelerometer-2-serial", "SN0002"],  # the rig has no response_2
-    ["--accelerometer-2-model", "AYZ-3"],  # its serial missing
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--accelerometer-2-model", "AYZ-3", "--accelerometer-2-serial", "SN0002"],
+     "response_2: an accelerometer is named for it, but the rig records no response_2 channel"),
+    (["--accelerometer-2-model", "AYZ-3"],
+     "response_2: the accelerometer on it needs both its model and its serial number"),
 ])
 def test_a_second_accelerometer_the_rig_cannot_record_is_refused_before_anything_moves(
-        tmp_path: Path, argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     state = tmp_path / "state.json"
     rc = main(["shot", "--sim", "--out", str(tmp_path), "--yes", "--sim-state-file", str(state), *argv])
     err = capsys.readouterr().err
-    assert rc == 2 and err.count("\n") == 1 and ("response_2" in err or "--accelerometer-2" in err), err
+    assert rc == 2 and err.count("\n") == 1 and message in err, err
     assert not state.exists() and not list(tmp_path.glob("*.h5"))  # the simulator never started
 
 

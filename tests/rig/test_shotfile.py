@@ -116,6 +116,18 @@ def test_meta_defaults_fill_uuid_time_and_version(tmp_path: Path) -> None:
     assert ShotMeta("op", "M", "S", 1.0, 3).uuid != meta.uuid
 
 
+
+def test_a_further_sensors_identity_round_trips_and_a_damaged_one_is_one_clear_error(tmp_path: Path) -> None:
+    second = {"response_2": {"model": "AYZ-3", "serial": "SN0002"}}
+    path = write_raw_shot(tmp_path / "a.h5", known_raw(64), known_meta(sensor_identities=second))
+    assert read_shot(path).meta.sensor_identities == second == read_shot_meta(path).sensor_identities
+    assert read_shot(write_raw_shot(tmp_path / "b.h5", known_raw(64), known_meta())).meta.sensor_identities == {}
+    with h5py.File(path, "r+") as f:
+        f.attrs["sensors_json"] = '{"response_2": ["AYZ-3", 7]}'
+    for reader in (read_shot, read_shot_meta):
+        with pytest.raises(ShotFileError, match=r"a\.h5: damaged shot file: meta cannot be read"):
+            reader(path)
+
 RESULTS = {
     "model": {
         "sample_interval_s": 1e-6,
