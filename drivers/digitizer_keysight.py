@@ -6,6 +6,9 @@ Commands (Keysight programmer's guides; short forms in capitals):
                                                       <s> is negative: pre-trigger = −position·rate
     :CHANnel<n>:RANGe <v>                             the FULL vertical span (8 divisions): a ±10 V
                                                       channel is RANGe 20
+    :CHANnel<n>:DISPlay ON | ? (1|0)                  a channel that is off is not acquired (after
+                                                      power-on or *RST only channel 1 is on; a
+                                                      transfer of an off channel is an empty block)
     :TRIGger:MODE EDGE, :TRIGger:EDGE:SOURce CHANnel<n>|EXTernal, :TRIGger:EDGE:LEVel <v>,
     :TRIGger:EDGE:SLOPe POSitive|NEGative
     :SINGle (arm one acquisition), :STOP, :RSTate? (RUN|STOP|SING), :TER? (trigger event
@@ -63,8 +66,9 @@ class KeysightDialect(ScpiErrorQueueDialect):
 
     def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
         position_s = -settings.pre_trigger_samples / settings.sample_rate_hz
-        units = [f":ACQuire:SRATe {settings.sample_rate_hz:.6E}", f":ACQuire:POINts {settings.record_length:d}",
-                 ":TIMebase:REFerence LEFT", f":TIMebase:POSition {position_s:.9E}"]
+        units = self.turn_on_units(settings)
+        units += [f":ACQuire:SRATe {settings.sample_rate_hz:.6E}", f":ACQuire:POINts {settings.record_length:d}",
+                  ":TIMebase:REFerence LEFT", f":TIMebase:POSition {position_s:.9E}"]
         units += [f":CHANnel{self.channel_number(ch):d}:RANGe {2.0 * float(r):.6E}"
                   for ch, r in settings.ranges_v.items()]
         units += [":TRIGger:MODE EDGE", f":TRIGger:EDGE:SOURce {self._source(settings.trigger_source)}",
@@ -90,11 +94,18 @@ class KeysightDialect(ScpiErrorQueueDialect):
         source = fields[4 + n].upper()
         source = self.external_trigger if source.startswith("EXT") else self.channel_name(source)
         slope = {"POS": "POS", "NEG": "NEG"}.get(fields[6 + n].upper()[:3], fields[6 + n].upper())
-        return DigitizerSettings(
+        held = DigitizerSettings(
             sample_rate_hz=rate, record_length=points, pre_trigger_samples=pre,
             ranges_v={ch: span / 2.0 for ch, span in zip(channels, spans, strict=True)},  # span -> ±range
             trigger_source=source, trigger_level_v=self.number(command, fields[5 + n]), trigger_slope=slope,
         )
+        return self.with_channels_on(link, held, context)
+
+    def on_command(self, channel: str) -> str | None:
+        return f":CHANnel{self.channel_number(channel):d}:DISPlay ON"
+
+    def on_query(self, channel: str) -> str | None:
+        return f":CHANnel{self.channel_number(channel):d}:DISPlay?"
 
     def arm(self, link: ScpiLink) -> None:
         self.forget_completion()

@@ -9,6 +9,9 @@ Commands (LeCroy remote control manual; short forms, CHDR OFF: no headers, no un
                                                 sample rate is MSIZ / (10·TDIV); SARA? reads it
     TRDL <percent>                              TRIG_DELAY: pre-trigger as % of the record
     C<n>:VDIV <V/div>, C<n>:OFST 0              8 divisions: a ±10 V channel is 2.5 V/div
+    C<n>:TRA ON | ? (ON|OFF)                    TRACE: a channel that is off is not acquired (the
+                                                default setup shows C1 only; an off channel's
+                                                waveform is an empty trace)
     TRSE EDGE,SR,C<n>|EX                        TRIG_SELECT: edge trigger and its source
     C<n>:TRLV <v>, C<n>:TRSL POS|NEG            TRIG_LEVEL and TRIG_SLOPE of that source
     TRMD SINGLE | STOP, TRMD?                   TRIG_MODE: arm one acquisition / stop
@@ -95,7 +98,8 @@ class LeCroyDialect(DigitizerDialect):
     def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
         time_per_div = settings.record_length / (HORIZONTAL_DIVISIONS * settings.sample_rate_hz)
         percent = 100.0 * settings.pre_trigger_samples / settings.record_length
-        units = [f"MSIZ {settings.record_length:d}", f"TDIV {time_per_div:.6E}", f"TRDL {percent:.6f}"]
+        units = self.turn_on_units(settings)
+        units += [f"MSIZ {settings.record_length:d}", f"TDIV {time_per_div:.6E}", f"TRDL {percent:.6f}"]
         for ch, range_v in settings.ranges_v.items():
             units += [f"{ch}:VDIV {2 * float(range_v) / VERTICAL_DIVISIONS:.6E}", f"{ch}:OFST 0"]
         source = settings.trigger_source
@@ -119,7 +123,7 @@ class LeCroyDialect(DigitizerDialect):
         source = self.trigger_source_name(select[2])
         level_units = [f"{source}:TRLV?", f"{source}:TRSL?"]
         level_text, slope = self.query_fields(link, level_units)
-        return DigitizerSettings(
+        held = DigitizerSettings(
             sample_rate_hz=rate, record_length=points,
             pre_trigger_samples=pre_trigger_samples(percent / 100.0, points),
             ranges_v={ch: self.number(command, f) * VERTICAL_DIVISIONS / 2
@@ -127,6 +131,13 @@ class LeCroyDialect(DigitizerDialect):
             trigger_source=source, trigger_level_v=self.number(self.join(*level_units), level_text),
             trigger_slope=slope.upper(),
         )
+        return self.with_channels_on(link, held, context)
+
+    def on_command(self, channel: str) -> str | None:
+        return f"{channel}:TRA ON"
+
+    def on_query(self, channel: str) -> str | None:
+        return f"{channel}:TRA?"
 
     def arm(self, link: ScpiLink) -> None:
         self.forget_completion()
@@ -146,7 +157,8 @@ class LeCroyDialect(DigitizerDialect):
         limit = self.block_limit(context, context.record_length, itemsize)
         _, block = link.query_block(command, limit, header_max=_HEADER_MAX)
         desc = parse_wavedesc(command, block)
-        if desc.points == 0:
+        if desc.points == 0:  # an empty trace: a channel that is off has one
+            self.refuse_if_off(link, channel, command, "")
             raise ReplyFormatError(command, f"no acquired record on {channel}")
         check_points(command, "", desc.points, context)
         start = desc.data_offset

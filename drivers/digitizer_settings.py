@@ -42,9 +42,14 @@ class DigitizerSettings:
     trigger_source: str = "CH1"
     trigger_level_v: float = 0.0
     trigger_slope: str = "POS"
+    # Read back only: each recorded channel's on/off state (a scope acquires only the channels
+    # that are on); None where the dialect has no such notion or it was not read.
+    channels_on: Mapping[str, bool] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ranges_v", dict(self.ranges_v))
+        if self.channels_on is not None:
+            object.__setattr__(self, "channels_on", dict(self.channels_on))
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -100,6 +105,10 @@ class DigitizerSettings:
             differ("trigger_level_v", self.trigger_level_v, other.trigger_level_v)
         if self.trigger_slope != other.trigger_slope:
             differ("trigger_slope", self.trigger_slope, other.trigger_slope)
+        for channel, on in (other.channels_on or {}).items():
+            if not on:
+                out.append(f"{channel}: off on the instrument (the rig records it: it must be on, or nothing "
+                           "is acquired on it)")
         return out
 
     def with_changes(self, **changes: object) -> DigitizerSettings:
@@ -116,7 +125,7 @@ class DigitizerSettings:
             "trigger_source": self.trigger_source,
             "trigger_level_v": self.trigger_level_v,
             "trigger_slope": self.trigger_slope,
-        }
+        } | ({} if self.channels_on is None else {"channels_on": dict(self.channels_on)})
 
 
 def pre_trigger_samples(fraction: float, record_length: int) -> int:

@@ -6,6 +6,9 @@ Commands (Tektronix programmer manuals; replies with HEADer OFF unless said othe
     HORizontal:DELay:MODe OFF, HORizontal:POSition <percent>   the trigger sits <percent> of the
                                                 record from its start: pre-trigger = % · record
     CH<n>:SCAle <volts/div>                     10 divisions: a ±10 V channel is 2 V/div
+    SELect:CH<n> ON | ? (1|0)                   a channel that is off is not acquired (the
+                                                default setup shows CH1 only; CURVe? of an off
+                                                source is refused: "source waveform is not active")
     CH<n>:OFFSet 0, CH<n>:POSition 0
     TRIGger:A:TYPe EDGE, TRIGger:A:EDGE:SOUrce CH<n>|AUXiliary, TRIGger:A:LEVel:CH<n> <v>,
     TRIGger:A:EDGE:SLOpe RISe|FALL
@@ -71,9 +74,10 @@ class TektronixDialect(DigitizerDialect):
 
     def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
         percent = 100.0 * settings.pre_trigger_samples / settings.record_length
-        units = ["HORizontal:MODE MANual", f"HORizontal:MODE:SAMPLERate {settings.sample_rate_hz:.6E}",
-                 f"HORizontal:MODE:RECOrdlength {settings.record_length:d}", "HORizontal:DELay:MODe OFF",
-                 f"HORizontal:POSition {percent:.6f}", f"DATa:STOP {settings.record_length:d}"]
+        units = self.turn_on_units(settings)
+        units += ["HORizontal:MODE MANual", f"HORizontal:MODE:SAMPLERate {settings.sample_rate_hz:.6E}",
+                  f"HORizontal:MODE:RECOrdlength {settings.record_length:d}", "HORizontal:DELay:MODe OFF",
+                  f"HORizontal:POSition {percent:.6f}", f"DATa:STOP {settings.record_length:d}"]
         for ch, range_v in settings.ranges_v.items():
             units += [f"{ch}:SCAle {float(range_v) * 2 / DIVISIONS:.6E}", f"{ch}:OFFSet 0", f"{ch}:POSition 0"]
         units += ["TRIGger:A:TYPe EDGE", f"TRIGger:A:EDGE:SOUrce {self._source(settings.trigger_source)}",
@@ -104,13 +108,20 @@ class TektronixDialect(DigitizerDialect):
             raise ReplyFormatError(command, f"unknown trigger slope {fields[4 + n]!r}", self.join(*fields))
         level_query = f"TRIGger:A:LEVel:{'AUXiliary' if source == self.external_trigger else source}?"
         level = self.number(level_query, link.query(level_query))
-        return DigitizerSettings(
+        held = DigitizerSettings(
             sample_rate_hz=rate, record_length=points,
             pre_trigger_samples=pre_trigger_samples(percent / 100.0, points),
             ranges_v={ch: self.number(command, f) * DIVISIONS / 2 for ch, f in zip(channels, fields[3:3 + n],
                                                                                      strict=True)},
             trigger_source=source, trigger_level_v=level, trigger_slope=slope,
         )
+        return self.with_channels_on(link, held, context)
+
+    def on_command(self, channel: str) -> str | None:
+        return f"SELect:{channel} ON"
+
+    def on_query(self, channel: str) -> str | None:
+        return f"SELect:{channel}?"
 
     def arm(self, link: ScpiLink) -> None:
         self.command(link, "ACQuire:STOPAfter SEQuence", "ACQuire:STATE RUN")

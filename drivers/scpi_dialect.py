@@ -24,6 +24,7 @@ dialect lists the formats its instruments can send.
 
 Generic SCPI (`GenericScpiDialect`, the simulator drivers/sim/scpi_digitizer.py's dialect):
     :ACQuire:SRATe/POINts/PRETrigger (samples), :CHANnel<n>:RANGe (full scale, ±V),
+    :CHANnel<n>:DISPlay ON|OFF | ? (1|0: a channel that is off is not acquired),
     :TRIGger:SOURce CH<n>|EXT, :TRIGger:LEVel, :TRIGger:SLOPe POS|NEG, :SINGle, :ABORt,
     :ACQuire:STATe? (IDLE|ARMED|TRIGGERED), :WAVeform:SOURce, :WAVeform:FORMat
     INT8|UINT8|INT16|UINT16|FLOAT32, :WAVeform:BYTeorder LSBF|MSBF, :WAVeform:PREamble?
@@ -71,6 +72,17 @@ class ReplyFormatError(DialectError):
 
 class CommandRefused(DialectError):
     """The instrument reported an error for a command."""
+
+
+class ChannelOff(DialectError):
+    """A transfer came back empty because its channel is off (not acquired)."""
+
+    def __init__(self, command: str, channel: str, reply: str | bytes = "") -> None:
+        super().__init__(command, f"{channel} is off on the instrument, and a channel that is off is not "
+                                  f"acquired: turn {channel} on (the rig turns on every channel it records at "
+                                  "ARM and checks them before FIRE: another program or the front panel turned "
+                                  "it off since)", reply)
+        self.channel = channel
 
 
 class ScpiLink(Protocol):
@@ -152,6 +164,63 @@ class DigitizerDialect:
     def join(self, *units: str) -> str:
         """Several message units as one message (one round trip)."""
         return self.separator.join(units)
+
+    # -- channels on or off (issue 21) ---------------------------------------------------------
+    # An oscilloscope acquires only the channels that are on (displayed): after power-on or *RST
+    # most have channel 1 alone on. A dialect whose instruments have that notion names its
+    # command and query; `apply` turns on every channel the rig records and `read_settings`
+    # reads their states back (DigitizerSettings.channels_on), which ARM compares before FIRE.
+
+    def on_command(self, channel: str) -> str | None:
+        """The command that turns `channel` on; None where the instruments record every channel."""
+        return None
+
+    def on_query(self, channel: str) -> str | None:
+        """The query of `channel`'s on/off state (replies ON/OFF or 1/0); None as on_command."""
+        return None
+
+    def recorded_channels(self, settings: DigitizerSettings) -> tuple[str, ...]:
+        """The channels the rig records (those with a range) and the trigger source's channel."""
+        channels = list(settings.ranges_v)
+        if settings.trigger_source != self.external_trigger and settings.trigger_source not in channels:
+            channels.append(settings.trigger_source)
+        return tuple(channels)
+
+    def turn_on_units(self, settings: DigitizerSettings) -> list[str]:
+        """The commands that turn on every recorded channel (empty for a dialect without them)."""
+        return [unit for ch in self.recorded_channels(settings) if (unit := self.on_command(ch))]
+
+    def read_channels_on(self, link: ScpiLink, channels: Sequence[str]) -> dict[str, bool] | None:
+        """Each channel's on/off state, in one message; None for a dialect without the notion."""
+        queries = [self.on_query(ch) for ch in channels]
+        if not channels or any(q is None for q in queries):
+            return None
+        units = [q for q in queries if q is not None]
+        command = self.join(*units)
+        fields = self.query_fields(link, units)
+        return {ch: self.on_state(command, text) for ch, text in zip(channels, fields, strict=True)}
+
+    @staticmethod
+    def on_state(command: str, text: str) -> bool:
+        """ON/1 -> True, OFF/0 -> False (a response header before the value is allowed)."""
+        words = text.strip().split()
+        word = words[-1].upper() if words else ""
+        if word in ("1", "ON"):
+            return True
+        if word in ("0", "OFF"):
+            return False
+        raise ReplyFormatError(command, f"expected a channel state ON/OFF or 1/0, got {text.strip()!r}", text)
+
+    def with_channels_on(self, link: ScpiLink, settings: DigitizerSettings,
+                         context: DigitizerSettings) -> DigitizerSettings:
+        """Read-back settings completed with the recorded channels' on/off states."""
+        return settings.with_changes(channels_on=self.read_channels_on(link, self.recorded_channels(context)))
+
+    def refuse_if_off(self, link: ScpiLink, channel: str, command: str, reply: str | bytes) -> None:
+        """Raise ChannelOff when `channel` is off (called when a transfer came back empty)."""
+        states = self.read_channels_on(link, (channel,))
+        if states is not None and not states[channel]:
+            raise ChannelOff(command, channel, reply)
 
     # -- the jobs (subclasses implement) ---------------------------------------------------
     def prepare(self, link: ScpiLink) -> None:
@@ -254,10 +323,13 @@ class DigitizerDialect:
         check_preamble(command, reply, points=points, interval_s=sample_interval_s, scale_v=scale_v,
                        offset_v=offset_v)
         if points == 0:
+            self.refuse_if_off(link, channel, command, reply)
             raise ReplyFormatError(command, f"no acquired record on {channel}", reply)
         check_points(command, reply, points, context)
         itemsize = np.dtype(dtype).itemsize  # type: ignore[call-overload]
         _, payload = link.query_block(data_query, self.block_limit(context, points, itemsize))
+        if len(payload) == 0:  # an empty block: a scope answers so for a channel that is off
+            self.refuse_if_off(link, channel, data_query, bytes(payload))
         return self.waveform(data_query, channel, payload, points=points, dtype=dtype, scale_v=scale_v,
                              offset_v=offset_v, sample_interval_s=sample_interval_s, trigger_index=trigger_index,
                              range_v=range_v, code_range=code_range)
@@ -341,8 +413,9 @@ class GenericScpiDialect(ScpiErrorQueueDialect):
                      f":WAVeform:BYTeorder {_GENERIC_ORDERS[self.transfer.byte_order]}")
 
     def apply(self, link: ScpiLink, settings: DigitizerSettings) -> None:
-        units = [f":ACQuire:SRATe {settings.sample_rate_hz!r}", f":ACQuire:POINts {settings.record_length:d}",
-                 f":ACQuire:PRETrigger {settings.pre_trigger_samples:d}"]
+        units = self.turn_on_units(settings)
+        units += [f":ACQuire:SRATe {settings.sample_rate_hz!r}", f":ACQuire:POINts {settings.record_length:d}",
+                  f":ACQuire:PRETrigger {settings.pre_trigger_samples:d}"]
         units += [f":CHANnel{self.channel_number(ch):d}:RANGe {float(r)!r}" for ch, r in settings.ranges_v.items()]
         units += [f":TRIGger:SOURce {settings.trigger_source}", f":TRIGger:LEVel {float(settings.trigger_level_v)!r}",
                   f":TRIGger:SLOPe {settings.trigger_slope}"]
@@ -356,7 +429,7 @@ class GenericScpiDialect(ScpiErrorQueueDialect):
         fields = self.query_fields(link, units)
         command = self.join(*units)
         n = len(channels)
-        return DigitizerSettings(
+        held = DigitizerSettings(
             sample_rate_hz=self.number(command, fields[0]),
             record_length=self.integer(command, fields[1]),
             pre_trigger_samples=self.integer(command, fields[2]),
@@ -365,6 +438,13 @@ class GenericScpiDialect(ScpiErrorQueueDialect):
             trigger_level_v=self.number(command, fields[4 + n]),
             trigger_slope=fields[5 + n].upper(),
         )
+        return self.with_channels_on(link, held, context)
+
+    def on_command(self, channel: str) -> str | None:
+        return f":CHANnel{self.channel_number(channel):d}:DISPlay ON"
+
+    def on_query(self, channel: str) -> str | None:
+        return f":CHANnel{self.channel_number(channel):d}:DISPlay?"
 
     def arm(self, link: ScpiLink) -> None:
         self.command(link, ":SINGle")

@@ -12,6 +12,10 @@ their short form ("CHAN1", "POS", "LSBF").
                                                 (LEFT and −10 µs: the trigger 10 µs into the record)
     :CHANnel<n>:RANGe <v> | ?                   the full vertical span, 8 divisions (±v/2)
     :CHANnel<n>:OFFSet <v> | ?                  (only 0 is simulated)
+    :CHANnel<n>:DISPlay ON|OFF|1|0 | ? (1|0)    after power-on and *RST only channel 1 is on; a
+                                                channel that is off is not acquired: its preamble
+                                                still announces the record, its :WAVeform:DATA? is
+                                                an empty block and -221 "Settings conflict" is queued
     :TRIGger:MODE EDGE | ?, :TRIGger:EDGE:SOURce CHANnel<n>|EXTernal | ?, :TRIGger:EDGE:LEVel
     <v> | ?, :TRIGger:EDGE:SLOPe POSitive|NEGative | ?
     :SINGle, :STOP, :RSTate? (SING while armed, STOP otherwise), :TER? (1 once per trigger)
@@ -46,6 +50,7 @@ class KeysightSimDigitizer(SimDigitizer):
     identity = "KEYSIGHT TECHNOLOGIES,HOPKINSON-SIM-KS,SIM0002,1.0"
     signed_numbers = True
     hole_code = True
+    power_on_channels = (1,)
 
     def reset(self) -> None:
         with self.lock:
@@ -67,6 +72,7 @@ class KeysightSimDigitizer(SimDigitizer):
             (("TIMebase", "POSition"), self._position),
             (("CHANnel<n>", "RANGe"), self._range),
             (("CHANnel<n>", "OFFSet"), lambda c: self.zero_only(c, "+0.00000E+00")),
+            (("CHANnel<n>", "DISPlay"), self._display),
             (("TRIGger", "MODE"), self.edge_only),
             (("TRIGger", "EDGE", "SOURce"), self._trigger_source),
             (("TRIGger", "EDGE", "LEVel"), self._trigger_level),
@@ -138,6 +144,13 @@ class KeysightSimDigitizer(SimDigitizer):
         if c.query:
             return f"{2.0 * self.settings.ch_range_v[channel]:+.6E}"
         self.set_range(channel, self.number(c.arg) / 2.0)  # span of 8 divisions -> ±half
+        return None
+
+    def _display(self, c: Call) -> Reply:
+        channel = self.channel(c.suffix)
+        if c.query:
+            return "1" if self.channel_on[channel] else "0"
+        self.channel_on[channel] = self.on_off(c.arg)
         return None
 
     def _trigger_source(self, c: Call) -> Reply:
@@ -237,7 +250,7 @@ class KeysightSimDigitizer(SimDigitizer):
         s = self.settings
         encoded = self.encoded(self.waveform_source)
         step, sent = self._sent()
-        points = sent if encoded else 0
+        points = sent if encoded or self.off_channel(self.waveform_source) else 0
         scale, zero = (encoded[1], encoded[2]) if encoded else (s.ch_range_v[self.waveform_source] / 127, 0.0)
         x_inc = step / s.sample_rate_hz
         fields = [f"{0 if self.word == 'BYTE' else 1:+d}", "+0", f"{points:+d}", "+1", f"{x_inc:+.15E}",
@@ -249,6 +262,9 @@ class KeysightSimDigitizer(SimDigitizer):
         c.query_only()
         self.poll_capture()
         encoded = self.encoded(self.waveform_source)
+        if encoded is None and self.off_channel(self.waveform_source):
+            self.record_error(-221, "Settings conflict")
+            return Block(b"")
         if encoded is None:
             self.record_error(-230, "Data corrupt or stale; no acquisition")
             return Block(b"")

@@ -11,6 +11,8 @@ framing is the VISA layer's business).
     MSIZ <points>, TDIV <s/div> (10 divisions: sample rate = MSIZ / (10·TDIV)), SARA? (the rate)
     TRDL <percent>            pre-trigger as % of the record (0 .. 100)
     C<n>:VDIV <V/div>         8 divisions: the channel reads ±4·VDIV;   C<n>:OFST <v> (0 only)
+    C<n>:TRACE|TRA ON|OFF | ? the default setup (*RST) shows C1 only; a channel that is off is
+                              not acquired: its waveform is an empty trace (a WAVEDESC, no data)
     TRSE EDGE,SR,C<n>|EX[,HT,OFF] | ?, C<n>|EX:TRLV <v> | ?, C<n>|EX:TRSL POS|NEG | ?
     TRMD AUTO|NORM|SINGLE|STOP | ?, ARM, STOP
     INR?   bit 0: a new signal was acquired, bit 13: the trigger became ready (read clears)
@@ -52,6 +54,7 @@ class LeCroySimDigitizer(SimDigitizer):
     """The simulated LeCroy-style instrument (module docstring)."""
 
     identity = "LECROY,HOPKINSON-SIM-LC,SIM0004,9.6.0"
+    power_on_channels = (1,)
 
     def __init__(self, *args: object, **kwargs: object) -> None:
         self.cmr, self.exr, self.inr = 0, 0, 0
@@ -85,6 +88,7 @@ class LeCroySimDigitizer(SimDigitizer):
             (("TRIG_DELAY|TRDL",), h(self._trigger_delay)),
             (("C<n>", "VOLT_DIV|VDIV"), h(self._volt_div)),
             (("C<n>", "OFFSET|OFST"), h(lambda c: self.zero_only(c, "0.000E+00"))),
+            (("C<n>", "TRACE|TRA"), h(self._trace)),
             (("TRIG_SELECT|TRSE",), h(self._trigger_select)),
             (("C<n>|EX", "TRIG_LEVEL|TRLV"), h(self._trigger_level)),
             (("C<n>|EX", "TRIG_SLOPE|TRSL"), h(self._trigger_slope)),
@@ -113,6 +117,13 @@ class LeCroySimDigitizer(SimDigitizer):
             name = long if self.header == "LONG" else (short or long)
             parts.append(name.replace("<n>", "") + ("" if suffix is None else str(suffix)))
         return ":".join(parts)
+
+    def _trace(self, c: Call) -> Reply:
+        channel = self.channel(c.suffix)
+        if c.query:
+            return "ON" if self.channel_on[channel] else "OFF"
+        self.channel_on[channel] = self.on_off(c.arg)
+        return None
 
     # -- status registers ----------------------------------------------------------------------
     def record_error(self, code: int, message: str) -> None:

@@ -12,6 +12,10 @@ ALLEv? read (codes 1xx command errors, 2xx execution errors, 3xx device errors).
     HORizontal:POSition <percent> | ?        the trigger at that % of the record (delay off)
     CH<n>:SCAle <V/div> | ?                  10 divisions: the channel reads ±5·scale
     CH<n>:OFFSet <v> | ?, CH<n>:POSition <div> | ?   (only 0 is simulated)
+    SELect:CH<n> ON|OFF|1|0 | ? (1|0)        the default setup (*RST) shows CH1 only; a channel
+                                             that is off is not acquired: its preamble has 0
+                                             points and CURVe? is refused (event 221, "source
+                                             waveform is not active") with an empty block
     TRIGger:A:TYPe EDGE | ?, TRIGger:A:EDGE:SOUrce CH<n>|AUXiliary | ?,
     TRIGger:A:LEVel:CH<n>|AUXiliary <v> | ? (one level per source), TRIGger:A:EDGE:SLOpe
     RISe|FALL | ?, TRIGger:STATE? (ARMED while armed, SAVE when stopped)
@@ -54,6 +58,7 @@ class TektronixSimDigitizer(SimDigitizer):
     """The simulated Tektronix-style instrument (module docstring)."""
 
     identity = "TEKTRONIX,HOPKINSON-SIM-TEK,SIM0003,CF:91.1CT FV:1.0"
+    power_on_channels = (1,)
 
     def __init__(self, *args: object, **kwargs: object) -> None:
         self.pending_events: list[tuple[int, str]] = []  # errors until *ESR? is read
@@ -84,6 +89,7 @@ class TektronixSimDigitizer(SimDigitizer):
             (("HORizontal", "DELay", "MODe"), h(self._delay_mode)),
             (("HORizontal", "POSition"), h(self._position)),
             (("CH<n>", "SCAle"), h(self._scale)),
+            (("SELect", "CH<n>"), h(self._select)),
             (("CH<n>", "OFFSet"), h(lambda c: self.zero_only(c, "0.0E+0"))),
             (("CH<n>", "POSition"), h(lambda c: self.zero_only(c, "0.0E+0"))),
             (("TRIGger", "A", "TYPe"), h(self.edge_only)),
@@ -108,6 +114,13 @@ class TektronixSimDigitizer(SimDigitizer):
         ]
         rows += [(("WFMOutpre", key), h(self._preamble_field)) for key in _FIELDS]
         return rows
+
+    def _select(self, c: Call) -> Reply:
+        channel = self.channel(c.suffix)
+        if c.query:
+            return "1" if self.channel_on[channel] else "0"
+        self.channel_on[channel] = self.on_off(c.arg)
+        return None
 
     def _headed(self, handler: Handler) -> Callable[[Call], Reply]:
         """A query's reply with its header while HEADer is ON."""
@@ -354,6 +367,9 @@ class TektronixSimDigitizer(SimDigitizer):
         fmt, _, order = self._format()
         self.sample_format, self.byte_order = fmt, order
         encoded = self.encoded(self.waveform_source)
+        if encoded is None and self.off_channel(self.waveform_source):
+            self.record_error(-221, "Settings conflict; source waveform is not active")
+            return Block(b"")
         if encoded is None:
             self.record_error(-230, "Data corrupt or stale; no acquisition")
             return Block(b"")

@@ -26,6 +26,11 @@ What every dialect shares (this module):
   level, with the configured slope, on the configured source. A wrong source, level or slope
   means no capture: the instrument stays ARMED and the shot is lost, as on the real rig. The
   external input ("EXT") has nothing connected in the simulated rig.
+- Channels on or off: an oscilloscope acquires only the channels that are on (displayed). Each
+  dialect has its command for it and its power-on / *RST state (`power_on_channels`: the
+  generic digitizer has all four on, the scopes channel 1 alone); a channel off at the capture
+  (or turned off since) has no record, and each dialect answers its transfer as its instrument
+  does (an empty block, an empty trace or a refusal).
 - The record is kept in volts and converted at transfer to the format asked for (int8, uint8,
   int16, uint16, float32, either byte order), clipped at the format's full-scale codes (or,
   for float32, at the channel's range) as a converter clips, never wrapped.
@@ -34,6 +39,8 @@ Generic SCPI dialect (short form in capitals):
     :SYSTem:ERRor? (<code>,"<text>"; 0,"No error"), :SYSTem:ERRor:COUNt?
     :ACQuire:SRATe <hz> | ?, :ACQuire:POINts <n> | ?, :ACQuire:PRETrigger <n> | ? (samples)
     :CHANnel<1-4>:RANGe <v> | ?       full scale: the channel reads -v .. +v volts
+    :CHANnel<1-4>:DISPlay ON|OFF|1|0 | ?   (1|0; all on after power-on and *RST; the transfer
+                                      of an off channel: preamble with 0 points, DATA? refused)
     :TRIGger:SOURce CH<n>|EXT | ?, :TRIGger:LEVel <v> | ?, :TRIGger:SLOPe POS|NEG | ?
     :SINGle, :ABORt, :ACQuire:STATe? (IDLE|ARMED|TRIGGERED)
     :WAVeform:SOURce CH<n> | ?, :WAVeform:FORMat INT8|UINT8|INT16|UINT16|FLOAT32 | ?,
@@ -246,6 +253,7 @@ class SimDigitizer:
 
     identity = "Hopkinson-Sim,SIMDIG-4CH,SIM0001,1.0"
     channel_names: dict[str, int] = {"CH1": 1, "CH2": 2, "CH3": 3, "CH4": 4}
+    power_on_channels: tuple[int, ...] = CHANNELS  # on after power-on and *RST
     hole_code = False  # True: the format's lowest code is a hole, the converter clips above it
 
     def __init__(self, capture: CaptureFn, faults: FaultSet) -> None:
@@ -269,6 +277,8 @@ class SimDigitizer:
             self.sample_format, self.byte_order = "int16", "little"
             self.waveform_source = 1
             self._encoded: dict[tuple[int, str, str], tuple[bytes, float, float]] = {}
+            self.channel_on = {n: n in self.power_on_channels for n in CHANNELS}
+            self.acquired: frozenset[int] = frozenset()  # the channels on at the last capture
 
     def table(self) -> list[tuple[tuple[str, ...], Handler]]:
         """The dialect's commands: (header node patterns, handler)."""
@@ -313,6 +323,8 @@ class SimDigitizer:
             if ch not in CHANNELS or record[ch].shape != (n,):
                 raise SimError(-240, f"simulated capture gave {record[ch].shape} samples on channel {ch}, "
                                      f"expected {n} on one of {CHANNELS}")
+        self.acquired = frozenset(ch for ch, on in self.channel_on.items() if on)
+        record = {ch: data for ch, data in record.items() if ch in self.acquired}
         self.volts, self._encoded, self.state = record, {}, "TRIGGERED"
         self.acquisitions += 1
         if self.opc_armed:
@@ -321,8 +333,8 @@ class SimDigitizer:
 
     def encoded(self, channel: int) -> tuple[memoryview, float, float] | None:
         """(payload bytes, scale_v, zero_code) of a channel in the current transfer format;
-        None without a record."""
-        if self.state != "TRIGGERED":
+        None without a record (none taken, or the channel off at the capture or since)."""
+        if not self.has_record(channel):
             return None
         key = (channel, self.sample_format, self.byte_order)
         if key not in self._encoded:
@@ -335,6 +347,18 @@ class SimDigitizer:
             codes = np.ascontiguousarray(codes.astype(codes.dtype.newbyteorder(order), copy=False))
             self._encoded[key] = (memoryview(codes).cast("B"), scale, zero)
         return self._encoded[key]
+
+    def has_record(self, channel: int) -> bool:
+        """A record was taken with the channel on, and it is on still."""
+        return self.state == "TRIGGERED" and channel in self.acquired and self.channel_on[channel]
+
+    def off_channel(self, channel: int) -> bool:
+        """A record was taken but this channel has none because it is (or was) off."""
+        return self.state == "TRIGGERED" and not self.has_record(channel)
+
+    def on_off(self, arg: str) -> bool:
+        """ON|1 -> True, OFF|0 -> False (as the dialects take a channel's state)."""
+        return self.choice(arg, {"ON": "1", "1": "1", "OFF": "0", "0": "0"}) == "1"
 
     # -- the interpreter -------------------------------------------------------------------
     def execute(self, message: str, stopping: threading.Event) -> list[str | Block]:
@@ -559,6 +583,7 @@ class GenericSimDigitizer(SimDigitizer):
             (("ACQuire", "PRETrigger"), self._pretrigger),
             (("ACQuire", "STATe"), self._state),
             (("CHANnel<n>", "RANGe"), self._range),
+            (("CHANnel<n>", "DISPlay"), self._display),
             (("TRIGger", "SOURce"), self._trigger_source),
             (("TRIGger", "LEVel"), self._trigger_level),
             (("TRIGger", "SLOPe"), self._trigger_slope),
@@ -596,6 +621,13 @@ class GenericSimDigitizer(SimDigitizer):
         if c.query:
             return repr(float(self.settings.ch_range_v[channel]))
         return self.set_range(channel, self.number(c.arg))
+
+    def _display(self, c: Call) -> Reply:
+        channel = self.channel(c.suffix)
+        if c.query:
+            return "1" if self.channel_on[channel] else "0"
+        self.channel_on[channel] = self.on_off(c.arg)
+        return None
 
     def _trigger_source(self, c: Call) -> Reply:
         if c.query:
@@ -655,6 +687,8 @@ class GenericSimDigitizer(SimDigitizer):
         c.query_only()
         self.poll_capture()
         encoded = self.encoded(self.waveform_source)
+        if encoded is None and self.off_channel(self.waveform_source):
+            raise SimError(-221, f"Settings conflict; CH{self.waveform_source} is off: not acquired")
         if encoded is None:
             raise SimError(-230, "Data corrupt or stale; no acquisition")
         return Block(encoded[0])
@@ -804,6 +838,12 @@ class SimDigitizerServer:
         """A copy of the instrument's current acquisition settings."""
         with self._instrument.lock:
             return copy.deepcopy(self._instrument.settings)
+
+    @property
+    def channels_on(self) -> dict[int, bool]:
+        """Each channel's on/off state as the instrument holds it (a copy)."""
+        with self._instrument.lock:
+            return dict(self._instrument.channel_on)
 
     @property
     def state(self) -> str:

@@ -6,9 +6,10 @@
    computer (the names rig.toml wants);
 2. opens each configured instrument;
 3. reads every mapped signal of the controller one by one (each coil, discrete input and
-   register, with its address and type), its identity and watchdog; the digitizer's identity
-   and every acquisition and channel setting; the amplifier's identity, settings and
-   overload flag;
+   register, with its address and type), its identity and watchdog; the digitizer's identity,
+   every acquisition and channel setting, each recorded channel's on/off state (a scope
+   acquires only the channels that are on) and, when it holds a record, each recorded
+   channel's transfer; the amplifier's identity, settings and overload flag;
 4. prints each step as ok or FAIL; every failure names the instrument, the command and the
    reply, and a line "fix:" says what to check. A digitizer that does not answer its dialect's
    commands is asked a plain *IDN? (IEEE 488.2, which every dialect answers): its maker then
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import threading
 import warnings
 from collections.abc import Callable
@@ -159,7 +161,14 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
         configured = getattr(config.digitizer, "settings", None)
         if settings is not None and callable(configured) and hasattr(settings, "differences"):
             steps.run("settings against rig.toml", lambda: _same(configured().differences(settings)))
-        steps.run("acquisition state", dig.acquisition_state)
+        roles = dict(getattr(dig, "channels", {}) or {})
+        if settings is not None and getattr(settings, "channels_on", None) is not None:
+            steps.run("recorded channels on", lambda: channel_states(settings.channels_on, roles))
+        state = steps.run("acquisition state", dig.acquisition_state)
+        if state == "TRIGGERED":  # the instrument holds a record: try each role's transfer
+            for role, channel in roles.items():
+                steps.run(f"transfer of {channel} ({role})",
+                          lambda role=role: f"{dig.fetch_waveform(role).codes.size} samples")
 
     steps = _probe(config, "digitizer", body)
     opened = [s for s in steps.steps if s["step"] == "open"]
@@ -212,6 +221,16 @@ def plain_identity(config: RigConfig) -> str | None:
     thread.start()
     thread.join(PLAIN_IDN_S + 1.0)
     return found[0] if found and found[0] else None
+
+
+def channel_states(channels_on: dict[str, bool], roles: dict[str, str]) -> str:
+    """'CHAN1 on (doppler), CHAN2 off (response)' and, when one is off, that ARM turns it on."""
+    names = {channel: role for role, channel in roles.items()}
+    text = ", ".join(f"{ch} {'on' if on else 'off'}" + (f" ({names[ch]})" if ch in names else "")
+                     for ch, on in channels_on.items())
+    if all(channels_on.values()):
+        return text
+    return text + ": a channel that is off is not acquired; the sequencer turns it on at ARM"
 
 
 def _same(differences: list[str]) -> str:
@@ -286,6 +305,10 @@ FIXES: list[tuple[str, str]] = [  # (text in the error, what to check), first ma
 def fix_for(exc: BaseException) -> str:
     """What to check for this failure (FIXES), or the general advice."""
     text = str(exc)
+    off = re.search(r"(\S+) is off on the instrument", text)
+    if off:
+        return (f"turn {off.group(1)} on at the instrument (a shot's ARM turns on every channel rig.toml records "
+                "and checks it before FIRE): another program or the front panel turned it off")
     for needle, fix in FIXES:
         if needle.lower() in text.lower():
             return fix

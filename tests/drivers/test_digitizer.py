@@ -402,7 +402,7 @@ def test_setting_is_sent_with_the_error_query_in_one_message(scripted: Callable[
         d.configure(settings(ranges_v={"CH1": 1.0}, trigger_source="EXT", trigger_level_v=1.5, trigger_slope="NEG",
                              pre_trigger_samples=7, sample_rate_hz=2.5e8))
     assert srv.received[2] == (
-        "*CLS;:ACQuire:SRATe 250000000.0;:ACQuire:POINts 20000;:ACQuire:PRETrigger 7;:CHANnel1:RANGe 1.0;"
+        "*CLS;:CHANnel1:DISPlay ON;:ACQuire:SRATe 250000000.0;:ACQuire:POINts 20000;:ACQuire:PRETrigger 7;:CHANnel1:RANGe 1.0;"
         ":TRIGger:SOURce EXT;:TRIGger:LEVel 1.5;:TRIGger:SLOPe NEG;:SYSTem:ERRor?")
 
 
@@ -476,7 +476,7 @@ def test_an_endless_or_slow_reply_is_bounded(scripted: Callable[..., ScriptedSer
 )
 def test_bad_preamble_names_command_and_reply(scripted: Callable[..., ScriptedServer], reply: bytes,
                                               words: str) -> None:
-    srv = scripted({PRE: reply})
+    srv = scripted({PRE: reply, ":CHANnel1:DISPlay?": b"1\n"})  # the channel is on
     with connected(srv) as d, pytest.raises(InstrumentError, match=words) as info:
         d.fetch_waveform(1)
     assert info.value.command == PRE and info.value.reply == reply.decode().strip()

@@ -177,14 +177,14 @@ def test_the_armed_instrument_refuses_changes(scope: tuple[str, SimDigitizerServ
 PLAIN = {  # set-up, arm, the data query, pyvisa datatype / byte order of the block
     "generic": ([":ACQ:POIN 4000", ":ACQ:PRET 400", ":TRIG:SOUR CH2", ":TRIG:LEV 0.5", ":WAV:FORM INT16",
                  ":WAV:BYT LSBF", ":WAV:SOUR CH2"], ":SING", ":WAV:DATA?", "h", False),
-    "keysight": ([":ACQ:POIN 4000", ":TIM:REF LEFT", ":TIM:POS -4E-6", ":TRIG:EDGE:SOUR CHAN2",
+    "keysight": ([":CHAN2:DISP ON", ":ACQ:POIN 4000", ":TIM:REF LEFT", ":TIM:POS -4E-6", ":TRIG:EDGE:SOUR CHAN2",
                   ":TRIG:EDGE:LEV 0.5", ":WAV:FORM WORD", ":WAV:UNS 0", ":WAV:BYT MSBF", ":WAV:SOUR CHAN2",
                   ":WAV:POIN:MODE RAW", ":WAV:POIN MAX"],  # *RST sends the screen's 1000 points
                  ":SING", ":WAV:DATA?", "h", True),
-    "tektronix": (["HOR:MODE:RECO 4000", "HOR:POS 10", "TRIG:A:EDGE:SOU CH2", "TRIG:A:LEV:CH2 0.5",
+    "tektronix": (["SEL:CH2 ON", "HOR:MODE:RECO 4000", "HOR:POS 10", "TRIG:A:EDGE:SOU CH2", "TRIG:A:LEV:CH2 0.5",
                    "DATA:ENC SRI", "DATA:WID 2", "DATA:START 1", "DATA:STOP 4000", "DATA:SOU CH2"],
                   "ACQ:STOPA SEQ;:ACQ:STATE RUN", "CURV?", "h", False),
-    "lecroy": (["CHDR OFF", "MSIZ 4000", "TDIV 4E-6", "TRDL 10", "TRSE EDGE,SR,C2", "C2:TRLV 0.5", "C2:TRSL POS",
+    "lecroy": (["CHDR OFF", "C2:TRA ON", "MSIZ 4000", "TDIV 4E-6", "TRDL 10", "TRSE EDGE,SR,C2", "C2:TRLV 0.5", "C2:TRSL POS",
                 "CFMT DEF9,WORD,BIN", "CORD LO"], "TRMD SINGLE", "C2:WF? DAT1", "h", False),
 }
 
@@ -211,6 +211,101 @@ def test_a_plain_pyvisa_client_reads_each_simulator(scope: tuple[str, SimDigitiz
     assert state.record_length == 4000 and state.pre_trigger_samples == 400 and state.trigger_level_v == 0.5
     np.testing.assert_array_equal(codes, expected_codes(world.record(state)[2], state.ch_range_v[2], "int16",
                                                         dialect))
+
+
+# -- channels on or off (issue 21): a scope acquires only the channels that are on ---------------
+
+ON_QUERY = {"generic": ":CHAN{n}:DISP?", "keysight": ":CHAN{n}:DISP?", "tektronix": "SEL:CH{n}?",
+            "lecroy": "C{n}:TRA?"}
+POWER_ON = {"generic": (True, True), "keysight": (True, False), "tektronix": (True, False),
+            "lecroy": (True, False)}  # channels 1 and 2 after power-on and *RST, as the real instruments
+
+
+def _plain(server: SimDigitizerServer) -> pyvisa.resources.MessageBasedResource:
+    return pyvisa.ResourceManager("@py").open_resource(server.resource, read_termination="\n",
+                                                       write_termination="\n", timeout=2000)
+
+
+def _turn_off_channel_2(inst: pyvisa.resources.MessageBasedResource, dialect: str) -> None:
+    """Another program turns channel 2 off (and its query confirms it was done)."""
+    query = ON_QUERY[dialect].format(n=2)
+    inst.write(query.replace("?", " OFF"))
+    assert not _on(inst.query(query))
+
+
+def _on(reply: str) -> bool:
+    return reply.split()[-1].upper() in ("1", "ON")  # Tektronix and LeCroy may put a header first
+
+
+def test_each_simulator_powers_on_and_resets_with_its_instruments_channels(scope) -> None:
+    dialect, server = scope
+    inst = _plain(server)
+    try:
+        queries = [ON_QUERY[dialect].format(n=n) for n in (1, 2)]
+        assert tuple(_on(inst.query(q)) for q in queries) == POWER_ON[dialect]
+        inst.write(queries[1].replace("?", " ON"))
+        assert _on(inst.query(queries[1]))
+        inst.write("*RST")
+        assert tuple(_on(inst.query(q)) for q in queries) == POWER_ON[dialect]
+    finally:
+        inst.close()
+
+
+@pytest.mark.parametrize("dialect", ("keysight", "tektronix", "lecroy"))
+def test_a_channel_left_off_after_power_on_is_not_acquired(dialect: str, world: World) -> None:
+    # The issue's scope: channel 2 never turned on, the acquisition runs, its transfer is empty.
+    server = serve(dialect, world)
+    setup, arm, data_query, datatype, big_endian = PLAIN[dialect]
+    inst = _plain(server)
+    try:
+        for command in setup[1:] if dialect != "lecroy" else [c for c in setup if c != "C2:TRA ON"]:
+            inst.write(command)
+        inst.write(arm)
+        world.fire()
+        assert inst.query("*OPC?") == "1"
+        codes = inst.query_binary_values(data_query, datatype=datatype, is_big_endian=big_endian,
+                                         container=np.array)
+        assert codes.size == 0
+    finally:
+        inst.close()
+        server.stop()
+
+
+def test_the_driver_turns_on_every_recorded_channel_and_reads_them_back(scope) -> None:
+    dialect, server = scope
+    wanted = configured(dialect)
+    ch1, ch2 = CHANNELS[dialect][:2]
+    with driver(dialect, server) as dig:
+        dig.configure(wanted)  # from the power-on state: only channel 1 on for a scope
+        assert server.channels_on[1] and server.channels_on[2]
+        held = dig.settings()
+        assert held.channels_on == {ch1: True, ch2: True} and wanted.differences(held) == []
+        other = _plain(server)
+        try:
+            _turn_off_channel_2(other, dialect)
+        finally:
+            other.close()
+        assert wanted.differences(dig.settings()) == [
+            f"{ch2}: off on the instrument (the rig records it: it must be on, or nothing is acquired on it)"]
+
+
+def test_a_transfer_of_a_channel_turned_off_names_the_channel(scope, world: World) -> None:
+    dialect, server = scope
+    ch2 = CHANNELS[dialect][1]
+    with driver(dialect, server) as dig:
+        dig.configure(configured(dialect))
+        dig.arm_single()
+        other = _plain(server)
+        try:
+            _turn_off_channel_2(other, dialect)
+        finally:
+            other.close()
+        world.fire()
+        assert dig.wait_for_trigger(2.0)
+        assert dig.fetch_waveform("doppler").codes.size == N  # channel 1 was on: recorded
+        with pytest.raises(InstrumentError, match=f"{ch2} is off on the instrument") as info:
+            dig.fetch_waveform("response")
+        assert f"turn {ch2} on" in str(info.value) and info.value.instrument == dig.instrument
 
 
 def test_a_decimated_keysight_transfer_is_refused(world: World) -> None:

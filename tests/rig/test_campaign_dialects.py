@@ -61,9 +61,11 @@ def test_a_campaign_runs_on_each_digitizer_dialect(tmp_path: Path, dialect: str)
         with open_instruments(config, lambda: sim.world.last_shot_truth) as instruments:
             outcome = CampaignRunner(run, load_plan(plan_path), instruments, config, EventBus(),
                                      analyse=quick_analysis).run()
+        channels_on = sim.digitizer.channels_on  # a scope starts with channel 1 alone on
     finally:
         sim.stop()
     assert outcome.exit_code == 0 and outcome.complete, outcome.message
+    assert channels_on[1] and channels_on[2]  # ARM turned on both recorded channels
     assert sim.world.shots_fired == 2
     with Journal.open(run) as journal:
         assert [(s.state.value, s.fire_count) for s in journal.statuses()] == [("ANALYSED", 1)] * 2

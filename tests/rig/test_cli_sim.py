@@ -319,3 +319,45 @@ def test_probe_names_the_dialect_of_a_digitizer_that_does_not_speak_the_configur
     assert not opened["ok"] and f'set [digitizer] dialect = "{dialect}" in rig.toml (it is "generic")' in opened["fix"]
     plain = steps[-1]
     assert plain["ok"] and plain["step"].startswith("identity by a plain *IDN?") and plain["value"].startswith(maker)
+
+
+def test_probe_reports_each_recorded_channels_state_and_names_an_off_channel_in_its_fix(tmp_path: Path) -> None:
+    # A Keysight scope after power-on: channel 1 alone on. Another program took a record without
+    # turning channel 2 on; the probe says which recorded channel is off, and its transfer (an
+    # empty block) gets a fix naming the channel.
+    import pyvisa
+    from hopkinson.drivers.sim.faults import FaultSet
+    from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
+    from hopkinson.rig.cli.probe import _probe_digitizer
+    from hopkinson.rig.config import load_rig_config
+
+    from tests.drivers.digitizer_world import World
+
+    world = World()
+    server = SimDigitizerServer(world, FaultSet(), dialect="keysight")
+    server.start()
+    try:
+        inst = pyvisa.ResourceManager("@py").open_resource(server.resource, read_termination="\n",
+                                                           write_termination="\n", timeout=2000)
+        try:
+            for command in (":ACQ:POIN 4000", ":TIM:REF LEFT", ":TIM:POS -4E-6", ":TRIG:EDGE:SOUR CHAN1",
+                            ":TRIG:EDGE:LEV 0.05", ":SING"):
+                inst.write(command)
+            world.fire()
+            assert inst.query("*OPC?") == "1"
+        finally:
+            inst.close()
+        path = rig_toml_for({"modbus_port": 1, "visa_resource": server.resource, "serial_port": "/dev/null"}, tmp_path)
+        config = load_rig_config(path)
+        digitizer = dataclasses.replace(config.digitizer, dialect="keysight", timeout_s=2.0,
+                                        channels={"doppler": "CHAN1", "response": "CHAN2"},
+                                        trigger_source="doppler")
+        steps = {s["step"]: s for s in _probe_digitizer(dataclasses.replace(config, digitizer=digitizer)).steps}
+    finally:
+        server.stop()
+    states = steps["recorded channels on"]
+    assert states["ok"] and states["value"].startswith("CHAN1 on (doppler), CHAN2 off (response)")
+    assert steps["transfer of CHAN1 (doppler)"]["value"] == "4000 samples"
+    failed = steps["transfer of CHAN2 (response)"]
+    assert not failed["ok"] and "CHAN2 is off on the instrument" in failed["error"]
+    assert failed["fix"].startswith("turn CHAN2 on at the instrument")

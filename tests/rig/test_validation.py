@@ -114,6 +114,29 @@ def test_a_second_client_changing_the_sample_rate_aborts_before_fire(rig) -> Non
     rig.assert_safe()
 
 
+def test_a_recorded_channel_turned_off_by_another_program_aborts_before_fire(rig) -> None:
+    """A scope records only the channels that are on: ARM turns them on, and its read-back
+    before FIRE catches one that another program turned off since (issue 21)."""
+    import pyvisa
+
+    channel = rig.config.digitizer.channels["response"]
+    other = pyvisa.ResourceManager("@py").open_resource(rig.config.digitizer.resource, read_termination="\n",
+                                                        write_termination="\n", timeout=2000)
+
+    def meddle() -> None:
+        other.write(f":CHANnel{channel[-1]}:DISPlay OFF")
+        assert other.query(f":CHANnel{channel[-1]}:DISPlay?") == "0"
+
+    rig.on_state("CHARGE", meddle)
+    try:
+        outcome = rig.run(FireAuthorisation.pre_given())
+    finally:
+        other.close()
+    assert outcome.aborted_in == "ARM" and not outcome.fired and rig.world.shots_fired == 0
+    assert f"{channel}: off on the instrument" in outcome.error, outcome.error
+    rig.assert_safe()
+
+
 def test_a_changed_pressure_set_point_aborts_before_fire(rig) -> None:
     authorisation = FireAuthorisation()
 
