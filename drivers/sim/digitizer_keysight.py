@@ -72,7 +72,7 @@ class KeysightSimDigitizer(SimDigitizer):
             (("TIMebase", "POSition"), self._position),
             (("CHANnel<n>", "RANGe"), self._range),
             (("CHANnel<n>", "OFFSet"), lambda c: self.zero_only(c, "+0.00000E+00")),
-            (("CHANnel<n>", "DISPlay"), self._display),
+            (("CHANnel<n>", "DISPlay"), self.channel_state),
             (("TRIGger", "MODE"), self.edge_only),
             (("TRIGger", "EDGE", "SOURce"), self._trigger_source),
             (("TRIGger", "EDGE", "LEVel"), self._trigger_level),
@@ -144,13 +144,6 @@ class KeysightSimDigitizer(SimDigitizer):
         if c.query:
             return f"{2.0 * self.settings.ch_range_v[channel]:+.6E}"
         self.set_range(channel, self.number(c.arg) / 2.0)  # span of 8 divisions -> ±half
-        return None
-
-    def _display(self, c: Call) -> Reply:
-        channel = self.channel(c.suffix)
-        if c.query:
-            return "1" if self.channel_on[channel] else "0"
-        self.channel_on[channel] = self.on_off(c.arg)
         return None
 
     def _trigger_source(self, c: Call) -> Reply:

@@ -88,7 +88,7 @@ class LeCroySimDigitizer(SimDigitizer):
             (("TRIG_DELAY|TRDL",), h(self._trigger_delay)),
             (("C<n>", "VOLT_DIV|VDIV"), h(self._volt_div)),
             (("C<n>", "OFFSET|OFST"), h(lambda c: self.zero_only(c, "0.000E+00"))),
-            (("C<n>", "TRACE|TRA"), h(self._trace)),
+            (("C<n>", "TRACE|TRA"), h(lambda c: self.channel_state(c, "ON", "OFF"))),
             (("TRIG_SELECT|TRSE",), h(self._trigger_select)),
             (("C<n>|EX", "TRIG_LEVEL|TRLV"), h(self._trigger_level)),
             (("C<n>|EX", "TRIG_SLOPE|TRSL"), h(self._trigger_slope)),
@@ -117,13 +117,6 @@ class LeCroySimDigitizer(SimDigitizer):
             name = long if self.header == "LONG" else (short or long)
             parts.append(name.replace("<n>", "") + ("" if suffix is None else str(suffix)))
         return ":".join(parts)
-
-    def _trace(self, c: Call) -> Reply:
-        channel = self.channel(c.suffix)
-        if c.query:
-            return "ON" if self.channel_on[channel] else "OFF"
-        self.channel_on[channel] = self.on_off(c.arg)
-        return None
 
     # -- status registers ----------------------------------------------------------------------
     def record_error(self, code: int, message: str) -> None:

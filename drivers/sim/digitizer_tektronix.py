@@ -89,7 +89,7 @@ class TektronixSimDigitizer(SimDigitizer):
             (("HORizontal", "DELay", "MODe"), h(self._delay_mode)),
             (("HORizontal", "POSition"), h(self._position)),
             (("CH<n>", "SCAle"), h(self._scale)),
-            (("SELect", "CH<n>"), h(self._select)),
+            (("SELect", "CH<n>"), h(self.channel_state)),
             (("CH<n>", "OFFSet"), h(lambda c: self.zero_only(c, "0.0E+0"))),
             (("CH<n>", "POSition"), h(lambda c: self.zero_only(c, "0.0E+0"))),
             (("TRIGger", "A", "TYPe"), h(self.edge_only)),
@@ -114,13 +114,6 @@ class TektronixSimDigitizer(SimDigitizer):
         ]
         rows += [(("WFMOutpre", key), h(self._preamble_field)) for key in _FIELDS]
         return rows
-
-    def _select(self, c: Call) -> Reply:
-        channel = self.channel(c.suffix)
-        if c.query:
-            return "1" if self.channel_on[channel] else "0"
-        self.channel_on[channel] = self.on_off(c.arg)
-        return None
 
     def _headed(self, handler: Handler) -> Callable[[Call], Reply]:
         """A query's reply with its header while HEADer is ON."""

@@ -356,9 +356,13 @@ class SimDigitizer:
         """A record was taken but this channel has none because it is (or was) off."""
         return self.state == "TRIGGERED" and not self.has_record(channel)
 
-    def on_off(self, arg: str) -> bool:
-        """ON|1 -> True, OFF|0 -> False (as the dialects take a channel's state)."""
-        return self.choice(arg, {"ON": "1", "1": "1", "OFF": "0", "0": "0"}) == "1"
+    def channel_state(self, c: Call, on: str = "1", off: str = "0") -> Reply:
+        """A channel's on/off command (ON|OFF|1|0) or query (answered `on` or `off`)."""
+        channel = self.channel(c.suffix)
+        if c.query:
+            return on if self.channel_on[channel] else off
+        self.channel_on[channel] = self.choice(c.arg, {"ON": "1", "1": "1", "OFF": "0", "0": "0"}) == "1"
+        return None
 
     # -- the interpreter -------------------------------------------------------------------
     def execute(self, message: str, stopping: threading.Event) -> list[str | Block]:
@@ -583,7 +587,7 @@ class GenericSimDigitizer(SimDigitizer):
             (("ACQuire", "PRETrigger"), self._pretrigger),
             (("ACQuire", "STATe"), self._state),
             (("CHANnel<n>", "RANGe"), self._range),
-            (("CHANnel<n>", "DISPlay"), self._display),
+            (("CHANnel<n>", "DISPlay"), self.channel_state),
             (("TRIGger", "SOURce"), self._trigger_source),
             (("TRIGger", "LEVel"), self._trigger_level),
             (("TRIGger", "SLOPe"), self._trigger_slope),
@@ -621,13 +625,6 @@ class GenericSimDigitizer(SimDigitizer):
         if c.query:
             return repr(float(self.settings.ch_range_v[channel]))
         return self.set_range(channel, self.number(c.arg))
-
-    def _display(self, c: Call) -> Reply:
-        channel = self.channel(c.suffix)
-        if c.query:
-            return "1" if self.channel_on[channel] else "0"
-        self.channel_on[channel] = self.on_off(c.arg)
-        return None
 
     def _trigger_source(self, c: Call) -> Reply:
         if c.query:

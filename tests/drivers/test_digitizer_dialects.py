@@ -189,9 +189,9 @@ PLAIN = {  # set-up, arm, the data query, pyvisa datatype / byte order of the bl
 }
 
 
-def test_a_plain_pyvisa_client_reads_each_simulator(scope: tuple[str, SimDigitizerServer], world: World) -> None:
-    dialect, server = scope
-    setup, arm, data_query, datatype, big_endian = PLAIN[dialect]
+def plain_record(server: SimDigitizerServer, world: World, dialect: str, setup: list[str]) -> tuple[np.ndarray, str]:
+    """A plain pyvisa client sets up, arms, fires and reads channel 2: (its codes, *ESR? after)."""
+    _, arm, data_query, datatype, big_endian = PLAIN[dialect]
     rm = pyvisa.ResourceManager("@py")
     inst = rm.open_resource(server.resource, read_termination="\n", write_termination="\n", timeout=2000)
     try:
@@ -203,10 +203,16 @@ def test_a_plain_pyvisa_client_reads_each_simulator(scope: tuple[str, SimDigitiz
         assert inst.query("*OPC?") == "1"
         codes = inst.query_binary_values(data_query, datatype=datatype, is_big_endian=big_endian,
                                          container=np.array)
-        assert inst.query("*ESR?") == "0"  # no command above was refused
+        return codes, inst.query("*ESR?")
     finally:
         inst.close()
         rm.close()
+
+
+def test_a_plain_pyvisa_client_reads_each_simulator(scope: tuple[str, SimDigitizerServer], world: World) -> None:
+    dialect, server = scope
+    codes, esr = plain_record(server, world, dialect, PLAIN[dialect][0])
+    assert esr == "0"  # no command was refused
     state = world.seen[-1]
     assert state.record_length == 4000 and state.pre_trigger_samples == 400 and state.trigger_level_v == 0.5
     np.testing.assert_array_equal(codes, expected_codes(world.record(state)[2], state.ch_range_v[2], "int16",
@@ -255,20 +261,12 @@ def test_each_simulator_powers_on_and_resets_with_its_instruments_channels(scope
 def test_a_channel_left_off_after_power_on_is_not_acquired(dialect: str, world: World) -> None:
     # The issue's scope: channel 2 never turned on, the acquisition runs, its transfer is empty.
     server = serve(dialect, world)
-    setup, arm, data_query, datatype, big_endian = PLAIN[dialect]
-    inst = _plain(server)
     try:
-        for command in setup[1:] if dialect != "lecroy" else [c for c in setup if c != "C2:TRA ON"]:
-            inst.write(command)
-        inst.write(arm)
-        world.fire()
-        assert inst.query("*OPC?") == "1"
-        codes = inst.query_binary_values(data_query, datatype=datatype, is_big_endian=big_endian,
-                                         container=np.array)
-        assert codes.size == 0
+        setup = [c for c in PLAIN[dialect][0] if c not in ("SEL:CH2 ON", ":CHAN2:DISP ON", "C2:TRA ON")]
+        codes, _ = plain_record(server, world, dialect, setup)
     finally:
-        inst.close()
         server.stop()
+    assert codes.size == 0
 
 
 def test_the_driver_turns_on_every_recorded_channel_and_reads_them_back(scope) -> None:
