@@ -112,6 +112,8 @@ class LabRepository:
                     time.sleep(0.05 * (attempt + 1))
                     continue
                 raise LabError(f"database {self.where}: {_first_line(exc)}") from None
+            except sa.exc.SQLAlchemyError as exc:  # anything else the database refused: one line
+                raise LabError(f"database {self.where}: {_first_line(exc)}") from None
         raise AssertionError("unreachable")
 
     @staticmethod
@@ -336,7 +338,7 @@ class LabRepository:
                 content_sha256=hashlib.sha256(text.encode()).hexdigest()))
             session.flush()
             self._audit(session, authorised_by, "certificate replaced" if replaces else "certificate issued",
-                        number, serial=serial, subject=subject, replaces=replaces)
+                        number, serial=serial, campaign=subject, replaces=replaces)
             return IssuedCertificate(number, replaces, issued, final)
 
         return self._write(work)
