@@ -1,0 +1,31 @@
+"""Shot records made up for the lab's tests: known figures, so what the record gives back can be
+compared with what went in."""
+
+from __future__ import annotations
+
+import hashlib
+import uuid as uuid_module
+
+from hopkinson.analysis.key_figures import Figure
+from hopkinson.lab.records import ReferenceLink, ShotRecord
+
+
+def figure(value: float, u: float) -> Figure:
+    return Figure(value, u, (value - 2 * u, value + 2 * u))
+
+
+def made_up_record(serial: str = "SN-7", *, utc: str = "2026-03-01T10:00:00Z", sensitivity: float = 1.0,
+                   u: float = 0.002, campaign: str = "", rig: str = "HB-1", uid: str | None = None,
+                   raw: bytes | None = None, state: str = "analysed", analysis: str = "a") -> ShotRecord:
+    uid = uid or str(uuid_module.uuid4())
+    raw_sha = hashlib.sha256(raw if raw is not None else uid.encode()).hexdigest()
+    figures = {"sensitivity": figure(sensitivity, u), "shock_sensitivity": figure(1.6 * sensitivity, u),
+               "natural_frequency_hz": figure(27e3, 5.0), "damping_ratio": figure(0.05, 1e-4),
+               "fbsd_5_hz": figure(5.9e3, 2.0), "fbsd_10_hz": None} if state == "analysed" else {}
+    return ShotRecord(
+        uuid=uid, raw_sha256=raw_sha, file_sha256=hashlib.sha256((uid + analysis).encode()).hexdigest(),
+        path=f"/shots/{uid}.h5", state=state, operator="tech A", utc_time=utc, accelerometer_model="ACC-20k",
+        accelerometer_serial=serial, pressure_bar=2.0, projectile=3, rig=rig, campaign=campaign,
+        shot_name=uid[:8], response_unit="m/s^2", peak_acceleration_m_s2=4.9e5, figures=figures,
+        reference_chain=(ReferenceLink("interferometer", "PTB-1234", "PTB", 5e-4, "2027-06-30"),),
+    )
