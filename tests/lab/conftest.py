@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.rig.conftest import make_rig  # noqa: F401 (the simulated rig's fixture, for the recorder's tests)
+
 PG_USER = "hopkinson"
 
 
