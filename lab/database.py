@@ -25,7 +25,8 @@ from sqlalchemy.engine import URL, Engine, make_url
 
 URL_ENV = "HOPKINSON_DATABASE_URL"
 MIGRATIONS = Path(__file__).with_name("migrations")
-SQLITE_BUSY_TIMEOUT_S = 30.0  # a second writer waits for the first (WAL: readers never wait)
+SQLITE_BUSY_TIMEOUT_S = 30.0
+WRITER = "hopkinson_writer"  # execution option of a writing transaction (SQLite: BEGIN IMMEDIATE)  # a second writer waits for the first (WAL: readers never wait)
 
 
 def data_folder() -> Path:
@@ -84,7 +85,8 @@ def make_engine(url: str) -> Engine:
 
         @sa.event.listens_for(engine, "begin")
         def _begin(conn):  # noqa: ANN001
-            conn.exec_driver_sql("BEGIN IMMEDIATE")  # one writer at a time, waiting its turn
+            # a writer (WRITER option) takes the write lock at once and waits its turn; readers never wait (WAL)
+            conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get(WRITER) else "BEGIN")
 
         return engine
     return sa.create_engine(parsed, pool_pre_ping=True, connect_args={"connect_timeout": 10})
@@ -125,7 +127,7 @@ def check_schema(engine: Engine, url: str) -> None:
     try:
         revision = current_revision(engine)
     except sa.exc.OperationalError as exc:
-        raise LabError(f"database {where}: cannot be reached ({_first_line(exc)})") from None
+        raise LabError(f"database {where}: cannot be reached ({first_line(exc)})") from None
     head = head_revision()
     if revision == head:
         return
@@ -155,6 +157,7 @@ def upgrade_database(engine: Engine) -> tuple[str | None, str]:
     return before, head_revision()
 
 
-def _first_line(exc: BaseException) -> str:
+def first_line(exc: BaseException) -> str:
+    """One line for a database error (the driver's own message, else the exception's)."""
     text = str(getattr(exc, "orig", None) or exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__

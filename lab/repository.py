@@ -19,7 +19,14 @@ from typing import Any, TypeVar
 import sqlalchemy as sa
 from hopkinson.analysis.key_figures import Figure
 from hopkinson.lab import schema as t
-from hopkinson.lab.database import check_schema, database_url, make_engine, redacted
+from hopkinson.lab.database import (
+    WRITER,
+    check_schema,
+    database_url,
+    first_line,
+    make_engine,
+    redacted,
+)
 from hopkinson.lab.errors import LabError, TamperedShotError
 from hopkinson.lab.records import ShotRecord
 from sqlalchemy.orm import Session
@@ -72,6 +79,7 @@ class LabRepository:
     def __init__(self, url: str = "") -> None:
         self.url = database_url(url)
         self.engine = make_engine(self.url)
+        self._writer = self.engine.execution_options(**{WRITER: True})
         try:
             check_schema(self.engine, self.url)
         except Exception:
@@ -101,7 +109,7 @@ class LabRepository:
         """Run `work` in one transaction, again when it lost a race on a unique key."""
         for attempt in range(RETRIES):
             try:
-                with Session(self.engine) as session, session.begin():
+                with Session(self._writer) as session, session.begin():
                     return work(session)
             except sa.exc.IntegrityError:
                 if attempt == RETRIES - 1:
@@ -111,9 +119,9 @@ class LabRepository:
                 if "locked" in str(exc) and attempt < RETRIES - 1:  # SQLite's busy writer
                     time.sleep(0.05 * (attempt + 1))
                     continue
-                raise LabError(f"database {self.where}: {_first_line(exc)}") from None
+                raise LabError(f"database {self.where}: {first_line(exc)}") from None
             except sa.exc.SQLAlchemyError as exc:  # anything else the database refused: one line
-                raise LabError(f"database {self.where}: {_first_line(exc)}") from None
+                raise LabError(f"database {self.where}: {first_line(exc)}") from None
         raise AssertionError("unreachable")
 
     @staticmethod
@@ -371,18 +379,13 @@ def _sensor_info(sensor: t.Sensor) -> SensorInfo:
                       sensor.sensitivity_unit, sensor.tolerance_percent, sensor.interval_days)
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(getattr(exc, "orig", None) or exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 def open_repository(url: str = "") -> LabRepository:
     """The lab's record at `url` (module doc of hopkinson.lab.database for the default);
     LabError when it cannot be reached or its schema is not this software's."""
     try:
         return LabRepository(url)
     except sa.exc.SQLAlchemyError as exc:
-        raise LabError(f"database {redacted(database_url(url))}: {_first_line(exc)}") from None
+        raise LabError(f"database {redacted(database_url(url))}: {first_line(exc)}") from None
 
 
 

@@ -4,7 +4,8 @@ recorder that records every shot as it is stored, and `lab import`.
 The recorder subscribes to the event bus where the command line, the panel and a campaign
 build their sequencer (`attach_recorder`): on `Stored` (the raw shot file has its final name)
 and `Analysed` (its analysis is in the file) it hands the shot file to a worker thread, which
-reads it and records it in one transaction. The sequencer never waits for the database; a
+reads it and records it in one transaction; on `CampaignFinished` every shot file of the run
+folder (what a campaign analysed from file, e.g. on resume, goes in too; the rest is known). The sequencer never waits for the database; a
 database that cannot be reached costs nothing but time: the record goes to the spool
 (hopkinson.lab.spool) and in at the next shot or `hopkinson lab import`.
 """
@@ -23,11 +24,12 @@ from pathlib import Path
 import h5py
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.lab import spool
+from hopkinson.lab.database import first_line
 from hopkinson.lab.errors import LabError, TamperedShotError
 from hopkinson.lab.records import ReferenceLink, ShotRecord, figures_of
 from hopkinson.lab.repository import LabRepository, open_repository
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.events import Analysed, EventBus, RigEvent, RigWarning, Stored
+from hopkinson.rig.events import Analysed, CampaignFinished, EventBus, RigEvent, RigWarning, Stored
 from hopkinson.rig.run_folder import SHOTS_DIR
 from hopkinson.rig.shotfile import ShotFileError, raw_sha256, read_shot
 
@@ -124,6 +126,9 @@ class LabRecorder:
     def on_event(self, event: RigEvent) -> None:
         if isinstance(event, Stored | Analysed):
             self._queue.put(Path(event.shot_path))
+        elif isinstance(event, CampaignFinished):
+            for path in sorted((Path(event.run_folder) / SHOTS_DIR).glob("*.h5")):
+                self._queue.put(path)
 
     def record_now(self, path: Path) -> str:
         """Record one shot file in this thread (the worker's step; spools when the database is away)."""
@@ -145,7 +150,7 @@ class LabRecorder:
             self._drop_repository()
             where = spool.spool(record)
             self.spooled += 1
-            self._warn(f"lab record: not recorded now ({_one_line(exc)}); queued in {where} "
+            self._warn(f"lab record: not recorded now ({first_line(exc)}); queued in {where} "
                        f"(retried at the next shot or `hopkinson lab import`)")
             return "spooled"
 
@@ -199,10 +204,3 @@ def attach_recorder(bus: EventBus, config: RigConfig, stack: contextlib.ExitStac
         stack.callback(recorder.close)
         stack.callback(unsubscribe)
     return recorder
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
