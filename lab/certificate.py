@@ -53,7 +53,7 @@ def _fmt(figure: Figure, scale: float, unit: str) -> tuple[str, str]:
     return value, expanded or "—"
 
 
-def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *, customer: str = "",
+def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *, customer: str = "", conditions: str = "",
                         authorised_by: str, software_version: str, today: date | None = None) -> dict[str, Any]:
     """Everything the certificate of `campaign` (a recorded run folder's name) states, without
     its number. LabError when there is nothing to certify or the reference chain is overdue."""
@@ -93,6 +93,7 @@ def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *,
             ["peak acceleration", f"{min(peaks) / 9.80665:,.0f} g to {max(peaks) / 9.80665:,.0f} g" if peaks else "—"],
             ["operator(s)", ", ".join(sorted({c.operator for c in calibrations if c.operator})) or "—"],
             ["response unit", unit or "—"],
+            ["environment", conditions or "not stated (not recorded by this system)"],
         ],
         "results": {"header": ["quantity", "value", "U", "k", "unit", "shots"], "rows": results},
         "results_note": COMBINATION_NOTE + " U is the expanded uncertainty for a coverage probability of about 95 %.",

@@ -37,6 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     def command(name: str, helptext: str, func: Any) -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=helptext, description=helptext)
+        func = _one_line_database_errors(func)
         p.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG,
                        help="rig TOML with [lab] and [database] (default %(default)s)")
         p.add_argument("--database", default="", metavar="URL",
@@ -69,12 +70,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="certificate file, .pdf or .html (repeatable)")
     p.add_argument("--authorised-by", required=True, metavar="NAME", help="the person who authorises it")
     p.add_argument("--customer", default="", help="default: the sensor's owner")
+    p.add_argument("--conditions", default="", metavar="TEXT",
+                   help="environmental conditions of the calibration, e.g. '(23 ± 2) °C, (45 ± 10) %% r.h.'")
     p.add_argument("--replaces", default="", metavar="NUMBER", help="the certificate this one replaces")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("audit", "the audit trail, newest first", audit_command)
     p.add_argument("--subject", help="only entries about this shot UUID, certificate number or serial")
     p.add_argument("--limit", type=int, default=50)
     p.add_argument("--json", action="store_true", help="one JSON object")
+
+
+def _one_line_database_errors(func: Any) -> Any:
+    """A database error anywhere in a command becomes one line (LabError: exit 2), never a traceback."""
+    def run(args: argparse.Namespace) -> int:
+        import sqlalchemy as sa
+        from hopkinson.lab.database import first_line
+        from hopkinson.lab.errors import LabError
+
+        try:
+            return func(args)
+        except sa.exc.SQLAlchemyError as exc:
+            raise LabError(f"database: {first_line(exc)}") from None
+
+    return run
 
 
 def _config(args: argparse.Namespace) -> Any:
@@ -238,7 +256,7 @@ def certificate_command(args: argparse.Namespace) -> int:
             campaign = source.resolve().name
         else:
             campaign = args.source
-        content = certificate_content(repo, campaign, identity, customer=args.customer,
+        content = certificate_content(repo, campaign, identity, customer=args.customer, conditions=args.conditions,
                                       authorised_by=args.authorised_by, software_version=software_version())
         issued = repo.issue_certificate(
             identity.certificate_prefix, content, serial=content["serial"], subject=campaign,

@@ -117,14 +117,15 @@ def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
         "--tolerance-percent", "2", "--interval-days", "365", "--config", str(lab_config))
     pdf, page = tmp_path / "cert.pdf", tmp_path / "cert.html"
     code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(pdf), "-o", str(page),
-                         "--authorised-by", "Dr. Q. Manager", "--json", "--config", str(lab_config))
+                         "--authorised-by", "Dr. Q. Manager", "--conditions", "(23 ± 2) °C", "--json",
+                         "--config", str(lab_config))
     assert code == 0, err
     first = json.loads(out)
     assert first["number"].startswith("XL-20") and first["number"].endswith("-0001")
     assert first["conformity"] == "pass"
     text = page.read_text()
     for expected in (first["number"], "Shock Calibration Lab, Example Institute", "ACME Aerospace", "SN-7",
-                     "ACC-20k", "Yang", "PTB-2025-0815", "ILAC-G8:2019 guarded acceptance", "Dr. Q. Manager",
+                     "ACC-20k", "Yang", "PTB-2025-0815", "(23 ± 2) °C", "ILAC-G8:2019 guarded acceptance", "Dr. Q. Manager",
                      "s000", "shall not be reproduced"):
         assert expected in text, expected
     # the three shots combined (GUM G.4): mean 1.002, s = 0.002, ū = 0.002, ν_eff = 32
