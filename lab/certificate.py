@@ -135,11 +135,12 @@ def _results(calibrations: list[Calibration]) -> tuple[list[list[str]], Figure |
         combined = combine([c.figures.get(key) for c in calibrations])
         if combined.mean is None:
             continue
-        figure = combined.figure()
+        known_u = bool(combined.expanded)  # none (or zero: identical values without their own u) is not stated
+        figure = combined.figure() if known_u else Figure(combined.mean)
         if key == "sensitivity":
             sensitivity = figure
         value, expanded = _fmt(figure, scale, "")
-        rows.append([label, value, expanded, f"{combined.k:.2f}" if combined.k else "—",
+        rows.append([label, value, expanded, f"{combined.k:.2f}" if known_u else "—",
                      shown_unit if shown_unit != "× nominal" or unit == "m/s^2" else f"{unit}/(m/s²)",
                      str(combined.n)])
     return rows, sensitivity, unit

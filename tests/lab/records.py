@@ -35,13 +35,15 @@ def made_up_results(sensitivity: float, u: float, f_n_hz: float = 27e3) -> dict:
     """A shot's results dict as the analysis stores it (only what the key figures read)."""
     return {
         "model": {"dc_gain": sensitivity, "order": 2},
-        "identification": {"main_mode": {"natural_frequency_hz": f_n_hz, "damping_ratio": 0.05}},
+        "identification": {"main_mode": {"natural_frequency_hz": f_n_hz, "damping_ratio": 0.05 * sensitivity}},
         "reduction": {"response_unit": "m/s^2", "shock_sensitivity": 1.6 * sensitivity,
                       "peak_acceleration_m_s2": 4.9e5},
         "fbsd_hz": {"5": 5.9e3, "10": 8.1e3},
         "uncertainty": {"dc_gain": {"value": sensitivity, "u": u, "interval": [sensitivity - 2 * u, sensitivity + 2 * u]},
                         "main_mode": {"natural_frequency_hz": {"value": f_n_hz, "u": 4.0,
-                                                               "interval": [f_n_hz - 8, f_n_hz + 8]}}},
+                                                               "interval": [f_n_hz - 8, f_n_hz + 8]},
+                                      "damping_ratio": {"value": 0.05, "u": 1e-4, "interval": [0.0498, 0.0502]}},
+                        "fbsd_hz": {"5": {"value": 5.9e3, "u": 3.0, "interval": [5894.0, 5906.0]}}},
     }
 
 
