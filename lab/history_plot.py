@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from datetime import datetime
 
+import matplotlib.dates as mdates
 from hopkinson.lab.history import SensorHistory
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -44,5 +45,9 @@ def history_figure(history: SensorHistory) -> Figure:
             ax.set_title(f"E_n = {drift.e_n:+.2f}" + (" — drifted" if drift.drifted else ""), fontsize=8,
                          loc="right", color="#a00" if drift.drifted else "#333")
         ax.grid(alpha=0.3)
+        ax.ticklabel_format(axis="y", useOffset=False)
+    locator = mdates.AutoDateLocator()
+    axes[-1].xaxis.set_major_locator(locator)
+    axes[-1].xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
     axes[-1].set_xlabel("calibration date (UTC)")
     return fig

@@ -76,9 +76,11 @@ def test_import_is_idempotent_and_records_each_analysis(run_folder: Path, lab_ur
                        "--config", str(lab_config))
     assert [s["outcome"] for s in json.loads(out)["shots"]] == ["analysis added"]
 
+    plot = run_folder / "history.png"
     code, out, _ = lab(capsys, lab_url, "sensor", "SN-7", "--json", "--tolerance-percent", "0.5",
-                       "--interval-days", "365", "--config", str(lab_config))
+                       "--interval-days", "365", "--plot", str(plot), "--config", str(lab_config))
     history = json.loads(out)
+    assert plot.read_bytes().startswith(b"\x89PNG")
     sensitivities = [c["figures"]["sensitivity"]["value"] for c in history["calibrations"]]
     assert sensitivities == pytest.approx([1.010, 1.004, 1.002])  # the newest analysis of each shot
     assert history["calibrations"][0]["figures"]["sensitivity"]["U"] == pytest.approx(0.004)
