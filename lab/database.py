@@ -1,6 +1,7 @@
 """Where the lab's record lives and how it is opened: the URL, the engine, the schema's version.
 
-The URL is, first found: `HOPKINSON_DATABASE_URL`, the rig configuration's `[database] url`,
+The URL is, first found: a command's --database, `HOPKINSON_DATABASE_URL`, the rig
+configuration's `[database] url`,
 else SQLite in the user's data folder (`$XDG_DATA_HOME/hopkinson/lab.sqlite`, or the
 platform's user data folder): nothing to set up. `postgresql://…` URLs use psycopg 3.
 
@@ -39,9 +40,10 @@ def data_folder() -> Path:
     return Path(platformdirs.user_data_dir("hopkinson", appauthor=False))
 
 
-def database_url(configured: str = "") -> str:
-    """The database URL in force: the environment, else `configured`, else the default SQLite file."""
-    url = os.environ.get(URL_ENV, "").strip() or configured.strip()
+def database_url(configured: str = "", explicit: str = "") -> str:
+    """The database URL in force: `explicit` (a command's --database), else the environment, else
+    `configured` (the rig configuration's), else the default SQLite file."""
+    url = explicit.strip() or os.environ.get(URL_ENV, "").strip() or configured.strip()
     if url:
         return url
     return f"sqlite:///{data_folder() / 'lab.sqlite'}"

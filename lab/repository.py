@@ -76,8 +76,8 @@ class IssuedCertificate:
 class LabRepository:
     """The lab's record behind one small API (see the module doc)."""
 
-    def __init__(self, url: str = "") -> None:
-        self.url = database_url(url)
+    def __init__(self, url: str = "", explicit: str = "") -> None:
+        self.url = database_url(url, explicit)
         self.engine = make_engine(self.url)
         self._writer = self.engine.execution_options(**{WRITER: True})
         try:
@@ -379,13 +379,14 @@ def _sensor_info(sensor: t.Sensor) -> SensorInfo:
                       sensor.sensitivity_unit, sensor.tolerance_percent, sensor.interval_days)
 
 
-def open_repository(url: str = "") -> LabRepository:
-    """The lab's record at `url` (module doc of hopkinson.lab.database for the default);
-    LabError when it cannot be reached or its schema is not this software's."""
+def open_repository(url: str = "", explicit: str = "") -> LabRepository:
+    """The lab's record: `explicit`, else HOPKINSON_DATABASE_URL, else `url` (the configured
+    one), else the default (hopkinson.lab.database); LabError when it cannot be reached or
+    its schema is not this software's."""
     try:
-        return LabRepository(url)
+        return LabRepository(url, explicit)
     except sa.exc.SQLAlchemyError as exc:
-        raise LabError(f"database {redacted(database_url(url))}: {first_line(exc)}") from None
+        raise LabError(f"database {redacted(database_url(url, explicit))}: {first_line(exc)}") from None
 
 
 

@@ -12,7 +12,7 @@
                                                issue a numbered certificate (<prefix>-<year>-<NNNN>)
     hopkinson lab audit [--subject S] [--json]  the audit trail, newest first
 
-The database: HOPKINSON_DATABASE_URL, else --database, else the rig configuration's
+The database: --database, else HOPKINSON_DATABASE_URL, else the rig configuration's
 [database] url, else SQLite in the user's data folder. The lab's name, certificate prefix,
 decision rule and this rig's reference chain come from the configuration's [lab].
 Exit codes: 0 done; 2 bad input, a database that cannot be reached or has another schema, a
@@ -41,7 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         p.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG,
                        help="rig TOML with [lab] and [database] (default %(default)s)")
         p.add_argument("--database", default="", metavar="URL",
-                       help="database URL (sqlite:///FILE or postgresql://…); HOPKINSON_DATABASE_URL wins")
+                       help="database URL (sqlite:///FILE or postgresql://…); else HOPKINSON_DATABASE_URL, else "
+                            "the configuration's [database] url")
         p.set_defaults(func=func)
         return p
 
@@ -105,7 +106,7 @@ def _repository(args: argparse.Namespace, config: Any = None) -> Any:
     from hopkinson.lab.repository import open_repository
 
     config = config or _config(args)
-    return open_repository(args.database or config.database.url)
+    return open_repository(config.database.url, explicit=args.database)
 
 
 def status_command(args: argparse.Namespace) -> int:
@@ -127,7 +128,7 @@ def upgrade_command(args: argparse.Namespace) -> int:
     from hopkinson.lab.database import database_url, make_engine, redacted, upgrade_database
 
     config = _config(args)
-    url = database_url(args.database or config.database.url)
+    url = database_url(config.database.url, explicit=args.database)
     engine = make_engine(url)
     try:
         before, after = upgrade_database(engine)
