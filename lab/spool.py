@@ -4,10 +4,12 @@ always on disk first; the spool only ever delays its record, never loses it."""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from hopkinson.lab.database import data_folder
@@ -17,19 +19,31 @@ from hopkinson.lab.records import ShotRecord
 from hopkinson.fileio import atomic_write
 
 SPOOL_NAME = "lab-spool.jsonl"
-_lock = threading.Lock()  # one process's threads take turns; records are idempotent across processes
+_lock = threading.Lock()  # one process's threads take turns
 
 
 def spool_path() -> Path:
     return data_folder() / SPOOL_NAME
 
 
+@contextlib.contextmanager
+def _held(path: Path) -> Iterator[None]:
+    """The spool to ourselves: this process's threads and every other process (a POSIX lock on
+    `<spool>.lock`), so a line appended while another drains is never lost in its rewrite."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _lock, open(path.with_name(path.name + ".lock"), "a") as lock_file:
+        fcntl.flock(lock_file.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock_file.fileno(), fcntl.LOCK_UN)
+
+
 def spool(record: ShotRecord, path: Path | None = None) -> Path:
     """Append `record` to the spool (fsynced)."""
     path = path or spool_path()
-    path.parent.mkdir(parents=True, exist_ok=True)
     line = json.dumps(record.to_dict(), allow_nan=True) + "\n"
-    with _lock, open(path, "a", encoding="utf-8") as f:
+    with _held(path), open(path, "a", encoding="utf-8") as f:
         f.write(line)
         f.flush()
         os.fsync(f.fileno())
@@ -54,7 +68,9 @@ def drain(record: Callable[[ShotRecord], object], path: Path | None = None) -> i
     """Hand every spooled record to `record` (which raises when the database is still away);
     keeps the ones that failed. Returns how many went in."""
     path = path or spool_path()
-    with _lock:
+    if not path.exists():
+        return 0
+    with _held(path):
         waiting = pending(path)
         if not waiting:
             return 0
