@@ -194,3 +194,19 @@ def test_the_raw_hash_ignores_the_analysis_and_follows_the_codes(tmp_path: Path)
     channels["doppler"] = (np.where(np.arange(codes.size) == 3, codes + 1, codes).astype(codes.dtype), scale, offset)
     assert raw_sha256(type(shot.raw)(channels, shot.raw.sample_interval_s, shot.raw.trigger_index)) != \
         raw_sha256(shot.raw)
+
+
+def test_no_certificate_rests_on_an_overdue_reference(tmp_path: Path, sqlite_url: str, lab_config: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run-overdue"
+    (run / "shots").mkdir(parents=True)
+    snapshot = {"lab": {"rig": "HB-2", "reference_chain": [
+        {"item": "digitizer gain", "certificate": "DKD-1", "u_rel": 0.002, "due": "2026-02-28"}]}}
+    write_made_up_shot(run / "shots" / "s000.h5", campaign=run.name, utc="2026-03-01T10:00:00Z", config=snapshot)
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run), "-o", str(tmp_path / "c.html"),
+                         "--authorised-by", "Q", "--config", str(lab_config))
+    assert code == 2 and not (tmp_path / "c.html").exists()
+    assert err == ("hopkinson: error: campaign run-overdue: reference chain overdue at the calibration: "
+                   "digitizer gain (DKD-1, due 2026-02-28); no certificate\n")
+    code, out, _ = lab(capsys, sqlite_url, "audit", "--json", "--config", str(lab_config))
+    assert not [a for a in json.loads(out)["audit"] if a["action"].startswith("certificate")]
