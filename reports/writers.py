@@ -56,7 +56,8 @@ def _png_base64(fig: Figure) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _html_table(header: list[str] | None, rows: Iterable[Sequence[str]], cls: str = "") -> str:
+def html_table(header: list[str] | None, rows: Iterable[Sequence[str]], cls: str = "") -> str:
+    """A table as HTML text (cells escaped); cls "kv" shows the first column bold."""
     out = [f'<table class="{cls}">' if cls else "<table>"]
     if header:
         out.append("<thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr></thead>")
@@ -67,7 +68,7 @@ def _html_table(header: list[str] | None, rows: Iterable[Sequence[str]], cls: st
     return "".join(out)
 
 
-_CSS = """
+HTML_CSS = """
 body { font-family: DejaVu Sans, Arial, sans-serif; margin: 2em auto; max-width: 60em; color: #222; }
 h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ccc; margin-top: 2em; } h3 { margin-top: 1.5em; }
 table { border-collapse: collapse; margin: 0.5em 0 1em 0; font-size: 0.9em; }
@@ -82,22 +83,22 @@ def _write_html(path: Path, report: CalibrationReport, pages: list[tuple[str, Fi
                 stats: CampaignStatistics | None) -> None:
     e = html.escape
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{e(report.title)}</title>"
-             f"<style>{_CSS}</style></head><body>", f"<h1>{e(report.title)}</h1>",
+             f"<style>{HTML_CSS}</style></head><body>", f"<h1>{e(report.title)}</h1>",
              "<p>Hopkinson-bar shock calibration: dynamic model, band of small distortion (FBSD, ±5 % and ±10 %) "
              "and dynamic compensation model (DCM).</p>",
-             "<h2>Accelerometer and rig</h2>", _html_table(None, report.identity.items(), "kv")]
+             "<h2>Accelerometer and rig</h2>", html_table(None, report.identity.items(), "kv")]
     by_caption = dict(pages)
     if report.campaign and stats is not None:
         parts.append("<h2>Shots</h2>")
-        parts.append(_html_table(*per_shot_rows(report.shots)))
+        parts.append(html_table(*per_shot_rows(report.shots)))
         parts.append(f"<h2>Spread across {len(stats.labels)} analysed shots</h2>")
-        parts.append(_html_table(*spread_rows(stats)))
+        parts.append(html_table(*spread_rows(stats)))
         header, rows = combined_rows(stats)
         if rows:
-            parts.append("<h2>Key figures of the campaign</h2>" + _html_table(header, rows)
+            parts.append("<h2>Key figures of the campaign</h2>" + html_table(header, rows)
                          + f"<p class='note'>{e(COMBINATION_NOTE)}</p>")
         if stats.sine:
-            parts.append("<h2>Against the sinusoidal calibration</h2>" + _html_table(*sine_rows(stats.sine)))
+            parts.append("<h2>Against the sinusoidal calibration</h2>" + html_table(*sine_rows(stats.sine)))
         for note in stats.sine_notes:
             parts.append(f"<p class='error'>{e(note)}</p>")
         parts.append("<h2>Cross-validation</h2><p>Row i: the model identified on shot i; column j: its response "
@@ -105,38 +106,38 @@ def _write_html(path: Path, report: CalibrationReport, pages: list[tuple[str, Fi
                      "100·(1 − ‖y − ŷ‖/‖y − ȳ‖).</p>")
         m = stats.cross_validation_percent
         rows = [[stats.labels[i]] + [fmt(v, digits=5) for v in m[i]] for i in range(len(stats.labels))]
-        parts.append(_html_table(["model \\ shot"] + stats.labels, rows, "cv"))
+        parts.append(html_table(["model \\ shot"] + stats.labels, rows, "cv"))
         for caption in ("Campaign: cross-validation and spread", "Campaign: responses of all shots", SINE_CAPTION):
             if caption in by_caption:
                 parts.append(_html_figure(caption, by_caption[caption]))
     for entry in report.shots:
         parts.append(f"<h2 id='shot-{e(entry.label)}'>Shot {e(entry.label)}</h2>")
-        parts.append(_html_table(None, list(entry.identity.items()) + [("state", entry.state or "—")], "kv"))
+        parts.append(html_table(None, list(entry.identity.items()) + [("state", entry.state or "—")], "kv"))
         if entry.analysis is None:
             parts.append(f"<p class='error'>No analysis: {e(entry.error or 'none stored')}</p>")
             continue
-        parts.append("<h3>Results</h3>" + _html_table(None, results_rows(entry), "kv"))
+        parts.append("<h3>Results</h3>" + html_table(None, results_rows(entry), "kv"))
         check = entry.compensation
         if check is not None and check.recommended is False:
             parts.append(f"<p class='error'><b>DCM not recommended</b>: "
                          f"{e(check.not_recommended_reason or 'compensation does not improve this shot')}</p>")
         header, rows = uncertainty_rows(entry)
         if rows:
-            parts.append("<h3>Measurement uncertainty</h3>" + _html_table(header, rows)
+            parts.append("<h3>Measurement uncertainty</h3>" + html_table(header, rows)
                          + f"<p class='note'>{e(uncertainty_method(entry))}</p>")
             header, rows = budget_rows(entry)
             if rows:
-                parts.append("<h4>Uncertainty budget: relative standard uncertainty (%)</h4>" + _html_table(header, rows)
+                parts.append("<h4>Uncertainty budget: relative standard uncertainty (%)</h4>" + html_table(header, rows)
                              + f"<p class='note'>{e(BUDGET_NOTE)}</p>")
         rows = compensation_rows(entry)
         if rows:
-            parts.append("<h3>Compensation checked on the shot itself</h3>" + _html_table(None, rows, "kv"))
+            parts.append("<h3>Compensation checked on the shot itself</h3>" + html_table(None, rows, "kv"))
         for caption, fig in [(c, f) for c, f in pages if c.startswith(f"{entry.label}: ")]:
             parts.append(_html_figure(caption, fig))
             if caption.endswith("poles and zeros"):
-                parts.append("<h3>Pole analysis (Table 1)</h3>" + _html_table(*pole_rows(entry.analysis)))
+                parts.append("<h3>Pole analysis (Table 1)</h3>" + html_table(*pole_rows(entry.analysis)))
             if caption.endswith("dynamic compensation model"):
-                parts.append("<h3>DCM</h3>" + _html_table(None, dcm_rows(entry.analysis), "kv"))
+                parts.append("<h3>DCM</h3>" + html_table(None, dcm_rows(entry.analysis), "kv"))
     if report.notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in report.notes) + "</ul>")
     parts.append("</body></html>\n")

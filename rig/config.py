@@ -19,6 +19,9 @@ one per section:
     [timeouts]           check_s, evacuate_s, charge_s, arm_s, fire_s, capture_s, safe_s, store_s, analyse_s
     [analysis]           grating_pitch_m, orders, sensitivity_v_per_m_s2, sample_rate_hz,
                          dcm_widening, dcm_noise_gain_limit, amp_gain_2, sensitivity_2_v_per_m_s2
+    [lab]                name, address, accreditation, certificate_prefix, rig, decision_rule
+      [[lab.reference_chain]]  item, certificate, issued_by, u_rel, due ("YYYY-MM-DD")
+    [database]           url (sqlite:///FILE or postgresql://…; default SQLite in the data folder)
 
 `load_sim_config(path) -> SimConfig` does the same for the simulator's file ([servers],
 [world] with its sub-tables, [register_map]).
@@ -42,9 +45,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import types
 import typing
 from dataclasses import dataclass, field
+from datetime import date
 from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any
@@ -324,6 +329,39 @@ class UncertaintyConfig:
 
 
 @dataclass(frozen=True)
+class ReferenceCertificateConfig:
+    """[[lab.reference_chain]]: one item of the rig's reference chain and its own certificate
+    (printed on every certificate as its traceability); due "YYYY-MM-DD"."""
+
+    item: str
+    certificate: str
+    issued_by: str = ""
+    u_rel: float = 0.0  # relative standard uncertainty, k = 1 (0: not stated)
+    due: str = ""
+
+
+@dataclass(frozen=True)
+class LabConfig:
+    """[lab]: the calibration lab as its certificates name it (hopkinson.lab)."""
+
+    name: str = ""
+    address: str = ""
+    accreditation: str = ""  # e.g. "DAkkS D-K-12345-01-00" ("" when not accredited)
+    certificate_prefix: str = "HB"  # certificates are numbered <prefix>-<year>-<sequence>
+    rig: str = ""  # this rig's name in the lab's record ("" : the configuration file's name)
+    decision_rule: str = "simple"  # "simple" (ILAC-G8 w = 0) or "guarded" (w = U)
+    reference_chain: tuple[ReferenceCertificateConfig, ...] = ()
+
+
+@dataclass(frozen=True)
+class DatabaseConfig:
+    """[database]: where the lab's record lives ("" : SQLite in the user's data folder;
+    HOPKINSON_DATABASE_URL overrides). Never copied into shot files (it may hold a password)."""
+
+    url: str = ""
+
+
+@dataclass(frozen=True)
 class RigConfig:
     """The whole of config/rig.toml, validated."""
 
@@ -334,6 +372,8 @@ class RigConfig:
     timeouts: TimeoutsConfig = field(default_factory=TimeoutsConfig)
     analysis: AnalysisConfig = field(default_factory=AnalysisConfig)
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+    lab: LabConfig = field(default_factory=LabConfig)
+    database: DatabaseConfig = field(default_factory=DatabaseConfig)
     path: str = ""  # where it was loaded from (not a TOML key)
 
     def snapshot(self) -> dict[str, Any]:
@@ -345,6 +385,7 @@ class RigConfig:
                 for f in dataclasses.fields(value):
                     if f.metadata.get("inline"):
                         data[section.name].update(data[section.name].pop(f.name))
+        del data["database"]  # the URL may hold a password: never in a shot file
         return data
 
 
@@ -412,6 +453,8 @@ RULES: dict[str, _Rule] = {
     "amplifier.excitation_v": _Rule(0.0, EXCITATION_RANGE_V[1]),
     "amplifier.lowpass_hz": _Rule(0.0, 1e8, text="0 (off) or the filter corner"),
     "amplifier.sensitivity_v_per_m_s2": _Rule(0.0, 1.0, text="0 (not entered) or the sensitivity"),
+    "lab.decision_rule": _Rule(choices=("simple", "guarded")),
+    "lab.reference_chain.u_rel": _Rule(0.0, 1.0),
     "limits.max_pressure_bar": _Rule(above=0.0, max=100.0),
     "limits.min_pressure_bar": _Rule(0.0, 100.0),
     "limits.pressure_tolerance_bar": _Rule(above=0.0, max=10.0),
@@ -553,6 +596,25 @@ def _check_rig(config: RigConfig, path: Path) -> None:
     _check_thresholds(config, path)
     _check_amplifier(config.amplifier, path)
     _check_driver(config.digitizer.driver, ("scpi",), path, "digitizer")
+    _check_lab(config.lab, config.database, path)
+
+
+def _check_lab(lab: LabConfig, database: DatabaseConfig, path: Path) -> None:
+    if not re.fullmatch(r"[A-Z0-9]{1,12}", lab.certificate_prefix):
+        raise ConfigError(f"{path}: lab.certificate_prefix: 1 to 12 capital letters or digits, "
+                          f"got {lab.certificate_prefix!r}")
+    for i, link in enumerate(lab.reference_chain):
+        if not link.item.strip() or not link.certificate.strip():
+            raise ConfigError(f"{path}: lab.reference_chain[{i}]: item and certificate must not be empty")
+        if link.due:
+            try:
+                date.fromisoformat(link.due)
+            except ValueError:
+                raise ConfigError(f"{path}: lab.reference_chain[{i}].due: a date YYYY-MM-DD (as a string), "
+                                  f"got {link.due!r}") from None
+    scheme = database.url.split(":", 1)[0].split("+", 1)[0]
+    if database.url and scheme not in ("sqlite", "postgresql", "postgres"):
+        raise ConfigError(f"{path}: database.url: a sqlite:///FILE or postgresql://… URL, got scheme {scheme!r}")
 
 
 def _check_valve_controller(vc: ValveControllerConfig, path: Path) -> None:

@@ -6,7 +6,9 @@ Layout (format "hopkinson-shot", format_version 1)::
                            "analysis_failed"), uuid, utc_time (ISO 8601, UTC), operator,
                            accelerometer_model, accelerometer_serial, software_version,
                            pressure_bar, projectile, simulated (bool), and when known shot_id,
-                           shot_index, campaign_id; config_json, instruments_json,
+                           shot_index, campaign_id; raw_sha256 (of the raw channels,
+                           rig.shotfile.raw_sha256: the lab's record keys a shot by it and
+                           refuses a file whose channels no longer match); config_json, instruments_json,
                            sensors_json (with further sensors: role -> {"model", "serial"}
                            of each, e.g. response_2's) and (in simulation) truth_json: the
                            exact JSON text of those dicts;
@@ -66,6 +68,7 @@ it the new file is complete. The cost is one copy of the file per analysis (tens
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import importlib.metadata
 import json
 import math
@@ -236,6 +239,7 @@ def write_raw_shot(path: str | Path, raw: RawShot, meta: ShotMeta) -> Path:
         f.attrs["pressure_bar"] = float(meta.pressure_bar)
         f.attrs["projectile"] = int(meta.projectile)
         f.attrs["simulated"] = meta.simulated_truth is not None
+        f.attrs["raw_sha256"] = raw_sha256(RawShot(channels, raw.sample_interval_s, raw.trigger_index))
         for key in ("shot_id", "campaign_id"):
             if getattr(meta, key) is not None:
                 f.attrs[key] = str(getattr(meta, key))
@@ -277,6 +281,18 @@ def write_raw_shot(path: str | Path, raw: RawShot, meta: ShotMeta) -> Path:
 
     _atomic_write(path, build)
     return path
+
+
+def raw_sha256(raw: RawShot) -> str:
+    """SHA-256 of the raw channels as recorded: each role (sorted) with its code type, scale,
+    offset and codes (little-endian), and the sampling; a re-analysis never changes it."""
+    digest = hashlib.sha256(f"{raw.sample_interval_s!r}|{int(raw.trigger_index)}".encode())
+    for role in sorted(raw.channels):
+        channel = RawChannel(*raw.channels[role])
+        codes = np.ascontiguousarray(channel.codes, dtype=channel.codes.dtype.newbyteorder("<"))
+        digest.update(f"|{role}|{codes.dtype.str}|{codes.size}|{channel.scale_v!r}|{channel.offset_v!r}|".encode())
+        digest.update(codes.tobytes())
+    return digest.hexdigest()
 
 
 def add_analysis(

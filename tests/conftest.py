@@ -21,8 +21,11 @@ ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 def private_rig_folders(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every test keeps rig locks (rig/lock.py) and the simulator's runtime files (pty links,
     addresses, state) in folders of its own: never the machine's shared ones, and no clash
-    between tests running in parallel."""
+    between tests running in parallel. The lab's record (hopkinson.lab) likewise: a data folder
+    of its own, never the user's database."""
     monkeypatch.setenv("HOPKINSON_LOCK_DIR", str(tmp_path_factory.mktemp("locks")))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path_factory.mktemp("data")))
+    monkeypatch.delenv("HOPKINSON_DATABASE_URL", raising=False)
     runtime = tmp_path_factory.mktemp("runtime")
     runtime.chmod(0o700)
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))

@@ -27,6 +27,9 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith((".dist-info", ".data"))}
     assert tops == {"hopkinson"}, tops
     assert "hopkinson/config/rig-sim.toml" in names and "hopkinson/config/campaigns/demo.toml" in names
+    # the lab's record: its schema's migrations ship as package data (alembic runs them from there)
+    assert "hopkinson/lab/migrations/env.py" in names and "hopkinson/lab/migrations/script.py.mako" in names
+    assert any(n.startswith("hopkinson/lab/migrations/versions/v0001") for n in names)
     site = work / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site),
                     str(wheel)], check=True, capture_output=True, timeout=300)
@@ -34,7 +37,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _run(site: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONPATH=str(site), HOPKINSON_CONFIG_DIR=str(cwd / "no-user-config"))
+    env = dict(os.environ, PYTHONPATH=str(site), HOPKINSON_CONFIG_DIR=str(cwd / "no-user-config"),
+               XDG_DATA_HOME=str(cwd / "data"))
     return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=240)
 
 
@@ -47,6 +51,10 @@ def test_installed_wheel_runs_from_any_folder(installed: Path, tmp_path: Path) -
                 "--out", "shots", "--json")
     assert shot.returncode == 0, shot.stderr
     assert list((tmp_path / "shots").glob("*.h5"))
+    # the shot went into the lab's record (SQLite in the data folder), its schema from the installed migrations
+    sensor = _run(installed, tmp_path, "-m", "hopkinson", "lab", "status", "--json",
+                  "--config", where.stdout.strip())
+    assert sensor.returncode == 0 and '"shots":1' in sensor.stdout, (sensor.stdout, sensor.stderr)
 
 
 def test_a_lab_rig_toml_in_the_user_config_dir_is_the_default(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

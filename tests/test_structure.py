@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("analysis", "drivers", "reports", "rig", "ui", "config", "hopkinson")
-TOP_LEVEL_FOLDERS = ("analysis", "drivers", "reports", "rig", "ui")
+PACKAGES = ("analysis", "drivers", "reports", "lab", "rig", "ui", "config", "hopkinson")
+TOP_LEVEL_FOLDERS = ("analysis", "drivers", "reports", "lab", "rig", "ui")
 STDLIB = set(sys.stdlib_module_names)
 # The root package's own modules (the version, file safety): standard library only, usable by all.
 ROOT_MODULES = {"hopkinson", "hopkinson.fileio"}
@@ -59,6 +59,10 @@ def _violation(rel: str, module: str) -> str | None:
     if folder == "reports":
         if inside and sub not in ("analysis", "reports"):
             return "reports/ imports only analysis/ of the project"
+        return None
+    if folder == "lab":
+        if inside and sub not in ("analysis", "reports", "lab"):
+            return "lab/ imports only analysis/ and reports/ of the project (never rig/ or ui/)"
         return None
     if folder == "rig":
         if inside and sub == "ui" and not rel.startswith("rig/cli/"):

@@ -42,6 +42,7 @@ from hopkinson.ui.campaign_tab import CampaignTab
 from hopkinson.ui.dcm_tab import DcmTab
 from hopkinson.ui.log_view import LogTab, LogView
 from hopkinson.ui.plots import ShotPlots, ShotView, configure_pyqtgraph, load_shot_view
+from hopkinson.ui.sensor_tab import SensorTab
 from hopkinson.ui.shot_setup import ShotSetup
 from hopkinson.ui.state_bar import StateBar
 from hopkinson.ui.status_panel import StatusPanel
@@ -181,6 +182,8 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(self.plots, "Shot")
         self.tabs.addTab(self.dcm_tab, "DCM design")
         self.tabs.addTab(self.campaign_tab, "Campaign")
+        self.sensor_tab = SensorTab(self.background, config.database.url, config.lab.decision_rule)
+        self.tabs.addTab(self.sensor_tab, "Sensor history")
         self.tabs.addTab(self.log_tab, "Log")
 
         splitter = QSplitter(Qt.Orientation.Horizontal)

@@ -56,6 +56,7 @@ from hopkinson.rig.errors import instrument_hint, with_hint
 from hopkinson.rig.events import EventBus, RigEvent
 from hopkinson.rig.instruments import Instruments, make_instruments
 from hopkinson.rig.interlocks import REQUIRED, evaluate, read_readings
+from hopkinson.rig.lab_record import attach_recorder
 from hopkinson.rig.lock import RigLock, command_line, rig_address
 from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.shot import ShotOutcome, ShotRequest
@@ -132,6 +133,7 @@ class RigLink(QObject):
         self.instruments.simulated_truth = simulated_truth
         self.sequencer = Sequencer(self.instruments, config, self.bus)
         self._unsubscribe = self.bus.subscribe(self._on_bus_event)
+        self.recorder = attach_recorder(self.bus, config)  # the lab's record (hopkinson.lab)
         self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rig-io")
         self._lock = threading.Lock()
         self._links = {
@@ -277,6 +279,7 @@ class RigLink(QObject):
             self.abort("the panel is closing")
         wait([self._io.submit(self.instruments.close)], timeout=timeout_s)  # after any SAFE queued before it
         self._unsubscribe()
+        self.recorder.close()
         self._io.shutdown(wait=False, cancel_futures=True)
         if self.rig_lock is not None:
             self.rig_lock.release()

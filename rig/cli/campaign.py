@@ -114,6 +114,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.control import controlled_rig
     from hopkinson.rig.events import EventBus
     from hopkinson.rig.instruments import with_sim_channels
+    from hopkinson.rig.lab_record import attach_recorder
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.plan import check_shot_count, load_plan
 
@@ -146,6 +147,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         if printer is not None:
             bus.subscribe(printer)
         subscribe_outputs(stack, bus, args, what=f"campaign {run.path.name}", lines=False)
+        attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
         report_reclaimed(control)
         runner = CampaignRunner(run, plan, control.instruments, config, bus,
                                 on_shot_start=fire_log.set_shot if fire_log is not None else None)

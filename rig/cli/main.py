@@ -41,6 +41,7 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.compare_sine",
     "hopkinson.rig.cli.reduce",
     "hopkinson.rig.cli.report",
+    "hopkinson.rig.cli.lab",
     "hopkinson.rig.cli.demo",
 ]
 
@@ -67,11 +68,12 @@ def rig_config_path(args: argparse.Namespace) -> Path:
 
 def _known_errors() -> tuple[type[BaseException], ...]:
     from hopkinson.analysis.errors import AnalysisError
+    from hopkinson.lab.errors import LabError
     from hopkinson.rig.errors import ConfigError, ShotAborted
 
     from hopkinson.fileio import UnsafeOutputError
 
-    errors: list[type[BaseException]] = [AnalysisError, ConfigError, ShotAborted, UnsafeOutputError]
+    errors: list[type[BaseException]] = [AnalysisError, ConfigError, LabError, ShotAborted, UnsafeOutputError]
     try:
         from hopkinson.drivers.errors import InstrumentError
 

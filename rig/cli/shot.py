@@ -117,6 +117,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.control import controlled_rig, run_shot_under_signals
     from hopkinson.rig.events import AwaitingConfirmation, EventBus
     from hopkinson.rig.instruments import with_sim_channels
+    from hopkinson.rig.lab_record import attach_recorder
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
     from hopkinson.rig.shot import ShotRequest, generated_shot_name, second_accelerometer
@@ -148,6 +149,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     sim_state: dict[str, Any] | None = None
     with contextlib.ExitStack() as stack:
         subscribe_outputs(stack, bus, args, what=f"shot {request.shot_path().name}")
+        attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
         truth = None
         if args.sim:
             from hopkinson.rig.sim_session import sim_session

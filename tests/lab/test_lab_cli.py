@@ -1,0 +1,212 @@
+"""`hopkinson lab` on real shot files: import (idempotent, re-analysis, tampering), a sensor's
+history, certificates (numbered, re-issued, drawn as PDF and HTML), and bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import sqlalchemy as sa
+from hopkinson.lab.database import make_engine
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.shotfile import add_analysis
+from scipy.stats import t as student_t
+
+from tests.lab.records import made_up_results, write_made_up_shot
+
+REPO = Path(__file__).resolve().parents[2]
+LAB_SECTION = """
+[lab]
+name = "Shock Calibration Lab, Example Institute"
+address = "1 Bar Street, Testville"
+accreditation = "ISO/IEC 17025, accreditation No. D-K-00000-00-00 (example)"
+certificate_prefix = "XL"
+rig = "HB-1"
+decision_rule = "guarded"
+
+[[lab.reference_chain]]
+item = "laser Doppler interferometer (grating pitch)"
+certificate = "PTB-2025-0815"
+issued_by = "PTB"
+u_rel = 0.0001
+due = "2030-06-30"
+"""
+
+
+@pytest.fixture
+def lab_config(tmp_path: Path) -> Path:
+    path = tmp_path / "rig.toml"
+    path.write_text((REPO / "config" / "rig-sim.toml").read_text() + LAB_SECTION)
+    return path
+
+
+@pytest.fixture
+def run_folder(tmp_path: Path) -> Path:
+    """A campaign's run folder with three analysed shots of SN-7 (sensitivity 1.000, 1.004, 1.002)."""
+    run = tmp_path / "run-2026-03"
+    (run / "shots").mkdir(parents=True)
+    snapshot = {"lab": {"rig": "HB-1", "reference_chain": [
+        {"item": "laser Doppler interferometer (grating pitch)", "certificate": "PTB-2025-0815", "issued_by": "PTB",
+         "u_rel": 0.0001, "due": "2030-06-30"}]}}
+    for i, s in enumerate((1.000, 1.004, 1.002)):
+        write_made_up_shot(run / "shots" / f"s00{i}.h5", campaign=run.name, sensitivity=s, u=0.002,
+                           utc=f"2026-03-01T10:0{i}:00Z", config=snapshot)
+    return run
+
+
+def lab(capsys: pytest.CaptureFixture[str], url: str, *args: str) -> tuple[int, str, str]:
+    code = main(["lab", args[0], "--database", url, *args[1:]])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_import_is_idempotent_and_records_each_analysis(run_folder: Path, lab_url: str, lab_config: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = lab(capsys, lab_url, "import", str(run_folder), "--json", "--config", str(lab_config))
+    assert code == 0 and [s["outcome"] for s in json.loads(out)["shots"]] == ["new"] * 3
+    code, out, _ = lab(capsys, lab_url, "import", str(run_folder), "--json", "--config", str(lab_config))
+    assert [s["outcome"] for s in json.loads(out)["shots"]] == ["known"] * 3
+    add_analysis(run_folder / "shots" / "s000.h5", made_up_results(1.010, 0.002))  # a re-analysis rewrites it
+    code, out, _ = lab(capsys, lab_url, "import", str(run_folder / "shots" / "s000.h5"), "--json",
+                       "--config", str(lab_config))
+    assert [s["outcome"] for s in json.loads(out)["shots"]] == ["analysis added"]
+
+    plot = run_folder / "history.png"
+    code, out, _ = lab(capsys, lab_url, "sensor", "SN-7", "--json", "--tolerance-percent", "0.5",
+                       "--interval-days", "365", "--plot", str(plot), "--config", str(lab_config))
+    history = json.loads(out)
+    assert plot.read_bytes().startswith(b"\x89PNG")
+    sensitivities = [c["figures"]["sensitivity"]["value"] for c in history["calibrations"]]
+    assert sensitivities == pytest.approx([1.010, 1.004, 1.002])  # the newest analysis of each shot
+    assert history["calibrations"][0]["figures"]["sensitivity"]["U"] == pytest.approx(0.004)
+    assert history["calibrations"][0]["rig"] == "HB-1"
+    assert history["sensor"]["tolerance_percent"] == 0.5
+    assert history["conformity"]["rule"] == "guarded"  # from the configuration's [lab]
+    # 1.002 with U 0.4 %: 0.2 + 0.4 > 0.5 ≥ 0.2 -> a conditional pass under guarded acceptance
+    assert history["conformity"]["verdict"] == "conditional pass"
+
+
+@pytest.fixture
+def sqlite_url(tmp_path: Path) -> str:
+    """The commands' own paths on SQLite only (the repository's tests run on both databases)."""
+    return f"sqlite:///{tmp_path / 'lab.sqlite'}"
+
+
+def test_a_tampered_shot_file_is_refused_with_one_line(run_folder: Path, sqlite_url: str, lab_config: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    shot = run_folder / "shots" / "s001.h5"
+    with h5py.File(shot, "r+") as f:  # the codes rewritten whole: the HDF5 checksums are valid again
+        codes = f["raw/response"][...]
+        codes[100] += 1
+        f["raw/response"][...] = codes
+    code, out, err = lab(capsys, sqlite_url, "import", str(run_folder), "--config", str(lab_config))
+    assert code == 2
+    assert err == f"hopkinson: error: {shot.resolve()}: raw channels do not match their SHA-256 written with the " \
+                  f"shot (tampered or damaged); refused\n"
+    assert out.count("new: ") == 2  # the others are recorded all the same
+
+
+def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
+        run_folder: Path, sqlite_url: str, lab_config: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        artifacts_dir: Path) -> None:
+    lab(capsys, sqlite_url, "import", str(run_folder), "--config", str(lab_config))
+    lab(capsys, sqlite_url, "sensor", "SN-7", "--owner", "ACME Aerospace", "--model", "ACC-20k",
+        "--tolerance-percent", "2", "--interval-days", "365", "--config", str(lab_config))
+    pdf, page = tmp_path / "cert.pdf", tmp_path / "cert.html"
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(pdf), "-o", str(page),
+                         "--authorised-by", "Dr. Q. Manager", "--conditions", "(23 ± 2) °C", "--json",
+                         "--config", str(lab_config))
+    assert code == 0, err
+    first = json.loads(out)
+    assert first["number"].startswith("XL-20") and first["number"].endswith("-0001")
+    assert first["conformity"] == "pass"
+    text = page.read_text()
+    for expected in (first["number"], "Shock Calibration Lab, Example Institute", "ACME Aerospace", "SN-7",
+                     "ACC-20k", "Yang", "PTB-2025-0815", "(23 ± 2) °C", "ILAC-G8:2019 guarded acceptance", "Dr. Q. Manager",
+                     "s000", "shall not be reproduced"):
+        assert expected in text, expected
+    # the three shots combined (GUM G.4): mean 1.002, s = 0.002, ū = 0.002, ν_eff = 32
+    u_c = (0.002 ** 2 / 3 + 0.002 ** 2) ** 0.5
+    k = student_t.ppf(0.975, u_c ** 4 / ((0.002 ** 2 / 3) ** 2 / 2))
+    assert f"<td>sensitivity (model DC gain)</td><td>1.0020</td><td>{k * u_c:.4f}</td><td>{k:.2f}</td>" in text
+    assert pdf.read_bytes().startswith(b"%PDF")
+    if shutil.which("pdftoppm"):
+        subprocess.run(["pdftoppm", "-png", "-r", "60", str(pdf), str(artifacts_dir / "lab-certificate")], check=True)
+
+    again = tmp_path / "cert-2.html"
+    code, out, _ = lab(capsys, sqlite_url, "certificate", run_folder.name, "-o", str(again), "--authorised-by",
+                       "Dr. Q. Manager", "--replaces", first["number"], "--json", "--config", str(lab_config))
+    second = json.loads(out)
+    assert code == 0 and second["replaces"] == first["number"] and second["number"].endswith("-0002")
+    assert f"certificate {first['number']}, which is withdrawn" in again.read_text()
+    code, out, _ = lab(capsys, sqlite_url, "audit", "--json", "--config", str(lab_config))
+    actions = [(a["action"], a["subject"]) for a in json.loads(out)["audit"]]
+    assert actions[:2] == [("certificate replaced", second["number"]), ("certificate issued", first["number"])]
+
+
+@pytest.mark.parametrize("case", ["bad url", "unreachable", "newer schema", "unknown campaign", "bad suffix"])
+def test_bad_input_is_one_line_and_exit_2(case: str, tmp_path: Path, lab_config: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 'lab.sqlite'}"
+    args = ["status"]
+    expected = ""
+    if case == "bad url":
+        url, expected = "mysql://x@host/db", "only sqlite and postgresql are supported"
+    elif case == "unreachable":
+        url, expected = "postgresql://nobody@127.0.0.1:9/none", "cannot be reached"
+    elif case == "newer schema":
+        main(["lab", "upgrade", "--database", url, "--config", str(lab_config)])
+        engine = make_engine(url)
+        with engine.begin() as connection:
+            connection.execute(sa.text("UPDATE alembic_version SET version_num = '0042'"))
+        engine.dispose()
+        expected = "schema version 0042 is newer than this software's (0001); use a newer hopkinson"
+    elif case == "unknown campaign":
+        args, expected = ["certificate", "no-such-run", "-o", str(tmp_path / "c.pdf"), "--authorised-by", "Q"], \
+            "campaign no-such-run: not in the lab's record"
+    else:
+        args, expected = ["certificate", "x", "-o", str(tmp_path / "c.docx"), "--authorised-by", "Q"], \
+            "a certificate is .pdf or .html"
+    capsys.readouterr()
+    code, out, err = lab(capsys, url, *args, "--config", str(lab_config))
+    assert code == 2
+    assert err.startswith("hopkinson: error: ") and err.count("\n") == 1 and expected in err, err
+    assert "Traceback" not in err and "password" not in err
+
+
+def test_the_raw_hash_ignores_the_analysis_and_follows_the_codes(tmp_path: Path) -> None:
+    from hopkinson.rig.shotfile import raw_sha256, read_shot
+
+    path = tmp_path / "one.h5"
+    write_made_up_shot(path)
+    shot = read_shot(path)
+    with h5py.File(path) as f:
+        assert f.attrs["raw_sha256"] == raw_sha256(shot.raw)
+    add_analysis(path, made_up_results(1.2, 0.01))
+    assert raw_sha256(read_shot(path).raw) == raw_sha256(shot.raw)
+    channels = dict(shot.raw.channels)
+    codes, scale, offset, *_ = channels["doppler"]
+    channels["doppler"] = (np.where(np.arange(codes.size) == 3, codes + 1, codes).astype(codes.dtype), scale, offset)
+    assert raw_sha256(type(shot.raw)(channels, shot.raw.sample_interval_s, shot.raw.trigger_index)) != \
+        raw_sha256(shot.raw)
+
+
+def test_no_certificate_rests_on_an_overdue_reference(tmp_path: Path, sqlite_url: str, lab_config: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run-overdue"
+    (run / "shots").mkdir(parents=True)
+    snapshot = {"lab": {"rig": "HB-2", "reference_chain": [
+        {"item": "digitizer gain", "certificate": "DKD-1", "u_rel": 0.002, "due": "2026-02-28"}]}}
+    write_made_up_shot(run / "shots" / "s000.h5", campaign=run.name, utc="2026-03-01T10:00:00Z", config=snapshot)
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run), "-o", str(tmp_path / "c.html"),
+                         "--authorised-by", "Q", "--config", str(lab_config))
+    assert code == 2 and not (tmp_path / "c.html").exists()
+    assert err == ("hopkinson: error: campaign run-overdue: reference chain overdue at the calibration: "
+                   "digitizer gain (DKD-1, due 2026-02-28); no certificate\n")
+    code, out, _ = lab(capsys, sqlite_url, "audit", "--json", "--config", str(lab_config))
+    assert not [a for a in json.loads(out)["audit"] if a["action"].startswith("certificate")]

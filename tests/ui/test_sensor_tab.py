@@ -1,0 +1,62 @@
+"""The panel's sensor-history tab: a serial's calibrations from the lab's record in a table and
+plots, with its drift, conformity and due-date flags (a made-up history whose last calibration
+drifted by a known amount)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hopkinson.lab.repository import open_repository
+
+from tests.lab.records import made_up_record
+from tests.ui.conftest import dispose, save_shot
+
+SENSITIVITIES = (1.000, 1.001, 0.999, 1.000, 1.002, 1.001, 1.000, 1.012)  # the last one drifted
+
+
+@pytest.fixture
+def database(tmp_path: Path) -> str:
+    url = f"sqlite:///{tmp_path / 'lab.sqlite'}"
+    with open_repository(url) as repo:
+        for i, s in enumerate(SENSITIVITIES):
+            repo.record_shot(made_up_record("SN-42", utc=f"202{i // 4 + 4}-{i % 4 * 3 + 1:02d}-15T09:00:00Z",
+                                            sensitivity=s, u=0.001, campaign=f"run-{i}"))
+        repo.register_sensor("SN-42", "tester", model="ACC-60k", owner="ACME Aerospace", tolerance_percent=1.0,
+                             interval_days=365)
+    return url
+
+
+@pytest.fixture
+def tab(qtbot, database: str):
+    from hopkinson.ui.plots import configure_pyqtgraph
+    from hopkinson.ui.sensor_tab import SensorTab
+    from hopkinson.ui.worker import Background
+
+    configure_pyqtgraph()
+    background = Background()
+    widget = SensorTab(background, database, "simple")
+    widget.resize(1100, 760)
+    widget.show()
+    yield widget
+    dispose(widget)
+
+
+def test_a_sensors_history_shows_its_calibrations_drift_and_flags(qtbot, tab, artifacts_dir: Path) -> None:
+    tab.serial_edit.setText("SN-42")
+    tab.show_button.click()
+    qtbot.waitUntil(lambda: tab.history is not None, timeout=20_000)
+    assert tab.table.rowCount() == len(SENSITIVITIES)
+    assert tab.table.item(0, 3).text().startswith("1.0120 ± 0.0020")  # newest first
+    flags = tab.flags.text()
+    assert "drift in sensitivity" in flags and "overdue since 2026-10-15" in flags
+    assert "FAIL: sensitivity deviates +1.20 %" in flags  # simple acceptance, tolerance ±1 %
+    points = tab.plots["sensitivity"].getPlotItem().listDataItems()
+    assert list(points[0].yData) == pytest.approx(SENSITIVITIES)
+    save_shot(tab, artifacts_dir / "panel-sensor-history.png")
+
+
+def test_an_unknown_serial_says_so(qtbot, tab) -> None:
+    tab.serial_edit.setText("SN-NOPE")
+    tab.show_button.click()
+    qtbot.waitUntil(lambda: "not in the lab's record" in tab.summary.text(), timeout=20_000)
