@@ -175,11 +175,19 @@ def identify_joint(record: Any, sine: SineCalibration, **options: Any) -> Any:
     if np.any(sine.frequency_hz >= nyquist):
         raise AnalysisError(f"{sine.source}: points at or above the analysis's Nyquist frequency ({nyquist:g} Hz)")
     weights = _reweighted(shock, sine, None)
-    ident = shock
+    ident, used = None, weights
     for _ in range(WEIGHT_ITERATIONS):
-        ident = identify(record, **options, sine_terms=sine_terms(sine, dt, weights))
+        try:
+            ident, used = identify(record, **options, sine_terms=sine_terms(sine, dt, weights)), weights
+        except AnalysisError as exc:
+            if ident is None:
+                raise AnalysisError(f"the fit of one model to the record and {sine.source} failed: {exc}") from None
+            ident.warnings.append(f"the joint fit with the sine's re-estimated weights failed ({exc}); the "
+                                  "previous weights are kept")
+            break
         weights = _reweighted(ident, sine, weights)
-    ident.sine_joint = consistency(ident, sine, weights)
+    assert ident is not None
+    ident.sine_joint = consistency(ident, sine, used)
     ident.model.info["fit_method"] = "eiv-frequency-oe + sine calibration"
     return ident
 
