@@ -14,6 +14,17 @@ from tests.analysis.hard_records import Case, record
 from tests.analysis.test_sine_joint import OTHER, synthetic_sine
 from tests.ptb_shock import write_ptb_record_csv, write_ptb_sine_csv
 
+PLAN = """name = "joint"
+operator = "T"
+[accelerometer]
+model = "M"
+serial = "S"
+sine_calibration = "{sine}"
+[[shots]]
+pressure_bar = 2.0
+projectile = 3
+"""
+
 
 def write_record(path, rec):
     np.savetxt(path, np.column_stack([rec.time_s, rec.reference, rec.response]), delimiter=",",
@@ -85,3 +96,34 @@ def test_ptb_record_with_its_sine_compensates_within_two_and_one_percent(tmp_pat
     check = json.loads(capsys.readouterr().out)["dcm"]["check"]
     assert abs(check["rms_error_pct"]["compensated"]) <= 2.0
     assert abs(check["peak_error_pct"]["compensated"]) <= 1.0
+
+
+def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
+    """The route of a plan's [accelerometer] sine_calibration and the panel's shot set-up: the
+    shot request's sine_calibration reaches the analysis options, the shot's analysis fits it,
+    a further sensor never inherits it, and an unreadable file is refused before anything moves."""
+    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.shot_analysis import analyse_record
+    from hopkinson.rig.campaign import shot_request
+    from hopkinson.rig.config import load_rig_config
+    from hopkinson.rig.plan import load_plan
+    from hopkinson.rig.run_folder import RunFolder
+    from hopkinson.rig.shot import ShotRequest, ShotRequestError, analysis_params, sensor_params
+
+    _, sine, _ = files
+    config = load_rig_config("config/rig-sim.toml")
+    request = ShotRequest(pressure_bar=2.0, sine_calibration=str(sine), out_dir=tmp_path)
+    request.check(config)
+    params = analysis_params(request, config, {})
+    assert params.sine_calibration == str(sine)
+    assert sensor_params(params, config)["response_2"].sine_calibration is None
+    analysis = analyse_record(record(Case(), 3), AnalysisParams(uncertainty=False, sine_calibration=str(sine)))
+    joint = analysis.to_dict()["identification"]["sine_joint"]
+    assert joint["consistent"] is True and joint["source"] == str(sine)
+    bad = ShotRequest(pressure_bar=2.0, sine_calibration=str(tmp_path / "none.csv"), out_dir=tmp_path)
+    with pytest.raises(ShotRequestError, match="sine_calibration: .*none.csv: no such file"):
+        bad.check(config)
+    plan_file = tmp_path / "plan.toml"
+    plan_file.write_text(PLAN.format(sine=sine))
+    plan = load_plan(plan_file)
+    assert shot_request(plan, plan.shots[0], RunFolder(tmp_path)).sine_calibration == str(sine)
