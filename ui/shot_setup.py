@@ -104,6 +104,21 @@ class ShotSetup(QWidget):
         out_row.addWidget(self.out_dir, 1)
         out_row.addWidget(browse)
 
+        # The sensor's sine calibration (optional): each shot's model is fitted to it too (analysis.sine_joint).
+        self.sine_calibration = QLineEdit()
+        self.sine_calibration.setPlaceholderText("optional: the sensor's sine calibration CSV")
+        self.sine_calibration.setToolTip("fit one model to each shot and this sine calibration of the same sensor "
+                                         "(frequency_hz,magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]); "
+                                         "their consistency is reported")
+        browse_sine = QPushButton("…")
+        browse_sine.setFixedWidth(28)
+        browse_sine.setToolTip("choose the sine calibration file")
+        browse_sine.clicked.connect(self._browse_sine)
+        sine_row = QHBoxLayout()
+        sine_row.setContentsMargins(0, 0, 0, 0)
+        sine_row.addWidget(self.sine_calibration, 1)
+        sine_row.addWidget(browse_sine)
+
         self.conditioner = _ConditionerFields(config) if config.amplifier.driver == "manual" else None
 
         for spin in (self.sensitivity, self.pressure, self.sample_rate, self.dcm_ratio, self.dcm_damping,
@@ -120,6 +135,7 @@ class ShotSetup(QWidget):
         form.addRow("Accelerometer", self.accelerometer_model)
         form.addRow("Serial No.", self.accelerometer_serial)
         form.addRow("Sensitivity", self.sensitivity)
+        form.addRow("Sine calibration", sine_row)
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             form.addRow("2nd accelerometer", self.accelerometer_2_model)
             form.addRow("its serial No.", self.accelerometer_2_serial)
@@ -152,6 +168,7 @@ class ShotSetup(QWidget):
             sample_rate_hz=self.sample_rate.value() * 1e3,
             dcm_ratio=ratio if ratio > 0 else None,
             dcm_damping=self.dcm_damping.value(),
+            sine_calibration=self.sine_calibration.text().strip() or None,
             out_dir=Path(self.out_dir.text().strip() or "."),
             confirm_timeout_s=confirm_timeout_s,
         )
@@ -209,7 +226,8 @@ class ShotSetup(QWidget):
 
     def _texts(self) -> dict[str, QLineEdit]:
         texts = {"operator": self.operator, "accelerometer_model": self.accelerometer_model,
-                 "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir}
+                 "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir,
+                 "sine_calibration": self.sine_calibration}
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             texts |= {"accelerometer_2_model": self.accelerometer_2_model,
                       "accelerometer_2_serial": self.accelerometer_2_serial}
@@ -226,6 +244,12 @@ class ShotSetup(QWidget):
         folder = QFileDialog.getExistingDirectory(self, "Folder for shot files", self.out_dir.text())
         if folder:
             self.out_dir.setText(folder)
+
+    def _browse_sine(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Sine calibration of the sensor", self.sine_calibration.text(),
+                                              "CSV (*.csv);;all files (*)")
+        if path:
+            self.sine_calibration.setText(path)
 
 
 class _ConditionerFields:
