@@ -13,6 +13,7 @@ campaign) starts, so they are the settings the shot file records.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -95,14 +96,7 @@ class ShotSetup(QWidget):
         self.dcm_damping.setSingleStep(0.05)
         self.dcm_damping.setValue(0.707)
         self.out_dir = QLineEdit(str(out_dir))
-        browse = QPushButton("…")
-        browse.setFixedWidth(28)
-        browse.setToolTip("choose the folder for shot files")
-        browse.clicked.connect(self._browse)
-        out_row = QHBoxLayout()
-        out_row.setContentsMargins(0, 0, 0, 0)
-        out_row.addWidget(self.out_dir, 1)
-        out_row.addWidget(browse)
+        out_row = _with_browse(self.out_dir, "choose the folder for shot files", self._browse)
 
         # The sensor's sine calibration (optional): each shot's model is fitted to it too (analysis.sine_joint).
         self.sine_calibration = QLineEdit()
@@ -110,14 +104,7 @@ class ShotSetup(QWidget):
         self.sine_calibration.setToolTip("fit one model to each shot and this sine calibration of the same sensor "
                                          "(frequency_hz,magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]); "
                                          "their consistency is reported")
-        browse_sine = QPushButton("…")
-        browse_sine.setFixedWidth(28)
-        browse_sine.setToolTip("choose the sine calibration file")
-        browse_sine.clicked.connect(self._browse_sine)
-        sine_row = QHBoxLayout()
-        sine_row.setContentsMargins(0, 0, 0, 0)
-        sine_row.addWidget(self.sine_calibration, 1)
-        sine_row.addWidget(browse_sine)
+        sine_row = _with_browse(self.sine_calibration, "choose the sine calibration file", self._browse_sine)
 
         self.conditioner = _ConditionerFields(config) if config.amplifier.driver == "manual" else None
 
@@ -284,6 +271,19 @@ class _ConditionerFields:
         return {"gain": self.gain.value(), "excitation_v": self.excitation.value(),
                 "lowpass_hz": self.lowpass.value() * KILO, "sensitivity_v_per_m_s2": sensitivity or None,
                 "identity": self.identity.text().strip()}
+
+
+def _with_browse(edit: QLineEdit, tip: str, browse: Callable[[], None]) -> QHBoxLayout:
+    """A path field with its "…" button (which calls `browse`) beside it."""
+    button = QPushButton("…")
+    button.setFixedWidth(28)
+    button.setToolTip(tip)
+    button.clicked.connect(browse)
+    row = QHBoxLayout()
+    row.setContentsMargins(0, 0, 0, 0)
+    row.addWidget(edit, 1)
+    row.addWidget(button)
+    return row
 
 
 def _spin(decimals: int, limits: tuple[float, float], value: float, suffix: str, tip: str,
