@@ -45,6 +45,9 @@ def joint():
 
 
 def test_the_joint_figures_contain_the_truth(joint) -> None:
+    """One seed (a 95 % interval misses on 1 seed in 20; this seed is not chosen to pass: seed 3
+    as elsewhere). The coverage over 40 seeds is benchmarks/bench_sine_joint_coverage.py's
+    (joint: 95–100 % per figure; README)."""
     ident, result = joint
     truth = truth_figures(CASE)
     for name, estimate in (("fbsd_5", result.fbsd_hz["5"]), ("fbsd_10", result.fbsd_hz["10"]),
