@@ -46,6 +46,48 @@ SK_ITERATIONS = 6
 
 
 @dataclass(frozen=True)
+class SineTerms:
+    """Points of a sinusoidal calibration fitted with the shock (analysis.sine_joint): extra
+    residuals of the same model, each weighed by its own uncertainty.
+
+    At each point the residual is e = ln(κ·G(ω)·e^{−jωτ}·e^{jωτ_s}) − ln(S·e^{jφ}) (imaginary
+    part wrapped to ±π): its real part the magnitude's relative error, its imaginary part the
+    phase error (rad). κ (a free relative gain: the sine's level need not be in the shock's
+    units) and τ_s (a free skew: the shock record's channel skew, which a sine calibration of
+    the sensor alone does not have) are two extra parameters, so the sine constrains the
+    model's shape only. The residuals are (Re e / σ_mag, Im e / σ_phase) × `weight`, where
+    σ² = u² + s² (the stated standard uncertainty and the extra scatter s of analysis.sine_joint)
+    and `weight` puts them on the scale of the shock's residuals (√ of the shock's V per degree
+    of freedom, so each data set counts by its own uncertainty, model error included).
+    """
+
+    omega: np.ndarray  # rad/sample at the analysis rate
+    log_target: np.ndarray  # ln S + jφ (S in any unit, φ in rad)
+    sigma_mag: np.ndarray  # relative standard uncertainty of each magnitude (u² + s²)^½
+    sigma_phase: np.ndarray  # rad
+    weight: float = 1.0
+
+    @property
+    def size(self) -> int:
+        return int(self.omega.size)
+
+    def drawn(self, rng: np.random.Generator) -> SineTerms:
+        """The points perturbed by their own uncertainty (a Monte Carlo draw)."""
+        g = rng.standard_normal((2, self.size))
+        return replace(self, log_target=self.log_target + self.sigma_mag * g[0] + 1j * self.sigma_phase * g[1])
+
+    def start(self, g: np.ndarray) -> tuple[float, float]:
+        """Weighted least-squares ln κ and τ_s for a model response g (with its delay) at the
+        points: the starts of the two sine parameters."""
+        e = self.log_target - np.log(g)
+        w_m, w_p = self.sigma_mag ** -2, self.sigma_phase ** -2
+        log_gain = float(np.sum(w_m * e.real) / np.sum(w_m))
+        phase = (e.imag + np.pi) % (2.0 * np.pi) - np.pi
+        skew = float(np.sum(w_p * self.omega * phase) / np.sum(w_p * self.omega ** 2))
+        return log_gain, skew
+
+
+@dataclass(frozen=True)
 class SpectralData:
     """The two channels' DFT over the fitted bins, and their noise variances per bin.
 
@@ -66,6 +108,7 @@ class SpectralData:
     y: np.ndarray | None = None
     ramp: np.ndarray | None = None
     transient: bool = False
+    sine: SineTerms | None = None  # a sine calibration fitted with the shock (two residuals per point, like a bin)
 
     @property
     def grouped(self) -> bool:
@@ -73,8 +116,8 @@ class SpectralData:
 
     @property
     def bins(self) -> int:
-        """Number of DFT bins the cost sums over."""
-        return int(np.sum(self.count))
+        """Number of DFT bins the cost sums over (a sine point, with its two residuals, counts as one)."""
+        return int(np.sum(self.count)) + (self.sine.size if self.sine is not None else 0)
 
     @classmethod
     def per_bin(
@@ -123,6 +166,9 @@ class OrderFit:
     converged: bool
     delay_fixed: bool
     start_unstable: bool = False  # its linear start settled with poles outside the unit circle
+    sine_gain: float = math.nan  # ln κ of the sine terms (SineTerms; NaN: not fitted with a sine)
+    sine_skew: float = 0.0  # τ_s of the sine terms, samples
+    sine_cost: float = 0.0  # the sine terms' share of `cost`
 
     @property
     def order(self) -> int:
@@ -205,7 +251,11 @@ class OrderProblem:
         self.powers = np.exp(-1j * np.outer(data.omega, np.arange(order + 1)))  # z_k^{-i}
         self.n_transient = order if (data.transient and not data.grouped) else 0
         self.drift = data.ramp is not None and not data.grouped
+        self.sine = data.sine
         self.size = 2 * order + 1 + (self.fixed_delay is None) + self.n_transient + int(self.drift)
+        if self.sine is not None:  # ln κ and τ_s of SineTerms, last
+            self.sine_powers = np.exp(-1j * np.outer(self.sine.omega, np.arange(order + 1)))
+            self.size += 2
         self._rejected: np.ndarray | None = None
 
     # -- parameter vector ------------------------------------------------------------------
@@ -222,6 +272,12 @@ class OrderProblem:
             parts.append(t)
         if self.drift:
             parts.append([fit.drift])
+        if self.sine is not None:
+            if math.isfinite(fit.sine_gain):
+                parts.append([fit.sine_gain, fit.sine_skew])
+            else:  # a start without them: their best values for this transfer function
+                g = (self.sine_powers[:, : fit.b.size] @ fit.b) / (self.sine_powers[:, : fit.a.size] @ fit.a)
+                parts.append(self.sine.start(g * np.exp(-1j * self.sine.omega * fit.delay)))
         return np.concatenate([np.asarray(p, dtype=float) for p in parts])
 
     def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, float]:
@@ -241,8 +297,12 @@ class OrderProblem:
 
     def fit_of(self, theta: np.ndarray, cost: float, evaluations: int, converged: bool) -> OrderFit:
         a, b, tau, transient, drift = self.unpack(theta)
-        return OrderFit(a, b, tau, np.array(transient), drift, cost, self.size, evaluations, converged,
-                        self.fixed_delay is not None)
+        fit = OrderFit(a, b, tau, np.array(transient), drift, cost, self.size, evaluations, converged,
+                       self.fixed_delay is not None)
+        if self.sine is None:
+            return fit
+        r = self._sine_residual(theta)
+        return replace(fit, sine_gain=float(theta[-2]), sine_skew=float(theta[-1]), sine_cost=0.5 * float(r @ r))
 
     # -- model pieces ------------------------------------------------------------------------
     def _pieces(self, theta: np.ndarray) -> dict[str, np.ndarray | float]:
@@ -258,6 +318,43 @@ class OrderProblem:
                 "drift": drift}
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
+        """The shock's residuals, then the sine points' (SineTerms) when there are any."""
+        r = self._shock_residual(theta)
+        if self.sine is None or r is self._rejected:
+            return r
+        return np.concatenate((r, self._sine_residual(theta)))
+
+    def _sine_error(self, theta: np.ndarray) -> np.ndarray:
+        """e of SineTerms at each sine point (imaginary part wrapped to ±π)."""
+        assert self.sine is not None
+        a, b, tau, _, _ = self.unpack(theta)
+        w = self.sine.omega
+        e = (np.log(self.sine_powers @ b) - np.log(self.sine_powers @ a) - 1j * w * tau + theta[-2]
+             + 1j * w * theta[-1] - self.sine.log_target)
+        return e.real + 1j * ((e.imag + np.pi) % (2.0 * np.pi) - np.pi)
+
+    def _sine_residual(self, theta: np.ndarray) -> np.ndarray:
+        assert self.sine is not None
+        e = self._sine_error(theta)
+        return self.sine.weight * np.concatenate((e.real / self.sine.sigma_mag, e.imag / self.sine.sigma_phase))
+
+    def _sine_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        assert self.sine is not None
+        n = self.n
+        a, b, _, _, _ = self.unpack(theta)
+        pw = self.sine_powers
+        w = self.sine.omega
+        de = np.zeros((w.size, self.size), dtype=complex)
+        de[:, :n] = -pw[:, 1:] / (pw @ a)[:, None]
+        de[:, n : 2 * n + 1] = pw / (pw @ b)[:, None]
+        if self.fixed_delay is None:
+            de[:, 2 * n + 1] = -1j * w * self._dtau(theta)
+        de[:, -2] = 1.0
+        de[:, -1] = 1j * w
+        s = self.sine
+        return s.weight * np.vstack((de.real / s.sigma_mag[:, None], de.imag / s.sigma_phase[:, None]))
+
+    def _shock_residual(self, theta: np.ndarray) -> np.ndarray:
         a = np.concatenate(([1.0], theta[: self.n]))
         if not is_stable(a):
             return self._reject()
@@ -287,10 +384,14 @@ class OrderProblem:
     def _reject(self) -> np.ndarray:
         if self._rejected is None:
             m = 3 * self.data.omega.size if self.data.grouped else 2 * self.data.omega.size
-            self._rejected = np.full(m, 1e8)
+            self._rejected = np.full(m + 2 * (self.sine.size if self.sine is not None else 0), 1e8)
         return self._rejected
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        jac = self._shock_jacobian(theta)
+        return jac if self.sine is None else np.vstack((jac, self._sine_jacobian(theta)))
+
+    def _shock_jacobian(self, theta: np.ndarray) -> np.ndarray:
         p = self._pieces(theta)
         d = self.data
         n = self.n
@@ -347,7 +448,9 @@ class OrderProblem:
         `stop_at_delay(τ)` true after a step ends the search there."""
         theta0 = self.pack(start)
         cost0 = self.cost(theta0)
-        if math.isfinite(start.cost) and start.cost < cost0 and start.a.size == self.n + 1:
+        # (a start fitted without the sine terms has a cost of other data)
+        same_data = self.sine is None or math.isfinite(start.sine_gain)
+        if math.isfinite(start.cost) and start.cost < cost0 and start.a.size == self.n + 1 and same_data:
             fallback = replace(start, parameters=self.size, evaluations=0, converged=False)
         else:
             fallback = self.fit_of(theta0, cost0, 0, False)
@@ -364,7 +467,7 @@ class OrderProblem:
         return self.fit_of(result.x, cost, result.evaluations, result.converged)
 
     def residual_size(self) -> int:
-        return (3 if self.data.grouped else 2) * self.data.omega.size
+        return (3 if self.data.grouped else 2) * self.data.omega.size + 2 * (self.sine.size if self.sine else 0)
 
     def linear_start(self, delay: float, iterations: int = SK_ITERATIONS) -> OrderFit:
         """Sanathanan–Koerner start at a fixed delay (no drift), poles reflected inside."""

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
@@ -57,6 +57,7 @@ from hopkinson.analysis.excitation import pulse_width, supported_band_hz
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
+    SineTerms,
     SpectralData,
     delay_branches,
     predicted_bins,
@@ -82,6 +83,9 @@ from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
 from hopkinson.analysis.response import simulate_from_rest
 from numpy import fft
+
+if TYPE_CHECKING:
+    from hopkinson.analysis.sine_comparison import SineCalibration
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10
@@ -170,6 +174,7 @@ class Identification:
     noise: dict[str, Any] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
     order_evidence: dict[str, Any] = field(default_factory=dict)  # why this order
     context: FitContext | None = field(default=None, repr=False, compare=False)
+    sine_joint: Any = None  # analysis.sine_joint.SineJoint when fitted with a sine calibration
 
     @property
     def sample_interval_s(self) -> float:
@@ -224,6 +229,8 @@ class Identification:
                 "order_evidence": _jsonable(self.order_evidence),
             }
         )
+        if self.sine_joint is not None:
+            out["sine_joint"] = _jsonable(self.sine_joint.to_dict())
         return out
 
 
@@ -303,6 +310,8 @@ def identify(
     patience: int | None = 3,
     max_evaluations: int = 60,
     stability_draws: int = 0,
+    sine: SineCalibration | None = None,
+    sine_terms: SineTerms | None = None,
 ) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record.
 
@@ -317,7 +326,17 @@ def identify(
         (their losses are NaN: not evaluated); None tries every order up to max_order.
     stability_draws: re-run the order choice on this many noise draws and report how often
         each order wins (analysis.uncertainty does so in any case).
+    sine: a sinusoidal calibration of the same sensor, fitted with the shock (analysis.sine_joint:
+        one model to both, each weighed by its own uncertainty; their consistency in `sine_joint`).
+    sine_terms: the sine points as analysis.sine_joint weighed them (its own passes; internal).
     """
+    if sine is not None:
+        from hopkinson.analysis.sine_joint import identify_joint
+
+        return identify_joint(record, sine, max_order=max_order, order=order, sample_rate_hz=sample_rate_hz,
+                              knee_tolerance=knee_tolerance, significance=significance,
+                              max_delay_samples=max_delay_samples, remove_delay=remove_delay, patience=patience,
+                              max_evaluations=max_evaluations, stability_draws=stability_draws)
     if max_order < 1:
         raise AnalysisError(f"max_order must be at least 1, got {max_order}")
     if order is not None and order < 1:
@@ -362,7 +381,7 @@ def identify(
             "scale_response": scale_y,
         }
     )
-    data = prep.spectral
+    data = prep.spectral if sine_terms is None else replace(prep.spectral, sine=sine_terms)
 
     # Delay start: the causal delay that best fits a second-order model (a coarse grid).
     delay_mode: str | float = "causal" if remove_delay else 0.0

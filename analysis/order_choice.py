@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -157,7 +157,10 @@ class NoiseDraws:
         skew = self.skew_sd * rng.standard_normal() if self.skew_sd > 0 else 0.0
         u = (self.u_bins + noise_u) * np.exp(-1j * self.omega * skew)
         y = (self.y_bins if self.centre_y is None else self.centre_y) + noise_y
-        return self.spectral.perturbed(u, y, self.group), skew
+        data = self.spectral.perturbed(u, y, self.group)
+        if data.sine is not None:  # sine points fitted with the shock: perturbed by their own uncertainty
+            data = replace(data, sine=data.sine.drawn(rng))
+        return data, skew
 
 
 class Refitter:

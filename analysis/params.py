@@ -68,6 +68,8 @@ class AnalysisParams:
     u_amp_gain_rel: float = 2e-3
     u_digitizer_gain_rel: float = 2e-3
     u_channel_skew_s: float = 1e-9
+    # A sinusoidal calibration of the same sensor (CSV), fitted with the shock (analysis.sine_joint)
+    sine_calibration: str | None = None
 
     @classmethod
     def from_options(cls, **options: Any) -> AnalysisParams:
@@ -129,6 +131,8 @@ class AnalysisParams:
         for name in ("u_grating_pitch_rel", "u_interferometer_rel", "u_amp_gain_rel", "u_digitizer_gain_rel"):
             _finite(getattr(self, name), name, at_least=0.0, at_most=0.5)
         _finite(self.u_channel_skew_s, "u_channel_skew_s", at_least=0.0, at_most=1e-3)
+        if self.sine_calibration is not None and not (isinstance(self.sine_calibration, str) and self.sine_calibration):
+            raise AnalysisError(f"analysis option sine_calibration: a file name, got {self.sine_calibration!r}")
 
     def reference_chain(self) -> dict[str, float]:
         """Relative standard uncertainties of the reference chain, by source name."""

@@ -42,6 +42,8 @@ from hopkinson.analysis.records import Record
 from hopkinson.analysis.reduce import SensorChannel, check_sensor_channel, reduce_sensors
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
+from hopkinson.analysis.sine_comparison import read_sine_calibration
+from hopkinson.analysis.sine_joint import with_draws
 from hopkinson.analysis.uncertainty import shot_uncertainty
 
 # Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
@@ -154,11 +156,14 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
     """Analyse a two-channel record (reference m/s², response in any unit)."""
     params = AnalysisParams() if params is None else params
     params.check()
-    ident = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz)
+    sine = read_sine_calibration(params.sine_calibration) if params.sine_calibration else None
+    ident = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz,
+                     sine=sine)
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
     warnings = list(ident.warnings)
     uncertainty, model_draws = shot_uncertainty(ident, params, reduction, warnings)
+    with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
     compensation = compensate_shot(ident, record, DcmOptions.from_params(params), draws=model_draws,
                                    seed=params.seed)
@@ -227,7 +232,8 @@ def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_inter
         else:  # the reference's constants are the first sensor's
             channels[role] = channel
             own_params[role] = dataclasses.replace(own, grating_pitch_m=params.grating_pitch_m, orders=params.orders,
-                                                   sample_rate_hz=params.sample_rate_hz)
+                                                   sample_rate_hz=params.sample_rate_hz,
+                                                   sine_calibration=None)  # the first sensor's sine is not its
     reduced = reduce_sensors(doppler_v, channels, sample_interval_s, quadrature_v=quadrature_v,
                              grating_pitch_m=params.grating_pitch_m, orders=params.orders,
                              sample_rate_hz=params.sample_rate_hz, source=source, full_scale_v=full_scale_v)

@@ -262,7 +262,9 @@ def evaluate(
         b = f.b * scale * gain_factor[r]
         dc_draws[r] = float(np.sum(b) / np.sum(f.a))
         delay_draws[r] = (f.delay - skews[r]) * dt
-        model_draws.append(DiscreteModel(dt, f.a, b, float(f.delay)))
+        # fitted with a sine calibration: the sine's level ÷ the model's (analysis.sine_joint)
+        info = {"sine_gain_ratio": math.exp(f.sine_gain) / (scale * gain_factor[r])} if ctx.spectral.sine else {}
+        model_draws.append(DiscreteModel(dt, f.a, b, float(f.delay), info=info))
         if main_pole is not None:
             fn_draws[r], zeta_draws[r] = _nearest_mode(f.a, main_pole, dt)
     nominal_edges = fbsd_edges(model)
@@ -513,6 +515,8 @@ def _budget(
         order_share[figure] = math.sqrt(max(total - within, 0.0)) / abs(ref) if np.isfinite(total) else math.nan
     shares["order choice"] = order_share
     sources = ["response noise", "reference noise", "channel skew", "order choice"]
+    if ctx.spectral.sine is not None:
+        sources.insert(2, "sine calibration")
     if not nominal_branch[fixed].all():  # the delay branch: the variance the other branches add
         branch_share: dict[str, float] = {}
         for figure, values in draws.items():
@@ -555,16 +559,21 @@ def _linear_noise_shares(
     rows = 3 if data.grouped else 2
     d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
     d_y = np.tile(var_y / s2, rows)
+    sine_rows = jac.shape[0] - d_u.size  # a sine calibration's residuals (analysis.sine_joint), last
+    d_u, d_y = np.pad(d_u, (0, sine_rows)), np.pad(d_y, (0, sine_rows))
     h_inv = np.linalg.pinv(jac.T @ jac)
     proj = h_inv @ jac.T
     cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T}
+    if sine_rows:  # each sine residual's variance under the draws: its weight² (SineTerms)
+        d_s = np.concatenate((np.zeros(d_u.size - sine_rows), np.full(sine_rows, data.sine.weight ** 2)))
+        cov["sine calibration"] = (proj * d_s) @ proj.T
     # The skew: the residual's change per sample of reference delay, through the same projection.
     eps = 1e-3
     shifted = _shift_data(data, eps)
     dr = (OrderProblem(shifted, n, ctx.delay_mode, ctx.max_delay).residual(theta) - problem.residual(theta)) / eps
     skew_step = -(proj @ dr) * (options.channel_skew_s / ctx.sample_interval_s)
     gradients = _figure_gradients(problem, theta, ctx, ident, nominal)
-    out: dict[str, dict[str, float]] = {"reference noise": {}, "response noise": {}, "channel skew": {}}
+    out: dict[str, dict[str, float]] = {source: {} for source in (*cov, "channel skew")}
     for figure, g in gradients.items():
         ref = nominal.get(figure)
         if ref is None or not ref or g is None:

@@ -12,7 +12,11 @@ Figures, all measured in the same run (best of --repeats):
    reduction of the raw channels, identification, uncertainty, DCM design and check with the
    compensated peak's interval) — the time from capture to the result on screen, less the
    storing — as seconds and as a ratio to one identification. Aim: about 3 s on a 2-core
-   machine.
+   machine;
+4. the joint fit with a sine calibration (analysis.sine_joint; 40 points 0.5–20 kHz drawn
+   from the truth with 0.3 % / 0.3°): one joint identification (three fits: the shock's, then
+   two re-weighted joint ones) and its uncertainty, the whole as a ratio to one joint
+   identification and to one plain identification (issue 17: under 10×).
 
     .venv/bin/python benchmarks/bench_uncertainty.py [--draws N] [--repeats 3]
 
@@ -31,6 +35,7 @@ from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
 from hopkinson.analysis.reduce import reduce_raw
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
+from hopkinson.analysis.sine_comparison import SineCalibration
 from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.doppler_beat import raw_shot
@@ -42,9 +47,22 @@ PRE_TRIGGER = 20_000
 GAIN, SENSITIVITY = 10.0, 2e-7
 
 
+TRUTH = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), lowpass_hz=200_000.0)
+
+
+def simulated_sine(seed: int = 1) -> SineCalibration:
+    """A sine calibration of the truth (V per m/s² at the amplifier output), 0.3 % / 0.3°."""
+    rng = np.random.default_rng(seed)
+    f = np.arange(500.0, 20_001.0, 500.0)
+    h = TRUTH.frequency_response(f) * GAIN * SENSITIVITY
+    return SineCalibration(f, np.abs(h) * (1 + 0.003 * rng.standard_normal(f.size)),
+                           np.degrees(np.angle(h)) + 0.3 * rng.standard_normal(f.size),
+                           np.full(f.size, 0.003), np.full(f.size, 0.3), "simulated sine")
+
+
 def simulated_shot(seed: int = 1) -> Any:
     t = np.arange(SAMPLES) * DT
-    truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),), lowpass_hz=200_000.0)
+    truth = TRUTH
     acc = half_sine_m_s2(t, 38.6e-6, 50_000 * G_M_S2, PRE_TRIGGER * DT)
     return raw_shot(acc, truth, DT, amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY,
                     rng=np.random.default_rng(seed))
@@ -60,6 +78,9 @@ def run(draws: int, repeats: int) -> dict[str, Any]:
     shot_s, shot = best_time(lambda: analyse_raw_shot(raw.doppler_v, raw.response_v, DT, params), repeats)
     no_unc = AnalysisParams(amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY, uncertainty=False)
     plain_s, _ = best_time(lambda: analyse_raw_shot(raw.doppler_v, raw.response_v, DT, no_unc), repeats)
+    sine = simulated_sine()
+    joint_s, joint = best_time(lambda: identify(record, sine=sine), repeats)
+    joint_unc_s, joint_result = best_time(lambda: evaluate(joint, options), repeats)
     out = {
         "benchmark": "uncertainty",
         "draws": result.draws,
@@ -70,6 +91,11 @@ def run(draws: int, repeats: int) -> dict[str, Any]:
         "shot_analysis_with_uncertainty_s": shot_s,
         "shot_analysis_ratio_to_identification": shot_s / ident_s,
         "shot_analysis_without_uncertainty_s": plain_s,
+        "joint_identification_s": joint_s,
+        "joint_uncertainty_s": joint_unc_s,
+        "joint_whole_ratio_to_joint_identification": (joint_s + joint_unc_s) / joint_s,
+        "joint_whole_ratio_to_identification": (joint_s + joint_unc_s) / ident_s,
+        "joint_verdict_consistent": bool(joint.sine_joint.consistent),
         "order": ident.order,
         "natural_frequency_hz": shot.to_dict()["uncertainty"]["main_mode"]["natural_frequency_hz"],
     }
@@ -78,6 +104,9 @@ def run(draws: int, repeats: int) -> dict[str, Any]:
           f"({out['uncertainty_ratio_to_identification']:.1f}× one identification)")
     print(f"whole shot analysis with uncertainty: {shot_s:.2f} s "
           f"({out['shot_analysis_ratio_to_identification']:.1f}× one identification; without it {plain_s:.2f} s)")
+    print(f"joint fit with a sine calibration: {joint_s:.3f} s, its uncertainty ({joint_result.draws} draws) "
+          f"{joint_unc_s:.3f} s; the whole {out['joint_whole_ratio_to_joint_identification']:.1f}× one joint "
+          f"identification, {out['joint_whole_ratio_to_identification']:.1f}× one plain identification")
     return out
 
 

@@ -130,6 +130,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         ("FBSD ±5 %", kf.fbsd_text("5")),
         ("FBSD ±10 %", kf.fbsd_text("10")),
         ("fit (measured vs model)", f"{fmt(kf.fit_percent, digits=5)} %"),
+        *sine_joint_rows(entry.stored.get("identification") or {}),
         ("peak acceleration", f"{figure_text(peak, 1e3, 'km/s²')} ({figure_text(peak, G_M_S2, 'g')})"
          if peak is not None else "—"),
         ("pulse width (10 % of peak)", figure_text(kf.pulse_width_s, 1e-6, "µs")),
@@ -156,6 +157,23 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     for w in check.other_warnings(kf.warnings) if check is not None else kf.warnings:
         rows.append(("warning", w))
     return rows
+
+
+def sine_joint_rows(identification: dict[str, Any]) -> list[tuple[str, str]]:
+    """A model fitted with a sine calibration too (analysis.sine_joint): their consistency."""
+    joint = identification.get("sine_joint")
+    if not joint:
+        return []
+    e_n = [v for v in joint.get("e_n") or [] if v is not None]
+    ratio = f"{fmt(joint.get('gain_ratio'), digits=5)}"
+    if joint.get("gain_ratio_u") is not None:
+        ratio += f" (u {sig(joint['gain_ratio_u'])})"
+    return [
+        ("fitted with the sine calibration", f"{joint.get('source')}: {joint.get('verdict')}"),
+        ("sine points: largest E_n, points with E_n > 1",
+         f"{fmt(max(e_n) if e_n else None, digits=3)}, {joint.get('points_beyond_e_n_1')} of {len(e_n)}"),
+        ("sine level ÷ shock model level", ratio),
+    ]
 
 
 # (label, unit, scale, KeyFigures field) of the uncertainty table, in order

@@ -210,7 +210,7 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder) -> ShotR
         sensor_identities=plan.sensor_identities(),
         sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
         order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
-        uncertainty=a.uncertainty, draws=a.draws,
+        uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0,
     )

@@ -13,7 +13,9 @@ Example (config/campaigns/example.toml is the documented one)::
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
     sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,
                                       # magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]; relative to
-                                      # the plan's folder); the report compares the model with it
+                                      # the plan's folder); every shot's model is fitted to the
+                                      # record and to it together (analysis.sine_joint), and the
+                                      # report compares the model with it
 
     [accelerometer_2]                 # optional: a second accelerometer recorded on the rig's
     model = "AYZ-3"                   # response_2 channel (its gain and nominal sensitivity:

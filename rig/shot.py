@@ -87,6 +87,7 @@ class ShotRequest:
     dcm_damping: float | None = None
     uncertainty: bool | None = None  # the Monte Carlo uncertainty; None -> the analysis' default (on)
     draws: int | None = None  # its draws; None -> the analysis' default
+    sine_calibration: str | None = None  # a sine calibration CSV of the sensor, fitted with the shot (analysis.sine_joint)
     out_dir: Path = Path("shots")
     shot_name: str | None = None  # None -> "shot-<UTC time>-<8 hex>"
     campaign_id: str | None = None
@@ -110,6 +111,13 @@ class ShotRequest:
             analysis_params(self, config, {})
         except AnalysisError as exc:
             raise ShotRequestError(str(exc)) from None
+        if self.sine_calibration is not None:  # readable as a sine calibration, before anything moves
+            from hopkinson.analysis.sine_comparison import read_sine_calibration
+
+            try:
+                read_sine_calibration(self.sine_calibration)
+            except AnalysisError as exc:
+                raise ShotRequestError(f"sine_calibration: {exc}") from None
         for role, identity in self.sensor_identities.items():
             if role not in MORE_SENSOR_ROLES:
                 raise ShotRequestError(f"sensor_identities: {role!r} is not a further sensor's role "
@@ -297,6 +305,7 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
         dcm_ratio=request.dcm_ratio,
         dcm_damping=request.dcm_damping,
         uncertainty=request.uncertainty,
+        sine_calibration=request.sine_calibration,
     )
 
 
@@ -305,7 +314,7 @@ def sensor_params(params: AnalysisParams, config: RigConfig) -> dict[str, Analys
     sensor's conditioner gain and nominal sensitivity ([analysis] amp_gain_2,
     sensitivity_2_v_per_m_s2)."""
     a = config.analysis
-    return {"response_2": dataclasses.replace(params, amp_gain=a.amp_gain_2,
+    return {"response_2": dataclasses.replace(params, amp_gain=a.amp_gain_2, sine_calibration=None,
                                               sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2)}
 
 

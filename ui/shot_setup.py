@@ -13,6 +13,7 @@ campaign) starts, so they are the settings the shot file records.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -95,14 +96,15 @@ class ShotSetup(QWidget):
         self.dcm_damping.setSingleStep(0.05)
         self.dcm_damping.setValue(0.707)
         self.out_dir = QLineEdit(str(out_dir))
-        browse = QPushButton("…")
-        browse.setFixedWidth(28)
-        browse.setToolTip("choose the folder for shot files")
-        browse.clicked.connect(self._browse)
-        out_row = QHBoxLayout()
-        out_row.setContentsMargins(0, 0, 0, 0)
-        out_row.addWidget(self.out_dir, 1)
-        out_row.addWidget(browse)
+        out_row = _with_browse(self.out_dir, "choose the folder for shot files", self._browse)
+
+        # The sensor's sine calibration (optional): each shot's model is fitted to it too (analysis.sine_joint).
+        self.sine_calibration = QLineEdit()
+        self.sine_calibration.setPlaceholderText("optional: the sensor's sine calibration CSV")
+        self.sine_calibration.setToolTip("fit one model to each shot and this sine calibration of the same sensor "
+                                         "(frequency_hz,magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]); "
+                                         "their consistency is reported")
+        sine_row = _with_browse(self.sine_calibration, "choose the sine calibration file", self._browse_sine)
 
         self.conditioner = _ConditionerFields(config) if config.amplifier.driver == "manual" else None
 
@@ -120,6 +122,7 @@ class ShotSetup(QWidget):
         form.addRow("Accelerometer", self.accelerometer_model)
         form.addRow("Serial No.", self.accelerometer_serial)
         form.addRow("Sensitivity", self.sensitivity)
+        form.addRow("Sine calibration", sine_row)
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             form.addRow("2nd accelerometer", self.accelerometer_2_model)
             form.addRow("its serial No.", self.accelerometer_2_serial)
@@ -152,6 +155,7 @@ class ShotSetup(QWidget):
             sample_rate_hz=self.sample_rate.value() * 1e3,
             dcm_ratio=ratio if ratio > 0 else None,
             dcm_damping=self.dcm_damping.value(),
+            sine_calibration=self.sine_calibration.text().strip() or None,
             out_dir=Path(self.out_dir.text().strip() or "."),
             confirm_timeout_s=confirm_timeout_s,
         )
@@ -209,7 +213,8 @@ class ShotSetup(QWidget):
 
     def _texts(self) -> dict[str, QLineEdit]:
         texts = {"operator": self.operator, "accelerometer_model": self.accelerometer_model,
-                 "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir}
+                 "accelerometer_serial": self.accelerometer_serial, "out_dir": self.out_dir,
+                 "sine_calibration": self.sine_calibration}
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             texts |= {"accelerometer_2_model": self.accelerometer_2_model,
                       "accelerometer_2_serial": self.accelerometer_2_serial}
@@ -226,6 +231,12 @@ class ShotSetup(QWidget):
         folder = QFileDialog.getExistingDirectory(self, "Folder for shot files", self.out_dir.text())
         if folder:
             self.out_dir.setText(folder)
+
+    def _browse_sine(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Sine calibration of the sensor", self.sine_calibration.text(),
+                                              "CSV (*.csv);;all files (*)")
+        if path:
+            self.sine_calibration.setText(path)
 
 
 class _ConditionerFields:
@@ -260,6 +271,19 @@ class _ConditionerFields:
         return {"gain": self.gain.value(), "excitation_v": self.excitation.value(),
                 "lowpass_hz": self.lowpass.value() * KILO, "sensitivity_v_per_m_s2": sensitivity or None,
                 "identity": self.identity.text().strip()}
+
+
+def _with_browse(edit: QLineEdit, tip: str, browse: Callable[[], None]) -> QHBoxLayout:
+    """A path field with its "…" button (which calls `browse`) beside it."""
+    button = QPushButton("…")
+    button.setFixedWidth(28)
+    button.setToolTip(tip)
+    button.clicked.connect(browse)
+    row = QHBoxLayout()
+    row.setContentsMargins(0, 0, 0, 0)
+    row.addWidget(edit, 1)
+    row.addWidget(button)
+    return row
 
 
 def _spin(decimals: int, limits: tuple[float, float], value: float, suffix: str, tip: str,

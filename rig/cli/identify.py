@@ -2,7 +2,7 @@
 uncertainty.
 
     hopkinson identify RECORD [--max-order N] [--order n] [--sample-rate HZ]
-                      [--draws N] [--no-uncertainty] [--seed N] [--json] [-o model.json]
+                      [--draws N] [--no-uncertainty] [--seed N] [--sine SINE.csv] [--json] [-o model.json]
 
 RECORD is a CSV (time_s,reference,response) or NPZ with the same keys. The JSON (printed
 with --json, written by -o) is the model file `hopkinson dcm --model` reads: sample interval,
@@ -11,6 +11,10 @@ paper's Table-1 pole analysis, the fit details, FBSD edges beyond the supported 
 bounds (`fbsd_bounds`), and the Monte Carlo uncertainty (`uncertainty`, analysis.uncertainty).
 The text output shows each uncertain figure as value ± U, U the half-width of its 95 %
 coverage interval (k ≈ 2).
+
+--sine SINE.csv fits one model to the record and a sinusoidal calibration of the same sensor
+(analysis.sine_joint), each weighed by its own uncertainty; the JSON's `sine_joint` and the text
+give their consistency (E_n per point, the verdict, the sine's level ÷ the shock's).
 """
 
 from __future__ import annotations
@@ -100,11 +104,24 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
         parts = ", ".join(f"{b['source']} {100 * b['u_rel']:.2g} %" for b in top)
         lines.append(f"  uncertainty: {unc['method']}, {unc['draws']} draws, ± = half-width of the 95 % interval "
                      f"(k ≈ 2); DC gain budget: {parts}")
+    if result.sine_joint is not None:
+        lines += sine_joint_lines(result.sine_joint)
     losses = ", ".join(f"{n}: {v:.4g}" for n, v in enumerate(result.loss_by_order, start=1) if math.isfinite(v))
     lines.append(f"  cost V by order (errors-in-variables, ≈ bins when right): {losses}")
     for warning in report["warnings"]:
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)
+
+
+def sine_joint_lines(joint: Any) -> list[str]:
+    """The joint fit's consistency in words (analysis.sine_joint.SineJoint)."""
+    lines = [f"  fitted with the sine calibration {joint.sine.source}: {joint.verdict()}",
+             f"  {joint.gain_text()}; skew of the shock's channels as the sine sees it {joint.skew_s * 1e6:.3g} µs"]
+    worst = sorted(range(joint.e_n.size), key=lambda i: -joint.e_n[i])[:3]
+    parts = ", ".join(f"{joint.sine.frequency_hz[i] / 1e3:.4g} kHz {joint.error_mag_pct[i]:+.2f} % "
+                      f"{joint.error_phase_deg[i]:+.2f}° (E_n {joint.e_n[i]:.2g})" for i in sorted(worst))
+    lines.append(f"  largest E_n: {parts}")
+    return lines
 
 
 def _checked_params(args: argparse.Namespace) -> Any:
@@ -138,18 +155,26 @@ def run_identify(args: argparse.Namespace) -> int:
     from hopkinson.fileio import atomic_write, check_output_path
 
     params = _checked_params(args)
-    out = check_output_path(args.output, [args.record], what="model file") if args.output else None
+    out = check_output_path(args.output, [args.record] + ([args.sine] if args.sine else []), what="model file") if args.output else None
     record = read_record(args.record)
+    sine = None
+    if args.sine:
+        from hopkinson.analysis.sine_comparison import read_sine_calibration
+
+        sine = read_sine_calibration(args.sine)
     try:
-        result = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz)
+        result = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz,
+                          sine=sine)
     except AnalysisError as exc:
-        raise AnalysisError(f"{args.record}: {exc}") from None
+        raise AnalysisError(f"{args.record}{' with ' + args.sine if sine else ''}: {exc}") from None
     warnings = list(result.warnings)
     uncertainty = None
     if params.uncertainty:
+        from hopkinson.analysis.sine_joint import with_draws
         from hopkinson.analysis.uncertainty import shot_uncertainty
 
-        uncertainty, _ = shot_uncertainty(result, params, None, warnings)
+        uncertainty, model_draws = shot_uncertainty(result, params, None, warnings)
+        with_draws(result, model_draws)
     else:
         warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
     report = identification_report(result, str(args.record), uncertainty, warnings)
@@ -192,6 +217,10 @@ def register(subparsers: Any) -> None:
                    help="Monte Carlo draws of the uncertainty (default 400: stable 95 %% intervals)")
     p.add_argument("--no-uncertainty", action="store_true", help="skip the uncertainty (the figures alone)")
     p.add_argument("--seed", type=int, metavar="N", help="seed of the Monte Carlo draws (default: fresh)")
+    p.add_argument("--sine", metavar="SINE.csv",
+                   help="fit one model to the record and this sinusoidal calibration of the same sensor (columns "
+                   "frequency_hz,magnitude,phase_deg, optional u_magnitude_rel,u_phase_deg), and report their "
+                   "consistency")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", metavar="MODEL.json", help="write the model JSON (read by `hopkinson dcm --model`)")
     p.set_defaults(func=run_identify)

@@ -604,3 +604,15 @@ def test_the_cross_validation_numbers_contrast_with_their_cells(campaign_report)
         assert text.get_color() == ("black" if light else "white"), text.get_text()
         checked += 1
     assert checked == 4
+
+
+def test_a_model_fitted_with_a_sine_calibration_shows_their_consistency(analyses: dict[str, ShotAnalysis]) -> None:
+    results = contract_results(analyses["a1"])
+    results["identification"]["sine_joint"] = {
+        "source": "sine.csv", "verdict": "inconsistent: the sine points scatter about the joint model …",
+        "e_n": [0.4, 2.5, 1.2], "points_beyond_e_n_1": 2, "gain_ratio": 1.0146, "gain_ratio_u": 0.004}
+    rows = dict(results_rows(entry("s", analyses["a1"], results=results)))
+    assert rows["fitted with the sine calibration"].startswith("sine.csv: inconsistent")
+    assert rows["sine points: largest E_n, points with E_n > 1"] == "2.5, 2 of 3"
+    assert rows["sine level ÷ shock model level"].startswith("1.0146 (u 0.004")
+    assert "fitted with the sine calibration" not in dict(results_rows(entry("s", analyses["a1"])))

@@ -161,3 +161,22 @@ def test_a_second_accelerometer_is_asked_for_only_where_the_rig_records_one(qtbo
     with pytest.raises(ShotRequestError, match="response_2: the accelerometer on it needs both its model and its serial"):
         second.request(1.0).check(config)
     dispose(second)
+
+
+def test_the_sine_calibration_field_reaches_the_request_and_is_remembered(qtbot, tmp_path):
+    """The shot set-up's sine calibration: empty is none; a file is the request's (fitted with
+    each shot, analysis.sine_joint) and remembered between runs."""
+    from hopkinson.ui.shot_setup import ShotSetup
+
+    config = rig_config_for_tests()
+    settings_file = str(tmp_path / "panel.ini")
+    first = ShotSetup(config, tmp_path)
+    assert first.request(1.0).sine_calibration is None
+    first.sine_calibration.setText(f"  {tmp_path / 'sine.csv'}  ")
+    assert first.request(1.0).sine_calibration == str(tmp_path / "sine.csv")
+    first.save(QSettings(settings_file, QSettings.Format.IniFormat))
+    dispose(first)
+    second = ShotSetup(config, tmp_path)
+    second.load(QSettings(settings_file, QSettings.Format.IniFormat))
+    assert second.request(1.0).sine_calibration == str(tmp_path / "sine.csv")
+    dispose(second)
