@@ -65,7 +65,7 @@ def _publish(tmp: Path, target: Path, mode: int | None) -> None:
     _fsync_folder(target.parent if str(target.parent) else Path("."))
 
 
-def atomic_write(path: str | os.PathLike[str], data: bytes | str | Callable[[Path], Any], *,
+def atomic_write(path: str | os.PathLike[str], data: bytes | bytearray | memoryview | str | Callable[[Path], Any], *,
                  encoding: str = "utf-8", mode: int | None = None) -> Path:
     """Write `data` to `path` atomically (module docstring); returns the path.
 
@@ -83,8 +83,7 @@ def atomic_write(path: str | os.PathLike[str], data: bytes | str | Callable[[Pat
             fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
             os.fsync(fd)
         else:
-            payload = data.encode(encoding) if isinstance(data, str) else bytes(data)
-            view = memoryview(payload)
+            view = memoryview(data.encode(encoding) if isinstance(data, str) else data)
             while view:
                 written = os.write(fd, view)
                 view = view[written:]

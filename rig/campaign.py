@@ -456,8 +456,8 @@ class CampaignRunner:
                 with contextlib.suppress(Exception):
                     record_analysis(path, None, error)
             else:
-                results, error = analyse_and_record(path, stored.raw, params, self._analyse,
-                                                    amplifier_overloaded=bool(settings.get("amplifier_overloaded")))
+                results, error, _ = analyse_and_record(path, stored.raw, params, self._analyse,
+                                                       amplifier_overloaded=bool(settings.get("amplifier_overloaded")))
         if error is None:
             self._journal.mark(shot.id, S.ANALYSED, **_result_info(results))
         else:

@@ -39,7 +39,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
@@ -52,6 +52,7 @@ from hopkinson.rig.shotfile import (
     PLAIN_NAME_RE,
     RawChannel,
     RawShot,
+    ShotFileError,
     ShotMeta,
     add_analysis,
     sensor_response_name,
@@ -276,6 +277,23 @@ def store_raw_shot(path: Path, captured: CapturedShot, meta: ShotMeta) -> Path:
     return write_raw_shot(path, captured.raw_shot(), meta)
 
 
+RESCUE_FOLDER = "rescued-shots"  # in the user's data folder: a raw shot its own folder could not take
+
+
+def rescue_raw_shot(path: Path, captured: CapturedShot, meta: ShotMeta) -> Path | None:
+    """Where the shot folder could not take the raw shot (a full disk, a quota, a read-only or
+    vanished folder): the same file in the user's data folder (`rescued-shots/`), so that the
+    shot is not lost with the folder's failure; None when that fails too."""
+    from hopkinson.lab.database import data_folder
+
+    folder = data_folder() / RESCUE_FOLDER
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        return write_raw_shot(folder / path.name, captured.raw_shot(), meta)
+    except (OSError, ShotFileError):
+        return None
+
+
 @dataclass(frozen=True)
 class AnalysisResult:
     """What the analysis gives back to be stored: results dict and the reduced record."""
@@ -391,14 +409,23 @@ def run_here(work: Callable[[], Any]) -> WorkResult:
         return WorkResult(True, error=exc)
 
 
+class RecordedAnalysis(NamedTuple):
+    """What ANALYSE gives: the results (None without), why there are none or what went wrong,
+    and whether the analysis (or why there is none) is stored in the shot file."""
+
+    results: dict[str, Any] | None
+    error: str | None
+    stored: bool = True
+
+
 def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse: AnalyseFn, *,
                        amplifier_overloaded: bool = False, run: Runner = run_here
-                       ) -> tuple[dict[str, Any] | None, str | None]:
-    """ANALYSE a stored shot and record the result (or why there is none) in its file; returns
-    (results, error). Never raises for the analysis' sake: an amplifier overload, a failing
-    (a clipped channel among the reasons) or unfinished analysis, or a file that cannot take
-    the result become the error text. `run`
-    runs the computation (the sequencer: a worker thread with a timeout, abandoned on abort)."""
+                       ) -> RecordedAnalysis:
+    """ANALYSE a stored shot and record the result (or why there is none) in its file. Never
+    raises for the analysis' sake: an amplifier overload, a failing (a clipped channel among
+    the reasons) or unfinished analysis become the error text; a file that cannot take the
+    result (a full disk) too, with `stored` False: the record is then incomplete. `run` runs
+    the computation (the sequencer: a worker thread with a timeout, abandoned on abort)."""
     result: AnalysisResult | None = None
     if amplifier_overloaded:  # the channels' clipping is the analysis' to judge (analyse_raw)
         error: str | None = ("not analysed: the amplifier overloaded during the shot: the response is clipped "
@@ -416,6 +443,7 @@ def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse
     try:
         record_analysis(path, result, error)
     except Exception as store_exc:
-        error = f"{error + '; ' if error else ''}the analysis could not be stored in {path}: {store_exc}"
-        result = None
-    return (result.results if result is not None else None), error
+        why = str(store_exc).removeprefix(f"{path}: ")
+        error = f"{error + '; ' if error else ''}the analysis could not be stored in {path} ({why})"
+        return RecordedAnalysis(None, error, stored=False)
+    return RecordedAnalysis(result.results if result is not None else None, error)

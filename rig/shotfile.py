@@ -58,9 +58,11 @@ leaves either no file or a complete one under the final name, plus possibly a `*
 leftover that rig.run_folder removes on resume. `write_raw_shot` never replaces an existing
 shot file. `add_analysis` never opens the shot file for writing: HDF5 has no journal, so an
 append that dies half-way can damage the file's metadata and with it the raw data. Instead it
-copies the file byte for byte to the temporary, replaces /derived, /analysis and /entry/record
-in the copy (every reference inside the file, such as the dimension scales, stays valid in a
-byte copy) and renames it over the old one. Until that rename the old file is untouched; after
+copies the file byte for byte into memory, replaces /derived, /analysis and /entry/record in
+the copy (every reference inside the file, such as the dimension scales, stays valid in a
+byte copy) and writes it to the temporary, renamed over the old one. Every HDF5 file is built
+in memory and written with plain os.write, so a full disk or a quota is one OSError (a
+ShotFileError naming the file), never HDF5 failing inside its own clean-up. Until that rename the old file is untouched; after
 it the new file is complete. The cost is one copy of the file per analysis (tens of ms for
 2 × 10 M samples).
 """
@@ -70,10 +72,10 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib.metadata
+import io
 import json
 import math
 import re
-import shutil
 import uuid as uuid_module
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -445,16 +447,21 @@ def _nexus_record(f: h5py.File, record_group: h5py.Group) -> None:
 def _atomic_write(final: Path, build: Callable[[h5py.File], None], seed: Path | None = None) -> None:
     """Build an HDF5 file and publish it as `final` through hopkinson.fileio.atomic_write (an
     exclusive temporary beside it, fsynced, renamed, the folder fsynced): new, or a byte copy of
-    `seed` opened for update."""
-    def write(tmp: Path) -> None:
-        if seed is not None:
-            shutil.copyfile(seed, tmp)
-        with h5py.File(tmp, "r+" if seed is not None else "w", track_order=True) as f:
-            build(f)
-            f.flush()
+    `seed` opened for update.
 
+    The file is built in memory and reaches the disk through plain os.write: HDF5 writing to a
+    file that fills up (a full disk, a quota) fails inside its own clean-up, where h5py can only
+    print the error while the process goes on or crashes (a segfault on a 400 kB file system,
+    issue 18). In memory nothing can fail that way; the disk's failure is then an OSError of
+    one write, and atomic_write removes the temporary."""
     try:
-        atomic_write(final, write)
+        image = io.BytesIO(seed.read_bytes() if seed is not None else b"")
+    except OSError as exc:
+        raise ShotFileError(f"{seed}: could not be read ({exc})") from exc
+    with h5py.File(image, "r+" if seed is not None else "w", track_order=True) as f:
+        build(f)
+    try:
+        atomic_write(final, image.getbuffer())
     except UnsafeOutputError as exc:
         raise ShotFileError(str(exc)) from None
     except OSError as exc:

@@ -59,6 +59,7 @@ from hopkinson.rig.shot import (
     EXIT_ABORTED,
     EXIT_DONE,
     AnalyseFn,
+    RecordedAnalysis,
     ShotOutcome,
     ShotRequest,
     ShotRequestError,
@@ -66,6 +67,7 @@ from hopkinson.rig.shot import (
     analyse_and_record,
     analysis_params,
     generated_shot_name,
+    rescue_raw_shot,
     shot_analyser,
     shot_meta,
     store_raw_shot,
@@ -248,21 +250,24 @@ class Sequencer:
 
         results: dict[str, Any] | None = None
         analysis_error: str | None = None
+        analysis_stored = True
         if failure is None and safe.confirmed and store_error is None and path is not None:
-            results, analysis_error = self._analyse_and_record(ctx, path)
-            final = State.DONE
-        elif safe.confirmed and store_error is None:
+            results, analysis_error, analysis_stored = self._analyse_and_record(ctx, path)
+            final = State.DONE if analysis_stored else State.FAULT
+        elif safe.confirmed and (store_error is None or path is not None):  # the record is kept
             final = State.ABORTED
         else:
             final = State.FAULT
 
         error = _message(ctx, failure, safe, path, store_error)
+        if not analysis_stored:
+            error = f"{analysis_error}; the raw shot is kept in {path} (free space, then `hopkinson analyse` it)"
         hint = (failure.hint if failure is not None else "") if safe.confirmed else HINT_SAFE_NOT_CONFIRMED
         aborted_in = failure.state.value if failure is not None else (
             State.SAFE.value if not safe.confirmed else State.STORE.value if store_error else None)
         outcome = ShotOutcome(
             final_state=final.value,
-            shot_path=path if store_error is None else None,
+            shot_path=path,
             results=results,
             error=error,
             exit_code=EXIT_DONE if final == State.DONE else EXIT_ABORTED,
@@ -273,7 +278,9 @@ class Sequencer:
             warnings=tuple(ctx.warnings),
             hint=hint,
         )
-        self._shielded(ctx, lambda: self._enter(ctx, final))
+        final_text = STATE_TEXT[final] if final != State.FAULT or not safe.confirmed else \
+            "FAULT: the shot's record is not complete (read why above); the rig is safe"
+        self._shielded(ctx, lambda: self._enter(ctx, final, final_text))
         self._shielded(ctx, lambda: self.bus.publish(ShotFinished(
             state=final.value, message=error or analysis_error or STATE_TEXT[final],
             final_state=final.value, exit_code=outcome.exit_code, fired=ctx.fired, safe_confirmed=safe.confirmed,
@@ -282,13 +289,13 @@ class Sequencer:
         return outcome
 
     # -- state plumbing -----------------------------------------------------------------------
-    def _enter(self, ctx: ShotContext, state: State) -> None:
+    def _enter(self, ctx: ShotContext, state: State, message: str | None = None) -> None:
         with self._lock:
             check_transition(self._state, state)
             self._state = state
         self._events.state = state
         ctx.start_clock(state)
-        self.bus.publish(StateEntered(state=state.value, message=STATE_TEXT.get(state, state.value),
+        self.bus.publish(StateEntered(state=state.value, message=message or STATE_TEXT.get(state, state.value),
                                       timeout_s=ctx.timeout_s))
 
     def _shielded(self, ctx: ShotContext, action: Callable[[], Any]) -> Any:
@@ -359,7 +366,9 @@ class Sequencer:
                     readings_ok = False
 
     def _store(self, ctx: ShotContext) -> tuple[Path | None, str | None]:
-        """STORE the raw shot; returns (path, error)."""
+        """STORE the raw shot; returns (path, error): (the file, None) stored; (the rescued file
+        in the user's data folder, why the shot folder failed) when only that could take it;
+        (None, why) when the raw shot is lost."""
         self._shielded(ctx, lambda: self._enter(ctx, State.STORE))
         assert ctx.captured is not None
         request = ctx.request
@@ -371,20 +380,29 @@ class Sequencer:
         if not done.finished:
             message = f"{path}: not written within {self.config.timeouts.store_s:g} s (the file may still appear)"
         elif done.error is not None:
-            message = f"{path}: {done.error}"
+            message = str(done.error) if str(done.error).startswith(str(path)) else f"{path}: {done.error}"
         else:
             self._shielded(ctx, lambda: self.bus.publish(Stored(state=State.STORE.value, message=f"raw shot stored "
                                                                 f"in {path}", shot_path=str(path))))
             if ctx.after_store is not None:
                 self._shielded(ctx, lambda: ctx.after_store(ctx, path))
             return path, None
+        rescued = None
+        if done.finished:  # the folder failed (full, read-only, vanished): the user's data folder
+            kept = self._in_worker(ctx, lambda: rescue_raw_shot(path, captured, meta), self.config.timeouts.store_s,
+                                   abandon_on_abort=False, name="rescue")
+            rescued = kept.value if kept.finished and kept.error is None else None
+        if rescued is not None:
+            message += f"; the raw shot was saved instead in {rescued}"
+        else:
+            message += "; the raw shot is LOST: nowhere could take it"
         self._shielded(ctx, lambda: self.bus.publish(RigError(state=State.STORE.value,
                                                               message=f"STORE failed: {message}", source="sequencer",
                                                               hint="Check the shot folder: disk space, "
                                                                    "permissions.")))
-        return path, message
+        return rescued, message
 
-    def _analyse_and_record(self, ctx: ShotContext, path: Path) -> tuple[dict[str, Any] | None, str | None]:
+    def _analyse_and_record(self, ctx: ShotContext, path: Path) -> RecordedAnalysis:
         """ANALYSE (rig.shot.analyse_and_record in a worker thread); never raises."""
         self._shielded(ctx, lambda: self._enter(ctx, State.ANALYSE))
         assert ctx.captured is not None
@@ -393,7 +411,7 @@ class Sequencer:
             params = analysis_params(ctx.request, self.config, ctx.settings)  # with the gain read back
             raw = captured.raw_shot()
         except Exception as exc:
-            results, error = None, f"analysis not started: {exc}"
+            recorded = RecordedAnalysis(None, f"analysis not started: {exc}")
         else:
             def run(work: Callable[[], Any]) -> WorkResult:
                 done = self._in_worker(ctx, work, self.config.timeouts.analyse_s, abandon_on_abort=True,
@@ -402,12 +420,13 @@ class Sequencer:
                     return WorkResult(False, why_not=f"{done.why_not} (re-analyse the stored shot)")
                 return done
 
-            results, error = analyse_and_record(path, raw, params, self._analyse or shot_analyser(self.config),
-                                                amplifier_overloaded=bool(ctx.settings.get("amplifier_overloaded")),
-                                                run=run)
+            recorded = analyse_and_record(path, raw, params, self._analyse or shot_analyser(self.config),
+                                          amplifier_overloaded=bool(ctx.settings.get("amplifier_overloaded")),
+                                          run=run)
+        error = recorded.error
         self._shielded(ctx, lambda: self.bus.publish(Analysed(
             state=State.ANALYSE.value, message=error or f"analysed: {path}", shot_path=str(path), error=error)))
-        return results, error
+        return recorded
 
 
 def _message(ctx: ShotContext, failure: _Failure | None, safe: SafeResult, path: Path | None,
@@ -425,6 +444,8 @@ def _message(ctx: ShotContext, failure: _Failure | None, safe: SafeResult, path:
         parts.append(f"SAFE NOT CONFIRMED: {safe.problem}; check the rig by hand")
     if store_error is not None:
         parts.append(f"STORE failed: {store_error}")
+        if failure is None and safe.confirmed:
+            parts.append("rig safe (fire and fill valves closed, reservoir vented)")
     elif path is not None:
         parts.append(f"the recorded data is kept in {path}")
     elif ctx.fired:

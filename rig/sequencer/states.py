@@ -2,7 +2,7 @@
 
     CHECK → EVACUATE → CHARGE → ARM → FIRE → CAPTURE → SAFE → STORE → ANALYSE → DONE
       any error, abort, timeout or interrupt in CHECK..CAPTURE ──► SAFE ──► (STORE) ──► ABORTED
-      SAFE not confirmed, or the shot file not written ──────────────────────────────► FAULT
+      SAFE not confirmed, or the shot file (or its analysis) not written ────────────► FAULT
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ TRANSITIONS: dict[State, frozenset[State]] = {
     _S.CAPTURE: frozenset({_S.SAFE}),
     _S.SAFE: frozenset({_S.STORE, _S.ABORTED, _S.FAULT}),
     _S.STORE: frozenset({_S.ANALYSE, _S.ABORTED, _S.FAULT}),
-    _S.ANALYSE: frozenset({_S.DONE}),
+    _S.ANALYSE: frozenset({_S.DONE, _S.FAULT}),  # FAULT: the analysis could not be stored
     _S.DONE: frozenset({_S.CHECK}),
     _S.ABORTED: frozenset({_S.CHECK}),
     _S.FAULT: frozenset({_S.CHECK}),
