@@ -312,6 +312,11 @@ class CampaignRunner:
             if self._stop.is_set() and not stop_message:
                 stop_message = self._stop_reason
             summary = journal.summary()
+            redo = [s.id for s in journal.pending_analysis()]
+            if redo and summary["complete"]:  # every shot fired, but an analysis was interrupted
+                summary = {**summary, "complete": False}
+                stop_message = stop_message or (f"the analysis of {', '.join(redo)} was interrupted or not stored: "
+                                                "--resume redoes it")
             exit_code, message = self._conclusion(summary, stop_message)
             self.bus.publish(CampaignFinished(state=CAMPAIGN_STATE, message=message, exit_code=exit_code,
                                               run_folder=str(self.run_folder.path)))
@@ -407,9 +412,10 @@ class CampaignRunner:
             state = journal.status(sid).state
         if state == S.RECORDED:
             if outcome.done and outcome.analysis_error is None:
-                journal.mark(sid, S.ANALYSED, **_result_info(outcome.results))
-            elif outcome.done:
-                journal.mark(sid, S.ANALYSIS_FAILED, error=outcome.analysis_error)
+                journal.mark(sid, S.ANALYSED, **result_info(outcome.results))
+            elif outcome.done or outcome.analysis_to_redo:
+                journal.mark(sid, S.ANALYSIS_FAILED, error=outcome.analysis_error or outcome.error,
+                             redo=outcome.analysis_to_redo)
             elif outcome.final_state != "FAULT":  # recorded, then aborted: analyse the stored data
                 self._analyse_from_file(shot)
                 return
@@ -437,6 +443,7 @@ class CampaignRunner:
         path = self.run_folder.shot_path(shot.id)
         self._note(f"analysing the recorded shot {path.name}")
         results: dict[str, Any] | None = None
+        redo = False
         try:
             stored = read_shot(path)
             if stored.raw is None:
@@ -456,12 +463,13 @@ class CampaignRunner:
                 with contextlib.suppress(Exception):
                     record_analysis(path, None, error)
             else:
-                results, error, _ = analyse_and_record(path, stored.raw, params, self._analyse,
-                                                       amplifier_overloaded=bool(settings.get("amplifier_overloaded")))
+                recorded = analyse_and_record(path, stored.raw, params, self._analyse,
+                                              amplifier_overloaded=bool(settings.get("amplifier_overloaded")))
+                results, error, redo = recorded.results, recorded.error, recorded.to_redo
         if error is None:
-            self._journal.mark(shot.id, S.ANALYSED, **_result_info(results))
+            self._journal.mark(shot.id, S.ANALYSED, **result_info(results))
         else:
-            self._journal.mark(shot.id, S.ANALYSIS_FAILED, error=error)
+            self._journal.mark(shot.id, S.ANALYSIS_FAILED, error=error, redo=redo)
         self._shot_ended(shot, "ANALYSED" if error is None else f"ANALYSIS_FAILED: {error}", None)
         self._current = None
 
@@ -469,7 +477,7 @@ class CampaignRunner:
         self.bus.publish(Note(state=CAMPAIGN_STATE, message=message))
 
 
-def _result_info(results: dict[str, Any] | None) -> dict[str, Any]:
+def result_info(results: dict[str, Any] | None) -> dict[str, Any]:
     """A few figures of an analysis for the journal's info (the shot file holds the rest)."""
     if not results:
         return {}

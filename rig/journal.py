@@ -381,8 +381,11 @@ class Journal:
         return next((s.shot for s in statuses if self._fireable(s)), None)
 
     def pending_analysis(self) -> list[PlannedShot]:
-        """RECORDED shots: raw data stored, analysis not (yet) done."""
-        return [s.shot for s in self.statuses() if s.state == S.RECORDED]
+        """RECORDED shots (raw data stored, analysis not yet done) and ANALYSIS_FAILED ones whose
+        analysis was interrupted or could not be stored (marked with redo=True): a resume
+        analyses them from their files."""
+        return [s.shot for s in self.statuses()
+                if s.state == S.RECORDED or (s.state == S.ANALYSIS_FAILED and s.info.get("redo"))]
 
     def needs_decision(self) -> list[PlannedShot]:
         """UNKNOWN shots: may have been fired, no raw data; an operator decides (decide())."""

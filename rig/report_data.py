@@ -46,6 +46,20 @@ def accelerometer_text(model: str, serial: str) -> str:
     return f"{model or '(model not given)'}, serial {serial or '(not given)'}"
 
 
+def analysis_version_text(analyses: tuple[dict[str, Any], ...]) -> str:
+    """'version 3 of 3 (2026-11-24T22:20Z, hopkinson 0.2.0); earlier versions kept in the file: 1
+    (2026-03-01, hopkinson 0.1.0, failed), 2 (...)': which analysis the report shows."""
+    def text(a: dict[str, Any]) -> str:
+        return (f"{a['utc_time'][:16].replace('T', ' ')} UTC, hopkinson {a['software_version']}"
+                + (", failed" if a["status"] == "failed" else ""))
+
+    current = analyses[-1]
+    out = f"version {current['version']} of {len(analyses)} ({text(current)})"
+    if len(analyses) > 1:
+        out += "; earlier versions kept in the file: " + "; ".join(f"{a['version']} ({text(a)})" for a in analyses[:-1])
+    return out
+
+
 def shot_identity(shot: Shot) -> dict[str, str]:
     """Who, what, when and with what rig a shot was fired, as report rows."""
     m = shot.meta
@@ -75,6 +89,8 @@ def shot_identity(shot: Shot) -> dict[str, str]:
         rows["Rig configuration"] = str(m.config["path"])
     rows["Shot file"] = f"{shot.path.name} (uuid {m.uuid})"
     rows["Software"] = f"hopkinson {m.software_version}"
+    if shot.analyses:
+        rows["Analysis"] = analysis_version_text(shot.analyses)
     if m.simulated_truth is not None:
         rows["Rig"] = "SIMULATED (the true accelerometer model is recorded with the shot)"
     return rows

@@ -186,6 +186,7 @@ class ShotOutcome:
     aborted_in: str | None = None
     fired: bool = False
     analysis_error: str | None = None
+    analysis_to_redo: bool = False  # interrupted or not stored: a re-analysis of the file redoes it
     safe_confirmed: bool = True
     warnings: tuple[str, ...] = ()
     hint: str = ""  # what the operator does about `error` (from its cause, never from its words)
@@ -416,6 +417,12 @@ class RecordedAnalysis(NamedTuple):
     results: dict[str, Any] | None
     error: str | None
     stored: bool = True
+    finished: bool = True  # False: interrupted, abandoned or timed out (a re-analysis redoes it)
+
+    @property
+    def to_redo(self) -> bool:
+        """The analysis did not run to its end or was not stored: `--resume` / `analyse` redo it."""
+        return not (self.finished and self.stored)
 
 
 def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse: AnalyseFn, *,
@@ -427,13 +434,14 @@ def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse
     result (a full disk) too, with `stored` False: the record is then incomplete. `run` runs
     the computation (the sequencer: a worker thread with a timeout, abandoned on abort)."""
     result: AnalysisResult | None = None
+    finished = True
     if amplifier_overloaded:  # the channels' clipping is the analysis' to judge (analyse_raw)
         error: str | None = ("not analysed: the amplifier overloaded during the shot: the response is clipped "
                              "(check the accelerometer cable and the amplifier range)")
     else:
         done = run(lambda: analyse(raw, params))
         if not done.finished:
-            error = done.why_not
+            error, finished = done.why_not, False
         elif done.error is not None:
             error = analysis_error_text(done.error)
         elif not isinstance(done.value, AnalysisResult):
@@ -445,5 +453,5 @@ def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse
     except Exception as store_exc:
         why = str(store_exc).removeprefix(f"{path}: ")
         error = f"{error + '; ' if error else ''}the analysis could not be stored in {path} ({why})"
-        return RecordedAnalysis(None, error, stored=False)
-    return RecordedAnalysis(result.results if result is not None else None, error)
+        return RecordedAnalysis(None, error, stored=False, finished=finished)
+    return RecordedAnalysis(result.results if result is not None else None, error, finished=finished)

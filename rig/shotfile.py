@@ -40,7 +40,10 @@ Layout (format "hopkinson-shot", format_version 1)::
                            software_version, results_json (the whole results dict as JSON
                            text: the exact round-trip); groups mirror the results dict
                            (nested dicts -> groups, numbers/strings -> attributes, numeric
-                           lists -> datasets; anything else -> a "<key>_json" attribute)
+                           lists -> datasets; anything else -> a "<key>_json" attribute);
+                           version (1, 2, ...: each re-analysis adds one)
+    /analyses/<version>    the earlier analyses, each kept as /analysis was when it was current
+                           (`hopkinson analyse` re-runs today's method; nothing is replaced)
     /entry                 NeXus NXentry, default = "signals": what a generic viewer (HDFView,
                            silx, h5web) plots without being told
     /entry/signals         NXdata: signal "response", auxiliary_signals (the other roles),
@@ -204,6 +207,9 @@ class Shot:
     analysis_error: str | None = None
     record: Record | None = None
     derived: dict[str, np.ndarray] = field(default_factory=dict)
+    # Every analysis stored in the file, oldest first (the last is the current one, /analysis):
+    # version, utc_time, software_version, status ("ok" | "failed") and error.
+    analyses: tuple[dict[str, Any], ...] = ()
 
     def volts(self, name: str) -> np.ndarray:
         """Raw channel `name` in volts."""
@@ -308,8 +314,9 @@ def add_analysis(
     """Store analysis results (and the reduced record) in an existing shot file, atomically.
 
     With `error` the analysis is recorded as failed (state "analysis_failed"); `results` may
-    then hold whatever was computed before the failure. A second call replaces the previous
-    /derived and /analysis. The raw data is copied, never rewritten in place (module doc).
+    then hold whatever was computed before the failure. A second call keeps the previous
+    /analysis as /analyses/<its version> and writes the new one (version + 1) as /analysis;
+    /derived (recomputed from the raw data) is replaced. The raw data is copied, never rewritten in place (module doc).
     response_units: the record's response unit (default: the reduction's `response_unit` in
     the results, else "1").
     """
@@ -329,10 +336,17 @@ def add_analysis(
                                else None) or "1"
 
     def build(dst: h5py.File) -> None:
-        # dst is a byte copy of the shot file (module doc): replace what an analysis writes.
-        for name in ("derived", "analysis"):
-            if name in dst:
-                del dst[name]
+        # dst is a byte copy of the shot file (module doc): the current analysis becomes an earlier
+        # version under /analyses/<version> (its results kept, never replaced); the reduced record
+        # in /derived is replaced (it is recomputed from the raw data by any re-analysis).
+        version = 1
+        if "analysis" in dst:
+            previous = int(dst["analysis"].attrs.get("version", 1))
+            dst.require_group(PREVIOUS_ANALYSES)
+            dst.move("analysis", f"{PREVIOUS_ANALYSES}/{previous}")
+            version = previous + 1
+        if "derived" in dst:
+            del dst["derived"]
         if "entry" in dst and "record" in dst["entry"]:
             del dst["entry/record"]
         dst.attrs["state"] = "analysis_failed" if error is not None else "analysed"
@@ -355,6 +369,7 @@ def add_analysis(
             ds = derived_group.create_dataset(name, data=arr)
             ds.attrs["units"] = units_of_name(name)
         analysis = dst.create_group("analysis")
+        analysis.attrs["version"] = version
         analysis.attrs["status"] = "failed" if error is not None else "ok"
         if error is not None:
             analysis.attrs["error"] = str(error)
@@ -365,6 +380,31 @@ def add_analysis(
 
     _atomic_write(path, build, seed=path)
     return path
+
+
+PREVIOUS_ANALYSES = "analyses"  # /analyses/<version>: the earlier analyses, each as /analysis was
+
+
+def analysis_results(path: str | Path, version: int) -> dict[str, Any] | None:
+    """The results dict of one analysis version of a shot file (None when there is no such
+    version): the current /analysis or an earlier /analyses/<version>."""
+    path = Path(path)
+    with _open_shot(path) as f:
+        for name in ("analysis", f"{PREVIOUS_ANALYSES}/{version}"):
+            if name in f and int(f[name].attrs.get("version", 1)) == version:
+                try:
+                    return json.loads(f[name].attrs["results_json"])
+                except (KeyError, ValueError) as exc:
+                    raise ShotFileError(f"{path}: damaged shot file: {name} cannot be read ({exc})") from None
+    return None
+
+
+def _analysis_summary(group: h5py.Group) -> dict[str, Any]:
+    """An analysis group's version, time, software version, status and error."""
+    a = group.attrs
+    return {"version": int(a.get("version", 1)), "utc_time": str(a.get("utc_time", "")),
+            "software_version": str(a.get("software_version", "")), "status": str(a.get("status", "")),
+            "error": str(a["error"]) if "error" in a else None}
 
 
 def sensor_response_name(role: str, unit: str) -> str:
@@ -697,10 +737,15 @@ def read_shot(path: str | Path, load_raw: bool = True) -> Shot:
                 )
             where = "/analysis"
             results = error = record = None
+            analyses: list[dict[str, Any]] = []
+            if PREVIOUS_ANALYSES in f:
+                analyses = [_analysis_summary(group) for group in f[PREVIOUS_ANALYSES].values()]
             if "analysis" in f:
                 analysis = f["analysis"]
                 results = json.loads(analysis.attrs["results_json"])
                 error = str(analysis.attrs["error"]) if "error" in analysis.attrs else None
+                analyses.append(_analysis_summary(analysis))
+            analyses.sort(key=lambda a: a["version"])
             where = "/derived"
             derived = {}
             if "derived" in f:
@@ -714,7 +759,7 @@ def read_shot(path: str | Path, load_raw: bool = True) -> Shot:
                         )
                     else:
                         derived[name] = obj[...]
-            return Shot(path, meta, raw, str(f.attrs["state"]), results, error, record, derived)
+            return Shot(path, meta, raw, str(f.attrs["state"]), results, error, record, derived, tuple(analyses))
     except KeyError as exc:
         raise ShotFileError(f"{path}: damaged shot file: {where}: missing {exc}") from None
     except (OSError, ValueError) as exc:

@@ -37,6 +37,7 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.sim",
     "hopkinson.rig.cli.probe",
     "hopkinson.rig.cli.identify",
+    "hopkinson.rig.cli.analyse",
     "hopkinson.rig.cli.dcm",
     "hopkinson.rig.cli.compare_sine",
     "hopkinson.rig.cli.reduce",

@@ -250,9 +250,11 @@ class Sequencer:
 
         results: dict[str, Any] | None = None
         analysis_error: str | None = None
-        analysis_stored = True
+        analysis_stored, analysis_to_redo = True, False
         if failure is None and safe.confirmed and store_error is None and path is not None:
-            results, analysis_error, analysis_stored = self._analyse_and_record(ctx, path)
+            recorded = self._analyse_and_record(ctx, path)
+            results, analysis_error, analysis_stored = recorded.results, recorded.error, recorded.stored
+            analysis_to_redo = recorded.to_redo
             final = State.DONE if analysis_stored else State.FAULT
         elif safe.confirmed and (store_error is None or path is not None):  # the record is kept
             final = State.ABORTED
@@ -274,6 +276,7 @@ class Sequencer:
             aborted_in=aborted_in,
             fired=ctx.fired,
             analysis_error=analysis_error,
+            analysis_to_redo=analysis_to_redo,
             safe_confirmed=safe.confirmed,
             warnings=tuple(ctx.warnings),
             hint=hint,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -327,3 +328,33 @@ def test_progress_lines_are_plain_text() -> None:
     assert stream.getvalue().splitlines() == ["12:00:01.250 [3/8] s002-r1 CHARGE", "12:00:01.250 [3/8] s002-r1 CHARGE 4.10 bar",
                                               "12:00:01.250 [3/8] s002-r1 CHARGE ! aborting: door open"]
     assert "\r" not in stream.getvalue() and "\x1b" not in stream.getvalue()
+
+
+def test_an_analysis_interrupted_by_an_abort_is_redone_on_resume(tmp_path: Path, rig: Rig) -> None:
+    # issue 18: an abort (as SIGTERM/SIGINT/SIGHUP) during ANALYSE left the shot ANALYSIS_FAILED
+    # and --resume skipped it. Now the journal marks it to redo, and the resume analyses it.
+    run, plan = new_run(tmp_path, entries="[[shots]]\npressure_bar = 1.2\n")
+    holder: list[CampaignRunner] = []
+
+    def aborted_analysis(raw, params):
+        holder[0].abort("operator: interrupted during the analysis")
+        time.sleep(10.0)  # abandoned long before this ends
+        raise AssertionError("the abandoned analysis was waited for")
+
+    first = CampaignRunner(run, plan, rig.instruments, rig.config, EventBus(), analyse=aborted_analysis)
+    holder.append(first)
+    outcome = first.run()
+    assert outcome.exit_code != 0 and not outcome.complete
+    with Journal.open(run) as journal:
+        status = journal.status("s001-r1")
+        assert status.state == S.ANALYSIS_FAILED and status.info["redo"] is True
+        pending = journal.pending_analysis()
+        assert [p.id for p in pending] == ["s001-r1"], pending
+    assert "--resume" in outcome.message
+
+    resumed = rig.runner(run, plan).run()  # the real analysis
+    assert resumed.exit_code == 0 and resumed.complete, resumed.message
+    assert len(rig.fired()) == 1  # analysed from its file, never fired again
+    assert states(run)["s001-r1"] == ("ANALYSED", 1)
+    shot = read_shot(run.shot_path("s001-r1"), load_raw=False)
+    assert shot.state == "analysed" and [a["status"] for a in shot.analyses] == ["failed", "ok"]

@@ -76,6 +76,7 @@ def test_every_signal_in_every_state_ends_safe(rig) -> None:
                 assert shot.safe_again == (True, None), case
                 if state != "DONE":  # the analysis was abandoned (the stored shot can be re-analysed)
                     assert outcome.analysis_error.startswith(f"analysis abandoned: interrupted ({sig.name})"), case
+                    assert outcome.analysis_to_redo, case  # a resume or `hopkinson analyse` redoes it
             if state == "IDLE":
                 assert [e.state for e in rig.recorder.of(StateEntered)][-3:] == ["CHECK", "SAFE", "ABORTED"]
     assert fired == len(SIGNALS) * len(AFTER_FIRE)
