@@ -19,9 +19,10 @@ rig held by another shot, campaign or panel is refused at once, exit 2, naming t
 While the command controls the rig it feeds the controller's link watchdog (rig/control.py).
 
 Confirmation. The shot is fired only with --yes, or when standard input is a terminal and the
-operator types "yes" at the prompt shown once the rig is armed (60 s to answer). Otherwise the
-sequencer runs up to ARM, reports, goes SAFE, and the command exits 3 saying the shot was not
-confirmed.
+operator types "yes" at the prompt shown once the rig is armed (60 s to answer; unanswered, the
+sequencer goes SAFE and the command exits 3). Without --yes and without a terminal nobody can
+confirm: the shot is refused before anything moves (exit 2), as `campaign run` refuses a plan
+without authorisation.
 
 Signals. SIGINT (Ctrl-C), SIGTERM and SIGHUP, whenever they come, abort the shot: the
 sequencer goes SAFE (fire and fill closed, reservoir vented, read back) and the command exits
@@ -124,9 +125,12 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
 
     if not args.sim and (args.sim_fault or args.sim_state_file):
         raise ConfigError("--sim-fault and --sim-state-file need --sim")
+    interactive = not args.yes and sys.stdin is not None and sys.stdin.isatty()
+    if not args.yes and not interactive:
+        raise ConfigError("nothing can confirm this shot: standard input is not a terminal and --yes was not "
+                          "given (give --yes to fire without asking); nothing was moved")
     config = load_rig_config(rig_config_path(args))
     _make_out_dir(args.out)
-    interactive = not args.yes and sys.stdin is not None and sys.stdin.isatty()
     request = ShotRequest(
         pressure_bar=args.pressure_bar, projectile=args.projectile, operator=args.operator,
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
@@ -135,8 +139,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         sample_rate_hz=args.sample_rate_hz, dcm_damping=args.dcm_damping,
         dcm_ratio=number_or_word(args.dcm_ratio, "--dcm-ratio", {"auto": None}, "a positive number"),
         uncertainty=args.uncertainty, draws=args.draws, out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
-        # Without --yes and without a terminal nobody can confirm: do not wait in ARM.
-        confirm_timeout_s=None if args.yes else (PROMPT_TIMEOUT_S if interactive else 0.0),
+        confirm_timeout_s=None if args.yes else PROMPT_TIMEOUT_S,
     )
     sim_config = load_sim_config(args.sim_config) if args.sim else None
     # bad input (the analysis options, a sensor on a channel the rig lacks): exit 2 before anything starts

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 from hopkinson.rig.cli.main import main
-from hopkinson.rig.logbook import read_log
 from hopkinson.rig.shotfile import read_shot
 
 from tests.rig.conftest import read_until
@@ -97,24 +96,16 @@ def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
     assert re.search(r"^results: .*f_n 2\d\.\d+ ± 0\.\d+ kHz, zeta 0\.0\d+ ± 0\.\d+, FBSD ±5 % \d\.\d+ ± 0\.\d+ kHz", out, flags=re.M)
 
 
-def test_without_yes_it_runs_to_arm_goes_safe_and_exits_3(configs, capsys) -> None:
-    rc = main(_args(configs))
+def test_without_yes_and_without_a_terminal_nothing_moves(configs, capsys) -> None:
+    # issue 18: it used to evacuate and charge to the set pressure, then abort at ARM for want of
+    # a confirmation nobody could give. Refused before the simulator even starts, exit 2.
+    rc = main(_args(configs))  # pytest's standard input is not a terminal
     out, err = capsys.readouterr()
-    assert rc == 3
-    assert err.count("\n") == 1
-    assert err.startswith("hopkinson: error: shot aborted in ARM: operator: shot not confirmed")
-    assert "rig safe" in err
-    lines = _states(out)
-    assert "ARM" in lines and "FIRE" not in lines and lines[-1] == "ABORTED"
-    state = _state(configs)
-    assert state["shots_fired"] == 0 and state["fire_refusals"] == []
-    _assert_safe(state)
-    assert not list(configs["out"].glob("*.h5"))  # nothing recorded; the shot's log tells what happened
-    (log,) = configs["out"].glob("*.log.jsonl")
-    entries = read_log(log)
-    assert entries[0]["type"] == "LogOpened" and entries[-1]["type"] == "ShotFinished"
-    assert entries[-1]["final_state"] == "ABORTED" and entries[-1]["hint"].startswith("The shot was not confirmed")
-    assert all(e["utc"].endswith("Z") for e in entries)
+    assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("hopkinson: error: nothing can confirm this shot: standard input is not a terminal")
+    assert "--yes" in err and "nothing was moved" in err and _states(out) == []
+    assert not configs["state"].exists()  # the simulated rig was never started
+    assert not configs["out"].exists()
 
 
 @pytest.mark.parametrize("fault, where, reason", [
