@@ -534,6 +534,7 @@ def load_rig_config(path: str | Path) -> RigConfig:
     data, _ = read_toml(path)
     config = _build(RigConfig, data, path, "", skip=("path",))
     _check_rig(config, path)
+    _check_limits_stated(data, path)
     return dataclasses.replace(config, path=str(path))
 
 
@@ -586,6 +587,17 @@ def register_map_of(controller_map: dict[str, dict[str, Any]]) -> RegisterMap:
 
 
 # -- checks across keys -------------------------------------------------------------------------
+def _check_limits_stated(data: dict[str, Any], path: Path) -> None:
+    """A rig's file states every safety limit itself: the built-in values are the simulated
+    rig's (rig-sim.toml states them too), never a real rig's by default."""
+    limits = data.get("limits")
+    missing = [f.name for f in dataclasses.fields(LimitsConfig) if not isinstance(limits, dict) or f.name not in limits]
+    if missing:
+        where = "[limits]" if not isinstance(limits, dict) else f"limits.{missing[0]}"
+        raise ConfigError(f"{path}: {where}: the rig must state its safety limits: add [limits] with "
+                          f"{', '.join(f'{m} = …' for m in missing)} (see config/rig.toml)")
+
+
 def _check_rig(config: RigConfig, path: Path) -> None:
     limits = config.limits
     if limits.min_pressure_bar >= limits.max_pressure_bar:

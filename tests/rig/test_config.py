@@ -164,15 +164,19 @@ def test_missing_section_file_and_toml_syntax(tmp_path: Path) -> None:
         load_rig_config(broken)
 
 
+LIMITS = ('[limits]\nmax_pressure_bar = 6.0\nmin_pressure_bar = 0.2\npressure_tolerance_bar = 0.05\n'
+          'fixture_vacuum_max_mbar = 100.0\nvent_done_bar = 0.05\n')
+
+
 def test_minimal_rig_config_takes_documented_defaults(tmp_path: Path) -> None:
     path = tmp_path / "minimal.toml"
     path.write_text('[valve_controller]\nhost = "10.0.0.5"\n[digitizer]\nresource = "TCPIP0::10.0.0.6::5025::SOCKET"\n'
-                    '[amplifier]\nport = "/dev/ttyS0"\n')
+                    '[amplifier]\nport = "/dev/ttyS0"\n' + LIMITS)  # the safety limits are never defaults
     config = load_rig_config(path)
     assert config.valve_controller.port == 502 and config.valve_controller.register_map == RegisterMap()
     assert config.valve_controller.watchdog_s == 3.0 and config.valve_controller.fire_pulse_s == 0.2
     assert config.digitizer.trigger_source == "CH2"
-    assert config.limits.max_pressure_bar == 8.0
+    assert config.limits.max_pressure_bar == 6.0
 
 
 def test_modbus_rtu_and_a_manual_conditioner(tmp_path: Path) -> None:
@@ -183,7 +187,7 @@ def test_modbus_rtu_and_a_manual_conditioner(tmp_path: Path) -> None:
                     'reservoir_pressure = { address = 10, type = "float32", word_order = "little" }\n'
                     '[digitizer]\nresource = "TCPIP0::10.0.0.6::5025::SOCKET"\n'
                     '[amplifier]\ndriver = "manual"\ngain = 3.16\nexcitation_v = 0.0\nlowpass_hz = 30000.0\n'
-                    'sensitivity_v_per_m_s2 = 1.2e-5\nidentity = "Kistler 5015A, SN 123"\n')
+                    'sensitivity_v_per_m_s2 = 1.2e-5\nidentity = "Kistler 5015A, SN 123"\n' + LIMITS)
     config = load_rig_config(path)
     vc = config.valve_controller
     assert vc.address == "modbus-rtu:///dev/ttyUSB1/17"
@@ -290,3 +294,29 @@ def test_the_readmes_instruments_example_loads(tmp_path: Path) -> None:
     vc = load_rig_config(path).valve_controller
     assert vc.address == "modbus-rtu:///dev/ttyUSB1/17"
     assert vc.register_map.input_registers.reservoir_pressure == Register(0, "int32", "little", 1e-4)
+
+
+@pytest.mark.parametrize("source", ["rig.toml", "rig-sim.toml"])
+@pytest.mark.parametrize("drop, named", [
+    ("section", "[limits]"),
+    ("max_pressure_bar", "limits.max_pressure_bar"),
+    ("vent_done_bar", "limits.vent_done_bar"),
+])
+def test_a_rig_file_must_state_its_safety_limits(tmp_path: Path, source: str, drop: str, named: str) -> None:
+    # issue 18: a config without [limits] loaded silently and fired with built-in limits (8 bar)
+    import re
+
+    text = (CONFIG / source).read_text(encoding="utf-8")
+    if drop == "section":
+        text, n = re.subn(r"^\[limits\][^\[]*", "", text, flags=re.M)
+    else:
+        text, n = re.subn(rf"^{drop} = .*$", "", text, flags=re.M)
+    assert n == 1
+    path = tmp_path / "rig.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_rig_config(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: {named}: the rig must state its safety limits")
+    assert (f"{drop} = …" in message) if drop != "section" else ("max_pressure_bar = …" in message)
+    load_rig_config(CONFIG / source)  # the shipped files state them

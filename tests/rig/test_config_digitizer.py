@@ -11,7 +11,9 @@ from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError
 
-HEAD = '[valve_controller]\nhost = "10.0.0.5"\n[amplifier]\nport = "/dev/ttyS0"\n'
+HEAD = ('[valve_controller]\nhost = "10.0.0.5"\n[amplifier]\nport = "/dev/ttyS0"\n'
+        '[limits]\nmax_pressure_bar = 8.0\nmin_pressure_bar = 0.2\npressure_tolerance_bar = 0.05\n'
+        'fixture_vacuum_max_mbar = 100.0\nvent_done_bar = 0.05\n')
 
 
 def load(tmp_path: Path, digitizer: str) -> object:
