@@ -143,7 +143,34 @@ def _same_file(a: Path, b: Path) -> bool:
     try:
         return os.path.samefile(a, b)
     except OSError:
-        return a.resolve(strict=False) == b.resolve(strict=False)
+        try:
+            return a.resolve(strict=False) == b.resolve(strict=False)
+        except (OSError, RuntimeError):  # a symlink loop: reading it fails later, with its own error
+            return False
+
+
+def check_writes(outputs: Iterable[tuple[str, str | os.PathLike[str]]],
+                 inputs: Iterable[str | os.PathLike[str]]) -> None:
+    """Refuse (UnsafeOutputError) before anything moves: an output (`(flag, path)` pairs) that
+    is one of the `inputs` or another output (through symlinks and hard links: the same file),
+    an existing HDF5 shot file, or a folder. Every command's write flags go through it."""
+    seen: list[tuple[str, Path]] = []
+    sources = [Path(i) for i in inputs]
+    for flag, output in outputs:
+        out = Path(output)
+        for source in sources:
+            if _same_file(out, source):
+                raise UnsafeOutputError(f"{flag} {out}: that is the input {source}: choose another name (an "
+                                        "input is never written over)")
+        for other_flag, other in seen:
+            if _same_file(out, other):
+                raise UnsafeOutputError(f"{flag} {out}: that is also {other_flag}'s file: choose another name")
+        if out.is_dir():
+            raise UnsafeOutputError(f"{flag} {out}: that is a folder, not a file name")
+        if out.exists() and is_hdf5_file(out):
+            raise UnsafeOutputError(f"{flag} {out}: an HDF5 shot file exists under that name: shot files are "
+                                    "never written over; choose another name")
+        seen.append((flag, out))
 
 
 def check_output_path(output: str | os.PathLike[str], inputs: Iterable[str | os.PathLike[str]] = (),

@@ -125,6 +125,31 @@ def fail(message: str, exit_code: int = 2) -> int:
     return exit_code
 
 
+# Every option that names a file a command writes (a folder option such as --out is not one).
+WRITE_FLAGS = {"output": "-o", "log_file": "--log-file", "sim_state_file": "--sim-state-file",
+               "sim_fire_log": "--sim-fire-log", "plot": "--plot", "screenshot": "--screenshot"}
+
+
+def check_write_flags(args: argparse.Namespace) -> None:
+    """No write flag may name a file the command reads (its --config, its default rig
+    configuration, a plan, a record, a model ...), another write flag's file or a shot file:
+    refused before anything moves (hopkinson.fileio.check_writes)."""
+    from hopkinson.fileio import check_writes
+
+    def paths(value: Any) -> list[Any]:
+        values = value if isinstance(value, list | tuple) else [value]
+        return [v for v in values if isinstance(v, str | Path) and str(v)]
+
+    outputs = [(WRITE_FLAGS[name], p) for name in WRITE_FLAGS for p in paths(getattr(args, name, None))]
+    if not outputs:
+        return
+    inputs = [p for name, value in vars(args).items() if name not in WRITE_FLAGS
+              for p in paths(value) if Path(p).is_file()]
+    if hasattr(args, "sim") and hasattr(args, "config"):
+        inputs.append(rig_config_path(args))  # read even when not named
+    check_writes(outputs, inputs)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `hopkinson` console command."""
     from hopkinson.rig.errors import Interrupted
@@ -135,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     known = _known_errors()
     try:
         with exit_cleanly_on_termination():
+            check_write_flags(args)
             return int(args.func(args) or 0)
     except known as exc:
         return fail(str(exc), getattr(exc, "exit_code", 2))
