@@ -112,6 +112,10 @@ def load_json_object(path: str | Path, what: str) -> dict[str, Any]:
         raise AnalysisError(f"{path}: no such file") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise AnalysisError(f"{path}: not a JSON {what} file ({exc})") from None
+    except RecursionError:
+        raise AnalysisError(f"{path}: not a JSON {what} file (nested too deeply to be one)") from None
+    except OSError as exc:
+        raise AnalysisError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     if not isinstance(data, dict):
         raise AnalysisError(f"{path}: expected a JSON object")
     return data

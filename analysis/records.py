@@ -16,6 +16,9 @@ from __future__ import annotations
 import csv
 import re
 import stat
+import warnings
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +30,9 @@ from hopkinson.fileio import atomic_open
 RECORD_KEYS = ("time_s", "reference", "response")
 MAX_HEADER_BYTES = 64 * 1024  # a record's header is a few names; more is not a record CSV
 MAX_ABS_VALUE = 1e30  # beyond any physical value in any unit; squares and sums stay finite
+# A shock record's sample interval: 1 GS/s .. 1 kS/s (a time column in µs or ms read as seconds
+# falls outside, and would make an analysis of a resampled record ask for petabytes).
+MIN_STEP_S, MAX_STEP_S = 1e-9, 1e-3
 _HEADER_CELL = re.compile(r"^\s*(?P<name>[^\[\]]*?)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
 _COLUMNS_CHANGED = re.compile(r"number of columns changed from (\d+) to (\d+) at row (\d+)")
 
@@ -82,6 +88,9 @@ def validated_columns(
     step = float(np.median(dt))
     if not step > 0:
         raise RecordError(f"{source}: time_s is not increasing")
+    if not MIN_STEP_S <= step <= MAX_STEP_S:
+        raise RecordError(f"{source}: time_s steps by {step:g} s, implausible for a shock record (expected "
+                          f"{MIN_STEP_S:g} .. {MAX_STEP_S:g} s): is the time column in seconds?")
     if np.max(np.abs(dt - step)) > 1e-3 * step:
         raise RecordError(f"{source}: time_s is not uniformly sampled (step varies by more than 0.1 %)")
     return step, cols
@@ -127,7 +136,7 @@ def read_table(path: str | Path, keys: tuple[str, ...], what: str = "record") ->
                 return Table([np.asarray(data[k], dtype=float).ravel() for k in keys], units)
         except RecordError:
             raise
-        except (OSError, ValueError, EOFError) as exc:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise RecordError(f"{path}: not a readable NPZ file ({exc})") from None
     return _read_csv_table(path, keys, what)
 
@@ -141,7 +150,7 @@ def column_names(path: str | Path, what: str = "record") -> list[str]:
         try:
             with np.load(path, allow_pickle=False) as data:
                 return list(data.files)
-        except (OSError, ValueError, EOFError) as exc:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise RecordError(f"{path}: not a readable NPZ file ({exc})") from None
     return [parse_header_cell(h)[0] for h in _read_header(path)]
 
@@ -211,7 +220,9 @@ def _read_csv_table(path: Path, keys: tuple[str, ...], what: str) -> Table:
             f"a CSV {what} needs {','.join(keys)}"
         )
     try:
-        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, encoding="utf-8")
+        with warnings.catch_warnings():  # a header-only file: numpy warns, the check below says it
+            warnings.simplefilter("ignore")
+            table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, encoding="utf-8")
     except ValueError as exc:
         changed = _COLUMNS_CHANGED.search(str(exc))
         if changed:
