@@ -149,6 +149,8 @@ class CalibrationReport:
     campaign: bool = False
     notes: list[str] = field(default_factory=list)
     sine_calibration: SineCalibration | None = None
+    # shot files that could not be reported (damaged, unreadable): {"id", "path", "reason"}
+    unreadable: list[dict[str, str]] = field(default_factory=list)
 
 
 def identification_dict(analysis: ShotAnalysis) -> dict[str, Any]:

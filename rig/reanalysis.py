@@ -28,7 +28,7 @@ from hopkinson.rig.shot import (
     analysis_params,
     shot_analyser,
 )
-from hopkinson.rig.shotfile import Shot, ShotFileError, analysis_results, read_shot
+from hopkinson.rig.shotfile import Shot, ShotFileError, analysis_results, read_shot, require_sound
 
 SNAPSHOT_EXTRAS = ("path", "shot_settings")  # keys of a shot's config snapshot that rig.toml has not
 
@@ -66,6 +66,7 @@ def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisParams:
 def reanalyse(path: str | Path, overrides: dict[str, Any] | None = None) -> RecordedAnalysis:
     """Analyse a stored shot again with today's method and store it as a new analysis version."""
     path = Path(path)
+    require_sound(path)  # a damaged raw channel is never analysed again as if it were whole
     shot = read_shot(path)
     if shot.raw is None:
         raise ShotFileError(f"{path}: holds no raw data")

@@ -29,7 +29,7 @@ from hopkinson.reports.writers import write_report
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
-from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, sensor_records
+from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, require_sound, sensor_records
 
 REPORT_NAME = "report"
 
@@ -99,6 +99,7 @@ def shot_identity(shot: Shot) -> dict[str, str]:
 def shot_entry(path: str | Path, state: str | None = None, label: str | None = None) -> ShotEntry:
     """A report entry from a shot file: identity, analysis (rebuilt), or the reason there is none."""
     path = Path(path)
+    require_sound(path)  # a damaged file is refused, never plotted as if it were whole
     shot = read_shot(path, load_raw=False)
     truth = shot.meta.simulated_truth
     truth_modes = None
@@ -218,6 +219,7 @@ def run_report(run_folder: str | Path) -> CalibrationReport:
     states = journal_states(run)
     entries: list[ShotEntry] = []
     missing: list[str] = []
+    unreadable: list[dict[str, str]] = []
     for planned in plan.shots:
         path = run.shot_path(planned.id)
         state = states.get(planned.id, {}).get("state")
@@ -228,6 +230,7 @@ def run_report(run_folder: str | Path) -> CalibrationReport:
             entries.append(shot_entry(path, state=state, label=planned.id))
         except ShotFileError as exc:
             missing.append(f"{planned.id} (unreadable: {exc})")
+            unreadable.append({"id": planned.id, "path": str(path), "reason": str(exc)})
     if not entries:
         raise ConfigError(f"{run.path}: no shot files yet; nothing to report")
     first = entries[0]
@@ -256,7 +259,7 @@ def run_report(run_folder: str | Path) -> CalibrationReport:
             notes.append(f"The plan's sine calibration is not compared: {exc}")
     title = f"Calibration report: {identity['Accelerometer']}, campaign {run.campaign_id}"
     return CalibrationReport(title=title, identity=identity, shots=entries, campaign=True, notes=notes,
-                             sine_calibration=sine)
+                             sine_calibration=sine, unreadable=unreadable)
 
 
 def report_for(path: str | Path) -> CalibrationReport:

@@ -360,13 +360,13 @@ def add_analysis(
                 ("reference", record.reference, "m/s^2", "reference acceleration (laser interferometer)"),
                 ("response", record.response, units, "accelerometer response"),
             ):
-                ds = rec.create_dataset(key, data=np.asarray(values, dtype=float))
+                ds = rec.create_dataset(key, data=np.asarray(values, dtype=float), **CHECKSUMMED)
                 ds.attrs["units"] = unit
                 ds.attrs["long_name"] = f"{long_name} ({unit})"
                 ds.dims[0].attach_scale(time_s)
             _nexus_record(dst, rec)
         for name, arr in derived_arrays.items():
-            ds = derived_group.create_dataset(name, data=arr)
+            ds = derived_group.create_dataset(name, data=arr, **CHECKSUMMED)
             ds.attrs["units"] = units_of_name(name)
         analysis = dst.create_group("analysis")
         analysis.attrs["version"] = version
@@ -376,10 +376,48 @@ def add_analysis(
         analysis.attrs["utc_time"] = utc_now_iso()
         analysis.attrs["software_version"] = software_version()
         analysis.attrs["results_json"] = results_json
+        analysis.attrs["results_sha256"] = hashlib.sha256(results_json.encode("utf-8")).hexdigest()
         _mirror(analysis, results)
 
     _atomic_write(path, build, seed=path)
     return path
+
+
+CHECKSUMMED: dict[str, Any] = {"fletcher32": True}  # every dataset: a flipped byte fails its read
+
+
+def verify_shot(path: str | Path) -> list[str]:
+    """Every way the shot file is damaged, one line each (empty: sound). Each dataset is read
+    whole (HDF5's fletcher32 checksum fails on a changed byte), each analysis' results JSON is
+    compared with its SHA-256 (a file written before the checksums has none to compare: it
+    still reads, only its damage cannot be seen)."""
+    path = Path(path)
+    problems: list[str] = []
+    with _open_shot(path) as f:
+        def visit(name: str, obj: Any) -> None:
+            if isinstance(obj, h5py.Dataset):
+                try:
+                    obj[...]
+                except (OSError, ValueError) as exc:
+                    problems.append(f"/{name} fails its checksum ({str(exc).splitlines()[0][:120]})")
+            elif isinstance(obj, h5py.Group) and "results_json" in obj.attrs:
+                digest = obj.attrs.get("results_sha256")
+                text = obj.attrs["results_json"]
+                if digest is not None and hashlib.sha256(str(text).encode("utf-8")).hexdigest() != digest:
+                    problems.append(f"/{name}: its results do not match their SHA-256")
+
+        try:
+            f.visititems(visit)
+        except (OSError, RuntimeError, KeyError) as exc:
+            problems.append(f"the file's structure cannot be read ({exc})")
+    return problems
+
+
+def require_sound(path: str | Path) -> None:
+    """ShotFileError naming every damage verify_shot finds."""
+    problems = verify_shot(path)
+    if problems:
+        raise ShotFileError(f"{path}: damaged shot file: {'; '.join(problems)}")
 
 
 PREVIOUS_ANALYSES = "analyses"  # /analyses/<version>: the earlier analyses, each as /analysis was
@@ -441,6 +479,7 @@ def _time_scale(group: h5py.Group, time_s: np.ndarray, long_name: str) -> h5py.D
     n = int(np.size(time_s))
     options = dict(chunks=(min(n, _CHUNK_SAMPLES),), compression="gzip", compression_opts=1, shuffle=True) \
         if n > 4096 else {}
+    options["fletcher32"] = True
     ds = group.create_dataset(TIME_NAME, data=np.asarray(time_s, dtype=np.float64), **options)
     ds.attrs["units"] = "s"
     ds.attrs["long_name"] = f"{long_name} (s)"
@@ -464,7 +503,7 @@ def _nexus_signals(f: h5py.File, channels: dict[str, RawChannel], time_s: h5py.D
     data[TIME_NAME] = time_s  # a hard link: one time axis in the file
     for name, channel in channels.items():
         volts = (channel.codes.astype(np.float64) * channel.scale_v + channel.offset_v).astype(np.float32)
-        ds = data.create_dataset(name, data=volts, chunks=(min(volts.size, _CHUNK_SAMPLES),))
+        ds = data.create_dataset(name, data=volts, chunks=(min(volts.size, _CHUNK_SAMPLES),), fletcher32=True)
         ds.attrs["units"] = "V"
         ds.attrs["long_name"] = f"{ROLE_NAMES.get(name, name)} (V)"
         ds.dims[0].attach_scale(time_s)
@@ -632,7 +671,7 @@ def _mirror(group: h5py.Group, obj: dict[str, Any]) -> None:
         else:
             arr = _numeric_array(value)
             if arr is not None:
-                ds = group.create_dataset(name, data=arr)
+                ds = group.create_dataset(name, data=arr, **CHECKSUMMED)
                 if units_of_name(name) != "1":
                     ds.attrs["units"] = units_of_name(name)
             elif isinstance(value, list | tuple) and value and all(isinstance(v, str) for v in value):

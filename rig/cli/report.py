@@ -10,7 +10,9 @@ the pole analysis, the DCM with its compensated response and step response, the 
 sensitivity. A run folder's report adds, across its shots, the spread (mean, standard
 deviation), the combined key figures (mean, repeatability, U) and the cross-validation matrix.
 --json prints {"reports": [...], "shots": [{"id", "state", "analysed", "error", "key_figures"}],
-"campaign": statistics or null}; key_figures is analysis.key_figures.KeyFigures.to_dict() (each
+"campaign": statistics or null, "unreadable": [{"id", "path", "reason"}]} (a damaged or
+unreadable shot file of a run folder: every file is checked against its checksums first, and a
+damaged single shot file is refused, exit 2); key_figures is analysis.key_figures.KeyFigures.to_dict() (each
 uncertain figure as {"value", "u", "interval"}). A shot whose analysis failed is reported with
 its error.
 Exit codes: 0 written; 2 bad input (no such file, not a shot file or run folder, a run folder
@@ -68,6 +70,7 @@ def report_command(args: argparse.Namespace) -> int:
                        "key_figures": e.key_figures.to_dict() if e.key_figures is not None else None}
                       for e in report.shots],
             "campaign": stats.to_dict() if stats is not None else None,
+            "unreadable": report.unreadable,
         })
     else:
         for path in written:

@@ -178,3 +178,53 @@ def test_a_plan_naming_a_sine_calibration_gets_the_comparison(run_folder: Path, 
     page = out.read_text(encoding="utf-8")
     assert "Against the sinusoidal calibration" in page and "sine.csv (10 points)" in page
     assert page.count("<img ") == 3 + 4 * 2
+
+
+def _flip(path: Path, dataset: str, count: int = 64) -> None:
+    """Flip `count` bytes inside a dataset's stored data (as a failing disk or a bad copy would)."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        ds = f[dataset]
+        offset = ds.id.get_chunk_info(0).byte_offset if ds.chunks else ds.id.get_offset()
+    with path.open("r+b") as fh:
+        fh.seek(offset + 16)
+        data = bytearray(fh.read(count))
+        fh.seek(offset + 16)
+        fh.write(bytes(b ^ 0xFF for b in data))
+
+
+@pytest.mark.parametrize("where", ["raw/response", "derived/record/reference", "entry/signals/doppler",
+                                   "analysis/results_json"])
+def test_a_damaged_shot_is_refused_by_report_and_analyse(run_folder: Path, tmp_path: Path, capsys,
+                                                         where: str) -> None:
+    # issue 18: with 64 bytes of /raw/response flipped `report` exited 0 and never said so
+    import h5py
+
+    shot = tmp_path / "damaged.h5"
+    shutil.copyfile(run_folder / "shots" / "s001-r1.h5", shot)
+    if where == "analysis/results_json":
+        with h5py.File(shot, "r+") as f:
+            f["analysis"].attrs["results_json"] = f["analysis"].attrs["results_json"].replace('"order"', '"ordeR"')
+        damage = "/analysis: its results do not match their SHA-256"
+    else:
+        _flip(shot, where)
+        damage = f"/{where} fails its checksum"
+    assert main(["report", str(shot), "-o", str(tmp_path / "r.html")]) == 2
+    line = one_error_line(capsys)
+    assert f"{shot}: damaged shot file: " in line and damage in line
+    assert not (tmp_path / "r.html").exists()
+    assert main(["analyse", str(shot)]) == 3
+    out = capsys.readouterr().out
+    assert out.startswith(f"{shot}: FAILED: {shot}: damaged shot file") and damage in out
+
+
+def test_a_run_folders_damaged_shot_is_listed_as_unreadable(run_folder: Path, tmp_path: Path, capsys) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(run_folder, run, ignore=shutil.ignore_patterns("*.lock", "report"))
+    _flip(run / "shots" / "s002-r1.h5", "raw/response")
+    assert main(["report", str(run), "-o", str(tmp_path / "r.html"), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    (bad,) = data["unreadable"]
+    assert bad["id"] == "s002-r1" and "/raw/response fails its checksum" in bad["reason"]
+    assert [s["id"] for s in data["shots"]] == ["s001-r1"]
