@@ -94,7 +94,9 @@ def run_shot_under_signals(sequencer: Sequencer, request: ShotRequest, authorisa
     latch.on_signal(sequencer.abort)
     outcome = sequencer.run_shot(request, authorisation)
     safe_again = None
-    if latch.received is not None and outcome.done:
+    # past the shot's own SAFE (DONE, or ABORTED by the signal only after FIRE, SAFE and STORE)
+    past_safe = outcome.done or (outcome.fired and outcome.safe_confirmed and outcome.aborted_in is None)
+    if latch.received is not None and past_safe:
         with contextlib.ExitStack() as stack:
             if outcome.log_path is not None:  # the second SAFE belongs in the shot's record too
                 from hopkinson.rig.lock import command_line

@@ -170,6 +170,11 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
                                      name="shot-prompt", daemon=True).start()
             bus.subscribe(on_event)
         shot = run_shot_under_signals(sequencer, request, authorisation, latch)
+        if latch.received is not None and shot.outcome.done:  # after the shot ended: the log says so too
+            from hopkinson.rig.events import RigError
+
+            bus.publish(RigError(state=shot.outcome.final_state, source="operator",
+                                 message=f"{latch.reason} after the shot ended: the command exits {EXIT_ABORTED}"))
         if args.sim:
             sim_state = session.state()
     return _report(args, shot.outcome, sim_state, latch, shot.safe_again)
@@ -210,6 +215,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
             out["sim_state"] = sim_state
         if latch.received is not None:
             out["interrupted"] = latch.reason
+            out["exit_code"] = EXIT_ABORTED  # as the process exits
         emit_json(out)
     elif outcome.shot_path is not None and not args.json_events:
         print(f"shot file: {outcome.shot_path}", flush=True)
@@ -231,14 +237,15 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
                          if outcome.analysis_error.startswith("analysis")
                          else f"hopkinson: warning: {outcome.analysis_error}\n")
     if latch.received is not None:
-        if not outcome.done:
+        before = "the shot was recorded before it; " if outcome.done else (f"{outcome.error}; " if outcome.error else "")
+        if safe_again is None and not outcome.done:
             line = outcome.error or f"shot ended in {outcome.final_state}"
         elif safe_again is None:  # the signal came once the shot had ended: nothing moved since
             line = "it came after the shot had ended with the rig confirmed safe; nothing was moved after that"
         elif not safe_again[0]:
-            line = f"SAFE NOT CONFIRMED: {safe_again[1]}; check the rig by hand"
+            line = f"{'' if outcome.done else before}SAFE NOT CONFIRMED: {safe_again[1]}; check the rig by hand"
         else:
-            line = "the shot was recorded before it; SAFE ran again and was confirmed"
+            line = f"{before}SAFE ran again and was confirmed"
         sys.stderr.write(f"hopkinson: error: {latch.reason}: {line}\n")
         return EXIT_ABORTED
     outcome.raise_for_outcome()

@@ -256,12 +256,17 @@ class Sequencer:
             results, analysis_error, analysis_stored = recorded.results, recorded.error, recorded.stored
             analysis_to_redo = recorded.to_redo
             final = State.DONE if analysis_stored else State.FAULT
+            if final == State.DONE and (self._abort.requested or ctx.interrupt is not None):
+                final = State.ABORTED  # a signal or an abort once the shot had fired: exit 3 everywhere
         elif safe.confirmed and (store_error is None or path is not None):  # the record is kept
             final = State.ABORTED
         else:
             final = State.FAULT
 
         error = _message(ctx, failure, safe, path, store_error)
+        if final == State.ABORTED and failure is None and store_error is None:
+            error = (f"shot aborted after FIRE ({self._abort.reason or 'interrupted'}): the recorded data is kept in "
+                     f"{path}" + ("; its analysis was not finished (`hopkinson analyse` it)" if analysis_to_redo else ""))
         if not analysis_stored:
             error = f"{analysis_error}; the raw shot is kept in {path} (free space, then `hopkinson analyse` it)"
         hint = (failure.hint if failure is not None else "") if safe.confirmed else HINT_SAFE_NOT_CONFIRMED

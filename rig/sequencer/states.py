@@ -41,7 +41,8 @@ TRANSITIONS: dict[State, frozenset[State]] = {
     _S.CAPTURE: frozenset({_S.SAFE}),
     _S.SAFE: frozenset({_S.STORE, _S.ABORTED, _S.FAULT}),
     _S.STORE: frozenset({_S.ANALYSE, _S.ABORTED, _S.FAULT}),
-    _S.ANALYSE: frozenset({_S.DONE, _S.FAULT}),  # FAULT: the analysis could not be stored
+    # FAULT: the analysis could not be stored; ABORTED: a signal or an abort came during the shot
+    _S.ANALYSE: frozenset({_S.DONE, _S.ABORTED, _S.FAULT}),
     _S.DONE: frozenset({_S.CHECK}),
     _S.ABORTED: frozenset({_S.CHECK}),
     _S.FAULT: frozenset({_S.CHECK}),

@@ -223,7 +223,9 @@ def test_abort_right_after_the_fire_command_keeps_the_record(rig) -> None:
     outcome = rig.run()
     assert outcome.fired and outcome.shot_path is not None
     assert read_shot(outcome.shot_path).raw.channels["doppler"].codes.size == rig.config.digitizer.record_length
-    assert outcome.final_state == "DONE" and outcome.analysis_error.startswith("analysis abandoned: too late")
+    assert outcome.final_state == "ABORTED" and outcome.exit_code == 3  # one meaning per exit code (issue 18)
+    assert outcome.analysis_error.startswith("analysis abandoned: too late") and outcome.analysis_to_redo
+    assert outcome.error.startswith("shot aborted after FIRE (too late): the recorded data is kept in ")
     rig.assert_safe()
 
 

@@ -67,7 +67,8 @@ def test_shot_gets_a_signal_goes_safe_and_exits_3(sim, tmp_path: Path, sig: sign
         print(f"\nSIGTERM in CHARGE -> SAFE confirmed by reading back in "
               f"{_seconds(error['utc'], safe[-1]['utc']):.3f} s (abort noticed -> confirmed)")
     else:  # fired and recorded before the signal: the record is kept and SAFE ran again
-        assert last.endswith("the shot was recorded before it; SAFE ran again and was confirmed")
+        assert last.endswith("SAFE ran again and was confirmed") and "shot aborted after FIRE" in last
+        assert "the recorded data is kept in " in last and "`hopkinson analyse` it" in last  # exit 3 said why
         assert session.world.shots_fired == 1 and len(list((tmp_path / "shots").glob("*.h5"))) == 1
         # the shot's SAFE, then one more: both on the screen and both in the shot's log
         assert len(safe) == 2 and (head + rest).count(" rig safe: ") == 2
