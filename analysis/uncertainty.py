@@ -134,7 +134,7 @@ class Estimate:
 
     @classmethod
     def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE,
-                 reflect: np.ndarray | None = None) -> Estimate:
+                 reflect: np.ndarray | None = None, positive: bool = False) -> Estimate:
         """u: the draws' standard deviation. Interval: the probabilistically symmetric one of
         the draws (GUM-S1 §7.7), reflected about `value`: each draw perturbs data that already
         carry noise, so the draws sit around the estimate as the estimate sits around the
@@ -146,7 +146,17 @@ class Estimate:
         in that sense. A draw that landed on another delay branch (Refitter.fit_branch) is not
         one: it is the other estimate the same estimator gives on data like these, a fixed
         offset from the truth rather than the estimate's scatter about it, and it is taken as it
-        is (the percentile interval); reflecting it would put that offset on the wrong side."""
+        is (the percentile interval); reflecting it would put that offset on the wrong side.
+
+        `positive`: a figure bounded below by zero (a frequency, a damping ratio): reflected
+        about the value on a log scale (value²/draw), so the interval stays inside the bound
+        (issue 17: a reflected f_n interval read [−8.9, 19.9] kHz)."""
+        if positive and value > 0:
+            d = np.asarray(draws, dtype=float)
+            d = np.where(d > 0, d, np.nan)
+            est = cls.of_draws(math.log(value), np.log(d), coverage, reflect)
+            return cls(float(value), float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan,
+                       (math.exp(est.interval[0]), math.exp(est.interval[1])))
         d = np.asarray(draws, dtype=float)
         flags = np.ones(d.size, dtype=bool) if reflect is None else np.asarray(reflect, dtype=bool)
         finite = np.isfinite(d)
@@ -270,9 +280,12 @@ def evaluate(
     fbsd_draws = _fbsd_draws(fits, good, nominal_edges, dt)
 
     dc = Estimate.of_draws(model.dc_gain, dc_draws, reflect=nominal_branch)
-    fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=nominal_branch) if main else None
-    zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws, reflect=nominal_branch) if main else None
-    fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k], reflect=nominal_branch) for k in fbsd_values}
+    fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=nominal_branch, positive=True) if main \
+        else None
+    zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws, reflect=nominal_branch, positive=True) if main \
+        else None
+    fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k], reflect=nominal_branch, positive=True)
+            for k in fbsd_values}
     delay = Estimate.of_draws(ident.delay_samples * dt, delay_draws, reflect=nominal_branch)
 
     # -- the peak figures: fresh noise around the peaks ---------------------------------------
@@ -513,6 +526,8 @@ def _budget(
         order_share[figure] = math.sqrt(max(total - within, 0.0)) / abs(ref) if np.isfinite(total) else math.nan
     shares["order choice"] = order_share
     sources = ["response noise", "reference noise", "channel skew", "order choice"]
+    if ctx.var_model_error is not None and np.any(ctx.var_model_error > 0):
+        sources.insert(2, "model error")  # the residual the noise does not explain (identify.ModelError)
     if not nominal_branch[fixed].all():  # the delay branch: the variance the other branches add
         branch_share: dict[str, float] = {}
         for figure, values in draws.items():
@@ -554,17 +569,22 @@ def _linear_noise_shares(
     var_u, var_y = _in_layout(ctx.var_u, data, ctx.group), _in_layout(ctx.var_y, data, ctx.group)
     rows = 3 if data.grouped else 2
     d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
-    d_y = np.tile(var_y / s2, rows)
+    var_me = (np.zeros_like(var_y) if ctx.var_model_error is None
+              else _in_layout(ctx.var_model_error, data, ctx.group))
+    d_y = np.tile((var_y - var_me) / s2, rows)
+    d_me = np.tile(var_me / s2, rows)
     h_inv = np.linalg.pinv(jac.T @ jac)
     proj = h_inv @ jac.T
-    cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T}
+    cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T,
+           "model error": inflate * (proj * d_me) @ proj.T}
     # The skew: the residual's change per sample of reference delay, through the same projection.
     eps = 1e-3
     shifted = _shift_data(data, eps)
     dr = (OrderProblem(shifted, n, ctx.delay_mode, ctx.max_delay).residual(theta) - problem.residual(theta)) / eps
     skew_step = -(proj @ dr) * (options.channel_skew_s / ctx.sample_interval_s)
     gradients = _figure_gradients(problem, theta, ctx, ident, nominal)
-    out: dict[str, dict[str, float]] = {"reference noise": {}, "response noise": {}, "channel skew": {}}
+    out: dict[str, dict[str, float]] = {"reference noise": {}, "response noise": {}, "model error": {},
+                                        "channel skew": {}}
     for figure, g in gradients.items():
         ref = nominal.get(figure)
         if ref is None or not ref or g is None:
