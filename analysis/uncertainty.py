@@ -78,7 +78,7 @@ from hopkinson.analysis.order_choice import (
     order_stability,
 )
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
-from hopkinson.analysis.response import fbsd_edges
+from hopkinson.analysis.response import fbsd_edges, frequency_response
 
 METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
 COVERAGE = 0.95
@@ -198,6 +198,7 @@ class UncertaintyResult:
     warnings: list[str] = field(default_factory=list)
     failed_draws: int = 0
     model_draws: list[DiscreteModel] = field(default_factory=list, repr=False)
+    response_band: dict[str, Any] | None = None  # the model's response with its 95 % band (response_band)
 
     def to_dict(self) -> dict[str, Any]:
         main = None
@@ -219,6 +220,7 @@ class UncertaintyResult:
             "seed": self.seed,
             "failed_draws": self.failed_draws,
             "warnings": list(self.warnings),
+            "response_band": self.response_band,
         }
 
 
@@ -314,6 +316,7 @@ def evaluate(
         shock_sensitivity=peaks.get("shock_sensitivity"), natural_frequency_hz=fn, damping_ratio=zeta,
         fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=budget, order=order_info,
         warnings=warnings, failed_draws=failed, model_draws=model_draws,
+        response_band=response_band(model, model_draws, ident.supported_band_hz),
     )
 
 
@@ -335,6 +338,49 @@ def shot_uncertainty(
         ident.order_evidence.setdefault("stability", {"draws": result.order["draws"],
                                                       "fraction_by_order": dict(result.order["fraction_by_order"])})
     return result.to_dict(), result.model_draws
+
+
+# ------------------------------------------------------------------------------ response band
+BAND_POINTS = 160
+
+
+def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tuple[float, float] | None,
+                   points: int = BAND_POINTS) -> dict[str, Any] | None:
+    """The model's frequency response with its 95 % band, from the same Monte Carlo draws as the
+    figures (issue 17): on a log grid from 100 Hz (or the band's start) to twice the supported
+    band's top (at most Nyquist), the magnitude relative to the DC gain (each draw relative to
+    its own: what a sine calibration normalised at a low frequency compares with) and the whole
+    phase in degrees (the fitted delay included), each as value, low and high. The band is the
+    draws' probabilistically symmetric interval reflected about the value, as the figures'
+    (Estimate.of_draws; the magnitude on a log scale), so it covers the truth as they do.
+    None without draws."""
+    if len(draws) < 2 or model.dc_gain == 0:
+        return None
+    nyquist = 0.5 / model.sample_interval_s
+    top = min(0.98 * nyquist, 2.0 * band_hz[1]) if band_hz else 0.5 * nyquist
+    f = np.geomspace(max(100.0, band_hz[0]) if band_hz and band_hz[0] > 0 else 100.0, top, points)
+    w = 2.0 * np.pi * f * model.sample_interval_s
+
+    def whole(m: DiscreteModel) -> np.ndarray:
+        return frequency_response(m, f) * np.exp(-1j * w * m.delay_samples) / m.dc_gain
+
+    nominal = whole(model)
+    stack = np.array([whole(m) for m in draws if m.dc_gain != 0])
+    tail = 50.0 * (1.0 - COVERAGE)
+    log_mag = np.log(np.abs(stack))
+    lo_m, hi_m = np.percentile(log_mag, [tail, 100.0 - tail], axis=0)
+    centre = np.log(np.abs(nominal))
+    dphase = np.degrees(np.angle(stack / nominal))  # each draw's phase about the nominal, wrapped
+    lo_p, hi_p = np.percentile(dphase, [tail, 100.0 - tail], axis=0)
+    phase = np.degrees(np.unwrap(np.angle(nominal)))
+
+    def floats(x: np.ndarray) -> list[float]:
+        return [float(v) for v in x]
+
+    return {"frequency_hz": floats(f), "coverage_probability": COVERAGE,
+            "magnitude_rel": floats(np.exp(centre)), "magnitude_rel_low": floats(np.exp(2 * centre - hi_m)),
+            "magnitude_rel_high": floats(np.exp(2 * centre - lo_m)),
+            "phase_deg": floats(phase), "phase_low_deg": floats(phase - hi_p), "phase_high_deg": floats(phase - lo_p)}
 
 
 # ------------------------------------------------------------------------------ noise
