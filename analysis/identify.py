@@ -10,7 +10,9 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
 3. Baselines and noise: each channel's pre-pulse mean is removed; a linear drift is removed
    when quiet stretches before and after the pulse pin it. The noise spectrum of each channel
    is measured where it is quiet (analysis.noise): the reference before the pulse and in
-   flight after it, the response before the pulse and after its ringing has died away.
+   flight after it, the response before the pulse and after its ringing has died away. A
+   stretch after the pulse where both channels move together (the bar's motion: coherent,
+   analysis.noise.is_motion) is not noise and is left out (issue 17).
 4. Window and band: the fit uses the record from just before the pulse to where the response
    has died into its noise (a record cut short keeps a transient term, see
    analysis.frequency_fit), and only the frequencies the excitation supports: where the
@@ -27,6 +29,9 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    (analysis.uncertainty), whose draws re-run that choice. `delay_samples` is therefore the
    delay of the best branch, not a measured channel skew: what the record determines is the
    model's whole phase (delay and zeros together), which analysis.sine_comparison compares.
+5b. Model error (ModelError, issue 17): the chosen order's residual beyond what the noise
+   explains, per frequency, is measured; when it is significant every order is fitted again
+   with it weighed as an output error of its own, and the Monte Carlo draws it.
 6. Order: the smallest n that no higher order beats both beyond chance (an F test on V,
    Bonferroni-corrected over the fitted bins: an extra pole pair can sit on the largest chance
    peak of the noise anywhere in the band) and in the frequency response where the pulse has
@@ -36,7 +41,8 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    choice across resampled noise is measured by analysis.uncertainty, which also draws the
    order.
 7. Claims stay inside the band: modes outside it are flagged `supported: False` (a DCM may
-   only cancel supported poles; the main mode is the lowest supported complex pair); the
+   only cancel supported poles; the main mode is the lowest supported complex pair; a pair
+   nearly cancelled by a zero is a doublet, never a mode); the
    response leading the reference, zeros outside the unit circle, a model that leaves far
    more residual than the noise explains, and a poor fit are reported.
 
