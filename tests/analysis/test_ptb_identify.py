@@ -214,3 +214,32 @@ def test_identify_explain_prints_the_trail_on_the_real_record(tmp_path, capsys):
     assert "band:" in trail and "V by order:" in trail
     assert "model error: the residual is" in trail
     assert "claimed (inside the band)" not in trail  # nothing below 28 kHz is a mode
+
+
+def test_motion_is_told_from_noise_by_its_coherence():
+    from hopkinson.analysis.noise import is_motion
+
+    rng = np.random.default_rng(11)
+    rate, n = 1e6, 800
+    t = np.arange(n) / rate
+    # independent noise in each channel (an interferometer in flight, the sensor's amplifier)
+    assert not is_motion(rng.standard_normal(n), rng.standard_normal(n), rate)[0]
+    # the bar's motion at a few kHz seen by both (the sensor at x0.75), each with its own noise
+    motion = np.sin(2 * np.pi * 3e3 * t) + 0.5 * np.sin(2 * np.pi * 11e3 * t + 1.0)
+    moving, coherence = is_motion(motion + 0.3 * rng.standard_normal(n),
+                                  0.75 * motion + 0.3 * rng.standard_normal(n), rate)
+    assert moving and coherence > 0.5
+    # too short to judge: never called motion
+    assert not is_motion(motion[:100], motion[:100], rate)[0]
+
+
+def test_a_pole_nearly_cancelled_by_a_zero_is_no_mode():
+    from hopkinson.analysis.identify import main_mode, mark_doublets, modes_of
+
+    dt = 1e-6
+    pole = np.exp((-0.05 + 1j) * 2 * np.pi * 17e3 * dt)  # ζ 0.05 at 17 kHz: 1 − |p| ≈ 5.3e-3
+    modes = modes_of(np.array([pole, pole.conjugate()]), dt, (0.0, 28e3))
+    near = mark_doublets(modes, np.array([pole * 1.001, np.conj(pole) * 1.001]))  # 1e-3 away
+    far = mark_doublets(modes, np.array([0.5, -0.3]))
+    assert near[0]["cancelled"] and not near[0]["supported"] and main_mode(near) is None
+    assert not far[0]["cancelled"] and main_mode(far)["natural_frequency_hz"] > 16e3
