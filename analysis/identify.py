@@ -42,7 +42,8 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    order.
 7. Claims stay inside the band: modes outside it are flagged `supported: False` (a DCM may
    only cancel supported poles; the main mode is the lowest supported complex pair; a pair
-   nearly cancelled by a zero is a doublet, never a mode); the
+   nearly cancelled by a zero is a doublet, never a mode; an order with a real pole far below
+   the lowest fitted bin, which the data cannot place, is no candidate); the
    response leading the reference, zeros outside the unit circle, a model that leaves far
    more residual than the noise explains, and a poor fit are reported.
 
@@ -450,7 +451,11 @@ def identify(
                     best = fitted
             assert best is not None
             fits[n], parameters[n] = best, problem.size
-            costs[n] = best.cost if _acceptable(best, data.bins) else math.inf  # an unstable or marginal order is no candidate
+            # an unstable or marginal order is no candidate, nor one with a real pole far below the
+            # lowest fitted bin (the data cannot place it; issue 17's lobe-gain hybrid used one
+            # at ~2 Hz to bend the lowest bins, and its DC gain came out negative)
+            candidate = _acceptable(best, data.bins) and not _pole_below_band(best, prep.bin_hz[0], dt)
+            costs[n] = best.cost if candidate else math.inf
             previous, tau = best, best.delay
             if patience is not None:
                 chosen_so_far, _ = choose_order(costs, parameters, data.bins, response_change(fits, data), significance)
@@ -1020,6 +1025,15 @@ def _acceptable(fit: OrderFit, bins: int) -> bool:
     dof = 2 * bins - fit.parameters
     unexplained = dof > 0 and 2.0 * fit.cost / dof > UNSTABLE_MODEL_ERROR
     return not (radius > 1.0 - 1e-3 or unexplained)
+
+
+def _pole_below_band(fit: OrderFit, lowest_bin_hz: float, dt: float) -> bool:
+    """Whether the fit has a real pole whose frequency lies below a tenth of the lowest
+    fitted bin's (undetermined by the fitted data)."""
+    roots = np.roots(fit.a) if fit.a.size > 1 else np.array([])
+    real = roots[(np.abs(roots.imag) < 1e-12) & (roots.real > 0)].real
+    f_hz = -np.log(np.clip(real, 1e-300, None)) / (2.0 * np.pi * dt)
+    return bool(np.any(f_hz < 0.1 * lowest_bin_hz))
 
 
 def _claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], model: DiscreteModel) -> list[str]:
