@@ -192,3 +192,36 @@ def _band_of_points(f: np.ndarray, magnitude: np.ndarray) -> dict[str, float | N
     except AnalysisError:  # the first point already outside the band (normalised elsewhere)
         return None
     return {k: (e.frequency_hz if e.reached else None) for k, e in edges.items()}
+
+
+def band_consistency(comparison: SineComparison, band: dict[str, Any]) -> dict[str, Any]:
+    """The sine points against the model's 95 % response band (analysis.uncertainty.response_band,
+    magnitudes relative to the DC gain, renormalised here at the comparison's reference
+    frequency): per point the band's limits and E_n = |model − sine| / √(U_model² + U_sine²),
+    U_model the band's half on the sine's side, U_sine = 2·u (k = 2); E_n ≤ 1: consistent. Points
+    outside the band's frequencies get None. Issue 17: the model's uncertainty, not only its
+    value, is what a sine calibration can confirm."""
+    f_band = np.asarray(band["frequency_hz"], dtype=float)
+    f = comparison.frequency_hz
+    inside = (f >= f_band[0]) & (f <= f_band[-1])
+
+    def at(key: str, x: np.ndarray) -> np.ndarray:
+        return np.interp(np.log(x), np.log(f_band), np.asarray(band[key], dtype=float))
+
+    f_ref = np.clip(comparison.reference_frequency_hz, f_band[0], f_band[-1])
+    norm = float(at("magnitude_rel", np.array([f_ref]))[0])
+    value, low, high = (at(k, np.clip(f, f_band[0], f_band[-1])) / norm
+                        for k in ("magnitude_rel", "magnitude_rel_low", "magnitude_rel_high"))
+    sine = comparison.sine_magnitude
+    u_model = np.where(sine >= value, high - value, value - low)
+    u_sine = (np.zeros_like(sine) if comparison.u_magnitude_rel is None
+              else 2.0 * comparison.u_magnitude_rel * sine)
+    e_n = np.abs(value - sine) / np.maximum(np.hypot(u_model, u_sine), 1e-300)
+
+    def listed(x: np.ndarray) -> list[float | None]:
+        return [float(v) if ok else None for v, ok in zip(x, inside, strict=True)]
+
+    worst = float(np.max(e_n[inside])) if np.any(inside) else None
+    return {"band_low": listed(low), "band_high": listed(high), "e_n": listed(e_n), "max_e_n": worst,
+            "consistent": None if worst is None else bool(worst <= 1.0),
+            "coverage_probability": band.get("coverage_probability")}

@@ -78,7 +78,7 @@ from hopkinson.analysis.order_choice import (
     order_stability,
 )
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
-from hopkinson.analysis.response import fbsd_edges
+from hopkinson.analysis.response import fbsd_edges, frequency_response
 
 METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
 COVERAGE = 0.95
@@ -134,7 +134,7 @@ class Estimate:
 
     @classmethod
     def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE,
-                 reflect: np.ndarray | None = None) -> Estimate:
+                 reflect: np.ndarray | None = None, positive: bool = False) -> Estimate:
         """u: the draws' standard deviation. Interval: the probabilistically symmetric one of
         the draws (GUM-S1 §7.7), reflected about `value`: each draw perturbs data that already
         carry noise, so the draws sit around the estimate as the estimate sits around the
@@ -146,7 +146,17 @@ class Estimate:
         in that sense. A draw that landed on another delay branch (Refitter.fit_branch) is not
         one: it is the other estimate the same estimator gives on data like these, a fixed
         offset from the truth rather than the estimate's scatter about it, and it is taken as it
-        is (the percentile interval); reflecting it would put that offset on the wrong side."""
+        is (the percentile interval); reflecting it would put that offset on the wrong side.
+
+        `positive`: a figure bounded below by zero (a frequency, a damping ratio): reflected
+        about the value on a log scale (value²/draw), so the interval stays inside the bound
+        (issue 17: a reflected f_n interval read [−8.9, 19.9] kHz)."""
+        if positive and value > 0:
+            d = np.asarray(draws, dtype=float)
+            d = np.where(d > 0, d, np.nan)
+            est = cls.of_draws(math.log(value), np.log(d), coverage, reflect)
+            return cls(float(value), float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan,
+                       (math.exp(est.interval[0]), math.exp(est.interval[1])))
         d = np.asarray(draws, dtype=float)
         flags = np.ones(d.size, dtype=bool) if reflect is None else np.asarray(reflect, dtype=bool)
         finite = np.isfinite(d)
@@ -188,6 +198,7 @@ class UncertaintyResult:
     warnings: list[str] = field(default_factory=list)
     failed_draws: int = 0
     model_draws: list[DiscreteModel] = field(default_factory=list, repr=False)
+    response_band: dict[str, Any] | None = None  # the model's response with its 95 % band (response_band)
 
     def to_dict(self) -> dict[str, Any]:
         main = None
@@ -209,6 +220,7 @@ class UncertaintyResult:
             "seed": self.seed,
             "failed_draws": self.failed_draws,
             "warnings": list(self.warnings),
+            "response_band": self.response_band,
         }
 
 
@@ -272,9 +284,12 @@ def evaluate(
     fbsd_draws = _fbsd_draws(fits, good, nominal_edges, dt)
 
     dc = Estimate.of_draws(model.dc_gain, dc_draws, reflect=nominal_branch)
-    fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=nominal_branch) if main else None
-    zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws, reflect=nominal_branch) if main else None
-    fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k], reflect=nominal_branch) for k in fbsd_values}
+    fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=nominal_branch, positive=True) if main \
+        else None
+    zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws, reflect=nominal_branch, positive=True) if main \
+        else None
+    fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k], reflect=nominal_branch, positive=True)
+            for k in fbsd_values}
     delay = Estimate.of_draws(ident.delay_samples * dt, delay_draws, reflect=nominal_branch)
 
     # -- the peak figures: fresh noise around the peaks ---------------------------------------
@@ -303,6 +318,7 @@ def evaluate(
         shock_sensitivity=peaks.get("shock_sensitivity"), natural_frequency_hz=fn, damping_ratio=zeta,
         fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=budget, order=order_info,
         warnings=warnings, failed_draws=failed, model_draws=model_draws,
+        response_band=response_band(model, model_draws, ident.supported_band_hz),
     )
 
 
@@ -324,6 +340,49 @@ def shot_uncertainty(
         ident.order_evidence.setdefault("stability", {"draws": result.order["draws"],
                                                       "fraction_by_order": dict(result.order["fraction_by_order"])})
     return result.to_dict(), result.model_draws
+
+
+# ------------------------------------------------------------------------------ response band
+BAND_POINTS = 160
+
+
+def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tuple[float, float] | None,
+                   points: int = BAND_POINTS) -> dict[str, Any] | None:
+    """The model's frequency response with its 95 % band, from the same Monte Carlo draws as the
+    figures (issue 17): on a log grid from 100 Hz (or the band's start) to twice the supported
+    band's top (at most Nyquist), the magnitude relative to the DC gain (each draw relative to
+    its own: what a sine calibration normalised at a low frequency compares with) and the whole
+    phase in degrees (the fitted delay included), each as value, low and high. The band is the
+    draws' probabilistically symmetric interval reflected about the value, as the figures'
+    (Estimate.of_draws; the magnitude on a log scale), so it covers the truth as they do.
+    None without draws."""
+    if len(draws) < 2 or model.dc_gain == 0:
+        return None
+    nyquist = 0.5 / model.sample_interval_s
+    top = min(0.98 * nyquist, 2.0 * band_hz[1]) if band_hz else 0.5 * nyquist
+    f = np.geomspace(max(100.0, band_hz[0]) if band_hz and band_hz[0] > 0 else 100.0, top, points)
+    w = 2.0 * np.pi * f * model.sample_interval_s
+
+    def whole(m: DiscreteModel) -> np.ndarray:
+        return frequency_response(m, f) * np.exp(-1j * w * m.delay_samples) / m.dc_gain
+
+    nominal = whole(model)
+    stack = np.array([whole(m) for m in draws if m.dc_gain != 0])
+    tail = 50.0 * (1.0 - COVERAGE)
+    log_mag = np.log(np.abs(stack))
+    lo_m, hi_m = np.percentile(log_mag, [tail, 100.0 - tail], axis=0)
+    centre = np.log(np.abs(nominal))
+    dphase = np.degrees(np.angle(stack / nominal))  # each draw's phase about the nominal, wrapped
+    lo_p, hi_p = np.percentile(dphase, [tail, 100.0 - tail], axis=0)
+    phase = np.degrees(np.unwrap(np.angle(nominal)))
+
+    def floats(x: np.ndarray) -> list[float]:
+        return [float(v) for v in x]
+
+    return {"frequency_hz": floats(f), "coverage_probability": COVERAGE,
+            "magnitude_rel": floats(np.exp(centre)), "magnitude_rel_low": floats(np.exp(2 * centre - hi_m)),
+            "magnitude_rel_high": floats(np.exp(2 * centre - lo_m)),
+            "phase_deg": floats(phase), "phase_low_deg": floats(phase - hi_p), "phase_high_deg": floats(phase - lo_p)}
 
 
 # ------------------------------------------------------------------------------ noise
@@ -515,6 +574,8 @@ def _budget(
         order_share[figure] = math.sqrt(max(total - within, 0.0)) / abs(ref) if np.isfinite(total) else math.nan
     shares["order choice"] = order_share
     sources = ["response noise", "reference noise", "channel skew", "order choice"]
+    if ctx.var_model_error is not None and np.any(ctx.var_model_error > 0):
+        sources.insert(2, "model error")  # the residual the noise does not explain (identify.ModelError)
     if ctx.spectral.sine is not None:
         sources.insert(2, "sine calibration")
     if not nominal_branch[fixed].all():  # the delay branch: the variance the other branches add
@@ -558,12 +619,16 @@ def _linear_noise_shares(
     var_u, var_y = _in_layout(ctx.var_u, data, ctx.group), _in_layout(ctx.var_y, data, ctx.group)
     rows = 3 if data.grouped else 2
     d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
-    d_y = np.tile(var_y / s2, rows)
+    var_me = (np.zeros_like(var_y) if ctx.var_model_error is None
+              else _in_layout(ctx.var_model_error, data, ctx.group))
+    d_y = np.tile((var_y - var_me) / s2, rows)
+    d_me = np.tile(var_me / s2, rows)
     sine_rows = jac.shape[0] - d_u.size  # a sine calibration's residuals (analysis.sine_joint), last
-    d_u, d_y = np.pad(d_u, (0, sine_rows)), np.pad(d_y, (0, sine_rows))
+    d_u, d_y, d_me = np.pad(d_u, (0, sine_rows)), np.pad(d_y, (0, sine_rows)), np.pad(d_me, (0, sine_rows))
     h_inv = np.linalg.pinv(jac.T @ jac)
     proj = h_inv @ jac.T
-    cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T}
+    cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T,
+           "model error": inflate * (proj * d_me) @ proj.T}
     if sine_rows:  # each sine residual's variance under the draws: its weight² (SineTerms)
         d_s = np.concatenate((np.zeros(d_u.size - sine_rows), np.full(sine_rows, data.sine.weight ** 2)))
         cov["sine calibration"] = (proj * d_s) @ proj.T

@@ -26,7 +26,11 @@ def run_compare_sine(args: argparse.Namespace) -> int:
     from hopkinson.analysis.dcm import DCM, load_dcm
     from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
     from hopkinson.analysis.model import DiscreteModel, load_json_object
-    from hopkinson.analysis.sine_comparison import compare_sine, read_sine_calibration
+    from hopkinson.analysis.sine_comparison import (
+        band_consistency,
+        compare_sine,
+        read_sine_calibration,
+    )
 
     plot = None
     if args.plot:
@@ -48,6 +52,9 @@ def run_compare_sine(args: argparse.Namespace) -> int:
     comparison = compare_sine(model, sine, dcm, args.reference_hz)
     result: dict[str, Any] = {"model": str(args.model), "sine": str(args.sine), "dcm": dcm_source,
                               **comparison.to_dict()}
+    band = (data.get("uncertainty") or {}).get("response_band")
+    consistency = band_consistency(comparison, band) if isinstance(band, dict) else None
+    result["response_band"] = consistency
     if plot is not None:
         from hopkinson.reports.sine_plot import write_sine_plot
 
@@ -73,6 +80,12 @@ def run_compare_sine(args: argparse.Namespace) -> int:
               f"of {comparison.phase_delay_s * 1e6:.3g} µs, the shock record's channel skew; model ÷ sine "
               f"sensitivity at the reference "
               f"frequency {comparison.sensitivity_ratio:.6g} (same units assumed)\n")
+    if consistency is not None and consistency["max_e_n"] is not None:
+        verdict = "consistent" if consistency["consistent"] else "NOT consistent"
+        out.write(f"the sine points against the model's 95 % response band: largest E_n "
+                  f"{consistency['max_e_n']:.2f} ({verdict}: E_n ≤ 1 at every point)\n")
+    elif consistency is None:
+        out.write("the model file carries no response band (identify with its uncertainty): no E_n\n")
     if comparison.compensated_fbsd_hz:
         parts = [f"±{k} %: " + ("beyond the last point" if v is None else f"{v / 1e3:.4g} kHz")
                  for k, v in comparison.compensated_fbsd_hz.items()]

@@ -89,7 +89,8 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
                      f"ζ = {figures.damping_ratio.format() if figures.damping_ratio else zeta}  (main mode)")
         else:
             where = f"f_n = {f_n / 1e3:.4g} kHz, ζ = {zeta:.4g}"
-        note = "" if mode["supported"] else ", outside the supported band: not claimed"
+        note = ("" if mode["supported"] else ", nearly cancelled by a zero (a doublet): not claimed"
+                if mode.get("cancelled") else ", outside the supported band: not claimed")
         lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode['kind']}{note}): {where}")
     lines.append(f"  FBSD: ±5 % up to {figures.fbsd_text('5')}, ±10 % up to {figures.fbsd_text('10')}")
     lines.append(f"  DC gain {figures.sensitivity.format()} (response units per m/s²)")
@@ -187,9 +188,68 @@ def run_identify(args: argparse.Namespace) -> int:
         emit_json(report)
     else:
         sys.stdout.write(_summary(report, result) + "\n")
+        if args.explain:
+            sys.stdout.write(explain(report) + "\n")
         if out is not None:
             sys.stdout.write(f"model written to {out}\n")
     return 0
+
+
+def explain(report: dict[str, Any]) -> str:
+    """The trail of what decided the identification (issue 17, `--explain`): where the noise was
+    measured and its levels, motion left out of it, the band, V by order and the order test's
+    comparisons, the model error, and what was claimed or not and why. Read from the report
+    (the JSON), so it says what the stages recorded, not a second account of them."""
+    noise = report.get("noise") or {}
+    pre = report.get("preprocessing") or {}
+    lines = ["how this identification was decided:"]
+    def rms(v: Any) -> str:
+        return "not measured" if v is None else f"{v:.4g}"
+
+    lines.append(f"  noise (RMS, channel units): reference {rms(noise.get('reference_rms'))} "
+                 f"({noise.get('reference_source')}), response {rms(noise.get('response_rms'))} "
+                 f"({noise.get('response_source')})")
+    for m in noise.get("motion_after_pulse") or []:
+        lines.append(f"  motion, not noise: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms moves coherently in "
+                     f"both channels (power-weighted coherence {m['coherence']:.2f}): left out of the noise")
+    band = report.get("supported_band_hz")
+    if band:
+        lines.append(f"  band: {band[0] / 1e3:.4g}–{band[1] / 1e3:.4g} kHz, where the reference's spectrum stands "
+                     "20 dB above its noise and within 40 dB of its maximum; "
+                     f"{pre.get('fitted_bins')} bins fitted over {pre.get('window_samples')} samples"
+                     + (" (a transient term fitted: the record ends before the response settles)"
+                        if pre.get("transient_term") else ""))
+    evidence = report.get("order_evidence") or {}
+    costs = evidence.get("cost_by_order") or {}
+    if costs:
+        lines.append("  V by order: " + ", ".join(f"{n}: {v:.4g}" for n, v in costs.items() if v is not None))
+    for c in evidence.get("comparisons") or []:
+        if c.get("beaten"):
+            lines.append(f"  order {c['order']} beaten by {c['against']}: F {c['f']:.3g} > {c['f_critical']:.3g}, "
+                         f"response change {c['response_change']:.2%}")
+    lines.append(f"  order {report.get('order')} ({report.get('order_selection')}): "
+                 f"{evidence.get('criterion', '')}")
+    error = noise.get("model_error") or {}
+    if error.get("detected"):
+        lo, hi = error.get("range_hz") or (None, None)
+        lines.append(f"  model error: the residual is {error['residual_over_noise']:.3g}× the noise's, "
+                     f"{error['rms_percent_of_peak']:.2g} % of the peak RMS, mostly "
+                     f"{(lo or 0) / 1e3:.3g}–{(hi or 0) / 1e3:.3g} kHz: weighed in a second fit and drawn in "
+                     "the uncertainty")
+    else:
+        lines.append(f"  model error: none beyond the noise (residual {error.get('residual_over_noise', 1.0):.3g}× "
+                     "the noise's)")
+    for m in report.get("modes") or []:
+        if m.get("kind") != "complex":
+            continue
+        f_n = m["natural_frequency_hz"] / 1e3
+        why = ("claimed (inside the band)" if m.get("supported")
+               else "not claimed: a pole–zero doublet" if m.get("cancelled")
+               else "not claimed: outside the supported band")
+        lines.append(f"  pole pair at {f_n:.4g} kHz, ζ {m['damping_ratio']:.3g}: {why}")
+    if report.get("resonance_above_hz"):
+        lines.append(f"  resonance: > {report['resonance_above_hz'] / 1e3:.4g} kHz, in a null of the excitation")
+    return "\n".join(lines)
 
 
 def register(subparsers: Any) -> None:
@@ -222,5 +282,8 @@ def register(subparsers: Any) -> None:
                    "frequency_hz,magnitude,phase_deg, optional u_magnitude_rel,u_phase_deg), and report their "
                    "consistency")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--explain", action="store_true",
+                   help="also print how each stage decided: noise and where measured, band, V by order, model "
+                   "error, what was claimed or not and why")
     p.add_argument("-o", "--output", metavar="MODEL.json", help="write the model JSON (read by `hopkinson dcm --model`)")
     p.set_defaults(func=run_identify)

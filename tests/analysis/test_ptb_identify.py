@@ -1,0 +1,251 @@
+"""Issue 17: the default identification on PTB's real shock record, and on hybrids (the real
+reference drives a known sensor, with a real-shaped disturbance injected): motion after the
+pulse is not taken as noise, the model error is detected and carried into the intervals, and
+the intervals contain the independent truth (the sine calibration's edges, the hybrid's model)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.shot_analysis import analyse_record
+from scipy import signal
+
+from tests.ptb_shock import SINE_FBSD_5_HZ, SINE_FBSD_10_HZ, ptb_record, ptb_sine
+
+DRAWS = 60
+
+
+@pytest.fixture(scope="module")
+def ptb():
+    return analyse_record(ptb_record(), AnalysisParams(draws=DRAWS, seed=1))
+
+
+def test_motion_after_the_pulse_is_not_taken_as_noise(ptb):
+    noise = ptb.identification.noise
+    assert noise["motion_after_pulse"], "the coherent motion after the pulse was not detected"
+    peak = float(np.max(np.abs(ptb_record().reference)))
+    # the lead-in's noise (~0.07 % of the peak), not the motion's (~0.8 %: 11.8× before issue 17)
+    assert noise["reference_rms"] < 0.002 * peak
+
+
+def test_the_model_error_is_detected_and_sized(ptb):
+    error = ptb.identification.noise["model_error"]
+    assert error["detected"]
+    assert 0.25 < error["rms_percent_of_peak"] < 3.0  # issue 17 measured 1–2 % of the peak
+    assert any("model error" in w for w in ptb.warnings)
+    assert any(row["source"] == "model error" for row in ptb.uncertainty["budget"])
+
+
+def test_the_intervals_contain_the_sine_calibration(ptb):
+    fbsd = ptb.uncertainty["fbsd_hz"]
+    for level, sine_hz in (("5", SINE_FBSD_5_HZ), ("10", SINE_FBSD_10_HZ)):
+        lo, hi = fbsd[level]["interval"]
+        assert lo <= sine_hz <= hi, (level, lo, hi)
+    lo, hi = ptb.uncertainty["dc_gain"]["interval"]
+    assert lo <= ptb_sine().magnitude[0] <= hi  # the 0.5 kHz point: the sensitivity
+
+
+@pytest.mark.xfail(strict=True, reason="issue 17 item 3 not met yet: the order-2 model is 6 % off the sine and its "
+                                       "intervals are honest but wide (FBSD ±5 % ~±30 %, sensitivity ~±3 %)")
+def test_the_intervals_are_as_narrow_as_the_issue_asks(ptb):
+    fbsd = ptb.uncertainty["fbsd_hz"]
+    for level in ("5", "10"):
+        lo, hi = fbsd[level]["interval"]
+        assert (hi - lo) / 2 <= 0.25 * fbsd[level]["value"]
+    lo, hi = ptb.uncertainty["dc_gain"]["interval"]
+    assert (hi - lo) / 2 <= 0.02 * ptb.uncertainty["dc_gain"]["value"]
+
+
+def test_no_mode_is_claimed_inside_the_band(ptb):
+    # the sine calibration shows none below 20 kHz (the resonance is near 51–57 kHz); issue 17's
+    # 17 kHz "main mode" was a pole–zero doublet
+    main = ptb.identification.main_mode
+    assert main is None or main["natural_frequency_hz"] > 40e3
+    for m in ptb.identification.modes:
+        if m["kind"] == "complex" and m["natural_frequency_hz"] < 20e3:
+            assert not m["supported"]
+
+
+def test_intervals_stay_inside_physical_bounds(ptb):
+    main = ptb.uncertainty["main_mode"]
+    if main is not None:
+        assert main["natural_frequency_hz"]["interval"][0] > 0
+        assert main["damping_ratio"]["interval"][0] >= 0
+    for e in ptb.uncertainty["fbsd_hz"].values():
+        assert e["interval"][0] > 0
+
+
+# ---------------------------------------------------------------------------- hybrids
+F_N_HZ, ZETA, SENSITIVITY = 55e3, 0.03, 0.23  # a sensor like PTB's (sine: mode near 51–57 kHz)
+
+
+def hybrid_record(tension: float = 1.0, compression: float = 1.0, seed: int = 5) -> tuple[Record, signal.lti]:
+    """PTB's real reference (its pulse, its motion after the pulse, its noise) driving a known
+    continuous sensor, each lobe of the pulse with its own gain (issue 17 measured ×0.993 in
+    tension and ×1.0145 in compression), plus white noise at 0.01 % of the response's peak."""
+    rec = ptb_record()
+    wn = 2 * np.pi * F_N_HZ
+    truth = signal.lti([SENSITIVITY * wn**2], [1.0, 2 * ZETA * wn, wn**2])
+    ref = rec.reference
+    drive = np.where(ref >= 0, tension, compression) * ref
+    _, y, _ = signal.lsim(truth, drive, rec.time_s - rec.time_s[0])
+    rng = np.random.default_rng(seed)
+    y = y + rng.normal(0.0, 1e-4 * np.max(np.abs(y)), y.size)
+    return Record(rec.sample_interval_s, ref, y, response_unit="pC"), truth
+
+
+def truth_fbsd_hz(truth: signal.lti) -> dict[str, float]:
+    f = np.linspace(100.0, 40e3, 4000)
+    _, h = signal.freqresp(truth, 2 * np.pi * f)
+    rel = np.abs(h) / SENSITIVITY
+    return {"5": float(np.interp(1.05, rel, f)), "10": float(np.interp(1.10, rel, f))}
+
+
+@pytest.fixture(scope="module")
+def clean_hybrid():
+    rec, truth = hybrid_record()
+    return analyse_record(rec, AnalysisParams(draws=DRAWS, seed=2)), truth
+
+
+def test_a_hybrid_with_the_real_reference_is_recovered(clean_hybrid):
+    analysis, truth = clean_hybrid
+    ident = analysis.identification
+    assert ident.noise["motion_after_pulse"]  # the real reference's motion, seen by both channels
+    assert not ident.noise["model_error"]["detected"]  # a linear sensor: nothing beyond the noise
+    for level, edge in truth_fbsd_hz(truth).items():
+        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
+        assert lo <= edge <= hi, (level, edge, lo, hi)
+    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
+    assert lo <= SENSITIVITY <= hi
+    # the 55 kHz mode lies in a null of the pulse's spectrum: reported as a bound, not claimed
+    assert ident.main_mode is None
+    assert ident.resonance_above_hz is not None and ident.resonance_above_hz < F_N_HZ
+    assert any("in a null of the excitation" in w for w in ident.warnings)
+
+
+@pytest.fixture(scope="module")
+def lobe_hybrid():
+    rec, truth = hybrid_record(tension=0.993, compression=1.0145, seed=1)
+    return analyse_record(rec, AnalysisParams(draws=DRAWS, seed=2)), truth
+
+
+def test_a_lobe_dependent_gain_is_detected_as_model_error(lobe_hybrid):
+    # issue 17: before, such a gain gave "no order gives a stable model"
+    analysis, _ = lobe_hybrid
+    assert analysis.identification.noise["model_error"]["detected"]
+    assert any(row["source"] == "model error" for row in analysis.uncertainty["budget"])
+    assert analysis.identification.main_mode is None  # nothing below 28 kHz to claim
+
+
+@pytest.mark.xfail(strict=True, reason="issue 17 not met yet: with a lobe-dependent gain the FBSD ±5 % edge comes out "
+                                       "~10 % high and its interval misses the truth; benchmarks/coverage_ptb_hybrids.py "
+                                       "measures the coverage over seeds")
+def test_a_lobe_dependent_gain_is_carried_into_the_intervals(lobe_hybrid):
+    analysis, truth = lobe_hybrid
+    for level, edge in truth_fbsd_hz(truth).items():
+        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
+        assert lo <= edge <= hi, (level, edge, lo, hi)
+    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
+    assert lo <= SENSITIVITY <= hi
+
+
+@pytest.fixture(scope="module")
+def motion_hybrid():
+    """The clean hybrid with the bar's motion after the pulse (from 0.7 ms) reaching the sensor
+    at ×0.75 of what the reference sees (issue 17 measured ×0.75 on the real record)."""
+    rec, truth = hybrid_record()
+    after = rec.time_s - rec.time_s[0] >= 7.0e-4
+    _, extra, _ = signal.lsim(truth, np.where(after, -0.25 * rec.reference, 0.0), rec.time_s - rec.time_s[0])
+    moved = Record(rec.sample_interval_s, rec.reference, rec.response + extra, response_unit="pC")
+    return analyse_record(moved, AnalysisParams(draws=DRAWS, seed=3)), truth
+
+
+def test_motion_that_differs_between_the_channels_is_model_error_not_noise(motion_hybrid):
+    analysis, truth = motion_hybrid
+    ident = analysis.identification
+    assert ident.noise["model_error"]["detected"]
+    assert ident.main_mode is None
+    for level, edge in truth_fbsd_hz(truth).items():
+        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
+        assert lo <= edge <= hi, (level, edge, lo, hi)
+    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
+    assert lo <= SENSITIVITY <= hi
+
+
+@pytest.mark.parametrize("case", ["clean_hybrid", "motion_hybrid"])
+def test_the_response_band_holds_the_known_sensor_throughout_the_band(case, request):
+    analysis, truth = request.getfixturevalue(case)
+    band = analysis.uncertainty["response_band"]
+    f = np.array(band["frequency_hz"])
+    _, h = signal.freqresp(truth, 2 * np.pi * f)
+    relative = np.abs(h) / SENSITIVITY
+    inside = f <= analysis.identification.supported_band_hz[1]
+    low, high = np.array(band["magnitude_rel_low"]), np.array(band["magnitude_rel_high"])
+    assert np.all((low[inside] <= relative[inside]) & (relative[inside] <= high[inside]))
+    assert np.all(low <= np.array(band["magnitude_rel"])) and np.all(np.array(band["magnitude_rel"]) <= high)
+
+
+def test_the_sine_points_are_judged_against_the_response_band(ptb):
+    from hopkinson.analysis.sine_comparison import band_consistency, compare_sine
+
+    sine = ptb_sine()
+    judged = band_consistency(compare_sine(ptb.model, sine), ptb.uncertainty["response_band"])
+    assert len(judged["e_n"]) == sine.frequency_hz.size
+    assert judged["max_e_n"] == max(e for e in judged["e_n"] if e is not None)
+    # the 0.5 kHz reference point: both normalised there, E_n 0
+    assert judged["e_n"][0] < 1e-6
+
+
+@pytest.mark.xfail(strict=True, reason="issue 17 item 3 not met yet: the order-2 model dips below the sine from "
+                                       "1 to 14 kHz beyond its band (largest E_n ~5)")
+def test_the_sine_points_lie_inside_the_response_band(ptb):
+    from hopkinson.analysis.sine_comparison import band_consistency, compare_sine
+
+    judged = band_consistency(compare_sine(ptb.model, ptb_sine()), ptb.uncertainty["response_band"])
+    assert judged["consistent"]
+
+
+def test_identify_explain_prints_the_trail_on_the_real_record(tmp_path, capsys):
+    from hopkinson.rig.cli.main import main
+
+    from tests.ptb_shock import write_ptb_record_csv
+
+    record = write_ptb_record_csv(tmp_path / "ptb.csv")
+    assert main(["identify", str(record), "--no-uncertainty", "--explain"]) == 0
+    out = capsys.readouterr().out
+    trail = out[out.index("how this identification was decided:"):]
+    assert "motion, not noise:" in trail  # the stretch after the pulse, left out of the noise
+    assert "band:" in trail and "V by order:" in trail
+    assert "model error: the residual is" in trail
+    assert "claimed (inside the band)" not in trail  # nothing below 28 kHz is a mode
+
+
+def test_motion_is_told_from_noise_by_its_coherence():
+    from hopkinson.analysis.noise import is_motion
+
+    rng = np.random.default_rng(11)
+    rate, n = 1e6, 800
+    t = np.arange(n) / rate
+    # independent noise in each channel (an interferometer in flight, the sensor's amplifier)
+    assert not is_motion(rng.standard_normal(n), rng.standard_normal(n), rate)[0]
+    # the bar's motion at a few kHz seen by both (the sensor at x0.75), each with its own noise
+    motion = np.sin(2 * np.pi * 3e3 * t) + 0.5 * np.sin(2 * np.pi * 11e3 * t + 1.0)
+    moving, coherence = is_motion(motion + 0.3 * rng.standard_normal(n),
+                                  0.75 * motion + 0.3 * rng.standard_normal(n), rate)
+    assert moving and coherence > 0.5
+    # too short to judge: never called motion
+    assert not is_motion(motion[:100], motion[:100], rate)[0]
+
+
+def test_a_pole_nearly_cancelled_by_a_zero_is_no_mode():
+    from hopkinson.analysis.identify import main_mode, mark_doublets, modes_of
+
+    dt = 1e-6
+    pole = np.exp((-0.05 + 1j) * 2 * np.pi * 17e3 * dt)  # ζ 0.05 at 17 kHz: 1 − |p| ≈ 5.3e-3
+    modes = modes_of(np.array([pole, pole.conjugate()]), dt, (0.0, 28e3))
+    near = mark_doublets(modes, np.array([pole * 1.001, np.conj(pole) * 1.001]))  # 1e-3 away
+    far = mark_doublets(modes, np.array([0.5, -0.3]))
+    assert near[0]["cancelled"] and not near[0]["supported"] and main_mode(near) is None
+    assert not far[0]["cancelled"] and main_mode(far)["natural_frequency_hz"] > 16e3
