@@ -502,6 +502,8 @@ def identify(
         model_error = measure_model_error(prep, data, settled, parameters[pick], dt)
         if model_error.significant:
             data = with_output_variance(prep, prep.var_y + model_error.var_bins)
+            if sine_terms is not None:  # the joint fit keeps its sine points (analysis.sine_joint)
+                data = replace(data, sine=sine_terms)
             fits, parameters, costs, changes, chosen_auto, comparisons = fit_orders(data)
     evidence: dict[str, Any] = {"comparisons": comparisons}
     if chosen_auto is None:
