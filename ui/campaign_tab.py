@@ -35,6 +35,7 @@ from hopkinson.rig.events import (
 from hopkinson.rig.journal import DONE_STATES, Journal
 from hopkinson.rig.plan import (
     CONFIRM_ABOVE_SHOTS,
+    G_M_S2,
     MAX_TOTAL_SHOTS,
     CampaignPlan,
     check_shot_count,
@@ -233,7 +234,9 @@ class CampaignTab(QWidget):
             row = self.table.rowCount()
             self.table.insertRow(row)
             self.rows[shot.id] = row
-            for col, text in enumerate((str(shot.index + 1), shot.id, f"{shot.pressure_bar:g}",
+            level = (f"{shot.pressure_bar:g}" if shot.target_peak_m_s2 is None  # a target: chosen at firing
+                     else f"→ {shot.target_peak_m_s2 / G_M_S2:.4g} g")
+            for col, text in enumerate((str(shot.index + 1), shot.id, level,
                                         f"No. {shot.projectile}", "PLANNED")):
                 self.table.setItem(row, col, QTableWidgetItem(text))
             self.states[shot.id] = "PLANNED"
