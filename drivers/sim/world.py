@@ -910,3 +910,33 @@ def accelerometer_truth(truth: dict[str, Any], key: str = "accelerometer") -> Ac
         sensitivity=acc["sensitivity"],
         zero_shift=acc["zero_shift"],
     )
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    """What a digitizer asks `World.capture` for (the pulse starts `pre_trigger_samples` in)."""
+
+    sample_rate_hz: float = 100e6
+    record_length: int = 100_000
+    pre_trigger_samples: int = 10_000
+
+
+def simulate_shot(params: WorldParams, pressure_bar: float, projectile: int = 3,
+                  settings: CaptureSettings | None = None, shot_number: int = 1
+                  ) -> tuple[dict[int, np.ndarray], dict[str, Any]]:
+    """One shot of a world of `params` without any server: charged to `pressure_bar`, the
+    amplifier zeroed, fired and captured; the channels (by number) and the shot's truth. Shot
+    `shot_number` of the world (its noise is drawn from (seed, shot_number))."""
+    clock = [0.0]
+    world = World(params, clock=lambda: clock[0])
+    world.shots_fired = shot_number - 1
+    world.load_projectile(projectile)
+    world.set_pressure_setpoint_bar(pressure_bar)
+    world.set_fill_valve(True)
+    clock[0] += 2.0 * pressure_bar / params.pneumatics.fill_rate_bar_s / params.time_scale + 1.0
+    world.set_fill_valve(False)
+    world.amp_auto_zero()
+    world.set_fire_valve(True)
+    channels = world.capture(settings or CaptureSettings())
+    assert channels is not None and world.last_shot_truth is not None
+    return channels, dict(world.last_shot_truth)
