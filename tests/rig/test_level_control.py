@@ -34,7 +34,7 @@ from hopkinson.rig.run_folder import create_run_folder
 from hopkinson.rig.shotfile import read_shot_meta
 from hopkinson.rig.sim_session import sim_session
 
-from tests.rig.conftest import short_timeouts_config
+from tests.rig.conftest import REPO, short_timeouts_config
 
 G = 9.80665
 PLAN = """
@@ -88,6 +88,13 @@ def test_a_target_that_needs_more_than_the_rigs_maximum_is_refused_at_the_plan_c
     # The rig's history says it is 10 % stronger than the model: the same target is reachable.
     history = [LevelPoint(3, 4.0, 1.10 * model_peak_m_s2(3, 4.0))]
     check_plan(plan, config, history)
+
+
+def test_the_shipped_linearity_plan_fires_four_target_levels_within_the_rig_limits() -> None:
+    plan = load_plan(REPO / "config" / "campaigns" / "linearity.toml")
+    targets = sorted({s.target_peak_m_s2 / G for s in plan.shots})
+    assert targets == pytest.approx([20_000, 40_000, 60_000, 80_000]) and len(plan.shots) == 12
+    check_plan(plan, short_timeouts_config())  # 80 000 g needs less than the rig's 8 bar
 
 
 # -- the choice ----------------------------------------------------------------------------------
