@@ -423,7 +423,7 @@ class CampaignRunner:
             state=CAMPAIGN_STATE,
             message=f"shot {shot.id}: {request.pressure_bar:.4g} bar, projectile No. {shot.projectile}{target}",
             shot_id=shot.id, index=current.index, total=current.total, pressure_bar=request.pressure_bar,
-            projectile=shot.projectile))
+            projectile=shot.projectile, target_peak_m_s2=shot.target_peak_m_s2))
         from hopkinson.rig.sequencer import FireAuthorisation
 
         firing_info: dict[str, Any] = {"pressure_bar": request.pressure_bar}

@@ -166,7 +166,7 @@ def test_every_shot_records_its_target_and_the_pressure_chosen(level_run) -> Non
         assert level["target_peak_m_s2"] == pytest.approx(level_run.target) == info["target_peak_m_s2"]
         assert level["pressure_bar"] == meta.pressure_bar == info["pressure_bar"] == event.pressure_bar
         assert meta.simulated_truth["pressure_bar"] == pytest.approx(meta.pressure_bar, abs=0.01)
-        assert "target 4.5e+04 g" in event.message
+        assert "target 4.5e+04 g" in event.message and event.target_peak_m_s2 == pytest.approx(level_run.target)
         bases.append(level["basis"])
     assert bases == ["model", "this entry", "this entry"]
     history = read_history(level_run.run.path.parent / LEVEL_HISTORY_NAME)
