@@ -219,7 +219,7 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
             for p, r in zip(points, fit.residuals_rel, strict=True)]
     rows.append(["linearity", f"{fit.peak_min_m_s2 / G_M_S2:,.0f}–{fit.peak_max_m_s2 / G_M_S2:,.0f}", "",
                  f"deviation {100 * fit.deviation_rel:+.3g} %", f"± {100 * fit.expanded_deviation_rel:.2g} %",
-                 f"Birge {fit.birge_ratio:.2g}" if fit.birge_ratio is not None else ""])
+                 f"Birge ratio {fit.birge_ratio:.2f}" if fit.birge_ratio is not None else ""])
     table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
     ax_note.axis("off")
     ax_note.text(0.0, 0.0, LINEARITY_NOTE, fontsize=6.5, color="0.3", wrap=True, va="bottom", transform=ax_note.transAxes)
