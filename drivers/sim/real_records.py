@@ -17,9 +17,10 @@ The effects, on the simulator's internal grid (t = 0 at the pulse's start), with
 - **the mount** (`MountParams`): base compliance raises the sensor's resonance by
   `frequency_ratio` over its sine-calibrated value; the sensor's gain in tension (a < 0) is
   `asymmetry_rel` lower than in compression;
-- **a transverse drive** (`TransverseParams`): a lateral acceleration burst at the impact
-  (Gaussian, `lateral_width_s`, `lateral_peak_rel`·P) reaches the sensor's mode through its
-  transverse sensitivity `sensitivity_rel`: a ringing the reference does not show;
+- **a transverse drive** (`TransverseParams`): a lateral acceleration burst at the impact (a
+  dipole: the end face rocks out and back; `lateral_width_s`, `lateral_peak_rel`·P) reaches the
+  sensor's mode through its transverse sensitivity `sensitivity_rel`: a ringing the reference
+  does not show;
 - **the reference chain** (`ReferenceChainParams`): interferometer noise rising as f² (its rms
   `noise_rel`·P in flight, `flight_noise_factor` times less at rest), the demodulator's
   Butterworth low-pass, a delay of the reference against the response, and demodulation errors
@@ -71,8 +72,8 @@ class TransverseParams:
 
     enabled: bool = True
     sensitivity_rel: float = 0.03  # transverse sensitivity ÷ axial (1–5 %)
-    lateral_peak_rel: float = 3.0  # peak lateral acceleration ÷ the axial peak
-    lateral_width_s: float = 3e-6  # its Gaussian's standard deviation
+    lateral_peak_rel: float = 3.5  # peak lateral acceleration ÷ the axial peak
+    lateral_width_s: float = 3e-6  # its time scale (the velocity pulse's standard deviation)
     lateral_delay_s: float = 4e-6  # its centre after the pulse's start
 
 
@@ -212,9 +213,10 @@ def ringing_m_s2(time_s: np.ndarray, pulse: PulseShape, p: BarRingingParams, rng
 
 
 def lateral_m_s2(time_s: np.ndarray, pulse: PulseShape, p: TransverseParams) -> np.ndarray:
-    """The lateral acceleration burst at the impact (a Gaussian)."""
-    t = np.asarray(time_s, dtype=float) - p.lateral_delay_s
-    return p.lateral_peak_rel * pulse.peak_m_s2 * np.exp(-0.5 * (t / p.lateral_width_s) ** 2)
+    """The lateral acceleration burst at the impact: the end face rocks out and back (a Gaussian
+    velocity pulse, so a dipole of acceleration: no lateral velocity is left, no DC content)."""
+    u = (np.asarray(time_s, dtype=float) - p.lateral_delay_s) / p.lateral_width_s
+    return p.lateral_peak_rel * pulse.peak_m_s2 * (-u) * np.exp(0.5 * (1.0 - u * u))
 
 
 def reference_chain_m_s2(time_s: np.ndarray, spot_m_s2: np.ndarray, peak_m_s2: float, p: ReferenceChainParams,
