@@ -87,6 +87,8 @@ from hopkinson.rig.shot import (
 )
 from hopkinson.rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
 
+from hopkinson.fileio import append_json_line
+
 if TYPE_CHECKING:
     from hopkinson.drivers.sim.world import World
     from hopkinson.rig.config import RigConfig
@@ -609,13 +611,7 @@ class FireLog:
         self.shot_id: str | None = None  # the campaign shot being fired, set by the runner
 
     def append(self, entry: dict[str, Any]) -> None:
-        line = json.dumps({"shot_id": self.shot_id, "pid": os.getpid(), "utc": utc_now_iso(), **entry})
-        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-        try:
-            os.write(fd, (line + "\n").encode())
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        append_json_line(self.path, {"shot_id": self.shot_id, "pid": os.getpid(), "utc": utc_now_iso(), **entry})
 
     def set_shot(self, shot: PlannedShot | None) -> None:
         self.shot_id = shot.id if shot is not None else None

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
+
+from hopkinson.fileio import append_json_line
 
 G_M_S2 = 9.80665
 LEVEL_HISTORY_NAME = "level-history.jsonl"
@@ -131,13 +132,7 @@ def read_history(path: str | Path) -> list[LevelPoint]:
 
 def append_history(path: str | Path, point: LevelPoint, **tags: Any) -> None:
     """Append one analysed shot to the rig's history (one fsynced JSON line)."""
-    line = json.dumps({**asdict(point), **tags}, default=str)
-    fd = os.open(Path(path), os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    try:
-        os.write(fd, (line + "\n").encode())
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+    append_json_line(path, {**asdict(point), **tags})
 
 
 def measured_peak_m_s2(results: dict[str, Any] | None) -> float | None:
