@@ -22,7 +22,11 @@ Shot. Opening the fire valve (a rising edge of the fire coil) with at least
 `min_fire_pressure_bar` in the reservoir launches the projectile: speed = k·√p; the
 calibrated object's velocity change Δv = `velocity_transfer`·speed; a half-sine acceleration
 pulse of the projectile's width δ (No. 3: 38.6 µs; wider for No. 1 and 2) and peak
-π·Δv/(2δ); then the object flies off at constant speed. The hardware interlock chain of the
+π·Δv/(2δ); then the object flies off at constant speed. With [world.realism] enabled
+(`RealismParams`, drivers/sim/real_records.py) the pulse comes from the world's pulse source
+(`WorldParams.pulse_source`: the closed form above or the bar model) with a shot-to-shot scatter
+of the speed, and the records carry the effects of a real rig (bar motion after the pulse, the
+mount, a transverse drive, the interferometer chain), every one recorded in the shot's truth. The hardware interlock chain of the
 controller keeps the fire valve shut while the door is open or the e-stop is tripped.
 If the digitizer is armed at that moment, the next `capture(settings)` returns the
 two channels around the digitizer's own trigger (a real crossing of its level, with its slope,
