@@ -17,6 +17,7 @@ from hopkinson.drivers.sim.real_records import RealismParams
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import LauncherParams, WorldParams
 from hopkinson.rig.campaign import CampaignRunner, check_plan
+from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import CampaignShotStarted, EventBus
 from hopkinson.rig.instruments import open_instruments
@@ -75,7 +76,7 @@ def test_an_entry_gives_a_target_in_g_or_m_s2_instead_of_a_pressure(tmp_path: Pa
         load_plan(write_plan(tmp_path, "[[shots]]\npeak_m_s2 = -5\n"))
 
 
-def test_a_target_that_needs_more_than_the_rigs_maximum_is_refused_at_the_plan_check(tmp_path: Path) -> None:
+def test_a_target_that_needs_more_than_the_rigs_maximum_is_refused_at_the_plan_check(tmp_path: Path, capsys) -> None:
     config = short_timeouts_config()
     top = model_peak_m_s2(3, config.limits.max_pressure_bar)
     check_plan(load_plan(write_plan(tmp_path, f"[[shots]]\npeak_m_s2 = {0.98 * top}\n")), config)
@@ -85,6 +86,11 @@ def test_a_target_that_needs_more_than_the_rigs_maximum_is_refused_at_the_plan_c
     message = str(caught.value)
     assert "shots[2] (s002-r1): target peak" in message and "above the rig's maximum 8 bar" in message
     assert "nothing was fired" in message and "\n" not in message
+    # the command line: one line, exit 2, nothing made (not even the run folder)
+    assert main(["campaign", "run", str(plan.path), "--sim", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "above the rig's maximum" in err[0] and "Traceback" not in err[0]
+    assert not (tmp_path / "run").exists()
     # The rig's history says it is 10 % stronger than the model: the same target is reachable.
     history = [LevelPoint(3, 4.0, 1.10 * model_peak_m_s2(3, 4.0))]
     check_plan(plan, config, history)
