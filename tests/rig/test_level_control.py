@@ -31,8 +31,9 @@ from hopkinson.rig.level_control import (
     read_history,
 )
 from hopkinson.rig.plan import load_plan
+from hopkinson.rig.report_data import shot_identity
 from hopkinson.rig.run_folder import create_run_folder
-from hopkinson.rig.shotfile import read_shot_meta
+from hopkinson.rig.shotfile import read_shot, read_shot_meta
 from hopkinson.rig.sim_session import sim_session
 
 from tests.rig.conftest import REPO, short_timeouts_config
@@ -174,6 +175,8 @@ def test_every_shot_records_its_target_and_the_pressure_chosen(level_run) -> Non
         assert meta.simulated_truth["pressure_bar"] == pytest.approx(meta.pressure_bar, abs=0.01)
         assert "target 4.5e+04 g" in event.message and event.target_peak_m_s2 == pytest.approx(level_run.target)
         bases.append(level["basis"])
+        identity = shot_identity(read_shot(level_run.run.shot_path(sid), load_raw=False))
+        assert identity["Target level"].startswith("45,000 g; pressure chosen from " + level["basis"])
     assert bases == ["model", "this entry", "this entry"]
     history = read_history(level_run.run.path.parent / LEVEL_HISTORY_NAME)
     assert [p.pressure_bar for p in history] == [level_run.infos[s]["pressure_bar"] for s in ("s001-r1", "s001-r2",
