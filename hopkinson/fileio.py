@@ -219,3 +219,17 @@ def private_runtime_dir(app: str = "hopkinson") -> Path:
         raise UnsafeOutputError(f"{folder}: the runtime folder is not a private folder of this user "
                                 "(a symlink, another owner, or open to others): remove it or set XDG_RUNTIME_DIR")
     return folder
+
+
+def append_json_line(path: str | os.PathLike[str], entry: dict[str, Any]) -> None:
+    """Append `entry` as one JSON line (a witness log, a history) and fsync it before returning:
+    a line is either whole on disk or absent (one write of O_APPEND)."""
+    import json
+
+    line = json.dumps(entry, default=str) + "\n"
+    fd = os.open(Path(path), os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, line.encode())
+        os.fsync(fd)
+    finally:
+        os.close(fd)

@@ -168,3 +168,59 @@ def sine_page(comparisons: Sequence[tuple[str, SineComparison]], sine: SineCalib
     header, rows = sine_rows(comparisons)
     table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
     return fig
+
+
+LINEARITY_CAPTION = "Campaign: amplitude linearity"
+LINEARITY_NOTE = ("ISO 16063-22: the shock sensitivity S_sh (peak ratio, ISO 16063-13) of each shot against its "
+                  "peak acceleration, error bars U (95 %); the line S(a) = S₀(1 + c·a) fitted with weights 1/u² "
+                  "(analysis.linearity); the linearity deviation is c·(a_max − a_min), the fitted change of S over "
+                  "the levels covered. A share of u common to all shots (the reference chain) is counted as "
+                  "independent: on the safe side.")
+
+
+def linearity_page(stats: CampaignStatistics) -> Figure:
+    """S_sh against the peak acceleration with each point's U and the fitted line, the deviations
+    from the line, and the table of the points."""
+    fit = stats.linearity
+    assert fit is not None
+    points = stats.linearity_points
+    fig = plot_page(LINEARITY_CAPTION, f"slope {fit.text()}")
+    ax_s, ax_r, ax_t, ax_note = fig.subplots(4, 1, height_ratios=[1.2, 0.75, 0.3 + 0.075 * len(points), 0.12])
+    peak_g = np.array([p.peak_m_s2 for p in points]) / G_M_S2
+    s = np.array([p.sensitivity for p in points])
+    big_u = np.array([np.nan if p.expanded is None else p.expanded for p in points])
+    ax_s.errorbar(peak_g, s, yerr=np.nan_to_num(big_u), fmt="o", color="tab:green", capsize=3, label="S_sh ± U per shot")
+    grid = np.linspace(0.0, 1.05 * float(np.max(peak_g)), 100)
+    ax_s.plot(grid, fit.sensitivity_at(grid * G_M_S2), color="0.2", lw=1,
+              label=f"fit: S₀ = {to_decimals_of(fit.reference_sensitivity, fit.k * fit.u_reference_sensitivity)}, "
+                    f"c = {100 * 1e5 * fit.slope_rel_per_m_s2:.3g} % per 100 km/s²")
+    for sign in (-1, 1):  # the line with its slope at ±U, through the weighted centre of the points
+        centre = float(np.mean(peak_g)) * G_M_S2
+        slope = fit.slope_rel_per_m_s2 + sign * fit.expanded_slope_rel_per_m_s2
+        base = fit.sensitivity_at(centre)
+        ax_s.plot(grid, base * (1 + slope * (grid * G_M_S2 - centre)), color="0.5", lw=0.8, ls="--",
+                  label="slope ± U" if sign < 0 else None)
+    ax_s.set_xlabel("peak acceleration (g)")
+    ax_s.set_ylabel("shock sensitivity S_sh (× nominal)")
+    ax_s.set_title("Shock sensitivity against the shock level", fontsize=9)
+    ax_s.grid(alpha=0.3)
+    ax_s.legend(fontsize=7)
+    resid = 100 * np.array(fit.residuals_rel)
+    rel_u = 100 * big_u / s
+    ax_r.errorbar(peak_g, resid, yerr=np.nan_to_num(rel_u), fmt="o", color="tab:green", capsize=3)
+    ax_r.axhline(0.0, color="0.3", lw=0.8)
+    ax_r.set_xlabel("peak acceleration (g)")
+    ax_r.set_ylabel("S_sh − fit (%)")
+    ax_r.set_title("Deviation of each shot from the line (± U)", fontsize=9)
+    ax_r.grid(alpha=0.3)
+    header = ["shot", "peak (g)", "peak (km/s²)", "S_sh (× nominal)", "U (95 %)", "− fit (%)"]
+    rows = [[p.label, f"{p.peak_m_s2 / G_M_S2:,.0f}", f"{p.peak_m_s2 / 1e3:.4g}", f"{p.sensitivity:.5g}",
+             "—" if p.expanded is None else sig(p.expanded), f"{100 * r:+.2f}"]
+            for p, r in zip(points, fit.residuals_rel, strict=True)]
+    rows.append(["linearity", f"{fit.peak_min_m_s2 / G_M_S2:,.0f}–{fit.peak_max_m_s2 / G_M_S2:,.0f}", "",
+                 f"deviation {100 * fit.deviation_rel:+.3g} %", f"± {100 * fit.expanded_deviation_rel:.2g} %",
+                 f"Birge ratio {fit.birge_ratio:.2f}" if fit.birge_ratio is not None else ""])
+    table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
+    ax_note.axis("off")
+    ax_note.text(0.0, 0.0, LINEARITY_NOTE, fontsize=6.5, color="0.3", wrap=True, va="bottom", transform=ax_note.transAxes)
+    return fig

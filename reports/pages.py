@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 from hopkinson.reports.campaign_pages import (
+    LINEARITY_CAPTION,
     campaign_responses_page,
     cross_validation_page,
+    linearity_page,
     sine_page,
 )
 from hopkinson.reports.data import CalibrationReport, ShotEntry
@@ -75,6 +77,12 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
             page.table(*sine_rows(stats.sine), size=7.5)
         for note in stats.sine_notes:
             page.paragraph(note, colour="#a00000")
+        if stats.linearity is not None:  # shots at two or more levels
+            page.heading("Amplitude linearity (ISO 16063-22)")
+            page.paragraph(f"shock sensitivity against the peak acceleration: slope {stats.linearity.text()} "
+                           "(95 %; plot and table on the linearity page)")
+            if stats.linearity_note:
+                page.paragraph(stats.linearity_note, colour="0.25")
         text = cross_validation_summary(stats)
         if text:
             page.heading("Cross-validation (each shot's model on every other shot)")
@@ -141,6 +149,8 @@ def report_pages(report: CalibrationReport, stats: CampaignStatistics | None = N
         pages.append(("Campaign: responses of all shots", campaign_responses_page(report.shots)))
         if stats.sine:
             pages.append((SINE_CAPTION, sine_page(stats.sine, report.sine_calibration)))
+        if stats.linearity is not None:
+            pages.append((LINEARITY_CAPTION, linearity_page(stats)))
     for entry in report.shots:
         pages.extend(shot_pages(entry))
     for _caption, fig in pages:

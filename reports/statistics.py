@@ -8,7 +8,10 @@
   diagonal equals each shot's own fit). Shot j's channels are prepared as the identification
   prepared them (its baselines and input delay, stored in its results);
 - the campaign's value of each uncertain key figure (`combine`): the mean of the shots, their
-  repeatability and a combined expanded uncertainty (see `combine` for how).
+  repeatability and a combined expanded uncertainty (see `combine` for how);
+- amplitude linearity (ISO 16063-22): each shot's shock sensitivity against its peak
+  acceleration with its U, and the straight line through them (analysis.linearity), when the
+  shots cover two or more levels.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import fit_percent
 from hopkinson.analysis.key_figures import Figure, KeyFigures
+from hopkinson.analysis.linearity import LinearityFit, fit_linearity
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.analysis.sine_comparison import SineCalibration, SineComparison, compare_sine
 from hopkinson.reports.data import (
@@ -152,6 +156,50 @@ def combined_figures(key_figures: Sequence[KeyFigures]) -> dict[str, Combined]:
     return out
 
 
+@dataclass(frozen=True)
+class LinearityPoint:
+    """One shot's shock sensitivity at its peak acceleration, with U (95 %) when it has one."""
+
+    label: str
+    peak_m_s2: float
+    sensitivity: float
+    u: float | None
+    expanded: float | None
+
+
+MIN_LEVEL_SPAN_REL = 0.05  # levels closer than this (relative) are one level: no line through them
+
+
+def linearity_points(labelled: Iterable[tuple[str, KeyFigures | None]]) -> list[LinearityPoint]:
+    """The shots with both a shock sensitivity and a peak acceleration."""
+    out = []
+    for label, kf in labelled:
+        if kf is None or kf.shock_sensitivity is None or kf.peak_acceleration_m_s2 is None:
+            continue
+        s, a = kf.shock_sensitivity, kf.peak_acceleration_m_s2
+        if s.value is None or a.value is None or not (math.isfinite(s.value) and math.isfinite(a.value)):
+            continue
+        out.append(LinearityPoint(label, abs(float(a.value)), float(s.value), s.u, s.expanded))
+    return out
+
+
+def campaign_linearity(points: Sequence[LinearityPoint]) -> tuple[LinearityFit | None, str]:
+    """The straight line through the points (analysis.linearity), or None and why not."""
+    if len(points) < 2:
+        return None, "amplitude linearity: needs analysed shots at two or more levels"
+    peaks = np.array([p.peak_m_s2 for p in points])
+    if np.ptp(peaks) < MIN_LEVEL_SPAN_REL * float(np.max(peaks)):
+        return None, "amplitude linearity: every shot is at one level (within 5 %): fire several levels"
+    us = [p.u for p in points]
+    known = all(u is not None and u > 0 for u in us)
+    try:
+        fit = fit_linearity(peaks, [p.sensitivity for p in points], us if known else None)  # type: ignore[arg-type]
+    except AnalysisError as exc:
+        return None, f"amplitude linearity: {exc}"
+    note = "" if known else "amplitude linearity: some shots have no uncertainty: equal weights, u from the scatter"
+    return fit, note
+
+
 @dataclass
 class CampaignStatistics:
     """Across the analysed shots: per-shot figures, their spread, the combined key figures and
@@ -164,6 +212,9 @@ class CampaignStatistics:
     combined: dict[str, Combined] = field(default_factory=dict)  # COMBINED key -> combination
     sine: list[tuple[str, SineComparison]] = field(default_factory=list)  # shot -> against the sine calibration
     sine_notes: list[str] = field(default_factory=list)
+    linearity_points: list[LinearityPoint] = field(default_factory=list)
+    linearity: LinearityFit | None = None  # None: fewer than two levels (linearity_note says)
+    linearity_note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (strict JSON: a NaN or infinite figure becomes None)."""
@@ -172,6 +223,9 @@ class CampaignStatistics:
                           "combination_note": COMBINATION_NOTE,
                           "sine_comparison": {label: c.to_dict() for label, c in self.sine} or None,
                           "cross_validation_percent": self.cross_validation_percent.tolist(),
+                          "linearity": None if self.linearity is None else {
+                              **self.linearity.to_dict(), "points": [vars(p) for p in self.linearity_points]},
+                          "linearity_note": self.linearity_note,
                           "cross_validation_note": "row i: model of shot i; column j: simulated on shot j's "
                                                    "reference; fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)"})
 
@@ -214,4 +268,7 @@ def campaign_statistics(entries: Sequence[ShotEntry], sine: SineCalibration | No
     matrix = cross_validation([e.analysis for e in analysed])  # type: ignore[misc]
     combined = combined_figures([e.key_figures for e in analysed if e.key_figures is not None])
     comparisons, notes = sine_comparisons(analysed, sine) if sine is not None else ([], [])
-    return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined, comparisons, notes)
+    points = linearity_points((e.label, e.key_figures) for e in analysed)
+    fit, note = campaign_linearity(points)
+    return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined, comparisons, notes,
+                              points, fit, note)

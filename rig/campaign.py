@@ -62,6 +62,16 @@ from hopkinson.rig.events import (
     RigWarning,
 )
 from hopkinson.rig.journal import Journal, ShotState, ShotStatus
+from hopkinson.rig.level_control import (
+    LevelChoice,
+    LevelPoint,
+    append_history,
+    choose_pressure,
+    history_path,
+    measured_peak_m_s2,
+    needed_pressure_bar,
+    read_history,
+)
 from hopkinson.rig.lock import command_line
 from hopkinson.rig.logbook import CAMPAIGN_LOG_NAME, Logbook
 from hopkinson.rig.plan import CampaignPlan, PlannedShot, load_plan
@@ -76,6 +86,8 @@ from hopkinson.rig.shot import (
     shot_analyser,
 )
 from hopkinson.rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
+
+from hopkinson.fileio import append_json_line
 
 if TYPE_CHECKING:
     from hopkinson.drivers.sim.world import World
@@ -198,30 +210,47 @@ class CampaignOutcome:
         }
 
 
-def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder) -> ShotRequest:
-    """The sequencer's request for a planned shot: file `shots/<id>.h5`, the plan's settings.
+def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: LevelChoice | None = None,
+                 pressure_bar: float | None = None) -> ShotRequest:
+    """The sequencer's request for a planned shot: file `shots/<id>.h5`, the plan's settings
+    (for a target level, the pressure `level` chose, or the `pressure_bar` it was fired at).
 
     `confirm_timeout_s` 0: the runner only ever fires with the authorisation already given.
     """
     a = shot.analysis
+    pressure = level.pressure_bar if level is not None else pressure_bar if pressure_bar is not None else shot.pressure_bar
+    assert pressure is not None, f"{shot.id}: a target level needs its pressure chosen"
     return ShotRequest(
-        pressure_bar=shot.pressure_bar, projectile=shot.projectile, operator=plan.operator,
+        pressure_bar=pressure, projectile=shot.projectile, operator=plan.operator,
         accelerometer_model=plan.accelerometer.model, accelerometer_serial=plan.accelerometer.serial,
         sensor_identities=plan.sensor_identities(),
         sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
         order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
         uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
-        shot_index=shot.index, confirm_timeout_s=0.0,
+        shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
     )
 
 
-def check_plan(plan: CampaignPlan, config: RigConfig) -> None:
+def check_plan(plan: CampaignPlan, config: RigConfig, history: list[LevelPoint] | None = None) -> None:
     """The whole plan against the rig, before anything moves: every shot's request (pressure
-    within the rig's limits, projectile, every analysis option) is checked; ConfigError (exit
-    2) names the plan, the entry and the reason."""
+    within the rig's limits, projectile, every analysis option) is checked, and a target level
+    the launcher model (corrected by the rig's `history`) says needs more than the rig's
+    maximum pressure is refused; ConfigError (exit 2) names the plan, the entry and the reason."""
+    limits = config.limits
     for shot in plan.shots:
-        request = dataclasses.replace(shot_request(plan, shot, RunFolder(Path("."))), out_dir=Path("."))
+        level = None
+        if shot.target_peak_m_s2 is not None:
+            level = needed_pressure_bar(shot.target_peak_m_s2, shot.projectile, history or ())
+            if level.pressure_bar > limits.max_pressure_bar:
+                raise ConfigError(
+                    f"{plan.path}: shots[{shot.entry}] ({shot.id}): target peak {shot.target_peak_m_s2:.4g} m/s² "
+                    f"({shot.target_peak_m_s2 / 9.80665:.4g} g) needs {level.pressure_bar:.3g} bar with projectile "
+                    f"No. {shot.projectile} (launcher model, {level.basis}), above the rig's maximum "
+                    f"{limits.max_pressure_bar:g} bar ({config.path or 'configuration'} [limits]); nothing was fired")
+            level = choose_pressure(shot.target_peak_m_s2, shot.projectile, history or (),
+                                    min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar)
+        request = dataclasses.replace(shot_request(plan, shot, RunFolder(Path(".")), level), out_dir=Path("."))
         try:
             request.check(config)
         except ConfigError as exc:
@@ -282,7 +311,7 @@ class CampaignRunner:
     # -- the run -----------------------------------------------------------------------------
     def run(self) -> CampaignOutcome:
         """Check the plan, open (or resume) the journal, analyse what is pending, fire what is left."""
-        check_plan(self.plan, self.config)
+        check_plan(self.plan, self.config, self._history())
         journal = Journal.open(self.run_folder, self.plan, max_aborts=self.max_aborts)
         self._journal = journal
         fired: list[str] = []
@@ -348,39 +377,84 @@ class CampaignRunner:
         parts.append(f"continue with --resume --out {self.run_folder.path}")
         return EXIT_STOPPED, "; ".join(parts)
 
-    def _progress(self, shot: PlannedShot) -> CampaignProgress:
-        return CampaignProgress(shot.index + 1, len(self.plan.shots), shot.id, shot.pressure_bar, shot.projectile)
+    def _progress(self, shot: PlannedShot, pressure_bar: float | None = None) -> CampaignProgress:
+        pressure = pressure_bar if pressure_bar is not None else shot.pressure_bar
+        return CampaignProgress(shot.index + 1, len(self.plan.shots), shot.id, pressure or 0.0, shot.projectile)
+
+    # -- automatic level control (rig/level_control.py) ------------------------------------------
+    def _history_path(self) -> Path:
+        return history_path(self.run_folder.path.parent)
+
+    def _history(self) -> list[LevelPoint]:
+        return read_history(self._history_path())
+
+    def _level_choice(self, shot: PlannedShot) -> LevelChoice | None:
+        """The pressure for a target-level shot from the entry's analysed shots, else the rig's history."""
+        if shot.target_peak_m_s2 is None:
+            return None
+        assert self._journal is not None
+        entry_shots = []
+        for other in self.plan.shots:
+            if other.entry != shot.entry or other.index >= shot.index:
+                continue
+            info = self._journal.status(other.id).info
+            if isinstance(info.get("peak_m_s2"), int | float) and isinstance(info.get("pressure_bar"), int | float):
+                entry_shots.append(LevelPoint(other.projectile, float(info["pressure_bar"]), float(info["peak_m_s2"])))
+        limits = self.config.limits
+        return choose_pressure(shot.target_peak_m_s2, shot.projectile, self._history(), entry_shots,
+                               min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar)
+
+    def _remember_level(self, shot: PlannedShot, pressure_bar: float | None, results: dict[str, Any] | None) -> None:
+        """An analysed shot's pressure → peak into the rig's history (a failure is a warning)."""
+        peak = measured_peak_m_s2(results)
+        if peak is None or pressure_bar is None:
+            return
+        try:
+            append_history(self._history_path(), LevelPoint(shot.projectile, float(pressure_bar), peak),
+                           campaign_id=self.run_folder.campaign_id, shot_id=shot.id, utc=utc_now_iso())
+        except OSError as exc:
+            self.bus.publish(RigWarning(state=CAMPAIGN_STATE, message=f"the level history cannot be written: {exc}"))
 
     def _fire(self, shot: PlannedShot) -> ShotOutcome:
         """One shot through the sequencer, journaled by its hooks, settled at its end."""
         assert self._journal is not None
-        current = self._current = self._progress(shot)
+        level = self._level_choice(shot)
+        request = shot_request(self.plan, shot, self.run_folder, level)
+        current = self._current = self._progress(shot, request.pressure_bar)
         self._mark_failure = None
         if self._on_shot_start is not None:
             self._on_shot_start(shot)
+        target = "" if level is None else (f" (target {level.target_peak_m_s2 / 9.80665:.4g} g, pressure from "
+                                           f"{level.basis}{', held at the rig limit' if level.held_at_limit else ''})")
         self.bus.publish(CampaignShotStarted(
-            state=CAMPAIGN_STATE, message=f"shot {shot.id}: {shot.pressure_bar:g} bar, projectile No. {shot.projectile}",
-            shot_id=shot.id, index=current.index, total=current.total, pressure_bar=shot.pressure_bar,
-            projectile=shot.projectile))
+            state=CAMPAIGN_STATE,
+            message=f"shot {shot.id}: {request.pressure_bar:.4g} bar, projectile No. {shot.projectile}{target}",
+            shot_id=shot.id, index=current.index, total=current.total, pressure_bar=request.pressure_bar,
+            projectile=shot.projectile, target_peak_m_s2=shot.target_peak_m_s2))
         from hopkinson.rig.sequencer import FireAuthorisation
 
+        firing_info: dict[str, Any] = {"pressure_bar": request.pressure_bar}
+        if level is not None:
+            firing_info.update(target_peak_m_s2=level.target_peak_m_s2, level_basis=level.basis)
         try:
-            outcome = self.sequencer.run_shot(shot_request(self.plan, shot, self.run_folder),
-                                              FireAuthorisation.pre_given(),
-                                              before_fire=lambda _ctx: self._mark_firing(shot.id),
+            outcome = self.sequencer.run_shot(request, FireAuthorisation.pre_given(),
+                                              before_fire=lambda _ctx: self._mark_firing(shot.id, firing_info),
                                               after_store=lambda _ctx, path: self._on_stored(shot.id, Path(path)))
             self._settle(shot, outcome)
+            if outcome.done and outcome.analysis_error is None:
+                self._remember_level(shot, request.pressure_bar, outcome.results)
             return outcome
         finally:
             if self._on_shot_start is not None:
                 self._on_shot_start(None)
             self._current = None
 
-    def _mark_firing(self, sid: str) -> None:
-        """The before-fire hook: FIRING on disk before the pulse is commanded, or no shot."""
+    def _mark_firing(self, sid: str, info: dict[str, Any] | None = None) -> None:
+        """The before-fire hook: FIRING on disk (with the pressure chosen and any target level)
+        before the pulse is commanded, or no shot."""
         assert self._journal is not None
         try:
-            self._journal.mark(sid, S.FIRING)
+            self._journal.mark(sid, S.FIRING, **(info or {}))
         except Exception as exc:  # never fire a shot the journal does not know is firing
             self._mark_failure = f"campaign journal: FIRING of {sid} could not be recorded ({exc})"
             raise RuntimeError(self._mark_failure) from exc
@@ -457,7 +531,8 @@ class CampaignRunner:
             # the shot (stored in the file) wins, as in the sequencer's own analysis.
             settings = dict(stored.meta.config.get("shot_settings", {}))
             try:
-                params = analysis_params(shot_request(self.plan, shot, self.run_folder), self.config, settings)
+                params = analysis_params(shot_request(self.plan, shot, self.run_folder,
+                                                      pressure_bar=stored.meta.pressure_bar), self.config, settings)
             except Exception as exc:
                 results, error = None, f"analysis not started: {exc}"
                 with contextlib.suppress(Exception):
@@ -468,6 +543,7 @@ class CampaignRunner:
                 results, error, redo = recorded.results, recorded.error, recorded.to_redo
         if error is None:
             self._journal.mark(shot.id, S.ANALYSED, **result_info(results))
+            self._remember_level(shot, stored.meta.pressure_bar, results)
         else:
             self._journal.mark(shot.id, S.ANALYSIS_FAILED, error=error, redo=redo)
         self._shot_ended(shot, "ANALYSED" if error is None else f"ANALYSIS_FAILED: {error}", None)
@@ -487,6 +563,9 @@ def result_info(results: dict[str, Any] | None) -> dict[str, Any]:
         info["order"] = model["order"]
     if results.get("fbsd_hz"):
         info["fbsd_hz"] = results["fbsd_hz"]
+    peak = measured_peak_m_s2(results)
+    if peak is not None:  # the level control's measure of the shot
+        info["peak_m_s2"] = peak
     return info
 
 
@@ -540,13 +619,7 @@ class FireLog:
         self.shot_id: str | None = None  # the campaign shot being fired, set by the runner
 
     def append(self, entry: dict[str, Any]) -> None:
-        line = json.dumps({"shot_id": self.shot_id, "pid": os.getpid(), "utc": utc_now_iso(), **entry})
-        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-        try:
-            os.write(fd, (line + "\n").encode())
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        append_json_line(self.path, {"shot_id": self.shot_id, "pid": os.getpid(), "utc": utc_now_iso(), **entry})
 
     def set_shot(self, shot: PlannedShot | None) -> None:
         self.shot_id = shot.id if shot is not None else None

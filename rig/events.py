@@ -259,6 +259,7 @@ class CampaignShotStarted(RigEvent):
     total: int
     pressure_bar: float
     projectile: int
+    target_peak_m_s2: float | None = None  # automatic level control: the entry's target (pressure_bar chosen for it)
 
 
 @dataclass(frozen=True, kw_only=True)

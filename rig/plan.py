@@ -40,9 +40,14 @@ Example (config/campaigns/example.toml is the documented one)::
     [shots.analysis]                  # optional per-shot overrides
     max_order = 8
 
+    [[shots]]                         # a target level instead of a pressure: automatic level
+    peak_g = 50000                    # control (rig/level_control.py) chooses each shot's
+    repeats = 3                       # pressure; or peak_m_s2 = 4.9e5
+
 Entries expand in order into planned shots with stable ids "s<entry>-r<repeat>"
 (s001-r1, s001-r2, s002-r1, ...). Entry numbers in ids and in error messages count from 1:
 "shots[2].pressure_bar" is the pressure of the second [[shots]] table, whose ids are s002-*.
+An entry gives one of pressure_bar, peak_m_s2 or peak_g (its own overrides what [defaults] gives).
 Pressure upper limits belong to the rig (config/rig.toml [limits]): `rig.campaign.check_plan`
 checks every entry against them before the first shot moves anything.
 
@@ -111,14 +116,17 @@ class PlannedShot:
     index: int  # 0-based position in the campaign
     entry: int  # 1-based [[shots]] entry
     repeat: int  # 1-based repeat within the entry
-    pressure_bar: float
+    pressure_bar: float | None  # None: chosen at firing time for target_peak_m_s2
     projectile: int
     analysis: AnalysisOptions
+    target_peak_m_s2: float | None = None  # automatic level control (rig/level_control.py)
 
     def to_dict(self) -> dict[str, Any]:
         """The shot as a dict (the plan's fingerprint is made of these). Options added later
         appear only when set, so a run started before them still resumes."""
         out = asdict(self)
+        if out["target_peak_m_s2"] is None:
+            del out["target_peak_m_s2"]
         for key, default in LATER_OPTIONS.items():
             if out["analysis"][key] == default:
                 del out["analysis"][key]
@@ -160,7 +168,8 @@ class CampaignPlan:
 _TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "accelerometer_2", "defaults",
              "shots"}
 _ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2", "sine_calibration"}
-_SHOT_KEYS = {"pressure_bar", "projectile", "analysis"}
+_SHOT_KEYS = {"pressure_bar", "peak_m_s2", "peak_g", "projectile", "analysis"}
+G_M_S2 = 9.80665
 _ENTRY_KEYS = _SHOT_KEYS | {"repeats"}
 _ANALYSIS_KEYS = set(AnalysisOptions.__dataclass_fields__)
 
@@ -280,9 +289,10 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         key = f"shots[{number}]"
         entry = c.table(entry, key, _ENTRY_KEYS)
         settings = _shot_settings(c, entry, key, base, base["analysis"])
-        for name_ in ("pressure_bar", "projectile"):
-            if name_ not in settings:
-                raise c.fail(f"{key}.{name_}", "missing (and no default in [defaults])")
+        if "pressure_bar" not in settings and "target_peak_m_s2" not in settings:
+            raise c.fail(f"{key}.pressure_bar", "missing (give pressure_bar, peak_m_s2 or peak_g; no default in [defaults])")
+        if "projectile" not in settings:
+            raise c.fail(f"{key}.projectile", "missing (and no default in [defaults])")
         repeats = c.integer(entry.get("repeats", 1), f"{key}.repeats", 1, MAX_TOTAL_SHOTS)
         total += repeats
         if total > MAX_TOTAL_SHOTS:
@@ -297,9 +307,10 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
                     index=len(shots),
                     entry=number,
                     repeat=repeat,
-                    pressure_bar=settings["pressure_bar"],
+                    pressure_bar=settings.get("pressure_bar"),
                     projectile=settings["projectile"],
                     analysis=settings["analysis"],
+                    target_peak_m_s2=settings.get("target_peak_m_s2"),
                 )
             )
     return CampaignPlan(
@@ -320,8 +331,16 @@ def _shot_settings(
 ) -> dict[str, Any]:
     """Pressure, projectile and analysis options of a table, over what it inherits."""
     out = dict(inherited)
+    levels = [k for k in ("pressure_bar", "peak_m_s2", "peak_g") if k in table]
+    if len(levels) > 1:
+        raise c.fail(f"{key}.{levels[1]}", f"give one of pressure_bar, peak_m_s2 or peak_g (got {' and '.join(levels)})")
     if "pressure_bar" in table:
         out["pressure_bar"] = c.number(table["pressure_bar"], f"{key}.pressure_bar", 0.0)
+        out.pop("target_peak_m_s2", None)
+    elif levels:  # a target level: the pressure is chosen when the shot is fired
+        scale = G_M_S2 if levels[0] == "peak_g" else 1.0
+        out["target_peak_m_s2"] = c.number(table[levels[0]], f"{key}.{levels[0]}", 0.0) * scale
+        out.pop("pressure_bar", None)
     if "projectile" in table:
         out["projectile"] = c.integer(table["projectile"], f"{key}.projectile", 1, 3)
     options = asdict(analysis)

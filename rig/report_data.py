@@ -77,6 +77,11 @@ def shot_identity(shot: Shot) -> dict[str, str]:
     rows["Reservoir pressure, projectile"] = (f"{m.pressure_bar:g} bar set "
                                               + (f"({fire_p:.3f} bar at fire)" if fire_p is not None else "")
                                               + f", projectile No. {m.projectile}")
+    level = settings.get("level_control")
+    if isinstance(level, dict) and isinstance(level.get("target_peak_m_s2"), int | float):  # automatic level control
+        rows["Target level"] = (f"{level['target_peak_m_s2'] / 9.80665:,.0f} g; pressure chosen from "
+                                f"{level.get('basis', '?')} (predicted {level.get('predicted_peak_m_s2', 0) / 9.80665:,.0f} g)"
+                                + (", held at the rig's pressure limit" if level.get("held_at_limit") else ""))
     if "amplifier_gain" in settings:
         rows["Bridge amplifier"] = (f"gain {settings['amplifier_gain']:g}, excitation "
                                     f"{settings.get('amplifier_excitation_v', float('nan')):g} V, low-pass "

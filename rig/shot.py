@@ -95,6 +95,9 @@ class ShotRequest:
     shot_id: str | None = None
     shot_index: int | None = None
     confirm_timeout_s: float | None = None  # how long ARM waits for the fire confirmation; None -> timeouts.arm_s
+    # automatic level control: the target and how the pressure was chosen (rig.level_control.
+    # LevelChoice.to_dict), recorded in the shot file's settings ("level_control")
+    level: dict[str, Any] | None = None
 
     def check(self, config: RigConfig) -> None:
         """Raise ShotRequestError (naming the field and the reason) unless the request is firable."""
@@ -257,6 +260,8 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
     snapshot["shot_settings"] = dict(captured.settings,
                                      sensitivity_v_per_m_s2=request.sensitivity(config),
                                      analysis_options=request.analysis_options())
+    if request.level is not None:
+        snapshot["shot_settings"]["level_control"] = dict(request.level)
     return ShotMeta(
         operator=request.operator,
         accelerometer_model=request.accelerometer_model,

@@ -23,6 +23,7 @@ from typing import Any
 
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.reports.data import CompensationCheck
+from hopkinson.reports.statistics import LinearityPoint, campaign_linearity, linearity_points
 from hopkinson.rig.campaign import CAMPAIGN_STATE, check_authorisation, prepare_run
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import (
@@ -35,6 +36,7 @@ from hopkinson.rig.events import (
 from hopkinson.rig.journal import DONE_STATES, Journal
 from hopkinson.rig.plan import (
     CONFIRM_ABOVE_SHOTS,
+    G_M_S2,
     MAX_TOTAL_SHOTS,
     CampaignPlan,
     check_shot_count,
@@ -121,6 +123,10 @@ class CampaignTab(QWidget):
         self.current_label.setStyleSheet("font-weight: 600;")
         self.message = QLabel("")
         self.message.setWordWrap(True)
+        # amplitude linearity (ISO 16063-22) over the analysed shots' levels; each point in the tooltip
+        self.linearity_label = QLabel("")
+        self.linearity_label.setWordWrap(True)
+        self._linearity: dict[str, LinearityPoint] = {}
 
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)
@@ -153,6 +159,7 @@ class CampaignTab(QWidget):
         layout.addLayout(controls)
         layout.addWidget(self.current_label)
         layout.addWidget(self.message)
+        layout.addWidget(self.linearity_label)
         layout.addWidget(self.table, 1)
 
         self.load_button.clicked.connect(self._load_clicked)
@@ -229,11 +236,15 @@ class CampaignTab(QWidget):
         self.table.setRowCount(0)
         self.rows.clear()
         self.states.clear()
+        self._linearity.clear()
+        self._update_linearity()
         for shot in plan.shots:
             row = self.table.rowCount()
             self.table.insertRow(row)
             self.rows[shot.id] = row
-            for col, text in enumerate((str(shot.index + 1), shot.id, f"{shot.pressure_bar:g}",
+            level = (f"{shot.pressure_bar:g}" if shot.target_peak_m_s2 is None  # a target: chosen at firing
+                     else f"→ {shot.target_peak_m_s2 / G_M_S2:.4g} g")
+            for col, text in enumerate((str(shot.index + 1), shot.id, level,
                                         f"No. {shot.projectile}", "PLANNED")):
                 self.table.setItem(row, col, QTableWidgetItem(text))
             self.states[shot.id] = "PLANNED"
@@ -394,6 +405,9 @@ class CampaignTab(QWidget):
             9: _fbsd_cell(kf, "10"),
             10: (format_figure(kf.shock_sensitivity, decimals=4), figure_tooltip(kf.shock_sensitivity)),
         }
+        for point in linearity_points([(sid, kf)]):
+            self._linearity[sid] = point
+        self._update_linearity()
         check = CompensationCheck.of(kf)
         if check is not None and check.recommended is not None:
             reason = check.not_recommended_reason or "compensation does not improve this shot"
@@ -405,6 +419,22 @@ class CampaignTab(QWidget):
             if col == DCM_COLUMN and check is not None and check.recommended is False:
                 item.setForeground(QBrush(QColor("#b3261e")))
             self.table.setItem(row, col, item)
+
+    def _update_linearity(self) -> None:
+        """The line through the analysed shots' shock sensitivities (reports.statistics), shown
+        once they cover two or more levels; each point with its U in the tooltip."""
+        points = [self._linearity[sid] for sid in self.rows if sid in self._linearity]
+        fit, _note = campaign_linearity(points)
+        if fit is None:
+            self.linearity_label.setText("")
+            self.linearity_label.setToolTip("")
+            return
+        self.linearity_label.setText(f"Amplitude linearity (ISO 16063-22), shock sensitivity against the peak: "
+                                     f"slope {fit.text()}")
+        lines = [f"{p.label}: {p.peak_m_s2 / G_M_S2:,.0f} g, S_sh {p.sensitivity:.5g}"
+                 + (f" ± {p.expanded:.2g}" if p.expanded is not None else "") + f" ({100 * r:+.2f} % from the line)"
+                 for p, r in zip(points, fit.residuals_rel, strict=True)]
+        self.linearity_label.setToolTip("\n".join(lines))
 
     def _show_summary(self, summary: dict[str, Any]) -> None:
         for shot in summary.get("shots", []):

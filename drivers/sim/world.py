@@ -22,7 +22,11 @@ Shot. Opening the fire valve (a rising edge of the fire coil) with at least
 `min_fire_pressure_bar` in the reservoir launches the projectile: speed = k·√p; the
 calibrated object's velocity change Δv = `velocity_transfer`·speed; a half-sine acceleration
 pulse of the projectile's width δ (No. 3: 38.6 µs; wider for No. 1 and 2) and peak
-π·Δv/(2δ); then the object flies off at constant speed. The hardware interlock chain of the
+π·Δv/(2δ); then the object flies off at constant speed. With [world.realism] enabled
+(`RealismParams`, drivers/sim/real_records.py) the pulse comes from the world's pulse source
+(`WorldParams.pulse_source`: the closed form above or the bar model) with a shot-to-shot scatter
+of the speed, and the records carry the effects of a real rig (bar motion after the pulse, the
+mount, a transverse drive, the interferometer chain), every one recorded in the shot's truth. The hardware interlock chain of the
 controller keeps the fire valve shut while the door is open or the e-stop is tripped.
 If the digitizer is armed at that moment, the next `capture(settings)` returns the
 two channels around the digitizer's own trigger (a real crossing of its level, with its slope,
@@ -72,9 +76,20 @@ from hopkinson.drivers.sim.accelerometer import (
 )
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput, pm_beat
 from hopkinson.drivers.sim.faults import FaultSet
-from hopkinson.drivers.sim.shock import G_M_S2, bipolar_m_s2, bipolar_velocity_m_s
+from hopkinson.drivers.sim.real_records import (
+    IdealPulseSource,
+    MountParams,
+    PulseShape,
+    PulseSource,
+    RealismParams,
+    ShotMotion,
+    mounted_input_m_s2,
+    shot_motion,
+)
+from hopkinson.drivers.sim.shock import G_M_S2, velocity_m_s
 
 PROJECTILES = (1, 2, 3)
+_NO_MOUNT = MountParams(enabled=False)  # the idealised world: the sensor as sine-calibrated
 # The digitizer's channel of each signal (World.capture's keys): the PM beat, the amplifier
 # output, and when configured the quadrature photodetector and the second sensor.
 CHANNELS = {"doppler": 1, "response": 2, "doppler_quadrature": 3, "response_2": 4}
@@ -120,6 +135,9 @@ class AccelerometerParams:
     nominal_excitation_v: float = 5.0
     shunt_equivalent_m_s2: float = 490_332.5  # 50 000 g
     bridge_offset_v: float = 0.002  # bridge unbalance at the amplifier input until auto-zero
+    # Amplitude non-linearity: the sensitivity changes by this fraction per m/s² of |a| (e.g.
+    # -1e-7: -1 % per 100 km/s²); applied to the acceleration the sensor's mass is driven by.
+    nonlinearity_per_m_s2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -199,6 +217,17 @@ class WorldParams:
     amplifier: AmplifierParams = field(default_factory=AmplifierParams)
     signals: SignalParams = field(default_factory=SignalParams)
     accelerometer_2: SecondSensorParams = field(default_factory=SecondSensorParams)
+    realism: RealismParams = field(default_factory=RealismParams)  # off: the idealised world
+
+    def pulse_source(self) -> PulseSource:
+        """What makes each shot's pulse: the closed form, or the bar model ([world.realism])."""
+        ideal = IdealPulseSource(self.launcher.speed_m_s_per_sqrt_bar, self.launcher.velocity_transfer,
+                                 tuple(self.launcher.pulse_width_s), self.signals.pulse_bipolar_ratio)
+        if self.realism.enabled and self.realism.pulse_source == "bar":
+            from hopkinson.drivers.sim.bar_source import bar_pulse_source
+
+            return bar_pulse_source(self.launcher)
+        return ideal
 
     def channels(self) -> dict[str, int]:
         """role -> the simulated digitizer's channel, for the signals this world makes."""
@@ -238,6 +267,9 @@ class _Shot:
     bridge_sensitivity_v_per_m_s2: float
     output_offset_v: float
     truth_2: AccelerometerTruth | None = None  # the second sensor's, when there is one
+    pulse: PulseShape | None = None  # the object's acceleration (the pulse source's)
+    speed_factor: float = 1.0  # the shot-to-shot scatter drawn for the projectile's speed
+    sine_modes: tuple[Mode, ...] | None = None  # the sensor's modes before mounting (realism's mount)
 
 
 class World:
@@ -270,6 +302,7 @@ class World:
         self.fire_pulses = 0
         self._inputs = {"door": p.door_closed, "clamped": p.fixture_clamped, "estop": p.estop_healthy}
         self._projectile = self.params.launcher.projectile
+        self._pulse_source = self.params.pulse_source()
         a = self.params.amplifier
         self.amplifier = AmplifierState(a.gain, a.excitation_v, a.lowpass_hz,
                                         bridge_offset_v=self.params.accelerometer.bridge_offset_v)
@@ -600,16 +633,23 @@ class World:
     # -- the shot -------------------------------------------------------------------------
     def _launch(self, armed: bool) -> dict[str, Any]:
         """Fire the projectile at the reservoir's pressure; return the shot's truth dict."""
-        launcher = self.params.launcher
         pressure = self._pressure_bar
-        speed = launcher.speed_m_s_per_sqrt_bar * math.sqrt(pressure)
-        delta_v = launcher.velocity_transfer * speed
-        width = launcher.pulse_width_s[self._projectile - 1]
-        peak = math.pi * delta_v / (2.0 * width)
+        realism = self.params.realism
+        factor = 1.0
+        if realism.enabled and realism.speed_scatter_rel > 0:  # its own generator: the noise stays as it was
+            draw = np.random.default_rng([self.params.seed, self.shots_fired + 1, 5]).standard_normal()
+            factor = max(0.5, 1.0 + realism.speed_scatter_rel * float(draw))
+        pulse = self._pulse_source.pulse(self._projectile, pressure, factor)
+        speed, delta_v, width, peak = pulse.speed_m_s, pulse.delta_v_m_s, pulse.width_s, pulse.peak_m_s2
         a = self.amplifier
         acc = self.params.accelerometer
+        modes = tuple(acc.modes)
+        sine_modes = None
+        if realism.enabled and realism.mount.enabled:  # base compliance: the mounted resonance is higher
+            sine_modes = modes
+            modes = tuple(Mode(m.natural_frequency_hz * realism.mount.frequency_ratio, m.damping_ratio) for m in modes)
         truth = AccelerometerTruth(
-            modes=tuple(acc.modes),
+            modes=modes,
             lowpass_hz=a.lowpass_hz,
             lowpass_order=self.params.amplifier.lowpass_order,
             sensitivity=1.0,
@@ -624,6 +664,7 @@ class World:
             bridge_sensitivity_v_per_m_s2=self._bridge_sensitivity(),
             output_offset_v=a.gain * (a.bridge_offset_v + shunt),
             truth_2=self.params.accelerometer_2.truth() if self.params.accelerometer_2.enabled else None,
+            pulse=pulse, speed_factor=factor, sine_modes=sine_modes,
         )
         shot_truth = self.last_shot_truth = _truth_dict(shot, self.params)
         # The static peak output latches the overload even when nobody records the shot;
@@ -657,7 +698,13 @@ class World:
         time_s = (np.arange(n + 2 * lead) - pre - lead) / fs
         rng = np.random.default_rng([self.params.seed, shot.number])
         sig = self.params.signals
-        velocity = bipolar_velocity_m_s(time_s, shot.width_s, shot.peak_m_s2, 0.0, sig.pulse_bipolar_ratio)
+        assert shot.pulse is not None
+        motion = self._motion(shot, time_s, fs)
+        if motion is None:
+            velocity = shot.pulse.velocity_m_s(time_s)
+        else:  # what the interferometer reports, integrated from rest and brought to the digitizer's grid
+            velocity = np.interp(time_s, motion.time_s, velocity_m_s(motion.measured_reference_m_s2,
+                                                                      float(motion.time_s[1] - motion.time_s[0])))
         beat_options: dict[str, Any] = dict(amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
                                             fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
         channels: dict[int, np.ndarray] = {}
@@ -667,9 +714,15 @@ class World:
                 quadrature_rng=np.random.default_rng([self.params.seed, shot.number, 1]), **beat_options)
         else:
             channels[1] = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders), **beat_options)
-        channels[2] = self._response_v(shot, time_s, fs, rng)
+        if motion is not None:  # the demodulator loses the beat's amplitude while the object jerks away
+            gain = np.interp(time_s, motion.time_s, motion.beat_gain)
+            channels[1] = sig.pm_dc_offset_v + (channels[1] - sig.pm_dc_offset_v) * gain
+            if 3 in channels:
+                channels[3] = sig.quadrature_offset_v + (channels[3] - sig.quadrature_offset_v) * gain
+        channels[2] = self._response_v(shot, time_s, fs, rng, motion)
         if shot.truth_2 is not None:
-            channels[4] = self._response_2_v(shot, time_s, fs, np.random.default_rng([self.params.seed, shot.number, 2]))
+            channels[4] = self._response_2_v(shot, time_s, fs, np.random.default_rng([self.params.seed, shot.number, 2]),
+                                             motion)
         first = 0
         if callable(locate):
             k = locate(channels, pre, pre + 2 * lead)
@@ -688,28 +741,58 @@ class World:
                     "triggered": True, "sample_rate_hz": fs, "record_length": n, "pre_trigger_samples": pre,
                     "pulse_start_index": pre + lead - first,
                 }
-                self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot, sig.pulse_bipolar_ratio)
+                if motion is None:
+                    self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot.pulse.acceleration_m_s2)
+                else:
+                    self.last_shot_truth["reference"] = _reference_dict(
+                        time_s, np.interp(time_s, motion.time_s, velocity_m_s(motion.spot_m_s2, 1.0 / self._rate(fs))),
+                        lambda t: np.interp(t, motion.time_s, motion.spot_m_s2))
+                    self.last_shot_truth["realism"]["drawn"] = motion.drawn
             if np.any(np.abs(response) >= self.params.amplifier.output_limit_v):
                 self.amplifier.overload_latched = True
         return channels
 
-    def _response_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator) -> np.ndarray:
+    def _rate(self, fs: float) -> float:
+        """The internal rate of the response model and of the realistic motions."""
+        return min(fs, self.params.signals.response_rate_hz)
+
+    def _internal_grid(self, time_s: np.ndarray, fs: float) -> np.ndarray:
+        rate = self._rate(fs)
+        n_int = int(np.ceil((time_s[-1] - time_s[0]) * rate)) + 2
+        return time_s[0] + np.arange(n_int) / rate
+
+    def _motion(self, shot: _Shot, time_s: np.ndarray, fs: float) -> ShotMotion | None:
+        """The shot's realistic motions on the internal grid (None in the idealised world)."""
+        realism = self.params.realism
+        if not realism.enabled:
+            return None
+        assert shot.pulse is not None
+        sig = self.params.signals
+        wavenumber = 2.0 * math.pi * (sig.orders[0] - sig.orders[1]) / sig.grating_pitch_m
+        return shot_motion(self._internal_grid(time_s, fs), shot.pulse, realism,
+                           np.random.default_rng([self.params.seed, shot.number, 3]), abs(wavenumber))
+
+    def _response_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator,
+                    motion: ShotMotion | None = None) -> np.ndarray:
         """Amplifier output (V) at the digitizer's times (`_sensor_output_v` of the first sensor)."""
         sig = self.params.signals
         return self._sensor_output_v(shot, shot.truth, shot.gain * shot.bridge_sensitivity_v_per_m_s2, time_s, fs,
                                      rng, offset_v=shot.output_offset_v, skew_s=sig.channel_skew_s,
-                                     drift_v_per_s=sig.response_drift_v_per_s)
+                                     drift_v_per_s=sig.response_drift_v_per_s, motion=motion,
+                                     nonlinearity_per_m_s2=self.params.accelerometer.nonlinearity_per_m_s2)
 
-    def _response_2_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator) -> np.ndarray:
+    def _response_2_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator,
+                      motion: ShotMotion | None = None) -> np.ndarray:
         """The second sensor's conditioner output (V): its own model, gain and sensitivity."""
         s2 = self.params.accelerometer_2
         assert shot.truth_2 is not None
         return self._sensor_output_v(shot, shot.truth_2, s2.conditioner_gain * s2.sensitivity_v_per_m_s2, time_s,
-                                     fs, rng)
+                                     fs, rng, motion=motion)
 
     def _sensor_output_v(self, shot: _Shot, truth: AccelerometerTruth, scale_v_per_m_s2: float,
                          time_s: np.ndarray, fs: float, rng: np.random.Generator, *, offset_v: float = 0.0,
-                         skew_s: float = 0.0, drift_v_per_s: float = 0.0) -> np.ndarray:
+                         skew_s: float = 0.0, drift_v_per_s: float = 0.0, motion: ShotMotion | None = None,
+                         nonlinearity_per_m_s2: float = 0.0) -> np.ndarray:
         """A sensor's conditioned output (V) at the digitizer's times: `truth` applied to the
         shot's acceleration, times `scale_v_per_m_s2`, with the noise of [world.signals].
 
@@ -720,11 +803,21 @@ class World:
         ~1e-4 of the signal.
         """
         sig = self.params.signals
-        rate = min(fs, sig.response_rate_hz)
-        n_int = int(np.ceil((time_s[-1] - time_s[0]) * rate)) + 2
-        t_int = time_s[0] + np.arange(n_int) / rate
-        accel = bipolar_m_s2(t_int, shot.width_s, shot.peak_m_s2, 0.0, sig.pulse_bipolar_ratio)
-        clean = truth.respond(accel, 1.0 / rate) * scale_v_per_m_s2
+        rate = self._rate(fs)
+        assert shot.pulse is not None
+        if motion is None:
+            t_int = self._internal_grid(time_s, fs)
+            accel = mounted_input_m_s2(shot.pulse.acceleration_m_s2(t_int), _NO_MOUNT, nonlinearity_per_m_s2)
+            clean = truth.respond(accel, 1.0 / rate)
+        else:  # the base's motion through the mount, and the transverse path into the same mode
+            t_int = motion.time_s
+            accel = mounted_input_m_s2(motion.base_m_s2, self.params.realism.mount, nonlinearity_per_m_s2)
+            clean = truth.respond(accel, 1.0 / rate)
+            transverse = self.params.realism.transverse
+            if transverse.enabled and transverse.sensitivity_rel:
+                clean = clean + transverse.sensitivity_rel * (truth.respond(motion.lateral_m_s2, 1.0 / rate)
+                                                              - truth.zero_shift)
+        clean = clean * scale_v_per_m_s2
         if sig.response_coloured_snr_db > 0:
             clean = clean + coloured_noise(clean, sig.response_coloured_snr_db, rng, sig.response_coloured_pole)
         # A skew shifts the response channel's sampling instants against the Doppler channel's.
@@ -744,6 +837,16 @@ def _truth_dict(shot: _Shot, params: WorldParams) -> dict[str, Any]:
         out["quadrature"] = {"offset_1_v": signals.pm_dc_offset_v, "offset_2_v": q.offset_v,
                              "amplitude_v": signals.pm_amplitude_v, "amplitude_ratio": 1.0 / q.gain_ratio,
                              "phase_error_rad": q.phase_error_rad}
+    out["accelerometer"]["nonlinearity_per_m_s2"] = params.accelerometer.nonlinearity_per_m_s2
+    assert shot.pulse is not None
+    out["pulse_source"] = "ideal" if not params.realism.enabled else params.realism.pulse_source
+    out["pulse"]["shape"] = shot.pulse.shape
+    if params.realism.enabled:  # every effect's switch and size, and (at capture) what was drawn
+        out["realism"] = {**params.realism.to_dict(), "speed_factor": shot.speed_factor}
+        if shot.sine_modes is not None:
+            out["accelerometer_sine_calibrated"] = {
+                "modes": [{"natural_frequency_hz": m.natural_frequency_hz, "damping_ratio": m.damping_ratio}
+                          for m in shot.sine_modes]}
     if shot.truth_2 is not None:
         s2 = params.accelerometer_2
         out["accelerometer_2"] = {**_model_dict(shot.truth_2), "sensitivity_v_per_m_s2": s2.sensitivity_v_per_m_s2,
@@ -787,7 +890,7 @@ def _shot_truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
     }
 
 
-def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot, ratio: float = 0.0
+def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, acceleration: Callable[[np.ndarray], np.ndarray]
                     ) -> dict[str, list[float]]:
     """The true reference decimated to at most ~1 MS/s (JSON-sized)."""
     fs = 1.0 / (time_s[1] - time_s[0]) if time_s.size > 1 else 1.0
@@ -796,7 +899,7 @@ def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, shot: _Shot, ratio
     return {
         "time_s": t.tolist(),
         "velocity_m_s": velocity[::step].tolist(),
-        "acceleration_m_s2": bipolar_m_s2(t, shot.width_s, shot.peak_m_s2, 0.0, ratio).tolist(),
+        "acceleration_m_s2": acceleration(t).tolist(),
     }
 
 
@@ -811,3 +914,33 @@ def accelerometer_truth(truth: dict[str, Any], key: str = "accelerometer") -> Ac
         sensitivity=acc["sensitivity"],
         zero_shift=acc["zero_shift"],
     )
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    """What a digitizer asks `World.capture` for (the pulse starts `pre_trigger_samples` in)."""
+
+    sample_rate_hz: float = 100e6
+    record_length: int = 100_000
+    pre_trigger_samples: int = 10_000
+
+
+def simulate_shot(params: WorldParams, pressure_bar: float, projectile: int = 3,
+                  settings: CaptureSettings | None = None, shot_number: int = 1
+                  ) -> tuple[dict[int, np.ndarray], dict[str, Any]]:
+    """One shot of a world of `params` without any server: charged to `pressure_bar`, the
+    amplifier zeroed, fired and captured; the channels (by number) and the shot's truth. Shot
+    `shot_number` of the world (its noise is drawn from (seed, shot_number))."""
+    clock = [0.0]
+    world = World(params, clock=lambda: clock[0])
+    world.shots_fired = shot_number - 1
+    world.load_projectile(projectile)
+    world.set_pressure_setpoint_bar(pressure_bar)
+    world.set_fill_valve(True)
+    clock[0] += 2.0 * pressure_bar / params.pneumatics.fill_rate_bar_s / params.time_scale + 1.0
+    world.set_fill_valve(False)
+    world.amp_auto_zero()
+    world.set_fire_valve(True)
+    channels = world.capture(settings or CaptureSettings())
+    assert channels is not None and world.last_shot_truth is not None
+    return channels, dict(world.last_shot_truth)

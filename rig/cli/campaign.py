@@ -224,8 +224,10 @@ class ProgressPrinter:
         prefix = current.prefix if current is not None else "campaign:"
         line = None
         if isinstance(event, CampaignShotStarted):
-            line = f"[{event.index}/{event.total}] {event.shot_id} START {event.pressure_bar:g} bar, " \
+            line = f"[{event.index}/{event.total}] {event.shot_id} START {event.pressure_bar:.4g} bar, " \
                    f"projectile No. {event.projectile}"
+            if event.target_peak_m_s2 is not None:
+                line += f" (target {event.target_peak_m_s2 / 9.80665:.5g} g)"
         elif isinstance(event, CampaignShotEnded):
             line = f"[{event.index}/{event.total}] {event.shot_id} {event.message}"
         elif isinstance(event, CampaignFinished):

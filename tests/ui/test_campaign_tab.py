@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hopkinson.analysis.key_figures import KeyFigures
+from hopkinson.analysis.linearity import fit_linearity
 from hopkinson.rig.events import CampaignShotStarted, Reading
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.shotfile import read_shot
@@ -123,6 +125,14 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     with Journal.open(run) as journal:
         assert [s.fire_count for s in journal.statuses()] == [1, 1, 1]
     assert not tab.resume_button.isEnabled()  # nothing left to do
+    # amplitude linearity over the plan's two levels (issue 19): the line through the stored shots
+    figures = [KeyFigures.from_results(read_shot(run.shot_path(sid), load_raw=False).results)
+               for sid in ("s001-r1", "s001-r2", "s002-r1")]
+    fit = fit_linearity([kf.peak_acceleration_m_s2.value for kf in figures],
+                        [kf.shock_sensitivity.value for kf in figures], [kf.shock_sensitivity.u for kf in figures])
+    assert tab.linearity_label.text().endswith(f"slope {fit.text()}") and "n = 3" in tab.linearity_label.text()
+    tips = tab.linearity_label.toolTip().splitlines()
+    assert [t.split(":")[0] for t in tips] == ["s001-r1", "s001-r2", "s002-r1"] and "% from the line" in tips[0]
     save_shot(w, artifacts_dir / "panel-campaign.png")
 
 

@@ -1,0 +1,142 @@
+"""Automatic level control: the reservoir pressure for a campaign entry's target peak (issue 19).
+
+A campaign entry may give `peak_m_s2` or `peak_g` instead of `pressure_bar`. Each of its shots is
+fired at a pressure chosen from what is known then:
+
+1. the launcher model's pressure → peak for the projectile (`model_peak_m_s2`: speed k·√p, the
+   object's Δv = transfer·speed, a pulse of the projectile's width: peak ∝ √p), scaled by
+2. a correction factor r = measured peak ÷ model peak, the geometric mean over
+   - the shots of this entry already fired and analysed, when there are any (the latest
+     `ENTRY_SHOTS_USED`), else
+   - this rig's own history for that projectile (`LEVEL_HISTORY_NAME` beside the run folders:
+     one JSON line per analysed shot, every campaign's; the latest `HISTORY_SHOTS_USED`), else 1;
+
+so p = model_pressure(target ÷ r). The pressure is never above the rig's maximum (nor below its
+minimum): a target the model says needs more is refused at the plan's check, before the first
+shot; a correction that asks for more later is held at the maximum, and the shot says so.
+Every shot records its target, the pressure chosen and how (`LevelChoice.to_dict`, in the shot
+file's settings and the campaign journal).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from hopkinson.fileio import append_json_line
+
+G_M_S2 = 9.80665
+LEVEL_HISTORY_NAME = "level-history.jsonl"
+ENTRY_SHOTS_USED = 3
+HISTORY_SHOTS_USED = 10
+
+# The launcher model (config/sim.toml [world.launcher] defaults, the paper's rig): speed
+# 10 m/s per √bar, 85 % of it passed to the object, pulse widths of projectiles No. 1-3.
+SPEED_M_S_PER_SQRT_BAR = 10.0
+VELOCITY_TRANSFER = 0.85
+PULSE_WIDTH_S = {1: 120e-6, 2: 75e-6, 3: 38.6e-6}
+
+
+def model_peak_m_s2(projectile: int, pressure_bar: float) -> float:
+    """The launcher model's peak: π·Δv/(2δ), Δv = transfer·k·√p (a half-sine of width δ)."""
+    delta_v = VELOCITY_TRANSFER * SPEED_M_S_PER_SQRT_BAR * math.sqrt(max(pressure_bar, 0.0))
+    return math.pi * delta_v / (2.0 * PULSE_WIDTH_S[projectile])
+
+
+def model_pressure_bar(projectile: int, peak_m_s2: float) -> float:
+    """The launcher model's pressure for a peak (the inverse of `model_peak_m_s2`)."""
+    return (abs(peak_m_s2) / model_peak_m_s2(projectile, 1.0)) ** 2
+
+
+@dataclass(frozen=True)
+class LevelPoint:
+    """One analysed shot: the pressure it was fired at and the peak the reference measured."""
+
+    projectile: int
+    pressure_bar: float
+    peak_m_s2: float
+
+    def ratio(self) -> float:
+        """Measured ÷ model peak at this pressure."""
+        return abs(self.peak_m_s2) / model_peak_m_s2(self.projectile, self.pressure_bar)
+
+
+@dataclass(frozen=True)
+class LevelChoice:
+    """The pressure chosen for a target peak, and what it was chosen from."""
+
+    target_peak_m_s2: float
+    pressure_bar: float
+    predicted_peak_m_s2: float  # at `pressure_bar`, after the correction
+    correction: float  # r: measured ÷ model peak
+    basis: str  # "model" | "rig history" | "this entry"
+    points_used: int
+    held_at_limit: bool = False  # the correction asked for more than the rig's maximum (or less than its minimum)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def choose_pressure(target_peak_m_s2: float, projectile: int, history: Iterable[LevelPoint] = (),
+                    entry_shots: Sequence[LevelPoint] = (), *, min_pressure_bar: float = 0.0,
+                    max_pressure_bar: float = math.inf) -> LevelChoice:
+    """The pressure for `target_peak_m_s2` (module docstring): entry shots first, then the rig's
+    history of this projectile, then the model alone; held within the rig's limits."""
+    used: list[LevelPoint] = [p for p in entry_shots if p.projectile == projectile and _usable(p)][-ENTRY_SHOTS_USED:]
+    basis = "this entry"
+    if not used:
+        used = [p for p in history if p.projectile == projectile and _usable(p)][-HISTORY_SHOTS_USED:]
+        basis = "rig history"
+    if used:
+        correction = math.exp(sum(math.log(p.ratio()) for p in used) / len(used))
+    else:
+        correction, basis = 1.0, "model"
+    wanted = model_pressure_bar(projectile, target_peak_m_s2 / correction)
+    pressure = min(max(wanted, min_pressure_bar), max_pressure_bar)
+    return LevelChoice(float(target_peak_m_s2), float(pressure), correction * model_peak_m_s2(projectile, pressure),
+                       float(correction), basis, len(used), held_at_limit=pressure != wanted)
+
+
+def needed_pressure_bar(target_peak_m_s2: float, projectile: int, history: Iterable[LevelPoint] = ()) -> LevelChoice:
+    """The first shot's choice without any limit: what the plan's check compares with the rig's maximum."""
+    return choose_pressure(target_peak_m_s2, projectile, history)
+
+
+def _usable(p: LevelPoint) -> bool:
+    return p.pressure_bar > 0 and math.isfinite(p.peak_m_s2) and p.peak_m_s2 != 0
+
+
+# -- the rig's history ----------------------------------------------------------------------------
+def history_path(runs_dir: str | Path) -> Path:
+    return Path(runs_dir) / LEVEL_HISTORY_NAME
+
+
+def read_history(path: str | Path) -> list[LevelPoint]:
+    """The rig's pressure → peak history (a missing file: none; a damaged line is skipped)."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    points = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            d = json.loads(line)
+            points.append(LevelPoint(int(d["projectile"]), float(d["pressure_bar"]), float(d["peak_m_s2"])))
+        except (ValueError, KeyError, TypeError):
+            continue
+    return points
+
+
+def append_history(path: str | Path, point: LevelPoint, **tags: Any) -> None:
+    """Append one analysed shot to the rig's history (one fsynced JSON line)."""
+    append_json_line(path, {**asdict(point), **tags})
+
+
+def measured_peak_m_s2(results: dict[str, Any] | None) -> float | None:
+    """The reference's peak acceleration of an analysis' results (None when there is none)."""
+    reduction = (results or {}).get("reduction") or {}
+    value = reduction.get("peak_acceleration_m_s2")
+    return float(value) if isinstance(value, int | float) and math.isfinite(value) else None
