@@ -75,6 +75,9 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     assert tab.last_outcome.exit_code == 3 and "paused" in tab.last_outcome.message
     assert column(tab, 4) == ["ANALYSED", "PLANNED", "PLANNED"]
     assert panel.world.shots_fired == 1
+    # the worker's "shot ended" and the lamps' state reach the window as their own events, maybe just
+    # after `ended` on a loaded machine: wait for them (the buttons must still come right)
+    qtbot.waitUntil(lambda: tab.resume_button.isEnabled() and w.arm_button.isEnabled(), timeout=5000)
     assert tab.resume_button.isEnabled() and not tab.run_button.isEnabled() and w.arm_button.isEnabled()
 
     # Resume, and Abort the second shot while it charges: it goes SAFE, the campaign stops
