@@ -188,7 +188,7 @@ class Identification:
     warnings: list[str]
     converged: bool
     iterations: int
-    order_selection: str  # "knee" (chosen by the order test) or "asked"
+    order_selection: str  # "order_test" (chosen by the order test) or "asked" (files before: "knee")
     knee_tolerance: float  # relative gain in V a higher order must also bring
     preprocessing: dict[str, Any] = field(default_factory=dict)
     supported_band_hz: tuple[float, float] | None = None  # band the excitation supports
@@ -545,7 +545,7 @@ def identify(
         return fits[n]
 
     if order is None:
-        chosen, selection = chosen_auto, "knee"
+        chosen, selection = chosen_auto, "order_test"
         if not _acceptable(polished(chosen), data.bins):
             fallback, dropped = choose_stable_order(
                 costs, parameters, data.bins, changes, lambda n: _acceptable(polished(n), data.bins), significance)

@@ -20,7 +20,8 @@ if TYPE_CHECKING:
 LEVELS = ("5", "10")  # FBSD band levels in per cent (keys of fbsd_hz)
 # How the order was chosen, in words (results' order_selection: "knee" is the order test's
 # stored name, kept for the files' sake)
-ORDER_SELECTION_TEXT = {"knee": "chosen by the order test", "asked": "as asked"}
+ORDER_SELECTION_TEXT = {"order_test": "chosen by the order test", "asked": "as asked",
+                        "knee": "chosen by the order test"}  # "knee": the name results stored before
 
 
 @dataclass(frozen=True)
@@ -130,7 +131,7 @@ class KeyFigures:
     @property
     def order_how(self) -> str:
         """How the order was chosen, in words."""
-        selection = self.order_selection or "knee"
+        selection = self.order_selection or "order_test"
         return ORDER_SELECTION_TEXT.get(selection, selection)
 
     @property

@@ -324,7 +324,7 @@ def _reduce_sensor(reference: ReferencePhase, response: np.ndarray, channel: Sen
     delay_samples = estimate_delay_samples(acceleration, response_out, max_lag)
     if align:
         response_out = shift_samples(response_out, -delay_samples)
-    record = Record(at_rate.sample_interval_s, acceleration, response_out, at_rate.start_time_s)
+    record = Record(at_rate.sample_interval_s, acceleration, response_out, at_rate.start_time_s, unit)
 
     pulse = pulse_width(acceleration, record.sample_interval_s, record.start_time_s)
     shock_sensitivity = peak_estimate(response_out)[0] / pulse.peak_m_s2

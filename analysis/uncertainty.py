@@ -414,7 +414,7 @@ def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitt
     n_hat = ident.order
     count = options.draws
     candidates = [m for m in candidates_around(n_hat, ctx.fits) if math.isfinite(ctx.fits[m].cost)]
-    if ident.order_selection != "knee" or len(candidates) < 2:
+    if ident.order_selection not in ("order_test", "knee") or len(candidates) < 2:
         return {"per_draw": [n_hat] * count, "fractions": {}, "decided": 0}
     bootstrap = replace(draws, seed=draws.seed + 1, skew_sd=0.0,
                         centre_y=predicted_bins(ctx.fits[n_hat], ctx.spectral, draws.omega, ctx.u_bins))

@@ -26,7 +26,7 @@ Example (config/campaigns/example.toml is the documented one)::
     projectile = 3                    # 1, 2 or 3 (No. 3 gives the shortest pulse)
     [defaults.analysis]
     max_order = 12
-    order = 4                         # optional: a fixed order instead of the knee rule
+    order = 4                         # optional: a fixed order instead of the order test's choice
     sample_rate_hz = 1.0e6
     dcm_ratio = "auto"                # response-time ratio r of the DCM; "auto" (default): r that
                                       # widens the ±5 % band 3× (analysis.dcm_design)
@@ -67,10 +67,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from hopkinson.analysis.params import MAX_ORDER_LIMIT  # one range for a plan and the command line
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
 
-MAX_ORDER_LIMIT = 40
 MIN_DRAWS, MAX_DRAWS = 50, 1_000_000  # as analysis.params checks them
 LATER_OPTIONS = {"uncertainty": True, "draws": None}  # analysis options added after plans were in use
 MAX_TOTAL_SHOTS = 10_000  # more is a typing error, not a campaign (a shot takes minutes)

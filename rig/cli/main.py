@@ -15,8 +15,10 @@ Ctrl-C with 130.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -164,6 +166,10 @@ def main(argv: list[str] | None = None) -> int:
             return int(args.func(args) or 0)
     except known as exc:
         return fail(str(exc), getattr(exc, "exit_code", 2))
+    except BrokenPipeError:  # the reader went away (`| head`): quietly, as a pipe writer does
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 128 + 13  # SIGPIPE
     except OSError as exc:  # a missing or unreadable input, an unwritable output, a folder for a file
         return fail(os_error_text(exc))
     except Interrupted as exc:

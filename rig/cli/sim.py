@@ -231,7 +231,14 @@ def format_status(report: dict[str, Any]) -> str:
             lowpass = "off" if entry["lowpass_hz"] == 0 else f"{entry['lowpass_hz'] / 1e3:g} kHz"
             lines.append(f"  gain {entry['gain']:g}, excitation {entry['excitation_v']:g} V, low-pass {lowpass} "
                          f"({entry['source']}), {'OVERLOAD' if entry['overloaded'] else 'no overload'}")
-    lines.append("all instruments answered" if report["ok"] else "some instruments did not answer")
+    skipped = [key for key in ("valve_controller", "digitizer", "amplifier")
+               if isinstance(report.get(key), dict) and report[key].get("skipped")]
+    if not report["ok"]:
+        lines.append("some instruments did not answer")
+    elif skipped:
+        lines.append(f"the instruments asked answered; not asked: {', '.join(k.replace('_', ' ') for k in skipped)}")
+    else:
+        lines.append("all instruments answered")
     return "\n".join(lines)
 
 

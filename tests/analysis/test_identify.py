@@ -163,7 +163,7 @@ def known_systems() -> dict[tuple[str, str], tuple[AccelerometerTruth, Record, I
 def test_known_system_recovered(known_systems, name: str, noise: str) -> None:
     truth, _, result = known_systems[(name, noise)]
     assert result.order == truth.order  # every mode is excited: the true order is chosen
-    assert result.order_selection == "knee"
+    assert result.order_selection == "order_test"
     assert result.converged
     assert_matches_truth(result, truth, noise)
     assert result.warnings == []

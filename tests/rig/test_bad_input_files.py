@@ -84,3 +84,21 @@ def test_each_bad_input_is_one_line_and_exit_2(bad, capsys, argv, words) -> None
 
 def test_a_truncated_npz_is_not_a_zip_the_reader_can_use(bad) -> None:
     assert not zipfile.is_zipfile(bad["truncated"])  # the fixture's damage is real
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(bad) -> None:
+    # issue 18: `hopkinson … | head` printed "hopkinson: error: Broken pipe"
+    import subprocess
+    import sys
+
+    f = np.linspace(100.0, 20_000.0, 4000)
+    sine = bad["tmp"] / "long-sine.csv"
+    np.savetxt(sine, np.column_stack([f, np.ones_like(f), np.zeros_like(f)]), delimiter=",",
+               header="frequency_hz,magnitude,phase_deg", comments="")
+    model = bad["tmp"] / "model.json"
+    proc = subprocess.Popen([sys.executable, "-m", "hopkinson", "compare-sine", str(model), str(sine)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout.readline()  # the first line, then the reader goes away
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 141 and err == b"", err  # 128 + SIGPIPE, nothing on stderr

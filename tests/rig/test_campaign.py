@@ -138,7 +138,7 @@ def test_every_planned_shot_is_fired_once_journaled_and_analysed(tmp_path: Path,
     fixed = read_shot(run.shot_path("s002-r1"), load_raw=False).results["identification"]
     assert (fixed["order"], fixed["order_selection"]) == (2, "asked")
     knee = read_shot(run.shot_path("s001-r1"), load_raw=False).results["identification"]
-    assert knee["order_selection"] == "knee"
+    assert knee["order_selection"] == "order_test"  # "knee" before issue 18: the order test chose it
     # The identified main resonance is the simulated truth's (the shot file holds both).
     shot = read_shot(run.shot_path("s001-r1"), load_raw=False)
     truth = shot.meta.simulated_truth["accelerometer"]["modes"][0]

@@ -54,6 +54,7 @@ def test_reduce_npz_writes_the_record_and_json(tmp_path: Path, simulated, capsys
     assert result["shock_sensitivity"] == pytest.approx(1.0, rel=5e-3)
     assert result["response_unit"] == "m/s^2"
     record = read_record(out)
+    assert record.response_unit == "m/s^2"  # the written record states its response's unit (issue 18)
     assert record.sample_rate_hz == pytest.approx(1e6)
     assert record.time_s[np.argmax(record.reference)] == pytest.approx(19.3e-6, abs=1.5e-6)  # trigger = 0
     # The peak is read between the samples (a polynomial over its lobe), not the largest sample:

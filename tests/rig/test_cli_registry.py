@@ -11,3 +11,24 @@ def test_each_command_is_registered_by_its_own_module() -> None:
     for command, module in (("probe", "probe"), ("status", "sim"), ("sim", "sim")):
         args = parser.parse_args([command])
         assert args.func.__module__ == f"hopkinson.rig.cli.{module}", command
+
+
+def test_the_commands_without_json_are_the_ones_the_readme_names() -> None:
+    # issue 18: the README said every command takes --json; these do not (they report no result)
+    import argparse
+    from pathlib import Path
+
+    without: list[str] = []
+
+    def walk(parser: argparse.ArgumentParser, words: list[str]) -> None:
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if subs:
+            for name, sub in subs[0].choices.items():
+                walk(sub, [*words, name])
+        elif not any("--json" in a.option_strings for a in parser._actions):
+            without.append(" ".join(words))
+
+    walk(build_parser(), [])
+    assert sorted(without) == ["campaign decide", "demo", "lab upgrade", "panel", "sim"]
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    assert "all but `demo`, `sim`, `panel`, `campaign decide` and `lab upgrade`" in readme

@@ -197,6 +197,8 @@ def test_status_while_the_rig_is_held_reads_only_the_shared_controller(
     assert "skipped" in report["digitizer"]
     assert served == 0  # the held serial line was never touched
     assert f"the rig is held by pid {os.getpid()} (hopkinson shot --sim" in text
+    # issue 18: it said "all instruments answered" though two were not asked
+    assert "all instruments answered" not in text and "not asked: digitizer, amplifier" in text
 
 
 def test_probe_reads_every_signal_and_says_what_to_fix(
