@@ -59,17 +59,32 @@ def controlled_rig(config: RigConfig, command: str | None = None,
                    simulated_truth: Callable[[], dict[str, Any] | None] | None = None,
                    heartbeat: bool = True) -> Iterator[Control]:
     """Lock, connect, start the heartbeat (module docstring). RigLockError (exit 2) when the
-    rig is held; InstrumentError when an instrument cannot be reached or the heartbeat cannot
-    be started."""
-    with rig_lock(config, command) as lock, open_instruments(config, simulated_truth) as instruments:
-        if heartbeat:
-            instruments.valves.start_heartbeat()
+    rig is held; InstrumentUnreachable (exit 2, one line with the fix) when an instrument
+    cannot be reached or the heartbeat cannot be started."""
+    with contextlib.ExitStack() as stack:
+        lock = stack.enter_context(rig_lock(config, command))
+        with _reached():  # only the session's set-up: a failure in the shot is the sequencer's to tell
+            instruments = stack.enter_context(open_instruments(config, simulated_truth))
+            if heartbeat:
+                instruments.valves.start_heartbeat()
         try:
             yield Control(instruments, lock)
         finally:
             if heartbeat:
                 with contextlib.suppress(Exception):  # closing stops it too; never mask the real error
                     instruments.valves.stop_heartbeat()
+
+
+@contextlib.contextmanager
+def _reached() -> Iterator[None]:
+    """An instrument failing while the session is set up: one clear line, exit 2 (nothing moved)."""
+    from hopkinson.drivers.errors import InstrumentError
+    from hopkinson.rig.errors import unreachable
+
+    try:
+        yield
+    except InstrumentError as exc:
+        raise unreachable(exc) from None
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,20 @@ def instrument_hint(exc: BaseException) -> str:
     return ""
 
 
+class InstrumentUnreachable(ConfigError):
+    """An instrument that could not be reached or set up before anything moved (exit 2)."""
+
+
+def unreachable(exc: InstrumentError) -> InstrumentUnreachable:
+    """One line for an instrument that failed before the shot: the instrument and the step,
+    the gist of the reason (the first clause: a library's long text cut), that nothing moved,
+    and the fix by the cause."""
+    gist = exc.problem.split(":")[0].strip() or exc.problem[:80]
+    fix = instrument_hint(exc) or HINT_INSTRUMENT
+    return InstrumentUnreachable(f"{exc.instrument}: could not be reached before the shot ('{exc.command}': "
+                                 f"{gist}); nothing was moved. Fix: {fix} `hopkinson probe` shows what answers")
+
+
 def with_hint(message: str, hint: str) -> str:
     """A message and its hint as the operator reads them ("text\\n→ hint")."""
     return f"{message}\n→ {hint}" if hint else message

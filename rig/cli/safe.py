@@ -65,6 +65,7 @@ def run_safe_command(args: argparse.Namespace) -> int:
 
 
 def _run_safe(args: argparse.Namespace) -> int:
+    from hopkinson.drivers.errors import InstrumentError
     from hopkinson.rig.cli.output import EventPrinter
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.events import EventBus
@@ -99,7 +100,16 @@ def _run_safe(args: argparse.Namespace) -> int:
                              "which is no longer running\n")
         valves = make_instrument(config, "valve_controller")
         stack.callback(valves.close)
-        valves.connect()
+        try:
+            valves.connect()
+        except InstrumentError as exc:  # nothing confirmed the safe state: exit 3, never "bad input"
+            problem = (f"the valve controller cannot be reached ({exc}): check the rig by hand; the controller's "
+                       "link watchdog vents it when no heartbeat comes")
+            if args.json:
+                emit_json({"confirmed": False, "problem": problem, "reservoir_pressure_bar": None,
+                           "elapsed_s": 0.0, "valves": {}})
+            sys.stderr.write(f"hopkinson: error: SAFE NOT CONFIRMED: {problem}\n")
+            return EXIT_ABORTED
         try:
             valves.start_heartbeat()
         except Exception as exc:  # noqa: BLE001 - making safe must not depend on the watchdog

@@ -84,3 +84,20 @@ def test_stop_holder_asks_the_running_shot_to_go_safe_then_confirms(sim, tmp_pat
     assert shot.returncode == 3 and f"interrupted ({signal.SIGTERM.name})" in shot_err
     assert session.world.shots_fired == 0
     assert session.world.coils() == {"fire": False, "fill": False, "vent": True, "pump": False}
+
+
+def test_safe_with_no_controller_listening_is_not_confirmed_exit_3(tmp_path: Path, capsys) -> None:
+    # issue 18: it exited 2 ("bad input"), though nothing had confirmed the rig safe
+    import socket
+
+    text = (Path(__file__).resolve().parents[2] / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    with socket.socket() as closed:  # bound, not listening: connection refused
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+        config = tmp_path / "rig.toml"
+        config.write_text(text.replace("port = 5020", f"port = {port}", 1), encoding="utf-8")
+        assert f"port = {port}" in config.read_text()
+        assert main(["safe", "--config", str(config)]) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("hopkinson: error: SAFE NOT CONFIRMED: the valve controller "
+                                                   "cannot be reached") and "check the rig by hand" in err

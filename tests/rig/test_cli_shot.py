@@ -96,6 +96,17 @@ def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
     assert re.search(r"^results: .*f_n 2\d\.\d+ ± 0\.\d+ kHz, zeta 0\.0\d+ ± 0\.\d+, FBSD ±5 % \d\.\d+ ± 0\.\d+ kHz", out, flags=re.M)
 
 
+def test_a_controller_unreachable_at_session_start_is_named_with_a_fix(configs, capsys) -> None:
+    # issue 18: exit 2 as "bad input" with pymodbus's own text ("... unbounded read bytes ...")
+    assert main(_args(configs, "--yes", "--sim-fault", "modbus-disconnect")) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and "unbounded" not in err
+    assert "valve controller" in err and "could not be reached before the shot" in err
+    assert "nothing was moved" in err and "Fix: " in err and "hopkinson probe" in err
+    state = _state(configs)
+    assert state["shots_fired"] == 0 and state["reservoir_pressure_bar"] <= 0.05
+
+
 def test_without_yes_and_without_a_terminal_nothing_moves(configs, capsys) -> None:
     # issue 18: it used to evacuate and charge to the set pressure, then abort at ARM for want of
     # a confirmation nobody could give. Refused before the simulator even starts, exit 2.
@@ -127,6 +138,7 @@ def test_sim_fault_aborts_with_one_line_and_the_state_file_is_safe(configs, caps
     (("--pressure-bar", "50"), "pressure_bar: 50 bar is outside the rig's limits"),
     (("--sim-fault", "gremlins"), "unknown simulator fault 'gremlins'"),
     (("--max-order", "0"), "max_order"),
+    (("--sample-rate", "0"), "sample_rate_hz: a finite number (above 0"),  # fell back to the default before
 ])
 def test_bad_input_exits_2_with_one_line(configs, capsys, extra, message) -> None:
     rc = main(_args(configs, "--yes", *extra))
