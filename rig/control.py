@@ -63,7 +63,7 @@ def controlled_rig(config: RigConfig, command: str | None = None,
     cannot be reached or the heartbeat cannot be started."""
     with contextlib.ExitStack() as stack:
         lock = stack.enter_context(rig_lock(config, command))
-        with _reached():  # only the session's set-up: a failure in the shot is the sequencer's to tell
+        with _reached(config):  # only the session's set-up: a failure in the shot is the sequencer's to tell
             instruments = stack.enter_context(open_instruments(config, simulated_truth))
             if heartbeat:
                 instruments.valves.start_heartbeat()
@@ -76,15 +76,19 @@ def controlled_rig(config: RigConfig, command: str | None = None,
 
 
 @contextlib.contextmanager
-def _reached() -> Iterator[None]:
-    """An instrument failing while the session is set up: one clear line, exit 2 (nothing moved)."""
+def _reached(config: RigConfig) -> Iterator[None]:
+    """An instrument failing while the session is set up: one clear line, exit 2 (nothing moved);
+    a digitizer that does not answer its configured dialect is asked a plain *IDN?, and the line
+    names the dialect to set (as `hopkinson probe` does)."""
     from hopkinson.drivers.errors import InstrumentError
+    from hopkinson.rig.dialect_hint import dialect_fix
     from hopkinson.rig.errors import unreachable
 
     try:
         yield
     except InstrumentError as exc:
-        raise unreachable(exc) from None
+        is_digitizer = str(getattr(config.digitizer, "resource", "\0")) in exc.instrument
+        raise unreachable(exc, dialect_fix(config) if is_digitizer else None) from None
 
 
 @dataclass(frozen=True)

@@ -56,12 +56,12 @@ class InstrumentUnreachable(ConfigError):
     """An instrument that could not be reached or set up before anything moved (exit 2)."""
 
 
-def unreachable(exc: InstrumentError) -> InstrumentUnreachable:
+def unreachable(exc: InstrumentError, fix: str | None = None) -> InstrumentUnreachable:
     """One line for an instrument that failed before the shot: the instrument and the step,
     the gist of the reason (the first clause: a library's long text cut), that nothing moved,
-    and the fix by the cause."""
+    and the fix (`fix`, else by the cause)."""
     gist = exc.problem.split(":")[0].strip() or exc.problem[:80]
-    fix = instrument_hint(exc) or HINT_INSTRUMENT
+    fix = f"{fix}." if fix else (instrument_hint(exc) or HINT_INSTRUMENT)
     return InstrumentUnreachable(f"{exc.instrument}: could not be reached before the shot ('{exc.command}': "
                                  f"{gist}); nothing was moved. Fix: {fix} `hopkinson probe` shows what answers")
 

@@ -16,8 +16,9 @@
    names the dialect to set in rig.toml.
 
 It only reads (never the heartbeat, never a coil). While another process holds the rig, it
-asks only what can be shared (as `status` does). Exit code 0 when everything answered, 1
-when something failed, 2 for a bad configuration.
+asks only what can be shared (as `status` does). Once a step has lost an instrument's link, its
+remaining steps are listed as not tried (one failure, one fix). Exit code 0 when everything
+answered, 1 when something failed (the lines say what to fix), 2 for a bad configuration.
 """
 
 from __future__ import annotations
@@ -32,15 +33,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG
+from hopkinson.rig.dialect_hint import dialect_fix, plain_identity
 
 if TYPE_CHECKING:
     from hopkinson.rig.config import RigConfig
 
 VISA_SCAN_S = 10.0  # a VISA library's resource scan may broadcast on the network: bounded
-PLAIN_IDN_S = 3.0  # the plain *IDN? of a digitizer that did not answer its dialect: bounded
 # The maker in an *IDN? reply -> the dialect (drivers/scpi_dialect.py) that speaks its commands.
-DIALECT_BY_MAKER = (("KEYSIGHT", "keysight"), ("AGILENT", "keysight"), ("TEKTRONIX", "tektronix"),
-                    ("LECROY", "lecroy"), ("TELEDYNE", "lecroy"))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -65,15 +64,21 @@ class _Steps:
 
     def __init__(self) -> None:
         self.steps: list[dict[str, Any]] = []
+        self.link_lost: str | None = None  # the step whose failure lost the link: the rest are not tried
 
     def run(self, step: str, action: Callable[[], Any]) -> Any:
-        from hopkinson.drivers.errors import InstrumentError
+        from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
         from hopkinson.rig.errors import ConfigError
 
+        if self.link_lost is not None:  # one failure, one fix: not the same lines for every register
+            self.steps.append({"step": step, "ok": None, "value": f"not tried: the link was lost at {self.link_lost}"})
+            return None
         try:
             value = action()
         except (InstrumentError, ConfigError, OSError, ValueError) as exc:
             self.steps.append({"step": step, "ok": False, "error": str(exc), "fix": fix_for(exc)})
+            if isinstance(exc, InstrumentConnectionError):
+                self.link_lost = step
             return None
         self.steps.append({"step": step, "ok": True, "value": _shown(value)})
         return value
@@ -176,51 +181,10 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
         identity = plain_identity(config)
         if identity:
             steps.steps.append({"step": "identity by a plain *IDN? (IEEE 488.2)", "ok": True, "value": identity})
-            dialect = dialect_for(identity)
-            current = str(getattr(config.digitizer, "dialect", ""))
-            if dialect is not None and dialect != current:
-                opened[0]["fix"] = (f"the instrument is a {identity.split(',')[0].strip()}: set [digitizer] dialect = "
-                                    f"\"{dialect}\" in rig.toml (it is \"{current}\") and name its channels as "
-                                    "that dialect does")
+            fix = dialect_fix(config, identity)
+            if fix is not None:
+                opened[0]["fix"] = fix
     return steps
-
-
-def dialect_for(identity: str) -> str | None:
-    """The dialect that speaks to an instrument of this *IDN? reply's maker, if one does."""
-    maker = identity.split(",")[0].upper()
-    return next((dialect for name, dialect in DIALECT_BY_MAKER if name in maker), None)
-
-
-def plain_identity(config: RigConfig) -> str | None:
-    """The digitizer's reply to a plain *IDN? through pyvisa (the configured library, resource
-    and terminations), or None when nothing answers within PLAIN_IDN_S."""
-    d = config.digitizer
-    found: list[str] = []
-
-    def ask() -> None:
-        try:
-            import pyvisa
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                manager = pyvisa.ResourceManager(d.visa_library)
-            try:
-                instrument = manager.open_resource(d.resource, read_termination=d.read_termination,
-                                                   write_termination=d.write_termination,
-                                                   timeout=int(1000 * PLAIN_IDN_S))
-                try:
-                    found.append(str(instrument.query("*IDN?")).strip()[:200])
-                finally:
-                    instrument.close()
-            finally:
-                manager.close()
-        except Exception:  # nothing (sensible) answers: the open step's failure already says why
-            return
-
-    thread = threading.Thread(target=ask, name="probe-idn", daemon=True)
-    thread.start()
-    thread.join(PLAIN_IDN_S + 1.0)
-    return found[0] if found and found[0] else None
 
 
 def channel_states(channels_on: dict[str, bool], roles: dict[str, str]) -> str:
@@ -343,7 +307,9 @@ def format_probe(report: dict[str, Any]) -> str:
         if "skipped" in entry:
             lines.append(f"  --    {entry['skipped']}")
         for step in entry["steps"]:
-            if step["ok"]:
+            if step["ok"] is None:  # not tried (the link was lost before it)
+                lines.append(f"  --    {step['step']}: {step['value']}")
+            elif step["ok"]:
                 passed += 1
                 shown = "" if step["value"] is None else f": {step['value']}"
                 lines.append(f"  ok    {step['step']}{shown}")

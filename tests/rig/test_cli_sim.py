@@ -363,3 +363,19 @@ def test_probe_reports_each_recorded_channels_state_and_names_an_off_channel_in_
     failed = steps["transfer of CHAN2 (response)"]
     assert not failed["ok"] and "CHAN2 is off on the instrument" in failed["error"]
     assert failed["fix"].startswith("turn CHAN2 on at the instrument")
+
+
+def test_probe_says_once_that_the_link_was_lost_not_once_per_register(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 18: after the link was lost, every register repeated a failure and a generic fix
+    monkeypatch.setattr("hopkinson.rig.cli.probe.visa_resources", lambda library: {"library": library,
+                                                                                   "resources": []})
+    with SimulatedRig() as sim:
+        sim.faults.inject("modbus-disconnect")
+        assert main(["probe", "--config", str(rig_toml_for(sim.addresses, tmp_path)), "--json"]) == 1
+    report = json.loads(capsys.readouterr().out)
+    steps = report["instruments"]["valve_controller"]["steps"]
+    failed = [s for s in steps if s["ok"] is False]
+    assert len(failed) == 1 and "connection lost" in failed[0]["error"] and failed[0]["fix"]
+    rest = steps[steps.index(failed[0]) + 1:]
+    assert rest and all(s["ok"] is None and s["value"].startswith("not tried: the link was lost at ") for s in rest)

@@ -144,3 +144,22 @@ def test_hopkinson_sim_in_a_dialect_prints_the_rig_config_that_reaches_it(tmp_pa
     assert "        lecroy dialect: doppler on channel 1, response on channel 2\n" in out
     assert ('        rig config: [digitizer] dialect = "lecroy"; [digitizer.channels] doppler = "C1", '
             'response = "C2"\n') in out
+
+
+def test_a_shot_whose_digitizer_speaks_another_dialect_names_the_dialect_to_set(tmp_path: Path, capsys) -> None:
+    # issue 18: `probe` named the dialect to set, `shot` gave no fix. The rig config says generic,
+    # the (simulated) instrument is a Keysight scope: refused before anything moves, with the fix.
+    from hopkinson.rig.sim_session import sim_session
+
+    from tests.rig.conftest import fast_sim_config, rig_toml, short_timeouts_config
+
+    sim = dataclasses.replace(fast_sim_config(), servers=ServerParams(digitizer_dialect="keysight"))
+    with sim_session(short_timeouts_config(), sim) as session:
+        toml = rig_toml(session, tmp_path / "rig.toml")
+        text = toml.read_text(encoding="utf-8").replace("timeout_s = 5.0", "timeout_s = 0.5", 1)
+        toml.write_text(text, encoding="utf-8")
+        assert main(["shot", "--config", str(toml), "--yes", "--out", str(tmp_path / "shots")]) == 2
+        assert session.world.shots_fired == 0 and session.world.coils()["fill"] is False
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "could not be reached before the shot" in err and "nothing was moved" in err
+    assert 'set [digitizer] dialect = "keysight" in rig.toml (it is "generic")' in err
