@@ -299,6 +299,8 @@ class DCM:
                 zeros = from_pairs(data["zeros"], f"{source}: zeros")
                 poles = from_pairs(data["poles"], f"{source}: poles")
                 gain = float(data["gain"])
+                if "num" in data and "den" in data:  # both forms: they must say the same (one was edited?)
+                    _check_same_filter(zeros, poles, gain, data["num"], data["den"], source)
             elif "num" in data and "den" in data:
                 num = np.trim_zeros(np.asarray(data["num"], dtype=float), "f")
                 den = np.trim_zeros(np.asarray(data["den"], dtype=float), "f")
@@ -316,6 +318,22 @@ class DCM:
             if isinstance(exc, AnalysisError):
                 raise AnalysisError(f"{exc}" if str(exc).startswith(source) else f"{source}: {exc}") from None
             raise AnalysisError(f"{source}: DCM coefficients must be numbers") from None
+
+
+def _check_same_filter(zeros: np.ndarray, poles: np.ndarray, gain: float, num: Any, den: Any, source: str) -> None:
+    """AnalysisError when num/den are not the filter that zeros/poles/gain give (to 1e-6 of the
+    largest coefficient): a file edited in one form only would otherwise be read silently."""
+    want_num = np.real_if_close(gain * np.poly(zeros)) if zeros.size else np.array([gain])
+    want_den = np.real_if_close(np.poly(poles)) if poles.size else np.array([1.0])
+    got_num, got_den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    if got_den.size and got_den[0] != 0:
+        got_num, got_den = got_num / got_den[0], got_den / got_den[0]
+    for got, want, name in ((got_num, want_num, "num"), (got_den, want_den, "den")):
+        got = np.trim_zeros(got, "f")
+        if got.shape != np.shape(want) or not np.allclose(got, want, rtol=1e-6,
+                                                          atol=1e-6 * float(np.max(np.abs(want)))):
+            raise AnalysisError(f"{source}: {name} is not the filter its zeros, poles and gain give (edited in one "
+                                "form only?): keep one form, or make both agree")
 
 
 def load_dcm(path: str | Path) -> DCM:

@@ -304,3 +304,20 @@ def test_dcm_of_an_identified_model_with_its_record_is_the_shot_analysis_dcm(tmp
     assert result["dcm"]["latency_s"] == pytest.approx(shot.design.latency_s, rel=1e-3)
     assert result["dcm"]["check"]["rms_error_pct"]["compensated"] == pytest.approx(shot.check.rms_error_pct[1], rel=1e-3)
     assert result["dcm"]["recommended"] is True
+
+
+def test_a_dcm_file_edited_in_one_form_only_is_refused(tmp_path, capsys):
+    # issue 18: a DCM JSON with zeros/poles/gain ignored edited num/den without saying so
+    model, rec_path, _, _ = shock_record(tmp_path)
+    model_path = tmp_path / "m.json"
+    model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
+    dcm_path = tmp_path / "dcm.json"
+    run_json(capsys, ["dcm", "--model", str(model_path), "--json", "-o", str(dcm_path)])
+    data = json.loads(dcm_path.read_text())
+    dcm = data.get("dcm", data)
+    assert "num" in dcm and "zeros" in dcm  # the file holds both forms
+    dcm["num"] = [2.0 * c for c in dcm["num"]]  # edited by hand in one form
+    edited = tmp_path / "edited.json"
+    edited.write_text(json.dumps(data))
+    line = run_error(capsys, ["compensate", str(rec_path), "--dcm", str(edited), "-o", str(tmp_path / "out.csv")])
+    assert f"{edited}: num is not the filter its zeros, poles and gain give" in line
