@@ -260,6 +260,26 @@ def read_running_addresses(runtime_dir: Path | None = None) -> dict[str, Any] | 
     return data
 
 
+def remove_stale_files(runtime: Path) -> list[Path]:
+    """Remove what a `hopkinson sim` that was killed (SIGKILL: no clean-up of its own) left in
+    the runtime folder: its pty links and state file (sim-<pid>-*) and a published address file
+    naming it; returns the paths removed."""
+    removed: list[Path] = []
+    for path in runtime.glob("sim-*-*"):
+        pid = path.name.split("-")[1]
+        if pid.isdigit() and not _alive(int(pid)):
+            with contextlib.suppress(OSError):
+                path.unlink()
+                removed.append(path)
+    published = runtime / ADDRESSES_FILE
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        pid = json.loads(published.read_text(encoding="utf-8")).get("pid")
+        if isinstance(pid, int) and not _alive(pid):
+            published.unlink()
+            removed.append(published)
+    return removed
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -281,8 +301,10 @@ def run_simulator(
     """Body of the `hopkinson sim` process (module docstring): serve until SIGINT/SIGTERM.
     `notes(addresses)`: lines printed under the digitizer's address (the rig config it needs)."""
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, lambda *_: stop.set())
+                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     runtime = runtime_dir or private_runtime_dir()
+    remove_stale_files(runtime)
     prefix = str(runtime / f"sim-{os.getpid()}-")
     state_path = Path(prefix + "state.json")
     published = runtime / ADDRESSES_FILE

@@ -379,3 +379,24 @@ def test_probe_says_once_that_the_link_was_lost_not_once_per_register(
     assert len(failed) == 1 and "connection lost" in failed[0]["error"] and failed[0]["fix"]
     rest = steps[steps.index(failed[0]) + 1:]
     assert rest and all(s["ok"] is None and s["value"].startswith("not tried: the link was lost at ") for s in rest)
+
+
+def test_a_killed_sims_files_are_cleared_by_the_next_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 18: a `hopkinson sim` killed with SIGKILL left its pty link, state and address files
+    runtime = tmp_path / "runtime"
+    runtime.mkdir(mode=0o700)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
+    folder = runtime / "hopkinson"
+    sim_toml = tmp_path / "sim.toml"
+    sim_toml.write_text("[servers]\nmodbus_port = 0\ndigitizer_port = 0\n")
+    with sim_process(["--config", str(sim_toml)], tmp_path / "a1.json") as (first, _):
+        first.kill()  # SIGKILL: no clean-up of its own
+        first.communicate()
+    left = sorted(p.name for p in folder.iterdir())
+    assert f"sim-{first.pid}-state.json" in left and "sim-addresses.json" in left  # what it left
+    with sim_process(["--config", str(sim_toml)], tmp_path / "a2.json") as (second, _):
+        names = sorted(p.name for p in folder.iterdir())
+        assert not [n for n in names if n.startswith(f"sim-{first.pid}-")]
+        assert json.loads((folder / "sim-addresses.json").read_text())["pid"] == second.pid
+        stop_with_ctrl_c(second)
+    assert sorted(p.name for p in folder.iterdir()) == []  # and the second cleans up after itself
