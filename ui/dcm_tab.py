@@ -64,7 +64,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from hopkinson.fileio import atomic_write
+from hopkinson.fileio import atomic_write, check_output_path
 
 DEBOUNCE_MS = 60
 RATIO_RANGE = (0.1, 200.0)
@@ -429,6 +429,7 @@ class DcmTab(QWidget):
         """Write the current design as JSON (`hopkinson compensate --dcm` reads it)."""
         if self.design is None or self.model is None:
             raise AnalysisError("no DCM designed yet")
+        check_output_path(path, [p for p in (self.shot_path, self.source) if p], what="DCM export")  # issue 18
         data = dict(self.design.report)
         data["source"] = str(self.shot_path or self.source or "panel")
         data["model"] = self.model.to_dict()

@@ -25,7 +25,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from hopkinson.fileio import atomic_write
+from hopkinson.fileio import atomic_write, check_output_path
 
 MAX_ROWS = 5000
 _COLOURS = {"error": "#b3261e", "warning": "#8a5a00", "result": "#0b57d0"}
@@ -88,7 +88,7 @@ class LogView(QTableWidget):
     def save(self, path: str | Path) -> Path:
         """Write the rows, oldest first: JSON lines for a `.jsonl`/`.json` name, else
         tab-separated text with a header line; atomically (hopkinson.fileio)."""
-        path = Path(path)
+        path = check_output_path(path, what="log")  # never over a shot file (issue 18)
         if path.suffix.lower() in (".jsonl", ".json"):
             text = "".join(json.dumps(row, ensure_ascii=False) + "\n" for row in self.rows)
         else:

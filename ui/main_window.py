@@ -463,6 +463,13 @@ class MainWindow(QMainWindow):
         if view is None or view.path is None:
             self.show_banner("warning", "No shot to report on yet.")
             return
+        from hopkinson.fileio import UnsafeOutputError, check_output_path
+
+        try:  # never over the shot itself or another shot file (issue 18)
+            check_output_path(path, [view.path], what="report")
+        except UnsafeOutputError as exc:
+            self.show_banner("error", f"Report not written: {exc}")
+            return
 
         def write() -> Path:
             from hopkinson.reports.writers import write_report

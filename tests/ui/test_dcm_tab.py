@@ -129,3 +129,20 @@ def test_the_shots_verdict_shows_only_for_a_dcm_not_recommended(qtbot, tab):
     assert tab.verdict.isVisible() and tab.verdict.text() == "The shot's DCM is NOT RECOMMENDED: nothing to compensate"
     tab.set_model(model, 3.0, 0.707)  # the next shot's DCM is recommended: no stale verdict
     assert not tab.verdict.isVisible() and tab.verdict.text() == ""
+
+
+def test_the_panels_exports_never_write_over_a_shot_file(qtbot, tab, tmp_path):
+    # issue 18: the panel's save dialogs go through the same check as the command line's -o
+    from hopkinson.ui.log_view import LogView
+
+    from hopkinson.fileio import HDF5_SIGNATURE, UnsafeOutputError
+
+    shot = tmp_path / "shot.h5"
+    shot.write_bytes(HDF5_SIGNATURE + b"\0" * 64)
+    before = shot.read_bytes()
+    tab.set_model(second_order_model(FN_HZ, ZETA), ratio=4.0, damping=0.707)
+    with pytest.raises(UnsafeOutputError, match="HDF5 shot file"):
+        tab.export_dcm(shot)
+    with pytest.raises(UnsafeOutputError, match="HDF5 shot file"):
+        LogView().save(shot)
+    assert shot.read_bytes() == before
