@@ -91,11 +91,13 @@ def atomic_write(path: str | os.PathLike[str], data: bytes | bytearray | memoryv
         os.close(fd)
         fd = -1
         _publish(tmp, target, mode)
-    except BaseException:
+    except BaseException as exc:
         if fd >= 0:
             os.close(fd)
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(exc, OSError) and exc.filename is None and exc.errno is not None:
+            raise OSError(exc.errno, exc.strerror, str(target)) from exc  # name the file (a full disk)
         raise
     return target
 

@@ -40,20 +40,26 @@ FORMATS = ("pdf", "html")
 
 
 def _write_pdf(path: Path, report: CalibrationReport, pages: list[tuple[str, Figure]]) -> None:
-    def write(tmp: Path) -> None:
-        with PdfPages(tmp, metadata={"Title": report.title, "Subject": "Hopkinson-bar shock calibration report",
-                                     "Keywords": " ".join(e.label for e in report.shots),
-                                     "Creator": "hopkinson"}) as pdf:
-            for _caption, fig in pages:
-                pdf.savefig(fig)
+    # Rendered in memory, then written with plain writes: matplotlib's PDF writer meeting a full
+    # disk fails inside zlib ("buffer error"); this way a full disk is one OSError naming the file.
+    buffer = io.BytesIO()
+    with PdfPages(buffer, metadata={"Title": report.title, "Subject": "Hopkinson-bar shock calibration report",
+                                    "Keywords": " ".join(e.label for e in report.shots),
+                                    "Creator": "hopkinson"}) as pdf:
+        for _caption, fig in pages:
+            pdf.savefig(fig)
+    atomic_write(path, buffer.getbuffer())
 
-    atomic_write(path, write)
+
+def _png(fig: Figure, dpi: int = PNG_DPI) -> bytes:
+    """The figure as PNG bytes, rendered in memory (written with plain writes by the caller)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return buf.getvalue()
 
 
 def _png_base64(fig: Figure) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=PNG_DPI)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
+    return base64.b64encode(_png(fig)).decode("ascii")
 
 
 def html_table(header: list[str] | None, rows: Iterable[Sequence[str]], cls: str = "") -> str:
@@ -189,6 +195,6 @@ def write_pngs(pages: list[tuple[str, Figure]], folder: str | Path, prefix: str,
         slug = "".join(c if c.isalnum() else "-" for c in caption.lower()).strip("-")
         slug = "-".join(part for part in slug.split("-") if part)[:60]
         path = Path(folder) / f"{prefix}-{n:02d}-{slug}.png"
-        atomic_write(path, lambda tmp, fig=fig: fig.savefig(tmp, format="png", dpi=dpi))
+        atomic_write(path, _png(fig, dpi))
         out.append(path)
     return out

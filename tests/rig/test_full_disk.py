@@ -102,3 +102,19 @@ def test_a_disk_that_takes_the_raw_shot_but_not_its_analysis_ends_in_fault_exit_
         _no_temporaries(small)
     rig.assert_safe()
 
+
+
+def test_a_report_on_a_full_disk_is_one_line(make_rig, small_fs, capsys) -> None:
+    # a report on a full disk ended in a zlib traceback inside matplotlib's PDF writer
+    rig = make_rig()
+    shot = rig.run(pressure_bar=1.0).shot_path
+    full = small_fs(64 * 1024)
+    with contextlib.suppress(OSError), (full / "filler").open("wb") as fh:  # fill it up
+        while True:
+            fh.write(b"\0" * 4096)
+            fh.flush()
+    for name in ("r.pdf", "r.html"):
+        assert main(["report", str(shot), "-o", str(full / name)]) == 2
+        err = capsys.readouterr().err
+        assert err == f"hopkinson: error: {full / name}: No space left on device\n"
+    assert [p.name for p in full.iterdir()] == ["filler"]  # no temporary left behind
