@@ -8,6 +8,10 @@ the traceability of the reference chain (each item's certificate), the statement
 with its decision rule (lab.history), who authorised it, and which shot files (by SHA-256) it
 rests on. The content is stored with the number as issued and is never changed; the files are
 drawn from it (`write_certificate`), so a copy printed again says the same.
+
+A campaign with shots made by the simulator gets no certificate: only a *specimen* (`specimen=
+True`), numbered in its own series (`<prefix>-SIM-<year>-<NNNN>`, never a certificate's
+number) and marked on every page as simulated data, not a calibration.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ METHOD = ("Primary shock calibration on a Hopkinson bar with laser Doppler inter
           "\"Dynamic characterization method of accelerometers based on the Hopkinson bar calibration system\"; "
           "uncertainty by Monte Carlo (GUM Supplement 1), combined across shots (GUM 5.1, G.4).")
 FORMATS = (".pdf", ".html")
+SPECIMEN_MARK = "SPECIMEN: simulated data, not a calibration"
 UNCONDITIONAL = ("This certificate shall not be reproduced except in full without the written approval of the "
                  "laboratory. The results relate only to the item calibrated, at the conditions stated.")
 
@@ -54,9 +59,11 @@ def _fmt(figure: Figure, scale: float, unit: str) -> tuple[str, str]:
 
 
 def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *, customer: str = "", conditions: str = "",
-                        authorised_by: str, software_version: str, today: date | None = None) -> dict[str, Any]:
+                        authorised_by: str, software_version: str, today: date | None = None,
+                        specimen: bool = False) -> dict[str, Any]:
     """Everything the certificate of `campaign` (a recorded run folder's name) states, without
-    its number. LabError when there is nothing to certify or the reference chain is overdue."""
+    its number. LabError when there is nothing to certify, the reference chain is overdue, or
+    a shot was simulated and `specimen` is False (module docstring)."""
     serial = repo.campaign_sensor(campaign)
     if serial is None:
         raise LabError(f"campaign {campaign}: not in the lab's record (run `hopkinson lab import` on its folder)")
@@ -65,6 +72,11 @@ def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *,
     calibrations = repo.calibrations(serial, campaign=campaign)
     if not calibrations:
         raise LabError(f"campaign {campaign}: no analysed shot to certify")
+    simulated = [c.shot_name or c.shot_uuid for c in calibrations if c.simulated]
+    if simulated and not specimen:
+        raise LabError(f"campaign {campaign}: {len(simulated)} of its {len(calibrations)} shots were made by the "
+                       f"simulator ({', '.join(simulated[:3])}{' …' if len(simulated) > 3 else ''}): no certificate; "
+                       "--specimen issues a specimen marked as simulated data")
     today = today or datetime.now(UTC).date()
     rigs = sorted({c.rig for c in calibrations})
     chain = [link for rig in rigs for link in repo.reference_chain(rig)]
@@ -78,7 +90,9 @@ def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *,
     first, last = calibrations[0].utc_time, calibrations[-1].utc_time
     peaks = [c.peak_acceleration_m_s2 for c in calibrations if c.peak_acceleration_m_s2]
     return {
-        "title": "Calibration certificate",
+        "title": "Specimen calibration certificate" if specimen else "Calibration certificate",
+        "specimen": SPECIMEN_MARK + (f" ({len(simulated)} of {len(calibrations)} shots simulated)" if simulated
+                                     else "") if specimen else "",
         "lab": {"name": lab.name or "(lab name not configured: [lab] name)", "address": lab.address,
                 "accreditation": lab.accreditation},
         "customer": customer or sensor.owner or "—",
@@ -208,6 +222,8 @@ def _write_pdf(content: dict[str, Any], path: Path) -> None:
 
     pages = TextPages(new_figure(), continued=continued)
     pages.centred(f"{content['title']} {content['number']}", 15.0)
+    if content.get("specimen"):
+        pages.centred(content["specimen"].upper(), 10.0)
     pages.space(6)
     for heading, kind, data in _sections(content):
         if heading:
@@ -223,6 +239,9 @@ def _write_pdf(content: dict[str, Any], path: Path) -> None:
     pages.space(24)
     pages.paragraph("Signature: ______________________________", size=9)
     for n, fig in enumerate(pages.pages, start=1):
+        if content.get("specimen"):  # across every page, under the text
+            fig.text(0.5, 0.5, "SPECIMEN · SIMULATED", ha="center", va="center", rotation=45, fontsize=48,
+                     color="#c00", alpha=0.18, zorder=-1)
         fig.text(0.5, 0.02, f"{content['number']} · page {n} of {len(pages.pages)}", ha="center", fontsize=7,
                  color="#555")
 
@@ -242,6 +261,9 @@ def _html(content: dict[str, Any]) -> str:
     title = f"{content['title']} {content['number']}"
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{e(title)}</title>"
              f"<style>{HTML_CSS}</style></head><body><h1>{e(title)}</h1>"]
+    if content.get("specimen"):
+        parts.append(f"<p class='specimen' style='color:#c00;font-weight:bold;border:2px solid #c00;padding:0.5em'>"
+                     f"{e(content['specimen'])}</p>")
     for heading, kind, data in _sections(content):
         if heading:
             parts.append(f"<h2>{e(heading)}</h2>")

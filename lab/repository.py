@@ -63,6 +63,7 @@ class Calibration:
     peak_acceleration_m_s2: float | None
     response_unit: str
     figures: dict[str, Figure | None]
+    simulated: bool = False  # the shot was made by the simulator (`hopkinson sim`), not by a rig
 
 
 @dataclass(frozen=True)
@@ -265,7 +266,8 @@ class LabRepository:
                   .where(t.Analysis.state == "analysed").group_by(t.Analysis.shot_id).subquery())
         columns = [getattr(t.Analysis, key + part) for key in t.FIGURE_KEYS for part in t.FIGURE_PARTS]
         query = (sa.select(t.Shot.utc_time, t.Shot.uuid, t.Shot.shot_name, t.Campaign.name, t.Rig.name,
-                           t.Shot.operator, t.Analysis.peak_acceleration_m_s2, t.Analysis.response_unit, *columns)
+                           t.Shot.operator, t.Analysis.peak_acceleration_m_s2, t.Analysis.response_unit,
+                           t.Shot.simulated, *columns)
                  .join(newest, newest.c.shot_id == t.Shot.id)
                  .join(t.Analysis, t.Analysis.id == newest.c.aid)
                  .join(t.Sensor, t.Sensor.id == t.Shot.sensor_id)
@@ -277,14 +279,14 @@ class LabRepository:
         out = []
         with self.engine.connect() as connection:
             for row in connection.execute(query):
-                values = row[8:]
+                values = row[9:]
                 figures = {}
                 for i, key in enumerate(t.FIGURE_KEYS):
                     value, u, lo, hi = values[4 * i: 4 * i + 4]
                     figures[key] = (Figure(value, u, (lo, hi) if lo is not None and hi is not None else None)
                                     if value is not None else None)
                 out.append(Calibration(row[0], row[1], row[2], row[3] or "", row[4], row[5], row[6], row[7] or "",
-                                       figures))
+                                       figures, bool(row[8])))
         return out
 
     def campaign_sensor(self, campaign: str) -> str | None:

@@ -8,8 +8,10 @@
                                                a sensor's history: every calibration, drift (E_n),
                                                tolerance and due date; the options record its data
     hopkinson lab certificate RUN_FOLDER|CAMPAIGN -o cert.pdf|.html --authorised-by NAME
-                         [--customer …] [--replaces NUMBER]
-                                               issue a numbered certificate (<prefix>-<year>-<NNNN>)
+                         [--customer …] [--replaces NUMBER] [--specimen]
+                                               issue a numbered certificate (<prefix>-<year>-<NNNN>);
+                                               a campaign with simulated shots gets only a specimen
+                                               (--specimen: <prefix>-SIM-<year>-<NNNN>, marked so)
     hopkinson lab audit [--subject S] [--json]  the audit trail, newest first
 
 The database: --database, else HOPKINSON_DATABASE_URL, else the rig configuration's
@@ -74,6 +76,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--conditions", default="", metavar="TEXT",
                    help="environmental conditions of the calibration, e.g. '(23 ± 2) °C, (45 ± 10) %% r.h.'")
     p.add_argument("--replaces", default="", metavar="NUMBER", help="the certificate this one replaces")
+    p.add_argument("--specimen", action="store_true",
+                   help="a specimen, marked as simulated data on every page and numbered <prefix>-SIM-…: the "
+                        "only document a campaign with simulated shots gets")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("audit", "the audit trail, newest first", audit_command)
     p.add_argument("--subject", help="only entries about this shot UUID, certificate number or serial")
@@ -258,9 +263,11 @@ def certificate_command(args: argparse.Namespace) -> int:
         else:
             campaign = args.source
         content = certificate_content(repo, campaign, identity, customer=args.customer, conditions=args.conditions,
-                                      authorised_by=args.authorised_by, software_version=software_version())
+                                      authorised_by=args.authorised_by, software_version=software_version(),
+                                      specimen=args.specimen)
+        prefix = f"{identity.certificate_prefix}-SIM" if args.specimen else identity.certificate_prefix
         issued = repo.issue_certificate(
-            identity.certificate_prefix, content, serial=content["serial"], subject=campaign,
+            prefix, content, serial=content["serial"], subject=campaign,
             authorised_by=args.authorised_by, replaces=args.replaces,
             number_into=lambda c, number, utc: with_number(c, number, utc, args.replaces))
     written = [str(write_certificate(issued.content, out)) for out in args.output]
@@ -268,7 +275,8 @@ def certificate_command(args: argparse.Namespace) -> int:
         emit_json({"number": issued.number, "replaces": issued.replaces or None, "files": written,
                    "conformity": issued.content["conformity"]})
     else:
-        print(f"certificate {issued.number}" + (f" (replaces {issued.replaces})" if issued.replaces else ""))
+        print(("specimen " if args.specimen else "") + f"certificate {issued.number}"
+              + (f" (replaces {issued.replaces})" if issued.replaces else ""))
         for path in written:
             print(f"written: {path}")
     return 0

@@ -48,7 +48,8 @@ def made_up_results(sensitivity: float, u: float, f_n_hz: float = 27e3) -> dict:
 
 
 def write_made_up_shot(path, *, serial: str = "SN-7", campaign: str | None = None, sensitivity: float = 1.0,
-                       u: float = 0.002, utc: str = "2026-03-01T10:00:00Z", config: dict | None = None):
+                       u: float = 0.002, utc: str = "2026-03-01T10:00:00Z", config: dict | None = None,
+                       simulated: bool = False):
     """A real shot file (rig.shotfile) with short made-up channels and made-up results; its meta."""
     import numpy as np
     from hopkinson.rig.shotfile import RawShot, ShotMeta, add_analysis, write_raw_shot
@@ -57,7 +58,8 @@ def write_made_up_shot(path, *, serial: str = "SN-7", campaign: str | None = Non
     raw = RawShot({"doppler": (rng.integers(-2000, 2000, 512).astype(np.int16), 1e-3, 0.0),
                    "response": (rng.integers(-2000, 2000, 512).astype(np.int16), 2e-3, 0.01)}, 1e-8, 64)
     meta = ShotMeta(operator="tech A", accelerometer_model="ACC-20k", accelerometer_serial=serial, pressure_bar=2.0,
-                    projectile=3, campaign_id=campaign, shot_id=path.stem, utc_time=utc, config=config or {})
+                    projectile=3, campaign_id=campaign, shot_id=path.stem, utc_time=utc, config=config or {},
+                    simulated_truth={"made_up": True} if simulated else None)
     write_raw_shot(path, raw, meta)
     add_analysis(path, made_up_results(sensitivity, u))
     return meta

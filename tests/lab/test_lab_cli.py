@@ -149,6 +149,44 @@ def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
     assert actions[:2] == [("certificate replaced", second["number"]), ("certificate issued", first["number"])]
 
 
+def test_a_simulated_campaign_gets_no_certificate_only_a_marked_specimen(
+        run_folder: Path, sqlite_url: str, lab_config: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        artifacts_dir: Path) -> None:
+    write_made_up_shot(run_folder / "shots" / "s003.h5", campaign=run_folder.name, sensitivity=1.001,
+                       utc="2026-03-01T10:04:00Z", simulated=True)
+    page = tmp_path / "cert.html"
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(page), "--authorised-by",
+                         "Dr. Q. Manager", "--config", str(lab_config))
+    assert code == 2 and not page.exists()
+    assert err == (f"hopkinson: error: campaign {run_folder.name}: 1 of its 4 shots were made by the simulator (s003): "
+                   "no certificate; --specimen issues a specimen marked as simulated data\n")
+    code, out, err = lab(capsys, sqlite_url, "audit", "--json", "--config", str(lab_config))
+    assert not [a for a in json.loads(out)["audit"] if a["action"].startswith("certificate")]
+
+    pdf = tmp_path / "specimen.pdf"
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(page), "-o", str(pdf),
+                         "--authorised-by", "Dr. Q. Manager", "--specimen", "--json", "--config", str(lab_config))
+    assert code == 0, err
+    number = json.loads(out)["number"]
+    assert number.startswith("XL-SIM-20") and number.endswith("-0001")  # never a certificate's number
+    text = page.read_text()
+    assert "Specimen calibration certificate" in text
+    assert "SPECIMEN: simulated data, not a calibration (1 of 4 shots simulated)" in text
+    if shutil.which("pdftoppm"):
+        subprocess.run(["pdftoppm", "-png", "-r", "60", "-f", "1", "-l", "1", str(pdf),
+                        str(artifacts_dir / "lab-specimen")], check=True)
+    # the real series is untouched: the next real certificate (of real shots only) is -0001
+    (run_folder / "shots" / "s003.h5").unlink()
+    other = tmp_path / "run-2026-04"
+    (other / "shots").mkdir(parents=True)
+    write_made_up_shot(other / "shots" / "r000.h5", campaign=other.name, utc="2026-04-01T10:00:00Z")
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(other), "-o", str(tmp_path / "real.html"),
+                         "--authorised-by", "Dr. Q. Manager", "--json", "--config", str(lab_config))
+    assert code == 0, err
+    real = json.loads(out)["number"]
+    assert real.startswith("XL-20") and real.endswith("-0001")
+
+
 @pytest.mark.parametrize("case", ["bad url", "unreachable", "newer schema", "unknown campaign", "bad suffix"])
 def test_bad_input_is_one_line_and_exit_2(case: str, tmp_path: Path, lab_config: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
