@@ -494,7 +494,14 @@ class CampaignRunner:
                 self._analyse_from_file(shot)
                 return
         elif state == S.FIRING:
-            if outcome.fired:
+            rescued = outcome.shot_path if outcome.shot_path is not None and outcome.shot_path != path else None
+            if outcome.fired and rescued is not None and rescued.exists():
+                # the run folder could not take the raw shot; rig.shot.rescue_raw_shot kept it
+                journal.mark(sid, S.UNKNOWN, rescued=str(rescued),
+                             reason=f"fired; the run folder could not take the raw shot, which was rescued to "
+                                    f"{rescued}: free the folder, move that file to {path} and resume "
+                                    "(`campaign run --resume` records and analyses it, never fires it again)")
+            elif outcome.fired:
                 journal.mark(sid, S.UNKNOWN, reason=outcome.error or "fired, but no raw file was stored")
             else:
                 journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted")

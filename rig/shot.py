@@ -289,13 +289,17 @@ RESCUE_FOLDER = "rescued-shots"  # in the user's data folder: a raw shot its own
 def rescue_raw_shot(path: Path, captured: CapturedShot, meta: ShotMeta) -> Path | None:
     """Where the shot folder could not take the raw shot (a full disk, a quota, a read-only or
     vanished folder): the same file in the user's data folder (`rescued-shots/`), so that the
-    shot is not lost with the folder's failure; None when that fails too."""
+    shot is not lost with the folder's failure (named after the shot, with its uuid where an
+    earlier rescue took that name: never over another record); None when that fails too."""
     from hopkinson.lab.database import data_folder
 
     folder = data_folder() / RESCUE_FOLDER
+    target = folder / path.name
+    if target.exists():
+        target = folder / f"{path.stem}-{meta.uuid}{path.suffix}"
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        return write_raw_shot(folder / path.name, captured.raw_shot(), meta)
+        return write_raw_shot(target, captured.raw_shot(), meta)
     except (OSError, ShotFileError):
         return None
 

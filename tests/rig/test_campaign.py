@@ -358,3 +358,41 @@ def test_an_analysis_interrupted_by_an_abort_is_redone_on_resume(tmp_path: Path,
     assert states(run)["s001-r1"] == ("ANALYSED", 1)
     shot = read_shot(run.shot_path("s001-r1"), load_raw=False)
     assert shot.state == "analysed" and [a["status"] for a in shot.analyses] == ["failed", "ok"]
+
+
+def test_a_rescued_raw_shot_is_journaled_with_where_it_is_and_a_resume_records_it(tmp_path: Path, rig: Rig) -> None:
+    # The shot folder vanishes between FIRE and STORE: the raw shot is rescued into the user's
+    # data folder; the journal used to say only UNKNOWN ("no raw file"), not where the record was.
+    import os
+    import shutil
+
+    run, plan = new_run(tmp_path, entries="[[shots]]\npressure_bar = 1.2\n")
+    bus = EventBus()
+    bus.subscribe(lambda e: shutil.rmtree(run.shots_dir) if isinstance(e, StateEntered) and e.state == "SAFE"
+                  and run.shots_dir.exists() else None)
+    outcome = rig.runner(run, plan, bus).run()
+    assert outcome.exit_code == 3 and rig.fired() == ["s001-r1"]
+    rescued = Path(os.environ["XDG_DATA_HOME"]) / "hopkinson" / "rescued-shots" / "s001-r1.h5"
+    assert read_shot(rescued).raw is not None
+    with Journal.open(run) as journal:
+        status = journal.status("s001-r1")
+        assert status.state == S.UNKNOWN and status.info["rescued"] == str(rescued)
+        assert f"move that file to {run.shot_path('s001-r1')} and resume" in status.info["reason"]
+
+    # another campaign's shot of the same id rescued later never replaces this record
+    other = create_run_folder(write_plan(tmp_path, entries="[[shots]]\npressure_bar = 1.2\n", name="p2.toml"),
+                              tmp_path / "runs", "run-2")
+    bus = EventBus()
+    bus.subscribe(lambda e: shutil.rmtree(other.shots_dir) if isinstance(e, StateEntered) and e.state == "SAFE"
+                  and other.shots_dir.exists() else None)
+    assert rig.runner(other, plan, bus).run().exit_code == 3
+    with Journal.open(other) as journal:
+        second = Path(journal.status("s001-r1").info["rescued"])
+    assert second != rescued and read_shot(second).meta.uuid != read_shot(rescued).meta.uuid
+
+    run.shots_dir.mkdir()
+    shutil.move(rescued, run.shot_path("s001-r1"))
+    outcome = rig.runner(run, plan).run()
+    assert outcome.exit_code == 0 and outcome.complete
+    assert states(run)["s001-r1"] == ("ANALYSED", 1)  # recorded, never fired again
+    assert rig.fired() == ["s001-r1", "s001-r1"]  # once per campaign
