@@ -95,6 +95,7 @@ class ShotView:
     figures: KeyFigures | None = None  # the shot's key figures (analysis.key_figures)
     compensation: CompensationCheck | None = None  # the DCM's check on the shot, when stored
     analysis_error: str | None = None
+    response_band: dict[str, Any] | None = None  # the model's response with its 95 % band (analysis.uncertainty)
 
 
 def frequency_grid_hz(sample_interval_s: float, lowest_hz: float = 100.0, points: int = 1500) -> np.ndarray:
@@ -133,6 +134,7 @@ def view_from_results(results: dict[str, Any], record: Record | None = None) -> 
         model=model, dcm=dcm, fbsd_hz=dict(analysis.fbsd_hz),
         frequency_hz=f, magnitude=mag, compensated_magnitude=comp, record=record,
         figures=figures, compensation=CompensationCheck.of(figures),
+        response_band=(results.get("uncertainty") or {}).get("response_band"),
     )
 
 
@@ -273,6 +275,16 @@ class MagnitudePlot(pg.PlotWidget):
                                        brush=pg.mkBrush(*BAND_COLOURS[key]), pen=pg.mkPen(None), movable=False)
             band.setZValue(-10)
             self.addItem(band)
+        # the model's 95 % band (Monte Carlo draws), under its curve
+        self.band_low = pg.PlotDataItem([], [], pen=pg.mkPen(None))
+        self.band_high = pg.PlotDataItem([], [], pen=pg.mkPen(None))
+        self.band_fill = pg.FillBetweenItem(self.band_low, self.band_high, brush=pg.mkBrush(31, 111, 209, 70))
+        for item in (self.band_low, self.band_high, self.band_fill):
+            item.setZValue(-5)
+            self.addItem(item)
+        # the legend's sample of the band: a filled curve never drawn (pyqtgraph's legend cannot
+        # draw a FillBetweenItem's sample: it crashed in paint)
+        self.band_sample = pg.PlotDataItem([], [], pen=pg.mkPen(None), fillLevel=0.0, brush=self.band_fill.brush())
         self.magnitude_curve = self.plot([], [], pen=MODEL_PEN, name=model_name)
         self.compensated_curve = self.plot([], [], pen=COMP_PEN, name=compensated_name)
         self.fbsd_lines: dict[str, pg.InfiniteLine] = {}
@@ -290,15 +302,31 @@ class MagnitudePlot(pg.PlotWidget):
         self.setYRange(0, self.Y_MAX, padding=0)
 
     def clear_curves(self) -> None:
+        self.show_band(None)
         self.magnitude_curve.setData([], [])
         self.compensated_curve.setData([], [])
         for line in self.fbsd_lines.values():
             line.setVisible(False)
         self.peak_note.setText("")
 
+    def show_band(self, band: dict[str, Any] | None) -> None:
+        """Shade the model's 95 % magnitude band (analysis.uncertainty.response_band; None: none)."""
+        legend = self.getPlotItem().legend
+        legend.removeItem(self.band_sample)
+        if not band:
+            self.band_low.setData([], [])
+            self.band_high.setData([], [])
+            return
+        f_khz = np.asarray(band["frequency_hz"], dtype=float) / KILO
+        self.band_low.setData(f_khz, np.asarray(band["magnitude_rel_low"], dtype=float))
+        self.band_high.setData(f_khz, np.asarray(band["magnitude_rel_high"], dtype=float))
+        legend.addItem(self.band_sample, f"{100 * band.get('coverage_probability', 0.95):.0f} % band of the model")
+
     def show_curves(self, frequency_hz: np.ndarray, magnitude: np.ndarray, compensated: np.ndarray | None,
-                    fbsd_hz: dict[str, float]) -> None:
-        """Draw the curves (|H/H0|) and mark the FBSD edges (Hz per level key)."""
+                    fbsd_hz: dict[str, float], band: dict[str, Any] | None = None) -> None:
+        """Draw the curves (|H/H0|), the model's 95 % band when known, and mark the FBSD edges
+        (Hz per level key)."""
+        self.show_band(band)
         f_khz = np.asarray(frequency_hz) / KILO
         self.magnitude_curve.setData(f_khz, magnitude)
         if compensated is None:
@@ -599,7 +627,8 @@ class ShotPlots(QWidget):
     def _show_magnitude(self, view: ShotView) -> None:
         if view.frequency_hz is None or view.magnitude is None:
             return
-        self.mag_plot.show_curves(view.frequency_hz, view.magnitude, view.compensated_magnitude, view.fbsd_hz)
+        self.mag_plot.show_curves(view.frequency_hz, view.magnitude, view.compensated_magnitude, view.fbsd_hz,
+                                  view.response_band)
 
     def _show_poles(self, view: ShotView) -> None:
         if view.model is None:

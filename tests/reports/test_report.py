@@ -164,6 +164,26 @@ def test_model_page_marks_the_bands_and_the_fbsd(analyses: dict[str, ShotAnalysi
     assert "(dB)" in ax_db.get_ylabel() and "(degrees)" in ax_phase.get_ylabel()
 
 
+def test_model_page_shades_the_models_95_percent_band(analyses: dict[str, ShotAnalysis], artifacts_dir) -> None:
+    """Issue 17: the model's response carries its own 95 % band (analysis.uncertainty.response_band)
+    in the report, magnitude and phase, as the draws gave it."""
+    from matplotlib.collections import PolyCollection
+
+    a = analyses["a1"]
+    band = a.uncertainty["response_band"]
+    fig = model_page(entry("s001-r1", a))
+    _ax_db, ax_band, ax_phase = fig.axes
+    (shade,) = [c for c in ax_band.collections if isinstance(c, PolyCollection) and "band of the model" in c.get_label()]
+    outline = shade.get_paths()[0].vertices
+    f_khz = np.asarray(band["frequency_hz"]) / 1e3
+    upper = np.array(sorted({(x, y) for x, y in outline if y >= np.interp(x, f_khz, band["magnitude_rel"])}))
+    top = np.interp(f_khz, upper[:, 0], upper[:, 1])
+    assert np.allclose(top, band["magnitude_rel_high"], rtol=1e-6)
+    assert np.all(np.asarray(band["magnitude_rel_low"]) <= np.asarray(band["magnitude_rel"]))
+    assert [c for c in ax_phase.collections if isinstance(c, PolyCollection) and "95 % band" in c.get_label()]
+    fig.savefig(artifacts_dir / "report-model-band.png", dpi=60)
+
+
 def test_dcm_page_and_step_responses(analyses: dict[str, ShotAnalysis]) -> None:
     a = analyses["a1"]
     fig = dcm_page(entry("s001-r1", a))

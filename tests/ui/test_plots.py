@@ -175,3 +175,50 @@ def test_the_strip_says_the_dcm_verdict_once(qtbot):
     strip.show_figures(kf, CompensationCheck.of(kf))
     assert strip.verdict.text() == f"DCM NOT RECOMMENDED: {reason}"
     assert strip.warnings.text() == "⚠ the pulse excites the sensor's resonance"
+
+
+def test_the_model_magnitude_is_shown_with_its_95_percent_band(qtbot, artifacts_dir):
+    """Issue 17: the model's response carries its own 95 % band (analysis.uncertainty.
+    response_band), shaded under the model's curve and named in the legend; a shot without one
+    shows none."""
+    from hopkinson.ui.plots import MagnitudePlot, configure_pyqtgraph
+
+    from tests.ui.conftest import save_shot
+
+    configure_pyqtgraph()  # the panel's white ground
+    plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "identified model", "with DCM")
+    qtbot.addWidget(plot)
+    plot.resize(700, 420)
+    f_hz = np.geomspace(100.0, 4.9e5, 600)
+    model = np.abs(1 / (1 - (f_hz / 52e3) ** 2 + 0.02j * f_hz / 52e3))
+    band_f = np.geomspace(100.0, 56e3, 160)
+    centre = np.abs(1 / (1 - (band_f / 52e3) ** 2 + 0.02j * band_f / 52e3))
+    half = 0.02 + 0.25 * (band_f / 56e3) ** 2  # widening towards the band's top
+    band = {"frequency_hz": list(band_f), "coverage_probability": 0.95, "magnitude_rel": list(centre),
+            "magnitude_rel_low": list(centre * (1 - half)), "magnitude_rel_high": list(centre * (1 + half))}
+    plot.show_curves(f_hz, model, None, {"5": 11.4e3, "10": 15.5e3}, band)
+    plot.show()
+    qtbot.waitExposed(plot)
+    low, high = plot.band_low.getData(), plot.band_high.getData()
+    assert np.allclose(high[1] - low[1], 2 * half * centre)  # the band as given, around the model
+    legend = [label.text for _item, label in plot.getPlotItem().legend.items]
+    assert "95 % band of the model" in legend
+    image = save_shot(plot, artifacts_dir / "panel-magnitude-band.png")
+    # shaded: the band's blue tint fills the plot between its edges where the model is near 1
+    from PySide6.QtGui import QImage
+
+    picture = QImage(str(image))
+    vb = plot.getPlotItem().getViewBox()
+    at = float(np.interp(25e3, band_f, centre * (1 + half / 2)))  # between the model's curve and the band's top
+    inside = plot.mapFromScene(vb.mapViewToScene(pg_point(np.log10(25.0), at)))
+    colour = picture.pixelColor(inside.x(), inside.y())
+    assert colour.blue() > colour.red() + 20, colour.name()  # tinted blue, not the white ground
+    plot.show_curves(f_hz, model, None, {"5": 11.4e3}, None)
+    assert plot.band_low.getData()[0] is None or len(plot.band_low.getData()[0]) == 0
+    assert "95 % band of the model" not in [label.text for _item, label in plot.getPlotItem().legend.items]
+
+
+def pg_point(x: float, y: float):
+    from PySide6.QtCore import QPointF
+
+    return QPointF(x, y)
