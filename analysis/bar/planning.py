@@ -1,0 +1,114 @@
+"""Shot planning: which projectile and pressure give a target peak acceleration, and whether
+the pulse will excite the sensor (bar model: analysis.bar.predict).
+
+For each projectile the prediction at 1 m/s is scaled (the peak is linear in the speed), the
+launcher gives the pressure for the needed speed, and the pulse's spectrum gives its bands:
+  - the −3 dB frequency: where |A(f)/A(0)| of the acceleration pulse first falls below 1/√2;
+  - the supported band: up to where it first falls below −40 dB (the identification fits
+    where the excitation stands within 40 dB of its maximum: analysis.identify);
+  - the paper's rule δ ≤ 1.06/f_n (Eq. 36; PAPER-NOTES: it does not follow from its Eqs.
+    33–35, so both it and the supported band are given), with δ the equivalent half-sine width.
+The projectile to load: among those within the rig's pressure limits (and meeting the rule when
+a sensor's f_n is named, if any does), the one with the widest supported band.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from hopkinson.analysis.bar.geometry import G_M_S2, BarRig
+from hopkinson.analysis.bar.predict import ShotPrediction, predict_shot
+
+PAPER_RULE = 1.06  # δ·f_n at most (the paper's Eq. 36)
+SUPPORT_DB = -40.0
+
+
+@dataclass(frozen=True)
+class ProjectileOption:
+    """What one projectile would do at the pressure that gives the target peak."""
+
+    projectile: int
+    description: str
+    pressure_bar: float
+    speed_m_s: float
+    peak_m_s2: float
+    width_s: float  # equivalent half-sine width δ = π·Δv/(2·peak)
+    width_10_s: float
+    minus_3db_hz: float
+    supported_band_hz: float
+    reachable: bool
+    why_not: str  # "" when reachable
+    paper_rule_holds: bool | None  # δ ≤ 1.06/f_n for the named sensor (None: no sensor named)
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ShotPlan:
+    target_peak_m_s2: float
+    sensor_fn_hz: float | None
+    options: tuple[ProjectileOption, ...]
+    chosen: int | None
+    reason: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"target_peak_m_s2": self.target_peak_m_s2, "target_peak_g": self.target_peak_m_s2 / G_M_S2,
+                "sensor_fn_hz": self.sensor_fn_hz, "chosen_projectile": self.chosen, "reason": self.reason,
+                "projectiles": [o.to_dict() for o in self.options]}
+
+
+def spectrum_bands_hz(prediction: ShotPrediction) -> tuple[float, float]:
+    """(−3 dB frequency, supported band's top) of the acceleration pulse's amplitude spectrum."""
+    a = prediction.acceleration_m_s2
+    size = 1 << int(np.ceil(np.log2(8 * a.size)))
+    spectrum = np.abs(np.fft.rfft(a, size))
+    f = np.fft.rfftfreq(size, prediction.sample_interval_s)
+    rel = spectrum / spectrum[0]
+    below_3 = np.flatnonzero(rel < 1 / math.sqrt(2))
+    below_40 = np.flatnonzero(rel < 10 ** (SUPPORT_DB / 20))
+    return (float(f[below_3[0]]) if below_3.size else float(f[-1]),
+            float(f[below_40[0]]) if below_40.size else float(f[-1]))
+
+
+def plan_shot(rig: BarRig, target_peak_m_s2: float, *, sensor_fn_hz: float | None = None,
+              min_pressure_bar: float = 0.0, max_pressure_bar: float = math.inf) -> ShotPlan:
+    """Every projectile's pressure, pulse and bands for the target peak, and which to load."""
+    if not target_peak_m_s2 > 0:
+        raise ValueError(f"the target peak must be positive, got {target_peak_m_s2:g} m/s²")
+    if sensor_fn_hz is not None and not sensor_fn_hz > 0:
+        raise ValueError(f"the sensor's natural frequency must be positive, got {sensor_fn_hz:g} Hz")
+    options = []
+    for projectile in rig.projectiles:
+        unit = predict_shot(rig, projectile.number, speed_m_s=1.0)
+        speed = target_peak_m_s2 / unit.peak_m_s2
+        pressure = rig.launcher.pressure_bar(projectile, speed)
+        shot = unit.scaled(speed)
+        low, top = spectrum_bands_hz(shot)
+        why = ""
+        if pressure > max_pressure_bar:
+            why = (f"needs {pressure:.3g} bar, above the rig's maximum {max_pressure_bar:g} bar "
+                   f"(at most {unit.peak_m_s2 * rig.launcher.speed_m_s(projectile, max_pressure_bar) / G_M_S2:,.0f} g)")
+        elif pressure < min_pressure_bar:
+            why = (f"needs {pressure:.3g} bar, below the rig's minimum {min_pressure_bar:g} bar "
+                   f"(at least {unit.peak_m_s2 * rig.launcher.speed_m_s(projectile, min_pressure_bar) / G_M_S2:,.0f} g)")
+        rule = None if sensor_fn_hz is None else bool(shot.equivalent_width_s <= PAPER_RULE / sensor_fn_hz)
+        options.append(ProjectileOption(projectile.number, projectile.description, pressure, speed, shot.peak_m_s2,
+                                        shot.equivalent_width_s, shot.width_10_s, low, top, not why, why, rule))
+    reachable = [o for o in options if o.reachable]
+    if not reachable:
+        return ShotPlan(target_peak_m_s2, sensor_fn_hz, tuple(options), None,
+                        "no projectile reaches the target within the rig's pressure limits: "
+                        + "; ".join(f"No. {o.projectile} {o.why_not}" for o in options))
+    exciting = [o for o in reachable if o.paper_rule_holds] if sensor_fn_hz is not None else reachable
+    pool = exciting or reachable
+    best = max(pool, key=lambda o: (o.supported_band_hz, -o.pressure_bar))
+    reason = f"the widest supported band ({best.supported_band_hz / 1e3:.1f} kHz) within the pressure limits"
+    if sensor_fn_hz is not None:
+        reason += (f", and δ = {best.width_s * 1e6:.1f} µs ≤ 1.06/f_n = {PAPER_RULE / sensor_fn_hz * 1e6:.1f} µs"
+                   if exciting else
+                   f"; no reachable projectile meets δ ≤ 1.06/f_n = {PAPER_RULE / sensor_fn_hz * 1e6:.1f} µs: "
+                   "the resonance will not be excited")
+    return ShotPlan(target_peak_m_s2, sensor_fn_hz, tuple(options), best.projectile, reason)
