@@ -241,7 +241,7 @@ def check_plan(plan: CampaignPlan, config: RigConfig, history: list[LevelPoint] 
     for shot in plan.shots:
         level = None
         if shot.target_peak_m_s2 is not None:
-            level = needed_pressure_bar(shot.target_peak_m_s2, shot.projectile, history or ())
+            level = needed_pressure_bar(shot.target_peak_m_s2, shot.projectile, history or (), config.bar.rig())
             if level.pressure_bar > limits.max_pressure_bar:
                 raise ConfigError(
                     f"{plan.path}: shots[{shot.entry}] ({shot.id}): target peak {shot.target_peak_m_s2:.4g} m/s² "
@@ -249,7 +249,8 @@ def check_plan(plan: CampaignPlan, config: RigConfig, history: list[LevelPoint] 
                     f"No. {shot.projectile} (launcher model, {level.basis}), above the rig's maximum "
                     f"{limits.max_pressure_bar:g} bar ({config.path or 'configuration'} [limits]); nothing was fired")
             level = choose_pressure(shot.target_peak_m_s2, shot.projectile, history or (),
-                                    min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar)
+                                    min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar,
+                                    rig=config.bar.rig())
         request = dataclasses.replace(shot_request(plan, shot, RunFolder(Path(".")), level), out_dir=Path("."))
         try:
             request.check(config)
@@ -402,7 +403,8 @@ class CampaignRunner:
                 entry_shots.append(LevelPoint(other.projectile, float(info["pressure_bar"]), float(info["peak_m_s2"])))
         limits = self.config.limits
         return choose_pressure(shot.target_peak_m_s2, shot.projectile, self._history(), entry_shots,
-                               min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar)
+                               min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar,
+                               rig=self.config.bar.rig())
 
     def _remember_level(self, shot: PlannedShot, pressure_bar: float | None, results: dict[str, Any] | None) -> None:
         """An analysed shot's pressure → peak into the rig's history (a failure is a warning)."""

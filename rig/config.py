@@ -362,6 +362,57 @@ class DatabaseConfig:
 
 
 @dataclass(frozen=True)
+class BarSegmentConfig:
+    """A uniform piece of a projectile: material (analysis.bar.MATERIALS), length, diameter."""
+
+    material: str
+    length_m: float
+    diameter_m: float
+
+
+@dataclass(frozen=True)
+class BarProjectileConfig:
+    """[[bar.projectiles]]: one projectile, its segments from the impact face backwards."""
+
+    number: int
+    segments: tuple[BarSegmentConfig, ...]
+    description: str = ""
+    uses_spacer: bool = True
+    contact_stiffness_n_m: float = 0.0  # the impact face's contact spring; 0: flat and rigid
+
+
+@dataclass(frozen=True)
+class BarConfig:
+    """[bar]: the rig's physics for shot planning and the first shot's pressure (analysis.bar);
+    every key has the paper's rig as its default, and no projectiles listed means the paper's three."""
+
+    material: str = "Ti-6Al-4V"
+    length_m: float = 1.6
+    diameter_m: float = 0.016
+    spacer_material: str = "Al-7075"
+    spacer_length_m: float = 0.003  # 0: no spacer
+    base_length_m: float = 0.010  # the raster base (the bar's material and diameter)
+    sensor_mass_kg: float = 0.005
+    barrel_length_m: float = 1.5
+    launcher_efficiency: float = 0.52
+    projectiles: tuple[BarProjectileConfig, ...] = ()
+
+    def rig(self) -> Any:
+        """The analysis.bar.BarRig this table describes."""
+        from hopkinson.analysis.bar import PAPER_RIG, BarRig, Launcher, Projectile, Segment
+
+        projectiles = tuple(
+            Projectile(p.number, p.description or f"projectile No. {p.number}",
+                       tuple(Segment(s.material, s.length_m, s.diameter_m) for s in p.segments), p.uses_spacer,
+                       p.contact_stiffness_n_m or None)
+            for p in self.projectiles) or PAPER_RIG.projectiles
+        spacer = Segment(self.spacer_material, self.spacer_length_m, self.diameter_m) if self.spacer_length_m else None
+        return BarRig(Segment(self.material, self.length_m, self.diameter_m), spacer,
+                      Segment(self.material, self.base_length_m, self.diameter_m), self.sensor_mass_kg, projectiles,
+                      Launcher(self.barrel_length_m, self.launcher_efficiency))
+
+
+@dataclass(frozen=True)
 class RigConfig:
     """The whole of config/rig.toml, validated."""
 
@@ -373,6 +424,7 @@ class RigConfig:
     analysis: AnalysisConfig = field(default_factory=AnalysisConfig)
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
     lab: LabConfig = field(default_factory=LabConfig)
+    bar: BarConfig = field(default_factory=BarConfig)
     database: DatabaseConfig = field(default_factory=DatabaseConfig)
     path: str = ""  # where it was loaded from (not a TOML key)
 
@@ -456,6 +508,18 @@ RULES: dict[str, _Rule] = {
     "lab.decision_rule": _Rule(choices=("simple", "guarded")),
     "lab.reference_chain.u_rel": _Rule(0.0, 1.0),
     "limits.max_pressure_bar": _Rule(above=0.0, max=100.0),
+    "bar.material": _Rule(choices=("C45", "Ti-6Al-4V", "PA6", "Al-7075"), text="analysis.bar.MATERIALS"),
+    "bar.spacer_material": _Rule(choices=("C45", "Ti-6Al-4V", "PA6", "Al-7075"), text="analysis.bar.MATERIALS"),
+    "bar.projectiles.segments.material": _Rule(choices=("C45", "Ti-6Al-4V", "PA6", "Al-7075"),
+                                               text="analysis.bar.MATERIALS"),
+    "bar.spacer_length_m": _Rule(0.0, 1.0, text="0: no spacer"),
+    "bar.*length_m": _Rule(above=0.0, max=20.0),
+    "bar.*diameter_m": _Rule(above=0.0, max=1.0),
+    "bar.projectiles.segments.*": _Rule(above=0.0, max=20.0),
+    "bar.sensor_mass_kg": _Rule(0.0, 10.0),
+    "bar.launcher_efficiency": _Rule(above=0.0, max=1.0),
+    "bar.projectiles.number": _Rule(1, 99),
+    "bar.projectiles.contact_stiffness_n_m": _Rule(0.0, 1e12, text="0: flat and rigid"),
     "limits.min_pressure_bar": _Rule(0.0, 100.0),
     "limits.pressure_tolerance_bar": _Rule(above=0.0, max=10.0),
     "limits.fixture_vacuum_max_mbar": _Rule(above=0.0, max=1100.0),

@@ -3,8 +3,8 @@
 A campaign entry may give `peak_m_s2` or `peak_g` instead of `pressure_bar`. Each of its shots is
 fired at a pressure chosen from what is known then:
 
-1. the launcher model's pressure → peak for the projectile (`model_peak_m_s2`: speed k·√p, the
-   object's Δv = transfer·speed, a pulse of the projectile's width: peak ∝ √p), scaled by
+1. the bar model's pressure → peak for the projectile (`model_peak_m_s2`: analysis.bar, the
+   rig's `[bar]`: launcher, impact, dispersion, separation; peak ∝ speed ∝ √p), scaled by
 2. a correction factor r = measured peak ÷ model peak, the geometric mean over
    - the shots of this entry already fired and analysed, when there are any (the latest
      `ENTRY_SHOTS_USED`), else
@@ -27,6 +27,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from hopkinson.analysis.bar import PAPER_RIG, BarRig, predict_shot
+
 from hopkinson.fileio import append_json_line
 
 G_M_S2 = 9.80665
@@ -34,22 +36,17 @@ LEVEL_HISTORY_NAME = "level-history.jsonl"
 ENTRY_SHOTS_USED = 3
 HISTORY_SHOTS_USED = 10
 
-# The launcher model (config/sim.toml [world.launcher] defaults, the paper's rig): speed
-# 10 m/s per √bar, 85 % of it passed to the object, pulse widths of projectiles No. 1-3.
-SPEED_M_S_PER_SQRT_BAR = 10.0
-VELOCITY_TRANSFER = 0.85
-PULSE_WIDTH_S = {1: 120e-6, 2: 75e-6, 3: 38.6e-6}
 
 
-def model_peak_m_s2(projectile: int, pressure_bar: float) -> float:
-    """The launcher model's peak: π·Δv/(2δ), Δv = transfer·k·√p (a half-sine of width δ)."""
-    delta_v = VELOCITY_TRANSFER * SPEED_M_S_PER_SQRT_BAR * math.sqrt(max(pressure_bar, 0.0))
-    return math.pi * delta_v / (2.0 * PULSE_WIDTH_S[projectile])
+def model_peak_m_s2(projectile: int, pressure_bar: float, rig: BarRig | None = None) -> float:
+    """The bar model's peak for the projectile fired from `pressure_bar` (the paper's rig
+    unless the rig's own `[bar]` is given)."""
+    return predict_shot(rig or PAPER_RIG, projectile, pressure_bar=max(pressure_bar, 0.0)).peak_m_s2
 
 
-def model_pressure_bar(projectile: int, peak_m_s2: float) -> float:
-    """The launcher model's pressure for a peak (the inverse of `model_peak_m_s2`)."""
-    return (abs(peak_m_s2) / model_peak_m_s2(projectile, 1.0)) ** 2
+def model_pressure_bar(projectile: int, peak_m_s2: float, rig: BarRig | None = None) -> float:
+    """The bar model's pressure for a peak (the inverse of `model_peak_m_s2`: peak ∝ √p)."""
+    return (abs(peak_m_s2) / model_peak_m_s2(projectile, 1.0, rig)) ** 2
 
 
 @dataclass(frozen=True)
@@ -60,9 +57,9 @@ class LevelPoint:
     pressure_bar: float
     peak_m_s2: float
 
-    def ratio(self) -> float:
+    def ratio(self, rig: BarRig | None = None) -> float:
         """Measured ÷ model peak at this pressure."""
-        return abs(self.peak_m_s2) / model_peak_m_s2(self.projectile, self.pressure_bar)
+        return abs(self.peak_m_s2) / model_peak_m_s2(self.projectile, self.pressure_bar, rig)
 
 
 @dataclass(frozen=True)
@@ -83,7 +80,7 @@ class LevelChoice:
 
 def choose_pressure(target_peak_m_s2: float, projectile: int, history: Iterable[LevelPoint] = (),
                     entry_shots: Sequence[LevelPoint] = (), *, min_pressure_bar: float = 0.0,
-                    max_pressure_bar: float = math.inf) -> LevelChoice:
+                    max_pressure_bar: float = math.inf, rig: BarRig | None = None) -> LevelChoice:
     """The pressure for `target_peak_m_s2` (module docstring): entry shots first, then the rig's
     history of this projectile, then the model alone; held within the rig's limits."""
     used: list[LevelPoint] = [p for p in entry_shots if p.projectile == projectile and _usable(p)][-ENTRY_SHOTS_USED:]
@@ -92,18 +89,19 @@ def choose_pressure(target_peak_m_s2: float, projectile: int, history: Iterable[
         used = [p for p in history if p.projectile == projectile and _usable(p)][-HISTORY_SHOTS_USED:]
         basis = "rig history"
     if used:
-        correction = math.exp(sum(math.log(p.ratio()) for p in used) / len(used))
+        correction = math.exp(sum(math.log(p.ratio(rig)) for p in used) / len(used))
     else:
         correction, basis = 1.0, "model"
-    wanted = model_pressure_bar(projectile, target_peak_m_s2 / correction)
+    wanted = model_pressure_bar(projectile, target_peak_m_s2 / correction, rig)
     pressure = min(max(wanted, min_pressure_bar), max_pressure_bar)
-    return LevelChoice(float(target_peak_m_s2), float(pressure), correction * model_peak_m_s2(projectile, pressure),
+    return LevelChoice(float(target_peak_m_s2), float(pressure), correction * model_peak_m_s2(projectile, pressure, rig),
                        float(correction), basis, len(used), held_at_limit=pressure != wanted)
 
 
-def needed_pressure_bar(target_peak_m_s2: float, projectile: int, history: Iterable[LevelPoint] = ()) -> LevelChoice:
+def needed_pressure_bar(target_peak_m_s2: float, projectile: int, history: Iterable[LevelPoint] = (),
+                        rig: BarRig | None = None) -> LevelChoice:
     """The first shot's choice without any limit: what the plan's check compares with the rig's maximum."""
-    return choose_pressure(target_peak_m_s2, projectile, history)
+    return choose_pressure(target_peak_m_s2, projectile, history, rig=rig)
 
 
 def _usable(p: LevelPoint) -> bool:

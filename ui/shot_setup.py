@@ -1,5 +1,7 @@
 """Shot set-up: accelerometer, operator, pressure, projectile, analysis options and where the
-shot file goes; remembered between runs (QSettings, group "shot").
+shot file goes; remembered between runs (QSettings, group "shot"). A target peak (and the
+sensor's f_n) gives each projectile's pressure and pulse from the bar model (ui.shot_planner);
+"Use" sets the projectile and pressure from it.
 
 `ShotSetup.request(confirm_timeout_s)` turns the form into a rig.shot.ShotRequest; the
 sequencer checks it again (`ShotRequest.check`) before anything moves.
@@ -19,6 +21,7 @@ from typing import Any
 
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.shot import ShotRequest, second_accelerometer
+from hopkinson.ui.shot_planner import ShotPlanner
 from hopkinson.ui.widgets import section_title
 from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import (
@@ -76,6 +79,7 @@ class ShotSetup(QWidget):
         for n in (1, 2, 3):
             self.projectile.addItem(f"No. {n}", n)
         self.projectile.setCurrentIndex(2)
+        self.planner = ShotPlanner(config, self.use_plan)
         self.max_order = QSpinBox()
         self.max_order.setRange(1, 40)
         self.max_order.setValue(DEFAULT_MAX_ORDER)
@@ -126,6 +130,9 @@ class ShotSetup(QWidget):
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             form.addRow("2nd accelerometer", self.accelerometer_2_model)
             form.addRow("its serial No.", self.accelerometer_2_serial)
+        form.addRow("Target peak", self.planner.target_g)
+        form.addRow("Sensor f_n", self.planner.sensor_fn_khz)
+        form.addRow(self.planner)
         form.addRow("Pressure", self.pressure)
         form.addRow("Projectile", self.projectile)
         form.addRow("Max. order", self.max_order)
@@ -159,6 +166,13 @@ class ShotSetup(QWidget):
             out_dir=Path(self.out_dir.text().strip() or "."),
             confirm_timeout_s=confirm_timeout_s,
         )
+
+    def use_plan(self, projectile: int, pressure_bar: float) -> None:
+        """Set the projectile and pressure the planner chose (within the rig's limits)."""
+        index = self.projectile.findData(projectile)
+        if index >= 0:
+            self.projectile.setCurrentIndex(index)
+        self.pressure.setValue(pressure_bar)
 
     def _second_accelerometer(self) -> dict[str, dict[str, str]]:
         """The second accelerometer's model and serial (ShotRequest.check asks for both)."""
@@ -224,7 +238,8 @@ class ShotSetup(QWidget):
         numbers: dict[str, QDoubleSpinBox | QSpinBox] = {
             "sensitivity_uv_per_m_s2": self.sensitivity, "pressure_bar": self.pressure,
             "max_order": self.max_order, "sample_rate_khz": self.sample_rate,
-            "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping}
+            "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping,
+            "target_peak_g": self.planner.target_g, "sensor_fn_khz": self.planner.sensor_fn_khz}
         return numbers | (self.conditioner.numbers() if self.conditioner else {})
 
     def _browse(self) -> None:

@@ -75,10 +75,12 @@ class Projectile:
 class Launcher:
     """Gas gun: the reservoir's gauge pressure p acts on the projectile's rear over the barrel,
     a fraction `efficiency` of that work becoming kinetic energy (valve losses, leakage past
-    the projectile, the gas's expansion): ½·m·v² = η·p·A·L, so v = √(2ηpAL/m)."""
+    the projectile, the gas's expansion): ½·m·v² = η·p·A·L, so v = √(2ηpAL/m). The paper gives
+    no launcher: the defaults put 50 000 g at 2 bar with projectile No. 3, the level the
+    earlier simulator gave."""
 
-    barrel_length_m: float = 1.0
-    efficiency: float = 0.3
+    barrel_length_m: float = 1.5
+    efficiency: float = 0.52
 
     def __post_init__(self) -> None:
         if not (self.barrel_length_m > 0 and 0 < self.efficiency <= 1):

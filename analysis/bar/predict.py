@@ -19,12 +19,13 @@ from hopkinson.analysis.bar.lattice import impact_force, object_motion
 
 DEFAULT_SAMPLE_INTERVAL_S = 1e-7
 DEFAULT_DURATION_S = 2e-3
+LEAD_S = 50e-6  # the record starts this long before the front's arrival at c₀
 
 
 @dataclass(frozen=True)
 class ShotPrediction:
-    """The calibrated object's acceleration for one projectile at one speed (t = 0: the
-    non-dispersed front's arrival at the bar's far end)."""
+    """The calibrated object's acceleration for one projectile at one speed (t = 0: LEAD_S before
+    the non-dispersed front's arrival at the bar's far end)."""
 
     projectile: int
     speed_m_s: float
@@ -85,8 +86,9 @@ def _unit_shot(rig: BarRig, number: int, dt: float, duration_s: float, dispersio
     impact = impact_force(list(projectile.segments), spacer, rig.bar, 1.0, dt, max_duration_s=duration_s,
                           contact_stiffness_n_m=projectile.contact_stiffness_n_m)
     n = int(round(duration_s / dt))
+    lead = int(round(LEAD_S / dt))  # room for the dispersed front's precursor (it runs ahead of c₀)
     wave = np.zeros(n)
-    wave[: min(n, impact.force_n.size)] = impact.force_n[:n]
+    wave[lead: min(n, lead + impact.force_n.size)] = impact.force_n[: n - lead]
     if dispersion:
         wave = disperse(wave, dt, rig.bar.length_m, rig.bar.diameter_m / 2.0, rig.bar.props)
     motion = object_motion(wave, rig.bar, rig.base, rig.sensor_mass_kg, dt)

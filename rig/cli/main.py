@@ -42,6 +42,7 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.analyse",
     "hopkinson.rig.cli.dcm",
     "hopkinson.rig.cli.compare_sine",
+    "hopkinson.rig.cli.plan_shot",
     "hopkinson.rig.cli.reduce",
     "hopkinson.rig.cli.report",
     "hopkinson.rig.cli.lab",

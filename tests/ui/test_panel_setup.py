@@ -180,3 +180,45 @@ def test_the_sine_calibration_field_reaches_the_request_and_is_remembered(qtbot,
     second.load(QSettings(settings_file, QSettings.Format.IniFormat))
     assert second.request(1.0).sine_calibration == str(tmp_path / "sine.csv")
     dispose(second)
+
+
+def test_the_planner_sets_projectile_and_pressure_for_a_target_peak(qtbot, tmp_path, artifacts_dir):
+    """Issue 19 item 3 in the panel: a target in g and the sensor's f_n give each projectile's
+    pressure from the bar model; "Use" sets the form; the request then fires the pressure that the
+    rig's physics says reaches the target. A target beyond the rig's maximum is said, and "Use" is off."""
+    from hopkinson.analysis.bar import predict_shot
+    from hopkinson.ui.shot_setup import ShotSetup
+
+    from tests.ui.conftest import save_shot
+
+    config = rig_config_for_tests()
+    setup = ShotSetup(config, tmp_path)
+    qtbot.addWidget(setup)
+    planner = setup.planner
+    planner.sensor_fn_khz.setValue(27.0)
+    planner.target_g.setValue(50_000)
+    assert planner.use_button.isEnabled() and "load No. 3" in planner.result.text()
+    qtbot.mouseClick(planner.use_button, Qt.MouseButton.LeftButton)
+    request = setup.request(confirm_timeout_s=1.0)
+    assert request.projectile == 3
+    # the pressure the form now holds gives 50 000 g through the rig's physics (to the form's 0.01 bar)
+    fired = predict_shot(config.bar.rig(), 3, pressure_bar=request.pressure_bar)
+    assert fired.peak_m_s2 == pytest.approx(50_000 * 9.80665, rel=0.01)
+    # No. 3's δ ≤ 1.06/27 kHz = 39.3 µs: the paper's rule holds for it and is shown
+    assert "<td>yes</td>" in planner.result.text()
+    setup.resize(520, setup.sizeHint().height())
+    save_shot(setup, artifacts_dir / "panel-setup-planner.png")
+    # beyond the rig: nothing is set, the reason is shown
+    before = setup.request(confirm_timeout_s=1.0).pressure_bar
+    planner.target_g.setValue(400_000)
+    assert not planner.use_button.isEnabled()
+    assert "no projectile reaches the target" in planner.result.text() and "maximum" in planner.result.text()
+    qtbot.mouseClick(planner.use_button, Qt.MouseButton.LeftButton)
+    assert setup.request(confirm_timeout_s=1.0).pressure_bar == before
+    # the planner's fields are remembered with the rest of the form
+    settings_file = str(tmp_path / "panel.ini")
+    setup.save(QSettings(settings_file, QSettings.Format.IniFormat))
+    again = ShotSetup(config, tmp_path)
+    qtbot.addWidget(again)
+    again.load(QSettings(settings_file, QSettings.Format.IniFormat))
+    assert again.planner.target_g.value() == 400_000 and again.planner.sensor_fn_khz.value() == 27.0

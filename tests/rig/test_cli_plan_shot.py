@@ -1,0 +1,83 @@
+"""`hopkinson plan-shot`: the pressure for a target peak per projectile from the bar model, which
+projectile to load, the δ ≤ 1.06/f_n judgement, and a target beyond the rig's limits refused
+with the reason (exit 2). Checked by firing the chosen pressure through the bar model again and
+against the paper's rule in closed form."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+from hopkinson.analysis.bar import predict_shot
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.config import load_rig_config
+from hopkinson.rig.config_paths import DEFAULT_SIM_RIG_CONFIG
+
+G = 9.80665
+
+
+def plan(capsys: pytest.CaptureFixture[str], *args: str, config: Path = DEFAULT_SIM_RIG_CONFIG
+         ) -> tuple[int, str, str]:
+    code = main(["plan-shot", *args, "--config", str(config)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_the_chosen_pressure_gives_the_target_and_the_paper_rule_is_judged(capsys) -> None:
+    code, out, err = plan(capsys, "--peak-g", "50000", "--sensor-fn-hz", "27000", "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["chosen_projectile"] == 3 and "δ = 38.6 µs ≤ 1.06/f_n" in result["reason"]
+    rig = load_rig_config(DEFAULT_SIM_RIG_CONFIG).bar.rig()
+    for option in result["projectiles"]:
+        fired = predict_shot(rig, option["projectile"], pressure_bar=option["pressure_bar"])
+        assert fired.peak_m_s2 == pytest.approx(50_000 * G, rel=0.01)  # the pressure gives the target
+        assert option["paper_rule_holds"] == (option["width_s"] <= 1.06 / 27_000)
+        assert option["reachable"] == (option["pressure_bar"] <= 8.0)  # rig-sim.toml's [limits] maximum
+    text_code, text, _ = plan(capsys, "--peak-g", "50000", "--sensor-fn-hz", "27000")
+    assert text_code == 0 and text.splitlines()[-1].startswith("load projectile No. 3: ")
+
+
+def test_a_sensor_too_fast_for_every_pulse_is_said(capsys) -> None:
+    code, out, _ = plan(capsys, "--peak-g", "20000", "--sensor-fn-hz", "60000", "--json")
+    result = json.loads(out)
+    assert code == 0 and all(o["paper_rule_holds"] is False for o in result["projectiles"])
+    assert "the resonance will not be excited" in result["reason"]
+
+
+def test_a_target_beyond_the_rig_is_refused_with_the_reason(capsys, tmp_path: Path) -> None:
+    code, out, err = plan(capsys, "--peak-g", "200000")
+    assert code == 2 and err.count("\n") == 1
+    assert "200,000 g: no projectile reaches the target within the rig's pressure limits" in err
+    # what No. 3 needs and reaches, consistent with peak ∝ √p (speed ∝ √p, a linear bar) and with
+    # the launcher's calibration point (50 000 g at 2 bar): about 100 000 g at 8 bar
+    found = re.search(r"No\. 3 needs ([\d.]+) bar, above the rig's maximum 8 bar \(at most ([\d,]+) g\)", err)
+    assert found, err
+    needed_bar, top_g = float(found[1]), float(found[2].replace(",", ""))
+    assert needed_bar == pytest.approx(8.0 * (200_000 / top_g) ** 2, rel=0.01)
+    assert top_g == pytest.approx(100_000, rel=0.05)
+    # a rig whose own [bar] has a longer barrel reaches it
+    text = DEFAULT_SIM_RIG_CONFIG.read_text()
+    config = tmp_path / "rig.toml"
+    config.write_text(text + "\n[bar]\nbarrel_length_m = 6.0\nlauncher_efficiency = 1.0\n")
+    code, out, err = plan(capsys, "--peak-g", "200000", "--json", config=config)
+    assert code == 0, err
+    assert json.loads(out)["chosen_projectile"] == 3
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--peak-g", "-5"], "the target peak must be positive"),
+    (["--peak-g", "5000", "--sensor-fn-hz", "0"], "--sensor-fn-hz must be positive"),
+])
+def test_bad_input_is_one_line_exit_2(capsys, args: list[str], message: str) -> None:
+    code, _out, err = plan(capsys, *args)
+    assert code == 2 and message in err and err.count("\n") == 1
+
+
+def test_a_wrong_bar_key_names_the_file_and_key(capsys, tmp_path: Path) -> None:
+    config = tmp_path / "rig.toml"
+    config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + "\n[bar]\nmaterial = \"unobtainium\"\n")
+    code, _out, err = plan(capsys, "--peak-g", "5000", config=config)
+    assert code == 2 and f"{config}: bar.material: must be one of" in err
