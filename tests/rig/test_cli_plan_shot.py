@@ -81,3 +81,20 @@ def test_a_wrong_bar_key_names_the_file_and_key(capsys, tmp_path: Path) -> None:
     config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + "\n[bar]\nmaterial = \"unobtainium\"\n")
     code, _out, err = plan(capsys, "--peak-g", "5000", config=config)
     assert code == 2 and f"{config}: bar.material: must be one of" in err
+
+
+def test_the_readmes_bar_table_is_a_valid_rig_configuration(capsys, tmp_path: Path) -> None:
+    """The README's `[bar]` example, appended to the simulated rig's file, loads and plans: its one
+    projectile (the paper's No. 3 written out) gives No. 3's pressure for 50 000 g."""
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"```toml\n(\[bar\]\n.*?)```", readme, re.S)
+    assert block, "README has no ```toml [bar] example"
+    config = tmp_path / "rig.toml"
+    config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + "\n" + block[1])
+    code, out, err = plan(capsys, "--peak-g", "50000", "--json", config=config)
+    assert code == 0, err
+    result = json.loads(out)
+    assert [o["projectile"] for o in result["projectiles"]] == [3] and result["chosen_projectile"] == 3
+    paper = predict_shot(load_rig_config(DEFAULT_SIM_RIG_CONFIG).bar.rig(), 3, speed_m_s=1.0)
+    own = result["projectiles"][0]
+    assert own["width_s"] == pytest.approx(paper.equivalent_width_s, rel=1e-6)
