@@ -551,7 +551,7 @@ def identify(
                 costs, parameters, data.bins, changes, lambda n: _acceptable(polished(n), data.bins), significance)
             if fallback is None:
                 raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
-                                    "or outside the unit circle)")
+                                    "or outside the unit circle" + _marginal_modes_text(polished(chosen), dt) + ")")
             unstable = ", ".join(str(n) for n in dropped)
             warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
                             f"{fallback} (the order test's choice among the stable orders) is used")
@@ -1051,6 +1051,24 @@ def _acceptable(fit: OrderFit, bins: int) -> bool:
     dof = 2 * bins - fit.parameters
     unexplained = dof > 0 and 2.0 * fit.cost / dof > UNSTABLE_MODEL_ERROR
     return not (radius > 1.0 - 1e-3 or unexplained)
+
+
+def _marginal_modes_text(fit: OrderFit, dt: float) -> str:
+    """Where the order test's choice put its poles on or beyond the unit circle, as modes
+    (e.g. ': order 2 has a mode at 58.4 kHz with ζ ≤ 1e-05, undamped'); '' when none is there."""
+    roots = np.roots(fit.a) if fit.a.size > 1 else np.array([])
+    marginal = roots[(np.abs(roots) >= 1.0 - MARGINAL_POLE) & (roots.imag >= 0)]
+    if not marginal.size:
+        return ""
+    parts = []
+    for z in marginal:
+        s = np.log(complex(z)) / dt
+        f_hz = abs(s) / (2.0 * np.pi)
+        zeta = -s.real / abs(s) if abs(s) > 0 else 0.0
+        parts.append(f"a mode at {f_hz / 1e3:.3g} kHz with ζ {'≤ 1e-05' if abs(zeta) <= 1e-5 else f'= {zeta:.2g}'}")
+    return (f": order {fit.order} has {', '.join(parts)}, undamped: a response that rings on without a drive in "
+            "the reference (a second drive path, motion the reference does not see) or a mode in a null of the "
+            "excitation whose damping the data do not fix")
 
 
 def _pole_below_band(fit: OrderFit, lowest_bin_hz: float, dt: float) -> bool:

@@ -345,3 +345,21 @@ def test_unrelated_channels_are_reported_as_a_poor_fit() -> None:
     result = identify(Record(T, u, y))
     assert result.fit_percent < 5.0
     assert any("explains only" in w for w in result.warnings)
+
+
+def test_an_undamped_mode_that_stops_every_order_is_named_with_its_frequency() -> None:
+    """When no order gives a stable model, the refusal says where the order test's choice put its
+    pole on the unit circle (PTB's record with its sine: the sensor's ~58 kHz mode, ringing with no
+    drive in the reference). Closed form: poles e^{±j2πf·Δt} are a mode at f with ζ = 0; poles
+    inside the circle are not named."""
+    from hopkinson.analysis.frequency_fit import OrderFit
+    from hopkinson.analysis.identify import _marginal_modes_text
+
+    dt, f_hz = 1e-6, 58.4e3
+    z = np.exp(1j * 2 * np.pi * f_hz * dt)
+    a = np.real(np.poly([z, np.conj(z)]))
+    fit = OrderFit(a, np.array([1.0, 0.0, 0.0]), 0.0, np.zeros(0), 0.0, 1.0, 5, 1, True, False)
+    text = _marginal_modes_text(fit, dt)
+    assert "order 2 has a mode at 58.4 kHz with ζ ≤ 1e-05, undamped" in text
+    damped = np.real(np.poly([0.99 * z, 0.99 * np.conj(z)]))
+    assert _marginal_modes_text(OrderFit(damped, fit.b, 0.0, np.zeros(0), 0.0, 1.0, 5, 1, True, False), dt) == ""
