@@ -58,6 +58,11 @@ def _fmt(figure: Figure, scale: float, unit: str) -> tuple[str, str]:
     return value, expanded or "—"
 
 
+def _specimen_mark(simulated: int, shots: int) -> str:
+    """The specimen's mark, with how many of its shots were simulated (when any)."""
+    return SPECIMEN_MARK + (f" ({simulated} of {shots} shots simulated)" if simulated else "")
+
+
 def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *, customer: str = "", conditions: str = "",
                         authorised_by: str, software_version: str, today: date | None = None,
                         specimen: bool = False) -> dict[str, Any]:
@@ -91,8 +96,7 @@ def certificate_content(repo: LabRepository, campaign: str, lab: LabIdentity, *,
     peaks = [c.peak_acceleration_m_s2 for c in calibrations if c.peak_acceleration_m_s2]
     return {
         "title": "Specimen calibration certificate" if specimen else "Calibration certificate",
-        "specimen": SPECIMEN_MARK + (f" ({len(simulated)} of {len(calibrations)} shots simulated)" if simulated
-                                     else "") if specimen else "",
+        "specimen": _specimen_mark(len(simulated), len(calibrations)) if specimen else "",
         "lab": {"name": lab.name or "(lab name not configured: [lab] name)", "address": lab.address,
                 "accreditation": lab.accreditation},
         "customer": customer or sensor.owner or "—",

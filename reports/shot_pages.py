@@ -216,9 +216,9 @@ def model_page(entry: ShotEntry) -> Figure:
     ax_band.plot(fl / 1e3, ml, color="tab:blue", lw=1.5, label="model")
     band = (entry.stored.get("uncertainty") or {}).get("response_band")
     if band:  # the model's response with its 95 % band, from the same Monte Carlo draws as the figures
-        fb = np.asarray(band["frequency_hz"], dtype=float)
+        band_hz = np.asarray(band["frequency_hz"], dtype=float)
         label = f"{100 * band.get('coverage_probability', 0.95):.0f} % band of the model (Monte Carlo)"
-        ax_band.fill_between(fb / 1e3, band["magnitude_rel_low"], band["magnitude_rel_high"], color="tab:blue",
+        ax_band.fill_between(band_hz / 1e3, band["magnitude_rel_low"], band["magnitude_rel_high"], color="tab:blue",
                              alpha=0.25, lw=0, label=label)
     draw_bands(ax_band, a.fbsd_hz, bounds=kf.fbsd_bounds if kf is not None else None,
                intervals={k: f.interval for k, f in kf.fbsd_hz.items()} if kf is not None else None)
@@ -234,9 +234,9 @@ def model_page(entry: ShotEntry) -> Figure:
     phase = np.degrees(np.unwrap(np.angle(h)))
     ax_ph.semilogx(f / 1e3, phase, color="tab:purple")
     if band:  # the band's phase includes the fitted delay; this page's does not: the band about this curve
-        at = np.degrees(np.unwrap(np.angle(frequency_response(model, fb))))
+        at = np.degrees(np.unwrap(np.angle(frequency_response(model, band_hz))))
         centre = np.asarray(band["phase_deg"], dtype=float)
-        ax_ph.fill_between(fb / 1e3, at + np.asarray(band["phase_low_deg"]) - centre,
+        ax_ph.fill_between(band_hz / 1e3, at + np.asarray(band["phase_low_deg"]) - centre,
                            at + np.asarray(band["phase_high_deg"]) - centre, color="tab:purple", alpha=0.25, lw=0,
                            label=f"{100 * band.get('coverage_probability', 0.95):.0f} % band")
     for key, _level, colour in BAND_LEVELS:

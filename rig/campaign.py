@@ -235,22 +235,27 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
 def check_plan(plan: CampaignPlan, config: RigConfig, history: list[LevelPoint] | None = None) -> None:
     """The whole plan against the rig, before anything moves: every shot's request (pressure
     within the rig's limits, projectile, every analysis option) is checked, and a target level
-    the launcher model (corrected by the rig's `history`) says needs more than the rig's
+    the bar model (corrected by the rig's `history`) says needs more than the rig's
     maximum pressure is refused; ConfigError (exit 2) names the plan, the entry and the reason."""
     limits = config.limits
+    rig = config.bar.rig()
     for shot in plan.shots:
         level = None
         if shot.target_peak_m_s2 is not None:
-            level = needed_pressure_bar(shot.target_peak_m_s2, shot.projectile, history or (), config.bar.rig())
+            try:
+                level = needed_pressure_bar(shot.target_peak_m_s2, shot.projectile, history or (), rig)
+            except ValueError as exc:  # e.g. a projectile the rig's [bar] does not describe
+                raise ConfigError(f"{plan.path}: shots[{shot.entry}] ({shot.id}): a target level needs the bar model: "
+                                  f"{exc} ({config.path or 'configuration'} [bar]); nothing was fired") from None
             if level.pressure_bar > limits.max_pressure_bar:
                 raise ConfigError(
                     f"{plan.path}: shots[{shot.entry}] ({shot.id}): target peak {shot.target_peak_m_s2:.4g} m/s² "
                     f"({shot.target_peak_m_s2 / 9.80665:.4g} g) needs {level.pressure_bar:.3g} bar with projectile "
-                    f"No. {shot.projectile} (launcher model, {level.basis}), above the rig's maximum "
+                    f"No. {shot.projectile} (bar model, {level.basis}), above the rig's maximum "
                     f"{limits.max_pressure_bar:g} bar ({config.path or 'configuration'} [limits]); nothing was fired")
             level = choose_pressure(shot.target_peak_m_s2, shot.projectile, history or (),
                                     min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar,
-                                    rig=config.bar.rig())
+                                    rig=rig)
         request = dataclasses.replace(shot_request(plan, shot, RunFolder(Path(".")), level), out_dir=Path("."))
         try:
             request.check(config)

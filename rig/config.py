@@ -361,6 +361,12 @@ class DatabaseConfig:
     url: str = ""
 
 
+# The names of analysis.bar.MATERIALS, written here so that reading a configuration does not
+# import the bar model (NumPy and SciPy: half a second for every command); a test holds the two
+# equal.
+BAR_MATERIALS = ("C45", "Ti-6Al-4V", "PA6", "Al-7075")
+
+
 @dataclass(frozen=True)
 class BarSegmentConfig:
     """A uniform piece of a projectile: material (analysis.bar.MATERIALS), length, diameter."""
@@ -508,10 +514,9 @@ RULES: dict[str, _Rule] = {
     "lab.decision_rule": _Rule(choices=("simple", "guarded")),
     "lab.reference_chain.u_rel": _Rule(0.0, 1.0),
     "limits.max_pressure_bar": _Rule(above=0.0, max=100.0),
-    "bar.material": _Rule(choices=("C45", "Ti-6Al-4V", "PA6", "Al-7075"), text="analysis.bar.MATERIALS"),
-    "bar.spacer_material": _Rule(choices=("C45", "Ti-6Al-4V", "PA6", "Al-7075"), text="analysis.bar.MATERIALS"),
-    "bar.projectiles.segments.material": _Rule(choices=("C45", "Ti-6Al-4V", "PA6", "Al-7075"),
-                                               text="analysis.bar.MATERIALS"),
+    "bar.material": _Rule(choices=BAR_MATERIALS, text="analysis.bar.MATERIALS"),
+    "bar.spacer_material": _Rule(choices=BAR_MATERIALS, text="analysis.bar.MATERIALS"),
+    "bar.projectiles.segments.material": _Rule(choices=BAR_MATERIALS, text="analysis.bar.MATERIALS"),
     "bar.spacer_length_m": _Rule(0.0, 1.0, text="0: no spacer"),
     "bar.*length_m": _Rule(above=0.0, max=20.0),
     "bar.*diameter_m": _Rule(above=0.0, max=1.0),

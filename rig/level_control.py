@@ -25,11 +25,12 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
-
-from hopkinson.analysis.bar import PAPER_RIG, BarRig, predict_shot
+from typing import TYPE_CHECKING, Any
 
 from hopkinson.fileio import append_json_line
+
+if TYPE_CHECKING:
+    from hopkinson.analysis.bar import BarRig
 
 G_M_S2 = 9.80665
 LEVEL_HISTORY_NAME = "level-history.jsonl"
@@ -37,10 +38,14 @@ ENTRY_SHOTS_USED = 3
 HISTORY_SHOTS_USED = 10
 
 
-
 def model_peak_m_s2(projectile: int, pressure_bar: float, rig: BarRig | None = None) -> float:
     """The bar model's peak for the projectile fired from `pressure_bar` (the paper's rig
     unless the rig's own `[bar]` is given)."""
+    from hopkinson.analysis.bar import (  # NumPy/SciPy: only when a level is chosen
+        PAPER_RIG,
+        predict_shot,
+    )
+
     return predict_shot(rig or PAPER_RIG, projectile, pressure_bar=max(pressure_bar, 0.0)).peak_m_s2
 
 

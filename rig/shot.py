@@ -62,6 +62,7 @@ from hopkinson.rig.shotfile import (
 EXIT_DONE = 0
 EXIT_ABORTED = 3
 QUADRATURE_ROLE = "doppler_quadrature"
+PROJECTILES = (1, 2, 3)  # the projectiles the rig's loader takes
 MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("response"), in this order
 
 
@@ -109,7 +110,7 @@ class ShotRequest:
             raise ShotRequestError(f"pressure_bar: {p:g} bar is outside the rig's limits "
                                    f"{limits.min_pressure_bar:g} .. {limits.max_pressure_bar:g} bar "
                                    f"({config.path or 'configuration'} [limits])")
-        if self.projectile not in (1, 2, 3) or isinstance(self.projectile, bool):
+        if self.projectile not in PROJECTILES or isinstance(self.projectile, bool):
             raise ShotRequestError(f"projectile: must be 1, 2 or 3, got {self.projectile!r}")
         try:  # every analysis option, before anything moves (the amplifier gain is read back later)
             analysis_params(self, config, {})

@@ -137,3 +137,20 @@ def test_no_module_uses_a_path_relative_to_the_source_tree_for_config(folder: st
     for path in _sources(folder):
         text = path.read_text(encoding="utf-8")
         assert 'parent / "config"' not in text and "parents[1] / \"config\"" not in text, path
+
+
+def test_reading_a_configuration_or_a_campaign_does_not_load_the_bar_model() -> None:
+    """The bar model (NumPy + SciPy) is imported where a level or a plan is computed, not by
+    every command that reads rig.toml or a campaign; the configuration's material names are
+    the bar model's own."""
+    import subprocess
+    import sys
+
+    probe = ("import sys, hopkinson.rig.config, hopkinson.rig.campaign; "
+             "print(sorted(m for m in ('scipy', 'hopkinson.analysis.bar') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
+    assert loaded == "[]"
+    from hopkinson.analysis.bar import MATERIALS
+    from hopkinson.rig.config import BAR_MATERIALS
+
+    assert set(BAR_MATERIALS) == set(MATERIALS)

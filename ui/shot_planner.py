@@ -6,14 +6,12 @@ again whenever a field changes; "Use" puts the chosen projectile and pressure in
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from html import escape
 
-from hopkinson.analysis.bar import ShotPlan, plan_shot
+from hopkinson.analysis.bar import G_M_S2, ShotPlan, plan_shot
 from hopkinson.rig.config import RigConfig
 from PySide6.QtWidgets import QDoubleSpinBox, QLabel, QPushButton, QVBoxLayout, QWidget
-
-G_M_S2 = 9.80665
 
 
 class ShotPlanner(QWidget):
@@ -21,8 +19,10 @@ class ShotPlanner(QWidget):
     out), the plan shown (this widget), and its choice handed to `apply` (projectile,
     pressure_bar) when the technician presses "Use"."""
 
-    def __init__(self, config: RigConfig, apply: Callable[[int, float], None], parent: QWidget | None = None) -> None:
+    def __init__(self, config: RigConfig, apply: Callable[[int, float], None], loadable: Collection[int],
+                 parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        self._loadable = frozenset(loadable)  # the projectiles the form (and the rig's loader) can take
         self._rig = config.bar.rig()
         self._limits = config.limits
         self._apply = apply
@@ -81,9 +81,10 @@ class ShotPlanner(QWidget):
             return
         self.result.setText(plan_html(self.plan))
         chosen = self.chosen_option()
-        self.use_button.setEnabled(chosen is not None)
+        self.use_button.setEnabled(chosen is not None and chosen[0] in self._loadable)
         if chosen is not None:
-            self.use_button.setText(f"Use No. {chosen[0]} at {chosen[1]:.2f} bar")
+            self.use_button.setText(f"Use No. {chosen[0]} at {chosen[1]:.2f} bar" if chosen[0] in self._loadable
+                                    else f"No. {chosen[0]} cannot be loaded here")
 
     def chosen_option(self) -> tuple[int, float] | None:
         """(projectile, pressure_bar) of the plan's choice, None when nothing reaches the target."""

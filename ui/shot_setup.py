@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.shot import ShotRequest, second_accelerometer
+from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
 from hopkinson.ui.shot_planner import ShotPlanner
 from hopkinson.ui.widgets import section_title
 from PySide6.QtCore import QSettings
@@ -76,10 +76,10 @@ class ShotSetup(QWidget):
         self.pressure.setSuffix(" bar")
         self.pressure.setValue(min(max(2.0, limits.min_pressure_bar), limits.max_pressure_bar))
         self.projectile = QComboBox()
-        for n in (1, 2, 3):
+        for n in PROJECTILES:
             self.projectile.addItem(f"No. {n}", n)
         self.projectile.setCurrentIndex(2)
-        self.planner = ShotPlanner(config, self.use_plan)
+        self.planner = ShotPlanner(config, self.use_plan, PROJECTILES)
         self.max_order = QSpinBox()
         self.max_order.setRange(1, 40)
         self.max_order.setValue(DEFAULT_MAX_ORDER)

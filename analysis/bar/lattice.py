@@ -47,6 +47,12 @@ def cells_of(segments: list[Segment], dt: float) -> np.ndarray:
     return np.concatenate(z)
 
 
+def _one_cell(rod: Segment, dt: float) -> Segment:
+    """One lattice cell of `rod` (a wave crosses it in dt): what stands for a semi-infinite rod,
+    whose far end the waves never reach within the time followed."""
+    return Segment(rod.material, rod.props.bar_speed_m_s * dt, rod.diameter_m)
+
+
 @dataclass
 class Contact:
     """A compression-only junction (between cell `index` and `index + 1`): rigid (its gap, m, while
@@ -156,20 +162,20 @@ def impact_force(projectile: list[Segment], spacer: Segment | None, bar: Segment
     (block means of the lattice's finer steps)."""
     rear_first = list(reversed(projectile))
     front = [spacer] if spacer is not None else []
-    segments = [*rear_first, *front, bar]
+
+    def chain(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(projectile's cells, spacer's cells, all cells with one cell of the bar) at step dt."""
+        z_proj = cells_of(rear_first, dt)
+        z_front = cells_of(front, dt) if front else np.zeros(0)
+        return z_proj, z_front, np.concatenate([z_proj, z_front, cells_of([_one_cell(bar, dt)], dt)])
+
     dt, m = step_for([*rear_first, *front], sample_interval_s)
-    z_proj = cells_of(rear_first, dt)
-    z_front = cells_of(front, dt) if front else np.zeros(0)
-    z = np.concatenate([z_proj, z_front, cells_of([Segment(bar.material, bar.props.bar_speed_m_s * dt, bar.diameter_m)],
-                                                  dt)])
+    z_proj, z_front, z = chain(dt)
     if contact_stiffness_n_m is not None:  # an explicit spring: Δt·k·(1/Z₁ + 1/Z₂) < 2 keeps it stable
         limit = 1.0 / (contact_stiffness_n_m * (1.0 / z_proj[-1] + 1.0 / z[z_proj.size]))
         while dt > limit:
             dt, m = dt / 2.0, m * 2
-        z_proj = cells_of(rear_first, dt)
-        z_front = cells_of(front, dt) if front else np.zeros(0)
-        z = np.concatenate([z_proj, z_front, cells_of([Segment(bar.material, bar.props.bar_speed_m_s * dt,
-                                                                bar.diameter_m)], dt)])
+        z_proj, z_front, z = chain(dt)
     lattice = Lattice(z, dt, contact=z_proj.size - 1, contact_stiffness_n_m=contact_stiffness_n_m)
     projectile_cells = slice(0, z_proj.size)
     lattice.set_moving(projectile_cells, speed_m_s)
@@ -190,7 +196,6 @@ def impact_force(projectile: list[Segment], spacer: Segment | None, bar: Segment
         if left_at is not None and n - left_at > settle and (c.gap_m > 0 or c.stiffness_n_m is not None):
             out = out[: n + 1]
             break
-    del segments
     p_end = lattice.momentum(projectile_cells)
     mass = sum(s.mass_kg for s in projectile)
     usable = out.size // m * m
@@ -217,8 +222,7 @@ def object_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sen
     the reflected wave would pull on it (the paper's Eqs. 27–30). Its acceleration is the
     contact force over its whole mass (the base's own ringing is not in it)."""
     dt, m = step_for([base], sample_interval_s)
-    bar_cell = Segment(bar.material, bar.props.bar_speed_m_s * dt, bar.diameter_m)
-    z = np.concatenate([cells_of([bar_cell], dt), cells_of([base], dt)])
+    z = np.concatenate([cells_of([_one_cell(bar, dt)], dt), cells_of([base], dt)])
     lattice = Lattice(z, dt, contact=0)
     mass = base.mass_kg + sensor_mass_kg
     incoming = np.repeat(np.asarray(incident_force_n, dtype=float), m)

@@ -18,7 +18,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from hopkinson.analysis.bar.geometry import G_M_S2, BarRig
+from hopkinson.analysis.bar.geometry import G_M_S2, BarRig, Projectile
 from hopkinson.analysis.bar.predict import ShotPrediction, predict_shot
 
 PAPER_RULE = 1.06  # δ·f_n at most (the paper's Eq. 36)
@@ -73,6 +73,11 @@ def spectrum_bands_hz(prediction: ShotPrediction) -> tuple[float, float]:
             float(f[below_40[0]]) if below_40.size else float(f[-1]))
 
 
+def _peak_g_at(rig: BarRig, projectile: Projectile, unit: ShotPrediction, pressure_bar: float) -> str:
+    """The peak `projectile` gives from `pressure_bar` (its 1 m/s prediction `unit` scaled), in g."""
+    return f"{unit.peak_m_s2 * rig.launcher.speed_m_s(projectile, pressure_bar) / G_M_S2:,.0f} g"
+
+
 def plan_shot(rig: BarRig, target_peak_m_s2: float, *, sensor_fn_hz: float | None = None,
               min_pressure_bar: float = 0.0, max_pressure_bar: float = math.inf) -> ShotPlan:
     """Every projectile's pressure, pulse and bands for the target peak, and which to load."""
@@ -90,10 +95,10 @@ def plan_shot(rig: BarRig, target_peak_m_s2: float, *, sensor_fn_hz: float | Non
         why = ""
         if pressure > max_pressure_bar:
             why = (f"needs {pressure:.3g} bar, above the rig's maximum {max_pressure_bar:g} bar "
-                   f"(at most {unit.peak_m_s2 * rig.launcher.speed_m_s(projectile, max_pressure_bar) / G_M_S2:,.0f} g)")
+                   f"(at most {_peak_g_at(rig, projectile, unit, max_pressure_bar)})")
         elif pressure < min_pressure_bar:
             why = (f"needs {pressure:.3g} bar, below the rig's minimum {min_pressure_bar:g} bar "
-                   f"(at least {unit.peak_m_s2 * rig.launcher.speed_m_s(projectile, min_pressure_bar) / G_M_S2:,.0f} g)")
+                   f"(at least {_peak_g_at(rig, projectile, unit, min_pressure_bar)})")
         rule = None if sensor_fn_hz is None else bool(shot.equivalent_width_s <= PAPER_RULE / sensor_fn_hz)
         options.append(ProjectileOption(projectile.number, projectile.description, pressure, speed, shot.peak_m_s2,
                                         shot.equivalent_width_s, shot.width_10_s, low, top, not why, why, rule))

@@ -6,7 +6,6 @@ Selected by `[world.realism] pulse_source = "bar"` (drivers/sim/world.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from hopkinson.analysis.bar import PAPER_RIG, BarRig, predict_shot
@@ -15,23 +14,16 @@ from hopkinson.drivers.sim.real_records import PulseShape, tabulated_pulse
 
 @dataclass(frozen=True)
 class BarPulseSource:
-    """projectile + pressure → the bar model's pulse (PulseSource)."""
+    """projectile + pressure → the bar model's pulse (PulseSource). The launcher is the bar
+    model's own (the [world.launcher] closed form does not apply)."""
 
     rig: BarRig = field(default_factory=lambda: PAPER_RIG)
     name: str = "bar"
 
     def pulse(self, projectile: int, pressure_bar: float, speed_factor: float = 1.0) -> PulseShape:
-        shot = predict_shot(self.rig, projectile, pressure_bar=pressure_bar)
-        shot = shot.scaled(shot.speed_m_s * speed_factor)
+        speed = self.rig.launcher.speed_m_s(self.rig.projectile(projectile), pressure_bar) * speed_factor
+        shot = predict_shot(self.rig, projectile, speed_m_s=speed)
         a = shot.acceleration_m_s2
         moving = np.flatnonzero(a != 0.0)
         end = int(moving[-1]) + 2 if moving.size else 2  # the pulse and a sample of flight
-        t = shot.time_s[:end]
-        return tabulated_pulse(t, a[:end], shot.speed_m_s, shape="bar_model")
-
-
-def bar_pulse_source(launcher: Any = None) -> BarPulseSource:
-    """The bar model's pulse source for the paper's rig (the [world.launcher] table's closed
-    form does not apply: the launcher is the bar model's own)."""
-    del launcher
-    return BarPulseSource()
+        return tabulated_pulse(shot.time_s[:end], a[:end], shot.speed_m_s, shape="bar_model")

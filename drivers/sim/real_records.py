@@ -5,8 +5,8 @@ config/sim.toml), all recorded in the shot's truth.
 The pulse source (`PulseSource`): projectile + reservoir pressure (+ a shot-to-shot factor on the
 projectile's speed) -> the acceleration of the calibrated object (`PulseShape`). `IdealPulseSource`
 is the closed-form pulse of the older simulator (a half-sine, or a bipolar pulse, of the
-projectile's tabulated width, peak π·Δv/(2δ), speed k·√p); the bar model of the analysis layer
-stands behind `bar_pulse_source` when it is there.
+projectile's tabulated width, peak π·Δv/(2δ), speed k·√p); `bar_source.BarPulseSource` is the
+bar model of the analysis layer (`pulse_source = "bar"`).
 
 The effects, on the simulator's internal grid (t = 0 at the pulse's start), with peak P:
 

@@ -221,13 +221,12 @@ class WorldParams:
 
     def pulse_source(self) -> PulseSource:
         """What makes each shot's pulse: the closed form, or the bar model ([world.realism])."""
-        ideal = IdealPulseSource(self.launcher.speed_m_s_per_sqrt_bar, self.launcher.velocity_transfer,
-                                 tuple(self.launcher.pulse_width_s), self.signals.pulse_bipolar_ratio)
         if self.realism.enabled and self.realism.pulse_source == "bar":
-            from hopkinson.drivers.sim.bar_source import bar_pulse_source
+            from hopkinson.drivers.sim.bar_source import BarPulseSource
 
-            return bar_pulse_source(self.launcher)
-        return ideal
+            return BarPulseSource()
+        return IdealPulseSource(self.launcher.speed_m_s_per_sqrt_bar, self.launcher.velocity_transfer,
+                                tuple(self.launcher.pulse_width_s), self.signals.pulse_bipolar_ratio)
 
     def channels(self) -> dict[str, int]:
         """role -> the simulated digitizer's channel, for the signals this world makes."""

@@ -18,8 +18,6 @@ from typing import Any
 
 from hopkinson.rig.cli.main import emit_json
 
-G_M_S2 = 9.80665
-
 
 def register(subparsers: Any) -> None:
     """Add the `plan-shot` sub-command."""
@@ -43,7 +41,7 @@ def register(subparsers: Any) -> None:
 
 
 def run_plan_shot(args: argparse.Namespace) -> int:
-    from hopkinson.analysis.bar import plan_shot
+    from hopkinson.analysis.bar import G_M_S2, plan_shot
     from hopkinson.rig.config import load_rig_config
     from hopkinson.rig.config_paths import default_rig_config
     from hopkinson.rig.errors import ConfigError
@@ -70,9 +68,11 @@ def run_plan_shot(args: argparse.Namespace) -> int:
 
 def plan_text(plan: Any) -> str:
     """The plan as a table and a sentence."""
+    from hopkinson.analysis.bar import G_M_S2, PAPER_RULE
+
     head = f"target {plan.target_peak_m_s2 / G_M_S2:,.0f} g ({plan.target_peak_m_s2:.4g} m/s²)"
     if plan.sensor_fn_hz:
-        head += f", sensor f_n {plan.sensor_fn_hz / 1e3:.3g} kHz (needs δ ≤ {1.06e6 / plan.sensor_fn_hz:.1f} µs)"
+        head += f", sensor f_n {plan.sensor_fn_hz / 1e3:.3g} kHz (needs δ ≤ {PAPER_RULE / plan.sensor_fn_hz * 1e6:.1f} µs)"
     lines = [head, f"{'No.':>4} {'pressure':>10} {'speed':>9} {'δ':>8} {'>10 %':>8} {'-3 dB':>9} {'band':>9}  excites"]
     for o in plan.options:
         rule = "—" if o.paper_rule_holds is None else ("yes" if o.paper_rule_holds else "no")

@@ -222,3 +222,22 @@ def test_the_planner_sets_projectile_and_pressure_for_a_target_peak(qtbot, tmp_p
     qtbot.addWidget(again)
     again.load(QSettings(settings_file, QSettings.Format.IniFormat))
     assert again.planner.target_g.value() == 400_000 and again.planner.sensor_fn_khz.value() == 27.0
+
+
+def test_the_planner_never_sets_a_projectile_the_rig_cannot_load(qtbot, tmp_path):
+    """A rig whose [bar] describes a No. 5 (the loader takes Nos. 1–3): the plan may choose it,
+    but "Use" stays off and says why; the form keeps its projectile and pressure."""
+    from hopkinson.rig.config import BarConfig, BarProjectileConfig, BarSegmentConfig
+    from hopkinson.ui.shot_setup import ShotSetup
+
+    five = BarProjectileConfig(5, (BarSegmentConfig("C45", 0.05, 0.016),), contact_stiffness_n_m=1e7)
+    config = dataclasses.replace(rig_config_for_tests(), bar=BarConfig(projectiles=(five,)))
+    setup = ShotSetup(config, tmp_path)
+    qtbot.addWidget(setup)
+    before = setup.request(confirm_timeout_s=1.0)
+    setup.planner.target_g.setValue(10_000)
+    assert setup.planner.plan is not None and setup.planner.plan.chosen == 5
+    assert not setup.planner.use_button.isEnabled() and "cannot be loaded" in setup.planner.use_button.text()
+    qtbot.mouseClick(setup.planner.use_button, Qt.MouseButton.LeftButton)
+    after = setup.request(confirm_timeout_s=1.0)
+    assert (after.projectile, after.pressure_bar) == (before.projectile, before.pressure_bar)
