@@ -180,7 +180,7 @@ def _why_not_cancelled(p: complex, mode: dict[str, Any], zeros: np.ndarray, nyqu
     if mode.get("nyquist") or (p.imag == 0 and p.real < 0):
         return "a negative real pole (at Nyquist): an artefact of the discretisation, not a mode of the sensor"
     f_n = _number(mode.get("natural_frequency_hz"))
-    if not mode.get("supported", True):
+    if not mode.get("supported", True) and not mode.get("shapes_band"):
         where = f" (f_n = {f_n / 1e3:.4g} kHz)" if f_n is not None else ""
         return f"outside the band the excitation supports{where}: the shot cannot vouch for it"
     if f_n is not None and f_n >= NEAR_NYQUIST * nyquist_hz:

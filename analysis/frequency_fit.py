@@ -169,6 +169,7 @@ class OrderFit:
     sine_gain: float = math.nan  # ln κ of the sine terms (SineTerms; NaN: not fitted with a sine)
     sine_skew: float = 0.0  # τ_s of the sine terms, samples
     sine_cost: float = 0.0  # the sine terms' share of `cost`
+    numerator: np.ndarray | None = None  # B's fixed shape (B = g·shape, `all_pole_numerator`); None: B free
 
     @property
     def order(self) -> int:
@@ -179,16 +180,56 @@ class OrderFit:
         return is_stable(self.a)
 
     def embedded(self) -> OrderFit:
-        """The same transfer function as an order n + 1 model (a pole and a zero at z = 0)."""
+        """The same transfer function as an order n + 1 model (a pole and a zero at z = 0); with a
+        fixed numerator shape, the next order's shape at the same DC gain (a start, not the same
+        transfer function)."""
+        if self.numerator is not None:
+            shape = all_pole_numerator(self.order + 1)
+            return replace(self, a=np.append(self.a, 0.0), b=float(np.sum(self.b)) * shape, numerator=shape,
+                           transient=np.append(self.transient, 0.0) if self.transient.size else self.transient)
         return replace(self, a=np.append(self.a, 0.0), b=np.append(self.b, 0.0),
                        transient=np.append(self.transient, 0.0) if self.transient.size else self.transient)
+
+
+def all_pole_numerator(order: int) -> np.ndarray:
+    """B's shape for an all-pole model of `order`: (1 + z⁻¹)ⁿ/2ⁿ (unit gain at DC), the bilinear
+    image of a continuous system with no finite zeros (a mass–spring sensor whose resonance
+    lies beyond the band, a low-pass): zeros at Nyquist only, so no zero can follow a ripple."""
+    return np.array([math.comb(order, i) for i in range(order + 1)], dtype=float) / 2.0**order
+
+
+# The least damping the all-pole structure gives a resonance beyond the band (`damping_floored`):
+# its phase at half the resonance is < 0.4°, its magnitude change there < 0.02 %.
+ZETA_FLOOR = 0.005
+
+
+def damping_floored(a: np.ndarray, omega_top: float) -> np.ndarray | None:
+    """A with each complex pole pair beyond the band (normalised frequency |ln p| above
+    `omega_top`, rad/sample) damped at least ZETA_FLOOR; None when none is below it. A record does
+    not determine the damping of a resonance beyond its band: in the band it trades with the
+    channels' skew (both a phase slope, 2ζ/ω_n against τ) and the fit presses it onto the unit
+    circle (ζ → 0) or past it whenever the model error favours a little more phase. The floor
+    is part of the estimator (every Monte Carlo draw re-runs it) and changes the response in the
+    band by less than any calibration's uncertainty; the damping is not reported as measured."""
+    poles = np.roots(a).astype(complex) if a.size > 1 else np.zeros(0, dtype=complex)
+    pair = np.abs(poles.imag) > 1e-12
+    if not np.any(pair):
+        return None
+    s = np.log(np.where(pair, poles, 1.0))  # s·dt of each pole
+    wn = np.abs(s)
+    zeta = np.where(pair, -s.real / np.where(wn > 0, wn, 1.0), 1.0)
+    low = pair & (zeta < ZETA_FLOOR) & (wn > omega_top)
+    if not np.any(low):
+        return None
+    s[low] = wn[low] * (-ZETA_FLOOR + 1j * np.sign(s[low].imag) * math.sqrt(1.0 - ZETA_FLOOR**2))
+    return np.real(np.poly(np.where(pair, np.exp(s), poles)))
 
 
 def predicted_bins(fit: OrderFit, data: SpectralData, omega: np.ndarray, u_bins: np.ndarray) -> np.ndarray:
     """The model's response spectrum at the fitted bins (before any grouping): e^{−jωτ}·B/A·U,
     plus the transient and drift terms where the per-bin fit has them."""
     if not data.grouped:
-        problem = OrderProblem(data, fit.order, fit.delay)
+        problem = OrderProblem(data, fit.order, fit.delay, numerator=fit.numerator)
         theta = problem.pack(replace(fit, transient=fit.transient if fit.transient.size else np.zeros(0)))
         return data.y - problem._error(problem._pieces(theta))
     return response(fit, omega) * u_bins
@@ -238,9 +279,12 @@ class OrderProblem:
     delay: "causal" (0 ≤ τ ≤ max_delay, as τ = max_delay·sin²t: the parameter is t), "free"
     (τ of either sign: only to test whether the response leads the reference) or a number (τ
     fixed there).
+    numerator: B's fixed shape (B = g·shape: one parameter g; `all_pole_numerator`); None: B free
+    (n + 1 parameters).
     """
 
-    def __init__(self, data: SpectralData, order: int, delay: str | float = "causal", max_delay: float = 32.0) -> None:
+    def __init__(self, data: SpectralData, order: int, delay: str | float = "causal", max_delay: float = 32.0,
+                 numerator: np.ndarray | None = None) -> None:
         self.max_delay = float(max_delay)
         self.data = data
         self.n = order
@@ -249,10 +293,17 @@ class OrderProblem:
             raise ValueError(f"unknown delay mode {delay!r}")
         self.fixed_delay = None if isinstance(delay, str) else float(delay)
         self.powers = np.exp(-1j * np.outer(data.omega, np.arange(order + 1)))  # z_k^{-i}
+        self.numerator = None if numerator is None else np.asarray(numerator, dtype=float)
+        if self.numerator is not None and self.numerator.size != order + 1:
+            raise ValueError(f"a numerator shape of order {order} has {order + 1} coefficients")
+        # ∂b/∂(B's parameters): the identity (B free) or the shape's column (B = g·shape)
+        self.b_map = np.eye(order + 1) if self.numerator is None else self.numerator[:, None]
+        self.nb = self.b_map.shape[1]
+        self.k_delay = order + self.nb  # index of the delay parameter (when it is free)
         self.n_transient = order if (data.transient and not data.grouped) else 0
         self.drift = data.ramp is not None and not data.grouped
         self.sine = data.sine
-        self.size = 2 * order + 1 + (self.fixed_delay is None) + self.n_transient + int(self.drift)
+        self.size = order + self.nb + (self.fixed_delay is None) + self.n_transient + int(self.drift)
         if self.sine is not None:  # ln κ and τ_s of SineTerms, last
             self.sine_powers = np.exp(-1j * np.outer(self.sine.omega, np.arange(order + 1)))
             self.size += 2
@@ -260,7 +311,8 @@ class OrderProblem:
 
     # -- parameter vector ------------------------------------------------------------------
     def pack(self, fit: OrderFit) -> np.ndarray:
-        parts = [fit.a[1:], fit.b]
+        b = fit.b if self.numerator is None else [float(fit.b @ self.numerator) / float(self.numerator @ self.numerator)]
+        parts = [fit.a[1:], b]
         if self.delay_mode == "causal":
             # τ = τmax·sin²t: a start on a bound would have no gradient in t, so it starts just off it.
             x = min(max(fit.delay, CAUSAL_START), self.max_delay - CAUSAL_START) / self.max_delay
@@ -283,8 +335,8 @@ class OrderProblem:
     def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, float]:
         n = self.n
         a = np.concatenate(([1.0], theta[:n]))
-        b = theta[n : 2 * n + 1]
-        k = 2 * n + 1
+        k = self.k_delay
+        b = self.b_map @ theta[n:k]
         if self.delay_mode == "fixed":
             tau = float(self.fixed_delay)
         else:
@@ -296,9 +348,14 @@ class OrderProblem:
         return a, b, tau, transient, drift
 
     def fit_of(self, theta: np.ndarray, cost: float, evaluations: int, converged: bool) -> OrderFit:
+        if self.numerator is not None:  # the all-pole structure's estimator floors the damping beyond the band
+            floored = damping_floored(np.concatenate(([1.0], theta[: self.n])), float(np.max(self.data.omega)))
+            if floored is not None:
+                theta = np.concatenate((floored[1:], theta[self.n :]))
+                cost = self.cost(theta)
         a, b, tau, transient, drift = self.unpack(theta)
         fit = OrderFit(a, b, tau, np.array(transient), drift, cost, self.size, evaluations, converged,
-                       self.fixed_delay is not None)
+                       self.fixed_delay is not None, numerator=self.numerator)
         if self.sine is None:
             return fit
         r = self._sine_residual(theta)
@@ -346,9 +403,9 @@ class OrderProblem:
         w = self.sine.omega
         de = np.zeros((w.size, self.size), dtype=complex)
         de[:, :n] = -pw[:, 1:] / (pw @ a)[:, None]
-        de[:, n : 2 * n + 1] = pw / (pw @ b)[:, None]
+        de[:, n : self.k_delay] = (pw / (pw @ b)[:, None]) @ self.b_map
         if self.fixed_delay is None:
-            de[:, 2 * n + 1] = -1j * w * self._dtau(theta)
+            de[:, self.k_delay] = -1j * w * self._dtau(theta)
         de[:, -2] = 1.0
         de[:, -1] = 1j * w
         s = self.sine
@@ -401,14 +458,14 @@ class OrderProblem:
         e_over_a = self.powers / big_a[:, None]  # z^{-i}/A
         dg = np.empty((d.omega.size, self.size), dtype=complex)  # ∂G/∂θ for the weight
         dg[:, :n] = -g[:, None] * e_over_a[:, 1 : n + 1]
-        dg[:, n : 2 * n + 1] = e_over_a
-        dg[:, 2 * n + 1 :] = 0.0
+        dg[:, n : self.k_delay] = e_over_a @ self.b_map
+        dg[:, self.k_delay :] = 0.0
         ds2 = 2.0 * d.var_u[:, None] * np.real(np.conj(g)[:, None] * dg)
         if d.grouped:
             gd = delay * g
             dgd = delay[:, None] * dg
             if self.fixed_delay is None:
-                dgd[:, 2 * n + 1] = -1j * d.omega * gd * self._dtau(theta)
+                dgd[:, self.k_delay] = -1j * d.omega * gd * self._dtau(theta)
             ghat = d.syu / d.suu
             c = np.maximum(d.syy - np.abs(d.syu) ** 2 / d.suu, 0.0)
             w = math.sqrt(2.0) * np.sqrt(d.suu)
@@ -420,7 +477,7 @@ class OrderProblem:
         if self.n_transient:
             trans = (self.powers[:, : self.n_transient] @ p["transient"]) / big_a
             dpred[:, :n] -= trans[:, None] * e_over_a[:, 1 : n + 1]
-        k = 2 * n + 1
+        k = self.k_delay
         if self.fixed_delay is None:
             dpred[:, k] = -1j * d.omega * delay * g * d.u * self._dtau(theta)
             k += 1
@@ -434,7 +491,7 @@ class OrderProblem:
 
     def _dtau(self, theta: np.ndarray) -> float:
         """∂τ/∂(delay parameter): τmax·sin 2t for τ = τmax·sin²t, else 1."""
-        return self.max_delay * math.sin(2.0 * theta[2 * self.n + 1]) if self.delay_mode == "causal" else 1.0
+        return self.max_delay * math.sin(2.0 * theta[self.k_delay]) if self.delay_mode == "causal" else 1.0
 
     def cost(self, theta: np.ndarray) -> float:
         r = self.residual(theta)
@@ -492,13 +549,13 @@ class OrderProblem:
             raw = np.concatenate(([1.0], x[:n]))
             raw_unstable = not is_stable(raw)
             a = stabilised(raw)
-            b = x[n : 2 * n + 1]
-            transient = x[2 * n + 1 :]
+            b = self.b_map @ x[n : self.k_delay]
+            transient = x[self.k_delay :]
             if not np.all(np.isfinite(a)) or not np.all(np.isfinite(b)):
                 a, b = np.concatenate(([1.0], np.zeros(n))), np.zeros(n + 1)
                 break
         fit = OrderFit(a, b, delay, transient, 0.0, float("nan"), self.size, 0, False, self.fixed_delay is not None,
-                       raw_unstable)
+                       raw_unstable, numerator=self.numerator)
         return replace(fit, cost=self.cost(self.pack(fit)))
 
     def _linear_rows(self, dl: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -512,13 +569,14 @@ class OrderProblem:
             r12 = d.syu / r11
             r22 = np.sqrt(np.maximum(d.suu - np.abs(d.syu) ** 2 / d.syy, 0.0))
             w = weight[:, None]
-            row1 = np.hstack((w * r11[:, None] * pw[:, 1:], -w * (r12 * dl)[:, None] * pw))
-            row2 = np.hstack((np.zeros((d.omega.size, n), dtype=complex), -w * (r22 * dl)[:, None] * pw))
+            pb = pw @ self.b_map
+            row1 = np.hstack((w * r11[:, None] * pw[:, 1:], -w * (r12 * dl)[:, None] * pb))
+            row2 = np.hstack((np.zeros((d.omega.size, n), dtype=complex), -w * (r22 * dl)[:, None] * pb))
             rows = np.vstack((row1, row2))
             rhs = np.concatenate((-weight * r11, np.zeros(d.omega.size)))
             return rows, rhs
         w = weight[:, None]
-        parts = [w * d.y[:, None] * pw[:, 1:], -w * (dl * d.u)[:, None] * pw]
+        parts = [w * d.y[:, None] * pw[:, 1:], -w * (dl * d.u)[:, None] * (pw @ self.b_map)]
         if self.n_transient:
             parts.append(-w * pw[:, : self.n_transient])
         return np.hstack(parts), -weight * d.y
@@ -543,7 +601,8 @@ class QuickRefit:
         self.delay = delay
         self.max_delay = max_delay
         self.start = fit
-        problem = OrderProblem(data, fit.order, delay, max_delay)
+        problem = OrderProblem(data, fit.order, delay, max_delay, numerator=fit.numerator)
+        self.numerator = fit.numerator
         self.theta0 = problem.pack(fit)
         # Directions the data hardly determine (a spare pole against a zero) are left alone.
         self.step = np.linalg.pinv(problem.jacobian(self.theta0), rcond=RCOND)
@@ -554,7 +613,7 @@ class QuickRefit:
         fixed-Jacobian iteration alone stops where J₀ᵀr = 0, a hair off the optimum Jᵀr = 0).
         `exact` False returns the best point reached instead of handing an unsettled draw to
         Levenberg–Marquardt (enough to compare costs with an order that fits far better)."""
-        problem = OrderProblem(data, self.order, self.delay, self.max_delay)
+        problem = OrderProblem(data, self.order, self.delay, self.max_delay, numerator=self.numerator)
         theta = self.theta0
         r = problem.residual(theta)
         cost = 0.5 * float(r @ r)
@@ -617,7 +676,7 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
     starts on a grid of delays from 0 to a few samples past `fit`'s, each refined; optima
     whose delay lies within a sample of one already kept are the same branch. Sorted by cost
     (the best may beat `fit`: the order search started each order from one delay)."""
-    problem = OrderProblem(data, fit.order, "causal", max_delay)
+    problem = OrderProblem(data, fit.order, "causal", max_delay, numerator=fit.numerator)
     top = min(float(max_delay) - CAUSAL_START, math.ceil(fit.delay) + 4.0)
     step = max(1.0, top / BRANCH_STARTS)
     found: list[OrderFit] = []

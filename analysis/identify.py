@@ -62,10 +62,12 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import pulse_width, supported_band_hz
 from hopkinson.analysis.frequency_fit import (
+    ZETA_FLOOR,
     OrderFit,
     OrderProblem,
     SineTerms,
     SpectralData,
+    all_pole_numerator,
     delay_branches,
     predicted_bins,
     response,
@@ -129,6 +131,7 @@ MODEL_ERROR_MIN_BINS = 5
 # A zero closer to a pole than this fraction of the pole's distance to the unit circle cancels it
 # (a pole–zero doublet changes the response by at most about that fraction near the pole).
 DOUBLET_DISTANCE = 0.5
+FREE, ALL_POLE = "free", "all_pole"  # the model structures: B free, or B = g·(1 + z⁻¹)ⁿ/2ⁿ (no finite zeros)
 # Quiet stretches shorter than this are not used for a noise spectrum.
 MIN_QUIET = 32
 
@@ -436,7 +439,13 @@ def identify(
     data = prep.spectral if sine_terms is None else replace(prep.spectral, sine=sine_terms)
 
     # Delay start: the causal delay that best fits a second-order model (a coarse grid).
-    delay_mode: str | float = "causal" if remove_delay else 0.0
+    # The free structure keeps its delay causal (its zeros can take up a lead: _lead_warning); the
+    # all-pole structure has no zeros to do so, and the reference chain's own delay (an
+    # interferometer's demodulation and low-pass, 0.2–0.9 µs; PTB's record leads by ~0.35 µs) would
+    # bias its poles (on PTB's record 45 kHz against 50.5 kHz free): its delay takes either sign.
+    delay_modes: dict[str, str | float] = {FREE: "causal" if remove_delay else 0.0,
+                                           ALL_POLE: "free" if remove_delay else 0.0}
+    delay_mode = delay_modes[FREE]
     max_delay_samples = max(1, int(max_delay_samples))
     tau0 = _initial_delay(data, prep, min(2, n_max), max_delay_samples) if remove_delay else 0.0
     # Each order needs more real residuals (two per bin) than parameters (2n + 2, and n more
@@ -453,16 +462,20 @@ def identify(
                         "frequency bins")
         n_max = allowed
 
-    def fit_orders(data: SpectralData) -> tuple[dict[int, OrderFit], dict[int, int], dict[int, float],
-                                                dict[tuple[int, int], float], int | None, Any]:
-        """Every order n = 1 … n_max fitted on `data` and the order test's choice (step 5–6)."""
+    def fit_orders(data: SpectralData, structure: str) -> tuple[dict[int, OrderFit], dict[int, int], dict[int, float],
+                                                                dict[tuple[int, int], float], int | None, Any]:
+        """Every order n = 1 … n_max of `structure` fitted on `data` and the order test's choice
+        (step 5–6)."""
         fits: dict[int, OrderFit] = {}
         parameters: dict[int, int] = {}
         costs: dict[int, float] = {}
         tau = tau0
         previous: OrderFit | None = None
-        for n in range(1, n_max + 1):
-            problem = OrderProblem(data, n, delay_mode, max_delay_samples)
+        # the all-pole structure stands for a resonance beyond the band: a pole pair at least (its
+        # order 1, a real pole, is a low-pass that cannot rise towards a resonance)
+        for n in range(2 if structure == ALL_POLE else 1, n_max + 1):
+            shape = all_pole_numerator(n) if structure == ALL_POLE else None
+            problem = OrderProblem(data, n, delay_modes[structure], max_delay_samples, numerator=shape)
             starts = [problem.linear_start(tau)]
             if abs(tau - tau0) > 0.5:
                 starts.append(problem.linear_start(tau0))
@@ -489,23 +502,38 @@ def identify(
         chosen_auto, comparisons = choose_order(costs, parameters, data.bins, changes, significance)
         return fits, parameters, costs, changes, chosen_auto, comparisons
 
+    def fit_structures(data: SpectralData) -> tuple[str, tuple[Any, ...]]:
+        """The free structure's orders and choice; where its choice is unstable or holds a pole–zero
+        doublet (the fit following a ripple of the data: its one dynamic feature in the band is a
+        smooth rise, a resonance beyond it, as on PTB's record), the all-pole structure's, whose
+        zeros cannot follow a ripple (`all_pole_numerator`)."""
+        found = fit_orders(data, FREE)
+        chosen_free = found[4]
+        if order is None and (chosen_free is None or _has_doublet(found[0][chosen_free])):
+            all_pole = fit_orders(data, ALL_POLE)
+            if all_pole[4] is not None:
+                return ALL_POLE, all_pole
+        return FREE, found
+
     # Model error (issue 17): a residual the noise does not explain is measured per frequency on
     # the order test's choice (iterated to convergence: the search stops each order early) and
     # weighed as an output error of its own (ModelError); the orders are then fitted again and
     # the test re-run with those weights. Once: measured again on a lower order's residual, the
     # model error would take in what that order lacks (on PTB's record it then fell to order 1).
-    fits, parameters, costs, changes, chosen_auto, comparisons = fit_orders(data)
+    structure, (fits, parameters, costs, changes, chosen_auto, comparisons) = FREE, fit_orders(data, FREE)
     model_error = ModelError.none(prep.bin_hz.size)
     if chosen_auto is not None:
         pick = order if order is not None and order in fits else chosen_auto
-        settled = OrderProblem(data, pick, delay_mode, max_delay_samples).solve(fits[pick], 200, 1e-9)
+        settled = OrderProblem(data, pick, delay_mode, max_delay_samples,
+                               numerator=fits[pick].numerator).solve(fits[pick], 200, 1e-9)
         model_error = measure_model_error(prep, data, settled, parameters[pick], dt)
         if model_error.significant:
             data = with_output_variance(prep, prep.var_y + model_error.var_bins)
             if sine_terms is not None:  # the joint fit keeps its sine points (analysis.sine_joint)
                 data = replace(data, sine=sine_terms)
-            fits, parameters, costs, changes, chosen_auto, comparisons = fit_orders(data)
-    evidence: dict[str, Any] = {"comparisons": comparisons}
+            structure, (fits, parameters, costs, changes, chosen_auto, comparisons) = fit_structures(data)
+            delay_mode = delay_modes[structure]
+    evidence: dict[str, Any] = {"comparisons": comparisons, "structure": structure}
     if chosen_auto is None:
         raise AnalysisError(f"no stable model of order 1 … {n_max} fits this record (every fit was unstable)")
     if order is None and stability_draws > 0:
@@ -535,9 +563,10 @@ def identify(
         the same model to ~1e-9. A delay pressed against zero converges slowly in its bounded
         parameter: there the fit with the delay held at zero is taken when it is as good."""
         if n not in polished_orders:
-            done = OrderProblem(data, n, delay_mode, max_delay_samples).solve(fits[n], 200, 1e-11)
+            shape = fits[n].numerator
+            done = OrderProblem(data, n, delay_mode, max_delay_samples, numerator=shape).solve(fits[n], 200, 1e-11)
             if delay_mode == "causal" and done.delay < 1e-2 and not done.converged:
-                at_zero = OrderProblem(data, n, 0.0, max_delay_samples).solve(done, 200, 1e-11)
+                at_zero = OrderProblem(data, n, 0.0, max_delay_samples, numerator=shape).solve(done, 200, 1e-11)
                 if at_zero.cost <= done.cost * (1 + 1e-9):
                     done = at_zero
             fits[n] = replace(done, start_unstable=fits[n].start_unstable)
@@ -549,13 +578,29 @@ def identify(
         if not _acceptable(polished(chosen), data.bins):
             fallback, dropped = choose_stable_order(
                 costs, parameters, data.bins, changes, lambda n: _acceptable(polished(n), data.bins), significance)
+            if fallback is None and structure == FREE:
+                # No stable order with free zeros (on PTB's record with its sine: the sensor's mode
+                # beyond the band pressed onto the unit circle): the all-pole structure, whose
+                # damping beyond the band is floored (frequency_fit.damping_floored).
+                found = fit_orders(data, ALL_POLE)
+                if found[4] is not None:
+                    marginal = _marginal_modes_text(polished(chosen), dt)
+                    structure, (fits, parameters, costs, changes, chosen_auto, comparisons) = ALL_POLE, found
+                    delay_mode = delay_modes[structure]
+                    polished_orders.clear()
+                    evidence.update({"comparisons": comparisons, "structure": structure})
+                    warnings.append("no model with free zeros is stable" + marginal + "; the all-pole model (a "
+                                    "resonance beyond the band, its damping not determined) is used")
+                    chosen = chosen_auto
+                    fallback, dropped = (chosen, []) if _acceptable(polished(chosen), data.bins) else (None, [])
             if fallback is None:
                 raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
                                     "or outside the unit circle" + _marginal_modes_text(polished(chosen), dt) + ")")
-            unstable = ", ".join(str(n) for n in dropped)
-            warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
-                            f"{fallback} (the order test's choice among the stable orders) is used")
-            evidence["unstable_when_converged"] = dropped
+            if dropped:
+                unstable = ", ".join(str(n) for n in dropped)
+                warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
+                                f"{fallback} (the order test's choice among the stable orders) is used")
+                evidence["unstable_when_converged"] = dropped
             chosen = fallback
     else:
         chosen, selection = order, "asked"
@@ -591,9 +636,15 @@ def identify(
 
     # The model in the record's units: the scales go back into B.
     b = final.b * (scale_y / scale_u)
-    model = DiscreteModel(dt, final.a, b, float(final.delay), info={"fit_method": "eiv-frequency-oe"})
+    model = DiscreteModel(dt, final.a, b, float(final.delay), info={"fit_method": "eiv-frequency-oe",
+                                                                       "structure": structure})
     band = prep.band
     modes = mark_doublets(modes_of(model.poles, dt, band), model.zeros)
+    if structure == ALL_POLE:
+        # the all-pole model's resonance beyond the band is what shapes the response inside it (its
+        # rise): that effect is measured though the pole's place and damping are not, so a DCM
+        # may cancel it (analysis.dcm_design; its band limit keeps it from amplifying beyond)
+        modes = [{**m, "shapes_band": True} if m["kind"] == "complex" and not m["supported"] else m for m in modes]
     noise_y, var_y = _response_noise_on_residual(prep, final, dt)
     y_hat = _simulate(prep.u, final)
     residual = prep.y - y_hat
@@ -602,7 +653,12 @@ def identify(
     dof = 2 * data.bins - parameters[chosen]
     ratio = 2.0 * final.cost / dof if dof > 0 else math.inf
     warnings += _claims_warnings(modes, band, model)
-    if remove_delay:
+    if remove_delay and structure == ALL_POLE:
+        if final.delay < -LEAD_WARNING_SAMPLES:
+            warnings.append(f"the response leads the reference by {-final.delay:.2g} samples ({-final.delay * dt * 1e6:.3g} "
+                            "µs), fitted as a negative delay: the reference chain's own delay (an interferometer's "
+                            "demodulation and low-pass) or the channels' skew (digitizer deskew, cable lengths)")
+    elif remove_delay:
         warnings += _lead_warning(data, final, dt, significance)
     if model_error.significant:
         lo_hz, hi_hz = model_error.range_hz
@@ -1071,6 +1127,16 @@ def _marginal_modes_text(fit: OrderFit, dt: float) -> str:
             "excitation whose damping the data do not fix")
 
 
+def _has_doublet(fit: OrderFit) -> bool:
+    """Whether a complex pole pair of the fit is nearly cancelled by a zero (`mark_doublets`)."""
+    if fit.order == 0 or fit.b.size < 2:
+        return False
+    zeros = np.roots(fit.b)
+    poles = np.roots(fit.a)
+    return any(p.imag > 0 and zeros.size and float(np.min(np.abs(zeros - p))) < DOUBLET_DISTANCE * (1.0 - abs(p))
+               for p in poles)
+
+
 def _pole_below_band(fit: OrderFit, lowest_bin_hz: float, dt: float) -> bool:
     """Whether the fit has a real pole whose frequency lies below a tenth of the lowest
     fitted bin's (undetermined by the fitted data)."""
@@ -1090,6 +1156,13 @@ def _claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], mod
                 f"the pole pair at {f / 1e3:.4g} kHz (ζ = {m['damping_ratio']:.3g}) is nearly cancelled by a zero (a "
                 "pole–zero doublet: the fit following a ripple of the data, not a resonance): it is not reported as "
                 "a mode"
+            )
+        elif m.get("shapes_band") and f is not None:
+            out.append(
+                f"the resonance near {f / 1e3:.4g} kHz lies beyond the band the excitation supports ({lo / 1e3:.3g}–"
+                f"{hi / 1e3:.3g} kHz): the all-pole model places it by the rise it gives inside the band, not by its "
+                f"own peak; its frequency is an extrapolation and its damping is not determined (held ≥ "
+                f"{ZETA_FLOOR:g}), so neither is reported as measured; the DCM cancels it for that rise"
             )
         elif m["kind"] == "complex" and not m["supported"] and f is not None:
             out.append(
@@ -1120,7 +1193,7 @@ def _lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: fl
     sensor's own lag cannot be told from it.)"""
     lead = _low_frequency_lead(fit)
     if fit.delay <= LEAD_WARNING_SAMPLES:
-        problem = OrderProblem(data, fit.order, "free")
+        problem = OrderProblem(data, fit.order, "free", numerator=fit.numerator)
         free = problem.solve(replace(fit, cost=math.nan), 60)
         gain = fit.cost - free.cost
         dof = 2 * data.bins - problem.size

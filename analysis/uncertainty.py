@@ -609,7 +609,7 @@ def _linear_noise_shares(
     n = ident.order
     fit = ctx.fits[n]
     data = ctx.spectral
-    problem = OrderProblem(data, n, ctx.delay_mode, ctx.max_delay)
+    problem = OrderProblem(data, n, ctx.delay_mode, ctx.max_delay, numerator=fit.numerator)
     theta = problem.pack(fit)
     jac = problem.jacobian(theta)
     pieces = problem._pieces(theta)
@@ -635,7 +635,7 @@ def _linear_noise_shares(
     # The skew: the residual's change per sample of reference delay, through the same projection.
     eps = 1e-3
     shifted = _shift_data(data, eps)
-    dr = (OrderProblem(shifted, n, ctx.delay_mode, ctx.max_delay).residual(theta) - problem.residual(theta)) / eps
+    dr = (OrderProblem(shifted, n, ctx.delay_mode, ctx.max_delay, numerator=fit.numerator).residual(theta) - problem.residual(theta)) / eps
     skew_step = -(proj @ dr) * (options.channel_skew_s / ctx.sample_interval_s)
     gradients = _figure_gradients(problem, theta, ctx, ident, nominal)
     out: dict[str, dict[str, float]] = {source: {} for source in (*cov, "channel skew")}

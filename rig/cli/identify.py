@@ -267,6 +267,10 @@ def explain(report: dict[str, Any]) -> str:
                          f"response change {c['response_change']:.2%}")
     lines.append(f"  order {report.get('order')} ({report.get('order_selection')}): "
                  f"{evidence.get('criterion', '')}")
+    if evidence.get("structure") == "all_pole":
+        lines.append("  structure: all-pole (no finite zeros, delay of either sign): the model with free zeros "
+                     "followed a ripple with a pole–zero doublet or was unstable, so the band's one feature is "
+                     "taken as the rise towards a resonance beyond it")
     error = noise.get("model_error") or {}
     if error.get("detected"):
         lo, hi = error.get("range_hz") or (None, None)
@@ -283,6 +287,7 @@ def explain(report: dict[str, Any]) -> str:
         f_n = m["natural_frequency_hz"] / 1e3
         why = ("claimed (inside the band)" if m.get("supported")
                else "not claimed: a pole–zero doublet" if m.get("cancelled")
+               else "not claimed: beyond the band, placed by the rise it gives inside it" if m.get("shapes_band")
                else "not claimed: outside the supported band")
         lines.append(f"  pole pair at {f_n:.4g} kHz, ζ {m['damping_ratio']:.3g}: {why}")
     if report.get("resonance_above_hz"):

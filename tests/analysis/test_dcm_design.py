@@ -74,6 +74,19 @@ def test_only_supported_modes_are_cancelled_and_zeros_never_inverted():
     assert dcm.design["nonminimum_phase_zeros"] == [[1.5, 0.0]] and dcm.design["zeros_inverted"] is False
 
 
+def test_a_resonance_that_shapes_the_band_is_cancelled_though_beyond_it():
+    """An all-pole model's resonance beyond the band (identify marks it `shapes_band`: its rise
+    inside the band is measured, its place is not) is cancelled; a plain unsupported mode is not."""
+    beyond = pair(50_000.0, 0.02)
+    model = model_of(np.concatenate([beyond, FAINT]))
+    shaped = {**mode(beyond[0], supported=False), "shapes_band": True}
+    design = design_compensation(ShotSupport(model, [shaped, mode(FAINT[0], supported=False)],
+                                             supported_band_hz=(0.0, 28_000.0)))
+    np.testing.assert_allclose(np.sort_complex(design.dcm.zeros), np.sort_complex(beyond), atol=1e-12)
+    skipped = design.dcm.design["skipped_poles"]
+    assert len(skipped) == 1 and "outside the band" in skipped[0]["reason"]
+
+
 def test_bare_model_still_refuses_artefacts_and_spare_pole_zero_pairs():
     """Without an identification: a negative real pole, a mode near Nyquist and a pole a zero
     nearly cancels (a spare pair of the fit) are left alone."""

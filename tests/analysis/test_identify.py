@@ -363,3 +363,39 @@ def test_an_undamped_mode_that_stops_every_order_is_named_with_its_frequency() -
     assert "order 2 has a mode at 58.4 kHz with ζ ≤ 1e-05, undamped" in text
     damped = np.real(np.poly([0.99 * z, 0.99 * np.conj(z)]))
     assert _marginal_modes_text(OrderFit(damped, fit.b, 0.0, np.zeros(0), 0.0, 1.0, 5, 1, True, False), dt) == ""
+
+
+def test_the_all_pole_structure_has_no_finite_zeros_and_unit_dc_gain() -> None:
+    from hopkinson.analysis.frequency_fit import all_pole_numerator
+
+    for n in (2, 3, 4):
+        shape = all_pole_numerator(n)
+        assert np.sum(shape) == pytest.approx(1.0)  # (1 + z⁻¹)ⁿ/2ⁿ at z = 1
+        np.testing.assert_allclose(shape, np.poly(-np.ones(n)) / 2.0**n)  # its zeros: all at Nyquist
+
+
+def test_damping_beyond_the_band_is_floored_and_inside_it_left_alone() -> None:
+    """Closed-form poles: a ζ 0.001 pair at 50 kHz beyond a 28 kHz band is raised to the floor at
+    the same natural frequency; the same pair inside the band, a better damped one and a pair
+    past the unit circle (ζ < 0) are treated as the rule says."""
+    from hopkinson.analysis.frequency_fit import ZETA_FLOOR, damping_floored
+
+    dt = 1e-6
+    top = 2 * np.pi * 28e3 * dt
+
+    def a_of(fn_hz: float, zeta: float) -> np.ndarray:
+        s = 2 * np.pi * fn_hz * (-zeta + 1j * np.sqrt(1 - zeta**2))
+        return np.real(np.poly(np.exp(np.array([s, np.conj(s)]) * dt)))
+
+    def zeta_fn(a: np.ndarray) -> tuple[float, float]:
+        s = np.log(np.roots(a)[0]) / dt
+        return -s.real / abs(s), abs(s) / (2 * np.pi)
+
+    for zeta in (0.001, -0.002):
+        floored = damping_floored(a_of(50e3, zeta), top)
+        assert floored is not None
+        z, fn = zeta_fn(floored)
+        assert z == pytest.approx(ZETA_FLOOR, rel=1e-9) and fn == pytest.approx(50e3, rel=1e-9)
+    assert damping_floored(a_of(20e3, 0.001), top) is None  # inside the band: the data determine it
+    assert damping_floored(a_of(50e3, 0.03), top) is None  # above the floor
+    assert damping_floored(np.array([1.0, -0.9]), top) is None  # a real pole

@@ -83,10 +83,29 @@ def test_a_bad_sine_file_is_one_line_and_exit_2(files, tmp_path, capsys) -> None
     assert "magnitudes must be positive" in capsys.readouterr().err
 
 
-@pytest.mark.xfail(reason="issue 17: the joint fit of PTB's record settles the sensor's 58 kHz mode on the unit "
-                   "circle (zeta -> 0: the ringing after the pulse has no drive in the reference, and the "
-                   "sine and the shock's null leave the damping free), so no order is stable; the "
-                   "requirement stands for after that fix", strict=False)
+def test_ptb_record_with_its_sine_is_fitted_jointly_and_compensated(tmp_path, capsys) -> None:
+    """Before, no order was stable (the free zeros put the sensor's mode on the unit circle); the
+    all-pole model fits both. Checked against the sine's own FBSD edges (an independent truth)
+    and the compensation's RMS error against the reference, as `hopkinson dcm --record` measures."""
+    from tests.ptb_shock import SINE_FBSD_5_HZ, SINE_FBSD_10_HZ
+
+    shot = write_ptb_record_csv(tmp_path / "ptb.csv")
+    sine = write_ptb_sine_csv(tmp_path / "ptb_sine.csv")
+    model = tmp_path / "model.json"
+    assert main(["identify", str(shot), "--sine", str(sine), "--no-uncertainty", "--json", "-o", str(model)]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["order_evidence"]["structure"] == "all_pole"
+    assert report["fbsd_hz"]["5"] == pytest.approx(SINE_FBSD_5_HZ, rel=0.05)
+    assert report["fbsd_hz"]["10"] == pytest.approx(SINE_FBSD_10_HZ, rel=0.05)
+    assert main(["dcm", "--model", str(model), "--record", str(shot), "--json"]) == 0
+    check = json.loads(capsys.readouterr().out)["dcm"]["check"]
+    assert abs(check["rms_error_pct"]["compensated"]) <= 2.0 < abs(check["rms_error_pct"]["uncompensated"])
+
+
+@pytest.mark.xfail(reason="issue 17 item 4: the joint model compensates PTB's shock to ~1.5 % RMS, but its peak comes "
+                   "out ~3.8 % low: the reference's peak holds ~2.8 % of content above the 28 kHz band the shot "
+                   "supports (a 28 kHz low-pass lowers it that much), which a DCM band-limited there cannot "
+                   "restore", strict=True)
 def test_ptb_record_with_its_sine_compensates_within_two_and_one_percent(tmp_path, capsys) -> None:
     shot = write_ptb_record_csv(tmp_path / "ptb.csv")
     sine = write_ptb_sine_csv(tmp_path / "ptb_sine.csv")
