@@ -15,10 +15,12 @@ import json
 
 import numpy as np
 import pytest
+from hopkinson.analysis.claims import excitation_warnings
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.identify import Identification, _excitation_warnings, identify, modes_of
+from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.modes import modes_of
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import shift_samples
 from hopkinson.analysis.response import band_edges, fbsd_hz, frequency_response
@@ -284,10 +286,10 @@ def test_a_mode_where_the_reference_has_no_energy_is_flagged() -> None:
     # places a pole pair there, the record cannot support it and the result says so.
     u = half_sine(width_s=38.6e-6)
     modes = modes_of(np.exp(np.array([-0.03 + 1j, -0.03 - 1j]) * 2 * np.pi * 300e3 * T), T)
-    warnings = _excitation_warnings(u, T, modes)  # the check identify() applies to its modes
+    warnings = excitation_warnings(u, T, modes)  # the check identify() applies to its modes
     assert len(warnings) == 1 and "mode at 300" in warnings[0] and "cannot determine" in warnings[0]
     in_band = modes_of(np.exp(np.array([-0.05 + 1j, -0.05 - 1j]) * 2 * np.pi * 27e3 * T), T)
-    assert _excitation_warnings(u, T, in_band) == []
+    assert excitation_warnings(u, T, in_band) == []
 
 
 # --- results and errors -----------------------------------------------------------------------
@@ -353,16 +355,16 @@ def test_an_undamped_mode_that_stops_every_order_is_named_with_its_frequency() -
     drive in the reference). Closed form: poles e^{±j2πf·Δt} are a mode at f with ζ = 0; poles
     inside the circle are not named."""
     from hopkinson.analysis.frequency_fit import OrderFit
-    from hopkinson.analysis.identify import _marginal_modes_text
+    from hopkinson.analysis.order_search import marginal_modes_text
 
     dt, f_hz = 1e-6, 58.4e3
     z = np.exp(1j * 2 * np.pi * f_hz * dt)
     a = np.real(np.poly([z, np.conj(z)]))
     fit = OrderFit(a, np.array([1.0, 0.0, 0.0]), 0.0, np.zeros(0), 0.0, 1.0, 5, 1, True, False)
-    text = _marginal_modes_text(fit, dt)
+    text = marginal_modes_text(fit, dt)
     assert "order 2 has a mode at 58.4 kHz with ζ ≤ 1e-05, undamped" in text
     damped = np.real(np.poly([0.99 * z, 0.99 * np.conj(z)]))
-    assert _marginal_modes_text(OrderFit(damped, fit.b, 0.0, np.zeros(0), 0.0, 1.0, 5, 1, True, False), dt) == ""
+    assert marginal_modes_text(OrderFit(damped, fit.b, 0.0, np.zeros(0), 0.0, 1.0, 5, 1, True, False), dt) == ""
 
 
 def test_the_all_pole_structure_has_no_finite_zeros_and_unit_dc_gain() -> None:

@@ -259,7 +259,7 @@ def test_motion_is_told_from_noise_by_its_coherence():
 
 
 def test_a_pole_nearly_cancelled_by_a_zero_is_no_mode():
-    from hopkinson.analysis.identify import main_mode, mark_doublets, modes_of
+    from hopkinson.analysis.modes import main_mode, mark_doublets, modes_of
 
     dt = 1e-6
     pole = np.exp((-0.05 + 1j) * 2 * np.pi * 17e3 * dt)  # ζ 0.05 at 17 kHz: 1 − |p| ≈ 5.3e-3

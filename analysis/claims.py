@@ -1,0 +1,146 @@
+"""Stage 7 of analysis.identify, "claims": what the identified model may be said to show.
+
+Modes outside the band the excitation supports are flagged `supported: False` (a DCM may only
+cancel supported poles; the main mode is the lowest supported complex pair); a pair nearly
+cancelled by a zero is a doublet, never a mode; the all-pole structure's resonance beyond the
+band is marked `shapes_band` (its rise inside the band is measured, its place and damping are
+not). A response leading the reference is reported, and a model whose delay was fitted negative
+says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from hopkinson.analysis.excitation import supported_band_hz
+from hopkinson.analysis.frequency_fit import ZETA_FLOOR, OrderFit, OrderProblem, SpectralData
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.modes import main_mode, mark_doublets, modes_of
+from hopkinson.analysis.numerics import f_quantile
+from hopkinson.analysis.order_search import ALL_POLE
+
+# A response leading the reference by more than this (samples, significant) is reported.
+LEAD_WARNING_SAMPLES = 0.2
+
+
+def claimed_modes(model: DiscreteModel, band: tuple[float, float], structure: str) -> list[dict[str, Any]]:
+    """The model's modes (modes.modes_of) with their claims: supported inside `band`, doublets
+    cancelled (modes.mark_doublets) and, in the all-pole structure, the resonance beyond the
+    band marked `shapes_band`: it is what shapes the response inside the band (its rise), an
+    effect that is measured though the pole's place and damping are not, so a DCM may cancel it
+    (analysis.dcm_design; its band limit keeps it from amplifying beyond)."""
+    modes = mark_doublets(modes_of(model.poles, model.sample_interval_s, band), model.zeros)
+    if structure == ALL_POLE:
+        modes = [{**m, "shapes_band": True} if m["kind"] == "complex" and not m["supported"] else m for m in modes]
+    return modes
+
+
+def delay_warnings(data: SpectralData, fit: OrderFit, structure: str, dt: float, significance: float) -> list[str]:
+    """The all-pole structure's delay fitted negative (a lead), or the free structure's causal
+    model absorbing a lead into its zeros (lead_warning)."""
+    if structure != ALL_POLE:
+        return lead_warning(data, fit, dt, significance)
+    if fit.delay < -LEAD_WARNING_SAMPLES:
+        return [f"the response leads the reference by {-fit.delay:.2g} samples ({-fit.delay * dt * 1e6:.3g} µs), "
+                "fitted as a negative delay: the reference chain's own delay (an interferometer's demodulation and "
+                "low-pass) or the channels' skew (digitizer deskew, cable lengths)"]
+    return []
+
+
+def claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], model: DiscreteModel) -> list[str]:
+    """What each mode's claim (or its absence) means for the reader: doublets, resonances beyond
+    the band placed by the rise they give inside it, modes outside the band, and no mode inside it."""
+    out = []
+    lo, hi = band
+    for m in modes:
+        f = m.get("natural_frequency_hz")
+        if m.get("cancelled"):
+            out.append(
+                f"the pole pair at {f / 1e3:.4g} kHz (ζ = {m['damping_ratio']:.3g}) is nearly cancelled by a zero (a "
+                "pole–zero doublet: the fit following a ripple of the data, not a resonance): it is not reported as "
+                "a mode"
+            )
+        elif m.get("shapes_band") and f is not None:
+            out.append(
+                f"the resonance near {f / 1e3:.4g} kHz lies beyond the band the excitation supports ({lo / 1e3:.3g}–"
+                f"{hi / 1e3:.3g} kHz): the all-pole model places it by the rise it gives inside the band, not by its "
+                f"own peak; its frequency is an extrapolation and its damping is not determined (held ≥ "
+                f"{ZETA_FLOOR:g}), so neither is reported as measured; the DCM cancels it for that rise"
+            )
+        elif m["kind"] == "complex" and not m["supported"] and f is not None:
+            out.append(
+                f"the mode at {f / 1e3:.4g} kHz (ζ = {m['damping_ratio']:.3g}) lies outside the band the excitation "
+                f"supports ({lo / 1e3:.3g}–{hi / 1e3:.3g} kHz): this record cannot determine it, so it is kept out "
+                "of the key figures and the DCM"
+            )
+    if main_mode(modes) is None:
+        beyond = [m for m in modes if m["kind"] == "complex" and not m.get("cancelled")
+                  and (m["natural_frequency_hz"] or 0.0) > hi]
+        bound = (f"the resonance lies above {hi / 1e3:.3g} kHz, in a null of the excitation" if beyond
+                 else "the sensor's natural frequency and damping are not reported")
+        out.append(
+            f"no resonance (complex pole pair) lies inside the supported band ({lo / 1e3:.3g}–{hi / 1e3:.3g} kHz): "
+            f"{bound}; a shorter pulse would excite it"
+        )
+    return out
+
+
+def lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: float) -> list[str]:
+    """Whether the response leads the reference. Two looks: the same order with the delay free
+    to go negative fits significantly better (the causal model cannot follow the lead); or the
+    causal model's whole group delay at low frequencies (delay + B's − A's) is negative. The
+    second catches what the first misses: the delay and the zeros share a flat valley of the
+    cost, so B's zeros take up the lead (a phase advance) as well as the free delay would,
+    and the fitted delay alone says nothing. A sensor (modes above the band) lags at low
+    frequencies by Σ 2ζ/ω_n: a whole lead is the channels' skew. (A lead smaller than the
+    sensor's own lag cannot be told from it.)"""
+    lead = _low_frequency_lead(fit)
+    if fit.delay <= LEAD_WARNING_SAMPLES:
+        problem = OrderProblem(data, fit.order, "free", numerator=fit.numerator)
+        free = problem.solve(replace(fit, cost=math.nan), 60)
+        gain = fit.cost - free.cost
+        dof = 2 * data.bins - problem.size
+        if free.delay < -LEAD_WARNING_SAMPLES and dof > 0 and gain > 0:
+            critical = f_quantile(1.0 - significance, 1, dof)
+            if (2.0 * gain) / (2.0 * free.cost / dof) > critical:
+                lead = max(lead, -free.delay)
+    if lead <= LEAD_WARNING_SAMPLES:
+        return []
+    return [
+        f"the response leads the reference by about {lead:.2g} samples ({lead * dt * 1e6:.3g} µs): no sensor answers "
+        "before it is excited, so the channels are skewed (digitizer deskew, cable lengths, trigger alignment); the "
+        "model is kept causal (delay ≥ 0) and absorbs the lead into its zeros, which biases it — correct the skew"
+    ]
+
+
+def _low_frequency_lead(fit: OrderFit) -> float:
+    """The causal model's lead at low frequencies, samples (0 when it lags): minus its group
+    delay at DC, τ + Σk·b_k/Σb_k − Σk·a_k/Σa_k. 0 when B or A nearly vanishes at DC (a
+    differentiating model: no DC group delay to judge by)."""
+    def group_delay(p: np.ndarray) -> float | None:
+        total = float(np.sum(p))
+        if abs(total) <= 1e-6 * float(np.sum(np.abs(p))):
+            return None
+        return float(np.dot(np.arange(p.size), p)) / total
+    gd_b, gd_a = group_delay(np.asarray(fit.b, dtype=float)), group_delay(np.asarray(fit.a, dtype=float))
+    if gd_b is None or gd_a is None:
+        return 0.0
+    return max(0.0, -(fit.delay + gd_b - gd_a))
+
+
+def excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) -> list[str]:
+    """Warn about modes outside the band the reference `u` supports (the data cannot determine them)."""
+    band = supported_band_hz(u, dt)
+    flagged = modes_of(np.array([complex(*m["pole"]) for m in modes] +
+                                [complex(*m["pole"]).conjugate() for m in modes if m["kind"] == "complex"]), dt,
+                       band)
+    out = []
+    for m in flagged:
+        f = m.get("natural_frequency_hz")
+        if m["kind"] == "complex" and not m["supported"] and f is not None:
+            out.append(f"the mode at {f / 1e3:.4g} kHz lies outside the band the reference supports "
+                       f"({band[0] / 1e3:.3g}–{band[1] / 1e3:.3g} kHz): this record cannot determine it")
+    return out

@@ -1,0 +1,249 @@
+"""Each stage of analysis.identify on its own (issue 17 item 6), against a truth the test builds:
+a half-sine of known place and width driving a known continuous sensor (scipy.signal), white
+noise of known level, a known drift, a known coherent motion, a known extra drive path."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hopkinson.analysis.claims import claimed_modes, delay_warnings
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.frequency_fit import OrderFit, all_pole_numerator
+from hopkinson.analysis.identify import fit_weighing_model_error
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.model_error import measure_model_error
+from hopkinson.analysis.modes import has_doublet
+from hopkinson.analysis.order_search import (
+    ALL_POLE,
+    FREE,
+    best_delay_branch,
+    fit_orders,
+    fit_structures,
+    search_setup,
+    settle_order,
+)
+from hopkinson.analysis.record_preparation import (
+    fitted_band,
+    locate_pulse,
+    measure_noise,
+    prepare_record,
+)
+from hopkinson.analysis.records import Record
+from scipy import signal
+
+DT = 1e-6  # the record is taken at the analysis rate (sample_rate_hz=None: no resampling)
+N = 4096
+START_S, WIDTH_S = 300e-6, 20e-6
+F_N_HZ, ZETA, GAIN = 27e3, 0.05, 2.5
+SIGMA_U, SIGMA_Y = 2e-3, 2e-3  # white noise RMS, × each channel's peak
+
+
+def sensor() -> signal.lti:
+    wn = 2 * np.pi * F_N_HZ
+    return signal.lti([GAIN * wn**2], [1.0, 2 * ZETA * wn, wn**2])
+
+
+def channels(seed: int = 1, samples: int = N, extra_y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The noise-free half-sine, the sensor's answer (plus `extra_y`), then white noise."""
+    t = np.arange(samples) * DT
+    u0 = np.where((t >= START_S) & (t < START_S + WIDTH_S), np.sin(np.pi * (t - START_S) / WIDTH_S), 0.0)
+    _, y0, _ = signal.lsim(sensor(), u0, t)
+    if extra_y is not None:
+        y0 = y0 + extra_y[:samples]
+    rng = np.random.default_rng(seed)
+    peak_y = float(np.max(np.abs(y0)))
+    return u0 + SIGMA_U * rng.standard_normal(samples), y0 + SIGMA_Y * peak_y * rng.standard_normal(samples)
+
+
+def record(**kwargs) -> Record:
+    u, y = channels(**kwargs)
+    return Record(DT, u, y)
+
+
+def prepared(rec: Record, order: int | None = None, warnings: list[str] | None = None):
+    warnings = [] if warnings is None else warnings
+    prep_rec = prepare_record(rec, None, 8, order, 32, warnings)
+    setup = search_setup(prep_rec.prep.spectral, prep_rec.prep, 8, order, DT, remove_delay=True, max_delay=32,
+                         patience=3, max_evaluations=60, significance=0.05, warnings=warnings)
+    return prep_rec, setup
+
+
+def mode_of(fit: OrderFit) -> tuple[float, float]:
+    """(f_n Hz, ζ) of the fit's complex pole pair."""
+    p = next(r for r in np.roots(fit.a) if r.imag > 0)
+    s = np.log(p) / DT
+    return abs(s) / (2 * np.pi), -s.real / abs(s)
+
+
+# ------------------------------------------------------------------------------ prepare
+def test_locate_pulse_finds_the_pulse_and_its_window():
+    u, y = channels()
+    activity = locate_pulse(u, y, DT, 32)
+    assert abs(activity.pulse_start - START_S / DT) <= 2
+    # the window holds the pulse and the ringing (27 kHz at ζ 0.05 decays e-fold in 118 µs)
+    assert activity.start < START_S / DT and activity.end > (START_S + WIDTH_S + 300e-6) / DT
+    assert not activity.truncated and not activity.cold_start
+
+
+def test_prepare_record_removes_each_channels_baseline():
+    u, y = channels()
+    pre = prepare_record(Record(DT, u + 0.3, y - 0.2), None, 8, None, 32, []).preprocessing
+    assert pre["reference_baseline"] == pytest.approx(0.3, abs=3 * SIGMA_U)
+    assert pre["response_baseline"] == pytest.approx(-0.2, abs=0.01)
+
+
+def test_locate_pulse_tells_a_record_cut_short():
+    u, y = channels(samples=340)  # cut 20 µs after the pulse, the sensor still ringing
+    assert locate_pulse(u, y, DT, 32).truncated
+
+
+# ------------------------------------------------------------------------------ noise
+def test_measure_noise_reads_the_known_levels():
+    u, y = channels(seed=3)
+    scale_y = float(np.max(np.abs(y)))
+    noise = measure_noise(locate_pulse(u, y / scale_y, DT, 32), DT, [])
+    assert noise.draw_noise_u.rms == pytest.approx(SIGMA_U, rel=0.15)
+    # y's peak is the noise-free peak within a few σ of the noise
+    assert noise.draw_noise_y.rms * scale_y == pytest.approx(SIGMA_Y * scale_y, rel=0.15)
+    assert not noise.motion
+    assert abs(noise.drift_lines["response"][0]) * N < 3 * SIGMA_Y  # no drift to speak of over the record
+
+
+def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():
+    t = np.arange(N) * DT
+    u, y = channels(seed=9)
+    peak_y = float(np.max(np.abs(y)))
+    slope_per_s = 20.0 * peak_y  # 2 % of the peak per ms
+    y = y + slope_per_s * t
+    scale_y = float(np.max(np.abs(y)))
+    activity = locate_pulse(u, y / scale_y, DT, 32)
+    noise = measure_noise(activity, DT, [])
+    assert noise.drift_removed
+    assert noise.drift_lines["response"][0] * scale_y / DT == pytest.approx(slope_per_s, rel=0.05)
+    assert noise.drift_lines["reference"][0] * 1 / DT == pytest.approx(0.0, abs=0.05 * slope_per_s / peak_y)
+
+
+# ------------------------------------------------------------------------------ band
+def test_fitted_band_stops_before_the_pulses_first_null_and_weighs_each_bin_by_its_noise():
+    u, y = channels(seed=5)
+    activity = locate_pulse(u, y, DT, 32)
+    prep = fitted_band(activity, measure_noise(activity, DT, []), DT, [])
+    first_null_hz = 1.5 / WIDTH_S  # a half-sine of width w has its first spectral zero at 1.5/w
+    assert prep.band[1] < first_null_hz
+    assert np.all((prep.bin_hz >= prep.band[0]) & (prep.bin_hz <= prep.band[1]))
+    # white noise of variance σ² gives E|DFT_k|² = N σ² at every bin (N: the window's length)
+    assert np.median(prep.draw_var_u) == pytest.approx(prep.u.size * SIGMA_U**2, rel=0.3)
+
+
+# ------------------------------------------------------------------------------ fit per order, order choice
+@pytest.fixture(scope="module")
+def clean():
+    prep_rec, setup = prepared(record(seed=6))
+    return prep_rec, setup, fit_orders(prep_rec.prep.spectral, FREE, setup)
+
+
+def test_fit_orders_chooses_the_known_order_and_finds_its_mode(clean):
+    _, _, sweep = clean
+    assert sweep.structure == FREE and sweep.chosen == 2
+    f_n, zeta = mode_of(sweep.fits[2])
+    assert f_n == pytest.approx(F_N_HZ, rel=0.01)
+    assert zeta == pytest.approx(ZETA, rel=0.15)
+    assert sweep.costs[2] < sweep.costs[1]
+
+
+def test_fit_structures_keeps_free_zeros_when_no_doublet_is_fitted(clean):
+    prep_rec, setup, _ = clean
+    sweep = fit_structures(prep_rec.prep.spectral, setup)
+    assert sweep.structure == FREE and not has_doublet(sweep.fits[sweep.chosen].a, sweep.fits[sweep.chosen].b)
+
+
+def test_the_all_pole_structure_has_no_finite_zeros_and_a_pole_pair_at_least(clean):
+    prep_rec, setup, _ = clean
+    sweep = fit_orders(prep_rec.prep.spectral, ALL_POLE, setup)
+    assert min(sweep.fits) == 2
+    for n, fit in sweep.fits.items():
+        shape = all_pole_numerator(n)
+        np.testing.assert_allclose(fit.b / fit.b[0], shape / shape[0], rtol=1e-12)
+    # a sensor with its mode inside the band is all-pole as well: the same mode
+    assert mode_of(sweep.fits[sweep.chosen])[0] == pytest.approx(F_N_HZ, rel=0.01)
+
+
+def test_settle_order_keeps_an_asked_order_and_says_the_data_support_fewer():
+    warnings: list[str] = []
+    prep_rec, setup = prepared(record(seed=7), order=4, warnings=warnings)
+    sweep = fit_orders(prep_rec.prep.spectral, FREE, setup)
+    settled = settle_order(sweep, prep_rec.prep.spectral, setup, warnings)
+    assert (settled.order, settled.selection) == (4, "asked")
+    assert any("data support only order 2" in w for w in warnings)
+
+
+def test_settle_order_refuses_a_sweep_with_no_stable_order(clean):
+    prep_rec, setup, sweep = clean
+    with pytest.raises(AnalysisError, match="no stable model"):
+        settle_order(replace(sweep, chosen=None), prep_rec.prep.spectral, setup, [])
+
+
+def test_best_delay_branch_keeps_the_lowest_cost(clean):
+    prep_rec, setup, sweep = clean
+    final, others = best_delay_branch(sweep, 2, prep_rec.prep.spectral, setup)
+    assert all(final.cost <= other.cost for other in others)
+    assert final.delay >= 0.0  # the free structure's delay is causal
+
+
+# ------------------------------------------------------------------------------ model error
+def test_model_error_is_found_where_a_second_drive_path_puts_it():
+    t = np.arange(N) * DT
+    # a 12 kHz ringing the reference does not drive, 200 µs after the pulse (≈ 3 % of the peak): no
+    # linear model of the reference with a delay ≤ 32 µs can follow it
+    late = START_S + 200e-6
+    burst = np.where(t >= late, 0.03 * GAIN * np.sin(2 * np.pi * 12e3 * (t - late)) * np.exp(-(t - late) / 150e-6),
+                     0.0)
+    prep_rec, setup = prepared(record(seed=8, extra_y=burst))
+    prep = prep_rec.prep
+    sweep, model_error, data = fit_weighing_model_error(prep, prep.spectral, setup, None)
+    assert model_error.significant
+    lo, hi = model_error.range_hz
+    assert lo <= 12e3 <= hi
+    assert data.var_y.sum() > prep.spectral.var_y.sum()  # weighed as an output error of its own
+
+
+def test_no_model_error_is_claimed_on_a_record_the_model_explains(clean):
+    prep_rec, setup, sweep = clean
+    prep = prep_rec.prep
+    error = measure_model_error(prep, prep.spectral, sweep.fits[2], sweep.parameters[2], DT)
+    assert not error.significant and error.ratio < 2.0
+
+
+# ------------------------------------------------------------------------------ claims
+def pair(f_hz: float, zeta: float) -> np.ndarray:
+    s = 2 * np.pi * f_hz * (-zeta + 1j * np.sqrt(1 - zeta**2))
+    p = np.exp(s * DT)
+    return np.array([p, p.conjugate()])
+
+
+def test_claims_mark_a_doublet_and_keep_it_from_the_modes():
+    poles = pair(17e3, 0.05)
+    model = DiscreteModel(DT, np.real(np.poly(poles)), np.real(np.poly(poles * 1.001)), 0.0)
+    modes = claimed_modes(model, (500.0, 28e3), FREE)
+    (m,) = [m for m in modes if m["kind"] == "complex"]
+    assert m["cancelled"] and not m["supported"]
+    assert m["natural_frequency_hz"] == pytest.approx(17e3, rel=1e-6)
+
+
+def test_claims_of_the_all_pole_structure_mark_a_resonance_beyond_the_band():
+    a = np.real(np.poly(pair(55e3, 0.02)))
+    model = DiscreteModel(DT, a, all_pole_numerator(2) * np.sum(a) / 1.0, 0.0)
+    (m,) = claimed_modes(model, (500.0, 28e3), ALL_POLE)
+    assert m["shapes_band"] and not m["supported"] and not m["cancelled"]
+    (free,) = claimed_modes(model, (500.0, 28e3), FREE)
+    assert "shapes_band" not in free
+
+
+def test_a_negative_all_pole_delay_is_reported_as_a_lead():
+    a = np.real(np.poly(pair(55e3, 0.02)))
+    fit = OrderFit(a, all_pole_numerator(2), -0.35, np.zeros(0), 1.0, 1.0, 5, 2, True, False)
+    (text,) = delay_warnings(None, fit, ALL_POLE, DT, 0.05)  # type: ignore[arg-type]
+    assert "leads the reference by 0.35 samples (0.35 µs)" in text
+    assert delay_warnings(None, replace(fit, delay=0.1), ALL_POLE, DT, 0.05) == []  # type: ignore[arg-type]
