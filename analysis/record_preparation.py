@@ -22,7 +22,7 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import pulse_width, supported_band_hz
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
-from hopkinson.analysis.noise import WELCH_SEGMENT, NoiseSpectrum, is_motion
+from hopkinson.analysis.noise import COHERENCE_SEGMENT, WELCH_SEGMENT, NoiseSpectrum, is_motion
 from hopkinson.analysis.numerics import next_fast_len
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate
@@ -35,6 +35,10 @@ MIN_SAMPLES_PER_PARAMETER = 10
 MAX_BINS = 512
 # Quiet stretches shorter than this are not used for a noise spectrum.
 MIN_QUIET = 32
+# Motion after the pulse (_without_motion): a stretch's tails are judged from its start in steps
+# of MOTION_STEP samples, down to MOTION_TAIL samples (9 coherence segments: 4/K = 0.44).
+MOTION_STEP = 64
+MOTION_TAIL = 5 * COHERENCE_SEGMENT
 
 
 @dataclass
@@ -380,24 +384,33 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
     out (analysis.noise.is_motion): the bar keeps moving after the pulse (PTB's record: 1–2 %
     of the peak for > 1 ms, coherence 0.88), and that motion, taken as noise, inflated the
     reference's noise ×12, cut the band, blinded the order test and hid the model error. Noise
-    is measured where a channel is at rest: the lead-in. A channel with no lead-in long enough
-    keeps its stretches (with a warning)."""
+    is measured where a channel is at rest: the lead-in, and a stretch after the pulse up to
+    where its motion starts. A channel with no lead-in long enough keeps its stretches (with a
+    warning)."""
     motion: list[dict[str, float]] = []
-    judged: dict[tuple[int, int], bool] = {}
+    split: dict[tuple[int, int], list[slice]] = {}
 
-    def moving(r: slice) -> bool:
+    def at_rest(r: slice) -> list[slice]:
+        """The part of stretch r that is not motion: all of it, none, or the part before the
+        longest tail that is (the sensor still ringing at the start of a stretch hides the
+        motion that follows in a judgement of the whole: the tail is judged in steps of
+        MOTION_STEP)."""
         key = (r.start, r.stop)
-        if key not in judged:
-            verdict, msc = is_motion(u[r], y[r], 1.0 / dt) if r.start > 0 else (False, math.nan)
-            judged[key] = verdict
-            if verdict:
-                motion.append({"start_sample": r.start, "stop_sample": r.stop, "coherence": msc})
-        return judged[key]
+        if key not in split:
+            split[key] = [r]
+            if r.start > 0:
+                for onset in [r.start, *range(r.start + MOTION_STEP, r.stop - MOTION_TAIL + 1, MOTION_STEP)]:
+                    verdict, msc = is_motion(u[onset:r.stop], y[onset:r.stop], 1.0 / dt)
+                    if verdict:
+                        motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc})
+                        split[key] = [slice(r.start, onset)] if onset - r.start >= MIN_QUIET else []
+                        break
+        return split[key]
 
     out = []
     for name, segs in (("reference", u_segments), ("response", y_segments)):
-        kept = [r for r in segs if not moving(r)]
-        if len(kept) < len(segs) and not any(r.start == 0 for r in kept):
+        kept = [part for r in segs for part in at_rest(r)]
+        if kept != segs and not any(r.start == 0 for r in kept):
             warnings.append(f"the {name} moves coherently with the other channel after the pulse and has no "
                             "lead-in at rest: its noise is measured on that motion, which overstates it")
             kept = segs

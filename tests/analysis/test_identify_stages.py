@@ -111,6 +111,25 @@ def test_measure_noise_reads_the_known_levels():
     assert abs(noise.drift_lines["response"][0]) * N < 3 * SIGMA_Y  # no drift to speak of over the record
 
 
+def test_measure_noise_leaves_coherent_motion_out():
+    t = np.arange(N) * DT
+    after = t > START_S + 700e-6
+    # below the reference's busy level (2 % of the peak), as on PTB's record (1–2 %)
+    motion = np.where(after, 0.009 * np.sin(2 * np.pi * 9e3 * t) + 0.006 * np.sin(2 * np.pi * 4.1e3 * t), 0.0)
+    u, y = channels(seed=4)
+    u, y = u + motion, y + motion * GAIN
+    scale_y = float(np.max(np.abs(y)))
+    noise = measure_noise(locate_pulse(u, y / scale_y, DT, 32), DT, [])
+    # the stretch after the pulse starts with the sensor still ringing (12 % of the peak in the
+    # response): judged whole it is not coherent, so the motion is found as its tail
+    assert noise.motion, "the coherent motion after the pulse was taken as noise"
+    onset = min(m["start_sample"] for m in noise.motion)
+    # found once it dominates the tail: after the pulse, and no later than a step past its start
+    assert (START_S + WIDTH_S) / DT < onset <= START_S / DT + 700 + 2 * 64
+    # measured where the channels are at rest: the known white level, not the motion's (~0.8 %)
+    assert noise.draw_noise_u.rms == pytest.approx(SIGMA_U, rel=0.2)
+
+
 def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():
     t = np.arange(N) * DT
     u, y = channels(seed=9)
