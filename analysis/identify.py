@@ -77,8 +77,13 @@ from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SineTerms, 
 from hopkinson.analysis.jsonable import finite_or_none, jsonable
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
-from hopkinson.analysis.model_error import ModelError, measure_model_error
-from hopkinson.analysis.modes import main_mode
+from hopkinson.analysis.model_error import (
+    MODEL_ERROR_DETECTED,
+    MODEL_ERROR_WITH_DOUBLET,
+    ModelError,
+    measure_model_error,
+)
+from hopkinson.analysis.modes import has_doublet, main_mode
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.order_choice import FRF_TOLERANCE, SIGNIFICANCE
 from hopkinson.analysis.order_search import (
@@ -346,7 +351,8 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     pick = order if order is not None and order in sweep.fits else sweep.chosen
     settled = OrderProblem(data, pick, sweep.delay_mode, setup.max_delay,
                            numerator=sweep.fits[pick].numerator).solve(sweep.fits[pick], 200, 1e-9)
-    model_error = measure_model_error(prep, data, settled, sweep.parameters[pick], setup.sample_interval_s)
+    threshold = MODEL_ERROR_WITH_DOUBLET if has_doublet(settled.a, settled.b) else MODEL_ERROR_DETECTED
+    model_error = measure_model_error(prep, data, settled, sweep.parameters[pick], setup.sample_interval_s, threshold)
     if model_error.significant:
         data = with_output_variance(prep, prep.var_y + model_error.var_bins)
         if sine_terms is not None:  # the joint fit keeps its sine points (analysis.sine_joint)

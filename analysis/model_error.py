@@ -21,6 +21,10 @@ from hopkinson.analysis.record_preparation import Prepared
 # with exactly known dynamics read up to ~2× (benchmarks/bench_uncertainty.py's shot: 2.1);
 # PTB's record reads 8 300×, its hybrids 5–120×.
 MODEL_ERROR_DETECTED = 4.0
+# ... and this many times when the fit it is measured on holds a pole–zero doublet: the doublet is
+# itself a sign of a ripple the model follows (issue 17: PTB's record with 0.5 % more noise read
+# 3.0×, its order-4 fit a doublet at 16 kHz); still above what a known sensor reads (~2×).
+MODEL_ERROR_WITH_DOUBLET = 2.5
 # Model error: how its spectrum is smoothed (over ±1/6 octave about each bin, at least 5 bins).
 MODEL_ERROR_OCTAVES = 1.0 / 6.0
 MODEL_ERROR_MIN_BINS = 5
@@ -56,13 +60,12 @@ class ModelError:
                           "range_hz": list(self.range_hz)})
 
 
-def measure_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, parameters: int, dt: float
-                        ) -> ModelError:
+def measure_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, parameters: int, dt: float,
+                        threshold: float = MODEL_ERROR_DETECTED) -> ModelError:
     """The excess of the fit's residual over the noise, per bin: |R_k|² smoothed over
     neighbouring bins (over ±MODEL_ERROR_OCTAVES, _log_smoothed) less the noise's
     E|N_k|² (response noise plus the reference's through the model), corrected for the degrees
-    of freedom the fit took. Significant when the residual exceeds MODEL_ERROR_DETECTED times the
-    noise's."""
+    of freedom the fit took. Significant when the residual exceeds `threshold` times the noise's."""
     omega = 2.0 * np.pi * prep.bin_hz * dt
     residual = prep.y_bins - predicted_bins(fit, data, omega, prep.u_bins)
     expected = prep.var_y + np.abs(response(fit, omega)) ** 2 * prep.var_u
@@ -70,7 +73,7 @@ def measure_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, param
     dof = max(2 * bins - parameters, 1)
     power = np.abs(residual) ** 2 * (2.0 * bins / dof)
     ratio = float(np.sum(power / expected) / bins)
-    if ratio <= MODEL_ERROR_DETECTED:
+    if ratio <= threshold:
         return replace(ModelError.none(bins), ratio=ratio)
     excess = np.maximum(_log_smoothed(power - expected, prep.bin_hz), 0.0)
     length = prep.u.size
