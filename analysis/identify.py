@@ -30,10 +30,12 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    delay of the best branch, not a measured channel skew: what the record determines is the
    model's whole phase (delay and zeros together), which analysis.sine_comparison compares.
 5b. Model error (ModelError, issue 17): the chosen order's residual beyond what the noise
-   explains, per frequency, is measured; when it is significant every order is fitted again
-   with it weighed as an output error of its own, and the Monte Carlo draws it. Where the
-   refitted choice then holds a pole–zero doublet (a zero following a ripple), or no order with
-   free zeros is stable, the orders are fitted once more in the all-pole structure (B =
+   explains, per frequency, is measured; when it is significant (4× the noise's, 2.5× where the
+   fit holds a pole–zero doublet) every order is fitted again with it weighed as an output error
+   of its own, and the Monte Carlo draws it. Where the refitted choice then holds a doublet (a
+   zero following a ripple), or no order with free zeros is stable, or the choice claims no mode
+   in the band while every higher order is unstable, the orders are fitted once more in the
+   all-pole structure (B =
    g·(1 + z⁻¹)ⁿ/2ⁿ, a pole pair at least, a delay of either sign: the reference chain's own
    delay), whose damping beyond the band is floored (frequency_fit.damping_floored); its
    resonance beyond the band is marked `shapes_band` (a DCM may cancel it for the rise it gives
