@@ -10,7 +10,7 @@ choice").
 - `settle_order`: the choice iterated to convergence and checked stable (falling back to a
   stable order, or to the all-pole structure), or the asked order checked.
 - `best_delay_branch`: the lowest optimum of the chosen order's delay–zeros valley.
-- `order_stability`: how often fresh noise of the record's level re-chooses the order.
+- `order_stability_evidence`: how often fresh noise of the record's level re-chooses the order.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from hopkinson.analysis.frequency_fit import (
     delay_branches,
     predicted_bins,
 )
-from hopkinson.analysis.modes import has_doublet
+from hopkinson.analysis.modes import has_doublet, modes_of
 from hopkinson.analysis.order_choice import (
     NoiseDraws,
     Refitter,
@@ -216,10 +216,9 @@ def _exhausted_without_mode(sweep: OrderSweep, setup: SearchSetup) -> bool:
     higher = [n for n in sweep.costs if n > chosen]
     if not higher or any(math.isfinite(sweep.costs[n]) for n in higher):
         return False
-    lo, hi = setup.band_hz
-    roots = np.roots(sweep.fits[chosen].a) if sweep.fits[chosen].a.size > 1 else np.zeros(0)
-    f_hz = np.abs(np.log(roots[roots.imag > 0])) / (2.0 * np.pi * setup.sample_interval_s)
-    return not np.any((f_hz >= lo) & (f_hz <= hi))
+    fit = sweep.fits[chosen]
+    modes = modes_of(np.roots(fit.a) if fit.a.size > 1 else np.zeros(0), setup.sample_interval_s, setup.band_hz)
+    return not any(m["kind"] == "complex" and m["supported"] for m in modes)
 
 
 @dataclass(frozen=True)

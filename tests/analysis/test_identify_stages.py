@@ -4,6 +4,7 @@ noise of known level, a known drift, a known coherent motion, a known extra driv
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -141,7 +142,8 @@ def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():
     noise = measure_noise(activity, DT, [])
     assert noise.drift_removed
     assert noise.drift_lines["response"][0] * scale_y / DT == pytest.approx(slope_per_s, rel=0.05)
-    assert noise.drift_lines["reference"][0] * 1 / DT == pytest.approx(0.0, abs=0.05 * slope_per_s / peak_y)
+    # the reference has no drift (its unit is its own: no scale was applied)
+    assert noise.drift_lines["reference"][0] / DT == pytest.approx(0.0, abs=0.05 * slope_per_s / peak_y)
 
 
 # ------------------------------------------------------------------------------ band
@@ -266,3 +268,21 @@ def test_a_negative_all_pole_delay_is_reported_as_a_lead():
     (text,) = delay_warnings(None, fit, ALL_POLE, DT, 0.05)  # type: ignore[arg-type]
     assert "leads the reference by 0.35 samples (0.35 µs)" in text
     assert delay_warnings(None, replace(fit, delay=0.1), ALL_POLE, DT, 0.05) == []  # type: ignore[arg-type]
+
+
+def test_the_all_pole_structure_is_tried_when_free_zeros_claim_no_mode_and_cannot_go_higher(clean):
+    from hopkinson.analysis.order_search import OrderSweep, _exhausted_without_mode
+
+    _, setup, _ = clean
+    real = OrderFit(np.array([1.0, -0.9]), np.array([0.1, 0.0]), 0.0, np.zeros(0), 0.0, 1.0, 4, 1, True, False)
+    in_band = OrderFit(np.real(np.poly(pair(F_N_HZ, ZETA))), np.array([0.1, 0.0, 0.0]), 0.0, np.zeros(0), 0.0, 1.0,
+                       6, 1, True, False)
+
+    def sweep(fit: OrderFit, higher_cost: float) -> OrderSweep:
+        n = fit.order
+        return OrderSweep(FREE, "causal", {n: fit}, {n: 2 * n + 2}, {n: 1.0, n + 1: higher_cost, n + 2: math.inf},
+                          {}, n, None)
+
+    assert _exhausted_without_mode(sweep(real, math.inf), setup)  # a real pole, every higher order unstable
+    assert not _exhausted_without_mode(sweep(real, 0.9), setup)  # a higher order is a candidate
+    assert not _exhausted_without_mode(sweep(in_band, math.inf), setup)  # a mode inside the band is claimed
