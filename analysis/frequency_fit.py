@@ -141,6 +141,18 @@ class SpectralData:
         return cls(centre, np.add.reduceat(var_u, edges) / count, np.add.reduceat(var_y, edges) / count, count,
                    suu, syy, syu)
 
+    def below(self, omega_max: float) -> SpectralData:
+        """The same data over the bins (or groups) at or below `omega_max` only (rad/sample); a
+        sine calibration fitted with the shock keeps all its points."""
+        keep = self.omega <= omega_max
+
+        def cut(x: np.ndarray | None) -> np.ndarray | None:
+            return None if x is None else x[keep]
+
+        return replace(self, omega=self.omega[keep], var_u=self.var_u[keep], var_y=self.var_y[keep],
+                       count=self.count[keep], suu=self.suu[keep], syy=self.syy[keep], syu=self.syu[keep],
+                       u=cut(self.u), y=cut(self.y), ramp=cut(self.ramp))
+
     def perturbed(self, u: np.ndarray, y: np.ndarray, group: int) -> SpectralData:
         """The same bins and noise with other channel spectra (a Monte Carlo draw)."""
         if self.grouped:

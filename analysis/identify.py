@@ -393,6 +393,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
     evidence.update({
         "comparisons": sweep.comparisons,
         "structure": sweep.structure,
+        "structure_reason": sweep.why,
         "criterion": "the smallest order no higher order beats, both beyond chance (F test on the "
                      f"errors-in-variables cost V at {setup.significance:.0%}, Bonferroni-corrected over the fitted "
                      f"bins) and in the excitation-weighted frequency response (by more than {FRF_TOLERANCE:.1%} RMS)",
@@ -434,10 +435,12 @@ def _residual_warnings(model_error: ModelError, prep: Prepared, ratio: float, fi
             f"{lo_hz / 1e3:.3g}–{hi_hz / 1e3:.3g} kHz; it is weighed in the fit and drawn in the uncertainty "
             "as its own source (budget row 'model error')"
         )
-    if prep.motion:
+    coherent = [m["coherence"] for m in prep.motion if m["coherence"] is not None]
+    if coherent:
         out.append("the channels keep moving together after the pulse (coherence "
-                   f"{max(m['coherence'] for m in prep.motion):.2f}): that motion is not taken as noise; the "
-                   "noise is measured on the lead-in at rest")
+                   f"{max(coherent):.2f}): that motion is not taken as noise; the noise is measured on the "
+                   "lead-in at rest")
+
     if ratio > MODEL_ERROR_RATIO:
         out.append(
             f"the model leaves {ratio:.1f}× the residual the measured noise explains (V per degree of freedom): "
@@ -467,7 +470,8 @@ def _noise_report(prepared: PreparedRecord, noise_y: NoiseSpectrum, residual: np
         "v_per_degree_of_freedom": ratio,
         "model_error": model_error.to_dict(),
         "motion_after_pulse": [{"start_s": rec.start_time_s + m["start_sample"] * dt,
-                                "stop_s": rec.start_time_s + m["stop_sample"] * dt, "coherence": m["coherence"]}
+                                "stop_s": rec.start_time_s + m["stop_sample"] * dt, "coherence": m["coherence"],
+                                "reason": m["reason"]}
                                for m in prep.motion],
     }
 

@@ -39,6 +39,12 @@ MIN_QUIET = 32
 # of MOTION_STEP samples, down to MOTION_TAIL samples (9 coherence segments: 4/K = 0.44).
 MOTION_STEP = 64
 MOTION_TAIL = 5 * COHERENCE_SEGMENT
+# A stretch after the pulse shorter than this (16 coherence segments, where the chance level 4/K
+# reaches MOTION_COHERENCE) cannot show weak motion by its coherence: while the other channel is
+# still moving over it, it is not taken as at rest (PTB's record cut to 1.2 ms: 0.2 ms of the
+# bar's motion after the pulse, coherence not judged, read as the reference's noise at 12x the
+# lead-in's, and the model error went undetected).
+MOTION_JUDGED = 17 * COHERENCE_SEGMENT // 2
 
 
 @dataclass
@@ -75,7 +81,7 @@ class Prepared:
     draw_var_y: np.ndarray
     drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed, normalised
     # stretches after the pulse left out of the noise as coherent motion (start_s, stop_s, coherence; samples)
-    motion: list[dict[str, float]] = field(default_factory=list)
+    motion: list[dict[str, Any]] = field(default_factory=list)
 
 
 def _scale(x: np.ndarray) -> float:
@@ -217,7 +223,7 @@ class NoiseLooks:
     y: np.ndarray
     u_segments: list[slice]  # where each noise was measured
     y_segments: list[slice]
-    motion: list[dict[str, float]]  # stretches after the pulse left out as coherent motion (samples, coherence)
+    motion: list[dict[str, Any]]  # stretches after the pulse left out as motion (samples, coherence, reason)
     drift_removed: bool
     drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed
     noise_u: NoiseSpectrum  # the conservative look (weighs the fit and the order test)
@@ -379,7 +385,7 @@ def _busy(x: np.ndarray, level: float, widen: int) -> np.ndarray:
 
 
 def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[slice], y_segments: list[slice],
-                    warnings: list[str]) -> tuple[list[slice], list[slice], list[dict[str, float]]]:
+                    warnings: list[str]) -> tuple[list[slice], list[slice], list[dict[str, Any]]]:
     """The quiet stretches with those after the pulse where the channels move together taken
     out (analysis.noise.is_motion): the bar keeps moving after the pulse (PTB's record: 1–2 %
     of the peak for > 1 ms, coherence 0.88), and that motion, taken as noise, inflated the
@@ -387,10 +393,10 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
     is measured where a channel is at rest: the lead-in, and a stretch after the pulse up to
     where its motion starts. A channel with no lead-in long enough keeps its stretches (with a
     warning)."""
-    motion: list[dict[str, float]] = []
+    motion: list[dict[str, Any]] = []
     split: dict[tuple[int, int], list[slice]] = {}
 
-    def at_rest(r: slice) -> list[slice]:
+    def at_rest(r: slice, other_quiet: list[slice]) -> list[slice]:
         """The part of stretch r that is not motion: all of it, none, or the part before the
         longest tail that is (the sensor still ringing at the start of a stretch hides the
         motion that follows in a judgement of the whole: the tail is judged in steps of
@@ -402,20 +408,33 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
                 for onset in [r.start, *range(r.start + MOTION_STEP, r.stop - MOTION_TAIL + 1, MOTION_STEP)]:
                     verdict, msc = is_motion(u[onset:r.stop], y[onset:r.stop], 1.0 / dt)
                     if verdict:
-                        motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc})
+                        motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc,
+                                       "reason": "coherent"})
                         split[key] = [slice(r.start, onset)] if onset - r.start >= MIN_QUIET else []
                         break
+                else:
+                    if r.stop - r.start < MOTION_JUDGED and _moving_over(r, other_quiet):
+                        motion.append({"start_sample": r.start, "stop_sample": r.stop, "coherence": None,
+                                       "reason": "too short to judge by coherence, the other channel not at rest"})
+                        split[key] = []
         return split[key]
 
     out = []
-    for name, segs in (("reference", u_segments), ("response", y_segments)):
-        kept = [part for r in segs for part in at_rest(r)]
+    for name, segs, other in (("reference", u_segments, y_segments), ("response", y_segments, u_segments)):
+        kept = [part for r in segs for part in at_rest(r, other)]
         if kept != segs and not any(r.start == 0 for r in kept):
-            warnings.append(f"the {name} moves coherently with the other channel after the pulse and has no "
-                            "lead-in at rest: its noise is measured on that motion, which overstates it")
+            warnings.append(f"the {name} is not at rest after the pulse (it moves with the other channel) and has "
+                            "no lead-in at rest: its noise is measured on that motion, which overstates it")
             kept = segs
         out.append(kept)
     return out[0], out[1], motion
+
+
+def _moving_over(r: slice, other_quiet: list[slice]) -> bool:
+    """Whether the other channel is busy (outside its own quiet stretches) over most of the
+    stretch r: the bar or the sensor is still moving there."""
+    quiet = sum(max(0, min(r.stop, q.stop) - max(r.start, q.start)) for q in other_quiet)
+    return quiet < 0.5 * (r.stop - r.start)
 
 
 def _provisional_drift(y: np.ndarray, pre_end: int, ref_busy: np.ndarray) -> np.ndarray:

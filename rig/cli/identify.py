@@ -248,8 +248,11 @@ def explain(report: dict[str, Any]) -> str:
                  f"({noise.get('reference_source')}), response {rms(noise.get('response_rms'))} "
                  f"({noise.get('response_source')})")
     for m in noise.get("motion_after_pulse") or []:
-        lines.append(f"  motion, not noise: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms moves coherently in "
-                     f"both channels (power-weighted coherence {m['coherence']:.2f}): left out of the noise")
+        why = (f"moves coherently in both channels (power-weighted coherence {m['coherence']:.2f})"
+               if m.get("coherence") is not None else
+               "too short to judge by coherence while the other channel is not at rest")
+        lines.append(f"  motion, not noise: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms {why}: left out of "
+                     "the noise")
     band = report.get("supported_band_hz")
     if band:
         lines.append(f"  band: {band[0] / 1e3:.4g}–{band[1] / 1e3:.4g} kHz, where the reference's spectrum stands "
@@ -268,9 +271,8 @@ def explain(report: dict[str, Any]) -> str:
     lines.append(f"  order {report.get('order')} ({report.get('order_selection')}): "
                  f"{evidence.get('criterion', '')}")
     if evidence.get("structure") == "all_pole":
-        lines.append("  structure: all-pole (no finite zeros, delay of either sign): the model with free zeros "
-                     "followed a ripple with a pole–zero doublet or was unstable, so the band's one feature is "
-                     "taken as the rise towards a resonance beyond it")
+        why = evidence.get("structure_reason") or "chosen over the model with free zeros"
+        lines.append(f"  structure: all-pole (no finite zeros, delay of either sign): {why}")
     error = noise.get("model_error") or {}
     if error.get("detected"):
         lo, hi = error.get("range_hz") or (None, None)

@@ -215,15 +215,33 @@ def test_the_sine_points_are_judged_against_the_response_band(ptb):
     assert judged["e_n"][0] < 1e-6
 
 
-@pytest.mark.xfail(strict=True, reason="issue 17 item 3 not met yet: the all-pole model follows the sine within "
-                                       "~1 % below 18 kHz, but the sine's own ripple (±1.7 % about any smooth model "
-                                       "against its stated 0.15–0.5 %) leaves E_n up to ~2.6 at 9.5 kHz: the band "
-                                       "does not carry the model error's correlated, local part")
-def test_the_sine_points_lie_inside_the_response_band(ptb):
+EN_SEEDS = range(1, 6)
+
+
+@pytest.fixture(scope="module")
+def sine_e_n():
+    """The largest E_n of the sine points against the response band, on each of EN_SEEDS."""
     from hopkinson.analysis.sine_comparison import band_consistency, compare_sine
 
-    judged = band_consistency(compare_sine(ptb.model, ptb_sine()), ptb.uncertainty["response_band"])
-    assert judged["consistent"]
+    out = []
+    for seed in EN_SEEDS:
+        result = analyse_record(ptb_record(), AnalysisParams(draws=DRAWS, seed=seed))
+        out.append(band_consistency(compare_sine(result.model, ptb_sine()), result.uncertainty["response_band"]))
+    return out
+
+
+def test_the_sine_points_lie_near_the_response_band(sine_e_n):
+    """Measured: the largest E_n is 0.9-1.3 over the seeds (2.6 before the band's parts were drawn,
+    analysis.uncertainty.BAND_TOPS): the sine's ripple jumps (9.5, 14 kHz) sit at the band's edge."""
+    assert all(judged["max_e_n"] <= 1.5 for judged in sine_e_n), [j["max_e_n"] for j in sine_e_n]
+
+
+@pytest.mark.xfail(strict=True, reason="issue 17 item 3 not met yet: E_n <= 1 at every sine point holds on 1-2 of 5 "
+                                       "seeds; the sine's own ripple (±1.7 % about any smooth model against its "
+                                       "stated 0.15–0.5 %) leaves one or two points at E_n 1.1–1.3 (9.5 kHz) on the "
+                                       "others")
+def test_the_sine_points_lie_inside_the_response_band(sine_e_n):
+    assert all(judged["consistent"] for judged in sine_e_n)
 
 
 def test_identify_explain_prints_the_trail_on_the_real_record(tmp_path, capsys):

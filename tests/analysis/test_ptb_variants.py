@@ -1,0 +1,84 @@
+"""Issue 17 item 3: the intervals hold the sine calibration's values on variants of PTB's record
+too, not only on the file as published: another sample rate, a shorter capture, a skew between
+the channels, more noise. The truth is independent (the sine calibration of the same sensor);
+the variants are made the way a lab's other recordings of the same shot would differ."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.records import Record
+from hopkinson.analysis.shot_analysis import analyse_record
+from scipy import signal
+
+from tests.ptb_shock import SINE_FBSD_5_HZ, SINE_FBSD_10_HZ, ptb_record, ptb_sine
+
+DRAWS = 60
+
+
+def decimated(factor: int) -> Record:
+    rec = ptb_record()
+    ref, resp = (signal.decimate(x, factor, ftype="fir", zero_phase=True) for x in (rec.reference, rec.response))
+    return Record(rec.sample_interval_s * factor, ref, resp, response_unit="pC")
+
+
+def cut(samples: int) -> Record:
+    rec = ptb_record()
+    return Record(rec.sample_interval_s, rec.reference[:samples], rec.response[:samples], response_unit="pC")
+
+
+def skewed(samples: int) -> Record:
+    """The response shifted by `samples` at 10 MS/s (0.1 µs each) against the reference."""
+    rec = ptb_record()
+    return Record(rec.sample_interval_s, rec.reference, np.roll(rec.response, samples), response_unit="pC")
+
+
+def noisier(level: float, seed: int = 0) -> Record:
+    """White noise of `level` × each channel's peak added to both."""
+    rec = ptb_record()
+    rng = np.random.default_rng(seed)
+    ref, resp = (x + rng.normal(0.0, level * float(np.max(np.abs(x))), x.size) for x in (rec.reference, rec.response))
+    return Record(rec.sample_interval_s, ref, resp, response_unit="pC")
+
+
+VARIANTS = {
+    "5 MS/s": lambda: decimated(2),
+    "2 MS/s": lambda: decimated(5),
+    "1.2 ms capture": lambda: cut(12_000),
+    "skew +0.3 us": lambda: skewed(3),
+    "skew -0.3 us": lambda: skewed(-3),
+    "skew +0.8 us": lambda: skewed(8),
+    "0.1 % more noise": lambda: noisier(1e-3),
+    "0.2 % more noise": lambda: noisier(2e-3, seed=2),
+    "0.5 % more noise": lambda: noisier(5e-3),
+}
+# Known misses, each strict: when one starts to pass, its mark must go.
+MISSES = {
+    "0.9 ms capture": (lambda: cut(9_000), "cut while the response still rings at 2-3 % of the peak: the all-pole "
+                       "fit's resonance sits at 43 kHz (50 on the whole record), both edges ~15 % low"),
+}
+
+
+def holds_the_sine(make) -> None:
+    result = analyse_record(make(), AnalysisParams(draws=DRAWS, seed=1))
+    unc = result.uncertainty
+    for level, sine_hz in (("5", SINE_FBSD_5_HZ), ("10", SINE_FBSD_10_HZ)):
+        edge = unc["fbsd_hz"][level]
+        lo, hi = edge["interval"]
+        assert lo <= sine_hz <= hi, (level, edge["value"], lo, hi)
+        assert (hi - lo) / 2 <= 0.25 * edge["value"]  # the issue's widest half-width
+    lo, hi = unc["dc_gain"]["interval"]
+    assert lo <= ptb_sine().magnitude[0] <= hi, (unc["dc_gain"]["value"], lo, hi)
+    assert (hi - lo) / 2 <= 0.02 * unc["dc_gain"]["value"]
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_the_intervals_hold_the_sine_calibration_on_a_variant(name):
+    holds_the_sine(VARIANTS[name])
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
+                                  for n, (_, why) in MISSES.items()])
+def test_the_known_misses_still_miss(name):
+    holds_the_sine(MISSES[name][0])
