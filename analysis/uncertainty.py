@@ -472,8 +472,8 @@ def _band_variants(ctx: FitContext, refitter: Refitter, orders: list[int], rng: 
                    ) -> BandVariants:
     """The band's parts each draw is refitted on: only the whole band unless the model error is
     detected (the residual then holds structure the model does not follow); a part is used when
-    every order drawn refits stably on it from its nominal fit and its bins outnumber the
-    parameters twice."""
+    every order drawn refits stably on it from its nominal fit and its real residuals (two
+    per bin) number at least twice its parameters."""
     count = len(orders)
     whole = BandVariants([math.inf], [refitter], [], np.zeros(count, dtype=int), np.zeros(count, dtype=bool))
     if ctx.var_model_error is None or not np.any(ctx.var_model_error > 0):
@@ -484,7 +484,7 @@ def _band_variants(ctx: FitContext, refitter: Refitter, orders: list[int], rng: 
         part = ctx.spectral.below(fraction * top)
         fits, branches = {}, {}
         for n in needed:
-            if n not in ctx.fits or 2 * part.bins < 2 * ctx.fits[n].parameters:
+            if n not in ctx.fits or part.bins < ctx.fits[n].parameters:  # 2·bins residuals ≥ 2·parameters
                 break
             starts = [ctx.fits[n], *ctx.branches.get(n, [])]
             refit = [OrderProblem(part, n, ctx.delay_mode, ctx.max_delay, numerator=f.numerator).solve(f, 200, 1e-9)
