@@ -15,7 +15,6 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from hopkinson.analysis.excitation import supported_band_hz
 from hopkinson.analysis.frequency_fit import ZETA_FLOOR, OrderFit, OrderProblem, SpectralData
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.modes import main_mode, mark_doublets, modes_of
@@ -50,7 +49,7 @@ def delay_warnings(data: SpectralData, fit: OrderFit, structure: str, dt: float,
     return []
 
 
-def claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float], model: DiscreteModel) -> list[str]:
+def claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float]) -> list[str]:
     """What each mode's claim (or its absence) means for the reader: doublets, resonances beyond
     the band placed by the rise they give inside it, modes outside the band, and no mode inside it."""
     out = []
@@ -99,7 +98,7 @@ def lead_warning(data: SpectralData, fit: OrderFit, dt: float, significance: flo
     sensor's own lag cannot be told from it.)"""
     lead = _low_frequency_lead(fit)
     if fit.delay <= LEAD_WARNING_SAMPLES:
-        problem = OrderProblem(data, fit.order, "free", numerator=fit.numerator)
+        problem = OrderProblem.for_fit(data, fit, "free")
         free = problem.solve(replace(fit, cost=math.nan), 60)
         gain = fit.cost - free.cost
         dof = 2 * data.bins - problem.size
@@ -129,18 +128,3 @@ def _low_frequency_lead(fit: OrderFit) -> float:
     if gd_b is None or gd_a is None:
         return 0.0
     return max(0.0, -(fit.delay + gd_b - gd_a))
-
-
-def excitation_warnings(u: np.ndarray, dt: float, modes: list[dict[str, Any]]) -> list[str]:
-    """Warn about modes outside the band the reference `u` supports (the data cannot determine them)."""
-    band = supported_band_hz(u, dt)
-    flagged = modes_of(np.array([complex(*m["pole"]) for m in modes] +
-                                [complex(*m["pole"]).conjugate() for m in modes if m["kind"] == "complex"]), dt,
-                       band)
-    out = []
-    for m in flagged:
-        f = m.get("natural_frequency_hz")
-        if m["kind"] == "complex" and not m["supported"] and f is not None:
-            out.append(f"the mode at {f / 1e3:.4g} kHz lies outside the band the reference supports "
-                       f"({band[0] / 1e3:.3g}–{band[1] / 1e3:.3g} kHz): this record cannot determine it")
-    return out

@@ -141,6 +141,14 @@ class SpectralData:
         return cls(centre, np.add.reduceat(var_u, edges) / count, np.add.reduceat(var_y, edges) / count, count,
                    suu, syy, syu)
 
+    def in_layout(self, per_bin: np.ndarray) -> np.ndarray:
+        """Values given per DFT bin (a noise variance) in this data's layout: as they are per bin,
+        averaged over each group when grouped (as `grouped_from` averages the variances)."""
+        if not self.grouped:
+            return per_bin
+        edges = np.concatenate(([0], np.cumsum(self.count[:-1]))).astype(int)
+        return np.add.reduceat(per_bin, edges) / self.count
+
     def below(self, omega_max: float) -> SpectralData:
         """The same data over the bins (or groups) at or below `omega_max` only (rad/sample); a
         sine calibration fitted with the shock keeps all its points."""
@@ -241,7 +249,7 @@ def predicted_bins(fit: OrderFit, data: SpectralData, omega: np.ndarray, u_bins:
     """The model's response spectrum at the fitted bins (before any grouping): e^{−jωτ}·B/A·U,
     plus the transient and drift terms where the per-bin fit has them."""
     if not data.grouped:
-        problem = OrderProblem(data, fit.order, fit.delay, numerator=fit.numerator)
+        problem = OrderProblem.for_fit(data, fit, fit.delay)
         theta = problem.pack(replace(fit, transient=fit.transient if fit.transient.size else np.zeros(0)))
         return data.y - problem._error(problem._pieces(theta))
     return response(fit, omega) * u_bins
@@ -294,6 +302,12 @@ class OrderProblem:
     numerator: B's fixed shape (B = g·shape: one parameter g; `all_pole_numerator`); None: B free
     (n + 1 parameters).
     """
+
+    @classmethod
+    def for_fit(cls, data: SpectralData, fit: OrderFit, delay: str | float = "causal", max_delay: float = 32.0
+                ) -> OrderProblem:
+        """The problem `fit` solves (its order and B's structure) on `data`."""
+        return cls(data, fit.order, delay, max_delay, numerator=fit.numerator)
 
     def __init__(self, data: SpectralData, order: int, delay: str | float = "causal", max_delay: float = 32.0,
                  numerator: np.ndarray | None = None) -> None:
@@ -609,12 +623,10 @@ class QuickRefit:
     fallback_evaluations = 20
 
     def __init__(self, data: SpectralData, fit: OrderFit, delay: str | float, max_delay: float) -> None:
-        self.order = fit.order
         self.delay = delay
         self.max_delay = max_delay
         self.start = fit
-        problem = OrderProblem(data, fit.order, delay, max_delay, numerator=fit.numerator)
-        self.numerator = fit.numerator
+        problem = OrderProblem.for_fit(data, fit, delay, max_delay)
         self.theta0 = problem.pack(fit)
         # Directions the data hardly determine (a spare pole against a zero) are left alone.
         self.step = np.linalg.pinv(problem.jacobian(self.theta0), rcond=RCOND)
@@ -625,7 +637,7 @@ class QuickRefit:
         fixed-Jacobian iteration alone stops where J₀ᵀr = 0, a hair off the optimum Jᵀr = 0).
         `exact` False returns the best point reached instead of handing an unsettled draw to
         Levenberg–Marquardt (enough to compare costs with an order that fits far better)."""
-        problem = OrderProblem(data, self.order, self.delay, self.max_delay, numerator=self.numerator)
+        problem = OrderProblem.for_fit(data, self.start, self.delay, self.max_delay)
         theta = self.theta0
         r = problem.residual(theta)
         cost = 0.5 * float(r @ r)
@@ -688,7 +700,7 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
     starts on a grid of delays from 0 to a few samples past `fit`'s, each refined; optima
     whose delay lies within a sample of one already kept are the same branch. Sorted by cost
     (the best may beat `fit`: the order search started each order from one delay)."""
-    problem = OrderProblem(data, fit.order, "causal", max_delay, numerator=fit.numerator)
+    problem = OrderProblem.for_fit(data, fit, "causal", max_delay)
     top = min(float(max_delay) - CAUSAL_START, math.ceil(fit.delay) + 4.0)
     step = max(1.0, top / BRANCH_STARTS)
     found: list[OrderFit] = []

@@ -12,7 +12,8 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    is measured where it is quiet (analysis.noise): the reference before the pulse and in
    flight after it, the response before the pulse and after its ringing has died away. A
    stretch after the pulse where both channels move together (the bar's motion: coherent,
-   analysis.noise.is_motion) is not noise and is left out (issue 17).
+   analysis.noise.is_motion), or one too short to judge so while the other channel is not at
+   rest, is not noise and is left out (issue 17).
 4. Window and band: the fit uses the record from just before the pulse to where the response
    has died into its noise (a record cut short keeps a transient term, see
    analysis.frequency_fit), and only the frequencies the excitation supports: where the
@@ -32,12 +33,13 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
 5b. Model error (ModelError, issue 17): the chosen order's residual beyond what the noise
    explains, per frequency, is measured; when it is significant (4× the noise's, 2.5× where the
    fit holds a pole–zero doublet) every order is fitted again with it weighed as an output error
-   of its own, and the Monte Carlo draws it. Where the refitted choice then holds a doublet (a
-   zero following a ripple), or no order with free zeros is stable, or the choice claims no mode
-   in the band while every higher order is unstable, the orders are fitted once more in the
-   all-pole structure (B =
-   g·(1 + z⁻¹)ⁿ/2ⁿ, a pole pair at least, a delay of either sign: the reference chain's own
-   delay), whose damping beyond the band is floored (frequency_fit.damping_floored); its
+   of its own, and the Monte Carlo draws it. Then, and also where the choice holds a doublet
+   without detected model error (the doublet can take the error in), the orders are fitted in
+   the all-pole structure too (B = g·(1 + z⁻¹)ⁿ/2ⁿ, a pole pair at least, a delay of either
+   sign: the reference chain's own delay) and the structure chosen (order_search.fit_structures:
+   all-pole where the free choice holds a doublet, is unstable, or claims no mode in the band
+   while every higher order is unstable, else the order test between the two choices). The
+   all-pole structure's damping beyond the band is floored (frequency_fit.damping_floored); its
    resonance beyond the band is marked `shapes_band` (a DCM may cancel it for the rise it gives
    inside the band) and never reported as a measured mode.
 6. Order: the smallest n that no higher order beats both beyond chance (an F test on V,
@@ -76,7 +78,7 @@ import numpy as np
 from hopkinson.analysis.claims import claimed_modes, claims_warnings, delay_warnings
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SineTerms, SpectralData
-from hopkinson.analysis.jsonable import finite_or_none, jsonable
+from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.model_error import (
@@ -155,6 +157,11 @@ class FitContext:
     # The model error's variance per fitted bin, included in var_y (identify.ModelError; zeros: none)
     var_model_error: np.ndarray | None = None
 
+    @property
+    def model_error_detected(self) -> bool:
+        """Whether identify detected model error (and weighed it in the fit and the draws)."""
+        return self.var_model_error is not None and bool(np.any(self.var_model_error > 0))
+
 
 @dataclass
 class Identification:
@@ -231,13 +238,13 @@ class Identification:
         out = self.model.to_dict()
         out.update(
             {
-                "loss_by_order": finite_or_none(self.loss_by_order),
-                "arx_loss_by_order": finite_or_none(self.arx_loss_by_order),
-                "aic_by_order": finite_or_none(self.aic_by_order),
-                "bic_by_order": finite_or_none(self.bic_by_order),
+                "loss_by_order": jsonable(self.loss_by_order),
+                "arx_loss_by_order": jsonable(self.arx_loss_by_order),
+                "aic_by_order": jsonable(self.aic_by_order),
+                "bic_by_order": jsonable(self.bic_by_order),
                 "order_selection": self.order_selection,
                 "knee_tolerance": self.knee_tolerance,
-                "fit_percent": finite_or_none([self.fit_percent])[0],
+                "fit_percent": jsonable(self.fit_percent),
                 "modes": [dict(m) for m in self.modes],
                 "converged": self.converged,
                 "iterations": self.iterations,
@@ -329,7 +336,7 @@ def identify(
     model = DiscreteModel(dt, final.a, final.b * (prepared.scale_y / prepared.scale_u), float(final.delay),
                           info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure})
     modes = claimed_modes(model, prep.band, sweep.structure)
-    warnings += claims_warnings(modes, prep.band, model)
+    warnings += claims_warnings(modes, prep.band)
     if remove_delay:
         warnings += delay_warnings(data, final, sweep.structure, dt, significance)
     return _identification(prepared, data, setup, settled, final, others, model, modes, model_error, evidence,
@@ -354,8 +361,8 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
         return sweep, model_error, data
     order = setup.asked_order
     pick = order if order is not None and order in sweep.fits else sweep.chosen
-    settled = OrderProblem(data, pick, sweep.delay_mode, setup.max_delay,
-                           numerator=sweep.fits[pick].numerator).solve(sweep.fits[pick], 200, 1e-9)
+    settled = OrderProblem.for_fit(data, sweep.fits[pick], sweep.delay_mode, setup.max_delay).solve(
+        sweep.fits[pick], 200, 1e-9)
     doublet = has_doublet(settled.a, settled.b)
     threshold = MODEL_ERROR_WITH_DOUBLET if doublet else MODEL_ERROR_DETECTED
     model_error = measure_model_error(prep, data, settled, sweep.parameters[pick], setup.sample_interval_s, threshold)
@@ -363,8 +370,7 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
         data = with_output_variance(prep, prep.var_y + model_error.var_bins)
         if sine_terms is not None:  # the joint fit keeps its sine points (analysis.sine_joint)
             data = replace(data, sine=sine_terms)
-        sweep = fit_structures(data, setup)
-    elif doublet:  # the doublet took in the model error, which then hides in its residual
+    if model_error.significant or doublet:  # a doublet can take the model error in: its residual reads as noise
         sweep = fit_structures(data, setup)
     return sweep, model_error, data
 
@@ -446,7 +452,6 @@ def _residual_warnings(model_error: ModelError, prep: Prepared, ratio: float, fi
         out.append("the channels keep moving together after the pulse (coherence "
                    f"{max(coherent):.2f}): that motion is not taken as noise; the noise is measured on the "
                    "lead-in at rest")
-
     if ratio > MODEL_ERROR_RATIO:
         out.append(
             f"the model leaves {ratio:.1f}× the residual the measured noise explains (V per degree of freedom): "

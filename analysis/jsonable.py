@@ -8,11 +8,6 @@ from typing import Any
 import numpy as np
 
 
-def finite_or_none(values: list[float]) -> list[float | None]:
-    """Each value as a float, or None where it is missing, infinite or NaN."""
-    return [float(v) if v is not None and math.isfinite(v) else None for v in values]
-
-
 def jsonable(value: Any) -> Any:
     """`value` with dict keys as strings, tuples as lists, NumPy numbers as Python's and
     non-finite floats as None (recursively)."""

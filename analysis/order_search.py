@@ -130,10 +130,10 @@ class OrderSweep:
         parameter: there the fit with the delay held at zero is taken when it is as good. Kept:
         the sweep's fit of order n is replaced by it."""
         if n not in self._polished:
-            fit, shape = self.fits[n], self.fits[n].numerator
-            done = OrderProblem(data, n, self.delay_mode, setup.max_delay, numerator=shape).solve(fit, 200, 1e-11)
+            fit = self.fits[n]
+            done = OrderProblem.for_fit(data, fit, self.delay_mode, setup.max_delay).solve(fit, 200, 1e-11)
             if self.delay_mode == "causal" and done.delay < 1e-2 and not done.converged:
-                at_zero = OrderProblem(data, n, 0.0, setup.max_delay, numerator=shape).solve(done, 200, 1e-11)
+                at_zero = OrderProblem.for_fit(data, fit, 0.0, setup.max_delay).solve(done, 200, 1e-11)
                 if at_zero.cost <= done.cost * (1 + 1e-9):
                     done = at_zero
             self.fits[n] = replace(done, start_unstable=fit.start_unstable)
@@ -191,13 +191,15 @@ def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderS
 
 
 def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
-    """The free structure's sweep; where its choice is unstable or holds a pole–zero doublet (the
-    fit following a ripple of the data: its one dynamic feature in the band is a smooth rise, a
-    resonance beyond it, as on PTB's record), or claims no mode in the band while every higher
-    order of it is unstable (the rise towards a resonance beyond the band, which free zeros
-    follow only by pressing a pole onto the unit circle: PTB's record with 0.5 % more noise),
-    the all-pole structure's, whose zeros cannot follow a ripple
-    (frequency_fit.all_pole_numerator). An asked order keeps the free structure."""
+    """Both structures' sweeps and the one chosen, its reason in `why` (empty: free). The
+    all-pole structure (frequency_fit.all_pole_numerator: no zero can follow a ripple) where the
+    free choice is unstable or holds a pole–zero doublet (the fit following a ripple of the data:
+    its one dynamic feature in the band is a smooth rise, a resonance beyond it, as on PTB's
+    record), or claims no mode in the band while every higher order of it is unstable (the rise
+    towards a resonance beyond the band, which free zeros follow only by pressing a pole onto the
+    unit circle: PTB's record with 0.5 % more noise); otherwise the order test between the two
+    choices decides (`_all_pole_preferred`). An asked order keeps the free structure, as does an
+    all-pole sweep with no stable order."""
     free = fit_orders(data, FREE, setup)
     if setup.asked_order is not None:
         return free
@@ -393,14 +395,12 @@ def marginal_modes_text(fit: OrderFit, dt: float) -> str:
     """Where the order test's choice put its poles on or beyond the unit circle, as modes
     (e.g. ': order 2 has a mode at 58.4 kHz with ζ ≤ 1e-05, undamped'); '' when none is there."""
     roots = np.roots(fit.a) if fit.a.size > 1 else np.array([])
-    marginal = roots[(np.abs(roots) >= 1.0 - MARGINAL_POLE) & (roots.imag >= 0)]
-    if not marginal.size:
+    marginal = modes_of(roots[np.abs(roots) >= 1.0 - MARGINAL_POLE], dt)
+    if not marginal:
         return ""
     parts = []
-    for z in marginal:
-        s = np.log(complex(z)) / dt
-        f_hz = abs(s) / (2.0 * np.pi)
-        zeta = -s.real / abs(s) if abs(s) > 0 else 0.0
+    for m in marginal:
+        f_hz, zeta = m["natural_frequency_hz"] or 0.0, m["damping_ratio"] or 0.0
         parts.append(f"a mode at {f_hz / 1e3:.3g} kHz with ζ {'≤ 1e-05' if abs(zeta) <= 1e-5 else f'= {zeta:.2g}'}")
     return (f": order {fit.order} has {', '.join(parts)}, undamped: a response that rings on without a drive in "
             "the reference (a second drive path, motion the reference does not see) or a mode in a null of the "

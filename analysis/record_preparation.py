@@ -80,7 +80,7 @@ class Prepared:
     draw_var_u: np.ndarray
     draw_var_y: np.ndarray
     drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed, normalised
-    # stretches after the pulse left out of the noise as coherent motion (start_s, stop_s, coherence; samples)
+    # stretches after the pulse left out of the noise as motion (start_sample, stop_sample, coherence, reason)
     motion: list[dict[str, Any]] = field(default_factory=list)
 
 
@@ -146,11 +146,6 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
         }
     )
     return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre)
-
-
-def _scale(x: np.ndarray) -> float:
-    """The channel's largest excursion from its median: the unit the fit works in."""
-    return float(np.max(np.abs(x - np.median(x))))
 
 
 @dataclass
@@ -353,11 +348,7 @@ def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tupl
 
 def with_output_variance(prep: Prepared, var_y: np.ndarray) -> SpectralData:
     """The fitted data with another output variance per bin (per bin or grouped as prepared)."""
-    data = prep.spectral
-    if data.grouped:
-        edges = np.arange(0, var_y.size, prep.group)
-        return replace(data, var_y=np.add.reduceat(var_y, edges) / data.count)
-    return replace(data, var_y=var_y)
+    return replace(prep.spectral, var_y=prep.spectral.in_layout(var_y))
 
 
 def checked_channels(rec: Record) -> tuple[np.ndarray, np.ndarray]:

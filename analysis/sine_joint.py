@@ -276,7 +276,7 @@ def _joint_error(ident: Any) -> tuple[np.ndarray, float, float]:
     if ctx is None or ctx.spectral.sine is None:
         raise AnalysisError("the identification was not fitted with a sine calibration")
     fit = ctx.fits[ident.order]
-    problem = OrderProblem(ctx.spectral, fit.order, ctx.delay_mode, ctx.max_delay, numerator=fit.numerator)
+    problem = OrderProblem.for_fit(ctx.spectral, fit, ctx.delay_mode, ctx.max_delay)
     error = problem._sine_error(problem.pack(fit))
     return error, gain_ratio_of(fit, ctx.scale_y / ctx.scale_u), float(fit.sine_skew)
 

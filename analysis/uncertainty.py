@@ -472,34 +472,37 @@ def _band_variants(ctx: FitContext, refitter: Refitter, orders: list[int], rng: 
                    ) -> BandVariants:
     """The band's parts each draw is refitted on: only the whole band unless the model error is
     detected (the residual then holds structure the model does not follow); a part is used when
-    every order drawn refits stably on it from its nominal fit and its real residuals (two
-    per bin) number at least twice its parameters."""
+    every order drawn can be refitted there (`_refitter_on`). Each draw takes a part at random and
+    a reflection flag at even odds."""
     count = len(orders)
-    whole = BandVariants([math.inf], [refitter], [], np.zeros(count, dtype=int), np.zeros(count, dtype=bool))
-    if ctx.var_model_error is None or not np.any(ctx.var_model_error > 0):
-        return whole
+    omega_max, refitters = [math.inf], [refitter]
     top = float(np.max(ctx.spectral.omega))
-    needed = sorted(set(orders))
-    for fraction in BAND_TOPS[1:]:
+    for fraction in BAND_TOPS[1:] if ctx.model_error_detected else ():
         part = ctx.spectral.below(fraction * top)
-        fits, branches = {}, {}
-        for n in needed:
-            if n not in ctx.fits or part.bins < ctx.fits[n].parameters:  # 2·bins residuals ≥ 2·parameters
-                break
-            starts = [ctx.fits[n], *ctx.branches.get(n, [])]
-            refit = [OrderProblem(part, n, ctx.delay_mode, ctx.max_delay, numerator=f.numerator).solve(f, 200, 1e-9)
-                     for f in starts]
-            if not all(is_stable(f.a) for f in refit):
-                break
-            fits[n], branches[n] = refit[0], refit[1:]
-        else:
-            whole.omega_max.append(fraction * top)
-            whole.refitters.append(Refitter(part, fits, ctx.delay_mode, ctx.max_delay, branches))
-            whole.tops_hz.append(fraction * top / (2.0 * math.pi * ctx.sample_interval_s))
-    if len(whole.refitters) > 1:
-        whole.per_draw = rng.integers(0, len(whole.refitters), count)
-        whole.flip = rng.random(count) < 0.5
-    return whole
+        prepared = _refitter_on(part, ctx, sorted(set(orders)))
+        if prepared is not None:
+            omega_max.append(fraction * top)
+            refitters.append(prepared)
+    if len(refitters) == 1:
+        return BandVariants(omega_max, refitters, [], np.zeros(count, dtype=int), np.zeros(count, dtype=bool))
+    tops_hz = [w / (2.0 * math.pi * ctx.sample_interval_s) for w in omega_max[1:]]
+    return BandVariants(omega_max, refitters, tops_hz, rng.integers(0, len(refitters), count), rng.random(count) < 0.5)
+
+
+def _refitter_on(part: SpectralData, ctx: FitContext, orders: list[int]) -> Refitter | None:
+    """A refitter of `orders` on a part of the band, each order (and each of its delay branches)
+    refitted there from its nominal fit; None when an order is missing, has fewer real residuals
+    (two per bin) than twice its parameters there, or refits unstably."""
+    fits, branches = {}, {}
+    for n in orders:
+        if n not in ctx.fits or part.bins < ctx.fits[n].parameters:
+            return None
+        refit = [OrderProblem.for_fit(part, f, ctx.delay_mode, ctx.max_delay).solve(f, 200, 1e-9)
+                 for f in (ctx.fits[n], *ctx.branches.get(n, []))]
+        if not all(is_stable(f.a) for f in refit):
+            return None
+        fits[n], branches[n] = refit[0], refit[1:]
+    return Refitter(part, fits, ctx.delay_mode, ctx.max_delay, branches)
 
 
 def _refits(draws: NoiseDraws, bands: BandVariants, orders: list[int]
@@ -656,7 +659,7 @@ def _budget(
     fixed = np.array([m == n_hat for m in orders]) & good
     shares["order choice"] = added(good, fixed)
     sources = ["response noise", "reference noise", "channel skew", "order choice"]
-    if ctx.var_model_error is not None and np.any(ctx.var_model_error > 0):
+    if ctx.model_error_detected:
         sources.insert(2, "model error")  # the residual the noise does not explain (identify.ModelError)
     if ctx.spectral.sine is not None:
         sources.insert(2, "sine calibration")
@@ -687,18 +690,18 @@ def _linear_noise_shares(
     n = ident.order
     fit = ctx.fits[n]
     data = ctx.spectral
-    problem = OrderProblem(data, n, ctx.delay_mode, ctx.max_delay, numerator=fit.numerator)
+    problem = OrderProblem.for_fit(data, fit, ctx.delay_mode, ctx.max_delay)
     theta = problem.pack(fit)
     jac = problem.jacobian(theta)
     pieces = problem._pieces(theta)
     s2 = pieces["s2"]  # each residual's variance as the fit weighs it (the conservative look)
     # The variance each source really gives each residual, over the weight: the noise measured
     # without bias (what the draws add), in the fit's layout (per bin or per group of bins).
-    var_u, var_y = _in_layout(ctx.var_u, data, ctx.group), _in_layout(ctx.var_y, data, ctx.group)
+    var_u, var_y = data.in_layout(ctx.var_u), data.in_layout(ctx.var_y)
     rows = 3 if data.grouped else 2
     d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
     var_me = (np.zeros_like(var_y) if ctx.var_model_error is None
-              else _in_layout(ctx.var_model_error, data, ctx.group))
+              else data.in_layout(ctx.var_model_error))
     d_y = np.tile((var_y - var_me) / s2, rows)
     d_me = np.tile(var_me / s2, rows)
     sine_rows = jac.shape[0] - d_u.size  # a sine calibration's residuals (analysis.sine_joint), last
@@ -713,7 +716,7 @@ def _linear_noise_shares(
     # The skew: the residual's change per sample of reference delay, through the same projection.
     eps = 1e-3
     shifted = _shift_data(data, eps)
-    dr = (OrderProblem(shifted, n, ctx.delay_mode, ctx.max_delay, numerator=fit.numerator).residual(theta) - problem.residual(theta)) / eps
+    dr = (OrderProblem.for_fit(shifted, fit, ctx.delay_mode, ctx.max_delay).residual(theta) - problem.residual(theta)) / eps
     skew_step = -(proj @ dr) * (options.channel_skew_s / ctx.sample_interval_s)
     gradients = _figure_gradients(problem, theta, ctx, ident, nominal)
     out: dict[str, dict[str, float]] = {source: {} for source in (*cov, "channel skew")}
@@ -725,14 +728,6 @@ def _linear_noise_shares(
             out[source][figure] = math.sqrt(max(float(g @ c @ g), 0.0)) / abs(ref)
         out["channel skew"][figure] = abs(float(g @ skew_step)) / abs(ref)
     return out
-
-
-def _in_layout(var: np.ndarray, data: SpectralData, group: int) -> np.ndarray:
-    """Per-bin variances averaged over each group of bins, as SpectralData.grouped_from does."""
-    if not data.grouped:
-        return var
-    edges = np.arange(0, var.size, group)
-    return np.add.reduceat(var, edges) / data.count
 
 
 def _shift_data(data: SpectralData, samples: float) -> SpectralData:

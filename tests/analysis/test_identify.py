@@ -15,12 +15,14 @@ import json
 
 import numpy as np
 import pytest
-from hopkinson.analysis.claims import excitation_warnings
+from hopkinson.analysis.claims import claimed_modes, claims_warnings
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.excitation import supported_band_hz
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.modes import modes_of
+from hopkinson.analysis.order_search import FREE
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import shift_samples
 from hopkinson.analysis.response import band_edges, fbsd_hz, frequency_response
@@ -283,13 +285,22 @@ def test_mode_beyond_the_excitation_band_gives_the_lower_order() -> None:
 
 def test_a_mode_where_the_reference_has_no_energy_is_flagged() -> None:
     # A 300 kHz resonance excited only by the 40 dB reference noise floor: even if the fit
-    # places a pole pair there, the record cannot support it and the result says so.
+    # places a pole pair there, the record cannot support it and the result says so (the
+    # claims identify() makes of its model, in the band the reference supports).
     u = half_sine(width_s=38.6e-6)
-    modes = modes_of(np.exp(np.array([-0.03 + 1j, -0.03 - 1j]) * 2 * np.pi * 300e3 * T), T)
-    warnings = excitation_warnings(u, T, modes)  # the check identify() applies to its modes
-    assert len(warnings) == 1 and "mode at 300" in warnings[0] and "cannot determine" in warnings[0]
-    in_band = modes_of(np.exp(np.array([-0.05 + 1j, -0.05 - 1j]) * 2 * np.pi * 27e3 * T), T)
-    assert excitation_warnings(u, T, in_band) == []
+    band = supported_band_hz(u, T)
+
+    def claims(f_hz: float, zeta: float) -> tuple[list[dict], list[str]]:
+        s = 2 * np.pi * f_hz * (-zeta + 1j * np.sqrt(1 - zeta**2))
+        a = np.real(np.poly(np.exp(np.array([s, np.conj(s)]) * T)))
+        modes = claimed_modes(DiscreteModel(T, a, np.array([np.sum(a)]), 0.0), band, FREE)
+        return modes, claims_warnings(modes, band)
+
+    modes, warnings = claims(300e3, 0.03)
+    assert not modes[0]["supported"]
+    assert any("mode at 300" in w and "cannot determine" in w for w in warnings)
+    modes, warnings = claims(27e3, 0.05)
+    assert modes[0]["supported"] and warnings == []
 
 
 # --- results and errors -----------------------------------------------------------------------
