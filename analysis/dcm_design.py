@@ -385,7 +385,7 @@ def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio:
     design.update(choice.to_dict())
     design["band_limit"] = {"cutoff_hz": limit.cutoff_hz, "order": BAND_LIMIT_ORDER if lp.size else 0,
                             "poles": complex_pairs(lp), "reason": limit.reason}
-    design["nonminimum_phase_zeros"] = complex_pairs(model.zeros[np.abs(model.zeros) >= 1.0])
+    design["nonminimum_phase_zeros"] = complex_pairs(model.nonminimum_phase_zeros)
     design["zeros_inverted"] = False
     return DCM(dt, zeros, poles, gain, design)
 

@@ -223,9 +223,8 @@ class Identification:
 
     @property
     def nonminimum_phase_zeros(self) -> np.ndarray:
-        """Zeros on or outside the unit circle (a DCM must never invert them)."""
-        z = self.model.zeros
-        return z[np.abs(z) >= 1.0]
+        """The model's (DiscreteModel.nonminimum_phase_zeros)."""
+        return self.model.nonminimum_phase_zeros
 
     def supported_poles(self) -> np.ndarray:
         """The poles of the supported modes (both poles of a pair): what a DCM may cancel."""

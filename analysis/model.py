@@ -7,6 +7,7 @@ transfer function is H(z) = B(z⁻¹)/A(z⁻¹) and `scipy.signal.lfilter(b, a, 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -57,8 +58,23 @@ class DiscreteModel:
 
     @property
     def zeros(self) -> np.ndarray:
+        """Roots of B; exactly −1 (n times) when B ∝ (1 + d⁻¹)ⁿ, the all-pole structure's
+        numerator (np.roots scatters a multiple root: ~1e-4 off the circle at n = 4)."""
         b = np.trim_zeros(self.b, "b")
-        return np.roots(b) if b.size > 1 else np.array([], dtype=complex)
+        if b.size <= 1:
+            return np.array([], dtype=complex)
+        n = b.size - 1
+        binomial = np.array([math.comb(n, i) for i in range(n + 1)], dtype=float)
+        if np.allclose(b / np.sum(b), binomial / np.sum(binomial), rtol=1e-9, atol=1e-12):
+            return np.full(n, -1.0 + 0.0j)
+        return np.roots(b)
+
+    @property
+    def nonminimum_phase_zeros(self) -> np.ndarray:
+        """Zeros on or outside the unit circle (a DCM must never invert them), less those at
+        z = −1: the all-pole structure's, at Nyquist, beyond every band."""
+        z = self.zeros
+        return z[(np.abs(z) >= 1.0) & (z != -1.0)]
 
     @property
     def dc_gain(self) -> float:

@@ -21,6 +21,21 @@ def test_poles_zeros_gain_of_known_polynomials():
     assert m.order == 4 and m.is_stable
 
 
+@pytest.mark.parametrize("order", [2, 4, 6])
+def test_the_all_pole_numerators_zeros_sit_at_nyquist_and_are_not_non_minimum_phase(order):
+    """B ∝ (1 + d⁻¹)ⁿ has an n-fold zero at z = −1 exactly (np.roots scatters it up to 3e-3 off the
+    circle at n = 6, which used to be listed as zeros outside the unit circle); a real zero
+    outside the circle beside it is still listed."""
+    from math import comb
+
+    a = np.real(np.poly([0.9 + 0.3j, 0.9 - 0.3j]))
+    m = DiscreteModel(1e-6, a, 0.02 * np.array([comb(order, i) for i in range(order + 1)]))
+    assert np.all(m.zeros == -1.0) and m.zeros.size == order
+    assert m.nonminimum_phase_zeros.size == 0
+    other = DiscreteModel(1e-6, a, 0.02 * np.real(np.poly([-0.5, 1.5])))
+    np.testing.assert_allclose(other.nonminimum_phase_zeros, [1.5], atol=1e-9)
+
+
 def test_a0_is_normalised():
     m = DiscreteModel(1e-6, [2.0, -1.0], [1.0])
     assert m.a[0] == 1.0 and m.b[0] == 0.5
