@@ -35,7 +35,9 @@ pulse width and peak velocity. Input quantities and the PDFs assigned to them (G
 
 Each draw refits the model by the same estimator (analysis.frequency_fit, Levenberg–Marquardt
 started from the nominal fit, which it is close to) — a full non-linear re-estimation, not a
-linearisation. That includes the delay search: the delay and B's zeros share a flat valley of
+linearisation; except where an all-pole fit's damping beyond the band is pressed under its
+floor (PTB's record), where a draw stops after QuickRefit.fallback_evaluations short of its
+optimum (a known limit, see there). That includes the delay search: the delay and B's zeros share a flat valley of
 the cost, which on some records holds separate optima a few samples apart with costs within
 chance (issue 10's rehearsed piezo record: τ ≈ 0.4 or ≈ 3.1 samples, the FBSD −0.6 % or
 +0.2 … +0.7 % with them); identify keeps the lowest and lists the others
