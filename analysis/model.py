@@ -65,7 +65,8 @@ class DiscreteModel:
             return np.array([], dtype=complex)
         n = b.size - 1
         binomial = np.array([math.comb(n, i) for i in range(n + 1)], dtype=float)
-        if np.allclose(b / np.sum(b), binomial / np.sum(binomial), rtol=1e-9, atol=1e-12):
+        total = float(np.sum(b))
+        if total != 0.0 and np.allclose(b / total, binomial / np.sum(binomial), rtol=1e-9, atol=1e-12):
             return np.full(n, -1.0 + 0.0j)
         return np.roots(b)
 
