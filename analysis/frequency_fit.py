@@ -36,6 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
+from hopkinson.analysis.model import all_pole_numerator
 from hopkinson.analysis.numerics import levenberg_marquardt
 
 # A pole this close to the unit circle is on the stability boundary (treated as unstable).
@@ -209,13 +210,6 @@ class OrderFit:
                            transient=np.append(self.transient, 0.0) if self.transient.size else self.transient)
         return replace(self, a=np.append(self.a, 0.0), b=np.append(self.b, 0.0),
                        transient=np.append(self.transient, 0.0) if self.transient.size else self.transient)
-
-
-def all_pole_numerator(order: int) -> np.ndarray:
-    """B's shape for an all-pole model of `order`: (1 + z⁻¹)ⁿ/2ⁿ (unit gain at DC), the bilinear
-    image of a continuous system with no finite zeros (a mass–spring sensor whose resonance
-    lies beyond the band, a low-pass): zeros at Nyquist only, so no zero can follow a ripple."""
-    return np.array([math.comb(order, i) for i in range(order + 1)], dtype=float) / 2.0**order
 
 
 # The least damping the all-pole structure gives a resonance beyond the band (`damping_floored`):

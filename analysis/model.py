@@ -30,6 +30,13 @@ def from_pairs(pairs: Any, what: str) -> np.ndarray:
     return arr[:, 0] + 1j * arr[:, 1]
 
 
+def all_pole_numerator(order: int) -> np.ndarray:
+    """B's shape for an all-pole model of `order`: (1 + z⁻¹)ⁿ/2ⁿ (unit gain at DC), the bilinear
+    image of a continuous system with no finite zeros (a mass–spring sensor whose resonance
+    lies beyond the band, a low-pass): zeros at Nyquist only, so no zero can follow a ripple."""
+    return np.array([math.comb(order, i) for i in range(order + 1)], dtype=float) / 2.0**order
+
+
 @dataclass(frozen=True)
 class DiscreteModel:
     """A discrete transfer function with its sample interval and input delay."""
@@ -64,9 +71,8 @@ class DiscreteModel:
         if b.size <= 1:
             return np.array([], dtype=complex)
         n = b.size - 1
-        binomial = np.array([math.comb(n, i) for i in range(n + 1)], dtype=float)
         total = float(np.sum(b))
-        if total != 0.0 and np.allclose(b / total, binomial / np.sum(binomial), rtol=1e-9, atol=1e-12):
+        if total != 0.0 and np.allclose(b / total, all_pole_numerator(n), rtol=1e-9, atol=1e-12):
             return np.full(n, -1.0 + 0.0j)
         return np.roots(b)
 
