@@ -401,6 +401,7 @@ class BarConfig:
     sensor_mass_kg: float = 0.005
     barrel_length_m: float = 1.5
     launcher_efficiency: float = 0.52
+    mount: str = "separating"  # the object on the bar's end: "separating" (flies off) | "bonded" (stays on)
     projectiles: tuple[BarProjectileConfig, ...] = ()
 
     def rig(self) -> Any:
@@ -415,7 +416,7 @@ class BarConfig:
         spacer = Segment(self.spacer_material, self.spacer_length_m, self.diameter_m) if self.spacer_length_m else None
         return BarRig(Segment(self.material, self.length_m, self.diameter_m), spacer,
                       Segment(self.material, self.base_length_m, self.diameter_m), self.sensor_mass_kg, projectiles,
-                      Launcher(self.barrel_length_m, self.launcher_efficiency))
+                      Launcher(self.barrel_length_m, self.launcher_efficiency), self.mount)
 
 
 @dataclass(frozen=True)
@@ -522,6 +523,7 @@ RULES: dict[str, _Rule] = {
     "bar.*diameter_m": _Rule(above=0.0, max=1.0),
     "bar.projectiles.segments.*": _Rule(above=0.0, max=20.0),
     "bar.sensor_mass_kg": _Rule(0.0, 10.0),
+    "bar.mount": _Rule(choices=("separating", "bonded")),
     "bar.launcher_efficiency": _Rule(above=0.0, max=1.0),
     "bar.projectiles.number": _Rule(1, 99),
     "bar.projectiles.contact_stiffness_n_m": _Rule(0.0, 1e12, text="0: flat and rigid"),
@@ -594,6 +596,7 @@ RULES: dict[str, _Rule] = {
     "world.accelerometer_2.lowpass_order": _Rule(1, 8),
     "world.accelerometer_2.*": _POSITIVE,
     "world.realism.pulse_source": _Rule(choices=("ideal", "bar")),
+    "world.realism.bar_mount": _Rule(choices=("bonded", "separating")),
     "world.realism.speed_scatter_rel": _Rule(0.0, 0.2),
     "world.realism.bar_ringing.amplitude_rel": _Rule(0.0, 0.5),
     "world.realism.bar_ringing.frequencies_hz": _Rule(above=0.0, max=1e6),

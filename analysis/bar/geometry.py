@@ -115,9 +115,17 @@ def _paper_projectiles() -> tuple[Projectile, ...]:
     )
 
 
+# How the calibrated object sits on the bar's end: "separating" (the paper's raster base, held
+# by compression only, which flies off when the reflected wave would pull: a unipolar pulse,
+# Eqs. 27–30) or "bonded" (screwed or glued to the end face, as PTB's shock calibration mounts
+# its sensor: it follows the bar through the whole wave, a bipolar pulse with deep spectral nulls).
+MOUNTS = ("separating", "bonded")
+
+
 @dataclass(frozen=True)
 class BarRig:
-    """The whole rig: bar, spacer, raster base with the sensor, projectiles and launcher."""
+    """The whole rig: bar, spacer, raster base with the sensor, projectiles, launcher, and how the
+    object is mounted on the bar's end (MOUNTS)."""
 
     bar: Segment = field(default_factory=lambda: Segment("Ti-6Al-4V", 1.6, 0.016))
     spacer: Segment | None = field(default_factory=lambda: Segment("Al-7075", 0.003, 0.016))
@@ -125,8 +133,11 @@ class BarRig:
     sensor_mass_kg: float = 0.005  # the accelerometer on the base's far face
     projectiles: tuple[Projectile, ...] = field(default_factory=_paper_projectiles)
     launcher: Launcher = field(default_factory=Launcher)
+    mount: str = "separating"
 
     def __post_init__(self) -> None:
+        if self.mount not in MOUNTS:
+            raise ValueError(f"the mount must be one of {', '.join(MOUNTS)}, got {self.mount!r}")
         if self.sensor_mass_kg < 0:
             raise ValueError(f"the sensor's mass must not be negative, got {self.sensor_mass_kg}")
         if not self.projectiles:

@@ -206,7 +206,9 @@ def impact_force(projectile: list[Segment], spacer: Segment | None, bar: Segment
 
 @dataclass(frozen=True)
 class ObjectMotion:
-    """The calibrated object's motion: its acceleration (contact force ÷ its mass) and velocity."""
+    """The calibrated object's motion: its acceleration and velocity, and the force that moves it
+    (separating: the contact's, over the object's whole mass; bonded: the base face's on the
+    sensor)."""
 
     acceleration_m_s2: np.ndarray
     velocity_m_s: np.ndarray
@@ -216,11 +218,15 @@ class ObjectMotion:
 
 
 def object_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sensor_mass_kg: float,
-                  sample_interval_s: float) -> ObjectMotion:
+                  sample_interval_s: float, bonded: bool = False) -> ObjectMotion:
     """The raster base (with the sensor's mass on its far face) on the bar's end, struck by the
-    incident force wave: the contact carries compression only, so the object flies off once
-    the reflected wave would pull on it (the paper's Eqs. 27–30). Its acceleration is the
-    contact force over its whole mass (the base's own ringing is not in it)."""
+    incident force wave. Separating (`bonded` False, the paper's rig): the contact carries
+    compression only, so the object flies off once the reflected wave would pull on it (the
+    paper's Eqs. 27–30); its acceleration is the contact force over its whole mass (the base's
+    own ringing is not in it). Bonded (`bonded_motion`): the base is screwed or glued to the
+    end face and follows the bar through the whole wave."""
+    if bonded:
+        return bonded_motion(incident_force_n, bar, base, sensor_mass_kg, sample_interval_s)
     dt, m = step_for([base], sample_interval_s)
     z = np.concatenate([cells_of([_one_cell(bar, dt)], dt), cells_of([base], dt)])
     lattice = Lattice(z, dt, contact=0)
@@ -245,3 +251,46 @@ def object_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sen
     velocity = np.cumsum(accel) * sample_interval_s
     return ObjectMotion(accel, velocity, force_out, sample_interval_s,
                         separated_at * dt if separated_at is not None else None)
+
+
+# The bonded end's impulse response is followed until it has fallen below this fraction of its
+# largest value (the sensor's mass on the base rings out into the bar within microseconds).
+IMPULSE_TAIL = 1e-12
+
+
+def bonded_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sensor_mass_kg: float,
+                  sample_interval_s: float) -> ObjectMotion:
+    """The sensor's mounting face (the base's far face, the sensor's mass on it) when the base is
+    bonded to the bar's end: the joint carries tension too, nothing separates, and the face
+    moves with the bar through the whole wave: forward while the compression arrives, back to
+    rest as the wave reflects (a light end doubles the particle velocity, v ≈ 2F/Z), so its
+    acceleration is bipolar with no net velocity change, the shape of PTB's record (its sensor
+    stays on the bar). The acceleration is the face's (what a sensor mounted there and an
+    interferometer spot beside it see), not the base's mean.
+
+    With no contact to open the lattice is linear and time-invariant, so the face's velocity is
+    the incident wave convolved with the lattice's own impulse response (followed until it has
+    rung out, IMPULSE_TAIL): the same numbers as stepping the whole record, in a fraction of
+    the time."""
+    dt, m = step_for([base], sample_interval_s)
+    z = np.concatenate([cells_of([_one_cell(bar, dt)], dt), cells_of([base], dt)])
+    lattice = Lattice(z, dt)
+    incoming = np.repeat(np.asarray(incident_force_n, dtype=float), m)
+    response: list[float] = []
+    largest = 0.0
+    for n in range(incoming.size):
+        lattice.step(left_in=1.0 if n == 0 else 0.0, right_mass_kg=sensor_mass_kg)
+        v = lattice.end_velocity
+        response.append(v)
+        largest = max(largest, abs(v))
+        if n > 2 * z.size and largest > 0 and np.all(np.abs(lattice.f) + np.abs(lattice.g) <= IMPULSE_TAIL * largest
+                                                     * z.max()) and abs(v) <= IMPULSE_TAIL * largest:
+            break
+    h = np.asarray(response)
+    size = int(2 ** math.ceil(math.log2(incoming.size + h.size)))
+    fine_v = np.fft.irfft(np.fft.rfft(incoming, size) * np.fft.rfft(h, size), size)[: incoming.size]
+    usable = fine_v.size // m * m
+    velocity = np.concatenate(([0.0], fine_v[m - 1: usable: m]))  # at the end of each sample's steps
+    accel = np.diff(velocity) / sample_interval_s
+    face_force = accel * sensor_mass_kg
+    return ObjectMotion(accel, velocity[1:], face_force, sample_interval_s, None)

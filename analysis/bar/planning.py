@@ -3,7 +3,8 @@ the pulse will excite the sensor (bar model: analysis.bar.predict).
 
 For each projectile the prediction at 1 m/s is scaled (the peak is linear in the speed), the
 launcher gives the pressure for the needed speed, and the pulse's spectrum gives its bands:
-  - the −3 dB frequency: where |A(f)/A(0)| of the acceleration pulse first falls below 1/√2;
+  - the −3 dB frequency: where |A(f)| of the acceleration pulse, above its maximum, first falls
+    below 1/√2 of it (the maximum is at DC for a separating mount's unipolar pulse);
   - the supported band: up to where it first falls below −40 dB (the identification fits
     where the excitation stands within 40 dB of its maximum: analysis.identify);
   - the paper's rule δ ≤ 1.06/f_n (Eq. 36; PAPER-NOTES: it does not follow from its Eqs.
@@ -34,7 +35,7 @@ class ProjectileOption:
     pressure_bar: float
     speed_m_s: float
     peak_m_s2: float
-    width_s: float  # equivalent half-sine width δ = π·Δv/(2·peak)
+    width_s: float  # equivalent half-sine width δ = π·Δv/(2·peak) (Δv of the positive lobe)
     width_10_s: float
     minus_3db_hz: float
     supported_band_hz: float
@@ -61,16 +62,20 @@ class ShotPlan:
 
 
 def spectrum_bands_hz(prediction: ShotPrediction) -> tuple[float, float]:
-    """(−3 dB frequency, supported band's top) of the acceleration pulse's amplitude spectrum."""
+    """(−3 dB frequency, supported band's top) of the acceleration pulse's amplitude spectrum,
+    both relative to its maximum and above it: at DC for a pulse that never turns negative (a
+    separating mount), at a few kHz for a bonded mount's bipolar pulse (no net velocity change,
+    so nothing at DC)."""
     a = prediction.acceleration_m_s2
     size = 1 << int(np.ceil(np.log2(8 * a.size)))
     spectrum = np.abs(np.fft.rfft(a, size))
     f = np.fft.rfftfreq(size, prediction.sample_interval_s)
-    rel = spectrum / spectrum[0]
+    top = int(np.argmax(spectrum))
+    rel = spectrum[top:] / spectrum[top]
     below_3 = np.flatnonzero(rel < 1 / math.sqrt(2))
     below_40 = np.flatnonzero(rel < 10 ** (SUPPORT_DB / 20))
-    return (float(f[below_3[0]]) if below_3.size else float(f[-1]),
-            float(f[below_40[0]]) if below_40.size else float(f[-1]))
+    return (float(f[top + below_3[0]]) if below_3.size else float(f[-1]),
+            float(f[top + below_40[0]]) if below_40.size else float(f[-1]))
 
 
 def _peak_g_at(rig: BarRig, projectile: Projectile, unit: ShotPrediction, pressure_bar: float) -> str:

@@ -1,7 +1,8 @@
 """A shot predicted from the rig's physics: projectile speed from the reservoir pressure
 (geometry.Launcher), the force wave of the impact (lattice.impact_force), its dispersion along
 the bar (dispersion.disperse), and the calibrated object's acceleration and flight
-(lattice.object_motion). Everything is linear in the projectile's speed (the contacts only
+(lattice.object_motion: flying off a separating mount, or following the bar's end on a bonded
+one). Everything is linear in the projectile's speed (the contacts only
 open and close on the sign of a force), so one prediction per projectile at 1 m/s serves every
 pressure.
 """
@@ -46,14 +47,20 @@ class ShotPrediction:
 
     @property
     def delta_v_m_s(self) -> float:
-        """The object's speed when it left the bar."""
+        """The object's speed when it left the bar (a bonded object's at the record's end: ~0)."""
         return float(self.velocity_m_s[-1])
 
     @property
+    def peak_velocity_m_s(self) -> float:
+        """The largest speed the object reaches: the velocity change of the pulse's positive lobe
+        (on a separating mount its speed when it left)."""
+        return float(np.max(self.velocity_m_s))
+
+    @property
     def equivalent_width_s(self) -> float:
-        """δ of the half-sine with the same peak and velocity change: π·Δv/(2·peak) (the paper's
-        pulse width δ for a half-sine)."""
-        return math.pi * self.delta_v_m_s / (2.0 * self.peak_m_s2) if self.peak_m_s2 > 0 else math.nan
+        """δ of the half-sine with the same peak and velocity change over its positive lobe:
+        π·Δv/(2·peak) (the paper's pulse width δ for a half-sine)."""
+        return math.pi * self.peak_velocity_m_s / (2.0 * self.peak_m_s2) if self.peak_m_s2 > 0 else math.nan
 
     @property
     def width_10_s(self) -> float:
@@ -91,7 +98,7 @@ def _unit_shot(rig: BarRig, number: int, dt: float, duration_s: float, dispersio
     wave[lead: min(n, lead + impact.force_n.size)] = impact.force_n[: n - lead]
     if dispersion:
         wave = disperse(wave, dt, rig.bar.length_m, rig.bar.diameter_m / 2.0, rig.bar.props)
-    motion = object_motion(wave, rig.bar, rig.base, rig.sensor_mass_kg, dt)
+    motion = object_motion(wave, rig.bar, rig.base, rig.sensor_mass_kg, dt, bonded=rig.mount == "bonded")
     accel = np.zeros(n)
     accel[: motion.acceleration_m_s2.size] = motion.acceleration_m_s2[:n]
     velocity = np.cumsum(accel) * dt

@@ -1,11 +1,13 @@
 """The simulated rig's pulses from the bar model (hopkinson.analysis.bar): each shot's object
 acceleration is what the rig's physics predicts for the projectile and reservoir pressure
 (launcher, impact, dispersion, separation), times the shot's scatter of the projectile's speed.
-Selected by `[world.realism] pulse_source = "bar"` (drivers/sim/world.py)."""
+Selected by `[world.realism] pulse_source = "bar"` (drivers/sim/world.py); `bar_mount` there says
+how the object sits on the bar's end: "bonded" (it follows the bar: a bipolar pulse, as in PTB's
+record) or "separating" (the paper's raster base, which flies off: a unipolar pulse)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from hopkinson.analysis.bar import PAPER_RIG, BarRig, predict_shot
@@ -19,6 +21,11 @@ class BarPulseSource:
 
     rig: BarRig = field(default_factory=lambda: PAPER_RIG)
     name: str = "bar"
+
+    @classmethod
+    def mounted(cls, mount: str) -> BarPulseSource:
+        """The paper's rig with the object mounted `mount` (analysis.bar.geometry.MOUNTS)."""
+        return cls(replace(PAPER_RIG, mount=mount))
 
     def pulse(self, projectile: int, pressure_bar: float, speed_factor: float = 1.0) -> PulseShape:
         speed = self.rig.launcher.speed_m_s(self.rig.projectile(projectile), pressure_bar) * speed_factor

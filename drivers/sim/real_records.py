@@ -43,6 +43,7 @@ from hopkinson.drivers.sim.shock import bipolar_m_s2, bipolar_velocity_m_s, velo
 from scipy import signal
 
 PULSE_SOURCES = ("ideal", "bar")
+BAR_MOUNTS = ("bonded", "separating")  # analysis.bar.geometry.MOUNTS
 
 
 @dataclass(frozen=True)
@@ -103,6 +104,7 @@ class RealismParams:
 
     enabled: bool = False
     pulse_source: str = "ideal"  # "ideal" (closed form) | "bar" (the bar model of hopkinson.analysis)
+    bar_mount: str = "bonded"  # with "bar": how the object sits on the bar's end (analysis.bar.geometry.MOUNTS)
     speed_scatter_rel: float = 0.01  # shot-to-shot scatter of the projectile's speed (1σ)
     bar_ringing: BarRingingParams = field(default_factory=BarRingingParams)
     mount: MountParams = field(default_factory=MountParams)
@@ -112,6 +114,8 @@ class RealismParams:
     def __post_init__(self) -> None:
         if self.pulse_source not in PULSE_SOURCES:
             raise ValueError(f"pulse_source must be one of {', '.join(PULSE_SOURCES)}, got {self.pulse_source!r}")
+        if self.bar_mount not in BAR_MOUNTS:
+            raise ValueError(f"bar_mount must be one of {', '.join(BAR_MOUNTS)}, got {self.bar_mount!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

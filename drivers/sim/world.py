@@ -224,7 +224,7 @@ class WorldParams:
         if self.realism.enabled and self.realism.pulse_source == "bar":
             from hopkinson.drivers.sim.bar_source import BarPulseSource
 
-            return BarPulseSource()
+            return BarPulseSource.mounted(self.realism.bar_mount)
         return IdealPulseSource(self.launcher.speed_m_s_per_sqrt_bar, self.launcher.velocity_transfer,
                                 tuple(self.launcher.pulse_width_s), self.signals.pulse_bipolar_ratio)
 
