@@ -129,7 +129,7 @@ class PulseShape:
     speed_m_s: float  # the projectile's speed at impact
     delta_v_m_s: float  # the object's velocity change over the pulse
     peak_m_s2: float
-    width_s: float  # the pulse's duration (zero to zero)
+    width_s: float  # the pulse's duration (zero to zero; a tabulated pulse's: above 10 % of its peak)
     acceleration: Callable[[np.ndarray], np.ndarray]  # t (s from the pulse's start) -> m/s²
     velocity: Callable[[np.ndarray], np.ndarray]  # its exact integral from rest (m/s)
     shape: str = "half_sine"
@@ -173,14 +173,20 @@ class IdealPulseSource:
                           "bipolar" if ratio else "half_sine", ratio)
 
 
+TABULATED_WIDTH_REL = 0.1
+
+
 def tabulated_pulse(time_s: np.ndarray, acceleration_m_s2: np.ndarray, speed_m_s: float,
                     shape: str = "bar_model") -> PulseShape:
-    """A PulseShape from a sampled acceleration (t from the pulse's start; zero outside)."""
+    """A PulseShape from a sampled acceleration (t from the pulse's start; zero outside). Its
+    duration runs from the first to the last sample above TABULATED_WIDTH_REL of the peak: both
+    lobes of a bipolar pulse, not the bar's dispersion ripple trailing it (which is motion after
+    the pulse, like the ringing added there)."""
     t = np.asarray(time_s, dtype=float)
     a = np.asarray(acceleration_m_s2, dtype=float)
     v = velocity_m_s(a, float(t[1] - t[0]))
     peak_index = int(np.argmax(np.abs(a)))
-    above = np.flatnonzero(np.abs(a) > 0.01 * abs(a[peak_index]))
+    above = np.flatnonzero(np.abs(a) > TABULATED_WIDTH_REL * abs(a[peak_index]))
     width = float(t[above[-1]] - t[above[0]]) if above.size else 0.0
     return PulseShape(speed_m_s, float(v[-1]), float(a[peak_index]), width,
                       lambda x: np.interp(x, t, a, left=0.0, right=0.0),

@@ -83,6 +83,28 @@ def test_a_wrong_bar_key_names_the_file_and_key(capsys, tmp_path: Path) -> None:
     assert code == 2 and f"{config}: bar.material: must be one of" in err
 
 
+def test_a_bonded_mount_plans_its_bipolar_pulse_and_a_wrong_mount_is_named(capsys, tmp_path: Path) -> None:
+    """`[bar] mount = "bonded"` plans with the pulse that stays on the bar: the chosen pressure,
+    fired through the bonded model again, gives the target; its bands are read above the
+    spectrum's maximum (a bipolar pulse has nothing at DC). A mount the model does not know is
+    one line naming the file and key."""
+    config = tmp_path / "rig.toml"
+    config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + "\n[bar]\nmount = \"bonded\"\n")
+    code, out, err = plan(capsys, "--peak-g", "50000", "--json", config=config)
+    assert code == 0, err
+    result = json.loads(out)
+    rig = load_rig_config(config).bar.rig()
+    assert rig.mount == "bonded"
+    for option in result["projectiles"]:
+        shot = predict_shot(rig, option["projectile"], pressure_bar=option["pressure_bar"])
+        assert shot.peak_m_s2 == pytest.approx(50000 * G, rel=1e-6)
+        assert abs(shot.delta_v_m_s) < 1e-3 * shot.peak_velocity_m_s  # it stays on the bar
+        assert 0 < option["minus_3db_hz"] < option["supported_band_hz"]
+    config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + "\n[bar]\nmount = \"glued\"\n")
+    code, _out, err = plan(capsys, "--peak-g", "5000", config=config)
+    assert code == 2 and f"{config}: bar.mount: must be one of" in err and err.count("\n") == 1
+
+
 def test_the_readmes_bar_table_is_a_valid_rig_configuration(capsys, tmp_path: Path) -> None:
     """The README's `[bar]` example, appended to the simulated rig's file, loads and plans: its one
     projectile (the paper's No. 3 written out) gives No. 3's pressure for 50 000 g."""
