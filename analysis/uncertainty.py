@@ -600,14 +600,15 @@ def _peak_figures(
     ny = noise_y.draw(seg_y.stop - seg_y.start, rng, count, uncertain_level=True) * scale_n
     u0, y0 = ref[seg_u], resp[seg_y]
     pu0, py0 = peak_estimate(u0)[0], peak_estimate(y0)[0]
-    peak_u = np.array([peak_estimate(u0 + nu[r])[0] for r in range(count)])
     peak_y = np.array([peak_estimate(y0 + ny[r])[0] for r in range(count)])
-    widths = np.full(count, np.nan)
+    peak_u, widths = np.empty(count), np.full(count, np.nan)
     for r in range(count):
-        try:
-            widths[r] = pulse_width(u0 + nu[r], dt).width_s
+        u = u0 + nu[r]
+        try:  # the width's own peak is the reference's peak (the same estimator on the same draw)
+            drawn = pulse_width(u, dt)
+            peak_u[r], widths[r] = drawn.peak_m_s2, drawn.width_s
         except AnalysisError:
-            pass
+            peak_u[r] = peak_estimate(u)[0]
     reduction = reduction or {}
     ss_value = reduction.get("shock_sensitivity", py0 / pu0)
     ss = peak_y / peak_u * gain_factor
