@@ -365,6 +365,7 @@ class DatabaseConfig:
 # import the bar model (NumPy and SciPy: half a second for every command); a test holds the two
 # equal.
 BAR_MATERIALS = ("C45", "Ti-6Al-4V", "PA6", "Al-7075")
+BAR_MOUNTS = ("separating", "bonded")  # analysis.bar.geometry.MOUNTS, the same way
 
 
 @dataclass(frozen=True)
@@ -523,7 +524,7 @@ RULES: dict[str, _Rule] = {
     "bar.*diameter_m": _Rule(above=0.0, max=1.0),
     "bar.projectiles.segments.*": _Rule(above=0.0, max=20.0),
     "bar.sensor_mass_kg": _Rule(0.0, 10.0),
-    "bar.mount": _Rule(choices=("separating", "bonded")),
+    "bar.mount": _Rule(choices=BAR_MOUNTS),
     "bar.launcher_efficiency": _Rule(above=0.0, max=1.0),
     "bar.projectiles.number": _Rule(1, 99),
     "bar.projectiles.contact_stiffness_n_m": _Rule(0.0, 1e12, text="0: flat and rigid"),
@@ -596,7 +597,7 @@ RULES: dict[str, _Rule] = {
     "world.accelerometer_2.lowpass_order": _Rule(1, 8),
     "world.accelerometer_2.*": _POSITIVE,
     "world.realism.pulse_source": _Rule(choices=("ideal", "bar")),
-    "world.realism.bar_mount": _Rule(choices=("bonded", "separating")),
+    "world.realism.bar_mount": _Rule(choices=BAR_MOUNTS),
     "world.realism.speed_scatter_rel": _Rule(0.0, 0.2),
     "world.realism.bar_ringing.amplitude_rel": _Rule(0.0, 0.5),
     "world.realism.bar_ringing.frequencies_hz": _Rule(above=0.0, max=1e6),

@@ -141,7 +141,7 @@ def test_no_module_uses_a_path_relative_to_the_source_tree_for_config(folder: st
 
 def test_reading_a_configuration_or_a_campaign_does_not_load_the_bar_model() -> None:
     """The bar model (NumPy + SciPy) is imported where a level or a plan is computed, not by
-    every command that reads rig.toml or a campaign; the configuration's material names are
+    every command that reads rig.toml or a campaign; the configuration's material and mount names are
     the bar model's own."""
     import subprocess
     import sys
@@ -151,6 +151,8 @@ def test_reading_a_configuration_or_a_campaign_does_not_load_the_bar_model() -> 
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
     assert loaded == "[]"
     from hopkinson.analysis.bar import MATERIALS
-    from hopkinson.rig.config import BAR_MATERIALS
+    from hopkinson.analysis.bar.geometry import MOUNTS
+    from hopkinson.rig.config import BAR_MATERIALS, BAR_MOUNTS
 
     assert set(BAR_MATERIALS) == set(MATERIALS)
+    assert BAR_MOUNTS == MOUNTS

@@ -227,8 +227,7 @@ def object_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sen
     end face and follows the bar through the whole wave."""
     if bonded:
         return bonded_motion(incident_force_n, bar, base, sensor_mass_kg, sample_interval_s)
-    dt, m = step_for([base], sample_interval_s)
-    z = np.concatenate([cells_of([_one_cell(bar, dt)], dt), cells_of([base], dt)])
+    dt, m, z = _end_cells(bar, base, sample_interval_s)
     lattice = Lattice(z, dt, contact=0)
     mass = base.mass_kg + sensor_mass_kg
     incoming = np.repeat(np.asarray(incident_force_n, dtype=float), m)
@@ -253,6 +252,13 @@ def object_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sen
                         separated_at * dt if separated_at is not None else None)
 
 
+def _end_cells(bar: Segment, base: Segment, sample_interval_s: float) -> tuple[float, int, np.ndarray]:
+    """The bar's end and the base as lattice cells: (step, steps per sample, impedances), the bar
+    one cell standing for a semi-infinite rod."""
+    dt, m = step_for([base], sample_interval_s)
+    return dt, m, np.concatenate([cells_of([_one_cell(bar, dt)], dt), cells_of([base], dt)])
+
+
 # The bonded end's impulse response is followed until it has fallen below this fraction of its
 # largest value (the sensor's mass on the base rings out into the bar within microseconds).
 IMPULSE_TAIL = 1e-12
@@ -272,8 +278,7 @@ def bonded_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sen
     the incident wave convolved with the lattice's own impulse response (followed until it has
     rung out, IMPULSE_TAIL): the same numbers as stepping the whole record, in a fraction of
     the time."""
-    dt, m = step_for([base], sample_interval_s)
-    z = np.concatenate([cells_of([_one_cell(bar, dt)], dt), cells_of([base], dt)])
+    dt, m, z = _end_cells(bar, base, sample_interval_s)
     lattice = Lattice(z, dt)
     incoming = np.repeat(np.asarray(incident_force_n, dtype=float), m)
     response: list[float] = []

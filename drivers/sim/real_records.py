@@ -37,13 +37,13 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+from hopkinson.analysis.bar.geometry import MOUNTS
 from hopkinson.drivers.sim.accelerometer import fractional_delay
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.shock import bipolar_m_s2, bipolar_velocity_m_s, velocity_m_s
 from scipy import signal
 
 PULSE_SOURCES = ("ideal", "bar")
-BAR_MOUNTS = ("bonded", "separating")  # analysis.bar.geometry.MOUNTS
 
 
 @dataclass(frozen=True)
@@ -114,8 +114,8 @@ class RealismParams:
     def __post_init__(self) -> None:
         if self.pulse_source not in PULSE_SOURCES:
             raise ValueError(f"pulse_source must be one of {', '.join(PULSE_SOURCES)}, got {self.pulse_source!r}")
-        if self.bar_mount not in BAR_MOUNTS:
-            raise ValueError(f"bar_mount must be one of {', '.join(BAR_MOUNTS)}, got {self.bar_mount!r}")
+        if self.bar_mount not in MOUNTS:
+            raise ValueError(f"bar_mount must be one of {', '.join(MOUNTS)}, got {self.bar_mount!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
