@@ -385,7 +385,8 @@ class BarProjectileConfig:
     segments: tuple[BarSegmentConfig, ...]
     description: str = ""
     uses_spacer: bool = True
-    contact_stiffness_n_m: float = 0.0  # the impact face's contact spring; 0: flat and rigid
+    contact_stiffness_n_m: float = 0.0  # the impact face's contact spring at 1 mm; 0: flat and rigid
+    contact_exponent: float = 1.0  # p of F = k·δ₁·(δ/δ₁)^p: 1 a linear spring, 1.5 Hertz's (the paper's projectiles)
 
 
 @dataclass(frozen=True)
@@ -401,7 +402,7 @@ class BarConfig:
     base_length_m: float = 0.010  # the raster base (the bar's material and diameter)
     sensor_mass_kg: float = 0.005
     barrel_length_m: float = 1.5
-    launcher_efficiency: float = 0.52
+    launcher_efficiency: float = 0.348
     mount: str = "separating"  # the object on the bar's end: "separating" (flies off) | "bonded" (stays on)
     projectiles: tuple[BarProjectileConfig, ...] = ()
 
@@ -412,7 +413,7 @@ class BarConfig:
         projectiles = tuple(
             Projectile(p.number, p.description or f"projectile No. {p.number}",
                        tuple(Segment(s.material, s.length_m, s.diameter_m) for s in p.segments), p.uses_spacer,
-                       p.contact_stiffness_n_m or None)
+                       p.contact_stiffness_n_m or None, p.contact_exponent)
             for p in self.projectiles) or PAPER_RIG.projectiles
         spacer = Segment(self.spacer_material, self.spacer_length_m, self.diameter_m) if self.spacer_length_m else None
         return BarRig(Segment(self.material, self.length_m, self.diameter_m), spacer,
@@ -528,6 +529,7 @@ RULES: dict[str, _Rule] = {
     "bar.launcher_efficiency": _Rule(above=0.0, max=1.0),
     "bar.projectiles.number": _Rule(1, 99),
     "bar.projectiles.contact_stiffness_n_m": _Rule(0.0, 1e12, text="0: flat and rigid"),
+    "bar.projectiles.contact_exponent": _Rule(1.0, 3.0, text="1: a linear spring, 1.5: Hertz's"),
     "limits.min_pressure_bar": _Rule(0.0, 100.0),
     "limits.pressure_tolerance_bar": _Rule(above=0.0, max=10.0),
     "limits.fixture_vacuum_max_mbar": _Rule(above=0.0, max=1100.0),

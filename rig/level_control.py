@@ -50,8 +50,14 @@ def model_peak_m_s2(projectile: int, pressure_bar: float, rig: BarRig | None = N
 
 
 def model_pressure_bar(projectile: int, peak_m_s2: float, rig: BarRig | None = None) -> float:
-    """The bar model's pressure for a peak (the inverse of `model_peak_m_s2`: peak ∝ √p)."""
-    return (abs(peak_m_s2) / model_peak_m_s2(projectile, 1.0, rig)) ** 2
+    """The bar model's pressure for a peak (the inverse of `model_peak_m_s2`)."""
+    from hopkinson.analysis.bar import PAPER_RIG, speed_for_peak
+
+    bar_rig = rig or PAPER_RIG
+    if peak_m_s2 == 0:
+        return 0.0
+    return bar_rig.launcher.pressure_bar(bar_rig.projectile(projectile),
+                                         speed_for_peak(bar_rig, projectile, abs(peak_m_s2)))
 
 
 @dataclass(frozen=True)

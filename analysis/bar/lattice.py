@@ -28,9 +28,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from hopkinson.analysis.bar.geometry import Segment
+from hopkinson.analysis.bar.geometry import CONTACT_REFERENCE_M, Segment
 
 MIN_CELLS = 8  # the shortest segment is cut into at least this many cells
+STEP_SPEED_M_S = 250.0  # a stiffening contact's step is set for impacts up to this speed (a gas gun's reach)
 
 
 def step_for(segments: list[Segment], sample_interval_s: float) -> tuple[float, int]:
@@ -56,28 +57,30 @@ def _one_cell(rod: Segment, dt: float) -> Segment:
 @dataclass
 class Contact:
     """A compression-only junction (between cell `index` and `index + 1`): rigid (its gap, m, while
-    open), or through a contact spring of `stiffness_n_m` (its compression, m: the faces touch
-    while it is positive)."""
+    open), or through a contact spring of secant stiffness `stiffness_n_m` at 1 mm and `exponent`
+    p (F = k·δ₁·(δ/δ₁)^p; its compression δ, m: the faces touch while it is positive)."""
 
     index: int
     open: bool = False
     gap_m: float = 0.0
     stiffness_n_m: float | None = None
     compression_m: float = 0.0
+    exponent: float = 1.0
 
 
 class Lattice:
     """The waves of a chain of cells; `step` advances them by one Δt."""
 
     def __init__(self, impedance: np.ndarray, dt: float, contact: int | None = None,
-                 contact_stiffness_n_m: float | None = None) -> None:
+                 contact_stiffness_n_m: float | None = None, contact_exponent: float = 1.0) -> None:
         self.z = np.asarray(impedance, dtype=float)
         self.dt = dt
         self.f = np.zeros(self.z.size)  # right-going force waves, at each cell's right end
         self.g = np.zeros(self.z.size)  # left-going, at each cell's left end
         self._zl, self._zr = self.z[:-1], self.z[1:]
         self._sum = self._zl + self._zr
-        self.contact = Contact(contact, stiffness_n_m=contact_stiffness_n_m) if contact is not None else None
+        self.contact = (Contact(contact, stiffness_n_m=contact_stiffness_n_m, exponent=contact_exponent)
+                        if contact is not None else None)
         self.contact_force = 0.0
         self.end_velocity = 0.0  # the right end's velocity (with a lumped mass on it)
 
@@ -105,10 +108,10 @@ class Lattice:
         f_new[1:] = force - gi1
         c = self.contact
         if c is not None and c.stiffness_n_m is not None:
-            # a contact spring (the faces' asperities, a shaped tip): F = k·compression, never pulling;
+            # a contact spring (the faces' asperities, a shaped tip): F = k·δ₁·(δ/δ₁)^p, never pulling;
             # each face reflects its wave about F, and the compression grows with their closing speed
-            j, k = c.index, c.stiffness_n_m
-            spring = k * max(c.compression_m, 0.0)
+            j = c.index
+            spring = c.stiffness_n_m * CONTACT_REFERENCE_M * (max(c.compression_m, 0.0) / CONTACT_REFERENCE_M) ** c.exponent
             g_new[j] = spring - fi[j]
             f_new[j + 1] = spring - gi1[j]
             closing = (2.0 * fi[j] - spring) / self._zl[j] - (spring - 2.0 * gi1[j]) / self._zr[j]
@@ -155,7 +158,7 @@ class Impact:
 
 def impact_force(projectile: list[Segment], spacer: Segment | None, bar: Segment, speed_m_s: float,
                  sample_interval_s: float, max_duration_s: float = 1e-3,
-                 contact_stiffness_n_m: float | None = None) -> Impact:
+                 contact_stiffness_n_m: float | None = None, contact_exponent: float = 1.0) -> Impact:
     """The force wave entering the bar when `projectile` (segments from its impact face
     backwards) strikes the spacer (or the bar) at `speed_m_s`; the bar is semi-infinite here
     (its far end is reached after the impact is over). Sampled every `sample_interval_s`
@@ -172,11 +175,16 @@ def impact_force(projectile: list[Segment], spacer: Segment | None, bar: Segment
     dt, m = step_for([*rear_first, *front], sample_interval_s)
     z_proj, z_front, z = chain(dt)
     if contact_stiffness_n_m is not None:  # an explicit spring: Δt·k·(1/Z₁ + 1/Z₂) < 2 keeps it stable
-        limit = 1.0 / (contact_stiffness_n_m * (1.0 / z_proj[-1] + 1.0 / z[z_proj.size]))
+        # the step for the fastest likely impact, not this one's: a step that changed with the speed
+        # would make the pulse jump where it halves, and a plan's search for a speed could not settle
+        stiffest = _stiffest_n_m(contact_stiffness_n_m, contact_exponent, projectile,
+                                 max(abs(speed_m_s), STEP_SPEED_M_S))
+        limit = 1.0 / (stiffest * (1.0 / z_proj[-1] + 1.0 / z[z_proj.size]))
         while dt > limit:
             dt, m = dt / 2.0, m * 2
         z_proj, z_front, z = chain(dt)
-    lattice = Lattice(z, dt, contact=z_proj.size - 1, contact_stiffness_n_m=contact_stiffness_n_m)
+    lattice = Lattice(z, dt, contact=z_proj.size - 1, contact_stiffness_n_m=contact_stiffness_n_m,
+                      contact_exponent=contact_exponent)
     projectile_cells = slice(0, z_proj.size)
     lattice.set_moving(projectile_cells, speed_m_s)
     p0 = lattice.momentum(projectile_cells)
@@ -202,6 +210,17 @@ def impact_force(projectile: list[Segment], spacer: Segment | None, bar: Segment
     blocks = out[:usable].reshape(-1, m).mean(axis=1)
     return Impact(blocks, sample_interval_s, (left_at if left_at is not None else out.size) * dt, p0 - p_end,
                   p_end / mass)
+
+
+def _stiffest_n_m(stiffness_n_m: float, exponent: float, projectile: list[Segment], speed_m_s: float) -> float:
+    """The contact's largest tangent stiffness p·k·(δ/δ₁)^(p−1) in this impact: at most at the
+    compression that would hold the projectile's whole kinetic energy (k·δ₁·δ^(p+1)/((p+1)·δ₁^p)
+    = ½mv²; the bar takes part of it, so the real compression is smaller)."""
+    if exponent == 1.0:
+        return stiffness_n_m
+    energy = 0.5 * sum(s.mass_kg for s in projectile) * speed_m_s**2
+    delta = ((exponent + 1.0) * energy * CONTACT_REFERENCE_M ** (exponent - 1.0) / stiffness_n_m) ** (1.0 / (exponent + 1.0))
+    return exponent * stiffness_n_m * (delta / CONTACT_REFERENCE_M) ** (exponent - 1.0)
 
 
 @dataclass(frozen=True)
@@ -231,19 +250,24 @@ def object_motion(incident_force_n: np.ndarray, bar: Segment, base: Segment, sen
     lattice = Lattice(z, dt, contact=0)
     mass = base.mass_kg + sensor_mass_kg
     incoming = np.repeat(np.asarray(incident_force_n, dtype=float), m)
+    # the fastest the bar's free end can still move: twice the particle velocity of the largest
+    # compression yet to arrive
+    reachable_m_s = 2.0 * np.maximum(np.maximum.accumulate(incoming[::-1])[::-1], 0.0) / z[0]
     force = np.zeros(incoming.size)
+    momentum = 0.0
     separated_at = None
     for n in range(incoming.size):
         lattice.step(left_in=float(incoming[n]), right_mass_kg=sensor_mass_kg)
         force[n] = lattice.contact_force
+        momentum += force[n] * dt
         c = lattice.contact
         assert c is not None
         if c.open and separated_at is None and n > 0 and np.any(force[:n] > 0):
             separated_at = n
         elif not c.open:
             separated_at = None
-        if separated_at is not None and n - separated_at > 4 * m and c.gap_m > 1e-9:
-            break  # flying off: no further contact is possible while it outruns the bar's end
+        if separated_at is not None and c.gap_m > 0.0 and momentum / mass > reachable_m_s[n]:
+            break  # flying off: the bar's end can no longer catch it up
     usable = force.size // m * m
     force_out = force[:usable].reshape(-1, m).mean(axis=1)
     accel = force_out / mass

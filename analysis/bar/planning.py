@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from hopkinson.analysis.bar.geometry import G_M_S2, BarRig, Projectile
-from hopkinson.analysis.bar.predict import ShotPrediction, predict_shot
+from hopkinson.analysis.bar.predict import ShotPrediction, predict_shot, speed_for_peak
 
 PAPER_RULE = 1.06  # δ·f_n at most (the paper's Eq. 36)
 SUPPORT_DB = -40.0
@@ -78,9 +78,9 @@ def spectrum_bands_hz(prediction: ShotPrediction) -> tuple[float, float]:
             float(f[top + below_40[0]]) if below_40.size else float(f[-1]))
 
 
-def _peak_g_at(rig: BarRig, projectile: Projectile, unit: ShotPrediction, pressure_bar: float) -> str:
-    """The peak `projectile` gives from `pressure_bar` (its 1 m/s prediction `unit` scaled), in g."""
-    return f"{unit.peak_m_s2 * rig.launcher.speed_m_s(projectile, pressure_bar) / G_M_S2:,.0f} g"
+def _peak_g_at(rig: BarRig, projectile: Projectile, pressure_bar: float) -> str:
+    """The peak `projectile` gives from `pressure_bar`, in g."""
+    return f"{predict_shot(rig, projectile.number, pressure_bar=pressure_bar).peak_m_s2 / G_M_S2:,.0f} g"
 
 
 def plan_shot(rig: BarRig, target_peak_m_s2: float, *, sensor_fn_hz: float | None = None,
@@ -92,18 +92,17 @@ def plan_shot(rig: BarRig, target_peak_m_s2: float, *, sensor_fn_hz: float | Non
         raise ValueError(f"the sensor's natural frequency must be positive, got {sensor_fn_hz:g} Hz")
     options = []
     for projectile in rig.projectiles:
-        unit = predict_shot(rig, projectile.number, speed_m_s=1.0)
-        speed = target_peak_m_s2 / unit.peak_m_s2
+        speed = speed_for_peak(rig, projectile.number, target_peak_m_s2)
         pressure = rig.launcher.pressure_bar(projectile, speed)
-        shot = unit.scaled(speed)
+        shot = predict_shot(rig, projectile.number, speed_m_s=speed)
         low, top = spectrum_bands_hz(shot)
         why = ""
         if pressure > max_pressure_bar:
             why = (f"needs {pressure:.3g} bar, above the rig's maximum {max_pressure_bar:g} bar "
-                   f"(at most {_peak_g_at(rig, projectile, unit, max_pressure_bar)})")
+                   f"(at most {_peak_g_at(rig, projectile, max_pressure_bar)})")
         elif pressure < min_pressure_bar:
             why = (f"needs {pressure:.3g} bar, below the rig's minimum {min_pressure_bar:g} bar "
-                   f"(at least {_peak_g_at(rig, projectile, unit, min_pressure_bar)})")
+                   f"(at least {_peak_g_at(rig, projectile, min_pressure_bar)})")
         rule = None if sensor_fn_hz is None else bool(shot.equivalent_width_s <= PAPER_RULE / sensor_fn_hz)
         options.append(ProjectileOption(projectile.number, projectile.description, pressure, speed, shot.peak_m_s2,
                                         shot.equivalent_width_s, shot.width_10_s, low, top, not why, why, rule))

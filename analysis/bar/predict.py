@@ -2,9 +2,10 @@
 (geometry.Launcher), the force wave of the impact (lattice.impact_force), its dispersion along
 the bar (dispersion.disperse), and the calibrated object's acceleration and flight
 (lattice.object_motion: flying off a separating mount, or following the bar's end on a bonded
-one). Everything is linear in the projectile's speed (the contacts only
-open and close on the sign of a force), so one prediction per projectile at 1 m/s serves every
-pressure.
+one). With a rigid or linear contact at the impact face everything is linear in the
+projectile's speed (the contacts only open and close on the sign of a force), so one prediction
+per projectile at 1 m/s serves every pressure; a stiffening contact (geometry: exponent > 1) gives
+a shorter pulse at a higher speed, so each speed is computed (and cached).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 from hopkinson.analysis.bar.dispersion import disperse
-from hopkinson.analysis.bar.geometry import BarRig
+from hopkinson.analysis.bar.geometry import REFERENCE_PRESSURE_BAR, BarRig
 from hopkinson.analysis.bar.lattice import impact_force, object_motion
 
 DEFAULT_SAMPLE_INTERVAL_S = 1e-7
@@ -69,7 +70,7 @@ class ShotPrediction:
         return float((above[-1] - above[0]) * self.sample_interval_s) if above.size else 0.0
 
     def scaled(self, speed_m_s: float) -> ShotPrediction:
-        """The same shot at another projectile speed (linear elasticity)."""
+        """The same shot at another projectile speed (linear elasticity and a linear contact)."""
         k = speed_m_s / self.speed_m_s
         return ShotPrediction(self.projectile, speed_m_s, self.sample_interval_s, self.acceleration_m_s2 * k,
                               self.velocity_m_s * k, self.incident_stress_pa * k, self.separation_s, self.contact_s)
@@ -82,16 +83,41 @@ def predict_shot(rig: BarRig, projectile: int, *, speed_m_s: float | None = None
     if (speed_m_s is None) == (pressure_bar is None):
         raise ValueError("give the projectile's speed or the reservoir pressure, not both")
     speed = speed_m_s if speed_m_s is not None else rig.launcher.speed_m_s(rig.projectile(projectile), pressure_bar)
-    unit = _unit_shot(rig, projectile, float(sample_interval_s), float(duration_s), bool(dispersion))
-    return unit.scaled(float(speed))
+    if rig.projectile(projectile).linear:
+        return _shot(rig, projectile, 1.0, float(sample_interval_s), float(duration_s), bool(dispersion)).scaled(
+            float(speed))
+    return _shot(rig, projectile, float(speed), float(sample_interval_s), float(duration_s), bool(dispersion))
 
 
-@lru_cache(maxsize=32)
-def _unit_shot(rig: BarRig, number: int, dt: float, duration_s: float, dispersion: bool) -> ShotPrediction:
+def speed_for_peak(rig: BarRig, projectile: int, peak_m_s2: float, rel_tol: float = 1e-12) -> float:
+    """The projectile's speed that gives the object `peak_m_s2`: the linear scaling for a linear
+    contact; for a stiffening one, the secant method on log peak against log speed (a power law
+    to within a few %, so a few predictions)."""
+    if not peak_m_s2 > 0:
+        raise ValueError(f"the peak must be positive, got {peak_m_s2:g} m/s²")
+    speed = rig.launcher.speed_m_s(rig.projectile(projectile), REFERENCE_PRESSURE_BAR)
+    peak = predict_shot(rig, projectile, speed_m_s=speed).peak_m_s2
+    if rig.projectile(projectile).linear:
+        return speed * peak_m_s2 / peak
+    slope = 1.0
+    for _ in range(40):
+        guess = speed * (peak_m_s2 / peak) ** (1.0 / slope)
+        got = predict_shot(rig, projectile, speed_m_s=guess).peak_m_s2
+        if abs(got / peak_m_s2 - 1.0) <= rel_tol:
+            return guess
+        if guess != speed and got != peak:
+            slope = min(max(math.log(got / peak) / math.log(guess / speed), 0.5), 3.0)
+        speed, peak = guess, got
+    raise ArithmeticError(f"no speed of projectile No. {projectile} gives {peak_m_s2:g} m/s² to {rel_tol:g}")
+
+
+@lru_cache(maxsize=64)
+def _shot(rig: BarRig, number: int, speed_m_s: float, dt: float, duration_s: float, dispersion: bool) -> ShotPrediction:
     projectile = rig.projectile(number)
     spacer = rig.spacer if projectile.uses_spacer else None
-    impact = impact_force(list(projectile.segments), spacer, rig.bar, 1.0, dt, max_duration_s=duration_s,
-                          contact_stiffness_n_m=projectile.contact_stiffness_n_m)
+    impact = impact_force(list(projectile.segments), spacer, rig.bar, speed_m_s, dt, max_duration_s=duration_s,
+                          contact_stiffness_n_m=projectile.contact_stiffness_n_m,
+                          contact_exponent=projectile.contact_exponent)
     n = int(round(duration_s / dt))
     lead = int(round(LEAD_S / dt))  # room for the dispersed front's precursor (it runs ahead of c₀)
     wave = np.zeros(n)
@@ -102,5 +128,5 @@ def _unit_shot(rig: BarRig, number: int, dt: float, duration_s: float, dispersio
     accel = np.zeros(n)
     accel[: motion.acceleration_m_s2.size] = motion.acceleration_m_s2[:n]
     velocity = np.cumsum(accel) * dt
-    return ShotPrediction(number, 1.0, dt, accel, velocity, wave / rig.bar.area_m2, motion.separation_s,
+    return ShotPrediction(number, speed_m_s, dt, accel, velocity, wave / rig.bar.area_m2, motion.separation_s,
                           impact.contact_s)
