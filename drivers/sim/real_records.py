@@ -174,20 +174,26 @@ class IdealPulseSource:
 
 
 TABULATED_WIDTH_REL = 0.1
+TABULATED_START_REL = 0.01
 
 
 def tabulated_pulse(time_s: np.ndarray, acceleration_m_s2: np.ndarray, speed_m_s: float,
                     shape: str = "bar_model") -> PulseShape:
-    """A PulseShape from a sampled acceleration (t from the pulse's start; zero outside). Its
-    duration runs from the first to the last sample above TABULATED_WIDTH_REL of the peak: both
-    lobes of a bipolar pulse, not the bar's dispersion ripple trailing it (which is motion after
-    the pulse, like the ringing added there)."""
-    t = np.asarray(time_s, dtype=float)
+    """A PulseShape from a sampled acceleration (zero outside the samples). Its start (t = 0,
+    where the effects timed from the pulse's start are anchored: the onset errors, the lateral
+    kick, the flight noise) is the first sample above TABULATED_START_REL of the peak; what comes
+    before (a dispersed front's precursor) stays, at negative times. Its duration runs from there
+    to the last sample above TABULATED_WIDTH_REL of the peak: both lobes of a bipolar pulse, not
+    the bar's dispersion ripple trailing it (which is motion after the pulse, like the ringing
+    added there)."""
     a = np.asarray(acceleration_m_s2, dtype=float)
-    v = velocity_m_s(a, float(t[1] - t[0]))
     peak_index = int(np.argmax(np.abs(a)))
-    above = np.flatnonzero(np.abs(a) > TABULATED_WIDTH_REL * abs(a[peak_index]))
-    width = float(t[above[-1]] - t[above[0]]) if above.size else 0.0
+    level = abs(a[peak_index])
+    start = int(np.flatnonzero(np.abs(a) > TABULATED_START_REL * level)[0]) if level > 0 else 0
+    t = np.asarray(time_s, dtype=float) - float(time_s[start])
+    v = velocity_m_s(a, float(t[1] - t[0]))
+    above = np.flatnonzero(np.abs(a) > TABULATED_WIDTH_REL * level)
+    width = float(t[above[-1]]) if above.size else 0.0
     return PulseShape(speed_m_s, float(v[-1]), float(a[peak_index]), width,
                       lambda x: np.interp(x, t, a, left=0.0, right=0.0),
                       lambda x: np.interp(x, t, v, left=0.0, right=float(v[-1])), shape)

@@ -45,3 +45,28 @@ def test_a_shot_through_the_bar_model_carries_its_pulse(mount: str) -> None:
     else:  # it stays on the bar's end, which comes back to rest once the wave has reflected
         assert abs(velocity[-1]) < 0.02 * predicted.peak_velocity_m_s
         assert np.min(reference) < -0.5 * np.max(reference)  # the bipolar pulse
+
+
+def test_a_bar_pulse_starts_where_the_object_starts_to_move() -> None:
+    """The effects timed from the pulse's start (onset errors, the lateral kick, the flight noise)
+    come with the pulse, not with the model's lead before it: t = 0 is where the acceleration
+    first reaches 1 % of its peak, the duration ends at its last 10 %, and the sensor's mode is
+    not kicked before the reference moves."""
+    from hopkinson.drivers.sim.bar_source import BarPulseSource
+
+    pulse = BarPulseSource.mounted("bonded").pulse(3, 2.0)
+    t = np.arange(-100e-6, 400e-6, 1e-8)
+    a = pulse.acceleration_m_s2(t)
+    first = t[np.flatnonzero(np.abs(a) > 0.01 * abs(pulse.peak_m_s2))[0]]
+    last = t[np.flatnonzero(np.abs(a) > 0.1 * abs(pulse.peak_m_s2))[-1]]
+    assert abs(first) <= 1e-7 and last == pytest.approx(pulse.width_s, abs=1e-7)
+    world = load_sim_config(REPO / "config" / "sim.toml").world
+    kicked = dataclasses.replace(world, realism=dataclasses.replace(world.realism, pulse_source="bar",
+                                                                   bar_mount="bonded"))
+    channels, truth = simulate_shot(kicked, 2.0, 3, CaptureSettings(100e6, 40_000, 4_000))
+    reduced = reduce_sensors(channels[1], {"response": SensorChannel(
+        channels[2], truth["amplifier_gain"], truth["sensitivity_v_per_m_s2"])}, 1e-8, sample_rate_hz=10e6)
+    record = reduced["response"].record
+    reference, response = np.asarray(record.reference), np.asarray(record.response)
+    moving = int(np.flatnonzero(np.abs(reference) > 0.05 * np.max(reference))[0])
+    assert np.max(np.abs(response[: moving - 20])) < 0.02 * np.max(response)
