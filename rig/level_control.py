@@ -4,7 +4,8 @@ A campaign entry may give `peak_m_s2` or `peak_g` instead of `pressure_bar`. Eac
 fired at a pressure chosen from what is known then:
 
 1. the bar model's pressure → peak for the projectile (`model_peak_m_s2`: analysis.bar, the
-   rig's `[bar]`: launcher, impact, dispersion, separation; peak ∝ speed ∝ √p), scaled by
+   rig's `[bar]`: launcher, impact, dispersion, separation; speed ∝ √p, the peak a little faster
+   than the speed with a stiffening contact), scaled by
 2. a correction factor r = measured peak ÷ model peak, the geometric mean over
    - the shots of this entry already fired and analysed, when there are any (the latest
      `ENTRY_SHOTS_USED`), else

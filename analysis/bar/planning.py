@@ -1,8 +1,9 @@
 """Shot planning: which projectile and pressure give a target peak acceleration, and whether
 the pulse will excite the sensor (bar model: analysis.bar.predict).
 
-For each projectile the prediction at 1 m/s is scaled (the peak is linear in the speed), the
-launcher gives the pressure for the needed speed, and the pulse's spectrum gives its bands:
+For each projectile the speed that gives the target peak is found (predict.speed_for_peak: a
+scaling for a linear contact, a few predictions for a stiffening one), the launcher gives the
+pressure for it, and the pulse at that speed gives its width and its spectrum's bands:
   - the −3 dB frequency: where |A(f)| of the acceleration pulse, above its maximum, first falls
     below 1/√2 of it (the maximum is at DC for a separating mount's unipolar pulse);
   - the supported band: up to where it first falls below −40 dB (the identification fits

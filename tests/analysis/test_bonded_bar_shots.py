@@ -1,0 +1,58 @@
+"""Shots of the simulator through the bar model with the sensor bonded to the bar's end (PTB's
+mounting: a bipolar pulse with no net velocity change, its first spectral null near 20 kHz for
+projectile No. 3), read by a quadrature interferometer (the velocity comes back through zero).
+
+The truth is the simulated sensor (a 29.7 kHz mode, ζ 0.05, as mounted; its FBSD ±5 % in closed
+form). What the default analysis must do, and does not yet (issue 19 item 2's blocker for making
+this the shipped simulator; issue 17's method on a record like PTB's): give each shot's FBSD
+±5 % within 25 % of the truth. Measured at this commit: three of five within 8 %, one at 9.3 kHz
+(+43 %), and one at 63 Hz, where an order-4 fit put a real pole at ~9 Hz: a bipolar pulse carries
+nothing at DC, so the record does not fix the gain below the band it supports.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.shot_analysis import analyse_raw_shot
+from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
+from hopkinson.rig.config import load_sim_config
+from scipy import signal
+
+from tests.rig.conftest import REPO
+
+SHOTS = ((1, 1.0), (2, 2.0), (3, 3.0), (4, 2.0), (5, 2.0))  # (shot number: its seed, pressure in bar)
+
+
+def _true_fbsd_hz(accelerometer: dict, deviation: float = 0.05) -> float:
+    """Where the true sensor's magnitude (its modes and conditioner low-pass, relative to DC)
+    first leaves 1 ± deviation."""
+    (mode,) = accelerometer["modes"]
+    w = 2 * np.pi * mode["natural_frequency_hz"]
+    num, den = [w**2], [1.0, 2 * mode["damping_ratio"] * w, w**2]
+    lp_b, lp_a = signal.butter(accelerometer["lowpass_order"], 2 * np.pi * accelerometer["lowpass_hz"], analog=True)
+    f = np.linspace(1.0, 60e3, 600_001)
+    _, h = signal.freqs(np.polymul(num, lp_b), np.polymul(den, lp_a), 2 * np.pi * f)
+    off = np.flatnonzero(np.abs(np.abs(h) - 1.0) >= deviation)
+    return float(f[off[0]])
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="issue 19 item 2 / issue 17: on bonded bar shots one FBSD comes out "
+                                       "at 63 Hz (a real pole at ~9 Hz: nothing at DC fixes the gain) and one "
+                                       "43 % high; the shipped simulator keeps the ideal pulse until this holds")
+def test_bonded_bar_shots_give_the_true_fbsd_within_25_percent() -> None:
+    world = load_sim_config(REPO / "config" / "sim.toml").world
+    world = dataclasses.replace(world, signals=dataclasses.replace(world.signals, quadrature=True),
+                                realism=dataclasses.replace(world.realism, pulse_source="bar", bar_mount="bonded"))
+    found = []
+    for number, pressure in SHOTS:
+        channels, truth = simulate_shot(world, pressure, 3, CaptureSettings(100e6, 200_000, 20_000),
+                                        shot_number=number)
+        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
+            amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
+            max_order=4, draws=50), quadrature_v=channels[3]).to_dict()
+        found.append((result["fbsd_hz"]["5"], _true_fbsd_hz(truth["accelerometer"])))
+    assert all(abs(got / true - 1) <= 0.25 for got, true in found), found
