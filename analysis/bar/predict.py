@@ -103,12 +103,14 @@ def speed_for_peak(rig: BarRig, projectile: int, peak_m_s2: float, rel_tol: floa
     for _ in range(40):
         guess = speed * (peak_m_s2 / peak) ** (1.0 / slope)
         got = predict_shot(rig, projectile, speed_m_s=guess).peak_m_s2
+        if not (math.isfinite(guess) and got > 0):
+            break
         if abs(got / peak_m_s2 - 1.0) <= rel_tol:
             return guess
         if guess != speed and got != peak:
             slope = min(max(math.log(got / peak) / math.log(guess / speed), 0.5), 3.0)
         speed, peak = guess, got
-    raise ArithmeticError(f"no speed of projectile No. {projectile} gives {peak_m_s2:g} m/s² to {rel_tol:g}")
+    raise ValueError(f"the bar model finds no speed of projectile No. {projectile} that gives {peak_m_s2:g} m/s²")
 
 
 @lru_cache(maxsize=64)
