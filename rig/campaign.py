@@ -407,9 +407,13 @@ class CampaignRunner:
             if isinstance(info.get("peak_m_s2"), int | float) and isinstance(info.get("pressure_bar"), int | float):
                 entry_shots.append(LevelPoint(other.projectile, float(info["pressure_bar"]), float(info["peak_m_s2"])))
         limits = self.config.limits
-        return choose_pressure(shot.target_peak_m_s2, shot.projectile, self._history(), entry_shots,
-                               min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar,
-                               rig=self.config.bar.rig())
+        try:
+            return choose_pressure(shot.target_peak_m_s2, shot.projectile, self._history(), entry_shots,
+                                   min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar,
+                                   rig=self.config.bar.rig())
+        except ValueError as exc:  # the bar model's speed search did not settle: fire nothing at a guess
+            raise ConfigError(f"{self.plan.path}: shots[{shot.entry}] ({shot.id}): a target level needs the bar "
+                              f"model: {exc}; this shot was not fired (--resume continues)") from None
 
     def _remember_level(self, shot: PlannedShot, pressure_bar: float | None, results: dict[str, Any] | None) -> None:
         """An analysed shot's pressure → peak into the rig's history (a failure is a warning)."""

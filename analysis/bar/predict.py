@@ -18,6 +18,7 @@ import numpy as np
 from hopkinson.analysis.bar.dispersion import disperse
 from hopkinson.analysis.bar.geometry import REFERENCE_PRESSURE_BAR, BarRig
 from hopkinson.analysis.bar.lattice import impact_force, object_motion
+from scipy import optimize
 
 DEFAULT_SAMPLE_INTERVAL_S = 1e-7
 DEFAULT_DURATION_S = 2e-3
@@ -89,28 +90,31 @@ def predict_shot(rig: BarRig, projectile: int, *, speed_m_s: float | None = None
     return _shot(rig, projectile, float(speed), float(sample_interval_s), float(duration_s), bool(dispersion))
 
 
-def speed_for_peak(rig: BarRig, projectile: int, peak_m_s2: float, rel_tol: float = 1e-12) -> float:
+def speed_for_peak(rig: BarRig, projectile: int, peak_m_s2: float) -> float:
     """The projectile's speed that gives the object `peak_m_s2`: the linear scaling for a linear
-    contact; for a stiffening one, the secant method on log peak against log speed (a power law
-    to within a few %, so a few predictions)."""
+    contact; for a stiffening one, the secant method (scipy.optimize.newton without a derivative)
+    on log peak against log speed, nearly a straight line, so a few predictions."""
     if not peak_m_s2 > 0:
         raise ValueError(f"the peak must be positive, got {peak_m_s2:g} m/s²")
     speed = rig.launcher.speed_m_s(rig.projectile(projectile), REFERENCE_PRESSURE_BAR)
     peak = predict_shot(rig, projectile, speed_m_s=speed).peak_m_s2
+    first_guess = math.log(speed * peak_m_s2 / peak)  # as if the peak were linear in the speed
     if rig.projectile(projectile).linear:
-        return speed * peak_m_s2 / peak
-    slope = 1.0
-    for _ in range(40):
-        guess = speed * (peak_m_s2 / peak) ** (1.0 / slope)
-        got = predict_shot(rig, projectile, speed_m_s=guess).peak_m_s2
-        if not (math.isfinite(guess) and got > 0):
-            break
-        if abs(got / peak_m_s2 - 1.0) <= rel_tol:
-            return guess
-        if guess != speed and got != peak:
-            slope = min(max(math.log(got / peak) / math.log(guess / speed), 0.5), 3.0)
-        speed, peak = guess, got
-    raise ValueError(f"the bar model finds no speed of projectile No. {projectile} that gives {peak_m_s2:g} m/s²")
+        return math.exp(first_guess)
+
+    def log_excess(log_speed: float) -> float:
+        got = predict_shot(rig, projectile, speed_m_s=math.exp(log_speed)).peak_m_s2
+        return math.log(got / peak_m_s2) if got > 0 else -math.inf
+
+    failed = ValueError(f"the bar model finds no speed of projectile No. {projectile} that gives {peak_m_s2:g} m/s²")
+    try:
+        log_speed, result = optimize.newton(log_excess, math.log(speed), x1=first_guess, tol=1e-9, maxiter=40,
+                                            full_output=True, disp=False)
+    except (ArithmeticError, RuntimeError, ValueError):
+        raise failed from None
+    if not (result.converged and math.isfinite(log_speed)):
+        raise failed
+    return math.exp(log_speed)
 
 
 @lru_cache(maxsize=64)

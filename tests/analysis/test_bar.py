@@ -10,7 +10,14 @@ import math
 
 import numpy as np
 import pytest
-from hopkinson.analysis.bar import PAPER_RIG, Launcher, Segment, plan_shot, predict_shot
+from hopkinson.analysis.bar import (
+    PAPER_RIG,
+    Launcher,
+    Segment,
+    plan_shot,
+    predict_shot,
+    speed_for_peak,
+)
 from hopkinson.analysis.bar.dispersion import disperse, phase_velocity_m_s, rayleigh_speed_ratio
 from hopkinson.analysis.bar.geometry import REFERENCE_PRESSURE_BAR
 from hopkinson.analysis.bar.lattice import impact_force, object_motion
@@ -236,6 +243,20 @@ def test_the_peak_grows_with_the_speed_and_the_object_leaves_after_the_pulse() -
         peaks = [s.peak_m_s2 for s in shots]
         assert all(b > a for a, b in zip(peaks, peaks[1:], strict=False)), (number, peaks)
         assert all(s.separation_s is not None and s.separation_s > 0.5 * s.contact_s for s in shots)
+
+
+def test_the_speed_for_a_peak_gives_that_peak_or_says_it_cannot() -> None:
+    """The search on the stiffening contact lands on the target to round-off, from 2 000 g to
+    5 million g, and a target it cannot reach, or none, is one ValueError (plan-shot and the panel
+    show it as a line)."""
+    for number in (1, 3):
+        for g in (2_000.0, 50_000.0, 5e6):
+            speed = speed_for_peak(PAPER_RIG, number, g * G)
+            assert predict_shot(PAPER_RIG, number, speed_m_s=speed).peak_m_s2 == pytest.approx(g * G, rel=1e-12)
+    with pytest.raises(ValueError, match="finds no speed of projectile No. 3"):
+        speed_for_peak(PAPER_RIG, 3, math.inf)
+    with pytest.raises(ValueError, match="must be positive"):
+        speed_for_peak(PAPER_RIG, 3, -1.0)
 
 
 def test_a_stiffening_contact_starts_and_ends_a_bonded_pulse_smoothly() -> None:

@@ -18,30 +18,16 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pytest
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
-from scipy import signal
 
 from tests.rig.conftest import REPO
+from tests.sim_truth import true_fbsd_hz
 
 SHOTS = ((1, 1.0), (2, 2.0), (3, 3.0), (4, 2.0), (5, 2.0))  # (shot number: its seed, pressure in bar)
-
-
-def _true_fbsd_hz(accelerometer: dict, deviation: float = 0.05) -> float:
-    """Where the true sensor's magnitude (its modes and conditioner low-pass, relative to DC)
-    first leaves 1 ± deviation."""
-    (mode,) = accelerometer["modes"]
-    w = 2 * np.pi * mode["natural_frequency_hz"]
-    num, den = [w**2], [1.0, 2 * mode["damping_ratio"] * w, w**2]
-    lp_b, lp_a = signal.butter(accelerometer["lowpass_order"], 2 * np.pi * accelerometer["lowpass_hz"], analog=True)
-    f = np.linspace(1.0, 60e3, 600_001)
-    _, h = signal.freqs(np.polymul(num, lp_b), np.polymul(den, lp_a), 2 * np.pi * f)
-    off = np.flatnonzero(np.abs(np.abs(h) - 1.0) >= deviation)
-    return float(f[off[0]])
 
 
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason="issue 19 item 2 / issue 17: on bonded bar shots one FBSD comes out "
@@ -58,5 +44,5 @@ def test_bonded_bar_shots_give_the_true_fbsd_within_25_percent() -> None:
         result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             max_order=4, draws=50), quadrature_v=channels[3]).to_dict()
-        found.append((result["fbsd_hz"]["5"], _true_fbsd_hz(truth["accelerometer"])))
+        found.append((result["fbsd_hz"]["5"], true_fbsd_hz(truth, 0.05)))
     assert all(abs(got / true - 1) <= 0.25 for got, true in found), found

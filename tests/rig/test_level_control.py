@@ -204,3 +204,35 @@ def test_every_shot_records_its_target_and_the_pressure_chosen(level_run) -> Non
                                                                                                  "s001-r3")]
     lines = (level_run.run.path.parent / LEVEL_HISTORY_NAME).read_text().splitlines()
     assert json.loads(lines[-1])["shot_id"] == "s001-r3"
+
+
+def test_a_level_the_bar_model_cannot_find_mid_campaign_stops_in_one_line_and_fires_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The speed search failing for the entry's second shot (injected: the corrected target after
+    the first shot is analysed) ends the campaign with one ConfigError naming the plan and the
+    shot; the first shot's record stays, the second is never fired (still PLANNED for --resume)."""
+    import hopkinson.rig.campaign as campaign_module
+
+    real = campaign_module.choose_pressure
+
+    def failing_after_the_first_shot(*args, **kwargs):
+        if len(args) > 3 and args[3]:  # the entry's analysed shots: only once the run has fired one
+            raise ValueError("the bar model finds no speed of projectile No. 3 that gives 4.4e+05 m/s²")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(campaign_module, "choose_pressure", failing_after_the_first_shot)
+    plan_path = write_plan(tmp_path, "[[shots]]\npeak_g = 45000\nrepeats = 2\n")
+    run = create_run_folder(plan_path, tmp_path / "runs", "run-1")
+    with contextlib.ExitStack() as stack:
+        session = stack.enter_context(sim_session(short_timeouts_config(), SimConfig(
+            world=WorldParams(time_scale=100.0), servers=ServerParams(modbus_slow_delay_s=0.3))))
+        instruments = stack.enter_context(open_instruments(session.config, session.simulated_truth))
+        with pytest.raises(ConfigError) as raised:
+            CampaignRunner(run, load_plan(plan_path), instruments, session.config, EventBus()).run()
+    message = str(raised.value)
+    assert "\n" not in message and str(plan_path) in message and "(s001-r2)" in message
+    assert "this shot was not fired" in message
+    with Journal.open(run) as journal:
+        states = {s.shot.id: s.state.value for s in journal.statuses()}
+    assert states == {"s001-r1": "ANALYSED", "s001-r2": "PLANNED"}
+    assert run.shot_path("s001-r1").is_file()

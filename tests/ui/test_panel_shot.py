@@ -10,26 +10,13 @@ import threading
 
 import numpy as np
 import pytest
-from hopkinson.analysis.response import band_edges
-from hopkinson.drivers.sim.world import accelerometer_truth
 from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import Qt, QTimer
 
+from tests.sim_truth import true_fbsd_hz
 from tests.ui.conftest import save_shot, unreachable_config
 
 SHOT_TIMEOUT_MS = 60_000
-
-
-def true_fbsd_hz(truth: dict, level: float) -> float:
-    """Independent truth: the band edge of the simulated accelerometer + amplifier (continuous)."""
-    acc = accelerometer_truth(truth)
-
-    def gain(f: np.ndarray) -> np.ndarray:
-        h = acc.frequency_response(np.atleast_1d(f))
-        return np.abs(h) / abs(acc.frequency_response(np.array([1e-3]))[0])
-
-    return band_edges(gain, 200e3, (level,), np.array([m.natural_frequency_hz for m in acc.modes]))[
-        f"{round(level * 100)}"].frequency_hz
 
 
 def expected_khz(value_hz: float, results: dict, level: str) -> str:
