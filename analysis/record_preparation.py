@@ -401,7 +401,10 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
                     if verdict:
                         motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc,
                                        "reason": "coherent"})
-                        split[key] = [slice(r.start, onset)] if onset - r.start >= MIN_QUIET else []
+                        head = slice(r.start, onset)
+                        at_rest_head = onset - r.start >= MIN_QUIET and not (
+                            onset - r.start < MOTION_JUDGED and _moving_over(head, other_quiet))
+                        split[key] = [head] if at_rest_head else []
                         break
                 else:
                     if r.stop - r.start < MOTION_JUDGED and _moving_over(r, other_quiet):
