@@ -65,7 +65,8 @@ def simulated_record(projectile: int, pressure_bar: float, n: int, pre: int, see
     truth = world.last_shot_truth
     sensitivity = truth["sensitivity_v_per_m_s2"]
     reduced = reduce_sensors(channels[1], {"response": SensorChannel(channels[2], truth["amplifier_gain"], sensitivity)},
-                             1.0 / raw_hz, grating_pitch_m=truth["grating_pitch_m"], orders=tuple(truth["orders"]),
+                             1.0 / raw_hz, quadrature_v=channels.get(3), grating_pitch_m=truth["grating_pitch_m"],
+                             orders=tuple(truth["orders"]),
                              sample_rate_hz=FS_HZ)["response"]
     return np.asarray(reduced.record.reference), np.asarray(reduced.record.response), truth
 

@@ -53,6 +53,9 @@ if TYPE_CHECKING:
 
 SIM_PORT_PREFIX = "sim:"
 SIM_PORTS = {"sim:amplifier": "serial_port", "sim:controller": "modbus_serial_port"}
+# A digitizer role beyond the first two, and the role whose range it takes when it names none.
+PARTNERS = {"doppler_quadrature": "doppler", "response_2": "response"}
+PARTNER_ROLES = tuple(PARTNERS)
 
 
 @dataclass
@@ -227,7 +230,10 @@ def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
                          channels: dict[str, int]) -> DigitizerConfig:
     """`base` with the simulated digitizer's resource, dialect and channels: each role of
     `channels` (role -> channel number) named as the dialect names it; a role of `base` on
-    another channel kept (renamed for the dialect), one on a simulator's channel dropped; a
+    another channel kept (renamed for the dialect), one on a simulator's channel dropped, and a
+    quadrature or second-sensor role the simulated world does not make dropped (the shipped
+    rig-sim.toml maps the quadrature photodetector; a world with one photodetector leaves that
+    channel flat, and its analysis would fail on it); a
     quadrature or second-sensor channel without a range takes the doppler's or response's; the
     sample format kept where the dialect can send it (else int16, which every dialect can);
     the driver the project's SCPI one."""
@@ -240,11 +246,13 @@ def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
             renamed = cls().channel_name(name)
         except ValueError:  # a lab's own naming: not a channel of the simulator
             continue
+        if role in PARTNER_ROLES and role not in spelled:
+            continue  # the simulated world makes no such signal: its channel would be flat
         if role not in spelled and renamed not in spelled.values():
             spelled[role] = renamed
     fmt = base.sample_format if base.sample_format in cls.sample_formats else "int16"
     ranges = {role: v for role, v in base.ranges_v.items() if role in spelled}
-    for role, like in (("doppler_quadrature", "doppler"), ("response_2", "response")):
+    for role, like in PARTNERS.items():
         if role in spelled and role not in ranges:  # a partner channel takes its first's range
             ranges[role] = ranges.get(like, base.ch1_range_v if like == "doppler" else base.ch2_range_v)
     return dataclasses.replace(base, driver="scpi", options={}, resource=resource, dialect=dialect,
@@ -267,7 +275,7 @@ def sim_digitizer_lines(dialect: str, channels: dict[str, int]) -> list[str]:
     cls = resolve_dialect(dialect)
     named = ", ".join(f'{role} = "{cls.channel_names[n - 1]}"' for role, n in channels.items())
     lines = [f'rig config: [digitizer] dialect = "{dialect}"; [digitizer.channels] {named}']
-    partners = [role for role in ("doppler_quadrature", "response_2") if role in channels]
+    partners = [role for role in PARTNER_ROLES if role in channels]
     if partners:  # channels beyond 1 and 2 need their range (the simulator's: 1 V and 10 V)
         ranges = ", ".join(f"{role} = {1.0 if role == 'doppler_quadrature' else 10.0}" for role in partners)
         lines.append(f"            [digitizer.ranges_v] {ranges}")

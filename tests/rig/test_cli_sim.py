@@ -353,6 +353,7 @@ def test_probe_reports_each_recorded_channels_state_and_names_an_off_channel_in_
         config = load_rig_config(path)
         digitizer = dataclasses.replace(config.digitizer, dialect="keysight", timeout_s=2.0,
                                         channels={"doppler": "CHAN1", "response": "CHAN2"},
+                                        ranges_v={role: config.digitizer.ranges_v[role] for role in ("doppler", "response")},
                                         trigger_source="doppler")
         steps = {s["step"]: s for s in _probe_digitizer(dataclasses.replace(config, digitizer=digitizer)).steps}
     finally:

@@ -26,7 +26,7 @@ from hopkinson.reports.pages import report_pages
 from hopkinson.reports.tables import results_rows
 from hopkinson.reports.writers import write_pngs, write_report
 from hopkinson.rig.cli.main import main
-from hopkinson.rig.config import load_sim_config
+from hopkinson.rig.config import load_rig_config, load_sim_config
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.report_data import shot_report
 from hopkinson.rig.shotfile import read_shot, sensor_records
@@ -228,9 +228,27 @@ def test_hopkinson_sim_prints_the_extra_channels_a_rig_config_needs() -> None:
     from hopkinson.rig.instruments import sim_digitizer_lines
 
     world = load_sim_config(REPO / "config" / "sim.toml").world
-    assert world.channels() == {"doppler": 1, "response": 2}  # both options are off by default
+    # the shipped simulator's interferometer is a quadrature one (a bonded object's velocity comes
+    # back through zero), and config/rig-sim.toml maps its second photodetector
+    assert world.channels() == {"doppler": 1, "response": 2, "doppler_quadrature": 3}
+    shipped = load_rig_config(REPO / "config" / "rig-sim.toml").digitizer.channels
+    assert shipped["doppler_quadrature"] == "CH3" and "response_2" not in shipped
     on = WorldParams(signals=dataclasses.replace(world.signals, quadrature=True),
                      accelerometer_2=dataclasses.replace(world.accelerometer_2, enabled=True))
     lines = sim_digitizer_lines("keysight", on.channels())
     assert 'doppler_quadrature = "CHAN3", response_2 = "CHAN4"' in lines[0]
     assert lines[1].split() == ["[digitizer.ranges_v]", "doppler_quadrature", "=", "1.0,", "response_2", "=", "10.0"]
+
+
+def test_a_simulated_world_with_one_photodetector_drops_the_shipped_quadrature_channel() -> None:
+    """config/rig-sim.toml maps the quadrature photodetector; a simulated world without one
+    leaves that channel flat, and the analysis would fail on it ("a quadrature channel is
+    constant"): the simulated rig's digitizer config keeps only the signals its world makes."""
+    from hopkinson.rig.instruments import sim_digitizer_config
+
+    base = load_rig_config(REPO / "config" / "rig-sim.toml").digitizer
+    one = sim_digitizer_config(base, "TCPIP::127.0.0.1::5025::SOCKET", "generic", {"doppler": 1, "response": 2})
+    assert set(one.channels) == {"doppler", "response"} and set(one.ranges_v) == {"doppler", "response"}
+    two = sim_digitizer_config(base, "TCPIP::127.0.0.1::5025::SOCKET", "keysight",
+                               {"doppler": 1, "response": 2, "doppler_quadrature": 3})
+    assert two.channels["doppler_quadrature"] == "CHAN3" and two.ranges_v["doppler_quadrature"] == 1.0
