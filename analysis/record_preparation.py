@@ -382,7 +382,10 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
     of the peak for > 1 ms, coherence 0.88), and that motion, taken as noise, inflated the
     reference's noise ×12, cut the band, blinded the order test and hid the model error. Noise
     is measured where a channel is at rest: the lead-in, and a stretch after the pulse up to
-    where its motion starts. A channel with no lead-in long enough keeps its stretches (with a
+    where its motion starts, when the other channel is at rest over that head or the head is
+    long enough to be judged itself (a bonded sensor's ringing hides the bar's motion from the
+    pulse on: the head held flight and motion, and set the reference's noise in the band ~10⁴
+    times too high on the simulator's bonded shots). A channel with no lead-in long enough keeps its stretches (with a
     warning)."""
     motion: list[dict[str, Any]] = []
     split: dict[tuple[int, int], list[slice]] = {}
