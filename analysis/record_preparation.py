@@ -385,16 +385,25 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
     where its motion starts, when the other channel is at rest over that head or the head is
     long enough to be judged itself (a bonded sensor's ringing hides the bar's motion from the
     pulse on: the head held flight and motion, and set the reference's noise in the band ~10⁴
-    times too high on the simulator's bonded shots). A channel with no lead-in long enough keeps its stretches (with a
-    warning)."""
+    times too high on the simulator's bonded shots). A channel with no lead-in long enough keeps
+    its stretches (with a warning)."""
     motion: list[dict[str, Any]] = []
     split: dict[tuple[int, int], list[slice]] = {}
+
+    def unjudged(r: slice, other_quiet: list[slice]) -> bool:
+        """Whether stretch r is too short for its coherence to show weak motion while the other
+        channel is busy over it: not at rest (recorded as motion)."""
+        if r.stop - r.start < MOTION_JUDGED and _moving_over(r, other_quiet):
+            motion.append({"start_sample": r.start, "stop_sample": r.stop, "coherence": None,
+                           "reason": "too short to judge by coherence, the other channel not at rest"})
+            return True
+        return False
 
     def at_rest(r: slice, other_quiet: list[slice]) -> list[slice]:
         """The part of stretch r that is not motion: all of it, none, or the part before the
         longest tail that is (the sensor still ringing at the start of a stretch hides the
         motion that follows in a judgement of the whole: the tail is judged in steps of
-        MOTION_STEP)."""
+        MOTION_STEP), that head kept only if it is long enough and not `unjudged`."""
         key = (r.start, r.stop)
         if key not in split:
             split[key] = [r]
@@ -405,14 +414,11 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
                         motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc,
                                        "reason": "coherent"})
                         head = slice(r.start, onset)
-                        at_rest_head = onset - r.start >= MIN_QUIET and not (
-                            onset - r.start < MOTION_JUDGED and _moving_over(head, other_quiet))
-                        split[key] = [head] if at_rest_head else []
+                        keep = onset - r.start >= MIN_QUIET and not unjudged(head, other_quiet)
+                        split[key] = [head] if keep else []
                         break
                 else:
-                    if r.stop - r.start < MOTION_JUDGED and _moving_over(r, other_quiet):
-                        motion.append({"start_sample": r.start, "stop_sample": r.stop, "coherence": None,
-                                       "reason": "too short to judge by coherence, the other channel not at rest"})
+                    if unjudged(r, other_quiet):
                         split[key] = []
         return split[key]
 

@@ -55,7 +55,6 @@ SIM_PORT_PREFIX = "sim:"
 SIM_PORTS = {"sim:amplifier": "serial_port", "sim:controller": "modbus_serial_port"}
 # A digitizer role beyond the first two, and the role whose range it takes when it names none.
 PARTNERS = {"doppler_quadrature": "doppler", "response_2": "response"}
-PARTNER_ROLES = tuple(PARTNERS)
 
 
 @dataclass
@@ -242,12 +241,12 @@ def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,
     cls = resolve_dialect(dialect)
     spelled = {role: cls.channel_names[number - 1] for role, number in channels.items()}
     for role, name in base.channels.items():
+        if role in PARTNERS and role not in spelled:
+            continue  # the simulated world makes no such signal: its channel would be flat
         try:
             renamed = cls().channel_name(name)
         except ValueError:  # a lab's own naming: not a channel of the simulator
             continue
-        if role in PARTNER_ROLES and role not in spelled:
-            continue  # the simulated world makes no such signal: its channel would be flat
         if role not in spelled and renamed not in spelled.values():
             spelled[role] = renamed
     fmt = base.sample_format if base.sample_format in cls.sample_formats else "int16"
@@ -275,7 +274,7 @@ def sim_digitizer_lines(dialect: str, channels: dict[str, int]) -> list[str]:
     cls = resolve_dialect(dialect)
     named = ", ".join(f'{role} = "{cls.channel_names[n - 1]}"' for role, n in channels.items())
     lines = [f'rig config: [digitizer] dialect = "{dialect}"; [digitizer.channels] {named}']
-    partners = [role for role in PARTNER_ROLES if role in channels]
+    partners = [role for role in PARTNERS if role in channels]
     if partners:  # channels beyond 1 and 2 need their range (the simulator's: 1 V and 10 V)
         ranges = ", ".join(f"{role} = {1.0 if role == 'doppler_quadrature' else 10.0}" for role in partners)
         lines.append(f"            [digitizer.ranges_v] {ranges}")

@@ -111,10 +111,8 @@ def demo_command(args: argparse.Namespace) -> int:
         if cmp is None and kf is not None:  # analysed, but no resonance the shot supports
             band = kf.supported_band_hz
             where = f" (supported band up to {band[1] / 1e3:.1f} kHz)" if band else ""
-            fbsd = kf.fbsd_hz["5"]
-            fbsd_text = fbsd.format(1e3, unit="kHz") if fbsd.expanded is not None else f"{fbsd.value / 1e3:.3f} kHz"
             print(f"  {entry.label}: f_n not claimed: the resonance lies beyond what the pulse excites{where}; "
-                  f"FBSD ±5 % {fbsd_text}", flush=True)
+                  f"FBSD ±5 % {kf.fbsd_hz['5'].format(1e3, unit='kHz')}", flush=True)
             continue
         if cmp is None:
             print(f"  {entry.label}: {entry.error or 'no analysis'}", flush=True)

@@ -176,6 +176,11 @@ def test_measure_noise_leaves_out_the_head_of_a_moving_stretch_while_the_sensor_
     after_pulse = [r for r in activity.u_segments if r.start > 0]
     assert after_pulse and min(m["start_sample"] for m in found) > after_pulse[0].start  # the case: a head
     assert noise.u_segments == [r for r in activity.u_segments if r.start == 0]
+    # the head left out is in the trail (identify --explain), with why
+    head = [m for m in noise.motion if m["coherence"] is None]
+    assert [(m["start_sample"], m["stop_sample"]) for m in head] == [
+        (after_pulse[0].start, min(m["start_sample"] for m in found))]
+    assert head[0]["reason"] == "too short to judge by coherence, the other channel not at rest"
     assert noise.draw_noise_u.rms == pytest.approx(SIGMA_U, rel=0.2)
 
 
