@@ -57,7 +57,15 @@ VARIANTS = {
 MISSES = {
     "0.9 ms capture": (lambda: cut(9_000), "cut while the response still rings at 2-3 % of the peak: the all-pole "
                        "fit's resonance sits at 43 kHz (50 on the whole record), both edges ~15 % low"),
+    "0.8 ms capture": (lambda: cut(8_000), "cut in the bar's motion after the pulse (2-3 % of the peak, the sensor "
+                       "seeing x0.75 of it): the DC gain's interval is -5.4 … +1.8 %, wider than the issue's 2 %"),
+    "0.75 ms capture": (lambda: cut(7_500), "cut in the bar's motion after the pulse: the FBSD ±5 % interval "
+                        "holds the sine's edge but its half-width is 26 % of the value, over the issue's 25 %"),
 }
+# Measured (stop 32) on captures cut every 0.02 ms from 0.6 to 0.92 ms: the nominal FBSD ±5 % edge moves
+# between 9.2 and 11.7 kHz with where the capture ends (the whole record: 10.9; the sine: 11.4). The
+# window's end is not the cause on its own (refitting the 0.9 ms fit on shorter windows keeps it at
+# 9.6 kHz): the model error's weights, measured on the free structure's residual, change with it.
 
 
 def holds_the_sine(make) -> None:
