@@ -221,11 +221,6 @@ class Identification:
                      for m in self.modes)
         return float(top) if beyond else None
 
-    @property
-    def nonminimum_phase_zeros(self) -> np.ndarray:
-        """The model's (DiscreteModel.nonminimum_phase_zeros)."""
-        return self.model.nonminimum_phase_zeros
-
     def supported_poles(self) -> np.ndarray:
         """The poles of the supported modes (both poles of a pair): what a DCM may cancel."""
         keep = [complex(*m["pole"]) for m in self.modes if m["supported"]]
@@ -251,7 +246,7 @@ class Identification:
                 "preprocessing": dict(self.preprocessing),
                 "main_mode": dict(self.main_mode) if self.main_mode is not None else None,
                 "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
-                "nonminimum_phase_zeros": complex_pairs(self.nonminimum_phase_zeros),
+                "nonminimum_phase_zeros": complex_pairs(self.model.nonminimum_phase_zeros),
                 "resonance_above_hz": self.resonance_above_hz,
                 "noise": dict(self.noise),
                 "order_evidence": jsonable(self.order_evidence),

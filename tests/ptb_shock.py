@@ -28,10 +28,14 @@ import numpy as np
 import pytest
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.sine_comparison import SineCalibration
+from scipy import signal
 
 SAMPLE_INTERVAL_S = 1e-7  # 10 MS/s
 SINE_FBSD_5_HZ = 11.37e3  # the sine calibration's +5 % edge (interpolated), issue 17
 SINE_FBSD_10_HZ = 15.46e3  # and its +10 % edge
+# Issue 17 item 3: the widest half-widths of the 95 % intervals (relative to the value)
+FBSD_HALF_WIDTH = 0.25
+DC_GAIN_HALF_WIDTH = 0.02
 
 
 def ptb_folder() -> Path:
@@ -92,3 +96,61 @@ def write_ptb_sine_csv(path: Path) -> Path:
                        sine.u_phase_deg, strict=True):
             out.writerow([f"{v:.10g}" for v in row])
     return path
+
+
+# ------------------------------------------------------------------------------ variants
+# Other recordings of the same shot, as a lab's would differ (tests/analysis/test_ptb_variants.py,
+# docs/ptb_variants.py).
+def decimated(factor: int) -> Record:
+    """The record at 10 MS/s ÷ `factor` (zero-phase FIR decimation)."""
+    rec = ptb_record()
+    ref, resp = (signal.decimate(x, factor, ftype="fir", zero_phase=True) for x in (rec.reference, rec.response))
+    return Record(rec.sample_interval_s * factor, ref, resp, response_unit="pC")
+
+
+def resampled(up: int, down: int) -> Record:
+    """The record at 10 MS/s × up / down (polyphase)."""
+    rec = ptb_record()
+    ref, resp = (signal.resample_poly(x, up, down) for x in (rec.reference, rec.response))
+    return Record(rec.sample_interval_s * down / up, ref, resp, response_unit="pC")
+
+
+def cut(samples: int) -> Record:
+    """The capture ended after `samples` (0.1 µs each)."""
+    rec = ptb_record()
+    return Record(rec.sample_interval_s, rec.reference[:samples], rec.response[:samples], response_unit="pC")
+
+
+def started_late(samples: int) -> Record:
+    """The capture started `samples` later (a shorter lead-in before the pulse)."""
+    rec = ptb_record()
+    return Record(rec.sample_interval_s, rec.reference[samples:], rec.response[samples:], response_unit="pC")
+
+
+def skewed(samples: int) -> Record:
+    """The response shifted by `samples` at 10 MS/s (0.1 µs each) against the reference."""
+    rec = ptb_record()
+    return Record(rec.sample_interval_s, rec.reference, np.roll(rec.response, samples), response_unit="pC")
+
+
+def noisier(level: float, seed: int = 0) -> Record:
+    """White noise of `level` × each channel's peak added to both."""
+    rec = ptb_record()
+    rng = np.random.default_rng(seed)
+    ref, resp = (x + rng.normal(0.0, level * float(np.max(np.abs(x))), x.size) for x in (rec.reference, rec.response))
+    return Record(rec.sample_interval_s, ref, resp, response_unit="pC")
+
+
+def against_sine(uncertainty: dict) -> dict[str, dict]:
+    """Each interval issue 17 judges (FBSD ±5 and ±10 %, DC gain) beside the sine calibration's
+    value: whether it contains it, and whether its half-width is within the issue's."""
+
+    def judged(estimate: dict, truth: float, half_width: float) -> dict:
+        lo, hi = estimate["interval"]
+        return {"value": estimate["value"], "interval": [lo, hi], "truth": truth, "contains": bool(lo <= truth <= hi),
+                "half_width_ok": bool((hi - lo) / 2 <= half_width * estimate["value"])}
+
+    out = {f"fbsd_{level}": judged(uncertainty["fbsd_hz"][level], truth, FBSD_HALF_WIDTH)
+           for level, truth in (("5", SINE_FBSD_5_HZ), ("10", SINE_FBSD_10_HZ))}
+    out["dc_gain"] = judged(uncertainty["dc_gain"], float(ptb_sine().magnitude[0]), DC_GAIN_HALF_WIDTH)
+    return out
