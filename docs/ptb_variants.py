@@ -22,6 +22,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
@@ -34,6 +36,7 @@ from tests.ptb_shock import (  # noqa: E402
     cut,
     decimated,
     noisier,
+    ptb_folder,
     resampled,
     skewed,
     started_late,
@@ -61,6 +64,11 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=60)
     parser.add_argument("--only", default="", help="run only the variants whose name contains this")
     args = parser.parse_args()
+    try:
+        ptb_folder()
+    except (pytest.skip.Exception, pytest.fail.Exception) as exc:  # the tests' own check, as one line here
+        print(f"docs/ptb_variants.py: {exc}", file=sys.stderr)
+        sys.exit(2)
     results = {}
     for name, make in variants().items():
         if args.only not in name:
