@@ -150,8 +150,13 @@ def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderS
     structure: it stands for a resonance beyond the band, and its order 1, a real pole, is a
     low-pass that cannot rise towards one), and the order test's choice. Each order starts from
     a linear start at the order below's delay (and at the first delay, when they differ) and
-    from the order below embedded, and keeps the best optimum. With `patience`, the sweep stops
-    once that many orders past the current choice gave no gain."""
+    from the order below embedded, and keeps the best optimum; an order none of whose starts
+    converged within the budget is started once more at the best delay of a grid of linear
+    starts (`delay_grid_starts`: the delay and the poles trade phase, so the order below's delay
+    can hold it in a slow valley; a known 27 kHz sensor behind a 40 kHz amplifier low-pass: order
+    4 started at order 3's 6.9 samples stopped at V 891, from 1.6 samples it settles at 165, and
+    order 5 had been chosen for it). With `patience`, the sweep stops once that many orders past
+    the current choice gave no gain."""
     fits: dict[int, OrderFit] = {}
     parameters: dict[int, int] = {}
     costs: dict[int, float] = {}
@@ -172,13 +177,14 @@ def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderS
             if best is None or fitted.cost < best.cost:
                 best = fitted
         assert best is not None
+        if not best.converged and setup.remove_delay:  # stopped on its way down a valley: try the grid's best delay
+            top = min(float(setup.max_delay), math.ceil(max(tau, tau0)) + 1.0)
+            for start in delay_grid_starts(problem, top, 1):
+                fitted = problem.solve(start, setup.max_evaluations, 1e-6)
+                if fitted.cost < best.cost:
+                    best = replace(fitted, start_unstable=starts[0].start_unstable)
         fits[n], parameters[n] = best, problem.size
-        # an unstable or marginal order is no candidate, nor one with a real pole far below the
-        # lowest fitted bin (the data cannot place it; issue 17's lobe-gain hybrid used one
-        # at ~2 Hz to bend the lowest bins, and its DC gain came out negative)
-        candidate = acceptable(best, data.bins) and not pole_below_band(best, setup.lowest_bin_hz,
-                                                                         setup.sample_interval_s)
-        costs[n] = best.cost if candidate else math.inf
+        costs[n] = _candidate_cost(best, data, setup)
         previous, tau = best, best.delay
         if setup.patience is not None:
             chosen_so_far, _ = choose_order(costs, parameters, data.bins, response_change(fits, data),
@@ -190,6 +196,15 @@ def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderS
     return OrderSweep(structure, delay_mode, fits, parameters, costs, changes, chosen, comparisons)
 
 
+def _candidate_cost(fit: OrderFit, data: SpectralData, setup: SearchSetup) -> float:
+    """V of an order that is a candidate for the order test, else inf: an unstable or marginal
+    order is none, nor one with a real pole far below the lowest fitted bin (the data cannot
+    place it; issue 17's lobe-gain hybrid used one at ~2 Hz to bend the lowest bins, and its DC
+    gain came out negative)."""
+    candidate = acceptable(fit, data.bins) and not pole_below_band(fit, setup.lowest_bin_hz, setup.sample_interval_s)
+    return fit.cost if candidate else math.inf
+
+
 def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
     """Both structures' sweeps and the one chosen, its reason in `why` (empty: free). The
     all-pole structure (frequency_fit.all_pole_numerator: no zero can follow a ripple) where the
@@ -198,8 +213,11 @@ def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
     record), or claims no mode in the band while every higher order of it is unstable (the rise
     towards a resonance beyond the band, which free zeros follow only by pressing a pole onto the
     unit circle: PTB's record with 0.5 % more noise); otherwise the order test between the two
-    choices decides (`_all_pole_preferred`). An asked order keeps the free structure, as does an
-    all-pole sweep with no stable order."""
+    choices decides (`_all_pole_preferred`). Where the free choice is sound (stable, no doublet),
+    an all-pole choice that is unstable once converged is not taken (a growing oscillation's
+    record: free order 1 claimed no mode in the band, every higher order unstable, and the
+    all-pole order 2 settled on the unit circle). An asked order keeps the free structure, as
+    does an all-pole sweep with no stable order."""
     free = fit_orders(data, FREE, setup)
     if setup.asked_order is not None:
         return free
@@ -210,6 +228,8 @@ def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
         all_pole.why = "no model with free zeros is stable"
     elif has_doublet(free.fits[free.chosen].a, free.fits[free.chosen].b):
         all_pole.why = "the model with free zeros followed a ripple with a pole–zero doublet"
+    elif not all_pole.acceptable(all_pole.chosen, data, setup):
+        pass  # the free choice is sound and the all-pole one unstable once converged: nothing to prefer
     elif _exhausted_without_mode(free, setup):
         all_pole.why = ("the model with free zeros claims no mode in the band and every higher order of it is "
                         "unstable")
@@ -293,15 +313,23 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
         return SettledOrder(sweep, chosen, "order_test", [])
     fallback, dropped = choose_stable_order(sweep.costs, sweep.parameters, data.bins, sweep.changes,
                                             lambda n: sweep.acceptable(n, data, setup), setup.significance)
-    if fallback is None and sweep.structure == FREE:
+    # A stable free order that holds a pole–zero doublet is the fit following a ripple: the same
+    # rule as fit_structures' (PTB's record cut at 0.75 ms: orders 1–2 unstable once converged,
+    # order 4 a doublet at 16.8 kHz, FBSD ±5 % 13.3 kHz against the sine's 11.4 kHz).
+    doublet = fallback is not None and has_doublet(sweep.fits[fallback].a, sweep.fits[fallback].b)
+    if (fallback is None or doublet) and sweep.structure == FREE and setup.asked_order is None:
         all_pole = fit_orders(data, ALL_POLE, setup)
-        if all_pole.chosen is not None:
-            marginal = marginal_modes_text(sweep.polished(chosen, data, setup), dt)
+        if all_pole.chosen is not None and all_pole.acceptable(all_pole.chosen, data, setup):
+            if doublet:
+                why = (f"the stable orders with free zeros hold a pole–zero doublet (order {fallback}, after "
+                       f"order {', '.join(str(n) for n in dropped)} became unstable when iterated to convergence)")
+            else:
+                why = "no model with free zeros is stable" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
             sweep, chosen = all_pole, all_pole.chosen
-            sweep.why = "no model with free zeros is stable" + marginal
-            warnings.append("no model with free zeros is stable" + marginal + "; the all-pole model (a "
-                            "resonance beyond the band, its damping not determined) is used")
-            fallback, dropped = (chosen, []) if sweep.acceptable(chosen, data, setup) else (None, [])
+            sweep.why = why
+            warnings.append(why + "; the all-pole model (a resonance beyond the band, its damping not determined) "
+                            "is used")
+            fallback, dropped = chosen, []
     if fallback is None:
         raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
                             "or outside the unit circle" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
@@ -362,17 +390,23 @@ def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: in
         xcorr = 0.0
     top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
     problem = OrderProblem(data, order, "causal", max_delay)
-    step = max(0.5, top / 8.0)  # at most ~9 starts
+    refined = [problem.solve(start, 40) for start in delay_grid_starts(problem, top, 2)]
+    return min(refined, key=lambda f: f.cost).delay if refined else 0.0
+
+
+def delay_grid_starts(problem: OrderProblem, top: float, count: int) -> list[OrderFit]:
+    """The `count` best linear starts on a grid of delays from 0 to `top` samples (steps of half a
+    sample, or 1/8 of the span: at most ~9 starts), at least a sample apart."""
+    step = max(0.5, top / 8.0)
     starts = sorted((problem.linear_start(float(tau)) for tau in np.arange(0.0, top + 0.25 * step, step)),
                     key=lambda f: f.cost)
     picked: list[OrderFit] = []
     for start in starts:
         if all(abs(start.delay - p.delay) >= 1.0 for p in picked):
             picked.append(start)
-        if len(picked) == 2:
+        if len(picked) == count:
             break
-    refined = [problem.solve(start, 40) for start in picked]
-    return min(refined, key=lambda f: f.cost).delay if refined else 0.0
+    return picked
 
 
 def acceptable(fit: OrderFit, bins: int) -> bool:
