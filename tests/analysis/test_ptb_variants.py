@@ -30,8 +30,9 @@ VARIANTS = {
 }
 # The captures of 0.75-0.9 ms missed until stop 33: the nominal FBSD ±5 % edge moved between 9.2 and
 # 11.7 kHz with where the capture ended, because the model error's weights were read per bin from one
-# residual (~2 degrees of freedom a bin) and followed its noise; they are one level now, measured
-# on the final model's residual (analysis.model_error), and the edge stays within 10.8-11.3 kHz.
+# residual (~2 degrees of freedom a bin) and followed its noise; its spectrum has two parameters now
+# (c·|U|^(2β), analysis.model_error), measured again on the final model, and the edge stays within
+# 11.2-11.35 kHz on them.
 
 
 def holds_the_sine(make) -> None:
