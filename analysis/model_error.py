@@ -5,7 +5,7 @@ weighed as an output error of its own (`with_output_variance`), its size is meas
 the final model, and the Monte Carlo draws it (the budget's "model error" row).
 
 What is weighed and drawn is a spectrum of two parameters, c·(|U|²/mean |U|²)^β over the fitted
-bins, by maximum likelihood on the residual (`_drive_law_variance`): β 0 is an error independent
+bins, by maximum likelihood on the residual (`drive_law_variance`): β 0 is an error independent
 of the drive (the bar's motion, a second drive path), β 1 one that grows with it, as a
 lobe-dependent gain does (β 2 its bound). Where it sits (its centroid and 10-90 % range) is read
 from its smoothed spectrum. Per-bin weights were tried and dropped: read from one residual (about
@@ -78,7 +78,7 @@ def measure_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, param
                         threshold: float = MODEL_ERROR_DETECTED) -> ModelError:
     """The excess of the fit's residual over the noise: |R_k|² less the noise's E|N_k|²
     (response noise plus the reference's through the model), corrected for the degrees of
-    freedom the fit took: its spectrum by `_drive_law_variance`, where it sits from its
+    freedom the fit took: its spectrum by `drive_law_variance`, where it sits from its
     smoothing over neighbouring bins (±MODEL_ERROR_OCTAVES, _log_smoothed). Significant when
     the residual exceeds `threshold` times the noise's (0: measure it whatever its size)."""
     omega = 2.0 * np.pi * prep.bin_hz * dt
@@ -92,7 +92,7 @@ def measure_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, param
         return replace(ModelError.none(bins), ratio=ratio)
     # Where it sits is read from its smoothed spectrum; what is weighed and drawn is its drive law.
     excess = np.maximum(_log_smoothed(power - expected, prep.bin_hz), 0.0)
-    var_bins, exponent = _drive_law_variance(power, expected, np.abs(prep.u_bins) ** 2)
+    var_bins, exponent = drive_law_variance(power, expected, np.abs(prep.u_bins) ** 2)
     total = float(np.sum(var_bins))
     length = prep.u.size
     rms = math.sqrt(2.0 * total) / length
@@ -118,7 +118,7 @@ def _log_smoothed(x: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
     return (total[hi] - total[lo]) / (hi - lo)
 
 
-def _drive_law_variance(power: np.ndarray, expected: np.ndarray, u_power: np.ndarray) -> tuple[np.ndarray, float]:
+def drive_law_variance(power: np.ndarray, expected: np.ndarray, u_power: np.ndarray) -> tuple[np.ndarray, float]:
     """The model error's variance per bin, c·(|U|²/mean |U|²)^β, and β: by maximum likelihood on
     the residual's power per bin (`power`, each bin a circular Gaussian of variance `expected` +
     the error's), β on MODEL_ERROR_EXPONENTS and c, for each, by the likelihood's fixed point
