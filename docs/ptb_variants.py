@@ -5,7 +5,7 @@
 The record is read from the installed PyDynamic (the test extra), as the tests read it, and each
 variant is made by tests/ptb_shock.py: one way a lab's other recording of the same shot would
 differ (another sample rate, a capture cut shorter or started later, a skew between the
-channels, more noise). For each it runs the whole shot analysis with its uncertainty and judges
+channels, more noise), alone and two or three at once. For each it runs the whole shot analysis with its uncertainty and judges
 it as tests/analysis/test_ptb_variants.py does (`against_sine`): both FBSD edges' 95 % intervals
 hold the sine's (11.37 / 15.46 kHz) with half-widths of at most 25 %, the DC gain's holds the
 sine's lowest point with at most 2 %. The tests run a few of these; this study runs many more,
@@ -48,14 +48,20 @@ def variants() -> dict[str, Callable[[], Record]]:
     for factor in (2, 10, 20):
         out[f"{10 / factor:g} MS/s"] = lambda f=factor: decimated(f)
     out["4.29 MS/s (3/7)"] = lambda: resampled(3, 7)
-    for n in (7_000, 7_500, 8_000, 8_500, 9_000, 9_500, 10_000, 11_000, 12_000, 14_000, 16_000):
+    for n in (6_500, 7_000, 7_500, 8_000, 8_500, 9_000, 9_500, 10_000, 11_000, 12_000, 14_000, 16_000):
         out[f"{n / 1e4:g} ms capture"] = lambda n=n: cut(n)
-    for s in (1_000, 2_500):
+    for s in (1_000, 2_500, 3_000):
         out[f"started {s / 1e4:g} ms later"] = lambda s=s: started_late(s)
-    for s in (-15, -5, 3, 8, 20):
+    for s in (-15, -5, 3, 8, 20, 30):
         out[f"skew {s / 10:+g} us"] = lambda s=s: skewed(s)
-    for level, seed in ((1e-3, 0), (3e-3, 5), (5e-3, 9), (1e-2, 1), (1e-2, 7)):
+    for level, seed in ((1e-3, 0), (3e-3, 5), (5e-3, 9), (1e-2, 1), (1e-2, 7), (2e-2, 1)):
         out[f"{100 * level:g} % more noise (seed {seed})"] = lambda lv=level, sd=seed: noisier(lv, sd)
+    # two or three at once, as one lab's recording would differ in several ways
+    out["2 MS/s, 0.8 ms"] = lambda: cut(1_600, decimated(5))
+    out["0.85 ms, 0.5 % noise"] = lambda: cut(8_500, noisier(5e-3, 3))
+    out["0.9 ms, skew -1 us"] = lambda: cut(9_000, skewed(-10))
+    out["5 MS/s, skew, noise"] = lambda: decimated(2, noisier(3e-3, 4, skewed(5)))
+    out["late 0.15 ms, 1 ms"] = lambda: cut(10_000, started_late(1_500))
     return out
 
 

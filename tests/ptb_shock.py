@@ -101,9 +101,9 @@ def write_ptb_sine_csv(path: Path) -> Path:
 # ------------------------------------------------------------------------------ variants
 # Other recordings of the same shot, as a lab's would differ (tests/analysis/test_ptb_variants.py,
 # docs/ptb_variants.py).
-def decimated(factor: int) -> Record:
-    """The record at 10 MS/s ÷ `factor` (zero-phase FIR decimation)."""
-    rec = ptb_record()
+def decimated(factor: int, rec: Record | None = None) -> Record:
+    """The record (PTB's, or `rec`) at its rate ÷ `factor` (zero-phase FIR decimation)."""
+    rec = rec or ptb_record()
     ref, resp = (signal.decimate(x, factor, ftype="fir", zero_phase=True) for x in (rec.reference, rec.response))
     return Record(rec.sample_interval_s * factor, ref, resp, response_unit="pC")
 
@@ -115,27 +115,27 @@ def resampled(up: int, down: int) -> Record:
     return Record(rec.sample_interval_s * down / up, ref, resp, response_unit="pC")
 
 
-def cut(samples: int) -> Record:
-    """The capture ended after `samples` (0.1 µs each)."""
-    rec = ptb_record()
+def cut(samples: int, rec: Record | None = None) -> Record:
+    """The capture (PTB's, 0.1 µs a sample, or `rec`) ended after `samples`."""
+    rec = rec or ptb_record()
     return Record(rec.sample_interval_s, rec.reference[:samples], rec.response[:samples], response_unit="pC")
 
 
-def started_late(samples: int) -> Record:
-    """The capture started `samples` later (a shorter lead-in before the pulse)."""
-    rec = ptb_record()
+def started_late(samples: int, rec: Record | None = None) -> Record:
+    """The capture (PTB's or `rec`) started `samples` later (a shorter lead-in before the pulse)."""
+    rec = rec or ptb_record()
     return Record(rec.sample_interval_s, rec.reference[samples:], rec.response[samples:], response_unit="pC")
 
 
-def skewed(samples: int) -> Record:
-    """The response shifted by `samples` at 10 MS/s (0.1 µs each) against the reference."""
-    rec = ptb_record()
+def skewed(samples: int, rec: Record | None = None) -> Record:
+    """The response shifted by `samples` (PTB's: 0.1 µs each; or `rec`'s) against the reference."""
+    rec = rec or ptb_record()
     return Record(rec.sample_interval_s, rec.reference, np.roll(rec.response, samples), response_unit="pC")
 
 
-def noisier(level: float, seed: int = 0) -> Record:
-    """White noise of `level` × each channel's peak added to both."""
-    rec = ptb_record()
+def noisier(level: float, seed: int = 0, rec: Record | None = None) -> Record:
+    """White noise of `level` × each channel's peak added to both (PTB's record or `rec`)."""
+    rec = rec or ptb_record()
     rng = np.random.default_rng(seed)
     ref, resp = (x + rng.normal(0.0, level * float(np.max(np.abs(x))), x.size) for x in (rec.reference, rec.response))
     return Record(rec.sample_interval_s, ref, resp, response_unit="pC")
