@@ -27,6 +27,9 @@ VARIANTS = {
     "0.1 % more noise": lambda: noisier(1e-3),
     "0.2 % more noise": lambda: noisier(2e-3, seed=2),
     "0.5 % more noise": lambda: noisier(5e-3),
+    # several differences at once
+    "2 MS/s, 0.8 ms capture": lambda: cut(1_600, decimated(5)),
+    "5 MS/s, skew +0.5 us, 0.3 % more noise": lambda: decimated(2, noisier(3e-3, 4, skewed(5))),
 }
 # The captures of 0.75-0.9 ms missed until stop 33: the nominal FBSD ±5 % edge moved between 9.2 and
 # 11.7 kHz with where the capture ended, because the model error's weights were read per bin from one
