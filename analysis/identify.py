@@ -34,10 +34,9 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    explains is measured (its spectrum c·|U|^(2β), by maximum likelihood; where it sits in
    frequency is reported); when it is significant (4× the noise's, 2.5× where the fit holds a
    pole–zero doublet) every order is fitted again with it weighed as an output error of its
-   own, its size is measured again on
-   the final model's residual (the free structure's choice can leave more unexplained than the
-   model used: PTB's record cut at 0.8 ms, 1.4 % of the peak against 0.65 %), and the Monte
-   Carlo draws it. Then, and also where the choice holds a doublet
+   own, its size is measured again on the final model's residual (the free structure's choice
+   can leave more unexplained than the model used: PTB's record cut at 0.8 ms, 1.4 % of the
+   peak against 0.7 %), and the Monte Carlo draws it. Then, and also where the choice holds a doublet
    without detected model error (the doublet can take the error in), the orders are fitted in
    the all-pole structure too (B = g·(1 + z⁻¹)ⁿ/2ⁿ, a pole pair at least, a delay of either
    sign: the reference chain's own delay) and the structure chosen (order_search.fit_structures:

@@ -278,7 +278,7 @@ def explain(report: dict[str, Any]) -> str:
         lo, hi = error.get("range_hz") or (None, None)
         lines.append(f"  model error: the residual is {error['residual_over_noise']:.3g}× the noise's, "
                      f"{error['rms_percent_of_peak']:.2g} % of the peak RMS, mostly "
-                     f"{(lo or 0) / 1e3:.3g}–{(hi or 0) / 1e3:.3g} kHz, its power ∝ |U|^{2 * error.get('drive_exponent', 0):.2g} "
+                     f"{(lo or 0) / 1e3:.3g}–{(hi or 0) / 1e3:.3g} kHz, its power ∝ |U|^{2 * (error.get('drive_exponent') or 0.0):.2g} "
                      "(0: independent of the drive): weighed in a second fit and drawn in the uncertainty")
     else:
         lines.append(f"  model error: none beyond the noise (residual {error.get('residual_over_noise', 1.0):.3g}× "
