@@ -60,8 +60,10 @@ PEAK_MIN_HALF = 2
 PEAK_MAX_HALF = 40
 
 
-def peak_estimate(x: np.ndarray) -> tuple[float, float]:
-    """(signed peak value, fractional sample index) of the largest excursion of `x`.
+def peak_estimate(x: np.ndarray, polarity: float | None = None) -> tuple[float, float]:
+    """(signed peak value, fractional sample index) of the largest excursion of `x` (of the sign
+    of `polarity` when given: a Monte Carlo draw keeps the nominal peak's polarity, where a
+    ringing response's opposite extreme is nearly as large).
 
     A least-squares polynomial over the extreme's lobe (where a 5-sample box-car of the signal
     stays above PEAK_LOBE of its maximum: chosen on the smoothed signal so that no single noisy
@@ -73,8 +75,12 @@ def peak_estimate(x: np.ndarray) -> tuple[float, float]:
     maximum inside the window.
     """
     x = np.asarray(x, dtype=float)
-    i_max = int(np.argmax(np.abs(x)))
-    sign = 1.0 if x[i_max] >= 0 else -1.0
+    if polarity is None:
+        i_max = int(np.argmax(np.abs(x)))
+        sign = 1.0 if x[i_max] >= 0 else -1.0
+    else:
+        sign = 1.0 if polarity >= 0 else -1.0
+        i_max = int(np.argmax(x * sign))
     s = x * sign
     lo_s, hi_s = max(0, i_max - PEAK_MAX_HALF - 2), min(s.size, i_max + PEAK_MAX_HALF + 3)
     local = s[lo_s:hi_s]
@@ -149,9 +155,11 @@ def shock_sensitivity(reference: np.ndarray, response: np.ndarray) -> float:
 
 
 def pulse_width(
-    acceleration_m_s2: np.ndarray, sample_interval_s: float, start_time_s: float = 0.0, fraction: float = WIDTH_FRACTION
+    acceleration_m_s2: np.ndarray, sample_interval_s: float, start_time_s: float = 0.0, fraction: float = WIDTH_FRACTION,
+    polarity: float | None = None,
 ) -> PulseWidth:
-    """Peak (by `peak_estimate`) and width at `fraction` of it of the largest pulse in the record."""
+    """Peak (by `peak_estimate`) and width at `fraction` of it of the largest pulse in the record
+    (of the sign of `polarity` when given: a bar's bipolar pulse has a second lobe nearly as large)."""
     a = np.asarray(acceleration_m_s2, dtype=float)
     if a.ndim != 1 or a.size < 3:
         raise AnalysisError("excitation: need a 1-D record of at least 3 samples")
@@ -159,10 +167,10 @@ def pulse_width(
         raise AnalysisError("excitation: the reference has NaN or infinite samples")
     if not sample_interval_s > 0:
         raise AnalysisError("excitation: the sample interval must be positive")
-    i_peak = int(np.argmax(np.abs(a)))
+    i_peak = int(np.argmax(np.abs(a) if polarity is None else a * (1.0 if polarity >= 0 else -1.0)))
     if a[i_peak] == 0.0:
         raise AnalysisError("excitation: the reference is all zeros; no pulse to measure")
-    peak, at = peak_estimate(a)
+    peak, at = peak_estimate(a, polarity)
     s = a * np.sign(peak)  # the main pulse made positive
     level = fraction * abs(peak)
     below = np.flatnonzero(s[:i_peak] < level)

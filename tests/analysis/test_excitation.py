@@ -115,3 +115,23 @@ def test_bad_records():
         pulse_width(np.linspace(0, 1, 100), 1e-6)
     with pytest.raises(AnalysisError, match="NaN"):
         pulse_width(np.array([0.0, np.nan, 1.0, 0.0]), 1e-6)
+
+
+def test_a_given_polarity_keeps_the_peak_on_its_lobe_when_the_other_is_nearly_as_large() -> None:
+    """A ringing response: +1.00 and −0.96 extremes. With noise, the largest excursion flips
+    between them; with the nominal's polarity every draw reads the positive lobe (closed form:
+    a cosine's crest of 1.0 at sample 100)."""
+    from hopkinson.analysis.excitation import peak_estimate
+
+    k = np.arange(200)
+    x = np.cos(2 * np.pi * (k - 100) / 40) * np.exp(-np.abs(k - 100) / 500)
+    x[120] = -0.96  # the opposite extreme nearly as large
+    rng = np.random.default_rng(3)
+    free, kept = [], []
+    for _ in range(200):
+        noisy = x + 0.03 * rng.standard_normal(k.size)
+        free.append(peak_estimate(noisy)[0])
+        kept.append(peak_estimate(noisy, polarity=1.0)[0])
+    assert min(free) < 0  # the flip this guards against happens
+    assert min(kept) > 0.9 and abs(np.median(kept) - 1.0) < 0.01
+    assert peak_estimate(x, polarity=-1.0)[0] < -0.9  # and the other lobe when asked
