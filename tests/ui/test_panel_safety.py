@@ -22,12 +22,21 @@ def assert_rig_safe(world, vent_done_bar: float) -> None:
 
 
 class FireWatch:
-    """Records whether the FIRE button was ever enabled (checked at every rig event)."""
+    """Records whether the FIRE button was ever enabled (checked at every rig event), while in
+    its `with` block. Leaving the block disconnects it: a slot left connected to a window that
+    the fixture's teardown disposes is called while the garbage collector clears this object,
+    and that crashed the test worker (AttributeError in the slot, then a segmentation fault)."""
 
     def __init__(self, window) -> None:
         self.window = window
         self.ever_enabled = False
-        window.link.event.connect(self._check)
+
+    def __enter__(self) -> "FireWatch":
+        self.window.link.event.connect(self._check)
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        self.window.link.event.disconnect(self._check)
 
     def _check(self, _event) -> None:
         self.ever_enabled |= self.window.fire_button.isEnabled()
@@ -65,9 +74,8 @@ def test_door_open_fire_never_enabled_shot_aborted_in_check(qtbot, make_panel):
     w = panel.window
     qtbot.waitUntil(lambda: w.status_panel.interlock_lamps["door"].level == "fault", timeout=5000)
     assert "door/guard open" in w.status_panel.interlock_lamps["door"].toolTip()
-    watch = FireWatch(w)
     w.confirm_fire = lambda: pytest.fail("FIRE must not be offered with the door open")
-    with qtbot.waitSignal(w.link.shot_finished, timeout=SHOT_TIMEOUT_MS) as finished:
+    with FireWatch(w) as watch, qtbot.waitSignal(w.link.shot_finished, timeout=SHOT_TIMEOUT_MS) as finished:
         qtbot.mouseClick(w.arm_button, Qt.MouseButton.LeftButton)
     outcome = finished.args[0]
     assert outcome.final_state == "ABORTED" and outcome.aborted_in == "CHECK" and not outcome.fired
