@@ -31,7 +31,7 @@ class FireWatch:
         self.window = window
         self.ever_enabled = False
 
-    def __enter__(self) -> "FireWatch":
+    def __enter__(self) -> FireWatch:
         self.window.link.event.connect(self._check)
         return self
 
