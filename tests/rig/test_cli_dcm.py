@@ -112,7 +112,10 @@ def test_compensate_streams_the_response_aligned_with_the_reference(tmp_path, ca
     model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
     dcm_path = tmp_path / "dcm.json"
     design = run_json(capsys, ["dcm", "--model", str(model_path), "--json", "-o", str(dcm_path)])
-    assert design["dcm"]["band_limit_hz"] == 36_000.0 and design["dcm"]["latency_s"] > 0
+    # the band limit's ±5 % edge at the top of the supported band (36 kHz): the analog
+    # prototype's cut-off 36 / 0.573 kHz, mapped to the sample rate
+    assert design["dcm"]["band_limit_hz"] == pytest.approx(36_000.0 / (1 / 0.95**2 - 1) ** 0.25, rel=0.05)
+    assert design["dcm"]["latency_s"] > 0
     out = tmp_path / "out.csv"
     info = run_json(capsys, ["compensate", str(rec_path), "--dcm", str(dcm_path), "-o", str(out),
                              "--block-samples", "257", "--json"])
@@ -203,7 +206,7 @@ def test_auto_is_the_default_and_reports_the_widening(tmp_path, capsys):
     assert dcm["recommended"] is True and dcm["not_recommended_reason"] is None
     # asking for more than the band limit allows: reached, aimed for, and why not
     text = run_text(capsys, ["dcm", "--model", str(model_path), "--widening", "10"])
-    assert "aimed for ×10, reached ×" in text and "band limit at 36 kHz" in text
+    assert "aimed for ×10, reached ×" in text and "±5 % up to 36 kHz" in text and "caps it" in text
 
 
 def test_dcm_file_is_written_atomically_and_never_over_an_input(tmp_path, capsys):
