@@ -166,7 +166,7 @@ class DcmTab(QWidget):
         self.noise_label = QLabel("—")
         self.noise_label.setWordWrap(True)
         self.noise_label.setToolTip("noise gain: RMS amplification of white noise at the analysis rate; band limit: "
-                                    "the low-pass at the top of what the shot vouches for; latency: removed when "
+                                    "the low-pass's cut-off (−3 dB); its ±5 % edge is the top of what the shot vouches for; latency: removed when "
                                     "compensating (`hopkinson compensate`, the plot on the right)")
         self.poles_label = QLabel("—")
         self.poles_label.setWordWrap(True)
@@ -402,7 +402,7 @@ class DcmTab(QWidget):
         band, latency = figures.get("band_limit_hz"), figures.get("latency_s")
         self.noise_label.setText(
             ("—" if noise is None else f"×{noise:.3g}" + (f" (limit ×{limit:.3g})" if limit else ""))
-            + "; " + ("no band limit" if band is None else f"≤ {band / KILO:.1f} kHz")
+            + "; " + ("no band limit" if band is None else f"low-pass {band / KILO:.1f} kHz")
             + ("" if latency is None else f"; {latency * 1e6:.1f} µs"))
         self.mag_plot.show_curves(d.frequency_hz, d.magnitude, d.compensated_magnitude, rep["compensated_fbsd_hz"])
         self.step_model_curve.setData(d.step_time_s, d.step_model)

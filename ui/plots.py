@@ -472,8 +472,9 @@ class ResultsStrip(QFrame):
         tip = "error over the pulse relative to its peak: without → with the DCM, on this shot itself"
         for key, pair in (("check_rms", check.rms_error_pct), ("check_peak", check.peak_error_pct)):
             self._set(key, "—" if pair is None else f"{_pct(pair[0])} → {_pct(pair[1])}", tip)
-        self._set("band_limit", "—" if check.band_limit_hz is None else f"≤ {check.band_limit_hz / KILO:.1f} kHz",
-                  "band limit of the compensation (low-pass): the top of what the shot vouches for")
+        self._set("band_limit", "—" if check.band_limit_hz is None else f"{check.band_limit_hz / KILO:.1f} kHz",
+                  "band limit of the compensation: the low-pass's cut-off (−3 dB); its ±5 % edge is the top of "
+                  "what the shot vouches for")
         if check.noise_gain is not None:
             self._set("noise_gain", f"×{check.noise_gain:.3g}" + (f" (limit ×{check.noise_gain_limit:.3g})"
                                                                   if check.noise_gain_limit else ""),
