@@ -51,7 +51,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hopkinson.analysis.key_figures import KeyFigures
-from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.errors import EXIT_BAD_INPUT, ConfigError
 from hopkinson.rig.events import (
     CAMPAIGN_STATE,
     CampaignFinished,
@@ -338,7 +338,12 @@ class CampaignRunner:
                 shot = journal.next_shot()
                 if shot is None:
                     break
-                last = self._fire(shot)
+                try:
+                    last = self._fire(shot)
+                except ConfigError as exc:  # a shot that cannot be planned (nothing fired): the run ends here
+                    self.bus.publish(CampaignFinished(state=CAMPAIGN_STATE, message=str(exc), exit_code=EXIT_BAD_INPUT,
+                                                      run_folder=str(self.run_folder.path)))
+                    raise
                 if last.fired:
                     fired.append(shot.id)
                 if not last.done:

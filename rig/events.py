@@ -277,7 +277,8 @@ class CampaignShotEnded(RigEvent):
 
 @dataclass(frozen=True, kw_only=True)
 class CampaignFinished(RigEvent):
-    """The campaign run ended: exit code 0 (complete) or 3 (stopped with shots left)."""
+    """The campaign run ended: exit code 0 (complete), 3 (stopped with shots left) or 2 (a shot
+    that cannot be planned, found between shots: nothing of it fired)."""
 
     LABEL: ClassVar[str] = "campaign"
 

@@ -18,7 +18,7 @@ from hopkinson.drivers.sim.world import LauncherParams, WorldParams
 from hopkinson.rig.campaign import CampaignRunner, check_plan
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
-from hopkinson.rig.events import CampaignShotStarted, EventBus
+from hopkinson.rig.events import CampaignFinished, CampaignShotStarted, EventBus
 from hopkinson.rig.instruments import open_instruments
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.level_control import (
@@ -210,7 +210,8 @@ def test_a_level_the_bar_model_cannot_find_mid_campaign_stops_in_one_line_and_fi
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The speed search failing for the entry's second shot (injected: the corrected target after
     the first shot is analysed) ends the campaign with one ConfigError naming the plan and the
-    shot; the first shot's record stays, the second is never fired (still PLANNED for --resume)."""
+    shot; the first shot's record stays, the second is never fired (still PLANNED for --resume).
+    Subscribers hear the end (CampaignFinished, exit code 2) and the rig is left safe."""
     import hopkinson.rig.campaign as campaign_module
 
     real = campaign_module.choose_pressure
@@ -227,9 +228,18 @@ def test_a_level_the_bar_model_cannot_find_mid_campaign_stops_in_one_line_and_fi
         session = stack.enter_context(sim_session(short_timeouts_config(), SimConfig(
             world=WorldParams(time_scale=100.0), servers=ServerParams(modbus_slow_delay_s=0.3))))
         instruments = stack.enter_context(open_instruments(session.config, session.simulated_truth))
+        bus = EventBus()
+        heard: list = []
+        bus.subscribe(heard.append)
         with pytest.raises(ConfigError) as raised:
-            CampaignRunner(run, load_plan(plan_path), instruments, session.config, EventBus()).run()
+            CampaignRunner(run, load_plan(plan_path), instruments, session.config, bus).run()
+        coils = session.world.coils()  # the world's own valves
+        assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True, coils
+        assert session.world.shots_fired == 1
     message = str(raised.value)
+    finished = [e for e in heard if isinstance(e, CampaignFinished)]
+    assert len(finished) == 1 and finished[0].exit_code == 2 and finished[0].message == message
+    assert finished[0].run_folder == str(run.path)
     assert "\n" not in message and str(plan_path) in message and "(s001-r2)" in message
     assert "this shot was not fired" in message
     with Journal.open(run) as journal:
