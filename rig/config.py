@@ -527,7 +527,7 @@ RULES: dict[str, _Rule] = {
     "bar.sensor_mass_kg": _Rule(0.0, 10.0),
     "bar.mount": _Rule(choices=BAR_MOUNTS),
     "bar.launcher_efficiency": _Rule(above=0.0, max=1.0),
-    "bar.projectiles.number": _Rule(1, 99),
+    "bar.projectiles.number": _Rule(1, 3, text="a position of the loader: plans and shots take 1, 2 or 3"),
     "bar.projectiles.contact_stiffness_n_m": _Rule(0.0, 1e12, text="0: flat and rigid"),
     "bar.projectiles.contact_exponent": _Rule(1.0, 3.0, text="1: a linear spring, 1.5: Hertz's"),
     "limits.min_pressure_bar": _Rule(0.0, 100.0),

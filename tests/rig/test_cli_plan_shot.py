@@ -107,6 +107,17 @@ def test_a_bonded_mount_plans_its_bipolar_pulse_and_a_wrong_mount_is_named(capsy
     assert code == 2 and f"{config}: bar.mount: must be one of" in err and err.count("\n") == 1
 
 
+def test_a_projectile_the_loader_cannot_take_is_refused_in_one_line(capsys, tmp_path: Path) -> None:
+    """[bar.projectiles] numbers are the loader's positions, 1-3, as plans and shots take them: a
+    No. 4 could be planned for and never fired."""
+    config = tmp_path / "rig.toml"
+    config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + (
+        "\n[[bar.projectiles]]\nnumber = 4\ncontact_stiffness_n_m = 1e7\n"
+        "segments = [{material = \"C45\", length_m = 0.05, diameter_m = 0.016}]\n"))
+    code, _out, err = plan(capsys, "--peak-g", "5000", config=config)
+    assert code == 2 and f"{config}: bar.projectiles" in err and "number" in err and err.count("\n") == 1, err
+
+
 def test_the_readmes_bar_table_is_a_valid_rig_configuration(capsys, tmp_path: Path) -> None:
     """The README's `[bar]` example, appended to the simulated rig's file, loads and plans: its one
     projectile (the paper's No. 3 written out) gives No. 3's pressure for 50 000 g."""

@@ -98,17 +98,17 @@ def test_a_target_that_needs_more_than_the_rigs_maximum_is_refused_at_the_plan_c
 
 def test_a_target_for_a_projectile_the_rigs_bar_does_not_describe_is_refused_in_one_line(tmp_path: Path,
                                                                                            capsys) -> None:
-    """A rig whose [bar] lists only its own projectile No. 5: a target level for No. 3 cannot be
+    """A rig whose [bar] lists only its own projectile No. 2: a target level for No. 3 cannot be
     planned; the plan's check says so (plan, entry, the rig file's [bar]), exit 2, nothing made."""
     config = tmp_path / "rig.toml"
     config.write_text((REPO / "config" / "rig-sim.toml").read_text() + (
-        "\n[[bar.projectiles]]\nnumber = 5\ncontact_stiffness_n_m = 1e7\n"
+        "\n[[bar.projectiles]]\nnumber = 2\ncontact_stiffness_n_m = 1e7\n"
         "segments = [{material = \"C45\", length_m = 0.05, diameter_m = 0.016}]\n"))
     plan = write_plan(tmp_path, "[[shots]]\npeak_g = 30000\n")
     code = main(["campaign", "run", str(plan), "--sim", "--config", str(config), "--out", str(tmp_path / "run")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "Traceback" not in err[0]
-    assert "shots[1] (s001-r1): a target level needs the bar model: the rig has no projectile No. 3 (it has 5)" in err[0]
+    assert "shots[1] (s001-r1): a target level needs the bar model: the rig has no projectile No. 3 (it has 2)" in err[0]
     assert f"{config} [bar]" in err[0] and "nothing was fired" in err[0]
     assert not (tmp_path / "run").exists()
 
