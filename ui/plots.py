@@ -362,7 +362,7 @@ class ResultsStrip(QFrame):
         ("shock", "Shock sens."),
         ("peak", "Peak"),
         ("pulse", "Pulse width"),
-        ("band_limit", "DCM band"),
+        ("band_limit", "DCM low-pass"),
         ("check_rms", "DCM RMS error"),
         ("check_peak", "DCM peak error"),
         ("noise_gain", "DCM noise gain"),
