@@ -124,6 +124,11 @@ def test_a_target_beyond_the_band_limit_is_not_reached_and_the_note_says_why():
     # reaches it and not beyond (within 2 %: the designed poles mapped by exp(sT) pass a
     # little more than 1 there)
     assert 0.9 * 36_000.0 <= design.compensated_fbsd_hz["5"] <= 1.02 * 36_000.0
+    # the ±10 % edge lies beyond the supported band: said to be the model's extrapolation
+    assert design.compensated_fbsd_hz["10"] > 36_000.0
+    beyond = [n for n in design.notes if "beyond the band the shot supports" in n]
+    assert len(beyond) == (2 if design.compensated_fbsd_hz["5"] > 36_000.0 else 1)
+    assert "compensated ±10 % edge" in beyond[-1] and "up to 36 kHz" in beyond[-1]
 
 
 def test_the_noise_gain_limit_bounds_the_automatic_ratio():
