@@ -421,10 +421,9 @@ def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit
             notes: list[str]) -> DcmDesign:
     after = {k: e.frequency_hz for k, e in compensated_fbsd_edges(model, dcm).items()}
     reached = after["5"] / before["5"] if before["5"] > 0 else None
-    for key, bound in fbsd_bounds(after, support.supported_band_hz).items():
-        notes = [*notes, f"the compensated ±{key} % edge ({after[key] / 1e3:.4g} kHz) lies beyond the band the shot "
-                         f"supports (up to {bound['lower_bound_hz'] / 1e3:.4g} kHz): there the compensated response "
-                         "is the model's extrapolation, not measured"]
+    notes = notes + [f"the compensated ±{key} % edge is {bound['reason']}: there the compensated response is the "
+                     "model's extrapolation, not measured"
+                     for key, bound in fbsd_bounds(after, support.supported_band_hz).items()]
     noise = dcm.noise_gain()
     dt = model.sample_interval_s
     fit_band = min(max(after["5"], before["5"]), 0.4 / dt)  # the band it passes flat

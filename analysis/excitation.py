@@ -60,6 +60,15 @@ PEAK_MIN_HALF = 2
 PEAK_MAX_HALF = 40
 
 
+def _extreme(x: np.ndarray, polarity: float | None) -> tuple[int, float]:
+    """(index, sign) of the largest excursion of `x`, or of its largest of `polarity`'s sign."""
+    if polarity is None:
+        i = int(np.argmax(np.abs(x)))
+        return i, (1.0 if x[i] >= 0 else -1.0)
+    sign = 1.0 if polarity >= 0 else -1.0
+    return int(np.argmax(x * sign)), sign
+
+
 def peak_estimate(x: np.ndarray, polarity: float | None = None) -> tuple[float, float]:
     """(signed peak value, fractional sample index) of the largest excursion of `x` (of the sign
     of `polarity` when given: a Monte Carlo draw keeps the nominal peak's polarity, where a
@@ -75,12 +84,7 @@ def peak_estimate(x: np.ndarray, polarity: float | None = None) -> tuple[float, 
     maximum inside the window.
     """
     x = np.asarray(x, dtype=float)
-    if polarity is None:
-        i_max = int(np.argmax(np.abs(x)))
-        sign = 1.0 if x[i_max] >= 0 else -1.0
-    else:
-        sign = 1.0 if polarity >= 0 else -1.0
-        i_max = int(np.argmax(x * sign))
+    i_max, sign = _extreme(x, polarity)
     s = x * sign
     lo_s, hi_s = max(0, i_max - PEAK_MAX_HALF - 2), min(s.size, i_max + PEAK_MAX_HALF + 3)
     local = s[lo_s:hi_s]
@@ -167,7 +171,7 @@ def pulse_width(
         raise AnalysisError("excitation: the reference has NaN or infinite samples")
     if not sample_interval_s > 0:
         raise AnalysisError("excitation: the sample interval must be positive")
-    i_peak = int(np.argmax(np.abs(a) if polarity is None else a * (1.0 if polarity >= 0 else -1.0)))
+    i_peak = _extreme(a, polarity)[0]
     if a[i_peak] == 0.0:
         raise AnalysisError("excitation: the reference is all zeros; no pulse to measure")
     peak, at = peak_estimate(a, polarity)

@@ -338,12 +338,7 @@ class CampaignRunner:
                 shot = journal.next_shot()
                 if shot is None:
                     break
-                try:
-                    last = self._fire(shot)
-                except ConfigError as exc:  # a shot that cannot be planned (nothing fired): the run ends here
-                    self.bus.publish(CampaignFinished(state=CAMPAIGN_STATE, message=str(exc), exit_code=EXIT_BAD_INPUT,
-                                                      run_folder=str(self.run_folder.path)))
-                    raise
+                last = self._fire(shot)
                 if last.fired:
                     fired.append(shot.id)
                 if not last.done:
@@ -362,6 +357,10 @@ class CampaignRunner:
                                               run_folder=str(self.run_folder.path)))
             return CampaignOutcome(self.run_folder.path, exit_code, message, summary, fired,
                                    list(journal.resume_report), last)
+        except ConfigError as exc:  # found once the run began (a shot it cannot plan): the run ends here
+            self.bus.publish(CampaignFinished(state=CAMPAIGN_STATE, message=str(exc), exit_code=EXIT_BAD_INPUT,
+                                              run_folder=str(self.run_folder.path)))
+            raise
         finally:
             self._current = None
             self._journal = None

@@ -126,9 +126,11 @@ def test_a_target_beyond_the_band_limit_is_not_reached_and_the_note_says_why():
     assert 0.9 * 36_000.0 <= design.compensated_fbsd_hz["5"] <= 1.02 * 36_000.0
     # the ±10 % edge lies beyond the supported band: said to be the model's extrapolation
     assert design.compensated_fbsd_hz["10"] > 36_000.0
-    beyond = [n for n in design.notes if "beyond the band the shot supports" in n]
+    beyond = [n for n in design.notes if "unsupported by the excitation" in n]
     assert len(beyond) == (2 if design.compensated_fbsd_hz["5"] > 36_000.0 else 1)
-    assert "compensated ±10 % edge" in beyond[-1] and "up to 36 kHz" in beyond[-1]
+    assert "compensated ±10 % edge" in beyond[-1] and "supports up to 36 kHz" in beyond[-1]
+    assert f"puts the edge at {design.compensated_fbsd_hz['10'] / 1e3:.3g} kHz" in beyond[-1]
+    assert "model's extrapolation" in beyond[-1]
 
 
 def test_the_noise_gain_limit_bounds_the_automatic_ratio():
