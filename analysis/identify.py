@@ -32,7 +32,7 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
    model's whole phase (delay and zeros together), which analysis.sine_comparison compares.
 5b. Model error (ModelError, issue 17): the chosen order's residual beyond what the noise
    explains is measured (its spectrum c·|U|^(2β), by maximum likelihood; where it sits in
-   frequency is reported); when it is significant (4× the noise's, 2.5× where the fit holds a
+   frequency is reported); when it is significant (2× the noise's, 1.5× where the fit holds a
    pole–zero doublet) every order is fitted again with it weighed as an output error of its
    own, its size is measured again on the final model's residual (the free structure's choice
    can leave more unexplained than the model used: PTB's record cut at 0.8 ms, 1.4 % of the

@@ -5,7 +5,7 @@
 The record is read from the installed PyDynamic (the test extra), as the tests read it, and each
 variant is made by tests/ptb_shock.py: one way a lab's other recording of the same shot would
 differ (another sample rate, a capture cut shorter or started later, a skew between the
-channels, more noise), alone and two or three at once. For each it runs the whole shot analysis
+channels, more noise: 20 noises each at 1 and 2 % of the peak), alone and two or three at once. For each it runs the whole shot analysis
 with its uncertainty and judges it as tests/analysis/test_ptb_variants.py does (`against_sine`):
 both FBSD edges' 95 % intervals hold the sine's (11.37 / 15.46 kHz) with half-widths of at most
 25 %, the DC gain's holds the sine's lowest point with at most 2 %. The tests run a few of these; this study runs many more,
@@ -54,7 +54,9 @@ def variants() -> dict[str, Callable[[], Record]]:
         out[f"started {s / 1e4:g} ms later"] = lambda s=s: started_late(s)
     for s in (-15, -5, 3, 8, 20, 30):
         out[f"skew {s / 10:+g} us"] = lambda s=s: skewed(s)
-    for level, seed in ((1e-3, 0), (3e-3, 5), (5e-3, 9), (1e-2, 1), (1e-2, 7), (2e-2, 1)):
+    # more noise: each seed another noise, as each recording would have its own
+    noises = [(1e-3, 0), (3e-3, 5), (5e-3, 9)] + [(level, seed) for level in (1e-2, 2e-2) for seed in range(20)]
+    for level, seed in noises:
         out[f"{100 * level:g} % more noise (seed {seed})"] = lambda lv=level, sd=seed: noisier(lv, sd)
     # two or three at once, as one lab's recording would differ in several ways
     out["2 MS/s, 0.8 ms"] = lambda: cut(1_600, decimated(5))

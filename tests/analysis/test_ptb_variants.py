@@ -27,6 +27,13 @@ VARIANTS = {
     "0.1 % more noise": lambda: noisier(1e-3),
     "0.2 % more noise": lambda: noisier(2e-3, seed=2),
     "0.5 % more noise": lambda: noisier(5e-3),
+    # 1 % of the peak, three noises that missed until stop 35: the record's model error, partly masked
+    # by the noise, read 2.3-3.8× what the noise explains, under the detection's 4× then: seed 12 took
+    # a resonance at 29.5 kHz (±5 % edge 16.8 kHz), seed 13 claimed a mode at 27.8 kHz inside the band,
+    # seed 6's intervals drew neither the model error nor the band's parts (12.0 [11.67, 12.90] kHz)
+    "1 % more noise (seed 6)": lambda: noisier(1e-2, seed=6),
+    "1 % more noise (seed 12)": lambda: noisier(1e-2, seed=12),
+    "1 % more noise (seed 13)": lambda: noisier(1e-2, seed=13),
     # several differences at once
     "2 MS/s, 0.8 ms capture": lambda: cut(1_600, decimated(5)),
     "5 MS/s, skew +0.5 us, 0.3 % more noise": lambda: decimated(2, noisier(3e-3, 4, skewed(5))),
