@@ -7,7 +7,7 @@ import pytest
 from hopkinson.rig.events import Reading
 from hopkinson.rig.interlocks import INTERLOCKS
 from hopkinson.rig.sequencer import FireAuthorisation
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QObject, Qt, Slot
 
 from tests.ui.conftest import unreachable_config
 
@@ -21,13 +21,17 @@ def assert_rig_safe(world, vent_done_bar: float) -> None:
     assert world.reservoir_pressure_bar() <= vent_done_bar
 
 
-class FireWatch:
+class FireWatch(QObject):
     """Records whether the FIRE button was ever enabled (checked at every rig event), while in
-    its `with` block. Leaving the block disconnects it: a slot left connected to a window that
-    the fixture's teardown disposes is called while the garbage collector clears this object,
-    and that crashed the test worker (AttributeError in the slot, then a segmentation fault)."""
+    its `with` block. A QObject child of the window, in the GUI thread: the rig's events reach
+    it queued from the sequencer's thread, and a call still queued when the block ends must
+    find it alive. A plain Python object's bound method (PySide holds its instance weakly) was
+    called from such a queued event after the test had dropped the object: an AttributeError
+    in the slot, then a segmentation fault of the test worker (stop 34 disconnected it on exit,
+    which did not remove the calls already queued; it crashed again in 1 of 4 full runs)."""
 
     def __init__(self, window) -> None:
+        super().__init__(window)  # lives and dies with the window
         self.window = window
         self.ever_enabled = False
 
@@ -38,6 +42,7 @@ class FireWatch:
     def __exit__(self, *_exc) -> None:
         self.window.link.event.disconnect(self._check)
 
+    @Slot(object)
     def _check(self, _event) -> None:
         self.ever_enabled |= self.window.fire_button.isEnabled()
 
