@@ -5,11 +5,12 @@
 The record is read from the installed PyDynamic (the test extra), as the tests read it, and each
 variant is made by tests/ptb_shock.py: one way a lab's other recording of the same shot would
 differ (another sample rate, a capture cut shorter or started later, a skew between the
-channels, more noise: 20 noises each at 1 and 2 % of the peak), alone and two or three at once. For each it runs the whole shot analysis
-with its uncertainty and judges it as tests/analysis/test_ptb_variants.py does (`against_sine`):
-both FBSD edges' 95 % intervals hold the sine's (11.37 / 15.46 kHz) with half-widths of at most
-25 %, the DC gain's holds the sine's lowest point with at most 2 %. The tests run a few of these; this study runs many more,
-so that a change to the method can be judged on variants it was not tuned on. Rates of 1 MS/s
+channels, more noise: 20 noises each at 1 and 2 % of the peak), alone and two or three at
+once. For each it runs the whole shot analysis with its uncertainty and judges it as
+tests/analysis/test_ptb_variants.py does (`against_sine`): both FBSD edges' 95 % intervals hold
+the sine's (11.37 / 15.46 kHz) with half-widths of at most 25 %, the DC gain's holds the sine's
+lowest point with at most 2 %. The tests run a few of these; this study runs many more, so that
+a change to the method can be judged on variants it was not tuned on. Rates of 1 MS/s
 and above are analysed alike (the analysis resamples to 1 MS/s), so only 5 and 1 MS/s of them
 are run. Last line: one JSON object.
 """

@@ -106,7 +106,8 @@ def test_a_right_model_is_rarely_taken_for_model_error(shots) -> None:
     one reads 3.2×, its response noise measured on 91 samples (7.6 degrees of freedom). The
     detection's 2× (model_error.MODEL_ERROR_DETECTED; 4× until stop 35, when PTB's record with
     1 % more noise read 2.2–3.8× and went undetected) flags it: a false-alarm rate near 1 %.
-    More than 2 of 140 would be a rate beyond ~1 % (binomial, 5 % tail): the threshold too low."""
+    The shots are fixed (seeds 1000–1139), so the count is exact; more than 2 of 140 would mean
+    a threshold low enough to widen right models' intervals needlessly."""
     detected = sum(bool(m["detected"]) for m in shots["model_error"])
     ratios = [m["residual_over_noise"] for m in shots["model_error"]]
     assert detected <= 2, sorted(ratios)[-5:]
