@@ -32,7 +32,7 @@ from hopkinson.analysis.record_preparation import Prepared
 # explains. A right model reads about 1: the coverage study's simulated shots median 0.69, 139
 # of 140 below 1.4, one 3.2 (its response noise measured on 91 samples: a false alarm, ~1 %);
 # the simulated rig's Doppler shots 0.56-2.3, one of 8 seeds 10 (the demodulation's own error);
-# PTB's record reads 8 300×, its hybrids 5-120×. It was 4 until stop 35: PTB's record with 1 %
+# PTB's record reads 17 900×, its hybrids 5-120×. It was 4 until stop 35: PTB's record with 1 %
 # of its peak of added noise (each seed another noise) reads 2.2-8×, its real model error partly
 # masked by the noise, and at 2.2-3.8× it went undetected: then a spurious resonance near the
 # band's top (the ±5 % edge at 16.8 kHz, the sine's 11.4), a mode claimed inside the band, or
