@@ -34,6 +34,7 @@ from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
 from hopkinson.ui.plots import (
+    BAND_LIMIT_TIP,
     COMP_PEN,
     KILO,
     LEVEL_KEYS,
@@ -166,8 +167,8 @@ class DcmTab(QWidget):
         self.noise_label = QLabel("—")
         self.noise_label.setWordWrap(True)
         self.noise_label.setToolTip("noise gain: RMS amplification of white noise at the analysis rate; band limit: "
-                                    "the low-pass's cut-off (−3 dB); its ±5 % edge is the top of what the shot vouches for; latency: removed when "
-                                    "compensating (`hopkinson compensate`, the plot on the right)")
+                                    f"{BAND_LIMIT_TIP}; latency: removed when compensating "
+                                    "(`hopkinson compensate`, the plot on the right)")
         self.poles_label = QLabel("—")
         self.poles_label.setWordWrap(True)
         self.poles_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)

@@ -345,6 +345,10 @@ class MagnitudePlot(pg.PlotWidget):
             self.peak_note.setText("")
 
 
+# What the DCM's band limit is, as its tooltips say (the strip here, the DCM tab).
+BAND_LIMIT_TIP = "the low-pass's cut-off (−3 dB); its ±5 % edge is the top of what the shot vouches for"
+
+
 class ResultsStrip(QFrame):
     """The shot's key figures (analysis.key_figures): FBSD before and with the DCM, model,
     resonance, sensitivities and pulse, each as value ± U (k ≈ 2) when the shot carries its
@@ -473,8 +477,7 @@ class ResultsStrip(QFrame):
         for key, pair in (("check_rms", check.rms_error_pct), ("check_peak", check.peak_error_pct)):
             self._set(key, "—" if pair is None else f"{_pct(pair[0])} → {_pct(pair[1])}", tip)
         self._set("band_limit", "—" if check.band_limit_hz is None else f"{check.band_limit_hz / KILO:.1f} kHz",
-                  "band limit of the compensation: the low-pass's cut-off (−3 dB); its ±5 % edge is the top of "
-                  "what the shot vouches for")
+                  f"band limit of the compensation: {BAND_LIMIT_TIP}")
         if check.noise_gain is not None:
             self._set("noise_gain", f"×{check.noise_gain:.3g}" + (f" (limit ×{check.noise_gain_limit:.3g})"
                                                                   if check.noise_gain_limit else ""),

@@ -27,10 +27,13 @@ VARIANTS = {
     "0.1 % more noise": lambda: noisier(1e-3),
     "0.2 % more noise": lambda: noisier(2e-3, seed=2),
     "0.5 % more noise": lambda: noisier(5e-3),
-    # 1 % of the peak, three noises that missed until stop 35: the record's model error, partly masked
-    # by the noise, read 2.3-3.8× what the noise explains, under the detection's 4× then: seed 12 took
+    # 1 % of the peak, four noises that missed until stop 35: the record's model error, partly masked
+    # by the noise, read 2.2-3.8× what the noise explains, under the detection's 4× then: seed 12 took
     # a resonance at 29.5 kHz (±5 % edge 16.8 kHz), seed 13 claimed a mode at 27.8 kHz inside the band,
-    # seed 6's intervals drew neither the model error nor the band's parts (12.0 [11.67, 12.90] kHz)
+    # seed 6's intervals drew neither the model error nor the band's parts (12.0 [11.67, 12.90] kHz);
+    # seed 5's free fit holds a doublet and reads 2.17×: it misses with that fit's threshold at 2.5×
+    # (model_error.MODEL_ERROR_WITH_DOUBLET, now 1.5×), the ±10 % interval [15.53, 17.38] kHz
+    "1 % more noise (seed 5)": lambda: noisier(1e-2, seed=5),
     "1 % more noise (seed 6)": lambda: noisier(1e-2, seed=6),
     "1 % more noise (seed 12)": lambda: noisier(1e-2, seed=12),
     "1 % more noise (seed 13)": lambda: noisier(1e-2, seed=13),
