@@ -249,8 +249,7 @@ def explain(report: dict[str, Any]) -> str:
                  f"({noise.get('response_source')})")
     for m in noise.get("motion_after_pulse") or []:
         why = (f"moves coherently in both channels (power-weighted coherence {m['coherence']:.2f})"
-               if m.get("coherence") is not None else
-               "too short to judge by coherence while the other channel is not at rest")
+               if m.get("coherence") is not None else m.get("reason") or "too short to judge by coherence")
         lines.append(f"  motion, not noise: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms {why}: left out of "
                      "the noise")
     band = report.get("supported_band_hz")

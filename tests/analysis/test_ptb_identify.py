@@ -301,3 +301,19 @@ def test_a_pole_nearly_cancelled_by_a_zero_is_no_mode():
     far = mark_doublets(modes, np.array([0.5, -0.3]))
     assert near[0]["cancelled"] and not near[0]["supported"] and main_mode(near) is None
     assert not far[0]["cancelled"] and main_mode(far)["natural_frequency_hz"] > 16e3
+
+
+def test_identify_explain_gives_each_left_out_stretch_its_own_reason():
+    """The trail says why each stretch after the pulse was left out of the noise, as the noise
+    stage recorded it (a head before motion and a short stretch beside a busy channel differ)."""
+    from hopkinson.rig.cli.identify import explain
+
+    head = "too short to judge by coherence, and the motion that follows may have begun in it"
+    beside = "too short to judge by coherence, the other channel not at rest"
+    trail = explain({"noise": {"motion_after_pulse": [
+        {"start_s": 1.188e-3, "stop_s": 1.8e-3, "coherence": 0.29, "reason": "coherent"},
+        {"start_s": 0.868e-3, "stop_s": 1.188e-3, "coherence": None, "reason": head},
+        {"start_s": 0.2e-3, "stop_s": 0.3e-3, "coherence": None, "reason": beside}]}})
+    assert "1.188–1.8 ms moves coherently in both channels (power-weighted coherence 0.29)" in trail
+    assert f"0.868–1.188 ms {head}: left out of the noise" in trail
+    assert f"0.2–0.3 ms {beside}: left out of the noise" in trail
