@@ -406,14 +406,14 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
         of noise added: found at 1.06–1.19 ms, begun at ~0.87–0.98; the head taken as quiet
         read the reference's noise ×1.3–1.6 too high). A head too short for its own coherence
         to tell (MOTION_JUDGED) is not at rest."""
-        if head.stop - head.start < MIN_QUIET or unjudged(head, other_quiet):
-            return False
-        if head.stop - head.start < MOTION_JUDGED:
+        length = head.stop - head.start
+        if length >= MOTION_JUDGED:
+            return True
+        if length >= MIN_QUIET and not unjudged(head, other_quiet):  # unjudged records its own reason
             motion.append({"start_sample": head.start, "stop_sample": head.stop, "coherence": None,
                            "reason": "too short to judge by coherence, and the motion that follows may have "
                                      "begun in it"})
-            return False
-        return True
+        return False
 
     def at_rest(r: slice, other_quiet: list[slice]) -> list[slice]:
         """The part of stretch r that is not motion: all of it, none, or the part before the
