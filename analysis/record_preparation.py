@@ -45,6 +45,13 @@ MOTION_TAIL = 5 * COHERENCE_SEGMENT
 # 1.2 ms: 0.2 ms of the bar's motion after the pulse, coherence not judged, read as the
 # reference's noise at 12x the lead-in's, and the model error went undetected).
 MOTION_JUDGED = 17 * COHERENCE_SEGMENT // 2
+# The response's mean power per bin of the fitted band, over its noise's, at or below which it is
+# taken as showing no response (pure noise reads 1, ±0.2 over 50 bins; a real shot 10³–10⁹).
+RESPONSE_ABOVE_NOISE = 2.0
+# The lead-in's end (_foot): where a FOOT_BOX-sample box-car of |x| last stands at FOOT_LEVEL × its
+# median before the pulse.
+FOOT_BOX = 5
+FOOT_LEVEL = 2.0
 
 
 @dataclass
@@ -181,9 +188,10 @@ def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Act
     width = max(1, int(round(pulse.width_s / dt)))
     i_start = int(math.floor(pulse.start_s / dt))
     floor = float(np.median(np.convolve(np.abs(u), np.full(5, 0.2), mode="same")))  # the noise's level
-    ref_busy = _busy(u, max(0.02 * float(np.max(np.abs(u))), 4.0 * floor), 2 * width + max_delay)
+    level = max(0.02 * float(np.max(np.abs(u))), 4.0 * floor)
+    ref_busy = _busy(u, level, 2 * width + max_delay)
     first = int(np.argmax(ref_busy)) if np.any(ref_busy) else i_start
-    pre_end = max(first, 0)
+    pre_end = max(first, _lead_in_end(u, y, int(np.argmax(_busy(u, level, 0))), width)) if np.any(ref_busy) else first
     base_u = float(np.mean(u[:pre_end])) if pre_end >= 16 else 0.0
     base_y = float(np.mean(y[:pre_end])) if pre_end >= 16 else 0.0
     u = u - base_u
@@ -204,8 +212,9 @@ def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Act
     pre_window = max(3 * width, 32) + max_delay
     start = max(0, first - pre_window + 2 * width + max_delay) if np.any(ref_busy) else max(0, i_start - pre_window)
     cold_start = first < 16
-    u_segments = [r for r in _runs(~ref_busy) if r.stop - r.start >= MIN_QUIET]
-    y_segments = [r for r in _runs(~resp_busy) if r.stop - r.start >= MIN_QUIET]
+    lead = [slice(0, pre_end)]  # the lead-in, up to the pulse's foot
+    u_segments = [r for r in lead + [r for r in _runs(~ref_busy) if r.start > 0] if r.stop - r.start >= MIN_QUIET]
+    y_segments = [r for r in lead + [r for r in _runs(~resp_busy) if r.start > 0] if r.stop - r.start >= MIN_QUIET]
     return Activity(u, y, base_u, base_y, i_start, ref_busy, start, end, truncated, cold_start, noise_y0, u_segments,
                     y_segments)
 
@@ -296,6 +305,12 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
     var_y = np.maximum(var_y, floor)
     draw_var_u = draw_noise_u.bin_variance(bin_hz, length) if draw_noise_u.samples else np.zeros(bin_hz.size)
     draw_var_y = np.maximum(draw_noise_y.bin_variance(bin_hz, length), floor)
+    above = float(np.mean(np.abs(y_spec) ** 2 / draw_var_y))
+    if above <= RESPONSE_ABOVE_NOISE:
+        raise AnalysisError(
+            f"the response shows nothing above its noise where the reference excites it: over "
+            f"{band[0] / 1e3:.3g}–{band[1] / 1e3:.3g} kHz its power is {above:.2g}× what its noise alone gives: "
+            "the channels do not belong together (a wrong channel or sensor), or the sensor was not connected")
     # The conservative look detrends each Welch segment, which empties its lowest bins: a slow
     # baseline wander (cable, thermal; below its first bins) was then weighed as if absent, and
     # a spare pole near DC 'explained' it beyond chance (DC gain off by 5 %, FBSD at 1 kHz).
@@ -453,6 +468,30 @@ def _moving_over(r: slice, other_quiet: list[slice]) -> bool:
     stretch r: the bar or the sensor is still moving there."""
     quiet = sum(max(0, min(r.stop, q.stop) - max(r.start, q.start)) for q in other_quiet)
     return quiet < 0.5 * (r.stop - r.start)
+
+
+def _lead_in_end(u: np.ndarray, y: np.ndarray, cross: int, width: int) -> int:
+    """Where the lead-in at rest ends: before the earlier of the two channels' feet (_foot) ahead
+    of `cross` (the reference's first sample at the pulse's level), less a guard of a quarter of
+    the pulse's width and the box-car's length. The pulse's busy stretch is widened by twice its
+    width and the delay for the window's margins; taken as the lead-in's end as well, that left a
+    capture started 0.2 ms later than PTB's (the pulse's foot 0.16 ms in) no lead-in at all, and
+    its reference's noise was measured on the bar's motion after the pulse, ×11."""
+    foot = min(_foot(u, cross), _foot(y, cross))
+    return max(foot - width // 4 - FOOT_BOX, 0)
+
+
+def _foot(x: np.ndarray, cross: int) -> int:
+    """Where the pulse's foot leaves the lead-in's noise: scanning back from `cross` (past the
+    foot), the last sample whose FOOT_BOX-sample box-car of |x| (its lead-in median removed) is
+    at the lead-in's own level, FOOT_LEVEL × the box-car's median before `cross` (robust while
+    the foot is the shorter part)."""
+    if cross < 2 * MIN_QUIET:
+        return 0
+    part = x[:cross] - np.median(x[:cross])
+    box = np.convolve(np.abs(part), np.full(FOOT_BOX, 1.0 / FOOT_BOX), mode="same")
+    at_level = np.flatnonzero(box <= FOOT_LEVEL * np.median(box))
+    return int(at_level[-1]) + 1 if at_level.size else 0
 
 
 def _provisional_drift(y: np.ndarray, pre_end: int, ref_busy: np.ndarray) -> np.ndarray:

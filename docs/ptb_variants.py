@@ -51,7 +51,7 @@ def variants() -> dict[str, Callable[[], Record]]:
     out["4.29 MS/s (3/7)"] = lambda: resampled(3, 7)
     for n in (6_500, 7_000, 7_500, 8_000, 8_500, 9_000, 9_500, 10_000, 11_000, 12_000, 14_000, 16_000):
         out[f"{n / 1e4:g} ms capture"] = lambda n=n: cut(n)
-    for s in (1_000, 2_500, 3_000):
+    for s in (1_000, 2_000, 2_500, 2_800, 3_000, 3_300):
         out[f"started {s / 1e4:g} ms later"] = lambda s=s: started_late(s)
     for s in (-15, -5, 3, 8, 20, 30):
         out[f"skew {s / 10:+g} us"] = lambda s=s: skewed(s)
@@ -65,6 +65,9 @@ def variants() -> dict[str, Callable[[], Record]]:
     out["0.9 ms, skew -1 us"] = lambda: cut(9_000, skewed(-10))
     out["5 MS/s, skew, noise"] = lambda: decimated(2, noisier(3e-3, 4, skewed(5)))
     out["late 0.15 ms, 1 ms"] = lambda: cut(10_000, started_late(1_500))
+    for seed in (1, 21):
+        out[f"late 0.2 ms, 1 % noise ({seed})"] = lambda sd=seed: started_late(2_000, noisier(1e-2, sd))
+    out["1 MS/s, late 0.25 ms, 2 % noise"] = lambda: decimated(10, started_late(2_500, noisier(2e-2, 32)))
     return out
 
 

@@ -222,6 +222,34 @@ def test_measure_noise_leaves_out_a_short_head_where_weak_motion_has_begun():
     assert noise.draw_noise_u.rms == pytest.approx(sigma, rel=0.1)
 
 
+def test_the_lead_in_reaches_the_pulses_foot():
+    """A capture started shortly before a long pulse (90 µs, 140 µs in) on a bar that keeps moving
+    after it: the lead-in at rest is the 140 µs before the foot, less a guard of a quarter of the
+    pulse's width. Until stop 37 it ended where the pulse's busy stretch, widened by twice its
+    width and the delay for the window's margins, began: before the record's start, so there was
+    no lead-in, and the reference's noise was measured on the motion (PTB's record started 0.2 ms
+    later: ×11, the band cut to 20 kHz and the FBSD ±5 % interval missing the sine's edge)."""
+    samples, start_s, base_s, sigma = 2000, 140e-6, 90e-6, 2e-3
+    t = np.arange(samples) * DT
+    u0 = np.where((t >= start_s) & (t < start_s + base_s), np.sin(np.pi * (t - start_s) / base_s), 0.0)
+    motion = 0.02 * (t > start_s + base_s) * np.sin(2 * np.pi * 6e3 * t)
+    _, y0, _ = signal.lsim(sensor(), u0 + motion, t)
+    rng = np.random.default_rng(4)
+    u = u0 + motion + sigma * rng.standard_normal(samples)
+    y = (y0 + sigma * GAIN * rng.standard_normal(samples)) / GAIN
+    activity = locate_pulse(u, y, DT, 32)
+    lead = activity.u_segments[0]
+    width = 60  # the half-sine's width at half its height, µs: 2/3 of its base
+    assert lead.start == 0 and start_s / DT - width // 4 - 12 <= lead.stop <= start_s / DT
+    assert activity.y_segments[0] == lead
+    warnings: list[str] = []
+    noise = measure_noise(activity, DT, warnings)
+    assert not any("no lead-in at rest" in w for w in warnings)
+    # both looks at the reference's noise are the known white level, not the motion's (0.014 RMS)
+    assert noise.noise_u.rms == pytest.approx(sigma, rel=0.25)
+    assert noise.draw_noise_u.rms == pytest.approx(sigma, rel=0.2)
+
+
 def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():
     t = np.arange(N) * DT
     u, y = channels(seed=9)

@@ -9,7 +9,7 @@ import pytest
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.shot_analysis import analyse_record
 
-from tests.ptb_shock import against_sine, cut, decimated, noisier, skewed
+from tests.ptb_shock import against_sine, cut, decimated, noisier, skewed, started_late
 
 DRAWS = 60
 
@@ -42,6 +42,13 @@ VARIANTS = {
     # quiet read the reference's noise ×1.3-1.6 too high, and the band stopped at 20 kHz instead of 28
     "2 % more noise (seed 3)": lambda: noisier(2e-2, seed=3),
     "2 % more noise (seed 6)": lambda: noisier(2e-2, seed=6),
+    # A capture started 0.2 ms later: the pulse's foot 0.16 ms in. Until stop 37 the lead-in at rest
+    # ended where the pulse's busy stretch, widened by twice its width and the delay for the window's
+    # margins, began: none was left, the reference's noise was measured on the bar's motion after
+    # the pulse (×11), the band stopped at 20 kHz and the ±5 % edge read 10.0 [8.45, 11.02] kHz.
+    # The lead-in now reaches the pulse's foot (record_preparation._lead_in_end).
+    "started 0.2 ms later": lambda: started_late(2_000),
+    "started 0.2 ms later, 1 % more noise (seed 21)": lambda: started_late(2_000, noisier(1e-2, seed=21)),
     # several differences at once
     "2 MS/s, 0.8 ms capture": lambda: cut(1_600, decimated(5)),
     "5 MS/s, skew +0.5 us, 0.3 % more noise": lambda: decimated(2, noisier(3e-3, 4, skewed(5))),
