@@ -478,7 +478,8 @@ def _lead_in_end(u: np.ndarray, y: np.ndarray, cross: int, width: int) -> int:
     capture started 0.2 ms later than PTB's (the pulse's foot 0.16 ms in) no lead-in at all, and
     its reference's noise was measured on the bar's motion after the pulse, ×11."""
     foot = min(_foot(u, cross), _foot(y, cross))
-    return max(foot - width // 4 - FOOT_BOX, 0)
+    end = foot - width // 4 - FOOT_BOX
+    return end if end >= MIN_QUIET else 0  # a few samples are no lead-in (its noise, nor its baseline)
 
 
 def _foot(x: np.ndarray, cross: int) -> int:

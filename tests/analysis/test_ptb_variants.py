@@ -42,6 +42,11 @@ VARIANTS = {
     # quiet read the reference's noise ×1.3-1.6 too high, and the band stopped at 20 kHz instead of 28
     "2 % more noise (seed 3)": lambda: noisier(2e-2, seed=3),
     "2 % more noise (seed 6)": lambda: noisier(2e-2, seed=6),
+    # seed 12 missed at stop 37's first step (the longer lead-in read its noise 3 % lower, one more
+    # bin entered the band): the free orders 1-2 became unstable once converged and order 3, whose
+    # fit stopped short of converging, was taken (±5 % edge 9.93 [9.05, 10.83] kHz); an unconverged
+    # fallback now gives way to the all-pole model (order_search.settle_order)
+    "2 % more noise (seed 12)": lambda: noisier(2e-2, seed=12),
     # A capture started 0.2 ms later: the pulse's foot 0.16 ms in. Until stop 37 the lead-in at rest
     # ended where the pulse's busy stretch, widened by twice its width and the delay for the window's
     # margins, began: none was left, the reference's noise was measured on the bar's motion after
