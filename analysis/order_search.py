@@ -316,21 +316,13 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
     # A stable free order that holds a pole–zero doublet is the fit following a ripple: the same
     # rule as fit_structures' (PTB's record cut at 0.75 ms: orders 1–2 unstable once converged,
     # order 4 a doublet at 16.8 kHz, FBSD ±5 % 13.3 kHz against the sine's 11.4 kHz).
-    # So is one whose fit stopped short of its optimum: the orders below it became unstable once
-    # converged, and its stability is that of where it stopped (PTB's record with 2 % of its peak of
-    # noise added, seed 12: orders 1-2 unstable, order 3 stopped after 200 evaluations with the
-    # FBSD ±5 % edge at 9.9 kHz, against the sine's 11.4 and the all-pole model's 11.3).
     doublet = fallback is not None and has_doublet(sweep.fits[fallback].a, sweep.fits[fallback].b)
-    unsettled = fallback is not None and not sweep.fits[fallback].converged
-    if (fallback is None or doublet or unsettled) and sweep.structure == FREE and setup.asked_order is None:
+    if (fallback is None or doublet) and sweep.structure == FREE and setup.asked_order is None:
         all_pole = fit_orders(data, ALL_POLE, setup)
         if all_pole.chosen is not None and all_pole.acceptable(all_pole.chosen, data, setup):
-            after = f"after order {', '.join(str(n) for n in dropped)} became unstable when iterated to convergence"
             if doublet:
-                why = f"the stable orders with free zeros hold a pole–zero doublet (order {fallback}, {after})"
-            elif unsettled:
-                why = (f"the stable order with free zeros stopped before converging (order {fallback}, {after}): "
-                       "its stability is not its optimum's")
+                why = (f"the stable orders with free zeros hold a pole–zero doublet (order {fallback}, after "
+                       f"order {', '.join(str(n) for n in dropped)} became unstable when iterated to convergence)")
             else:
                 why = "no model with free zeros is stable" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
             sweep, chosen = all_pole, all_pole.chosen

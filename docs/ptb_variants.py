@@ -46,7 +46,7 @@ from tests.ptb_shock import (  # noqa: E402
 
 def variants() -> dict[str, Callable[[], Record]]:
     out: dict[str, Callable[[], Record]] = {}
-    for factor in (2, 10, 20):
+    for factor in (2, 10, 20, 40):
         out[f"{10 / factor:g} MS/s"] = lambda f=factor: decimated(f)
     out["4.29 MS/s (3/7)"] = lambda: resampled(3, 7)
     for n in (6_500, 7_000, 7_500, 8_000, 8_500, 9_000, 9_500, 10_000, 11_000, 12_000, 14_000, 16_000):

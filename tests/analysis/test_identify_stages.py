@@ -225,10 +225,11 @@ def test_measure_noise_leaves_out_a_short_head_where_weak_motion_has_begun():
 def test_the_lead_in_reaches_the_pulses_foot():
     """A capture started shortly before a long pulse (90 µs, 140 µs in) on a bar that keeps moving
     after it: the lead-in at rest is the 140 µs before the foot, less a guard of a quarter of the
-    pulse's width. Until stop 37 it ended where the pulse's busy stretch, widened by twice its
-    width and the delay for the window's margins, began: before the record's start, so there was
-    no lead-in, and the reference's noise was measured on the motion (PTB's record started 0.2 ms
-    later: ×11, the band cut to 20 kHz and the FBSD ±5 % interval missing the sine's edge)."""
+    pulse's width, as the margins the window needs (twice the pulse's width and the delay) leave
+    none. Until stop 37 it ended where they begin (the lead-in's end when they leave one): before
+    the record's start, so there was no lead-in, and the reference's noise was measured on the
+    motion (PTB's record started 0.2 ms later: ×11, the band cut to 20 kHz and the FBSD ±5 %
+    interval missing the sine's edge)."""
     samples, start_s, base_s, sigma = 2000, 140e-6, 90e-6, 2e-3
     t = np.arange(samples) * DT
     u0 = np.where((t >= start_s) & (t < start_s + base_s), np.sin(np.pi * (t - start_s) / base_s), 0.0)
@@ -248,6 +249,11 @@ def test_the_lead_in_reaches_the_pulses_foot():
     # both looks at the reference's noise are the known white level, not the motion's (0.014 RMS)
     assert noise.noise_u.rms == pytest.approx(sigma, rel=0.25)
     assert noise.draw_noise_u.rms == pytest.approx(sigma, rel=0.2)
+    # the same shot captured 0.3 ms earlier: the margins leave a lead-in, and it ends there, clear of
+    # the foot's rise below the noise
+    early = locate_pulse(np.concatenate((sigma * rng.standard_normal(300), u)),
+                         np.concatenate((sigma * rng.standard_normal(300), y)), DT, 32)
+    assert early.u_segments[0].start == 0 and early.u_segments[0].stop <= 300 + start_s / DT - 2 * width - 32
 
 
 def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():

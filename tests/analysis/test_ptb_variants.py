@@ -42,10 +42,10 @@ VARIANTS = {
     # quiet read the reference's noise ×1.3-1.6 too high, and the band stopped at 20 kHz instead of 28
     "2 % more noise (seed 3)": lambda: noisier(2e-2, seed=3),
     "2 % more noise (seed 6)": lambda: noisier(2e-2, seed=6),
-    # seed 12 missed at stop 37's first step (the longer lead-in read its noise 3 % lower, one more
-    # bin entered the band): the free orders 1-2 became unstable once converged and order 3, whose
-    # fit stopped short of converging, was taken (±5 % edge 9.93 [9.05, 10.83] kHz); an unconverged
-    # fallback now gives way to the all-pole model (order_search.settle_order)
+    # seed 12 missed while the lead-in reached the pulse's foot on every record (a step of stop 37):
+    # its noise read 3 % lower, one more bin entered the band, the free orders 1-2 became unstable
+    # once converged and order 3, its fit stopped short of converging, was taken (±5 % edge 9.93
+    # [9.05, 10.83] kHz)
     "2 % more noise (seed 12)": lambda: noisier(2e-2, seed=12),
     # A capture started 0.2 ms later: the pulse's foot 0.16 ms in. Until stop 37 the lead-in at rest
     # ended where the pulse's busy stretch, widened by twice its width and the delay for the window's
@@ -53,6 +53,9 @@ VARIANTS = {
     # the pulse (×11), the band stopped at 20 kHz and the ±5 % edge read 10.0 [8.45, 11.02] kHz.
     # The lead-in now reaches the pulse's foot (record_preparation._lead_in_end).
     "started 0.2 ms later": lambda: started_late(2_000),
+    # at 0.25 MS/s the margins (twice the pulse's width and 32 samples of delay, 128 µs) left no lead-in
+    # either: ±5 % edge 9.72 [5.83, 9.99] kHz until stop 37
+    "0.25 MS/s": lambda: decimated(40),
     "started 0.2 ms later, 1 % more noise (seed 21)": lambda: started_late(2_000, noisier(1e-2, seed=21)),
     # several differences at once
     "2 MS/s, 0.8 ms capture": lambda: cut(1_600, decimated(5)),
