@@ -447,7 +447,7 @@ def _residual_warnings(model_error: ModelError, prep: Prepared, ratio: float, fi
             "as its own source (budget row 'model error')"
         )
     coherent = [m["coherence"] for m in prep.motion if m["coherence"] is not None]
-    if coherent:
+    if coherent and prep.lead_in:  # without a lead-in the motion is the noise (record_preparation's warning)
         out.append("the channels keep moving together after the pulse (coherence "
                    f"{max(coherent):.2f}): that motion is not taken as noise; the noise is measured on the "
                    "lead-in at rest")
@@ -479,6 +479,8 @@ def _noise_report(prepared: PreparedRecord, noise_y: NoiseSpectrum, residual: np
         "residual_rms": float(np.std(residual) * scale_y),
         "v_per_degree_of_freedom": ratio,
         "model_error": model_error.to_dict(),
+        "lead_in": {"start_s": rec.start_time_s, "stop_s": rec.start_time_s + prep.lead_in * dt,
+                    "to_foot": prep.lead_in_to_foot} if prep.lead_in else None,
         "motion_after_pulse": [{"start_s": rec.start_time_s + m["start_sample"] * dt,
                                 "stop_s": rec.start_time_s + m["stop_sample"] * dt, "coherence": m["coherence"],
                                 "reason": m["reason"]}

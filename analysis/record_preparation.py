@@ -89,6 +89,8 @@ class Prepared:
     drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed, normalised
     # stretches after the pulse left out of the noise as motion (start_sample, stop_sample, coherence, reason)
     motion: list[dict[str, Any]] = field(default_factory=list)
+    lead_in: int = 0  # the lead-in at rest is samples [0, lead_in) (0: none)
+    lead_in_to_foot: bool = False  # it reaches the pulse's foot (the window's margins left none)
 
 
 def _scale(x: np.ndarray) -> float:
@@ -172,6 +174,8 @@ class Activity:
     noise_y0: float  # the response's rough noise level (pre-pulse RMS, or a robust level of the tail)
     u_segments: list[slice]  # the stretches where each channel is quiet (before motion is judged)
     y_segments: list[slice]
+    lead_in: int = 0  # the lead-in at rest is samples [0, lead_in) (0: none)
+    lead_in_to_foot: bool = False  # it reaches the pulse's foot (the window's margins left none)
 
 
 def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Activity:
@@ -218,7 +222,7 @@ def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Act
     u_segments = [r for r in lead + [r for r in _runs(~ref_busy) if r.start > 0] if r.stop - r.start >= MIN_QUIET]
     y_segments = [r for r in lead + [r for r in _runs(~resp_busy) if r.start > 0] if r.stop - r.start >= MIN_QUIET]
     return Activity(u, y, base_u, base_y, i_start, ref_busy, start, end, truncated, cold_start, noise_y0, u_segments,
-                    y_segments)
+                    y_segments, pre_end if pre_end >= MIN_QUIET else 0, pre_end > first)
 
 
 @dataclass
@@ -338,7 +342,7 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
     return Prepared(uw, yw, start, activity.baseline_u, activity.baseline_y, noise.drift_removed, noise_u, noise_y,
                     band, bin_hz, u_spec, y_spec, var_u, var_y, group, spectral, activity.pulse_start, u, y,
                     noise.y_segments, activity.ref_busy, draw_noise_u, draw_noise_y, draw_var_u, draw_var_y,
-                    noise.drift_lines, noise.motion)
+                    noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot)
 
 
 def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:

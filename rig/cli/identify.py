@@ -247,11 +247,21 @@ def explain(report: dict[str, Any]) -> str:
     lines.append(f"  noise (RMS, channel units): reference {rms(noise.get('reference_rms'))} "
                  f"({noise.get('reference_source')}), response {rms(noise.get('response_rms'))} "
                  f"({noise.get('response_source')})")
+    lead = noise.get("lead_in")
+    if lead:
+        to = ("to a quarter of the pulse's width before its foot: the window's margins left none" if lead["to_foot"]
+              else "to the window's margin before the pulse")
+        lines.append(f"  lead-in at rest: {lead['start_s'] * 1e3:.4g}–{lead['stop_s'] * 1e3:.4g} ms ({to})")
+    elif "lead_in" in noise:
+        lines.append("  lead-in at rest: none (the pulse starts too near the record's start)")
+    # without a lead-in at rest the noise is measured on the motion all the same (with a warning)
+    kept = "lead_in" in noise and not lead
     for m in noise.get("motion_after_pulse") or []:
         why = (f"moves coherently in both channels (power-weighted coherence {m['coherence']:.2f})"
                if m.get("coherence") is not None else m.get("reason") or "too short to judge by coherence")
-        lines.append(f"  motion, not noise: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms {why}: left out of "
-                     "the noise")
+        lines.append(f"  motion{'' if kept else ', not noise'}: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms "
+                     f"{why}: " + ("measured as noise all the same, there being no lead-in at rest" if kept
+                                   else "left out of the noise"))
     band = report.get("supported_band_hz")
     if band:
         lines.append(f"  band: {band[0] / 1e3:.4g}–{band[1] / 1e3:.4g} kHz, where the reference's spectrum stands "

@@ -343,3 +343,30 @@ def test_identify_explain_gives_each_left_out_stretch_its_own_reason():
     assert "1.188–1.8 ms moves coherently in both channels (power-weighted coherence 0.29)" in trail
     assert f"0.868–1.188 ms {head}: left out of the noise" in trail
     assert f"0.2–0.3 ms {beside}: left out of the noise" in trail
+
+
+def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
+    """The trail says where the noise's lead-in at rest ends and why: at the window's margin on the
+    record as published; at the pulse's foot on a capture started 0.2 ms later (the margins leave
+    none); none at all on one started 0.33 ms later, where the bar's motion is measured as noise
+    all the same, and no warning claims it was left out."""
+    from hopkinson.rig.cli.main import main
+
+    from tests.ptb_shock import started_late
+
+    def trail(rec, name):
+        path = tmp_path / f"{name}.csv"
+        np.savetxt(path, np.column_stack([np.arange(rec.reference.size) * rec.sample_interval_s, rec.reference,
+                                          rec.response]), delimiter=",", header="time_s,reference,response",
+                   comments="", fmt="%.10g")
+        assert main(["identify", str(path), "--no-uncertainty", "--explain"]) == 0
+        return capsys.readouterr().out
+
+    assert "lead-in at rest: 0–0.214 ms (to the window's margin before the pulse)" in trail(ptb_record(), "ptb")
+    late = trail(started_late(2_000), "late")
+    assert "lead-in at rest: 0–0.125 ms (to a quarter of the pulse's width before its foot" in late
+    assert "motion, not noise:" in late
+    gone = trail(started_late(3_300), "gone")
+    assert "lead-in at rest: none" in gone and "no lead-in at rest: its noise is measured on that motion" in gone
+    assert "motion, not noise:" not in gone and "measured as noise all the same" in gone
+    assert "that motion is not taken as noise" not in gone
