@@ -42,6 +42,10 @@ VARIANTS = {
     # quiet read the reference's noise ×1.3-1.6 too high, and the band stopped at 20 kHz instead of 28
     "2 % more noise (seed 3)": lambda: noisier(2e-2, seed=3),
     "2 % more noise (seed 6)": lambda: noisier(2e-2, seed=6),
+    # seed 5 chose free order 1 (V 23.8) over all-pole order 2 (V 10.5), both with 4 parameters: of two
+    # structures with as many, the free one stood by default until stop 37 (±10 % interval [12, 18 600]
+    # kHz); the lower cost stands now (order_search._all_pole_preferred)
+    "2 % more noise (seed 5)": lambda: noisier(2e-2, seed=5),
     # seed 12 missed while the lead-in reached the pulse's foot on every record (a step of stop 37):
     # its noise read 3 % lower, one more bin entered the band, the free orders 1-2 became unstable
     # once converged and order 3, its fit stopped short of converging, was taken (±5 % edge 9.93
