@@ -218,9 +218,16 @@ def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Act
     pre_window = max(3 * width, 32) + max_delay
     start = max(0, first - pre_window + 2 * width + max_delay) if np.any(ref_busy) else max(0, i_start - pre_window)
     cold_start = first < 16
-    lead = [slice(0, pre_end)]  # the lead-in, up to the pulse's foot
-    u_segments = [r for r in lead + [r for r in _runs(~ref_busy) if r.start > 0] if r.stop - r.start >= MIN_QUIET]
-    y_segments = [r for r in lead + [r for r in _runs(~resp_busy) if r.start > 0] if r.stop - r.start >= MIN_QUIET]
+
+    def quiet(busy: np.ndarray) -> list[slice]:
+        """The runs outside `busy`, the first being the lead-in [0, pre_end) (to the margins, or to the
+        pulse's foot when they leave none), each at least MIN_QUIET long."""
+        runs = _runs(~busy)
+        if np.any(ref_busy):
+            runs = [slice(0, pre_end)] + [r for r in runs if r.start > 0]
+        return [r for r in runs if r.stop - r.start >= MIN_QUIET]
+
+    u_segments, y_segments = quiet(ref_busy), quiet(resp_busy)
     return Activity(u, y, base_u, base_y, i_start, ref_busy, start, end, truncated, cold_start, noise_y0, u_segments,
                     y_segments, pre_end if pre_end >= MIN_QUIET else 0, pre_end > first)
 
