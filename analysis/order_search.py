@@ -73,6 +73,7 @@ class SearchSetup:
     lowest_bin_hz: float
     sample_interval_s: float
     band_hz: tuple[float, float]  # the band the excitation supports
+    lead: float = 0.0  # the channels' cross-correlation lag where the response leads (samples, < 0), else 0
 
     def delay_mode(self, structure: str) -> str | float:
         """The free structure keeps its delay causal (its zeros can take up a lead: the lead
@@ -92,7 +93,7 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
     and the orders the band allows: each order needs more real residuals (two per bin) than
     parameters (2n + 2, and n more with a transient term)."""
     max_delay = max(1, int(max_delay))
-    tau0 = _initial_delay(data, prep, min(2, n_max), max_delay) if remove_delay else 0.0
+    tau0, lag = _initial_delay(data, prep, min(2, n_max), max_delay) if remove_delay else (0.0, 0.0)
     per_order = 3 if data.transient else 2
     allowed = (2 * data.bins - 4) // per_order
     if allowed < 1 or (order is not None and order > allowed):
@@ -105,7 +106,7 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
                         "frequency bins")
         n_max = allowed
     return SearchSetup(n_max, order, tau0, remove_delay, max_delay, patience, max_evaluations, significance,
-                       float(prep.bin_hz[0]), dt, prep.band)
+                       float(prep.bin_hz[0]), dt, prep.band, min(lag, 0.0))
 
 
 @dataclass
@@ -297,7 +298,8 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
     dt = setup.sample_interval_s
     order = setup.asked_order
     if sweep.chosen is None:
-        raise AnalysisError(f"no stable model of order 1 … {setup.n_max} fits this record (every fit was unstable)")
+        raise AnalysisError(f"no stable model of order 1 … {setup.n_max} fits this record (every fit was unstable)"
+                            + _lead_hint(setup))
     if order is not None:
         if not sweep.acceptable(order, data, setup):
             why = (f"the data support only order {sweep.chosen}" if sweep.chosen < order
@@ -340,7 +342,7 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
     if fallback is None:
         raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
                             "or outside the unit circle" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
-                            + ")")
+                            + ")" + _lead_hint(setup))
     if dropped:
         unstable = ", ".join(str(n) for n in dropped)
         warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
@@ -387,10 +389,27 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
     return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
 
 
-def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: int) -> float:
+# A response that leads its reference by more than this many samples (by their cross-correlation, which
+# includes the sensor's own group delay and so reads later than the true lag) is taken as skewed.
+SKEWED_LEAD_SAMPLES = 2.0
+
+
+def _lead_hint(setup: SearchSetup) -> str:
+    """The cause, when the response leads the reference by several samples: no sensor answers
+    before it is excited, and neither structure follows such a lead (PTB's response shifted 10 µs
+    earlier: every fit unstable)."""
+    if setup.lead >= -SKEWED_LEAD_SAMPLES:
+        return ""
+    lead_us = -setup.lead * setup.sample_interval_s * 1e6
+    return (f"; the response leads the reference by about {-setup.lead:.3g} samples ({lead_us:.3g} µs) by their "
+            "cross-correlation: no sensor answers before it is excited, so the channels are skewed (digitizer "
+            "deskew, trigger alignment, cable lengths); correct the skew and analyse again")
+
+
+def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: int) -> tuple[float, float]:
     """A start for the causal delay: on a grid (half a sample, or 1/8 of the span) up to just past
     the cross-correlation lag, the two best linear starts of `order` are refined and the best
-    refined delay kept."""
+    refined delay kept; and that lag (samples, negative where the response leads)."""
     try:
         xcorr = estimate_delay_samples(prep.u, prep.y, max(1, min(max_delay, prep.u.size // 4)))
     except AnalysisError:
@@ -398,7 +417,7 @@ def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: in
     top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
     problem = OrderProblem(data, order, "causal", max_delay)
     refined = [problem.solve(start, 40) for start in delay_grid_starts(problem, top, 2)]
-    return min(refined, key=lambda f: f.cost).delay if refined else 0.0
+    return (min(refined, key=lambda f: f.cost).delay if refined else 0.0), xcorr
 
 
 def delay_grid_starts(problem: OrderProblem, top: float, count: int) -> list[OrderFit]:

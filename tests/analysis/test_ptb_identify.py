@@ -370,3 +370,23 @@ def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
     assert "lead-in at rest: none" in gone and "no lead-in at rest: its noise is measured on that motion" in gone
     assert "motion, not noise:" not in gone and "measured as noise all the same" in gone
     assert "that motion is not taken as noise" not in gone
+
+
+def test_a_response_that_leads_by_microseconds_is_refused_with_its_cause(tmp_path, capsys):
+    """PTB's response shifted 10 µs earlier (a trigger or deskew error): no sensor answers before it
+    is excited and no model follows it. The refusal names the lead the channels' cross-correlation
+    shows (10 µs, the shift made, less the sensor's own lag) and what to do; exit code 2."""
+    from hopkinson.rig.cli.main import main
+
+    from tests.ptb_shock import skewed
+
+    rec = skewed(-100)
+    path = tmp_path / "skewed.csv"
+    np.savetxt(path, np.column_stack([np.arange(rec.reference.size) * rec.sample_interval_s, rec.reference,
+                                      rec.response]), delimiter=",", header="time_s,reference,response",
+               comments="", fmt="%.10g")
+    assert main(["identify", str(path), "--no-uncertainty"]) == 2
+    err = capsys.readouterr().err
+    assert "skewed.csv" in err and "correct the skew" in err and "Traceback" not in err
+    lead_us = float(err.split("the response leads the reference by about ")[1].split(" samples (")[1].split(" µs")[0])
+    assert 9.0 <= lead_us <= 10.5
