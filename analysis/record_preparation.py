@@ -174,8 +174,12 @@ class Activity:
     noise_y0: float  # the response's rough noise level (pre-pulse RMS, or a robust level of the tail)
     u_segments: list[slice]  # the stretches where each channel is quiet (before motion is judged)
     y_segments: list[slice]
-    lead_in: int = 0  # the lead-in at rest is samples [0, lead_in) (0: none)
-    lead_in_to_foot: bool = False  # it reaches the pulse's foot (the window's margins left none)
+    lead_in_to_foot: bool = False  # the lead-in reaches the pulse's foot (the window's margins left none)
+
+    @property
+    def lead_in(self) -> int:
+        """The lead-in at rest is samples [0, lead_in) (0: none)."""
+        return self.u_segments[0].stop if self.u_segments and self.u_segments[0].start == 0 else 0
 
 
 def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Activity:
@@ -229,7 +233,7 @@ def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Act
 
     u_segments, y_segments = quiet(ref_busy), quiet(resp_busy)
     return Activity(u, y, base_u, base_y, i_start, ref_busy, start, end, truncated, cold_start, noise_y0, u_segments,
-                    y_segments, pre_end if pre_end >= MIN_QUIET else 0, pre_end > first)
+                    y_segments, pre_end > first)
 
 
 @dataclass

@@ -78,9 +78,10 @@ def ptb_sine() -> SineCalibration:
                            source="PTB sine calibration (PyDynamic example)")
 
 
-def write_ptb_record_csv(path: Path) -> Path:
-    """The record as the interchange CSV (time_s, reference m/s², response pC)."""
-    rec = ptb_record()
+def write_ptb_record_csv(path: Path, rec: Record | None = None) -> Path:
+    """The record (PTB's, or a variant `rec`) as the interchange CSV (time_s, reference m/s²,
+    response pC)."""
+    rec = rec or ptb_record()
     np.savetxt(path, np.column_stack([rec.time_s, rec.reference, rec.response]), delimiter=",",
                header="time_s,reference,response", comments="", fmt="%.10g")
     return path

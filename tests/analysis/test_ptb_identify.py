@@ -5,6 +5,9 @@ the intervals contain the independent truth (the sine calibration's edges, the h
 
 from __future__ import annotations
 
+import math
+import re
+
 import numpy as np
 import pytest
 from hopkinson.analysis.params import AnalysisParams
@@ -347,26 +350,42 @@ def test_identify_explain_gives_each_left_out_stretch_its_own_reason():
 
 def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
     """The trail says where the noise's lead-in at rest ends and why: at the window's margin on the
-    record as published; at the pulse's foot on a capture started 0.2 ms later (the margins leave
-    none); none at all on one started 0.33 ms later, where the bar's motion is measured as noise
-    all the same, and no warning claims it was left out."""
+    record as published (more than three of the pulse's widths at half height before its foot);
+    within one such width before the foot on a capture started 0.2 ms later (the margins leave
+    none); none at all on one
+    started 0.33 ms later, where the bar's motion is measured as noise all the same, and no
+    warning claims it was left out. The foot and the width are read here from the raw 10 MS/s
+    record: where either channel's 50-sample mean |x| first stands 4 lead-in σ above its baseline,
+    and the reference's span above half its peak."""
     from hopkinson.rig.cli.main import main
 
-    from tests.ptb_shock import started_late
+    from tests.ptb_shock import started_late, write_ptb_record_csv
 
-    def trail(rec, name):
-        path = tmp_path / f"{name}.csv"
-        np.savetxt(path, np.column_stack([np.arange(rec.reference.size) * rec.sample_interval_s, rec.reference,
-                                          rec.response]), delimiter=",", header="time_s,reference,response",
-                   comments="", fmt="%.10g")
-        assert main(["identify", str(path), "--no-uncertainty", "--explain"]) == 0
-        return capsys.readouterr().out
+    rec = ptb_record()
+    dt = rec.sample_interval_s
 
-    assert "lead-in at rest: 0–0.214 ms (to the window's margin before the pulse)" in trail(ptb_record(), "ptb")
-    late = trail(started_late(2_000), "late")
-    assert "lead-in at rest: 0–0.125 ms (to a quarter of the pulse's width before its foot" in late
-    assert "motion, not noise:" in late
-    gone = trail(started_late(3_300), "gone")
+    def rises(x: np.ndarray) -> int:
+        quiet = x[:2000]
+        level = np.convolve(np.abs(x - np.median(quiet)), np.full(50, 1 / 50), mode="same")
+        return int(np.argmax(level > 4 * np.std(quiet)))
+
+    foot_s = min(rises(rec.reference), rises(rec.response)) * dt
+    width_s = np.count_nonzero(rec.reference > 0.5 * np.max(rec.reference)) * dt
+
+    def lead_in_ms(record, name: str) -> tuple[str, float]:
+        assert main(["identify", str(write_ptb_record_csv(tmp_path / f"{name}.csv", record)), "--no-uncertainty",
+                     "--explain"]) == 0
+        out = capsys.readouterr().out
+        found = re.search(r"lead-in at rest: 0–([0-9.]+) ms", out)
+        return out, float(found.group(1)) if found else math.nan
+
+    published, stop_ms = lead_in_ms(rec, "ptb")
+    assert "(to the window's margin before the pulse)" in published
+    assert stop_ms * 1e-3 <= foot_s - 3 * width_s
+    late, stop_ms = lead_in_ms(started_late(2_000), "late")
+    assert "(to a quarter of the pulse's width before its foot" in late and "motion, not noise:" in late
+    assert foot_s - 0.2e-3 - width_s <= stop_ms * 1e-3 < foot_s - 0.2e-3
+    gone, _ = lead_in_ms(started_late(3_300), "gone")
     assert "lead-in at rest: none" in gone and "no lead-in at rest: its noise is measured on that motion" in gone
     assert "motion, not noise:" not in gone and "measured as noise all the same" in gone
     assert "that motion is not taken as noise" not in gone
@@ -378,15 +397,11 @@ def test_a_response_that_leads_by_microseconds_is_refused_with_its_cause(tmp_pat
     shows (10 µs, the shift made, less the sensor's own lag) and what to do; exit code 2."""
     from hopkinson.rig.cli.main import main
 
-    from tests.ptb_shock import skewed
+    from tests.ptb_shock import skewed, write_ptb_record_csv
 
-    rec = skewed(-100)
-    path = tmp_path / "skewed.csv"
-    np.savetxt(path, np.column_stack([np.arange(rec.reference.size) * rec.sample_interval_s, rec.reference,
-                                      rec.response]), delimiter=",", header="time_s,reference,response",
-               comments="", fmt="%.10g")
+    path = write_ptb_record_csv(tmp_path / "skewed.csv", skewed(-100))
     assert main(["identify", str(path), "--no-uncertainty"]) == 2
     err = capsys.readouterr().err
     assert "skewed.csv" in err and "correct the skew" in err and "Traceback" not in err
-    lead_us = float(err.split("the response leads the reference by about ")[1].split(" samples (")[1].split(" µs")[0])
-    assert 9.0 <= lead_us <= 10.5
+    lead = re.search(r"the response leads the reference by about [0-9.]+ samples \(([0-9.]+) µs\)", err)
+    assert lead and 9.0 <= float(lead.group(1)) <= 10.5
