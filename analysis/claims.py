@@ -37,9 +37,19 @@ def claimed_modes(model: DiscreteModel, band: tuple[float, float], structure: st
     return modes
 
 
-def delay_warnings(data: SpectralData, fit: OrderFit, structure: str, dt: float, significance: float) -> list[str]:
-    """The all-pole structure's delay fitted negative (a lead), or the free structure's causal
-    model absorbing a lead into its zeros (lead_warning)."""
+def delay_warnings(data: SpectralData, fit: OrderFit, structure: str, dt: float, significance: float,
+                   realigned_samples: int = 0) -> list[str]:
+    """The response realigned before the fit (record_preparation.realigned: the lead the model
+    then carries, from its delay and low-frequency group delay), the all-pole structure's delay
+    fitted negative (a lead), or the free structure's causal model absorbing a lead into its
+    zeros (lead_warning). `fit` is on the realigned record."""
+    if realigned_samples:
+        lead = _low_frequency_lead(replace(fit, delay=fit.delay - realigned_samples))
+        return [f"the response leads the reference by about {lead:.3g} samples ({lead * dt * 1e6:.3g} µs): no "
+                "sensor answers before it is excited, so this is the channels' skew (digitizer deskew, trigger "
+                "alignment, cable lengths) or the reference chain's own delay (an interferometer's demodulation); "
+                f"the response was realigned by {realigned_samples} samples before the fit, and the model's delay "
+                "carries the lead (negative)"]
     if structure != ALL_POLE:
         return lead_warning(data, fit, dt, significance)
     if fit.delay < -LEAD_WARNING_SAMPLES:

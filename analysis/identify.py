@@ -152,13 +152,20 @@ class FitContext:
     knee_tolerance: float
     max_delay: int
     asked_order: int | None
-    record: Record  # the record at the analysis rate
+    record: Record  # the record at the analysis rate (its response realigned: `realigned_samples`)
     model_error_ratio: float  # V / degrees of freedom of the chosen order (≈ 1: noise explains it)
     # Other near-equal optima of the chosen order's delay–zeros valley (frequency_fit.delay_branches):
     # the Monte Carlo refits each draw from every branch and keeps the lowest cost.
     branches: dict[int, list[OrderFit]] = field(default_factory=dict)
     # The model error's variance per fitted bin, included in var_y (identify.ModelError; zeros: none)
     var_model_error: np.ndarray | None = None
+    # The response was delayed by this many samples before the fit (record_preparation.realigned):
+    # a fit's delay τ is the model's τ − realigned_samples.
+    realigned_samples: int = 0
+
+    def model_delay(self, fit_delay_samples: float) -> float:
+        """The model's delay (samples) of a fit's."""
+        return float(fit_delay_samples) - self.realigned_samples
 
     @property
     def model_error_detected(self) -> bool:
@@ -307,7 +314,8 @@ def identify(
         raise AnalysisError(f"order must be at least 1, got {order}")
     warnings: list[str] = []
     # Steps 1–4: rate, scale, baselines and noise, window and band.
-    prepared = prepare_record(record, sample_rate_hz, max(max_order, order or 0), order, max_delay_samples, warnings)
+    prepared = prepare_record(record, sample_rate_hz, max(max_order, order or 0), order, max_delay_samples, warnings,
+                              realign=remove_delay)
     prep, dt = prepared.prep, prepared.record.sample_interval_s
     data = prep.spectral if sine_terms is None else replace(prep.spectral, sine=sine_terms)
     setup = search_setup(data, prep, max(max_order, order or 0), order, dt, remove_delay=remove_delay,
@@ -325,19 +333,21 @@ def identify(
         evidence["unstable_when_converged"] = settled.unstable_when_converged
     final, others = best_delay_branch(sweep, chosen, data, setup)
     if others:
-        evidence["delay_branches"] = [{"delay_samples": f.delay, "cost": f.cost} for f in [final, *others]]
+        evidence["delay_branches"] = [{"delay_samples": f.delay - prepared.realigned_samples, "cost": f.cost}
+                                      for f in [final, *others]]
     if model_error.significant:  # its size is what the final model leaves unexplained (detection stays above)
         model_error = measure_model_error(prep, data, final, sweep.parameters[chosen], dt, threshold=0.0)
     if not final.converged:
         warnings.append(f"the order-{chosen} fit stopped before converging in {final.evaluations} evaluations "
                         "(its cost was the lowest reached)")
     # Step 7: the model in the record's units (the scales go back into B) and its claims.
-    model = DiscreteModel(dt, final.a, final.b * (prepared.scale_y / prepared.scale_u), float(final.delay),
+    model = DiscreteModel(dt, final.a, final.b * (prepared.scale_y / prepared.scale_u),
+                          float(final.delay) - prepared.realigned_samples,
                           info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure})
     modes = claimed_modes(model, prep.band, sweep.structure)
     warnings += claims_warnings(modes, prep.band)
     if remove_delay:
-        warnings += delay_warnings(data, final, sweep.structure, dt, significance)
+        warnings += delay_warnings(data, final, sweep.structure, dt, significance, prepared.realigned_samples)
     return _identification(prepared, data, setup, settled, final, others, model, modes, model_error, evidence,
                            warnings, knee_tolerance)
 
@@ -424,10 +434,11 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
         significance=setup.significance, knee_tolerance=knee_tolerance, max_delay=setup.max_delay,
         asked_order=setup.asked_order, record=rec, model_error_ratio=ratio,
         branches={chosen: others} if others else {}, var_model_error=model_error.var_bins,
+        realigned_samples=prepared.realigned_samples,
     )
     return Identification(
         model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,
-        bic_by_order=bic, fit_percent=fit, delay_samples=float(final.delay), modes=modes, warnings=warnings,
+        bic_by_order=bic, fit_percent=fit, delay_samples=model.delay_samples, modes=modes, warnings=warnings,
         converged=final.converged, iterations=final.evaluations, order_selection=settled.selection,
         knee_tolerance=knee_tolerance, preprocessing=pre, supported_band_hz=prep.band, noise=noise,
         order_evidence=evidence, context=context,

@@ -40,7 +40,7 @@ from hopkinson.analysis.order_choice import (
     order_stability,
     response_change,
 )
-from hopkinson.analysis.record_preparation import Prepared
+from hopkinson.analysis.record_preparation import SKEWED_LEAD_SAMPLES, Prepared
 from hopkinson.analysis.resample import estimate_delay_samples
 
 FREE, ALL_POLE = "free", "all_pole"  # the model structures: B free, or B = g·(1 + z⁻¹)ⁿ/2ⁿ (no finite zeros)
@@ -389,15 +389,12 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
     return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
 
 
-# A response that leads its reference by more than this many samples (by their cross-correlation, which
-# includes the sensor's own group delay and so reads later than the true lag) is taken as skewed.
-SKEWED_LEAD_SAMPLES = 2.0
-
-
 def _lead_hint(setup: SearchSetup) -> str:
-    """The cause, when the response leads the reference by several samples: no sensor answers
-    before it is excited, and neither structure follows such a lead (PTB's response shifted 10 µs
-    earlier: every fit unstable)."""
+    """The cause, when the response still leads the reference by several samples in the fitted
+    window (record_preparation.realigned takes a lead up to the longest delay searched, judged
+    on the whole record): no sensor answers before it is excited, and neither structure follows
+    such a lead (PTB's response shifted 10 µs earlier, before the realignment: every fit
+    unstable)."""
     if setup.lead >= -SKEWED_LEAD_SAMPLES:
         return ""
     lead_us = -setup.lead * setup.sample_interval_s * 1e6

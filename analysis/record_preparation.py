@@ -25,7 +25,7 @@ from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
 from hopkinson.analysis.noise import COHERENCE_SEGMENT, WELCH_SEGMENT, NoiseSpectrum, is_motion
 from hopkinson.analysis.numerics import next_fast_len
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.resample import resample_to_rate
+from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
 from hopkinson.analysis.response import simulate_from_rest
 from numpy import fft
 
@@ -48,6 +48,12 @@ MOTION_JUDGED = 17 * COHERENCE_SEGMENT // 2
 # The response's mean power per bin of the fitted band, over its noise's, at or below which it is
 # taken as showing no response (pure noise reads 1, ±0.2 over 50 bins; a real shot 10³–10⁹).
 RESPONSE_ABOVE_NOISE = 2.0
+# A response leading the reference by more than this many samples (their cross-correlation) is the
+# channels' skew or the reference chain's own delay (an interferometer's demodulation and low-pass:
+# microseconds), not the sensor, which cannot answer before it is excited. Neither structure follows
+# such a lead from the fit's start (PTB's response shifted 7-10 µs earlier: every fit unstable), so
+# the response is realigned by whole samples first (`realigned`); the model's delay keeps the lead.
+SKEWED_LEAD_SAMPLES = 2.0
 # The lead-in's end (_foot): where a FOOT_BOX-sample box-car of |x| last stands at FOOT_LEVEL × its
 # median before the pulse.
 FOOT_BOX = 5
@@ -109,16 +115,28 @@ class PreparedRecord:
     u_all: np.ndarray  # each whole channel normalised, its median removed (the ARX losses' input)
     y_all: np.ndarray
     preprocessing: dict[str, Any]
+    # the response was delayed by this many samples against the reference before the fit
+    # (`realigned`): a fitted delay τ is the model's τ − realigned_samples
+    realigned_samples: int = 0
 
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
-                   warnings: list[str]) -> PreparedRecord:
-    """Resample to the analysis rate (None: the record's), check and scale both channels, and run
-    the prepare, noise and band stages. Warnings are appended to `warnings`."""
+                   warnings: list[str], realign: bool = True) -> PreparedRecord:
+    """Resample to the analysis rate (None: the record's), check both channels, realign a response
+    that leads by several samples (`realigned`; not when `realign` is False: the delay held at 0;
+    claims.delay_warnings says so), scale both channels, and run the prepare, noise and band
+    stages. Warnings are appended to `warnings`."""
     pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
         pre["resampled_to_hz"] = rec.sample_rate_hz
+    checked_channels(rec)
+    shift = 0
+    if realign:
+        rec, shift, lead = realigned(rec, max_delay)
+        if shift:
+            pre["response_realigned_samples"] = shift
+            pre["response_lead_by_cross_correlation_samples"] = lead
     ref, resp = checked_channels(rec)
     dt = rec.sample_interval_s
     need = MIN_SAMPLES_PER_PARAMETER * (2 * n_max + 1)
@@ -142,8 +160,9 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
             "drift_removed": prep.drift_removed,
             # What was taken off each channel, in its own units, at time t of the record:
             # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
+            # (the response's samples, realigned, stand `shift` samples earlier on the record's time)
             **{f"{name}_drift": {"intercept": line[1] * scale, "slope_per_s": line[0] * scale / dt,
-                                 "origin_s": rec.start_time_s}
+                                 "origin_s": rec.start_time_s - (shift * dt if name == "response" else 0.0)}
                for (name, line), scale in zip(prep.drift_lines.items(), (scale_u, scale_y), strict=True)},
             "window_start_s": rec.start_time_s + prep.start * dt,
             "window_samples": int(prep.u.size),
@@ -154,7 +173,30 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
             "scale_response": scale_y,
         }
     )
-    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre)
+    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, shift)
+
+
+def realigned(rec: Record, max_delay: int) -> tuple[Record, int, float]:
+    """The record with its response delayed by S whole samples where it leads the reference by
+    more than SKEWED_LEAD_SAMPLES (their cross-correlation over the whole record:
+    analysis.resample.estimate_delay_samples): the reference's first S samples and
+    the response's last S are dropped, so that each response sample stands beside the reference
+    S samples before it; the time base stays the reference's. S is the lead rounded up: the
+    response then lags by a fraction of a sample, as a causal model has it. Returns the record,
+    S (0: the record itself) and the lead (samples; 0 when not judged). The lag is searched
+    within twice the longest delay the fit searches; one at the search's edge is not located and
+    not taken."""
+    reach = max(1, min(2 * int(max_delay), rec.n_samples // 4))
+    try:
+        lag = estimate_delay_samples(rec.reference, rec.response, reach)
+    except AnalysisError:
+        return rec, 0, 0.0
+    if lag >= -SKEWED_LEAD_SAMPLES or -lag >= reach - 1:
+        return rec, 0, 0.0
+    shift = int(math.ceil(-lag))
+    ref, resp = np.asarray(rec.reference)[shift:], np.asarray(rec.response)[: rec.n_samples - shift]
+    return (Record(rec.sample_interval_s, ref, resp, rec.start_time_s + shift * rec.sample_interval_s,
+                   rec.response_unit), shift, -lag)
 
 
 @dataclass

@@ -271,14 +271,14 @@ def _stated(sine: SineCalibration) -> tuple[np.ndarray, np.ndarray]:
 
 def _joint_error(ident: Any) -> tuple[np.ndarray, float, float]:
     """The chosen fit's complex log-error at the sine points (SineTerms), κ in the record's
-    units and τ_s (samples)."""
+    units and τ_s (samples; on the record's own alignment, as the model's delay)."""
     ctx = ident.context
     if ctx is None or ctx.spectral.sine is None:
         raise AnalysisError("the identification was not fitted with a sine calibration")
     fit = ctx.fits[ident.order]
     problem = OrderProblem.for_fit(ctx.spectral, fit, ctx.delay_mode, ctx.max_delay)
     error = problem._sine_error(problem.pack(fit))
-    return error, gain_ratio_of(fit, ctx.scale_y / ctx.scale_u), float(fit.sine_skew)
+    return error, gain_ratio_of(fit, ctx.scale_y / ctx.scale_u), ctx.model_delay(fit.sine_skew)
 
 
 def _shock_only_error(ident: Any, sine: SineCalibration) -> np.ndarray:

@@ -299,10 +299,10 @@ def evaluate(
             continue
         b = f.b * scale * gain_factor[r]
         dc_draws[r] = float(np.sum(b) / np.sum(f.a))
-        delay_draws[r] = (f.delay - skews[r]) * dt
+        delay_draws[r] = (ctx.model_delay(f.delay) - skews[r]) * dt
         # fitted with a sine calibration: the sine's level ÷ the model's (analysis.sine_joint)
         info = {"sine_gain_ratio": math.exp(f.sine_gain) / (scale * gain_factor[r])} if ctx.spectral.sine else {}
-        model_draws.append(DiscreteModel(dt, f.a, b, float(f.delay), info=info))
+        model_draws.append(DiscreteModel(dt, f.a, b, ctx.model_delay(f.delay), info=info))
         if main_pole is not None:
             fn_draws[r], zeta_draws[r] = _nearest_mode(f.a, main_pole, dt)
     nominal_edges = fbsd_edges(model)
@@ -763,7 +763,7 @@ def _figure_gradients(
         if pole is not None:
             out["natural_frequency_hz"], out["damping_ratio"] = _nearest_mode(a, pole, dt)
         try:
-            for key, edge in fbsd_edges(DiscreteModel(dt, a, b * scale, tau)).items():
+            for key, edge in fbsd_edges(DiscreteModel(dt, a, b * scale, ctx.model_delay(tau))).items():
                 out[f"fbsd_{key}_hz"] = edge.frequency_hz
         except AnalysisError:
             pass

@@ -53,7 +53,7 @@ def variants() -> dict[str, Callable[[], Record]]:
         out[f"{n / 1e4:g} ms capture"] = lambda n=n: cut(n)
     for s in (1_000, 2_000, 2_500, 2_800, 3_000, 3_300):
         out[f"started {s / 1e4:g} ms later"] = lambda s=s: started_late(s)
-    for s in (-50, -15, -5, 3, 8, 20, 30, 50, 100):
+    for s in (-400, -200, -100, -50, -15, -5, 3, 8, 20, 30, 50, 100):
         out[f"skew {s / 10:+g} us"] = lambda s=s: skewed(s)
     # more noise: each seed another noise, as each recording would have its own
     noises = ([(1e-3, 0), (3e-3, 5), (5e-3, 9)] + [(level, seed) for level in (1e-2, 2e-2) for seed in range(20)]

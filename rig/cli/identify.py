@@ -262,6 +262,12 @@ def explain(report: dict[str, Any]) -> str:
         lines.append(f"  motion{'' if kept else ', not noise'}: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms "
                      f"{why}: " + ("measured as noise all the same, there being no lead-in at rest" if kept
                                    else "left out of the noise"))
+    shift = pre.get("response_realigned_samples")
+    if shift:
+        lines.append(f"  realigned: the response delayed by {shift} samples before the fit (it led the reference by "
+                     f"{pre.get('response_lead_by_cross_correlation_samples', 0.0):.3g} samples by their "
+                     f"cross-correlation); the model's delay, {report.get('delay_samples', 0.0):.3g} samples, "
+                     "carries the lead")
     band = report.get("supported_band_hz")
     if band:
         lines.append(f"  band: {band[0] / 1e3:.4g}–{band[1] / 1e3:.4g} kHz, where the reference's spectrum stands "

@@ -30,6 +30,7 @@ from hopkinson.analysis.record_preparation import (
     locate_pulse,
     measure_noise,
     prepare_record,
+    realigned,
 )
 from hopkinson.analysis.records import Record
 from scipy import signal
@@ -93,6 +94,33 @@ def test_prepare_record_removes_each_channels_baseline():
     pre = prepare_record(Record(DT, u + 0.3, y - 0.2), None, 8, None, 32, []).preprocessing
     assert pre["reference_baseline"] == pytest.approx(0.3, abs=3 * SIGMA_U)
     assert pre["response_baseline"] == pytest.approx(-0.2, abs=0.01)
+
+
+def test_a_response_leading_by_many_samples_is_realigned_and_the_model_keeps_the_lead():
+    """The known sensor's response advanced by 12 samples (the channels' skew, or an
+    interferometer's demodulation delaying the reference): `realigned` delays it by whole
+    samples before the fit (the cross-correlation reads the lead ~8 samples short, by the
+    ringing sensor's own lag, so by a few here), and the identified model, its delay included,
+    is the truth advanced by 12 samples, within 1 % and 0.5° from 1 to 20 kHz (as recorded it
+    was 80 % and 26° off: no structure reached the lead). A lead under 2 samples is left alone."""
+    from hopkinson.analysis.identify import identify
+    from hopkinson.analysis.response import frequency_response
+
+    u, y = channels()
+    as_recorded = Record(DT, u, y)
+    assert realigned(as_recorded, 32)[:2] == (as_recorded, 0)  # the sensor's own lag: nothing to do
+    rec = Record(DT, u, np.roll(y, -12))
+    moved, shift, lead = realigned(rec, 32)
+    assert shift >= 1 and shift - 1 < lead <= shift
+    assert moved.start_time_s == pytest.approx(shift * DT) and moved.n_samples == N - shift
+    assert np.array_equal(moved.response, rec.response[: N - shift]) and np.array_equal(moved.reference, u[shift:])
+    ident = identify(rec, sample_rate_hz=None)
+    assert any(f"realigned by {shift} samples" in w for w in ident.warnings), ident.warnings
+    f = np.linspace(1e3, 20e3, 20)
+    model = frequency_response(ident.model, f) * np.exp(-2j * np.pi * f * DT * ident.model.delay_samples)
+    _, truth = signal.freqresp(sensor(), 2 * np.pi * f)
+    ratio = model / (truth * np.exp(2j * np.pi * f * DT * 12))
+    assert np.max(np.abs(np.abs(ratio) - 1.0)) < 0.01 and np.max(np.abs(np.degrees(np.angle(ratio)))) < 0.5
 
 
 def test_locate_pulse_tells_a_record_cut_short():

@@ -15,7 +15,7 @@ from hopkinson.analysis.records import Record
 from hopkinson.analysis.shot_analysis import analyse_record
 from scipy import signal
 
-from tests.ptb_shock import SINE_FBSD_5_HZ, SINE_FBSD_10_HZ, ptb_record, ptb_sine
+from tests.ptb_shock import SINE_FBSD_5_HZ, SINE_FBSD_10_HZ, against_sine, ptb_record, ptb_sine
 
 DRAWS = 60
 
@@ -391,17 +391,29 @@ def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
     assert "that motion is not taken as noise" not in gone
 
 
-def test_a_response_that_leads_by_microseconds_is_refused_with_its_cause(tmp_path, capsys):
-    """PTB's response shifted 10 µs earlier (a trigger or deskew error): no sensor answers before it
-    is excited and no model follows it. The refusal names the lead the channels' cross-correlation
-    shows (10 µs, the shift made, less the sensor's own lag) and what to do; exit code 2."""
-    from hopkinson.rig.cli.main import main
+def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(ptb):
+    """PTB's response shifted 10 µs earlier (a deskew or trigger error, or the delay of an
+    interferometer's demodulation): no sensor answers before it is excited and, as recorded, no
+    model followed it (every fit unstable, refused until stop 38). It is realigned by whole
+    samples before the fit and the lead kept in the model's delay. The truth is the shift made:
+    the model, its delay draws and the joint fit's skew move by exactly 10 µs against the
+    published record's; the intervals hold the sine's; the warning names the lead."""
+    from hopkinson.analysis.identify import identify
+    from hopkinson.rig.cli.identify import explain
 
-    from tests.ptb_shock import skewed, write_ptb_record_csv
+    from tests.ptb_shock import skewed
 
-    path = write_ptb_record_csv(tmp_path / "skewed.csv", skewed(-100))
-    assert main(["identify", str(path), "--no-uncertainty"]) == 2
-    err = capsys.readouterr().err
-    assert "skewed.csv" in err and "correct the skew" in err and "Traceback" not in err
-    lead = re.search(r"the response leads the reference by about [0-9.]+ samples \(([0-9.]+) µs\)", err)
-    assert lead and 9.0 <= float(lead.group(1)) <= 10.5
+    shifted = analyse_record(skewed(-100), AnalysisParams(draws=DRAWS, seed=1))
+    warning = next(w for w in shifted.warnings if "realigned" in w)
+    lead = re.search(r"the response leads the reference by about [0-9.]+ samples \(([0-9.]+) µs\)", warning)
+    assert lead and 9.0 <= float(lead.group(1)) <= 10.5 and "realigned by 11 samples" in warning
+    dt = shifted.model.sample_interval_s
+    assert shifted.model.delay_samples * dt == pytest.approx(ptb.model.delay_samples * dt - 10e-6, abs=0.05e-6)
+    delay, published = shifted.uncertainty["delay_s"], ptb.uncertainty["delay_s"]
+    assert np.allclose(delay["interval"], np.array(published["interval"]) - 10e-6, atol=0.2e-6)
+    judged = against_sine(shifted.uncertainty)
+    assert all(j["contains"] and j["half_width_ok"] for j in judged.values()), judged
+    trail = explain(shifted.identification.to_dict())
+    assert "realigned: the response delayed by 11 samples before the fit" in trail
+    skews = [identify(rec, sine=ptb_sine()).sine_joint.skew_s for rec in (skewed(-100), ptb_record())]
+    assert skews[0] == pytest.approx(skews[1] - 10e-6, abs=0.1e-6)
