@@ -92,7 +92,7 @@ from hopkinson.analysis.model_error import (
 )
 from hopkinson.analysis.modes import has_doublet, main_mode
 from hopkinson.analysis.noise import NoiseSpectrum
-from hopkinson.analysis.order_choice import FRF_TOLERANCE, SIGNIFICANCE
+from hopkinson.analysis.order_choice import FRF_TOLERANCE, SIGNIFICANCE, choose_order
 from hopkinson.analysis.order_search import (
     FREE,
     OrderSweep,
@@ -356,7 +356,8 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
                              ) -> tuple[OrderSweep, ModelError, SpectralData]:
     """Steps 5–5b: every order of the free structure fitted and the order test's choice; the
     model error measured on that choice (iterated to convergence: the search stops each order
-    early) and, when significant, weighed as an output error of its own, every order fitted
+    early; where the choice took more than half the real residuals, on the test's choice among
+    the orders that leave half) and, when significant, weighed as an output error of its own, every order fitted
     again with those weights (model_error.with_output_variance), and the structure chosen
     (order_search.fit_structures); the structure is also chosen when the free choice holds a
     pole–zero doublet, whose ripple can take in the model error so that its residual reads as
@@ -370,6 +371,16 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
         return sweep, model_error, data
     order = setup.asked_order
     pick = order if order is not None and order in sweep.fits else sweep.chosen
+    if order is None and sweep.parameters[pick] > data.bins:
+        # A choice that took more than half the 2·bins real residuals follows the model error
+        # itself: measured on its residual the error reads too small, and the refit's V stays far
+        # above the bins (PTB's record cut to 0.65 ms, 14 bins: order 6 with 20 parameters read
+        # 21× the noise, the refit's V 97-177, free order 1 chosen at a delay of 4 samples and every
+        # interval too wide). It is measured on the order test's choice among the orders that
+        # leave at least half (there order 3: 1 300×, V 4-10 after the refit).
+        within = {n: v for n, v in sweep.costs.items() if sweep.parameters[n] <= data.bins}
+        kept, _ = choose_order(within, sweep.parameters, data.bins, sweep.changes, setup.significance)
+        pick = kept if kept is not None else pick
     settled = OrderProblem.for_fit(data, sweep.fits[pick], sweep.delay_mode, setup.max_delay).solve(
         sweep.fits[pick], 200, 1e-9)
     doublet = has_doublet(settled.a, settled.b)
