@@ -357,13 +357,14 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     """Steps 5–5b: every order of the free structure fitted and the order test's choice; the
     model error measured on that choice (iterated to convergence: the search stops each order
     early; where the choice took more than half the real residuals, on the test's choice among
-    the orders that leave half) and, when significant, weighed as an output error of its own, every order fitted
-    again with those weights (model_error.with_output_variance), and the structure chosen
-    (order_search.fit_structures); the structure is also chosen when the free choice holds a
-    pole–zero doublet, whose ripple can take in the model error so that its residual reads as
-    noise (PTB's reference driving a known sensor with a 0.4 % lobe-dependent gain: residual
-    1.08× the noise, a doublet at 12.7 kHz, the ±5 % edge 10 % off). Once: measured again on a lower order's residual, the model
-    error would take in what that order lacks (on PTB's record it then fell to order 1).
+    the orders that leave half) and, when significant, weighed as an output error of its own,
+    every order fitted again with those weights (model_error.with_output_variance), and the
+    structure chosen (order_search.fit_structures); the structure is also chosen when the free
+    choice holds a pole–zero doublet, whose ripple can take in the model error so that its
+    residual reads as noise (PTB's reference driving a known sensor with a 0.4 % lobe-dependent
+    gain: residual 1.08× the noise, a doublet at 12.7 kHz, the ±5 % edge 10 % off). Once:
+    measured again on a lower order's residual, the model error would take in what that order
+    lacks (on PTB's record it then fell to order 1).
     Returns the sweep, the model error and the data as weighed."""
     sweep = fit_orders(data, FREE, setup)
     model_error = ModelError.none(prep.bin_hz.size)

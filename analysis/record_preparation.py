@@ -130,9 +130,8 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
         pre["resampled_to_hz"] = rec.sample_rate_hz
-    checked_channels(rec)
     shift = 0
-    if realign:
+    if realign:  # (a channel with a NaN is not realigned: checked_channels below refuses it)
         rec, shift, lead = realigned(rec, max_delay)
         if shift:
             pre["response_realigned_samples"] = shift
