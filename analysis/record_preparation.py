@@ -159,7 +159,7 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
             "drift_removed": prep.drift_removed,
             # What was taken off each channel, in its own units, at time t of the record:
             # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
-            # (the response's samples, realigned, stand `shift` samples earlier on the record's time)
+            # (the response, realigned, starts `shift` samples before the record: `realigned`)
             **{f"{name}_drift": {"intercept": line[1] * scale, "slope_per_s": line[0] * scale / dt,
                                  "origin_s": rec.start_time_s - (shift * dt if name == "response" else 0.0)}
                for (name, line), scale in zip(prep.drift_lines.items(), (scale_u, scale_y), strict=True)},
@@ -178,13 +178,16 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
 def realigned(rec: Record, max_delay: int) -> tuple[Record, int, float]:
     """The record with its response delayed by S whole samples where it leads the reference by
     more than SKEWED_LEAD_SAMPLES (their cross-correlation over the whole record:
-    analysis.resample.estimate_delay_samples): the reference's first S samples and
-    the response's last S are dropped, so that each response sample stands beside the reference
-    S samples before it; the time base stays the reference's. S is the lead rounded up: the
-    response then lags by a fraction of a sample, as a causal model has it. Returns the record,
-    S (0: the record itself) and the lead (samples; 0 when not judged). The lag is searched
-    within twice the longest delay the fit searches; one at the search's edge is not located and
-    not taken."""
+    analysis.resample.estimate_delay_samples), so that each response sample stands beside the
+    reference S samples before it. The reference is kept whole, its lead-in at rest with it (its
+    first S samples dropped instead, PTB's record at 0.25 MS/s with a 120 µs lead lost its
+    lead-in and missed the sine); the response's last S samples are dropped and its first S
+    mirrored from its own lead-in (np.pad "reflect": noise of its own level, continuous at the
+    join). S is the lead rounded up: the response then lags by a fraction of a sample, as a
+    causal model has it. Returns the record, S (0: the record itself) and the lead (samples; 0
+    when not judged). The lag is searched within twice the longest delay the fit searches; one
+    at the search's edge is not located and not taken, nor one the response's lead-in cannot
+    mirror (its pulse within 2·S samples of its start)."""
     reach = max(1, min(2 * int(max_delay), rec.n_samples // 4))
     try:
         lag = estimate_delay_samples(rec.reference, rec.response, reach)
@@ -193,9 +196,12 @@ def realigned(rec: Record, max_delay: int) -> tuple[Record, int, float]:
     if lag >= -SKEWED_LEAD_SAMPLES or -lag >= reach - 1:
         return rec, 0, 0.0
     shift = int(math.ceil(-lag))
-    ref, resp = np.asarray(rec.reference)[shift:], np.asarray(rec.response)[: rec.n_samples - shift]
-    return (Record(rec.sample_interval_s, ref, resp, rec.start_time_s + shift * rec.sample_interval_s,
-                   rec.response_unit), shift, -lag)
+    resp = np.asarray(rec.response, dtype=float)
+    head = resp[: 2 * shift + 1]
+    if np.max(np.abs(head - np.median(head))) > 0.5 * np.max(np.abs(resp - np.median(resp))):
+        return rec, 0, 0.0
+    moved = np.pad(resp[: resp.size - shift], (shift, 0), mode="reflect")
+    return Record(rec.sample_interval_s, rec.reference, moved, rec.start_time_s, rec.response_unit), shift, -lag
 
 
 @dataclass

@@ -69,6 +69,9 @@ def variants() -> dict[str, Callable[[], Record]]:
     for seed in (1, 21):
         out[f"late 0.2 ms, 1 % noise ({seed})"] = lambda sd=seed: started_late(2_000, noisier(1e-2, sd))
     out["1 MS/s, late 0.25 ms, 2 % noise"] = lambda: decimated(10, started_late(2_500, noisier(2e-2, 32)))
+    # a lead realigned (record_preparation.realigned) where the lead-in is short or the rate low
+    out["late 0.2 ms, skew -10 us"] = lambda: started_late(2_000, skewed(-100))
+    out["0.25 MS/s, skew -120 us"] = lambda: skewed(-30, decimated(40))
     return out
 
 
