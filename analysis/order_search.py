@@ -74,6 +74,9 @@ class SearchSetup:
     sample_interval_s: float
     band_hz: tuple[float, float]  # the band the excitation supports
     lead: float = 0.0  # the channels' cross-correlation lag where the response leads (samples, < 0), else 0
+    # the whole record's cross-correlation peaked at the edge of realignment's search, this many
+    # samples of lead (record_preparation.realigned; 0: not so)
+    lead_beyond_search: float = 0.0
 
     def delay_mode(self, structure: str) -> str | float:
         """The free structure keeps its delay causal (its zeros can take up a lead: the lead
@@ -88,7 +91,7 @@ class SearchSetup:
 
 def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | None, dt: float, *,
                  remove_delay: bool, max_delay: int, patience: int | None, max_evaluations: int,
-                 significance: float, warnings: list[str]) -> SearchSetup:
+                 significance: float, warnings: list[str], lead_beyond_search: float = 0.0) -> SearchSetup:
     """The delay's start (the causal delay that best fits a second-order model, on a coarse grid)
     and the orders the band allows: each order needs more real residuals (two per bin) than
     parameters (2n + 2, and n more with a transient term)."""
@@ -106,7 +109,7 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
                         "frequency bins")
         n_max = allowed
     return SearchSetup(n_max, order, tau0, remove_delay, max_delay, patience, max_evaluations, significance,
-                       float(prep.bin_hz[0]), dt, prep.band, min(lag, 0.0))
+                       float(prep.bin_hz[0]), dt, prep.band, min(lag, 0.0), lead_beyond_search)
 
 
 @dataclass
@@ -395,6 +398,12 @@ def _lead_hint(setup: SearchSetup) -> str:
     on the whole record): no sensor answers before it is excited, and neither structure follows
     such a lead (PTB's response shifted 10 µs earlier, before the realignment: every fit
     unstable)."""
+    if setup.lead_beyond_search:
+        edge = setup.lead_beyond_search
+        return (f"; the channels' cross-correlation peaks at the edge of its search, a lead of {edge:.3g} samples "
+                f"({edge * setup.sample_interval_s * 1e6:.3g} µs) or more, beyond what the analysis realigns: the "
+                "channels are skewed (digitizer deskew, trigger alignment, cable lengths); correct the skew and "
+                "analyse again")
     if setup.lead >= -SKEWED_LEAD_SAMPLES:
         return ""
     lead_us = -setup.lead * setup.sample_interval_s * 1e6

@@ -136,6 +136,8 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
         if shift:
             pre["response_realigned_samples"] = shift
             pre["response_lead_by_cross_correlation_samples"] = lead
+        elif lead:
+            pre["response_lead_beyond_search_samples"] = lead
     ref, resp = checked_channels(rec)
     dt = rec.sample_interval_s
     need = MIN_SAMPLES_PER_PARAMETER * (2 * n_max + 1)
@@ -186,15 +188,18 @@ def realigned(rec: Record, max_delay: int) -> tuple[Record, int, float]:
     join). S is the lead rounded up: the response then lags by a fraction of a sample, as a
     causal model has it. Returns the record, S (0: the record itself) and the lead (samples; 0
     when not judged). The lag is searched within twice the longest delay the fit searches; one
-    at the search's edge is not located and not taken, nor one the response's lead-in cannot
-    mirror (its pulse within 2·S samples of its start)."""
+    at the search's edge is not located and not taken (S 0 with the lead at the edge: the
+    refusal that follows says so), nor one the response's lead-in cannot mirror (its pulse
+    within 2·S samples of its start)."""
     reach = max(1, min(2 * int(max_delay), rec.n_samples // 4))
     try:
         lag = estimate_delay_samples(rec.reference, rec.response, reach)
     except AnalysisError:
         return rec, 0, 0.0
-    if lag >= -SKEWED_LEAD_SAMPLES or -lag >= reach - 1:
+    if lag >= -SKEWED_LEAD_SAMPLES:
         return rec, 0, 0.0
+    if -lag >= reach - 1:
+        return rec, 0, -lag
     shift = int(math.ceil(-lag))
     resp = np.asarray(rec.response, dtype=float)
     head = resp[: 2 * shift + 1]

@@ -417,3 +417,18 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     assert "realigned: the response delayed by 11 samples before the fit" in trail
     skews = [identify(rec, sine=ptb_sine()).sine_joint.skew_s for rec in (skewed(-100), ptb_record())]
     assert skews[0] == pytest.approx(skews[1] - 10e-6, abs=0.1e-6)
+
+
+def test_a_lead_beyond_the_realignments_search_is_refused_with_its_cause(tmp_path, capsys):
+    """PTB's response shifted 70 µs earlier, beyond the 64 samples realignment searches: every fit
+    is unstable, and the refusal says the channels' cross-correlation peaked at its search's edge
+    and what to do (until stop 38 it named no cause); one line naming the file, exit code 2."""
+    from hopkinson.rig.cli.main import main
+
+    from tests.ptb_shock import skewed, write_ptb_record_csv
+
+    path = write_ptb_record_csv(tmp_path / "skewed.csv", skewed(-700))
+    assert main(["identify", str(path), "--no-uncertainty"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "skewed.csv" in err and "Traceback" not in err
+    assert "peaks at the edge of its search, a lead of 64 samples" in err and "correct the skew" in err
