@@ -122,10 +122,10 @@ class PreparedRecord:
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
                    warnings: list[str], realign: bool = True) -> PreparedRecord:
-    """Resample to the analysis rate (None: the record's), check both channels, realign a response
-    that leads by several samples (`realigned`; not when `realign` is False: the delay held at 0;
-    claims.delay_warnings says so), scale both channels, and run the prepare, noise and band
-    stages. Warnings are appended to `warnings`."""
+    """Resample to the analysis rate (None: the record's), realign a response that leads by
+    several samples (`realigned`; not when `realign` is False: the delay held at 0;
+    claims.delay_warnings says so), check and scale both channels, and run the prepare, noise
+    and band stages. Warnings are appended to `warnings`."""
     pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
