@@ -577,8 +577,11 @@ class DcmStream:
     own group delay) so that it lines up with the reference: the whole samples are held back
     at the start (`process` returns fewer samples than it was given until they are used up),
     the fraction is removed by a fractional-delay FIR, and `flush()` returns the tail,
-    computed by continuing the input with its last sample. Every output is checked: a
-    non-finite sample (an overflowing DCM) is an AnalysisError.
+    computed by continuing the input with its last sample. A latency below zero (a response
+    that leads its reference by more than the FIR's half length: the channels' skew, which the
+    latency includes) is removed by delaying the output instead: it starts with that many
+    samples of its initial level, and its last ones, past the input's length, are dropped.
+    Every output is checked: a non-finite sample (an overflowing DCM) is an AnalysisError.
     """
 
     def __init__(self, dcm: DCM, initial: str = "rest", align: bool = False) -> None:
@@ -590,6 +593,7 @@ class DcmStream:
         self._sos = dcm.sos()
         self._fir: np.ndarray | None = None
         self._hold = 0
+        self._delay = 0  # output samples to delay by (a latency below zero)
         if align:
             latency = dcm.latency_s / dcm.sample_interval_s
             whole = math.floor(latency)
@@ -597,11 +601,7 @@ class DcmStream:
             if fraction > 1e-9:
                 self._fir = fractional_delay_fir(_ALIGN_HALF_TAPS - fraction)
                 whole += _ALIGN_HALF_TAPS
-            if whole < 0:
-                raise AnalysisError(
-                    f"DCM stream: a latency of {latency:.3g} samples (the output ahead of its input) cannot be removed"
-                )
-            self._hold = whole
+            self._hold, self._delay = max(whole, 0), max(-whole, 0)
         self.reset()
 
     @property
@@ -614,6 +614,7 @@ class DcmStream:
         self._zi: np.ndarray | None = None
         self._fir_zi: np.ndarray | None = None
         self._to_drop = self._hold
+        self._queue: np.ndarray | None = None  # the delay line (None: not started)
         self._last = 0.0
         self.samples_processed = 0
         self.samples_returned = 0
@@ -663,6 +664,11 @@ class DcmStream:
         return y
 
     def _release(self, y: np.ndarray) -> np.ndarray:
+        if self._delay:
+            if self._queue is None:  # the initial level: the filter's first output from rest or steady state
+                self._queue = np.full(self._delay, y[0] if self.initial == "steady" else 0.0)
+            line = np.concatenate([self._queue, y])
+            y, self._queue = line[: y.size], line[y.size :]
         if self._to_drop:
             drop = min(self._to_drop, y.size)
             self._to_drop -= drop
@@ -682,9 +688,11 @@ def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False) -> np.ndarray:
         return x.copy()
     if not np.all(np.isfinite(x)):
         raise AnalysisError("DCM: NaN or infinite sample in a record to compensate")
-    n, hold = x.shape[1], stream.held_samples
+    n, hold, delay = x.shape[1], stream.held_samples, stream._delay
     if hold:
         x = np.concatenate([x, np.repeat(x[:, -1:], hold, axis=1)], axis=1)
+    if delay:  # from rest: the delayed output starts at zero (DcmStream._release)
+        x = np.concatenate([np.zeros((x.shape[0], delay)), x], axis=1)
     y = signal.sosfilt(stream._sos, x, axis=1)
     if stream._fir is not None:
         y = signal.lfilter(stream._fir, [1.0], y, axis=1)

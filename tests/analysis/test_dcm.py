@@ -149,6 +149,37 @@ def test_stream_in_random_blocks_equals_one_shot():
     np.testing.assert_allclose(apply(dcm, x), signal.lfilter(dcm.b, dcm.a, x), rtol=1e-8, atol=1e-8)
 
 
+@pytest.mark.parametrize("latency", [-5.0, -32.4, 7.6])
+def test_aligned_output_is_the_unaligned_one_moved_by_the_latency(latency):
+    """align=True moves the output by the DCM's latency, either way: a latency below zero (a
+    response leading its reference by microseconds, the channels' skew the latency includes)
+    delays it, which until stop 38 was refused ("cannot be removed"). The truth is the unaligned
+    output shifted by the latency (an integer latency: exactly, from rest; a fractional one: the
+    same through a band-limited record, within the FIR's 2e-4), the same in any blocks, and the
+    same from apply_rows (the compensated peak's draws)."""
+    from dataclasses import replace
+
+    from hopkinson.analysis.dcm import apply_rows
+    from hopkinson.analysis.resample import shift_samples
+
+    dcm = replace(design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA), latency_samples=latency)
+    rng = np.random.default_rng(3)
+    x = signal.filtfilt(*signal.butter(6, 0.1), rng.standard_normal(4_000))  # content below 0.05 × the rate
+    x *= np.clip((np.arange(x.size) - 200) / 400, 0, 1) ** 2 * (3 - 2 * np.clip((np.arange(x.size) - 200) / 400, 0, 1))
+    aligned, plain = apply(dcm, x, align=True), apply(dcm, x)
+    assert aligned.size == x.size
+    expected = shift_samples(plain, -latency)
+    inner = slice(100, x.size - 100)  # away from the record's ends, which the shift cannot know
+    tolerance = 1e-12 if float(latency).is_integer() else 2e-4
+    np.testing.assert_allclose(aligned[inner], expected[inner], rtol=0, atol=tolerance * np.max(np.abs(plain)))
+    if latency < 0:
+        np.testing.assert_array_equal(aligned[: int(-latency)], 0.0)
+    blocked = apply(dcm, x, align=True, block_samples=257)
+    np.testing.assert_allclose(blocked, aligned, rtol=0, atol=1e-12 * np.max(np.abs(aligned)))
+    np.testing.assert_allclose(apply_rows(dcm, x[None, :], align=True)[0], aligned, rtol=0,
+                               atol=1e-12 * np.max(np.abs(aligned)))
+
+
 def test_steady_start_has_no_transient_on_a_constant():
     dcm = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
     y = apply(dcm, np.full(500, 2.5), initial="steady")
