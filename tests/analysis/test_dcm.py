@@ -165,7 +165,8 @@ def test_aligned_output_is_the_unaligned_one_moved_by_the_latency(latency):
     dcm = replace(design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA), latency_samples=latency)
     rng = np.random.default_rng(3)
     x = signal.filtfilt(*signal.butter(6, 0.1), rng.standard_normal(4_000))  # content below 0.05 × the rate
-    x *= np.clip((np.arange(x.size) - 200) / 400, 0, 1) ** 2 * (3 - 2 * np.clip((np.arange(x.size) - 200) / 400, 0, 1))
+    ramp = np.clip((np.arange(x.size) - 200) / 400, 0.0, 1.0)
+    x *= ramp**2 * (3 - 2 * ramp)  # at rest for 200 samples, then a smooth onset (a smoothstep)
     aligned, plain = apply(dcm, x, align=True), apply(dcm, x)
     assert aligned.size == x.size
     expected = shift_samples(plain, -latency)
