@@ -158,8 +158,11 @@ def run_identify(args: argparse.Namespace) -> int:
     params = _checked_params(args)
     out = check_output_path(args.output, [args.record] + ([args.sine] if args.sine else []), what="model file") if args.output else None
     record = read_record(args.record)
+    from hopkinson.analysis.doppler import flat_top_warnings
+
+    clipped = flat_top_warnings(record, str(args.record))  # a table file has no full scale to judge by
     if args.method == "paper":
-        return _run_paper(args, params, record, out)
+        return _run_paper(args, params, record, out, clipped)
     sine = None
     if args.sine:
         from hopkinson.analysis.sine_comparison import read_sine_calibration
@@ -170,7 +173,7 @@ def run_identify(args: argparse.Namespace) -> int:
                           sine=sine)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}{' with ' + args.sine if sine else ''}: {exc}") from None
-    warnings = list(result.warnings)
+    warnings = clipped + list(result.warnings)
     uncertainty = None
     if params.uncertainty:
         from hopkinson.analysis.sine_joint import with_draws
@@ -197,8 +200,9 @@ def run_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any) -> int:
-    """`--method paper`: the paper's section 2.1, literally (analysis.paper_method)."""
+def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any, clipped: list[str]) -> int:
+    """`--method paper`: the paper's section 2.1, literally (analysis.paper_method); `clipped`:
+    the record's flat-top warnings."""
     from hopkinson.analysis.paper_method import paper_identify
     from hopkinson.analysis.response import fbsd_hz
 
@@ -213,7 +217,8 @@ def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any) -> 
         raise AnalysisError(f"{args.record}: {exc}") from None
     model = result.model
     report = result.to_dict() | {"record": str(args.record), "fbsd_hz": fbsd_hz(model),
-                                 "poles": [[p.real, p.imag] for p in model.poles]}
+                                 "poles": [[p.real, p.imag] for p in model.poles],
+                                 "warnings": clipped + list(result.warnings)}
     if out is not None:
         atomic_write(out, json.dumps(report, indent=2, allow_nan=False) + "\n")
     if args.json:
@@ -226,7 +231,7 @@ def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any) -> 
              f"  FBSD: ±5 % up to {f['5'] / 1e3:.4g} kHz, ±10 % up to {f['10'] / 1e3:.4g} kHz",
              "  poles: " + ", ".join(f"{p.real:.6f}{p.imag:+.6f}j (|p| {abs(p):.5f})" for p in model.poles),
              "  no uncertainty: the paper's method gives none"]
-    lines += [f"  warning: {w}" for w in result.warnings]
+    lines += [f"  warning: {w}" for w in report["warnings"]]
     sys.stdout.write("\n".join(lines) + "\n")
     if out is not None:
         sys.stdout.write(f"model written to {out}\n")

@@ -5,6 +5,7 @@ the intervals contain the independent truth (the sine calibration's edges, the h
 
 from __future__ import annotations
 
+import json
 import math
 import re
 
@@ -432,3 +433,40 @@ def test_a_lead_beyond_the_realignments_search_is_refused_with_its_cause(tmp_pat
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "skewed.csv" in err and "Traceback" not in err
     assert "peaks at the edge of its search, a lead of 64 samples" in err and "correct the skew" in err
+
+
+def test_a_table_file_whose_response_is_clipped_is_warned_about(tmp_path, capsys):
+    """A table file carries no digitizer full scale, so a clipped channel went through unnoticed:
+    PTB's response clipped at 90 % of its peak gave FBSD intervals too wide and a sensitivity's
+    that misses the sine's (−1.8 % [−3.6, −0.6]), with no warning. `identify` now warns, by
+    either method, of a clip at 97 % already (the clip is the truth: made here), and not of the
+    same record quantised in 12 bits over 1.25× or in 8 bits over 4× its peak, whose extreme
+    code repeats too."""
+    from hopkinson.rig.cli.main import main
+
+    from tests.ptb_shock import write_ptb_record_csv
+
+    rec = ptb_record()
+
+    def quantised(x: np.ndarray, bits: int, span: float) -> np.ndarray:
+        step = 2 * span / 2**bits
+        return np.round(x / step) * step
+
+    top = 0.97 * float(np.max(np.abs(rec.response)))
+    cases = {
+        "clipped": (Record(rec.sample_interval_s, rec.reference, np.clip(rec.response, -top, top)), True),
+        "published": (rec, False),
+        "12bit": (Record(rec.sample_interval_s, *(quantised(x, 12, 1.25 * np.max(np.abs(x)))
+                                                  for x in (rec.reference, rec.response))), False),
+        "8bit": (Record(rec.sample_interval_s, *(quantised(x, 8, 4 * np.max(np.abs(x)))
+                                                 for x in (rec.reference, rec.response))), False),
+    }
+    for name, (record, clipped) in cases.items():
+        path = write_ptb_record_csv(tmp_path / f"{name}.csv", record)
+        assert main(["identify", str(path), "--no-uncertainty", "--method", "paper"]) == 0
+        out = capsys.readouterr().out
+        assert ("response channel holds its extreme value" in out and "is it clipped?" in out) == clipped, name
+        assert "reference channel holds its extreme value" not in out, name
+    assert main(["identify", str(tmp_path / "clipped.csv"), "--no-uncertainty", "--json"]) == 0
+    warnings = json.loads(capsys.readouterr().out)["warnings"]
+    assert any("response channel holds its extreme value" in w for w in warnings), warnings
