@@ -281,7 +281,7 @@ def flat_top_warnings(record: Record, source: str) -> list[str]:
         if run >= max(FLAT_TOP_MIN_SAMPLES, FLAT_TOP_FACTOR * expected):
             out.append(f"{source}: the {name} channel holds its extreme value for {run} samples "
                        f"({run * record.sample_interval_s * 1e6:.3g} µs, {run / width:.0%} of its pulse's half-height "
-                       f"width; a smooth peak in its quantisation steps would for ~{expected:.2g}): is it clipped? "
+                       f"width; a smooth peak in its quantisation steps would hold it for ~{expected:.2g}): is it clipped? "
                        "A table file carries no digitizer full scale to judge it by; a clipped channel reads the "
                        "peak, the sensitivity and the FBSD wrong")
     return out
