@@ -609,6 +609,11 @@ class DcmStream:
         """Output samples held back at the start to remove the latency (0 without align)."""
         return self._hold
 
+    @property
+    def delayed_samples(self) -> int:
+        """Output samples the output is delayed by to remove a latency below zero (0 otherwise)."""
+        return self._delay
+
     def reset(self) -> None:
         """Forget the carried state: the next block starts a new stream."""
         self._zi: np.ndarray | None = None
@@ -688,7 +693,7 @@ def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False) -> np.ndarray:
         return x.copy()
     if not np.all(np.isfinite(x)):
         raise AnalysisError("DCM: NaN or infinite sample in a record to compensate")
-    n, hold, delay = x.shape[1], stream.held_samples, stream._delay
+    n, hold, delay = x.shape[1], stream.held_samples, stream.delayed_samples
     if hold:
         x = np.concatenate([x, np.repeat(x[:, -1:], hold, axis=1)], axis=1)
     if delay:  # from rest: the delayed output starts at zero (DcmStream._release)

@@ -264,6 +264,8 @@ def flat_top_warnings(record: Record, source: str) -> list[str]:
     out = []
     for name, x in (("reference", record.reference), ("response", record.response)):
         x = np.asarray(x, dtype=float)
+        if x.size == 0 or not np.all(np.isfinite(x)):  # not judged: the identification refuses such a channel
+            continue
         centre = float(np.median(x))
         sign = 1.0 if np.max(x) - centre >= centre - np.min(x) else -1.0
         v = sign * (x - centre)

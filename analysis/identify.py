@@ -321,7 +321,7 @@ def identify(
     setup = search_setup(data, prep, max(max_order, order or 0), order, dt, remove_delay=remove_delay,
                          max_delay=max_delay_samples, patience=patience, max_evaluations=max_evaluations,
                          significance=significance, warnings=warnings,
-                         lead_beyond_search=prepared.preprocessing.get("response_lead_beyond_search_samples", 0.0))
+                         alignment=prepared.alignment)
     # Steps 5–5b: every order fitted, the model error measured and weighed.
     sweep, model_error, data = fit_weighing_model_error(prep, data, setup, sine_terms)
     evidence: dict[str, Any] = {}
@@ -349,11 +349,9 @@ def identify(
     warnings += claims_warnings(modes, prep.band)
     if remove_delay:
         warnings += delay_warnings(data, final, sweep.structure, dt, significance, prepared.realigned_samples)
-        if setup.lead_beyond_search:
-            warnings.append(f"the channels' cross-correlation peaks at the edge of its search, a lead of "
-                            f"{setup.lead_beyond_search:.3g} samples or more, beyond what the analysis realigns: if "
-                            "the channels are skewed by that much, this model is not the sensor's; correct the skew "
-                            "and analyse again")
+        if prepared.alignment.at_edge:
+            warnings.append(f"{prepared.alignment.not_taken_text(dt)}: if the channels are skewed by that much, "
+                            "this model is not the sensor's; correct the skew and analyse again")
     return _identification(prepared, data, setup, settled, final, others, model, modes, model_error, evidence,
                            warnings, knee_tolerance)
 

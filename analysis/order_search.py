@@ -40,7 +40,7 @@ from hopkinson.analysis.order_choice import (
     order_stability,
     response_change,
 )
-from hopkinson.analysis.record_preparation import SKEWED_LEAD_SAMPLES, Prepared
+from hopkinson.analysis.record_preparation import Alignment, Prepared
 from hopkinson.analysis.resample import estimate_delay_samples
 
 FREE, ALL_POLE = "free", "all_pole"  # the model structures: B free, or B = g·(1 + z⁻¹)ⁿ/2ⁿ (no finite zeros)
@@ -73,10 +73,7 @@ class SearchSetup:
     lowest_bin_hz: float
     sample_interval_s: float
     band_hz: tuple[float, float]  # the band the excitation supports
-    lead: float = 0.0  # the channels' cross-correlation lag where the response leads (samples, < 0), else 0
-    # the whole record's cross-correlation peaked at the edge of realignment's search, this many
-    # samples of lead (record_preparation.realigned; 0: not so)
-    lead_beyond_search: float = 0.0
+    alignment: Alignment = field(default_factory=Alignment)  # what record_preparation.realigned did
 
     def delay_mode(self, structure: str) -> str | float:
         """The free structure keeps its delay causal (its zeros can take up a lead: the lead
@@ -91,12 +88,12 @@ class SearchSetup:
 
 def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | None, dt: float, *,
                  remove_delay: bool, max_delay: int, patience: int | None, max_evaluations: int,
-                 significance: float, warnings: list[str], lead_beyond_search: float = 0.0) -> SearchSetup:
+                 significance: float, warnings: list[str], alignment: Alignment | None = None) -> SearchSetup:
     """The delay's start (the causal delay that best fits a second-order model, on a coarse grid)
     and the orders the band allows: each order needs more real residuals (two per bin) than
     parameters (2n + 2, and n more with a transient term)."""
     max_delay = max(1, int(max_delay))
-    tau0, lag = _initial_delay(data, prep, min(2, n_max), max_delay) if remove_delay else (0.0, 0.0)
+    tau0 = _initial_delay(data, prep, min(2, n_max), max_delay) if remove_delay else 0.0
     per_order = 3 if data.transient else 2
     allowed = (2 * data.bins - 4) // per_order
     if allowed < 1 or (order is not None and order > allowed):
@@ -109,7 +106,7 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
                         "frequency bins")
         n_max = allowed
     return SearchSetup(n_max, order, tau0, remove_delay, max_delay, patience, max_evaluations, significance,
-                       float(prep.bin_hz[0]), dt, prep.band, min(lag, 0.0), lead_beyond_search)
+                       float(prep.bin_hz[0]), dt, prep.band, alignment or Alignment())
 
 
 @dataclass
@@ -393,29 +390,19 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
 
 
 def _lead_hint(setup: SearchSetup) -> str:
-    """The cause, when the response still leads the reference by several samples in the fitted
-    window (record_preparation.realigned takes a lead up to the longest delay searched, judged
-    on the whole record): no sensor answers before it is excited, and neither structure follows
-    such a lead (PTB's response shifted 10 µs earlier, before the realignment: every fit
-    unstable)."""
-    if setup.lead_beyond_search:
-        edge = setup.lead_beyond_search
-        return (f"; the channels' cross-correlation peaks at the edge of its search, a lead of {edge:.3g} samples "
-                f"({edge * setup.sample_interval_s * 1e6:.3g} µs) or more, beyond what the analysis realigns: the "
-                "channels are skewed (digitizer deskew, trigger alignment, cable lengths); correct the skew and "
-                "analyse again")
-    if setup.lead >= -SKEWED_LEAD_SAMPLES:
-        return ""
-    lead_us = -setup.lead * setup.sample_interval_s * 1e6
-    return (f"; the response leads the reference by about {-setup.lead:.3g} samples ({lead_us:.3g} µs) by their "
-            "cross-correlation: no sensor answers before it is excited, so the channels are skewed (digitizer "
-            "deskew, trigger alignment, cable lengths); correct the skew and analyse again")
+    """The cause, when the response leads the reference by more than the analysis realigned
+    (record_preparation.realigned): no sensor answers before it is excited, and neither
+    structure follows such a lead (PTB's response shifted 10 µs earlier, before the realignment:
+    every fit unstable)."""
+    why = setup.alignment.not_taken_text(setup.sample_interval_s)
+    return (f"; {why}: the channels are skewed (digitizer deskew, trigger alignment, cable lengths); correct the "
+            "skew and analyse again") if why else ""
 
 
-def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: int) -> tuple[float, float]:
+def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: int) -> float:
     """A start for the causal delay: on a grid (half a sample, or 1/8 of the span) up to just past
     the cross-correlation lag, the two best linear starts of `order` are refined and the best
-    refined delay kept; and that lag (samples, negative where the response leads)."""
+    refined delay kept."""
     try:
         xcorr = estimate_delay_samples(prep.u, prep.y, max(1, min(max_delay, prep.u.size // 4)))
     except AnalysisError:
@@ -423,7 +410,7 @@ def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: in
     top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
     problem = OrderProblem(data, order, "causal", max_delay)
     refined = [problem.solve(start, 40) for start in delay_grid_starts(problem, top, 2)]
-    return (min(refined, key=lambda f: f.cost).delay if refined else 0.0), xcorr
+    return min(refined, key=lambda f: f.cost).delay if refined else 0.0
 
 
 def delay_grid_starts(problem: OrderProblem, top: float, count: int) -> list[OrderFit]:

@@ -104,6 +104,33 @@ def _scale(x: np.ndarray) -> float:
     return float(np.max(np.abs(x - np.median(x))))
 
 
+@dataclass(frozen=True)
+class Alignment:
+    """What `realigned` found and did: the response led the reference by `lead` samples by their
+    cross-correlation (0: by no more than SKEWED_LEAD_SAMPLES) and was delayed by `shift` whole
+    samples (0: not). A lead not taken lay at the edge of the search (`at_edge`: it may be
+    larger) or too near the record's start for the response's lead-in to cover it."""
+
+    shift: int = 0
+    lead: float = 0.0
+    at_edge: bool = False
+
+    @property
+    def not_taken(self) -> bool:
+        return self.lead > 0 and self.shift == 0
+
+    def not_taken_text(self, sample_interval_s: float) -> str:
+        """The lead not taken and why, for a refusal or a warning ("" when there is none)."""
+        if not self.not_taken:
+            return ""
+        us = self.lead * sample_interval_s * 1e6
+        if self.at_edge:
+            return (f"the channels' cross-correlation peaks at the edge of its search, a lead of {self.lead:.3g} "
+                    f"samples ({us:.3g} µs) or more, beyond what the analysis realigns")
+        return (f"the response leads the reference by about {self.lead:.3g} samples ({us:.3g} µs) by their "
+                "cross-correlation, too near the record's start to be realigned")
+
+
 @dataclass
 class PreparedRecord:
     """Stage 1–4's result: the prepared data and what the report says about how it was made."""
@@ -115,9 +142,13 @@ class PreparedRecord:
     u_all: np.ndarray  # each whole channel normalised, its median removed (the ARX losses' input)
     y_all: np.ndarray
     preprocessing: dict[str, Any]
-    # the response was delayed by this many samples against the reference before the fit
-    # (`realigned`): a fitted delay τ is the model's τ − realigned_samples
-    realigned_samples: int = 0
+    alignment: Alignment = field(default_factory=Alignment)  # what `realigned` did
+
+    @property
+    def realigned_samples(self) -> int:
+        """The response was delayed by this many samples before the fit: a fitted delay τ is the
+        model's τ − realigned_samples."""
+        return self.alignment.shift
 
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
@@ -130,14 +161,14 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
         pre["resampled_to_hz"] = rec.sample_rate_hz
-    shift = 0
+    alignment = Alignment()
     if realign:  # (a channel with a NaN is not realigned: checked_channels below refuses it)
-        rec, shift, lead = realigned(rec, max_delay)
-        if shift:
-            pre["response_realigned_samples"] = shift
-            pre["response_lead_by_cross_correlation_samples"] = lead
-        elif lead:
-            pre["response_lead_beyond_search_samples"] = lead
+        rec, alignment = realigned(rec, max_delay)
+        if alignment.lead:
+            pre["response_lead_by_cross_correlation_samples"] = alignment.lead
+        if alignment.shift:
+            pre["response_realigned_samples"] = alignment.shift
+    shift = alignment.shift
     ref, resp = checked_channels(rec)
     dt = rec.sample_interval_s
     need = MIN_SAMPLES_PER_PARAMETER * (2 * n_max + 1)
@@ -174,39 +205,39 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
             "scale_response": scale_y,
         }
     )
-    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, shift)
+    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, alignment)
 
 
-def realigned(rec: Record, max_delay: int) -> tuple[Record, int, float]:
+def realigned(rec: Record, max_delay: int) -> tuple[Record, Alignment]:
     """The record with its response delayed by S whole samples where it leads the reference by
     more than SKEWED_LEAD_SAMPLES (their cross-correlation over the whole record:
     analysis.resample.estimate_delay_samples), so that each response sample stands beside the
-    reference S samples before it. The reference is kept whole, its lead-in at rest with it (its
-    first S samples dropped instead, PTB's record at 0.25 MS/s with a 120 µs lead lost its
-    lead-in and missed the sine); the response's last S samples are dropped and its first S
-    mirrored from its own lead-in (np.pad "reflect": noise of its own level, continuous at the
-    join). S is the lead rounded up: the response then lags by a fraction of a sample, as a
-    causal model has it. Returns the record, S (0: the record itself) and the lead (samples; 0
-    when not judged). The lag is searched within twice the longest delay the fit searches; one
-    at the search's edge is not located and not taken (S 0 with the lead at the edge: the
-    refusal that follows says so), nor one the response's lead-in cannot mirror (its pulse
-    within 2·S samples of its start)."""
+    reference S samples before it; and what was done (`Alignment`). The reference is kept whole,
+    its lead-in at rest with it (its first S samples dropped instead, PTB's record at 0.25 MS/s
+    with a 120 µs lead lost its lead-in and missed the sine); the response's last S samples are
+    dropped and its first S mirrored from its own lead-in (np.pad "reflect": noise of its own
+    level, continuous at the join). S is the lead rounded up: the response then lags by a
+    fraction of a sample, as a causal model has it. The lag is searched within twice the longest
+    delay the fit searches; a lead at the search's edge is not located and not taken, nor one the
+    response's lead-in cannot mirror (its pulse within 2·S samples of its start): the refusal or
+    warning that follows says so (`Alignment.not_taken_text`)."""
     reach = max(1, min(2 * int(max_delay), rec.n_samples // 4))
     try:
         lag = estimate_delay_samples(rec.reference, rec.response, reach)
     except AnalysisError:
-        return rec, 0, 0.0
+        return rec, Alignment()
     if lag >= -SKEWED_LEAD_SAMPLES:
-        return rec, 0, 0.0
+        return rec, Alignment()
     if -lag >= reach - 1:
-        return rec, 0, -lag
+        return rec, Alignment(lead=-lag, at_edge=True)
     shift = int(math.ceil(-lag))
     resp = np.asarray(rec.response, dtype=float)
     head = resp[: 2 * shift + 1]
     if np.max(np.abs(head - np.median(head))) > 0.5 * np.max(np.abs(resp - np.median(resp))):
-        return rec, 0, 0.0
+        return rec, Alignment(lead=-lag)
     moved = np.pad(resp[: resp.size - shift], (shift, 0), mode="reflect")
-    return Record(rec.sample_interval_s, rec.reference, moved, rec.start_time_s, rec.response_unit), shift, -lag
+    return (Record(rec.sample_interval_s, rec.reference, moved, rec.start_time_s, rec.response_unit),
+            Alignment(shift, -lag))
 
 
 @dataclass

@@ -26,6 +26,7 @@ from hopkinson.analysis.order_search import (
     settle_order,
 )
 from hopkinson.analysis.record_preparation import (
+    Alignment,
     fitted_band,
     locate_pulse,
     measure_noise,
@@ -108,10 +109,12 @@ def test_a_response_leading_by_many_samples_is_realigned_and_the_model_keeps_the
 
     u, y = channels()
     as_recorded = Record(DT, u, y)
-    assert realigned(as_recorded, 32)[:2] == (as_recorded, 0)  # the sensor's own lag: nothing to do
+    same, nothing = realigned(as_recorded, 32)
+    assert same is as_recorded and nothing == Alignment()  # the sensor's own lag: nothing to do
     rec = Record(DT, u, np.roll(y, -12))
-    moved, shift, lead = realigned(rec, 32)
-    assert shift >= 1 and shift - 1 < lead <= shift
+    moved, alignment = realigned(rec, 32)
+    shift = alignment.shift
+    assert shift >= 1 and shift - 1 < alignment.lead <= shift and not alignment.not_taken
     # the reference whole (its lead-in with it); the response delayed, its head mirrored from its lead-in
     assert moved.start_time_s == 0.0 and np.array_equal(moved.reference, u)
     assert np.array_equal(moved.response[shift:], rec.response[: N - shift])
@@ -123,6 +126,23 @@ def test_a_response_leading_by_many_samples_is_realigned_and_the_model_keeps_the
     _, truth = signal.freqresp(sensor(), 2 * np.pi * f)
     ratio = model / (truth * np.exp(2j * np.pi * f * DT * 12))
     assert np.max(np.abs(np.abs(ratio) - 1.0)) < 0.01 and np.max(np.abs(np.degrees(np.angle(ratio)))) < 0.5
+
+
+def test_a_lead_the_responses_lead_in_cannot_cover_is_not_realigned_and_says_why():
+    """A response leading by 8 samples whose pulse starts 2 samples into the record: its head
+    cannot be mirrored from a lead-in it does not have, so the record is left as it is, and the
+    lead not taken is named for the refusal or warning that follows; one at the search's edge
+    says it may be larger."""
+    t = np.arange(400)
+    u = np.where((t >= 10) & (t < 30), np.sin(np.pi * (t - 10) / 20), 0.0)
+    rec = Record(DT, u, 0.5 * np.roll(u, -8) + 1e-4 * np.random.default_rng(2).standard_normal(t.size))
+    same, alignment = realigned(rec, 32)
+    assert same is rec and alignment.shift == 0 and alignment.not_taken
+    assert alignment.lead == pytest.approx(8.0, abs=0.1)
+    assert "leads the reference by about 8 samples (8 µs)" in alignment.not_taken_text(DT)
+    assert "too near the record's start" in alignment.not_taken_text(DT)
+    assert "or more" in Alignment(lead=64.0, at_edge=True).not_taken_text(DT)
+    assert Alignment(shift=9, lead=8.4).not_taken_text(DT) == ""
 
 
 def test_locate_pulse_tells_a_record_cut_short():

@@ -407,7 +407,10 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     shifted = analyse_record(skewed(-100), AnalysisParams(draws=DRAWS, seed=1))
     warning = next(w for w in shifted.warnings if "realigned" in w)
     lead = re.search(r"the response leads the reference by about [0-9.]+ samples \(([0-9.]+) µs\)", warning)
-    assert lead and 9.0 <= float(lead.group(1)) <= 10.5 and "realigned by 11 samples" in warning
+    assert lead and 9.0 <= float(lead.group(1)) <= 10.5
+    # whole samples covering the 10 µs shift less the sensor's own lag, at most one more
+    shift = int(re.search(r"realigned by (\d+) samples", warning).group(1))
+    assert 10 <= shift <= 11
     dt = shifted.model.sample_interval_s
     assert shifted.model.delay_samples * dt == pytest.approx(ptb.model.delay_samples * dt - 10e-6, abs=0.05e-6)
     delay, published = shifted.uncertainty["delay_s"], ptb.uncertainty["delay_s"]
@@ -415,7 +418,7 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     judged = against_sine(shifted.uncertainty)
     assert all(j["contains"] and j["half_width_ok"] for j in judged.values()), judged
     trail = explain(shifted.identification.to_dict())
-    assert "realigned: the response delayed by 11 samples before the fit" in trail
+    assert f"realigned: the response delayed by {shift} samples before the fit" in trail
     skews = [identify(rec, sine=ptb_sine()).sine_joint.skew_s for rec in (skewed(-100), ptb_record())]
     assert skews[0] == pytest.approx(skews[1] - 10e-6, abs=0.1e-6)
 
