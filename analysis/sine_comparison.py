@@ -20,7 +20,12 @@ At each frequency:
   The phase without τ, which moves with that split (22.6° at 20 kHz on the 3.1-sample
   branch), is kept beside it as `phase_error_without_delay_deg`, with τ as `fitted_delay_s`;
   it is not a measure of the model;
-- consistent: |magnitude error| ≤ 2 × u_magnitude_rel (k = 2) when the file gives u;
+- consistent: |magnitude error| ≤ 2 × u (k = 2) when the file gives u, u the relative standard
+  uncertainty of the NORMALISED point sine(f)/sine(f_ref): the point's stated u and the
+  reference point's, combined as independent (the file states no correlation between points),
+  √(u(f)² + u(f_ref)²); 0 at the reference point itself, which is 1 by construction. The
+  normaliser is a measured point like any other: PTB's 0.5 % at 500 Hz counts in every ratio
+  to it, which the 0.15 % stated at 5–10 kHz alone understates three-fold;
 - compensated magnitude = sine(f) × |G(f)|, normalised at f_ref: how flat the DCM would make
   the sensor the sine calibration measured (its ±5 % / ±10 % band from the sine points,
   interpolated, as far as the points reach).
@@ -104,10 +109,11 @@ class SineComparison:
     compensated_magnitude: np.ndarray | None  # sine × |G|, normalised
     compensated_fbsd_hz: dict[str, float | None] | None
     sensitivity_ratio: float  # |H(f_ref)| / sine(f_ref): model over sine, same units assumed
-    u_magnitude_rel: np.ndarray | None
+    u_magnitude_rel: np.ndarray | None  # of the normalised sine point (module docstring), per point
     source: str
     phase_error_without_delay_deg: np.ndarray | None = None  # the model's phase less its fitted delay − sine phase
     fitted_delay_s: float = 0.0  # the model's input delay (how the fit split its lag; not well-determined)
+    u_reference_rel: float | None = None  # the stated u of the sine at the reference frequency
 
     @property
     def max_magnitude_error_pct(self) -> float:
@@ -135,6 +141,7 @@ class SineComparison:
             "phase_error_without_delay_deg": floats(self.phase_error_without_delay_deg),
             "fitted_delay_s": self.fitted_delay_s,
             "u_magnitude_rel": floats(self.u_magnitude_rel),
+            "u_reference_rel": self.u_reference_rel,
             "consistent": None if self.consistent is None else [bool(v) for v in self.consistent],
             "compensated_magnitude": floats(self.compensated_magnitude),
             "compensated_fbsd_hz": self.compensated_fbsd_hz,
@@ -169,7 +176,9 @@ def compare_sine(model: DiscreteModel, sine: SineCalibration, dcm: DCM | None = 
     without_delay = (np.degrees(np.angle(h)) - sine.phase_deg + 180.0) % 360.0 - 180.0
     phase_error = (without_delay - np.degrees(w * fitted_delay_s) + 180.0) % 360.0 - 180.0
     delay = float(-np.dot(w, np.radians(phase_error)) / np.dot(w, w))
-    consistent = None if sine.u_magnitude_rel is None else np.abs(error) <= 2 * 100.0 * sine.u_magnitude_rel
+    u_ref, u_norm = _normalised_u(sine, f_ref)
+    # (+1e-9 %: the reference point's error is 0 but for rounding, and so is its u)
+    consistent = None if u_norm is None else np.abs(error) <= 2 * 100.0 * u_norm + 1e-9
     compensated = band = None
     if dcm is not None:
         if abs(dcm.sample_interval_s - model.sample_interval_s) > 1e-9 * model.sample_interval_s:
@@ -178,8 +187,19 @@ def compare_sine(model: DiscreteModel, sine: SineCalibration, dcm: DCM | None = 
         compensated = sine_norm * np.abs(g[1:]) / abs(g[0])
         band = _band_of_points(f, compensated)
     return SineComparison(f, f_ref, sine_norm, model_norm, error, phase_error, delay, consistent, compensated,
-                          band, float(abs(h_ref) / sine_ref), sine.u_magnitude_rel, sine.source, without_delay,
-                          fitted_delay_s)
+                          band, float(abs(h_ref) / sine_ref), u_norm, sine.source, without_delay,
+                          fitted_delay_s, u_ref)
+
+
+def _normalised_u(sine: SineCalibration, f_ref_hz: float) -> tuple[float | None, np.ndarray | None]:
+    """(the stated u at the reference frequency, the u of each normalised point); see the module
+    docstring. Between two points the reference's u is interpolated."""
+    if sine.u_magnitude_rel is None:
+        return None, None
+    u = np.asarray(sine.u_magnitude_rel, dtype=float)
+    u_ref = float(np.interp(f_ref_hz, sine.frequency_hz, u))
+    u_norm = np.where(sine.frequency_hz == f_ref_hz, 0.0, np.hypot(u, u_ref))
+    return u_ref, u_norm
 
 
 def _band_of_points(f: np.ndarray, magnitude: np.ndarray) -> dict[str, float | None] | None:
@@ -198,7 +218,8 @@ def band_consistency(comparison: SineComparison, band: dict[str, Any]) -> dict[s
     """The sine points against the model's 95 % response band (analysis.uncertainty.response_band,
     magnitudes relative to the DC gain, renormalised here at the comparison's reference
     frequency): per point the band's limits and E_n = |model − sine| / √(U_model² + U_sine²),
-    U_model the band's half on the sine's side, U_sine = 2·u (k = 2); E_n ≤ 1: consistent. Points
+    U_model the band's half on the sine's side, U_sine = 2·u (k = 2), u the normalised point's
+    (module docstring: the reference point's stated u included); E_n ≤ 1: consistent. Points
     outside the band's frequencies get None. Issue 17: the model's uncertainty, not only its
     value, is what a sine calibration can confirm."""
     f_band = np.asarray(band["frequency_hz"], dtype=float)
