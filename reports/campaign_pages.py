@@ -151,7 +151,8 @@ def sine_page(comparisons: Sequence[tuple[str, SineComparison]], sine: SineCalib
         ax_m.axhline(level, color="tab:green", ls=":", lw=0.8)
     if first.u_magnitude_rel is not None:
         band = 2 * 100.0 * first.u_magnitude_rel
-        ax_e.fill_between(f_khz, -band, band, color="0.5", alpha=0.2, label="±2u of the sine calibration")
+        ax_e.fill_between(f_khz, -band, band, color="0.5", alpha=0.2,
+                          label=f"±2u of the sine calibration (its {first.reference_frequency_hz:g} Hz point's u included)")
     ax_e.axhline(0.0, color="0.4", lw=0.7)
     ax_m.set_ylabel(f"|H| / |H({fmt(first.reference_frequency_hz)} Hz)|")
     ax_m.set_title("Normalised magnitude (±5 % dotted)", fontsize=9)

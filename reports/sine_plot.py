@@ -37,7 +37,8 @@ def sine_figure(comparison: SineComparison, title: str = "") -> Figure:
     err.semilogx(f_khz, c.magnitude_error_pct, "o-", color="#d62728", markersize=3, label="model − sine")
     if c.u_magnitude_rel is not None:
         band = 2 * 100.0 * c.u_magnitude_rel
-        err.fill_between(f_khz, -band, band, color="#1f77b4", alpha=0.2, label="±2u of the sine calibration")
+        err.fill_between(f_khz, -band, band, color="#1f77b4", alpha=0.2,
+                         label=f"±2u of the sine calibration (its {c.reference_frequency_hz:g} Hz point's u included)")
     err.axhline(0.0, color="grey", linewidth=0.8)
     err.set_ylabel("magnitude error (%)")
     err.legend(loc="best", fontsize=8)
