@@ -13,8 +13,12 @@ Design (checked against Eqs. (40)–(42) in PAPER-NOTES.md):
   samples (recorded as design["origin_poles"]). More poles than zeros is an error;
 - the gain K makes G(1) = 1 (unit DC gain).
 
-Filtering uses second-order sections with carried state, so a stream compensated block by
-block equals the whole record compensated at once. A stream can also remove the latency
+A DCM may end in a linear-phase FIR stage (`DCM.fir`, taps in powers of z⁻¹): the band limit
+analysis.dcm_design puts after the paper's design. The pole-zero part is the paper's; the
+whole filter (num/den, b/a, its response, DC gain, delay and noise gain) includes the stage.
+
+Filtering uses second-order sections with carried state, then the FIR stage with its own, so
+a stream compensated block by block equals the whole record compensated at once. A stream can also remove the latency
 (`DcmStream(align=True)`): the output is advanced by `DCM.latency_samples` (whole samples
 held back, the fraction by a windowed-sinc fractional-delay FIR), so it lines up in time
 with the reference; `flush()` returns the held-back tail.
@@ -149,7 +153,8 @@ def _real_poly(roots: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class DCM:
-    """A compensator G(z) = gain·Π(z − zeros)/Π(z − poles) for one sample interval."""
+    """A compensator G(z) = gain·Π(z − zeros)/Π(z − poles) · Σ fir[k]·z⁻ᵏ for one sample
+    interval (fir None: no FIR stage)."""
 
     sample_interval_s: float
     zeros: np.ndarray
@@ -160,6 +165,9 @@ class DCM:
     # channel delay plus the low-frequency group delay of model × DCM (analysis.dcm_design).
     # None: not known (a DCM from poles alone): the DCM's own group delay is used.
     latency_samples: float | None = None
+    # A FIR stage after the pole-zero part (taps in powers of z⁻¹; None: none): the band limit.
+    # Kept as taps, not as zeros: the roots of a 100-tap polynomial do not survive rounding.
+    fir: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         z = np.atleast_1d(np.asarray(self.zeros, dtype=complex))
@@ -186,6 +194,13 @@ class DCM:
             )
         if np.any(np.abs(1 - z) < 1e-12):
             raise AnalysisError("DCM: a zero at z = 1 gives it zero DC gain: it would remove the acceleration itself")
+        if self.fir is not None:
+            taps = np.asarray(self.fir, dtype=float)
+            if taps.ndim != 1 or taps.size == 0 or not np.all(np.isfinite(taps)):
+                raise AnalysisError("DCM: fir must be a non-empty list of finite numbers (taps in powers of z⁻¹)")
+            if abs(float(np.sum(taps))) < 1e-12 * float(np.max(np.abs(taps))):
+                raise AnalysisError("DCM: the FIR stage has zero DC gain: it would remove the acceleration itself")
+            object.__setattr__(self, "fir", taps)
         if self.latency_samples is not None:
             if not math.isfinite(self.latency_samples):
                 raise AnalysisError("DCM: latency must be a finite number of samples")
@@ -193,13 +208,17 @@ class DCM:
 
     @property
     def num(self) -> np.ndarray:
-        """Numerator coefficients in descending powers of z (gain·Π(z − zᵢ))."""
-        return self.gain * _real_poly(self.zeros)
+        """Numerator coefficients in descending powers of z (gain·Π(z − zᵢ), times the FIR's
+        Σ fir[k]·z^(N−1−k))."""
+        core = self.gain * _real_poly(self.zeros)
+        return core if self.fir is None else np.convolve(core, self.fir)
 
     @property
     def den(self) -> np.ndarray:
-        """Denominator coefficients in descending powers of z (monic Π(z − pᵢ))."""
-        return _real_poly(self.poles)
+        """Denominator coefficients in descending powers of z (monic Π(z − pᵢ), times z^(N−1)
+        with an N-tap FIR stage)."""
+        core = _real_poly(self.poles)
+        return core if self.fir is None else np.concatenate([core, np.zeros(self.fir.size - 1)])
 
     @property
     def b(self) -> np.ndarray:
@@ -209,7 +228,7 @@ class DCM:
     @property
     def a(self) -> np.ndarray:
         """Denominator in powers of z⁻¹ (for lfilter)."""
-        return self.den
+        return _real_poly(self.poles)
 
     @property
     def order(self) -> int:
@@ -217,7 +236,8 @@ class DCM:
 
     @property
     def dc_gain(self) -> float:
-        return float(np.real(self.gain * np.prod(1 - self.zeros) / np.prod(1 - self.poles)))
+        core = float(np.real(self.gain * np.prod(1 - self.zeros) / np.prod(1 - self.poles)))
+        return core if self.fir is None else core * float(np.sum(self.fir))
 
     @property
     def group_delay_samples(self) -> float:
@@ -228,7 +248,10 @@ class DCM:
         (a pole at the origin is one sample). scipy.signal.group_delay evaluates the same from
         polynomial coefficients numerically and warns at singular points; this needs neither.
         """
-        return dc_group_delay_samples(self.zeros, self.poles)
+        core = dc_group_delay_samples(self.zeros, self.poles)
+        if self.fir is None:
+            return core
+        return core + float(np.dot(np.arange(self.fir.size), self.fir) / np.sum(self.fir))
 
     @property
     def latency_s(self) -> float:
@@ -251,16 +274,25 @@ class DCM:
             raise AnalysisError(f"DCM: a pole at |p| = {slowest:.9g} decays too slowly to evaluate its noise gain")
         impulse = np.zeros(n)
         impulse[0] = 1.0
-        return signal.sosfilt(self.sos(), impulse)
+        return self.filter(impulse if self.fir is None else np.concatenate([impulse, np.zeros(self.fir.size - 1)]))
 
     def sos(self) -> np.ndarray:
-        """Second-order sections (what `apply` and `DcmStream` filter with)."""
+        """Second-order sections of the pole-zero part (what `apply` and `DcmStream` filter
+        with, then the FIR stage)."""
         return zpk_to_sos(self.zeros, self.poles, self.gain)
+
+    def filter(self, x: np.ndarray, axis: int = -1) -> np.ndarray:
+        """The whole DCM from rest along `axis`: the sections, then the FIR stage."""
+        y = signal.sosfilt(self.sos(), x, axis=axis)
+        return y if self.fir is None else signal.lfilter(self.fir, [1.0], y, axis=axis)
 
     def frequency_response(self, frequency_hz: np.ndarray) -> np.ndarray:
         """Complex G(e^{j2πfT}) at the given frequencies (Hz)."""
         f = np.atleast_1d(np.asarray(frequency_hz, dtype=float))
-        _, h = signal.freqz_zpk(self.zeros, self.poles, self.gain, worN=f, fs=1.0 / self.sample_interval_s)
+        fs = 1.0 / self.sample_interval_s
+        _, h = signal.freqz_zpk(self.zeros, self.poles, self.gain, worN=f, fs=fs)
+        if self.fir is not None:
+            h = h * signal.freqz(self.fir, [1.0], worN=f, fs=fs)[1]
         return h
 
     def to_dict(self) -> dict[str, Any]:
@@ -280,6 +312,7 @@ class DCM:
             "latency_s": self.latency_s,
             "noise_gain": self.noise_gain(),
             "design": self.design,
+            **({} if self.fir is None else {"fir": [float(x) for x in self.fir]}),
         }
 
     @classmethod
@@ -294,13 +327,19 @@ class DCM:
         except (TypeError, ValueError):
             raise AnalysisError(f"{source}: sample_interval_s must be a number") from None
         design = data.get("design", {}) if isinstance(data.get("design", {}), dict) else {}
+        fir = data.get("fir")
+        if fir is not None and not (isinstance(fir, list) and fir):
+            raise AnalysisError(f"{source}: fir must be a non-empty list of taps")
         try:
+            fir = None if fir is None else np.asarray(fir, dtype=float)
             if all(k in data for k in ("zeros", "poles", "gain")):
                 zeros = from_pairs(data["zeros"], f"{source}: zeros")
                 poles = from_pairs(data["poles"], f"{source}: poles")
                 gain = float(data["gain"])
                 if "num" in data and "den" in data:  # both forms: they must say the same (one was edited?)
-                    _check_same_filter(zeros, poles, gain, data["num"], data["den"], source)
+                    _check_same_filter(zeros, poles, gain, data["num"], data["den"], source, fir)
+            elif fir is not None:
+                raise AnalysisError(f"{source}: a DCM with a FIR stage needs its zeros, poles and gain")
             elif "num" in data and "den" in data:
                 num = np.trim_zeros(np.asarray(data["num"], dtype=float), "f")
                 den = np.trim_zeros(np.asarray(data["den"], dtype=float), "f")
@@ -313,18 +352,23 @@ class DCM:
                 raise AnalysisError(f"{source}: missing keys: a DCM needs zeros, poles and gain (or num and den)")
             latency = data.get("latency_s")
             latency_samples = None if latency is None else float(latency) / dt
-            return cls(dt, zeros, poles, gain, design, latency_samples)
+            return cls(dt, zeros, poles, gain, design, latency_samples, fir)
         except (TypeError, ValueError, ZeroDivisionError) as exc:
             if isinstance(exc, AnalysisError):
                 raise AnalysisError(f"{exc}" if str(exc).startswith(source) else f"{source}: {exc}") from None
             raise AnalysisError(f"{source}: DCM coefficients must be numbers") from None
 
 
-def _check_same_filter(zeros: np.ndarray, poles: np.ndarray, gain: float, num: Any, den: Any, source: str) -> None:
-    """AnalysisError when num/den are not the filter that zeros/poles/gain give (to 1e-6 of the
-    largest coefficient): a file edited in one form only would otherwise be read silently."""
+def _check_same_filter(zeros: np.ndarray, poles: np.ndarray, gain: float, num: Any, den: Any, source: str,
+                       fir: np.ndarray | None = None) -> None:
+    """AnalysisError when num/den are not the filter that zeros/poles/gain (and the FIR stage)
+    give (to 1e-6 of the largest coefficient): a file edited in one form only would otherwise
+    be read silently."""
     want_num = np.real_if_close(gain * np.poly(zeros)) if zeros.size else np.array([gain])
     want_den = np.real_if_close(np.poly(poles)) if poles.size else np.array([1.0])
+    if fir is not None:
+        want_num = np.convolve(want_num, fir)
+        want_den = np.concatenate([want_den, np.zeros(fir.size - 1)])
     got_num, got_den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
     if got_den.size and got_den[0] != 0:
         got_num, got_den = got_num / got_den[0], got_den / got_den[0]
@@ -467,36 +511,47 @@ def _settling_time(step: np.ndarray, tolerance: float) -> float:
 
 
 def step_responses(model: DiscreteModel, dcm: DCM, n_samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Unit-step responses normalised to their final values: (model alone, model then DCM).
+    """Unit-step responses normalised to their final values: (model alone, model then DCM), as
+    a plot shows them. The model's sections are delay-free (its input delay only shifts the
+    curve). The DCM's linear-phase FIR stage (its band limit) is a pure delay of half its
+    length, removed here as alignment removes it from a record (its pre-ringing before the
+    step's centre is then cut off). `n_samples` None: long enough for the slowest pole to
+    settle (4 response times)."""
+    alone, both, lead = _simulate_steps(model, dcm, n_samples)
+    return alone[: alone.size - lead], both[lead:]
 
-    The model's sections are delay-free (its input delay only shifts the curve). `n_samples`
-    None: long enough for the slowest pole to settle (4 response times).
-    """
+
+def _simulate_steps(model: DiscreteModel, dcm: DCM, n_samples: int | None) -> tuple[np.ndarray, np.ndarray, int]:
+    """(alone, both, lead): the normalised step responses over n + lead samples from the step,
+    lead the DCM's FIR stage's delay (0 without one)."""
     _same_interval(model, dcm)
     slowest = float(np.max(response_times_samples(np.concatenate([model.poles, dcm.poles]))))
     n = int(np.ceil(4 * slowest)) + model.b.size + dcm.order + 64 if n_samples is None else int(n_samples)
-    if n > _MAX_STEP_SAMPLES:
+    lead = 0 if dcm.fir is None else (dcm.fir.size - 1) // 2
+    if n + lead > _MAX_STEP_SAMPLES:
         raise AnalysisError(
             f"step response: a pole settles in {slowest:.3g} samples; too slow to simulate a step response"
         )
     final = model.dc_gain
     if final == 0:
         raise AnalysisError("step response: the model has zero DC gain")
-    alone = model_output(model, np.ones(n))
-    both = signal.sosfilt(dcm.sos(), alone)
-    return alone / final, both / (final * dcm.dc_gain)
+    alone = model_output(model, np.ones(n + lead))
+    return alone / final, dcm.filter(alone) / (final * dcm.dc_gain), lead
 
 
 @dataclass(frozen=True)
 class StepComparison:
     """The normalised step responses of the model alone and followed by the DCM (one simulation,
-    `compare_steps`) and the times read off them, in samples: (without, with the DCM)."""
+    `compare_steps`) and the times read off them, in samples: (without, with the DCM). `lead`:
+    the DCM's FIR stage's pure delay, which the settling time leaves out (`step_responses`)."""
 
     alone: np.ndarray
     both: np.ndarray
+    lead: int = 0
 
     def rise_times_samples(self) -> tuple[float, float]:
-        """10–90 % rise times."""
+        """10–90 % rise times (of the whole responses: a linear-phase stage's step rises about
+        its centre, half of it before the delay that alignment removes)."""
         return _rise_time(self.alone), _rise_time(self.both)
 
     def rise_time_ratio(self) -> float:
@@ -507,8 +562,9 @@ class StepComparison:
         return before / after
 
     def settling_times_samples(self, tolerance: float = 0.05) -> tuple[float, float]:
-        """Samples to settle within ±5 % of the final value."""
-        return _settling_time(self.alone, tolerance), _settling_time(self.both, tolerance)
+        """Samples to settle within ±5 % of the final value (the compensated one counted from
+        the step less the FIR stage's delay)."""
+        return _settling_time(self.alone, tolerance), _settling_time(self.both[self.lead:], tolerance)
 
     def settling_time_ratio(self, tolerance: float = 0.05) -> float:
         """Uncompensated ÷ compensated time to settle within ±5 % (the paper's response time T_r).
@@ -521,8 +577,8 @@ class StepComparison:
 
 
 def compare_steps(model: DiscreteModel, dcm: DCM) -> StepComparison:
-    """Simulate both step responses once (`step_responses`) for every time and ratio read off them."""
-    return StepComparison(*step_responses(model, dcm))
+    """Simulate both step responses once for every time and ratio read off them."""
+    return StepComparison(*_simulate_steps(model, dcm, None))
 
 
 def rise_times_samples(model: DiscreteModel, dcm: DCM) -> tuple[float, float]:
@@ -617,7 +673,8 @@ class DcmStream:
     def reset(self) -> None:
         """Forget the carried state: the next block starts a new stream."""
         self._zi: np.ndarray | None = None
-        self._fir_zi: np.ndarray | None = None
+        self._band_zi: np.ndarray | None = None  # the DCM's own FIR stage
+        self._fir_zi: np.ndarray | None = None  # the alignment's fractional delay
         self._to_drop = self._hold
         self._queue: np.ndarray | None = None  # the delay line (None: not started)
         self._last = 0.0
@@ -653,6 +710,12 @@ class DcmStream:
             steady = self.initial == "steady"
             self._zi = signal.sosfilt_zi(self._sos) * x[0] if steady else np.zeros((self._sos.shape[0], 2))
         y, self._zi = signal.sosfilt(self._sos, x, zi=self._zi)
+        band = self.dcm.fir
+        if band is not None:
+            if self._band_zi is None:
+                level = y[0] if self.initial == "steady" else 0.0
+                self._band_zi = signal.lfilter_zi(band, [1.0]) * level
+            y, self._band_zi = signal.lfilter(band, [1.0], y, zi=self._band_zi)
         if self._fir is not None:
             if self._fir_zi is None:
                 level = y[0] if self.initial == "steady" else 0.0
@@ -698,7 +761,7 @@ def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False) -> np.ndarray:
         x = np.concatenate([x, np.repeat(x[:, -1:], hold, axis=1)], axis=1)
     if delay:  # from rest: the delayed output starts at zero (DcmStream._release)
         x = np.concatenate([np.zeros((x.shape[0], delay)), x], axis=1)
-    y = signal.sosfilt(stream._sos, x, axis=1)
+    y = dcm.filter(x, axis=1)
     if stream._fir is not None:
         y = signal.lfilter(stream._fir, [1.0], y, axis=1)
     bad = ~(np.abs(y) <= MAX_ABS_VALUE)

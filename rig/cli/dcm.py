@@ -131,9 +131,17 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
             )
     r = result["dcm"]
     band = r.get("band_limit_hz")
-    out.write("  band limit: " + (f"{band / 1e3:.4g} kHz (2nd-order Butterworth; {r.get('band_limit_reason')})\n"
+    import numpy as np  # here: building the parser imports no heavy library
+
+    taps = 0 if dcm.fir is None else dcm.fir.size
+    out.write("  band limit: " + (f"{band / 1e3:.4g} kHz cut-off (a linear-phase FIR of {taps} taps, 4th-order "
+                                  f"Butterworth magnitude; {r.get('band_limit_reason')})\n"
                                   if band else f"none ({r.get('band_limit_reason', 'not asked')})\n"))
-    out.write(f"  num: {_poly_text(dcm.num)}\n  den: {_poly_text(dcm.den)}\n  gain K = {dcm.gain:.6g} (G(1) = 1)\n")
+    core = _poly_text(dcm.gain * np.real(np.poly(dcm.zeros))) if dcm.zeros.size else f"{dcm.gain:.6g}"
+    out.write(f"  num: {core}\n  den: {_poly_text(np.real(np.poly(dcm.poles))) if dcm.poles.size else '1'}\n"
+              f"  gain K = {dcm.gain:.6g}"
+              + (f", then the band limit's {taps} taps (`fir` in the JSON; num/den there include them)" if taps else "")
+              + " (G(1) = 1)\n")
     limit = r.get("noise_gain_limit")
     out.write(f"  noise gain {r['noise_gain']:.3g} (white-noise RMS at the analysis rate"
               + (f"; limit {limit:g})\n" if limit is not None else ")\n"))

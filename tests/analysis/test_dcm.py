@@ -266,3 +266,58 @@ def test_settling_time_ratio_of_a_second_order_pair_against_its_envelope():
     # ripple of where the last ±5 % excursion happens to fall (half a ringing period)
     assert ratio == pytest.approx(r, rel=0.25)
     assert rise_time_ratio(model, dcm) < 1  # while the 10–90 % rise time gets longer
+
+
+def with_band_limit() -> DCM:
+    """The Table 1 design followed by a linear-phase band limit (analysis.dcm_design), as the
+    automatic design builds every DCM."""
+    from dataclasses import replace
+
+    from hopkinson.analysis.dcm_design import band_limit_fir
+
+    return replace(design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA), fir=band_limit_fir(60e3, 1e-6))
+
+
+def test_a_fir_stage_is_part_of_the_whole_filter():
+    """A DCM ending in a FIR stage against scipy's own filters: sections then the taps from rest,
+    in any blocks; steady from a constant; the textbook G = num/den (b/a in z⁻¹); its response
+    the product of the two parts'; DC gain, DC group delay (+ half the taps) and noise gain
+    (white noise through it, an independent estimate)."""
+    dcm = with_band_limit()
+    core = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal(30_000) + 3.0
+    truth = signal.lfilter(dcm.fir, [1.0], signal.sosfilt(core.sos(), x))
+    scale = np.max(np.abs(truth))
+    np.testing.assert_allclose(apply(dcm, x), truth, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(apply(dcm, x, block_samples=97), truth, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(signal.lfilter(dcm.b, dcm.a, x), truth, rtol=0, atol=1e-7 * scale)
+    np.testing.assert_allclose(apply(dcm, np.full(400, 2.5), initial="steady"), 2.5, rtol=1e-9)
+    f = np.array([0.0, 1e3, 3e4, 2e5])
+    np.testing.assert_allclose(dcm.frequency_response(f),
+                               core.frequency_response(f) * signal.freqz(dcm.fir, [1.0], worN=f, fs=1e6)[1], rtol=1e-12)
+    assert dcm.dc_gain == pytest.approx(1.0, abs=1e-12)
+    assert dcm.group_delay_samples == pytest.approx(core.group_delay_samples + (dcm.fir.size - 1) / 2, abs=1e-9)
+    noise = rng.standard_normal(400_000)
+    assert np.std(dcm.filter(noise)[2000:]) == pytest.approx(dcm.noise_gain() * np.std(noise), rel=0.01)
+
+
+def test_a_fir_stage_survives_its_json_and_an_edit_is_caught(tmp_path):
+    dcm = with_band_limit()
+    path = tmp_path / "dcm.json"
+    path.write_text(json.dumps({"dcm": dcm.to_dict()}, allow_nan=False))
+    back = load_dcm(path)
+    np.testing.assert_array_equal(back.fir, dcm.fir)
+    f = np.array([0.0, 2e4, 1e5])
+    np.testing.assert_allclose(back.frequency_response(f), dcm.frequency_response(f), rtol=1e-12)
+    edited = dcm.to_dict()
+    edited["fir"] = [2 * t for t in edited["fir"]]  # the taps changed, num/den not
+    path.write_text(json.dumps(edited))
+    with pytest.raises(AnalysisError, match=r"dcm\.json: num is not the filter"):
+        load_dcm(path)
+    edited["fir"] = []
+    path.write_text(json.dumps(edited))
+    with pytest.raises(AnalysisError, match="fir must be a non-empty list"):
+        load_dcm(path)
+    with pytest.raises(AnalysisError, match="zero DC gain"):
+        DCM(1e-6, [], [], 1.0, fir=np.array([1.0, -1.0]))

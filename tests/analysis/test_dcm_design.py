@@ -11,7 +11,7 @@ from hopkinson.analysis.dcm import compensated_fbsd_hz
 from hopkinson.analysis.dcm_design import (
     DcmOptions,
     ShotSupport,
-    band_limit_poles,
+    band_limit_fir,
     choose_poles,
     design_compensation,
 )
@@ -151,7 +151,7 @@ def test_noise_gain_is_the_white_noise_rms_gain():
     """Measured on white noise through the designed DCM (an independent estimate)."""
     design = design_compensation(ShotSupport(model_of(MAIN), supported_band_hz=(0.0, 60_000.0)))
     x = np.random.default_rng(3).standard_normal(400_000)
-    y = signal.sosfilt(design.dcm.sos(), x)
+    y = signal.lfilter(design.dcm.fir, [1.0], signal.sosfilt(design.dcm.sos(), x))  # the sections, then the band limit
     assert np.std(y[1000:]) / np.std(x) == pytest.approx(design.noise_gain, rel=0.01)
 
 
@@ -159,19 +159,27 @@ def test_band_limit_choice():
     model = model_of(MAIN)
     auto = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0), response_band_top_hz=42_000.0))
     assert "noise" in auto.band_limit.reason and "±5 % up to 42 kHz" in auto.band_limit.reason
-    # automatic: the low-pass alone passes the lower top (42 kHz) at exactly −5 %, a closed form
-    lp = band_limit_poles(auto.band_limit.cutoff_hz, DT)
-    _, h = signal.freqz_zpk([], lp, np.real(np.prod(1 - lp)), worN=[42e3], fs=1 / DT)
-    assert auto.band_limit.cutoff_hz == pytest.approx(42e3 / (1 / 0.95**2 - 1) ** 0.25, rel=0.05)  # the prototype's
-    assert abs(h[0]) == pytest.approx(0.95, abs=1e-6)
+    # automatic: the low-pass alone passes the lower top (42 kHz) at −5 %: a 4th-order
+    # Butterworth's magnitude, whose cut-off is then 42 / (1/0.95² − 1)^(1/8) kHz, a closed form
+    taps = auto.dcm.fir
+    _, h = signal.freqz(taps, [1.0], worN=[42e3], fs=1 / DT)
+    assert auto.band_limit.cutoff_hz == pytest.approx(42e3 / (1 / 0.95**2 - 1) ** 0.125, rel=1e-9)
+    assert abs(h[0]) == pytest.approx(0.95, abs=1e-3)
     asked = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), DcmOptions(band_limit_hz=30e3))
-    assert asked.band_limit.cutoff_hz == 30e3 and asked.dcm.design["band_limit"]["order"] == 2
+    assert asked.band_limit.cutoff_hz == 30e3 and asked.dcm.design["band_limit"]["order"] == 4
     off = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), DcmOptions(band_limit_hz=0))
-    assert off.band_limit.cutoff_hz is None and off.dcm.order == 2
-    # the band-limit poles are the analog Butterworth's mapped by z = exp(sT): −3 dB at the cut-off
-    p = band_limit_poles(30e3, DT)
-    _, h = signal.freqz_zpk([], p, np.real(np.prod(1 - p)), worN=[0.0, 30e3], fs=1 / DT)
-    assert abs(h[0]) == pytest.approx(1.0) and abs(h[1]) == pytest.approx(1 / math.sqrt(2), rel=0.02)
+    assert off.band_limit.cutoff_hz is None and off.dcm.order == 2 and off.dcm.fir is None
+    # the band limit is a linear-phase FIR: symmetric taps (a delay of exactly half its length at
+    # every frequency), unit DC gain, the Butterworth's magnitude: −3 dB at the cut-off and
+    # within 2e-3 of 1/√(1 + (f/f_c)⁸) from DC to twice the cut-off
+    taps = band_limit_fir(30e3, DT)
+    np.testing.assert_allclose(taps, taps[::-1], atol=1e-15)
+    assert taps.size % 2 == 1 and np.sum(taps) == pytest.approx(1.0, abs=1e-12)
+    f = np.linspace(0.0, 60e3, 601)
+    _, h = signal.freqz(taps, [1.0], worN=f, fs=1 / DT)
+    np.testing.assert_allclose(np.abs(h), 1 / np.sqrt(1 + (f / 30e3) ** 8), atol=2e-3)
+    _, gd = signal.group_delay((taps, [1.0]), w=f[1:200], fs=1 / DT)
+    np.testing.assert_allclose(gd, (taps.size - 1) / 2, atol=1e-6)
     with pytest.raises(AnalysisError, match="below Nyquist"):
         design_compensation(ShotSupport(model), DcmOptions(band_limit_hz=600e3))
 

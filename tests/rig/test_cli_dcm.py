@@ -112,9 +112,9 @@ def test_compensate_streams_the_response_aligned_with_the_reference(tmp_path, ca
     model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
     dcm_path = tmp_path / "dcm.json"
     design = run_json(capsys, ["dcm", "--model", str(model_path), "--json", "-o", str(dcm_path)])
-    # the band limit's ±5 % edge at the top of the supported band (36 kHz): the analog
-    # prototype's cut-off 36 / 0.573 kHz, mapped to the sample rate
-    assert design["dcm"]["band_limit_hz"] == pytest.approx(36_000.0 / (1 / 0.95**2 - 1) ** 0.25, rel=0.05)
+    # the band limit's ±5 % edge at the top of the supported band (36 kHz): the 4th-order
+    # Butterworth magnitude's cut-off 36 / 0.758 kHz
+    assert design["dcm"]["band_limit_hz"] == pytest.approx(36_000.0 / (1 / 0.95**2 - 1) ** 0.125, rel=1e-9)
     assert design["dcm"]["latency_s"] > 0
     out = tmp_path / "out.csv"
     info = run_json(capsys, ["compensate", str(rec_path), "--dcm", str(dcm_path), "-o", str(out),
