@@ -342,7 +342,8 @@ def compensation_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         rows.append(("noise gain (RMS, white noise)", f"{fmt(check.noise_gain, digits=3)}"
                      + (f" (limit {fmt(check.noise_gain_limit, digits=3)})" if check.noise_gain_limit else "")))
     if check.band_limit_hz is not None:
-        rows.append(("band limit of the compensation (low-pass)", f"{fmt(check.band_limit_hz, 1e3)} kHz"))
+        rows.append(("band limit of the compensation (linear-phase low-pass, 4th-order Butterworth magnitude)",
+                     f"{fmt(check.band_limit_hz, 1e3)} kHz (−3 dB)"))
     if check.latency_s is not None:
         rows.append(("latency removed (channel delay + DCM group delay)", f"{fmt(check.latency_s, 1e-6)} µs"))
     if check.compensated_peak is not None and check.compensated_peak.value is not None:

@@ -346,7 +346,8 @@ class MagnitudePlot(pg.PlotWidget):
 
 
 # What the DCM's band limit is, as its tooltips say (the strip here, the DCM tab).
-BAND_LIMIT_TIP = "the low-pass's cut-off (−3 dB); its ±5 % edge is the top of what the shot vouches for"
+BAND_LIMIT_TIP = ("the cut-off (−3 dB) of its linear-phase low-pass (4th-order Butterworth magnitude); its ±5 % edge "
+                  "is the top of what the shot vouches for")
 
 
 class ResultsStrip(QFrame):

@@ -360,7 +360,7 @@ def test_the_uncertainty_and_the_compensation_check_are_shown(tmp_path: Path, un
     check = dict(compensation_rows(e))
     assert check["verdict"].startswith("DCM NOT RECOMMENDED: the compensated RMS error (6.1 %)")
     assert check["RMS error over the pulse (of the peak), without → with DCM"] == "4.95 % → 6.1 %"
-    assert check["band limit of the compensation (low-pass)"] == "40 kHz"
+    assert check["band limit of the compensation (linear-phase low-pass, 4th-order Butterworth magnitude)"] == "40 kHz (−3 dB)"
     pdf, page_html = write_report(report, [tmp_path / "u.pdf", tmp_path / "u.html"], pages=pages)
     text = pdf_text(pdf.read_bytes())  # (matplotlib draws "fi" as a ligature: needles avoid it)
     big_u = 1.96 * f_n["u"] / 1e3
