@@ -18,10 +18,11 @@ analysis.dcm_design puts after the paper's design. The pole-zero part is the pap
 whole filter (num/den, b/a, its response, DC gain, delay and noise gain) includes the stage.
 
 Filtering uses second-order sections with carried state, then the FIR stage with its own, so
-a stream compensated block by block equals the whole record compensated at once. A stream can also remove the latency
-(`DcmStream(align=True)`): the output is advanced by `DCM.latency_samples` (whole samples
-held back, the fraction by a windowed-sinc fractional-delay FIR), so it lines up in time
-with the reference; `flush()` returns the held-back tail.
+a stream compensated block by block equals the whole record compensated at once. A stream
+can also remove the latency (`DcmStream(align=True)`): the output is advanced by
+`DCM.latency_samples` (whole samples held back, the fraction by a windowed-sinc
+fractional-delay FIR), so it lines up in time with the reference; `flush()` returns the
+held-back tail.
 
 Which poles a shot lets the DCM cancel, the automatic ratio, the band limit and the noise
 gain bound live in analysis.dcm_design; the check of a DCM on its own shot in

@@ -20,8 +20,8 @@ noise-gain bound and the latency (issue 11). analysis.dcm holds the paper's desi
   measured, and the low-pass rolls off there. Linear phase, because a causal IIR low-pass
   bends a pulse's shape by its own phase: until stop 39 the band limit was a 2nd-order
   Butterworth IIR (poles exp(s·T)), and on PTB's shock model × DCM applied to the reference
-  itself lowered its peak by 0.78 %, 0.24 % of it the phase; with this stage, 0.4 %, and the
-  compensated peak error went from −1.23 % to −0.8 %. 4th order, because the same edge then
+  itself lowered its peak by 0.78 %, 0.24 % of it the phase; with this stage by 0.42 %, and
+  the compensated peak error went from −1.23 % to −0.89 %. 4th order, because the same edge then
   passes the band flatter (a 2nd-order linear-phase stage: −1.05 %); its latency, half its
   length (≈ 2 × the sample rate / the edge: 71 µs at 1 MS/s and 28 kHz), is part of the
   DCM's and removed with it. (The −3 dB point at the top, as until stop 34, capped the
