@@ -82,6 +82,10 @@ _BAND_LIMIT_FBSD5 = (1 / 0.95**2 - 1) ** (1 / (2 * BAND_LIMIT_ORDER))
 # The band limit's taps: about this many × (sample rate / its ±5 % edge), odd; its magnitude is
 # then within 2e-3 of the Butterworth's up to twice its cut-off (measured at 10-60 kHz edges, 1 MS/s).
 BAND_LIMIT_TAPS_PER_RATE = 4.0
+# At least this many (a cut-off near Nyquist: 15 taps left it 3 % off the Butterworth), at most
+# this many (an edge below 1/250 of the sample rate: 2.3 kHz at 1 MS/s passes 94 % at the edge,
+# not 95 %; the compensated band reported is the DCM's own response's, so it stays true).
+MIN_BAND_LIMIT_TAPS = 31
 MAX_BAND_LIMIT_TAPS = 1001
 NEAR_NYQUIST = 0.8  # a mode above this fraction of Nyquist is not resolved by the record
 # A pole with a model zero within this fraction of its distance to the unit circle forms a
@@ -224,7 +228,7 @@ def _band_limit_taps(cutoff_hz: float, sample_interval_s: float, order: int) -> 
     nyquist = 0.5 / sample_interval_s
     edge = cutoff_hz * (1 / 0.95**2 - 1) ** (1 / (2 * order))
     half = math.ceil(0.5 * BAND_LIMIT_TAPS_PER_RATE / (edge * sample_interval_s))
-    taps = min(2 * half + 1, MAX_BAND_LIMIT_TAPS)
+    taps = min(max(2 * half + 1, MIN_BAND_LIMIT_TAPS), MAX_BAND_LIMIT_TAPS)
     turn = min(4.0 * cutoff_hz, nyquist)
     grid = np.unique(np.concatenate([np.linspace(0.0, turn, 81), np.linspace(turn, nyquist, 33)]))
     bands = np.repeat(grid, 2)[1:-1]

@@ -218,3 +218,14 @@ def test_compensated_fbsd_of_the_true_sensor_matches_the_prediction_for_an_exact
     model = model_of(MAIN)
     design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)))
     assert compensated_fbsd_hz(model, design.dcm)["5"] == pytest.approx(design.compensated_fbsd_hz["5"])
+
+
+@pytest.mark.parametrize(("cutoff_hz", "dt"), [(400e3, 1e-6), (37e3, 4e-6), (8e3, 1e-6)])
+def test_the_band_limit_passes_its_edge_at_95_percent_from_near_nyquist_to_far_below(cutoff_hz, dt):
+    """The ±5 % edge of the band limit, where the design puts the top of the supported band,
+    against the closed form edge = f_c·(1/0.95² − 1)^(1/8): at 0.8 × Nyquist (the cap; 15 taps
+    left it at 0.947 until MIN_BAND_LIMIT_TAPS), at 0.25 MS/s and at 1/160 of the rate."""
+    taps = band_limit_fir(cutoff_hz, dt)
+    edge = cutoff_hz * (1 / 0.95**2 - 1) ** 0.125
+    _, h = signal.freqz(taps, [1.0], worN=[0.0, edge], fs=1 / dt)
+    assert abs(h[0]) == pytest.approx(1.0, abs=1e-12) and abs(h[1]) == pytest.approx(0.95, abs=1e-3)
