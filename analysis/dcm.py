@@ -187,6 +187,13 @@ class DCM:
         object.__setattr__(self, "zeros", z)
         object.__setattr__(self, "poles", p)
         object.__setattr__(self, "gain", float(self.gain))
+        if self.fir is not None:
+            taps = np.asarray(self.fir, dtype=float)
+            if taps.ndim != 1 or taps.size == 0 or not np.all(np.isfinite(taps)):
+                raise AnalysisError("DCM: fir must be a non-empty list of finite numbers (taps in powers of z⁻¹)")
+            if abs(float(np.sum(taps))) < 1e-12 * float(np.max(np.abs(taps))):
+                raise AnalysisError("DCM: the FIR stage has zero DC gain: it would remove the acceleration itself")
+            object.__setattr__(self, "fir", taps)
         with np.errstate(over="ignore", invalid="ignore"):
             finite = bool(np.all(np.isfinite(self.num)) and math.isfinite(self.dc_gain))
         if not finite:
@@ -195,30 +202,33 @@ class DCM:
             )
         if np.any(np.abs(1 - z) < 1e-12):
             raise AnalysisError("DCM: a zero at z = 1 gives it zero DC gain: it would remove the acceleration itself")
-        if self.fir is not None:
-            taps = np.asarray(self.fir, dtype=float)
-            if taps.ndim != 1 or taps.size == 0 or not np.all(np.isfinite(taps)):
-                raise AnalysisError("DCM: fir must be a non-empty list of finite numbers (taps in powers of z⁻¹)")
-            if abs(float(np.sum(taps))) < 1e-12 * float(np.max(np.abs(taps))):
-                raise AnalysisError("DCM: the FIR stage has zero DC gain: it would remove the acceleration itself")
-            object.__setattr__(self, "fir", taps)
         if self.latency_samples is not None:
             if not math.isfinite(self.latency_samples):
                 raise AnalysisError("DCM: latency must be a finite number of samples")
             object.__setattr__(self, "latency_samples", float(self.latency_samples))
 
     @property
+    def pole_zero_num(self) -> np.ndarray:
+        """The pole-zero part's numerator, descending powers of z: gain·Π(z − zᵢ)."""
+        return self.gain * _real_poly(self.zeros)
+
+    @property
+    def pole_zero_den(self) -> np.ndarray:
+        """The pole-zero part's denominator, descending powers of z: monic Π(z − pᵢ)."""
+        return _real_poly(self.poles)
+
+    @property
     def num(self) -> np.ndarray:
-        """Numerator coefficients in descending powers of z (gain·Π(z − zᵢ), times the FIR's
+        """Numerator coefficients in descending powers of z (the pole-zero part's, times the FIR's
         Σ fir[k]·z^(N−1−k))."""
-        core = self.gain * _real_poly(self.zeros)
+        core = self.pole_zero_num
         return core if self.fir is None else np.convolve(core, self.fir)
 
     @property
     def den(self) -> np.ndarray:
-        """Denominator coefficients in descending powers of z (monic Π(z − pᵢ), times z^(N−1)
+        """Denominator coefficients in descending powers of z (the pole-zero part's, times z^(N−1)
         with an N-tap FIR stage)."""
-        core = _real_poly(self.poles)
+        core = self.pole_zero_den
         return core if self.fir is None else np.concatenate([core, np.zeros(self.fir.size - 1)])
 
     @property
@@ -228,8 +238,8 @@ class DCM:
 
     @property
     def a(self) -> np.ndarray:
-        """Denominator in powers of z⁻¹ (for lfilter)."""
-        return _real_poly(self.poles)
+        """Denominator in powers of z⁻¹ (for lfilter): the pole-zero part's (the FIR adds none)."""
+        return self.pole_zero_den
 
     @property
     def order(self) -> int:

@@ -76,9 +76,15 @@ from scipy import signal
 # DEFAULT_DCM_NOISE_GAIN_LIMIT (analysis.params, with the other defaults and the options'
 # rules): a compensated record at most 4× (12 dB) as noisy as the raw one.
 BAND_LIMIT_ORDER = 4
-# |H| of a 4th-order Butterworth is 0.95 at this fraction of its cut-off: the widest ±5 % band
-# the band limit allows ((1/0.95² − 1)^(1/8)).
-_BAND_LIMIT_FBSD5 = (1 / 0.95**2 - 1) ** (1 / (2 * BAND_LIMIT_ORDER))
+
+
+def _edge_fraction(order: int) -> float:
+    """|H| of an order-n Butterworth is 0.95 at this fraction of its cut-off ((1/0.95² − 1)^(1/2n))."""
+    return (1 / 0.95**2 - 1) ** (1 / (2 * order))
+
+
+# The widest ±5 % band the band limit allows, as a fraction of its cut-off.
+_BAND_LIMIT_FBSD5 = _edge_fraction(BAND_LIMIT_ORDER)
 # The band limit's taps: about this many × (sample rate / its ±5 % edge), odd; its magnitude is
 # then within 2e-3 of the Butterworth's up to twice its cut-off (measured at 10-60 kHz edges, 1 MS/s).
 BAND_LIMIT_TAPS_PER_RATE = 4.0
@@ -226,7 +232,7 @@ def band_limit_fir(cutoff_hz: float, sample_interval_s: float, order: int = BAND
 @lru_cache(maxsize=64)
 def _band_limit_taps(cutoff_hz: float, sample_interval_s: float, order: int) -> tuple[float, ...]:
     nyquist = 0.5 / sample_interval_s
-    edge = cutoff_hz * (1 / 0.95**2 - 1) ** (1 / (2 * order))
+    edge = cutoff_hz * _edge_fraction(order)
     half = math.ceil(0.5 * BAND_LIMIT_TAPS_PER_RATE / (edge * sample_interval_s))
     taps = min(max(2 * half + 1, MIN_BAND_LIMIT_TAPS), MAX_BAND_LIMIT_TAPS)
     turn = min(4.0 * cutoff_hz, nyquist)

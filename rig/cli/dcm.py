@@ -131,14 +131,11 @@ def _print_design(result: dict[str, Any], dcm: DCM) -> None:
             )
     r = result["dcm"]
     band = r.get("band_limit_hz")
-    import numpy as np  # here: building the parser imports no heavy library
-
     taps = 0 if dcm.fir is None else dcm.fir.size
     out.write("  band limit: " + (f"{band / 1e3:.4g} kHz cut-off (a linear-phase FIR of {taps} taps, 4th-order "
                                   f"Butterworth magnitude; {r.get('band_limit_reason')})\n"
                                   if band else f"none ({r.get('band_limit_reason', 'not asked')})\n"))
-    core = _poly_text(dcm.gain * np.real(np.poly(dcm.zeros))) if dcm.zeros.size else f"{dcm.gain:.6g}"
-    out.write(f"  num: {core}\n  den: {_poly_text(np.real(np.poly(dcm.poles))) if dcm.poles.size else '1'}\n"
+    out.write(f"  num: {_poly_text(dcm.pole_zero_num)}\n  den: {_poly_text(dcm.pole_zero_den)}\n"
               f"  gain K = {dcm.gain:.6g}"
               + (f", then the band limit's {taps} taps (`fir` in the JSON; num/den there include them)" if taps else "")
               + " (G(1) = 1)\n")

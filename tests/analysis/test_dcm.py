@@ -319,5 +319,10 @@ def test_a_fir_stage_survives_its_json_and_an_edit_is_caught(tmp_path):
     path.write_text(json.dumps(edited))
     with pytest.raises(AnalysisError, match="fir must be a non-empty list"):
         load_dcm(path)
+    edited["fir"] = [float("nan")] * 3  # named as the taps' fault, not as an overflow of the gain
+    del edited["num"], edited["den"]
+    path.write_text(json.dumps(edited))
+    with pytest.raises(AnalysisError, match=r"dcm\.json: DCM: fir must be a non-empty list of finite numbers"):
+        load_dcm(path)
     with pytest.raises(AnalysisError, match="zero DC gain"):
         DCM(1e-6, [], [], 1.0, fir=np.array([1.0, -1.0]))
