@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from hopkinson.analysis.frequency_fit import ZETA_FLOOR, OrderFit, OrderProblem, SpectralData
 from hopkinson.analysis.model import DiscreteModel
-from hopkinson.analysis.modes import main_mode, mark_doublets, modes_of
+from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, main_mode, mark_doublets, modes_of
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.order_search import ALL_POLE
 
@@ -78,6 +78,11 @@ def claims_warnings(modes: list[dict[str, Any]], band: tuple[float, float]) -> l
                 f"{hi / 1e3:.3g} kHz): the all-pole model places it by the rise it gives inside the band, not by its "
                 f"own peak; its frequency is an extrapolation and its damping is not determined (held ≥ "
                 f"{ZETA_FLOOR:g}), so neither is reported as measured; the DCM cancels it for that rise"
+            )
+        elif m["kind"] == "complex" and m["supported"] and not m.get("resonance", True) and f is not None:
+            out.append(
+                f"the pole pair at {f / 1e3:.4g} kHz is damped ζ = {m['damping_ratio']:.3g} (more than "
+                f"{RESONANCE_MAX_DAMPING:g}): it shapes the response but is no resonance, and is not reported as a mode"
             )
         elif m["kind"] == "complex" and not m["supported"] and f is not None:
             out.append(

@@ -319,6 +319,137 @@ SUPPORT_SNR = 10.0
 SUPPORT_FLOOR = 1e-2
 
 
+@dataclass(frozen=True)
+class SupportedBand:
+    """The frequencies an excitation supports (Hz): the stretches of its amplitude spectrum that
+    stand above its level (`supported_stretches`), from the one around the spectrum's maximum
+    outwards across its spectral nulls while each null is narrower than the stretch before it.
+
+    A bar's pulse (two lobes, a comb of nulls) supports every frequency between its narrow
+    nulls, up to where its sidelobes sink into the noise: `top_hz`, what the fit, the claims
+    of modes and FBSD edges, the DCM's band limit and the shot planner all use. The nulls
+    themselves (`gaps_hz`) are not fitted.
+    """
+
+    intervals_hz: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        if not self.intervals_hz or any(not lo <= hi for lo, hi in self.intervals_hz):
+            raise ValueError(f"a supported band needs ordered intervals, got {self.intervals_hz!r}")
+
+    @property
+    def low_hz(self) -> float:
+        return float(self.intervals_hz[0][0])
+
+    @property
+    def top_hz(self) -> float:
+        """The highest frequency the excitation supports."""
+        return float(self.intervals_hz[-1][1])
+
+    @property
+    def hull_hz(self) -> tuple[float, float]:
+        return self.low_hz, self.top_hz
+
+    @property
+    def gaps_hz(self) -> tuple[tuple[float, float], ...]:
+        """The nulls inside the band: not supported, not fitted."""
+        return tuple((a[1], b[0]) for a, b in zip(self.intervals_hz[:-1], self.intervals_hz[1:], strict=True))
+
+    def contains(self, frequency_hz: np.ndarray | float) -> np.ndarray:
+        """Whether each frequency lies in a supported interval (not in a null)."""
+        f = np.asarray(frequency_hz, dtype=float)
+        inside = np.zeros(f.shape, dtype=bool)
+        for lo, hi in self.intervals_hz:
+            inside |= (f >= lo) & (f <= hi)
+        return inside
+
+    def below(self, top_hz: float) -> SupportedBand:
+        """The stretches up to `top_hz` (the first one kept whole if it reaches beyond)."""
+        kept = [(lo, min(hi, top_hz)) for lo, hi in self.intervals_hz if lo < top_hz]
+        return SupportedBand(tuple(kept) or self.intervals_hz[:1])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"intervals_hz": [[float(lo), float(hi)] for lo, hi in self.intervals_hz], "low_hz": self.low_hz,
+                "top_hz": self.top_hz}
+
+    @classmethod
+    def of(cls, data: Any) -> SupportedBand | None:
+        """From `to_dict()` output, a [low, high] pair (results written before nulls were
+        skipped) or None."""
+        if isinstance(data, SupportedBand) or data is None:
+            return data
+        if isinstance(data, dict):
+            data = data.get("intervals_hz")
+            return cls(tuple((float(lo), float(hi)) for lo, hi in data)) if data else None
+        lo, hi = data
+        return cls(((float(lo), float(hi)),))
+
+
+def supported_stretches(frequency_hz: np.ndarray, magnitude: np.ndarray, level: np.ndarray | float) -> SupportedBand:
+    """The band an amplitude spectrum supports above `level` (per frequency, or one number):
+    the run of frequencies above it that holds the spectrum's maximum, joined to the runs
+    above and below it across each gap (a null) narrower than the run it follows; the first
+    wider gap ends the band on that side (there the spectrum's lobes have sunk to the level).
+    One rule for the analysis (level: the floor and the reference's noise) and the shot
+    planner (the floor), so both name the same band."""
+    f = np.asarray(frequency_hz, dtype=float)
+    ok = np.asarray(magnitude, dtype=float) >= level
+    i_max = int(np.argmax(magnitude))
+    if not ok[i_max]:
+        raise AnalysisError("excitation: the pulse's spectrum does not rise above the reference's noise")
+    edges = np.flatnonzero(np.diff(ok.astype(np.int8)))
+    starts = np.concatenate(([0] if ok[0] else [], edges[~ok[edges]] + 1)).astype(int)
+    stops = np.concatenate((edges[ok[edges]], [ok.size - 1] if ok[-1] else [])).astype(int)
+    runs = list(zip(starts.tolist(), stops.tolist(), strict=True))
+    home = next(k for k, (a, b) in enumerate(runs) if a <= i_max <= b)
+    keep = [runs[home]]
+    for k in range(home + 1, len(runs)):  # upwards
+        last = keep[-1]
+        if f[runs[k][0]] - f[last[1]] > f[last[1]] - f[last[0]]:
+            break
+        keep.append(runs[k])
+    for k in range(home - 1, -1, -1):  # downwards
+        first = keep[0]
+        if f[first[0]] - f[runs[k][1]] > f[first[1]] - f[first[0]]:
+            break
+        keep.insert(0, runs[k])
+    return SupportedBand(tuple((float(f[a]), float(f[b])) for a, b in keep))
+
+
+def supported_band(
+    acceleration: np.ndarray,
+    sample_interval_s: float,
+    noise_rms: float | None = None,
+    *,
+    noise_psd: Callable[[np.ndarray], np.ndarray] | None = None,
+    snr: float = SUPPORT_SNR,
+    floor: float = SUPPORT_FLOOR,
+) -> SupportedBand:
+    """The band the excitation supports (`supported_stretches`): where the amplitude spectrum of
+    the pulse window stands at least floor·max|F| and snr × the amplitude spectrum the
+    reference's noise has over the same window.
+
+    The noise is white of standard deviation `noise_rms`, or has the one-sided power spectral
+    density `noise_psd(f)` (units²/Hz); over a window of L samples its amplitude spectrum is
+    about √(L·S(f)·f_s/2)·T (σ·√L·T for white noise). The pulse window is the main pulse
+    widened by two pulse widths on each side. A half-sine's band runs across its spectral nulls
+    up to where its sidelobes (falling as 1/f²) sink under the floor or the noise; a bipolar
+    pulse's starts above DC. Invariant to the scale of `acceleration` (with the noise scaled
+    alike).
+    """
+    a = np.asarray(acceleration, dtype=float)
+    pulse = pulse_width(a, sample_interval_s)
+    segment = a[pulse_window(pulse, a.size, sample_interval_s)]
+    freq, mag = amplitude_spectrum(segment, sample_interval_s)
+    level = np.full(mag.size, floor * float(np.max(mag)))
+    if noise_psd is not None:
+        noise = np.sqrt(segment.size * np.asarray(noise_psd(freq)) / (2.0 * sample_interval_s)) * sample_interval_s
+        level = np.maximum(level, snr * noise)
+    elif noise_rms is not None and noise_rms > 0:
+        level = np.maximum(level, snr * noise_rms * np.sqrt(segment.size) * sample_interval_s)
+    return supported_stretches(freq, mag, level)
+
+
 def supported_band_hz(
     acceleration: np.ndarray,
     sample_interval_s: float,
@@ -328,33 +459,6 @@ def supported_band_hz(
     snr: float = SUPPORT_SNR,
     floor: float = SUPPORT_FLOOR,
 ) -> tuple[float, float]:
-    """The band [low, high] (Hz) the excitation supports: the contiguous band around the
-    spectral maximum of the pulse window where |F(f)| ≥ floor·max|F| and ≥ snr × the amplitude
-    spectrum the reference's noise has over the same window.
-
-    The noise is white of standard deviation `noise_rms`, or has the one-sided power spectral
-    density `noise_psd(f)` (units²/Hz); over a window of L samples its amplitude spectrum is
-    about √(L·S(f)·f_s/2)·T (σ·√L·T for white noise). The pulse window is the main pulse
-    widened by two pulse widths on each side. A half-sine's band ends near its first spectral
-    null (f·δ ≈ 1.5); a bipolar pulse's starts above DC. Invariant to the scale of
-    `acceleration` (with the noise scaled alike).
-    """
-    a = np.asarray(acceleration, dtype=float)
-    pulse = pulse_width(a, sample_interval_s)
-    segment = a[pulse_window(pulse, a.size, sample_interval_s)]
-    freq, mag = amplitude_spectrum(segment, sample_interval_s)
-    i_max = int(np.argmax(mag))
-    level = np.full(mag.size, floor * mag[i_max])
-    if noise_psd is not None:
-        noise = np.sqrt(segment.size * np.asarray(noise_psd(freq)) / (2.0 * sample_interval_s)) * sample_interval_s
-        level = np.maximum(level, snr * noise)
-    elif noise_rms is not None and noise_rms > 0:
-        level = np.maximum(level, snr * noise_rms * np.sqrt(segment.size) * sample_interval_s)
-    ok = mag >= level
-    if not ok[i_max]:
-        raise AnalysisError("excitation: the pulse's spectrum does not rise above the reference's noise")
-    below_hi = np.flatnonzero(~ok[i_max:])
-    hi = freq[i_max + below_hi[0] - 1] if below_hi.size else freq[-1]
-    below_lo = np.flatnonzero(~ok[: i_max + 1])
-    lo = freq[below_lo[-1] + 1] if below_lo.size else 0.0
-    return float(lo), float(hi)
+    """(low, top) of `supported_band` (Hz): the band's hull, its nulls included."""
+    return supported_band(acceleration, sample_interval_s, noise_rms, noise_psd=noise_psd, snr=snr,
+                          floor=floor).hull_hz

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from hopkinson.analysis.model import all_pole_numerator
@@ -110,6 +110,15 @@ class SpectralData:
     ramp: np.ndarray | None = None
     transient: bool = False
     sine: SineTerms | None = None  # a sine calibration fitted with the shock (two residuals per point, like a bin)
+    # Input terms (per-bin only; analysis.input_terms): the DFT of K signals made from the reference
+    # (bins × K), whose fitted coefficients c correct the model's input, U + V·c; and each one's
+    # prior weight w (c·w joins the residuals: a prior c ~ N(0, 1/w²); 0: none).
+    inputs: np.ndarray | None = None
+    input_prior: np.ndarray | None = None
+
+    @property
+    def input_count(self) -> int:
+        return 0 if self.inputs is None else int(self.inputs.shape[1])
 
     @property
     def grouped(self) -> bool:
@@ -123,10 +132,10 @@ class SpectralData:
     @classmethod
     def per_bin(
         cls, omega: np.ndarray, u: np.ndarray, y: np.ndarray, var_u: np.ndarray, var_y: np.ndarray,
-        ramp: np.ndarray | None = None, transient: bool = False,
+        ramp: np.ndarray | None = None, transient: bool = False, inputs: np.ndarray | None = None,
     ) -> SpectralData:
         return cls(omega, var_u, var_y, np.ones(omega.size), np.abs(u) ** 2, np.abs(y) ** 2, y * np.conj(u),
-                   u, y, ramp, transient)
+                   u, y, ramp, transient, inputs=inputs)
 
     @classmethod
     def grouped_from(
@@ -160,7 +169,7 @@ class SpectralData:
 
         return replace(self, omega=self.omega[keep], var_u=self.var_u[keep], var_y=self.var_y[keep],
                        count=self.count[keep], suu=self.suu[keep], syy=self.syy[keep], syu=self.syu[keep],
-                       u=cut(self.u), y=cut(self.y), ramp=cut(self.ramp))
+                       u=cut(self.u), y=cut(self.y), ramp=cut(self.ramp), inputs=cut(self.inputs))
 
     def perturbed(self, u: np.ndarray, y: np.ndarray, group: int) -> SpectralData:
         """The same bins and noise with other channel spectra (a Monte Carlo draw)."""
@@ -191,6 +200,7 @@ class OrderFit:
     sine_skew: float = 0.0  # τ_s of the sine terms, samples
     sine_cost: float = 0.0  # the sine terms' share of `cost`
     numerator: np.ndarray | None = None  # B's fixed shape (B = g·shape, `all_pole_numerator`); None: B free
+    inputs: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the input terms' coefficients c
 
     @property
     def order(self) -> int:
@@ -322,8 +332,14 @@ class OrderProblem:
         self.k_delay = order + self.nb  # index of the delay parameter (when it is free)
         self.n_transient = order if (data.transient and not data.grouped) else 0
         self.drift = data.ramp is not None and not data.grouped
+        self.n_inputs = 0 if data.grouped else data.input_count
+        prior = data.input_prior if self.n_inputs and data.input_prior is not None else np.zeros(self.n_inputs)
+        self.prior_columns = np.flatnonzero(prior > 0)
+        self.prior_weights = prior[self.prior_columns]
+        self.n_prior = int(self.prior_columns.size)  # residual rows of the input terms' prior, after the bins'
         self.sine = data.sine
-        self.size = order + self.nb + (self.fixed_delay is None) + self.n_transient + int(self.drift)
+        self.size = (order + self.nb + (self.fixed_delay is None) + self.n_transient + int(self.drift)
+                     + self.n_inputs)
         if self.sine is not None:  # ln κ and τ_s of SineTerms, last
             self.sine_powers = np.exp(-1j * np.outer(self.sine.omega, np.arange(order + 1)))
             self.size += 2
@@ -344,6 +360,8 @@ class OrderProblem:
             parts.append(t)
         if self.drift:
             parts.append([fit.drift])
+        if self.n_inputs:
+            parts.append(fit.inputs if fit.inputs.size == self.n_inputs else np.zeros(self.n_inputs))
         if self.sine is not None:
             if math.isfinite(fit.sine_gain):
                 parts.append([fit.sine_gain, fit.sine_skew])
@@ -367,6 +385,16 @@ class OrderProblem:
         drift = float(theta[k]) if self.drift else 0.0
         return a, b, tau, transient, drift
 
+    @property
+    def _k_inputs(self) -> int:
+        """Index of the first input term's coefficient in θ."""
+        return self.k_delay + (self.fixed_delay is None) + self.n_transient + int(self.drift)
+
+    def input_coefficients(self, theta: np.ndarray) -> np.ndarray:
+        """The input terms' coefficients c in θ (empty without input terms)."""
+        k = self._k_inputs
+        return np.array(theta[k : k + self.n_inputs], dtype=float)
+
     def fit_of(self, theta: np.ndarray, cost: float, evaluations: int, converged: bool) -> OrderFit:
         if self.numerator is not None:  # the all-pole structure's estimator floors the damping beyond the band
             floored = damping_floored(np.concatenate(([1.0], theta[: self.n])), float(np.max(self.data.omega)))
@@ -375,7 +403,7 @@ class OrderProblem:
                 cost = self.cost(theta)
         a, b, tau, transient, drift = self.unpack(theta)
         fit = OrderFit(a, b, tau, np.array(transient), drift, cost, self.size, evaluations, converged,
-                       self.fixed_delay is not None, numerator=self.numerator)
+                       self.fixed_delay is not None, numerator=self.numerator, inputs=self.input_coefficients(theta))
         if self.sine is None:
             return fit
         r = self._sine_residual(theta)
@@ -391,8 +419,11 @@ class OrderProblem:
         g = big_b / big_a
         delay = np.exp(-1j * d.omega * tau)
         s2 = d.var_y + np.abs(g) ** 2 * d.var_u
+        u = d.u
+        if self.n_inputs:  # the corrected input U + V·c
+            u = d.u + d.inputs @ self.input_coefficients(theta)
         return {"A": big_a, "B": big_b, "G": g, "D": delay, "s2": s2, "tau": tau, "transient": transient,
-                "drift": drift}
+                "drift": drift, "U": u}
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
         """The shock's residuals, then the sine points' (SineTerms) when there are any."""
@@ -447,11 +478,14 @@ class OrderProblem:
             return np.concatenate((r1.real, r1.imag, r2))
         err = self._error(p)
         r = math.sqrt(2.0) * err / sigma
+        if self.n_prior:
+            c = self.input_coefficients(theta)[self.prior_columns]
+            return np.concatenate((r.real, r.imag, self.prior_weights * c))
         return np.concatenate((r.real, r.imag))
 
     def _error(self, p: dict) -> np.ndarray:
         d = self.data
-        pred = p["D"] * p["G"] * d.u
+        pred = p["D"] * p["G"] * p["U"]
         if self.n_transient:
             pred = pred + (self.powers[:, : self.n_transient] @ p["transient"]) / p["A"]
         if self.drift:
@@ -460,7 +494,7 @@ class OrderProblem:
 
     def _reject(self) -> np.ndarray:
         if self._rejected is None:
-            m = 3 * self.data.omega.size if self.data.grouped else 2 * self.data.omega.size
+            m = 3 * self.data.omega.size if self.data.grouped else 2 * self.data.omega.size + self.n_prior
             self._rejected = np.full(m + 2 * (self.sine.size if self.sine is not None else 0), 1e8)
         return self._rejected
 
@@ -493,20 +527,28 @@ class OrderProblem:
             j2 = -(np.sqrt(2.0 * c) / (2.0 * s2 * sigma))[:, None] * ds2
             return np.vstack((j1.real, j1.imag, j2))
         err = self._error(p)
-        dpred = delay[:, None] * dg * d.u[:, None]
+        u = p["U"]
+        dpred = delay[:, None] * dg * u[:, None]
         if self.n_transient:
             trans = (self.powers[:, : self.n_transient] @ p["transient"]) / big_a
             dpred[:, :n] -= trans[:, None] * e_over_a[:, 1 : n + 1]
         k = self.k_delay
         if self.fixed_delay is None:
-            dpred[:, k] = -1j * d.omega * delay * g * d.u * self._dtau(theta)
+            dpred[:, k] = -1j * d.omega * delay * g * u * self._dtau(theta)
             k += 1
         if self.n_transient:
             dpred[:, k : k + self.n_transient] = e_over_a[:, : self.n_transient]
             k += self.n_transient
         if self.drift:
             dpred[:, k] = d.ramp
+            k += 1
+        if self.n_inputs:
+            dpred[:, k : k + self.n_inputs] = (delay * g)[:, None] * d.inputs
         jac = math.sqrt(2.0) * (-dpred / sigma[:, None] - (err / (2.0 * s2 * sigma))[:, None] * ds2)
+        if self.n_prior:
+            prior = np.zeros((self.n_prior, self.size))
+            prior[np.arange(self.n_prior), self._k_inputs + self.prior_columns] = self.prior_weights
+            return np.vstack((jac.real, jac.imag, prior))
         return np.vstack((jac.real, jac.imag))
 
     def _dtau(self, theta: np.ndarray) -> float:
@@ -544,11 +586,17 @@ class OrderProblem:
         return self.fit_of(result.x, cost, result.evaluations, result.converged)
 
     def residual_size(self) -> int:
-        return (3 if self.data.grouped else 2) * self.data.omega.size + 2 * (self.sine.size if self.sine else 0)
+        """Rows of the residual: the bins' (and the input terms' prior's), then the sine points'."""
+        return ((3 if self.data.grouped else 2) * self.data.omega.size + self.n_prior
+                + 2 * (self.sine.size if self.sine else 0))
 
-    def linear_start(self, delay: float, iterations: int = SK_ITERATIONS) -> OrderFit:
-        """Sanathanan–Koerner start at a fixed delay (no drift), poles reflected inside."""
+    def linear_start(self, delay: float, iterations: int = SK_ITERATIONS, inputs: np.ndarray | None = None
+                     ) -> OrderFit:
+        """Sanathanan–Koerner start at a fixed delay (no drift), poles reflected inside; the input
+        terms held at `inputs` (None: zero)."""
         d = self.data
+        c = np.zeros(self.n_inputs) if inputs is None or inputs.size != self.n_inputs else np.asarray(inputs)
+        u = d.u if not self.n_inputs else d.u + d.inputs @ c
         n = self.n
         dl = np.exp(-1j * d.omega * delay)
         pw = self.powers
@@ -560,7 +608,7 @@ class OrderProblem:
             big_a = pw @ a
             g = (pw @ b) / big_a
             weight = 1.0 / (np.abs(big_a) * np.sqrt(d.var_y + np.abs(g) ** 2 * d.var_u))
-            rows, rhs = self._linear_rows(dl, weight)
+            rows, rhs = self._linear_rows(dl, weight, u)
             try:
                 x, *_ = np.linalg.lstsq(np.vstack((rows.real, rows.imag)), np.concatenate((rhs.real, rhs.imag)),
                                         rcond=None)
@@ -575,10 +623,11 @@ class OrderProblem:
                 a, b = np.concatenate(([1.0], np.zeros(n))), np.zeros(n + 1)
                 break
         fit = OrderFit(a, b, delay, transient, 0.0, float("nan"), self.size, 0, False, self.fixed_delay is not None,
-                       raw_unstable, numerator=self.numerator)
+                       raw_unstable, numerator=self.numerator, inputs=c)
         return replace(fit, cost=self.cost(self.pack(fit)))
 
-    def _linear_rows(self, dl: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _linear_rows(self, dl: np.ndarray, weight: np.ndarray, u: np.ndarray | None
+                     ) -> tuple[np.ndarray, np.ndarray]:
         """Rows of the linearised cost Σ w²|A·Y − D·B·U − I|² in x = (a_1..a_n, b_0..b_n, i)."""
         d = self.data
         n = self.n
@@ -596,7 +645,7 @@ class OrderProblem:
             rhs = np.concatenate((-weight * r11, np.zeros(d.omega.size)))
             return rows, rhs
         w = weight[:, None]
-        parts = [w * d.y[:, None] * pw[:, 1:], -w * (dl * d.u)[:, None] * (pw @ self.b_map)]
+        parts = [w * d.y[:, None] * pw[:, 1:], -w * (dl * u)[:, None] * (pw @ self.b_map)]
         if self.n_transient:
             parts.append(-w * pw[:, : self.n_transient])
         return np.hstack(parts), -weight * d.y
@@ -716,7 +765,7 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
         if near_kept(refined.delay) or not (is_stable(refined.a) and refined.cost <= fit.cost + BRANCH_COST):
             continue
         # iterated to convergence; the valley is flat, so it may slide back to a kept optimum
-        refined = problem.solve(refined, 200, 1e-11, near_kept)
+        refined = problem.solve(refined, 400, 1e-11, near_kept)
         if not near_kept(refined.delay):
             found.append(refined)
     return sorted(found, key=lambda f: f.cost)

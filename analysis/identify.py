@@ -80,7 +80,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from hopkinson.analysis.claims import claimed_modes, claims_warnings, delay_warnings
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SineTerms, SpectralData
+from hopkinson.analysis.excitation import SupportedBand
+from hopkinson.analysis.frequency_fit import (
+    OrderFit,
+    OrderProblem,
+    SineTerms,
+    SpectralData,
+    predicted_bins,
+    response,
+)
+from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, ONSET, InputTerms, term_summary
 from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
@@ -92,6 +101,7 @@ from hopkinson.analysis.model_error import (
 )
 from hopkinson.analysis.modes import has_doublet, main_mode
 from hopkinson.analysis.noise import NoiseSpectrum
+from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.order_choice import FRF_TOLERANCE, SIGNIFICANCE, choose_order
 from hopkinson.analysis.order_search import (
     FREE,
@@ -162,6 +172,8 @@ class FitContext:
     # The response was delayed by this many samples before the fit (record_preparation.realigned):
     # a fit's delay τ is the model's τ − realigned_samples.
     realigned_samples: int = 0
+    terms: InputTerms = field(default_factory=InputTerms)  # the input terms fitted (analysis.input_terms)
+    band_cut: Any = None  # BandCut: where the band's stretches past the first null stop being explained
 
     def model_delay(self, fit_delay_samples: float) -> float:
         """The model's delay (samples) of a fit's."""
@@ -197,11 +209,13 @@ class Identification:
     order_selection: str  # "order_test" (chosen by the order test) or "asked" (files before: "knee")
     knee_tolerance: float  # relative gain in V a higher order must also bring
     preprocessing: dict[str, Any] = field(default_factory=dict)
-    supported_band_hz: tuple[float, float] | None = None  # band the excitation supports
+    supported_band_hz: tuple[float, float] | None = None  # band the excitation supports: (low, top), nulls included
     noise: dict[str, Any] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
     order_evidence: dict[str, Any] = field(default_factory=dict)  # why this order
     context: FitContext | None = field(default=None, repr=False, compare=False)
     sine_joint: Any = None  # analysis.sine_joint.SineJoint when fitted with a sine calibration
+    supported_band: SupportedBand | None = None  # its stretches (the pulse's nulls between them are not fitted)
+    input_terms: dict[str, Any] = field(default_factory=dict)  # what the input terms found (input_terms.term_summary)
 
     @property
     def sample_interval_s(self) -> float:
@@ -256,10 +270,12 @@ class Identification:
                 "preprocessing": dict(self.preprocessing),
                 "main_mode": dict(self.main_mode) if self.main_mode is not None else None,
                 "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
+                "supported_band": self.supported_band.to_dict() if self.supported_band else None,
                 "nonminimum_phase_zeros": complex_pairs(self.model.nonminimum_phase_zeros),
                 "resonance_above_hz": self.resonance_above_hz,
                 "noise": dict(self.noise),
                 "order_evidence": jsonable(self.order_evidence),
+                "input_terms": jsonable(self.input_terms),
             }
         )
         if self.sine_joint is not None:
@@ -312,10 +328,29 @@ def identify(
         raise AnalysisError(f"max_order must be at least 1, got {max_order}")
     if order is not None and order < 1:
         raise AnalysisError(f"order must be at least 1, got {order}")
+    options = dict(max_order=max_order, order=order, sample_rate_hz=sample_rate_hz, knee_tolerance=knee_tolerance,
+                   significance=significance, max_delay_samples=max_delay_samples, remove_delay=remove_delay,
+                   patience=patience, max_evaluations=max_evaluations, stability_draws=stability_draws,
+                   sine_terms=sine_terms)
+    result = _identify(record, **options)
+    cut = result.context.band_cut if result.context is not None else None
+    if cut is None:
+        return result
+    again = _identify(record, **options, band_top_hz=cut.top_hz)
+    again.warnings.insert(0, cut.text)
+    again.preprocessing["band_cut"] = cut.to_dict()
+    return again
+
+
+def _identify(record: Record, max_order: int, order: int | None, sample_rate_hz: float | None, knee_tolerance: float,
+              significance: float, max_delay_samples: int, remove_delay: bool, patience: int | None,
+              max_evaluations: int, stability_draws: int, sine_terms: SineTerms | None,
+              band_top_hz: float | None = None) -> Identification:
+    """Steps 1–7 once, on the band the excitation supports (capped at `band_top_hz`)."""
     warnings: list[str] = []
     # Steps 1–4: rate, scale, baselines and noise, window and band.
     prepared = prepare_record(record, sample_rate_hz, max(max_order, order or 0), order, max_delay_samples, warnings,
-                              realign=remove_delay)
+                              realign=remove_delay, band_top_hz=band_top_hz)
     prep, dt = prepared.prep, prepared.record.sample_interval_s
     data = prep.spectral if sine_terms is None else replace(prep.spectral, sine=sine_terms)
     setup = search_setup(data, prep, max(max_order, order or 0), order, dt, remove_delay=remove_delay,
@@ -345,6 +380,7 @@ def identify(
     model = DiscreteModel(dt, final.a, final.b * (prepared.scale_y / prepared.scale_u),
                           float(final.delay) - prepared.realigned_samples,
                           info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure})
+    band_cut = stretches_beyond_the_model(prep, data, final, dt) if band_top_hz is None else None
     modes = claimed_modes(model, prep.band, sweep.structure)
     warnings += claims_warnings(modes, prep.band)
     if remove_delay:
@@ -352,8 +388,65 @@ def identify(
         if prepared.alignment.at_edge:
             warnings.append(f"{prepared.alignment.not_taken_text(dt)}: if the channels are skewed by that much, "
                             "this model is not the sensor's; correct the skew and analyse again")
-    return _identification(prepared, data, setup, settled, final, others, model, modes, model_error, evidence,
-                           warnings, knee_tolerance)
+    ident = _identification(prepared, data, setup, settled, final, others, model, modes, model_error, evidence,
+                            warnings, knee_tolerance)
+    if ident.context is not None:
+        ident.context.band_cut = band_cut
+    return ident
+
+
+@dataclass(frozen=True)
+class BandCut:
+    """Where the band stops short of the excitation's support: past the pulse's first null, the
+    first stretch the model does not explain to within the noise, and how far it departs."""
+
+    top_hz: float  # the band's new top (the last stretch kept ends there)
+    stretch_hz: tuple[float, float]  # the first stretch dropped
+    ratio: float  # its residual per bin over what the noise explains
+
+    @property
+    def text(self) -> str:
+        lo, hi = self.stretch_hz
+        return (f"the band stops at {self.top_hz / 1e3:.3g} kHz: past the pulse's first null the stretch "
+                f"{lo / 1e3:.3g}–{hi / 1e3:.3g} kHz leaves {self.ratio:.3g}× the residual its noise explains, so the "
+                "response there is not the sensor's answer to the reference alone (a drive the reference does not "
+                "show, or dynamics beyond the model), which the pulse's weak sidelobes cannot outweigh; the model "
+                "is fitted on the stretches below it")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"top_hz": self.top_hz, "stretch_hz": list(self.stretch_hz), "residual_over_noise": self.ratio}
+
+
+# A stretch of the band past the pulse's first null is kept while the model explains it to within
+# this many times what its noise explains (model_error.MODEL_ERROR_DETECTED's level), or the 99.9 %
+# point of chance for a stretch of few bins.
+STRETCH_EXCESS = MODEL_ERROR_DETECTED
+STRETCH_CHANCE = 0.999
+
+
+def stretches_beyond_the_model(prep: Prepared, data: SpectralData, fit: OrderFit, dt: float) -> BandCut | None:
+    """The band's cut (`BandCut`), or None: the stretches past the first null are kept up to the
+    first whose residual per bin exceeds STRETCH_EXCESS × what its noise explains (and chance).
+    Their bins weigh little against the noise (the pulse's sidelobes), so a response they do not
+    explain (PTB's record: 120–11 000× its noise beyond its first null at 28 kHz) bends the model
+    while the order test and the model-error test still read it as fitted; on the simulated bar's
+    records the model explains them (0.6–1.4×) and the band reaches 60–200 kHz."""
+    support = prep.support
+    if support is None or len(support.intervals_hz) < 2:
+        return None
+    omega = 2.0 * np.pi * prep.bin_hz * dt
+    residual = prep.y_bins - predicted_bins(fit, data, omega, prep.u_bins)
+    expected = prep.draw_var_y + np.abs(response(fit, omega)) ** 2 * prep.draw_var_u
+    for k, (lo, hi) in enumerate(support.intervals_hz[1:], start=1):
+        inside = (prep.bin_hz >= lo) & (prep.bin_hz <= hi)
+        bins = int(np.sum(inside))
+        if bins == 0:
+            continue
+        ratio = float(np.mean(np.abs(residual[inside]) ** 2 / expected[inside]))
+        chance = f_quantile(STRETCH_CHANCE, 2 * bins, 1e6)
+        if ratio > max(STRETCH_EXCESS, chance):
+            return BandCut(float(support.intervals_hz[k - 1][1]), (float(lo), float(hi)), ratio)
+    return None
 
 
 def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSetup, sine_terms: SineTerms | None
@@ -374,6 +467,18 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     model_error = ModelError.none(prep.bin_hz.size)
     if sweep.chosen is None:
         return sweep, model_error, data
+    with_onset = onset_shows(prep, data, sweep, setup)
+    if with_onset is not None:  # the onset's disturbances are fitted with every order
+        data = with_onset
+        sweep = fit_orders(data, FREE, setup)
+        if sweep.chosen is None:
+            return sweep, model_error, data
+    settled = undetermined_terms_dropped(prep, data, sweep, setup)
+    if settled is not None:  # a term the record does not call for is not fitted
+        data = settled
+        sweep = fit_orders(data, FREE, setup)
+        if sweep.chosen is None:
+            return sweep, model_error, data
     order = setup.asked_order
     pick = order if order is not None and order in sweep.fits else sweep.chosen
     if order is None and sweep.parameters[pick] > data.bins:
@@ -400,6 +505,74 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     return sweep, model_error, data
 
 
+# ε (tension/compression) and γ (motion after the pulse) are fitted where the chosen order's fit
+# sees them beyond chance (|c|/u(c) at least TERM_Z: two-sided 10⁻³, u from the fit's Jacobian and
+# residual) and determines them (u under UNDETERMINED_U): a term the data do not call for only opens
+# degenerate solutions (a dipole a few samples long fitted ε = −1, one lobe and a zero explaining two
+# lobes, and the order test then took 5-6 poles for the known 4).
+TERM_Z = 3.29
+UNDETERMINED_U = {ASYMMETRY: 0.05, MOTION: 0.25}
+
+
+def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup
+                               ) -> SpectralData | None:
+    """The data without the input terms ε and γ the chosen order's fit does not call for (module
+    constants above), or None when it keeps both; `prep.terms` and `prep.spectral` take the
+    change, with the reason (the estimate and its standard uncertainty)."""
+    if sweep.chosen is None or not prep.terms.count:
+        return None
+    fit = sweep.fits[sweep.chosen]
+    problem = OrderProblem.for_fit(data, fit, sweep.delay_mode, setup.max_delay)
+    jac = problem.jacobian(problem.pack(fit))
+    dof = max(problem.residual_size() - problem.size, 1)
+    cov = np.linalg.pinv(jac.T @ jac) * max(2.0 * fit.cost / dof, 1.0)
+    first = problem._k_inputs
+    terms = prep.terms
+    for name, limit in UNDETERMINED_U.items():
+        cols = prep.terms.columns(name)
+        if not cols.size:
+            continue
+        k = first + int(cols[0])
+        value, u = float(fit.inputs[cols[0]]), math.sqrt(max(float(cov[k, k]), 0.0))
+        if not u <= limit:
+            terms = terms.without(name, f"the record does not determine it ({value:+.2g}, standard uncertainty {u:.2g})")
+        elif abs(value) < TERM_Z * u:
+            terms = terms.without(name, f"not seen beyond chance: {value:+.2g} with a standard uncertainty of {u:.2g}")
+    if terms.count == prep.terms.count:
+        return None
+    prep.terms = terms
+    prep.spectral = replace(prep.with_terms(terms), var_y=prep.spectral.var_y)
+    return replace(prep.spectral, var_y=data.var_y, sine=data.sine)
+
+
+# The onset terms are kept where they lower the chosen order's cost beyond chance at this level
+# (an F test on V for their K parameters).
+ONSET_SIGNIFICANCE = 1e-3
+
+
+def onset_shows(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup) -> SpectralData | None:
+    """The data with the onset's input terms (analysis.input_terms) where they lower the chosen
+    order's cost beyond chance (an F test at ONSET_SIGNIFICANCE for their parameters); None where
+    they do not, and `prep` then records why. `prep.terms` and `prep.spectral` take them on."""
+    onset = prep.onset_terms
+    if onset is None or sweep.chosen is None:
+        return None
+    extra = onset.count - prep.terms.count
+    fit = sweep.fits[sweep.chosen]
+    trial = replace(prep.with_terms(onset), var_y=data.var_y, sine=data.sine)
+    problem = OrderProblem.for_fit(trial, fit, sweep.delay_mode, setup.max_delay)
+    start = replace(fit, inputs=np.concatenate((fit.inputs, np.zeros(extra))), cost=math.nan)
+    refit = problem.solve(start, 200, 1e-9)
+    dof = problem.residual_size() - problem.size
+    statistic = ((fit.cost - refit.cost) / extra) / (refit.cost / dof) if dof > 0 and refit.cost > 0 else 0.0
+    if dof > 0 and statistic > f_quantile(1.0 - ONSET_SIGNIFICANCE, extra, dof):
+        prep.terms, prep.spectral = onset, replace(prep.spectral, inputs=trial.inputs, input_prior=trial.input_prior)
+        return trial
+    prep.terms = replace(prep.terms, not_fitted={
+        **prep.terms.not_fitted, ONSET: f"the onset's disturbances do not show (F = {statistic:.2g} for {extra} terms)"})
+    return None
+
+
 def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchSetup, settled: SettledOrder,
                     final: OrderFit, others: list[OrderFit], model: DiscreteModel, modes: list[dict[str, Any]],
                     model_error: ModelError, evidence: dict[str, Any], warnings: list[str],
@@ -410,7 +583,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
     dt, scale_y, n_max = rec.sample_interval_s, prepared.scale_y, setup.n_max
     pre = dict(prepared.preprocessing)
     noise_y, var_y = response_noise_on_residual(prep, final, dt)
-    y_hat = _simulate(prep.u, final)
+    y_hat = _simulate(prep.corrected_u(final.inputs), final)
     residual = prep.y - y_hat
     fit = fit_percent(prep.y, y_hat)
     pre["response_offset_fitted"] = float(np.mean(residual) * scale_y)
@@ -450,14 +623,15 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
         significance=setup.significance, knee_tolerance=knee_tolerance, max_delay=setup.max_delay,
         asked_order=setup.asked_order, record=rec, model_error_ratio=ratio,
         branches={chosen: others} if others else {}, var_model_error=model_error.var_bins,
-        realigned_samples=prepared.realigned_samples,
+        realigned_samples=prepared.realigned_samples, terms=prep.terms,
     )
     return Identification(
         model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,
         bic_by_order=bic, fit_percent=fit, delay_samples=model.delay_samples, modes=modes, warnings=warnings,
         converged=final.converged, iterations=final.evaluations, order_selection=settled.selection,
         knee_tolerance=knee_tolerance, preprocessing=pre, supported_band_hz=prep.band, noise=noise,
-        order_evidence=evidence, context=context,
+        order_evidence=evidence, context=context, supported_band=prep.support,
+        input_terms=term_summary(prep.terms, final.inputs, prepared.scale_u),
     )
 
 

@@ -252,6 +252,7 @@ def main_mode_of(identification: dict[str, Any]) -> dict[str, Any] | None:
     pairs = [
         m for m in identification.get("modes") or []
         if m.get("kind") in ("complex", "pair") and m.get("supported", True) and _number(m.get("natural_frequency_hz"))
+        and (_number(m.get("damping_ratio")) or 0.0) <= 0.3  # a pair damped more is no resonance (analysis.modes)
     ]
     return dict(min(pairs, key=lambda m: m["natural_frequency_hz"])) if pairs else None
 

@@ -8,6 +8,9 @@ from typing import Any
 
 import numpy as np
 
+# A pole pair damped more than this is no resonance (it shapes the response without a peak that
+# could be called the sensor's natural frequency): never a mode claimed, never the main mode.
+RESONANCE_MAX_DAMPING = 0.3
 # A zero closer to a pole than this fraction of the pole's distance to the unit circle cancels it
 # (a pole–zero doublet changes the response by at most about that fraction near the pole).
 DOUBLET_DISTANCE = 0.5
@@ -23,7 +26,8 @@ def modes_of(
     time constant 1/(2π·f_n)); a negative real pole sits at Nyquist (an artefact of the
     discretisation: `nyquist` True, never supported); a pole at the origin has no frequency.
     `supported`: the natural frequency lies inside `supported_band_hz` (the band the excitation
-    supports; None: not judged, True).
+    supports; None: not judged, True). `resonance`: a complex pair damped at most
+    RESONANCE_MAX_DAMPING (only a resonance is ever claimed as a mode).
     """
     modes = []
     for p in np.asarray(poles, dtype=complex):
@@ -40,14 +44,16 @@ def modes_of(
         supported = not nyquist and (
             supported_band_hz is None or supported_band_hz[0] <= f_n <= supported_band_hz[1]
         )
+        zeta = float(-s.real / wn) if wn > 0 else None
         modes.append(
             {
                 "kind": "complex" if p.imag > 0 else "real",
                 "pole": [float(p.real), float(p.imag)],
                 "natural_frequency_hz": f_n,
-                "damping_ratio": float(-s.real / wn) if wn > 0 else None,
+                "damping_ratio": zeta,
                 "nyquist": nyquist,
                 "supported": bool(supported),
+                "resonance": bool(p.imag > 0 and zeta is not None and zeta <= RESONANCE_MAX_DAMPING),
             }
         )
     return sorted(modes, key=lambda m: m["natural_frequency_hz"] or 0.0)
@@ -72,9 +78,17 @@ def mark_doublets(modes: list[dict[str, Any]], zeros: np.ndarray) -> list[dict[s
     return out
 
 
+def claimed(mode: dict[str, Any]) -> bool:
+    """Whether a mode is claimed: a resonance (ζ ≤ RESONANCE_MAX_DAMPING) the band supports, not
+    cancelled by a zero (results written before `resonance` was kept: judged by its damping)."""
+    zeta = mode.get("damping_ratio")
+    resonance = mode.get("resonance", zeta is not None and zeta <= RESONANCE_MAX_DAMPING)
+    return mode["kind"] == "complex" and bool(mode["supported"]) and bool(resonance) and not mode.get("cancelled")
+
+
 def main_mode(modes: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The sensor's main mode: the lowest supported complex pole pair (None if there is none)."""
-    pairs = [m for m in modes if m["kind"] == "complex" and m["supported"]]
+    """The sensor's main mode: the lowest claimed resonance (`claimed`; None if there is none)."""
+    pairs = [m for m in modes if claimed(m)]
     return min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else None
 
 

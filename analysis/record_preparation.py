@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.excitation import pulse_width, supported_band_hz
+from hopkinson.analysis.excitation import SupportedBand, pulse_width, supported_band
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
+from hopkinson.analysis.input_terms import ONSET, InputTerms, input_terms
 from hopkinson.analysis.noise import COHERENCE_SEGMENT, WELCH_SEGMENT, NoiseSpectrum, is_motion
 from hopkinson.analysis.numerics import next_fast_len
 from hopkinson.analysis.records import Record
@@ -33,6 +34,10 @@ from numpy import fft
 MIN_SAMPLES_PER_PARAMETER = 10
 # More bins than this are summed in groups of adjacent bins (same cost while G is flat there).
 MAX_BINS = 512
+# The band runs across the pulse's nulls up to this fraction of the Nyquist frequency at most: the
+# last fifth below it holds the resampling's anti-alias transition, which no model of the sensor
+# follows (a 10 µs half-sine's sidelobes reach 450 kHz at 1 MS/s).
+NULLS_CROSSED_TO = 0.8
 # Quiet stretches shorter than this are not used for a noise spectrum.
 MIN_QUIET = 32
 # Motion after the pulse (_without_motion): a stretch's tails are judged from its start in steps
@@ -73,7 +78,7 @@ class Prepared:
     drift_removed: bool
     noise_u: NoiseSpectrum
     noise_y: NoiseSpectrum
-    band: tuple[float, float]
+    band: tuple[float, float]  # the supported band's hull (low, top)
     bin_hz: np.ndarray
     u_bins: np.ndarray
     y_bins: np.ndarray
@@ -97,6 +102,24 @@ class Prepared:
     motion: list[dict[str, Any]] = field(default_factory=list)
     lead_in: int = 0  # the lead-in at rest is samples [0, lead_in) (0: none)
     lead_in_to_foot: bool = False  # it reaches the pulse's foot (the window's margins left none)
+    support: SupportedBand | None = None  # the supported stretches (the nulls between them are not fitted)
+    bin_index: np.ndarray | None = None  # each fitted bin's index in the window's DFT
+    ramp: np.ndarray | None = None  # the drift ramp's DFT at the fitted bins (with a transient term)
+    # The input terms fitted (analysis.input_terms: in `spectral`), and the onset terms tried (identify)
+    terms: InputTerms = field(default_factory=InputTerms)
+    onset_terms: InputTerms | None = None
+
+    def corrected_u(self, coefficients: np.ndarray) -> np.ndarray:
+        """The window's reference with the fitted input terms' correction (`terms`)."""
+        if not self.terms.count:
+            return self.u
+        return self.u + self.terms.correction(coefficients)[self.start : self.start + self.u.size]
+
+    def with_terms(self, terms: InputTerms) -> SpectralData:
+        """The fitted data with `terms`' input terms (per bin: data with input terms are never grouped)."""
+        assert self.bin_index is not None and not self.spectral.grouped
+        return replace(self.spectral, inputs=terms.bins(self.start, self.start + self.u.size, self.bin_index),
+                       input_prior=terms.prior)
 
 
 def _scale(x: np.ndarray) -> float:
@@ -152,11 +175,12 @@ class PreparedRecord:
 
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
-                   warnings: list[str], realign: bool = True) -> PreparedRecord:
+                   warnings: list[str], realign: bool = True, band_top_hz: float | None = None) -> PreparedRecord:
     """Resample to the analysis rate (None: the record's), realign a response that leads by
     several samples (`realigned`; not when `realign` is False: the delay held at 0;
     claims.delay_warnings says so), check and scale both channels, and run the prepare, noise
-    and band stages. Warnings are appended to `warnings`."""
+    and band stages (the band capped at `band_top_hz`: identify's cut). Warnings are appended to
+    `warnings`."""
     pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
@@ -183,7 +207,7 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     u_all, y_all = (ref - np.median(ref)) / scale_u, (resp - np.median(resp)) / scale_y
     activity = locate_pulse(u_all, y_all, dt, max_delay)
     noise = measure_noise(activity, dt, warnings)
-    prep = fitted_band(activity, noise, dt, warnings)
+    prep = fitted_band(activity, noise, dt, warnings, band_top_hz)
     pre.update(
         {
             "reference_baseline": float(np.median(ref) + prep.baseline_u * scale_u),
@@ -370,10 +394,11 @@ def measure_noise(activity: Activity, dt: float, warnings: list[str]) -> NoiseLo
                       draw_noise_y)
 
 
-def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list[str]) -> Prepared:
+def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list[str],
+                band_top_hz: float | None = None) -> Prepared:
     """The band the excitation supports (where the reference's spectrum stands 20 dB above its
-    noise and within 40 dB of its maximum, analysis.excitation.supported_band_hz), the window's
-    DFT bins inside it (grouped beyond MAX_BINS; per bin with a transient term when the record
+    noise and within 40 dB of its maximum, across the pulse's narrow spectral nulls:
+    analysis.excitation.supported_band), the window's DFT bins inside it (not in its nulls) (grouped beyond MAX_BINS; per bin with a transient term when the record
     is cut short or starts cold) and each bin's noise variance."""
     u, y, n = noise.u, noise.y, noise.u.size
     start, end, truncated, cold_start = activity.start, activity.end, activity.truncated, activity.cold_start
@@ -385,12 +410,17 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
             end = start + fast
     uw, yw = u[start:end], y[start:end]
     try:
-        band = supported_band_hz(u, dt, noise_psd=noise_u.at if noise_u.samples else None)
+        support = supported_band(u, dt, noise_psd=noise_u.at if noise_u.samples else None)
     except AnalysisError as exc:
         raise AnalysisError(f"the reference's pulse is lost in its noise: {exc}") from None
+    if len(support.intervals_hz) > 1:  # past the first null, not into the analysis rate's last fifth
+        support = support.below(NULLS_CROSSED_TO * 0.5 / dt)
+    if band_top_hz is not None:
+        support = support.below(band_top_hz)
+    band = support.hull_hz
     length = uw.size
     freq = fft.rfftfreq(length, dt)
-    keep = (freq >= max(band[0], freq[1] if freq.size > 1 else 0.0)) & (freq <= band[1])
+    keep = support.contains(freq) & (freq >= (freq[1] if freq.size > 1 else 0.0))
     keep[0] = False
     if not np.any(keep):
         raise AnalysisError("the supported band holds no frequency bin of the fitted window (record too short)")
@@ -419,24 +449,34 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
     var_u = np.where(low, np.maximum(var_u, draw_var_u), var_u)
     var_y = np.where(low, np.maximum(var_y, draw_var_y), var_y)
     transient = truncated or cold_start
+    terms = input_terms(u, dt, activity.pulse_start, noise_u.rms if noise_u.samples else 0.0, activity.ref_busy,
+                        band[1], any(m["reason"] == "coherent" for m in noise.motion))
+    onset_terms = terms if terms.columns(ONSET).size else None
+    if onset_terms is not None:  # the onset is fitted only where it shows (identify decides)
+        terms = terms.without(ONSET, "")
+    inputs = terms.bins(start, end, np.flatnonzero(keep))
+    ramp = None
     if truncated:
         warnings.append("the record ends before the response has died away: a transient term is fitted with the "
                         "model, and the uncertainty is larger than a complete record would give")
     if transient:
         t = np.arange(length, dtype=float)
         ramp = fft.rfft((t - t.mean()) / length)[keep]
-        spectral = SpectralData.per_bin(omega, u_spec, y_spec, var_u, var_y, ramp, True)
+        spectral = replace(SpectralData.per_bin(omega, u_spec, y_spec, var_u, var_y, ramp, True, inputs),
+                           input_prior=terms.prior)
         group = 1
     else:
-        group = max(1, math.ceil(bin_hz.size / MAX_BINS))
+        group = 1 if inputs is not None or onset_terms is not None else max(1, math.ceil(bin_hz.size / MAX_BINS))
         if group == 1:
-            spectral = SpectralData.per_bin(omega, u_spec, y_spec, var_u, var_y)
+            spectral = replace(SpectralData.per_bin(omega, u_spec, y_spec, var_u, var_y, inputs=inputs),
+                               input_prior=terms.prior)
         else:
             spectral = SpectralData.grouped_from(omega, u_spec, y_spec, var_u, var_y, group)
     return Prepared(uw, yw, start, activity.baseline_u, activity.baseline_y, noise.drift_removed, noise_u, noise_y,
                     band, bin_hz, u_spec, y_spec, var_u, var_y, group, spectral, activity.pulse_start, u, y,
                     noise.y_segments, activity.ref_busy, draw_noise_u, draw_noise_y, draw_var_u, draw_var_y,
-                    noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot)
+                    noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot, support,
+                    np.flatnonzero(keep), ramp, terms, onset_terms)
 
 
 def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:
@@ -452,7 +492,8 @@ def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tupl
         return prep.draw_noise_y, prep.draw_var_y
     # The model driven by the pulse alone: driven by the whole reference it would add the
     # reference's noise through G, counted as response noise (~15 % too much at 2 % each).
-    residual = prep.y_full - simulate_from_rest(fit.a, fit.b, fit.delay, np.where(prep.ref_busy, prep.u_full, 0.0))
+    drive = prep.u_full + prep.terms.correction(fit.inputs) if prep.terms.count else prep.u_full
+    residual = prep.y_full - simulate_from_rest(fit.a, fit.b, fit.delay, np.where(prep.ref_busy, drive, 0.0))
     second = NoiseSpectrum.measure(residual, 1.0 / dt, prep.y_segments)
     if second.samples == 0:
         return prep.draw_noise_y, prep.draw_var_y

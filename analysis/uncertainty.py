@@ -71,6 +71,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.estimate import COVERAGE, Estimate
 from hopkinson.analysis.excitation import peak_estimate, pulse_width
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
@@ -95,7 +96,6 @@ from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
 from hopkinson.analysis.response import fbsd_edges, frequency_response
 
 METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
-COVERAGE = 0.95
 ORDER_DRAWS = 40  # draws that re-run the whole order choice (its PDF's resolution: 2.5 %)
 FBSD_GRID = 2000
 PEAK_SEGMENT = 256  # samples around a peak that get fresh noise for the peak figures
@@ -138,64 +138,6 @@ class UncertaintyOptions:
             "amplifier gain": (self.u_amp_gain_rel, "response"),
             "digitizer gain": (self.u_digitizer_gain_rel, "response"),
         }
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """One figure: the reported value, its standard uncertainty and 95 % coverage interval."""
-
-    value: float
-    u: float
-    interval: tuple[float, float]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"value": _finite(self.value), "u": _finite(self.u),
-                "interval": [_finite(self.interval[0]), _finite(self.interval[1])]}
-
-    @classmethod
-    def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE,
-                 reflect: np.ndarray | None = None, positive: bool = False) -> Estimate:
-        """u: the draws' standard deviation. Interval: the probabilistically symmetric one of
-        the draws (GUM-S1 §7.7), reflected about `value`: each draw perturbs data that already
-        carry noise, so the draws sit around the estimate as the estimate sits around the
-        truth — with the estimator's own (second-order) bias once more; reflecting puts the
-        interval where the truth lies (the basic bootstrap interval; identical for a
-        symmetric distribution).
-
-        `reflect` (one flag per draw; None: all) marks the draws that sit around the estimate
-        in that sense. A draw that landed on another delay branch (Refitter.fit_branch) is not
-        one: it is the other estimate the same estimator gives on data like these, a fixed
-        offset from the truth rather than the estimate's scatter about it, and it is taken as it
-        is (the percentile interval); reflecting it would put that offset on the wrong side.
-
-        `positive`: a figure bounded below by zero (a frequency, a damping ratio): reflected
-        about the value on a log scale (value²/draw), so the interval stays inside the bound
-        (issue 17: a reflected f_n interval read [−8.9, 19.9] kHz)."""
-        if positive and value > 0:
-            d = np.asarray(draws, dtype=float)
-            d = np.where(d > 0, d, np.nan)
-            est = cls.of_draws(math.log(value), np.log(d), coverage, reflect)
-            return cls(float(value), float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan,
-                       (math.exp(est.interval[0]), math.exp(est.interval[1])))
-        d = np.asarray(draws, dtype=float)
-        flags = np.ones(d.size, dtype=bool) if reflect is None else np.asarray(reflect, dtype=bool)
-        finite = np.isfinite(d)
-        d, flags = d[finite], flags[finite]
-        if d.size < 2:
-            return cls(value, math.nan, (math.nan, math.nan))
-        tail = 50.0 * (1.0 - coverage)
-        u = float(np.std(d, ddof=1))
-        if flags.all():
-            lo, hi = np.percentile(d, [tail, 100.0 - tail])
-            return cls(float(value), u, (float(2.0 * value - hi), float(2.0 * value - lo)))
-        lo, hi = np.percentile(np.where(flags, 2.0 * value - d, d), [tail, 100.0 - tail])
-        return cls(float(value), u, (float(lo), float(hi)))
-
-    @classmethod
-    def normal(cls, value: float, u: float) -> Estimate:
-        """A normal PDF's 95 % interval (k = 1.96)."""
-        k = 1.959963984540054
-        return cls(float(value), float(u), (float(value - k * u), float(value + k * u)))
 
 
 @dataclass
@@ -309,7 +251,7 @@ def evaluate(
     fbsd_values = {k: e.frequency_hz for k, e in nominal_edges.items()}
     fbsd_draws = _fbsd_draws(fits, good, nominal_edges, dt)
 
-    dc = Estimate.of_draws(model.dc_gain, dc_draws, reflect=reflect)
+    dc = Estimate.of_draws(model.dc_gain, dc_draws, reflect=reflect, signed=True)
     fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=reflect, positive=True) if main \
         else None
     zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws, reflect=reflect, positive=True) if main \
@@ -616,7 +558,7 @@ def _peak_figures(
     reduction = reduction or {}
     ss_value = reduction.get("shock_sensitivity", py0 / pu0)
     ss = peak_y / peak_u * gain_factor
-    out: dict[str, Any] = {"shock_sensitivity": Estimate.of_draws(ss_value, ss / (py0 / pu0) * ss_value)}
+    out: dict[str, Any] = {"shock_sensitivity": Estimate.of_draws(ss_value, ss / (py0 / pu0) * ss_value, signed=True)}
     acc_value = reduction.get("peak_acceleration_m_s2", pu0)
     reference = {
         "peak_acceleration_m_s2": Estimate.of_draws(acc_value, peak_u * reference_factor / pu0 * acc_value),
@@ -711,8 +653,10 @@ def _linear_noise_shares(
               else data.in_layout(ctx.var_model_error))
     d_y = np.tile((var_y - var_me) / s2, rows)
     d_me = np.tile(var_me / s2, rows)
-    sine_rows = jac.shape[0] - d_u.size  # a sine calibration's residuals (analysis.sine_joint), last
-    d_u, d_y, d_me = np.pad(d_u, (0, sine_rows)), np.pad(d_y, (0, sine_rows)), np.pad(d_me, (0, sine_rows))
+    # the input terms' prior rows (frequency_fit), then a sine calibration's residuals (analysis.sine_joint), last
+    sine_rows = jac.shape[0] - d_u.size - problem.n_prior
+    pad = (0, problem.n_prior + sine_rows)
+    d_u, d_y, d_me = np.pad(d_u, pad), np.pad(d_y, pad), np.pad(d_me, pad)
     h_inv = np.linalg.pinv(jac.T @ jac)
     proj = h_inv @ jac.T
     cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T,

@@ -322,13 +322,21 @@ def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():
 
 
 # ------------------------------------------------------------------------------ band
-def test_fitted_band_stops_before_the_pulses_first_null_and_weighs_each_bin_by_its_noise():
+def test_fitted_band_crosses_the_pulses_nulls_and_weighs_each_bin_by_its_noise():
+    """Issue 40 item 4: the band is every frequency the pulse supports, between its spectral nulls
+    too. A half-sine of width w has its nulls at (k + 0.5)/w (k ≥ 1); its band runs past the first
+    one, no fitted bin lies in a null (there |F| < 1 % of its maximum: within 0.2/w of the zero),
+    and its first stretch ends before the first null (it stopped there before)."""
     u, y = channels(seed=5)
     activity = locate_pulse(u, y, DT, 32)
     prep = fitted_band(activity, measure_noise(activity, DT, []), DT, [])
     first_null_hz = 1.5 / WIDTH_S  # a half-sine of width w has its first spectral zero at 1.5/w
-    assert prep.band[1] < first_null_hz
-    assert np.all((prep.bin_hz >= prep.band[0]) & (prep.bin_hz <= prep.band[1]))
+    assert prep.support.intervals_hz[0][1] < first_null_hz < prep.band[1]
+    assert prep.band[1] >= 2.5 / WIDTH_S  # past its second null
+    nulls = (np.arange(1, 12) + 0.5) / WIDTH_S
+    distance = np.min(np.abs(prep.bin_hz[:, None] - nulls[None, :]), axis=1)
+    assert np.all(distance > 0.02 / WIDTH_S)  # no bin in a null
+    assert np.all(prep.support.contains(prep.bin_hz))
     # white noise of variance σ² gives E|DFT_k|² = N σ² at every bin (N: the window's length)
     assert np.median(prep.draw_var_u) == pytest.approx(prep.u.size * SIGMA_U**2, rel=0.3)
 

@@ -1,0 +1,115 @@
+"""A reported figure with its uncertainty (GUM Supplement 1): the value, its standard
+uncertainty and its 95 % coverage interval from Monte Carlo draws, or the reason it is not
+determined.
+
+Invariants every interval keeps (issue 40): it contains its own value, and a figure bounded by
+physics stays inside its bound (a frequency or a damping ratio above zero, a DC gain of the
+value's sign): such a figure's draws are reflected on a log scale. A figure the record cannot
+determine is not given a number with an absurd interval: `NotDetermined` says why.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+COVERAGE = 0.95
+
+
+@dataclass(frozen=True)
+class NotDetermined:
+    """A figure the shot does not determine, and why (a typed result, never a magic number)."""
+
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"not_determined": self.reason}
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One figure: the reported value, its standard uncertainty and 95 % coverage interval."""
+
+    value: float
+    u: float
+    interval: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"value": _finite(self.value), "u": _finite(self.u),
+                "interval": [_finite(self.interval[0]), _finite(self.interval[1])]}
+
+    @classmethod
+    def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE,
+                 reflect: np.ndarray | None = None, positive: bool = False, signed: bool = False) -> Estimate:
+        """u: the draws' standard deviation. Interval: the probabilistically symmetric one of
+        the draws (GUM-S1 §7.7), reflected about `value`: each draw perturbs data that already
+        carry noise, so the draws sit around the estimate as the estimate sits around the
+        truth — with the estimator's own (second-order) bias once more; reflecting puts the
+        interval where the truth lies (the basic bootstrap interval; identical for a
+        symmetric distribution).
+
+        `reflect` (one flag per draw; None: all) marks the draws that sit around the estimate
+        in that sense. A draw that landed on another delay branch (Refitter.fit_branch) is not
+        one: it is the other estimate the same estimator gives on data like these, a fixed
+        offset from the truth rather than the estimate's scatter about it, and it is taken as it
+        is (the percentile interval); reflecting it would put that offset on the wrong side.
+
+        `positive`: a figure bounded below by zero (a frequency, a damping ratio): reflected
+        about the value on a log scale (value²/draw), so the interval stays inside the bound
+        (issue 17: a reflected f_n interval read [−8.9, 19.9] kHz). `signed`: a figure that keeps
+        its value's sign (a DC gain): its magnitude is treated as `positive`, so the interval
+        never crosses zero (issue 40: a DC gain of 1.25 read [−728, 0.295]).
+
+        The interval always contains `value`: where the draws lie all on one side of it (they do
+        not bracket the estimate), the interval is extended to it."""
+        if signed and value != 0:
+            sign = 1.0 if value > 0 else -1.0
+            mag = cls.of_draws(abs(value), sign * np.asarray(draws, dtype=float), coverage, reflect, positive=True)
+            lo, hi = sorted((sign * mag.interval[0], sign * mag.interval[1]))
+            return cls(float(value), mag.u, (lo, hi))
+        return cls._of_draws(value, draws, coverage, reflect, positive).holding_value()
+
+    def holding_value(self) -> Estimate:
+        """The same estimate with its interval extended to hold the value (where it did not)."""
+        lo, hi = self.interval
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo <= self.value <= hi:
+            return self
+        return Estimate(self.value, self.u, (min(lo, self.value), max(hi, self.value)))
+
+    @classmethod
+    def _of_draws(cls, value: float, draws: np.ndarray, coverage: float, reflect: np.ndarray | None,
+                  positive: bool) -> Estimate:
+        if positive and value > 0:
+            d = np.asarray(draws, dtype=float)
+            d = np.where(d > 0, d, np.nan)
+            est = cls._of_draws(math.log(value), np.log(d), coverage, reflect, False)
+            return cls(float(value), float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan,
+                       (math.exp(est.interval[0]), math.exp(est.interval[1])))
+        d = np.asarray(draws, dtype=float)
+        flags = np.ones(d.size, dtype=bool) if reflect is None else np.asarray(reflect, dtype=bool)
+        finite = np.isfinite(d)
+        d, flags = d[finite], flags[finite]
+        if d.size < 2:
+            return cls(value, math.nan, (math.nan, math.nan))
+        tail = 50.0 * (1.0 - coverage)
+        u = float(np.std(d, ddof=1))
+        if flags.all():
+            lo, hi = np.percentile(d, [tail, 100.0 - tail])
+            return cls(float(value), u, (float(2.0 * value - hi), float(2.0 * value - lo)))
+        lo, hi = np.percentile(np.where(flags, 2.0 * value - d, d), [tail, 100.0 - tail])
+        return cls(float(value), u, (float(lo), float(hi)))
+
+    @classmethod
+    def normal(cls, value: float, u: float) -> Estimate:
+        """A normal PDF's 95 % interval (k = 1.96)."""
+        k = 1.959963984540054
+        return cls(float(value), float(u), (float(value - k * u), float(value + k * u)))
+
+
+
+
+def _finite(value: float | None) -> float | None:
+    return float(value) if value is not None and math.isfinite(value) else None
