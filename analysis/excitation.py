@@ -263,6 +263,8 @@ class ExcitationSummary:
     band_eq35_low_hz: float  # the paper's Eq. (35) read literally (|F| ≥ 0.841·max)
     band_eq35_high_hz: float
     paper_rule_max_natural_frequency_hz: float  # Eq. (36): f_n ≤ 1.06 / δ, δ = pulse_width_s
+    # the amplitude a linear model's gain is measured at (`gain_amplitude`): the linearity's abscissa
+    gain_amplitude_m_s2: float = float("nan")
 
     def covers(self, natural_frequency_hz: float) -> dict[str, Any]:
         """Whether a natural frequency is excited: by the paper's rule and by the computed band."""
@@ -308,7 +310,23 @@ def excitation_summary(
         band_eq35_low_hz=low35,
         band_eq35_high_hz=high35,
         paper_rule_max_natural_frequency_hz=float(PAPER_RULE_CONSTANT / pulse.width_s),
+        gain_amplitude_m_s2=gain_amplitude(segment),
     )
+
+
+GAIN_AMPLITUDE_FLOOR = 0.02  # samples under this fraction of the peak (noise, rest) are left out
+
+
+def gain_amplitude(acceleration_m_s2: np.ndarray) -> float:
+    """The amplitude at which a linear model's gain is measured: Σ|a|³/Σa² over the pulse (its
+    samples above GAIN_AMPLITUDE_FLOOR of the peak). A sensor whose sensitivity changes with the
+    amplitude as S₀(1 + c·|a|) gives a least-squares gain S₀(1 + c·Σ|a|·a²/Σa²): each shot's DC
+    gain against this amplitude is a line of slope c (analysis.linearity), whatever the pulse's
+    shape; against the peak it would read c times a shape factor (0.6–0.8 for a bar's pulses)."""
+    a = np.abs(np.asarray(acceleration_m_s2, dtype=float))
+    a = a[a >= GAIN_AMPLITUDE_FLOOR * float(np.max(a))] if a.size else a
+    power = float(np.sum(a * a))
+    return float(np.sum(a ** 3) / power) if power > 0 else float("nan")
 
 
 # An excitation supports the frequencies where its amplitude spectrum stands this far above

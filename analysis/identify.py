@@ -174,6 +174,7 @@ class FitContext:
     realigned_samples: int = 0
     terms: InputTerms = field(default_factory=InputTerms)  # the input terms fitted (analysis.input_terms)
     band_cut: Any = None  # BandCut: where the band's stretches past the first null stop being explained
+    prep: Prepared | None = None  # the prepared record (analysis.systematics refits its variants on it)
 
     def model_delay(self, fit_delay_samples: float) -> float:
         """The model's delay (samples) of a fit's."""
@@ -623,7 +624,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
         significance=setup.significance, knee_tolerance=knee_tolerance, max_delay=setup.max_delay,
         asked_order=setup.asked_order, record=rec, model_error_ratio=ratio,
         branches={chosen: others} if others else {}, var_model_error=model_error.var_bins,
-        realigned_samples=prepared.realigned_samples, terms=prep.terms,
+        realigned_samples=prepared.realigned_samples, terms=prep.terms, prep=prep,
     )
     return Identification(
         model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,

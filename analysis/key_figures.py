@@ -18,6 +18,9 @@ if TYPE_CHECKING:
     from hopkinson.analysis.shot_analysis import ShotAnalysis
 
 LEVELS = ("5", "10")  # FBSD band levels in per cent (keys of fbsd_hz)
+# Budget rows every shot of one sensor on one rig shares (KeyFigures.shot_specific_u)
+COMMON_SOURCES = ("grating pitch", "interferometer", "amplifier gain", "digitizer gain",
+                  "transverse sensitivity × transverse motion")
 # How the order was chosen, in words (results' order_selection: "knee" is the order test's
 # stored name, kept for the files' sake)
 ORDER_SELECTION_TEXT = {"order_test": "chosen by the order test", "asked": "as asked",
@@ -31,6 +34,7 @@ class Figure:
     value: float | None
     u: float | None = None
     interval: tuple[float, float] | None = None
+    not_determined: str | None = None  # why the shot does not determine it (value None then)
 
     @property
     def expanded(self) -> float | None:
@@ -46,7 +50,10 @@ class Figure:
         return abs(self.u / self.value)
 
     def format(self, scale: float = 1.0, digits: int = 4, unit: str = "") -> str:
-        """'27.01 ± 0.12 kHz' (value ± U, 95 %), or the value alone without uncertainty."""
+        """'27.01 ± 0.12 kHz' (value ± U, 95 %), or the value alone without uncertainty; "not
+        determined" where the shot does not determine it."""
+        if self.not_determined:
+            return "not determined"
         if self.value is None:
             return "—"
         suffix = f" {unit}" if unit else ""
@@ -58,8 +65,10 @@ class Figure:
         return f"{self.value / scale:.{decimals}f} ± {big / scale:.{decimals}f}{suffix}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"value": self.value, "u": self.u,
-                "interval": list(self.interval) if self.interval is not None else None}
+        out = {"value": self.value, "u": self.u, "interval": list(self.interval) if self.interval is not None else None}
+        if self.not_determined:
+            out["not_determined"] = self.not_determined
+        return out
 
     @classmethod
     def of(cls, data: Any) -> Figure | None:
@@ -73,12 +82,18 @@ class Figure:
             if isinstance(interval, (list, tuple)) and len(interval) == 2:
                 lo, hi = _number(interval[0]), _number(interval[1])
                 pair = (lo, hi) if lo is not None and hi is not None else None
-            return cls(value, _number(data.get("u")), pair)
+            why = data.get("not_determined")
+            return cls(value, _number(data.get("u")), pair, str(why) if why else None)
         return cls(_number(data))
 
     def with_value(self, value: float | None) -> Figure:
         """The same uncertainty around another reported value (the value elsewhere wins)."""
-        return Figure(value, self.u, self.interval)
+        return Figure(value, self.u, self.interval, self.not_determined)
+
+    @classmethod
+    def undetermined(cls, reason: str) -> Figure:
+        """A figure the shot does not determine (analysis.determination), with why."""
+        return cls(None, None, None, reason)
 
 
 @dataclass(frozen=True)
@@ -127,6 +142,14 @@ class KeyFigures:
     dcm_noise_gain_limit: float | None = None
     dcm_band_limit_hz: float | None = None
     dcm_latency_s: float | None = None
+    # figure -> why the shot does not determine it (analysis.determination; those figures read None
+    # or Figure.undetermined), and whether the shot is a result at all (its DC gain determined)
+    not_determined: dict[str, str] = field(default_factory=dict)
+    is_result: bool = True
+    not_a_result_reason: str = ""
+    # the tension/compression asymmetry ε and the other input terms' estimates (analysis.input_terms)
+    input_terms: dict[str, Any] = field(default_factory=dict)
+    gain_amplitude_m_s2: float | None = None  # the amplitude the DC gain is measured at (excitation.gain_amplitude)
 
     @property
     def order_how(self) -> str:
@@ -137,6 +160,17 @@ class KeyFigures:
     @property
     def has_uncertainty(self) -> bool:
         return self.sensitivity.u is not None
+
+    def shot_specific_u(self, figure: str = "dc_gain") -> float | None:
+        """The standard uncertainty of `figure` (budget key: "dc_gain", …) less the Type B rows
+        every shot of one sensor on one rig shares (the reference chain, the transverse row): what
+        differs from shot to shot, for comparing shots (a linearity's slope, a repeatability)."""
+        own = {"dc_gain": self.sensitivity, "shock_sensitivity": self.shock_sensitivity}.get(figure)
+        if own is None or own.u is None or not own.value:
+            return None
+        common = sum((row.get("u_rel_by_figure") or {}).get(figure, 0.0) ** 2 for row in self.budget
+                     if row.get("source") in COMMON_SOURCES)
+        return math.sqrt(max(own.u ** 2 - common * own.value ** 2, (0.1 * own.u) ** 2))
 
     def fbsd_text(self, level: str, scale: float = 1e3, unit: str = "kHz") -> str:
         """'> 18 kHz (unsupported by the excitation)' for a bound, else value ± U."""
@@ -158,6 +192,7 @@ class KeyFigures:
         out["supported_band_hz"] = list(self.supported_band_hz) if self.supported_band_hz else None
         out["budget"] = [dict(b) for b in self.budget]
         out["warnings"] = list(self.warnings)
+        out["not_determined"] = dict(self.not_determined)
         return out
 
     @classmethod
@@ -203,6 +238,21 @@ class KeyFigures:
         peak_acc = _number(reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")))
         peak_vel = _number(reduction.get("peak_velocity_m_s"))
         comp = dcm.get("compensated_fbsd_hz") or {}
+        undetermined = {str(k): str(v) for k, v in (results.get("not_determined") or {}).items()}
+        if "dc_gain" in undetermined:
+            sensitivity = Figure.undetermined(undetermined["dc_gain"])
+        if "shock_sensitivity" in undetermined:
+            shock = None
+        for key in ("natural_frequency_hz", "damping_ratio"):
+            if key in undetermined and (f_n if key == "natural_frequency_hz" else zeta) is not None:
+                if key == "natural_frequency_hz":
+                    f_n = Figure.undetermined(undetermined[key])
+                else:
+                    zeta = Figure.undetermined(undetermined[key])
+        for level in list(fbsd):
+            if f"fbsd_{level}_hz" in undetermined and level not in bounds:
+                fbsd[level] = Figure.undetermined(undetermined[f"fbsd_{level}_hz"])
+        verdict = results.get("result") or {}
         warnings = list(results.get("warnings") or [])
         for w in unc.get("warnings") or []:
             if w not in warnings:
@@ -240,6 +290,11 @@ class KeyFigures:
             coverage_probability=_number(unc.get("coverage_probability")),
             budget=tuple(dict(b) for b in unc.get("budget") or [] if isinstance(b, dict)),
             warnings=tuple(warnings),
+            not_determined=undetermined,
+            is_result=bool(verdict.get("valid", True)),
+            not_a_result_reason=str(verdict.get("reason") or ""),
+            input_terms=dict(ident.get("input_terms") or {}),
+            gain_amplitude_m_s2=_number(excitation.get("gain_amplitude_m_s2")),
         )
 
 

@@ -68,6 +68,13 @@ class AnalysisParams:
     u_amp_gain_rel: float = 2e-3
     u_digitizer_gain_rel: float = 2e-3
     u_channel_skew_s: float = 1e-9
+    # Transverse sensitivity (analysis.systematics): the sensor's stated transverse sensitivity
+    # (its datasheet's limit; 5 %: the usual "< 5 %" of shock accelerometers) and the bar's
+    # transverse motion share at the sensor (2 %: a well-aligned bar; a lab that has measured its
+    # bar's, e.g. with a triaxial sensor, states its own). Their product bounds a Type B row of
+    # the DC gain and the shock sensitivity.
+    transverse_sensitivity_rel: float = 0.05
+    transverse_motion_rel: float = 0.02
     # A sinusoidal calibration of the same sensor (CSV), fitted with the shock (analysis.sine_joint)
     sine_calibration: str | None = None
 
@@ -131,6 +138,8 @@ class AnalysisParams:
         for name in ("u_grating_pitch_rel", "u_interferometer_rel", "u_amp_gain_rel", "u_digitizer_gain_rel"):
             _finite(getattr(self, name), name, at_least=0.0, at_most=0.5)
         _finite(self.u_channel_skew_s, "u_channel_skew_s", at_least=0.0, at_most=1e-3)
+        for name in ("transverse_sensitivity_rel", "transverse_motion_rel"):
+            _finite(getattr(self, name), name, at_least=0.0, at_most=1.0)
         if self.sine_calibration is not None and not (isinstance(self.sine_calibration, str) and self.sine_calibration):
             raise AnalysisError(f"analysis option sine_calibration: a file name, got {self.sine_calibration!r}")
 

@@ -108,6 +108,18 @@ class Prepared:
     # The input terms fitted (analysis.input_terms: in `spectral`), and the onset terms tried (identify)
     terms: InputTerms = field(default_factory=InputTerms)
     onset_terms: InputTerms | None = None
+    terms_source: tuple = ()  # input_terms' arguments (analysis.systematics makes its variants from them)
+
+    def terms_variant(self, **options: Any) -> InputTerms:
+        """The candidate input terms made with other `options` (input_terms' keywords), with the same
+        terms as fitted (`terms`: those not fitted left out; the onset kept only if fitted, or
+        `with_onset`)."""
+        with_onset = options.pop("with_onset", False)
+        made = input_terms(*self.terms_source, **options)
+        for name in {*made.names} - {*self.terms.names}:
+            if name != ONSET or not with_onset:
+                made = made.without(name, self.terms.not_fitted.get(name, ""))
+        return made
 
     def corrected_u(self, coefficients: np.ndarray) -> np.ndarray:
         """The window's reference with the fitted input terms' correction (`terms`)."""
@@ -449,8 +461,9 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
     var_u = np.where(low, np.maximum(var_u, draw_var_u), var_u)
     var_y = np.where(low, np.maximum(var_y, draw_var_y), var_y)
     transient = truncated or cold_start
-    terms = input_terms(u, dt, activity.pulse_start, noise_u.rms if noise_u.samples else 0.0, activity.ref_busy,
-                        band[1], any(m["reason"] == "coherent" for m in noise.motion))
+    terms_source = (u, dt, activity.pulse_start, noise_u.rms if noise_u.samples else 0.0, activity.ref_busy,
+                    band[1], any(m["reason"] == "coherent" for m in noise.motion))
+    terms = input_terms(*terms_source)
     onset_terms = terms if terms.columns(ONSET).size else None
     if onset_terms is not None:  # the onset is fitted only where it shows (identify decides)
         terms = terms.without(ONSET, "")
@@ -476,7 +489,7 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
                     band, bin_hz, u_spec, y_spec, var_u, var_y, group, spectral, activity.pulse_start, u, y,
                     noise.y_segments, activity.ref_busy, draw_noise_u, draw_noise_y, draw_var_u, draw_var_y,
                     noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot, support,
-                    np.flatnonzero(keep), ramp, terms, onset_terms)
+                    np.flatnonzero(keep), ramp, terms, onset_terms, terms_source)
 
 
 def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:

@@ -32,6 +32,7 @@ import numpy as np
 from hopkinson.analysis.compensation import compensate_shot
 from hopkinson.analysis.dcm import DCM, compare_steps
 from hopkinson.analysis.dcm_design import DcmOptions
+from hopkinson.analysis.determination import is_result, not_determined
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
 from hopkinson.analysis.identify import Identification, identify
@@ -81,8 +82,13 @@ class ShotAnalysis:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready results (stored in shot files, printed by --json); a "sensors" object
-        (role -> results, or {"error": why}) only when further sensors were analysed."""
+        (role -> results, or {"error": why}) only when further sensors were analysed. Beside the
+        figures: "not_determined" (figure -> why the shot does not determine it) and "result"
+        (whether the shot is a result at all: analysis.determination)."""
         out = self._own_dict()
+        out["not_determined"] = not_determined(out)
+        valid, why = is_result(out["not_determined"])
+        out["result"] = {"valid": valid, "reason": why}
         if self.sensors or self.sensor_errors:
             out["sensors"] = {**{role: a.to_dict() for role, a in self.sensors.items()},
                               **{role: {"error": why} for role, why in self.sensor_errors.items()}}

@@ -84,6 +84,7 @@ from hopkinson.analysis.identify import (
     FitContext,
     Identification,
 )
+from hopkinson.analysis.input_terms import ASYMMETRY, MOTION
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.order_choice import (
     NoiseDraws,
@@ -94,6 +95,7 @@ from hopkinson.analysis.order_choice import (
 )
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
 from hopkinson.analysis.response import fbsd_edges, frequency_response
+from hopkinson.analysis.systematics import TypeB, fitted_shares, transverse_row, variant_bounds
 
 METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
 ORDER_DRAWS = 40  # draws that re-run the whole order choice (its PDF's resolution: 2.5 %)
@@ -123,12 +125,16 @@ class UncertaintyOptions:
     u_digitizer_gain_rel: float = 2e-3
     channel_skew_s: float = 1e-9
     order_draws: int = ORDER_DRAWS
+    transverse_sensitivity_rel: float = 0.05  # analysis.systematics.transverse_row
+    transverse_motion_rel: float = 0.02
 
     @classmethod
     def from_params(cls, params: AnalysisParams) -> UncertaintyOptions:
         return cls(draws=params.draws, seed=params.seed, u_grating_pitch_rel=params.u_grating_pitch_rel,
                    u_interferometer_rel=params.u_interferometer_rel, u_amp_gain_rel=params.u_amp_gain_rel,
-                   u_digitizer_gain_rel=params.u_digitizer_gain_rel, channel_skew_s=params.u_channel_skew_s)
+                   u_digitizer_gain_rel=params.u_digitizer_gain_rel, channel_skew_s=params.u_channel_skew_s,
+                   transverse_sensitivity_rel=params.transverse_sensitivity_rel,
+                   transverse_motion_rel=params.transverse_motion_rel)
 
     def chain(self) -> dict[str, tuple[float, str]]:
         """Reference-chain sources: (relative standard uncertainty, channel it scales)."""
@@ -162,6 +168,7 @@ class UncertaintyResult:
     model_draws: list[DiscreteModel] = field(default_factory=list, repr=False)
     response_band: dict[str, Any] | None = None  # the model's response with its 95 % band (response_band)
     band_tops_hz: list[float] = field(default_factory=list)  # the band's tops the draws were refitted on
+    input_terms: dict[str, Estimate] = field(default_factory=dict)  # ε and γ (analysis.input_terms), refitted per draw
 
     def to_dict(self) -> dict[str, Any]:
         main = None
@@ -178,6 +185,7 @@ class UncertaintyResult:
             "fbsd_hz": {k: e.to_dict() for k, e in self.fbsd_hz.items()},
             "budget": [dict(b) for b in self.budget],
             "delay_s": self.delay_s.to_dict(),
+            "input_terms": {k: e.to_dict() for k, e in self.input_terms.items()},
             "reference": {k: e.to_dict() for k, e in self.reference.items()},
             "order": dict(self.order),
             "seed": self.seed,
@@ -250,6 +258,21 @@ def evaluate(
     nominal_edges = fbsd_edges(model)
     fbsd_values = {k: e.frequency_hz for k, e in nominal_edges.items()}
     fbsd_draws = _fbsd_draws(fits, good, nominal_edges, dt)
+    # The Type B inputs (analysis.systematics): each a rectangular shift added to every draw.
+    shock_value = (reduction or {}).get("shock_sensitivity")
+    type_b = variant_bounds(ident)
+    transverse = transverse_row(model.dc_gain, shock_value, options.transverse_sensitivity_rel,
+                                options.transverse_motion_rel)
+    type_b += [transverse] if transverse is not None else []
+    figure_draws = {"dc_gain": dc_draws, "natural_frequency_hz": fn_draws, "damping_ratio": zeta_draws,
+                    **{f"fbsd_{k}_hz": fbsd_draws[k] for k in fbsd_draws}}
+    added_shock = np.zeros(options.draws)
+    for row in type_b:
+        for figure, shift in row.draws(len(fits), rng).items():
+            if figure in figure_draws:
+                figure_draws[figure] += shift
+            elif figure == "shock_sensitivity":
+                added_shock += shift
 
     dc = Estimate.of_draws(model.dc_gain, dc_draws, reflect=reflect, signed=True)
     fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=reflect, positive=True) if main \
@@ -259,9 +282,10 @@ def evaluate(
     fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k], reflect=reflect, positive=True)
             for k in fbsd_values}
     delay = Estimate.of_draws(ident.delay_samples * dt, delay_draws, reflect=reflect)
+    terms = _term_estimates(ident, fits, good, reflect)
 
     # -- the peak figures: fresh noise around the peaks ---------------------------------------
-    peaks = _peak_figures(ctx, reduction, options, rng, inflate, reference_factor, gain_factor)
+    peaks = _peak_figures(ctx, reduction, options, rng, inflate, reference_factor, gain_factor, added_shock)
 
     # -- budget -------------------------------------------------------------------------------
     nominal = {"dc_gain": model.dc_gain, "natural_frequency_hz": main["natural_frequency_hz"] if main else None,
@@ -270,7 +294,8 @@ def evaluate(
     draws_by_figure = {"dc_gain": dc_draws, "natural_frequency_hz": fn_draws, "damping_ratio": zeta_draws,
                        **{f"fbsd_{k}_hz": fbsd_draws[k] for k in fbsd_values}}
     budget = _budget(ident, ctx, options, inflate, nominal, draws_by_figure, orders["per_draw"], good,
-                     peaks.get("shares", {}), nominal_branch, bands.per_draw)
+                     peaks.get("shares", {}), nominal_branch, bands.per_draw, type_b,
+                     {**nominal, "shock_sensitivity": shock_value})
     order_info = {"chosen": n_hat, "selection": ident.order_selection, "fraction_by_order": orders["fractions"],
                   "draws": orders["decided"]}
     stability = orders["fractions"].get(str(n_hat))
@@ -287,8 +312,26 @@ def evaluate(
         fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=budget, order=order_info,
         warnings=warnings, failed_draws=failed, model_draws=model_draws,
         response_band=response_band(model, model_draws, ident.supported_band_hz, reflect[good]),
-        band_tops_hz=bands.tops_hz,
+        band_tops_hz=bands.tops_hz, input_terms=terms,
     )
+
+
+def _term_estimates(ident: Identification, fits: list[OrderFit | None], good: np.ndarray, reflect: np.ndarray
+                    ) -> dict[str, Estimate]:
+    """ε and γ (analysis.input_terms) with their uncertainty: each draw refits them with the model."""
+    out = {}
+    ctx = ident.context
+    assert ctx is not None
+    for name in (ASYMMETRY, MOTION):
+        cols = ctx.terms.columns(name)
+        value = ident.input_terms.get(name)
+        if not cols.size or not isinstance(value, float):
+            continue
+        k = int(cols[0])
+        draws = np.array([f.inputs[k] if f is not None and good[r] and f.inputs.size > k else np.nan
+                          for r, f in enumerate(fits)])
+        out[name] = Estimate.of_draws(value, draws, reflect=reflect)
+    return out
 
 
 def shot_uncertainty(
@@ -516,7 +559,7 @@ def _fbsd_draws(fits: list[OrderFit | None], good: np.ndarray, nominal: dict, dt
 # ------------------------------------------------------------------------------ peak figures
 def _peak_figures(
     ctx: FitContext, reduction: dict[str, Any] | None, options: UncertaintyOptions, rng: np.random.Generator,
-    inflate: float, reference_factor: np.ndarray, gain_factor: np.ndarray,
+    inflate: float, reference_factor: np.ndarray, gain_factor: np.ndarray, added_shock: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Shock sensitivity, peak acceleration and pulse width: the same estimators on the record
     with fresh noise around the peaks; peak velocity from the reduction's plateau fit."""
@@ -557,8 +600,10 @@ def _peak_figures(
             peak_u[r] = peak_estimate(u, polarity=pu0)[0]
     reduction = reduction or {}
     ss_value = reduction.get("shock_sensitivity", py0 / pu0)
-    ss = peak_y / peak_u * gain_factor
-    out: dict[str, Any] = {"shock_sensitivity": Estimate.of_draws(ss_value, ss / (py0 / pu0) * ss_value, signed=True)}
+    ss = peak_y / peak_u * gain_factor / (py0 / pu0) * ss_value
+    if added_shock is not None:  # the Type B inputs' shifts (analysis.systematics)
+        ss = ss + added_shock
+    out: dict[str, Any] = {"shock_sensitivity": Estimate.of_draws(ss_value, ss, signed=True)}
     acc_value = reduction.get("peak_acceleration_m_s2", pu0)
     reference = {
         "peak_acceleration_m_s2": Estimate.of_draws(acc_value, peak_u * reference_factor / pu0 * acc_value),
@@ -586,8 +631,10 @@ def _budget(
     ident: Identification, ctx: FitContext, options: UncertaintyOptions, inflate: float,
     nominal: dict[str, float | None], draws: dict[str, np.ndarray], orders: list[int], good: np.ndarray,
     peak_shares: dict[str, dict[str, float]], nominal_branch: np.ndarray, band_variant: np.ndarray,
+    type_b: list[TypeB] | None = None, nominal_with_shock: dict[str, float | None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Relative standard uncertainty of each figure by source (see the module docstring)."""
+    """Relative standard uncertainty of each figure by source (see the module docstring), each
+    row with its kind: "Type A" (the record's noise, the fit's scatter) or "Type B"."""
     shares = _linear_noise_shares(ident, ctx, options, inflate, nominal)
     for figure, by_source in peak_shares.items():
         for source, u_rel in by_source.items():
@@ -623,10 +670,20 @@ def _budget(
         if channel == "reference":
             figures["peak_acceleration_m_s2"] = u_rel
         shares[source] = figures
+    sources += [source for source in shares if source.endswith("(fitted)")]
+    for row in type_b or []:
+        shares[row.source] = row.u_rel_by_figure(nominal_with_shock or nominal)
+        sources.append(row.source)
+    notes = {row.source: row.note for row in type_b or []}
+    type_b_sources = {*notes, "grating pitch", "interferometer", "amplifier gain", "digitizer gain", "channel skew"}
     out = []
     for source in (*sources, "grating pitch", "interferometer", "amplifier gain", "digitizer gain"):
         figures = {k: _finite(v) for k, v in shares.get(source, {}).items()}
-        out.append({"source": source, "u_rel": figures.get("dc_gain"), "u_rel_by_figure": figures})
+        row = {"source": source, "u_rel": figures.get("dc_gain"), "u_rel_by_figure": figures,
+               "kind": "Type B" if source in type_b_sources else "Type A"}
+        if source in notes:
+            row["note"] = notes[source]
+        out.append(row)
     return out
 
 
@@ -678,6 +735,8 @@ def _linear_noise_shares(
         for source, c in cov.items():
             out[source][figure] = math.sqrt(max(float(g @ c @ g), 0.0)) / abs(ref)
         out["channel skew"][figure] = abs(float(g @ skew_step)) / abs(ref)
+    if problem.n_inputs:  # the fitted corrections' shares (analysis.systematics)
+        out.update(fitted_shares(jac, gradients, nominal, problem._k_inputs, ctx.terms, inflate))
     return out
 
 

@@ -172,16 +172,18 @@ def sine_page(comparisons: Sequence[tuple[str, SineComparison]], sine: SineCalib
 
 
 LINEARITY_CAPTION = "Campaign: amplitude linearity"
-LINEARITY_NOTE = ("ISO 16063-22: the shock sensitivity S_sh (peak ratio, ISO 16063-13) of each shot against its "
-                  "peak acceleration, error bars U (95 %); the line S(a) = S₀(1 + c·a) fitted with weights 1/u² "
-                  "(analysis.linearity); the linearity deviation is c·(a_max − a_min), the fitted change of S over "
-                  "the levels covered. A share of u common to all shots (the reference chain) is counted as "
-                  "independent: on the safe side.")
+LINEARITY_NOTE = ("ISO 16063-22: each shot's sensitivity (its model's DC gain, which means the same at every level; "
+                  "a peak ratio S_sh reads the resonance's ringing when the pulse excites it) against the amplitude "
+                  "it is measured at, Σ|a|³/Σa² over the pulse (for a sensitivity S₀(1 + c·|a|) the gain a linear "
+                  "model measures), error bars U (95 %) of what differs from shot to shot (the reference chain and "
+                  "the transverse row, common to all shots, left out: they move S₀, not c); the line "
+                  "S(a) = S₀(1 + c·a) fitted with weights 1/u² (analysis.linearity); the linearity deviation is "
+                  "c·(a_max − a_min), the fitted change of S over the levels covered.")
 
 
 def linearity_page(stats: CampaignStatistics) -> Figure:
-    """S_sh against the peak acceleration with each point's U and the fitted line, the deviations
-    from the line, and the table of the points."""
+    """The sensitivity (DC gain) against the amplitude it is measured at, with each point's U and
+    the fitted line, the deviations from the line, and the table of the points."""
     fit = stats.linearity
     assert fit is not None
     points = stats.linearity_points
@@ -190,7 +192,7 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
     peak_g = np.array([p.peak_m_s2 for p in points]) / G_M_S2
     s = np.array([p.sensitivity for p in points])
     big_u = np.array([np.nan if p.expanded is None else p.expanded for p in points])
-    ax_s.errorbar(peak_g, s, yerr=np.nan_to_num(big_u), fmt="o", color="tab:green", capsize=3, label="S_sh ± U per shot")
+    ax_s.errorbar(peak_g, s, yerr=np.nan_to_num(big_u), fmt="o", color="tab:green", capsize=3, label="sensitivity (DC gain) ± U per shot")
     grid = np.linspace(0.0, 1.05 * float(np.max(peak_g)), 100)
     ax_s.plot(grid, fit.sensitivity_at(grid * G_M_S2), color="0.2", lw=1,
               label=f"fit: S₀ = {to_decimals_of(fit.reference_sensitivity, fit.k * fit.u_reference_sensitivity)}, "
@@ -201,20 +203,20 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
         base = fit.sensitivity_at(centre)
         ax_s.plot(grid, base * (1 + slope * (grid * G_M_S2 - centre)), color="0.5", lw=0.8, ls="--",
                   label="slope ± U" if sign < 0 else None)
-    ax_s.set_xlabel("peak acceleration (g)")
-    ax_s.set_ylabel("shock sensitivity S_sh (× nominal)")
-    ax_s.set_title("Shock sensitivity against the shock level", fontsize=9)
+    ax_s.set_xlabel("amplitude Σ|a|³/Σa² (g)")
+    ax_s.set_ylabel("sensitivity, DC gain (× nominal)")
+    ax_s.set_title("Sensitivity against the shock level", fontsize=9)
     ax_s.grid(alpha=0.3)
     ax_s.legend(fontsize=7)
     resid = 100 * np.array(fit.residuals_rel)
     rel_u = 100 * big_u / s
     ax_r.errorbar(peak_g, resid, yerr=np.nan_to_num(rel_u), fmt="o", color="tab:green", capsize=3)
     ax_r.axhline(0.0, color="0.3", lw=0.8)
-    ax_r.set_xlabel("peak acceleration (g)")
-    ax_r.set_ylabel("S_sh − fit (%)")
+    ax_r.set_xlabel("amplitude Σ|a|³/Σa² (g)")
+    ax_r.set_ylabel("sensitivity − fit (%)")
     ax_r.set_title("Deviation of each shot from the line (± U)", fontsize=9)
     ax_r.grid(alpha=0.3)
-    header = ["shot", "peak (g)", "peak (km/s²)", "S_sh (× nominal)", "U (95 %)", "− fit (%)"]
+    header = ["shot", "amplitude (g)", "amplitude (km/s²)", "DC gain (× nominal)", "U (95 %)", "− fit (%)"]
     rows = [[p.label, f"{p.peak_m_s2 / G_M_S2:,.0f}", f"{p.peak_m_s2 / 1e3:.4g}", f"{p.sensitivity:.5g}",
              "—" if p.expanded is None else sig(p.expanded), f"{100 * r:+.2f}"]
             for p, r in zip(points, fit.residuals_rel, strict=True)]

@@ -79,7 +79,7 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
             page.paragraph(note, colour="#a00000")
         if stats.linearity is not None:  # shots at two or more levels
             page.heading("Amplitude linearity (ISO 16063-22)")
-            page.paragraph(f"shock sensitivity against the peak acceleration: slope {stats.linearity.text()} "
+            page.paragraph(f"sensitivity (DC gain) against the amplitude it is measured at: slope {stats.linearity.text()} "
                            "(95 %; plot and table on the linearity page)")
             if stats.linearity_note:
                 page.paragraph(stats.linearity_note, colour="0.25")

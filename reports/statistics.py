@@ -158,7 +158,10 @@ def combined_figures(key_figures: Sequence[KeyFigures]) -> dict[str, Combined]:
 
 @dataclass(frozen=True)
 class LinearityPoint:
-    """One shot's shock sensitivity at its peak acceleration, with U (95 %) when it has one."""
+    """One shot's sensitivity (its model's DC gain: what means the same at every level, where a
+    peak ratio reads the resonance's ringing) at the amplitude it is measured at
+    (analysis.excitation.gain_amplitude; the peak for files written before), with the u (and U,
+    95 %) that differs from shot to shot (KeyFigures.shot_specific_u)."""
 
     label: str
     peak_m_s2: float
@@ -171,15 +174,19 @@ MIN_LEVEL_SPAN_REL = 0.05  # levels closer than this (relative) are one level: n
 
 
 def linearity_points(labelled: Iterable[tuple[str, KeyFigures | None]]) -> list[LinearityPoint]:
-    """The shots with both a shock sensitivity and a peak acceleration."""
+    """The shots that are results, with a DC gain and the amplitude it was measured at."""
     out = []
     for label, kf in labelled:
-        if kf is None or kf.shock_sensitivity is None or kf.peak_acceleration_m_s2 is None:
+        if kf is None or not kf.is_result or kf.sensitivity.value is None:
             continue
-        s, a = kf.shock_sensitivity, kf.peak_acceleration_m_s2
-        if s.value is None or a.value is None or not (math.isfinite(s.value) and math.isfinite(a.value)):
+        s = kf.sensitivity
+        a = kf.gain_amplitude_m_s2
+        if a is None and kf.peak_acceleration_m_s2 is not None:
+            a = kf.peak_acceleration_m_s2.value
+        if a is None or not (math.isfinite(s.value) and math.isfinite(a)):
             continue
-        out.append(LinearityPoint(label, abs(float(a.value)), float(s.value), s.u, s.expanded))
+        u = kf.shot_specific_u("dc_gain")
+        out.append(LinearityPoint(label, abs(float(a)), float(s.value), u, None if u is None else 1.959963984540054 * u))
     return out
 
 

@@ -108,7 +108,9 @@ def sensitivity_text(figure: Figure | None, kf: KeyFigures, nominal_v_per_m_s2: 
 
 
 def figure_text(figure: Figure | None, scale: float = 1.0, unit: str = "", digits: int = 4) -> str:
-    """value ± U (k ≈ 2) in `unit`, or the value alone; "—" when unknown."""
+    """value ± U (k ≈ 2) in `unit`, or the value alone; "—" when unknown; "not determined: why"."""
+    if figure is not None and figure.not_determined:
+        return f"not determined: {figure.not_determined}"
     if figure is None or figure.value is None:
         return "—"
     if figure.expanded is None:
@@ -122,9 +124,14 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     if a is None or kf is None:
         return [("analysis", entry.error or "no analysis")]
     peak = kf.peak_acceleration_m_s2
+    if not kf.is_result:
+        return [("analysis", kf.not_a_result_reason)]
     rows = [
         ("model order", f"{kf.order} ({kf.order_how})"),
-        ("sensitivity (model DC gain)", sensitivity_text(kf.sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)),
+        ("sensitivity (model DC gain, in the main pulse's direction)",
+         figure_text(kf.sensitivity) if kf.sensitivity.not_determined else
+         sensitivity_text(kf.sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)),
+        *asymmetry_rows(entry.stored),
         ("main mode f_n", figure_text(kf.natural_frequency_hz, 1e3, "kHz", 5)),
         ("main mode damping ζ", figure_text(kf.damping_ratio)),
         ("FBSD ±5 %", kf.fbsd_text("5")),
@@ -138,6 +145,8 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     if kf.shock_sensitivity is not None:
         rows.append(("shock sensitivity S_sh (ISO 16063-13)",
                      sensitivity_text(kf.shock_sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)))
+    elif "shock_sensitivity" in kf.not_determined:
+        rows.append(("shock sensitivity S_sh (ISO 16063-13)", kf.not_determined["shock_sensitivity"]))
     design = a.dcm.design or {}
     comp = kf.compensated_fbsd_hz
     rows += [
@@ -157,6 +166,20 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     for w in check.other_warnings(kf.warnings) if check is not None else kf.warnings:
         rows.append(("warning", w))
     return rows
+
+
+def asymmetry_rows(results: dict[str, Any]) -> list[tuple[str, str]]:
+    """The tension/compression asymmetry ε (analysis.input_terms): the sensitivity in the other
+    direction ÷ the one reported, less one, with its U; or why it was not measured."""
+    estimate = ((results.get("uncertainty") or {}).get("input_terms") or {}).get("asymmetry")
+    terms = (results.get("identification") or {}).get("input_terms") or {}
+    label = "asymmetry ε (other direction ÷ main − 1)"
+    if estimate:
+        return [(label, figure_text(Figure.of(estimate)))]
+    if isinstance(terms.get("asymmetry"), float):
+        return [(label, fmt(terms["asymmetry"]))]
+    why = (terms.get("not_fitted") or {}).get("asymmetry")
+    return [(label, f"not measured: {why}")] if why else []
 
 
 def sine_joint_rows(identification: dict[str, Any]) -> list[tuple[str, str]]:
@@ -264,7 +287,12 @@ BUDGET_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("peak_acceleration_m_s2", "peak acc.", "peak_acceleration_m_s2"),
 )
 BUDGET_NOTE = ("Relative standard uncertainty (%) of each figure from each source alone (the GUM's linear "
-               "propagation); the last row is each figure's own u from the Monte Carlo, all sources together.")
+               "propagation); the last row is each figure's own u from the Monte Carlo, all sources together. "
+               "Type A: evaluated from the record (its noise, the fit's scatter; '(fitted)': a correction applied to "
+               "the record, the tension/compression asymmetry, the bar's motion after the pulse, the onset's "
+               "disturbances, and its estimate's uncertainty). Type B: from other knowledge (the reference chain's "
+               "certificates, the stated transverse sensitivity, and bounds, rectangular, on how the corrections and "
+               "the model are made).")
 
 
 def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
@@ -277,7 +305,8 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
     items = sorted(kf.budget, key=lambda b: -(_budget_share(b, "dc_gain") or 0.0))
     columns = [c for c in BUDGET_FIGURES if any(_budget_share(b, c[0]) is not None for b in items)
                and _reported(kf, c[2])]  # no column for a figure the shot does not report (an S_sh without S_sh)
-    header = ["source"] + [label for _key, label, _attr in columns]
+    kinds = any("kind" in b for b in items)  # results before issue 40 name no kind: no such column
+    header = ["source"] + (["type"] if kinds else []) + [label for _key, label, _attr in columns]
 
     def pct(value: float | None, largest: float = 0.0) -> str:
         if value is None:
@@ -292,9 +321,10 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
         combined.append(figure.u_rel if figure is not None and attr not in kf.fbsd_bounds else None)
     largest = [max([abs(v) for v in [total] + [_budget_share(b, key) for b in items] if v is not None], default=0.0)
                for (key, _l, _a), total in zip(columns, combined, strict=True)]
-    rows = [[str(b.get("source", "—"))] + [pct(_budget_share(b, key), top) for (key, _l, _a), top
-                                           in zip(columns, largest, strict=True)] for b in items]
-    rows.append(["all sources (Monte Carlo)"] + [pct(total) for total in combined])
+    rows = [[str(b.get("source", "—"))] + ([str(b.get("kind", "—")).replace("Type ", "")] if kinds else [])
+            + [pct(_budget_share(b, key), top) for (key, _l, _a), top in zip(columns, largest, strict=True)]
+            for b in items]
+    rows.append(["all sources (Monte Carlo)"] + ([""] if kinds else []) + [pct(total) for total in combined])
     return header, rows
 
 

@@ -22,12 +22,16 @@ import numpy as np
 
 from tests.sim_truth import shot_truth_figures
 
-FIGURES = ("sensitivity", "natural_frequency_hz", "damping_ratio", "fbsd_5", "fbsd_10")
+FIGURES = ("sensitivity", "natural_frequency_hz", "damping_ratio", "fbsd_5", "fbsd_10", "asymmetry")
 LABELS = {"sensitivity": "DC gain", "natural_frequency_hz": "f_n", "damping_ratio": "ζ", "fbsd_5": "FBSD ±5 %",
-          "fbsd_10": "FBSD ±10 %"}
+          "fbsd_10": "FBSD ±10 %", "asymmetry": "ε (tension/compression)"}
 PRESSURE_BAR = (1.0, 6.0)
 PROJECTILES = (1, 2, 3)
 PLAN_SEED = 2040  # the shot plan's generator (issue 40): fixed once, before any result was seen
+# The study judges the method, so the reference chain's Type B inputs (grating, interferometer,
+# amplifier and digitizer gains: exact in the simulator, a pure scale of the DC gain whose
+# propagation is exact and tested apart) are set to zero, as in tests/analysis/test_uncertainty.py.
+NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0)
 
 
 def _only(effect: str) -> Callable[[Any], Any]:
@@ -88,6 +92,8 @@ class ShotOutcome:
     interval: dict[str, tuple[float, float] | None] = field(default_factory=dict)
     not_determined: dict[str, str] = field(default_factory=dict)  # figure -> why it was not determined
     modes_hz: list[float] = field(default_factory=list)  # every mode claimed (supported, not cancelled)
+    band_top_hz: float | None = None  # the analysis' supported band's top
+    planned_top_hz: float | None = None  # the shot planner's (analysis.bar.planning) for this projectile and pressure
     error: str | None = None  # the analysis refused the shot
     results: dict[str, Any] | None = None  # the analysis' results dict (when kept)
 
@@ -102,9 +108,10 @@ class ShotOutcome:
 
 
 def run_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int, draws: int = 100,
-             keep_results: bool = False, **params: Any) -> ShotOutcome:
-    """Simulate and analyse one shot as the rig does; its figures against the sensor's truth."""
-    from hopkinson.analysis.key_figures import KeyFigures
+             keep_results: bool = False, chain: bool = False, **params: Any) -> ShotOutcome:
+    """Simulate and analyse one shot as the rig does; its figures against the sensor's truth
+    (`chain`: with the reference chain's default Type B inputs, as a rig's shot; else NO_CHAIN)."""
+    from hopkinson.analysis.key_figures import Figure, KeyFigures
     from hopkinson.analysis.params import AnalysisParams
     from hopkinson.analysis.shot_analysis import analyse_raw_shot
     from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
@@ -115,14 +122,15 @@ def run_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int,
     try:
         result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
-            draws=draws, seed=shot_number, **params), quadrature_v=channels.get(3))
+            draws=draws, seed=shot_number, **{**({} if chain else NO_CHAIN), **params}), quadrature_v=channels.get(3))
     except Exception as exc:  # noqa: BLE001 - a shot the analysis refuses counts as not holding its truth
         out.error = f"{type(exc).__name__}: {exc}"
         return out
     results = result.to_dict()
     kf = KeyFigures.from_results(results)
     for name in FIGURES:
-        figure = getattr(kf, name, None)
+        figure = getattr(kf, name, None) if name != "asymmetry" else \
+            Figure.of((results.get("uncertainty") or {}).get("input_terms", {}).get("asymmetry"))
         if name.startswith("fbsd"):
             figure = kf.fbsd_hz.get(name.split("_")[1])
             bound = kf.fbsd_bounds.get(name.split("_")[1])
@@ -130,17 +138,32 @@ def run_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int,
                 out.not_determined[name] = bound.reason
         out.value[name] = figure.value if figure is not None else None
         out.interval[name] = figure.interval if figure is not None else None
-        reason = getattr(kf, "not_determined", {}).get(name) if hasattr(kf, "not_determined") else None
+        reason = kf.not_determined.get({"sensitivity": "dc_gain", "fbsd_5": "fbsd_5_hz",
+                                         "fbsd_10": "fbsd_10_hz"}.get(name, name))
+        if name == "asymmetry" and figure is None:
+            reason = (kf.input_terms.get("not_fitted") or {}).get("asymmetry", "not fitted")
         if reason:
             out.not_determined[name] = reason
         elif figure is None or figure.value is None:
             out.not_determined.setdefault(name, "not claimed")
     ident = results.get("identification") or {}
+    out.band_top_hz = (ident.get("supported_band_hz") or [None, None])[1]
+    out.planned_top_hz = planned_top_hz(projectile, pressure_bar)
     out.modes_hz = [m["natural_frequency_hz"] for m in ident.get("modes") or []
                     if m.get("kind") == "complex" and m.get("supported") and not m.get("cancelled")]
     if keep_results:
         out.results = results
     return out
+
+
+def planned_top_hz(projectile: int, pressure_bar: float, mount: str = "bonded") -> float:
+    """The shot planner's supported band's top for the shipped bar (the simulator's bar model,
+    the sensor bonded to its end as config/sim.toml has it)."""
+    from hopkinson.analysis.bar import PAPER_RIG, predict_shot
+    from hopkinson.analysis.bar.planning import spectrum_bands_hz
+
+    rig = dataclasses.replace(PAPER_RIG, mount=mount)
+    return spectrum_bands_hz(predict_shot(rig, projectile, pressure_bar=pressure_bar))[1]
 
 
 def run_study(world_name: str, shots: int, draws: int = 100, workers: int = 1,

@@ -6,8 +6,10 @@ scaling for a linear contact, a few predictions for a stiffening one), the launc
 pressure for it, and the pulse at that speed gives its width and its spectrum's bands:
   - the −3 dB frequency: where |A(f)| of the acceleration pulse, above its maximum, first falls
     below 1/√2 of it (the maximum is at DC for a separating mount's unipolar pulse);
-  - the supported band: up to where it first falls below −40 dB (the identification fits
-    where the excitation stands within 40 dB of its maximum: analysis.identify);
+  - the supported band's top: the identification's own rule (analysis.excitation.supported_band:
+    the pulse window's stretches within 40 dB of the spectrum's maximum, across the pulse's
+    narrow nulls), the reference's noise left out (a prediction has none: the analysis of a
+    shot can stop lower where the noise rises above a weak sidelobe);
   - the paper's rule δ ≤ 1.06/f_n (Eq. 36; PAPER-NOTES: it does not follow from its Eqs.
     33–35, so both it and the supported band are given), with δ the equivalent half-sine width.
 The projectile to load: among those within the rig's pressure limits (and meeting the rule when
@@ -22,6 +24,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from hopkinson.analysis.bar.geometry import G_M_S2, BarRig, Projectile
 from hopkinson.analysis.bar.predict import ShotPrediction, predict_shot, speed_for_peak
+from hopkinson.analysis.excitation import supported_band
 
 PAPER_RULE = 1.06  # δ·f_n at most (the paper's Eq. 36)
 SUPPORT_DB = -40.0
@@ -66,7 +69,7 @@ def spectrum_bands_hz(prediction: ShotPrediction) -> tuple[float, float]:
     """(−3 dB frequency, supported band's top) of the acceleration pulse's amplitude spectrum,
     both relative to its maximum and above it: at DC for a pulse that never turns negative (a
     separating mount), at a few kHz for a bonded mount's bipolar pulse (no net velocity change,
-    so nothing at DC)."""
+    so nothing at DC). The top by the analysis' own rule (analysis.excitation.supported_band)."""
     a = prediction.acceleration_m_s2
     size = 1 << int(np.ceil(np.log2(8 * a.size)))
     spectrum = np.abs(np.fft.rfft(a, size))
@@ -74,9 +77,8 @@ def spectrum_bands_hz(prediction: ShotPrediction) -> tuple[float, float]:
     top = int(np.argmax(spectrum))
     rel = spectrum[top:] / spectrum[top]
     below_3 = np.flatnonzero(rel < 1 / math.sqrt(2))
-    below_40 = np.flatnonzero(rel < 10 ** (SUPPORT_DB / 20))
-    return (float(f[top + below_3[0]]) if below_3.size else float(f[-1]),
-            float(f[top + below_40[0]]) if below_40.size else float(f[-1]))
+    support = supported_band(a, prediction.sample_interval_s, floor=10 ** (SUPPORT_DB / 20))
+    return float(f[top + below_3[0]]) if below_3.size else float(f[-1]), support.top_hz
 
 
 def _peak_g_at(rig: BarRig, projectile: Projectile, pressure_bar: float) -> str:

@@ -86,6 +86,7 @@ from hopkinson.drivers.sim.real_records import (
     mounted_input_m_s2,
     shot_motion,
 )
+from hopkinson.drivers.sim.sensor_truth import sensor_truth
 from hopkinson.drivers.sim.shock import G_M_S2, velocity_m_s
 
 PROJECTILES = (1, 2, 3)
@@ -837,6 +838,11 @@ def _truth_dict(shot: _Shot, params: WorldParams) -> dict[str, Any]:
                              "amplitude_v": signals.pm_amplitude_v, "amplitude_ratio": 1.0 / q.gain_ratio,
                              "phase_error_rad": q.phase_error_rad}
     out["accelerometer"]["nonlinearity_per_m_s2"] = params.accelerometer.nonlinearity_per_m_s2
+    realism = params.realism
+    out["sensor"] = sensor_truth(  # the figures as the analysis reports them (drivers/sim/sensor_truth.py)
+        shot.truth, realism.mount.asymmetry_rel if realism.enabled and realism.mount.enabled else 0.0,
+        realism.transverse.sensitivity_rel if realism.enabled and realism.transverse.enabled else 0.0,
+        params.accelerometer.nonlinearity_per_m_s2)
     assert shot.pulse is not None
     out["pulse_source"] = "ideal" if not params.realism.enabled else params.realism.pulse_source
     out["pulse"]["shape"] = shot.pulse.shape

@@ -6,8 +6,12 @@ Starts the simulated rig (config/sim.toml: the three instruments on free loopbac
 pty), writes a demo plan of N shots (default 3) at rising reservoir pressures into DIR (default
 demo-output/demo-plan.toml), runs it as a campaign into a new run folder DIR/demo-<UTC time>
 (the plan authorises its own shots: simulation only), writes the report and prints where
-everything is. In simulation every shot file holds the true accelerometer model; the demo
-prints, per shot, the identified main resonance beside the truth and the error of its pole.
+everything is. In simulation every shot file holds the simulated sensor's truth (its "sensor"
+block: drivers/sim/sensor_truth.py); the demo prints, per shot, each figure with its 95 %
+interval beside that truth (the sensitivity in the main pulse's direction, f_n, ζ, both FBSD
+edges, the tension/compression asymmetry ε), "not determined" with the reason where the shot
+does not determine a figure, and the shock sensitivity's verdict. How often these intervals hold
+their truths over many demo campaigns is docs/coverage_realistic.py --demo's study.
 
 Exit codes as `hopkinson campaign run`: 0 done; 2 bad input; 3 a shot aborted.
 `make demo` runs `hopkinson demo --out demo-output`.
@@ -16,8 +20,11 @@ Exit codes as `hopkinson campaign run`: 0 done; 2 bad input; 3 a shot aborted.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
+from typing import Any
 
+from hopkinson.analysis.key_figures import Figure
 from hopkinson.rig.cli.campaign import ProgressPrinter, report_formats
 from hopkinson.rig.cli.main import DEFAULT_SIM_CONFIG, DEFAULT_SIM_RIG_CONFIG
 from hopkinson.rig.errors import ConfigError
@@ -69,8 +76,66 @@ def demo_plan_text(shots: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+FIGURE_ROWS = (  # (name, KeyFigures attribute or FBSD level, truth key, scale, unit, digits of the truth)
+    ("sensitivity", "sensitivity", "dc_gain", 1.0, "× nominal", 4),
+    ("f_n", "natural_frequency_hz", "natural_frequency_hz", 1e3, "kHz", 3),
+    ("ζ", "damping_ratio", "damping_ratio", 1.0, "", 4),
+    ("FBSD ±5 %", "5", "fbsd_5", 1e3, "kHz", 3),
+    ("FBSD ±10 %", "10", "fbsd_10", 1e3, "kHz", 3),
+)
+UNDETERMINED_KEYS = {"sensitivity": "dc_gain", "5": "fbsd_5_hz", "10": "fbsd_10_hz"}
+
+
+def truth_lines(label: str, kf: Any, results: dict[str, Any], truth: dict[str, Any] | None) -> list[str]:
+    """The demo's lines for one shot: each figure as value ± U (95 %) beside the simulated truth
+    (drivers/sim/sensor_truth), or "not determined" and why; the asymmetry ε; the shock
+    sensitivity's verdict. The truth of the sensitivity is put in the analysis' units (the
+    analysis divides by the amplifier gain and the nominal sensitivity it was given)."""
+    sensor = (truth or {}).get("sensor") or {}
+    params = results.get("params") or {}
+    unit_scale = 1.0
+    if truth and params.get("amp_gain") and params.get("sensitivity_v_per_m_s2"):
+        unit_scale = (truth["amplifier_gain"] * truth["sensitivity_v_per_m_s2"]
+                      / (params["amp_gain"] * params["sensitivity_v_per_m_s2"]))
+    true = {"dc_gain": sensor.get("dc_gain", math.nan) * unit_scale,
+            "natural_frequency_hz": sensor.get("natural_frequency_hz", math.nan),
+            "damping_ratio": sensor.get("damping_ratio", math.nan),
+            "fbsd_5": (sensor.get("fbsd_hz") or {}).get("5", math.nan),
+            "fbsd_10": (sensor.get("fbsd_hz") or {}).get("10", math.nan)}
+    head = f"  {label}:"
+    if not kf.is_result:
+        return [f"{head} {kf.not_a_result_reason}"]
+    parts = []
+    for name, attr, key, scale, unit, digits in FIGURE_ROWS:
+        figure = kf.fbsd_hz.get(attr) if attr in ("5", "10") else getattr(kf, attr)
+        why = kf.not_determined.get(UNDETERMINED_KEYS.get(attr, attr))
+        truth_text = f"truth {true[key] / scale:.{digits}f}" if math.isfinite(true[key]) else "no truth"
+        if figure is None or figure.value is None or why:
+            parts.append(f"{name} not determined ({why or 'not claimed'}; {truth_text})")
+        else:
+            suffix = f" {unit}" if unit else ""
+            parts.append(f"{name} {figure.format(scale)}{suffix} ({truth_text})")
+    epsilon = ((results.get("uncertainty") or {}).get("input_terms") or {}).get("asymmetry")
+    if epsilon and epsilon.get("value") is not None:
+        parts.append(f"ε (tension ÷ compression − 1) {Figure.of(epsilon).format()} "
+                     f"(truth {sensor.get('asymmetry_epsilon', math.nan):+.4f})")
+    shock = kf.not_determined.get("shock_sensitivity")
+    parts.append(f"S_sh {shock}" if shock else
+                 f"S_sh {kf.shock_sensitivity.format()}" if kf.shock_sensitivity is not None else "S_sh —")
+    return [head] + [f"    {p}" for p in parts]
+
+
+def _shot_truth(path: Path) -> dict[str, Any] | None:
+    """The simulated truth a shot file holds (None when it holds none)."""
+    from hopkinson.rig.shotfile import read_shot_meta
+
+    try:
+        return read_shot_meta(path).simulated_truth
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 def demo_command(args: argparse.Namespace) -> int:
-    from hopkinson.reports.data import truth_comparison
     from hopkinson.rig.campaign import CampaignRunner, prepare_run
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.events import EventBus
@@ -106,22 +171,13 @@ def demo_command(args: argparse.Namespace) -> int:
     print(f"demo: {outcome.message}; the simulated rig fired {fired} shot(s)", flush=True)
     report = run_report(run.path)
     for entry in report.shots:
-        cmp = truth_comparison(entry)
         kf = entry.key_figures
-        if cmp is None and kf is not None:  # analysed, but no resonance the shot supports
-            band = kf.supported_band_hz
-            where = f" (supported band up to {band[1] / 1e3:.1f} kHz)" if band else ""
-            print(f"  {entry.label}: f_n not claimed: the resonance lies beyond what the pulse excites{where}; "
-                  f"FBSD ±5 % {kf.fbsd_hz['5'].format(1e3, unit='kHz')}", flush=True)
-            continue
-        if cmp is None:
+        if kf is None:
             print(f"  {entry.label}: {entry.error or 'no analysis'}", flush=True)
             continue
-        f_n = entry.key_figures.natural_frequency_hz  # value ± U when the shot carries its uncertainty
-        f_n_text = f_n.format(1e3, unit="kHz") if f_n.expanded is not None else f"{f_n.value / 1e3:.3f} kHz"
-        print(f"  {entry.label}: f_n {f_n_text} (truth "
-              f"{cmp['truth_natural_frequency_hz'] / 1e3:.3f}), zeta {cmp['damping_ratio']:.4f} (truth "
-              f"{cmp['truth_damping_ratio']:.4f}), pole error {cmp['pole_error_percent']:.3f} %", flush=True)
+        truth = _shot_truth(run.shots_dir / f"{entry.label}.h5")
+        for line in truth_lines(entry.label, kf, entry.stored, truth):
+            print(line, flush=True)
     for path in write_run_report(run.path, formats, report):
         print(f"report: {path}", flush=True)
     print(f"shot files: {run.shots_dir}", flush=True)
