@@ -109,6 +109,7 @@ class Prepared:
     terms: InputTerms = field(default_factory=InputTerms)
     onset_terms: InputTerms | None = None
     terms_source: tuple = ()  # input_terms' arguments (analysis.systematics makes its variants from them)
+    unseen: dict[str, float] = field(default_factory=dict)  # term not seen beyond chance -> its standard uncertainty
 
     def terms_variant(self, **options: Any) -> InputTerms:
         """The candidate input terms made with other `options` (input_terms' keywords), with the same

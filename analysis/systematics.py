@@ -14,8 +14,9 @@ refit moves them together) and added to every Monte Carlo draw:
 - **how a correction is modelled** (`variant_bounds`): the figures refitted with the correction
   made another defensible way, the largest shift the bound: the motion term switched on over
   20 or 80 µs instead of 40 µs (half and twice); the onset window widened, or, where the record did
-  not call for the onset's disturbances (or ε), with them fitted all the same: the reference's
-  onset and demodulation errors, and an asymmetry, as Type B inputs where they do not show;
+  not call for the onset's disturbances, with them fitted all the same (the reference's onset and
+  demodulation errors as a Type B input where they do not show); where ε was not seen beyond
+  chance, the figures' change with ε at twice its standard uncertainty;
 - **the model's error** (`variant_bounds`, where identify detected model error): the figures
   refitted on 0.9 and 0.8 of the band's top (a right model gives one answer on every part of
   the band its excitation supports; a model the data bend does not), its bound the largest shift;
@@ -48,6 +49,7 @@ MOTION_RAMPS_S = (20e-6, 80e-6)  # the motion term's alternative switch-on times
 ONSET_WINDOWS_S = ((14e-6, 24e-6),)
 BAND_PARTS = (0.9, 0.8)  # the band's tops the model error's bound is refitted on
 SQRT3 = math.sqrt(3.0)
+MODEL_ERROR_BOUND = "model error (bound: the band's parts)"
 FIGURES = ("dc_gain", "natural_frequency_hz", "damping_ratio", "fbsd_5_hz", "fbsd_10_hz")
 
 
@@ -59,7 +61,7 @@ class TypeB:
     source: str
     shift_by_figure: dict[str, float]
     note: str = ""
-
+    models: tuple = ()  # the variants' models (DiscreteModel), for the response's band
     def u_rel_by_figure(self, nominal: dict[str, float | None]) -> dict[str, float]:
         return {k: abs(v) / SQRT3 / abs(nominal[k]) for k, v in self.shift_by_figure.items()
                 if nominal.get(k) and math.isfinite(v)}
@@ -115,6 +117,12 @@ def _refit(data: SpectralData, ctx: FitContext, start: OrderFit) -> OrderFit | N
     return fit if is_stable(fit.a) else None
 
 
+def _model_of(fit: OrderFit, ctx: FitContext) -> Any:
+    from hopkinson.analysis.model import DiscreteModel
+
+    return DiscreteModel(ctx.sample_interval_s, fit.a, fit.b * ctx.scale_y / ctx.scale_u, ctx.model_delay(fit.delay))
+
+
 def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) -> dict[str, float]:
     """Per figure the variant's shift of largest magnitude (signed)."""
     out: dict[str, float] = {}
@@ -138,52 +146,48 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     terms = ctx.terms
     window = (prep.start, prep.start + prep.u.size)
 
-    def refitted(**options: Any) -> dict[str, float] | None:
+    def refitted(**options: Any) -> OrderFit | None:
         made = prep.terms_variant(**options)
         data = replace(ctx.spectral, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-        start = replace(fit, inputs=_matched(terms, made, fit.inputs))
-        refit = _refit(data, ctx, start)
-        return None if refit is None else figures_of(refit, ctx, pole)
+        return _refit(data, ctx, replace(fit, inputs=_matched(terms, made, fit.inputs)))
+
+    def row(source: str, refits: list[OrderFit | None], note: str) -> None:
+        found = [f for f in refits if f is not None]
+        if found:
+            rows.append(TypeB(source, _largest_shift(nominal, [figures_of(f, ctx, pole) for f in found]), note,
+                              tuple(_model_of(f, ctx) for f in found)))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
-        found = [f for f in (refitted(motion_ramp_s=r) for r in MOTION_RAMPS_S) if f is not None]
-        if found:
-            rows.append(TypeB("motion after the pulse (where it begins)", _largest_shift(nominal, found),
-                              "the motion term switched on over 20 or 80 µs instead of 40 µs"))
+        row("motion after the pulse (where it begins)", [refitted(motion_ramp_s=r) for r in MOTION_RAMPS_S],
+            "the motion term switched on over 20 or 80 µs instead of 40 µs")
     if terms.columns(ONSET).size:
-        found = [f for f in (refitted(onset_s=w, with_onset=True) for w in ONSET_WINDOWS_S) if f is not None]
-        if found:
-            rows.append(TypeB("onset disturbances (their window)", _largest_shift(nominal, found),
-                              "the onset's window widened to 14 µs before and 24 µs after the pulse's foot"))
+        row("onset disturbances (their window)", [refitted(onset_s=w, with_onset=True) for w in ONSET_WINDOWS_S],
+            "the onset's window widened to 14 µs before and 24 µs after the pulse's foot")
     elif prep.onset_terms is not None:  # not seen beyond chance: the reference's onset errors as a Type B
-        found = [f for f in [refitted(with_onset=True)] if f is not None]
-        if found:
-            rows.append(TypeB("reference's onset and demodulation errors", _largest_shift(nominal, found),
-                              "not seen beyond chance: the figures with the onset's disturbances fitted"))
-    if not terms.columns(ASYMMETRY).size and ASYMMETRY in terms.not_fitted and "not seen" in terms.not_fitted[ASYMMETRY]:
-        found = [f for f in [_with_asymmetry(prep, ctx, fit, pole, window)] if f is not None]
-        if found:
-            rows.append(TypeB("tension/compression asymmetry (not seen)", _largest_shift(nominal, found),
-                              "not seen beyond chance: the figures with ε fitted"))
-    if ctx.model_error_detected:
-        found = []
+        row("reference's onset and demodulation errors", [refitted(with_onset=True)],
+            "not seen beyond chance: the figures with the onset's disturbances fitted")
+    if not terms.columns(ASYMMETRY).size and ASYMMETRY in prep.unseen:
+        refit = _with_asymmetry(prep, ctx, fit, window)
+        if refit is not None:  # the effect of ε at twice its standard uncertainty (linear in ε)
+            epsilon = float(refit.inputs[made_asymmetry_column(prep, ctx)]) if refit.inputs.size else 0.0
+            scale = 2.0 * prep.unseen[ASYMMETRY] / abs(epsilon) if abs(epsilon) > 0.1 * prep.unseen[ASYMMETRY] else 1.0
+            shifts = {k: scale * v for k, v in _largest_shift(nominal, [figures_of(refit, ctx, pole)]).items()}
+            rows.append(TypeB("tension/compression asymmetry (not seen)", shifts,
+                              "not seen beyond chance: the figures' change with ε at twice its standard uncertainty",
+                              (_model_of(refit, ctx),)))
+    if ctx.model_error_detected:  # the Monte Carlo draws these as its "band part"; here for the response band
         top = float(np.max(ctx.spectral.omega))
-        for part in BAND_PARTS:
-            data = ctx.spectral.below(part * top)
-            if data.bins >= fit.parameters:
-                refit = _refit(data, ctx, fit)
-                if refit is not None:
-                    found.append(figures_of(refit, ctx, pole))
-        if found:
-            rows.append(TypeB("model error (bound)", _largest_shift(nominal, found),
-                              "the model refitted on 0.9 and 0.8 of the band's top"))
+        parts = [ctx.spectral.below(part * top) for part in BAND_PARTS]
+        found = [_refit(data, ctx, fit) for data in parts if data.bins >= fit.parameters]
+        models = tuple(_model_of(f, ctx) for f in found if f is not None)
+        if models:
+            rows.append(TypeB(MODEL_ERROR_BOUND, {}, "the model refitted on 0.9 and 0.8 of the band's top", models))
     return rows
 
 
-def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, pole: complex | None, window: tuple[int, int]
-                    ) -> dict[str, float] | None:
-    """The figures refitted with ε fitted (where identify found it not beyond chance)."""
+def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, window: tuple[int, int]) -> OrderFit | None:
+    """The fit with ε fitted (where identify found it not beyond chance)."""
     from hopkinson.analysis.input_terms import input_terms
 
     made = input_terms(*prep.terms_source)
@@ -194,8 +198,16 @@ def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, pole: complex | N
     if made.columns(ONSET).size != ctx.terms.columns(ONSET).size:
         return None
     data = replace(ctx.spectral, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-    refit = _refit(data, ctx, replace(fit, inputs=_matched(ctx.terms, made, fit.inputs)))
-    return None if refit is None else figures_of(refit, ctx, pole)
+    return _refit(data, ctx, replace(fit, inputs=_matched(ctx.terms, made, fit.inputs)))
+
+
+def made_asymmetry_column(prep: Any, ctx: FitContext) -> int:
+    """The column of ε in `_with_asymmetry`'s terms (the fitted terms with ε put back in order)."""
+    from hopkinson.analysis.input_terms import input_terms
+
+    made = input_terms(*prep.terms_source)
+    kept = [n for n in made.names if n in ctx.terms.names or n == ASYMMETRY]
+    return kept.index(ASYMMETRY)
 
 
 def _matched(fitted: Any, made: Any, coefficients: np.ndarray) -> np.ndarray:

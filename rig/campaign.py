@@ -227,6 +227,7 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
         sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
         order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
         uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
+        transverse_sensitivity_rel=plan.accelerometer.transverse_sensitivity_rel,
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
     )

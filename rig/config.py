@@ -320,12 +320,16 @@ class UncertaintyConfig:
     digitizer_gain_rel: float = 2e-3
     channel_skew_s: float = 1e-9
     draws: int = 400
+    # issue 40: the bar's transverse motion share at the sensor (a Type B row with the sensor's
+    # stated transverse sensitivity; analysis.systematics), 2 % for a well-aligned bar by default
+    transverse_motion_rel: float = 0.02
 
     def analysis_options(self) -> dict[str, Any]:
         """The same values keyed as analysis.params.AnalysisParams options."""
         return {"u_grating_pitch_rel": self.grating_pitch_rel, "u_interferometer_rel": self.interferometer_rel,
                 "u_amp_gain_rel": self.amplifier_gain_rel, "u_digitizer_gain_rel": self.digitizer_gain_rel,
-                "u_channel_skew_s": self.channel_skew_s, "draws": self.draws}
+                "u_channel_skew_s": self.channel_skew_s, "draws": self.draws,
+                "transverse_motion_rel": self.transverse_motion_rel}
 
 
 @dataclass(frozen=True)

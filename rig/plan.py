@@ -11,6 +11,7 @@ Example (config/campaigns/example.toml is the documented one)::
     model = "AYZ-3"
     serial = "SN0001"
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
+    transverse_sensitivity_rel = 0.05 # optional: its stated (datasheet) transverse sensitivity (issue 40; default 5 %)
     sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,
                                       # magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]; relative to
                                       # the plan's folder); every shot's model is fitted to the
@@ -85,6 +86,7 @@ class Accelerometer:
     serial: str
     sensitivity_v_per_m_s2: float | None = None  # nominal, at the amplifier output
     sine_calibration: str | None = None  # sine calibration CSV (analysis.sine_comparison), resolved path
+    transverse_sensitivity_rel: float | None = None  # stated (datasheet) transverse sensitivity; None: 5 % (issue 40)
 
 
 @dataclass(frozen=True)
@@ -167,7 +169,7 @@ class CampaignPlan:
 
 _TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "accelerometer_2", "defaults",
              "shots"}
-_ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2", "sine_calibration"}
+_ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2", "sine_calibration", "transverse_sensitivity_rel"}
 _SHOT_KEYS = {"pressure_bar", "peak_m_s2", "peak_g", "projectile", "analysis"}
 G_M_S2 = 9.80665
 _ENTRY_KEYS = _SHOT_KEYS | {"repeats"}
@@ -264,6 +266,8 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         else c.number(sensitivity, "accelerometer.sensitivity_v_per_m_s2", 0.0),
         None if acc.get("sine_calibration") is None
         else str(path.parent / c.text(acc["sine_calibration"], "accelerometer.sine_calibration")),
+        None if acc.get("transverse_sensitivity_rel") is None
+        else c.number(acc["transverse_sensitivity_rel"], "accelerometer.transverse_sensitivity_rel", 0.0, False, 1.0),
     )
 
     accelerometer_2 = None

@@ -90,6 +90,8 @@ class ShotRequest:
     uncertainty: bool | None = None  # the Monte Carlo uncertainty; None -> the analysis' default (on)
     draws: int | None = None  # its draws; None -> the analysis' default
     sine_calibration: str | None = None  # a sine calibration CSV of the sensor, fitted with the shot (analysis.sine_joint)
+    # issue 40: the sensor's stated transverse sensitivity (datasheet; None -> the analysis' 5 %)
+    transverse_sensitivity_rel: float | None = None
     out_dir: Path = Path("shots")
     shot_name: str | None = None  # None -> "shot-<UTC time>-<8 hex>"
     campaign_id: str | None = None
@@ -335,6 +337,7 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
         dcm_damping=request.dcm_damping,
         uncertainty=request.uncertainty,
         sine_calibration=request.sine_calibration,
+        transverse_sensitivity_rel=request.transverse_sensitivity_rel,
     )
 
 

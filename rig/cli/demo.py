@@ -87,7 +87,7 @@ UNDETERMINED_KEYS = {"sensitivity": "dc_gain", "5": "fbsd_5_hz", "10": "fbsd_10_
 
 
 def truth_lines(label: str, kf: Any, results: dict[str, Any], truth: dict[str, Any] | None) -> list[str]:
-    """The demo's lines for one shot: each figure as value ± U (95 %) beside the simulated truth
+    """The demo's lines for one shot: each figure with its 95 % interval beside the simulated truth
     (drivers/sim/sensor_truth), or "not determined" and why; the asymmetry ε; the shock
     sensitivity's verdict. The truth of the sensitivity is put in the analysis' units (the
     analysis divides by the amplifier gain and the nominal sensitivity it was given)."""
@@ -113,16 +113,26 @@ def truth_lines(label: str, kf: Any, results: dict[str, Any], truth: dict[str, A
         if figure is None or figure.value is None or why:
             parts.append(f"{name} not determined ({why or 'not claimed'}; {truth_text})")
         else:
-            suffix = f" {unit}" if unit else ""
-            parts.append(f"{name} {figure.format(scale)}{suffix} ({truth_text})")
+            parts.append(f"{name} {interval_text(figure, scale, unit)} ({truth_text})")
     epsilon = ((results.get("uncertainty") or {}).get("input_terms") or {}).get("asymmetry")
     if epsilon and epsilon.get("value") is not None:
-        parts.append(f"ε (tension ÷ compression − 1) {Figure.of(epsilon).format()} "
+        parts.append(f"ε (tension ÷ compression − 1) {interval_text(Figure.of(epsilon), 1.0, '')} "
                      f"(truth {sensor.get('asymmetry_epsilon', math.nan):+.4f})")
     shock = kf.not_determined.get("shock_sensitivity")
     parts.append(f"S_sh {shock}" if shock else
                  f"S_sh {kf.shock_sensitivity.format()}" if kf.shock_sensitivity is not None else "S_sh —")
     return [head] + [f"    {p}" for p in parts]
+
+
+def interval_text(figure: Figure, scale: float, unit: str) -> str:
+    """'29.701 kHz [29.679, 29.724]': the value and its 95 % interval (as it is: an interval need
+    not be symmetric), to the decimals two significant digits of U need; the value alone without."""
+    suffix = f" {unit}" if unit else ""
+    if figure.interval is None or figure.expanded is None:
+        return f"{figure.format(scale)}{suffix}"
+    decimals = max(0, 1 - math.floor(math.log10(figure.expanded / scale))) if figure.expanded > 0 else 4
+    lo, hi = figure.interval
+    return f"{figure.value / scale:.{decimals}f}{suffix} [{lo / scale:.{decimals}f}, {hi / scale:.{decimals}f}]"
 
 
 def _shot_truth(path: Path) -> dict[str, Any] | None:

@@ -141,14 +141,23 @@ def test_the_delay_branch_the_noise_flips_is_inside_the_fbsd_interval(seed: int)
     for key in ("5", "10"):
         lo, hi = result.fbsd_hz[key].interval
         assert lo <= truth[f"fbsd_{key}"] <= hi, (key, lo, hi, truth[f"fbsd_{key}"])
-    # The reported delay's interval spans both optima of the cost (found here by starting the
-    # fit on either side of the valley), not only the branch the record happened to take.
+    # Where the two optima of the cost (found here by starting the fit on either side of the
+    # valley) are within chance of each other, the reported delay's interval spans both, not only
+    # the branch the record happened to take. (Since issue 40 the band runs across the pulse's
+    # nulls, to 84 kHz: on seed 101 its bins tell the branches apart, V 84.4 against 91.4, and the
+    # draws stay on the better one; on seed 113 they stay within chance, 50.5 against 50.7.)
     ctx = ident.context
     problem = OrderProblem(ctx.spectral, ident.order, "causal", ctx.max_delay)
-    optima = [problem.solve(problem.linear_start(tau), 200, 1e-10).delay for tau in (0.0, 4.0)]
+    fits = [problem.solve(problem.linear_start(tau), 200, 1e-10) for tau in (0.0, 4.0)]
+    optima = [f.delay for f in fits]
     assert abs(optima[1] - optima[0]) > 2.0
     lo, hi = (x / ctx.sample_interval_s for x in result.delay_s.interval)
-    assert lo <= min(optima) + 0.1 and hi >= max(optima) - 0.1, (lo, hi, optima)
+    if abs(fits[1].cost - fits[0].cost) <= 2.0:  # within chance (V is half a χ²: ΔV 2 is p ≈ 0.05)
+        assert lo <= min(optima) + 0.1 and hi >= max(optima) - 0.1, (lo, hi, optima)
+    else:
+        assert seed == 101
+        best = min(fits, key=lambda f: f.cost).delay
+        assert lo <= best <= hi, (lo, hi, best)
 
 
 def test_compare_sine_judges_the_models_whole_phase_not_the_part_left_by_an_undetermined_delay() -> None:

@@ -1,0 +1,83 @@
+"""Issue 40 item 2: on the shipped realistic simulator (config/sim.toml as shipped: the bar model's
+bonded pulse, every realistic effect on), each 95 % interval holds the simulated sensor's truth,
+held statistically.
+
+The study (tests/realistic_study.py, computed once for the module): SHOTS shots, projectiles 1, 2,
+3 in turn at pressures drawn uniformly over 1–6 bar by a generator fixed before any result was
+seen, each analysed as a rig's shot (DRAWS Monte Carlo draws; the reference chain left out: exact
+in the simulator, a pure scale of the DC gain). The truth is the sensor's own (the shot's truth
+"sensor" block).
+
+Power (scipy.stats.binom): each figure passes with at most MAX_MISSES misses among the shots that
+claim it. Were the true coverage 90 % (what the issue must reject), a figure claimed on all 50
+shots would pass with probability P(X ≥ 49 | n = 50, p = 0.90) = 0.034 (≤ 5 %); at 98 % it passes
+with 0.74, at 99 % with 0.91. docs/coverage_realistic.py prints the full study (more shots, each
+effect alone, the demo over many seeds).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import binom
+
+from tests.realistic_study import FIGURES, coverage, run_study
+
+SHOTS = 50
+MAX_MISSES = 1
+DRAWS = 100
+TRUE_F_N_HZ = 29_700.0  # the mounted resonance (config/sim.toml: 27 kHz × 1.10)
+
+
+@pytest.fixture(scope="module")
+def study():
+    return run_study("shipped", SHOTS, draws=DRAWS)
+
+
+def test_the_test_rejects_a_coverage_of_90_percent() -> None:
+    """The design's own power, as the module docstring states it."""
+    assert binom.sf(SHOTS - MAX_MISSES - 1, SHOTS, 0.90) <= 0.05
+    assert binom.sf(SHOTS - MAX_MISSES - 1, SHOTS, 0.98) >= 0.7
+
+
+def test_each_interval_holds_the_truth_on_the_realistic_simulator(study) -> None:
+    rows = coverage(study)
+    for name in ("sensitivity", "natural_frequency_hz", "damping_ratio", "fbsd_5", "fbsd_10"):
+        row = rows[name]
+        assert row.claims >= 0.9 * SHOTS, (name, row)  # the figure is determined on (nearly) every shot
+        assert row.claims - row.holds <= MAX_MISSES, (name, row)
+
+
+def test_the_intervals_are_not_needlessly_wide(study) -> None:
+    """The median U at most 4 × the median |error| (issue 40 item 2), and the shots that miss do
+    so by a little (within 2 U): no interval is a point beside a biased value."""
+    for name, row in coverage(study).items():
+        if name == "asymmetry" or not row.claims:
+            continue
+        assert row.median_expanded_rel <= 4.0 * row.median_abs_error_rel, (name, row)
+    for outcome in study:
+        for name in FIGURES:
+            if outcome.holds(name) is False and outcome.value.get(name) is not None:
+                lo, hi = outcome.interval[name]
+                assert abs(outcome.value[name] - outcome.truth[name]) <= hi - lo, (name, outcome)  # 2 U
+
+
+def test_no_mode_is_claimed_that_the_truth_lacks(study) -> None:
+    """The simulated sensor has one mode (29.7 kHz, ζ 0.05): every claimed mode is it (issue 40
+    item 3: shots claimed modes at 18.5, 20.2, 20.8, 33.65 and 55-66 kHz, ζ up to 0.75), f_n within
+    0.5 % of it where the pulse excites it between its nulls (item 4)."""
+    for outcome in study:
+        assert len(outcome.modes_hz) <= 1, outcome
+        for f_hz in outcome.modes_hz:
+            assert abs(f_hz / TRUE_F_N_HZ - 1) < 0.005, outcome
+
+
+def test_the_planner_and_the_analysis_agree_on_the_band(study) -> None:
+    """Both use one rule (analysis.excitation.supported_band): the planner on the predicted pulse,
+    the analysis on the measured one, whose noise, onset glitches and cut where the model stops
+    explaining the response move its top. The analysis' top is at least half the planner's on every
+    shot, and its median ratio to it within 30 %."""
+    ratios = np.array([o.band_top_hz / o.planned_top_hz for o in study if o.band_top_hz])
+    assert ratios.size >= 0.9 * SHOTS
+    assert np.all(ratios >= 0.5), np.sort(ratios)[:5]
+    assert 0.7 <= float(np.median(ratios)) <= 1.3, float(np.median(ratios))
