@@ -406,7 +406,9 @@ def _identified(prepared: PreparedRecord, max_order: int, order: int | None, kne
         warnings.append(f"the order-{chosen} fit stopped before converging in {final.evaluations} evaluations "
                         "(its cost was the lowest reached)")
     # Step 7: the model in the record's units (the scales go back into B) and its claims.
-    model = DiscreteModel(dt, final.a, final.b * (prepared.scale_y / prepared.scale_u),
+    # B/A holds the main direction's gain; the model reported, the mean of both directions' (input_terms)
+    mean = prep.terms.mean_gain_factor(final.inputs)
+    model = DiscreteModel(dt, final.a, final.b * (mean * prepared.scale_y / prepared.scale_u),
                           float(final.delay) - prepared.realigned_samples,
                           info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure})
     band_cut = stretches_beyond_the_model(prep, data, final, dt) if band_top_hz is None else None

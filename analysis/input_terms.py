@@ -8,8 +8,11 @@ so the sensor is taken as driven by u + Σ c_k·v_k (analysis.frequency_fit, `Sp
 - **tension/compression asymmetry** ("asymmetry"): v = the part of the reference of the sign
   opposite to the main pulse's peak. c = ε, the sensitivity in that direction over the sensitivity
   in the main pulse's direction, less one (a bonded mount's tension lobe, a lobe-dependent gain).
-  The model's DC gain is then the sensitivity in the main pulse's direction (compression on a
-  bonded bar): what this product reports, and ε beside it. Fitted where the pulse has an
+  The fit's B/A then holds the main direction's gain; the model this product reports is scaled to
+  the **mean of both directions**, S = S_main·(1 + ε/2) (`mean_gain_factor`): what a sinusoidal
+  calibration measures, what a fit without ε reads of a pulse with lobes of both signs, and what
+  stays defined when the record cannot resolve ε. ε is reported beside it: the directions'
+  sensitivities are S_main = S/(1 + ε/2) and S_other = S_main·(1 + ε). Fitted where the pulse has an
   opposite lobe of at least OPPOSITE_LOBE of its peak and both lobes span LOBE_SAMPLES samples
   (a dipole of a few samples is two lobes the model cannot tell apart from one lobe and a zero:
   its ε went to −1); else ε is not determined.
@@ -102,6 +105,13 @@ class InputTerms:
         if not self.count:
             return None
         return np.fft.rfft(self.signals[:, start:stop], axis=1)[:, keep].T
+
+    def mean_gain_factor(self, coefficients: np.ndarray) -> float:
+        """1 + ε/2: the main direction's gain (the fit's B/A) to the mean of both directions (the
+        sensitivity reported); 1 without ε."""
+        cols = self.columns(ASYMMETRY)
+        c = np.asarray(coefficients, dtype=float)
+        return 1.0 + 0.5 * float(c[cols[0]]) if cols.size and c.size == self.count else 1.0
 
     def correction(self, coefficients: np.ndarray) -> np.ndarray:
         """Σ c_k·v_k over the whole record (what the fit adds to the reference)."""

@@ -84,15 +84,16 @@ class Systematics:
                                                     "note": t.note} for t in self.type_b]}
 
 
-def figures_of(fit: OrderFit, ctx: FitContext, main_pole: complex | None) -> dict[str, float]:
-    """The figures of a fit (DC gain in the record's units, the mode nearest the nominal main
-    pole, both FBSD edges): what the variants are compared by."""
+def figures_of(fit: OrderFit, ctx: FitContext, main_pole: complex | None, terms: Any = None) -> dict[str, float]:
+    """The figures of a fit (DC gain in the record's units, the mean of both directions with the
+    fit's `terms` (None: the identification's), the mode nearest the nominal main pole, both FBSD
+    edges): what the variants are compared by."""
     from hopkinson.analysis.errors import AnalysisError
     from hopkinson.analysis.model import DiscreteModel
     from hopkinson.analysis.response import fbsd_edges
 
     dt = ctx.sample_interval_s
-    scale = ctx.scale_y / ctx.scale_u
+    scale = ctx.scale_y / ctx.scale_u * (terms or ctx.terms).mean_gain_factor(fit.inputs)
     out = {"dc_gain": float(np.sum(fit.b) * scale / np.sum(fit.a))}
     if main_pole is not None:
         roots = np.roots(fit.a)
@@ -117,10 +118,11 @@ def _refit(data: SpectralData, ctx: FitContext, start: OrderFit) -> OrderFit | N
     return fit if is_stable(fit.a) else None
 
 
-def _model_of(fit: OrderFit, ctx: FitContext) -> Any:
+def _model_of(fit: OrderFit, ctx: FitContext, terms: Any = None) -> Any:
     from hopkinson.analysis.model import DiscreteModel
 
-    return DiscreteModel(ctx.sample_interval_s, fit.a, fit.b * ctx.scale_y / ctx.scale_u, ctx.model_delay(fit.delay))
+    scale = ctx.scale_y / ctx.scale_u * (terms or ctx.terms).mean_gain_factor(fit.inputs)
+    return DiscreteModel(ctx.sample_interval_s, fit.a, fit.b * scale, ctx.model_delay(fit.delay))
 
 
 def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) -> dict[str, float]:
@@ -146,16 +148,18 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     terms = ctx.terms
     window = (prep.start, prep.start + prep.u.size)
 
-    def refitted(**options: Any) -> OrderFit | None:
+    def refitted(**options: Any) -> tuple[OrderFit, Any] | None:
         made = prep.terms_variant(**options)
         data = replace(ctx.spectral, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-        return _refit(data, ctx, replace(fit, inputs=_matched(terms, made, fit.inputs)))
+        refit = _refit(data, ctx, replace(fit, inputs=_matched(terms, made, fit.inputs)))
+        return None if refit is None else (refit, made)
 
-    def row(source: str, refits: list[OrderFit | None], note: str) -> None:
+    def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0) -> None:
         found = [f for f in refits if f is not None]
         if found:
-            rows.append(TypeB(source, _largest_shift(nominal, [figures_of(f, ctx, pole) for f in found]), note,
-                              tuple(_model_of(f, ctx) for f in found)))
+            shifts = _largest_shift(nominal, [figures_of(f, ctx, pole, made) for f, made in found])
+            rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
+                              tuple(_model_of(f, ctx, made) for f, made in found)))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -168,14 +172,14 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         row("reference's onset and demodulation errors", [refitted(with_onset=True)],
             "not seen beyond chance: the figures with the onset's disturbances fitted")
     if not terms.columns(ASYMMETRY).size and ASYMMETRY in prep.unseen:
-        refit = _with_asymmetry(prep, ctx, fit, window)
-        if refit is not None:  # the effect of ε at twice its standard uncertainty (linear in ε)
-            epsilon = float(refit.inputs[made_asymmetry_column(prep, ctx)]) if refit.inputs.size else 0.0
-            scale = 2.0 * prep.unseen[ASYMMETRY] / abs(epsilon) if abs(epsilon) > 0.1 * prep.unseen[ASYMMETRY] else 1.0
-            shifts = {k: scale * v for k, v in _largest_shift(nominal, [figures_of(refit, ctx, pole)]).items()}
-            rows.append(TypeB("tension/compression asymmetry (not seen)", shifts,
-                              "not seen beyond chance: the figures' change with ε at twice its standard uncertainty",
-                              (_model_of(refit, ctx),)))
+        found = _with_asymmetry(prep, ctx, fit, window)
+        if found is not None:  # the effect of ε at twice its standard uncertainty (linear in ε)
+            refit, made = found
+            epsilon = float(refit.inputs[made.columns(ASYMMETRY)[0]])
+            u = prep.unseen[ASYMMETRY]
+            row("tension/compression asymmetry (not seen)", [found],
+                "not seen beyond chance: the figures' change with ε at twice its standard uncertainty",
+                2.0 * u / abs(epsilon) if abs(epsilon) > 0.1 * u else 1.0)
     if ctx.model_error_detected:  # the Monte Carlo draws these as its "band part"; here for the response band
         top = float(np.max(ctx.spectral.omega))
         parts = [ctx.spectral.below(part * top) for part in BAND_PARTS]
@@ -186,8 +190,9 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     return rows
 
 
-def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, window: tuple[int, int]) -> OrderFit | None:
-    """The fit with ε fitted (where identify found it not beyond chance)."""
+def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, window: tuple[int, int]
+                    ) -> tuple[OrderFit, Any] | None:
+    """The fit with ε fitted (where identify found it not beyond chance), and its terms."""
     from hopkinson.analysis.input_terms import input_terms
 
     made = input_terms(*prep.terms_source)
@@ -198,16 +203,8 @@ def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, window: tuple[int
     if made.columns(ONSET).size != ctx.terms.columns(ONSET).size:
         return None
     data = replace(ctx.spectral, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-    return _refit(data, ctx, replace(fit, inputs=_matched(ctx.terms, made, fit.inputs)))
-
-
-def made_asymmetry_column(prep: Any, ctx: FitContext) -> int:
-    """The column of ε in `_with_asymmetry`'s terms (the fitted terms with ε put back in order)."""
-    from hopkinson.analysis.input_terms import input_terms
-
-    made = input_terms(*prep.terms_source)
-    kept = [n for n in made.names if n in ctx.terms.names or n == ASYMMETRY]
-    return kept.index(ASYMMETRY)
+    refit = _refit(data, ctx, replace(fit, inputs=_matched(ctx.terms, made, fit.inputs)))
+    return None if refit is None else (refit, made)
 
 
 def _matched(fitted: Any, made: Any, coefficients: np.ndarray) -> np.ndarray:

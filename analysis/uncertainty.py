@@ -254,7 +254,7 @@ def evaluate(
     for r, f in enumerate(fits):
         if f is None or not good[r]:
             continue
-        b = f.b * scale * gain_factor[r]
+        b = f.b * scale * gain_factor[r] * ctx.terms.mean_gain_factor(f.inputs)  # the mean of both directions
         dc_draws[r] = float(np.sum(b) / np.sum(f.a))
         delay_draws[r] = (ctx.model_delay(f.delay) - skews[r]) * dt
         # fitted with a sine calibration: the sine's level ÷ the model's (analysis.sine_joint)
@@ -788,7 +788,8 @@ def _figure_gradients(
 
     def figures(th: np.ndarray) -> dict[str, float]:
         a, b, tau, _, _ = problem.unpack(th)
-        out = {"dc_gain": float(np.sum(b) * scale / np.sum(a))}
+        mean = ctx.terms.mean_gain_factor(problem.input_coefficients(th))  # the mean of both directions
+        out = {"dc_gain": float(np.sum(b) * scale * mean / np.sum(a))}
         if pole is not None:
             out["natural_frequency_hz"], out["damping_ratio"] = _nearest_mode(a, pole, dt)
         try:

@@ -128,7 +128,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         return [("analysis", kf.not_a_result_reason)]
     rows = [
         ("model order", f"{kf.order} ({kf.order_how})"),
-        ("sensitivity (model DC gain, in the main pulse's direction)",
+        ("sensitivity (model DC gain, mean of both directions)",
          figure_text(kf.sensitivity) if kf.sensitivity.not_determined else
          sensitivity_text(kf.sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)),
         *asymmetry_rows(entry.stored),

@@ -23,8 +23,8 @@ def true_fbsd_hz(truth: dict, level: float) -> float:
 
 def shot_truth_figures(truth: dict) -> dict[str, float]:
     """The figures an analysis reports, as the simulated sensor has them (the truth's "sensor"
-    block, drivers/sim/sensor_truth.py): its DC gain in the main pulse's direction (compression:
-    1, the model is normalised), the mounted main mode's natural frequency and damping ratio, its
+    block, drivers/sim/sensor_truth.py): its DC gain, the mean of both directions (compression 1:
+    the model is normalised), the mounted main mode's natural frequency and damping ratio, its
     FBSD ±5 % and ±10 % (checked against this module's own band_edges), and ε."""
     sensor = truth["sensor"]
     fbsd = {level: true_fbsd_hz(truth, level / 100) for level in (5, 10)}

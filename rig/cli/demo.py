@@ -8,7 +8,7 @@ demo-output/demo-plan.toml), runs it as a campaign into a new run folder DIR/dem
 (the plan authorises its own shots: simulation only), writes the report and prints where
 everything is. In simulation every shot file holds the simulated sensor's truth (its "sensor"
 block: drivers/sim/sensor_truth.py); the demo prints, per shot, each figure with its 95 %
-interval beside that truth (the sensitivity in the main pulse's direction, f_n, ζ, both FBSD
+interval beside that truth (the sensitivity: the mean of both directions, f_n, ζ, both FBSD
 edges, the tension/compression asymmetry ε), "not determined" with the reason where the shot
 does not determine a figure, and the shock sensitivity's verdict. How often these intervals hold
 their truths over many demo campaigns is docs/coverage_realistic.py --demo's study.
