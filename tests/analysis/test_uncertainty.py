@@ -7,15 +7,18 @@ their width is compared with 2 × 1.96 × the spread of the estimates over the s
 1.4826 × the median absolute deviation, as a few shots choose another order). The reference
 chain is set to zero there (its contribution is exact and is tested apart).
 
-What 140 shots can tell: the two-sided 99 % Clopper–Pearson interval of an observed rate spans
-about ±5 points. Every figure's coverage must be consistent with 95 % (that interval holds
-0.95); the DC gain's, the certificate's headline, must also not be below 85 % (its lower end;
-a bound of 0.90 would need some 250 shots, beyond the suite's time budget). The finer figures
+What 140 shots can tell (issue 45 item 3, issue 40): each figure passes with at least
+MIN_INSIDE = 133 of its 140 intervals holding the truth. Were its true coverage 90 %, it would pass
+with probability P(X ≥ 133 | n = 140, p = 0.90) = 0.034 (scipy.stats.binom; ≤ 5 %); at 95 % with
+0.62, at 97 % with 0.96. (Until issue 40 the test asked only that a 99 % Clopper–Pearson interval
+of the rate hold 0.95: a true coverage of 90 % passed it 57 % of the time.) The DC gain's rate
+must also not exceed 99 % (too wide). The finer figures
 come from a 300-shot, 200-draw run of the same study (README "Calibrated"): DC gain 94.0 % (it
 was 92.3 % before the noise the draws add was measured without bias), f_n 95.3 %, ζ 93.7 %,
 FBSD 92.3 %, shock sensitivity 94.7 % (f_n, ζ and the shock sensitivity were 99.3–99.7 %:
-too wide). On the 140 shots here: DC gain 133/140 = 0.950 (99 % interval 0.882–0.985; mean width
-1.06 × 3.92 × the spread of the estimates), ζ 127/140 = 0.907 (0.826–0.959).
+too wide). On the 140 shots here (issue 40's analysis: the band across the pulse's nulls, the Type B rows):
+DC gain 136, f_n 136, ζ 134, FBSD ±5 % and ±10 % 138, S_sh 134 of 140; the median U 2.9–3.1 ×
+the median |error| (before: DC gain 133/140, ζ 127/140).
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ from hopkinson.analysis.uncertainty import Estimate, UncertaintyOptions, evaluat
 from tests.analysis.hard_records import Case, record, truth_figures
 
 NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0,
-                channel_skew_s=0.0)
+                channel_skew_s=0.0, transverse_motion_rel=0.0)  # the transverse row too: these records have none
+MIN_INSIDE = 133  # of SHOTS: see the module docstring for the test's power
 CASE = Case(reference_noise=0.02, response_noise=0.02, samples=10_000)
 SHOTS = 140
 # 150 draws per shot (a 95 % interval's ends from 100 draws scatter by ~0.27 u and cost ~1.5
@@ -71,33 +75,30 @@ def study(shots) -> dict[str, dict[str, list[float]]]:
     return shots["figures"]
 
 
-def _clopper_pearson(inside: int, shots: int, level: float = 0.99) -> tuple[float, float]:
-    """Two-sided `level` Clopper–Pearson interval of a binomial rate (scipy.stats.beta)."""
-    from scipy.stats import beta
-
-    tail = 0.5 * (1.0 - level)
-    lo = float(beta.ppf(tail, inside, shots - inside + 1)) if inside > 0 else 0.0
-    hi = float(beta.ppf(1.0 - tail, inside + 1, shots - inside)) if inside < shots else 1.0
-    return lo, hi
-
-
 def _robust_spread(values: list[float]) -> float:
     v = np.asarray(values, dtype=float)
     return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
+def test_the_test_rejects_a_coverage_of_90_percent() -> None:
+    """The design's power, as the module docstring states it."""
+    from scipy.stats import binom
+
+    assert binom.sf(MIN_INSIDE - 1, SHOTS, 0.90) <= 0.05
+    assert binom.sf(MIN_INSIDE - 1, SHOTS, 0.97) >= 0.9
+
+
 def test_about_95_percent_of_the_intervals_contain_the_truth(study) -> None:
-    """Each figure's coverage is consistent with 95 % (the two-sided 99 % binomial interval of
-    the observed rate holds 0.95); the sensitivity (DC gain), the certificate's headline, is
-    also not far below it (that interval's lower end ≥ 0.85) nor above 99 % (too wide)."""
+    """Each figure's intervals hold the truth in at least MIN_INSIDE of the shots (a true coverage
+    of 90 % passes with probability 0.034); the sensitivity (DC gain), the certificate's headline,
+    not in more than 99 % (too wide)."""
     truth = truth_figures(CASE)
     rates = {}
     for name, row in study.items():
         inside = sum(lo <= truth[name] <= hi for lo, hi in zip(row["lo"], row["hi"], strict=True))
-        lo, hi = _clopper_pearson(inside, SHOTS)
-        rates[name] = (inside / SHOTS, round(lo, 3), round(hi, 3))
-        assert lo <= 0.95 <= hi, (name, rates[name])
-    assert rates["dc_gain"][1] >= 0.85 and rates["dc_gain"][0] <= 0.99, rates
+        rates[name] = inside
+    assert all(inside >= MIN_INSIDE for inside in rates.values()), rates
+    assert rates["dc_gain"] <= 0.99 * SHOTS, rates
 
 
 def test_a_right_model_is_rarely_taken_for_model_error(shots) -> None:
