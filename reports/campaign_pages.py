@@ -181,6 +181,11 @@ LINEARITY_NOTE = ("ISO 16063-22: each shot's sensitivity (its model's DC gain, w
                   "c·(a_max − a_min), the fitted change of S over the levels covered.")
 
 
+def _signed(text: str) -> str:
+    """A number's text with its sign ("+0.12", "−0.3")."""
+    return text if text.startswith(("-", "−")) else f"+{text}"
+
+
 def linearity_page(stats: CampaignStatistics) -> Figure:
     """The sensitivity (DC gain) against the amplitude it is measured at, with each point's U and
     the fitted line, the deviations from the line, and the table of the points."""
@@ -216,12 +221,13 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
     ax_r.set_ylabel("sensitivity − fit (%)")
     ax_r.set_title("Deviation of each shot from the line (± U)", fontsize=9)
     ax_r.grid(alpha=0.3)
-    header = ["shot", "amplitude (g)", "amplitude (km/s²)", "DC gain (× nominal)", "U (95 %)", "− fit (%)"]
+    header = ["shot", "a (g)", "a (km/s²)", "DC gain (× nom.)", "U (95 %)", "− fit (%)"]  # a = Σ|a|³/Σa²
     rows = [[p.label, f"{p.peak_m_s2 / G_M_S2:,.0f}", f"{p.peak_m_s2 / 1e3:.4g}", f"{p.sensitivity:.5g}",
              "—" if p.expanded is None else sig(p.expanded), f"{100 * r:+.2f}"]
             for p, r in zip(points, fit.residuals_rel, strict=True)]
     rows.append(["linearity", f"{fit.peak_min_m_s2 / G_M_S2:,.0f}–{fit.peak_max_m_s2 / G_M_S2:,.0f}", "",
-                 f"deviation {100 * fit.deviation_rel:+.3g} %", f"± {100 * fit.expanded_deviation_rel:.2g} %",
+                 f"deviation {_signed(to_decimals_of(100 * fit.deviation_rel, 100 * fit.expanded_deviation_rel))} %",
+                 f"± {100 * fit.expanded_deviation_rel:.2g} %",
                  f"Birge ratio {fit.birge_ratio:.2f}" if fit.birge_ratio is not None else ""])
     table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
     ax_note.axis("off")

@@ -300,7 +300,9 @@ def test_campaign_report_pdf(tmp_path: Path, campaign_report) -> None:
     entries = report.shots
     (pdf,) = write_report(report, [tmp_path / "c.pdf"], pages=pages)
     data = pdf.read_bytes()
-    assert pdf_pages(data) == 1 + 3 + 4 * 2 + 1  # summary, 3 campaign pages (one the sine), 2 shots, 1 failed
+    # summary, 4 campaign pages (one the sine, one the linearity: since issue 40 every analysed shot's DC gain
+    # enters it, where the shots' S_sh did before), 2 shots, 1 failed
+    assert pdf_pages(data) == 1 + 4 + 4 * 2 + 1
     text = pdf_text(data)
     stats = campaign_statistics(entries, report.sine_calibration)
     for needle in ("Cross-validation", "Spread across 2 analysed shots", "s004-r1 (UNKNOWN)",
