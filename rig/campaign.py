@@ -211,7 +211,7 @@ class CampaignOutcome:
 
 
 def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: LevelChoice | None = None,
-                 pressure_bar: float | None = None) -> ShotRequest:
+                 pressure_bar: float | None = None, campaign_uuid: str | None = None) -> ShotRequest:
     """The sequencer's request for a planned shot: file `shots/<id>.h5`, the plan's settings
     (for a target level, the pressure `level` chose, or the `pressure_bar` it was fired at).
 
@@ -227,7 +227,8 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
         sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
         order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
         uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
-        out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
+        out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, campaign_uuid=campaign_uuid,
+        shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
     )
 
@@ -434,7 +435,7 @@ class CampaignRunner:
         """One shot through the sequencer, journaled by its hooks, settled at its end."""
         assert self._journal is not None
         level = self._level_choice(shot)
-        request = shot_request(self.plan, shot, self.run_folder, level)
+        request = shot_request(self.plan, shot, self.run_folder, level, campaign_uuid=self._journal.campaign_uuid)
         current = self._current = self._progress(shot, request.pressure_bar)
         self._mark_failure = None
         if self._on_shot_start is not None:

@@ -93,6 +93,7 @@ class ShotRequest:
     out_dir: Path = Path("shots")
     shot_name: str | None = None  # None -> "shot-<UTC time>-<8 hex>"
     campaign_id: str | None = None
+    campaign_uuid: str | None = None  # the campaign's identity (rig.journal), recorded in the shot file
     shot_id: str | None = None
     shot_index: int | None = None
     confirm_timeout_s: float | None = None  # how long ARM waits for the fire confirmation; None -> timeouts.arm_s
@@ -275,6 +276,7 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
         shot_id=request.shot_id,
         shot_index=request.shot_index,
         campaign_id=request.campaign_id,
+        campaign_uuid=request.campaign_uuid,
         simulated_truth=captured.truth,
     )
 
