@@ -43,9 +43,10 @@ def issue(db: LabDatabase, *, campaign: str, prefix: str, authorised_by: str, co
         camp = uow.campaigns.find(campaign)
         if camp.sensor_id is None:
             raise LabError(f"campaign {camp.name}: its shots name no sensor serial; no certificate")
-        simulated = [r.shot_name or r.shot_uuid for r in uow.shots.results(campaign=camp) if r.simulated]
+        results = uow.shots.results(campaign=camp)
+        simulated = [r.shot_name or r.shot_uuid for r in results if r.simulated]
         if simulated and not specimen:
-            raise LabError(f"campaign {camp.name}: {len(simulated)} of its shots were made by the simulator "
+            raise LabError(f"campaign {camp.name}: {len(simulated)} of its {len(results)} shots were made by the simulator "
                            f"({', '.join(simulated[:3])}{' …' if len(simulated) > 3 else ''}): no certificate; "
                            "--specimen issues a specimen marked as simulated data")
         revision = uow.certificates.revision_for(camp, specimen, replaces)

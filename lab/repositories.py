@@ -62,6 +62,7 @@ class ShotResult:
     context: dict[str, Any] = field(default_factory=dict)
     file_sha256: str = ""
     path: str = ""
+    analysis_software: str = ""  # the version of hopkinson that analysed it
 
     @property
     def simulated(self) -> bool:
@@ -308,7 +309,8 @@ def _shot_result(row: Any) -> ShotResult:
         peak_acceleration_m_s2=analysis.peak_acceleration_m_s2, pulse_width_s=analysis.pulse_width_s,
         response_unit=analysis.response_unit or "", figures=analysis_figures(analysis),
         simulated_marks=tuple(m for m in shot.simulated_marks.split("; ") if m) or (("flag",) if shot.simulated else ()),
-        context=json.loads(shot.context_json or "{}"), file_sha256=analysis.file_sha256, path=shot.path)
+        context=json.loads(shot.context_json or "{}"), file_sha256=analysis.file_sha256, path=shot.path,
+        analysis_software=analysis.software_version or "")
 
 
 @dataclass(frozen=True)

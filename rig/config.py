@@ -20,7 +20,8 @@ one per section:
     [analysis]           grating_pitch_m, orders, sensitivity_v_per_m_s2, sample_rate_hz,
                          dcm_widening, dcm_noise_gain_limit, amp_gain_2, sensitivity_2_v_per_m_s2
     [lab]                name, address, accreditation, certificate_prefix, rig, decision_rule
-      [[lab.reference_chain]]  item, certificate, issued_by, u_rel, due ("YYYY-MM-DD")
+      [[lab.reference_chain]]  item, certificate, issued_by, u_rel, due ("YYYY-MM-DD"), budget
+      [[lab.signatories]]      name, role (who may authorise a certificate); [lab] country (for the DCC)
     [database]           url (sqlite:///FILE or postgresql://…; default SQLite in the data folder)
 
 `load_sim_config(path) -> SimConfig` does the same for the simulator's file ([servers],
@@ -338,6 +339,17 @@ class ReferenceCertificateConfig:
     issued_by: str = ""
     u_rel: float = 0.0  # relative standard uncertainty, k = 1 (0: not stated)
     due: str = ""
+    # the [uncertainty] input this item's u_rel is (e.g. "grating_pitch_rel"): a certificate is
+    # refused when the two disagree (hopkinson.lab.certificate); "" : not an input of the budget
+    budget: str = ""
+
+
+@dataclass(frozen=True)
+class SignatoryConfig:
+    """[[lab.signatories]]: a person who may authorise certificates, and their role."""
+
+    name: str
+    role: str
 
 
 @dataclass(frozen=True)
@@ -351,6 +363,8 @@ class LabConfig:
     rig: str = ""  # this rig's name in the lab's record ("" : the configuration file's name)
     decision_rule: str = "simple"  # "simple" (ILAC-G8 w = 0) or "guarded" (w = U)
     reference_chain: tuple[ReferenceCertificateConfig, ...] = ()
+    signatories: tuple[SignatoryConfig, ...] = ()  # none: no certificate can be authorised
+    country: str = ""  # ISO 3166-1 alpha-2 code of the lab (a Digital Calibration Certificate states it)
 
 
 @dataclass(frozen=True)
@@ -718,6 +732,15 @@ def _check_lab(lab: LabConfig, database: DatabaseConfig, path: Path) -> None:
             except ValueError:
                 raise ConfigError(f"{path}: lab.reference_chain[{i}].due: a date YYYY-MM-DD (as a string), "
                                   f"got {link.due!r}") from None
+        budget_keys = [f.name for f in dataclasses.fields(UncertaintyConfig) if f.name.endswith("_rel")]
+        if link.budget and link.budget not in budget_keys:
+            raise ConfigError(f"{path}: lab.reference_chain[{i}].budget: one of {', '.join(budget_keys)} "
+                              f"(the [uncertainty] input it is), got {link.budget!r}")
+    if lab.country and not re.fullmatch(r"[A-Z]{2}", lab.country):
+        raise ConfigError(f"{path}: lab.country: an ISO 3166-1 alpha-2 code such as \"DE\", got {lab.country!r}")
+    for i, person in enumerate(lab.signatories):
+        if not person.name.strip() or not person.role.strip():
+            raise ConfigError(f"{path}: lab.signatories[{i}]: name and role must not be empty")
     scheme = database.url.split(":", 1)[0].split("+", 1)[0]
     if database.url and scheme not in ("sqlite", "postgresql", "postgres"):
         raise ConfigError(f"{path}: database.url: a sqlite:///FILE or postgresql://… URL, got scheme {scheme!r}")

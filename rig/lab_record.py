@@ -80,6 +80,8 @@ def shot_context(meta: ShotMeta) -> dict[str, Any]:
         "instruments": dict(meta.instruments),
         "uncertainty": dict(config.get("uncertainty") or {}),
         "mounting": str((config.get("lab") or {}).get("mounting", "")),
+        "reference_chain": [dict(r) for r in (config.get("lab") or {}).get("reference_chain") or ()
+                            if isinstance(r, dict)],
     }
 
 
@@ -287,3 +289,60 @@ def attach_recorder(bus: EventBus, config: RigConfig, stack: contextlib.ExitStac
         stack.callback(unsubscribe)
         stack.callback(recorder.close)
     return recorder
+
+
+def verify_record(repo: LabRepository) -> dict[str, Any]:
+    """`lab verify`: every certificate's content against its stored SHA-256, every shot file
+    against the verification and the raw SHA-256 kept since its first import, every analysis
+    row against an analysis the shot file holds. Problems are listed; files not found are
+    listed apart (moved or archived: they cannot be checked here)."""
+    import json as json_module
+
+    from hopkinson.lab.repositories import analysis_figures
+    from hopkinson.rig.shotfile import analysis_results
+
+    problems: list[str] = []
+    missing: list[str] = []
+    with repo.reading() as uow:
+        certificates = uow.certificates.every()
+        shots = uow.shots.every()
+        for c in certificates:
+            if hashlib.sha256(c.content_json.encode()).hexdigest() != c.content_sha256:
+                problems.append(f"certificate {c.number}: its stored content does not match its SHA-256 (changed)")
+            elif json_module.loads(c.content_json).get("number") not in (c.number, None):
+                problems.append(f"certificate {c.number}: its content names another number")
+    for shot, analyses in shots:
+        path = Path(shot.path)
+        if not path.is_file():
+            missing.append(str(path))
+            continue
+        found = verify_shot(path, shot.raw_sha256)
+        if found:
+            problems.append(f"shot {shot.uuid} ({path}): {'; '.join(found)}")
+            continue
+        held = []
+        for version in read_shot(path, load_raw=False).analyses:
+            results = analysis_results(path, int(version["version"]))
+            if results:
+                held.append(figures_of(KeyFigures.from_results(results)))
+        for a in analyses:
+            if a.state != "analysed":
+                continue
+            stored = analysis_figures(a)
+            if not any(_same_figures(stored, h) for h in held):
+                problems.append(f"shot {shot.uuid} ({path}): analysis {a.id} (file {a.file_sha256[:12]}…) holds "
+                                f"figures no analysis in the shot file has (changed in the database)")
+    return {"certificates": len(certificates), "shots": len(shots), "problems": problems, "missing_files": missing}
+
+
+def _same_figures(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    for key in a:
+        x, y = a.get(key), b.get(key)
+        if (x is None) != (y is None):
+            return False
+        if x is None:
+            continue
+        for p, q in ((x.value, y.value), (x.u, y.u)):
+            if (p is None) != (q is None) or (p is not None and abs(p - q) > 1e-12 * max(1.0, abs(q))):
+                return False
+    return True
