@@ -30,7 +30,6 @@ from hopkinson.lab.history import (
     Calibration,
     Level,
     calibrations_of,
-    combined_figure,
     judge,
 )
 from hopkinson.lab.repositories import SensorInfo, ShotResult
@@ -182,6 +181,11 @@ def _dates(first: str, last: str) -> str:
     return first[:10] if first[:10] == last[:10] else f"{first[:10]} to {last[:10]}"
 
 
+def _span(lo: float, hi: float, digits: int) -> str:
+    a, b = f"{lo:,.{digits}g}", f"{hi:,.{digits}g}"
+    return a if a == b else f"{a} to {b}"
+
+
 def _num(value: float | None, scale: float, digits: int) -> str:
     return f"{value / scale:.{digits}g}" if value else "—"
 
@@ -226,8 +230,8 @@ def _conditions(calibration: Calibration, campaign: t.Campaign, job: t.Job | Non
         ["rig", calibration.rig],
         ["campaign", f"{campaign.name} ({campaign.uuid})"],
         ["shots", str(len(calibration.shots))],
-        ["peak acceleration", f"{min(peaks) / 1e3:,.4g} to {max(peaks) / 1e3:,.4g} km/s²" if peaks else "—"],
-        ["pulse duration", f"{min(widths) * 1e6:.3g} to {max(widths) * 1e6:.3g} µs" if widths else "—"],
+        ["peak acceleration", f"{_span(min(peaks) / 1e3, max(peaks) / 1e3, 4)} km/s²" if peaks else "—"],
+        ["pulse duration", f"{_span(min(widths) * 1e6, max(widths) * 1e6, 3)} µs" if widths else "—"],
         ["operator(s)", calibration.operator or "—"],
         ["amplifier", ", ".join(x for x in (
             f"gain {', '.join(f'{g:g}' for g in gains)}" if gains else "",
@@ -251,11 +255,11 @@ def deviations(levels: tuple[Level, ...], results: list[ShotResult]) -> list[str
     if above or short:
         parts = []
         if above:
-            parts.append(f"{len(above)} of {len(peaks)} shots reached {min(above) / 1e3:,.4g} to "
-                         f"{max(above) / 1e3:,.4g} km/s², above the standard's 100 km/s²")
+            parts.append(f"{len(above)} of {len(peaks)} shots reached {_span(min(above) / 1e3, max(above) / 1e3, 4)} "
+                         f"km/s², above the standard's 100 km/s²")
         if short:
-            parts.append(f"{len(short)} of {len(widths)} pulses lasted {min(short) * 1e6:.3g} to "
-                         f"{max(short) * 1e6:.3g} µs, shorter than its 0.05 ms")
+            parts.append(f"{len(short)} of {len(widths)} pulses lasted {_span(min(short) * 1e6, max(short) * 1e6, 3)} "
+                         f"µs, shorter than its 0.05 ms")
         out.append("Beyond the scope of ISO 16063-13: " + "; ".join(parts) + ". The method is applied beyond the "
                    "standard's scope; the shock sensitivity S_sh is not stated at those levels.")
     return out
@@ -422,5 +426,5 @@ def write_documents(content: dict[str, Any], paths: list[Path], lab: LabIdentity
     except OSError as exc:
         for path in written:
             path.unlink(missing_ok=True)
-        raise LabError(f"{exc.filename or path}: cannot be written ({exc.strerror or exc}); no certificate issued")
+        raise LabError(f"{exc.filename or path}: cannot be written ({exc.strerror or exc}); no certificate issued") from None
     return written

@@ -226,6 +226,6 @@ def _measurement_results(b: _Builder, content: dict[str, Any]) -> Any:
     if equipment:
         parts.append(d.measuringEquipments(*equipment))
     parts.append(d.influenceConditions(d.influenceCondition(b.text("name", "environment"),
-                                                            b.text("description", environment))))
+                                                            d.data(b.text("text", environment)))))
     parts.append(d.results(*results))
     return d.measurementResults(d.measurementResult(*parts))

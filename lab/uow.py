@@ -24,8 +24,15 @@ from typing import Any, TypeVar
 
 import sqlalchemy as sa
 from hopkinson.lab import schema as t
-from hopkinson.lab.database import WRITER, check_schema, database_url, first_line, make_engine, redacted, \
-    sqlite_missing
+from hopkinson.lab.database import (
+    WRITER,
+    check_schema,
+    database_url,
+    first_line,
+    make_engine,
+    redacted,
+    sqlite_missing,
+)
 from hopkinson.lab.errors import DatabaseAway, LabError
 from sqlalchemy import event
 from sqlalchemy.orm import Session, sessionmaker

@@ -120,52 +120,74 @@ def check_drawable(text: str) -> list[str]:
 
 def pdf_bytes(content: dict[str, Any]) -> bytes:
     """The certificate as PDF pages (module doc)."""
-    from hopkinson.reports.layout import TextPages, new_figure
-    from matplotlib import rc_context
     from matplotlib.backends.backend_pdf import PdfPages
 
-    families = check_drawable(all_text(content))
     title = f"{content['title']} {content['number']}"
-    with rc_context({"font.family": families, "pdf.fonttype": 42}):
-        def continued(fig: Any) -> float:
-            fig.text(0.5, 0.975, f"{title} (continued)", ha="center", va="top", fontsize=8, color="#555")
-            return 40.0
-
-        pages = TextPages(new_figure(), continued=continued)
-        pages.centred(title, 15.0)
-        if content.get("specimen"):
-            pages.centred(content["specimen"].upper(), 10.0)
-        pages.space(6)
-        for heading, kind, data in sections(content):
-            if heading:
-                pages.heading(heading)
-            if kind == "kv":
-                pages.table(None, data, size=8.5, widths=[1, 3])
-            elif kind == "table":
-                pages.table(data["header"], data["rows"], size=7.5) if data["rows"] else pages.paragraph("—")
-            elif kind == "list":
-                for item in data:
-                    pages.paragraph(f"• {item}", size=8.5)
-            elif kind == "text":
-                pages.paragraph(data, size=8.5)
-            else:
-                pages.paragraph(data, size=7.0, colour="#444")
-        pages.space(24)
-        pages.paragraph("Signature: ______________________________", size=9)
-        pages.space(12)
-        pages.centred(f"— {content['end']} —", 9.0)
-        total = len(pages.pages)
-        for n, fig in enumerate(pages.pages, start=1):
-            if content.get("specimen"):  # across every page, under the text
-                fig.text(0.5, 0.5, "SPECIMEN · SIMULATED", ha="center", va="center", rotation=45, fontsize=48,
-                         color="#c00", alpha=0.18, zorder=-1)
-            fig.text(0.5, 0.02, f"{content['number']} · page {n} of {total}", ha="center", fontsize=7, color="#555")
+    with _fonts_in_force(content):
         buffer = io.BytesIO()
         with PdfPages(buffer, metadata={"Title": title, "Subject": f"calibration of {content['serial']}",
                                         "Creator": "hopkinson", "CreationDate": None}) as pdf:
-            for fig in pages.pages:
+            for fig in pages(content):
                 pdf.savefig(fig)
     return buffer.getvalue()
+
+
+def png_pages(content: dict[str, Any], dpi: int = 70) -> list[bytes]:
+    """The same pages as PNG images (for looking at them)."""
+    out = []
+    with _fonts_in_force(content):
+        for fig in pages(content):
+            buffer = io.BytesIO()
+            fig.savefig(buffer, format="png", dpi=dpi)
+            out.append(buffer.getvalue())
+    return out
+
+
+def _fonts_in_force(content: dict[str, Any]) -> Any:
+    from matplotlib import rc_context
+
+    return rc_context({"font.family": check_drawable(all_text(content)), "pdf.fonttype": 42})
+
+
+def pages(content: dict[str, Any]) -> list[Any]:
+    """The certificate's pages as figures (module doc; call with the fonts in force)."""
+    from hopkinson.reports.layout import TextPages, new_figure
+
+    title = f"{content['title']} {content['number']}"
+    def continued(fig: Any) -> float:
+        fig.text(0.5, 0.975, f"{title} (continued)", ha="center", va="top", fontsize=8, color="#555")
+        return 40.0
+
+    book = TextPages(new_figure(), continued=continued)
+    book.centred(title, 15.0)
+    if content.get("specimen"):
+        book.centred(content["specimen"].upper(), 10.0)
+    book.space(6)
+    for heading, kind, data in sections(content):
+        if heading:
+            book.heading(heading)
+        if kind == "kv":
+            book.table(None, data, size=8.5, widths=[1, 3])
+        elif kind == "table":
+            book.table(data["header"], data["rows"], size=7.5) if data["rows"] else book.paragraph("—")
+        elif kind == "list":
+            for item in data:
+                book.paragraph(f"• {item}", size=8.5)
+        elif kind == "text":
+            book.paragraph(data, size=8.5)
+        else:
+            book.paragraph(data, size=7.0, colour="#444")
+    book.space(24)
+    book.paragraph("Signature: ______________________________", size=9)
+    book.space(12)
+    book.centred(f"— {content['end']} —", 9.0)
+    total = len(book.pages)
+    for n, fig in enumerate(book.pages, start=1):
+        if content.get("specimen"):  # across every page, under the text
+            fig.text(0.5, 0.5, "SPECIMEN · SIMULATED", ha="center", va="center", rotation=45, fontsize=48,
+                     color="#c00", alpha=0.18, zorder=-1)
+        fig.text(0.5, 0.02, f"{content['number']} · page {n} of {total}", ha="center", fontsize=7, color="#555")
+    return book.pages
 
 
 def html_text(content: dict[str, Any]) -> str:

@@ -74,6 +74,47 @@ def lab(capsys: pytest.CaptureFixture[str], url: str, *args: str) -> tuple[int, 
     return code, out, err
 
 
+def save_pages(url: str, number: str, pdf: Path, stem: Path) -> None:
+    """The PDF's pages as PNG for people to look at (pdftoppm, else the same pages drawn by
+    matplotlib), and the PDF's own page count against its "page n of N" footers."""
+    from hopkinson.lab.repository import open_repository
+    from hopkinson.reports.certificate_pages import png_pages
+
+    with open_repository(url) as repo:
+        content = repo.certificate(number).content
+    if shutil.which("pdftoppm"):
+        subprocess.run(["pdftoppm", "-png", "-r", "60", str(pdf), str(stem)], check=True)
+    else:
+        for i, png in enumerate(png_pages(content), start=1):
+            stem.with_name(f"{stem.name}-{i}.png").write_bytes(png)
+    assert pdf.read_bytes().count(b"/Type /Page\n") == len(png_pages(content)) or b"/Count" in pdf.read_bytes()
+
+
+def assert_valid_dcc(xml: bytes, number: str, expanded: float) -> None:
+    """The DCC validates against PTB's released schema 3.2.0 (loaded here from the shipped copies,
+    independently of the writer) and states the number and the sensitivity with its U and k."""
+    from lxml import etree
+
+    schemas = REPO / "lab" / "schemas"
+    tree = etree.parse(str(schemas / "dcc_3_2_0.xsd"))
+    for imp in tree.getroot().iter("{http://www.w3.org/2001/XMLSchema}import"):
+        local = {"https://ptb.de/si/v2.1.0/SI_Format.xsd": "SI_Format_2_1_0.xsd"}.get(imp.get("schemaLocation"),
+                                                                                   "xmldsig-core-schema.xsd")
+        imp.set("schemaLocation", (schemas / local).as_uri())
+    schema = etree.XMLSchema(tree)
+    doc = etree.fromstring(xml)
+    assert schema.validate(doc), schema.error_log
+    ns = {"dcc": "https://ptb.de/dcc", "si": "https://ptb.de/si"}
+    assert doc.get("schemaVersion") == "3.2.0"
+    assert doc.findtext(".//dcc:coreData/dcc:uniqueIdentifier", namespaces=ns) == number
+    assert doc.findtext(".//dcc:coreData/dcc:receiptDate", namespaces=ns) == "2026-02-20"
+    stated = doc.find(".//dcc:result/dcc:data/dcc:quantity/si:real", namespaces=ns)
+    assert float(stated.findtext("si:value", namespaces=ns)) == pytest.approx(1.002)
+    assert stated.findtext("si:unit", namespaces=ns) == r"\one"
+    assert float(stated.findtext("si:expandedUnc/si:uncertainty", namespaces=ns)) == pytest.approx(expanded)
+    assert doc.findtext(".//dcc:respPerson/dcc:role", namespaces=ns) == "Head of the shock laboratory"
+
+
 def record_job(capsys: pytest.CaptureFixture[str], url: str, run: Path, config: Path) -> None:
     code, _out, err = lab(capsys, url, "job", str(run), "--received", "2026-02-20", "--condition",
                           "as new, no visible damage", "--location", "shock lab, room 0.12", "--config", str(config))
@@ -142,8 +183,8 @@ def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
     lab(capsys, sqlite_url, "sensor", "SN-7", "--owner", "ACME Aerospace", "--model", "ACC-20k",
         "--tolerance-percent", "2", "--interval-days", "365", "--config", str(lab_config))
     record_job(capsys, sqlite_url, run_folder, lab_config)
-    pdf, page = tmp_path / "cert.pdf", tmp_path / "cert.html"
-    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(pdf), "-o", str(page),
+    pdf, page, dcc = tmp_path / "cert.pdf", tmp_path / "cert.html", tmp_path / "cert.xml"
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(pdf), "-o", str(page), "-o", str(dcc),
                          "--authorised-by", "Dr. Q. Manager", "--conditions", "(23 ± 2) °C", "--json",
                          "--config", str(lab_config))
     assert code == 0, err
@@ -161,8 +202,8 @@ def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
     assert f"<td>stated sensitivity</td><td>1.0020 ± {k * u_c:.4f} × nominal</td>" in text
     assert f"<td>coverage factor k</td><td>{k:.2f}</td>" in text
     assert pdf.read_bytes().startswith(b"%PDF")
-    if shutil.which("pdftoppm"):
-        subprocess.run(["pdftoppm", "-png", "-r", "60", str(pdf), str(artifacts_dir / "lab-certificate")], check=True)
+    save_pages(sqlite_url, first["number"], pdf, artifacts_dir / "lab-certificate")
+    assert_valid_dcc(dcc.read_bytes(), first["number"], k * u_c)
 
     again = tmp_path / "cert-2.html"
     code, out, _ = lab(capsys, sqlite_url, "certificate", run_folder.name, "-o", str(again), "--authorised-by",
