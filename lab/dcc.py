@@ -212,7 +212,7 @@ def _measurement_results(b: _Builder, content: dict[str, Any]) -> Any:
     if levels:
         results.append(d.result(b.text("name", "per level"), d.data(d.list(*levels))))
     fbsd = [b.quantity(f"FBSD ±{level} %", f"fbsd_{level}", f["value"], r"\hertz", f.get("U"), 2.0)
-            for level, f in content["fbsd"].items() if f and f.get("value")]
+            for level, f in sorted(content["fbsd"].items(), key=lambda kv: float(kv[0])) if f and f.get("value")]
     if fbsd:
         results.append(d.result(b.text("name", "band of small distortion"), d.data(*fbsd)))
     methods = d.usedMethods(d.usedMethod(b.text("name", "primary shock calibration, Hopkinson bar"),

@@ -38,7 +38,7 @@ from hopkinson.fileio import atomic_write
 SPOOL_NAME = "lab-spool.jsonl"
 QUARANTINE_NAME = "lab-quarantine.jsonl"
 LEGACY = ""  # the database of a line written before lines named theirs
-_lock = threading.Lock()  # one process's threads take turns
+_lock = threading.RLock()  # one process's threads take turns (re-entered: a drain quarantines)
 
 
 def spool_path() -> Path:

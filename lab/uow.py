@@ -128,8 +128,7 @@ class LabDatabase:
         try:
             yield UnitOfWork(session)
         finally:
-            session.rollback()
-            session.close()
+            session.close()  # its rows stay readable, detached (a rollback would expire them)
 
     def transact(self, actor: str, work: Callable[[UnitOfWork], T], **info: Any) -> T:
         """Run `work` in one unit of work, again when it lost a race on a unique key or met

@@ -147,10 +147,19 @@ def check_write_flags(args: argparse.Namespace) -> None:
     if not outputs:
         return
     inputs = [p for name, value in vars(args).items() if name not in WRITE_FLAGS
-              for p in paths(value) if Path(p).is_file()]
+              for p in paths(value) if _is_file(p)]
     if hasattr(args, "sim") and hasattr(args, "config"):
         inputs.append(rig_config_path(args))  # read even when not named
     check_writes(outputs, inputs)
+
+
+def _is_file(value: Any) -> bool:
+    """Whether an argument names an existing file (a text no file can be named, e.g. longer
+    than the system's name limit, is not one)."""
+    try:
+        return Path(value).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -152,7 +152,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     sim_state: dict[str, Any] | None = None
     with contextlib.ExitStack() as stack:
         subscribe_outputs(stack, bus, args, what=f"shot {request.shot_path().name}")
-        attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
+        recorder = attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
         truth = None
         if args.sim:
             from hopkinson.rig.sim_session import sim_session
@@ -177,7 +177,18 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
                                  message=f"{latch.reason} after the shot ended: the command exits {EXIT_ABORTED}"))
         if args.sim:
             sim_state = session.state()
-    return _report(args, shot.outcome, sim_state, latch, shot.safe_again)
+    code = _report(args, shot.outcome, sim_state, latch, shot.safe_again)
+    return not_recorded_exit(recorder, code)
+
+
+def not_recorded_exit(recorder: Any, code: int) -> int:
+    """A shot whose lab record is in neither the database nor the spool never exits 0."""
+    from hopkinson.rig.lab_record import EXIT_NOT_RECORDED
+
+    for path in recorder.not_kept:
+        sys.stderr.write(f"hopkinson: error: the lab record of {path} is in neither the database nor the spool; "
+                         f"the shot file is kept: run `hopkinson lab import {path}`\n")
+    return EXIT_NOT_RECORDED if recorder.not_kept and code == 0 else code
 
 
 def subscribe_outputs(stack: contextlib.ExitStack, bus: Any, args: argparse.Namespace, what: str,
