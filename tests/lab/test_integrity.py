@@ -249,7 +249,7 @@ def test_one_verification_serves_report_analyse_and_import(tmp_path: Path, url: 
     # the record keeps the raw SHA-256 of the first import: a file whose attribute was rewritten too is caught
     good = tmp_path / "good.h5"
     write_made_up_shot(good, serial="SN-V")
-    with open_repository(url) as repo:
+    with open_repository(url):
         kept = shot_record(good).raw_sha256
         assert verify_shot(good, kept) == [] and "kept by the lab's record" in verify_shot(good, "0" * 64)[0]
 
@@ -282,7 +282,7 @@ def test_smaller_faults(tmp_path: Path, url: str, lab_config: Path, capsys: pyte
     code, _out, err = lab(capsys, url, "certificate", "nothing", "-o", str(tmp_path / "c.pdf"), "--authorised-by",
                           "Q", "--customer", long_text, "--conditions", long_text, "--config", str(lab_config))
     assert code == 2 and "File name too long" not in err and "not in the lab's record" in err
-    for bad, why in ((f"sqlite:///relative.sqlite", "absolute path"),
+    for bad, why in (("sqlite:///relative.sqlite", "absolute path"),
                      ("sqlite:////nonexistent-dir/x/lab.sqlite", "does not exist")):
         code, _out, err = lab(capsys, bad, "status", "--config", str(lab_config))
         assert code == 2 and why in err
