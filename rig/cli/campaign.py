@@ -109,7 +109,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         check_plan,
         prepare_run,
     )
-    from hopkinson.rig.cli.shot import report_reclaimed, subscribe_outputs
+    from hopkinson.rig.cli.shot import not_recorded_exit, report_reclaimed, subscribe_outputs
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig
     from hopkinson.rig.events import EventBus
@@ -147,7 +147,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         if printer is not None:
             bus.subscribe(printer)
         subscribe_outputs(stack, bus, args, what=f"campaign {run.path.name}", lines=False)
-        attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
+        recorder = attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
         report_reclaimed(control)
         runner = CampaignRunner(run, plan, control.instruments, config, bus,
                                 on_shot_start=fire_log.set_shot if fire_log is not None else None)
@@ -177,7 +177,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         return EXIT_ABORTED
     if outcome.exit_code != 0:
         sys.stderr.write(f"hopkinson: error: {outcome.message}\n")
-    return outcome.exit_code
+    return not_recorded_exit(recorder, outcome.exit_code)
 
 
 def _write_report(run_folder: Path, formats: list[str]) -> list[str]:
