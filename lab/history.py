@@ -157,7 +157,7 @@ def calibrations_of(results: list[ShotResult], sensor: SensorInfo | None = None)
 
 
 def absolute_sensitivity(shots: list[ShotResult], sensor: SensorInfo | None) -> tuple[Figure | None, str]:
-    """The stated sensitivity in the sensor's unit (else V/(m/s²) at the conditioner's input),
+    """The stated sensitivity in the sensor's unit (else V, mV or µV per m/s² at the conditioner's input),
     from each shot's figure and the scale its response was divided by; (None, "") when a shot's
     scale is not recorded."""
     scaled: list[Figure | None] = []
@@ -175,8 +175,11 @@ def absolute_sensitivity(shots: list[ShotResult], sensor: SensorInfo | None) -> 
         return None, ""
     wanted = sensor.sensitivity_unit if sensor and sensor.sensitivity_unit else ""
     k = units.factor("V/(m/s²)", wanted) if wanted else None
-    if k is None:
-        return base, "V/(m/s²)"
+    if k is None:  # no unit recorded for the sensor (or not convertible): a readable prefix
+        for scale, unit in ((1.0, "V/(m/s²)"), (1e3, "mV/(m/s²)"), (1e6, "µV/(m/s²)")):
+            if abs(base.value or 0.0) * scale >= 0.1:
+                break
+        return _scaled(base, scale), unit
     return _scaled(base, k), wanted
 
 

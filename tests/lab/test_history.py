@@ -93,3 +93,18 @@ def test_without_a_tolerance_there_is_no_statement_and_overdue_is_flagged() -> N
     assert history.due == date(2026, 1, 31) and history.overdue
     assert history.flags == ["overdue since 2026-01-31"]
     assert not history_of([shot("2026-01-01T08:00:00Z", 1.0, 0.001)], today=date(2026, 1, 31)).overdue
+
+
+def test_the_stated_sensitivity_in_the_sensors_own_unit() -> None:
+    """A ratio to the nominal the rig scaled by, times that nominal (V/(m/s²) at the
+    conditioner's input), in the sensor's unit: 1.01 × 2e-7 V/(m/s²) = 1.981e-3 mV/g."""
+    from dataclasses import replace
+
+    shots = [replace(shot("2026-01-01T00:00:00Z", 1.01, 0.001), context={"sensitivity_v_per_m_s2": 2e-7})]
+    sensor = SensorInfo("SN-7", "", "", 2e-3, "mV/g", 2.0, None)
+    (c,) = calibrations_of(shots, sensor)
+    assert c.absolute_unit == "mV/g"
+    assert c.absolute.value == pytest.approx(1.01 * 2e-7 * 1e3 * 9.80665, rel=1e-12)
+    assert c.absolute.expanded == pytest.approx(student_t.ppf(0.975, math.inf) * 0.001 * 2e-7 * 1e3 * 9.80665)
+    (raw,) = calibrations_of([replace(shots[0], context={})], sensor)
+    assert raw.absolute is None  # no scale recorded: never a guess
