@@ -176,10 +176,9 @@ def absolute_sensitivity(shots: list[ShotResult], sensor: SensorInfo | None) -> 
     wanted = sensor.sensitivity_unit if sensor and sensor.sensitivity_unit else ""
     k = units.factor("V/(m/s²)", wanted) if wanted else None
     if k is None:  # no unit recorded for the sensor (or not convertible): a readable prefix
-        for scale, unit in ((1.0, "V/(m/s²)"), (1e3, "mV/(m/s²)"), (1e6, "µV/(m/s²)")):
-            if abs(base.value or 0.0) * scale >= 0.1:
-                break
-        return _scaled(base, scale), unit
+        prefixes = ((1.0, "V/(m/s²)"), (1e3, "mV/(m/s²)"), (1e6, "µV/(m/s²)"))
+        scale, shown = next((p for p in prefixes if abs(base.value or 0.0) * p[0] >= 0.1), prefixes[-1])
+        return _scaled(base, scale), shown
     return _scaled(base, k), wanted
 
 
