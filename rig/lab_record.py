@@ -93,11 +93,12 @@ def shot_record(path: str | Path, recorded_raw_sha256: str | None = None) -> Sho
     problems = verify_shot(path, recorded_raw_sha256)
     if problems:
         raise TamperedShotError(f"{path}: {'; '.join(problems)}; refused")
-    shot = read_shot(path, load_raw=True)
-    assert shot.raw is not None
     with h5py.File(path, "r") as f:
         analysis = dict(f["analysis"].attrs) if "analysis" in f else {}
         flag = bool(f.attrs.get("simulated", False))
+        written = f.attrs.get("raw_sha256")  # verified against the channels above
+    shot = read_shot(path, load_raw=written is None)
+    digest = str(written) if written is not None else raw_sha256(shot.raw)
     meta = shot.meta
     lab = meta.config.get("lab") or {}
     rig = str(lab.get("rig") or Path(str(meta.config.get("path") or "unnamed rig")).stem)
@@ -108,7 +109,7 @@ def shot_record(path: str | Path, recorded_raw_sha256: str | None = None) -> Sho
     campaign_uuid = meta.campaign_uuid or (read_campaign_uuid(path.parent.parent / JOURNAL_NAME) if in_run else None)
     key_figures = KeyFigures.from_results(shot.results) if shot.state == "analysed" and shot.results else None
     return ShotRecord(
-        uuid=meta.uuid, raw_sha256=raw_sha256(shot.raw), file_sha256=file_sha256(path), path=str(path),
+        uuid=meta.uuid, raw_sha256=digest, file_sha256=file_sha256(path), path=str(path),
         state=shot.state, operator=meta.operator, utc_time=meta.utc_time, accelerometer_model=meta.accelerometer_model,
         accelerometer_serial=meta.accelerometer_serial, pressure_bar=meta.pressure_bar, projectile=meta.projectile,
         simulated_marks=simulated_marks(meta, flag), software_version=meta.software_version, rig=rig,

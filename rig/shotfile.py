@@ -401,11 +401,12 @@ def verify_shot(path: str | Path, recorded_raw_sha256: str | None = None) -> lis
     before the checksums has none to compare: it still reads, only its damage cannot be seen."""
     path = Path(path)
     problems: list[str] = []
+    read: dict[str, np.ndarray] = {}
     with _open_shot(path) as f:
         def visit(name: str, obj: Any) -> None:
             if isinstance(obj, h5py.Dataset):
                 try:
-                    obj[...]
+                    read[name] = obj[...]
                 except (OSError, ValueError) as exc:
                     problems.append(f"/{name} fails its checksum ({str(exc).splitlines()[0][:120]})")
             elif isinstance(obj, h5py.Group) and "results_json" in obj.attrs:
@@ -416,11 +417,23 @@ def verify_shot(path: str | Path, recorded_raw_sha256: str | None = None) -> lis
 
         try:
             f.visititems(visit)
-        except (OSError, RuntimeError, KeyError) as exc:
+            written = f.attrs.get("raw_sha256")
+            raw = f["raw"]
+            channels = {str(role): RawChannel(read[f"raw/{role}"], float(raw[role].attrs["scale_v"]),
+                                              float(raw[role].attrs["offset_v"]))
+                        for role in raw.attrs["channels"]} if not problems else {}
+            sampling = (float(raw.attrs["sample_interval_s"]), int(raw.attrs["trigger_index"]))
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:
             problems.append(f"the file's structure cannot be read ({exc})")
-        written = f.attrs.get("raw_sha256")
     if problems:
         return problems
+    digest = raw_sha256(RawShot(channels, *sampling))  # from the codes just read: one pass over the file
+    if written is not None and str(written) != digest:
+        problems.append(RAW_MISMATCH)
+    elif recorded_raw_sha256 is not None and recorded_raw_sha256 != digest:
+        problems.append(f"raw channels' SHA-256 {digest[:12]}… differ from {recorded_raw_sha256[:12]}… kept by the "
+                        f"lab's record since the shot's first import (tampered or damaged)")
+    return problems
     try:
         shot = read_shot(path, load_raw=True)
     except ShotFileError as exc:
