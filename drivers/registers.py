@@ -11,6 +11,9 @@ from `config/rig.toml`:
   convention; "little": low word first), and engineering value = raw * scale + offset.
   address -1 = absent. A plain integer in the config is a uint16 at that address, scale 1.
 
+Every field declares its own bounds and meaning (drivers/config_fields.py): rig/config.py
+validates a rig file's [valve_controller.*] tables against these classes.
+
 Encoding refuses what a register cannot hold (RegisterRangeError, a ValueError): a value is
 never clipped or wrapped on its way to the controller. The byte packing is pymodbus's own
 (`convert_to_registers` / `convert_from_registers`).
@@ -22,8 +25,10 @@ import math
 import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Literal
+from typing import Annotated, Any, Literal
 
+from hopkinson.drivers.config_fields import SECTION, Int, Number
+from pydantic import BeforeValidator, Field
 from pymodbus.client.mixin import ModbusClientMixin
 
 _DT = ModbusClientMixin.DATATYPE
@@ -36,6 +41,11 @@ REGISTER_TYPES: dict[str, tuple[_DT, int, float, float]] = {
     "float32": (_DT.FLOAT32, 2, -3.4028234663852886e38, 3.4028234663852886e38),
 }
 WORD_ORDERS = ("big", "little")
+RegisterType = Literal["int16", "uint16", "int32", "uint32", "float32"]  # the keys of REGISTER_TYPES
+WordOrder = Literal["big", "little"]
+# A bit's address: -1 = the controller has no such bit; a signal every controller has: 0 and up.
+Bit = Annotated[Int, Field(ge=-1, le=65535, description="address 0..65535, or -1: the controller has none")]
+RequiredBit = Annotated[Int, Field(ge=0, le=65535, description="address 0..65535")]
 
 
 class RegisterRangeError(ValueError):
@@ -46,11 +56,13 @@ class RegisterRangeError(ValueError):
 class Register:
     """One value in holding or input registers (module docstring); address -1 = absent."""
 
-    address: int = -1
-    type: str = "uint16"
-    word_order: str = "big"
-    scale: float = 1.0
-    offset: float = 0.0
+    __pydantic_config__ = SECTION
+    address: Bit = -1
+    type: Annotated[RegisterType, Field(description="how the value is packed")] = "uint16"
+    word_order: Annotated[WordOrder, Field(description="32-bit values: big = high word first (Modicon), "
+                                                       "little = low word first")] = "big"
+    scale: Annotated[Number, Field(description="value = raw * scale + offset; non-zero")] = 1.0
+    offset: Number = 0.0
 
     def __post_init__(self) -> None:
         if self.type not in REGISTER_TYPES:
@@ -126,14 +138,24 @@ def _reg(address: int, scale: float = 1.0, type_: str = "uint16") -> Register:
     return Register(address, type=type_, scale=scale)
 
 
+def _address_only(value: Any) -> Any:
+    """A register written as a plain address: a uint16 there, scale 1."""
+    return {"address": value} if isinstance(value, int) and not isinstance(value, bool) else value
+
+
+# A register field of a map: a table, or a plain address (a uint16 at that address, scale 1).
+RegisterField = Annotated[Register, BeforeValidator(_address_only, json_schema_input_type=int | Register)]
+
+
 @dataclass(frozen=True)
 class CoilMap:
     """Coil addresses of the four actuators (True = open / running)."""
 
-    fire_valve: int = 0
-    fill_valve: int = 1
-    vent_valve: int = 2
-    vacuum_pump: int = 3
+    __pydantic_config__ = SECTION
+    fire_valve: RequiredBit = 0
+    fill_valve: RequiredBit = 1
+    vent_valve: RequiredBit = 2
+    vacuum_pump: RequiredBit = 3
 
 
 @dataclass(frozen=True)
@@ -141,12 +163,13 @@ class DiscreteInputMap:
     """Discrete-input addresses: interlocks (True = safe) and valve positions (True = open;
     -1 = the controller reports no position)."""
 
-    door_closed: int = 0
-    fixture_clamped: int = 1
-    estop_healthy: int = 2
-    fire_valve_open: int = 8
-    fill_valve_open: int = 9
-    vent_valve_open: int = 10
+    __pydantic_config__ = SECTION
+    door_closed: RequiredBit = 0
+    fixture_clamped: RequiredBit = 1
+    estop_healthy: RequiredBit = 2
+    fire_valve_open: Bit = 8
+    fill_valve_open: Bit = 9
+    vent_valve_open: Bit = 10
 
 
 @dataclass(frozen=True)
@@ -160,11 +183,12 @@ class HoldingRegisterMap:
     N ms, timed by the controller.
     """
 
-    pressure_setpoint: Register = field(default_factory=lambda: _reg(0, 0.001))
-    projectile: int = 1
-    heartbeat: int = 2
-    watchdog_ms: Register = field(default_factory=lambda: _reg(3))
-    fire_pulse_ms: Register = field(default_factory=lambda: _reg(4))
+    __pydantic_config__ = SECTION
+    pressure_setpoint: RegisterField = field(default_factory=lambda: _reg(0, 0.001))
+    projectile: Bit = 1
+    heartbeat: Bit = 2
+    watchdog_ms: RegisterField = field(default_factory=lambda: _reg(3))
+    fire_pulse_ms: RegisterField = field(default_factory=lambda: _reg(4))
 
 
 @dataclass(frozen=True)
@@ -175,10 +199,11 @@ class InputRegisterMap:
     1 armed, 2 tripped; -1 = not reported), fire_pulse_count (pulses fired).
     """
 
-    reservoir_pressure: Register = field(default_factory=lambda: _reg(0, 0.001))
-    fixture_vacuum: Register = field(default_factory=lambda: _reg(1, 0.1))
-    watchdog_state: int = 2
-    fire_pulse_count: Register = field(default_factory=lambda: _reg(4, type_="uint32"))
+    __pydantic_config__ = SECTION
+    reservoir_pressure: RegisterField = field(default_factory=lambda: _reg(0, 0.001))
+    fixture_vacuum: RegisterField = field(default_factory=lambda: _reg(1, 0.1))
+    watchdog_state: Bit = 2
+    fire_pulse_count: RegisterField = field(default_factory=lambda: _reg(4, type_="uint32"))
 
 
 @dataclass(frozen=True)
@@ -189,6 +214,7 @@ class RegisterMap:
     positions after a gap in the discrete inputs, a 32-bit pulse counter after a gap in the
     input registers."""
 
+    __pydantic_config__ = SECTION
     coils: CoilMap = field(default_factory=CoilMap)
     discrete_inputs: DiscreteInputMap = field(default_factory=DiscreteInputMap)
     holding_registers: HoldingRegisterMap = field(default_factory=HoldingRegisterMap)

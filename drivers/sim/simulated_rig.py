@@ -36,37 +36,51 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Annotated, Any, Literal, TextIO
 
+from hopkinson.drivers.sim.config_fields import (
+    SECTION,
+    Baud,
+    Int,
+    Number,
+    Parity,
+    StopBits,
+    Transport,
+)
 from hopkinson.drivers.sim.controller_map import ControllerMap, default_map
 from hopkinson.drivers.sim.faults import FAULTS, FaultSet
 from hopkinson.drivers.sim.modbus_server import SimModbusServer
-from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
+from hopkinson.drivers.sim.scpi_digitizer import SIM_DIALECTS, SimDigitizerServer
 from hopkinson.drivers.sim.serial_amplifier import SimSerialAmplifier
 from hopkinson.drivers.sim.world import World, WorldParams
+from pydantic import Field
 
 from hopkinson.fileio import atomic_write, private_runtime_dir
 
 ADDRESSES_FILE = "sim-addresses.json"  # in the runtime folder: the running `hopkinson sim`
 STATE_PERIOD_S = 0.2
 DIGITIZER_CHANNELS = {"doppler": 1, "response": 2}  # role -> channel number (World.capture)
+SimDialect = Literal[tuple(SIM_DIALECTS)]  # type: ignore[valid-type]  # generic | keysight | tektronix | lecroy
 
 
 @dataclass(frozen=True)
 class ServerParams:
-    """How the simulated instruments are reached (port 0 = any free port)."""
+    """[servers] of config/sim.toml: how the simulated instruments are reached (port 0 = any free port)."""
 
+    __pydantic_config__ = SECTION
     host: str = "127.0.0.1"
-    modbus_transport: str = "tcp"  # "tcp" | "rtu" (RTU: on a simulated serial line)
-    modbus_port: int = 0
-    modbus_unit_id: int = 1
-    modbus_baudrate: int = 19200
-    modbus_parity: str = "N"
-    modbus_stopbits: int = 1
-    digitizer_port: int = 0
-    digitizer_dialect: str = "generic"  # generic | keysight | tektronix | lecroy (scpi_digitizer.SIM_DIALECTS)
-    amplifier_baudrate: int = 115200
-    modbus_slow_delay_s: float = 2.0
+    modbus_transport: Annotated[Transport, Field(description="the controller on Modbus TCP, or RTU on a "
+                                                             "simulated serial line")] = "tcp"
+    modbus_port: Annotated[Int, Field(ge=0, le=65535, description="TCP port; 0 = any free port")] = 0
+    modbus_unit_id: Annotated[Int, Field(ge=1, le=247, description="the controller answers only this unit id")] = 1
+    modbus_baudrate: Baud = 19200
+    modbus_parity: Parity = "N"
+    modbus_stopbits: StopBits = 1
+    digitizer_port: Annotated[Int, Field(ge=0, le=65535, description="SCPI socket; 0 = any free port")] = 0
+    digitizer_dialect: Annotated[SimDialect, Field(description="the simulated digitizer's command set")] = "generic"
+    amplifier_baudrate: Baud = 115200
+    modbus_slow_delay_s: Annotated[Number, Field(ge=0, le=60, description="reply delay under the modbus-slow "
+                                                                          "fault")] = 2.0
 
 
 @dataclass(frozen=True)

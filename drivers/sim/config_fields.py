@@ -1,0 +1,30 @@
+"""Field types of config/sim.toml's sections: the simulator's copy of drivers/config_fields.py
+(whose docstring tells how a section declares its keys), as drivers/sim/ imports no driver."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import AfterValidator, AllowInfNan, ConfigDict, Strict, WithJsonSchema
+
+Int = Annotated[int, Strict()]
+Number = Annotated[float, Strict(), AllowInfNan(False)]
+Flag = Annotated[bool, Strict()]
+SECTION = ConfigDict(extra="forbid")
+# A serial line and a Modbus link, as both ends name them.
+Baud = Literal[1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600]
+Parity = Literal["N", "E", "O"]
+StopBits = Literal[1, 2]
+Transport = Literal["tcp", "rtu"]
+
+
+def one_of(values: tuple[float, ...]) -> tuple[AfterValidator, WithJsonSchema]:
+    """Metadata of a number that must be one of `values`: its check and its schema's enum
+    (``Annotated[Number, *one_of(GAINS)]``)."""
+
+    def check(value: float) -> float:
+        if value not in values:
+            raise ValueError(f"must be one of {', '.join(f'{v:g}' for v in values)}, got {value!r}")
+        return value
+
+    return AfterValidator(check), WithJsonSchema({"type": "number", "enum": list(values)})
