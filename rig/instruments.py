@@ -44,6 +44,7 @@ from hopkinson.rig.config import (
     RigConfig,
     ValveControllerConfig,
     register_map_of,
+    register_tables,
 )
 from hopkinson.rig.driver_classes import driver_class
 from hopkinson.rig.errors import ConfigError
@@ -212,7 +213,7 @@ def sim_rig_config(base: RigConfig, rig: SimulatedRig) -> RigConfig:
         host=a.modbus_host, port=a.modbus_port or base.valve_controller.port,
         serial_port=a.modbus_serial_port, baudrate=a.modbus_baudrate, parity=a.modbus_parity,
         stopbits=a.modbus_stopbits, unit_id=a.modbus_unit_id,
-        register_map=register_map_of(rig.config.register_map))
+        **register_tables(register_map_of(rig.config.register_map)))
     amp: AmplifierConfig = base.amplifier
     if amp.driver != "manual":  # a manual conditioner stays as entered; anything else: the simulated one
         amp = dataclasses.replace(amp, driver="serial-bridge", options={}, port=a.serial_port,

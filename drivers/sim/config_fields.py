@@ -1,11 +1,13 @@
 """Field types of config/sim.toml's sections: the simulator's copy of drivers/config_fields.py
-(whose docstring tells how a section declares its keys), as drivers/sim/ imports no driver."""
+(whose docstring tells how a section declares its keys), as drivers/sim/ imports no driver;
+and the diffraction orders, which rig.toml's [analysis] shares. Pydantic only: reading a
+configuration imports no NumPy."""
 
 from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, AllowInfNan, ConfigDict, Strict, WithJsonSchema
+from pydantic import AfterValidator, AllowInfNan, ConfigDict, Field, Strict, WithJsonSchema
 
 Int = Annotated[int, Strict()]
 Number = Annotated[float, Strict(), AllowInfNan(False)]
@@ -16,6 +18,18 @@ Baud = Literal[1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 4608
 Parity = Literal["N", "E", "O"]
 StopBits = Literal[1, 2]
 Transport = Literal["tcp", "rtu"]
+
+
+def _distinct(orders: tuple[int, int]) -> tuple[int, int]:
+    if orders[0] == orders[1]:
+        raise ValueError(f"the two diffraction orders must differ, got {list(orders)}")
+    return orders
+
+
+Order = Annotated[Int, Field(ge=-10, le=10)]
+# The interferometer's diffraction orders (phi, xi): beat = v*(phi - xi)/d; rig.toml's [analysis]
+# takes the same type.
+Orders = Annotated[tuple[Order, Order], AfterValidator(_distinct)]
 
 
 def one_of(values: tuple[float, ...]) -> tuple[AfterValidator, WithJsonSchema]:

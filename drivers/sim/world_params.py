@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
-from hopkinson.drivers.sim.config_fields import SECTION, Flag, Int, Number, one_of
+from hopkinson.drivers.sim.config_fields import SECTION, Flag, Int, Number, Orders, one_of
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput
 from hopkinson.drivers.sim.real_records import IdealPulseSource, PulseSource, RealismParams
-from pydantic import AfterValidator, Field
+from pydantic import Field
 
 PROJECTILES = (1, 2, 3)
 # The digitizer's channel of each signal (World.capture's keys): the PM beat, the amplifier
@@ -35,16 +35,6 @@ Mbar = Annotated[Number, Field(ge=0, le=2000)]
 FilterOrder = Annotated[Int, Field(ge=1, le=8, description="Butterworth order")]
 Width = Annotated[Number, Field(gt=0, le=0.01)]
 
-
-def _distinct(orders: tuple[int, int]) -> tuple[int, int]:
-    if orders[0] == orders[1]:
-        raise ValueError(f"the two diffraction orders must differ, got {list(orders)}")
-    return orders
-
-
-Order = Annotated[Int, Field(ge=-10, le=10)]
-# The interferometer's diffraction orders (phi, xi): beat = v*(phi - xi)/d (also rig.toml's [analysis]).
-Orders = Annotated[tuple[Order, Order], AfterValidator(_distinct)]
 SnrDb = Annotated[Number, Field(ge=0, le=200, description="0 (no noise) .. 200 dB")]
 Modes = Annotated[tuple[Mode, ...], Field(min_length=1, description="the sensor's resonances")]
 
