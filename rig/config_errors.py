@@ -70,6 +70,7 @@ class _Field:
 
     annotation: Any
     info: FieldInfo | None = None
+    hint: Any = None  # as declared (Annotated, unions)
 
 
 def _locate(root: Any, loc: tuple[Any, ...], first_index: int) -> tuple[str, _Field, _Field | None]:
@@ -90,7 +91,7 @@ def _step(tp: Any, step: Any) -> _Field | None:
         hints = typing.get_type_hints(tp, include_extras=True)
         if step not in hints:
             return _Field(Any)  # an unknown key
-        return _Field(_strip(hints[step]), FieldInfo.from_annotation(hints[step]))
+        return _Field(_strip(hints[step]), FieldInfo.from_annotation(hints[step]), hints[step])
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin is dict and isinstance(step, str):
         return _Field(_strip(args[1]) if args else Any)
@@ -99,7 +100,7 @@ def _step(tp: Any, step: Any) -> _Field | None:
             item = args[0]
         else:
             item = args[step] if step < len(args) else Any
-        return _Field(_strip(item), FieldInfo.from_annotation(item))
+        return _Field(_strip(item), FieldInfo.from_annotation(item), item)
     return None
 
 
@@ -134,7 +135,7 @@ def _reason(error: Any, field: _Field, parent: _Field | None, key: str, symbolic
         return _length(field.annotation, kind, ctx) + hint
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         if symbolic:
-            return f"must be {_range_text(field)} (got {value}){hint}"
+            return f"must be {_range_text(field, ctx)} (got {value}){hint}"
         bound, limit = next(iter(ctx.items()))
         return f"must be {_BOUND_WORDS[bound]} {limit:g}, got {value!r}{hint}"
     if kind in ("literal_error", "enum"):
@@ -160,18 +161,31 @@ def _length(tp: Any, kind: str, ctx: dict[str, Any]) -> str:
     return f"must have at most {ctx.get('max_length')} items, got {actual}"
 
 
-def _range_text(field: _Field) -> str:
+def _range_text(field: _Field, ctx: dict[str, Any]) -> str:
     """A field's bounds as a plan writes them: "1..3" (integers, both ends), "> 0 and <= 1"."""
-    bounds: dict[str, float] = {}
-    for item in field.info.metadata if field.info is not None else ():
-        for name in ("gt", "ge", "lt", "le"):
-            if isinstance(item, getattr(annotated_types, name.capitalize())):
-                bounds[name] = getattr(item, name)
+    bounds = {**ctx, **_bounds(field.hint)}
     if field.annotation is int and "ge" in bounds and "le" in bounds:
         return f"{bounds['ge']}..{bounds['le']}"
     parts = [f"{sign} {bounds[name]:g}" for name, sign in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
              if name in bounds]
     return " and ".join(parts)
+
+
+def _bounds(hint: Any) -> dict[str, float]:
+    """gt, ge, lt, le declared anywhere in `hint` (inside Annotated, unions and Field)."""
+    out: dict[str, float] = {}
+    if typing.get_origin(hint) is typing.Annotated:
+        base, *metadata = typing.get_args(hint)
+        out.update(_bounds(base))
+        for item in metadata:
+            for constraint in (item.metadata if isinstance(item, FieldInfo) else [item]):
+                for name in ("gt", "ge", "lt", "le"):
+                    if isinstance(constraint, getattr(annotated_types, name.capitalize())):
+                        out[name] = getattr(constraint, name)
+    elif typing.get_origin(hint) in (typing.Union, types.UnionType):
+        for option in typing.get_args(hint):
+            out.update(_bounds(option))
+    return out
 
 
 def _field_names(tp: Any) -> list[str]:
