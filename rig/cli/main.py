@@ -47,6 +47,7 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.report",
     "hopkinson.rig.cli.lab",
     "hopkinson.rig.cli.demo",
+    "hopkinson.rig.cli.config",
 ]
 
 # The shared rig options live here, not in rig.config: building the parser must not load the

@@ -1,0 +1,99 @@
+"""`hopkinson config schema`: the JSON Schema an editor checks a file with says what the loader
+does. Checked with an independent validator (jsonschema): every shipped file passes, and a file
+the loader refuses for one key's type, range or name is refused by the schema too."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import jsonschema
+import pytest
+from hopkinson.rig.cli.main import main
+from hopkinson.rig.config import load_rig_config, load_sim_config
+from hopkinson.rig.config_schema import KINDS, schema_text
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan import load_plan
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+SHIPPED = {"rig.toml": "rig", "rig-sim.toml": "rig", "sim.toml": "sim", "campaigns/demo.toml": "plan",
+           "campaigns/example.toml": "plan", "campaigns/linearity.toml": "plan"}
+LOADERS = {"rig": load_rig_config, "sim": load_sim_config, "plan": load_plan}
+
+
+def _validator(kind: str) -> jsonschema.Draft202012Validator:
+    schema = json.loads((CONFIG / "schemas" / f"{kind}.schema.json").read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_shipped_schemas_are_the_declarations_of_today(kind: str) -> None:
+    shipped = (CONFIG / "schemas" / f"{kind}.schema.json").read_text(encoding="utf-8")
+    assert shipped == schema_text(kind), (
+        f"config/schemas/{kind}.schema.json is out of date: run `hopkinson config schema --out config/schemas`")
+
+
+@pytest.mark.parametrize(("name", "kind"), SHIPPED.items())
+def test_every_shipped_file_points_at_its_schema_and_passes_it(name: str, kind: str) -> None:
+    path = CONFIG / name
+    first = path.read_text(encoding="utf-8").splitlines()[0]
+    assert first.startswith("#:schema ") and (path.parent / first.split()[1]).resolve() == \
+        (CONFIG / "schemas" / f"{kind}.schema.json").resolve()
+    errors = [e.message for e in _validator(kind).iter_errors(tomllib.loads(path.read_text(encoding="utf-8")))]
+    assert errors == []
+    LOADERS[kind](path)
+
+
+@pytest.mark.parametrize(("name", "old", "new", "key"), [
+    ("rig.toml", "port = 502\n", 'port = "502"\n', "valve_controller.port"),
+    ("rig.toml", "port = 502\n", "port = 70000\n", "valve_controller.port"),
+    ("rig.toml", "port = 502\n", "port = 502\nprot = 5\n", "valve_controller.prot"),
+    ("rig.toml", "[limits]", "[limit]", "limit"),
+    ("rig.toml", 'transport = "tcp"', 'transport = "udp"', "valve_controller.transport"),
+    ("rig.toml", "fire_valve = 0", "fire_valve = -3", "valve_controller.coils.fire_valve"),
+    ("rig.toml", 'pressure_setpoint = { address = 0, type = "uint16", scale = 0.001 }',
+     'pressure_setpoint = { address = 0, type = "int64" }', "valve_controller.holding_registers.pressure_setpoint.type"),
+    ("rig.toml", "orders = [1, -1]", "orders = [1, -1, 2]", "analysis.orders"),
+    ("rig.toml", "charge_s = 120.0", "charge_s = -1.0", "timeouts.charge_s"),
+    ("rig.toml", "draws = 400", "draws = 5", "uncertainty.draws"),
+    ("sim.toml", "damping_ratio = 0.05", "damping_ratio = -0.05", "world.accelerometer.modes[0].damping_ratio"),
+    ("sim.toml", "projectile = 3", "projectile = 4", "world.launcher.projectile"),
+    ("sim.toml", "door_closed = true", "door_closed = 1", "world.pneumatics.door_closed"),
+    ("sim.toml", "gain = 10.0", "gain = 3.0", "world.amplifier.gain"),
+    ("sim.toml", 'digitizer_dialect = "generic"', 'digitizer_dialect = "rigol"', "servers.digitizer_dialect"),
+    ("campaigns/example.toml", "projectile = 2 ", "projectile = 4 ", "shots[3].projectile"),
+    ("campaigns/example.toml", "repeats = 2", "repeats = 0", "shots[3].repeats"),
+    ("campaigns/example.toml", "dcm_damping = 0.707", "dcm_damping = 1.5", "defaults.analysis.dcm_damping"),
+    ("campaigns/example.toml", 'dcm_ratio = "auto"', 'dcm_ratio = "manual"', "defaults.analysis.dcm_ratio"),
+    ("campaigns/example.toml", 'serial = "SN0001"', 'serial = "SN0001"\ncolour = "red"', "accelerometer.colour"),
+])
+def test_what_the_loader_refuses_for_a_key_the_schema_refuses(tmp_path: Path, name: str, old: str, new: str,
+                                                              key: str) -> None:
+    kind = SHIPPED[name]
+    text = (CONFIG / name).read_text(encoding="utf-8")
+    assert old in text, old
+    path = tmp_path / Path(name).name
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    with pytest.raises(ConfigError) as caught:
+        LOADERS[kind](path)
+    assert str(caught.value).startswith(f"{path}: {key}: ")
+    assert not _validator(kind).is_valid(tomllib.loads(path.read_text(encoding="utf-8")))
+
+
+def test_the_command_writes_the_three_schemas_and_checks_a_file(tmp_path: Path, capsys) -> None:
+    assert main(["config", "schema", "--out", str(tmp_path / "schemas"), "--json"]) == 0
+    written = json.loads(capsys.readouterr().out)
+    assert sorted(written) == sorted(KINDS)
+    for kind, path in written.items():
+        assert Path(path).read_text(encoding="utf-8") == schema_text(kind)
+    assert main(["config", "check", str(CONFIG / "sim.toml"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == {"file": str(CONFIG / "sim.toml"), "kind": "sim", "ok": True}
+    bad = tmp_path / "plan.toml"
+    bad.write_text((CONFIG / "campaigns" / "demo.toml").read_text(encoding="utf-8").replace("repeats = 2",
+                                                                                           "repeats = 0"))
+    assert main(["config", "check", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"hopkinson: error: {bad}: shots[1].repeats: must be 1..10000 (got 0) (how many shots this entry " \
+                  "fires)\n"
