@@ -97,3 +97,14 @@ def test_the_command_writes_the_three_schemas_and_checks_a_file(tmp_path: Path, 
     err = capsys.readouterr().err
     assert err == f"hopkinson: error: {bad}: shots[1].repeats: must be 1..10000 (got 0) (how many shots this entry " \
                   "fires)\n"
+
+
+def test_the_configuration_page_has_a_heading_for_every_section_of_a_rig_file() -> None:
+    import dataclasses
+
+    from hopkinson.rig.config import RigConfig
+
+    page = (CONFIG.parent / "docs" / "configuration.md").read_text(encoding="utf-8")
+    headings = [line for line in page.splitlines() if line.startswith("### ")]
+    for section in (f.name for f in dataclasses.fields(RigConfig) if f.name != "path"):
+        assert any(f"[{section}]" in heading for heading in headings), section
