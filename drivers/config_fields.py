@@ -13,24 +13,26 @@ The scalar types are strict: a TOML string is never read as a number, nor a bool
 integer; an integer is a number; a number must be finite. `SECTION` refuses unknown keys.
 Code that builds a section itself (tests, the panel) is not checked: the checks run on load.
 
-Used by drivers/ and rig/; the simulator keeps its own copy (drivers/sim/config_fields.py),
-as drivers/sim/ imports no driver.
+Used by drivers/ and rig/. The types are defined once, in drivers/sim/config_fields.py (the
+simulator's sections use them too, and drivers/sim/ imports no driver); this module names them
+for the drivers and the rig, and adds Text.
 """
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated
 
-from pydantic import AllowInfNan, ConfigDict, Strict
+from hopkinson.drivers.sim.config_fields import (
+    SECTION,
+    Baud,
+    Flag,
+    Int,
+    Number,
+    Parity,
+    StopBits,
+    Transport,
+)
+from pydantic import Strict
 
-Int = Annotated[int, Strict()]
-Number = Annotated[float, Strict(), AllowInfNan(False)]
 Text = Annotated[str, Strict()]
-Flag = Annotated[bool, Strict()]
-
-SECTION = ConfigDict(extra="forbid")
-# A serial line and a Modbus link, as both ends name them.
-Baud = Literal[1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600]
-Parity = Literal["N", "E", "O"]
-StopBits = Literal[1, 2]
-Transport = Literal["tcp", "rtu"]
+__all__ = ["SECTION", "Baud", "Flag", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]

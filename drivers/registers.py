@@ -164,12 +164,12 @@ class DiscreteInputMap:
     -1 = the controller reports no position)."""
 
     __pydantic_config__ = SECTION
-    door_closed: RequiredBit = 0
-    fixture_clamped: RequiredBit = 1
-    estop_healthy: RequiredBit = 2
-    fire_valve_open: Bit = 8
-    fill_valve_open: Bit = 9
-    vent_valve_open: Bit = 10
+    door_closed: Annotated[RequiredBit, Field(description="interlock: True = the door is closed")] = 0
+    fixture_clamped: Annotated[RequiredBit, Field(description="interlock: True = the fixture is clamped")] = 1
+    estop_healthy: Annotated[RequiredBit, Field(description="interlock: True = the e-stop chain is healthy")] = 2
+    fire_valve_open: Annotated[Bit, Field(description="limit switch: True = open (-1: none)")] = 8
+    fill_valve_open: Annotated[Bit, Field(description="limit switch: True = open (-1: none)")] = 9
+    vent_valve_open: Annotated[Bit, Field(description="limit switch: True = open (-1: none)")] = 10
 
 
 @dataclass(frozen=True)

@@ -29,28 +29,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
+from hopkinson.drivers import config_fields as fields
+from hopkinson.drivers import registers
 from hopkinson.drivers.amplifier import EXCITATION
 from hopkinson.drivers.amplifier import SETTINGS as BRIDGE_SETTINGS
-from hopkinson.drivers.config_fields import (
-    SECTION,
-    Baud,
-    Int,
-    Number,
-    Parity,
-    StopBits,
-    Text,
-    Transport,
-)
+from hopkinson.drivers.config_fields import SECTION, Int, Number, Text
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.modbus_link import ModbusTarget
-from hopkinson.drivers.registers import (
-    CoilMap,
-    DiscreteInputMap,
-    HoldingRegisterMap,
-    InputRegisterMap,
-    Register,
-    RegisterMap,
-)
 from hopkinson.drivers.sim.config_fields import Orders
 from hopkinson.rig.config_checks import check_limits_stated, check_register_map, check_rig
 from hopkinson.rig.config_errors import validate
@@ -97,14 +82,14 @@ class ValveControllerConfig:
     driver: Annotated[Text, Field(description='"modbus", or a lab\'s own class "package.module:Class"')] = "modbus"
     options: Annotated[dict[str, Any], Field(description="a lab's own driver: keyword arguments of its class")] = (
         field(default_factory=dict))
-    transport: Annotated[Transport, Field(description="tcp: host and port; rtu: serial_port, baudrate, parity, "
+    transport: Annotated[fields.Transport, Field(description="tcp: host and port; rtu: serial_port, baudrate, parity, "
                                                       "stopbits")] = "tcp"
     host: Annotated[Text, Field(description="the controller's address on Modbus TCP")] = ""
     port: Annotated[Port, Field(description="the controller's TCP port")] = 502
     serial_port: Annotated[Text, Field(description="RTU: the RS-485 port, or \"sim:controller\"")] = ""
-    baudrate: Baud = 19200
-    parity: Parity = "N"
-    stopbits: StopBits = 1
+    baudrate: fields.Baud = 19200
+    parity: fields.Parity = "N"
+    stopbits: fields.StopBits = 1
     unit_id: Annotated[Int, Field(ge=1, le=247, description="Modbus unit (slave) id")] = 1
     timeout_s: Annotated[Seconds, Field(description="per request")] = 1.0
     retries: Retries = 0
@@ -112,15 +97,21 @@ class ValveControllerConfig:
                                                                    "the heartbeat is silent this long")] = 3.0
     fire_pulse_s: Annotated[Number, Field(gt=0, le=10, description="fire-valve pulse, timed by the "
                                                                    "controller")] = 0.2
-    coils: CoilMap = field(default_factory=CoilMap)
-    discrete_inputs: DiscreteInputMap = field(default_factory=DiscreteInputMap)
-    holding_registers: HoldingRegisterMap = field(default_factory=HoldingRegisterMap)
-    input_registers: InputRegisterMap = field(default_factory=InputRegisterMap)
+    # The register map (drivers/registers.py): where each signal lives on the controller.
+    coils: Annotated[registers.CoilMap, Field(description="the actuators: True = open / running")] = field(
+        default_factory=registers.CoilMap)
+    discrete_inputs: Annotated[registers.DiscreteInputMap, Field(description=(
+        "interlocks (True = safe) and valve limit switches (True = open)"))] = field(
+        default_factory=registers.DiscreteInputMap)
+    holding_registers: Annotated[registers.HoldingRegisterMap, Field(description="what the host writes")] = field(
+        default_factory=registers.HoldingRegisterMap)
+    input_registers: Annotated[registers.InputRegisterMap, Field(description="what the host reads")] = field(
+        default_factory=registers.InputRegisterMap)
 
     @property
-    def register_map(self) -> RegisterMap:
+    def register_map(self) -> registers.RegisterMap:
         """The four tables as the driver takes them."""
-        return RegisterMap(self.coils, self.discrete_inputs, self.holding_registers, self.input_registers)
+        return registers.RegisterMap(self.coils, self.discrete_inputs, self.holding_registers, self.input_registers)
 
     @property
     def target(self) -> ModbusTarget:
@@ -142,7 +133,7 @@ class ValveControllerConfig:
         return self.input_registers.reservoir_pressure.resolution
 
 
-def register_tables(register_map: RegisterMap) -> dict[str, Any]:
+def register_tables(register_map: registers.RegisterMap) -> dict[str, Any]:
     """A driver's map as ValveControllerConfig's four table fields (for dataclasses.replace)."""
     return {f.name: getattr(register_map, f.name) for f in dataclasses.fields(register_map)}
 
@@ -314,7 +305,7 @@ class AmplifierConfig:
     options: Annotated[dict[str, Any], Field(description="a lab's own driver: keyword arguments of its class")] = (
         field(default_factory=dict))
     port: Annotated[Text, Field(description='serial-bridge: its serial port, or "sim:amplifier"')] = ""
-    baudrate: Baud = 115200
+    baudrate: fields.Baud = 115200
     timeout_s: Seconds = 1.0
     retries: Retries = 1
     gain: Annotated[Number, Field(gt=0, le=1e6, description="output volts per input volt"), BridgeSetting] = 10.0
@@ -348,15 +339,15 @@ class TimeoutsConfig:
     """[timeouts]: longest time each sequencer state may take, seconds."""
 
     __pydantic_config__ = SECTION
-    check_s: Seconds = 5.0
-    evacuate_s: Seconds = 60.0
-    charge_s: Seconds = 120.0
-    arm_s: Seconds = 5.0
-    fire_s: Seconds = 5.0
-    capture_s: Seconds = 10.0
-    safe_s: Seconds = 60.0
-    store_s: Seconds = 30.0
-    analyse_s: Seconds = 120.0
+    check_s: Annotated[Seconds, Field(description="CHECK: instruments answer, interlocks hold")] = 5.0
+    evacuate_s: Annotated[Seconds, Field(description="EVACUATE: the fixture pumped below its limit")] = 60.0
+    charge_s: Annotated[Seconds, Field(description="CHARGE: the reservoir filled to the set-point")] = 120.0
+    arm_s: Annotated[Seconds, Field(description="ARM: the digitizer armed, settings read back")] = 5.0
+    fire_s: Annotated[Seconds, Field(description="FIRE: the pulse fired and counted")] = 5.0
+    capture_s: Annotated[Seconds, Field(description="CAPTURE: the record transferred")] = 10.0
+    safe_s: Annotated[Seconds, Field(description="SAFE: valves closed and read back, reservoir vented")] = 60.0
+    store_s: Annotated[Seconds, Field(description="STORE: the shot file written")] = 30.0
+    analyse_s: Annotated[Seconds, Field(description="ANALYSE: the shot analysed")] = 120.0
 
 
 @dataclass(frozen=True)
@@ -454,30 +445,30 @@ def load_sim_config(path: str | Path) -> SimConfig:
     return SimConfig(world=sim.world, servers=sim.servers, register_map=controller_map_of(sim.register_map))
 
 
-def controller_map_of(register_map: RegisterMap) -> dict[str, dict[str, Any]]:
+def controller_map_of(register_map: registers.RegisterMap) -> dict[str, dict[str, Any]]:
     """The simulated controller's map (drivers/sim/controller_map.py) for a driver's map."""
     from hopkinson.drivers.sim.controller_map import Point
 
-    return {table: {name: Point(**dataclasses.asdict(entry)) if isinstance(entry, Register) else Point(entry)
-                    for name, entry in entries.items()}
+    return {table: {name: Point(**dataclasses.asdict(entry)) if isinstance(entry, registers.Register)
+                    else Point(entry) for name, entry in entries.items()}
             for table, entries in register_map.blocks().items()}
 
 
-def register_map_of(controller_map: dict[str, dict[str, Any]]) -> RegisterMap:
+def register_map_of(controller_map: dict[str, dict[str, Any]]) -> registers.RegisterMap:
     """The driver's map that reaches a simulated controller laid out by `controller_map`."""
     tables = {}
-    for block in dataclasses.fields(RegisterMap):
-        table_type = typing.get_type_hints(RegisterMap)[block.name]
+    for block in dataclasses.fields(registers.RegisterMap):
+        table_type = typing.get_type_hints(registers.RegisterMap)[block.name]
         points = controller_map.get(block.name, {})
         values: dict[str, Any] = {}
         for f in dataclasses.fields(table_type):
             point = points.get(f.name)
-            if typing.get_type_hints(table_type)[f.name] is Register:
-                values[f.name] = Register(**dataclasses.asdict(point)) if point is not None else Register()
+            if typing.get_type_hints(table_type)[f.name] is registers.Register:
+                values[f.name] = registers.Register(**dataclasses.asdict(point)) if point else registers.Register()
             else:
                 values[f.name] = point.address if point is not None else -1
         tables[block.name] = table_type(**values)
-    return RegisterMap(**tables)
+    return registers.RegisterMap(**tables)
 
 
 def _jsonable(obj: Any) -> Any:

@@ -1,7 +1,8 @@
-"""Field types of config/sim.toml's sections: the simulator's copy of drivers/config_fields.py
-(whose docstring tells how a section declares its keys), as drivers/sim/ imports no driver;
-and the diffraction orders, which rig.toml's [analysis] shares. Pydantic only: reading a
-configuration imports no NumPy."""
+"""Field types of the configuration files' sections (drivers/config_fields.py tells how a
+section declares its keys with them): defined here, where the simulator's sections can import
+them (drivers/sim/ imports no driver), and named for the drivers and the rig by
+drivers/config_fields.py. The diffraction orders are rig.toml's [analysis] and sim.toml's
+[world.signals] both. Pydantic only: reading a configuration imports no NumPy."""
 
 from __future__ import annotations
 

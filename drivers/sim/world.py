@@ -1,5 +1,10 @@
 """The one physics model behind the simulated rig (DESIGN.md, "Physics of the simulated rig").
 
+Longer than 600 lines, for a reason: `World` is one object whose single lock guards the whole
+physical state (pneumatics, controller, amplifier, the pending shot), and every method below
+takes it; split across modules, which state a method may touch under the lock would no longer
+be visible in one place. Its configuration ([world] of sim.toml) is drivers/sim/world_params.py.
+
 The Modbus controller, the SCPI digitizer and the serial amplifier of the simulated rig all
 read and change this one World, so a fired shot gives consistent pressures, trigger and
 waveforms.

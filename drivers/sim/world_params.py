@@ -45,15 +45,16 @@ class PneumaticsParams:
     absolute mbar)."""
 
     __pydantic_config__ = SECTION
-    supply_pressure_bar: Bar = 10.0
-    fill_rate_bar_s: Positive = 0.5
-    vent_time_constant_s: Positive = 1.0
-    fire_exhaust_time_constant_s: Positive = 0.05
-    min_fire_pressure_bar: Bar = 0.05
-    atmosphere_mbar: Annotated[Number, Field(gt=0, le=2000)] = 1013.25
-    pump_time_constant_s: Positive = 2.0
-    pump_floor_mbar: Mbar = 2.0
-    leak_rate_mbar_s: Positive = 1.0
+    supply_pressure_bar: Annotated[Bar, Field(description="the gas supply behind the fill valve")] = 10.0
+    fill_rate_bar_s: Annotated[Positive, Field(description="the reservoir's rise while filling")] = 0.5
+    vent_time_constant_s: Annotated[Positive, Field(description="exponential decay through the vent valve")] = 1.0
+    fire_exhaust_time_constant_s: Annotated[Positive, Field(description="through the open fire valve")] = 0.05
+    min_fire_pressure_bar: Annotated[Bar, Field(description="below this an open fire valve launches "
+                                                            "nothing")] = 0.05
+    atmosphere_mbar: Annotated[Number, Field(gt=0, le=2000, description="what the fixture leaks back to")] = 1013.25
+    pump_time_constant_s: Annotated[Positive, Field(description="exponential pump-down of the fixture")] = 2.0
+    pump_floor_mbar: Annotated[Mbar, Field(description="the best vacuum the pump reaches")] = 2.0
+    leak_rate_mbar_s: Annotated[Positive, Field(description="the fixture's leak with the pump off")] = 1.0
     fault_leak_floor_mbar: Annotated[Mbar, Field(description="best vacuum under the vacuum-leak fault")] = 500.0
     door_closed: Flag = True
     fixture_clamped: Flag = True
