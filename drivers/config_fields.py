@@ -26,6 +26,7 @@ from hopkinson.drivers.sim.config_fields import (
     SECTION,
     Baud,
     Flag,
+    Hint,
     Int,
     Number,
     Parity,
@@ -35,4 +36,4 @@ from hopkinson.drivers.sim.config_fields import (
 from pydantic import Strict
 
 Text = Annotated[str, Strict()]
-__all__ = ["SECTION", "Baud", "Flag", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]
+__all__ = ["SECTION", "Baud", "Flag", "Hint", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]

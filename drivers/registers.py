@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Annotated, Any, Literal
 
-from hopkinson.drivers.config_fields import SECTION, Int, Number
+from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number
 from pydantic import BeforeValidator, Field
 from pymodbus.client.mixin import ModbusClientMixin
 
@@ -44,7 +44,8 @@ WORD_ORDERS = ("big", "little")
 RegisterType = Literal["int16", "uint16", "int32", "uint32", "float32"]  # the keys of REGISTER_TYPES
 WordOrder = Literal["big", "little"]
 # A bit's address: -1 = the controller has no such bit; a signal every controller has: 0 and up.
-Bit = Annotated[Int, Field(ge=-1, le=65535, description="address 0..65535, or -1: the controller has none")]
+Bit = Annotated[Int, Field(ge=-1, le=65535, description="address 0..65535, or -1: the controller has none"),
+                Hint("-1 (none) or an address 0..65535")]
 RequiredBit = Annotated[Int, Field(ge=0, le=65535, description="address 0..65535")]
 
 
@@ -60,7 +61,8 @@ class Register:
     address: Bit = -1
     type: Annotated[RegisterType, Field(description="how the value is packed")] = "uint16"
     word_order: Annotated[WordOrder, Field(description="32-bit values: big = high word first (Modicon), "
-                                                       "little = low word first")] = "big"
+                                                       "little = low word first"),
+                          Hint("big: high word first; little: low word first")] = "big"
     scale: Annotated[Number, Field(description="value = raw * scale + offset; non-zero")] = 1.0
     offset: Number = 0.0
 

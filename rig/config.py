@@ -33,7 +33,7 @@ from hopkinson.drivers import config_fields as fields
 from hopkinson.drivers import registers
 from hopkinson.drivers.amplifier import EXCITATION
 from hopkinson.drivers.amplifier import SETTINGS as BRIDGE_SETTINGS
-from hopkinson.drivers.config_fields import SECTION, Int, Number, Text
+from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number, Text
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.modbus_link import ModbusTarget
 from hopkinson.drivers.sim.config_fields import Orders
@@ -94,7 +94,8 @@ class ValveControllerConfig:
     timeout_s: Annotated[Seconds, Field(description="per request")] = 1.0
     retries: Retries = 0
     watchdog_s: Annotated[Number, Field(ge=0.2, le=60, description="the controller's link watchdog: it vents when "
-                                                                   "the heartbeat is silent this long")] = 3.0
+                                                                   "the heartbeat is silent this long"),
+                          Hint("the controller's link watchdog, seconds")] = 3.0
     fire_pulse_s: Annotated[Number, Field(gt=0, le=10, description="fire-valve pulse, timed by the "
                                                                    "controller")] = 0.2
     # The register map (drivers/registers.py): where each signal lives on the controller.
@@ -311,10 +312,11 @@ class AmplifierConfig:
     gain: Annotated[Number, Field(gt=0, le=1e6, description="output volts per input volt"), BridgeSetting] = 10.0
     excitation_v: Annotated[Number, Field(ge=0, le=EXCITATION.limits[1] if EXCITATION.limits else 10.0,
                                           description="bridge excitation (0: none)"), BridgeSetting] = 5.0
-    lowpass_hz: Annotated[Number, Field(ge=0, le=1e8, description="0 (off) or the filter corner"),
-                          BridgeSetting] = 200_000.0
+    lowpass_hz: Annotated[Number, Field(ge=0, le=1e8, description="the filter corner; 0 = off"),
+                          Hint("0 (off) or the filter corner"), BridgeSetting] = 200_000.0
     sensitivity_v_per_m_s2: Annotated[Number, Field(ge=0, le=1, description=(
-        "manual: the sensitivity entered on the conditioner (0: not entered)"))] = 0.0
+        "manual: the sensitivity entered on the conditioner (0: not entered)")),
+        Hint("0 (not entered) or the sensitivity")] = 0.0
     identity: Annotated[Text, Field(description="manual: make, model, serial as the technician reads them")] = ""
 
 

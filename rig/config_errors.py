@@ -4,8 +4,8 @@
 raises ConfigError "FILE: KEY: what was wrong", e.g.
 ``rig.toml: valve_controller.port: must be at most 65535, got 70000 (the controller's TCP port)``.
 The key is dotted, list items indexed (``world.accelerometer.modes[0].damping_ratio``); the
-reason is said in the project's words, with the field's description (drivers/config_fields.py)
-after it. Pydantic's own text is used only for an error kind not listed here.
+reason is said in the project's words, with the key's `Hint` where it has one
+(drivers/sim/config_fields.py). Pydantic's own text is used only for an error kind not listed here.
 
 Campaign plans count their [[shots]] from 1 and write ranges as ``1..3`` or ``> 0``
 (`first_index=1, symbolic=True`), as their messages always have.
@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import annotated_types
+from hopkinson.drivers.config_fields import Hint
 from hopkinson.rig.errors import ConfigError
 from pydantic import TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
@@ -117,8 +118,8 @@ def _strip(tp: Any) -> Any:
 
 def _reason(error: Any, field: _Field, parent: _Field | None, key: str, symbolic: bool) -> str:
     kind, value, ctx = error["type"], error["input"], error.get("ctx") or {}
-    description = field.info.description if field.info is not None else None
-    hint = f" ({description})" if description else ""
+    hints = [m.text for m in (field.info.metadata if field.info is not None else ()) if isinstance(m, Hint)]
+    hint = f" ({hints[0]})" if hints else ""
     if kind == "missing":
         table = dataclasses.is_dataclass(field.annotation)
         return "missing section" if table else "missing key"
@@ -128,21 +129,21 @@ def _reason(error: Any, field: _Field, parent: _Field | None, key: str, symbolic
         what = "section" if isinstance(value, dict) else "key"
         return f"unknown {what} in {where} (known: {', '.join(sorted(known))})"
     if kind in _TYPE_WORDS:
-        return f"must be {_TYPE_WORDS[kind]}, got {_type_name(value)}{hint}"
+        return f"must be {_TYPE_WORDS[kind]}{hint}, got {_type_name(value)}"
     if kind == "finite_number":
         return f"must be a finite number, got {value}"
     if kind in ("too_short", "too_long"):
         return _length(field.annotation, kind, ctx) + hint
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         if symbolic:
-            return f"must be {_range_text(field, ctx)} (got {value}){hint}"
+            return f"must be {_range_text(field, ctx)}{hint} (got {value})"
         bound, limit = next(iter(ctx.items()))
-        return f"must be {_BOUND_WORDS[bound]} {limit:g}, got {value!r}{hint}"
+        return f"must be {_BOUND_WORDS[bound]} {limit:g}{hint}, got {value!r}"
     if kind in ("literal_error", "enum"):
         choices = ", ".join(str(c) for c in typing.get_args(field.annotation)) or ctx.get("expected", "")
-        return f"must be one of {choices}, got {value!r}{hint}"
+        return f"must be one of {choices}{hint}, got {value!r}"
     if kind == "string_pattern_mismatch":
-        return f"must match {ctx.get('pattern')}, got {value!r}{hint}"
+        return f"must match {ctx.get('pattern')}{hint}, got {value!r}"
     if kind in ("value_error", "assertion_error"):
         return str(ctx.get("error", error["msg"]))
     message = str(error["msg"])

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from datetime import date
 from typing import Annotated, Any, Literal
 
-from hopkinson.drivers.config_fields import SECTION, Flag, Int, Number, Text
+from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
 from pydantic import AfterValidator, Field
 
 # The names of analysis.bar.MATERIALS, written here so that reading a configuration does not
@@ -17,7 +17,8 @@ from pydantic import AfterValidator, Field
 # equal.
 BAR_MATERIALS = ("C45", "Ti-6Al-4V", "PA6", "Al-7075")
 BAR_MOUNTS = ("separating", "bonded")  # analysis.bar.geometry.MOUNTS, the same way
-Material = Annotated[Literal[BAR_MATERIALS], Field(description="analysis.bar.MATERIALS")]  # type: ignore[valid-type]
+Material = Annotated[Literal[BAR_MATERIALS], Field(description="analysis.bar.MATERIALS"),  # type: ignore[valid-type]
+                     Hint("analysis.bar.MATERIALS")]
 Length = Annotated[Number, Field(gt=0, le=20)]
 Diameter = Annotated[Number, Field(gt=0, le=1)]
 
@@ -60,7 +61,7 @@ class LabConfig:
     address: Text = ""
     accreditation: Annotated[Text, Field(description='e.g. "DAkkS D-K-12345-01-00" ("": not accredited)')] = ""
     certificate_prefix: Annotated[Text, Field(pattern=r"^[A-Z0-9]{1,12}$", description=(
-        "certificates are numbered <prefix>-<year>-<sequence>: 1 to 12 capital letters or digits"))] = "HB"
+        "certificates are numbered <prefix>-<year>-<sequence>")), Hint("1 to 12 capital letters or digits")] = "HB"
     rig: Annotated[Text, Field(description="this rig's name in the lab's record (\"\": the file's name)")] = ""
     decision_rule: Annotated[Literal["simple", "guarded"], Field(description=(
         "simple: ILAC-G8 w = 0; guarded: w = U"))] = "simple"
@@ -98,15 +99,15 @@ class BarProjectileConfig:
     """[[bar.projectiles]]: one projectile, its segments from the impact face backwards."""
 
     __pydantic_config__ = SECTION
-    number: Annotated[Int, Field(ge=1, le=3, description="a position of the loader: plans and shots take 1, 2 "
-                                                         "or 3")]
+    number: Annotated[Int, Field(ge=1, le=3, description="the projectile's position in the loader"),
+                      Hint("a position of the loader: plans and shots take 1, 2 or 3")]
     segments: tuple[BarSegmentConfig, ...]
     description: Text = ""
     uses_spacer: Flag = True
     contact_stiffness_n_m: Annotated[Number, Field(ge=0, le=1e12, description=(
-        "the impact face's contact spring at 1 mm; 0: flat and rigid"))] = 0.0
+        "the impact face's contact spring at 1 mm; 0: flat and rigid")), Hint("0: flat and rigid")] = 0.0
     contact_exponent: Annotated[Number, Field(ge=1, le=3, description=(
-        "p of F = k·δ₁·(δ/δ₁)^p: 1 a linear spring, 1.5 Hertz's"))] = 1.0
+        "p of F = k·δ₁·(δ/δ₁)^p: 1 a linear spring, 1.5 Hertz's")), Hint("1: a linear spring, 1.5: Hertz's")] = 1.0
 
 
 @dataclass(frozen=True)
@@ -119,7 +120,7 @@ class BarConfig:
     length_m: Length = 1.6
     diameter_m: Diameter = 0.016
     spacer_material: Material = "Al-7075"
-    spacer_length_m: Annotated[Number, Field(ge=0, le=1, description="0: no spacer")] = 0.003
+    spacer_length_m: Annotated[Number, Field(ge=0, le=1, description="0: no spacer"), Hint("0: no spacer")] = 0.003
     base_length_m: Annotated[Length, Field(description="the raster base (the bar's material and diameter)")] = 0.010
     sensor_mass_kg: Annotated[Number, Field(ge=0, le=10)] = 0.005
     barrel_length_m: Length = 1.5

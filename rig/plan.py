@@ -68,7 +68,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from hopkinson.analysis.params import MAX_ORDER_LIMIT  # one range for a plan and the command line
-from hopkinson.drivers.config_fields import SECTION, Flag, Int, Number, Text
+from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
 from hopkinson.rig.config_errors import validate
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
@@ -239,8 +239,8 @@ class PlanFile:
     accelerometer: Accelerometer
     accelerometer_2: FurtherAccelerometer | None = None
     defaults: ShotTable = dataclasses.field(default_factory=ShotTable)
-    shots: Annotated[tuple[ShotEntry, ...], Field(min_length=1, description="one or more [[shots]] tables, "
-                                                                            "fired in order")]
+    shots: Annotated[tuple[ShotEntry, ...], Field(min_length=1, description="the entries, fired in order"),
+                     Hint("one or more [[shots]] tables")]
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

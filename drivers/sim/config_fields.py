@@ -6,6 +6,7 @@ drivers/config_fields.py. The diffraction orders are rig.toml's [analysis] and s
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Literal
 
 from pydantic import AfterValidator, AllowInfNan, ConfigDict, Field, Strict, WithJsonSchema
@@ -14,6 +15,17 @@ Int = Annotated[int, Strict()]
 Number = Annotated[float, Strict(), AllowInfNan(False)]
 Flag = Annotated[bool, Strict()]
 SECTION = ConfigDict(extra="forbid")
+
+
+@dataclass(frozen=True)
+class Hint:
+    """Words a one-line error adds to its reason, where a bound alone does not say enough
+    (``Annotated[Number, Field(ge=0), Hint("0 (off) or the filter corner")]``): a key's
+    description is for the editor, its hint for the error. Pydantic ignores it."""
+
+    text: str
+
+
 # A serial line and a Modbus link, as both ends name them.
 Baud = Literal[1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600]
 Parity = Literal["N", "E", "O"]

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
-from hopkinson.drivers.sim.config_fields import SECTION, Flag, Int, Number, Orders, one_of
+from hopkinson.drivers.sim.config_fields import SECTION, Flag, Hint, Int, Number, Orders, one_of
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput
 from hopkinson.drivers.sim.real_records import IdealPulseSource, PulseSource, RealismParams
 from pydantic import Field
@@ -35,7 +35,8 @@ Mbar = Annotated[Number, Field(ge=0, le=2000)]
 FilterOrder = Annotated[Int, Field(ge=1, le=8, description="Butterworth order")]
 Width = Annotated[Number, Field(gt=0, le=0.01)]
 
-SnrDb = Annotated[Number, Field(ge=0, le=200, description="0 (no noise) .. 200 dB")]
+SnrDb = Annotated[Number, Field(ge=0, le=200, description="signal-to-noise ratio, dB; 0 = no noise"),
+                  Hint("0 (no noise) .. 200 dB")]
 Modes = Annotated[tuple[Mode, ...], Field(min_length=1, description="the sensor's resonances")]
 
 
@@ -87,7 +88,7 @@ class AccelerometerParams:
     shunt_equivalent_m_s2: Annotated[Positive, Field(description="the shunt calibration's acceleration")] = 490_332.5
     bridge_offset_v: Annotated[Number, Field(ge=-1, le=1, description="bridge unbalance until auto-zero")] = 0.002
     nonlinearity_per_m_s2: Annotated[Number, Field(ge=-1e-5, le=1e-5, description=(
-        "sensitivity change per m/s2 of |a|; 0 = linear"))] = 0.0
+        "sensitivity change per m/s2 of |a|; 0 = linear")), Hint("per m/s2 of |a|; 0 = linear")] = 0.0
 
 
 @dataclass(frozen=True)
@@ -151,7 +152,8 @@ class SecondSensorParams:
     zero_shift_m_s2: Number = 0.0
     sensitivity_v_per_m_s2: Annotated[Positive, Field(description="at its conditioner's input")] = 1.0e-7
     conditioner_gain: Positive = 20.0
-    lowpass_hz: Annotated[Number, Field(ge=0, le=1e8, description="0 (off) or the filter corner")] = 200_000.0
+    lowpass_hz: Annotated[Number, Field(ge=0, le=1e8, description="the conditioner's low-pass corner"),
+                          Hint("0 (off) or the filter corner")] = 200_000.0
     lowpass_order: FilterOrder = 2
 
     def truth(self) -> AccelerometerTruth:
