@@ -62,9 +62,7 @@ def edited(tmp_path: Path, source: str, old: str, new: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize(
-    ("old", "new", "key", "reason"),
-    [
+BAD_RIG = [  # (old, new, key, reason): one edit of config/rig.toml and the error it gives
         ("[limits]", "[limit]", "limit", "unknown section in top level"),
         ("port = 502\n", "port = 502\nprot = 5\n", "valve_controller.prot", "unknown key"),
         ("port = 502\n", 'port = "502"\n', "valve_controller.port", "must be an integer, got a string ('502')"),
@@ -129,8 +127,10 @@ def edited(tmp_path: Path, source: str, old: str, new: str) -> Path:
         ("orders = [1, -1]", "orders = [1, 1]", "analysis.orders", "must differ"),
         ("orders = [1, -1]", "orders = [1, -1, 2]", "analysis.orders", "must have 2 items, got 3"),
         ("orders = [1, -1]", 'orders = [1, "-1"]', "analysis.orders[1]", "must be an integer"),
-    ],
-)
+    ]
+
+
+@pytest.mark.parametrize(("old", "new", "key", "reason"), BAD_RIG)
 def test_bad_rig_config_names_file_key_and_reason(tmp_path: Path, old: str, new: str, key: str, reason: str) -> None:
     path = edited(tmp_path, "rig.toml", old, new)
     with pytest.raises(ConfigError) as caught:
@@ -241,9 +241,7 @@ def _config_error(path: Path) -> str:
     return "no error"
 
 
-@pytest.mark.parametrize(
-    ("old", "new", "key", "reason"),
-    [
+BAD_SIM = [  # (old, new, key, reason): one edit of config/sim.toml and the error it gives
         ("time_scale = 10.0", "time_scale = 0.0", "world.time_scale", "must be greater than 0"),
         ("projectile = 3", "projectile = 4", "world.launcher.projectile", "must be one of 1, 2, 3"),
         ("pulse_width_s = [120e-6, 75e-6, 38.6e-6]", "pulse_width_s = [120e-6, 75e-6]",
@@ -256,8 +254,10 @@ def _config_error(path: Path) -> str:
         ("door_closed = true", "door_closed = 1", "world.pneumatics.door_closed", "must be true or false"),
         ("pm_snr_db = 30.0", "pm_snr_db = -5.0", "world.signals.pm_snr_db", "0 (no noise)"),
         ("orders = [1, -1]", "orders = [2, 2]", "world.signals.orders", "must differ"),
-    ],
-)
+    ]
+
+
+@pytest.mark.parametrize(("old", "new", "key", "reason"), BAD_SIM)
 def test_bad_sim_config_names_file_key_and_reason(tmp_path: Path, old: str, new: str, key: str, reason: str) -> None:
     path = edited(tmp_path, "sim.toml", old, new)
     with pytest.raises(ConfigError) as caught:
