@@ -16,7 +16,7 @@ from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.config_fields import SECTION, Flag, Hint, Int, Number, Orders, one_of
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput
 from hopkinson.drivers.sim.real_records import IdealPulseSource, PulseSource, RealismParams
-from pydantic import Field
+from pydantic import AfterValidator, Field
 
 PROJECTILES = (1, 2, 3)
 # The digitizer's channel of each signal (World.capture's keys): the PM beat, the amplifier
@@ -37,7 +37,16 @@ Width = Annotated[Number, Field(gt=0, le=0.01)]
 
 SnrDb = Annotated[Number, Field(ge=0, le=200, description="signal-to-noise ratio, dB; 0 = no noise"),
                   Hint("0 (no noise) .. 200 dB")]
-Modes = Annotated[tuple[Mode, ...], Field(min_length=1, description="the sensor's resonances")]
+
+
+def _some_modes(modes: tuple[Mode, ...]) -> tuple[Mode, ...]:
+    if not modes:
+        raise ValueError("at least one mode is needed")
+    return modes
+
+
+Modes = Annotated[tuple[Mode, ...], AfterValidator(_some_modes),
+                  Field(description="the sensor's resonances", json_schema_extra={"minItems": 1})]
 
 
 @dataclass(frozen=True)
