@@ -48,6 +48,7 @@ from hopkinson.rig.config_lab import (
     DatabaseConfig,
     LabConfig,
     ReferenceCertificateConfig,
+    SignatoryConfig,
 )
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
@@ -59,7 +60,7 @@ if typing.TYPE_CHECKING:
 
 __all__ = ["BAR_MATERIALS", "BAR_MOUNTS", "AmplifierConfig", "AnalysisConfig", "BarConfig", "BarProjectileConfig",
            "BarSegmentConfig", "DatabaseConfig", "DigitizerConfig", "LabConfig", "LimitsConfig",
-           "ReferenceCertificateConfig", "RigConfig", "TimeoutsConfig", "UncertaintyConfig", "ValveControllerConfig",
+           "ReferenceCertificateConfig", "RigConfig", "SignatoryConfig", "TimeoutsConfig", "UncertaintyConfig", "ValveControllerConfig",
            "controller_map_of", "load_rig_config", "load_sim_config", "register_map_of", "register_tables"]
 
 Positive = Annotated[Number, Field(gt=0)]

@@ -1,10 +1,12 @@
-"""rig.toml's sections about the lab and the bar: [lab] (with [[lab.reference_chain]]),
+"""rig.toml's sections about the lab and the bar: [lab] (with [[lab.reference_chain]] and
+[[lab.signatories]]),
 [database] and [bar] (with [[bar.projectiles]]); rig/config.py holds the instruments' and
 gathers them all in RigConfig. Each key is one field with its type, default, bounds and
 description (drivers/config_fields.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from datetime import date
 from typing import Annotated, Any, Literal
@@ -32,6 +34,16 @@ def _iso_date(text: str) -> str:
     return text
 
 
+def _budget_input(name: str) -> str:
+    """An [uncertainty] input's name (UncertaintyConfig's *_rel keys), or ""."""
+    from hopkinson.rig.config import UncertaintyConfig
+
+    inputs = [f.name for f in dataclasses.fields(UncertaintyConfig) if f.name.endswith("_rel")]
+    if name and name not in inputs:
+        raise ValueError(f"one of {', '.join(inputs)} (the [uncertainty] input it is), got {name!r}")
+    return name
+
+
 def _not_blank(text: str) -> str:
     if not text.strip():
         raise ValueError("must not be empty")
@@ -50,6 +62,18 @@ class ReferenceCertificateConfig:
     u_rel: Annotated[Number, Field(ge=0, le=1, description="relative standard uncertainty, k = 1 "
                                                           "(0: not stated)")] = 0.0
     due: Annotated[Text, AfterValidator(_iso_date), Field(description="re-calibration due, YYYY-MM-DD")] = ""
+    budget: Annotated[Text, AfterValidator(_budget_input), Field(description=(
+        "the [uncertainty] input this item's u_rel is (e.g. grating_pitch_rel): a certificate is refused when "
+        "the two disagree (hopkinson.lab.certificate); \"\": not an input of the budget"))] = ""
+
+
+@dataclass(frozen=True)
+class SignatoryConfig:
+    """[[lab.signatories]]: a person who may authorise certificates, and their role."""
+
+    __pydantic_config__ = SECTION
+    name: Annotated[Text, AfterValidator(_not_blank)]
+    role: Annotated[Text, AfterValidator(_not_blank)]
 
 
 @dataclass(frozen=True)
@@ -66,6 +90,11 @@ class LabConfig:
     decision_rule: Annotated[Literal["simple", "guarded"], Field(description=(
         "simple: ILAC-G8 w = 0; guarded: w = U"))] = "simple"
     reference_chain: tuple[ReferenceCertificateConfig, ...] = ()
+    signatories: Annotated[tuple[SignatoryConfig, ...], Field(description=(
+        "who may authorise a certificate (none: no certificate can be authorised)"))] = ()
+    country: Annotated[Text, Field(pattern=r"^([A-Z]{2})?$", description=(
+        "ISO 3166-1 alpha-2 code of the lab (a Digital Calibration Certificate states it)")),
+        Hint('an ISO 3166-1 alpha-2 code such as "DE"')] = ""
 
 
 def _database_url(url: str) -> str:

@@ -320,3 +320,25 @@ def test_a_rig_file_must_state_its_safety_limits(tmp_path: Path, source: str, dr
     assert message.startswith(f"{path}: {named}: the rig must state its safety limits")
     assert (f"{drop} = …" in message) if drop != "section" else ("max_pressure_bar = …" in message)
     load_rig_config(CONFIG / source)  # the shipped files state them
+
+
+@pytest.mark.parametrize(("lab", "key", "reason"), [
+    ('[[lab.reference_chain]]\nitem = "grating"\ncertificate = "C-1"\nbudget = "grating_rel"\n',
+     "lab.reference_chain[0].budget", "one of grating_pitch_rel, interferometer_rel, amplifier_gain_rel"),
+    ('[[lab.signatories]]\nname = "A. Head"\nrole = " "\n', "lab.signatories[0].role", "must not be empty"),
+    ('[[lab.signatories]]\nname = "A. Head"\n', "lab.signatories[0].role", "missing key"),
+    ('[lab]\ncountry = "Germany"\n', "lab.country", 'an ISO 3166-1 alpha-2 code such as "DE"'),
+])
+def test_the_labs_signatories_country_and_budget_inputs_are_checked(tmp_path: Path, lab: str, key: str,
+                                                                   reason: str) -> None:
+    path = tmp_path / "rig.toml"
+    path.write_text((CONFIG / "rig.toml").read_text() + lab)
+    with pytest.raises(ConfigError) as caught:
+        load_rig_config(path)
+    assert str(caught.value).startswith(f"{path}: {key}: ") and reason in str(caught.value), str(caught.value)
+    good = ('[lab]\ncountry = "DE"\n[[lab.signatories]]\nname = "A. Head"\nrole = "head of lab"\n'
+            '[[lab.reference_chain]]\nitem = "grating"\ncertificate = "C-1"\nbudget = "grating_pitch_rel"\n')
+    path.write_text((CONFIG / "rig.toml").read_text() + good)
+    lab_config = load_rig_config(path).lab
+    assert lab_config.country == "DE" and lab_config.signatories[0].role == "head of lab"
+    assert lab_config.reference_chain[0].budget == "grating_pitch_rel"
