@@ -1,4 +1,4 @@
-"""The uncertainty's coverage study on the simulated rig's realistic records (README, "Realistic
+"""The uncertainty's coverage study on the simulated rig's realistic records (docs/bar-physics.md, "Realistic
 simulated records"), beside the same study on its idealised records.
 
     .venv/bin/python docs/coverage_realistic.py [--shots 100] [--draws 100] [--out docs/coverage-realistic.png]
@@ -12,7 +12,7 @@ is the sensor as mounted (truth "accelerometer": f_n is 1.10 × the sine-calibra
 gain, FBSD ±5 % from the sensor's continuous model (tests/sim_truth.py). f_n counts only the shots
 that claim one (a bonded pulse of projectile No. 3 at low pressure stops short of the resonance,
 and the analysis then rightly reports none). A 95 % interval should hold the truth in 95 % of the shots; the realistic effects the
-uncertainty does not model (README, uncertainty "Limits": mounting, transverse motion,
+uncertainty does not model (docs/method.md, uncertainty "Limits": mounting, transverse motion,
 demodulation errors at the onset, bar motion seen differently by spot and base) show as a lower
 rate. Prints one line per world and figure, the last line one JSON object; draws the rates.
 """

@@ -30,5 +30,5 @@ def test_the_commands_without_json_are_the_ones_the_readme_names() -> None:
 
     walk(build_parser(), [])
     assert sorted(without) == ["campaign decide", "demo", "lab upgrade", "panel", "sim"]
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[2] / "docs" / "commands.md").read_text(encoding="utf-8")
     assert "all but `demo`, `sim`, `panel`, `campaign decide` and `lab upgrade`" in readme

@@ -285,8 +285,7 @@ def test_sim_register_map_override(tmp_path: Path) -> None:
 
 
 def test_the_readmes_instruments_example_loads(tmp_path: Path) -> None:
-    readme = (CONFIG.parent / "README.md").read_text(encoding="utf-8")
-    section = readme[readme.index("## Instruments"):readme.index("## Files and formats")]
+    section = (CONFIG.parent / "docs" / "instruments.md").read_text(encoding="utf-8")
     example = section[section.index("```toml\n") + 8:section.index("```\n", section.index("```toml"))]
     text = (CONFIG / "rig.toml").read_text()
     path = tmp_path / "rig.toml"
