@@ -1,17 +1,22 @@
 """`hopkinson analyse` (issue 18): a stored shot analysed again with today's method, as a new
 analysis version beside the earlier ones, the raw data untouched; a shot whose analysis was
-never stored analysed from its configuration snapshot; bad input one line, exit 2."""
+never stored analysed from its configuration snapshot; bad input one line, exit 2. A lab's
+archive (issue 43): a folder tree of run folders and loose shot files, analysed in parallel
+worker processes, bad files one line each, the run journals following."""
 
 from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 from hopkinson.rig.cli.main import main
+from hopkinson.rig.journal import Journal
+from hopkinson.rig.run_folder import RunFolder
 from hopkinson.rig.shotfile import analysis_results, read_shot
 
 from tests.rig.test_cli_shot import _args, configs  # noqa: F401 (fixture)
@@ -72,3 +77,119 @@ def test_a_file_that_is_not_a_shot_is_a_failed_row_exit_3(tmp_path: Path, capsys
     assert main(["analyse", str(junk)]) == 3
     out = capsys.readouterr().out
     assert out.startswith(f"{junk}: FAILED: ") and out.count("\n") == 1
+
+
+# ------------------------------------------------------------------ an archive: folder trees, in parallel
+PLAN = """
+name = "archive"
+operator = "tester"
+authorise_firing = true
+[accelerometer]
+model = "SIM-ACC"
+serial = "A1"
+[defaults]
+projectile = 3
+[defaults.analysis]
+max_order = 6
+uncertainty = false
+[[shots]]
+pressure_bar = 1.3
+[[shots]]
+pressure_bar = 2.4
+"""
+
+
+@pytest.fixture(scope="module")
+def campaign_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A campaign of two shots fired on the simulated rig (100x real time), as `make demo` leaves one."""
+    base = tmp_path_factory.mktemp("archive-run")
+    plan = base / "plan.toml"
+    plan.write_text(PLAN, encoding="utf-8")
+    sim = base / "sim-fast.toml"
+    sim.write_text("[world]\ntime_scale = 100.0\n", encoding="utf-8")
+    assert main(["campaign", "run", str(plan), "--sim", "--sim-config", str(sim), "--out", str(base / "run"),
+                 "--no-report"]) == 0
+    return base / "run"
+
+
+@pytest.fixture
+def archive(campaign_run: Path, tmp_path: Path) -> dict[str, Path]:
+    """A lab's archive: a campaign run folder, a loose shot two folders down, a file that is not a shot."""
+    root = tmp_path / "archive"
+    run = shutil.copytree(campaign_run, root / "2026" / "run")
+    loose = root / "2025" / "bench" / "loose.h5"
+    loose.parent.mkdir(parents=True)
+    shutil.copy(sorted((run / "shots").glob("*.h5"))[0], loose)
+    (root / "2025" / "junk.h5").write_bytes(b"not hdf5")
+    (root / "2025" / "notes.txt").write_text("not a shot")
+    return {"root": root, "run": run, "loose": loose, "junk": root / "2025" / "junk.h5"}
+
+
+def journal_states(run: Path) -> dict[str, tuple[str, dict, str]]:
+    with Journal.open(run) as journal:
+        return {s.shot.id: (s.state.value, s.info, s.updated_utc) for s in journal.statuses()}
+
+
+def test_a_folder_tree_is_analysed_in_parallel_bad_files_one_line_each(archive: dict[str, Path], capsys) -> None:
+    run = archive["run"]
+    shots = sorted((run / "shots").glob("*.h5"))
+    before = journal_states(run)
+    assert len(shots) == 2 and all(s[0] == "ANALYSED" for s in before.values())
+    code = main(["analyse", str(archive["root"]), "--jobs", "2", "--max-order", "2", "--json"])
+    rows = {Path(r["path"]): r for r in json.loads(capsys.readouterr().out)["shots"]}
+    assert code == 3  # the junk file failed; the rest did not stop
+    assert set(rows) == {*shots, archive["loose"], archive["junk"]}
+    assert not rows[archive["junk"]]["ok"] and "junk.h5" in rows[archive["junk"]]["error"]
+    for path in (*shots, archive["loose"]):
+        assert rows[path]["ok"] and rows[path]["version"] == 2, rows[path]
+        assert [a["version"] for a in read_shot(path).analyses] == [1, 2]
+        assert read_shot(path).results["params"]["max_order"] == 2
+    after = journal_states(run)  # the run's journal follows its shots
+    for shot_id, (state, info, updated) in after.items():
+        assert state == "ANALYSED" and updated > before[shot_id][2]
+        assert info["order"] == rows[run / "shots" / f"{shot_id}.h5"]["key_figures"]["order"]
+    assert not list(archive["root"].rglob("*.tmp"))  # every file written whole
+
+
+def test_the_demos_shots_folder_named_alone_keeps_its_journal(archive: dict[str, Path], capsys) -> None:
+    """A run folder's shots/ folder (as `make demo` leaves it), named alone: its shots' journal
+    follows each outcome, an analysis that fails as ANALYSIS_FAILED with its reason."""
+    folder = archive["run"] / "shots"
+    code = main(["analyse", str(folder), "--jobs", "2", "--order", "3", "--json"])  # the data support order 2
+    rows = json.loads(capsys.readouterr().out)["shots"]
+    assert code == (0 if all(r["ok"] for r in rows) else 3) and any(not r["ok"] for r in rows)
+    states = journal_states(archive["run"])
+    for row in rows:
+        state, info, _ = states[Path(row["path"]).stem]
+        assert (state, info.get("error")) == (("ANALYSED", None) if row["ok"] else ("ANALYSIS_FAILED", row["error"]))
+
+
+def test_the_lines_come_in_the_order_found_and_parallel_equals_serial(archive: dict[str, Path], capsys) -> None:
+    folder = archive["run"]
+    assert main(["analyse", str(folder), "--jobs", "1", "--max-order", "2"]) == 0
+    serial = capsys.readouterr().out.splitlines()
+    assert main(["analyse", str(folder), "--jobs", "2", "--max-order", "2"]) == 0
+    parallel = capsys.readouterr().out.splitlines()
+    shots = sorted((folder / "shots").glob("*.h5"))
+    assert [line.split(": analysis version ")[0] for line in serial] == [str(s) for s in shots]
+    assert [line.replace("version 3", "version 2") for line in parallel] == serial  # the same figures
+
+
+def test_a_run_folder_in_use_is_refused_before_anything_moves(archive: dict[str, Path], capsys) -> None:
+    run = archive["run"]
+    held = RunFolder(run).lock()  # as a campaign running there holds it
+    try:
+        assert main(["analyse", str(archive["root"]), "--jobs", "2"]) == 2
+    finally:
+        held.release()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "in use by another process" in err
+    assert all(len(read_shot(p).analyses) == 1 for p in run.glob("shots/*.h5"))  # nothing analysed
+    assert len(read_shot(archive["loose"]).analyses) == 1
+
+
+@pytest.mark.parametrize("jobs", ["0", "two"])
+def test_jobs_must_be_a_positive_count(jobs: str, capsys) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main(["analyse", "x.h5", "--jobs", jobs])
+    assert stop.value.code == 2 and "--jobs" in capsys.readouterr().err
