@@ -41,6 +41,8 @@ from hopkinson.rig.errors import ConfigError
 if TYPE_CHECKING:  # concurrent.futures is loaded by this command only, not by every command's parser
     from concurrent.futures import Executor, Future
 
+    from hopkinson.rig.reanalysis import Target
+
 EXIT_SOME_FAILED = 3
 # Set to one thread in the workers (unless the caller set them): N processes each with N BLAS
 # threads would oversubscribe the cores.
@@ -97,23 +99,27 @@ def analyse_command(args: argparse.Namespace) -> int:
     jobs = min(args.jobs or available_cpus(), len(targets))
     rows: list[dict[str, Any]] = []
     futures: list[Future] = []
+
+    def take(target: Target, future: Future) -> None:
+        row = _row_of(target.path, future)
+        rows.append(row)
+        journals.done(target, row)
+        if not args.json:
+            print(_line(row), flush=True)
+
     try:
         with _executor(jobs) as pool:
             futures = [pool.submit(_row, t.path, overrides) for t in targets]
             try:
                 for target, future in zip(targets, futures, strict=True):
-                    row = _row_of(target.path, future)
-                    rows.append(row)
-                    journals.done(target, row)
-                    if not args.json:
-                        print(_line(row), flush=True)
+                    take(target, future)
             finally:
                 for future in futures[len(rows):]:
                     future.cancel()  # not started: never will; running: finish and are stored
-    finally:  # after an interruption the shots that finished still reach their journals
+    finally:  # after an interruption the shots that finished are still told and reach their journals
         for target, future in zip(targets[len(rows):], futures[len(rows):], strict=False):
             if future.done() and not future.cancelled():
-                journals.done(target, _row_of(target.path, future))
+                take(target, future)
         problems = journals.close()
     if args.json:
         emit_json({"shots": [{k: v for k, v in row.items() if k != "journal"} for row in rows]})

@@ -7,8 +7,12 @@ worker processes, bad files one line each, the run journals following."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -19,6 +23,7 @@ from hopkinson.rig.journal import Journal
 from hopkinson.rig.run_folder import RunFolder
 from hopkinson.rig.shotfile import analysis_results, read_shot
 
+from tests.rig.conftest import read_until
 from tests.rig.test_cli_shot import _args, configs  # noqa: F401 (fixture)
 
 
@@ -193,3 +198,33 @@ def test_jobs_must_be_a_positive_count(jobs: str, capsys) -> None:
     with pytest.raises(SystemExit) as stop:
         main(["analyse", "x.h5", "--jobs", jobs])
     assert stop.value.code == 2 and "--jobs" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_archive_run_stops_starting_shots_and_loses_none(shot_file: Path, tmp_path: Path, sig) -> None:
+    """Ctrl-C (to the whole process group, as a terminal sends it) or SIGTERM (to the command)
+    after the first shot is told: no shot starts after it, the ones running finish and are told,
+    every file is whole (one version or two, no temporary left), exit code 128 + the signal."""
+    tree = tmp_path / "tree"
+    for i in range(8):
+        (tree / f"{i % 2}").mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(shot_file, tree / f"{i % 2}" / f"s{i}.h5")
+    proc = subprocess.Popen([sys.executable, "-m", "hopkinson", "analyse", str(tree), "--jobs", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        first = read_until(proc, proc.stdout, r"analysis version 2: .*\n")
+        if sig == signal.SIGINT:
+            os.killpg(proc.pid, sig)  # a terminal's Ctrl-C reaches the workers too
+        else:
+            proc.send_signal(sig)
+        rest, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    told = (first + rest.decode()).splitlines()
+    assert proc.returncode == 128 + sig and "Traceback" not in err.decode()
+    versions = {p: [a["version"] for a in read_shot(p, load_raw=False).analyses] for p in sorted(tree.rglob("*.h5"))}
+    analysed = {str(p) for p, v in versions.items() if v == [1, 2]}
+    assert all(v in ([1], [1, 2]) for v in versions.values()) and not list(tree.rglob("*.tmp"))
+    assert {line.split(": analysis version 2")[0] for line in told} == analysed  # each analysed shot told
+    assert 1 <= len(analysed) < len(versions)  # the rest never started
