@@ -3,8 +3,9 @@
 `hopkinson …` command the pages quote parses with the real argument parser (nothing is run).
 
 A quoted command may be a synopsis: `[--opt V]` is read as given, `A|B` as its first
-alternative (at a sub-command, each), `…` dropped, and a placeholder value (`N`, `P`, `HZ`)
-is given a value its option's type accepts. A quote that names only a command
+alternative (at a sub-command, each), `…` dropped (or, as an option's value, a placeholder), a
+placeholder value (`N`, `P`, `HZ`) given a value its option's type accepts, and the command
+ends at a shell operator (`| psql`, `&& next`, `> out.json`). A quote that names only a command
 (`hopkinson campaign run`) must name one that exists; one with arguments must parse whole,
 a missing positional argument filled in as prose leaves it out (`hopkinson identify --explain`).
 """
@@ -35,6 +36,7 @@ HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*#*\s*$")
 COMMAND_START = re.compile(r"^(?:\$\s+)?(?:\S*/)?hopkinson\s+(?=[-a-z])")
 PLACEHOLDER = re.compile(r"^[A-Z][A-Z0-9_]*(?:\.[a-z0-9]+)?$")
 ELLIPSIS = ("…", "...")
+SHELL_OPERATORS = {"|", "||", "&&", ";", "&"}
 
 
 @dataclass(frozen=True)
@@ -135,10 +137,18 @@ def test_every_docs_page_is_reachable_from_the_readme_or_the_index() -> None:
 
 
 def _quotes(page: Path) -> list[Quote]:
-    """Every `hopkinson …` command in a page: inline code and the lines of code blocks."""
+    """Every `hopkinson …` command in a page: inline code and the lines of code blocks (a line
+    ending in a backslash continued by the next)."""
     quotes = []
+    held: tuple[int, str] | None = None
     for number, line, fenced in _lines_outside_code(page.read_text(encoding="utf-8")):
         if fenced:
+            if held is not None:
+                number, line = held[0], held[1] + " " + line.strip()
+                held = None
+            if line.rstrip().endswith("\\"):
+                held = (number, line.rstrip()[:-1])
+                continue
             candidates = [line.strip()]
         else:
             candidates = [m.group(2).strip() for m in INLINE_CODE.finditer(line.replace("\\|", "|"))]
@@ -157,8 +167,15 @@ def _words(text: str) -> list[str]:
     text = re.sub(r"\s#\s.*$", "", text)  # a trailing comment
     text = re.sub(r"\[([^\[\]]*?)\s\|\s[^\[\]]*\]", r"\1", text)  # [--a | --b]: the first
     text = text.replace("[", " ").replace("]", " ")
-    words = [w for w in shlex.split(text) if w not in ELLIPSIS]
-    return [w.removesuffix("…").removesuffix("...") for w in words]
+    try:
+        words = shlex.split(text)
+    except ValueError:  # an unbalanced quote in prose
+        words = text.split()
+    for i, word in enumerate(words):  # the command ends at a shell operator: `| psql`, `&& next`, `> file`
+        if word in SHELL_OPERATORS or word[:1] in "<>" or word[:2] in ("2>", "1>", "&>"):
+            words = words[:i]
+            break
+    return [w if w in ELLIPSIS else w.removesuffix("…").removesuffix("...") for w in words]
 
 
 @functools.cache
@@ -173,6 +190,8 @@ def _subparsers(parser: argparse.ArgumentParser) -> argparse._SubParsersAction |
 def _command_paths(parser: argparse.ArgumentParser, words: list[str]) -> list[tuple[list[str], list[str]]]:
     """([sub-command words], [the rest]) for each alternative `a|b` at a sub-command."""
     sub = _subparsers(parser)
+    if words and words[0] in ELLIPSIS:  # `hopkinson lab …`: any of its commands
+        return [([], [])]
     if sub is None or not words or words[0].startswith("-"):
         return [([], words)]
     paths = []
@@ -211,6 +230,11 @@ def _with_values(leaf: argparse.ArgumentParser, rest: list[str]) -> list[str]:
     argv, previous = [], None
     for word in rest:
         option = leaf._option_string_actions.get(previous or "")
+        if word in ELLIPSIS:  # "…": an option's value left out, or "and so on"
+            if option is not None and option.nargs != 0:
+                argv.append(_value_for(option, "X"))
+            previous = None
+            continue
         if option is not None and option.nargs != 0 and not word.startswith("-"):
             alternatives = word.split("|")
             word = next((a for a in alternatives if not PLACEHOLDER.match(a)), alternatives[0])
@@ -278,6 +302,7 @@ def test_every_quoted_command_parses(quote: Quote) -> None:
     ("hopkinson identify RECORD --draws many", "invalid int value"),
     ("hopkinson shot --sim --projectile 7", "invalid choice"),
     ("hopkinson lab import|sertificate RUN", "no command 'sertificate'"),
+    ("hopkinson shot --sim --yes --pressure-bar 2 --jsn > shot.json && next", "unrecognized arguments: --jsn"),
 ])
 def test_a_command_that_no_longer_parses_is_named(text: str, wrong: str) -> None:
     problem = quote_problem(Quote(REPO / "README.md", 1, text))
