@@ -136,6 +136,17 @@ def test_every_docs_page_is_reachable_from_the_readme_or_the_index() -> None:
     assert not unreached, f"docs pages linked from neither README.md nor docs/index.md: {unreached}"
 
 
+def test_every_docs_page_starts_with_who_it_is_for() -> None:
+    """The title, then a paragraph that begins with whom the page is for ("For …" or "**For** …")."""
+    missing = []
+    for page in PAGES[1:]:
+        lines = [line.strip() for line in page.read_text(encoding="utf-8").splitlines()]
+        body = [line for line in lines[1:] if line]
+        if not (lines and lines[0].startswith("# ") and body and re.match(r"^(\*\*)?For(\*\*)? ", body[0])):
+            missing.append(str(page.relative_to(REPO)))
+    assert not missing, f"pages that do not start with a title and whom they are for: {missing}"
+
+
 def _quotes(page: Path) -> list[Quote]:
     """Every `hopkinson …` command in a page: inline code and the lines of code blocks (a line
     ending in a backslash continued by the next)."""
