@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import time
 from collections import Counter, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -175,15 +176,16 @@ def _tree_targets(root: Path, plans: dict[Path, frozenset[str]]) -> list[Target]
 
 def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     """Analyse one shot file again and store it (`reanalyse`), as one row of `hopkinson analyse`:
-    path, version, ok, error, key_figures, summary, and `journal` (what its run's journal
-    records, or None when nothing was stored). A bad file is a failed row, never an exception:
-    many shots are analysed in one go, in worker processes."""
+    path, version, ok, error, key_figures, summary, cpu_s (the CPU seconds it took), and
+    `journal` (what its run's journal records, or None when nothing was stored). A bad file is a
+    failed row, never an exception: many shots are analysed in one go, in worker processes."""
     from hopkinson.analysis.key_figures import KeyFigures
     from hopkinson.rig.campaign import result_info, result_line
     from hopkinson.rig.shot import analysis_error_text
 
     row: dict[str, Any] = {"path": str(path), "version": None, "ok": False, "error": None, "key_figures": None,
-                           "summary": None, "journal": None}
+                           "summary": None, "cpu_s": None, "journal": None}
+    started = time.process_time()
     try:
         recorded = reanalyse(path, overrides)
         if recorded.stored:
@@ -197,6 +199,8 @@ def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     except Exception as exc:  # noqa: BLE001 - one bad file must not stop the rest
         row["error"] = f"{path}: {analysis_error_text(exc)}"
         return row
+    finally:
+        row["cpu_s"] = time.process_time() - started
     row["ok"] = recorded.error is None
     row["error"] = recorded.error
     if recorded.results is not None:

@@ -19,10 +19,10 @@ stored, the journals record them.
 
 One line per shot, in the order found (its file, the new version, its key figures or why it
 failed); --json one object {"shots": [{"path", "version", "ok", "error", "key_figures",
-"summary"}]}. Exit codes: 0 every shot analysed and stored; 2 bad input (no such file, a folder
-with no shot file, a run folder whose campaign is running, a journal that could not be
-updated); 3 a shot could not be analysed or its analysis not stored (the others still are;
-each line says which and why).
+"summary", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes: 0 every
+shot analysed and stored; 2 bad input (no such file, a folder with no shot file, a run folder
+whose campaign is running, a journal that could not be updated); 3 a shot could not be
+analysed or its analysis not stored (the others still are; each line says which and why).
 """
 
 from __future__ import annotations
@@ -179,7 +179,7 @@ def _row_of(path: Path, future: Future) -> dict[str, Any]:
         return future.result()
     except Exception as exc:  # noqa: BLE001 - a dead worker fails its shots, not the command
         return {"path": str(path), "version": None, "ok": False, "summary": None, "key_figures": None,
-                "journal": None, "error": f"{path}: the analysis process failed: {type(exc).__name__}: {exc}"}
+                "cpu_s": None, "journal": None, "error": f"{path}: the analysis process failed: {type(exc).__name__}: {exc}"}
 
 
 def _line(row: dict[str, Any]) -> str:
