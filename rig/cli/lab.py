@@ -95,6 +95,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--mounting", help="how the accelerometer was mounted (torque, adapter, couplant)")
     p.add_argument("--environment", help="e.g. '(23 ± 2) °C, (45 ± 10) %% r.h.'")
     p.add_argument("--by", default="", help="who records it (default: the login name)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("certificate", "issue a numbered calibration certificate of a campaign", certificate_command)
     p.add_argument("source", metavar="RUN_FOLDER|CAMPAIGN", help="a run folder (imported first), or a campaign's "
                                                                  "UUID or unambiguous name")
@@ -115,11 +116,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = command("reprint", "an issued certificate's documents again, from its stored content", reprint_command)
     p.add_argument("number", metavar="NUMBER")
     p.add_argument("-o", "--output", type=Path, action="append", required=True, metavar="PATH")
+    p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("verify", "re-check every certificate's hash and every analysis against its shot file", verify_command)
     p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("grants", "the SQL that gives the rig's role INSERT and SELECT only (PostgreSQL)", grants_command)
     p.add_argument("rig_role", metavar="RIG_ROLE")
     p.add_argument("--owner", default="", metavar="ROLE", help="the role that owns the tables and runs `lab upgrade`")
+    p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("audit", "the audit trail, newest first", audit_command)
     p.add_argument("--subject", help="only entries about this shot UUID, certificate number, campaign UUID or serial")
     p.add_argument("--limit", type=int, default=50)
@@ -331,6 +334,9 @@ def job_command(args: argparse.Namespace) -> int:
     with _repository(args) as repo:
         ref = _campaign_ref(repo, args.campaign, actor)
         job = repo.transact(actor, lambda uow: _job_dict(uow.campaigns.record_job(uow.campaigns.find(ref), **fields)))
+    if args.json:
+        emit_json({"campaign": str(ref), "job": job})
+        return 0
     print(f"job recorded for campaign {ref}: " + ", ".join(f"{k} {v!r}" for k, v in job.items() if v))
     return 0
 
@@ -401,7 +407,12 @@ def reprint_command(args: argparse.Namespace) -> int:
         issued = repo.certificate(args.number)
     if issued is None:
         raise LabError(f"certificate {args.number}: not in the lab's record")
-    for path in write_documents(issued.content, list(args.output), _identity(config)):
+    written = write_documents(issued.content, list(args.output), _identity(config))
+    if args.json:
+        emit_json({"number": args.number, "written": [str(p) for p in written],
+                   "withdrawn_by": issued.withdrawn_by or None})
+        return 0
+    for path in written:
         print(f"written: {path}" + (f" (withdrawn: replaced by {issued.withdrawn_by})" if issued.withdrawn_by else ""))
     return 0
 
@@ -427,7 +438,11 @@ def verify_command(args: argparse.Namespace) -> int:
 def grants_command(args: argparse.Namespace) -> int:
     from hopkinson.lab.roles import grants_sql
 
-    print(grants_sql(args.rig_role, args.owner))
+    sql = grants_sql(args.rig_role, args.owner)
+    if args.json:
+        emit_json({"rig_role": args.rig_role, "owner": args.owner or None, "sql": sql})
+    else:
+        print(sql)
     return 0
 
 
