@@ -107,8 +107,12 @@ def analyse_command(args: argparse.Namespace) -> int:
         if not args.json:
             print(_line(row), flush=True)
 
+    # Ctrl-C is caught explicitly, as SIGTERM is: a process started with SIGINT ignored (by
+    # a non-interactive shell or a test runner) would otherwise run the whole archive on.
+    from hopkinson.rig.signals import exit_cleanly_on_termination
+
     try:
-        with _executor(jobs) as pool:
+        with exit_cleanly_on_termination((signal.SIGINT, signal.SIGTERM, signal.SIGHUP)), _executor(jobs) as pool:
             futures = [pool.submit(_row, t.path, overrides) for t in targets]
             try:
                 for target, future in zip(targets, futures, strict=True):
