@@ -36,6 +36,8 @@ NAME = "valve controller 127.0.0.1:5020"
 LIMITS = LimitsConfig(max_pressure_bar=8.0, min_pressure_bar=0.2, pressure_tolerance_bar=0.05,
                       fixture_vacuum_max_mbar=100.0, vent_done_bar=0.05)
 POLL_S = 0.005
+# Each test here takes well under 2 s; a mutant that keeps SAFE from ever returning fails at 30 s.
+pytestmark = pytest.mark.timeout(30)
 
 
 def config(safe_s: float = 0.3, controller_timeout_s: float = 0.05, resolution_bar: float = 0.0) -> Any:
