@@ -86,7 +86,8 @@ def test_fbsd_lightly_damped_is_two_sided_not_a_drop():
     fn, zeta = 30_000.0, 0.05
     edge = band_edges(second_order_gain(fn, zeta), 5 * fn, (0.05,))["5"]
     assert edge.crossing == "above"
-    assert edge.frequency_hz < 0.25 * fn  # analytic: x = 0.2189
+    assert edge.frequency_hz == pytest.approx(analytic_edge(fn, zeta, 0.05)[0], rel=1e-9)
+    assert edge.frequency_hz < 0.25 * fn  # far below the resonance, where a drop-only band would put it
 
 
 def test_fbsd_of_discrete_model_matches_continuous_truth():
