@@ -259,6 +259,22 @@ def test_an_error_after_a_stuck_valve_was_read_names_the_valve_too() -> None:
     assert result.valves.fill_valve_position is True
 
 
+def test_a_round_whose_re_command_fails_is_not_clean_so_the_error_is_the_problem() -> None:
+    """A stuck fill valve whose command is carried out but answered with an error (the coil drops,
+    the reply is lost): every round has an instrument error, so the problem is that error and the
+    valve last read, not a clean round's account."""
+    controller = Controller(stuck={"fill_valve": True})
+    error = InstrumentError(NAME, "write coil fill", "no reply")
+
+    def set_fill(value: bool) -> None:
+        controller.coils["fill_valve"] = value
+        raise error
+
+    controller.set_fill_valve = set_fill
+    result, _ = run(controller)
+    assert result.problem == f"{error}; last read back: fill valve commanded shut but open"
+
+
 def test_an_error_with_no_stuck_valve_read_is_only_the_error() -> None:
     controller = Controller()
     controller.failures["interlocks"] = [InstrumentError(NAME, "read inputs", "connection lost")] * 1000
@@ -382,6 +398,14 @@ def test_a_valve_that_changes_late_is_caught_within_the_hold() -> None:
     assert controller.coils["fill_valve"] is False
 
 
+def test_a_safe_result_is_frozen_and_its_defaults_claim_nothing() -> None:
+    result = safe.SafeResult(True)
+    assert (result.problem, result.reservoir_pressure_bar, result.valves, result.controller_timed_out,
+            result.interrupt, result.elapsed_s) == (None, None, None, False, None, 0.0)
+    with pytest.raises(AttributeError):
+        result.confirmed = False  # type: ignore[misc]
+
+
 # -- interlock rules ------------------------------------------------------------------------------------
 def readings(**kw: Any) -> RigReadings:
     base: dict[str, Any] = dict(reservoir_pressure_bar=2.0, fixture_vacuum_mbar=50.0, door_closed=True,
@@ -418,6 +442,7 @@ def test_pressure_check(pressure, setpoint, charging, ok, detail) -> None:
      "fixture vacuum gauge reads inf (not a number: check the gauge and its register)"),
     ("digitizer_state", "ARMED", True, "digitizer armed"),
     ("digitizer_state", "TRIGGERED", False, "digitizer not armed (state TRIGGERED)"),
+    ("digitizer_state", None, False, "digitizer not armed (state None)"),
     ("amplifier_overloaded", False, True, "amplifier not overloaded"),
     ("amplifier_overloaded", True, False, "amplifier overloaded"),
     ("amplifier_overloaded", None, False, "amplifier overload status not read"),
@@ -452,6 +477,12 @@ def test_a_report_keeps_the_interlocks_order_and_only_those_required() -> None:
         evaluate(readings(), LIMITS, ("door", "doors"))
 
 
+def test_evaluate_judges_a_charged_reservoir_unless_told_it_is_charging() -> None:
+    low = readings(reservoir_pressure_bar=1.0)
+    assert evaluate(low, LIMITS, ("pressure",), setpoint_bar=2.0).failing() == [InterlockCode.PRESSURE]
+    assert evaluate(low, LIMITS, ("pressure",), setpoint_bar=2.0, charging=True).all_ok
+
+
 def test_what_each_state_requires() -> None:
     basic = ("door", "clamp", "estop", "amplifier")
     assert REQUIRED == {"CHECK": basic, "EVACUATE": basic, "CHARGE": (*basic, "vacuum", "pressure"),
@@ -472,3 +503,5 @@ def test_reading_the_instruments() -> None:
     assert read_readings(instruments) == RigReadings(3.5, 990.0, True, False, True, True, None)
     assert read_readings(instruments, amplifier=False, digitizer=True) == RigReadings(3.5, 990.0, True, False, True,
                                                                                        None, "ARMED")
+    with pytest.raises(TypeError):
+        read_readings(instruments, False)  # type: ignore[misc]  # the flags are keyword-only: no bare booleans
