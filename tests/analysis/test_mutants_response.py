@@ -113,6 +113,11 @@ def test_fbsd_from_response_refuses_frequencies_not_increasing(f) -> None:
         fbsd_from_response(np.array(f), np.ones(4))
 
 
+def test_fbsd_from_response_takes_two_samples() -> None:
+    edge = fbsd_from_response(np.array([0.0, 10.0]), np.array([1.0, 0.9]), (0.05,))["5"]
+    assert edge.frequency_hz == pytest.approx(5.0, rel=1e-12) and edge.crossing == "below"
+
+
 def test_fbsd_from_response_accepts_steps_under_one_hertz() -> None:
     f = np.array([0.0, 0.25, 0.5, 0.75])
     edges = fbsd_from_response(f, np.array([1.0, 1.0, 1.0, 0.9]), (0.05,))
@@ -191,6 +196,8 @@ def test_zpk_to_sos_refuses_more_zeros_than_poles_and_handles_a_pure_gain() -> N
     with pytest.raises(AnalysisError, match="2 zeros but only 1 poles"):
         zpk_to_sos(np.array([0.5, 0.2]), np.array([0.3]), 1.0)
     x = np.random.default_rng(3).standard_normal(50)
+    np.testing.assert_allclose(signal.sosfilt(zpk_to_sos(np.array([0.5]), np.array([0.2]), 2.0), x),
+                               signal.lfilter([2.0, -1.0], [1.0, -0.2], x), atol=1e-12)  # no delay unless asked
     for delay in (0, 1, 2, 3):
         y = signal.sosfilt(zpk_to_sos(np.array([]), np.array([]), 2.5, delay), x)
         np.testing.assert_allclose(y, 2.5 * np.concatenate([np.zeros(delay), x[: x.size - delay]]), atol=1e-12)
@@ -214,6 +221,28 @@ def test_simulate_from_rest_is_the_linear_filter(a, n) -> None:
         got = simulate_from_rest(np.array(a), b, float(delay), u)
         tolerance = 1e-3 if a == [1.0, -0.99] else 1e-9
         assert np.max(np.abs(got - want)) <= tolerance * np.max(np.abs(want))
+
+
+def test_simulate_from_rest_pads_for_a_two_tap_numerator() -> None:
+    """64 samples (a fast FFT length itself): the one sample of b's tail needs the one of padding."""
+    u = np.random.default_rng(7).standard_normal(64)
+    want = signal.lfilter([0.2, 0.1], [1.0], u)
+    np.testing.assert_allclose(simulate_from_rest(np.array([1.0]), np.array([0.2, 0.1]), 0.0, u), want, atol=1e-12)
+
+
+def test_simulate_from_rest_with_an_unstable_pole_still_returns_the_record() -> None:
+    """A fit's trial step may leave the unit circle: the padding is then capped (four record
+    lengths), and the output is the record's length and finite."""
+    u = np.random.default_rng(8).standard_normal(200)
+    for a in ([1.0, -1.05], [1.0, -1.6, 1.1]):
+        y = simulate_from_rest(np.array(a), np.array([0.1]), 0.0, u)
+        assert y.shape == (200,) and np.all(np.isfinite(y))
+
+
+def test_delayed_model_output_without_a_delay_is_the_filter() -> None:
+    u = np.random.default_rng(9).standard_normal(300)
+    model = DiscreteModel(1e-6, np.array([1.0, -1.2, 0.5]), np.array([0.1, 0.2]))
+    np.testing.assert_allclose(delayed_model_output(model, u), signal.lfilter(model.b, model.a, u), atol=1e-10)
 
 
 @pytest.mark.xfail(strict=True, reason="simulate_from_rest pads for the poles' decay and the delay but not for "
@@ -261,10 +290,19 @@ def test_to_continuous_maps_a_negative_real_pole_to_a_pair_at_nyquist_and_drops_
     np.testing.assert_allclose(zeros_s, [math.log(0.3) / dt], rtol=1e-12)
 
 
+def test_to_continuous_maps_complex_poles_beyond_a_quarter_of_the_rate_and_drops_poles_at_the_origin() -> None:
+    dt = 1e-6
+    p = 0.9 * np.exp(2j * np.pi * 0.3)  # a negative real part: not a negative real pole
+    model = DiscreteModel(dt, np.real(np.poly([p, np.conj(p), 0.0])), np.array([1.0]))
+    _, poles_s, _ = to_continuous(model)
+    want = np.log(np.array([p, np.conj(p)])) / dt
+    np.testing.assert_allclose(np.sort_complex(poles_s), np.sort_complex(want), rtol=1e-12)
+
+
 def test_fbsd_bounds_above_the_supported_band() -> None:
-    edges = {"5": 40_000.0, "10": 62_500.0, "20": 50_000.0}
+    edges = {"5": 40_000.0, "10": 81_250.0, "20": 62_500.0}
     assert fbsd_bounds(edges, None) == {}
-    bounds = fbsd_bounds(edges, (1_000.0, 50_000.0))
-    assert bounds == {"10": {"lower_bound_hz": 50_000.0,
-                             "reason": "unsupported by the excitation (the pulse supports up to 50 kHz; the model "
-                                       "puts the edge at 62.5 kHz)"}}
+    bounds = fbsd_bounds(edges, (1_000.0, 62_500.0))
+    assert bounds == {"10": {"lower_bound_hz": 62_500.0,
+                             "reason": "unsupported by the excitation (the pulse supports up to 62.5 kHz; the model "
+                                       "puts the edge at 81.2 kHz)"}}
