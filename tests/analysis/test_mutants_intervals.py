@@ -93,6 +93,8 @@ def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
     assert est.interval == (pytest.approx(math.exp(mixed[25]), rel=1e-12), pytest.approx(math.exp(mixed[975]), rel=1e-12))
     linear = Estimate.of_draws(0.0, GRID, positive=True)  # a value at zero: the linear reflection
     assert linear.interval == (pytest.approx(-975.0), pytest.approx(-25.0))
+    below = Estimate.of_draws(-100.0, GRID, positive=True)  # and below zero (no log of it)
+    assert below.interval == (pytest.approx(-1175.0), pytest.approx(-225.0))
 
 
 def test_estimate_to_dict_turns_non_finite_numbers_into_none() -> None:
