@@ -477,6 +477,13 @@ def test_a_report_keeps_the_interlocks_order_and_only_those_required() -> None:
         evaluate(readings(), LIMITS, ("door", "doors"))
 
 
+def test_readings_and_judgements_are_frozen() -> None:
+    report = evaluate(readings(), LIMITS, ("door",))
+    for value, field in ((report.readings, "door_closed"), (report.checks[0], "ok"), (report, "checks")):
+        with pytest.raises(AttributeError):
+            setattr(value, field, False)
+
+
 def test_evaluate_judges_a_charged_reservoir_unless_told_it_is_charging() -> None:
     low = readings(reservoir_pressure_bar=1.0)
     assert evaluate(low, LIMITS, ("pressure",), setpoint_bar=2.0).failing() == [InterlockCode.PRESSURE]
