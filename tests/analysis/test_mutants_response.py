@@ -68,15 +68,16 @@ def test_band_edges_starts_at_dc() -> None:
     assert edges["5"].crossing == "above"
 
 
-def test_band_edges_finds_a_narrow_bump_far_below_f_max_on_the_log_grid() -> None:
-    """A bump 0.5 Hz wide at 5 Hz with f_max 1 MHz (linear grid step 50 Hz): the geometric grid
-    finds it; the edge is where 1 + 0.2·exp(−((f − 5)/0.5)²) = 1.05 (closed form)."""
+@pytest.mark.parametrize(("centre_hz", "width_hz"), [(5.0, 0.5), (1.3, 0.05)])
+def test_band_edges_finds_a_narrow_bump_far_below_f_max_on_the_log_grid(centre_hz, width_hz) -> None:
+    """A narrow bump a few hertz up with f_max 1 MHz (linear grid step 50 Hz): the geometric grid,
+    six decades down to 1 Hz, finds it; the edge is where 1 + 0.2·exp(−((f − c)/w)²) = 1.05."""
     def gain(f: np.ndarray) -> np.ndarray:
-        return 1.0 + 0.2 * np.exp(-(((f - 5.0) / 0.5) ** 2))
+        return 1.0 + 0.2 * np.exp(-(((f - centre_hz) / width_hz) ** 2))
 
     edge = band_edges(gain, 1e6, (0.05,))["5"]
     assert edge.crossing == "above"
-    assert edge.frequency_hz == pytest.approx(5.0 - 0.5 * math.sqrt(math.log(4.0)), rel=1e-9)
+    assert edge.frequency_hz == pytest.approx(centre_hz - width_hz * math.sqrt(math.log(4.0)), rel=1e-9)
 
 
 def test_band_edges_uses_the_frequencies_of_interest_inside_the_range_only() -> None:
@@ -113,6 +114,12 @@ def test_fbsd_from_response_refuses_frequencies_not_increasing(f) -> None:
         fbsd_from_response(np.array(f), np.ones(4))
 
 
+def test_fbsd_from_response_touching_the_band_is_not_leaving_it() -> None:
+    """|0.75 − 1| = 0.25 exactly (binary fractions): on the edge, not outside it."""
+    edge = fbsd_from_response(np.array([0.0, 10.0, 20.0, 30.0]), np.array([1.0, 0.75, 1.0, 1.0]), (0.25,))["25"]
+    assert edge == BandEdge(0.25, 30.0, "none")
+
+
 def test_fbsd_from_response_takes_two_samples() -> None:
     edge = fbsd_from_response(np.array([0.0, 10.0]), np.array([1.0, 0.9]), (0.05,))["5"]
     assert edge.frequency_hz == pytest.approx(5.0, rel=1e-12) and edge.crossing == "below"
@@ -147,6 +154,8 @@ def test_normalised_gain_with_a_negative_dc_gain_and_without_a_finite_one() -> N
     f = np.array([0.0, 100.0, 250.0])
     z = np.exp(-2j * np.pi * f * 1e-3)
     np.testing.assert_allclose(gain(f), np.abs(0.5 / (-1.0 + 0.5 * z)), rtol=1e-12)
+    gain = normalised_gain_function(np.array([0.5]), np.array([-1.5, 0.5]), 1e-3)  # Σa = −1: H(1) = −0.5
+    np.testing.assert_allclose(gain(f), np.abs(0.5 / (-1.5 + 0.5 * z)) / 0.5, rtol=1e-12)
     with pytest.raises(AnalysisError, match="no finite, non-zero DC gain"):
         normalised_gain_function(np.array([1.0]), np.array([1.0, -1.0]), 1e-3)
     with pytest.raises(AnalysisError, match="no finite, non-zero DC gain"):
@@ -175,6 +184,8 @@ def test_pole_analysis_ratios_and_order() -> None:
     assert [r["pole"] for r in rows] == [[0.5, 0.0], [0.9, 0.0]]
     assert rows[0]["ratio"] == pytest.approx(math.log(1 / 0.5) / math.log(1 / 0.9))
     assert rows[1]["ratio"] == 1.0
+    fast = pole_analysis(np.array([0.5, 0.01]))[1]  # T'_r = 3/ln 100 = 0.65 sample: a ratio all the same
+    assert fast["ratio"] == pytest.approx(math.log(100) / math.log(2), rel=1e-12)
 
 
 def test_natural_frequency_and_damping_closed_form() -> None:
@@ -221,6 +232,17 @@ def test_simulate_from_rest_is_the_linear_filter(a, n) -> None:
         got = simulate_from_rest(np.array(a), b, float(delay), u)
         tolerance = 1e-3 if a == [1.0, -0.99] else 1e-9
         assert np.max(np.abs(got - want)) <= tolerance * np.max(np.abs(want))
+
+
+def test_simulate_from_rest_pads_four_record_lengths_for_a_slow_pole() -> None:
+    """An impulse in the last sample through 1/(1 − 0.99z⁻¹): the response r^k wraps past the padded
+    length S into the first sample as r^(S−n+1)/(1 − r^S), at most 0.99⁸⁰¹/(1 − 0.99⁸⁰¹) with four
+    record lengths of padding (3.2e-4; three would leave 2.4e-3)."""
+    u = np.zeros(200)
+    u[-1] = 1.0
+    y = simulate_from_rest(np.array([1.0, -0.99]), np.array([1.0]), 0.0, u)
+    assert y[-1] == pytest.approx(1.0, abs=1e-3)
+    assert abs(y[0]) <= 0.99**801 / (1 - 0.99**801)
 
 
 def test_simulate_from_rest_pads_for_a_two_tap_numerator() -> None:
@@ -286,8 +308,10 @@ def test_to_continuous_maps_a_negative_real_pole_to_a_pair_at_nyquist_and_drops_
     np.testing.assert_allclose(sorted(poles_s, key=lambda v: (v.imag, v.real)), want, rtol=1e-12)
     assert zeros_s.size == 0  # −0.6 is a sampling zero; 0 a delay
     assert gain * 1.0 / np.prod(-poles_s) == pytest.approx(model.dc_gain, rel=1e-12)
-    zeros_s, _, _ = to_continuous(DiscreteModel(dt, [1.0, -0.5], [1.0, -0.3]))
+    one_zero = DiscreteModel(dt, [1.0, -0.5], [1.0, -0.3])
+    zeros_s, poles_s, gain = to_continuous(one_zero)
     np.testing.assert_allclose(zeros_s, [math.log(0.3) / dt], rtol=1e-12)
+    assert gain * np.prod(-zeros_s) / np.prod(-poles_s) == pytest.approx(one_zero.dc_gain, rel=1e-12)
 
 
 def test_to_continuous_maps_complex_poles_beyond_a_quarter_of_the_rate_and_drops_poles_at_the_origin() -> None:
