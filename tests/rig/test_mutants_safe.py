@@ -362,12 +362,13 @@ def test_after_a_controller_timeout_safe_holds_before_it_confirms() -> None:
     assert result.confirmed and result.controller_timed_out and result.elapsed_s >= 1.0
 
 
-def test_a_timeout_of_another_instrument_is_no_reason_to_hold() -> None:
+@pytest.mark.parametrize("other", ["digitizer TCPIP::127.0.0.1::5025::SOCKET", "zeta digitizer"])
+def test_a_timeout_of_another_instrument_is_no_reason_to_hold(other: str) -> None:
     controller = Controller()
     digitizer = Digitizer()
 
     def late() -> None:
-        raise InstrumentTimeout("digitizer", "ABOR", "no reply")
+        raise InstrumentTimeout(other, "ABOR", "no reply")
 
     digitizer.abort = late
     result, _ = run(controller, config(safe_s=2.5), digitizer=digitizer)
