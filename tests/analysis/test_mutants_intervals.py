@@ -80,6 +80,8 @@ def test_a_positive_figure_leaves_out_draws_at_or_below_zero() -> None:
     got = Estimate.of_draws(1.5, with_bad, positive=True)
     want = Estimate.of_draws(1.5, draws, positive=True)
     assert got.interval == want.interval and got.u == pytest.approx(want.u, rel=1e-12)
+    two = Estimate.of_draws(1.5, np.array([1.0, 2.0, -1.0]), positive=True)
+    assert two.u == pytest.approx(math.sqrt(0.5), rel=1e-12)
     one = Estimate.of_draws(1.5, np.array([2.0, -1.0, 0.0]), positive=True)
     assert math.isnan(one.u) and all(math.isnan(x) for x in one.interval)
 
@@ -118,6 +120,21 @@ def rel_gain(c: float, f: np.ndarray) -> np.ndarray:
 def test_response_band_needs_two_draws_and_a_dc_gain() -> None:
     assert response_band(zero_model(0.2), [zero_model(0.2)], (1e3, 1e5)) is None
     assert response_band(DiscreteModel(DT, np.array([1.0]), np.array([1.0, -1.0])), [zero_model(0.1)] * 2, None) is None
+
+
+def test_response_band_from_two_draws_and_of_a_negative_dc_gain() -> None:
+    """Two draws are enough; a sensor read with inverted polarity (negative DC gain) has the same
+    band, each response taken relative to its own DC gain."""
+    assert response_band(zero_model(0.2), [zero_model(0.1), zero_model(0.3)], (1e3, 1e5), points=5) is not None
+    cs = GRID / 2000.0
+
+    def inverted(c: float) -> DiscreteModel:
+        return DiscreteModel(DT, np.array([1.0]), np.array([-1.0, -c]))
+
+    want = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5), points=10)
+    got = response_band(inverted(0.25), [inverted(c) for c in cs], (1e3, 1e5), points=10)
+    for key in ("magnitude_rel", "magnitude_rel_low", "magnitude_rel_high", "phase_low_deg", "phase_high_deg"):
+        np.testing.assert_allclose(got[key], want[key], rtol=1e-12, atol=1e-9)
 
 
 def test_response_band_grid() -> None:
