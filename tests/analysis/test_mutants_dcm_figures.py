@@ -175,6 +175,16 @@ def test_a_linear_phase_fir_stage_is_a_delay_the_times_leave_out() -> None:
     assert steps.settling_times_samples() == (28.0, 4.0)
 
 
+def test_an_even_length_fir_stage_leaves_its_half_sample() -> None:
+    """Taps [0, 0, ½, ½, 0, 0]: a delay of 2.5 samples, of which the whole 2 are removed; the
+    compensated step is then ½(y[k] + y[k−1]) = 1 − 0.75·0.5^k (closed form)."""
+    model, dcm = first_order_pair()
+    even = DCM(DT, dcm.zeros, dcm.poles, dcm.gain, fir=np.array([0.0, 0.0, 0.5, 0.5, 0.0, 0.0]))
+    _, both = step_responses(model, even)
+    np.testing.assert_allclose(both, 1 - 0.75 * 0.5 ** np.arange(both.size), atol=1e-12)
+    assert compare_steps(model, even).lead == 2
+
+
 def test_rise_times_interpolate_linearly_between_samples() -> None:
     """A ramp k/37 crosses 10 % at 3.7 and 90 % at 33.3 samples: rise 29.6. The first-order pair:
     each crossing between the two samples that bracket it, closed form."""
