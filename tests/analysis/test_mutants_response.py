@@ -50,6 +50,12 @@ def test_band_edges_refuses_a_non_positive_f_max(f_max: float) -> None:
         band_edges(lambda f: np.ones_like(f), f_max)
 
 
+def test_band_edges_touching_the_band_is_not_leaving_it() -> None:
+    """A gain of exactly 0.75 at one grid point (500 Hz of 1 kHz): on the ±25 % edge, not outside."""
+    edge = band_edges(lambda f: np.where(f == 500.0, 0.75, 1.0), 1000.0, (0.25,))["25"]
+    assert edge == BandEdge(0.25, 1000.0, "none")
+
+
 def test_band_edges_refuses_a_gain_not_finite() -> None:
     with pytest.raises(AnalysisError, match="not finite"):
         band_edges(lambda f: np.where(f > 500.0, np.inf, 1.0), 1000.0)
@@ -209,6 +215,9 @@ def test_zpk_to_sos_refuses_more_zeros_than_poles_and_handles_a_pure_gain() -> N
     x = np.random.default_rng(3).standard_normal(50)
     np.testing.assert_allclose(signal.sosfilt(zpk_to_sos(np.array([0.5]), np.array([0.2]), 2.0), x),
                                signal.lfilter([2.0, -1.0], [1.0, -0.2], x), atol=1e-12)  # no delay unless asked
+    # one pole more than zeros: (z − 0.5)/((z − 0.2)(z − 0.3)) = z⁻¹(1 − 0.5z⁻¹)/((1 − 0.2z⁻¹)(1 − 0.3z⁻¹))
+    np.testing.assert_allclose(signal.sosfilt(zpk_to_sos(np.array([0.5]), np.array([0.2, 0.3]), 1.0), x),
+                               signal.lfilter([0.0, 1.0, -0.5], np.poly([0.2, 0.3]), x), atol=1e-12)
     for delay in (0, 1, 2, 3):
         y = signal.sosfilt(zpk_to_sos(np.array([]), np.array([]), 2.5, delay), x)
         np.testing.assert_allclose(y, 2.5 * np.concatenate([np.zeros(delay), x[: x.size - delay]]), atol=1e-12)
@@ -248,8 +257,10 @@ def test_simulate_from_rest_pads_four_record_lengths_for_a_slow_pole() -> None:
 def test_simulate_from_rest_pads_for_a_two_tap_numerator() -> None:
     """64 samples (a fast FFT length itself): the one sample of b's tail needs the one of padding."""
     u = np.random.default_rng(7).standard_normal(64)
-    want = signal.lfilter([0.2, 0.1], [1.0], u)
-    np.testing.assert_allclose(simulate_from_rest(np.array([1.0]), np.array([0.2, 0.1]), 0.0, u), want, atol=1e-12)
+    for delay in (0, 3):
+        want = signal.lfilter([0.2, 0.1], [1.0], np.concatenate([np.zeros(delay), u])[:64])
+        got = simulate_from_rest(np.array([1.0]), np.array([0.2, 0.1]), float(delay), u)
+        np.testing.assert_allclose(got, want, atol=1e-12)
 
 
 def test_simulate_from_rest_with_an_unstable_pole_still_returns_the_record() -> None:
@@ -312,6 +323,20 @@ def test_to_continuous_maps_a_negative_real_pole_to_a_pair_at_nyquist_and_drops_
     zeros_s, poles_s, gain = to_continuous(one_zero)
     np.testing.assert_allclose(zeros_s, [math.log(0.3) / dt], rtol=1e-12)
     assert gain * np.prod(-zeros_s) / np.prod(-poles_s) == pytest.approx(one_zero.dc_gain, rel=1e-12)
+
+
+def test_to_continuous_keeps_complex_zeros_left_of_the_axis_and_a_zero_outside_the_circle() -> None:
+    """−0.5 ± 0.5j is no sampling zero (those lie on the negative real axis); a zero at 1.5 (non-
+    minimum phase) maps to s = ln 1.5/T > 0, and the DC gain still matches."""
+    dt = 1e-5
+    zeros = np.array([-0.5 + 0.5j, -0.5 - 0.5j])
+    model = DiscreteModel(dt, np.real(np.poly([0.3, 0.4, 0.6])), np.real(np.poly(zeros)))
+    zeros_s, _, _ = to_continuous(model)
+    np.testing.assert_allclose(np.sort_complex(zeros_s), np.sort_complex(np.log(zeros) / dt), rtol=1e-12)
+    outside = DiscreteModel(dt, [1.0, -0.5], [1.0, -1.5])
+    zeros_s, poles_s, gain = to_continuous(outside)
+    np.testing.assert_allclose(zeros_s, [math.log(1.5) / dt], rtol=1e-12)
+    assert gain * np.prod(-zeros_s) / np.prod(-poles_s) == pytest.approx(outside.dc_gain, rel=1e-12)
 
 
 def test_to_continuous_maps_complex_poles_beyond_a_quarter_of_the_rate_and_drops_poles_at_the_origin() -> None:
