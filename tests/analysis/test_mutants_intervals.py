@@ -72,6 +72,9 @@ def test_a_positive_figure_is_reflected_on_a_log_scale() -> None:
     assert est.interval == (pytest.approx(v * v / q_hi, rel=1e-12), pytest.approx(v * v / q_lo, rel=1e-12))
     assert est.u == pytest.approx(float(np.std(draws, ddof=1)), rel=1e-12)
     assert Estimate.of_draws(v, draws).interval[0] < 0 < est.interval[0]
+    small = Estimate.of_draws(0.05, 0.05 / 1.5 * draws, positive=True)  # a damping ratio: below 1 too
+    assert small.interval == (pytest.approx(est.interval[0] * 0.05 / 1.5, rel=1e-12),
+                              pytest.approx(est.interval[1] * 0.05 / 1.5, rel=1e-12))
 
 
 def test_a_positive_figure_leaves_out_draws_at_or_below_zero() -> None:
