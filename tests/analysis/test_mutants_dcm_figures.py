@@ -120,6 +120,12 @@ def test_compensated_fbsd_searches_the_model_zeros_and_the_dcm_poles() -> None:
     assert edge.frequency_hz == pytest.approx(f_true, abs=1e-3)
 
 
+def test_a_compensated_gain_within_the_band_to_nyquist_reports_nyquist() -> None:
+    model = DiscreteModel(DT, np.array([1.0]), np.array([0.0, 1.0]))
+    edges = compensated_fbsd_edges(model, DCM(DT, np.array([0.01]), np.array([0.0]), 1.0))  # flat to ±1 %
+    assert all(e.crossing == "none" and e.frequency_hz == 0.5 / DT for e in edges.values())
+
+
 def test_compensated_fbsd_refuses_another_interval_and_a_zero_dc_gain() -> None:
     model = DiscreteModel(DT, np.array([1.0, -0.5]), np.array([0.5]))
     with pytest.raises(AnalysisError, match="designed for a sample interval of 2e-06 s, the model has 1e-06 s"):
@@ -148,6 +154,15 @@ def test_step_responses_of_first_order_systems() -> None:
     np.testing.assert_allclose(both, 1 - 0.5 ** (k + 1), atol=1e-12)
     alone, both = step_responses(model, dcm, n_samples=10)
     assert alone.size == both.size == 10
+
+
+def test_the_step_responses_are_normalised_by_both_dc_gains() -> None:
+    """A DCM with twice the gain (DC gain 2) gives the same normalised steps."""
+    model, dcm = first_order_pair()
+    doubled = DCM(DT, dcm.zeros, dcm.poles, 2 * dcm.gain)
+    assert doubled.dc_gain == pytest.approx(2.0)
+    for got, want in zip(step_responses(model, doubled), step_responses(model, dcm), strict=True):
+        np.testing.assert_allclose(got, want, atol=1e-12)
 
 
 def test_settling_times_closed_form() -> None:
