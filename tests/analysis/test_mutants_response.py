@@ -15,6 +15,7 @@ from hopkinson.analysis.response import (
     delayed_model_output,
     fbsd_bounds,
     fbsd_from_response,
+    frequency_response,
     level_key,
     model_output,
     natural_frequency_damping,
@@ -31,17 +32,34 @@ from scipy import signal
 
 def test_level_keys_and_band_edge_dict() -> None:
     assert [level_key(x) for x in (0.05, 0.10, 0.025, 0.5)] == ["5", "10", "2.5", "50"]
+    assert level_key(0.001234567) == "0.123457"  # six significant digits
     reached, never = BandEdge(0.05, 1234.5, "above"), BandEdge(0.1, 5e5, "none")
     assert reached.reached and not never.reached
     assert reached.to_dict() == {"level": 0.05, "frequency_hz": 1234.5, "crossing": "above",
                                  "within_band_to_limit": False}
     assert never.to_dict()["within_band_to_limit"] is True
+    with pytest.raises(AttributeError):
+        reached.frequency_hz = 1.0  # type: ignore[misc]
+
+
+def test_frequency_response_of_a_numerator_with_several_taps_closed_form() -> None:
+    """The phase too: reversing b's or a's coefficients keeps |H| on the unit circle but not H."""
+    dt = 1e-5
+    model = DiscreteModel(dt, [1.0, -0.5, 0.2], [0.3, 0.2, 0.1])
+    f = np.array([0.0, 3_000.0, 17_000.0, 41_000.0])
+    z_inv = np.exp(-2j * np.pi * f * dt)
+    want = (0.3 + 0.2 * z_inv + 0.1 * z_inv**2) / (1 - 0.5 * z_inv + 0.2 * z_inv**2)
+    np.testing.assert_allclose(frequency_response(model, f), want, rtol=1e-12)
 
 
 @pytest.mark.parametrize("level", [0.0, 1.0, -0.05, 1.5])
 def test_band_edges_refuses_a_level_outside_0_1(level: float) -> None:
     with pytest.raises(AnalysisError, match="level must be between 0 and 1"):
         band_edges(lambda f: np.ones_like(f), 1000.0, (level,))
+
+
+def test_band_edges_below_one_hertz() -> None:
+    assert band_edges(lambda f: 1.0 + f, 0.5, (0.05,))["5"].frequency_hz == pytest.approx(0.05, rel=1e-9)
 
 
 @pytest.mark.parametrize("f_max", [0.0, -10.0])
