@@ -187,6 +187,7 @@ def test_a_linear_phase_fir_stage_is_a_delay_the_times_leave_out() -> None:
     np.testing.assert_allclose(alone, 1 - 0.9 ** (k + 1), atol=1e-12)
     steps = compare_steps(model, delayed)
     assert steps.lead == 2 and steps.both.size == alone.size + 2
+    assert alone.size == both.size == step_responses(model, dcm)[0].size  # n samples from the step either way
     assert steps.settling_times_samples() == (28.0, 4.0)
 
 
@@ -232,6 +233,24 @@ def test_rise_time_from_the_first_sample_and_its_errors() -> None:
         StepComparison(np.full(40, 0.8), slow).rise_times_samples()
     with pytest.raises(AnalysisError, match="rises within one sample"):
         StepComparison(slow, np.ones(40)).rise_time_ratio()
+
+
+def test_touching_the_tolerance_is_settled() -> None:
+    """|1.25 − 1| = 0.25 exactly (binary fractions): on the ±25 % line, not outside it."""
+    steps = StepComparison(np.array([1.25, 0.75, 1.0, 1.0]), np.ones(4))
+    assert steps.settling_times_samples(0.25) == (0.0, 0.0)
+
+
+def test_a_step_response_whose_fir_delay_passes_the_limit_is_refused() -> None:
+    """n + lead samples are simulated: a pole that needs 4 000 000 − 1 samples with a 5-tap stage
+    (lead 2) passes the 4 000 000 limit."""
+    n_wanted = 4_000_000 - 1
+    response_time = (n_wanted - 1 - 1 - 64 - 0.5) / 4  # n = ceil(4·T'_r) + b.size + order + 64
+    p = math.exp(-3.0 / response_time)
+    model = DiscreteModel(DT, np.array([1.0, -p]), np.array([1 - p]))
+    dcm = DCM(DT, np.array([0.5]), np.array([0.2]), 1.0, fir=np.array([0.0, 0.0, 1.0, 0.0, 0.0]))
+    with pytest.raises(AnalysisError, match="too slow to simulate"):
+        step_responses(model, dcm)
 
 
 def test_settling_time_ratio_with_a_compensated_response_settled_at_once() -> None:
