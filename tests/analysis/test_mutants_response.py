@@ -112,6 +112,9 @@ def test_band_edges_uses_the_frequencies_of_interest_inside_the_range_only() -> 
     assert band_edges(gain, 1000.0, (0.05,))["5"].crossing == "none"
     edge = band_edges(gain, 1000.0, (0.05,), (-5.0, 0.0, 333.3337, 1000.0, 2000.0))["5"]
     assert edge.crossing == "below" and abs(edge.frequency_hz - 333.3337) < 1e-3
+    # below the geometric grid's six decades (1 Hz of 1 MHz): found through its frequency only
+    low = band_edges(lambda f: np.where(np.abs(f - 0.4) < 1e-4, 0.5, 1.0), 1e6, (0.05,), (0.4,))["5"]
+    assert low.crossing == "below" and abs(low.frequency_hz - 0.4) < 1e-3
 
 
 def test_band_edges_none_is_f_max_and_each_level_on_its_own() -> None:
