@@ -148,6 +148,11 @@ def test_fast_path_commands_every_actuator_once_then_confirms_by_reading_back() 
     assert reading.interlocks == {"door": True, "clamp": False, "estop": True, "vacuum": False, "pressure": True}
 
 
+def test_the_options_are_keyword_only() -> None:
+    with pytest.raises(TypeError):
+        make_rig_safe(Controller(), config(), Events(), Digitizer())  # type: ignore[misc]
+
+
 def test_a_disconnected_digitizer_is_not_asked_and_none_is_fine() -> None:
     digitizer = Digitizer(connected=False)
     assert run(Controller(), digitizer=digitizer)[0].confirmed
