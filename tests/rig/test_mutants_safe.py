@@ -479,6 +479,8 @@ def test_a_report_keeps_the_interlocks_order_and_only_those_required() -> None:
     assert event.interlocks == report.as_dict() and event.details == report.details()
     assert (event.amplifier_overloaded, event.digitizer_state) == (False, "IDLE")
     assert report.reading("ARM").idle is False
+    with pytest.raises(TypeError):
+        report.reading("ARM", True)  # type: ignore[misc]  # idle is keyword-only
     with pytest.raises(ValueError, match=r"unknown interlock\(s\) \['doors'\]"):
         evaluate(readings(), LIMITS, ("door", "doors"))
 
