@@ -165,6 +165,14 @@ def test_the_step_responses_are_normalised_by_both_dc_gains() -> None:
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
+def test_a_model_of_negative_dc_gain_has_the_same_normalised_steps() -> None:
+    """A sensor read with inverted polarity: each response normalised by its own final value."""
+    model, dcm = first_order_pair()
+    inverted = DiscreteModel(DT, model.a, -model.b)
+    for got, want in zip(step_responses(inverted, dcm), step_responses(model, dcm), strict=True):
+        np.testing.assert_allclose(got, want, atol=1e-12)
+
+
 def test_settling_times_closed_form() -> None:
     """1 − p^(k+1) stays within 5 % from the first k with p^(k+1) ≤ 0.05: k = 28 for 0.9, 4 for 0.5
     (0.9²⁹ = 0.047, 0.9²⁸ = 0.052; 0.5⁵ = 0.031, 0.5⁴ = 0.0625)."""
@@ -233,6 +241,8 @@ def test_rise_time_from_the_first_sample_and_its_errors() -> None:
         StepComparison(np.full(40, 0.8), slow).rise_times_samples()
     with pytest.raises(AnalysisError, match="rises within one sample"):
         StepComparison(slow, np.ones(40)).rise_time_ratio()
+    # a compensated rise of 0.8 sample (under one, above none) still gives its ratio: 16 / 0.8
+    assert StepComparison(slow, jump).rise_time_ratio() == pytest.approx(16.0 / 0.8, rel=1e-12)
 
 
 def test_touching_the_tolerance_is_settled() -> None:
