@@ -342,11 +342,30 @@ def test_the_watchdog_vents_when_the_heartbeat_stops_and_stays_tripped(transport
         assert rig.world.watchdog_state() == "off" and rig.world.coils()["fill"] is True  # disarmed
 
 
+def _count_beats(rig: SimulatedRig) -> list[int]:
+    """Every value written to the heartbeat register from now on (the world's own record)."""
+    beats: list[int] = []
+    write = rig.world.heartbeat
+
+    def counted(value: int) -> None:
+        beats.append(value)
+        write(value)
+
+    rig.world.heartbeat = counted  # type: ignore[method-assign]
+    return beats
+
+
 def test_the_heartbeat_thread_keeps_the_watchdog_fed_in_real_time() -> None:
     # the wall clock; 0.8 s: a beat (every 0.2 s) delayed by a loaded machine must not trip it
     with SimulatedRig(sim_config()) as rig, controller(rig, watchdog_s=0.8) as vc:
+        beats = _count_beats(rig)
         vc.start_heartbeat()
-        time.sleep(2.4)  # three watchdog times: fed by the driver's thread
+        # 13 beats written by the driver's thread (every 0.2 s: three watchdog times and more),
+        # waited for as events with a generous timeout, and the watchdog never tripped meanwhile
+        deadline = time.monotonic() + 60.0
+        while len(beats) < 13 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert len(beats) >= 13 and rig.world.watchdog_trips == 0
         assert vc.heartbeat_running and vc.watchdog_state() == "armed"
         vc.stop_heartbeat_thread()
         deadline = time.monotonic() + 10.0

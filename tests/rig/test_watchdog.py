@@ -59,7 +59,10 @@ def test_a_killed_shot_leaves_the_controller_to_vent_the_rig(tmp_path: Path, kil
         vented_s = _wait_for(lambda: world.reservoir_pressure_bar() <= session.config.limits.vent_done_bar, 10.0)
         print(f"\nkilled while {kill_when}: watchdog tripped {trip_s:.2f} s after SIGKILL "
               f"(watchdog_s {WATCHDOG_S:g}), vented {vented_s:.2f} s later (sim {TIME_SCALE:g}x)")
-        assert trip_s <= WATCHDOG_S + 1.0  # the last beat came before the kill
+        # The safety deadline: the controller must trip within watchdog_s of the last beat, and the
+        # last beat came before the kill, so trip_s <= WATCHDOG_S. Margin 1 s (half the period): the
+        # SIGKILL's delivery and the simulator's polling on a loaded machine.
+        assert trip_s <= WATCHDOG_S + 1.0
         if kill_when == "fired":
             assert world.shots_fired == 1 and world.fire_pulses == 1
 
