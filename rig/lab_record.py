@@ -171,6 +171,34 @@ def _kept_raw_sha256(repo: LabRepository, path: Path) -> str | None:
         return None
 
 
+_lookup_lock = threading.Lock()
+_lookups: dict[str, LabRepository | None] = {}  # by the URL in force; None: it cannot be reached
+
+
+def kept_raw_sha256(path: str | Path) -> str | None:
+    """The raw channels' SHA-256 the lab's record kept from the shot's first import, for `report`
+    and `analyse` to verify against (None: no lab record on this machine, or the shot is not in
+    it). The record in force (HOPKINSON_DATABASE_URL, else the default SQLite file) is opened once
+    per process and never created; one that cannot be reached is not asked again."""
+    url = database_url()
+    with _lookup_lock:
+        if url not in _lookups:
+            try:
+                _lookups[url] = open_repository(url, create=False)
+            except (LabError, OSError):
+                _lookups[url] = None
+        repo = _lookups[url]
+    if repo is None:
+        return None
+    from sqlalchemy.exc import SQLAlchemyError
+
+    try:
+        return _kept_raw_sha256(repo, Path(path))
+    except (LabError, OSError, SQLAlchemyError) as exc:
+        _log.warning("the lab's record could not be asked for %s's recorded SHA-256: %s", path, exc)
+        return None
+
+
 class LabRecorder:
     """Records each stored or analysed shot (module doc) on its own thread."""
 

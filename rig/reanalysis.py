@@ -74,7 +74,11 @@ def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisParams:
 def reanalyse(path: str | Path, overrides: dict[str, Any] | None = None) -> RecordedAnalysis:
     """Analyse a stored shot again with today's method and store it as a new analysis version."""
     path = Path(path)
-    require_sound(path)  # a damaged raw channel is never analysed again as if it were whole
+    from hopkinson.rig.lab_record import kept_raw_sha256  # the lab's record only when asked
+
+    # a damaged raw channel is never analysed again as if it were whole; the raw SHA-256 the
+    # lab's record kept is checked too (channels and their written SHA-256 both rewritten)
+    require_sound(path, kept_raw_sha256(path))
     shot = read_shot(path)
     if shot.raw is None:
         raise ShotFileError(f"{path}: holds no raw data")

@@ -328,3 +328,32 @@ def test_the_pdf_draws_every_character_or_refuses(tmp_path: Path, url: str, lab_
         assert not (tmp_path / "c.pdf").exists() and not (tmp_path / "c.xml").exists()
         with open_repository(url) as repo:
             assert repo.counts()["certificates"] == 0
+
+
+def test_report_and_analyse_check_the_raw_sha256_the_lab_record_kept(
+        tmp_path: Path, url: str, lab_config: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Channels and the SHA-256 written beside them, both rewritten with h5py, pass the file's own
+    checks; `report` and `analyse` still refuse the file, against the SHA-256 the lab's record
+    kept from its first import (the record in force: HOPKINSON_DATABASE_URL)."""
+    from hopkinson.rig.shotfile import raw_sha256, read_shot
+
+    shot = tmp_path / "shot.h5"
+    write_made_up_shot(shot, serial="SN-K")
+    code, _out, _err = lab(capsys, url, "import", str(shot), "--config", str(lab_config))
+    assert code == 0
+    with h5py.File(shot, "r+") as f:
+        codes = f["raw/response"][...]
+        codes[7] += 3
+        f["raw/response"][...] = codes
+    with h5py.File(shot, "r+") as f:
+        f.attrs["raw_sha256"] = raw_sha256(read_shot(shot).raw)  # the file now agrees with itself
+    assert verify_shot(shot) == []
+    monkeypatch.setenv("HOPKINSON_DATABASE_URL", url)
+    assert main(["report", str(shot), "-o", str(tmp_path / "r.pdf")]) == 2
+    assert "kept by the lab's record" in capsys.readouterr().err
+    assert not (tmp_path / "r.pdf").exists()
+    assert main(["analyse", str(shot), "--jobs", "1", "--no-uncertainty"]) != 0
+    told = capsys.readouterr()
+    assert "kept by the lab's record" in told.out + told.err
+    assert len(read_shot(shot, load_raw=False).analyses) <= 1  # no analysis added to a changed shot
