@@ -21,6 +21,7 @@ never clipped or wrapped on its way to the controller. The byte packing is pymod
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 from collections.abc import Iterable, Sequence
@@ -47,6 +48,7 @@ WordOrder = Literal["big", "little"]
 Bit = Annotated[Int, Field(ge=-1, le=65535, description="address 0..65535, or -1: the controller has none"),
                 Hint("-1 (none) or an address 0..65535")]
 RequiredBit = Annotated[Int, Field(ge=0, le=65535, description="address 0..65535")]
+FLOAT32_SMALLEST_NORMAL = 1.1754943508222875e-38
 
 
 class RegisterRangeError(ValueError):
@@ -125,11 +127,49 @@ class Register:
 
     def decode(self, words: Sequence[int]) -> float:
         """Engineering value of the register words."""
+        return self.raw(words) * self.scale + self.offset
+
+    def raw(self, words: Sequence[int]) -> float:
+        """The words as the register's type reads them, before scale and offset."""
         if len(words) != self.words:
             raise ValueError(f"{self.type} needs {self.words} words, got {len(words)}")
         data_type = REGISTER_TYPES[self.type][0]
-        raw = ModbusClientMixin.convert_from_registers(list(words), data_type, word_order=self._order)
-        return float(raw) * self.scale + self.offset  # type: ignore[arg-type]
+        return float(ModbusClientMixin.convert_from_registers(  # type: ignore[arg-type]
+            list(words), data_type, word_order=self._order))
+
+    def subnormal(self, words: Sequence[int]) -> bool:
+        """True for a float32 that is not zero yet below the smallest normal float (~1.2e-38):
+        no instrument reports such a number; two words in the wrong order often read as one."""
+        if not self.is_float:
+            return False
+        raw = self.raw(words)
+        return raw != 0.0 and abs(raw) < FLOAT32_SMALLEST_NORMAL
+
+    def reinterpretations(self) -> list[Register]:
+        """The same address read the other ways a PLC's documentation is commonly misread: a
+        32-bit value in the other word order, or as the other 32-bit types in either order; a
+        16-bit value with the other signedness. Scale and offset are kept."""
+        if self.words == 1:
+            others = [dataclasses.replace(self, type="int16" if self.type == "uint16" else "uint16")]
+        else:
+            others = [dataclasses.replace(self, type=t, word_order=o)
+                      for t in ("float32", "int32", "uint32") for o in WORD_ORDERS]
+            others.sort(key=lambda r: (r.type != self.type, r.word_order == self.word_order))
+        return [r for r in others if r != self]
+
+    def changes_from(self, other: Register) -> str:
+        """How this register is written differently from `other`, as TOML keys
+        ('word_order = "little"', 'type = "int32", word_order = "little"')."""
+        return ", ".join(f'{name} = "{getattr(self, name)}"' for name in ("type", "word_order")
+                         if getattr(self, name) != getattr(other, name))
+
+    def describe(self, table: str) -> str:
+        """Where and how the value is read: 'input registers 0..1, float32 big, x0.001'."""
+        span = f"{self.address}" if self.words == 1 else f"{self.address}..{self.address + 1}"
+        order = f" {self.word_order}" if self.words == 2 else ""
+        scaled = f", x{self.scale:g}" if self.scale != 1.0 else ""
+        scaled += f" {self.offset:+g}" if self.offset else ""
+        return f"{table.replace('_', ' ')} {span}, {self.type}{order}{scaled}"
 
     @property
     def _order(self) -> Literal["big", "little"]:
@@ -149,15 +189,22 @@ def _address_only(value: Any) -> Any:
 RegisterField = Annotated[Register, BeforeValidator(_address_only, json_schema_input_type=int | Register)]
 
 
+ACTUATORS = ("fire_valve", "fill_valve", "vent_valve", "vacuum_pump")
+
+
 @dataclass(frozen=True)
 class CoilMap:
-    """Coil addresses of the four actuators (True = open / running)."""
+    """Coil addresses of the four actuators (True = open / running) and, for a PLC that fires
+    on a coil of its own (docs/plc-fire-styles.md), that fire coil (-1 = none: the fire
+    styles that need a coil then use fire_valve)."""
 
     __pydantic_config__ = SECTION
     fire_valve: RequiredBit = 0
     fill_valve: RequiredBit = 1
     vent_valve: RequiredBit = 2
     vacuum_pump: RequiredBit = 3
+    fire_command: Annotated[Bit, Field(description="a coil of its own that starts the PLC's timed pulse "
+                                                   "(docs/plc-fire-styles.md; -1: none)")] = -1
 
 
 @dataclass(frozen=True)
@@ -181,8 +228,10 @@ class HoldingRegisterMap:
     pressure_setpoint: reservoir set-point (bar). projectile: the projectile type loaded
     (1..3; -1 = none). heartbeat: link-watchdog register (0 = stop, 1 = start a session and
     clear a trip, 2..65535 = beats). watchdog_ms: the watchdog time the controller applies
-    (absent: the controller's own setting). fire_pulse_ms: writing N opens the fire valve for
-    N ms, timed by the controller.
+    (absent: the controller's own setting). fire_pulse_ms: the fire pulse's length in ms, timed
+    by the controller: writing it starts the pulse, or it is the preset a fire coil or command
+    word starts (the fire style, docs/plc-fire-styles.md). fire_command: the command word that
+    starts a pulse of the preset (-1 = none).
     """
 
     __pydantic_config__ = SECTION
@@ -191,6 +240,8 @@ class HoldingRegisterMap:
     heartbeat: Bit = 2
     watchdog_ms: RegisterField = field(default_factory=lambda: _reg(3))
     fire_pulse_ms: RegisterField = field(default_factory=lambda: _reg(4))
+    fire_command: Annotated[Bit, Field(description="the command word that starts a pulse of the preset "
+                                                   "(docs/plc-fire-styles.md; -1: none)")] = -1
 
 
 @dataclass(frozen=True)

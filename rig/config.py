@@ -35,6 +35,7 @@ from hopkinson.drivers.amplifier import EXCITATION
 from hopkinson.drivers.amplifier import SETTINGS as BRIDGE_SETTINGS
 from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number, Text
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
+from hopkinson.drivers.fire_styles import FIRE_STYLE_DOC, FIRE_STYLES
 from hopkinson.drivers.modbus_link import ModbusTarget
 from hopkinson.drivers.sim.config_fields import Orders
 from hopkinson.rig.config_checks import check_limits_stated, check_register_map, check_rig
@@ -63,6 +64,7 @@ __all__ = ["BAR_MATERIALS", "BAR_MOUNTS", "AmplifierConfig", "AnalysisConfig", "
            "ReferenceCertificateConfig", "RigConfig", "SignatoryConfig", "TimeoutsConfig", "UncertaintyConfig", "ValveControllerConfig",
            "controller_map_of", "load_rig_config", "load_sim_config", "register_map_of", "register_tables"]
 
+FireStyleName = typing.Literal[FIRE_STYLES]  # type: ignore[valid-type]  # drivers/fire_styles.py
 Positive = Annotated[Number, Field(gt=0)]
 Seconds = Annotated[Number, Field(gt=0, le=3600)]
 Retries = Annotated[Int, Field(ge=0, le=10, description="re-sends after a timeout or a garbled reply")]
@@ -99,6 +101,15 @@ class ValveControllerConfig:
                           Hint("the controller's link watchdog, seconds")] = 3.0
     fire_pulse_s: Annotated[Number, Field(gt=0, le=10, description="fire-valve pulse, timed by the "
                                                                    "controller")] = 0.2
+    # How the PLC fires (drivers/fire_styles.py, docs/plc-fire-styles.md); what each style needs
+    # is checked by rig/config_checks.py check_fire_style.
+    fire_style: Annotated[FireStyleName, Field(description="how the PLC fires (docs/plc-fire-styles.md)"),
+                          Hint(FIRE_STYLE_DOC)] = "pulse_register"
+    fire_command_value: Annotated[Int, Field(ge=1, le=65535, description=(
+        "preset_and_command: the word written to holding_registers.fire_command to fire"))] = 1
+    host_timed_fire_allowed: Annotated[fields.Flag, Field(description=(
+        "host_timed_coil: the lab accepts a pulse timed by this computer (the watchdog closes the valve if "
+        "it stops)"))] = False
     # The register map (drivers/registers.py): where each signal lives on the controller.
     coils: Annotated[registers.CoilMap, Field(description="the actuators: True = open / running")] = field(
         default_factory=registers.CoilMap)

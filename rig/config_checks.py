@@ -11,6 +11,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
+from hopkinson.drivers.fire_styles import FIRE_STYLE_DOC, FireStyle
 from hopkinson.drivers.registers import Register, RegisterMap
 from hopkinson.rig.errors import ConfigError
 
@@ -56,13 +57,15 @@ def _check_valve_controller(vc: ValveControllerConfig, path: Path) -> None:
     check_register_map(vc.register_map, path, "valve_controller")
     m = vc.register_map
     required = {"holding_registers.heartbeat": m.holding_registers.heartbeat,
-                "input_registers.watchdog_state": m.input_registers.watchdog_state,
-                "holding_registers.fire_pulse_ms": m.holding_registers.fire_pulse_ms.address,
-                "input_registers.fire_pulse_count": m.input_registers.fire_pulse_count.address}
+                "input_registers.watchdog_state": m.input_registers.watchdog_state}
+    if vc.fire_style == FireStyle.PULSE_REGISTER:
+        required["holding_registers.fire_pulse_ms"] = m.holding_registers.fire_pulse_ms.address
+        required["input_registers.fire_pulse_count"] = m.input_registers.fire_pulse_count.address
     for key, address in required.items():
         if address < 0:
             raise ConfigError(f"{path}: valve_controller.{key}: missing (the controller's link watchdog and "
                               "its fire pulse are what keep the rig safe when this computer fails; map them)")
+    check_fire_style(vc, path)
     for key, register, value, unit in (
             ("holding_registers.fire_pulse_ms", m.holding_registers.fire_pulse_ms, vc.fire_pulse_s * 1000, "ms"),
             ("holding_registers.watchdog_ms", m.holding_registers.watchdog_ms, vc.watchdog_s * 1000, "ms")):
@@ -71,6 +74,27 @@ def _check_valve_controller(vc: ValveControllerConfig, path: Path) -> None:
     if vc.fire_pulse_s >= vc.watchdog_s:
         raise ConfigError(f"{path}: valve_controller.fire_pulse_s: {vc.fire_pulse_s:g} s must be shorter than "
                           f"valve_controller.watchdog_s ({vc.watchdog_s:g} s)")
+
+
+def check_fire_style(vc: ValveControllerConfig, path: Path) -> None:
+    """The signals each fire style needs, and the lab's word for a pulse timed by this computer."""
+    style = FireStyle(vc.fire_style)
+    h = vc.register_map.holding_registers
+    why = f'valve_controller.fire_style = "{style}" ({FIRE_STYLE_DOC})'
+    if style.writes_preset and not h.fire_pulse_ms.present:
+        raise ConfigError(f"{path}: valve_controller.holding_registers.fire_pulse_ms: missing: {why} writes the "
+                          "pulse length there")
+    if style == FireStyle.PRESET_AND_COMMAND and h.fire_command < 0:
+        raise ConfigError(f"{path}: valve_controller.holding_registers.fire_command: missing: {why} starts the "
+                          f"pulse by writing valve_controller.fire_command_value ({vc.fire_command_value}) there")
+    if style == FireStyle.HOST_TIMED_COIL and not vc.host_timed_fire_allowed:
+        raise ConfigError(f"{path}: valve_controller.host_timed_fire_allowed: {why} has this computer open and "
+                          "close the fire valve; if it stops mid-pulse the valve stays open until the controller's "
+                          f"link watchdog closes it ({vc.watchdog_s:g} s): set host_timed_fire_allowed = true only "
+                          "if the lab accepts that, else use a style the PLC times")
+    if vc.host_timed_fire_allowed and style != FireStyle.HOST_TIMED_COIL:
+        raise ConfigError(f"{path}: valve_controller.host_timed_fire_allowed: only for fire_style = "
+                          f'"host_timed_coil" (this rig fires with "{style}")')
 
 
 def _check_thresholds(config: RigConfig, path: Path) -> None:

@@ -166,7 +166,8 @@ class ShotContext:
     deadline: float = 0.0
     # what the steps learn
     setpoint_bar: float | None = None
-    fired: bool = False
+    fired: bool = False  # the fire command went out (the projectile may be on its way)
+    fire_confirmed_by: str | None = None  # what confirmed the shot (pulse counter, valve read-back, trigger)
     pulse_count: int | None = None
     captured: CapturedShot | None = None
     identities: dict[str, str] = field(default_factory=dict)

@@ -456,6 +456,8 @@ def _message(ctx: ShotContext, failure: _Failure | None, safe: SafeResult, path:
             parts.append("rig safe (fire and fill valves closed, reservoir vented)")
     elif path is not None:
         parts.append(f"the recorded data is kept in {path}")
+    elif ctx.fire_confirmed_by is not None:
+        parts.append(f"the shot was fired but nothing was recorded (confirmed by {ctx.fire_confirmed_by})")
     elif ctx.fired:
-        parts.append("the shot was fired but nothing was recorded")
+        parts.append("the fire command was sent but nothing confirms a shot, and nothing was recorded")
     return "; ".join(parts)
