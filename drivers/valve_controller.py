@@ -404,7 +404,8 @@ class ValveController(ModbusDriver):
         """After a pulse: the fire coil off, or the command word back to 0 (best effort: SAFE
         withdraws it again)."""
         with contextlib.suppress(InstrumentError):
-            if self.fire_style == FireStyle.HOST_TIMED_COIL or self.fire_coil == self.map.coils.fire_valve:
+            style = self.fire_style
+            if style == FireStyle.HOST_TIMED_COIL or (style.uses_fire_coil and self.fire_coil == self.map.coils.fire_valve):
                 self.write_coil(self.map.coils.fire_valve, False, "fire valve")
             self._withdraw_fire_command()
 

@@ -170,11 +170,20 @@ def make_rig(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     stacks: list[contextlib.ExitStack] = []
 
     def make(faults: tuple[str, ...] = (), config: RigConfig | None = None,
-             time_scale: float = TIME_SCALE) -> Rig:
+             time_scale: float = TIME_SCALE, sim: SimConfig | None = None,
+             adjust: Callable[[RigConfig], RigConfig] | None = None, heartbeat: bool = False) -> Rig:
+        """sim: the simulator's config (default `fast_sim_config`); adjust: changes the rig
+        config that reaches it (e.g. another fire style than the simulated PLC's);
+        heartbeat: run a heartbeat session, as `hopkinson shot` does."""
         stack = contextlib.ExitStack()
         stacks.append(stack)
-        session = stack.enter_context(sim_session(config or short_timeouts_config(), fast_sim_config(time_scale), faults))
+        session = stack.enter_context(sim_session(config or short_timeouts_config(),
+                                                  sim or fast_sim_config(time_scale), faults))
+        if adjust is not None:
+            session.config = adjust(session.config)
         instruments = stack.enter_context(open_instruments(session.config, session.simulated_truth))
+        if heartbeat:
+            instruments.valves.start_heartbeat()
         out = tmp_path / f"shots{len(stacks)}"
         out.mkdir()
         return Rig(session, instruments, out)
