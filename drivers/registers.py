@@ -48,7 +48,7 @@ WordOrder = Literal["big", "little"]
 Bit = Annotated[Int, Field(ge=-1, le=65535, description="address 0..65535, or -1: the controller has none"),
                 Hint("-1 (none) or an address 0..65535")]
 RequiredBit = Annotated[Int, Field(ge=0, le=65535, description="address 0..65535")]
-FLOAT32_SMALLEST_NORMAL = 1.1754943508222875e-38
+FLOAT32_SMALLEST_READING = 1e-9  # a float32 reading closer to zero (but not zero) is no rig gauge's
 
 
 class RegisterRangeError(ValueError):
@@ -137,13 +137,14 @@ class Register:
         return float(ModbusClientMixin.convert_from_registers(  # type: ignore[arg-type]
             list(words), data_type, word_order=self._order))
 
-    def subnormal(self, words: Sequence[int]) -> bool:
-        """True for a float32 that is not zero yet below the smallest normal float (~1.2e-38):
-        no instrument reports such a number; two words in the wrong order often read as one."""
+    def implausibly_small(self, words: Sequence[int]) -> bool:
+        """True for a float32 that is not zero yet below FLOAT32_SMALLEST_READING in magnitude:
+        no instrument reports such a number, but two words in the wrong order often read as one
+        (2.0 with its words swapped reads 2.3e-41)."""
         if not self.is_float:
             return False
         raw = self.raw(words)
-        return raw != 0.0 and abs(raw) < FLOAT32_SMALLEST_NORMAL
+        return raw != 0.0 and abs(raw) < FLOAT32_SMALLEST_READING
 
     def reinterpretations(self) -> list[Register]:
         """The same address read the other ways a PLC's documentation is commonly misread: a

@@ -61,7 +61,7 @@ if typing.TYPE_CHECKING:
 
 __all__ = ["BAR_MATERIALS", "BAR_MOUNTS", "AmplifierConfig", "AnalysisConfig", "BarConfig", "BarProjectileConfig",
            "BarSegmentConfig", "DatabaseConfig", "DigitizerConfig", "LabConfig", "LimitsConfig",
-           "ReferenceCertificateConfig", "RigConfig", "SignatoryConfig", "TimeoutsConfig", "UncertaintyConfig", "ValveControllerConfig",
+           "PlausibilityConfig", "ReferenceCertificateConfig", "RigConfig", "SignatoryConfig", "TimeoutsConfig", "UncertaintyConfig", "ValveControllerConfig",
            "controller_map_of", "load_rig_config", "load_sim_config", "register_map_of", "register_tables"]
 
 FireStyleName = typing.Literal[FIRE_STYLES]  # type: ignore[valid-type]  # drivers/fire_styles.py
@@ -349,6 +349,32 @@ class LimitsConfig:
 
 
 @dataclass(frozen=True)
+class PlausibilityConfig:
+    """[plausibility]: what the controller's readings can be at all (rig/plausibility.py,
+    docs/plausibility.md); a reading outside fails `probe` and CHECK as a register-map mistake
+    (word order, scale, type), never as a pressure to vent. Checked against [limits] by
+    rig/config_checks.py check_plausibility."""
+
+    __pydantic_config__ = SECTION
+    reservoir_min_bar: Annotated[Number, Field(ge=-1.1, le=0, description=(
+        "the lowest reading of the reservoir gauge (gauge bar; a gauge cannot read below -1.013 bar)")),
+        Hint("a gauge cannot read below -1.013 bar")] = -1.0
+    reservoir_max_bar: Annotated[Number, Field(ge=0, le=1000, description=(
+        "the reservoir gauge's full scale, gauge bar (0: twice limits.max_pressure_bar)")),
+        Hint("0: twice limits.max_pressure_bar")] = 0.0
+    vacuum_max_mbar: Annotated[Number, Field(ge=1013.25, le=2000, description=(
+        "the highest absolute fixture pressure (ambient is ~1013 mbar)")), Hint("at least ambient, 1013.25 mbar")] = (
+        1100.0)
+    pulse_count_max: Annotated[Int, Field(ge=1, le=2**32 - 1, description=(
+        "the most fire pulses a controller can have counted (a fire valve lives ~10 million cycles)"))] = 10_000_000
+
+    def reservoir_range_bar(self, limits: LimitsConfig) -> tuple[float, float]:
+        """(lowest, highest) plausible reservoir gauge reading, bar."""
+        high = self.reservoir_max_bar if self.reservoir_max_bar > 0 else 2.0 * limits.max_pressure_bar
+        return self.reservoir_min_bar, high
+
+
+@dataclass(frozen=True)
 class TimeoutsConfig:
     """[timeouts]: longest time each sequencer state may take, seconds."""
 
@@ -418,6 +444,7 @@ class RigConfig:
     digitizer: DigitizerConfig
     amplifier: AmplifierConfig
     limits: LimitsConfig = field(default_factory=LimitsConfig)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     timeouts: TimeoutsConfig = field(default_factory=TimeoutsConfig)
     analysis: AnalysisConfig = field(default_factory=AnalysisConfig)
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)

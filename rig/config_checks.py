@@ -39,6 +39,7 @@ def check_rig(config: RigConfig, path: Path) -> None:
                           f"({limits.min_pressure_bar:g} >= {limits.max_pressure_bar:g})")
     _check_valve_controller(config.valve_controller, path)
     _check_thresholds(config, path)
+    check_plausibility(config, path)
     _check_amplifier(config.amplifier, path)
     _check_driver(config.digitizer.driver, ("scpi",), path, "digitizer")
 
@@ -95,6 +96,17 @@ def check_fire_style(vc: ValveControllerConfig, path: Path) -> None:
     if vc.host_timed_fire_allowed and style != FireStyle.HOST_TIMED_COIL:
         raise ConfigError(f"{path}: valve_controller.host_timed_fire_allowed: only for fire_style = "
                           f'"host_timed_coil" (this rig fires with "{style}")')
+
+
+def check_plausibility(config: RigConfig, path: Path) -> None:
+    """Every pressure the limits allow must be a plausible reading."""
+    _, high = config.plausibility.reservoir_range_bar(config.limits)
+    if high <= config.limits.max_pressure_bar:
+        raise ConfigError(f"{path}: plausibility.reservoir_max_bar: {high:g} bar must be above "
+                          f"limits.max_pressure_bar ({config.limits.max_pressure_bar:g} bar): an overpressure "
+                          "must read as one, not as nonsense")
+    if config.plausibility.vacuum_max_mbar <= config.limits.fixture_vacuum_max_mbar:
+        raise ConfigError(f"{path}: plausibility.vacuum_max_mbar: must be above limits.fixture_vacuum_max_mbar")
 
 
 def _check_thresholds(config: RigConfig, path: Path) -> None:

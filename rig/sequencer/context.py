@@ -174,6 +174,7 @@ class ShotContext:
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     controller_timed_out: bool = False
+    untrusted_gauge: Any = None  # CHECK's Implausible reading of the reservoir gauge: SAFE trusts it no more
     interrupt: BaseException | None = None
     last_report: InterlockReport | None = None
 

@@ -269,7 +269,8 @@ class Sequencer:
                      f"{path}" + ("; its analysis was not finished (`hopkinson analyse` it)" if analysis_to_redo else ""))
         if not analysis_stored:
             error = f"{analysis_error}; the raw shot is kept in {path} (free space, then `hopkinson analyse` it)"
-        hint = (failure.hint if failure is not None else "") if safe.confirmed else HINT_SAFE_NOT_CONFIRMED
+        cause_hint = failure.hint if failure is not None else ""
+        hint = cause_hint if safe.confirmed else " ".join(filter(None, (HINT_SAFE_NOT_CONFIRMED, cause_hint)))
         aborted_in = failure.state.value if failure is not None else (
             State.SAFE.value if not safe.confirmed else State.STORE.value if store_error else None)
         outcome = ShotOutcome(
@@ -322,7 +323,8 @@ class Sequencer:
         disarm = ctx is None or ctx.captured is None  # a captured record stays in the digitizer
         result = make_rig_safe(self.instruments.valves, self.config, self._events,
                                digitizer=self.instruments.digitizer if disarm else None,
-                               controller_timed_out=controller_timed_out, poll_s=self._poll_s)
+                               controller_timed_out=controller_timed_out, poll_s=self._poll_s,
+                               untrusted_gauge=ctx.untrusted_gauge if ctx is not None else None)
         return result
 
     def _in_worker(self, ctx: ShotContext, work: Callable[[], Any], timeout_s: float, abandon_on_abort: bool,

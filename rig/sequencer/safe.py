@@ -17,6 +17,11 @@ Run by the sequencer after every shot (done, aborted, timed out, interrupted, fa
 3. After a Modbus timeout the controller may still carry out a request it did not answer in
    time (a late "fill open" after SAFE closed it), so SAFE then keeps re-checking for
    `safe_hold_s` before it confirms.
+4. A reservoir reading that cannot be true (rig/plausibility.py: a word-order or scale
+   mistake reads 4e27 bar, or 2e-41 bar for 5 bar) never counts as vented, and venting is not
+   waited for: once the valves read back as wanted, SAFE ends unconfirmed at once, saying the
+   pressure is unknown and why (never "fill valve stuck open?"). Once seen (or handed in by
+   CHECK), the gauge stays untrusted: a later reading that happens to look right confirms nothing.
 
 SAFE never raises: an instrument error is retried within the time; an interrupt (Ctrl-C) that
 arrives meanwhile is held and handed back in the result, for the caller to re-raise once the
@@ -26,6 +31,7 @@ rig is safe.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +41,7 @@ from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
 from hopkinson.rig.errors import HINT_SAFE_NOT_CONFIRMED
 from hopkinson.rig.events import RigError
 from hopkinson.rig.interlocks import controller_readings, evaluate
+from hopkinson.rig.plausibility import RESERVOIR, Implausible, plausible_ranges, read_and_judge
 from hopkinson.rig.sequencer.context import POLL_INTERVAL_S, Publisher
 
 if TYPE_CHECKING:
@@ -79,8 +86,10 @@ def gauge_half_count_bar(valves: ValveControllerRole, config: RigConfig) -> floa
 
 def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publisher, *,
                   digitizer: DigitizerRole | None = None, controller_timed_out: bool = False,
-                  poll_s: float = POLL_INTERVAL_S) -> SafeResult:
-    """Make the rig safe and confirm it by reading back (module docstring); never raises."""
+                  poll_s: float = POLL_INTERVAL_S, untrusted_gauge: Implausible | None = None) -> SafeResult:
+    """Make the rig safe and confirm it by reading back (module docstring); never raises.
+    untrusted_gauge: the reservoir gauge already read something that cannot be true (CHECK's
+    finding): no reading of it confirms "vented"."""
     limits = config.limits
     start = time.monotonic()
     deadline = start + config.timeouts.safe_s
@@ -114,6 +123,8 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
         attempt(lambda: digitizer.abort() if digitizer.connected else None)
 
     half_count = gauge_half_count_bar(valves, config)
+    reservoir_rule = plausible_ranges(config)[RESERVOIR]
+    finding: Implausible | None = untrusted_gauge  # once seen, the gauge stays untrusted
     confirmed = False
     states = readings = last_states = None
     while True:
@@ -127,16 +138,26 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
         if readings is not None:
             report = evaluate(readings, limits, DISPLAY_INTERLOCKS)
             attempt(lambda report=report: events.reading(report))
-        clean_round = errors == errors_before and states is not None and readings is not None
         vented = readings is not None and readings.reservoir_pressure_bar + half_count <= limits.vent_done_bar
+        if readings is not None and (vented or not reservoir_rule.holds(readings.reservoir_pressure_bar)) \
+                and math.isfinite(readings.reservoir_pressure_bar):  # NaN: waited for (a gauge fault may clear)
+            judged = attempt(lambda: read_and_judge(valves, config, RESERVOIR))  # with its words: the cause
+            finding = finding or (judged[1] if judged is not None else None)
+            vented = vented and judged is not None and finding is None
+        clean_round = errors == errors_before and states is not None and readings is not None
         now = time.monotonic()
         hold_until = start + (safe_hold_s(config) if timed_out else 0.0)
         if clean_round and not wrong and vented and now >= hold_until:
             confirmed = True
             break
+        if clean_round and not wrong and finding is not None and now >= hold_until:
+            problem = (f"{valves.name}: the valves read back safe (fire and fill closed, vent open, pump off), but "
+                       f"{finding.message}: the reservoir pressure is unknown")
+            break
         if now >= deadline:
             if clean_round:
-                problem = _what_is_wrong(valves.name, states, wrong, readings.reservoir_pressure_bar, vented, config)
+                problem = _what_is_wrong(valves.name, states, wrong, readings.reservoir_pressure_bar, vented, config,
+                                         finding)
             elif last_states is not None and last_states.mismatches():  # a stuck valve seen before the error
                 problem = f"{problem}; last read back: {'; '.join(last_states.mismatches())}"
             break
@@ -157,7 +178,7 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
 
 
 def _what_is_wrong(name: str, states: ValveStates, wrong: list[str], pressure_bar: float, vented: bool,
-                   config: RigConfig) -> str:
+                   config: RigConfig, finding: Implausible | None = None) -> str:
     """Every reason SAFE could not confirm, in one line."""
     parts = []
     for valve in wrong:
@@ -170,7 +191,9 @@ def _what_is_wrong(name: str, states: ValveStates, wrong: list[str], pressure_ba
         told = word[bool(getattr(states, valve))]
         seen = f"{word[bool(position)]} (commanded {told})" if position is not None else f"{told} (coil)"
         parts.append(f"{label} {seen}, wanted {word[WANTED[valve]]} after {config.timeouts.safe_s:g} s")
-    if not vented:
+    if finding is not None:
+        parts.append(f"{finding.message}: the reservoir pressure is unknown")
+    elif not vented:
         parts.append(f"reservoir still at {pressure_bar:.3f} bar after venting for {config.timeouts.safe_s:g} s "
                      f"(needs at most {config.limits.vent_done_bar:g} bar; fill valve stuck open?)")
     return f"{name}: " + "; ".join(parts)

@@ -1,6 +1,9 @@
 """The steps of a shot, CHECK to CAPTURE: each a function of the shot's context.
 
-- CHECK: a held abort stops here before anything moves; identities; fire and fill closed; a
+- CHECK: a held abort stops here before anything moves; identities; fire and fill closed; every
+  reading it relies on must be able to be true (rig/plausibility.py: reservoir, vacuum,
+  set-point, pulse count; the count must not move during CHECK), else the shot is refused
+  naming the value, its register and the likely cause, before any venting; a
   tripped link watchdog gets a new heartbeat session; pressure left in the reservoir is vented
   first (and said so); the amplifier configured (read back) and zeroed; the digitizer
   configured; the projectile set where the controller has a register; door, clamp, e-stop and
@@ -38,6 +41,13 @@ from hopkinson.drivers.errors import InstrumentError
 from hopkinson.drivers.fire_styles import FIRE_STYLE_DOC
 from hopkinson.rig.errors import HINT_NOT_CONFIRMED
 from hopkinson.rig.events import AwaitingConfirmation, Fired, Identified
+from hopkinson.rig.plausibility import (
+    PULSE_COUNT,
+    RESERVOIR,
+    controller_findings,
+    counter_moved,
+    plausible_ranges,
+)
 from hopkinson.rig.sequencer.context import Abort, ShotContext
 from hopkinson.rig.sequencer.states import State
 from hopkinson.rig.shot import CapturedShot, digitizer_channels
@@ -45,6 +55,8 @@ from hopkinson.rig.shot import CapturedShot, digitizer_channels
 HINT_SETTINGS_CHANGED = ("Another program may be using the instrument: close it (hopkinson status only reads), "
                          "then ARM again.")
 HINT_NOT_FIRED = "The controller refused the fire pulse: read why above, fix it, then ARM again."
+HINT_IMPLAUSIBLE = ("A reading that cannot be true is a mistake in the register map, not a pressure: fix rig.toml, "
+                    "check every signal with `hopkinson probe`, then start again.")
 HINT_NOT_FIRED_STYLE = (f"Nothing was launched: set valve_controller.fire_style to the way the PLC fires "
                         f"({FIRE_STYLE_DOC}), then fire again.")
 PULSE_COUNT_WAIT_S = 1.0  # how long FIRE waits for the controller to count the pulse
@@ -62,6 +74,7 @@ def check(ctx: ShotContext) -> None:
     valves.set_fire_valve(False)
     valves.set_fill_valve(False)
     ctx.checkpoint(valves.name, "closing the valves")
+    count_at_check = _check_plausible(ctx)
     _restart_tripped_watchdog(ctx)
     _vent_leftover_pressure(ctx)
     amp = cfg.amplifier
@@ -81,7 +94,34 @@ def check(ctx: ShotContext) -> None:
     else:
         ctx.events.note(f"the controller has no projectile register: make sure projectile No. {projectile} is loaded")
     ctx.watch(State.CHECK)
+    _check_counter_still(ctx, count_at_check)
     ctx.checkpoint(valves.name, "checking the interlocks")
+
+
+def _check_plausible(ctx: ShotContext) -> tuple[float, float] | None:
+    """Every reading CHECK relies on must be able to be true (rig/plausibility.py), before any
+    venting or charging: a word-order or scale mistake is named as such, never taken for a
+    pressure to vent. Returns (pulse count, when read) for `_check_counter_still`."""
+    valves = ctx.instruments.valves
+    readings, findings = controller_findings(valves, ctx.config)
+    ctx.untrusted_gauge = next((f for f in findings if f.signal == RESERVOIR), None)
+    if findings:
+        raise Abort(valves.name, "shot refused: " + "; ".join(f.message for f in findings),
+                    " ".join([HINT_IMPLAUSIBLE, *(f"Fix: {f.fix}." for f in findings)]))
+    count = readings.get(PULSE_COUNT)
+    return (count, time.monotonic()) if count is not None else None
+
+
+def _check_counter_still(ctx: ShotContext, count_at_check: tuple[float, float] | None) -> None:
+    """A pulse counter that moved during CHECK, with nothing fired, is not a pulse counter."""
+    if count_at_check is None:
+        return
+    valves = ctx.instruments.valves
+    before, when = count_at_check
+    finding = counter_moved(plausible_ranges(ctx.config)[PULSE_COUNT], before, float(valves.fire_pulse_count()),
+                            time.monotonic() - when)
+    if finding is not None:
+        raise Abort(valves.name, f"shot refused: {finding.message}", f"{HINT_IMPLAUSIBLE} Fix: {finding.fix}.")
 
 
 def _restart_tripped_watchdog(ctx: ShotContext) -> None:
