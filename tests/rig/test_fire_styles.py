@@ -10,10 +10,11 @@ from dataclasses import replace
 import pytest
 from hopkinson.drivers.sim.controller_map import Point, default_map
 from hopkinson.drivers.sim.simulated_rig import SimConfig
-from hopkinson.rig.config import RigConfig
+from hopkinson.rig.config import RigConfig, load_rig_config
+from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import Fired
 
-from tests.rig.conftest import fast_sim_config, short_timeouts_config
+from tests.rig.conftest import REPO, fast_sim_config, short_timeouts_config
 
 # style -> the extra signals its PLC has (a fire coil of its own, a command word)
 STYLES: dict[str, dict[str, int]] = {
@@ -129,3 +130,58 @@ def test_without_any_witness_a_missing_trigger_never_claims_a_fire(make_rig) -> 
     assert "the shot was fired" not in outcome.error and not rig.recorder.of(Fired)
     assert outcome.fired  # the command went out: a campaign asks the operator (UNKNOWN), never refires on its own
     rig.assert_safe()
+
+
+# -- the fire style in rig.toml -------------------------------------------------------------------------
+def rig_toml_with(tmp_path, *edits: tuple[str, str]):
+    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    path = tmp_path / "rig.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+STYLE_LINE = 'fire_style = "pulse_register"'
+
+
+@pytest.mark.parametrize(("edits", "message"), [
+    ([(STYLE_LINE, 'fire_style = "pulse"')],
+     r"valve_controller.fire_style: .*pulse_register, preset_and_coil, preset_and_command, plc_preset_coil, "
+     r"host_timed_coil"),
+    ([(STYLE_LINE, 'fire_style = "preset_and_command"')],
+     r"valve_controller.holding_registers.fire_command: missing: valve_controller.fire_style = "
+     r"\"preset_and_command\" \(docs/plc-fire-styles.md\) starts the pulse by writing "
+     r"valve_controller.fire_command_value \(1\) there"),
+    ([(STYLE_LINE, 'fire_style = "preset_and_coil"'), ("fire_pulse_ms = 4 ", "fire_pulse_ms = -1 ")],
+     r"valve_controller.holding_registers.fire_pulse_ms: missing: .*writes the pulse length there"),
+    ([(STYLE_LINE, 'fire_style = "host_timed_coil"')],
+     r"valve_controller.host_timed_fire_allowed: .*if it stops mid-pulse the valve stays open until the "
+     r"controller's link watchdog closes it \(3 s\): set host_timed_fire_allowed = true only if the lab accepts"),
+    ([(STYLE_LINE, STYLE_LINE + "\nhost_timed_fire_allowed = true")],
+     r"valve_controller.host_timed_fire_allowed: only for fire_style = \"host_timed_coil\""),
+    ([("fire_pulse_count = { address = 4, type = \"uint32\" }", "fire_pulse_count = -1")],
+     r"valve_controller.input_registers.fire_pulse_count: missing"),
+])
+def test_the_fire_style_is_checked_on_load(tmp_path, edits, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        load_rig_config(rig_toml_with(tmp_path, *edits))
+
+
+def test_each_style_loads_with_what_it_needs(tmp_path) -> None:
+    coil = load_rig_config(rig_toml_with(
+        tmp_path, (STYLE_LINE, 'fire_style = "plc_preset_coil"'), ("fire_pulse_ms = 4 ", "fire_pulse_ms = -1 "),
+        ("fire_pulse_count = { address = 4, type = \"uint32\" }", "fire_pulse_count = -1"),
+        ("vacuum_pump = 3\n", "vacuum_pump = 3\nfire_command = 12\n")))
+    assert coil.valve_controller.fire_style == "plc_preset_coil"  # no preset, no counter: the PLC keeps both
+    assert coil.valve_controller.register_map.coils.fire_command == 12
+    word = load_rig_config(rig_toml_with(
+        tmp_path, (STYLE_LINE, 'fire_style = "preset_and_command"\nfire_command_value = 42'),
+        ("fire_pulse_ms = 4 ", "fire_pulse_ms = 4 \nfire_command = 7 ")))
+    assert word.valve_controller.register_map.holding_registers.fire_command == 7
+    assert word.valve_controller.fire_command_value == 42
+    host = load_rig_config(rig_toml_with(
+        tmp_path, (STYLE_LINE, 'fire_style = "host_timed_coil"\nhost_timed_fire_allowed = true')))
+    assert host.valve_controller.host_timed_fire_allowed is True
+    assert host.snapshot()["valve_controller"]["fire_style"] == "host_timed_coil"  # recorded with every shot

@@ -290,3 +290,20 @@ def test_safe_never_calls_a_swapped_charged_reservoir_vented(make_rig) -> None:
     assert re.search(r'read as word_order = "little" it is 1\.\d+ bar', problem), problem
     assert "the reservoir pressure is unknown" in problem
     rig.assert_safe(vented=False)
+
+
+def test_the_plausible_ranges_are_checked_against_the_limits(tmp_path: Path) -> None:
+    from hopkinson.rig.errors import ConfigError
+
+    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    for old, new, message in (
+            ("reservoir_max_bar = 0.0 ", "reservoir_max_bar = 8.0 ",
+             r"plausibility.reservoir_max_bar: 8 bar must be above limits.max_pressure_bar \(8 bar\)"),
+            ("reservoir_min_bar = -1.0 ", "reservoir_min_bar = -2.0 ", r"plausibility.reservoir_min_bar: .*-1.013"),
+            ("vacuum_max_mbar = 1100.0 ", "vacuum_max_mbar = 900.0 ", r"plausibility.vacuum_max_mbar: .*1013.25")):
+        path = tmp_path / "rig.toml"
+        path.write_text(text.replace(old, new, 1), encoding="utf-8")
+        with pytest.raises(ConfigError, match=message):
+            load_rig_config(path)
+    path.write_text(text.replace("reservoir_max_bar = 0.0 ", "reservoir_max_bar = 25.0 ", 1), encoding="utf-8")
+    assert plausible_ranges(load_rig_config(path))[RESERVOIR].high == 25.0
