@@ -4,7 +4,7 @@
     check_authorisation(plan, yes)                                  # ConfigError (exit 2) unless authorised
     with open_instruments(config) as instruments:
         runner = CampaignRunner(run, plan, instruments, config, bus)
-    outcome = runner.run()                                          # blocking; outcome.exit_code 0 / 3
+    outcome = runner.run()                                          # blocking; outcome.exit_code 0 / 3 / 4
 
 How a shot moves through the journal (rig/journal.py has the rules):
 
@@ -29,9 +29,10 @@ The runner stops at the first shot that does not end DONE (aborted to the safe s
 FAULT): the operator looks at the rig before anything else is fired; `--resume` continues.
 `stop_after_shot()` (a pause) stops after the current shot; `abort(reason)` aborts the
 current shot (SAFE runs) and stops; an abort asked for between shots is held by the sequencer
-and stops the campaign before the next shot moves anything. Outcome exit codes: 0 every planned shot is done
-(analysed, analysis failed, or skipped); 3 the campaign stopped with shots left (aborted,
-paused, or waiting for an operator decision).
+and stops the campaign before the next shot moves anything. Outcome exit codes (docs/exit-codes.md):
+0 every planned shot is done (analysed or skipped); 4 every planned shot is done but some
+analyses failed (the message and `analyses_failed` name them); 3 the campaign stopped with
+shots left (aborted, paused, or waiting for an operator decision).
 
 Simulation only: `attach_fire_log` makes the simulated world append one JSON line per
 projectile launch (fsynced), tagged with the campaign shot being fired. It is an independent
@@ -97,6 +98,7 @@ if TYPE_CHECKING:
 DEFAULT_RUNS_DIR = Path("runs")
 EXIT_COMPLETE = 0
 EXIT_STOPPED = 3
+EXIT_ANALYSIS_FAILED = 4  # complete, but some analyses failed (rig/errors.py, docs/exit-codes.md)
 
 S = ShotState
 
@@ -205,9 +207,15 @@ class CampaignOutcome:
             "complete": self.complete,
             "fired_this_run": list(self.fired_this_run),
             "resume_report": list(self.resume_report),
+            "analyses_failed": analyses_failed(self.summary),
             "summary": self.summary,
             "last_shot": self.last_shot.to_dict() if self.last_shot is not None else None,
         }
+
+
+def analyses_failed(summary: dict[str, Any]) -> list[str]:
+    """The ids of the shots whose analysis failed (journal state ANALYSIS_FAILED)."""
+    return [shot["id"] for shot in summary.get("shots", []) if shot.get("state") == S.ANALYSIS_FAILED.value]
 
 
 def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: LevelChoice | None = None,
@@ -372,11 +380,13 @@ class CampaignRunner:
     def _conclusion(self, summary: dict[str, Any], stop_message: str) -> tuple[int, str]:
         counts = summary["by_state"]
         done = counts[S.ANALYSED.value] + counts[S.ANALYSIS_FAILED.value] + counts[S.SKIPPED.value]
+        failed = analyses_failed(summary)
+        note = (f" ({len(failed)} with a failed analysis: {', '.join(failed)}; the raw shots are kept, "
+                "`hopkinson analyse` them)") if failed else ""
         if summary["complete"]:
-            failed = counts[S.ANALYSIS_FAILED.value]
-            note = f" ({failed} with a failed analysis)" if failed else ""
-            return EXIT_COMPLETE, f"campaign complete: {done} of {summary['total']} shots done{note}"
-        parts = [f"campaign stopped with {done} of {summary['total']} shots done"]
+            code = EXIT_ANALYSIS_FAILED if failed else EXIT_COMPLETE
+            return code, f"campaign complete: {done} of {summary['total']} shots done{note}"
+        parts = [f"campaign stopped with {done} of {summary['total']} shots done{note}"]
         if stop_message:
             parts.append(stop_message)
         if summary["needs_decision"]:

@@ -27,7 +27,8 @@ file and never loses the shot.
 Analysis failures. When the analysis raises (bad data, a fit the data cannot support, a
 bug), the shot file keeps its raw data and gets an /analysis group with status "failed" and
 the error text; the shot still ends DONE (it was fired and recorded) with
-`ShotOutcome.analysis_error` set, and the command line exits 0 after printing that error.
+`ShotOutcome.analysis_error` set and exit code 4 (EXIT_ANALYSIS_FAILED, docs/exit-codes.md):
+a script never takes it for a calibration that worked.
 """
 
 from __future__ import annotations
@@ -47,7 +48,9 @@ from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.errors import ConfigError, ShotAborted
+from hopkinson.rig.errors import EXIT_ABORTED as EXIT_ABORTED  # re-exported: the shot's exit codes
+from hopkinson.rig.errors import EXIT_ANALYSIS_FAILED as EXIT_ANALYSIS_FAILED
+from hopkinson.rig.errors import EXIT_DONE, ConfigError, ShotAborted
 from hopkinson.rig.shotfile import (
     PLAIN_NAME_RE,
     RawChannel,
@@ -59,8 +62,6 @@ from hopkinson.rig.shotfile import (
     write_raw_shot,
 )
 
-EXIT_DONE = 0
-EXIT_ABORTED = 3
 QUADRATURE_ROLE = "doppler_quadrature"
 PROJECTILES = (1, 2, 3)  # the projectiles the rig's loader takes
 MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("response"), in this order
@@ -178,6 +179,9 @@ class ShotOutcome:
     final_state: "DONE", "ABORTED" or "FAULT" (FAULT: the safe state could not be confirmed).
     error: the one-line message when the shot did not complete (None when DONE).
     analysis_error: set when the shot was recorded but its analysis failed (still DONE).
+    exit_code: 0 done and analysed; 4 done but the analysis failed; 3 aborted or FAULT
+    (rig/errors.py EXIT_CODES); the command's exit code and its JSON's `exit_code`.
+    fire_confirmed_by: what confirmed the shot was fired (None: nothing did).
     fired: the fire command was sent (the projectile may have been launched).
     aborted_in: the state in which the abort began (None when DONE).
     hint: what the operator does about it.
@@ -190,6 +194,7 @@ class ShotOutcome:
     exit_code: int = EXIT_DONE
     aborted_in: str | None = None
     fired: bool = False
+    fire_confirmed_by: str | None = None
     analysis_error: str | None = None
     analysis_to_redo: bool = False  # interrupted or not stored: a re-analysis of the file redoes it
     safe_confirmed: bool = True

@@ -450,8 +450,8 @@ class CampaignTab(QWidget):
         self.last_outcome = outcome
         self.current_label.setText("")
         self._show_summary(outcome.summary)
-        self._say(outcome.message + ("" if outcome.exit_code == 0 else " — on the panel: press Resume."),
-                  error=outcome.exit_code != 0)
+        self._say(outcome.message + ("" if outcome.complete else " — on the panel: press Resume."),
+                  error=outcome.exit_code != 0)  # 4: complete, some analyses failed (nothing to resume)
         self.update_buttons()
         self.ended.emit()
 

@@ -19,9 +19,9 @@ stored, the journals record them.
 
 One line per shot, in the order found (its file, the new version, its key figures or why it
 failed); --json one object {"shots": [{"path", "version", "ok", "error", "key_figures",
-"summary", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes: 0 every
-shot analysed and stored; 2 bad input (no such file, a folder with no shot file, a run folder
-whose campaign is running, a journal that could not be updated); 3 a shot could not be
+"summary", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes
+(docs/exit-codes.md): 0 every shot analysed and stored; 2 bad input (no such file, a folder with no shot file, a run folder
+whose campaign is running, a journal that could not be updated); 4 a shot could not be
 analysed or its analysis not stored (the others still are; each line says which and why).
 """
 
@@ -36,14 +36,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hopkinson.rig.cli.main import emit_json
-from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.errors import EXIT_ANALYSIS_FAILED, ConfigError
 
 if TYPE_CHECKING:  # concurrent.futures is loaded by this command only, not by every command's parser
     from concurrent.futures import Executor, Future
 
     from hopkinson.rig.reanalysis import Target
 
-EXIT_SOME_FAILED = 3
+EXIT_SOME_FAILED = EXIT_ANALYSIS_FAILED  # as a shot whose analysis failed: 4, never 3 (aborted to safe)
 # Set to one thread in the workers (unless the caller set them): N processes each with N BLAS
 # threads would oversubscribe the cores.
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")

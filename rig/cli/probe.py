@@ -22,7 +22,8 @@
 It only reads (never the heartbeat, never a coil). While another process holds the rig, it
 asks only what can be shared (as `status` does). Once a step has lost an instrument's link, its
 remaining steps are listed as not tried (one failure, one fix). Exit code 0 when everything
-answered, 1 when something failed (the lines say what to fix), 2 for a bad configuration.
+answered and could be true, 1 when something failed or read a value that cannot be true (the
+lines say what to fix), 2 for a bad configuration (docs/exit-codes.md).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG
 from hopkinson.rig.dialect_hint import dialect_fix, plain_identity
+from hopkinson.rig.errors import exit_codes_help
 
 if TYPE_CHECKING:
     from hopkinson.rig.config import RigConfig
@@ -51,7 +53,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     probe = subparsers.add_parser(
         "probe", help="bring up a rig: list ports, open each instrument, read every signal, say what to fix",
         description="List VISA resources and serial ports, open each configured instrument, read every mapped "
-                    "register and channel setting, and print what works and what does not, with the fix.")
+                    "register and channel setting, and print what works and what does not, with the fix.",
+        epilog=exit_codes_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     probe.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG, help="rig TOML (default %(default)s)")
     probe.add_argument("--json", action="store_true", help="one JSON object on stdout")
     probe.set_defaults(func=run_probe)

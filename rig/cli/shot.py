@@ -36,10 +36,11 @@ happens (the last one is the outcome). The shot's JSON-lines log is written besi
 file (<name>.log.jsonl, rig/logbook.py), also for a shot aborted before anything was recorded;
 --log-file writes a copy elsewhere; --trace adds every instrument command and reply to the logs.
 
-Exit codes: 0 done (also when the analysis failed: the shot is recorded, the analysis error is
-printed on stderr); 2 bad input or configuration, or the rig held by another process (nothing
-was moved); 3 the shot was aborted to the safe state or interrupted by a signal (one line on
-stderr: which state, which instrument, why).
+Exit codes (docs/exit-codes.md, `hopkinson shot --help`): 0 fired, recorded and analysed; 2 bad
+input or configuration, or the rig held by another process (nothing was moved); 3 the shot was
+aborted to the safe state, ended in FAULT, or was interrupted by a signal (one line on stderr:
+which state, which instrument, why); 4 the shot is recorded but its analysis failed (one line
+on stderr; the raw shot is kept). The --json object's `exit_code` is always the exit code.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
-from hopkinson.rig.errors import EXIT_ABORTED, ConfigError
+from hopkinson.rig.errors import EXIT_ABORTED, ConfigError, exit_codes_help
 
 PROMPT_TIMEOUT_S = 60.0
 
@@ -62,7 +63,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "shot", help="fire one calibration shot (CHECK..FIRE..ANALYSE), store and analyse it",
         description="Fire one shot: check, evacuate, charge, arm, fire, capture, make safe, store the "
-                    "raw data, analyse. Fires only with --yes or a 'yes' typed at the prompt.")
+                    "raw data, analyse. Fires only with --yes or a 'yes' typed at the prompt.",
+        epilog=exit_codes_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     add_rig_arguments(p)
     p.add_argument("--sim-state-file", type=Path, metavar="PATH",
                    help="with --sim: write the simulator's final state as JSON here (also on failures)")
@@ -243,10 +245,11 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
                 print(f"{role}: {text}", flush=True)
     for warning in outcome.warnings:
         sys.stderr.write(f"hopkinson: warning: {warning}\n")
-    if outcome.done and outcome.analysis_error:
-        sys.stderr.write(f"hopkinson: warning: the shot is recorded but its {outcome.analysis_error}\n"
-                         if outcome.analysis_error.startswith("analysis")
-                         else f"hopkinson: warning: {outcome.analysis_error}\n")
+    if outcome.done and outcome.analysis_error and latch.received is None:
+        what = outcome.analysis_error if outcome.analysis_error.startswith("analysis") else \
+            f"analysis failed: {outcome.analysis_error}"
+        sys.stderr.write(f"hopkinson: error: the shot is recorded in {outcome.shot_path} but its {what} "
+                         f"(exit {outcome.exit_code}: `hopkinson analyse` it again once the cause is fixed)\n")
     if latch.received is not None:
         before = "the shot was recorded before it; " if outcome.done else (f"{outcome.error}; " if outcome.error else "")
         if safe_again is None and not outcome.done:
@@ -260,7 +263,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         sys.stderr.write(f"hopkinson: error: {latch.reason}: {line}\n")
         return EXIT_ABORTED
     outcome.raise_for_outcome()
-    return 0
+    return outcome.exit_code  # 0, or 4: recorded, its analysis failed
 
 
 def _make_out_dir(out: Path) -> None:

@@ -18,7 +18,7 @@ STORE: whenever data was captured (also after an abort or a fault following the 
 raw shot file written atomically (rig/shot.py, rig/shotfile.py). ANALYSE: in a worker thread,
 bounded by timeouts.analyse_s; its result or its failure stored in the shot file
 (rig.shot.analyse_and_record, the same code a campaign uses for a stored shot). An analysis
-failure ends DONE with analysis_error set.
+failure ends DONE with analysis_error set and exit code 4 (docs/exit-codes.md).
 
 No printing: progress goes to the EventBus (rig/events.py).
 """
@@ -36,7 +36,13 @@ from typing import Any
 
 from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.errors import HINT_SAFE_NOT_CONFIRMED, instrument_hint
+from hopkinson.rig.errors import (
+    EXIT_ABORTED,
+    EXIT_ANALYSIS_FAILED,
+    EXIT_DONE,
+    HINT_SAFE_NOT_CONFIRMED,
+    instrument_hint,
+)
 from hopkinson.rig.events import Analysed, EventBus, RigError, ShotFinished, StateEntered, Stored
 from hopkinson.rig.instruments import Instruments
 from hopkinson.rig.interlocks import InterlockReport, evaluate, read_readings
@@ -56,8 +62,6 @@ from hopkinson.rig.sequencer.safe import DISPLAY_INTERLOCKS, SafeResult, make_ri
 from hopkinson.rig.sequencer.states import STATE_TEXT, State, check_transition
 from hopkinson.rig.sequencer.steps import STEPS
 from hopkinson.rig.shot import (
-    EXIT_ABORTED,
-    EXIT_DONE,
     AnalyseFn,
     RecordedAnalysis,
     ShotOutcome,
@@ -278,9 +282,10 @@ class Sequencer:
             shot_path=path,
             results=results,
             error=error,
-            exit_code=EXIT_DONE if final == State.DONE else EXIT_ABORTED,
+            exit_code=(EXIT_ABORTED if final != State.DONE else EXIT_ANALYSIS_FAILED if analysis_error else EXIT_DONE),
             aborted_in=aborted_in,
             fired=ctx.fired,
+            fire_confirmed_by=ctx.fire_confirmed_by,
             analysis_error=analysis_error,
             analysis_to_redo=analysis_to_redo,
             safe_confirmed=safe.confirmed,

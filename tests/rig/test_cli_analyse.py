@@ -76,10 +76,10 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, make, message) -> 
     assert err.count("\n") == 1 and message in err and "Traceback" not in err
 
 
-def test_a_file_that_is_not_a_shot_is_a_failed_row_exit_3(tmp_path: Path, capsys) -> None:
+def test_a_file_that_is_not_a_shot_is_a_failed_row_exit_4(tmp_path: Path, capsys) -> None:
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"not hdf5")
-    assert main(["analyse", str(junk)]) == 3
+    assert main(["analyse", str(junk)]) == 4  # an analysis that failed, as for `shot` (docs/exit-codes.md)
     out = capsys.readouterr().out
     assert out.startswith(f"{junk}: FAILED: ") and out.count("\n") == 1
 
@@ -142,7 +142,7 @@ def test_a_folder_tree_is_analysed_in_parallel_bad_files_one_line_each(archive: 
     assert len(shots) == 2 and all(s[0] == "ANALYSED" for s in before.values())
     code = main(["analyse", str(archive["root"]), "--jobs", "2", "--max-order", "2", "--json"])
     rows = {Path(r["path"]): r for r in json.loads(capsys.readouterr().out)["shots"]}
-    assert code == 3  # the junk file failed; the rest did not stop
+    assert code == 4  # the junk file failed (an analysis that failed: docs/exit-codes.md); the rest did not stop
     assert set(rows) == {*shots, archive["loose"], archive["junk"]}
     assert not rows[archive["junk"]]["ok"] and "junk.h5" in rows[archive["junk"]]["error"]
     for path in (*shots, archive["loose"]):

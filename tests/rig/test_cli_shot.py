@@ -76,13 +76,15 @@ def test_shot_with_yes_fires_stores_and_reports_json(configs, capsys) -> None:
     assert result["results"]["fbsd_hz"]["5"] > 0
 
 
-def test_analysis_failure_still_exits_0_and_says_why(configs, capsys) -> None:
+def test_analysis_failure_exits_4_and_says_why(configs, capsys) -> None:
+    """Issue 44: it exited 0, and `hopkinson shot && next-step` went on as if calibrated."""
     # A 20 kS/s analysis rate leaves 40 samples of the 2 ms record: too few to identify a model.
     rc = main(_args(configs, "--yes", "--json", "--sample-rate", "20000"))
     out, err = capsys.readouterr()
     result = json.loads(out)
-    assert rc == 0 and result["final_state"] == "DONE" and result["analysis_error"]
-    assert err.startswith("hopkinson: warning: the shot is recorded but its analysis failed")
+    assert rc == 4 and result["exit_code"] == rc and result["final_state"] == "DONE" and result["analysis_error"]
+    assert err.startswith(f"hopkinson: error: the shot is recorded in {result['shot_path']} but its analysis failed")
+    assert "(exit 4: `hopkinson analyse` it again once the cause is fixed)" in err
     assert "too short" in result["analysis_error"] and err.count("\n") == 1
     assert read_shot(result["shot_path"]).state == "analysis_failed"
 
