@@ -107,6 +107,7 @@ class ValveController(ModbusDriver):
         self.fire_style = FireStyle(fire_style)
         self.fire_command_value = int(fire_command_value)
         self.host_timed_fire_allowed = bool(host_timed_fire_allowed)
+        self.last_pulse_s: float | None = None  # the pulse last fired (plc_preset_coil: the PLC's preset)
         # One stop event per heartbeat session: a thread that outlived its stop (its join timed
         # out while it waited for a slow transaction) ends as soon as it looks, and a new
         # session can never revive it.
@@ -307,6 +308,7 @@ class ValveController(ModbusDriver):
                 preset_s = self._read_one("holding registers", "fire_pulse_ms", h.fire_pulse_ms) / 1000.0
                 if 0 < preset_s <= 60:
                     duration_s = preset_s
+        self.last_pulse_s = duration_s
         try:
             if style == FireStyle.PULSE_REGISTER:
                 self.write_value(h.fire_pulse_ms, duration_s * 1000.0, "fire pulse", "ms")

@@ -220,8 +220,8 @@ class SimulatedRig:
 
     def state(self) -> dict[str, Any]:
         """The rig as it is: what the valves were told and where they really are, pressures,
-        interlocks, watchdog, shots (JSON-ready)."""
-        return world_state(self.world)
+        interlocks, watchdog, shots, and the digitizer's acquisition state (JSON-ready)."""
+        return {**world_state(self.world), "digitizer_state": self.digitizer.state}
 
 
 def world_state(world: World) -> dict[str, Any]:

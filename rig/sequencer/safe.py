@@ -4,10 +4,11 @@ Run by the sequencer after every shot (done, aborted, timed out, interrupted, fa
 `Sequencer.make_safe` (the panel's idle ABORT, a signal between shots) and by `hopkinson safe`
 (with only the valve controller connected).
 
-1. Fast path: fire closed, fill closed, vent open, pump off; the digitizer disarmed when asked.
-2. Then, until confirmed or `timeouts.safe_s` has passed: the valves are read back (their real
-   positions where the controller reports them, else the coils) and any that is wrong is
-   commanded again; the gauges are read. Confirmed when a whole round had no instrument
+1. Fast path: fire closed, fill closed, vent open, pump off; the digitizer disarmed when asked
+   (also when an error had closed its link: the driver reopens it for the abort).
+2. Then, until confirmed or `timeouts.safe_s` has passed: the valves are read back (their coils
+   and, where the controller reports them, their real positions: both must be as wanted) and
+   any that is wrong is commanded again; the gauges are read. Confirmed when a whole round had no instrument
    error, every valve is as wanted and the reservoir (plus half a gauge count: the gauge rounds
    to the nearest count) is at or below `limits.vent_done_bar`. Not confirmed in time: the
    problem names every valve not as wanted (a stuck one: its real position against its
@@ -71,9 +72,12 @@ def safe_hold_s(config: RigConfig) -> float:
     return min(max(1.0, 4.0 * config.valve_controller.timeout_s), config.timeouts.safe_s / 2)
 
 
-def _is(states: ValveStates, name: str) -> bool:
-    """A valve's real position where reported (else its coil); the pump's coil."""
-    return states.is_open(name) if name != "vacuum_pump" else bool(states.vacuum_pump)
+def _as_wanted(states: ValveStates, name: str) -> bool:
+    """The actuator's coil is as SAFE wants it and, where the controller reports the valve's
+    real position, so is the valve: a fill coil left energised behind a valve the controller's
+    regulation happens to hold shut is not "closed" (it opens once the pressure drops)."""
+    wanted = WANTED[name]
+    return bool(getattr(states, name)) == wanted and (name == "vacuum_pump" or states.is_open(name) == wanted)
 
 
 def gauge_half_count_bar(valves: ValveControllerRole, config: RigConfig) -> float:
@@ -119,8 +123,8 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
 
     for name, wanted in WANTED.items():  # the fast path first
         attempt(lambda name=name, wanted=wanted: setters[name](wanted))
-    if digitizer is not None:
-        attempt(lambda: digitizer.abort() if digitizer.connected else None)
+    if digitizer is not None:  # a link an error closed is reopened for it (the driver's rule): never left armed
+        attempt(lambda: _disarm(digitizer, events))
 
     half_count = gauge_half_count_bar(valves, config)
     reservoir_rule = plausible_ranges(config)[RESERVOIR]
@@ -131,7 +135,7 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
         errors_before = errors
         states = attempt(valves.valves)
         last_states = states if states is not None else last_states
-        wrong = [] if states is None else [n for n, want in WANTED.items() if _is(states, n) != want]
+        wrong = [] if states is None else [n for n in WANTED if not _as_wanted(states, n)]
         for name in wrong:  # not as wanted (or changed late): command it again
             attempt(lambda name=name: setters[name](WANTED[name]))
         readings = attempt(lambda: controller_readings(valves))
@@ -175,6 +179,15 @@ def make_rig_safe(valves: ValveControllerRole, config: RigConfig, events: Publis
         attempt(lambda: events.publish(RigError(state=events.state, message=f"SAFE NOT CONFIRMED: {problem}",
                                                 source=valves.name, hint=HINT_SAFE_NOT_CONFIRMED)))
     return SafeResult(confirmed, None if confirmed else problem, pressure, states, timed_out, interrupt, elapsed)
+
+
+def _disarm(digitizer: DigitizerRole, events: Publisher) -> None:
+    """Disarm the digitizer; one that cannot be reached is said, not hidden (SAFE goes on)."""
+    try:
+        digitizer.abort()
+    except InstrumentError as exc:
+        events.warn(f"SAFE could not disarm the digitizer ({exc}): it may still be armed; it holds no record of "
+                    "this rig's to keep")
 
 
 def _what_is_wrong(name: str, states: ValveStates, wrong: list[str], pressure_bar: float, vented: bool,

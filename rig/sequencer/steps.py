@@ -292,7 +292,7 @@ def fire(ctx: ShotContext) -> None:
     except InstrumentError:
         ctx.fired = _pulse_count_rose(ctx, count_before) is not False  # unknown counts as fired
         raise
-    ctx.settings["fire_pulse_s"] = pulse_s
+    ctx.settings["fire_pulse_s"] = float(getattr(valves, "last_pulse_s", None) or pulse_s)  # a PLC preset's own
     ctx.settings["fire_style"] = str(getattr(valves, "fire_style", ctx.config.valve_controller.fire_style))
     count = _wait_for_pulse_count(ctx, count_before) if count_before is not None else None
     ctx.pulse_count = count

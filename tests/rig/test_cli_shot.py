@@ -13,9 +13,10 @@ from pathlib import Path
 
 import pytest
 from hopkinson.rig.cli.main import main
+from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.shotfile import read_shot
 
-from tests.rig.conftest import read_until
+from tests.rig.conftest import assert_state_safe, read_until
 
 REPO = Path(__file__).resolve().parents[2]
 LINE = re.compile(r"^(\d\d:\d\d:\d\d\.\d\d\d) (\S+)")  # every event line: its UTC time, then the state
@@ -52,9 +53,9 @@ def _state(c: dict[str, Path]) -> dict:
     return json.loads(c["state"].read_text(encoding="utf-8"))
 
 
-def _assert_safe(state: dict) -> None:
-    assert state["fire_valve_open"] is False and state["fill_valve_open"] is False
-    assert state["vent_valve_open"] is True and state["reservoir_pressure_bar"] <= 0.05
+def _assert_safe(state: dict, **kw: object) -> None:
+    """tests/rig/conftest.py's assert_safe, on the simulator's state file."""
+    assert_state_safe(state, load_rig_config(REPO / "config" / "rig-sim.toml"), **kw)  # type: ignore[arg-type]
 
 
 def test_shot_with_yes_fires_stores_and_reports_json(configs, capsys) -> None:

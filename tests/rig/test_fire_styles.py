@@ -67,6 +67,8 @@ def test_a_shot_fires_in_each_style(make_rig, style: str, transport: str) -> Non
         assert "timed by this computer" in fired[0].message
     else:
         assert rig.world.fire_pulses == 1 and fired[0].confirmed_by == COUNTER
+    # the pulse recorded is the one fired: the PLC's own preset where it keeps one (sim default 150 ms)
+    assert fired[0].pulse_s == pytest.approx(0.15 if style == "plc_preset_coil" else 0.2)
     rig.assert_safe()
 
 
