@@ -39,7 +39,12 @@ from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.reduce import SensorChannel, check_sensor_channel, reduce_sensors
+from hopkinson.analysis.reduce import (
+    SensorChannel,
+    check_carries_pulse,
+    check_sensor_channel,
+    reduce_sensors,
+)
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 from hopkinson.analysis.sine_comparison import read_sine_calibration
@@ -227,6 +232,7 @@ def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_inter
         try:
             own.check()
             check_sensor_channel(role, channel, np.asarray(doppler_v).size, source, (full_scale_v or {}).get(role))
+            check_carries_pulse(role, np.asarray(volts, dtype=float).ravel(), doppler_v, source)
         except AnalysisError as exc:
             errors[role] = str(exc)
         else:  # the reference's constants are the first sensor's

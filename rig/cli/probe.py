@@ -13,7 +13,10 @@
    read twice and must not move (unless another process holds the rig); the digitizer's identity,
    every acquisition and channel setting, each recorded channel's on/off state (a scope
    acquires only the channels that are on) and, when it holds a record, each recorded
-   channel's transfer; the amplifier's identity, settings and overload flag;
+   channel's transfer and whether it carries its signal (analysis.channel_content: a
+   quadrature role must carry the beat, a sensor role the pulse; one that holds only noise
+   fails, with the fix, e.g. "unmap the quadrature channel"); the amplifier's identity,
+   settings and overload flag;
 4. prints each step as ok or FAIL; every failure names the instrument, the command and the
    reply, and a line "fix:" says what to check. A digitizer that does not answer its dialect's
    commands is asked a plain *IDN? (IEEE 488.2, which every dialect answers): its maker then
@@ -225,10 +228,19 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
         if settings is not None and getattr(settings, "channels_on", None) is not None:
             steps.run("recorded channels on", lambda: channel_states(settings.channels_on, roles))
         state = steps.run("acquisition state", dig.acquisition_state)
-        if state == "TRIGGERED":  # the instrument holds a record: try each role's transfer
+        if state == "TRIGGERED":  # the instrument holds a record: each role's transfer, and what it carries
+            volts: dict[str, Any] = {}
+
+            def transfer(role: str) -> str:
+                waveform = dig.fetch_waveform(role)
+                volts[role] = waveform.volts()
+                return f"{waveform.codes.size} samples"
+
             for role, channel in roles.items():
-                steps.run(f"transfer of {channel} ({role})",
-                          lambda role=role: f"{dig.fetch_waveform(role).codes.size} samples")
+                steps.run(f"transfer of {channel} ({role})", lambda role=role: transfer(role))
+            for role, channel in roles.items():
+                if role != "doppler" and role in volts and "doppler" in volts:
+                    steps.run(f"{role} ({channel}) carries its signal", lambda role=role: _content(role, volts))
 
     steps = _probe(config, "digitizer", body)
     opened = [s for s in steps.steps if s["step"] == "open"]
@@ -240,6 +252,29 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
             if fix is not None:
                 opened[0]["fix"] = fix
     return steps
+
+
+class EmptyChannel(ValueError):
+    """A recorded channel that carries nothing for its role (analysis.channel_content)."""
+
+    def __init__(self, message: str, fix: str) -> None:
+        super().__init__(message)
+        self.fix = fix
+
+
+def _content(role: str, volts: dict[str, Any]) -> str:
+    """How much the role's channel rises while the doppler channel's beat runs; EmptyChannel
+    when it carries nothing (a quadrature role on a one-photodetector interferometer, a sensor
+    role with no sensor)."""
+    from hopkinson.analysis.channel_content import beat_content, pulse_content
+
+    judge = beat_content if role == "doppler_quadrature" else pulse_content
+    content = judge(volts[role], volts["doppler"], role)
+    if content is None:
+        return "not judged: the doppler channel shows no motion in this record"
+    if content.carries_nothing:
+        raise EmptyChannel(content.message(), content.fix())
+    return f"rises {content.rise_db:.0f} dB while the object moves"
 
 
 def channel_states(channels_on: dict[str, bool], roles: dict[str, str]) -> str:
