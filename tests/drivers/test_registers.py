@@ -7,7 +7,13 @@ import math
 import struct
 
 import pytest
-from hopkinson.drivers.registers import CoilMap, Register, RegisterMap, RegisterRangeError, contiguous_runs
+from hopkinson.drivers.registers import (
+    CoilMap,
+    Register,
+    RegisterMap,
+    RegisterRangeError,
+    contiguous_runs,
+)
 from hopkinson.drivers.sim.controller_map import Point
 
 
