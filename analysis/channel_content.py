@@ -107,31 +107,29 @@ def beat_content(quadrature_v: np.ndarray, doppler_v: np.ndarray,
                  role: str = "doppler_quadrature") -> ChannelContent | None:
     """Does the quadrature channel carry the beat (module docstring)? None: the doppler channel
     shows no motion to judge it by."""
-    window = _windows(np.asarray(doppler_v).size)
-    motion = _motion(np.asarray(doppler_v), window)
-    if motion is None:
-        return None
-    moving, reference_db = motion
-    if np.ptp(quadrature_v) == 0:
-        return ChannelContent(role, QUADRATURE, math.nan, reference_db)  # constant
-    power = _blocks(np.asarray(quadrature_v), window)[: moving.size].var(axis=1)
-    return ChannelContent(role, QUADRATURE, _rise_db(power, moving), reference_db)
+    return _content(quadrature_v, doppler_v, role, QUADRATURE)
 
 
 def pulse_content(response_v: np.ndarray, doppler_v: np.ndarray, role: str = "response") -> ChannelContent | None:
     """Does the sensor channel carry the pulse (module docstring)? None: no motion to judge by."""
-    window = _windows(np.asarray(doppler_v).size)
-    motion = _motion(np.asarray(doppler_v), window)
+    return _content(response_v, doppler_v, role, SENSOR)
+
+
+def _content(x: np.ndarray, doppler_v: np.ndarray, role: str, kind: str) -> ChannelContent | None:
+    doppler_v = np.asarray(doppler_v)
+    window = _windows(doppler_v.size)
+    motion = _motion(doppler_v, window)
     if motion is None:
         return None
     moving, reference_db = motion
-    if np.ptp(response_v) == 0:
-        return ChannelContent(role, SENSOR, math.nan, reference_db)  # constant
-    blocks = _blocks(np.asarray(response_v), window)[: moving.size]
-    means = blocks.mean(axis=1)
+    if np.ptp(x) == 0:
+        return ChannelContent(role, kind, math.nan, reference_db)  # constant
+    blocks = _blocks(np.asarray(x), window)[: moving.size]
+    if kind == QUADRATURE:
+        return ChannelContent(role, kind, _rise_db(blocks.var(axis=1), moving), reference_db)
     noise = blocks.var(axis=1)
     quiet = noise <= np.percentile(noise, REST_PERCENTILE)
-    level = float(np.median(means[quiet]))  # the rest level: offsets and drift-free windows
+    level = float(np.median(blocks.mean(axis=1)[quiet]))  # the rest level: offsets and drift-free windows
     power = ((blocks - level) ** 2).mean(axis=1)
     # the largest: the pulse takes a few windows; a separated object flies on (the beat runs) at rest
-    return ChannelContent(role, SENSOR, _rise_db(power, moving, "max"), reference_db)
+    return ChannelContent(role, kind, _rise_db(power, moving, "max"), reference_db)
