@@ -528,7 +528,8 @@ class CampaignRunner:
                                     f"{rescued}: free the folder, move that file to {path} and resume "
                                     "(`campaign run --resume` records and analyses it, never fires it again)")
             elif outcome.fired:
-                journal.mark(sid, S.UNKNOWN, reason=outcome.error or "fired, but no raw file was stored")
+                journal.mark(sid, S.UNKNOWN, reason=outcome.error or "the fire command went out, but no raw file "
+                                                                    "was stored")
             else:
                 journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted")
         elif state in (S.PLANNED, S.ABORTED):
