@@ -19,6 +19,8 @@ EXIT_CODES: dict[str, str] = {
          "signal; a campaign stopped with shots left",
     "4": "recorded but its analysis failed: the raw shot is kept (`hopkinson analyse` it); a campaign "
          "complete with failed analyses",
+    "5": "done, but its lab record is in neither the database nor the spool: `hopkinson lab import` the "
+         "shot file (rig/lab_record.py EXIT_NOT_RECORDED)",
     "130, 128+N": "Ctrl-C, or signal N, in a command that drives no rig",
 }
 

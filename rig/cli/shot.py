@@ -40,7 +40,9 @@ Exit codes (docs/exit-codes.md, `hopkinson shot --help`): 0 fired, recorded and 
 input or configuration, or the rig held by another process (nothing was moved); 3 the shot was
 aborted to the safe state, ended in FAULT, or was interrupted by a signal (one line on stderr:
 which state, which instrument, why); 4 the shot is recorded but its analysis failed (one line
-on stderr; the raw shot is kept). The --json object's `exit_code` is always the exit code.
+on stderr; the raw shot is kept); 5 the shot is done but its lab record is in neither the
+database nor the spool (`hopkinson lab import` it). The --json object's `exit_code` is always
+the exit code.
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
-from hopkinson.rig.errors import EXIT_ABORTED, ConfigError, exit_codes_help
+from hopkinson.rig.errors import EXIT_ABORTED, EXIT_DONE, ConfigError, exit_codes_help
 
 PROMPT_TIMEOUT_S = 60.0
 
@@ -179,8 +181,8 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
                                  message=f"{latch.reason} after the shot ended: the command exits {EXIT_ABORTED}"))
         if args.sim:
             sim_state = session.state()
-    code = _report(args, shot.outcome, sim_state, latch, shot.safe_again)
-    return not_recorded_exit(recorder, code)
+    kept = not_recorded_exit(recorder, EXIT_DONE) == EXIT_DONE  # (says which record is lost)
+    return _report(args, shot.outcome, sim_state, latch, shot.safe_again, record_lost=not kept)
 
 
 def not_recorded_exit(recorder: Any, code: int) -> int:
@@ -221,14 +223,19 @@ def report_reclaimed(control: Any) -> None:
 
 
 def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | None, latch: Any,
-            safe_again: tuple[bool, str | None] | None) -> int:
+            safe_again: tuple[bool, str | None] | None, record_lost: bool = False) -> int:
+    """Print the outcome; the exit code (docs/exit-codes.md), which the --json object carries too."""
+    from hopkinson.rig.lab_record import EXIT_NOT_RECORDED
+
+    exit_code = EXIT_ABORTED if latch.received is not None else \
+        EXIT_NOT_RECORDED if record_lost and outcome.exit_code == EXIT_DONE else outcome.exit_code
     if args.json:
         out = outcome.to_dict()
         if sim_state is not None:
             out["sim_state"] = sim_state
         if latch.received is not None:
             out["interrupted"] = latch.reason
-            out["exit_code"] = EXIT_ABORTED  # as the process exits
+        out["exit_code"] = exit_code  # as the process exits
         emit_json(out)
     elif outcome.shot_path is not None and not args.json_events:
         print(f"shot file: {outcome.shot_path}", flush=True)
@@ -263,7 +270,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         sys.stderr.write(f"hopkinson: error: {latch.reason}: {line}\n")
         return EXIT_ABORTED
     outcome.raise_for_outcome()
-    return outcome.exit_code  # 0, or 4: recorded, its analysis failed
+    return exit_code  # 0; 4: recorded, its analysis failed; 5: done, its lab record lost
 
 
 def _make_out_dir(out: Path) -> None:

@@ -214,3 +214,30 @@ def test_a_late_signal_is_reported_as_what_happened(safe_again, expected, capsys
     args = argparse.Namespace(json=False, json_events=True)
     assert _report(args, ShotOutcome(final_state="DONE"), None, latch, safe_again) == EXIT_ABORTED
     assert capsys.readouterr().err.strip().splitlines()[-1] == f"hopkinson: error: interrupted (SIGHUP): {expected}"
+
+
+def test_the_json_exit_code_is_the_exit_code_also_when_the_lab_record_is_lost(capsys) -> None:
+    import argparse
+
+    from hopkinson.rig.cli.shot import _report
+    from hopkinson.rig.shot import ShotOutcome
+
+    no_signal = argparse.Namespace(received=None, reason="")
+    args = argparse.Namespace(json=True, json_events=False)
+    assert _report(args, ShotOutcome(final_state="DONE"), None, no_signal, None, record_lost=True) == 5
+    assert json.loads(capsys.readouterr().out)["exit_code"] == 5
+    failed = ShotOutcome(final_state="DONE", analysis_error="analysis failed: too short", exit_code=4)
+    assert _report(args, failed, None, no_signal, None, record_lost=True) == 4  # the analysis says more
+    assert json.loads(capsys.readouterr().out)["exit_code"] == 4
+
+
+def test_every_exit_code_is_in_the_one_table() -> None:
+    import hopkinson.rig.errors as errors
+    from hopkinson.rig.campaign import EXIT_ANALYSIS_FAILED, EXIT_COMPLETE, EXIT_STOPPED
+    from hopkinson.rig.lab_record import EXIT_NOT_RECORDED
+
+    codes = {v for k, v in vars(errors).items() if k.startswith("EXIT_") and isinstance(v, int)}
+    codes |= {EXIT_ANALYSIS_FAILED, EXIT_COMPLETE, EXIT_STOPPED, EXIT_NOT_RECORDED}
+    assert {str(c) for c in codes} <= set(errors.EXIT_CODES)
+    text = (REPO / "docs" / "exit-codes.md").read_text(encoding="utf-8")
+    assert all(f"| {code} |" in text for code in errors.EXIT_CODES)
