@@ -187,3 +187,34 @@ def test_each_style_loads_with_what_it_needs(tmp_path) -> None:
         tmp_path, (STYLE_LINE, 'fire_style = "host_timed_coil"\nhost_timed_fire_allowed = true')))
     assert host.valve_controller.host_timed_fire_allowed is True
     assert host.snapshot()["valve_controller"]["fire_style"] == "host_timed_coil"  # recorded with every shot
+
+
+def test_every_example_in_the_fire_styles_page_loads_as_it_says(tmp_path) -> None:
+    """docs/plc-fire-styles.md, run: each TOML example, put into config/rig-sim.toml, is a valid
+    rig configuration firing in the style it names."""
+    import re
+    import tomllib
+
+    import tomli_w
+
+    page = (REPO / "docs" / "plc-fire-styles.md").read_text(encoding="utf-8")
+    examples = re.findall(r"```toml\n(.*?)```", page, flags=re.S)
+    assert len(examples) == len(STYLES)
+
+    def merged(base: dict, extra: dict) -> dict:
+        out = dict(base)
+        for key, value in extra.items():
+            into = base.get(key)
+            out[key] = merged(into, value) if isinstance(value, dict) and isinstance(into, dict) else value
+        return out
+
+    base = tomllib.loads((REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8"))
+    named = []
+    for i, example in enumerate(examples):
+        data = tomllib.loads(example)
+        path = tmp_path / f"example-{i}.toml"
+        path.write_text(tomli_w.dumps(merged(base, data)), encoding="utf-8")
+        config = load_rig_config(path)
+        assert config.valve_controller.fire_style == data["valve_controller"]["fire_style"]
+        named.append(config.valve_controller.fire_style)
+    assert sorted(named) == sorted(STYLES)
