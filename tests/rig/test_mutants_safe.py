@@ -17,7 +17,7 @@ from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
 from hopkinson.drivers.roles import Interlocks, ValveStates
 from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.errors import HINT_SAFE_NOT_CONFIRMED
-from hopkinson.rig.events import EventBus, Note, Reading, RigError, RigEvent
+from hopkinson.rig.events import EventBus, Note, Reading, RigError, RigEvent, RigWarning
 from hopkinson.rig.interlocks import (
     INTERLOCKS,
     REQUIRED,
@@ -153,10 +153,22 @@ def test_the_options_are_keyword_only() -> None:
         make_rig_safe(Controller(), config(), Events(), Digitizer())  # type: ignore[misc]
 
 
-def test_a_disconnected_digitizer_is_not_asked_and_none_is_fine() -> None:
+def test_a_disconnected_digitizer_is_still_asked_one_that_fails_is_said_and_none_is_fine() -> None:
+    """Issue 45 item 2 (SAFE never leaves the digitizer armed unsaid): a digitizer whose link an
+    error closed is asked all the same (its driver reopens the link, or refuses at once when it
+    never had one); one that cannot be disarmed is a warning, never a reason to stop SAFE."""
     digitizer = Digitizer(connected=False)
     assert run(Controller(), digitizer=digitizer)[0].confirmed
-    assert digitizer.aborts == 0
+    assert digitizer.aborts == 1
+
+    class Hung(Digitizer):
+        def abort(self) -> None:
+            raise InstrumentError("digitizer", "abort", "reply longer than 65536 bytes")
+
+    result, events = run(Controller(), digitizer=Hung())
+    assert result.confirmed
+    (warning,) = events.of(RigWarning)
+    assert warning.message.startswith("SAFE could not disarm the digitizer (digitizer: 'abort': reply longer than")
     assert run(Controller())[0].confirmed
 
 
