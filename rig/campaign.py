@@ -238,6 +238,7 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, campaign_uuid=campaign_uuid,
         shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
+        sensitivity_unit=plan.accelerometer.sensitivity_unit, tolerance_percent=plan.accelerometer.tolerance_percent,
     )
 
 

@@ -11,6 +11,8 @@ Example (config/campaigns/example.toml is the documented one)::
     model = "AYZ-3"
     serial = "SN0001"
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
+    sensitivity_unit = "µV/(m/s²)"    # optional: the unit results show it in (analysis.sensitivity_units)
+    tolerance_percent = 5.0           # optional: the sensor's tolerance on its nominal (each shot's verdict)
     sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,
                                       # magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]; relative to
                                       # the plan's folder); every shot's model is fitted to the
@@ -97,6 +99,15 @@ def _auto(value: Any) -> Any:
     return None if value == "auto" else value
 
 
+def _unit_name(name: str | None) -> str | None:
+    """A sensitivity unit as analysis.sensitivity_units names it ("uV/(m/s^2)" → "µV/(m/s²)")."""
+    if name is None:
+        return None
+    from hopkinson.analysis.sensitivity_units import sensitivity_unit
+
+    return sensitivity_unit(name).name
+
+
 Name = Annotated[Text, AfterValidator(_not_blank)]
 Positive = Annotated[Number, Field(gt=0)]
 Order = Annotated[Int, Field(ge=1, le=MAX_ORDER_LIMIT)]
@@ -114,6 +125,10 @@ class Accelerometer:
     sine_calibration: Annotated[Text | None, Field(description=(
         "a sine calibration CSV (frequency_hz, magnitude, phase_deg[, u_magnitude_rel, u_phase_deg]), "
         "relative to the plan's folder"))] = None  # once loaded: the resolved path
+    sensitivity_unit: Annotated[Text | None, AfterValidator(_unit_name), Field(description=(
+        'the unit results show the sensitivity in (analysis.sensitivity_units), e.g. "mV/g"'))] = None
+    tolerance_percent: Annotated[Annotated[Number, Field(gt=0, lt=100)] | None, Field(description=(
+        "the sensor's tolerance on its nominal sensitivity, per cent: a shot beyond it is flagged"))] = None
 
 
 @dataclass(frozen=True)

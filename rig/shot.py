@@ -101,6 +101,11 @@ class ShotRequest:
     # automatic level control: the target and how the pressure was chosen (rig.level_control.
     # LevelChoice.to_dict), recorded in the shot file's settings ("level_control")
     level: dict[str, Any] | None = None
+    # the sensor's own sensitivity unit (analysis.sensitivity_units; None: the analysis' SI value,
+    # shown in µV/(m/s²)) and its tolerance on the nominal (per cent), recorded in the shot
+    # file's settings ("sensitivity_unit", "sensitivity_tolerance_percent") for its verdict
+    sensitivity_unit: str | None = None
+    tolerance_percent: float | None = None
 
     def check(self, config: RigConfig) -> None:
         """Raise ShotRequestError (naming the field and the reason) unless the request is firable."""
@@ -135,6 +140,7 @@ class ShotRequest:
             if role not in config.digitizer.channels:
                 raise ShotRequestError(f"{role}: an accelerometer is named for it, but the rig records no {role} "
                                        f"channel ({config.path or 'configuration'} [digitizer.channels])")
+        self._check_sensor(config)
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")
@@ -143,6 +149,20 @@ class ShotRequest:
                                    "(letters, digits, '_', '.', '-')")
         if not Path(self.out_dir).is_dir():
             raise ShotRequestError(f"out_dir: {self.out_dir} is not an existing folder")
+
+    def _check_sensor(self, config: RigConfig) -> None:
+        """The sensitivity unit known and the nominal plausible in it; the tolerance 0..100 %."""
+        if self.sensitivity_unit is not None:
+            from hopkinson.analysis.sensitivity_units import check_plausible, sensitivity_unit
+
+            try:
+                unit = sensitivity_unit(self.sensitivity_unit)
+                check_plausible(unit.from_si(self.sensitivity(config)), unit)
+            except ValueError as exc:
+                raise ShotRequestError(f"sensitivity: {exc}") from None
+        t = self.tolerance_percent
+        if t is not None and not (isinstance(t, int | float) and 0 < t < 100):
+            raise ShotRequestError(f"tolerance_percent: must be between 0 and 100 %, got {t!r}")
 
     def shot_path(self) -> Path:
         """Where the shot file goes: out_dir / <shot_name or a generated name>.h5."""
@@ -269,6 +289,10 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
                                      analysis_options=request.analysis_options())
     if request.level is not None:
         snapshot["shot_settings"]["level_control"] = dict(request.level)
+    if request.sensitivity_unit is not None:
+        snapshot["shot_settings"]["sensitivity_unit"] = request.sensitivity_unit
+    if request.tolerance_percent is not None:
+        snapshot["shot_settings"]["sensitivity_tolerance_percent"] = float(request.tolerance_percent)
     return ShotMeta(
         operator=request.operator,
         accelerometer_model=request.accelerometer_model,
