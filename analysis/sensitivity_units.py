@@ -91,7 +91,7 @@ def check_plausible(value: float, unit: SensitivityUnit) -> None:
     low, high = unit.plausible_range()
     if not (isinstance(value, int | float) and math.isfinite(value) and low <= value <= high):
         raise ValueError(f"sensitivity {value:g} {unit.name} is outside the plausible range "
-                         f"{low:.3g} … {high:.3g} {unit.name}: check the value and its unit")
+                         f"{low:.6g} … {high:.6g} {unit.name}: check the value and its unit")
 
 
 def format_sensitivity(value_si: float, unit: SensitivityUnit, expanded_si: float | None = None) -> str:

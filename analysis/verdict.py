@@ -202,11 +202,11 @@ def _level(kf: KeyFigures, target_m_s2: float | None, c: VerdictCriteria) -> Fin
         return Finding(Check.LEVEL, Status.FAIL, not_determined_text(peak, "peak acceleration"))
     assert peak is not None and peak.value is not None
     reached = abs(peak.value)
-    text = f"level {reached / G_M_S2:,.0f} g"
+    text = f"level {_g(reached)} g"
     if target_m_s2 is None or not target_m_s2 > 0:
         return Finding(Check.LEVEL, Status.OK, text)
     off = reached / target_m_s2 - 1.0
-    text += f" (target {target_m_s2 / G_M_S2:,.0f} g, {_signed(100 * off)} %)"
+    text += f" (target {_g(target_m_s2)} g, {_signed(100 * off)} %)"
     if abs(off) > c.level_tolerance_rel:
         return Finding(Check.LEVEL, Status.FAIL, text + f": outside ±{100 * c.level_tolerance_rel:g} %")
     return Finding(Check.LEVEL, Status.OK, text)
@@ -241,6 +241,11 @@ def _dcm(kf: KeyFigures) -> Finding:
 def _khz(value_hz: float) -> str:
     """kHz to three significant digits, at least one decimal below 10 kHz ('0.06', '6.36', '66.3')."""
     return f"{value_hz / 1e3:.3g}" if value_hz >= 1e3 else f"{value_hz / 1e3:.2g}"
+
+
+def _g(value_m_s2: float) -> str:
+    """An acceleration in g, thousands apart by a no-break space: '50\u00a0614'."""
+    return f"{value_m_s2 / G_M_S2:,.0f}".replace(",", "\u00a0")
 
 
 def _signed(value: float) -> str:

@@ -55,7 +55,7 @@ def test_a_good_shot_is_accepted_with_every_check_in_its_line() -> None:
     assert verdict.reason == "every check passed"
     line = verdict.line()
     assert line.startswith("ACCEPT — fit 97.6 %")
-    for text in ("band 0.061–66.3 kHz", "resonance excited (29.7 kHz)", "level 50,614 g (target 50,000 g, +1.2 %)",
+    for text in ("band 0.061–66.3 kHz", "resonance excited (29.7 kHz)", "level 50\u00a0614 g (target 50\u00a0000 g, +1.2 %)",
                  "sensitivity −2.2 % from nominal", "DCM recommended"):
         assert text in line, (text, line)
 

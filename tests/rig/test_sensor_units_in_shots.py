@@ -86,3 +86,30 @@ def test_a_campaign_shot_carries_the_plans_unit_and_tolerance(tmp_path: Path) ->
     run = SimpleNamespace(shots_dir=tmp_path, campaign_id="t-run")
     request = shot_request(plan, plan.shots[0], run)  # type: ignore[arg-type]
     assert (request.sensitivity_unit, request.tolerance_percent) == ("mV/g", 2.5)
+
+
+def test_a_shots_judgement_reads_its_unit_nominal_tolerance_and_target() -> None:
+    from hopkinson.analysis.verdict import Check, Decision, Status
+    from hopkinson.rig.shot_verdict import judge
+
+    results = {
+        "params": {"sensitivity_v_per_m_s2": 0.312e-6},  # the nominal the analysis divided by
+        "model": {"dc_gain": 0.627, "order": 4, "sample_interval_s": 1e-6},
+        "identification": {"fit_percent": 98.0, "supported_band_hz": [60.0, 66e3],
+                           "main_mode": {"natural_frequency_hz": 29.7e3, "damping_ratio": 0.05}},
+        "fbsd_hz": {"5": 6.3e3},
+        "reduction": {"response_unit": "m/s^2", "peak_acceleration_m_s2": 40_000 * 9.80665,
+                      "shock_sensitivity": 0.95},
+        "dcm": {"recommended": True},
+    }
+    settings = {"sensitivity_unit": "µV/(m/s²)", "sensitivity_tolerance_percent": 5.0,
+                "level_control": {"target_peak_m_s2": 50_000 * 9.80665}}
+    j = judge(results, settings)
+    assert j.sensitivity.text() == "0.1956 µV/(m/s²)" and j.sensitivity.ratio == 0.627
+    assert j.verdict.finding(Check.SENSITIVITY).status == Status.FLAG  # −37 % against ±5 %
+    assert j.verdict.decision == Decision.REPEAT and "target 50\u00a0000 g, −20.0 %" in j.verdict.reason
+    assert j.shock_sensitivity.text() == "0.2964 µV/(m/s²)"
+    mv = judge(results, {"sensitivity_unit": "mV/g"})  # 0.1956 µV/(m/s²) × 9.80665 m/s² per g
+    assert mv.sensitivity.text() == "0.001918 mV/g"
+    failed = judge(None, settings, "analysis failed: the response is clipped")
+    assert failed.verdict.decision == Decision.REPEAT and failed.sensitivity is None
