@@ -94,6 +94,7 @@ if TYPE_CHECKING:
     from hopkinson.drivers.sim.world import World
     from hopkinson.rig.config import RigConfig
     from hopkinson.rig.instruments import Instruments
+    from hopkinson.rig.sequencer import FireAuthorisation
 
 DEFAULT_RUNS_DIR = Path("runs")
 EXIT_COMPLETE = 0
@@ -282,12 +283,16 @@ class CampaignRunner:
     CampaignShotStarted, CampaignShotEnded (the journal state at a shot's end), Note, and
     CampaignFinished. analyse: the analysis computation (default rig.shot.shot_analyser(config));
     on_shot_start: called with the shot about to be fired (None after it), e.g. to tag a
-    simulation fire log.
+    simulation fire log. confirm_each: firing not authorised for the whole campaign, each shot
+    is confirmed: called with the shot about to be fired, it gives the FireAuthorisation the
+    armed sequencer then waits for (at most confirm_timeout_s, as a single shot: the panel's FIRE).
     """
 
     def __init__(self, run: RunFolder, plan: CampaignPlan, instruments: Instruments, config: RigConfig,
                  bus: EventBus, *, analyse: AnalyseFn | None = None,
-                 max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None) -> None:
+                 max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None,
+                 confirm_each: Callable[[PlannedShot], FireAuthorisation] | None = None,
+                 confirm_timeout_s: float = 600.0) -> None:
         from hopkinson.rig.sequencer import Sequencer  # the drivers load only when shots are fired
 
         self.run_folder = run
@@ -298,6 +303,8 @@ class CampaignRunner:
         self._analyse = analyse or shot_analyser(config)
         self.sequencer = Sequencer(instruments, config, bus, analyse=self._analyse)
         self._on_shot_start = on_shot_start
+        self._confirm_each = confirm_each
+        self._confirm_timeout_s = confirm_timeout_s
         self._journal: Journal | None = None
         self._current: CampaignProgress | None = None
         self._stop = threading.Event()
@@ -463,8 +470,13 @@ class CampaignRunner:
         firing_info: dict[str, Any] = {"pressure_bar": request.pressure_bar}
         if level is not None:
             firing_info.update(target_peak_m_s2=level.target_peak_m_s2, level_basis=level.basis)
+        if self._confirm_each is None:
+            authorisation = FireAuthorisation.pre_given()
+        else:
+            authorisation = self._confirm_each(shot)
+            request = dataclasses.replace(request, confirm_timeout_s=self._confirm_timeout_s)
         try:
-            outcome = self.sequencer.run_shot(request, FireAuthorisation.pre_given(),
+            outcome = self.sequencer.run_shot(request, authorisation,
                                               before_fire=lambda _ctx: self._mark_firing(shot.id, firing_info),
                                               after_store=lambda _ctx, path: self._on_stored(shot.id, Path(path)))
             self._settle(shot, outcome)

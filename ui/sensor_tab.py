@@ -1,20 +1,31 @@
 """Sensor history: every calibration of one serial from the lab's record (hopkinson.lab) — a
-table of sensitivity, shock sensitivity, f_n and FBSD ±5 % with their U over time, the same
-as plots with U as error bars, and the judgement: drift (E_n of the newest against the
-earlier ones), the statement of conformity against the sensor's tolerance, and the due date.
-The record is read on the panel's background worker; the tab only draws what it returns."""
+table of sensitivity, shock sensitivity, f_n and FBSD ±5 % with their U over time (units in
+every column), the same as plots against the calibration date (dated axes) with U as error
+bars, and the judgement: drift (E_n of the newest against the earlier ones), the statement of
+conformity against the sensor's tolerance, and the due date. The sensor's data (nominal
+sensitivity and its unit, tolerance, recalibration interval, owner) is set here too
+(`save_sensor`: the lab's record, audited).
+
+The tab opens on the serial set up for the shot (`prefill`). Calibrations the simulator made
+are marked "SIMULATED". The record is read on the panel's background worker; the tab only draws
+what it returns.
+"""
 
 from __future__ import annotations
 
+import getpass
 from typing import Any
 
+import numpy as np
 import pyqtgraph as pg
 from hopkinson.analysis.key_figures import Figure
-from hopkinson.lab.history import SensorHistory, sensor_history
+from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
+from hopkinson.lab.history import RATIO_UNITS, SensorHistory, sensor_history
 from hopkinson.lab.history_plot import SHOWN, history_series
-from hopkinson.lab.repository import open_repository
+from hopkinson.lab.repository import SensorInfo, open_repository
+from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
 from hopkinson.ui.plots import configure_plot
-from hopkinson.ui.widgets import section_title
+from hopkinson.ui.widgets import TEXT_COLOURS, section_title
 from hopkinson.ui.worker import Background
 from PySide6.QtWidgets import (
     QGridLayout,
@@ -30,7 +41,10 @@ from PySide6.QtWidgets import (
 )
 
 POINT_BRUSH = pg.mkBrush("#1a73e8")
+SIMULATED_BRUSH = pg.mkBrush("#bdc1c6")
 DRIFT_COLOUR = "#c5221f"
+DAY_S = 86_400.0
+MIN_SPAN_S = 30 * DAY_S  # a history within one day still gets a dated axis (not "54.500 … 55.250" seconds)
 
 
 def load_history(url: str, serial: str, rule: str) -> tuple[SensorHistory, list[dict[str, str]]]:
@@ -44,6 +58,21 @@ def load_history(url: str, serial: str, rule: str) -> tuple[SensorHistory, list[
         return sensor_history(sensor, repo.calibrations(serial), rule), repo.certificates(serial)
 
 
+def save_sensor(url: str, serial: str, **fields: Any) -> SensorInfo:
+    """Set a sensor's data in the lab's record (audited under the OS user)."""
+    with open_repository(url) as repo:
+        return repo.register_sensor(serial, getpass.getuser(), **fields)
+
+
+def column_unit(history: SensorHistory, key: str, unit: str) -> str:
+    """A column's unit: the sensitivities are relative to each shot's nominal when the record
+    holds them so (the response was divided by the nominal), else in V/(m/s²)."""
+    if key in ("sensitivity", "shock_sensitivity"):
+        units = {c.response_unit for c in history.calibrations}
+        return "× nominal" if units <= set(RATIO_UNITS) else "V/(m/s²)" if units == {"V"} else "as recorded"
+    return unit
+
+
 class SensorTab(QWidget):
     """The "Sensor history" tab (module doc)."""
 
@@ -53,6 +82,7 @@ class SensorTab(QWidget):
         self.database_url = database_url
         self.decision_rule = decision_rule
         self.history: SensorHistory | None = None
+        self._prefilled = ""
 
         self.serial_edit = QLineEdit()
         self.serial_edit.setPlaceholderText("serial number")
@@ -68,27 +98,79 @@ class SensorTab(QWidget):
         row.addWidget(self.serial_edit, 1)
         row.addWidget(self.show_button)
 
-        self.table = QTableWidget(0, 3 + len(SHOWN))
-        self.table.setHorizontalHeaderLabels(["date (UTC)", "rig", "campaign"] + [s[1] for s in SHOWN])
+        # the sensor's data, as the lab's record keeps it
+        self.nominal = UnitSpinBox("Nominal sensitivity", "", UNITS[DEFAULT_UNIT].plausible_range(), 0.0, decimals=4,
+                                   special="not set")
+        self.unit = ComboBox()
+        for name in UNITS:
+            self.unit.addItem(name, name)
+        self.unit.setCurrentIndex(self.unit.findData(DEFAULT_UNIT))
+        self.unit.currentIndexChanged.connect(
+            lambda: self.nominal.set_plausible(*UNITS[str(self.unit.currentData())].plausible_range()))
+        self.tolerance = UnitSpinBox("Tolerance", "%", (0.1, 50.0), 0.0, decimals=1, special="not set",
+                                     tip="the sensor's tolerance on its nominal sensitivity (conformity, flags)")
+        self.interval = IntSpinBox(0, 3650, 0)
+        self.interval.setSuffix(" days")
+        self.interval.setSpecialValueText("not set")
+        self.interval.setToolTip("recalibration interval: the due date is the last calibration plus this")
+        self.owner = QLineEdit()
+        self.owner.setPlaceholderText("owner (the certificate's customer)")
+        self.save_button = QPushButton("Save sensor data")
+        self.save_button.clicked.connect(self.save_sensor_data)
+        self.save_message = QLabel("")
+        for spin in (self.nominal, self.tolerance):
+            spin.refused.connect(lambda text: self._said("warning", f"Not taken: {text}."))
+        data = QHBoxLayout()
+        data.addWidget(QLabel("Nominal"))
+        data.addWidget(self.nominal)
+        data.addWidget(self.unit)
+        data.addWidget(QLabel("Tolerance ±"))
+        data.addWidget(self.tolerance)
+        data.addWidget(QLabel("Recalibrate every"))
+        data.addWidget(self.interval)
+        data.addWidget(self.owner, 1)
+        data.addWidget(self.save_button)
+
+        self.table = QTableWidget(0, 4 + len(SHOWN))
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.table.verticalHeader().setVisible(False)
         self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        self._set_headers(None)
 
         self.plots: dict[str, pg.PlotWidget] = {}
         grid = QGridLayout()
         for i, (key, label, _scale, unit) in enumerate(SHOWN):
-            plot = pg.PlotWidget(axisItems={"bottom": pg.DateAxisItem()})
-            configure_plot(plot, label, f"{label} ({unit})" if unit else label, "calibration date")
+            plot = pg.PlotWidget(axisItems={"bottom": pg.DateAxisItem(utcOffset=0)})
+            configure_plot(plot, label, f"{label} ({unit})" if unit else label, "calibration date (UTC)")
             self.plots[key] = plot
             grid.addWidget(plot, i // 2, i % 2)
 
         layout = QVBoxLayout(self)
         layout.addLayout(row)
+        layout.addLayout(data)
+        layout.addWidget(self.save_message)
         layout.addWidget(self.summary)
         layout.addWidget(self.flags)
         layout.addWidget(section_title("Calibrations"))
         layout.addWidget(self.table, 2)
         layout.addLayout(grid, 3)
+
+    def _set_headers(self, history: SensorHistory | None) -> None:
+        heads = ["date (UTC)", "rig", "campaign", "source"]
+        for key, label, _scale, unit in SHOWN:
+            shown = column_unit(history, key, unit) if history is not None else unit
+            heads.append(f"{label} ({shown})" if shown else label)
+        self.table.setHorizontalHeaderLabels(heads)
+
+    # -- the serial --------------------------------------------------------------------------------
+    def prefill(self, serial: str) -> None:
+        """Open on `serial` (the shot's), unless the technician typed another one here."""
+        typed = self.serial_edit.text().strip()
+        if not serial or typed == serial or (typed and typed != self._prefilled):
+            return
+        self._prefilled = serial
+        self.serial_edit.setText(serial)
+        self.show_serial()
 
     def show_serial(self) -> None:
         serial = self.serial_edit.text().strip()
@@ -97,6 +179,25 @@ class SensorTab(QWidget):
         self.summary.setText(f"reading the history of {serial}…")
         self.background.run(lambda: load_history(self.database_url, serial, self.decision_rule),
                             on_done=self._show, on_error=self._show_error)
+
+    def save_sensor_data(self) -> None:
+        """Write the sensor's data (nominal in its unit, tolerance, interval, owner) to the record."""
+        serial = self.serial_edit.text().strip()
+        if not serial:
+            self._said("warning", "Enter the sensor's serial number first.")
+            return
+        unit = UNITS[str(self.unit.currentData())]
+        fields = {"nominal_sensitivity": self.nominal.value() or None, "sensitivity_unit": unit.name,
+                  "tolerance_percent": self.tolerance.value() or None, "interval_days": self.interval.value() or None,
+                  "owner": self.owner.text().strip() or None}
+        self.background.run(lambda: save_sensor(self.database_url, serial, **fields),
+                            lambda _info: (self._said("ok", f"Sensor {serial}: data saved in the lab's record."),
+                                           self.show_serial()),
+                            lambda exc: self._said("error", f"Sensor data not saved: {exc}"))
+
+    def _said(self, level: str, text: str) -> None:
+        self.save_message.setStyleSheet(f"color: {TEXT_COLOURS[level]};")
+        self.save_message.setText(text)
 
     def _show_error(self, exc: BaseException) -> None:
         self.history = None
@@ -107,9 +208,16 @@ class SensorTab(QWidget):
         history, certificates = loaded
         self.history = history
         s = history.sensor
-        parts = [f"<b>{s.serial}</b> {s.model or ''}", f"owner {s.owner or '—'}",
+        self._fill_sensor_data(s)
+        nominal = (f"nominal {s.nominal_sensitivity:g} {s.sensitivity_unit}".rstrip() if s.nominal_sensitivity
+                   else "no nominal")
+        parts = [f"<b>{s.serial}</b> {s.model or ''}", f"owner {s.owner or '—'}", nominal,
                  f"tolerance ±{s.tolerance_percent:g} %" if s.tolerance_percent is not None else "no tolerance",
+                 f"recalibrate every {s.interval_days} days" if s.interval_days else "no interval",
                  f"{len(history.calibrations)} calibrations"]
+        simulated = sum(1 for c in history.calibrations if getattr(c, "simulated", False))
+        if simulated:
+            parts.append(f"{simulated} SIMULATED")
         if history.due is not None:
             parts.append(f"due {history.due.isoformat()}")
         if certificates:
@@ -126,43 +234,61 @@ class SensorTab(QWidget):
         colour = DRIFT_COLOUR if flags else "#137333"
         self.flags.setText(f"<span style='color:{colour}'><b>{'; '.join(flags) or 'no flags'}</b></span><br>"
                            + "<br>".join(lines))
+        self._set_headers(history)
         self._fill_table(history)
         self._draw(history)
+
+    def _fill_sensor_data(self, s: SensorInfo) -> None:
+        index = self.unit.findData(s.sensitivity_unit) if s.sensitivity_unit in UNITS else -1
+        if index >= 0:
+            self.unit.setCurrentIndex(index)
+        self.nominal.setValue(s.nominal_sensitivity or 0.0)
+        self.tolerance.setValue(s.tolerance_percent or 0.0)
+        self.interval.setValue(s.interval_days or 0)
+        self.owner.setText(s.owner or "")
 
     def _fill_table(self, history: SensorHistory) -> None:
         rows = list(reversed(history.calibrations))  # newest first
         self.table.setRowCount(len(rows))
         for r, c in enumerate(rows):
-            cells = [c.utc_time[:16].replace("T", " "), c.rig, c.campaign or "—"]
-            cells += [_text(c.figures.get(key), scale, unit) for key, _label, scale, unit in SHOWN]
+            source = "SIMULATED" if getattr(c, "simulated", False) else "rig"
+            cells = [c.utc_time[:16].replace("T", " "), c.rig, c.campaign or "—", source]
+            cells += [_text(c.figures.get(key), scale) for key, _label, scale, _unit in SHOWN]
             for col, text in enumerate(cells):
                 self.table.setItem(r, col, QTableWidgetItem(text))
 
     def _draw(self, history: SensorHistory) -> None:
-        for key, _label, scale, _unit in SHOWN:
+        for key, _label, scale, unit in SHOWN:
             plot = self.plots[key]
             plot.clear()
+            shown = column_unit(history, key, unit)
+            plot.getPlotItem().setLabel("left", f"{_label} ({shown})" if shown else _label)
             dates, values, expanded = history_series(history, key, scale)
             if not dates:
                 continue
             x = [d.timestamp() for d in dates]
-            plot.addItem(pg.ErrorBarItem(x=_array(x), y=_array(values), height=_array([2 * e for e in expanded]),
+            simulated = [bool(getattr(c, "simulated", False)) for c in history.calibrations
+                         if c.figures.get(key) is not None and c.figures[key].value is not None]
+            plot.addItem(pg.ErrorBarItem(x=np.asarray(x), y=np.asarray(values), height=2 * np.asarray(expanded),
                                          beam=0.0, pen=pg.mkPen("#5f6368")))
-            plot.plot(x, values, pen=None, symbol="o", symbolSize=6, symbolBrush=POINT_BRUSH)
+            brushes = [SIMULATED_BRUSH if sim else POINT_BRUSH for sim in simulated] or POINT_BRUSH
+            plot.plot(x, values, pen=None, symbol="o", symbolSize=6, symbolBrush=brushes)
             drift = history.drift.get(key)
             if drift is not None and drift.drifted:
                 plot.plot([x[-1]], [values[-1]], pen=None, symbol="o", symbolSize=10,
                           symbolBrush=pg.mkBrush(DRIFT_COLOUR))
-            plot.getPlotItem().enableAutoRange()
+            plot.getPlotItem().enableAutoRange(axis="y")
+            plot.setXRange(*_date_range(x), padding=0)
 
 
-def _array(values: list[float]) -> Any:
-    import numpy as np
+def _date_range(x: list[float]) -> tuple[float, float]:
+    """At least MIN_SPAN_S around the calibrations, so the axis shows dates, not seconds."""
+    lo, hi = min(x), max(x)
+    pad = max(0.08 * (hi - lo), 0.5 * max(0.0, MIN_SPAN_S - (hi - lo)), DAY_S)
+    return lo - pad, hi + pad
 
-    return np.asarray(values, dtype=float)
 
-
-def _text(figure: Figure | None, scale: float, unit: str) -> str:
-    return figure.format(scale, unit=unit) if figure is not None and figure.value is not None else "—"
-
+def _text(figure: Figure | None, scale: float) -> str:
+    """value ± U without the unit (the column's header has it)."""
+    return figure.format(scale) if figure is not None and figure.value is not None else "—"
 

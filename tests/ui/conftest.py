@@ -117,6 +117,11 @@ def make_panel(qtbot: Any, tmp_path: Path) -> Iterator[Callable[..., Panel]]:
         window = MainWindow(rig_config, settings=QSettings(str(settings_path), QSettings.Format.IniFormat),
                             simulated_truth=truth, out_dir=out_dir, runs_dir=runs_dir, poll_interval_ms=150)
         windows.append(window)
+        # the dialogs a test does not answer itself: a set-up off its target is armed (the tests of
+        # that check answer it), and closing with a shot running aborts it (as before the question)
+        window.set_up_answers = []
+        window.confirm_setup = lambda problems: window.set_up_answers.append(problems) or True
+        window.ask_close = lambda: "abort"
         window.resize(1280, 800)
         window.show()
         window.start()

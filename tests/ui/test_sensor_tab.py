@@ -47,7 +47,7 @@ def test_a_sensors_history_shows_its_calibrations_drift_and_flags(qtbot, tab, ar
     tab.show_button.click()
     qtbot.waitUntil(lambda: tab.history is not None, timeout=20_000)
     assert tab.table.rowCount() == len(SENSITIVITIES)
-    assert tab.table.item(0, 3).text().startswith("1.0120 ± 0.0020")  # newest first
+    assert tab.table.item(0, 4).text().startswith("1.0120 ± 0.0020")  # newest first
     flags = tab.flags.text()
     assert "drift in sensitivity" in flags and "overdue since 2026-10-15" in flags
     assert "FAIL: sensitivity deviates +1.20 %" in flags  # simple acceptance, tolerance ±1 %
