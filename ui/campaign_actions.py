@@ -1,21 +1,24 @@
 """What the Campaign tab does with a run folder besides firing, each a plain function the tab runs
 on its background worker: re-analyse a shot (rig.reanalysis, then the journal), write the
 campaign's report (rig.report_data), issue its certificate (the lab's record, as `hopkinson lab
-certificate RUN_FOLDER`), and read a shot's row of the table (rig.shot_verdict)."""
+certificate RUN_FOLDER`), read a shot's row of the table (rig.shot_verdict), and say how a campaign
+ended."""
 
 from __future__ import annotations
 
 import getpass
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.journal import Journal, ShotState
+from hopkinson.rig.journal import DONE_STATES, Journal, ShotState
 from hopkinson.rig.plan import CampaignPlan
 from hopkinson.rig.run_folder import RunFolder
 from hopkinson.rig.shot_verdict import ShotJudgement, shot_judgement
 
 CERTIFICATE_NAME = "certificate"
+_DONE = frozenset(state.value for state in DONE_STATES)
 
 
 @dataclass(frozen=True)
@@ -92,3 +95,30 @@ def issue_certificate(config: RigConfig, run: RunFolder, authorised_by: str, spe
     files = [write_certificate(issued.content, run.report_dir / f"{CERTIFICATE_NAME}-{issued.number}.{suffix}")
              for suffix in ("pdf", "html")]
     return issued.number, [Path(f) for f in files]
+
+
+def campaign_end_message(outcome: Any, failure: str = "") -> tuple[str, str]:
+    """(banner level, text) for how a campaign ended, written for the panel (no command lines)."""
+    if outcome is None:
+        return "error", failure or "The campaign was not run."
+    summary = outcome.summary
+    counts = summary.get("by_state", {})
+    done = sum(counts.get(s, 0) for s in _DONE)
+    total = summary.get("total", 0)
+    failed = counts.get("ANALYSIS_FAILED", 0)
+    if outcome.exit_code == 0:
+        note = f" ({failed} with a failed analysis: re-analyse them from the table)" if failed else ""
+        return "ok", (f"Campaign complete: {done} of {total} shots done{note}. Its report and certificate: the "
+                      "buttons under the Campaign table.")
+    last = outcome.last_shot
+    if last is not None and last.final_state == "FAULT":
+        return "error", f"Campaign stopped by a FAULT: {last.error}. Check the rig by hand before anything else."
+    if summary.get("needs_decision"):
+        ids = ", ".join(summary["needs_decision"])
+        return "error", (f"Campaign stopped: {ids} may have been fired without a record; an operator decides whether "
+                         "to retry or skip it (hopkinson campaign decide) before it resumes.")
+    if "paused" in outcome.message:
+        return "warning", f"Campaign paused: {done} of {total} shots done. Press Resume in the Campaign tab to go on."
+    why = last.error if last is not None and last.error else outcome.message.split("; ")[1] \
+        if "; " in outcome.message else "stopped"
+    return "warning", f"Campaign stopped ({why}): {done} of {total} shots done. Resume continues it."

@@ -24,15 +24,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
-from hopkinson.analysis.verdict import Decision
-from hopkinson.reports.data import CompensationCheck
 from hopkinson.reports.statistics import LinearityPoint, campaign_linearity, linearity_points
 from hopkinson.rig.campaign import CAMPAIGN_STATE, prepare_run
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import (
+    AwaitingConfirmation,
     CampaignShotEnded,
     CampaignShotStarted,
     Reading,
@@ -52,70 +50,30 @@ from hopkinson.rig.run_folder import RunFolder, open_run_folder
 from hopkinson.rig.toml_file import read_toml
 from hopkinson.ui.campaign_actions import (
     ShotRow,
+    campaign_end_message,
     issue_certificate,
     read_shot_row,
     reanalyse_shot,
     write_campaign_report,
 )
+from hopkinson.ui.campaign_table import CampaignTable
+from hopkinson.ui.dialogs import ask_campaign_authorisation, ask_name, ask_shot_count
 from hopkinson.ui.plan_editor import PlanEditor
-from hopkinson.ui.plots import KILO, figure_tooltip, format_figure
 from hopkinson.ui.widgets import TEXT_COLOURS, section_title
 from hopkinson.ui.worker import Background, RigLink
 from PySide6.QtCore import Signal
-from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
-    QAbstractItemView,
     QFileDialog,
     QHBoxLayout,
-    QHeaderView,
-    QInputDialog,
     QLabel,
     QLineEdit,
-    QMessageBox,
     QProgressBar,
     QPushButton,
-    QTableWidget,
-    QTableWidgetItem,
     QVBoxLayout,
     QWidget,
 )
 
-# units in the headers (the sensitivity's is the plan's), a figure's ± U under its value: at
-# 1280 × 800 every column, the verdict and the DCM's included, is in view without scrolling
-COLUMNS = (("#", "#"), ("Shot", "Shot"), ("Level", "Level"), ("p", "p (bar)"), ("Proj.", "Proj."),
-           ("State", "State"), ("Peak", "Peak (g)"), ("Order", "Order"), ("Sensitivity", "Sensitivity"),
-           ("FBSD", "FBSD ±5 %\n(kHz)"), ("f_n", "f_n (kHz)"), ("Verdict", "Verdict"), ("DCM", "DCM"),
-           ("File", "Shot file"))
-COL = {key: i for i, (key, _header) in enumerate(COLUMNS)}
-_STATE_COLOURS = {"ANALYSED": "#1e6b2e", "ANALYSIS_FAILED": "#8a5a00", "ABORTED": "#b3261e", "UNKNOWN": "#b3261e",
-                  "SKIPPED": "#5f6368", "FIRING": "#1f6fd1", "RECORDED": "#1f6fd1"}
 _DONE = frozenset(state.value for state in DONE_STATES)
-
-
-def campaign_end_message(outcome: Any, failure: str = "") -> tuple[str, str]:
-    """(banner level, text) for how a campaign ended, written for the panel (no command lines)."""
-    if outcome is None:
-        return "error", failure or "The campaign was not run."
-    summary = outcome.summary
-    counts = summary.get("by_state", {})
-    done = sum(counts.get(s, 0) for s in _DONE)
-    total = summary.get("total", 0)
-    failed = counts.get("ANALYSIS_FAILED", 0)
-    if outcome.exit_code == 0:
-        note = f" ({failed} with a failed analysis: re-analyse them from the table)" if failed else ""
-        return "ok", f"Campaign complete: {done} of {total} shots done{note}. Report and certificate: Campaign tab."
-    last = outcome.last_shot
-    if last is not None and last.final_state == "FAULT":
-        return "error", f"Campaign stopped by a FAULT: {last.error}. Check the rig by hand before anything else."
-    if summary.get("needs_decision"):
-        ids = ", ".join(summary["needs_decision"])
-        return "error", (f"Campaign stopped: {ids} may have been fired without a record; an operator decides whether "
-                         "to retry or skip it (hopkinson campaign decide) before it resumes.")
-    if "paused" in outcome.message:
-        return "warning", f"Campaign paused: {done} of {total} shots done. Press Resume in the Campaign tab to go on."
-    why = last.error if last is not None and last.error else outcome.message.split("; ")[1] \
-        if "; " in outcome.message else "stopped"
-    return "warning", f"Campaign stopped ({why}): {done} of {total} shots done. Resume continues it."
 
 
 class CampaignTab(QWidget):
@@ -137,7 +95,6 @@ class CampaignTab(QWidget):
         self.plan_path: Path | None = None
         self.run_folder: RunFolder | None = None
         self.running = False
-        self.rows: dict[str, int] = {}
         self.states: dict[str, str] = {}
         self.last_outcome: Any = None
         self.confirm_each = False  # this run's shots are confirmed one by one with FIRE
@@ -188,18 +145,8 @@ class CampaignTab(QWidget):
         self.linearity_label.setWordWrap(True)
         self._linearity: dict[str, LinearityPoint] = {}
 
-        self.table = QTableWidget(0, len(COLUMNS))
-        self.table.setHorizontalHeaderLabels([header for _key, header in COLUMNS])
-        self.table.verticalHeader().setVisible(False)
-        self.table.verticalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
-        self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
-        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
-        self.table.setSelectionMode(QAbstractItemView.SelectionMode.SingleSelection)
-        self.table.setAlternatingRowColors(True)
-        header = self.table.horizontalHeader()
-        for i in range(len(COLUMNS) - 1):
-            header.setSectionResizeMode(i, QHeaderView.ResizeMode.ResizeToContents)
-        header.setSectionResizeMode(len(COLUMNS) - 1, QHeaderView.ResizeMode.Stretch)
+        self.table = CampaignTable()
+        self.rows = self.table.rows
 
         top = QHBoxLayout()
         for b in (self.new_button, self.edit_button, self.load_button, self.open_button):
@@ -254,31 +201,16 @@ class CampaignTab(QWidget):
     def confirm_campaign(self, plan: CampaignPlan) -> str:
         """A plan that does not authorise itself: "all" (fire every shot), "each" (confirm each
         shot with FIRE) or "cancel"."""
-        box = QMessageBox(QMessageBox.Icon.Warning, "Authorise the campaign",
-                          f"The plan {plan.name!r} does not authorise firing. Fire its {len(plan.shots)} shots on "
-                          f"{plan.accelerometer.model} {plan.accelerometer.serial}?", parent=self)
-        box.setInformativeText("Confirm each shot: every shot is armed and waits for FIRE, as a single shot does.")
-        each = box.addButton("Confirm each shot", QMessageBox.ButtonRole.AcceptRole)
-        every = box.addButton(f"Fire all {len(plan.shots)}", QMessageBox.ButtonRole.DestructiveRole)
-        cancel = box.addButton("Cancel", QMessageBox.ButtonRole.RejectRole)
-        box.setDefaultButton(each)
-        box.setEscapeButton(cancel)
-        box.exec()
-        return "each" if box.clickedButton() is each else "all" if box.clickedButton() is every else "cancel"
+        a = plan.accelerometer
+        return ask_campaign_authorisation(self, plan.name, len(plan.shots), f"{a.model} {a.serial}")
 
     def confirm_shot_count(self, plan: CampaignPlan) -> int | None:
         """Ask the operator to type the number of shots of a large plan (None: cancelled)."""
-        total = len(plan.shots)
-        value, ok = QInputDialog.getInt(
-            self, "Confirm the number of shots",
-            f"The plan {plan.name!r} fires {total} shots, more than {self.confirm_above}.\n\n"
-            "Type its number of shots to fire them:", 0, 0, MAX_TOTAL_SHOTS)
-        return value if ok else None
+        return ask_shot_count(self, plan.name, len(plan.shots), self.confirm_above, MAX_TOTAL_SHOTS)
 
     def ask_authorised_by(self) -> str | None:
         """Who authorises the certificate (None: cancelled)."""
-        name, ok = QInputDialog.getText(self, "Issue the certificate", "Authorised by (name):")
-        return name.strip() if ok and name.strip() else None
+        return ask_name(self, "Issue the certificate", "Authorised by (name):")
 
     # -- plan and run folder ----------------------------------------------------------------------
     def edit_plan(self, new: bool = False) -> Path | None:
@@ -347,31 +279,19 @@ class CampaignTab(QWidget):
         return name if name in UNITS else DEFAULT_UNIT
 
     def _fill_table(self, plan: CampaignPlan) -> None:
-        self.table.setRowCount(0)
-        self.rows.clear()
         self.states.clear()
         self._linearity.clear()
         self._update_linearity()
-        header = QTableWidgetItem(f"Sensitivity\n({self.unit_name()})")
-        self.table.setHorizontalHeaderItem(COL["Sensitivity"], header)
+        self.table.fill(plan, self.unit_name())
         for shot in plan.shots:
-            row = self.table.rowCount()
-            self.table.insertRow(row)
-            self.rows[shot.id] = row
-            level = (f"{shot.pressure_bar:g} bar" if shot.target_peak_m_s2 is None  # a target: pressure chosen at firing
-                     else f"{shot.target_peak_m_s2 / G_M_S2:,.0f} g".replace(",", "\u00a0"))
-            for col, text in ((COL["#"], str(shot.index + 1)), (COL["Shot"], shot.id), (COL["Level"], level),
-                              (COL["p"], "—"), (COL["Proj."], f"No. {shot.projectile}")):
-                self.table.setItem(row, col, QTableWidgetItem(text))
             self._set_state(shot.id, "PLANNED")
         self.progress.setFormat("%v of %m shots done")
         self.progress.setRange(0, max(1, len(plan.shots)))
         self._update_progress()
 
     def column(self, name: str) -> list[str]:
-        """The texts of a column by its key (COLUMNS), top to bottom."""
-        col = COL[name]
-        return [self.table.item(r, col).text() if self.table.item(r, col) else "" for r in range(self.table.rowCount())]
+        """The texts of a table column by its key (ui.campaign_table.COLUMNS), top to bottom."""
+        return self.table.column(name)
 
     # -- control ------------------------------------------------------------------------------------
     def run(self) -> None:
@@ -475,10 +395,7 @@ class CampaignTab(QWidget):
     # -- rows -----------------------------------------------------------------------------------------
     def selected_shot(self) -> str | None:
         rows = {i.row() for i in self.table.selectedIndexes()}
-        if len(rows) != 1:
-            return None
-        row = rows.pop()
-        return next((sid for sid, r in self.rows.items() if r == row), None)
+        return self.table.shot_at(rows.pop()) if len(rows) == 1 else None
 
     def _file_of(self, sid: str) -> Path | None:
         if self.run_folder is None:
@@ -488,7 +405,7 @@ class CampaignTab(QWidget):
 
     def open_row(self, row: int) -> None:
         """Show a row's shot in the Shot tab."""
-        sid = next((s for s, r in self.rows.items() if r == row), None)
+        sid = self.table.shot_at(row)
         path = self._file_of(sid) if sid is not None else None
         if path is None:
             self._say(f"{sid or 'this row'}: no shot file yet (not fired)", level="warning")
@@ -557,10 +474,8 @@ class CampaignTab(QWidget):
             return
         if isinstance(event, CampaignShotStarted):
             self._current = event.shot_id
-            self._set_state(event.shot_id, "FIRING…")
-            row = self.rows.get(event.shot_id)
-            if row is not None:
-                self.table.setItem(row, COL["p"], QTableWidgetItem(f"{event.pressure_bar:.3g}"))
+            self._set_state(event.shot_id, "RUNNING…")
+            self.table.set_pressure(event.shot_id, event.pressure_bar)
             self.current_label.setText(f"[{event.index}/{event.total}] {event.shot_id}: {event.message}")
         elif isinstance(event, CampaignShotEnded):
             error = event.message.split(": ", 1)[1] if event.journal_state == "ANALYSIS_FAILED" and ": " in \
@@ -572,6 +487,10 @@ class CampaignTab(QWidget):
             return
         elif self._current and isinstance(event, StateEntered):
             self.current_label.setText(f"{self._prefix()} {event.state}: {event.message}")
+            if self.states.get(self._current, "").endswith("…"):  # the shot's own step, live
+                self._set_state(self._current, f"{event.state}…")
+        elif self._current and isinstance(event, AwaitingConfirmation):
+            self._set_state(self._current, "ARMED: press FIRE…")
         elif self._current and isinstance(event, Reading) and event.state in ("CHARGE", "EVACUATE"):
             p, v = event.reservoir_pressure_bar, event.fixture_vacuum_mbar
             self.current_label.setText(f"{self._prefix()} {event.state} {p:.2f} bar, {v:.0f} mbar")
@@ -581,17 +500,10 @@ class CampaignTab(QWidget):
         return f"[{row + 1}/{len(self.rows)}] {self._current}"
 
     def _set_state(self, sid: str, state: str, why: str = "") -> None:
-        row = self.rows.get(sid)
-        if row is None:
+        if sid not in self.rows:
             return
         self.states[sid] = state
-        item = QTableWidgetItem(state)
-        colour = _STATE_COLOURS.get(state.rstrip("…"))
-        if colour:
-            item.setForeground(QBrush(QColor(colour)))
-        if why:
-            item.setToolTip(why)
-        self.table.setItem(row, COL["State"], item)
+        self.table.set_state(sid, state, why)
         self._update_progress()
 
     def _update_progress(self) -> None:
@@ -603,60 +515,13 @@ class CampaignTab(QWidget):
                             lambda exc: self._say(f"{path.name}: results not read: {exc}", error=True))
 
     def _show_results(self, sid: str, path: Path, shot: ShotRow) -> None:
-        row = self.rows.get(sid)
-        if row is None:
-            return
-        self.table.setItem(row, COL["File"], QTableWidgetItem(path.name))
-        self.table.setItem(row, COL["p"], QTableWidgetItem(f"{shot.pressure_bar:.3g}"))
-        j = shot.judgement
-        cells: dict[str, tuple[str, str]] = {}
-        if shot.analysis_error and self.states.get(sid) == "ANALYSIS_FAILED":
-            self.table.item(row, COL["State"]).setToolTip(shot.analysis_error)
-        verdict = j.verdict
-        cells["Verdict"] = (verdict.decision.value, verdict.line())
-        kf = j.figures
-        if kf is not None:
-            cells |= self._figure_cells(kf, j)
+        self.table.show_shot(sid, path, shot, failed=self.states.get(sid) == "ANALYSIS_FAILED")
+        kf = shot.judgement.figures
+        if kf is not None and sid in self.rows:
             for point in linearity_points([(sid, kf)]):
                 self._linearity[sid] = point
             self._update_linearity()
-        for name, (text, tip) in cells.items():
-            # value over ± U: in one line the figures pushed the verdict out of view
-            item = QTableWidgetItem(text.replace(" ± ", "\n± "))
-            item.setToolTip(tip)
-            if name == "Verdict":
-                item.setForeground(QBrush(QColor(TEXT_COLOURS["ok"] if verdict.decision == Decision.ACCEPT
-                                                 else TEXT_COLOURS["error"])))
-            if name == "DCM" and kf is not None and kf.dcm_recommended is False:
-                item.setForeground(QBrush(QColor(TEXT_COLOURS["error"])))
-            self.table.setItem(row, COL[name], item)
         self.update_buttons()
-
-    def _figure_cells(self, kf: KeyFigures, j: Any) -> dict[str, tuple[str, str]]:
-        """The figures of an analysed shot as (text, tooltip) by column (units in the headers)."""
-        peak = kf.peak_acceleration_m_s2
-        cells = {
-            "Order": (str(kf.order) if kf.order is not None else "—", f"model order; fit {kf.fit_percent:.1f} %"
-                      if kf.fit_percent is not None else "model order"),
-            "Peak": ("—" if peak is None or peak.value is None else f"{peak.value / G_M_S2:,.0f}".replace(",", "\u00a0"),
-                     "peak acceleration of the reference pulse (g)"),
-            "FBSD": _fbsd_cell(kf, "5"),
-            "f_n": _determined(kf.natural_frequency_hz, KILO, 2, "not excited", "no resonance inside the supported band"),
-        }
-        zeta = kf.damping_ratio
-        if zeta is not None and zeta.value is not None:
-            cells["f_n"] = (cells["f_n"][0], f"{cells['f_n'][1]}; ζ = {format_figure(zeta, decimals=4)}".lstrip("; "))
-        if j.sensitivity is not None:
-            unit = j.unit
-            text = j.sensitivity.text().removesuffix(f" {unit.name}")
-            cells["Sensitivity"] = (text, f"{j.sensitivity.text()}; {j.sensitivity.ratio_text()}")
-        else:
-            cells["Sensitivity"] = _determined(kf.sensitivity, 1.0, 4, "not determined", "")
-        check = CompensationCheck.of(kf)
-        if check is not None and check.recommended is not None:
-            reason = check.not_recommended_reason or "compensation does not improve this shot"
-            cells["DCM"] = ("recommended", "") if check.recommended else ("NOT recommended", reason)
-        return cells
 
     def _update_linearity(self) -> None:
         """The line through the analysed shots' shock sensitivities (reports.statistics), shown
@@ -727,26 +592,3 @@ def _journal_summary(run: RunFolder, plan: CampaignPlan) -> dict[str, Any]:
         return journal.summary()
     finally:
         journal.close()
-
-
-def _determined(figure: Figure | None, scale: float, decimals: int, missing: str, why: str) -> tuple[str, str]:
-    """value ± U without its unit (the header has it); `missing` with the reason when the
-    analysis could not determine it."""
-    if figure is None or figure.value is None:
-        reason = getattr(figure, "reason", None) or why
-        return missing, reason
-    return format_figure(figure, scale, decimals=decimals), figure_tooltip(figure, scale)
-
-
-def _fbsd_cell(kf: KeyFigures, level: str) -> tuple[str, str]:
-    """An FBSD in kHz without the unit (the header has it) and its tooltip; a bound as '> 18'
-    with the reason in the tooltip; an edge the analysis could not place (no value, or none
-    above 0 Hz) as "not determined", never "0 ± 101"."""
-    bound = kf.fbsd_bounds.get(level)
-    if bound is not None:
-        return f"> {bound.lower_bound_hz / KILO:.3g}", kf.fbsd_text(level, KILO)
-    figure = kf.fbsd_hz.get(level)
-    if figure is None or figure.value is None or not figure.value > 0:
-        reason = getattr(figure, "reason", None) if figure is not None else None
-        return "not determined", reason or f"the ±{level} % edge could not be placed from this shot"
-    return format_figure(figure, KILO), figure_tooltip(figure, KILO, "kHz")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import QSize, Qt, Signal
 from PySide6.QtGui import QWheelEvent
 from PySide6.QtWidgets import QComboBox, QDoubleSpinBox, QSpinBox, QWidget
 
@@ -91,6 +91,18 @@ class UnitSpinBox(QDoubleSpinBox):
             super().wheelEvent(event)
         else:
             event.ignore()  # to the form around it: it scrolls
+
+    def sizeHint(self) -> QSize:  # noqa: N802 (Qt's name)
+        return self._fit(super().sizeHint())
+
+    def minimumSizeHint(self) -> QSize:  # noqa: N802 (Qt's name)
+        return self._fit(super().minimumSizeHint())
+
+    def _fit(self, hint: QSize) -> QSize:
+        """As wide as its plausible values need (Qt sizes it for TYPED_LIMIT, which nobody types)."""
+        texts = [self.textFromValue(v) + self.suffix() for v in self.plausible] + [self.special]
+        need = max(self.fontMetrics().horizontalAdvance(t) for t in texts) + 44  # arrows and frame
+        return QSize(min(hint.width(), need), hint.height())
 
 
 class IntSpinBox(QSpinBox):

@@ -54,14 +54,15 @@ from hopkinson.rig.sequencer import State
 from hopkinson.rig.shot import ShotOutcome, ShotRequest
 from hopkinson.ui.campaign_tab import CampaignTab, campaign_end_message
 from hopkinson.ui.dcm_tab import DcmTab
+from hopkinson.ui.dialogs import ask_arm_anyway, ask_close, ask_fire
 from hopkinson.ui.log_view import LogTab, LogView
 from hopkinson.ui.menus import build_menus
 from hopkinson.ui.plots import ShotView, configure_pyqtgraph, load_shot_view
 from hopkinson.ui.sensor_tab import SensorTab
-from hopkinson.ui.setup_check import SetupPrediction
+from hopkinson.ui.setup_check import SetupPrediction, predict_setup
 from hopkinson.ui.shot_setup import ShotSetup
 from hopkinson.ui.shot_tab import ShotPlots
-from hopkinson.ui.state_bar import StateBar
+from hopkinson.ui.state_bar import STATE_MESSAGES, StateBar, action_buttons, header_row
 from hopkinson.ui.status_panel import StatusPanel
 from hopkinson.ui.widgets import Banner
 from hopkinson.ui.worker import Background, InstrumentLink, RigLink
@@ -71,10 +72,7 @@ from PySide6.QtWidgets import (
     QFileDialog,
     QFrame,
     QHBoxLayout,
-    QLabel,
     QMainWindow,
-    QMessageBox,
-    QPushButton,
     QScrollArea,
     QSplitter,
     QTabWidget,
@@ -88,22 +86,6 @@ DEFAULT_CONFIRM_TIMEOUT_S = 600.0  # how long the armed rig waits for a human to
 MIN_SIZE = (1280, 800)
 FIRED_STATES = (State.FIRE, State.CAPTURE, State.SAFE, State.STORE, State.ANALYSE)
 
-_BUTTON = ("QPushButton {{ font-size: 15pt; font-weight: 700; padding: 8px 18px; border-radius: 6px; "
-           "color: white; background: {bg}; border: 2px solid {border}; min-width: 96px; }} "
-           "QPushButton:disabled {{ background: #e8eaed; color: #9aa0a6; border: 2px solid #dadce0; }} "
-           "QPushButton:pressed {{ background: {border}; }}")
-ARM_STYLE = _BUTTON.format(bg="#1f6fd1", border="#174ea6")
-FIRE_STYLE = _BUTTON.format(bg="#e8710a", border="#b45309")
-ABORT_STYLE = _BUTTON.format(bg="#d0312d", border="#8c1d18")
-# What the message line says while the rig works through a shot (states not named: unchanged).
-_STATE_MESSAGES = {
-    State.CHECK: "Preparing the shot: checking the interlocks, then evacuating and charging. ABORT (Esc) stands down.",
-    State.FIRE: "FIRED — capturing the shot.",
-    State.CAPTURE: "FIRED — capturing the shot.",
-    State.SAFE: "Making the rig safe after the shot (valves closed, reservoir vented).",
-    State.STORE: "Storing the raw shot.",
-    State.ANALYSE: "Shot stored; analysing it (the result follows here).",
-}
 # QSettings keys of the window itself
 GEOMETRY_KEY, TAB_KEY = "window/geometry", "window/tab"
 
@@ -140,37 +122,19 @@ class MainWindow(QMainWindow):
         self.last_outcome: ShotOutcome | None = None
         self.last_view: ShotView | None = None
         self._setup_enabled: bool | None = None
+        self._armed_text = "The armed shot"  # a campaign shot's, for FIRE's confirmation
+        self._announce: Path | None = None  # the shot whose verdict the message line gives when shown
         self._close_when_idle = False  # "finish the shot, then close" was chosen
         self._closing = False
 
         self.setWindowTitle("Hopkinson-bar shock calibration" + (f" — {title_note}" if title_note else ""))
         self.setMinimumSize(*MIN_SIZE)
 
-        # header: state and buttons
+        # header: state, the buttons, the message line
         self.state_bar = StateBar()
-        self.arm_button = QPushButton("ARM")
-        self.fire_button = QPushButton("FIRE")
-        self.abort_button = QPushButton("ABORT")
-        self.arm_button.setStyleSheet(ARM_STYLE)
-        self.fire_button.setStyleSheet(FIRE_STYLE)
-        self.abort_button.setStyleSheet(ABORT_STYLE)
-        self.arm_button.setToolTip("check, evacuate, charge and arm the rig for the shot set up on the left (F5)")
-        self.fire_button.setToolTip("fire the armed shot (asks for confirmation); needs every interlock (Ctrl+Shift+F)")
-        self.abort_button.setToolTip("stop now and make the rig safe: fire and fill closed, reservoir vented (Esc)")
+        self.arm_button, self.fire_button, self.abort_button = action_buttons()
         self.banner = Banner()
-
-        header = QHBoxLayout()
-        header.setContentsMargins(10, 8, 10, 4)
-        header.addWidget(self.state_bar, 1)
-        self.mode_badge = QLabel(title_note)
-        self.mode_badge.setStyleSheet("QLabel { background: #fef7e0; color: #7a4f01; border: 1px solid #f9d97c; "
-                                      "border-radius: 4px; padding: 3px 8px; font-weight: 700; font-size: 9pt; }")
-        self.mode_badge.setVisible(bool(title_note))
-        self.mode_badge.setToolTip("the panel drives a simulated rig: nothing real moves")
-        header.addWidget(self.mode_badge, 0, Qt.AlignmentFlag.AlignTop)
-        header.addSpacing(12)
-        for button in (self.arm_button, self.fire_button, self.abort_button):
-            header.addWidget(button)
+        header = header_row(self.state_bar, title_note, (self.arm_button, self.fire_button, self.abort_button))
 
         # left: status and set-up
         self.status_panel = StatusPanel(config.limits)
@@ -187,7 +151,7 @@ class MainWindow(QMainWindow):
         left_layout.addWidget(rule)
         left_layout.addWidget(self.setup)
         left_layout.addStretch(1)
-        scroll = QScrollArea()
+        self.left_scroll = scroll = QScrollArea()
         scroll.setWidget(left)
         scroll.setWidgetResizable(True)
         scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
@@ -244,7 +208,7 @@ class MainWindow(QMainWindow):
         self.link.safe_done.connect(self._on_safe_done)
         self.campaign_tab.started.connect(self._campaign_started)
         self.campaign_tab.ended.connect(self._campaign_ended)
-        self.campaign_tab.open_shot.connect(self._open_campaign_shot)
+        self.campaign_tab.open_shot.connect(self.open_shot)
         self.campaign_tab.say.connect(self._on_message)
         self.setup.refused.connect(self._on_refused)
         self.tabs.currentChanged.connect(self._tab_changed)
@@ -298,16 +262,13 @@ class MainWindow(QMainWindow):
     # -- seams --------------------------------------------------------------------------------------
     def confirm_fire(self) -> bool:
         """Ask the operator to confirm the shot (explicit Yes; the default is No)."""
-        answer = QMessageBox.warning(
-            self, "Fire the shot?", self.fire_question(),
-            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
-        return answer == QMessageBox.StandardButton.Yes
+        return ask_fire(self, self.fire_question())
 
     def fire_question(self) -> str:
         """FIRE's confirmation: what is armed and what the bar model predicts for it."""
         r = self.request
         what = (f"Reservoir {r.pressure_bar:g} bar, projectile No. {r.projectile}, accelerometer "
-                f"{r.accelerometer_model or '—'} {r.accelerometer_serial}".rstrip()) if r else "The armed shot"
+                f"{r.accelerometer_model or '—'} {r.accelerometer_serial}".rstrip()) if r else self._armed_text
         p = self.prediction
         predicted = ("" if p is None else
                      f"\n\nPredicted peak {p.peak_text()}, pulse width {p.width_10_s * 1e6:.0f} µs, "
@@ -318,30 +279,11 @@ class MainWindow(QMainWindow):
 
     def confirm_setup(self, problems: list[str]) -> bool:
         """Ask whether to arm a set-up that misses its target or exceeds the sensor's range (default No)."""
-        answer = QMessageBox.warning(
-            self, "The set-up does not match the plan",
-            "ARM anyway?\n\n" + "\n".join(f"• {p}" for p in problems)
-            + "\n\nChange the pressure or projectile (the planner's \"Use\" sets them for the target), or answer "
-              "Yes to arm as set.",
-            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
-        return answer == QMessageBox.StandardButton.Yes
+        return ask_arm_anyway(self, problems)
 
     def ask_close(self) -> str:
         """Closing while a shot or campaign runs: "finish", "abort" or "cancel"."""
-        box = QMessageBox(QMessageBox.Icon.Question, "A shot is running",
-                          "A shot or campaign is running. Close the panel?", parent=self)
-        box.setInformativeText("Finish: the shot now running is stored and analysed, then the panel closes (a "
-                               "campaign stops after it; Resume continues it).\nAbort: the shot is aborted and the "
-                               "rig made safe now; a shot already fired keeps its raw data and is marked for "
-                               "re-analysis.")
-        finish = box.addButton("Finish this shot, then close", QMessageBox.ButtonRole.AcceptRole)
-        abort = box.addButton("Abort now and close", QMessageBox.ButtonRole.DestructiveRole)
-        keep = box.addButton("Keep running", QMessageBox.ButtonRole.RejectRole)
-        box.setDefaultButton(keep)
-        box.setEscapeButton(keep)
-        box.exec()
-        clicked = box.clickedButton()
-        return "finish" if clicked is finish else "abort" if clicked is abort else "cancel"
+        return ask_close(self)
 
     # -- buttons ------------------------------------------------------------------------------------
     def arm(self) -> None:
@@ -375,7 +317,7 @@ class MainWindow(QMainWindow):
         self.awaiting_confirmation = False
         self.state_bar.reset()
         self.state_bar.set_text("starting the shot…")
-        self.show_banner("info", _STATE_MESSAGES[State.CHECK])
+        self.show_banner("info", STATE_MESSAGES[State.CHECK])
         self.plots.clear("Shot running…")
         what = f"{request.accelerometer_model} {request.accelerometer_serial}".strip()
         self.log_view.add_message("info", f"ARM: {request.pressure_bar:g} bar, projectile No. {request.projectile}"
@@ -411,6 +353,12 @@ class MainWindow(QMainWindow):
         self.link.abort("ABORT pressed on the panel")
         self.awaiting_confirmation = False
         self.update_buttons()
+
+    def _predict(self, projectile: int, pressure_bar: float, target_m_s2: float | None) -> SetupPrediction | None:
+        try:
+            return predict_setup(self.config.bar.rig(), projectile, pressure_bar, target_m_s2)
+        except ValueError:
+            return None
 
     def reconnect(self) -> None:
         """Rig ▸ Reconnect: try every instrument not answering now (it is retried every few s anyway)."""
@@ -491,6 +439,10 @@ class MainWindow(QMainWindow):
             self.statusBar().showMessage(f"{event.state}: {event.message}")
         elif isinstance(event, CampaignShotStarted):
             self.authorisation = None  # the next shot's own, when it is confirmed shot by shot
+            self.request = None
+            self.prediction = self._predict(event.projectile, event.pressure_bar, event.target_peak_m_s2)
+            self._armed_text = (f"Campaign shot {event.shot_id} ({event.index} of {event.total}): reservoir "
+                                f"{event.pressure_bar:.3g} bar, projectile No. {event.projectile}")
             self.show_banner("info", f"Campaign: shot {event.index} of {event.total} ({event.shot_id}) — "
                                      f"{event.message.removeprefix(f'shot {event.shot_id}: ')}")
         elif isinstance(event, RigError):
@@ -501,7 +453,7 @@ class MainWindow(QMainWindow):
 
     def _follow_state(self, state: State) -> None:
         """The message line follows the shot (it never keeps saying ARMED once fired)."""
-        text = _STATE_MESSAGES.get(state)
+        text = STATE_MESSAGES.get(state)
         if text is not None and self.busy and self.banner.level in ("info", "idle"):
             self.show_banner("info", text)
 
@@ -527,6 +479,7 @@ class MainWindow(QMainWindow):
 
     def _on_shot_finished(self, outcome: ShotOutcome) -> None:
         self.last_outcome = outcome
+        self._announce = outcome.shot_path
         self._shot_ended()
         if outcome.done and not outcome.analysis_error:
             self.show_banner("ok", f"Shot done and analysed: {outcome.shot_path.name if outcome.shot_path else ''} "
@@ -581,17 +534,18 @@ class MainWindow(QMainWindow):
         if self.tabs.widget(index) is self.sensor_tab:
             self.sensor_tab.prefill(self.setup.accelerometer_serial.text().strip())
 
-    def _open_campaign_shot(self, path: Path) -> None:
-        self.tabs.setCurrentWidget(self.plots)
-        self.load_shot(path)
-
     # -- shots ----------------------------------------------------------------------------------------
     def open_shot_dialog(self) -> None:
         name, _ = QFileDialog.getOpenFileName(self, "Open a shot file", self.setup.out_dir.text(),
                                               "Shot files (*.h5);;all files (*)")
         if name:
-            self.tabs.setCurrentWidget(self.plots)
-            self.load_shot(Path(name))
+            self.open_shot(Path(name))
+
+    def open_shot(self, path: Path) -> None:
+        """Show a shot file the technician chose, and its verdict in the message line."""
+        self._announce = Path(path)
+        self.tabs.setCurrentWidget(self.plots)
+        self.load_shot(Path(path))
 
     def load_shot(self, path: Path) -> None:
         """Read a shot file off the GUI thread and show it in the Shot and DCM tabs."""
@@ -615,7 +569,7 @@ class MainWindow(QMainWindow):
                                    support=view.support, band_limit_hz=view.band_limit_hz,
                                    not_recommended_reason=(view.compensation.not_recommended_text
                                                            if view.compensation else None))
-        if view.judgement is not None and not self.link.campaign_running and not self.busy:
+        if view.judgement is not None and view.path is not None and view.path == self._announce:
             verdict = view.judgement.verdict
             name = view.path.name if view.path else "the shot"
             level = "ok" if verdict.decision == Decision.ACCEPT and verdict.reason == "every check passed" else \

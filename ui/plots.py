@@ -227,8 +227,9 @@ def legend_below(widget: pg.PlotWidget, columns: int = 2) -> pg.LegendItem:
     """A legend in its own row under the plot's x axis, never over the data: the curves and
     scatters added afterwards with a name join it (pyqtgraph's PlotItem.legend)."""
     item = widget.getPlotItem()
-    legend = pg.LegendItem(colCount=columns, labelTextSize="8pt", verSpacing=-8, horSpacing=4,
+    legend = pg.LegendItem(colCount=columns, labelTextSize="8pt", verSpacing=-10, horSpacing=2,
                            pen=pg.mkPen(None), brush=pg.mkBrush(None))
+    legend.layout.setContentsMargins(0, 0, 0, 0)
     item.layout.addItem(legend, 4, 1)
     item.legend = legend
     return legend
@@ -313,7 +314,8 @@ class MagnitudePlot(pg.PlotWidget):
             self.addItem(line)
             self.fbsd_lines[key] = line
         # on a white ground: the resonance's rising curve runs through the note's corner of the plot
-        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 1), fill=(255, 255, 255, 220))
+        # top left, where the normalised magnitude stays near 1: it never covers the resonance's rise
+        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(0, 0), fill=(255, 255, 255, 220))
         self.peak_note.setZValue(20)
         self.addItem(self.peak_note, ignoreBounds=True)
         self.setYRange(0, self.Y_MAX, padding=0)
@@ -337,7 +339,7 @@ class MagnitudePlot(pg.PlotWidget):
         f_khz = np.asarray(band["frequency_hz"], dtype=float) / KILO
         self.band_low.setData(f_khz, np.asarray(band["magnitude_rel_low"], dtype=float))
         self.band_high.setData(f_khz, np.asarray(band["magnitude_rel_high"], dtype=float))
-        legend.addItem(self.band_sample, f"{100 * band.get('coverage_probability', 0.95):.0f} % band of the model")
+        legend.addItem(self.band_sample, f"{100 * band.get('coverage_probability', 0.95):.0f} % band")
 
     def show_curves(self, frequency_hz: np.ndarray, magnitude: np.ndarray, compensated: np.ndarray | None,
                     fbsd_hz: dict[str, float], band: dict[str, Any] | None = None) -> None:
@@ -356,8 +358,8 @@ class MagnitudePlot(pg.PlotWidget):
         self.setYRange(0, self.Y_MAX, padding=0)
         i = int(np.nanargmax(magnitude))
         if magnitude[i] > self.Y_MAX:
-            self.peak_note.setText(f"peak ×{magnitude[i]:.1f}\nat {f_khz[i]:.1f} kHz ↑")
-            self.peak_note.setPos(hi, 0.8 * self.Y_MAX)
+            self.peak_note.setText(f"peak ×{magnitude[i]:.1f} at {f_khz[i]:.1f} kHz\n(above the scale)")
+            self.peak_note.setPos(lo, 0.98 * self.Y_MAX)
         else:
             self.peak_note.setText("")
 

@@ -120,6 +120,9 @@ class SensorTab(QWidget):
         self.save_message = QLabel("")
         for spin in (self.nominal, self.tolerance):
             spin.refused.connect(lambda text: self._said("warning", f"Not taken: {text}."))
+        for spin in (self.nominal, self.tolerance, self.interval):
+            spin.setMaximumWidth(120)
+        self.owner.setMinimumWidth(160)
         data = QHBoxLayout()
         data.addWidget(QLabel("Nominal"))
         data.addWidget(self.nominal)
@@ -141,7 +144,7 @@ class SensorTab(QWidget):
         grid = QGridLayout()
         for i, (key, label, _scale, unit) in enumerate(SHOWN):
             plot = pg.PlotWidget(axisItems={"bottom": pg.DateAxisItem(utcOffset=0)})
-            configure_plot(plot, label, f"{label} ({unit})" if unit else label, "calibration date (UTC)")
+            configure_plot(plot, label, unit or "value", "calibration date (UTC)")
             self.plots[key] = plot
             grid.addWidget(plot, i // 2, i % 2)
 
@@ -261,8 +264,7 @@ class SensorTab(QWidget):
         for key, _label, scale, unit in SHOWN:
             plot = self.plots[key]
             plot.clear()
-            shown = column_unit(history, key, unit)
-            plot.getPlotItem().setLabel("left", f"{_label} ({shown})" if shown else _label)
+            plot.getPlotItem().setLabel("left", column_unit(history, key, unit) or "value")  # the title names it
             dates, values, expanded = history_series(history, key, scale)
             if not dates:
                 continue

@@ -433,6 +433,8 @@ class ShotPlots(QWidget):
         grid.addWidget(self.pz_plot, 1, 2)
         for column in range(3):
             grid.setColumnStretch(column, 1)
+        grid.setRowStretch(0, 3)  # the shot's response and magnitude first; the PM beat, losses, poles below
+        grid.setRowStretch(1, 2)
 
         results = QWidget()
         top = QVBoxLayout(results)
@@ -441,7 +443,6 @@ class ShotPlots(QWidget):
         top.addWidget(self.title)
         top.addWidget(self.verdict_bar)
         top.addWidget(self.strip)
-        top.addStretch(1)
         self.results_scroll = QScrollArea()
         self.results_scroll.setWidgetResizable(True)
         self.results_scroll.setFrameShape(QFrame.Shape.NoFrame)
@@ -466,8 +467,9 @@ class ShotPlots(QWidget):
     def _fit_results(self) -> None:
         """The results part as tall as its content needs, at most 45 % of the tab (it scrolls then)."""
         content = self.results_scroll.widget()
-        content.adjustSize()
-        need = content.sizeHint().height() + 4
+        width = self.results_scroll.viewport().width()
+        layout = content.layout()
+        need = (layout.totalHeightForWidth(width) if layout.hasHeightForWidth() else content.sizeHint().height()) + 4
         total = max(1, self.splitter.height())
         top = min(need, int(0.45 * total))
         self.splitter.setSizes([top, max(1, total - top)])

@@ -44,7 +44,6 @@ import contextlib
 import logging
 import threading
 import time
-import traceback
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
@@ -316,9 +315,9 @@ class RigLink(QObject):
         try:
             task()
         except Exception as exc:  # a bug, not an instrument error: show it, keep the panel alive
-            _log.exception("rig I/O task failed")
-            self.message.emit("error", f"internal error in the rig link: {type(exc).__name__}: {exc} "
-                                       f"({traceback.format_exc(limit=1).strip().splitlines()[-1]})")
+            _log.exception("rig I/O task failed")  # the traceback goes to the log file, not to the technician
+            self.message.emit("error", f"The panel's rig link met an internal error ({exc or type(exc).__name__}); "
+                                       "the rig is unaffected. Report it with the panel's log.")
 
     def _on_bus_event(self, event: RigEvent) -> None:
         """Bus subscriber (sequencer's thread): forward to the GUI thread."""
