@@ -54,17 +54,17 @@ def reanalyse_shot(run: RunFolder, plan: CampaignPlan, shot_id: str) -> tuple[st
         return ShotState.ANALYSIS_FAILED.value, recorded.error
 
 
-def write_campaign_report(run: RunFolder) -> list[Path]:
-    """The campaign's report, PDF and HTML, into the run folder's report folder (as `hopkinson
-    report RUN_FOLDER`)."""
+def write_campaign_report(run: RunFolder, formats: tuple[str, ...] = ("pdf", "html")) -> list[Path]:
+    """The campaign's report into the run folder's report folder (as `hopkinson report RUN_FOLDER`)."""
     from hopkinson.rig.report_data import write_run_report
 
-    return write_run_report(run.path)
+    return write_run_report(run.path, formats)
 
 
-def issue_certificate(config: RigConfig, run: RunFolder, authorised_by: str, specimen: bool) -> tuple[str, list[Path]]:
-    """Record the run's shots in the lab's record and issue its numbered certificate, PDF and
-    HTML in the run folder's report folder (as `hopkinson lab certificate RUN_FOLDER -o …
+def issue_certificate(config: RigConfig, run: RunFolder, authorised_by: str, specimen: bool,
+                      formats: tuple[str, ...] = ("pdf", "html")) -> tuple[str, list[Path]]:
+    """Record the run's shots in the lab's record and issue its numbered certificate (in
+    `formats`) in the run folder's report folder (as `hopkinson lab certificate RUN_FOLDER -o …
     --authorised-by NAME [--specimen]`): (number, files). LabError says why not (a shot refused,
     the reference chain overdue, simulated shots without `specimen`)."""
     from hopkinson.lab.certificate import (
@@ -93,7 +93,7 @@ def issue_certificate(config: RigConfig, run: RunFolder, authorised_by: str, spe
                                         number_into=lambda c, number, utc: with_number(c, number, utc))
     run.report_dir.mkdir(parents=True, exist_ok=True)
     files = [write_certificate(issued.content, run.report_dir / f"{CERTIFICATE_NAME}-{issued.number}.{suffix}")
-             for suffix in ("pdf", "html")]
+             for suffix in formats]
     return issued.number, [Path(f) for f in files]
 
 

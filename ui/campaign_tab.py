@@ -102,6 +102,7 @@ class CampaignTab(QWidget):
         self.simulated = link.instruments.simulated_truth is not None
         self._current: str | None = None
         self.confirm_above = CONFIRM_ABOVE_SHOTS
+        self.formats: tuple[str, ...] = ("pdf", "html")  # of the report and the certificate
         self.conditioner_entry: Callable[[], dict[str, Any] | None] = lambda: None
 
         self.new_button = QPushButton("New plan…")
@@ -446,7 +447,7 @@ class CampaignTab(QWidget):
             self._say("No finished run to report on: run the campaign (or open its run folder) first.", level="warning")
             return
         self._say("Writing the campaign report…", level="info")
-        self.background.run(lambda: write_campaign_report(run),
+        self.background.run(lambda: write_campaign_report(run, self.formats),
                             lambda paths: self._say("Campaign report written: " + ", ".join(str(p) for p in paths),
                                                     level="ok"),
                             lambda exc: self._say(f"Campaign report not written: {exc}", error=True))
@@ -462,7 +463,7 @@ class CampaignTab(QWidget):
             return
         specimen = self.simulated
         self._say("Issuing the certificate…", level="info")
-        self.background.run(lambda: issue_certificate(config, run, who, specimen),
+        self.background.run(lambda: issue_certificate(config, run, who, specimen, self.formats),
                             lambda issued: self._say(f"{'Specimen c' if specimen else 'C'}ertificate {issued[0]} "
                                                      f"issued: {', '.join(str(p) for p in issued[1])}", level="ok"),
                             lambda exc: self._say(f"Certificate not issued: {exc}", error=True))

@@ -219,22 +219,22 @@ class DcmTab(QWidget):
         left.setLayout(controls)
         left.setFixedWidth(330)
 
-        self.mag_plot = MagnitudePlot("Compensated magnitude", "model", "model + DCM", edge_prefix="DCM ")
+        self.mag_plot = MagnitudePlot("Compensated magnitude", "model", "with DCM", edge_prefix="DCM ")
         self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.step_plot = _plot("Step response", "normalised output", "time", None, "s")
         legend_below(self.step_plot)
         self.step_model_curve = self.step_plot.plot([], [], pen=MODEL_PEN, name="model")
-        self.step_comp_curve = self.step_plot.plot([], [], pen=COMP_PEN, name="model + DCM")
+        self.step_comp_curve = self.step_plot.plot([], [], pen=COMP_PEN, name="with DCM")
         for level in (0.1, 0.9, 1.0):
             self.step_plot.addItem(pg.InfiniteLine(pos=level, angle=0, pen=pg.mkPen("#bdc1c6", width=1,
                                                                                     style=Qt.PenStyle.DotLine)))
 
         self.record_plot = _plot("The shot, compensated", "acceleration (km/s²)", "time", None, "s")
-        legend_below(self.record_plot, columns=3)
+        legend_below(self.record_plot)
         self.resp_curve = self.record_plot.plot([], [], pen=RESP_PEN, name="response")
         self.ref_curve = self.record_plot.plot([], [], pen=REF_PEN, name="reference")
-        self.comp_record_curve = self.record_plot.plot([], [], pen=COMP_PEN, name="compensated response")
+        self.comp_record_curve = self.record_plot.plot([], [], pen=COMP_PEN, name="compensated")
         self.ref_curve.setZValue(5)
         self.comp_record_curve.setZValue(6)
 

@@ -225,7 +225,8 @@ def configure_plot(widget: pg.PlotWidget, title: str, left: str, bottom: str, le
 
 def legend_below(widget: pg.PlotWidget, columns: int = 2) -> pg.LegendItem:
     """A legend in its own row under the plot's x axis, never over the data: the curves and
-    scatters added afterwards with a name join it (pyqtgraph's PlotItem.legend)."""
+    scatters added afterwards with a name join it (pyqtgraph's PlotItem.legend). Its width is
+    part of the plot's least width: two columns of short names keep a plot narrow."""
     item = widget.getPlotItem()
     legend = pg.LegendItem(colCount=columns, labelTextSize="8pt", verSpacing=-10, horSpacing=2,
                            pen=pg.mkPen(None), brush=pg.mkBrush(None))
@@ -281,11 +282,12 @@ class MagnitudePlot(pg.PlotWidget):
 
     Y_MAX = 2.0
 
-    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "") -> None:
+    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "",
+                 legend_columns: int = 2) -> None:
         super().__init__(axisItems={"bottom": PlainLogAxis("bottom")})
         configure_plot(self, title, "normalised magnitude", "frequency (kHz)")
         self.setLogMode(x=True, y=False)
-        legend_below(self, columns=3)
+        legend_below(self, legend_columns)
         self.edge_prefix = edge_prefix
         for key in ("10", "5"):
             level = int(key) / 100

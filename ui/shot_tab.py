@@ -400,7 +400,7 @@ class ShotPlots(QWidget):
         self.order_line.setVisible(False)
         self.loss_plot.addItem(self.order_line)
 
-        self.mag_plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "model", "with DCM")
+        self.mag_plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "model", "with DCM", legend_columns=3)
         self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.pz_plot = _plot("Pole-zero map (z-plane)", "imaginary", "real")
@@ -422,19 +422,17 @@ class ShotPlots(QWidget):
         self.trend = LiveTrend()
 
         plots = QWidget()
-        grid = QGridLayout(plots)
-        grid.setContentsMargins(0, 0, 0, 0)
-        grid.setSpacing(6)
-        grid.addWidget(self.accel_plot, 0, 0)
-        grid.addWidget(self.mag_plot, 0, 1)
-        grid.addWidget(self.trend, 0, 2)
-        grid.addWidget(self.pm_plot, 1, 0)
-        grid.addWidget(self.loss_plot, 1, 1)
-        grid.addWidget(self.pz_plot, 1, 2)
-        for column in range(3):
-            grid.setColumnStretch(column, 1)
-        grid.setRowStretch(0, 3)  # the shot's response and magnitude first; the PM beat, losses, poles below
-        grid.setRowStretch(1, 2)
+        rows = QVBoxLayout(plots)
+        rows.setContentsMargins(0, 0, 0, 0)
+        rows.setSpacing(6)
+        # the shot's response and magnitude first and widest; the live gauges, PM beat, losses, poles smaller
+        for stretch, widgets in ((3, ((self.accel_plot, 2), (self.mag_plot, 2), (self.trend, 1))),
+                                 (2, ((self.pm_plot, 1), (self.loss_plot, 1), (self.pz_plot, 1)))):
+            row = QHBoxLayout()
+            row.setSpacing(6)
+            for widget, width in widgets:
+                row.addWidget(widget, width)
+            rows.addLayout(row, stretch)
 
         results = QWidget()
         top = QVBoxLayout(results)
@@ -465,13 +463,13 @@ class ShotPlots(QWidget):
         self._fit_results()
 
     def _fit_results(self) -> None:
-        """The results part as tall as its content needs, at most 45 % of the tab (it scrolls then)."""
+        """The results part as tall as its content needs, at most 40 % of the tab (it scrolls then)."""
         content = self.results_scroll.widget()
         width = self.results_scroll.viewport().width()
         layout = content.layout()
         need = (layout.totalHeightForWidth(width) if layout.hasHeightForWidth() else content.sizeHint().height()) + 4
         total = max(1, self.splitter.height())
-        top = min(need, int(0.45 * total))
+        top = min(need, int(0.40 * total))
         self.splitter.setSizes([top, max(1, total - top)])
 
     # -- drawing ---------------------------------------------------------------------------------

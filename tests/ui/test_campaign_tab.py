@@ -11,7 +11,7 @@ from hopkinson.rig.events import CampaignShotStarted, Reading
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.shot_verdict import judge
 from hopkinson.rig.shotfile import read_shot
-from hopkinson.ui.campaign_tab import COL
+from hopkinson.ui.campaign_table import COL
 from PySide6.QtCore import Qt
 
 from tests.ui.conftest import save_shot

@@ -206,7 +206,7 @@ def test_the_model_magnitude_is_shown_with_its_95_percent_band(qtbot, artifacts_
     low, high = plot.band_low.getData(), plot.band_high.getData()
     assert np.allclose(high[1] - low[1], 2 * half * centre)  # the band as given, around the model
     legend = [label.text for _item, label in plot.getPlotItem().legend.items]
-    assert "95 % band of the model" in legend
+    assert "95 % band" in legend
     image = save_shot(plot, artifacts_dir / "panel-magnitude-band.png")
     # shaded: the band's blue tint fills the plot between its edges where the model is near 1
     from PySide6.QtGui import QImage
@@ -219,7 +219,7 @@ def test_the_model_magnitude_is_shown_with_its_95_percent_band(qtbot, artifacts_
     assert colour.blue() > colour.red() + 20, colour.name()  # tinted blue, not the white ground
     plot.show_curves(f_hz, model, None, {"5": 11.4e3}, None)
     assert plot.band_low.getData()[0] is None or len(plot.band_low.getData()[0]) == 0
-    assert "95 % band of the model" not in [label.text for _item, label in plot.getPlotItem().legend.items]
+    assert "95 % band" not in [label.text for _item, label in plot.getPlotItem().legend.items]
 
 
 def pg_point(x: float, y: float):

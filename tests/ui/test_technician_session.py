@@ -18,7 +18,7 @@ from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import QCoreApplication, QPoint, QPointF, Qt
 from PySide6.QtGui import QWheelEvent
 
-from tests.ui.conftest import save_shot
+from tests.ui.conftest import quick_config, save_shot
 
 SHOT_TIMEOUT_MS = 60_000
 SIZES = ((1280, 800), (1600, 1000))
@@ -65,7 +65,7 @@ def errors(monkeypatch) -> list[str]:
 
 
 def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, capfd):
-    panel = make_panel()
+    panel = make_panel(config=quick_config())  # 60 Monte Carlo draws: this is about what the panel shows
     w = panel.window
     setup, planner = w.setup, w.setup.planner
     assert [a.text() for a in w.menuBar().actions()] == ["&File", "&Rig", "&Help"]
