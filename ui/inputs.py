@@ -21,7 +21,18 @@ from PySide6.QtWidgets import QComboBox, QDoubleSpinBox, QSpinBox, QWidget
 TYPED_LIMIT = 1e12  # what may be typed at all: the plausible range is checked after typing
 
 
-class UnitSpinBox(QDoubleSpinBox):
+class FocusWheel:
+    """Mixed into a field before its Qt class: the wheel changes it only while it has the focus;
+    without, the event goes on to the form around it, which scrolls."""
+
+    def wheelEvent(self, event: QWheelEvent) -> None:  # noqa: N802 (Qt's name)
+        if self.hasFocus():  # type: ignore[attr-defined]
+            super().wheelEvent(event)  # type: ignore[misc]
+        else:
+            event.ignore()
+
+
+class UnitSpinBox(FocusWheel, QDoubleSpinBox):
     """A number with its unit and plausible range (module docstring).
 
     what: the field's name in messages; unit: shown after the number ("" for none);
@@ -86,12 +97,6 @@ class UnitSpinBox(QDoubleSpinBox):
         self.refused.emit(f"{self.what}: {_number(value)}{unit} is outside {_number(low)} … {_number(high)}{unit}; "
                           f"kept {kept_text}")
 
-    def wheelEvent(self, event: QWheelEvent) -> None:  # noqa: N802 (Qt's name)
-        if self.hasFocus():
-            super().wheelEvent(event)
-        else:
-            event.ignore()  # to the form around it: it scrolls
-
     def sizeHint(self) -> QSize:  # noqa: N802 (Qt's name)
         return self._fit(super().sizeHint())
 
@@ -105,7 +110,7 @@ class UnitSpinBox(QDoubleSpinBox):
         return QSize(min(hint.width(), need), hint.height())
 
 
-class IntSpinBox(QSpinBox):
+class IntSpinBox(FocusWheel, QSpinBox):
     """A whole number whose wheel works only with the focus (module docstring)."""
 
     def __init__(self, low: int, high: int, value: int, parent: QWidget | None = None) -> None:
@@ -115,25 +120,13 @@ class IntSpinBox(QSpinBox):
         self.setKeyboardTracking(False)
         self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
 
-    def wheelEvent(self, event: QWheelEvent) -> None:  # noqa: N802 (Qt's name)
-        if self.hasFocus():
-            super().wheelEvent(event)
-        else:
-            event.ignore()
 
-
-class ComboBox(QComboBox):
+class ComboBox(FocusWheel, QComboBox):
     """A drop-down whose wheel works only with the focus (module docstring)."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
-
-    def wheelEvent(self, event: QWheelEvent) -> None:  # noqa: N802 (Qt's name)
-        if self.hasFocus():
-            super().wheelEvent(event)
-        else:
-            event.ignore()
 
 
 def _number(value: float) -> str:

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 from hopkinson.rig.journal import Journal, ShotState
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.shotfile import add_analysis, read_shot
+from PySide6.QtCore import QCoreApplication
 
 from tests.ui.conftest import quick_config
 
@@ -161,3 +162,50 @@ def test_a_campaign_shot_started_is_shown_live(qtbot):
     table.set_state("s001-r1", "ARMED: press FIRE…")
     table.set_pressure("s001-r1", 1.5)
     assert table.column("State")[0] == "ARMED: press FIRE…" and table.column("p")[0] == "1.5"
+
+
+def test_closing_mid_campaign_with_abort_keeps_the_fired_shot_and_no_traceback(qtbot, make_panel, tmp_path, capfd):
+    """Closing while a fired shot is analysed, answering "abort": the rig goes safe, the shot's raw
+    data stays and it is marked for re-analysis (Resume redoes it); no "cannot schedule new
+    futures after shutdown" on stderr (issue 42)."""
+    import sys
+
+    caught: list[str] = []
+    previous = sys.excepthook
+    sys.excepthook = lambda kind, exc, tb: caught.append(f"{kind.__name__}: {exc}")
+    try:
+        panel = make_panel(config=quick_config())
+        w = panel.window
+        tab = w.campaign_tab
+        plan_path = tmp_path / "plan.toml"
+        plan_path.write_text(PLAN + "\n[[shots]]\npressure_bar = 2.0\n", encoding="utf-8")
+        tab.load_plan(plan_path)
+        tab.run()
+        qtbot.waitUntil(lambda: w.state_bar.state == "ANALYSE", timeout=CAMPAIGN_TIMEOUT_MS)
+        run = tab.run_folder
+        asked: list[bool] = []
+        w.ask_close = lambda: asked.append(True) or "abort"
+        w.close()
+        qtbot.waitUntil(lambda: not w.isVisible(), timeout=CAMPAIGN_TIMEOUT_MS)
+        for _ in range(20):  # what the closed window still receives (the campaign's end) is delivered
+            QCoreApplication.processEvents()
+        assert asked == [True] and panel.world.shots_fired == 1
+        coils = panel.world.coils()
+        assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True
+        shot = read_shot(run.shot_path("s001-r1"), load_raw=True)
+        assert shot.raw is not None  # the fired shot's data is kept
+        with Journal.open(run) as journal:
+            status = journal.status("s001-r1")
+            redo = [s.id for s in journal.pending_analysis()]
+        assert status.state == ShotState.ANALYSED or "s001-r1" in redo, status  # analysed, or to be redone
+        assert journal_states(run) == {"s002-r1": "PLANNED"} | {"s001-r1": status.state.value}
+    finally:
+        sys.excepthook = previous
+    assert caught == []
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "cannot schedule new futures" not in err
+
+
+def journal_states(run) -> dict[str, str]:
+    with Journal.open(run) as journal:
+        return {s.shot.id: s.state.value for s in journal.statuses()}
