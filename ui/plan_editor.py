@@ -188,7 +188,7 @@ class PlanEditor(QDialog):
         row.addWidget(self.sensitivity, 1)
         row.addWidget(self.unit)
         form.addRow("Nominal sens.", row)
-        form.addRow("Tolerance (±)", self.tolerance)
+        form.addRow("Tolerance (± %)", self.tolerance)
         form.addRow("", self.authorise)
         buttons_row = QHBoxLayout()
         buttons_row.addWidget(add)

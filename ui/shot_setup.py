@@ -141,20 +141,20 @@ class ShotSetup(QWidget):
         form.addRow("Accelerometer", self.accelerometer_model)
         form.addRow("Serial No.", self.accelerometer_serial)
         form.addRow("Nominal sens.", sensitivity_row)
-        form.addRow("Tolerance (±)", self.tolerance)
-        form.addRow("Sensor range", self.sensor_range)
+        form.addRow("Tolerance (± %)", self.tolerance)
+        form.addRow("Sensor range (g)", self.sensor_range)
         form.addRow("Sine calibration", sine_row)
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             form.addRow("2nd accelerometer", self.accelerometer_2_model)
             form.addRow("its serial No.", self.accelerometer_2_serial)
-        form.addRow("Target peak", self.planner.target_g)
-        form.addRow("Sensor f_n", self.planner.sensor_fn_khz)
+        form.addRow("Target peak (g)", self.planner.target_g)
+        form.addRow("Sensor f_n (kHz)", self.planner.sensor_fn_khz)
         form.addRow(self.planner)
-        form.addRow("Pressure", self.pressure)
+        form.addRow("Pressure (bar)", self.pressure)
         form.addRow("Projectile", self.projectile)
         form.addRow(self.prediction_label)
         form.addRow("Max. order", self.max_order)
-        form.addRow("Analysis rate", self.sample_rate)
+        form.addRow("Analysis (kS/s)", self.sample_rate)
         form.addRow("DCM ratio r", self.dcm_ratio)
         form.addRow("DCM damping ζₑ", self.dcm_damping)
         form.addRow("Shot folder", out_row)
@@ -372,8 +372,9 @@ class _ConditionerFields:
         note = QLabel("as set on its front panel; recorded in the shot file")
         note.setStyleSheet("color: #5f6368;")
         form.addRow(note)
-        for label, field in (("Gain", self.gain), ("Excitation", self.excitation), ("Low-pass", self.lowpass),
-                             ("Sensitivity", self.sensitivity), ("Identity", self.identity)):
+        for label, field in (("Gain (V/V)", self.gain), ("Excitation (V)", self.excitation),
+                             ("Low-pass (kHz)", self.lowpass), ("Sensitivity", self.sensitivity),
+                             ("Identity", self.identity)):
             form.addRow(label, field)
 
     def numbers(self) -> dict[str, UnitSpinBox]:
