@@ -73,6 +73,14 @@ def column_unit(history: SensorHistory, key: str, unit: str) -> str:
     return unit
 
 
+def relative_keys(history: SensorHistory) -> set[str]:
+    """The sensitivities the record holds relative to each shot's nominal, with no absolute value
+    beside them: shots analysed with other nominals would read as drift (issue 42)."""
+    relative = [c for c in history.calibrations if c.response_unit in RATIO_UNITS
+                and getattr(c, "absolute", None) is None]
+    return {"sensitivity", "shock_sensitivity"} if relative else set()
+
+
 class SensorTab(QWidget):
     """The "Sensor history" tab (module doc)."""
 
@@ -230,9 +238,14 @@ class SensorTab(QWidget):
         if history.conformity is not None:
             lines.append(history.conformity.statement())
         labels = {key: label for key, label, _scale, _unit in SHOWN}
+        relative = relative_keys(history)
         for key, drift in history.drift.items():
             if key in self.plots and drift.e_n is not None:
                 lines.append(f"{labels[key]}: E_n = {drift.e_n:+.2f}" + (" — DRIFTED" if drift.drifted else ""))
+        if relative:
+            lines.append(f"<span style='color:{TEXT_COLOURS['warning']}'>The record holds the sensitivities relative "
+                         "to each shot's own nominal: a shot analysed with another nominal reads as drift here. "
+                         "Check a flagged drift against the shots' nominals.</span>")
         flags = history.flags
         colour = DRIFT_COLOUR if flags else "#137333"
         self.flags.setText(f"<span style='color:{colour}'><b>{'; '.join(flags) or 'no flags'}</b></span><br>"
