@@ -492,6 +492,7 @@ class CampaignTab(QWidget):
                 self._set_state(self._current, f"{event.state}…")
         elif self._current and isinstance(event, AwaitingConfirmation):
             self._set_state(self._current, "ARMED: press FIRE…")
+            self.current_label.setText(f"{self._prefix()} ARMED: waiting for FIRE (ABORT stands down)")
         elif self._current and isinstance(event, Reading) and event.state in ("CHARGE", "EVACUATE"):
             p, v = event.reservoir_pressure_bar, event.fixture_vacuum_mbar
             self.current_label.setText(f"{self._prefix()} {event.state} {p:.2f} bar, {v:.0f} mbar")
