@@ -316,8 +316,9 @@ class MagnitudePlot(pg.PlotWidget):
             self.addItem(line)
             self.fbsd_lines[key] = line
         # on a white ground: the resonance's rising curve runs through the note's corner of the plot
-        # top left, where the normalised magnitude stays near 1: it never covers the resonance's rise
-        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(0, 0), fill=(255, 255, 255, 220))
+        # bottom left, under the magnitude's flat start (near 1): it covers neither the resonance's rise
+        # nor the FBSD edges' labels at the top
+        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(0, 1), fill=(255, 255, 255, 220))
         self.peak_note.setZValue(20)
         self.addItem(self.peak_note, ignoreBounds=True)
         self.setYRange(0, self.Y_MAX, padding=0)
@@ -361,7 +362,7 @@ class MagnitudePlot(pg.PlotWidget):
         i = int(np.nanargmax(magnitude))
         if magnitude[i] > self.Y_MAX:
             self.peak_note.setText(f"peak ×{magnitude[i]:.1f} at {f_khz[i]:.1f} kHz\n(above the scale)")
-            self.peak_note.setPos(lo, 0.98 * self.Y_MAX)
+            self.peak_note.setPos(lo, 0.02 * self.Y_MAX)
         else:
             self.peak_note.setText("")
 
