@@ -375,3 +375,30 @@ def _same_figures(a: dict[str, Any], b: dict[str, Any]) -> bool:
             if (p is None) != (q is None) or (p is not None and abs(p - q) > 1e-12 * max(1.0, abs(q))):
                 return False
     return True
+
+
+def campaign_ref(repo: LabRepository, source: str | Path, actor: str) -> str:
+    """The campaign a run folder (its shots imported first) or a UUID/name names: its reference
+    for the lab's record (`hopkinson lab certificate RUN_FOLDER`, the panel's Certificate…)."""
+    folder = Path(source)
+    if not folder.is_dir():
+        return str(source)
+    refused = [o for _p, o in import_shots(repo, [folder], actor) if o.startswith("refused")]
+    if refused:
+        raise LabError(refused[0].removeprefix("refused: "))
+    uuid = read_campaign_uuid(folder / JOURNAL_NAME)
+    if uuid is None:
+        uuids = {shot_record(p).campaign_uuid for p in shot_files([folder])}
+        if len(uuids) != 1 or not next(iter(uuids)):
+            raise LabError(f"{folder}: not the run folder of one campaign (its shots name {len(uuids)} campaigns)")
+        uuid = uuids.pop()
+    return uuid
+
+
+def lab_identity(config: RigConfig) -> Any:
+    """The lab as its certificates name it (lab.certificate.LabIdentity) from the rig's [lab]."""
+    from hopkinson.lab.certificate import LabIdentity
+
+    lab = config.lab
+    return LabIdentity(lab.name, lab.address, lab.accreditation, lab.certificate_prefix, lab.decision_rule,
+                       {s.name: s.role for s in lab.signatories}, lab.country)

@@ -64,37 +64,34 @@ def write_campaign_report(run: RunFolder, formats: tuple[str, ...] = ("pdf", "ht
 def issue_certificate(config: RigConfig, run: RunFolder, authorised_by: str, specimen: bool,
                       formats: tuple[str, ...] = ("pdf", "html")) -> tuple[str, list[Path]]:
     """Record the run's shots in the lab's record and issue its numbered certificate (in
-    `formats`) in the run folder's report folder (as `hopkinson lab certificate RUN_FOLDER -o …
-    --authorised-by NAME [--specimen]`): (number, files). LabError says why not (a shot refused,
-    the reference chain overdue, simulated shots without `specimen`)."""
-    from hopkinson.lab.certificate import (
-        LabIdentity,
-        certificate_content,
-        with_number,
-        write_certificate,
-    )
-    from hopkinson.lab.errors import LabError
+    `formats`) in the run folder's report folder, as `hopkinson lab certificate RUN_FOLDER -o …
+    --authorised-by NAME [--specimen]` (lab.issuing: the number only with its documents):
+    (number, files). LabError says why not (not a signatory, a shot refused, the reference
+    chain, simulated shots without `specimen`)."""
+    from hopkinson.lab.certificate import Request, certificate_content, write_documents
+    from hopkinson.lab.issuing import issue
     from hopkinson.lab.repository import open_repository
-    from hopkinson.rig.lab_record import import_shots
+    from hopkinson.rig.lab_record import campaign_ref, lab_identity
     from hopkinson.rig.shotfile import software_version
 
-    lab = config.lab
-    identity = LabIdentity(lab.name, lab.address, lab.accreditation, lab.certificate_prefix, lab.decision_rule)
-    campaign = run.path.resolve().name
-    with open_repository(config.database.url) as repo:
-        refused = [o for _p, o in import_shots(repo, [run.path], getpass.getuser()) if o.startswith("refused")]
-        if refused:
-            raise LabError(refused[0].removeprefix("refused: "))
-        content = certificate_content(repo, campaign, identity, authorised_by=authorised_by,
-                                      software_version=software_version(), specimen=specimen)
-        prefix = f"{identity.certificate_prefix}-SIM" if specimen else identity.certificate_prefix
-        issued = repo.issue_certificate(prefix, content, serial=content["serial"], subject=campaign,
-                                        authorised_by=authorised_by,
-                                        number_into=lambda c, number, utc: with_number(c, number, utc))
+    identity = lab_identity(config)
+    identity.role_of(authorised_by, specimen)  # refused before anything is imported
+    request = Request(authorised_by, software_version(), specimen=specimen)
     run.report_dir.mkdir(parents=True, exist_ok=True)
-    files = [write_certificate(issued.content, run.report_dir / f"{CERTIFICATE_NAME}-{issued.number}.{suffix}")
-             for suffix in formats]
-    return issued.number, [Path(f) for f in files]
+    written: list[Path] = []
+
+    def documents(content: dict[str, Any]) -> list[Path]:
+        paths = [run.report_dir / f"{CERTIFICATE_NAME}-{content['number']}.{suffix}" for suffix in formats]
+        written.extend(write_documents(content, paths, identity))
+        return written
+
+    with open_repository(config.database.url) as repo:
+        ref = campaign_ref(repo, run.path, getpass.getuser())
+        issued = issue(repo, campaign=ref, prefix=identity.certificate_prefix, authorised_by=authorised_by,
+                       specimen=specimen, content=lambda uow, campaign: certificate_content(uow, campaign, identity,
+                                                                                            request),
+                       documents=documents)
+    return issued.number, written
 
 
 def campaign_end_message(outcome: Any, failure: str = "") -> tuple[str, str]:

@@ -14,14 +14,15 @@ what it returns.
 from __future__ import annotations
 
 import getpass
+from datetime import datetime
 from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
 from hopkinson.analysis.key_figures import Figure
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
-from hopkinson.lab.history import RATIO_UNITS, SensorHistory, sensor_history
-from hopkinson.lab.history_plot import SHOWN, history_series
+from hopkinson.lab.history import RATIO_UNITS, SensorHistory, load_sensor_history
+from hopkinson.lab.history_plot import SHOWN
 from hopkinson.lab.repository import SensorInfo, open_repository
 from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
 from hopkinson.ui.plots import configure_plot
@@ -47,15 +48,11 @@ DAY_S = 86_400.0
 MIN_SPAN_S = 30 * DAY_S  # a history within one day still gets a dated axis (not "54.500 … 55.250" seconds)
 
 
-def load_history(url: str, serial: str, rule: str) -> tuple[SensorHistory, list[dict[str, str]]]:
+def load_history(url: str, serial: str, rule: str) -> tuple[SensorHistory, list[dict[str, Any]]]:
     """The sensor's judged history and its certificates (LabError when it is not in the record)."""
-    from hopkinson.lab.errors import LabError
-
     with open_repository(url) as repo:
-        sensor = repo.sensor(serial)
-        if sensor is None:
-            raise LabError(f"sensor {serial}: not in the lab's record")
-        return sensor_history(sensor, repo.calibrations(serial), rule), repo.certificates(serial)
+        history = load_sensor_history(repo, serial, rule)
+    return history, list(history.certificates)
 
 
 def save_sensor(url: str, serial: str, **fields: Any) -> SensorInfo:
@@ -64,21 +61,65 @@ def save_sensor(url: str, serial: str, **fields: Any) -> SensorInfo:
         return repo.register_sensor(serial, getpass.getuser(), **fields)
 
 
+def absolute_unit(history: SensorHistory) -> str | None:
+    """The one unit every calibration's absolute sensitivity is stated in (the record's, in the
+    sensor's own unit), None when a calibration has none or they differ."""
+    units = {c.absolute_unit if c.absolute is not None else None for c in history.calibrations}
+    return units.pop() if len(units) == 1 and None not in units else None
+
+
 def column_unit(history: SensorHistory, key: str, unit: str) -> str:
-    """A column's unit: the sensitivities are relative to each shot's nominal when the record
-    holds them so (the response was divided by the nominal), else in V/(m/s²)."""
+    """A column's unit: the sensitivities in the sensor's own unit when the record states the
+    sensitivity so for every calibration (and every shock sensitivity converts); else relative
+    to each shot's nominal when the response was divided by it, or in V/(m/s²)."""
+    stated = absolute_unit(history)
+    if stated and (key == "sensitivity" or key == "shock_sensitivity" and all(
+            absolute_shock(c, stated) is not None for c in history.calibrations if c.figures.get(key) is not None)):
+        return stated
     if key in ("sensitivity", "shock_sensitivity"):
         units = {c.response_unit for c in history.calibrations}
         return "× nominal" if units <= set(RATIO_UNITS) else "V/(m/s²)" if units == {"V"} else "as recorded"
     return unit
 
 
-def relative_keys(history: SensorHistory) -> set[str]:
-    """The sensitivities the record holds relative to each shot's nominal, with no absolute value
-    beside them: shots analysed with other nominals would read as drift (issue 42)."""
-    relative = [c for c in history.calibrations if c.response_unit in RATIO_UNITS
-                and getattr(c, "absolute", None) is None]
-    return {"sensitivity", "shock_sensitivity"} if relative else set()
+def shown_figure(c: Any, key: str, history: SensorHistory) -> Figure | None:
+    """The figure a column shows for a calibration: in the sensor's unit where the column is (the
+    record's stated sensitivity; the shock sensitivity scaled here the same way, shot by shot),
+    else the record's figure."""
+    stated = absolute_unit(history)
+    if stated and key in ("sensitivity", "shock_sensitivity") and column_unit(history, key, "") == stated:
+        return c.absolute if key == "sensitivity" else absolute_shock(c, stated)
+    return c.figures.get(key)
+
+
+def absolute_shock(c: Any, unit_name: str) -> Figure | None:
+    """A calibration's shock sensitivity in `unit_name`: each shot's ratio × the nominal it was
+    divided by, combined as the record combines (lab.history.combined_figure); None when a
+    shot's nominal is unknown or the unit is not one of analysis.sensitivity_units'."""
+    from hopkinson.analysis.sensitivity_units import sensitivity_unit
+    from hopkinson.lab.history import combined_figure
+
+    try:
+        unit = sensitivity_unit(unit_name)
+    except ValueError:
+        return None
+    scaled = []
+    for shot in c.shots:
+        figure, nominal = shot.figures.get("shock_sensitivity"), shot.context.get("sensitivity_v_per_m_s2")
+        if figure is None or figure.value is None:
+            continue
+        if shot.response_unit not in RATIO_UNITS or not isinstance(nominal, int | float) or not nominal > 0:
+            return None
+        k = unit.from_si(float(nominal))
+        scaled.append(Figure(figure.value * k, None if figure.u is None else figure.u * k,
+                             None if figure.interval is None else (figure.interval[0] * k, figure.interval[1] * k)))
+    return combined_figure(scaled) if scaled else None
+
+
+def nominals(history: SensorHistory) -> set[float]:
+    """The nominal sensitivities (V/(m/s²)) the shots' responses were divided by."""
+    return {float(v) for c in history.calibrations for s in getattr(c, "shots", ())
+            if isinstance(v := s.context.get("sensitivity_v_per_m_s2"), int | float) and v > 0}
 
 
 class SensorTab(QWidget):
@@ -238,14 +279,16 @@ class SensorTab(QWidget):
         if history.conformity is not None:
             lines.append(history.conformity.statement())
         labels = {key: label for key, label, _scale, _unit in SHOWN}
-        relative = relative_keys(history)
         for key, drift in history.drift.items():
             if key in self.plots and drift.e_n is not None:
                 lines.append(f"{labels[key]}: E_n = {drift.e_n:+.2f}" + (" — DRIFTED" if drift.drifted else ""))
-        if relative:
-            lines.append(f"<span style='color:{TEXT_COLOURS['warning']}'>The record holds the sensitivities relative "
-                         "to each shot's own nominal: a shot analysed with another nominal reads as drift here. "
-                         "Check a flagged drift against the shots' nominals.</span>")
+        used = nominals(history)
+        if len(used) > 1 and {c.response_unit for c in history.calibrations} <= set(RATIO_UNITS):
+            unit = UNITS[DEFAULT_UNIT]
+            lines.append(f"<span style='color:{TEXT_COLOURS['warning']}'>The shots were analysed with "
+                         f"{len(used)} different nominals ({', '.join(f'{unit.from_si(v):.4g}' for v in sorted(used))} "
+                         f"{unit.name}): E_n of the sensitivities compares their ratios to those nominals, not the "
+                         "sensitivities; compare the absolute values in the table.</span>")
         flags = history.flags
         colour = DRIFT_COLOUR if flags else "#137333"
         self.flags.setText(f"<span style='color:{colour}'><b>{'; '.join(flags) or 'no flags'}</b></span><br>"
@@ -269,7 +312,7 @@ class SensorTab(QWidget):
         for r, c in enumerate(rows):
             source = "SIMULATED" if getattr(c, "simulated", False) else "rig"
             cells = [c.utc_time[:16].replace("T", " "), c.rig, c.campaign or "—", source]
-            cells += [_text(c.figures.get(key), scale) for key, _label, scale, _unit in SHOWN]
+            cells += [_text(shown_figure(c, key, history), scale) for key, _label, scale, _unit in SHOWN]
             for col, text in enumerate(cells):
                 self.table.setItem(r, col, QTableWidgetItem(text))
 
@@ -278,12 +321,9 @@ class SensorTab(QWidget):
             plot = self.plots[key]
             plot.clear()
             plot.getPlotItem().setLabel("left", column_unit(history, key, unit) or "value")  # the title names it
-            dates, values, expanded = history_series(history, key, scale)
-            if not dates:
+            x, values, expanded, simulated = _series(history, key, scale)
+            if not x:
                 continue
-            x = [d.timestamp() for d in dates]
-            simulated = [bool(getattr(c, "simulated", False)) for c in history.calibrations
-                         if c.figures.get(key) is not None and c.figures[key].value is not None]
             plot.addItem(pg.ErrorBarItem(x=np.asarray(x), y=np.asarray(values), height=2 * np.asarray(expanded),
                                          beam=0.0, pen=pg.mkPen("#5f6368")))
             brushes = [SIMULATED_BRUSH if sim else POINT_BRUSH for sim in simulated] or POINT_BRUSH
@@ -294,6 +334,20 @@ class SensorTab(QWidget):
                           symbolBrush=pg.mkBrush(DRIFT_COLOUR))
             plot.getPlotItem().enableAutoRange(axis="y")
             plot.setXRange(*_date_range(x), padding=0)
+
+
+def _series(history: SensorHistory, key: str, scale: float) -> tuple[list[float], list[float], list[float], list[bool]]:
+    """(UTC timestamps, values, U, simulated?) of what a column shows, over the calibrations that have it."""
+    out: tuple[list[float], list[float], list[float], list[bool]] = ([], [], [], [])
+    for c in history.calibrations:
+        figure = shown_figure(c, key, history)
+        if figure is None or figure.value is None:
+            continue
+        out[0].append(datetime.fromisoformat(c.utc_time.replace("Z", "+00:00")).timestamp())
+        out[1].append(figure.value / scale)
+        out[2].append((figure.expanded or 0.0) / scale)
+        out[3].append(bool(getattr(c, "simulated", False)))
+    return out
 
 
 def _date_range(x: list[float]) -> tuple[float, float]:

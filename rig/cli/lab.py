@@ -293,27 +293,9 @@ def history_text(history: Any) -> str:
 
 
 def _campaign_ref(repo: Any, source: str, actor: str) -> str:
-    """The campaign a RUN_FOLDER (imported first) or a UUID/name names: its reference."""
-    from hopkinson.lab.errors import LabError
-    from hopkinson.rig.journal import read_campaign_uuid
-    from hopkinson.rig.lab_record import import_shots
-    from hopkinson.rig.run_folder import JOURNAL_NAME
+    from hopkinson.rig.lab_record import campaign_ref
 
-    folder = Path(source)
-    if not folder.is_dir():
-        return source
-    refused = [o for _p, o in import_shots(repo, [folder], actor) if o.startswith("refused")]
-    if refused:
-        raise LabError(refused[0].removeprefix("refused: "))
-    uuid = read_campaign_uuid(folder / JOURNAL_NAME)
-    if uuid is None:
-        from hopkinson.rig.lab_record import shot_files, shot_record
-
-        uuids = {shot_record(p).campaign_uuid for p in shot_files([folder])}
-        if len(uuids) != 1 or not next(iter(uuids)):
-            raise LabError(f"{folder}: not the run folder of one campaign (its shots name {len(uuids)} campaigns)")
-        uuid = uuids.pop()
-    return uuid
+    return campaign_ref(repo, source, actor)
 
 
 def job_command(args: argparse.Namespace) -> int:
@@ -347,11 +329,9 @@ def _job_dict(job: Any) -> dict[str, str]:
 
 
 def _identity(config: Any) -> Any:
-    from hopkinson.lab.certificate import LabIdentity
+    from hopkinson.rig.lab_record import lab_identity
 
-    lab = config.lab
-    return LabIdentity(lab.name, lab.address, lab.accreditation, lab.certificate_prefix, lab.decision_rule,
-                       {s.name: s.role for s in lab.signatories}, lab.country)
+    return lab_identity(config)
 
 
 def _check_documents(outputs: list[Path]) -> None:

@@ -163,6 +163,12 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
     qtbot.waitUntil(lambda: history.history is not None and history.table.rowCount() == 2, timeout=30_000)
     heads = [history.table.horizontalHeaderItem(c).text() for c in range(history.table.columnCount())]
     assert heads[0] == "date (UTC)" and all("(" in h for h in heads[4:]), heads
+    # the two shots of one sensor, fired with nominals 0.312 and 0.200: the same absolute sensitivity
+    assert heads[4] == "sensitivity (µV/(m/s²))" and heads[5] == "shock sensitivity (µV/(m/s²))"
+    cells = [history.table.item(r, 4).text().split(" ± ") for r in range(2)]
+    (a, ua), (b, ub) = ((float(v), float(u)) for v, u in cells)
+    assert abs(a - b) <= 3 * math.hypot(ua, ub) and a == pytest.approx(TRUE_SENSITIVITY_UV, rel=0.05), cells
+    assert "2 different nominals (0.2, 0.312 µV/(m/s²))" in history.flags.text()
     axis = history.plots["natural_frequency_hz"].getPlotItem().getAxis("bottom")
     low, high = axis.range
     assert high - low >= 20 * 86_400  # a span of dates, not of seconds
