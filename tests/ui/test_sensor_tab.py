@@ -60,3 +60,27 @@ def test_an_unknown_serial_says_so(qtbot, tab) -> None:
     tab.serial_edit.setText("SN-NOPE")
     tab.show_button.click()
     qtbot.waitUntil(lambda: "not in the lab's record" in tab.summary.text(), timeout=20_000)
+
+
+def test_the_sensors_tolerance_and_interval_are_set_from_the_tab(qtbot, tab) -> None:
+    """Issue 42: the tolerance and the recalibration interval can be set in the panel (the lab's
+    record keeps them, audited); the history is judged against them at once."""
+    tab.prefill("SN-42")  # as when the tab opens on the shot's serial
+    qtbot.waitUntil(lambda: tab.history is not None, timeout=20_000)
+    assert tab.serial_edit.text() == "SN-42" and tab.tolerance.value() == 1.0 and tab.interval.value() == 365
+    tab.tolerance.setValue(2.0)
+    tab.interval.setValue(180)
+    tab.owner.setText("ACME Aerospace, Test Dept.")
+    tab.history = None
+    tab.save_sensor_data()
+    qtbot.waitUntil(lambda: tab.history is not None and "Test Dept." in tab.summary.text(), timeout=20_000)
+    summary = tab.summary.text()
+    assert "tolerance ±2 %" in summary and "recalibrate every 180 days" in summary
+    assert "saved in the lab's record" in tab.save_message.text()
+    with open_repository(tab.database_url) as repo:
+        sensor = repo.sensor("SN-42")
+    assert (sensor.tolerance_percent, sensor.interval_days) == (2.0, 180)
+    assert "PASS" in tab.flags.text()  # +1.20 % is inside ±2 %: no longer out of tolerance
+    tab.serial_edit.setText("SN-77")  # typed here by the technician: the shot's serial does not replace it
+    tab.prefill("SN-99")
+    assert tab.serial_edit.text() == "SN-77"
