@@ -289,6 +289,17 @@ class DcmTab(QWidget):
         self._enable(True)
         self.reset()
 
+    def show_shot(self, view: Any) -> None:
+        """Design for a shot shown (ui.plots.ShotView) from its own DCM settings; nothing without a model."""
+        if view.model is None or view.dcm is None:
+            return
+        design = view.dcm.design or {}
+        self.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
+                       [complex(*p) for p in design.get("extra_poles", [])], view.record,
+                       source=view.path.name if view.path else "", shot_path=view.path, support=view.support,
+                       band_limit_hz=view.band_limit_hz,
+                       not_recommended_reason=view.compensation.not_recommended_text if view.compensation else None)
+
     def _draw_record(self) -> None:
         """The shot's reference and response, drawn once per model (a redesign only changes the
         compensated curve)."""

@@ -35,7 +35,6 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.verdict import Decision
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError, with_hint
 from hopkinson.rig.events import (
@@ -59,9 +58,9 @@ from hopkinson.ui.log_view import LogTab, LogView
 from hopkinson.ui.menus import build_menus
 from hopkinson.ui.plots import ShotView, configure_pyqtgraph, load_shot_view
 from hopkinson.ui.sensor_tab import SensorTab
-from hopkinson.ui.setup_check import SetupPrediction, predict_setup
+from hopkinson.ui.setup_check import SetupPrediction, fire_question, predict_setup
 from hopkinson.ui.shot_setup import ShotSetup
-from hopkinson.ui.shot_tab import ShotPlots
+from hopkinson.ui.shot_tab import ShotPlots, verdict_level
 from hopkinson.ui.state_bar import STATE_MESSAGES, StateBar, action_buttons, header_row
 from hopkinson.ui.status_panel import StatusPanel
 from hopkinson.ui.widgets import Banner
@@ -138,7 +137,7 @@ class MainWindow(QMainWindow):
 
         # left: status and set-up
         self.status_panel = StatusPanel(config.limits)
-        self.setup = ShotSetup(config, out_dir)
+        self.setup = ShotSetup(config, out_dir, background=self.background)
         self.setup.load(self.settings)
         left = QWidget()
         left_layout = QVBoxLayout(left)
@@ -211,6 +210,7 @@ class MainWindow(QMainWindow):
         self.campaign_tab.open_shot.connect(self.open_shot)
         self.campaign_tab.say.connect(self._on_message)
         self.setup.refused.connect(self._on_refused)
+        self.setup.advice.connect(self._on_advice)
         self.tabs.currentChanged.connect(self._tab_changed)
         self.status_panel.set_links(self.link.links)
         self.restored_geometry = self._restore_window()
@@ -269,13 +269,7 @@ class MainWindow(QMainWindow):
         r = self.request
         what = (f"Reservoir {r.pressure_bar:g} bar, projectile No. {r.projectile}, accelerometer "
                 f"{r.accelerometer_model or '—'} {r.accelerometer_serial}".rstrip()) if r else self._armed_text
-        p = self.prediction
-        predicted = ("" if p is None else
-                     f"\n\nPredicted peak {p.peak_text()}, pulse width {p.width_10_s * 1e6:.0f} µs, "
-                     f"band to {p.band_hz / 1e3:.0f} kHz" + (f" ({p.target_text()})" if p.target_m_s2 else ""))
-        warning = "".join(f"\n⚠ {problem}" for problem in (p.problems() if p is not None else []))
-        return (f"FIRE the armed shot now?\n\n{what}{predicted}{warning}\n\n"
-                "Every interlock holds. Make sure nobody is at the bar.")
+        return fire_question(what, self.prediction)
 
     def confirm_setup(self, problems: list[str]) -> bool:
         """Ask whether to arm a set-up that misses its target or exceeds the sensor's range (default No)."""
@@ -407,6 +401,12 @@ class MainWindow(QMainWindow):
         """Back to saying what to do next."""
         self.banner.show_message("idle", "Set up the shot on the left and press ARM (F5); open a shot file with "
                                          "Ctrl+O; a campaign runs from its tab.")
+
+    def _on_advice(self, level: str, text: str) -> None:
+        """What the lab's record says of the set-up's sensor (ui.sensor_lookup)."""
+        if not self.busy:
+            self.show_banner(level, text)
+            self.log_view.add_message("warning" if level == "warning" else "info", text)
 
     def _on_refused(self, text: str) -> None:
         self.show_banner("warning", f"Not taken: {text}.")
@@ -561,21 +561,11 @@ class MainWindow(QMainWindow):
     def show_shot_view(self, view: ShotView) -> None:
         self.last_view = view
         self.plots.show_view(view)
-        if view.model is not None and view.dcm is not None:
-            design = view.dcm.design or {}
-            self.dcm_tab.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
-                                   [complex(*p) for p in design.get("extra_poles", [])], view.record,
-                                   source=view.path.name if view.path else "", shot_path=view.path,
-                                   support=view.support, band_limit_hz=view.band_limit_hz,
-                                   not_recommended_reason=(view.compensation.not_recommended_text
-                                                           if view.compensation else None))
+        self.dcm_tab.show_shot(view)
         if view.judgement is not None and view.path is not None and view.path == self._announce:
             verdict = view.judgement.verdict
-            name = view.path.name if view.path else "the shot"
-            level = "ok" if verdict.decision == Decision.ACCEPT and verdict.reason == "every check passed" else \
-                "warning" if verdict.decision == Decision.ACCEPT else "error"
-            self.show_banner(level, f"{name}: {verdict.decision.value} — {verdict.reason}")
-            self.log_view.add_message("result", f"{name}: {verdict.line()}")
+            self.show_banner(verdict_level(verdict), f"{view.path.name}: {verdict.decision.value} — {verdict.reason}")
+            self.log_view.add_message("result", f"{view.path.name}: {verdict.line()}")
         self.shot_view_shown.emit(view)
 
     def export_report_dialog(self) -> None:

@@ -90,3 +90,13 @@ def _predict(rig: BarRig, projectile: int, pressure_bar: float) -> tuple[float, 
 
 def _g(value_m_s2: float) -> str:
     return f"{value_m_s2 / G_M_S2:,.0f}".replace(",", "\u00a0")
+
+
+def fire_question(what: str, prediction: SetupPrediction | None) -> str:
+    """FIRE's confirmation: `what` is armed, the bar model's prediction for it and its problems."""
+    p = prediction
+    predicted = ("" if p is None else
+                 f"\n\nPredicted peak {p.peak_text()}, pulse width {p.width_10_s * 1e6:.0f} µs, "
+                 f"band to {p.band_hz / 1e3:.0f} kHz" + (f" ({p.target_text()})" if p.target_m_s2 else ""))
+    warning = "".join(f"\n⚠ {problem}" for problem in (p.problems() if p is not None else []))
+    return f"FIRE the armed shot now?\n\n{what}{predicted}{warning}\n\nEvery interlock holds. Make sure nobody is at the bar."

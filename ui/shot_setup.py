@@ -35,9 +35,11 @@ from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS, Se
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
 from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
+from hopkinson.ui.sensor_lookup import RecordAdvice, record_advice
 from hopkinson.ui.setup_check import SetupPrediction, predict_setup
 from hopkinson.ui.shot_planner import ShotPlanner
 from hopkinson.ui.widgets import TEXT_COLOURS, section_title
+from hopkinson.ui.worker import Background
 from PySide6.QtCore import QSettings, QTimer, Signal
 from PySide6.QtWidgets import (
     QFileDialog,
@@ -61,9 +63,13 @@ class ShotSetup(QWidget):
 
     refused = Signal(str)  # a value refused by a field: one line naming the unit
     changed = Signal()  # the prediction was drawn again (tests wait on it)
+    advice = Signal(str, str)  # level, what the lab's record says of the sensor (ui.sensor_lookup)
 
-    def __init__(self, config: RigConfig, out_dir: Path, parent: QWidget | None = None) -> None:
+    def __init__(self, config: RigConfig, out_dir: Path, parent: QWidget | None = None,
+                 background: Background | None = None) -> None:
         super().__init__(parent)
+        self._background = background
+        self._database_url = config.database.url
         limits, analysis = config.limits, config.analysis
         self._rig = config.bar.rig()
         self._prediction: SetupPrediction | None = None
@@ -174,6 +180,8 @@ class ShotSetup(QWidget):
             spin.value_accepted.connect(self._predict_timer.start)
         self.projectile.currentIndexChanged.connect(self._predict_timer.start)
         self.sensitivity_unit.currentIndexChanged.connect(self._unit_changed)
+        self.accelerometer_serial.editingFinished.connect(self.check_record)
+        self.sensitivity.value_accepted.connect(self.check_record)
         self.update_prediction()
 
     # -- units ----------------------------------------------------------------------------------
@@ -191,6 +199,23 @@ class ShotSetup(QWidget):
         if index >= 0:
             self.sensitivity_unit.setCurrentIndex(index)
         self.sensitivity.setValue(value)
+
+    def check_record(self) -> None:
+        """The sensor against the lab's record, off the GUI thread: a nominal that differs is said
+        (`advice`), a tolerance the form lacks is taken from it (ui.sensor_lookup)."""
+        serial = self.accelerometer_serial.text().strip()
+        if not serial or self._background is None or not self.isEnabled():
+            return
+        nominal, tolerance = self.unit.to_si(self.sensitivity.value()), self.tolerance.value() or None
+        url = self._database_url
+        self._background.run(lambda: record_advice(url, serial, nominal, tolerance), self._take_advice,
+                             lambda exc: self.advice.emit("warning", f"The lab's record was not read: {exc}"))
+
+    def _take_advice(self, advice: RecordAdvice) -> None:
+        if advice.tolerance_percent and not self.tolerance.value():
+            self.tolerance.setValue(advice.tolerance_percent)
+        if advice.level:
+            self.advice.emit(advice.level, advice.text)
 
     # -- the prediction ------------------------------------------------------------------------
     def prediction(self) -> SetupPrediction | None:

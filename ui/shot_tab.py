@@ -72,6 +72,14 @@ _STATUS_COLOURS = {Status.OK: "#202124", Status.NOTE: "#5f6368", Status.FLAG: TE
                    Status.FAIL: TEXT_COLOURS["error"]}
 
 
+def verdict_level(verdict: ShotVerdict) -> str:
+    """The message line's level for a verdict: green when every check passed, amber for an
+    ACCEPT with a flag, red for a REPEAT."""
+    if verdict.decision == Decision.REPEAT:
+        return "error"
+    return "ok" if verdict.reason == "every check passed" else "warning"
+
+
 class VerdictBar(QFrame):
     """ACCEPT / REPEAT and its reason in one line (module docstring)."""
 

@@ -84,3 +84,34 @@ def test_the_sensors_tolerance_and_interval_are_set_from_the_tab(qtbot, tab) -> 
     tab.serial_edit.setText("SN-77")  # typed here by the technician: the shot's serial does not replace it
     tab.prefill("SN-99")
     assert tab.serial_edit.text() == "SN-77"
+
+
+def test_the_set_up_is_checked_against_the_sensors_record(qtbot, database) -> None:
+    """A serial the record knows: a nominal typed that differs from the record's is said before
+    ARM (the issue's 0.312 for a 0.2 µV/(m/s²) sensor), its tolerance fills the set-up's."""
+    import dataclasses
+
+    from hopkinson.ui.shot_setup import ShotSetup
+    from hopkinson.ui.worker import Background
+
+    from tests.ui.conftest import rig_config_for_tests
+
+    with open_repository(database) as repo:
+        repo.register_sensor("SN-42", "tester", nominal_sensitivity=0.2, sensitivity_unit="µV/(m/s²)")
+    config = rig_config_for_tests()
+    config = dataclasses.replace(config, database=dataclasses.replace(config.database, url=database))
+    background = Background()
+    setup = ShotSetup(config, Path("shots"), background=background)
+    qtbot.addWidget(setup)
+    setup.set_sensitivity(0.312, "µV/(m/s²)")
+    with qtbot.waitSignal(setup.advice, timeout=20_000) as said:
+        setup.accelerometer_serial.setText("SN-42")
+        setup.accelerometer_serial.editingFinished.emit()
+    level, text = said.args
+    assert level == "warning" and text == ("SN-42: the set-up's nominal 0.312 µV/(m/s²) differs from the lab's record, "
+                                           "0.2 µV/(m/s²): check the data sheet before ARM.")
+    assert setup.tolerance.value() == 1.0  # from the record
+    with qtbot.waitSignal(setup.advice, timeout=20_000) as said:
+        setup.sensitivity.setValue(0.2)
+    assert said.args[0] == "ok" and "as in the lab's record" in said.args[1]
+    background.shutdown()
