@@ -159,6 +159,7 @@ def _demo_shot(app: Any, window: Any, screenshot: str | None, errors: list[str])
     from PySide6.QtCore import QElapsedTimer, QTimer
 
     window.confirm_fire = lambda: True
+    window.confirm_setup = lambda _problems: True  # the demo fires as set up, without asking
     setup = window.setup
     if not setup.operator.text():
         setup.operator.setText("demo")
