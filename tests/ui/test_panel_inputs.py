@@ -133,3 +133,27 @@ def test_shortcuts_arm_and_abort_and_fire_is_guarded(qtbot, make_panel):
     with qtbot.waitSignal(w.link.shot_finished, timeout=60_000) as finished:
         w.actions["abort"].trigger()
     assert finished.args[0].final_state == "ABORTED" and panel.world.shots_fired == 0
+
+
+def test_the_set_up_prediction_is_the_planners_inverse_and_names_its_problems():
+    """At the pressure the planner gives for a target (analysis.bar.plan_shot, the inverse), the
+    set-up's prediction reaches that target; 7 bar instead is over it and over a 100 000 g range."""
+    from hopkinson.analysis.bar import plan_shot
+    from hopkinson.ui.setup_check import fire_question, predict_setup
+
+    from tests.ui.conftest import rig_config_for_tests
+
+    rig = rig_config_for_tests().bar.rig()
+    target = 50_000 * 9.80665
+    plan = plan_shot(rig, target)
+    option = next(o for o in plan.options if o.projectile == 3)
+    on_plan = predict_setup(rig, 3, option.pressure_bar, target, 100_000 * 9.80665)
+    assert on_plan.peak_m_s2 == pytest.approx(target, rel=0.01) and on_plan.problems() == []
+    assert on_plan.width_10_s == pytest.approx(option.width_10_s, rel=0.02)
+    assert on_plan.band_hz == pytest.approx(option.supported_band_hz, rel=0.02)
+    over = predict_setup(rig, 3, 7.0, target, 100_000 * 9.80665)
+    problems = over.problems()
+    assert len(problems) == 2 and "above the target 50\u00a0000 g (tolerance ±10 %)" in problems[0]
+    assert "exceeds the sensor's range 100\u00a0000 g" in problems[1]
+    question = fire_question("Reservoir 7 bar", over)
+    assert f"Predicted peak {over.peak_text()}" in question and "⚠ the predicted peak" in question
