@@ -103,7 +103,7 @@ def campaign_end_message(outcome: Any, failure: str = "") -> tuple[str, str]:
     done = sum(counts.get(s, 0) for s in _DONE)
     total = summary.get("total", 0)
     failed = counts.get("ANALYSIS_FAILED", 0)
-    if outcome.exit_code == 0:
+    if outcome.complete:  # exit 0, or 4 when some analyses failed (rig.errors, docs/exit-codes.md)
         note = f" ({failed} with a failed analysis: re-analyse them from the table)" if failed else ""
         return "ok", (f"Campaign complete: {done} of {total} shots done{note}. Its report and certificate: the "
                       "buttons under the Campaign table.")

@@ -135,13 +135,14 @@ def test_how_a_campaign_ended_is_said_for_the_panel():
     def outcome(code: int, message: str, **counts: int) -> SimpleNamespace:
         by_state = {"ANALYSED": 0, "ANALYSIS_FAILED": 0, "SKIPPED": 0, "PLANNED": 0} | counts
         summary = {"by_state": by_state, "total": sum(by_state.values()), "needs_decision": []}
-        return SimpleNamespace(exit_code=code, message=message, summary=summary, last_shot=None)
+        return SimpleNamespace(exit_code=code, message=message, summary=summary, last_shot=None,
+                               complete=all(by_state[s] == 0 for s in ("PLANNED",)))
 
     level, text = campaign_end_message(outcome(3, "campaign stopped with 1 of 3 shots done; paused by the operator; "
                                                   "continue with --resume --out runs/x", ANALYSED=1, PLANNED=2))
     assert level == "warning" and text == ("Campaign paused: 1 of 3 shots done. Press Resume in the Campaign tab "
                                            "to go on.")
-    level, text = campaign_end_message(outcome(0, "campaign complete", ANALYSED=2, ANALYSIS_FAILED=1))
+    level, text = campaign_end_message(outcome(4, "campaign complete", ANALYSED=2, ANALYSIS_FAILED=1))  # exit 4
     assert level == "ok" and text.startswith("Campaign complete: 3 of 3 shots done (1 with a failed analysis")
     level, text = campaign_end_message(None, "Campaign not run: not connected")
     assert level == "error" and text == "Campaign not run: not connected"
