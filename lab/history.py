@@ -160,17 +160,10 @@ def absolute_sensitivity(shots: list[ShotResult], sensor: SensorInfo | None) -> 
     """The stated sensitivity in the sensor's unit (else V, mV or µV per m/s² at the conditioner's input),
     from each shot's figure and the scale its response was divided by; (None, "") when a shot's
     scale is not recorded."""
-    scaled: list[Figure | None] = []
-    for s in shots:
-        figure = s.figures.get("sensitivity")
-        scale = _input_scale(s)
-        if figure is None or figure.value is None:
-            continue
-        if scale is None:
-            return None, ""
-        scaled.append(Figure(figure.value * scale, figure.u * abs(scale) if figure.u is not None else None,
-                             (figure.interval[0] * scale, figure.interval[1] * scale) if figure.interval else None))
-    base = combined_figure(scaled) if scaled else None
+    scaled = _absolute_figures("sensitivity", shots)
+    if scaled is None:
+        return None, ""
+    base = combined_figure(scaled) if any(f is not None for f in scaled) else None
     if base is None:
         return None, ""
     wanted = sensor.sensitivity_unit if sensor and sensor.sensitivity_unit else ""
@@ -210,6 +203,7 @@ class Drift:
     previous_expanded: float | None
     levels: int  # how many like levels were compared
     e_n: float | None
+    unit: str = ""  # "V/(m/s²)": a sensitivity compared as an absolute value; "": as stated
 
     @property
     def drifted(self) -> bool:
@@ -218,7 +212,7 @@ class Drift:
     def to_dict(self) -> dict[str, Any]:
         return {"newest": self.newest, "newest_U": self.newest_expanded, "previous": self.previous,
                 "previous_U": self.previous_expanded, "like_levels": self.levels, "E_n": self.e_n,
-                "drifted": self.drifted}
+                "drifted": self.drifted, "unit": self.unit}
 
 
 def like_shots(newest: Calibration, previous: Calibration) -> tuple[list[ShotResult], list[ShotResult], int]:
@@ -242,17 +236,50 @@ def like_shots(newest: Calibration, previous: Calibration) -> tuple[list[ShotRes
 
 
 def drift_of(key: str, calibrations: list[Calibration]) -> Drift | None:
-    """The newest calibration's `key` against the previous one's at like levels (module doc)."""
+    """The newest calibration's `key` against the previous one's at like levels (module doc). A
+    sensitivity is compared as an absolute value: the same sensor fired with two nominals gives
+    two ratios but one sensitivity."""
     if len(calibrations) < 2:
         return None
     newest_shots, previous_shots, pairs = like_shots(calibrations[-1], calibrations[-2])
-    newest = combined_figure([s.figures.get(key) for s in newest_shots])
-    previous = combined_figure([s.figures.get(key) for s in previous_shots])
+    unit = ""
+    newest_figures, previous_figures = _stated_figures(key, newest_shots), _stated_figures(key, previous_shots)
+    if key in SENSITIVITY_KEYS:
+        newest_abs, previous_abs = _absolute_figures(key, newest_shots), _absolute_figures(key, previous_shots)
+        if newest_abs is not None and previous_abs is not None:
+            newest_figures, previous_figures, unit = newest_abs, previous_abs, "V/(m/s²)"
+        elif len({_input_scale(s) for s in (*newest_shots, *previous_shots)}) != 1:
+            return None  # a scale not recorded, and ratios to different nominals: not comparable
+    newest = combined_figure(newest_figures)
+    previous = combined_figure(previous_figures)
     if newest is None or previous is None or newest.value is None or previous.value is None:
         return None
     variance = (newest.expanded or 0.0) ** 2 + (previous.expanded or 0.0) ** 2
     e_n = (newest.value - previous.value) / math.sqrt(variance) if variance > 0 else None
-    return Drift(key, newest.value, newest.expanded, previous.value, previous.expanded, pairs, e_n)
+    return Drift(key, newest.value, newest.expanded, previous.value, previous.expanded, pairs, e_n, unit)
+
+
+SENSITIVITY_KEYS = ("sensitivity", "shock_sensitivity")  # compared as absolute values (V/(m/s²))
+
+
+def _stated_figures(key: str, shots: list[ShotResult]) -> list[Figure | None]:
+    return [s.figures.get(key) for s in shots]
+
+
+def _absolute_figures(key: str, shots: list[ShotResult]) -> list[Figure | None] | None:
+    """Each shot's `key` in V/(m/s²) at the conditioner's input (None: a shot's scale is not
+    recorded): the same sensor fired with two nominals gives two ratios but one sensitivity."""
+    out: list[Figure | None] = []
+    for s in shots:
+        figure = s.figures.get(key)
+        if figure is None or figure.value is None:
+            out.append(None)
+            continue
+        scale = _input_scale(s)
+        if scale is None:
+            return None
+        out.append(_scaled(figure, scale))
+    return out
 
 
 @dataclass(frozen=True)

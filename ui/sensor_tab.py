@@ -285,10 +285,11 @@ class SensorTab(QWidget):
         used = nominals(history)
         if len(used) > 1 and {c.response_unit for c in history.calibrations} <= set(RATIO_UNITS):
             unit = UNITS[DEFAULT_UNIT]
-            lines.append(f"<span style='color:{TEXT_COLOURS['warning']}'>The shots were analysed with "
-                         f"{len(used)} different nominals ({', '.join(f'{unit.from_si(v):.4g}' for v in sorted(used))} "
-                         f"{unit.name}): E_n of the sensitivities compares their ratios to those nominals, not the "
-                         "sensitivities; compare the absolute values in the table.</span>")
+            compared = history.drift.get("sensitivity")
+            how = ("E_n compares the absolute sensitivities" if compared is not None and compared.unit
+                   else "their ratios to nominal are not compared")
+            lines.append(f"The shots were analysed with {len(used)} different nominals "
+                         f"({', '.join(f'{unit.from_si(v):.4g}' for v in sorted(used))} {unit.name}): {how}.")
         flags = history.flags
         colour = DRIFT_COLOUR if flags else "#137333"
         self.flags.setText(f"<span style='color:{colour}'><b>{'; '.join(flags) or 'no flags'}</b></span><br>"

@@ -108,3 +108,22 @@ def test_the_stated_sensitivity_in_the_sensors_own_unit() -> None:
     assert c.absolute.expanded == pytest.approx(student_t.ppf(0.975, math.inf) * 0.001 * 2e-7 * 1e3 * 9.80665)
     (raw,) = calibrations_of([replace(shots[0], context={})], sensor)
     assert raw.absolute is None  # no scale recorded: never a guess
+
+
+def test_drift_compares_absolute_sensitivities_not_ratios_to_two_nominals() -> None:
+    """One sensor fired with nominal 0.312 and then 0.200 µV/(m/s²): the ratios (0.627, 0.9785)
+    differ by 56 %, the sensitivities (0.19562, 0.19570 µV/(m/s²)) by 0.04 %; E_n compares
+    the sensitivities: the closed form on V/(m/s²)."""
+    from dataclasses import replace
+
+    first = replace(shot("2025-01-01T00:00:00Z", 0.627, 0.002, "a"), context={"sensitivity_v_per_m_s2": 0.312e-6})
+    second = replace(shot("2026-01-01T00:00:00Z", 0.9785, 0.002, "b"), context={"sensitivity_v_per_m_s2": 0.200e-6})
+    drift = history_of([first, second], today=date(2026, 1, 2)).drift["sensitivity"]
+    k = student_t.ppf(0.975, math.inf)
+    a1, a2 = 0.627 * 0.312e-6, 0.9785 * 0.200e-6
+    expected = (a2 - a1) / math.sqrt((k * 0.002 * 0.200e-6) ** 2 + (k * 0.002 * 0.312e-6) ** 2)
+    assert drift.unit == "V/(m/s²)" and drift.newest == pytest.approx(a2, rel=1e-12)
+    assert drift.e_n == pytest.approx(expected, rel=1e-9) and not drift.drifted
+    # one scale not recorded and the other shot's nominal differs: the ratios are not compared at all
+    unknown = replace(second, context={})
+    assert "sensitivity" not in history_of([first, unknown], today=date(2026, 1, 2)).drift
