@@ -400,8 +400,9 @@ class AnalysisConfig:
     sensitivity_v_per_m_s2: Annotated[Positive, Field(description=(
         "accelerometer nominal sensitivity at the amplifier input"))] = 2.0e-7
     sample_rate_hz: Annotated[Number, Field(ge=1e3, le=1e9, description="analysis rate")] = 1e6
-    dcm_widening: Annotated[Number, Field(gt=1, le=1e3, description=(
-        "automatic DCM: widen the model's ±5 % band this many times"))] = 3.0
+    dcm_widening: Annotated[Annotated[Number, Field(gt=1, le=1e3)] | None, Field(description=(
+        "automatic DCM: unset sizes it to each shot's pulse (analysis.dcm_ratio); W widens the model's ±5 % "
+        "band W times instead"))] = None
     dcm_noise_gain_limit: Annotated[Number, Field(gt=0, le=1e6, description=(
         "DCM's white-noise RMS gain allowed at the analysis rate"))] = 4.0
     # A second sensor (digitizer role response_2): its conditioner's gain (set by hand) and its

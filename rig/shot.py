@@ -353,7 +353,7 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
     chain = config.uncertainty.analysis_options()  # the reference chain and the rig's draws
     return AnalysisParams.from_options(
         **chain | {"draws": request.draws if request.draws is not None else chain["draws"]},
-        dcm_widening=a.dcm_widening,
+        dcm_widening=a.dcm_widening,  # None (unset): sized to the pulse
         dcm_noise_gain_limit=a.dcm_noise_gain_limit,
         grating_pitch_m=a.grating_pitch_m,
         orders=tuple(a.orders),

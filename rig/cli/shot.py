@@ -85,8 +85,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-order", type=int, help="highest model order tried by the identification")
     p.add_argument("--sample-rate", type=float, dest="sample_rate_hz", help="analysis sample rate, Hz")
     p.add_argument("--dcm-ratio", default="auto", metavar="auto|R",
-                   help="DCM response-time ratio r (> 0), or 'auto' (default): the r that widens the ±5 %% band "
-                        "[analysis] dcm_widening times within dcm_noise_gain_limit (rig config)")
+                   help="DCM response-time ratio r (> 0), or 'auto' (default): sized to the shot's pulse (or the "
+                        "±5 %% band widened [analysis] dcm_widening times) within dcm_noise_gain_limit (rig config)")
     p.add_argument("--dcm-damping", type=float, help="DCM damping of the new poles")
     p.add_argument("--draws", type=int, help="Monte Carlo draws of the uncertainty (default: the analysis' own)")
     p.add_argument("--no-uncertainty", dest="uncertainty", action="store_false", default=None,

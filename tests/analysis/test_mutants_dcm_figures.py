@@ -220,9 +220,7 @@ def test_rise_times_interpolate_linearly_between_samples() -> None:
 
     def crossing(p: float, level: float) -> float:
         k = math.ceil(math.log(1 - level) / math.log(p) - 1)  # first sample at or above the level
-        if k == 0:
-            return 0.0
-        y0, y1 = 1 - p**k, 1 - p ** (k + 1)
+        y0, y1 = 1 - p**k, 1 - p ** (k + 1)  # y0 = 0 at k = 0: the rest before the step
         return (k - 1) + (level - y0) / (y1 - y0)
 
     model, dcm = first_order_pair()
@@ -232,17 +230,21 @@ def test_rise_times_interpolate_linearly_between_samples() -> None:
 
 
 def test_rise_time_from_the_first_sample_and_its_errors() -> None:
-    """A response at 50 % from its first sample crosses 10 % at 0; one that never reaches 90 % has
-    no rise time; a compensated one that rises within one sample gives no ratio."""
+    """A response at 50 % from its first sample crosses 10 % at −0.8, interpolated from the rest
+    before the step (as from the zeros a FIR stage's delay puts before it: the time does not
+    depend on that delay); one that never reaches 90 % has no rise time; one complete at its
+    first sample rises in 0.8 sample."""
     slow = np.minimum(np.arange(40) / 20.0, 1.0)
-    jump = np.concatenate([[0.5], np.ones(39)])
-    assert StepComparison(jump, jump).rise_times_samples() == (pytest.approx(0.8), pytest.approx(0.8))
+    half = np.concatenate([[0.5], np.ones(39)])
+    assert StepComparison(half, half).rise_times_samples() == (pytest.approx(1.6), pytest.approx(1.6))
+    jump = np.concatenate([[0.95], np.ones(39)])  # 10 % at −1 + 0.1/0.95, 90 % at −1 + 0.9/0.95
     with pytest.raises(AnalysisError, match="never reaches 90 %"):
         StepComparison(np.full(40, 0.8), slow).rise_times_samples()
-    with pytest.raises(AnalysisError, match="rises within one sample"):
-        StepComparison(slow, np.ones(40)).rise_time_ratio()
-    # a compensated rise of 0.8 sample (under one, above none) still gives its ratio: 16 / 0.8
-    assert StepComparison(slow, jump).rise_time_ratio() == pytest.approx(16.0 / 0.8, rel=1e-12)
+    # complete at its first sample: 0.8 sample from the rest before it (until issue 45's fix: 0,
+    # refused as "rises within one sample")
+    assert StepComparison(slow, np.ones(40)).rise_time_ratio() == pytest.approx(16.0 / 0.8, rel=1e-12)
+    # a compensated rise of 0.8/0.95 sample (under one, above none) still gives its ratio
+    assert StepComparison(slow, jump).rise_time_ratio() == pytest.approx(16.0 / (0.8 / 0.95), rel=1e-12)
 
 
 def test_touching_the_tolerance_is_settled() -> None:

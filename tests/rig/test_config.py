@@ -127,6 +127,7 @@ BAD_RIG = [  # (old, new, key, reason): one edit of config/rig.toml and the erro
         ("orders = [1, -1]", "orders = [1, 1]", "analysis.orders", "must differ"),
         ("orders = [1, -1]", "orders = [1, -1, 2]", "analysis.orders", "must have 2 items, got 3"),
         ("orders = [1, -1]", 'orders = [1, "-1"]', "analysis.orders[1]", "must be an integer"),
+        ("# dcm_widening = 3.0", "dcm_widening = 0.5", "analysis.dcm_widening", "must be greater than 1"),
     ]
 
 
