@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench lint clean mutate
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,19 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+# Mutation testing (docs/mutation-testing.md): cosmic-ray on the safe path, FBSD and the response,
+# the DCM's figures and the uncertainty's intervals, each with only its own tests; a copy of the
+# tree is mutated, never the checkout. `make mutate TARGETS="safe response"` runs some of them.
+TARGETS ?= safe response dcm uncertainty
+MUTATE_STAMP := $(VENV)/.mutate-stamp
+
+$(MUTATE_STAMP): pyproject.toml $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[test,mutate]'
+	touch $(MUTATE_STAMP)
+
+mutate: $(MUTATE_STAMP)
+	nice -n 10 mutation/run $(TARGETS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

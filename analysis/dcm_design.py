@@ -7,10 +7,11 @@ noise-gain bound and the latency (issue 11). analysis.dcm holds the paper's desi
   pair of the fit: cancelling the pole alone would leave the zero as a notch). Model zeros are
   never inverted (the DCM's zeros are the cancelled poles only), so a non-minimum-phase zero
   stays what it is; the DCM's poles all lie inside the unit circle.
-- **Ratio.** The paper's r (Eqs. 21-25) from the slowest cancelled pole. Automatic (default):
-  the smallest r whose compensated ±5 % band reaches `widening` × the model's, within the
-  noise-gain limit; when no r reaches it, the r of the widest band within the limit (the
-  smallest r within 1 % of it), and `widening_note` says what stopped it.
+- **Ratio.** The paper's r (Eqs. 21-25) from the slowest cancelled pole, chosen by
+  analysis.dcm_ratio: by default sized to the shot's pulse (the smallest r at which its
+  compensated peak settles), capped by the band limit and the noise-gain limit; without a
+  pulse, the widest band they allow; `widening` W aims for W × the model's ±5 % band instead.
+  The note says why r sits where it does and, when it falls short, what stopped it.
 - **Band limit.** A linear-phase FIR stage after the paper's pole-zero design (`DCM.fir`)
   whose magnitude is a 4th-order Butterworth low-pass's, unit DC gain, with its ±5 % edge at
   the top of the band the shot vouches for: the band the excitation supports (its spectrum ≥
@@ -46,12 +47,13 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from hopkinson.analysis.dcm import (
-    DCM,
-    compare_steps,
-    compensated_fbsd_edges,
-    design_dcm,
-    passband_delay_samples,
+from hopkinson.analysis.dcm import DCM, compare_steps, compensated_fbsd_edges, design_dcm
+from hopkinson.analysis.dcm_ratio import (
+    FALLBACK_WIDENING,
+    RatioChoice,
+    ShotPulse,
+    choose_ratio,
+    compensated_delay_samples,
 )
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SUPPORT_SNR, amplitude_spectrum, pulse_width, pulse_window
@@ -68,7 +70,6 @@ from hopkinson.analysis.response import (
     fbsd_edges,
     frequency_response,
     pole_analysis,
-    response_times_samples,
 )
 from scipy import signal
 
@@ -97,8 +98,6 @@ NEAR_NYQUIST = 0.8  # a mode above this fraction of Nyquist is not resolved by t
 # A pole with a model zero within this fraction of its distance to the unit circle forms a
 # pair that changes the model's gain by at most ~10 %: the fit's spare pole-zero pair.
 DOUBLET = 0.1
-_SEARCH_POINTS = 48
-_MAX_DESIGNED_ANGLE = 0.45 * math.pi  # designed poles' ω_e·T at most 0.45 π (below 0.45 × Nyquist)
 
 
 @dataclass(frozen=True)
@@ -110,6 +109,8 @@ class ShotSupport:
     supported_band_hz: the band the excitation supports (None: not known).
     response_band_top_hz: where the response stops standing above its noise (None: not known).
     channel_delay_samples: the identified input delay (samples at the model's rate).
+    pulse: the shot's reference pulse at the model's rate (None: not known), what the automatic
+    ratio sizes the DCM to (analysis.dcm_ratio).
     """
 
     model: DiscreteModel
@@ -117,15 +118,17 @@ class ShotSupport:
     supported_band_hz: tuple[float, float] | None = None
     response_band_top_hz: float | None = None
     channel_delay_samples: float = 0.0
+    pulse: ShotPulse | None = None
 
     @classmethod
     def from_identification(cls, ident: Any, record: Record | None = None) -> ShotSupport:
         """From an analysis.identify.Identification (and the record at the model's rate, for
-        the response's own signal-to-noise band)."""
+        the response's own signal-to-noise band and the pulse)."""
         top = None
         rms = (getattr(ident, "noise", None) or {}).get("response_rms")
         if record is not None and rms:
             top = response_band_top_hz(record, ident.model, float(rms))
+        pulse = None if record is None else pulse_of(record)
         band = getattr(ident, "supported_band_hz", None)
         return cls(
             model=ident.model,
@@ -133,6 +136,7 @@ class ShotSupport:
             supported_band_hz=tuple(band) if band else None,
             response_band_top_hz=top,
             channel_delay_samples=float(ident.delay_samples),
+            pulse=pulse,
         )
 
     @classmethod
@@ -151,6 +155,14 @@ class ShotSupport:
             response_band_top_hz=_number(data.get("response_band_top_hz")),
             channel_delay_samples=float(model.delay_samples),
         )
+
+
+def pulse_of(record: Record) -> ShotPulse | None:
+    """The record's reference pulse (at the model's rate), None when it has none to size to."""
+    try:
+        return ShotPulse.of(record)
+    except AnalysisError:
+        return None
 
 
 @dataclass(frozen=True)
@@ -275,12 +287,12 @@ _OPTION_FIELDS = {"dcm_ratio": "ratio", "dcm_damping": "damping", "dcm_widening"
 
 @dataclass(frozen=True)
 class DcmOptions:
-    """How to design: ratio None = automatic (for `widening`); band_limit_hz None = automatic,
-    0 = none; noise_gain_limit bounds the automatic design."""
+    """How to design: ratio None = automatic (sized to the pulse, or for `widening` W when given);
+    band_limit_hz None = automatic, 0 = none; noise_gain_limit bounds the automatic design."""
 
     ratio: float | None = None
     damping: float = DEFAULT_DCM_DAMPING
-    widening: float = DEFAULT_DCM_WIDENING
+    widening: float | None = DEFAULT_DCM_WIDENING
     noise_gain_limit: float = DEFAULT_DCM_NOISE_GAIN_LIMIT
     band_limit_hz: float | None = None
     extra_poles: tuple[complex, ...] = ()
@@ -353,7 +365,8 @@ def choose_band_limit(support: ShotSupport, asked_hz: float | None) -> BandLimit
 
 @dataclass(frozen=True)
 class DcmDesign:
-    """A DCM designed for a shot, with the figures issue 11 asks to report."""
+    """A DCM designed for a shot, with the figures issue 11 asks to report. `ratio_choice`: how
+    the automatic ratio was chosen (None: r given, or nothing to cancel)."""
 
     dcm: DCM
     model: DiscreteModel
@@ -368,10 +381,16 @@ class DcmDesign:
     noise_gain: float
     channel_delay_samples: float
     notes: list[str] = field(default_factory=list)
+    ratio_choice: RatioChoice | None = None
 
     @property
     def noise_gain_exceeded(self) -> bool:
         return self.noise_gain > self.options.noise_gain_limit * (1 + 1e-9)
+
+    @property
+    def widening_short(self) -> bool:
+        """The automatic ratio fell short of what it aimed for (the note says what stopped it)."""
+        return self.ratio_choice is not None and self.ratio_choice.short
 
     @property
     def latency_s(self) -> float:
@@ -379,10 +398,14 @@ class DcmDesign:
 
     def to_dict(self) -> dict[str, Any]:
         """The design figures of the results' "dcm" object (issue 11 / CONTRACTS keys)."""
+        choice = self.ratio_choice
+        error = None if choice is None or choice.peak_error is None else 100.0 * choice.peak_error
         return {
             "target_widening": self.target_widening,
             "reached_widening": self.reached_widening,
             "widening_note": self.widening_note,
+            "sized_to": None if choice is None else choice.sized_to.value,
+            "predicted_peak_error_pct": error,
             "noise_gain": self.noise_gain,
             "noise_gain_limit": self.options.noise_gain_limit,
             "band_limit_hz": self.band_limit.cutoff_hz,
@@ -399,23 +422,27 @@ def design_compensation(support: ShotSupport, options: DcmOptions | None = None)
     choice = choose_poles(support)
     limit = choose_band_limit(support, options.band_limit_hz)
     before = {k: e.frequency_hz for k, e in fbsd_edges(model).items()}
-    notes: list[str] = []
     if choice.cancelled.size == 0:
         dcm = _assemble(model, choice, limit, None, options)
         note = "nothing to compensate: no pole of the model is one the shot supports"
-        return _finish(dcm, model, choice, limit, options, before, None, note, support, [note])
+        return _finish(dcm, model, choice, limit, options, before, support, note, [note])
     if options.ratio is not None:
         dcm = _assemble(model, choice, limit, options.ratio, options)
         note = f"ratio r = {options.ratio:g} given: no widening was aimed for"
-        design = _finish(dcm, model, choice, limit, options, before, None, note, support, notes)
+        design = _finish(dcm, model, choice, limit, options, before, support, note, [])
         if design.noise_gain_exceeded:
             design.notes.append(
                 f"the noise gain {design.noise_gain:.3g} exceeds the limit {options.noise_gain_limit:g} at the given r"
             )
         return design
-    ratio, note = _automatic_ratio(model, choice, limit, options, before["5"])
-    dcm = _assemble(model, choice, limit, ratio, options)
-    return _finish(dcm, model, choice, limit, options, before, options.widening, note, support, notes)
+    cap_edge = None if limit.cutoff_hz is None else _BAND_LIMIT_FBSD5 * limit.cutoff_hz
+    cap = "none" if limit.cutoff_hz is None else f"at {limit.cutoff_hz / 1e3:.4g} kHz, {limit.reason}"
+    ratio = choose_ratio(model, choice.cancelled, lambda r: _assemble(model, choice, limit, r, options),
+                         damping=options.damping, noise_gain_limit=options.noise_gain_limit,
+                         model_fbsd5_hz=before["5"], widening=options.widening, pulse=support.pulse,
+                         band_known=limit.cutoff_hz is not None, cap=cap, cap_edge_hz=cap_edge)
+    dcm = _assemble(model, choice, limit, ratio.ratio, options)
+    return _finish(dcm, model, choice, limit, options, before, support, ratio.note, [], ratio)
 
 
 def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio: float | None,
@@ -440,8 +467,8 @@ def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio:
 
 
 def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit, options: DcmOptions,
-            before: dict[str, float], target: float | None, note: str | None, support: ShotSupport,
-            notes: list[str]) -> DcmDesign:
+            before: dict[str, float], support: ShotSupport, note: str | None, notes: list[str],
+            ratio: RatioChoice | None = None) -> DcmDesign:
     after = {k: e.frequency_hz for k, e in compensated_fbsd_edges(model, dcm).items()}
     reached = after["5"] / before["5"] if before["5"] > 0 else None
     notes = notes + [f"the compensated ±{key} % edge is {bound['reason']}: there the compensated response is the "
@@ -450,10 +477,12 @@ def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit
     noise = dcm.noise_gain()
     dt = model.sample_interval_s
     fit_band = min(max(after["5"], before["5"]), 0.4 / dt)  # the band it passes flat
-    in_band = passband_delay_samples(lambda f: frequency_response(model, f) * dcm.frequency_response(f), fit_band, dt)
+    in_band = compensated_delay_samples(model, dcm, before["5"], after["5"])
     latency = support.channel_delay_samples + in_band
+    target = None if ratio is None else ratio.target_widening
     figures = {
         "target_widening": target, "reached_widening": reached, "widening_note": note,
+        "sized_to": None if ratio is None else ratio.sized_to.value,
         "noise_gain": noise, "noise_gain_limit": options.noise_gain_limit,
         "latency": {
             "total_s": latency * dt,
@@ -466,78 +495,7 @@ def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit
     }
     dcm = replace(dcm, design={**dcm.design, **figures}, latency_samples=latency)
     return DcmDesign(dcm, model, choice, limit, options, before, after, target, reached, note, noise,
-                     support.channel_delay_samples, list(notes))
-
-
-def _automatic_ratio(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, options: DcmOptions,
-                     model_fbsd5_hz: float) -> tuple[float, str | None]:
-    """The smallest r reaching the widening within the noise-gain limit, else the best r and why."""
-    target = options.widening * model_fbsd5_hz
-    slowest = float(np.max(response_times_samples(choice.cancelled)))
-    r_max = _MAX_DESIGNED_ANGLE * options.damping * slowest / 3.0
-    if r_max <= 1.0:
-        return r_max, (f"the slowest supported pole already responds within {slowest:.3g} samples: the designed "
-                       "poles cannot be made faster at this sample rate")
-
-    def evaluate(r: float) -> tuple[float, float]:
-        """(compensated ±5 % edge, noise gain) at r; NaN noise for a design that cannot be
-        evaluated (new poles too slow to integrate, say): skipped."""
-        try:
-            dcm = _assemble(model, choice, limit, r, options)
-            return compensated_fbsd_edges(model, dcm, (0.05,))["5"].frequency_hz, dcm.noise_gain()
-        except AnalysisError:
-            return 0.0, math.nan
-
-    limit_ng = options.noise_gain_limit
-    rs: list[float] = []  # evaluable ratios below the target, within the noise limit
-    bands: list[float] = []
-    noisy_from: float | None = None
-    for r in map(float, np.geomspace(1.0, r_max, _SEARCH_POINTS)):
-        band, noise = evaluate(r)
-        if math.isnan(noise):
-            continue
-        if noise > limit_ng:
-            noisy_from = r
-            break
-        if band >= target:
-            return (r if not rs else _bisect(lambda x: evaluate(x)[0] >= target, rs[-1], r)), None
-        rs.append(r)
-        bands.append(band)
-    if noisy_from is not None:
-        if not rs:
-            return noisy_from, (f"even the smallest ratio tried (r = {noisy_from:.3g}) has a noise gain above the "
-                                f"limit {limit_ng:g}; the DCM is designed there")
-        edge = _bisect(lambda x: evaluate(x)[1] > limit_ng, rs[-1], noisy_from) / 1.0005
-        rs.append(edge)
-        bands.append(evaluate(edge)[0])
-    if not rs:
-        raise AnalysisError("DCM: no response-time ratio gives a design that can be evaluated (a pole too slow?)")
-    best = max(bands)
-    r = rs[int(np.flatnonzero(np.asarray(bands) >= 0.99 * best)[0])]
-    return r, _why_short(best, target, model_fbsd5_hz, limit, noisy_from is not None, options)
-
-
-def _why_short(best: float, target: float, model_fbsd5_hz: float, limit: BandLimit, noisy: bool,
-               options: DcmOptions) -> str:
-    aim = f"{options.widening:g}× (±5 % band {target / 1e3:.4g} kHz) was not reached: "
-    got = f"the widest band is {best / 1e3:.4g} kHz (×{best / model_fbsd5_hz:.2f})" if model_fbsd5_hz > 0 else ""
-    if limit.cutoff_hz is not None and best >= 0.8 * _BAND_LIMIT_FBSD5 * limit.cutoff_hz:
-        return (aim + f"the band limit at {limit.cutoff_hz / 1e3:.4g} kHz ({limit.reason}) caps it; " + got)
-    if noisy:
-        return aim + f"the noise gain limit {options.noise_gain_limit:g} stops the ratio; " + got
-    return (aim + "the dynamics the DCM does not cancel (unsupported modes, the model's zeros) or the sample rate "
-            "cap it; " + got)
-
-
-def _bisect(reached: Any, lo: float, hi: float) -> float:
-    """Smallest r in (lo, hi] with reached(r) (reached(lo) False, reached(hi) True), on a log scale.
-    By hand: the band is a step-like function of r near an edge, so no root-finder applies."""
-    for _ in range(30):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (lo, mid) if reached(mid) else (mid, hi)
-        if hi / lo < 1.0005:
-            break
-    return hi
+                     support.channel_delay_samples, list(notes), ratio)
 
 
 def design_report(poles: np.ndarray, dcm: DCM, model: DiscreteModel | None, source: str,
@@ -590,7 +548,7 @@ def poles_only_model(poles: Sequence[complex] | np.ndarray, sample_interval_s: f
 def ratio_for_widening(
     model: DiscreteModel,
     damping: float = DEFAULT_DCM_DAMPING,
-    widening: float = DEFAULT_DCM_WIDENING,
+    widening: float = FALLBACK_WIDENING,
     extra_poles: Sequence[complex] | np.ndarray = (),
 ) -> float:
     """The automatic r for a bare model: every stable pole cancelled, no band limit, no noise

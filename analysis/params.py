@@ -28,7 +28,9 @@ DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/dop
 # The DCM's defaults and the rules its options obey live here, once: analysis.dcm_design's
 # DcmOptions and AnalysisParams.check() both apply `dcm_option_problem`, so the rig's check
 # before FIRE refuses exactly what the design would refuse after it.
-DEFAULT_DCM_WIDENING = 3.0  # DCM: compensated ±5 % band this many times the model's (analysis.dcm_design)
+# DCM: None sizes the compensated band to the shot's pulse (analysis.dcm_ratio); a number W aims for
+# W × the model's ±5 % band instead.
+DEFAULT_DCM_WIDENING: float | None = None
 DEFAULT_DCM_NOISE_GAIN_LIMIT = 4.0  # DCM white-noise RMS gain allowed (12 dB; analysis.dcm_design)
 DEFAULT_DCM_DAMPING = 0.707  # ζ_e of the DCM's new poles
 # Two poles closer than this (relative) are one conjugate pair (analysis.dcm.check_conjugate_pairs).
@@ -52,9 +54,9 @@ class AnalysisParams:
     sample_rate_hz: float = DEFAULT_ANALYSIS_RATE_HZ
     max_order: int = 12
     order: int | None = None  # None: chosen by analysis.identify's order test
-    dcm_ratio: float | None = None  # None: chosen for `dcm_widening`
+    dcm_ratio: float | None = None  # None: automatic (analysis.dcm_ratio)
     dcm_damping: float = DEFAULT_DCM_DAMPING
-    dcm_widening: float = DEFAULT_DCM_WIDENING
+    dcm_widening: float | None = DEFAULT_DCM_WIDENING  # None: sized to the pulse
     extra_poles: tuple[complex, ...] = ()
     # DCM noise gain (white-noise RMS gain at the analysis rate) allowed in the automatic design
     dcm_noise_gain_limit: float = DEFAULT_DCM_NOISE_GAIN_LIMIT
@@ -160,8 +162,8 @@ def dcm_option_problem(
     """The first DCM option the design refuses, as (AnalysisParams field, what it must be), or None.
 
     The rules of analysis.dcm.design_dcm and analysis.dcm_design (DcmOptions, the band limit):
-    ratio None (automatic) or a finite number > 0; damping ζ_e in (0, 1]; widening a finite
-    number > 1; noise gain limit > 0 (inf: no bound); band limit None (from the shot), 0
+    ratio None (automatic) or a finite number > 0; damping ζ_e in (0, 1]; widening None (sized
+    to the pulse) or a finite number > 1; noise gain limit > 0 (inf: no bound); band limit None (from the shot), 0
     (none) or a finite frequency below Nyquist (`nyquist_hz`, when known); extra poles
     finite, inside the unit circle, each complex one with its conjugate. (How many extra
     poles fit depends on the model's poles: only the design can tell.)"""
@@ -169,8 +171,8 @@ def dcm_option_problem(
         return "dcm_ratio", "a finite number above 0 (or none: automatic)"
     if not (_real(damping) and 0 < damping <= 1):
         return "dcm_damping", "the damping ratio ζ_e, a number above 0 and at most 1"
-    if not (_real(widening) and math.isfinite(widening) and widening > 1):
-        return "dcm_widening", "a finite number above 1"
+    if widening is not None and not (_real(widening) and math.isfinite(widening) and widening > 1):
+        return "dcm_widening", "a finite number above 1 (or none: sized to the pulse)"
     if not (_real(noise_gain_limit) and noise_gain_limit > 0):
         return "dcm_noise_gain_limit", "a number above 0 (inf: no bound)"
     if band_limit_hz is not None:

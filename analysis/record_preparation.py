@@ -23,7 +23,7 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand, pulse_width, supported_band
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
 from hopkinson.analysis.input_terms import ONSET, InputTerms, input_terms
-from hopkinson.analysis.noise import COHERENCE_SEGMENT, WELCH_SEGMENT, NoiseSpectrum, is_motion
+from hopkinson.analysis.noise import COHERENCE_SEGMENT, WELCH_SEGMENT, NoiseSpectrum, first_motion, is_motion
 from hopkinson.analysis.numerics import next_fast_len
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
@@ -594,17 +594,16 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
         if key not in split:
             split[key] = [r]
             if r.start > 0:
-                for onset in [r.start, *range(r.start + MOTION_STEP, r.stop - MOTION_TAIL + 1, MOTION_STEP)]:
-                    verdict, msc = is_motion(u[onset:r.stop], y[onset:r.stop], 1.0 / dt)
-                    if verdict:
-                        motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc,
-                                       "reason": "coherent"})
-                        head = slice(r.start, onset)
-                        split[key] = [head] if at_rest_before(head, other_quiet) else []
-                        break
-                else:
-                    if unjudged(r, other_quiet):
-                        split[key] = []
+                onsets = [r.start, *range(r.start + MOTION_STEP, r.stop - MOTION_TAIL + 1, MOTION_STEP)]
+                found = first_motion(u, y, 1.0 / dt, onsets, r.stop)  # is_motion on each tail in turn
+                if found is not None:
+                    onset, msc = found
+                    motion.append({"start_sample": onset, "stop_sample": r.stop, "coherence": msc,
+                                   "reason": "coherent"})
+                    head = slice(r.start, onset)
+                    split[key] = [head] if at_rest_before(head, other_quiet) else []
+                elif unjudged(r, other_quiet):
+                    split[key] = []
         return split[key]
 
     out = []

@@ -54,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from hopkinson.analysis.channel_content import beat_content, pulse_content
 from hopkinson.analysis.doppler import (
     DECIMATED_RATE_HZ,
     BeatPhase,
@@ -256,6 +257,8 @@ def reduce_sensors(
         raise AnalysisError(f"{source}: analysis sample rate must be a finite non-zero number, got {sample_rate_hz!r}")
     responses = {role: check_sensor_channel(role, channel, n, source, full_scale_v.get(role))
                  for role, channel in sensors.items()}
+    for role, response in responses.items():
+        check_carries_pulse(role, response, doppler_v, source)
     reference = reference_phase(doppler_v, sample_interval_s, quadrature_v=quadrature_v,
                                 decimated_rate_hz=decimated_rate_for(sample_rate_hz), source=source,
                                 full_scale_v=full_scale_v)
@@ -287,6 +290,14 @@ def check_sensor_channel(role: str, channel: SensorChannel, n: int, source: str,
     check_not_clipped(response, full_scale_v, f"{source}: {role} channel",
                       "lower the amplifier gain or widen the digitizer's range")
     return response
+
+
+def check_carries_pulse(role: str, response_v: np.ndarray, doppler_v: np.ndarray, source: str) -> None:
+    """AnalysisError naming the role when its channel holds only noise while the object moves
+    (analysis.channel_content: no sensor connected, or a role mapped to an empty channel)."""
+    content = pulse_content(response_v, np.asarray(doppler_v).ravel(), role)
+    if content is not None and content.carries_nothing:
+        raise AnalysisError(f"{source}: {content.message()}")
 
 
 def _reduce_sensor(reference: ReferencePhase, response: np.ndarray, channel: SensorChannel,
@@ -384,6 +395,9 @@ def quadrature_phase(u1_v: np.ndarray, u2_v: np.ndarray, sample_interval_s: floa
     for role, u in (("doppler", u1_v), (QUADRATURE_KEY, u2_v)):
         check_not_clipped(u, (full_scale_v or {}).get(role), f"{source}: {role} channel",
                           "reduce the digitizer's gain or widen its range")
+    content = beat_content(np.asarray(u2_v).ravel(), np.asarray(u1_v).ravel(), QUADRATURE_KEY)
+    if content is not None and content.carries_nothing:  # one photodetector, its partner's role mapped: say so
+        raise AnalysisError(f"{source}: {content.message()}")
     m = max(1, int((1.0 / sample_interval_s) // decimated_rate_hz))
     n_blocks = np.asarray(u1_v).size // m
     if n_blocks < 64:

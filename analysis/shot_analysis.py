@@ -5,10 +5,10 @@ analysis of a shot is the same wherever it runs. `ShotAnalysis.to_dict()` is wha
 store under /analysis; `ShotAnalysis.from_dict` rebuilds the model and the DCM from it.
 
 DCM (analysis.compensation.compensate_shot): designed from the modes the shot supports, with
-the automatic ratio (`dcm_ratio=None`: the r that widens the ±5 % band `dcm_widening` times,
-because the paper's r acts on the decay envelope and a fixed r can narrow a lightly damped
-sensor's band), the noise-gain bound and the band limit; checked on the shot itself, and
-marked not recommended where it does not improve it.
+the automatic ratio (`dcm_ratio=None`: sized to the shot's pulse, analysis.dcm_ratio; or the r
+that widens the ±5 % band `dcm_widening` times), the noise-gain bound and the band limit;
+checked on the shot itself, and marked not recommended where it does not improve it or may
+leave the compensated peak beyond ±5 % of the reference's.
 
 Interferometer and sensors. `analyse_raw_shot` reduces the reference from the PM beat, or from
 a quadrature interferometer's pair when its second photodetector is given (analysis.reduce);
@@ -40,7 +40,12 @@ from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.reduce import SensorChannel, check_sensor_channel, reduce_sensors
+from hopkinson.analysis.reduce import (
+    SensorChannel,
+    check_carries_pulse,
+    check_sensor_channel,
+    reduce_sensors,
+)
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 from hopkinson.analysis.sine_comparison import read_sine_calibration
@@ -48,9 +53,9 @@ from hopkinson.analysis.sine_joint import with_draws
 from hopkinson.analysis.uncertainty import shot_uncertainty
 
 # Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
-COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "noise_gain", "noise_gain_limit",
-                     "band_limit_hz", "band_limit_reason", "latency_s", "recommended", "not_recommended_reason",
-                     "check", "compensated_peak")
+COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "sized_to", "predicted_peak_error_pct",
+                     "noise_gain", "noise_gain_limit", "band_limit_hz", "band_limit_reason", "latency_s", "recommended",
+                     "not_recommended_reason", "check", "compensated_peak")
 
 
 @dataclass
@@ -233,6 +238,7 @@ def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_inter
         try:
             own.check()
             check_sensor_channel(role, channel, np.asarray(doppler_v).size, source, (full_scale_v or {}).get(role))
+            check_carries_pulse(role, np.asarray(volts, dtype=float).ravel(), doppler_v, source)
         except AnalysisError as exc:
             errors[role] = str(exc)
         else:  # the reference's constants are the first sensor's

@@ -11,7 +11,10 @@ four ways in the same run:
                      `hopkinson compensate` does), latency kept (--causal)
     stream aligned   the same with the latency removed (fractional-delay FIR, held-back tail)
 The stream's output equals the whole-record filter (checked). Figures are samples per second
-(best of the repeats) and ratios to the baseline. The last line of output is one JSON object.
+(best of the repeats) and ratios to the baseline. Then the design itself, timed (best of the
+repeats): the automatic ratio sized to a 38.6 µs half-sine pulse (analysis.dcm_ratio, what every
+shot analysis does) against the former fixed ×3 widening. The last line of output is one JSON
+object.
 
 Usage: .venv/bin/python benchmarks/bench_compensate.py [--samples N] [--block B] [--repeats R]
 """
@@ -25,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 from hopkinson.analysis.dcm import DcmStream, apply
-from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
+from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from scipy import signal
@@ -38,6 +41,28 @@ def best_rate(run: Callable[[], np.ndarray], samples: int, repeats: int) -> tupl
         out = run()
         best = min(best, time.perf_counter() - start)
     return samples / best, out
+
+
+def design_times(model: DiscreteModel, repeats: int) -> dict[str, float]:
+    """Seconds (best of `repeats`) to design the shot's DCM: sized to a 38.6 µs half-sine pulse
+    through the model, and for a fixed ×3 widening."""
+    from hopkinson.analysis.dcm_ratio import ShotPulse
+    from hopkinson.analysis.records import Record
+    from hopkinson.analysis.response import model_output
+
+    t = np.arange(4000) * model.sample_interval_s - 1e-3
+    u = np.where((t >= 0) & (t <= 38.6e-6), np.sin(np.pi * t / 38.6e-6), 0.0)
+    pulse = ShotPulse.of(Record(model.sample_interval_s, u, model_output(model, u)))
+    support = ShotSupport(model, supported_band_hz=(0.0, 38_000.0), pulse=pulse)
+    out = {}
+    for name, options in (("pulse", DcmOptions()), ("widening_3", DcmOptions(widening=3.0))):
+        best = float("inf")
+        for _ in range(repeats):
+            start = time.perf_counter()
+            design_compensation(support, options)
+            best = min(best, time.perf_counter() - start)
+        out[name] = best
+    return out
 
 
 def streamed(stream: DcmStream, x: np.ndarray, block: int) -> np.ndarray:
@@ -73,6 +98,9 @@ def main() -> None:
     assert aligned.size == n
     for name, rate in rates.items():
         print(f"{name:<15} {rate / 1e6:9.1f} Msamples/s   x{rate / rates['lfilter_whole']:.2f} of lfilter whole")
+    design_s = design_times(DiscreteModel(dt, a, b), args.repeats)
+    print(f"design sized to the pulse {design_s['pulse']:.3f} s, with a fixed ×3 widening {design_s['widening_3']:.3f} s "
+          f"(x{design_s['pulse'] / design_s['widening_3']:.2f})")
     print(json.dumps({
         "benchmark": "compensate",
         "samples": n,
@@ -81,6 +109,8 @@ def main() -> None:
         "band_limit_taps": 0 if dcm.fir is None else int(dcm.fir.size),
         "samples_per_s": {k: round(v) for k, v in rates.items()},
         "ratio_to_lfilter_whole": {k: round(v / rates["lfilter_whole"], 3) for k, v in rates.items()},
+        "design_s": {k: round(v, 4) for k, v in design_s.items()},
+        "design_ratio_pulse_to_widening_3": round(design_s["pulse"] / design_s["widening_3"], 3),
     }))
 
 

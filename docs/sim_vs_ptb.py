@@ -1,4 +1,4 @@
-"""A simulated shock record beside PTB's real one (README, "Realistic simulated records").
+"""A simulated shock record beside PTB's real one (docs/bar-physics.md, "Realistic simulated records").
 
     .venv/bin/python -m pip install PyDynamic      # only for this figure: PTB's record ships in it
     .venv/bin/python docs/sim_vs_ptb.py [--out docs/sim-vs-ptb.png] [--projectile 1] [--pressure-bar 4]

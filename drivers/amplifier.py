@@ -13,11 +13,11 @@ command they answer (an echo check: a stale or foreign reply is never taken for 
 command               reply                   meaning
 ====================  ======================  ==========================================
 ``*IDN?``             ``*IDN v,model,sn,fw``  identity
-``EXC <volts>``       ``EXC OK``              bridge excitation, 0.5 … 10 V
+``EXC <volts>``       ``EXC OK``              bridge excitation, 0.5 … 10 V (EXCITATION)
 ``EXC?``              ``EXC 5.000``
-``GAIN <g>``          ``GAIN OK``             gain, one of GAINS
+``GAIN <g>``          ``GAIN OK``             gain, one of GAIN.values
 ``GAIN?``             ``GAIN 10``
-``LP <hz>|OFF``       ``LP OK``               low-pass filter corner, one of LOWPASS_HZ
+``LP <hz>|OFF``       ``LP OK``               low-pass filter corner, one of LOWPASS.values
 ``LP?``               ``LP 200000`` / ``LP OFF``
 ``AZ``                ``AZ OK``               auto-zero (bridge balance); clears overload
 ``SHUNT ON|OFF``      ``SHUNT OK``            shunt calibration resistor in/out
@@ -28,6 +28,9 @@ command               reply                   meaning
 ====================  ======================  ==========================================
 
 An error is ``<VERB> ERR <REASON>`` (UNKNOWN, RANGE, SYNTAX, CHECKSUM).
+
+The three settings are declared once (`SETTINGS`, drivers/controls.py: their commands and
+allowed values); rig/config.py checks a rig file's [amplifier] against the same declarations.
 
 Example bytes: the driver sends ``b"GAIN 20*23\\n"``; the amplifier answers ``b"GAIN OK*25\\n"``.
 
@@ -42,13 +45,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from hopkinson.drivers.base import TraceHook
+from hopkinson.drivers.controls import Control
 from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
 from hopkinson.drivers.roles import AmplifierSettings
 from hopkinson.drivers.serial_link import SerialLineDriver
 
-GAINS: tuple[float, ...] = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
-LOWPASS_HZ: tuple[float, ...] = (1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3)  # plus 0 = OFF
-EXCITATION_RANGE_V = (0.5, 10.0)
+EXCITATION = Control("excitation_v", "excitation", "EXC?", "EXC {}", limits=(0.5, 10.0), unit="V", text="{:.3f}")
+GAIN = Control("gain", "gain", "GAIN?", "GAIN {}", values=(1, 2, 5, 10, 20, 50, 100, 200, 500, 1000))
+LOWPASS = Control("lowpass_hz", "low-pass", "LP?", "LP {}", unit="Hz", words={0.0: "OFF"},
+                  values=(0.0, 1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3))  # 0 = filter off
+SETTINGS = (EXCITATION, GAIN, LOWPASS)  # in the order `configure` sets them
 MAX_LINE_BYTES = 256
 
 
@@ -131,35 +137,26 @@ class BridgeAmplifier(SerialLineDriver):
         return self.query("*IDN?")
 
     def set_excitation_v(self, excitation_v: float) -> None:
-        """Bridge excitation voltage, 0.5 … 10 V."""
-        low, high = EXCITATION_RANGE_V
-        if not low <= excitation_v <= high:
-            raise ValueError(f"{self.name}: excitation {excitation_v} V outside {low}..{high} V")
-        self._expect_ok(f"EXC {excitation_v:.3f}")
+        """Bridge excitation voltage, within EXCITATION.limits."""
+        self._set(EXCITATION, excitation_v)
 
     def excitation_v(self) -> float:
-        return self._number("EXC?")
+        return self._get(EXCITATION)
 
     def set_gain(self, gain: float) -> None:
-        """Amplifier gain, one of GAINS."""
-        if gain not in GAINS:
-            raise ValueError(f"{self.name}: gain {gain} not one of {', '.join(f'{g:g}' for g in GAINS)}")
-        self._expect_ok(f"GAIN {gain:g}")
+        """Amplifier gain, one of GAIN.values."""
+        self._set(GAIN, gain)
 
     def gain(self) -> float:
-        return self._number("GAIN?")
+        return self._get(GAIN)
 
     def set_lowpass_hz(self, lowpass_hz: float) -> None:
-        """Low-pass corner, one of LOWPASS_HZ, or 0 to switch the filter off."""
-        if lowpass_hz != 0 and lowpass_hz not in LOWPASS_HZ:
-            raise ValueError(f"{self.name}: low-pass {lowpass_hz} Hz not one of "
-                             f"{', '.join(f'{f:g}' for f in LOWPASS_HZ)} or 0 (off)")
-        self._expect_ok("LP OFF" if lowpass_hz == 0 else f"LP {lowpass_hz:g}")
+        """Low-pass corner, one of LOWPASS.values (0 switches the filter off)."""
+        self._set(LOWPASS, lowpass_hz)
 
     def lowpass_hz(self) -> float:
         """The low-pass corner in Hz; 0 when the filter is off."""
-        value = self.query("LP?")
-        return 0.0 if value == "OFF" else self._to_float("LP?", value)
+        return self._get(LOWPASS)
 
     def auto_zero(self) -> None:
         """Balance the bridge (zero the output); also clears the overload latch."""
@@ -184,11 +181,11 @@ class BridgeAmplifier(SerialLineDriver):
         return self._number("OUT?")
 
     def configure(self, *, gain: float, excitation_v: float, lowpass_hz: float) -> None:
-        """Set excitation, gain and low-pass, then read them back to check."""
-        self.set_excitation_v(excitation_v)
-        self.set_gain(gain)
-        self.set_lowpass_hz(lowpass_hz)
-        got = (self.excitation_v(), self.gain(), self.lowpass_hz())
+        """Set excitation, gain and low-pass (`SETTINGS`), then read them back to check."""
+        wanted = {"excitation_v": excitation_v, "gain": gain, "lowpass_hz": lowpass_hz}
+        for control in SETTINGS:
+            self._set(control, wanted[control.name])
+        got = tuple(self._get(control) for control in SETTINGS)
         if abs(got[0] - excitation_v) > 1e-3 or got[1] != gain or got[2] != lowpass_hz:
             raise InstrumentError(self.name, "configure", "settings did not stick",
                                   f"EXC {got[0]}, GAIN {got[1]:g}, LP {got[2]:g}")
@@ -245,6 +242,20 @@ class BridgeAmplifier(SerialLineDriver):
             return parse_line(line)
         except FramingError as exc:
             raise _GarbledReply(str(exc), line) from exc
+
+    def _set(self, control: Control, value: float) -> None:
+        try:
+            command = control.command(value)
+        except ValueError as exc:
+            raise ValueError(f"{self.name}: {exc}") from None
+        self._expect_ok(command)
+
+    def _get(self, control: Control) -> float:
+        value = self.query(control.get_command)
+        try:
+            return control.parse(value)
+        except ValueError:
+            raise InstrumentError(self.name, control.get_command, "reply is not a number", value) from None
 
     def _expect_ok(self, command: str) -> None:
         value = self.query(command)

@@ -11,6 +11,9 @@ from `config/rig.toml`:
   convention; "little": low word first), and engineering value = raw * scale + offset.
   address -1 = absent. A plain integer in the config is a uint16 at that address, scale 1.
 
+Every field declares its own bounds and meaning (drivers/config_fields.py): rig/config.py
+validates a rig file's [valve_controller.*] tables against these classes.
+
 Encoding refuses what a register cannot hold (RegisterRangeError, a ValueError): a value is
 never clipped or wrapped on its way to the controller. The byte packing is pymodbus's own
 (`convert_to_registers` / `convert_from_registers`).
@@ -18,12 +21,15 @@ never clipped or wrapped on its way to the controller. The byte packing is pymod
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Literal
+from typing import Annotated, Any, Literal
 
+from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number
+from pydantic import BeforeValidator, Field
 from pymodbus.client.mixin import ModbusClientMixin
 
 _DT = ModbusClientMixin.DATATYPE
@@ -36,6 +42,13 @@ REGISTER_TYPES: dict[str, tuple[_DT, int, float, float]] = {
     "float32": (_DT.FLOAT32, 2, -3.4028234663852886e38, 3.4028234663852886e38),
 }
 WORD_ORDERS = ("big", "little")
+RegisterType = Literal["int16", "uint16", "int32", "uint32", "float32"]  # the keys of REGISTER_TYPES
+WordOrder = Literal["big", "little"]
+# A bit's address: -1 = the controller has no such bit; a signal every controller has: 0 and up.
+Bit = Annotated[Int, Field(ge=-1, le=65535, description="address 0..65535, or -1: the controller has none"),
+                Hint("-1 (none) or an address 0..65535")]
+RequiredBit = Annotated[Int, Field(ge=0, le=65535, description="address 0..65535")]
+FLOAT32_SMALLEST_READING = 1e-9  # a float32 reading closer to zero (but not zero) is no rig gauge's
 
 
 class RegisterRangeError(ValueError):
@@ -46,11 +59,14 @@ class RegisterRangeError(ValueError):
 class Register:
     """One value in holding or input registers (module docstring); address -1 = absent."""
 
-    address: int = -1
-    type: str = "uint16"
-    word_order: str = "big"
-    scale: float = 1.0
-    offset: float = 0.0
+    __pydantic_config__ = SECTION
+    address: Bit = -1
+    type: Annotated[RegisterType, Field(description="how the value is packed")] = "uint16"
+    word_order: Annotated[WordOrder, Field(description="32-bit values: big = high word first (Modicon), "
+                                                       "little = low word first"),
+                          Hint("big: high word first; little: low word first")] = "big"
+    scale: Annotated[Number, Field(description="value = raw * scale + offset; non-zero")] = 1.0
+    offset: Number = 0.0
 
     def __post_init__(self) -> None:
         if self.type not in REGISTER_TYPES:
@@ -111,11 +127,50 @@ class Register:
 
     def decode(self, words: Sequence[int]) -> float:
         """Engineering value of the register words."""
+        return self.raw(words) * self.scale + self.offset
+
+    def raw(self, words: Sequence[int]) -> float:
+        """The words as the register's type reads them, before scale and offset."""
         if len(words) != self.words:
             raise ValueError(f"{self.type} needs {self.words} words, got {len(words)}")
         data_type = REGISTER_TYPES[self.type][0]
-        raw = ModbusClientMixin.convert_from_registers(list(words), data_type, word_order=self._order)
-        return float(raw) * self.scale + self.offset  # type: ignore[arg-type]
+        return float(ModbusClientMixin.convert_from_registers(  # type: ignore[arg-type]
+            list(words), data_type, word_order=self._order))
+
+    def implausibly_small(self, words: Sequence[int]) -> bool:
+        """True for a float32 that is not zero yet below FLOAT32_SMALLEST_READING in magnitude:
+        no instrument reports such a number, but two words in the wrong order often read as one
+        (2.0 with its words swapped reads 2.3e-41)."""
+        if not self.is_float:
+            return False
+        raw = self.raw(words)
+        return raw != 0.0 and abs(raw) < FLOAT32_SMALLEST_READING
+
+    def reinterpretations(self) -> list[Register]:
+        """The same address read the other ways a PLC's documentation is commonly misread: a
+        32-bit value in the other word order, or as the other 32-bit types in either order; a
+        16-bit value with the other signedness. Scale and offset are kept."""
+        if self.words == 1:
+            others = [dataclasses.replace(self, type="int16" if self.type == "uint16" else "uint16")]
+        else:
+            others = [dataclasses.replace(self, type=t, word_order=o)
+                      for t in ("float32", "int32", "uint32") for o in WORD_ORDERS]
+            others.sort(key=lambda r: (r.type != self.type, r.word_order == self.word_order))
+        return [r for r in others if r != self]
+
+    def changes_from(self, other: Register) -> str:
+        """How this register is written differently from `other`, as TOML keys
+        ('word_order = "little"', 'type = "int32", word_order = "little"')."""
+        return ", ".join(f'{name} = "{getattr(self, name)}"' for name in ("type", "word_order")
+                         if getattr(self, name) != getattr(other, name))
+
+    def describe(self, table: str) -> str:
+        """Where and how the value is read: 'input registers 0..1, float32 big, x0.001'."""
+        span = f"{self.address}" if self.words == 1 else f"{self.address}..{self.address + 1}"
+        order = f" {self.word_order}" if self.words == 2 else ""
+        scaled = f", x{self.scale:g}" if self.scale != 1.0 else ""
+        scaled += f" {self.offset:+g}" if self.offset else ""
+        return f"{table.replace('_', ' ')} {span}, {self.type}{order}{scaled}"
 
     @property
     def _order(self) -> Literal["big", "little"]:
@@ -126,14 +181,31 @@ def _reg(address: int, scale: float = 1.0, type_: str = "uint16") -> Register:
     return Register(address, type=type_, scale=scale)
 
 
+def _address_only(value: Any) -> Any:
+    """A register written as a plain address: a uint16 there, scale 1."""
+    return {"address": value} if isinstance(value, int) and not isinstance(value, bool) else value
+
+
+# A register field of a map: a table, or a plain address (a uint16 at that address, scale 1).
+RegisterField = Annotated[Register, BeforeValidator(_address_only, json_schema_input_type=int | Register)]
+
+
+ACTUATORS = ("fire_valve", "fill_valve", "vent_valve", "vacuum_pump")
+
+
 @dataclass(frozen=True)
 class CoilMap:
-    """Coil addresses of the four actuators (True = open / running)."""
+    """Coil addresses of the four actuators (True = open / running) and, for a PLC that fires
+    on a coil of its own (docs/plc-fire-styles.md), that fire coil (-1 = none: the fire
+    styles that need a coil then use fire_valve)."""
 
-    fire_valve: int = 0
-    fill_valve: int = 1
-    vent_valve: int = 2
-    vacuum_pump: int = 3
+    __pydantic_config__ = SECTION
+    fire_valve: RequiredBit = 0
+    fill_valve: RequiredBit = 1
+    vent_valve: RequiredBit = 2
+    vacuum_pump: RequiredBit = 3
+    fire_command: Annotated[Bit, Field(description="a coil of its own that starts the PLC's timed pulse "
+                                                   "(docs/plc-fire-styles.md; -1: none)")] = -1
 
 
 @dataclass(frozen=True)
@@ -141,12 +213,13 @@ class DiscreteInputMap:
     """Discrete-input addresses: interlocks (True = safe) and valve positions (True = open;
     -1 = the controller reports no position)."""
 
-    door_closed: int = 0
-    fixture_clamped: int = 1
-    estop_healthy: int = 2
-    fire_valve_open: int = 8
-    fill_valve_open: int = 9
-    vent_valve_open: int = 10
+    __pydantic_config__ = SECTION
+    door_closed: Annotated[RequiredBit, Field(description="interlock: True = the door is closed")] = 0
+    fixture_clamped: Annotated[RequiredBit, Field(description="interlock: True = the fixture is clamped")] = 1
+    estop_healthy: Annotated[RequiredBit, Field(description="interlock: True = the e-stop chain is healthy")] = 2
+    fire_valve_open: Annotated[Bit, Field(description="limit switch: True = open (-1: none)")] = 8
+    fill_valve_open: Annotated[Bit, Field(description="limit switch: True = open (-1: none)")] = 9
+    vent_valve_open: Annotated[Bit, Field(description="limit switch: True = open (-1: none)")] = 10
 
 
 @dataclass(frozen=True)
@@ -156,15 +229,20 @@ class HoldingRegisterMap:
     pressure_setpoint: reservoir set-point (bar). projectile: the projectile type loaded
     (1..3; -1 = none). heartbeat: link-watchdog register (0 = stop, 1 = start a session and
     clear a trip, 2..65535 = beats). watchdog_ms: the watchdog time the controller applies
-    (absent: the controller's own setting). fire_pulse_ms: writing N opens the fire valve for
-    N ms, timed by the controller.
+    (absent: the controller's own setting). fire_pulse_ms: the fire pulse's length in ms, timed
+    by the controller: writing it starts the pulse, or it is the preset a fire coil or command
+    word starts (the fire style, docs/plc-fire-styles.md). fire_command: the command word that
+    starts a pulse of the preset (-1 = none).
     """
 
-    pressure_setpoint: Register = field(default_factory=lambda: _reg(0, 0.001))
-    projectile: int = 1
-    heartbeat: int = 2
-    watchdog_ms: Register = field(default_factory=lambda: _reg(3))
-    fire_pulse_ms: Register = field(default_factory=lambda: _reg(4))
+    __pydantic_config__ = SECTION
+    pressure_setpoint: RegisterField = field(default_factory=lambda: _reg(0, 0.001))
+    projectile: Bit = 1
+    heartbeat: Bit = 2
+    watchdog_ms: RegisterField = field(default_factory=lambda: _reg(3))
+    fire_pulse_ms: RegisterField = field(default_factory=lambda: _reg(4))
+    fire_command: Annotated[Bit, Field(description="the command word that starts a pulse of the preset "
+                                                   "(docs/plc-fire-styles.md; -1: none)")] = -1
 
 
 @dataclass(frozen=True)
@@ -175,10 +253,11 @@ class InputRegisterMap:
     1 armed, 2 tripped; -1 = not reported), fire_pulse_count (pulses fired).
     """
 
-    reservoir_pressure: Register = field(default_factory=lambda: _reg(0, 0.001))
-    fixture_vacuum: Register = field(default_factory=lambda: _reg(1, 0.1))
-    watchdog_state: int = 2
-    fire_pulse_count: Register = field(default_factory=lambda: _reg(4, type_="uint32"))
+    __pydantic_config__ = SECTION
+    reservoir_pressure: RegisterField = field(default_factory=lambda: _reg(0, 0.001))
+    fixture_vacuum: RegisterField = field(default_factory=lambda: _reg(1, 0.1))
+    watchdog_state: Bit = 2
+    fire_pulse_count: RegisterField = field(default_factory=lambda: _reg(4, type_="uint32"))
 
 
 @dataclass(frozen=True)
@@ -189,6 +268,7 @@ class RegisterMap:
     positions after a gap in the discrete inputs, a 32-bit pulse counter after a gap in the
     input registers."""
 
+    __pydantic_config__ = SECTION
     coils: CoilMap = field(default_factory=CoilMap)
     discrete_inputs: DiscreteInputMap = field(default_factory=DiscreteInputMap)
     holding_registers: HoldingRegisterMap = field(default_factory=HoldingRegisterMap)

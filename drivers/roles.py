@@ -226,12 +226,16 @@ class ValveControllerRole(Instrument, Protocol):
         """True when the controller's watchdog lapsed since the current session started."""
         ...
 
-    def fire_pulse(self, duration_s: float) -> None:
-        """Have the controller open the fire valve for `duration_s` and close it itself;
-        InstrumentError when its interlock chain refuses."""
+    def fire_pulse(self, duration_s: float) -> bool | None:
+        """Have the controller open the fire valve for `duration_s` and close it itself (in the
+        PLC's fire style, docs/plc-fire-styles.md); InstrumentError when its interlock chain
+        refuses. Returns True when the valve was read back open during the pulse, False when it
+        read back shut throughout, None when it cannot tell (then the pulse counter or the
+        digitizer's trigger confirms the shot)."""
 
     def fire_pulse_count(self) -> int:
-        """Pulses the controller really fired (read before and after to confirm a shot)."""
+        """Pulses the controller really fired (read before and after to confirm a shot). A driver
+        whose controller has no counter says so with `has_pulse_counter = False` (optional)."""
         ...
 
 

@@ -23,9 +23,13 @@ What the software cannot guarantee, the controller does:
   the controller hears nothing for `watchdog_s`, it de-energises fill and fire, stops the
   pump and opens the vent, and latches "tripped" until the next session. `stop_heartbeat()`
   writes 0 (disarm). A read-only client (`status`, `probe`) never writes the register.
-- **Fire pulse.** `fire_pulse(duration_s)` writes the length in ms; the controller opens the
-  fire valve and closes it itself, and counts the pulse (`fire_pulse_count()`). A pulse its
-  interlock chain refuses is answered with a Modbus exception: InstrumentError naming why.
+- **Fire pulse.** `fire_pulse(duration_s)` fires the way the PLC does it, its fire style
+  (drivers/fire_styles.py, docs/plc-fire-styles.md): by default it writes the length in ms and
+  the controller opens the fire valve, closes it itself and counts the pulse
+  (`fire_pulse_count()`). It watches the fire valve through the pulse and returns whether it
+  was read back open (True), read back shut throughout (False), or could not be told apart
+  from the host's own command (None). A pulse the interlock chain refuses is answered with a
+  Modbus exception: InstrumentError naming why.
 
 Errors name the instrument, the Modbus function and address, and what came back.
 """
@@ -34,13 +38,15 @@ from __future__ import annotations
 
 import contextlib
 import threading
-from dataclasses import fields
+import time
 from typing import Any
 
 from hopkinson.drivers.base import TraceHook
 from hopkinson.drivers.errors import InstrumentError
+from hopkinson.drivers.fire_styles import FIRE_STYLE_DOC, FireStyle, how_it_fires
 from hopkinson.drivers.modbus_link import ModbusDriver, ModbusRefusal, ModbusTarget
 from hopkinson.drivers.registers import (
+    ACTUATORS,
     CoilMap,
     DiscreteInputMap,
     HoldingRegisterMap,
@@ -63,6 +69,8 @@ __all__ = [
 HEARTBEAT_STOP, HEARTBEAT_START, HEARTBEAT_FIRST_BEAT = 0, 1, 2
 DEFAULT_WATCHDOG_S = 3.0
 _VALVES = ("fire_valve", "fill_valve", "vent_valve")
+PULSE_WATCH_MARGIN_S = 0.3  # how long after its end a pulse is still watched for
+PULSE_POLL_S = 0.01  # the fire valve's read-back during a pulse
 
 
 class ValveController(ModbusDriver):
@@ -80,6 +88,9 @@ class ValveController(ModbusDriver):
         timeout_s: float = 1.0,
         retries: int = 0,
         watchdog_s: float = DEFAULT_WATCHDOG_S,
+        fire_style: str = FireStyle.PULSE_REGISTER,
+        fire_command_value: int = 1,
+        host_timed_fire_allowed: bool = False,
         name: str | None = None,
         trace: TraceHook | None = None,
     ) -> None:
@@ -87,8 +98,16 @@ class ValveController(ModbusDriver):
                          name=name or f"valve controller {target.label}", trace=trace)
         if not 0 < watchdog_s <= 3600:
             raise ValueError(f"{self.name}: watchdog_s must be in (0, 3600] s, got {watchdog_s!r}")
+        if fire_style not in FireStyle.__members__.values():
+            raise ValueError(f"{self.name}: fire_style must be one of {', '.join(FireStyle)}, got {fire_style!r}")
+        if not 1 <= fire_command_value <= 0xFFFF:
+            raise ValueError(f"{self.name}: fire_command_value must be 1..65535, got {fire_command_value!r}")
         self.map = register_map or RegisterMap()
         self.watchdog_s = float(watchdog_s)
+        self.fire_style = FireStyle(fire_style)
+        self.fire_command_value = int(fire_command_value)
+        self.host_timed_fire_allowed = bool(host_timed_fire_allowed)
+        self.last_pulse_s: float | None = None  # the pulse last fired (plc_preset_coil: the PLC's preset)
         # One stop event per heartbeat session: a thread that outlived its stop (its join timed
         # out while it waited for a slow transaction) ends as soon as it looks, and a new
         # session can never revive it.
@@ -119,8 +138,12 @@ class ValveController(ModbusDriver):
 
     # -- actuators ------------------------------------------------------------------------------
     def set_fire_valve(self, open_: bool) -> None:
-        """Open or close the fire valve directly (a shot should use `fire_pulse`)."""
+        """Open or close the fire valve directly (a shot should use `fire_pulse`). Closing it
+        also withdraws a fire command (the fire coil off, the command word 0) where the fire
+        style has one."""
         self._write_coil("fire_valve", open_)
+        if not open_:
+            self._withdraw_fire_command()
 
     def set_fill_valve(self, open_: bool) -> None:
         """Open the fill valve (the controller fills up to the set-point) or close it."""
@@ -137,11 +160,11 @@ class ValveController(ModbusDriver):
     def valves(self) -> ValveStates:
         """The coils as commanded and, where the map has position inputs, the real positions."""
         c, d = self.map.coils, self.map.discrete_inputs
-        coils = self.read_bits("coils", [getattr(c, f.name) for f in fields(c)])
+        coils = self.read_bits("coils", [getattr(c, name) for name in ACTUATORS])
         mapped = {v: getattr(d, f"{v}_open") for v in _VALVES if getattr(d, f"{v}_open") >= 0}
         positions = self.read_bits("discrete inputs", mapped.values()) if mapped else {}
         return ValveStates(
-            *(coils[getattr(c, f.name)] for f in fields(c)),
+            *(coils[getattr(c, name)] for name in ACTUATORS),
             **{f"{v}_position": positions[a] for v, a in mapped.items()},
         )
 
@@ -263,17 +286,138 @@ class ValveController(ModbusDriver):
         return self.watchdog_state() == "tripped"
 
     # -- fire pulse -----------------------------------------------------------------------------
-    def fire_pulse(self, duration_s: float) -> None:
-        """Have the controller open the fire valve for `duration_s` and close it itself."""
-        register = self.map.holding_registers.fire_pulse_ms
-        self._required("fire_pulse_ms", register.address)
+    def fire_pulse(self, duration_s: float) -> bool | None:
+        """Fire a pulse of `duration_s` the PLC's way (its fire style, module docstring) and
+        watch the fire valve through it. Returns True when the valve was read back open, False
+        when it read back shut throughout, None when nothing but the host's own command could
+        be read back. InstrumentError when the controller refuses (naming why)."""
         if not 0 < duration_s <= 60:
             raise ValueError(f"{self.name}: fire pulse must be in (0, 60] s, got {duration_s!r}")
+        style = self.fire_style
+        h = self.map.holding_registers
+        if style.writes_preset:
+            self._required("fire_pulse_ms", h.fire_pulse_ms.address)
+        if style == FireStyle.PRESET_AND_COMMAND:
+            self._required("fire_command", h.fire_command)
+        if style == FireStyle.HOST_TIMED_COIL and not (self.host_timed_fire_allowed and self.heartbeat_running):
+            why = ("the lab has not allowed it (valve_controller.host_timed_fire_allowed)"
+                   if not self.host_timed_fire_allowed else "no heartbeat runs, so the watchdog cannot back it")
+            raise InstrumentError(self.name, "fire pulse", f"a pulse timed by this computer is refused: {why}")
+        if style == FireStyle.PLC_PRESET_COIL and h.fire_pulse_ms.present:
+            with contextlib.suppress(InstrumentError):  # the PLC's own preset, when it can be read
+                preset_s = self._read_one("holding registers", "fire_pulse_ms", h.fire_pulse_ms) / 1000.0
+                if 0 < preset_s <= 60:
+                    duration_s = preset_s
+        self.last_pulse_s = duration_s
         try:
-            self.write_value(register, duration_s * 1000.0, "fire pulse", "ms")
+            if style == FireStyle.PULSE_REGISTER:
+                self.write_value(h.fire_pulse_ms, duration_s * 1000.0, "fire pulse", "ms")
+            elif style.writes_preset:
+                self.write_value(h.fire_pulse_ms, duration_s * 1000.0, "fire pulse preset", "ms")
+            started = time.monotonic()
+            if style.uses_fire_coil or style == FireStyle.HOST_TIMED_COIL:
+                coil = self.map.coils.fire_valve if style == FireStyle.HOST_TIMED_COIL else self.fire_coil
+                self.write_coil(coil, True, "fire coil" if coil != self.map.coils.fire_valve else "fire valve")
+            elif style == FireStyle.PRESET_AND_COMMAND:
+                self.write_word(h.fire_command, self.fire_command_value, "fire command")
         except ModbusRefusal as exc:
             raise InstrumentError(self.name, exc.command, f"fire pulse refused by the controller: {self._why_refused()}",
                                   exc.reply) from exc
+        try:
+            return self._watch_pulse(started, duration_s)
+        finally:
+            if style != FireStyle.PULSE_REGISTER:
+                self._end_fire_command()
+
+    @property
+    def fire_coil(self) -> int:
+        """The coil that starts a pulse in the coil styles: coils.fire_command, else coils.fire_valve."""
+        c = self.map.coils
+        return c.fire_command if c.fire_command >= 0 else c.fire_valve
+
+    @property
+    def has_pulse_counter(self) -> bool:
+        return self.map.input_registers.fire_pulse_count.present
+
+    def how_it_fires(self) -> str:
+        """What this driver does to fire, with the addresses (for a "not fired" message)."""
+        h = self.map.holding_registers
+        coil = self.map.coils.fire_valve if self.fire_style == FireStyle.HOST_TIMED_COIL else self.fire_coil
+        return (f'fire_style = "{self.fire_style}" ' + how_it_fires(self.fire_style, h.fire_pulse_ms.address, coil,
+                                                                 h.fire_command, self.fire_command_value)
+                + f" ({FIRE_STYLE_DOC})")
+
+    def _fire_valve_readback(self) -> tuple[str, int] | None:
+        """Where the real fire valve can be read: its position input, else its coil when the
+        host did not write that coil itself to fire (then it is the PLC's output); None."""
+        position = self.map.discrete_inputs.fire_valve_open
+        if position >= 0:
+            return "discrete inputs", position
+        written = (self.map.coils.fire_valve if self.fire_style == FireStyle.HOST_TIMED_COIL
+                   else self.fire_coil if self.fire_style.uses_fire_coil else -1)
+        if written != self.map.coils.fire_valve:
+            return "coils", self.map.coils.fire_valve
+        return None
+
+    def _watch_pulse(self, started: float, duration_s: float) -> bool | None:
+        """Read the fire valve back until the pulse is over (seen open, then shut) or its time
+        and a margin have passed; a host-timed pulse is ended here. A failed read is not a
+        failed shot: the pulse counter and the trigger still tell."""
+        source = self._fire_valve_readback()
+        host_timed = self.fire_style == FireStyle.HOST_TIMED_COIL
+        seen_open = False
+        ends = started + duration_s
+        while True:
+            now = time.monotonic()
+            if host_timed and now >= ends:
+                self._close_host_timed_valve()
+                host_timed = False
+            if source is not None:
+                with contextlib.suppress(InstrumentError):
+                    is_open = self.read_bits(source[0], [source[1]])[source[1]]
+                    if seen_open and not is_open:
+                        break  # open, then shut: the pulse is over
+                    seen_open = seen_open or is_open
+            elif not host_timed:
+                break  # nothing to watch, nothing to time
+            if now >= ends + PULSE_WATCH_MARGIN_S:
+                break
+            time.sleep(PULSE_POLL_S)
+        return seen_open if source is not None else None
+
+    def _close_host_timed_valve(self) -> None:
+        """End a host-timed pulse. When the close cannot be written within a second, the
+        heartbeat is stopped so that the controller's watchdog closes the valve (it backs the
+        host-timed style), and InstrumentError says so."""
+        deadline = time.monotonic() + 1.0
+        while True:
+            try:
+                self.write_coil(self.map.coils.fire_valve, False, "fire valve")
+                return
+            except InstrumentError as exc:
+                if time.monotonic() >= deadline:
+                    self.stop_heartbeat_thread()
+                    raise InstrumentError(self.name, exc.command, f"the host-timed fire valve could not be closed "
+                                          f"({exc.problem}): the heartbeat is stopped, so the controller's watchdog "
+                                          f"closes it within {self.watchdog_s:g} s", exc.reply) from exc
+                time.sleep(PULSE_POLL_S)
+
+    def _end_fire_command(self) -> None:
+        """After a pulse: the fire coil off, or the command word back to 0 (best effort: SAFE
+        withdraws it again)."""
+        with contextlib.suppress(InstrumentError):
+            style = self.fire_style
+            if style == FireStyle.HOST_TIMED_COIL or (style.uses_fire_coil and self.fire_coil == self.map.coils.fire_valve):
+                self.write_coil(self.map.coils.fire_valve, False, "fire valve")
+            self._withdraw_fire_command()
+
+    def _withdraw_fire_command(self) -> None:
+        """A fire coil of its own off, or the command word back to 0 (where the style has one)."""
+        style = self.fire_style
+        if style.uses_fire_coil and self.fire_coil != self.map.coils.fire_valve:
+            self.write_coil(self.fire_coil, False, "fire coil")
+        elif style == FireStyle.PRESET_AND_COMMAND and self.map.holding_registers.fire_command >= 0:
+            self.write_word(self.map.holding_registers.fire_command, 0, "fire command: none")
 
     def fire_pulse_count(self) -> int:
         """Pulses the controller fired since it started."""

@@ -5,28 +5,38 @@ configuration's `[database] url`,
 else SQLite in the user's data folder (`$XDG_DATA_HOME/hopkinson/lab.sqlite`, or the
 platform's user data folder): nothing to set up. `postgresql://…` URLs use psycopg 3.
 
-The schema is versioned by Alembic (migrations/ ships with the package). `open_database`
+A SQLite URL names an absolute path whose folder exists (the default's folder is created):
+a mistyped URL is refused, never a new empty database somewhere else.
+
+The schema is versioned by Alembic (migrations/ ships with the package). `check_schema`
 creates an empty database at the newest revision (first use), opens one at the newest
 revision, and refuses any other: an older schema is upgraded only by `upgrade_database`
-(`hopkinson lab upgrade`), never silently; a newer one (written by newer software) is refused
-with both versions named.
+(`hopkinson lab upgrade`, as the owner role on PostgreSQL), never silently; a newer one
+(written by newer software) is refused with both versions named.
+
+`failure_of(exc)` sorts what a database said into the three things a caller does about it:
+AWAY (try again later: the record waits in the spool), SETUP (the configuration is wrong, a
+password or a privilege: the record waits, the operator is told to fix it) and REJECTED (the
+record itself was refused: it is set aside with the reason, lab.spool).
 """
 
 from __future__ import annotations
 
 import os
+from enum import StrEnum
 from pathlib import Path
 
 import sqlalchemy as sa
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from hopkinson.lab.errors import LabError
+from hopkinson.lab.errors import DatabaseAway, LabError
 from sqlalchemy.engine import URL, Engine, make_url
 
 URL_ENV = "HOPKINSON_DATABASE_URL"
 MIGRATIONS = Path(__file__).with_name("migrations")
 SQLITE_BUSY_TIMEOUT_S = 30.0
+POSTGRES_LOCK_TIMEOUT_S = 20.0  # a statement waiting longer on a lock fails (the record is spooled)
 WRITER = "hopkinson_writer"  # execution option of a writing transaction (SQLite: BEGIN IMMEDIATE)  # a second writer waits for the first (WAL: readers never wait)
 
 
@@ -69,12 +79,39 @@ def _driver_url(url: str) -> URL:
     return parsed
 
 
+def _sqlite_file(url: str, parsed: URL) -> Path | None:
+    """The SQLite file a URL names (None: in memory); LabError for a relative path or a folder
+    that does not exist (but for the default location's, which is created)."""
+    if not parsed.database or parsed.database == ":memory:":
+        return None
+    path = Path(parsed.database).expanduser()
+    if not path.is_absolute():
+        raise LabError(f"database URL {url!r}: a SQLite file needs an absolute path "
+                       f"(sqlite:////absolute/path/lab.sqlite), not one relative to the working folder")
+    if not path.parent.is_dir():
+        if path.parent == data_folder():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        else:
+            raise LabError(f"database URL {url!r}: folder {path.parent} does not exist (a mistyped URL?); "
+                           f"nothing created")
+    return path
+
+
+def sqlite_missing(url: str) -> Path | None:
+    """The SQLite file `url` names when it does not exist yet (None otherwise, or not SQLite)."""
+    parsed = _driver_url(url)
+    if parsed.get_backend_name() != "sqlite":
+        return None
+    path = _sqlite_file(url, parsed)
+    return path if path is not None and not path.exists() else None
+
+
 def make_engine(url: str) -> Engine:
-    """An engine for `url` (SQLite: its folder created, WAL, foreign keys, a busy timeout)."""
+    """An engine for `url` (SQLite: WAL, foreign keys, a busy timeout; PostgreSQL: a lock
+    timeout, so a locked table makes a record wait in the spool rather than hang)."""
     parsed = _driver_url(url)
     if parsed.get_backend_name() == "sqlite":
-        if parsed.database and parsed.database != ":memory:":
-            Path(parsed.database).expanduser().parent.mkdir(parents=True, exist_ok=True)
+        _sqlite_file(url, parsed)
         engine = sa.create_engine(parsed, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_S})
 
         @sa.event.listens_for(engine, "connect")
@@ -91,7 +128,8 @@ def make_engine(url: str) -> Engine:
             conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get(WRITER) else "BEGIN")
 
         return engine
-    return sa.create_engine(parsed, pool_pre_ping=True, connect_args={"connect_timeout": 10})
+    return sa.create_engine(parsed, pool_pre_ping=True, connect_args={
+        "connect_timeout": 10, "options": f"-c lock_timeout={int(POSTGRES_LOCK_TIMEOUT_S * 1000)}"})
 
 
 def _alembic_config(connection: sa.Connection) -> Config:
@@ -129,7 +167,8 @@ def check_schema(engine: Engine, url: str) -> None:
     try:
         revision = current_revision(engine)
     except sa.exc.OperationalError as exc:
-        raise LabError(f"database {where}: cannot be reached ({first_line(exc)})") from None
+        kind = DatabaseAway if failure_of(exc) is Failure.AWAY else LabError
+        raise kind(f"database {where}: cannot be reached ({first_line(exc)})") from None
     head = head_revision()
     if revision == head:
         return
@@ -137,7 +176,11 @@ def check_schema(engine: Engine, url: str) -> None:
         with engine.connect() as connection:
             if sa.inspect(connection).get_table_names():
                 raise LabError(f"database {where}: holds tables but no hopkinson schema version; not touched")
-        upgrade_database(engine)
+        try:
+            upgrade_database(engine)
+        except sa.exc.ProgrammingError as exc:  # PostgreSQL: the rig's role may not create tables
+            raise LabError(f"database {where}: the schema cannot be created with this role ({first_line(exc)}); "
+                           f"run `hopkinson lab upgrade` as the database's owner role (docs/lab-record.md)") from None
         return
     if not _known(revision):
         raise LabError(f"database {where}: schema version {revision} is newer than this software's "
@@ -154,8 +197,18 @@ def upgrade_database(engine: Engine) -> tuple[str | None, str]:
     if before is not None and not _known(before):
         raise LabError(f"database schema version {before} is newer than this software's ({head_revision()}); "
                        f"use a newer hopkinson")
-    with engine.begin() as connection:
-        command.upgrade(_alembic_config(connection), "head")
+    with engine.connect() as connection:
+        sqlite = engine.dialect.name == "sqlite"
+        if sqlite:  # batch migrations copy tables: foreign keys are checked after, not during
+            connection.connection.dbapi_connection.execute("PRAGMA foreign_keys=OFF")
+        try:
+            with connection.begin():
+                command.upgrade(_alembic_config(connection), "head")
+                if sqlite and connection.exec_driver_sql("PRAGMA foreign_key_check").first() is not None:
+                    raise LabError("the migration left a broken foreign key; rolled back")
+        finally:
+            if sqlite:
+                connection.connection.dbapi_connection.execute("PRAGMA foreign_keys=ON")
     return before, head_revision()
 
 
@@ -163,3 +216,30 @@ def first_line(exc: BaseException) -> str:
     """One line for a database error (the driver's own message, else the exception's)."""
     text = str(getattr(exc, "orig", None) or exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
+
+
+class Failure(StrEnum):
+    """What a database's refusal means for the record (module doc)."""
+
+    AWAY = "away"
+    SETUP = "setup"
+    REJECTED = "rejected"
+
+
+_SETUP_WORDS = ("password authentication failed", "authentication failed", "permission denied",
+                "must be owner", "role", "does not exist", "no pg_hba.conf entry", "readonly database",
+                "attempt to write a readonly")
+
+
+def failure_of(exc: BaseException) -> Failure:
+    """AWAY, SETUP or REJECTED for an exception met while recording (module doc)."""
+    if isinstance(exc, LabError):
+        return Failure(exc.failure)
+    text = first_line(exc).lower()
+    if isinstance(exc, sa.exc.DBAPIError) and any(word in text for word in _SETUP_WORDS):
+        return Failure.SETUP
+    if isinstance(exc, sa.exc.DataError | sa.exc.IntegrityError):
+        return Failure.REJECTED
+    if isinstance(exc, sa.exc.ProgrammingError):
+        return Failure.SETUP
+    return Failure.AWAY

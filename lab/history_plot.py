@@ -15,10 +15,14 @@ SHOWN = (("sensitivity", "sensitivity", 1.0, ""), ("shock_sensitivity", "shock s
          ("natural_frequency_hz", "f_n", 1e3, "kHz"), ("fbsd_5_hz", "FBSD ±5 %", 1e3, "kHz"))
 
 
-def history_series(history: SensorHistory, key: str, scale: float) -> tuple[list[datetime], list[float], list[float]]:
-    """(dates, values, U) of one figure over the calibrations that have it (U 0 when unknown)."""
+def history_series(history: SensorHistory, key: str, scale: float, simulated: bool | None = None
+                   ) -> tuple[list[datetime], list[float], list[float]]:
+    """(dates, values, U) of one figure over the calibrations that have it (U 0 when unknown);
+    `simulated` True or False keeps only the simulated or the real calibrations."""
     dates, values, expanded = [], [], []
     for c in history.calibrations:
+        if simulated is not None and c.simulated != simulated:
+            continue
         figure = c.figures.get(key)
         if figure is None or figure.value is None:
             continue
@@ -37,8 +41,13 @@ def history_figure(history: SensorHistory) -> Figure:
                  fontsize=10)
     axes = fig.subplots(len(SHOWN), 1, sharex=True)
     for ax, (key, label, scale, unit) in zip(axes, SHOWN, strict=True):
-        dates, values, expanded = history_series(history, key, scale)
+        dates, values, expanded = history_series(history, key, scale, simulated=False)
         ax.errorbar(dates, values, yerr=expanded, fmt="o", ms=3, capsize=2)
+        dates, values, expanded = history_series(history, key, scale, simulated=True)
+        if dates:  # simulated calibrations: open red markers, never judged
+            ax.errorbar(dates, values, yerr=expanded, fmt="o", ms=4, capsize=2, mfc="none", color="#c00",
+                        label="simulated")
+            ax.legend(fontsize=7, loc="best")
         ax.set_ylabel(f"{label} ({unit})" if unit else label, fontsize=8)
         drift = history.drift.get(key)
         if drift is not None and drift.e_n is not None:

@@ -1,6 +1,12 @@
 """The lab record's tables (SQLAlchemy 2 declarative). Changing a table means a new Alembic
 revision in migrations/versions: the database is never silently rewritten.
 
+Every table is append-only: a row, once written, is never updated or deleted (the database's
+triggers refuse it, migration 0002; the rig's role holds INSERT and SELECT only,
+docs/lab-record.md). What changes over time is a new row: a sensor's data (`SensorData`, the
+newest row wins), a campaign's job record (`Job`), a re-issued certificate (a new row naming
+the one it replaces, which is thereby withdrawn).
+
 Times are ISO 8601 UTC text ending in Z (as in shot files: sortable, the same on SQLite and
 PostgreSQL). Key figures are stored as value, standard uncertainty u and the 95 % interval
 (lo, hi) per figure: `FIGURE_KEYS`, one column each, so a sensor's history is one query.
@@ -15,6 +21,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 FIGURE_KEYS = ("sensitivity", "shock_sensitivity", "natural_frequency_hz", "damping_ratio", "fbsd_5_hz",
                "fbsd_10_hz")
 FIGURE_PARTS = ("", "_u", "_lo", "_hi")
+APPEND_ONLY_MESSAGE = "is append-only: rows are never updated or deleted"
 
 
 class Base(DeclarativeBase):
@@ -22,18 +29,28 @@ class Base(DeclarativeBase):
 
 
 class Sensor(Base):
-    """An accelerometer by serial: what the lab knows of it beyond its shots."""
+    """An accelerometer by its serial (normalised: lab.records.normal_serial)."""
 
     __tablename__ = "sensors"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     serial: Mapped[str] = mapped_column(String(120), unique=True)
+    created_utc: Mapped[str] = mapped_column(String(40))
+
+
+class SensorData(Base):
+    """What the lab knows of a sensor beyond its shots, as of `utc`: the newest row is in force."""
+
+    __tablename__ = "sensor_data"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    sensor_id: Mapped[int] = mapped_column(ForeignKey("sensors.id"), index=True)
+    utc: Mapped[str] = mapped_column(String(40))
+    actor: Mapped[str] = mapped_column(String(200))
     model: Mapped[str] = mapped_column(String(200), default="")
     owner: Mapped[str] = mapped_column(String(200), default="")
     nominal_sensitivity: Mapped[float | None] = mapped_column(Float, nullable=True)
     sensitivity_unit: Mapped[str] = mapped_column(String(40), default="")
     tolerance_percent: Mapped[float | None] = mapped_column(Float, nullable=True)
     interval_days: Mapped[int | None] = mapped_column(Integer, nullable=True)
-    created_utc: Mapped[str] = mapped_column(String(40))
 
 
 class Rig(Base):
@@ -57,13 +74,35 @@ class ReferenceItem(Base):
 
 
 class Campaign(Base):
+    """A calibration: one run of a plan, known by the UUID in its run folder's journal and shot
+    files (never by its folder's name, which is only shown)."""
+
     __tablename__ = "campaigns"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    name: Mapped[str] = mapped_column(String(200), unique=True)  # the run folder's name
+    uuid: Mapped[str] = mapped_column(String(36), unique=True)
+    name: Mapped[str] = mapped_column(String(200))  # the run folder's name, for people
     rig_id: Mapped[int | None] = mapped_column(ForeignKey("rigs.id"), nullable=True)
     sensor_id: Mapped[int | None] = mapped_column(ForeignKey("sensors.id"), nullable=True)
     path: Mapped[str] = mapped_column(Text, default="")
     first_utc: Mapped[str] = mapped_column(String(40))
+
+
+class Job(Base):
+    """A campaign's job record (ISO/IEC 17025 §7.8.2.1: receipt, condition, location); the
+    newest row of a campaign is in force."""
+
+    __tablename__ = "jobs"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaigns.id"), index=True)
+    utc: Mapped[str] = mapped_column(String(40))
+    actor: Mapped[str] = mapped_column(String(200))
+    received: Mapped[str] = mapped_column(String(20), default="")  # YYYY-MM-DD
+    condition: Mapped[str] = mapped_column(Text, default="")  # condition of the item as received
+    location: Mapped[str] = mapped_column(Text, default="")  # where the calibration was done
+    customer: Mapped[str] = mapped_column(String(200), default="")
+    customer_contact: Mapped[str] = mapped_column(Text, default="")
+    mounting: Mapped[str] = mapped_column(Text, default="")
+    environment: Mapped[str] = mapped_column(Text, default="")
 
 
 class Shot(Base):
@@ -73,7 +112,7 @@ class Shot(Base):
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     uuid: Mapped[str] = mapped_column(String(36), unique=True)
     raw_sha256: Mapped[str] = mapped_column(String(64))
-    sensor_id: Mapped[int] = mapped_column(ForeignKey("sensors.id"), index=True)
+    sensor_id: Mapped[int | None] = mapped_column(ForeignKey("sensors.id"), index=True, nullable=True)
     rig_id: Mapped[int] = mapped_column(ForeignKey("rigs.id"))
     campaign_id: Mapped[int | None] = mapped_column(ForeignKey("campaigns.id"), nullable=True, index=True)
     shot_name: Mapped[str] = mapped_column(String(200), default="")
@@ -82,8 +121,10 @@ class Shot(Base):
     pressure_bar: Mapped[float] = mapped_column(Float)
     projectile: Mapped[int] = mapped_column(Integer)
     simulated: Mapped[bool] = mapped_column(Boolean, default=False)
+    simulated_marks: Mapped[str] = mapped_column(Text, default="")  # what marked it simulated ("; ")
     software_version: Mapped[str] = mapped_column(String(60), default="")
     path: Mapped[str] = mapped_column(Text)
+    context_json: Mapped[str] = mapped_column(Text, default="{}")  # amplifier, instruments, budget inputs
     recorded_utc: Mapped[str] = mapped_column(String(40))
 
 
@@ -101,6 +142,7 @@ class Analysis(Base):
     software_version: Mapped[str] = mapped_column(String(60), default="")
     response_unit: Mapped[str] = mapped_column(String(40), default="")
     peak_acceleration_m_s2: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pulse_width_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     recorded_utc: Mapped[str] = mapped_column(String(40))
     # one column per key figure and part: sensitivity, sensitivity_u, sensitivity_lo, ...
     locals().update({key + part: mapped_column(Float, nullable=True)
@@ -108,18 +150,24 @@ class Analysis(Base):
 
 
 class Certificate(Base):
-    """A certificate as issued: immutable (a re-issue is a new row naming this one)."""
+    """A certificate as issued: immutable. A re-issue is a new row naming this one in
+    `replaces` (unique: one successor), with the next `revision` of the same campaign and kind
+    (unique: one first issue, one line of re-issues); the one not replaced is valid."""
 
     __tablename__ = "certificates"
-    __table_args__ = (UniqueConstraint("prefix", "year", "sequence"),)
+    __table_args__ = (UniqueConstraint("prefix", "year", "sequence"),
+                      UniqueConstraint("campaign_id", "specimen", "revision", name="uq_certificates_lineage"))
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     number: Mapped[str] = mapped_column(String(40), unique=True)
     prefix: Mapped[str] = mapped_column(String(16))
     year: Mapped[int] = mapped_column(Integer)
     sequence: Mapped[int] = mapped_column(Integer)
-    replaces: Mapped[str] = mapped_column(String(40), default="")
+    replaces: Mapped[str | None] = mapped_column(String(40), nullable=True, unique=True)
     sensor_id: Mapped[int] = mapped_column(ForeignKey("sensors.id"), index=True)
-    subject: Mapped[str] = mapped_column(Text)  # the campaign (run folder) certified
+    campaign_id: Mapped[int | None] = mapped_column(ForeignKey("campaigns.id"), nullable=True, index=True)
+    specimen: Mapped[bool] = mapped_column(Boolean, default=False)
+    revision: Mapped[int] = mapped_column(Integer, default=0)
+    subject: Mapped[str] = mapped_column(Text)  # the campaign certified (its name, for people)
     customer: Mapped[str] = mapped_column(String(200), default="")
     authorised_by: Mapped[str] = mapped_column(String(200))
     issued_utc: Mapped[str] = mapped_column(String(40))
@@ -130,7 +178,7 @@ class Certificate(Base):
 
 
 class AuditEntry(Base):
-    """Who did what and when: append-only (no update or delete path; triggers refuse them)."""
+    """Who did what and when: written by the unit of work's before_flush hook (lab.uow)."""
 
     __tablename__ = "audit"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
@@ -139,3 +187,7 @@ class AuditEntry(Base):
     action: Mapped[str] = mapped_column(String(40))
     subject: Mapped[str] = mapped_column(Text)
     detail: Mapped[str] = mapped_column(Text, default="")
+
+
+APPEND_ONLY_TABLES = tuple(table.__tablename__ for table in (
+    Sensor, SensorData, Rig, ReferenceItem, Campaign, Job, Shot, Analysis, Certificate, AuditEntry))

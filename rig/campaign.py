@@ -4,7 +4,7 @@
     check_authorisation(plan, yes)                                  # ConfigError (exit 2) unless authorised
     with open_instruments(config) as instruments:
         runner = CampaignRunner(run, plan, instruments, config, bus)
-    outcome = runner.run()                                          # blocking; outcome.exit_code 0 / 3
+    outcome = runner.run()                                          # blocking; outcome.exit_code 0 / 3 / 4
 
 How a shot moves through the journal (rig/journal.py has the rules):
 
@@ -29,9 +29,10 @@ The runner stops at the first shot that does not end DONE (aborted to the safe s
 FAULT): the operator looks at the rig before anything else is fired; `--resume` continues.
 `stop_after_shot()` (a pause) stops after the current shot; `abort(reason)` aborts the
 current shot (SAFE runs) and stops; an abort asked for between shots is held by the sequencer
-and stops the campaign before the next shot moves anything. Outcome exit codes: 0 every planned shot is done
-(analysed, analysis failed, or skipped); 3 the campaign stopped with shots left (aborted,
-paused, or waiting for an operator decision).
+and stops the campaign before the next shot moves anything. Outcome exit codes (docs/exit-codes.md):
+0 every planned shot is done (analysed or skipped); 4 every planned shot is done but some
+analyses failed (the message and `analyses_failed` name them); 3 the campaign stopped with
+shots left (aborted, paused, or waiting for an operator decision).
 
 Simulation only: `attach_fire_log` makes the simulated world append one JSON line per
 projectile launch (fsynced), tagged with the campaign shot being fired. It is an independent
@@ -93,10 +94,12 @@ if TYPE_CHECKING:
     from hopkinson.drivers.sim.world import World
     from hopkinson.rig.config import RigConfig
     from hopkinson.rig.instruments import Instruments
+    from hopkinson.rig.sequencer import FireAuthorisation
 
 DEFAULT_RUNS_DIR = Path("runs")
 EXIT_COMPLETE = 0
 EXIT_STOPPED = 3
+EXIT_ANALYSIS_FAILED = 4  # complete, but some analyses failed (rig/errors.py, docs/exit-codes.md)
 
 S = ShotState
 
@@ -205,13 +208,19 @@ class CampaignOutcome:
             "complete": self.complete,
             "fired_this_run": list(self.fired_this_run),
             "resume_report": list(self.resume_report),
+            "analyses_failed": analyses_failed(self.summary),
             "summary": self.summary,
             "last_shot": self.last_shot.to_dict() if self.last_shot is not None else None,
         }
 
 
+def analyses_failed(summary: dict[str, Any]) -> list[str]:
+    """The ids of the shots whose analysis failed (journal state ANALYSIS_FAILED)."""
+    return [shot["id"] for shot in summary.get("shots", []) if shot.get("state") == S.ANALYSIS_FAILED.value]
+
+
 def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: LevelChoice | None = None,
-                 pressure_bar: float | None = None) -> ShotRequest:
+                 pressure_bar: float | None = None, campaign_uuid: str | None = None) -> ShotRequest:
     """The sequencer's request for a planned shot: file `shots/<id>.h5`, the plan's settings
     (for a target level, the pressure `level` chose, or the `pressure_bar` it was fired at).
 
@@ -228,8 +237,10 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
         order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
         uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
         transverse_sensitivity_rel=plan.accelerometer.transverse_sensitivity_rel,
-        out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, shot_id=shot.id,
+        out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, campaign_uuid=campaign_uuid,
+        shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
+        sensitivity_unit=plan.accelerometer.sensitivity_unit, tolerance_percent=plan.accelerometer.tolerance_percent,
     )
 
 
@@ -273,12 +284,16 @@ class CampaignRunner:
     CampaignShotStarted, CampaignShotEnded (the journal state at a shot's end), Note, and
     CampaignFinished. analyse: the analysis computation (default rig.shot.shot_analyser(config));
     on_shot_start: called with the shot about to be fired (None after it), e.g. to tag a
-    simulation fire log.
+    simulation fire log. confirm_each: firing not authorised for the whole campaign, each shot
+    is confirmed: called with the shot about to be fired, it gives the FireAuthorisation the
+    armed sequencer then waits for (at most confirm_timeout_s, as a single shot: the panel's FIRE).
     """
 
     def __init__(self, run: RunFolder, plan: CampaignPlan, instruments: Instruments, config: RigConfig,
                  bus: EventBus, *, analyse: AnalyseFn | None = None,
-                 max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None) -> None:
+                 max_aborts: int = 3, on_shot_start: Callable[[PlannedShot | None], None] | None = None,
+                 confirm_each: Callable[[PlannedShot], FireAuthorisation] | None = None,
+                 confirm_timeout_s: float = 600.0) -> None:
         from hopkinson.rig.sequencer import Sequencer  # the drivers load only when shots are fired
 
         self.run_folder = run
@@ -289,6 +304,8 @@ class CampaignRunner:
         self._analyse = analyse or shot_analyser(config)
         self.sequencer = Sequencer(instruments, config, bus, analyse=self._analyse)
         self._on_shot_start = on_shot_start
+        self._confirm_each = confirm_each
+        self._confirm_timeout_s = confirm_timeout_s
         self._journal: Journal | None = None
         self._current: CampaignProgress | None = None
         self._stop = threading.Event()
@@ -372,11 +389,13 @@ class CampaignRunner:
     def _conclusion(self, summary: dict[str, Any], stop_message: str) -> tuple[int, str]:
         counts = summary["by_state"]
         done = counts[S.ANALYSED.value] + counts[S.ANALYSIS_FAILED.value] + counts[S.SKIPPED.value]
+        failed = analyses_failed(summary)
+        note = (f" ({len(failed)} with a failed analysis: {', '.join(failed)}; the raw shots are kept, "
+                "`hopkinson analyse` them)") if failed else ""
         if summary["complete"]:
-            failed = counts[S.ANALYSIS_FAILED.value]
-            note = f" ({failed} with a failed analysis)" if failed else ""
-            return EXIT_COMPLETE, f"campaign complete: {done} of {summary['total']} shots done{note}"
-        parts = [f"campaign stopped with {done} of {summary['total']} shots done"]
+            code = EXIT_ANALYSIS_FAILED if failed else EXIT_COMPLETE
+            return code, f"campaign complete: {done} of {summary['total']} shots done{note}"
+        parts = [f"campaign stopped with {done} of {summary['total']} shots done{note}"]
         if stop_message:
             parts.append(stop_message)
         if summary["needs_decision"]:
@@ -435,7 +454,7 @@ class CampaignRunner:
         """One shot through the sequencer, journaled by its hooks, settled at its end."""
         assert self._journal is not None
         level = self._level_choice(shot)
-        request = shot_request(self.plan, shot, self.run_folder, level)
+        request = shot_request(self.plan, shot, self.run_folder, level, campaign_uuid=self._journal.campaign_uuid)
         current = self._current = self._progress(shot, request.pressure_bar)
         self._mark_failure = None
         if self._on_shot_start is not None:
@@ -452,8 +471,13 @@ class CampaignRunner:
         firing_info: dict[str, Any] = {"pressure_bar": request.pressure_bar}
         if level is not None:
             firing_info.update(target_peak_m_s2=level.target_peak_m_s2, level_basis=level.basis)
+        if self._confirm_each is None:
+            authorisation = FireAuthorisation.pre_given()
+        else:
+            authorisation = self._confirm_each(shot)
+            request = dataclasses.replace(request, confirm_timeout_s=self._confirm_timeout_s)
         try:
-            outcome = self.sequencer.run_shot(request, FireAuthorisation.pre_given(),
+            outcome = self.sequencer.run_shot(request, authorisation,
                                               before_fire=lambda _ctx: self._mark_firing(shot.id, firing_info),
                                               after_store=lambda _ctx, path: self._on_stored(shot.id, Path(path)))
             self._settle(shot, outcome)
@@ -518,7 +542,8 @@ class CampaignRunner:
                                     f"{rescued}: free the folder, move that file to {path} and resume "
                                     "(`campaign run --resume` records and analyses it, never fires it again)")
             elif outcome.fired:
-                journal.mark(sid, S.UNKNOWN, reason=outcome.error or "fired, but no raw file was stored")
+                journal.mark(sid, S.UNKNOWN, reason=outcome.error or "the fire command went out, but no raw file "
+                                                                    "was stored")
             else:
                 journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted")
         elif state in (S.PLANNED, S.ABORTED):

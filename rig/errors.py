@@ -5,8 +5,31 @@ from __future__ import annotations
 
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 
+# The exit codes of every `hopkinson` command (docs/exit-codes.md; `hopkinson --help` lists them).
+EXIT_DONE = 0
+EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_ABORTED = 3
+EXIT_ANALYSIS_FAILED = 4
+EXIT_CODES: dict[str, str] = {
+    "0": "done: the shot, campaign or command completed (for a shot: fired, recorded and analysed)",
+    "1": "probe/status/sim check: something did not answer, or read a value that cannot be true",
+    "2": "bad input or configuration, or the rig held by another process: nothing was moved or fired",
+    "3": "aborted to the safe state, a FAULT (the safe state not confirmed; `safe` too), or interrupted by a "
+         "signal; a campaign stopped with shots left",
+    "4": "recorded but its analysis failed: the raw shot is kept (`hopkinson analyse` it); a campaign "
+         "complete with failed analyses",
+    "5": "done, but its lab record is in neither the database nor the spool: `hopkinson lab import` the "
+         "shot file (rig/lab_record.py EXIT_NOT_RECORDED)",
+    "130, 128+N": "Ctrl-C, or signal N, in a command that drives no rig",
+}
+
+
+def exit_codes_help() -> str:
+    """The exit codes as `--help` shows them (an argparse epilog)."""
+    width = max(len(code) for code in EXIT_CODES)
+    return "exit codes (docs/exit-codes.md):\n" + "\n".join(f"  {code:<{width}}  {text}"
+                                                            for code, text in EXIT_CODES.items())
 
 
 class ConfigError(ValueError):

@@ -12,7 +12,7 @@ Shot events (rig.sequencer):
 - `StepProgress`: a step inside a state ("charging 0.62 of 1.00 bar"), with its figures;
 - `Identified`: the instruments' identities (CHECK);
 - `AwaitingConfirmation`: armed, the sequencer waits up to `timeout_s` for the fire confirmation;
-- `Fired`: the controller confirmed the fire pulse (`pulse_count` from the controller);
+- `Fired`: the shot was fired, as its `confirmed_by` says (pulse counter, valve read-back, trigger);
 - `Stored`: the raw shot file has its final name; `Analysed`: the analysis (or its failure)
   is stored in it;
 - `Reading`: gauges and interlocks (up to ~10 Hz while a shot runs, ~2 Hz idle in the panel);
@@ -140,13 +140,15 @@ class AwaitingConfirmation(RigEvent):
 
 @dataclass(frozen=True, kw_only=True)
 class Fired(RigEvent):
-    """The controller fired the pulse (confirmed by its pulse counter where it has one)."""
+    """The shot was fired, as something confirmed (`confirmed_by`: the controller's pulse
+    counter, the fire valve's read-back, or the digitizer's trigger); never on the command alone."""
 
     LABEL: ClassVar[str] = "fired"
 
     reservoir_pressure_bar: float
     pulse_s: float
     pulse_count: int | None = None
+    confirmed_by: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -17,8 +17,8 @@ if one cannot be reached, the ones already open are closed again and the Instrum
 (naming the instrument) propagates. On leaving the context every instrument is closed.
 
 `sim_rig_config` makes a RigConfig that reaches a running SimulatedRig (in-process, on free
-ports): its addresses, register map and digitizer dialect and channels, everything else from
-the given base configuration.
+ports): its addresses, register map, fire style and digitizer dialect and channels, everything
+else from the given base configuration.
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from hopkinson.rig.config import (
     RigConfig,
     ValveControllerConfig,
     register_map_of,
+    register_tables,
 )
 from hopkinson.rig.driver_classes import driver_class
 from hopkinson.rig.errors import ConfigError
@@ -103,7 +104,9 @@ def _modbus_controller(config: RigConfig) -> ValveControllerRole:
     if target.transport == "rtu":
         target = dataclasses.replace(target, serial_port=resolve_port(vc.serial_port, "valve controller"))
     return ValveController(target, register_map=vc.register_map, timeout_s=vc.timeout_s, retries=vc.retries,
-                           watchdog_s=vc.watchdog_s)
+                           watchdog_s=vc.watchdog_s, fire_style=vc.fire_style,
+                           fire_command_value=vc.fire_command_value,
+                           host_timed_fire_allowed=vc.host_timed_fire_allowed)
 
 
 def _serial_bridge(config: RigConfig) -> AmplifierRole:
@@ -212,7 +215,7 @@ def sim_rig_config(base: RigConfig, rig: SimulatedRig) -> RigConfig:
         host=a.modbus_host, port=a.modbus_port or base.valve_controller.port,
         serial_port=a.modbus_serial_port, baudrate=a.modbus_baudrate, parity=a.modbus_parity,
         stopbits=a.modbus_stopbits, unit_id=a.modbus_unit_id,
-        register_map=register_map_of(rig.config.register_map))
+        **register_tables(register_map_of(rig.config.register_map)), **sim_fire_style(rig))
     amp: AmplifierConfig = base.amplifier
     if amp.driver != "manual":  # a manual conditioner stays as entered; anything else: the simulated one
         amp = dataclasses.replace(amp, driver="serial-bridge", options={}, port=a.serial_port,
@@ -223,6 +226,13 @@ def sim_rig_config(base: RigConfig, rig: SimulatedRig) -> RigConfig:
         digitizer=sim_digitizer_config(base.digitizer, a.visa_resource, a.digitizer_dialect, a.digitizer_channels),
         amplifier=amp,
     )
+
+
+def sim_fire_style(rig: SimulatedRig) -> dict[str, Any]:
+    """How the simulated controller fires, as [valve_controller] keys (docs/plc-fire-styles.md)."""
+    s = rig.config.servers
+    return {"fire_style": s.modbus_fire_style, "fire_command_value": s.modbus_fire_command_value,
+            "host_timed_fire_allowed": s.modbus_fire_style == "host_timed_coil"}
 
 
 def sim_digitizer_config(base: DigitizerConfig, resource: str, dialect: str,

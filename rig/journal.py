@@ -37,6 +37,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
+import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -115,6 +116,28 @@ class ShotStatus:
     aborts: int
     info: dict[str, Any] = field(default_factory=dict)
     updated_utc: str = ""
+
+
+def legacy_campaign_uuid(meta: dict[str, str]) -> str:
+    """The identity of a campaign whose journal predates campaign UUIDs: derived from when
+    its journal was created and its plan's fingerprint (never from the folder's name)."""
+    return str(uuid.uuid5(uuid.NAMESPACE_URL, f"hopkinson-campaign:{meta.get('created_utc')}|"
+                                               f"{meta.get('plan_fingerprint')}"))
+
+
+def read_campaign_uuid(journal_path: Path) -> str | None:
+    """A run folder's campaign UUID from its journal, read-only (None: no journal or none kept)."""
+    if not journal_path.is_file():
+        return None
+    try:
+        conn = sqlite3.connect(f"file:{journal_path}?mode=ro", uri=True)
+        try:
+            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+        finally:
+            conn.close()
+    except sqlite3.Error:
+        return None
+    return meta.get("campaign_uuid") or (legacy_campaign_uuid(meta) if "created_utc" in meta else None)
 
 
 class Journal:
@@ -215,6 +238,7 @@ class Journal:
                 db.executemany("INSERT INTO meta VALUES (?, ?)", [
                     ("schema_version", str(SCHEMA_VERSION)),
                     ("campaign_id", self.run.campaign_id),
+                    ("campaign_uuid", str(uuid.uuid4())),
                     ("plan_name", self.plan.name),
                     ("plan_fingerprint", self.plan.fingerprint),
                     ("created_utc", now),
@@ -231,6 +255,9 @@ class Journal:
                 f"the plan {self.plan.path} differs from the one this journal was started with "
                 "(was the run folder's plan copy edited?)"
             )
+        if "campaign_uuid" not in meta:  # a journal from before campaigns had an identity of their own
+            with self._tx() as db:
+                db.execute("INSERT INTO meta VALUES ('campaign_uuid', ?)", (legacy_campaign_uuid(meta),))
         ids = [row[0] for row in self._conn.execute("SELECT id FROM shots ORDER BY idx")]
         if ids != [s.id for s in self.plan.shots]:
             raise self._fail("the journal's shots do not match the plan")
@@ -407,6 +434,12 @@ class Journal:
         """Every shot analysed (or failed analysis) or skipped, and none can be fired."""
         return all(s.state in DONE_STATES for s in self.statuses())
 
+    @property
+    def campaign_uuid(self) -> str:
+        """The campaign's identity (the lab's record keys it by this, never by the folder's name)."""
+        meta = self._meta() or {}
+        return meta.get("campaign_uuid") or legacy_campaign_uuid(meta)
+
     def summary(self) -> dict[str, Any]:
         """JSON-ready overview: counts by state, shots needing a decision or analysis."""
         statuses = self.statuses()
@@ -415,6 +448,7 @@ class Journal:
             by_state[s.state.value] += 1
         return {
             "campaign_id": self.run.campaign_id,
+            "campaign_uuid": self.campaign_uuid,
             "plan": self.plan.name,
             "total": len(statuses),
             "by_state": by_state,

@@ -12,6 +12,8 @@ Example (config/campaigns/example.toml is the documented one)::
     serial = "SN0001"
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
     transverse_sensitivity_rel = 0.05 # optional: its stated (datasheet) transverse sensitivity (issue 40; default 5 %)
+    sensitivity_unit = "µV/(m/s²)"    # optional: the unit results show it in (analysis.sensitivity_units)
+    tolerance_percent = 5.0           # optional: the sensor's tolerance on its nominal (each shot's verdict)
     sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,
                                       # magnitude,phase_deg[,u_magnitude_rel,u_phase_deg]; relative to
                                       # the plan's folder); every shot's model is fitted to the
@@ -61,53 +63,104 @@ fires only when the operator confirms its exact number (`--shots N`, or the pane
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
-import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 from hopkinson.analysis.params import MAX_ORDER_LIMIT  # one range for a plan and the command line
+from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
+from hopkinson.rig.config_errors import validate
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
+from pydantic import AfterValidator, BeforeValidator, Field
 
 MIN_DRAWS, MAX_DRAWS = 50, 1_000_000  # as analysis.params checks them
 LATER_OPTIONS = {"uncertainty": True, "draws": None}  # analysis options added after plans were in use
 MAX_TOTAL_SHOTS = 10_000  # more is a typing error, not a campaign (a shot takes minutes)
 CONFIRM_ABOVE_SHOTS = 50  # a plan of more shots needs its number confirmed
+G_M_S2 = 9.80665
+
+
+def _not_blank(text: str) -> str:
+    if not text.strip():
+        raise ValueError("must not be empty")
+    return text
+
+
+def _folder_name(name: str) -> str:
+    if any(ch in name for ch in "/\\:") or name.startswith("."):
+        raise ValueError(f"must be usable as a folder name (got {name!r})")
+    return name
+
+
+def _auto(value: Any) -> Any:
+    return None if value == "auto" else value
+
+
+def _unit_name(name: str | None) -> str | None:
+    """A sensitivity unit as analysis.sensitivity_units names it ("uV/(m/s^2)" → "µV/(m/s²)")."""
+    if name is None:
+        return None
+    from hopkinson.analysis.sensitivity_units import sensitivity_unit
+
+    return sensitivity_unit(name).name
+
+
+Name = Annotated[Text, AfterValidator(_not_blank)]
+Positive = Annotated[Number, Field(gt=0)]
+Order = Annotated[Int, Field(ge=1, le=MAX_ORDER_LIMIT)]
 
 
 @dataclass(frozen=True)
 class Accelerometer:
-    """The accelerometer under calibration."""
+    """[accelerometer]: the accelerometer under calibration."""
 
-    model: str
-    serial: str
-    sensitivity_v_per_m_s2: float | None = None  # nominal, at the amplifier output
-    sine_calibration: str | None = None  # sine calibration CSV (analysis.sine_comparison), resolved path
-    transverse_sensitivity_rel: float | None = None  # stated (datasheet) transverse sensitivity; None: 5 % (issue 40)
+    __pydantic_config__ = SECTION
+    model: Name
+    serial: Name
+    sensitivity_v_per_m_s2: Annotated[Positive | None, Field(description=(
+        "nominal sensitivity at the amplifier output, V per m/s²"))] = None
+    sine_calibration: Annotated[Text | None, Field(description=(
+        "a sine calibration CSV (frequency_hz, magnitude, phase_deg[, u_magnitude_rel, u_phase_deg]), "
+        "relative to the plan's folder"))] = None  # once loaded: the resolved path
+    sensitivity_unit: Annotated[Text | None, AfterValidator(_unit_name), Field(description=(
+        'the unit results show the sensitivity in (analysis.sensitivity_units), e.g. "mV/g"'))] = None
+    tolerance_percent: Annotated[Annotated[Number, Field(gt=0, lt=100)] | None, Field(description=(
+        "the sensor's tolerance on its nominal sensitivity, per cent: a shot beyond it is flagged"))] = None
+    transverse_sensitivity_rel: Annotated[Annotated[Number, Field(ge=0, le=1)] | None, Field(description=(
+        "its stated (datasheet) transverse sensitivity, a fraction; unset: 5 % (a Type B row of the budget)"))] = None
 
 
 @dataclass(frozen=True)
 class FurtherAccelerometer:
-    """A further accelerometer recorded in the same shots (the rig's response_2 channel)."""
+    """[accelerometer_2]: a further accelerometer recorded in the same shots (the rig's
+    response_2 channel)."""
 
-    model: str
-    serial: str
+    __pydantic_config__ = SECTION
+    model: Name
+    serial: Name
 
 
 @dataclass(frozen=True)
 class AnalysisOptions:
-    """Analysis settings of a shot (defaults from DESIGN.md and the paper's example)."""
+    """[defaults.analysis] and [shots.analysis]: analysis settings of a shot (defaults from
+    DESIGN.md and the paper's example); a table gives only the keys it changes."""
 
-    max_order: int = 12
-    order: int | None = None  # None: chosen where the bias-corrected loss stops falling
-    sample_rate_hz: float = 1.0e6
-    dcm_ratio: float | None = None  # None ("auto"): the r that widens the ±5 % band 3×
-    dcm_damping: float = 0.707
-    uncertainty: bool = True  # the Monte Carlo uncertainty of the key figures
-    draws: int | None = None  # its draws; None: the analysis' default
+    __pydantic_config__ = SECTION
+    max_order: Annotated[Order, Field(description="highest model order tried")] = 12
+    order: Annotated[Order | None, Field(description=(
+        "a fixed order instead of the order test's choice"))] = None  # None: where the loss stops falling
+    sample_rate_hz: Annotated[Positive, Field(description="analysis rate after alignment and resampling")] = 1.0e6
+    dcm_ratio: Annotated[Annotated[Number, Field(ge=1)] | None, BeforeValidator(
+        _auto, json_schema_input_type=Annotated[float, Field(ge=1)] | Literal["auto"]), Field(description=(
+            'DCM response-time ratio r, or "auto": the r that widens the ±5 % band 3×'))] = None  # None: "auto"
+    dcm_damping: Annotated[Number, Field(gt=0, le=1, description="damping of the DCM's new poles")] = 0.707
+    uncertainty: Annotated[Flag, Field(description="the Monte Carlo (GUM-S1) uncertainty of the key figures")] = True
+    draws: Annotated[Annotated[Int, Field(ge=MIN_DRAWS, le=MAX_DRAWS)] | None, Field(description=(
+        "its number of draws (default: the analysis' own)"))] = None
 
 
 @dataclass(frozen=True)
@@ -167,68 +220,45 @@ class CampaignPlan:
         return hashlib.sha256(canonical.encode()).hexdigest()
 
 
-_TOP_KEYS = {"name", "operator", "description", "authorise_firing", "accelerometer", "accelerometer_2", "defaults",
-             "shots"}
-_ACCEL_KEYS = {"model", "serial", "sensitivity_v_per_m_s2", "sine_calibration", "transverse_sensitivity_rel"}
-_SHOT_KEYS = {"pressure_bar", "peak_m_s2", "peak_g", "projectile", "analysis"}
-G_M_S2 = 9.80665
-_ENTRY_KEYS = _SHOT_KEYS | {"repeats"}
-_ANALYSIS_KEYS = set(AnalysisOptions.__dataclass_fields__)
+# -- the file as written ----------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class ShotTable:
+    """[defaults]: what every [[shots]] entry inherits; an entry overrides any of it."""
+
+    __pydantic_config__ = SECTION
+    pressure_bar: Annotated[Positive | None, Field(description="reservoir pressure, bar (the rig's limits "
+                                                              "apply too)")] = None
+    peak_m_s2: Annotated[Positive | None, Field(description="a target level instead of a pressure "
+                                                           "(automatic level control)")] = None
+    peak_g: Annotated[Positive | None, Field(description="the target level in g")] = None
+    projectile: Annotated[Annotated[Int, Field(ge=1, le=3)] | None, Field(description=(
+        "1, 2 or 3; No. 3 gives the shortest pulse"))] = None
+    analysis: AnalysisOptions | None = None
 
 
-class _Checker:
-    """Type and range checks that name the file and the key in every message."""
+@dataclass(frozen=True, kw_only=True)
+class ShotEntry(ShotTable):
+    """[[shots]]: one entry, fired `repeats` times in a row."""
 
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def fail(self, key: str, reason: str) -> ConfigError:
-        return ConfigError(f"{self.path}: {key}: {reason}")
-
-    def table(self, value: Any, key: str, allowed: set[str]) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(key, f"must be a table, got {_kind(value)}")
-        unknown = sorted(set(value) - allowed)
-        if unknown:
-            where = f"{key}." if key else ""
-            raise self.fail(
-                f"{where}{unknown[0]}", f"unknown key (allowed here: {', '.join(sorted(allowed))})"
-            )
-        return value
-
-    def text(self, value: Any, key: str, required: bool = True) -> str:
-        if not isinstance(value, str):
-            raise self.fail(key, f"must be a string, got {_kind(value)}")
-        if required and not value.strip():
-            raise self.fail(key, "must not be empty")
-        return value
-
-    def number(self, value: Any, key: str, low: float, low_open: bool = True,
-               high: float = math.inf, high_open: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.fail(key, f"must be a number, got {_kind(value)}")
-        x = float(value)
-        too_low = x <= low if low_open else x < low
-        too_high = x >= high if high_open else x > high
-        if not math.isfinite(x) or too_low or too_high:
-            lo = f"> {low:g}" if low_open else f">= {low:g}"
-            hi = "" if high == math.inf else (f" and < {high:g}" if high_open else f" and <= {high:g}")
-            raise self.fail(key, f"must be {lo}{hi} (got {value})")
-        return x
-
-    def integer(self, value: Any, key: str, low: int, high: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"must be an integer, got {_kind(value)}")
-        if value < low or (high is not None and value > high):
-            span = f"{low}..{high}" if high is not None else f">= {low}"
-            raise self.fail(key, f"must be {span} (got {value})")
-        return value
+    repeats: Annotated[Int, Field(ge=1, le=MAX_TOTAL_SHOTS, description="how many shots this entry fires")] = 1
 
 
-def _kind(value: Any) -> str:
-    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-             list: "an array", dict: "a table"}
-    return names.get(type(value), type(value).__name__)
+@dataclass(frozen=True, kw_only=True)
+class PlanFile:
+    """A campaign plan file (config/campaigns/*.toml) as written."""
+
+    __pydantic_config__ = SECTION
+    name: Annotated[Name, AfterValidator(_folder_name), Field(description="campaign name: run folders are named "
+                                                                          "after it")]
+    operator: Name
+    description: Text = ""
+    authorise_firing: Annotated[Flag, Field(description="true: the plan authorises FIRE for its shots "
+                                                        "(no --yes)")] = False
+    accelerometer: Accelerometer
+    accelerometer_2: FurtherAccelerometer | None = None
+    defaults: ShotTable = dataclasses.field(default_factory=ShotTable)
+    shots: Annotated[tuple[ShotEntry, ...], Field(min_length=1, description="the entries, fired in order"),
+                     Hint("one or more [[shots]] tables")]
 
 
 def load_plan(path: str | Path) -> CampaignPlan:
@@ -240,69 +270,30 @@ def load_plan(path: str | Path) -> CampaignPlan:
 
 def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignPlan:
     """Validate a parsed plan (`path` names it in errors) and expand its shots."""
-    c = _Checker(path)
-    c.table(doc, "", _TOP_KEYS)
-    for key in ("name", "operator", "accelerometer", "shots"):
-        if key not in doc:
-            raise c.fail(key, "missing (required)")
-    name = c.text(doc["name"], "name")
-    if any(ch in name for ch in "/\\:") or name.startswith("."):
-        raise c.fail("name", f"must be usable as a folder name (got {name!r})")
-    operator = c.text(doc["operator"], "operator")
-    description = c.text(doc.get("description", ""), "description", required=False)
-    authorise = doc.get("authorise_firing", False)
-    if not isinstance(authorise, bool):
-        raise c.fail("authorise_firing", f"must be true or false, got {_kind(authorise)}")
-
-    acc = c.table(doc["accelerometer"], "accelerometer", _ACCEL_KEYS)
-    for key in ("model", "serial"):
-        if key not in acc:
-            raise c.fail(f"accelerometer.{key}", "missing (required)")
-    sensitivity = acc.get("sensitivity_v_per_m_s2")
-    accelerometer = Accelerometer(
-        c.text(acc["model"], "accelerometer.model"),
-        c.text(acc["serial"], "accelerometer.serial"),
-        None if sensitivity is None
-        else c.number(sensitivity, "accelerometer.sensitivity_v_per_m_s2", 0.0),
-        None if acc.get("sine_calibration") is None
-        else str(path.parent / c.text(acc["sine_calibration"], "accelerometer.sine_calibration")),
-        None if acc.get("transverse_sensitivity_rel") is None
-        else c.number(acc["transverse_sensitivity_rel"], "accelerometer.transverse_sensitivity_rel", 0.0, False, 1.0),
-    )
-
-    accelerometer_2 = None
-    if "accelerometer_2" in doc:
-        acc2 = c.table(doc["accelerometer_2"], "accelerometer_2", {"model", "serial"})
-        for key in ("model", "serial"):
-            if key not in acc2:
-                raise c.fail(f"accelerometer_2.{key}", "missing (required)")
-        accelerometer_2 = FurtherAccelerometer(c.text(acc2["model"], "accelerometer_2.model"),
-                                               c.text(acc2["serial"], "accelerometer_2.serial"))
-
-    defaults = c.table(doc.get("defaults", {}), "defaults", _SHOT_KEYS)
-    base = _shot_settings(c, defaults, "defaults", {}, AnalysisOptions())
-
-    entries = doc["shots"]
-    if not isinstance(entries, list) or not entries:
-        raise c.fail("shots", "must be one or more [[shots]] tables")
-    width = max(3, len(str(len(entries))))
+    plan = validate(PlanFile, doc, path, first_index=1, symbolic=True)
+    accelerometer = plan.accelerometer
+    if accelerometer.sine_calibration is not None:
+        accelerometer = dataclasses.replace(accelerometer,
+                                            sine_calibration=str(path.parent / accelerometer.sine_calibration))
+    raw_defaults = doc.get("defaults", {})
+    base = _shot_settings(plan.defaults, raw_defaults, path, "defaults", {}, AnalysisOptions())
+    width = max(3, len(str(len(plan.shots))))
     shots: list[PlannedShot] = []
     expanded: list[tuple[int, dict[str, Any], int]] = []
     total = 0
-    for number, entry in enumerate(entries, start=1):
+    for number, (entry, raw) in enumerate(zip(plan.shots, doc["shots"], strict=True), start=1):
         key = f"shots[{number}]"
-        entry = c.table(entry, key, _ENTRY_KEYS)
-        settings = _shot_settings(c, entry, key, base, base["analysis"])
+        settings = _shot_settings(entry, raw, path, key, base, base["analysis"])
         if "pressure_bar" not in settings and "target_peak_m_s2" not in settings:
-            raise c.fail(f"{key}.pressure_bar", "missing (give pressure_bar, peak_m_s2 or peak_g; no default in [defaults])")
+            raise ConfigError(f"{path}: {key}.pressure_bar: missing (give pressure_bar, peak_m_s2 or peak_g; "
+                              "no default in [defaults])")
         if "projectile" not in settings:
-            raise c.fail(f"{key}.projectile", "missing (and no default in [defaults])")
-        repeats = c.integer(entry.get("repeats", 1), f"{key}.repeats", 1, MAX_TOTAL_SHOTS)
-        total += repeats
+            raise ConfigError(f"{path}: {key}.projectile: missing (and no default in [defaults])")
+        total += entry.repeats
         if total > MAX_TOTAL_SHOTS:
-            raise c.fail(f"{key}.repeats", f"the plan would fire more than {MAX_TOTAL_SHOTS} shots "
-                                           f"({total} up to this entry): split it into several campaigns")
-        expanded.append((number, settings, repeats))
+            raise ConfigError(f"{path}: {key}.repeats: the plan would fire more than {MAX_TOTAL_SHOTS} shots "
+                              f"({total} up to this entry): split it into several campaigns")
+        expanded.append((number, settings, entry.repeats))
     for number, settings, repeats in expanded:
         for repeat in range(1, repeats + 1):
             shots.append(
@@ -319,62 +310,43 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
             )
     return CampaignPlan(
         path=path,
-        name=name,
-        operator=operator,
+        name=plan.name,
+        operator=plan.operator,
         accelerometer=accelerometer,
         shots=tuple(shots),
-        description=description,
-        authorise_firing=authorise,
+        description=plan.description,
+        authorise_firing=plan.authorise_firing,
         text=text,
-        accelerometer_2=accelerometer_2,
+        accelerometer_2=plan.accelerometer_2,
     )
 
 
-def _shot_settings(
-    c: _Checker, table: dict[str, Any], key: str, inherited: dict[str, Any], analysis: AnalysisOptions
-) -> dict[str, Any]:
-    """Pressure, projectile and analysis options of a table, over what it inherits."""
+def _shot_settings(table: ShotTable, raw: dict[str, Any], path: Path, key: str, inherited: dict[str, Any],
+                   analysis: AnalysisOptions) -> dict[str, Any]:
+    """Pressure, projectile and analysis options of a validated table over what it inherits;
+    `raw` (the table as written) tells which analysis keys it gives."""
     out = dict(inherited)
-    levels = [k for k in ("pressure_bar", "peak_m_s2", "peak_g") if k in table]
+    levels = [k for k in ("pressure_bar", "peak_m_s2", "peak_g") if getattr(table, k) is not None]
     if len(levels) > 1:
-        raise c.fail(f"{key}.{levels[1]}", f"give one of pressure_bar, peak_m_s2 or peak_g (got {' and '.join(levels)})")
-    if "pressure_bar" in table:
-        out["pressure_bar"] = c.number(table["pressure_bar"], f"{key}.pressure_bar", 0.0)
+        raise ConfigError(f"{path}: {key}.{levels[1]}: give one of pressure_bar, peak_m_s2 or peak_g "
+                          f"(got {' and '.join(levels)})")
+    if table.pressure_bar is not None:
+        out["pressure_bar"] = table.pressure_bar
         out.pop("target_peak_m_s2", None)
     elif levels:  # a target level: the pressure is chosen when the shot is fired
         scale = G_M_S2 if levels[0] == "peak_g" else 1.0
-        out["target_peak_m_s2"] = c.number(table[levels[0]], f"{key}.{levels[0]}", 0.0) * scale
+        out["target_peak_m_s2"] = getattr(table, levels[0]) * scale
         out.pop("pressure_bar", None)
-    if "projectile" in table:
-        out["projectile"] = c.integer(table["projectile"], f"{key}.projectile", 1, 3)
+    if table.projectile is not None:
+        out["projectile"] = table.projectile
     options = asdict(analysis)
-    if "analysis" in table:
-        akey = f"{key}.analysis"
-        given = c.table(table["analysis"], akey, _ANALYSIS_KEYS)
-        if "max_order" in given:
-            options["max_order"] = c.integer(given["max_order"], f"{akey}.max_order", 1, MAX_ORDER_LIMIT)
-        if "order" in given:
-            options["order"] = c.integer(given["order"], f"{akey}.order", 1, MAX_ORDER_LIMIT)
-        if "sample_rate_hz" in given:
-            options["sample_rate_hz"] = c.number(given["sample_rate_hz"], f"{akey}.sample_rate_hz", 0.0)
-        if "dcm_ratio" in given and given["dcm_ratio"] == "auto":
-            options["dcm_ratio"] = None
-        elif "dcm_ratio" in given:
-            options["dcm_ratio"] = c.number(given["dcm_ratio"], f"{akey}.dcm_ratio", 1.0, low_open=False)
-        if "dcm_damping" in given:
-            options["dcm_damping"] = c.number(given["dcm_damping"], f"{akey}.dcm_damping", 0.0, high=1.0)
-        if "uncertainty" in given:
-            if not isinstance(given["uncertainty"], bool):
-                raise c.fail(f"{akey}.uncertainty", f"must be true or false, got {_kind(given['uncertainty'])}")
-            options["uncertainty"] = given["uncertainty"]
-        if "draws" in given:
-            options["draws"] = c.integer(given["draws"], f"{akey}.draws", MIN_DRAWS, MAX_DRAWS)
+    if table.analysis is not None:
+        given = raw.get("analysis", {})
+        options.update({name: getattr(table.analysis, name) for name in given})
         if options["order"] is not None and options["order"] > options["max_order"]:
             bad = "order" if "order" in given else "max_order"
-            raise c.fail(
-                f"{akey}.{bad}",
-                f"order {options['order']} exceeds max_order {options['max_order']}",
-            )
+            raise ConfigError(f"{path}: {key}.analysis.{bad}: order {options['order']} exceeds max_order "
+                              f"{options['max_order']}")
     out["analysis"] = AnalysisOptions(**options)
     return out
 

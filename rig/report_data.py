@@ -104,7 +104,9 @@ def shot_identity(shot: Shot) -> dict[str, str]:
 def shot_entry(path: str | Path, state: str | None = None, label: str | None = None) -> ShotEntry:
     """A report entry from a shot file: identity, analysis (rebuilt), or the reason there is none."""
     path = Path(path)
-    require_sound(path)  # a damaged file is refused, never plotted as if it were whole
+    from hopkinson.rig.lab_record import kept_raw_sha256  # the lab's record only when asked
+
+    require_sound(path, kept_raw_sha256(path))  # a damaged or changed file is refused, never plotted as if whole
     shot = read_shot(path, load_raw=False)
     truth = shot.meta.simulated_truth
     truth_modes = None

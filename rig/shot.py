@@ -27,7 +27,8 @@ file and never loses the shot.
 Analysis failures. When the analysis raises (bad data, a fit the data cannot support, a
 bug), the shot file keeps its raw data and gets an /analysis group with status "failed" and
 the error text; the shot still ends DONE (it was fired and recorded) with
-`ShotOutcome.analysis_error` set, and the command line exits 0 after printing that error.
+`ShotOutcome.analysis_error` set and exit code 4 (EXIT_ANALYSIS_FAILED, docs/exit-codes.md):
+a script never takes it for a calibration that worked.
 """
 
 from __future__ import annotations
@@ -47,7 +48,9 @@ from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.errors import ConfigError, ShotAborted
+from hopkinson.rig.errors import EXIT_ABORTED as EXIT_ABORTED  # re-exported: the shot's exit codes
+from hopkinson.rig.errors import EXIT_ANALYSIS_FAILED as EXIT_ANALYSIS_FAILED
+from hopkinson.rig.errors import EXIT_DONE, ConfigError, ShotAborted
 from hopkinson.rig.shotfile import (
     PLAIN_NAME_RE,
     RawChannel,
@@ -59,8 +62,6 @@ from hopkinson.rig.shotfile import (
     write_raw_shot,
 )
 
-EXIT_DONE = 0
-EXIT_ABORTED = 3
 QUADRATURE_ROLE = "doppler_quadrature"
 PROJECTILES = (1, 2, 3)  # the projectiles the rig's loader takes
 MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("response"), in this order
@@ -95,12 +96,18 @@ class ShotRequest:
     out_dir: Path = Path("shots")
     shot_name: str | None = None  # None -> "shot-<UTC time>-<8 hex>"
     campaign_id: str | None = None
+    campaign_uuid: str | None = None  # the campaign's identity (rig.journal), recorded in the shot file
     shot_id: str | None = None
     shot_index: int | None = None
     confirm_timeout_s: float | None = None  # how long ARM waits for the fire confirmation; None -> timeouts.arm_s
     # automatic level control: the target and how the pressure was chosen (rig.level_control.
     # LevelChoice.to_dict), recorded in the shot file's settings ("level_control")
     level: dict[str, Any] | None = None
+    # the sensor's own sensitivity unit (analysis.sensitivity_units; None: the analysis' SI value,
+    # shown in µV/(m/s²)) and its tolerance on the nominal (per cent), recorded in the shot
+    # file's settings ("sensitivity_unit", "sensitivity_tolerance_percent") for its verdict
+    sensitivity_unit: str | None = None
+    tolerance_percent: float | None = None
 
     def check(self, config: RigConfig) -> None:
         """Raise ShotRequestError (naming the field and the reason) unless the request is firable."""
@@ -135,6 +142,7 @@ class ShotRequest:
             if role not in config.digitizer.channels:
                 raise ShotRequestError(f"{role}: an accelerometer is named for it, but the rig records no {role} "
                                        f"channel ({config.path or 'configuration'} [digitizer.channels])")
+        self._check_sensor(config)
         if self.confirm_timeout_s is not None and not (
                 isinstance(self.confirm_timeout_s, int | float) and 0 <= self.confirm_timeout_s <= 3600):
             raise ShotRequestError(f"confirm_timeout_s: must be 0..3600 s, got {self.confirm_timeout_s!r}")
@@ -143,6 +151,20 @@ class ShotRequest:
                                    "(letters, digits, '_', '.', '-')")
         if not Path(self.out_dir).is_dir():
             raise ShotRequestError(f"out_dir: {self.out_dir} is not an existing folder")
+
+    def _check_sensor(self, config: RigConfig) -> None:
+        """The sensitivity unit known and the nominal plausible in it; the tolerance 0..100 %."""
+        if self.sensitivity_unit is not None:
+            from hopkinson.analysis.sensitivity_units import check_plausible, sensitivity_unit
+
+            try:
+                unit = sensitivity_unit(self.sensitivity_unit)
+                check_plausible(unit.from_si(self.sensitivity(config)), unit)
+            except ValueError as exc:
+                raise ShotRequestError(f"sensitivity: {exc}") from None
+        t = self.tolerance_percent
+        if t is not None and not (isinstance(t, int | float) and 0 < t < 100):
+            raise ShotRequestError(f"tolerance_percent: must be between 0 and 100 %, got {t!r}")
 
     def shot_path(self) -> Path:
         """Where the shot file goes: out_dir / <shot_name or a generated name>.h5."""
@@ -179,6 +201,9 @@ class ShotOutcome:
     final_state: "DONE", "ABORTED" or "FAULT" (FAULT: the safe state could not be confirmed).
     error: the one-line message when the shot did not complete (None when DONE).
     analysis_error: set when the shot was recorded but its analysis failed (still DONE).
+    exit_code: 0 done and analysed; 4 done but the analysis failed; 3 aborted or FAULT
+    (rig/errors.py EXIT_CODES); the command's exit code and its JSON's `exit_code`.
+    fire_confirmed_by: what confirmed the shot was fired (None: nothing did).
     fired: the fire command was sent (the projectile may have been launched).
     aborted_in: the state in which the abort began (None when DONE).
     hint: what the operator does about it.
@@ -191,6 +216,7 @@ class ShotOutcome:
     exit_code: int = EXIT_DONE
     aborted_in: str | None = None
     fired: bool = False
+    fire_confirmed_by: str | None = None
     analysis_error: str | None = None
     analysis_to_redo: bool = False  # interrupted or not stored: a re-analysis of the file redoes it
     safe_confirmed: bool = True
@@ -265,6 +291,10 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
                                      analysis_options=request.analysis_options())
     if request.level is not None:
         snapshot["shot_settings"]["level_control"] = dict(request.level)
+    if request.sensitivity_unit is not None:
+        snapshot["shot_settings"]["sensitivity_unit"] = request.sensitivity_unit
+    if request.tolerance_percent is not None:
+        snapshot["shot_settings"]["sensitivity_tolerance_percent"] = float(request.tolerance_percent)
     return ShotMeta(
         operator=request.operator,
         accelerometer_model=request.accelerometer_model,
@@ -277,6 +307,7 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
         shot_id=request.shot_id,
         shot_index=request.shot_index,
         campaign_id=request.campaign_id,
+        campaign_uuid=request.campaign_uuid,
         simulated_truth=captured.truth,
     )
 
@@ -324,7 +355,7 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
     chain = config.uncertainty.analysis_options()  # the reference chain and the rig's draws
     return AnalysisParams.from_options(
         **chain | {"draws": request.draws if request.draws is not None else chain["draws"]},
-        dcm_widening=a.dcm_widening,
+        dcm_widening=a.dcm_widening,  # None (unset): sized to the pulse
         dcm_noise_gain_limit=a.dcm_noise_gain_limit,
         grating_pitch_m=a.grating_pitch_m,
         orders=tuple(a.orders),

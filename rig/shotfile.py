@@ -6,7 +6,8 @@ Layout (format "hopkinson-shot", format_version 1)::
                            "analysis_failed"), uuid, utc_time (ISO 8601, UTC), operator,
                            accelerometer_model, accelerometer_serial, software_version,
                            pressure_bar, projectile, simulated (bool), and when known shot_id,
-                           shot_index, campaign_id; raw_sha256 (of the raw channels,
+                           shot_index, campaign_id (the run folder's name), campaign_uuid
+                           (the campaign's identity, rig.journal); raw_sha256 (of the raw channels,
                            rig.shotfile.raw_sha256: the lab's record keys a shot by it and
                            refuses a file whose channels no longer match); config_json, instruments_json,
                            sensors_json (with further sensors: role -> {"model", "serial"}
@@ -189,6 +190,7 @@ class ShotMeta:
     shot_id: str | None = None
     shot_index: int | None = None
     campaign_id: str | None = None
+    campaign_uuid: str | None = None  # the campaign's identity (its journal's), never its folder's name
     simulated_truth: dict[str, Any] | None = None  # simulation only
     uuid: str = field(default_factory=lambda: str(uuid_module.uuid4()))
     utc_time: str = field(default_factory=utc_now_iso)
@@ -248,7 +250,7 @@ def write_raw_shot(path: str | Path, raw: RawShot, meta: ShotMeta) -> Path:
         f.attrs["projectile"] = int(meta.projectile)
         f.attrs["simulated"] = meta.simulated_truth is not None
         f.attrs["raw_sha256"] = raw_sha256(RawShot(channels, raw.sample_interval_s, raw.trigger_index))
-        for key in ("shot_id", "campaign_id"):
+        for key in ("shot_id", "campaign_id", "campaign_uuid"):
             if getattr(meta, key) is not None:
                 f.attrs[key] = str(getattr(meta, key))
         if meta.shot_index is not None:
@@ -386,18 +388,25 @@ def add_analysis(
 CHECKSUMMED: dict[str, Any] = {"fletcher32": True}  # every dataset: a flipped byte fails its read
 
 
-def verify_shot(path: str | Path) -> list[str]:
-    """Every way the shot file is damaged, one line each (empty: sound). Each dataset is read
-    whole (HDF5's fletcher32 checksum fails on a changed byte), each analysis' results JSON is
-    compared with its SHA-256 (a file written before the checksums has none to compare: it
-    still reads, only its damage cannot be seen)."""
+RAW_MISMATCH = "raw channels do not match their SHA-256 written with the shot (tampered or damaged)"
+
+
+def verify_shot(path: str | Path, recorded_raw_sha256: str | None = None) -> list[str]:
+    """Every way the shot file is damaged or changed, one line each (empty: sound): the one
+    verification `report`, `analyse` and `lab import` share. Each dataset is read whole
+    (HDF5's fletcher32 checksum fails on a changed byte), each analysis' results JSON is
+    compared with its SHA-256, and the raw channels' SHA-256 with the one written with the shot
+    and with `recorded_raw_sha256` (the lab record's, kept from the shot's first import) —
+    channels rewritten whole with h5py pass HDF5's checksums but not these. A file written
+    before the checksums has none to compare: it still reads, only its damage cannot be seen."""
     path = Path(path)
     problems: list[str] = []
+    read: dict[str, np.ndarray] = {}
     with _open_shot(path) as f:
         def visit(name: str, obj: Any) -> None:
             if isinstance(obj, h5py.Dataset):
                 try:
-                    obj[...]
+                    read[name] = obj[...]
                 except (OSError, ValueError) as exc:
                     problems.append(f"/{name} fails its checksum ({str(exc).splitlines()[0][:120]})")
             elif isinstance(obj, h5py.Group) and "results_json" in obj.attrs:
@@ -408,14 +417,40 @@ def verify_shot(path: str | Path) -> list[str]:
 
         try:
             f.visititems(visit)
-        except (OSError, RuntimeError, KeyError) as exc:
+            written = f.attrs.get("raw_sha256")
+            raw = f["raw"]
+            channels = {str(role): RawChannel(read[f"raw/{role}"], float(raw[role].attrs["scale_v"]),
+                                              float(raw[role].attrs["offset_v"]))
+                        for role in raw.attrs["channels"]} if not problems else {}
+            sampling = (float(raw.attrs["sample_interval_s"]), int(raw.attrs["trigger_index"]))
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:
             problems.append(f"the file's structure cannot be read ({exc})")
+    if problems:
+        return problems
+    digest = raw_sha256(RawShot(channels, *sampling))  # from the codes just read: one pass over the file
+    if written is not None and str(written) != digest:
+        problems.append(RAW_MISMATCH)
+    elif recorded_raw_sha256 is not None and recorded_raw_sha256 != digest:
+        problems.append(f"raw channels' SHA-256 {digest[:12]}… differ from {recorded_raw_sha256[:12]}… kept by the "
+                        f"lab's record since the shot's first import (tampered or damaged)")
+    return problems
+    try:
+        shot = read_shot(path, load_raw=True)
+    except ShotFileError as exc:
+        return [str(exc).removeprefix(f"{path}: ")]
+    assert shot.raw is not None
+    digest = raw_sha256(shot.raw)
+    if written is not None and str(written) != digest:
+        problems.append(RAW_MISMATCH)
+    elif recorded_raw_sha256 is not None and recorded_raw_sha256 != digest:
+        problems.append(f"raw channels' SHA-256 {digest[:12]}… differ from {recorded_raw_sha256[:12]}… kept by the "
+                        f"lab's record since the shot's first import (tampered or damaged)")
     return problems
 
 
-def require_sound(path: str | Path) -> None:
+def require_sound(path: str | Path, recorded_raw_sha256: str | None = None) -> None:
     """ShotFileError naming every damage verify_shot finds."""
-    problems = verify_shot(path)
+    problems = verify_shot(path, recorded_raw_sha256)
     if problems:
         raise ShotFileError(f"{path}: damaged shot file: {'; '.join(problems)}")
 
@@ -741,6 +776,7 @@ def _meta(attrs: Any) -> ShotMeta:
         shot_id=str(attrs["shot_id"]) if "shot_id" in attrs else None,
         shot_index=int(attrs["shot_index"]) if "shot_index" in attrs else None,
         campaign_id=str(attrs["campaign_id"]) if "campaign_id" in attrs else None,
+        campaign_uuid=str(attrs["campaign_uuid"]) if "campaign_uuid" in attrs else None,
         simulated_truth=json.loads(attrs["truth_json"]) if "truth_json" in attrs else None,
         uuid=str(attrs["uuid"]),
         utc_time=str(attrs["utc_time"]),

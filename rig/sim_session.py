@@ -27,7 +27,6 @@ from hopkinson.drivers.sim.faults import FAULTS
 from hopkinson.drivers.sim.simulated_rig import (
     SimConfig,
     SimulatedRig,
-    world_state,
     write_state_file,
 )
 from hopkinson.drivers.sim.world import World
@@ -53,7 +52,7 @@ class SimSession:
         return copy.deepcopy(truth) if truth is not None else None
 
     def state(self) -> dict[str, Any]:
-        return world_state(self.rig.world)
+        return self.rig.state()
 
 
 def check_fault_names(names: Iterable[str]) -> list[str]:

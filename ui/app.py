@@ -88,7 +88,8 @@ def run_panel(args: argparse.Namespace) -> int:
         previous_hook = sys.excepthook
         sys.excepthook = _excepthook(window, errors)
         try:
-            window.resize(*SCREENSHOT_SIZE)
+            if args.screenshot is not None or args.demo_shot or not window.restored_geometry:
+                window.resize(*SCREENSHOT_SIZE)  # else as the technician left it (ui.main_window)
             window.show()
             window.start()
             if args.demo_shot:
@@ -129,7 +130,8 @@ def _excepthook(window: Any, errors: list[str]) -> Any:
         sys.stderr.write("".join(traceback.format_exception(exc_type, exc, tb, limit=3)))
         with contextlib.suppress(Exception):
             window.log_view.add_message("error", line)
-            window.show_banner("error", f"{line} (the rig is unaffected; see the log)")
+            window.show_banner("error", "The panel met an internal error (the rig is unaffected): "
+                                        f"{exc or exc_type.__name__}. The details are in the Log tab.")
     return hook
 
 
@@ -157,6 +159,7 @@ def _demo_shot(app: Any, window: Any, screenshot: str | None, errors: list[str])
     from PySide6.QtCore import QElapsedTimer, QTimer
 
     window.confirm_fire = lambda: True
+    window.confirm_setup = lambda _problems: True  # the demo fires as set up, without asking
     setup = window.setup
     if not setup.operator.text():
         setup.operator.setText("demo")

@@ -33,6 +33,7 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
+from hopkinson.ui.inputs import UnitSpinBox
 from hopkinson.ui.plots import (
     BAND_LIMIT_TIP,
     COMP_PEN,
@@ -45,14 +46,14 @@ from hopkinson.ui.plots import (
     _plot,
     format_khz,
     frequency_grid_hz,
+    legend_below,
     magnitudes,
     pulse_window_s,
-    set_y_with_legend_room,
+    set_y_to_curves,
 )
-from hopkinson.ui.widgets import section_title
+from hopkinson.ui.widgets import TEXT_COLOURS, plain_message, section_title
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (
-    QDoubleSpinBox,
     QFileDialog,
     QFormLayout,
     QGridLayout,
@@ -131,20 +132,14 @@ class DcmTab(QWidget):
         self._export_report = export_report
         self._syncing = False
 
-        self.ratio = QDoubleSpinBox()
-        self.ratio.setDecimals(3)
-        self.ratio.setRange(*RATIO_RANGE)
-        self.ratio.setSingleStep(0.5)
-        self.ratio.setValue(1.0)
-        self.ratio.setToolTip("r: how many times faster than the slowest model pole the compensated system "
-                              "decays (paper Eq. 40)")
+        self.ratio = UnitSpinBox("Ratio r", "", RATIO_RANGE, 1.0, decimals=3, step=0.5,
+                                 tip="r: how many times faster than the slowest model pole the compensated system "
+                                     "decays (paper Eq. 40)")
         self.ratio_slider = QSlider(Qt.Orientation.Horizontal)
         self.ratio_slider.setRange(0, SLIDER_STEPS)
-        self.damping = QDoubleSpinBox()
-        self.damping.setDecimals(3)
-        self.damping.setRange(0.01, 1.0)
-        self.damping.setSingleStep(0.05)
-        self.damping.setValue(0.707)
+        self.ratio_slider.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.damping = UnitSpinBox("Damping ζₑ", "", (0.01, 1.0), 0.707, decimals=3, step=0.05,
+                                   tip="damping of the DCM's new poles")
         self.extra = QLineEdit()
         self.extra.setPlaceholderText("e.g. 0.6+0.1j, 0.6-0.1j (both of a pair)")
         self.reset_button = QPushButton("Reset to the shot's DCM")
@@ -154,7 +149,7 @@ class DcmTab(QWidget):
                                              "like `hopkinson report`; export the tuned DCM with Export DCM")
         self.message = QLabel("")
         self.message.setWordWrap(True)
-        self.message.setStyleSheet("color: #b3261e;")
+        self.message_level = "idle"
         self.verdict = QLabel("")  # the analysis' verdict on the shot's own DCM (the Shot tab says it too)
         self.verdict.setWordWrap(True)
         self.verdict.setStyleSheet("color: #b3261e; font-weight: 700;")
@@ -224,22 +219,22 @@ class DcmTab(QWidget):
         left.setLayout(controls)
         left.setFixedWidth(330)
 
-        self.mag_plot = MagnitudePlot("Compensated magnitude", "model", "model + DCM", edge_prefix="DCM ")
+        self.mag_plot = MagnitudePlot("Compensated magnitude", "model", "with DCM", edge_prefix="DCM ")
         self.fbsd_lines = self.mag_plot.fbsd_lines
 
         self.step_plot = _plot("Step response", "normalised output", "time", None, "s")
-        self.step_plot.addLegend(offset=(-5, -5), labelTextSize="8pt")
+        legend_below(self.step_plot)
         self.step_model_curve = self.step_plot.plot([], [], pen=MODEL_PEN, name="model")
-        self.step_comp_curve = self.step_plot.plot([], [], pen=COMP_PEN, name="model + DCM")
+        self.step_comp_curve = self.step_plot.plot([], [], pen=COMP_PEN, name="with DCM")
         for level in (0.1, 0.9, 1.0):
             self.step_plot.addItem(pg.InfiniteLine(pos=level, angle=0, pen=pg.mkPen("#bdc1c6", width=1,
                                                                                     style=Qt.PenStyle.DotLine)))
 
         self.record_plot = _plot("The shot, compensated", "acceleration (km/s²)", "time", None, "s")
-        self.record_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
+        legend_below(self.record_plot)
         self.resp_curve = self.record_plot.plot([], [], pen=RESP_PEN, name="response")
         self.ref_curve = self.record_plot.plot([], [], pen=REF_PEN, name="reference")
-        self.comp_record_curve = self.record_plot.plot([], [], pen=COMP_PEN, name="compensated response")
+        self.comp_record_curve = self.record_plot.plot([], [], pen=COMP_PEN, name="compensated")
         self.ref_curve.setZValue(5)
         self.comp_record_curve.setZValue(6)
 
@@ -260,12 +255,14 @@ class DcmTab(QWidget):
         self.update_timer.setSingleShot(True)
         self.update_timer.setInterval(DEBOUNCE_MS)
         self.update_timer.timeout.connect(self.redesign)
-        self.ratio.valueChanged.connect(self._ratio_changed)
+        self.ratio.value_accepted.connect(self._ratio_changed)
+        for spin in (self.ratio, self.damping):
+            spin.refused.connect(lambda text: self.say("warning", f"Not taken: {text}."))
         self.ratio_slider.valueChanged.connect(self._slider_changed)
-        self.damping.valueChanged.connect(self._schedule)
+        self.damping.value_accepted.connect(self._schedule)
         self.extra.textChanged.connect(self._schedule)
         self.reset_button.clicked.connect(self.reset)
-        self.export_dcm_button.clicked.connect(self._export_dcm_clicked)
+        self.export_dcm_button.clicked.connect(self.export_dcm_dialog)
         self.export_report_button.clicked.connect(self._export_report_clicked)
         self._set_slider(self.ratio.value())
         self._enable(False)
@@ -291,6 +288,17 @@ class DcmTab(QWidget):
         self._draw_record()
         self._enable(True)
         self.reset()
+
+    def show_shot(self, view: Any) -> None:
+        """Design for a shot shown (ui.plots.ShotView) from its own DCM settings; nothing without a model."""
+        if view.model is None or view.dcm is None:
+            return
+        design = view.dcm.design or {}
+        self.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
+                       [complex(*p) for p in design.get("extra_poles", [])], view.record,
+                       source=view.path.name if view.path else "", shot_path=view.path, support=view.support,
+                       band_limit_hz=view.band_limit_hz,
+                       not_recommended_reason=view.compensation.not_recommended_text if view.compensation else None)
 
     def _draw_record(self) -> None:
         """The shot's reference and response, drawn once per model (a redesign only changes the
@@ -369,11 +377,11 @@ class DcmTab(QWidget):
                                     self.support, self.band_limit_hz)
         except AnalysisError as exc:
             self.error = str(exc)
-            self.message.setText(f"Cannot design this DCM: {exc}")
+            self.say("error", f"Cannot design this DCM: {plain_message(str(exc))}")
             self.export_dcm_button.setEnabled(False)
             return
         self.error = None
-        self.message.setText("")
+        self.say("idle", "")
         self.export_dcm_button.setEnabled(True)
         self.design = design
         self._show(design)
@@ -419,7 +427,14 @@ class DcmTab(QWidget):
             self.comp_record_curve.setData(t, curves[-1])
         if self._record_window is not None:
             self.record_plot.setXRange(*self._record_window, padding=0)
-            set_y_with_legend_room(self.record_plot, *curves)
+            set_y_to_curves(self.record_plot, *curves)
+
+    def say(self, level: str, text: str) -> None:
+        """A message under the design, in its level's colour (every message sets its own:
+        an error after a successful export is red, never the export's green)."""
+        self.message_level = level
+        self.message.setStyleSheet(f"color: {TEXT_COLOURS[level]};")
+        self.message.setText(text)
 
     def compensated_fbsd_hz(self) -> dict[str, float] | None:
         """The current design's compensated FBSD (Hz per level), None without a design."""
@@ -436,17 +451,15 @@ class DcmTab(QWidget):
         data["model"] = self.model.to_dict()
         return atomic_write(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
 
-    def _export_dcm_clicked(self) -> None:
+    def export_dcm_dialog(self) -> None:
         name, _ = QFileDialog.getSaveFileName(self, "Export the DCM", str(_default_name(self.shot_path, "-dcm.json")),
                                               "DCM JSON (*.json)")
         if name:
             try:
                 self.export_dcm(Path(name))
-                self.message.setStyleSheet("color: #2e9d43;")
-                self.message.setText(f"DCM written to {name}")
+                self.say("ok", f"DCM written to {name}")
             except (OSError, AnalysisError, ValueError) as exc:
-                self.message.setStyleSheet("color: #b3261e;")
-                self.message.setText(f"DCM not written: {exc}")
+                self.say("error", f"DCM not written: {plain_message(str(exc))}")
 
     def _export_report_clicked(self) -> None:
         if self._export_report is None:

@@ -119,7 +119,7 @@ class LogTab(QWidget):
         layout.setSpacing(4)
         layout.addLayout(bar)
         layout.addWidget(log_view, 1)
-        self.save_button.clicked.connect(self._save_clicked)
+        self.save_button.clicked.connect(self.save_dialog)
 
     def save(self, path: Path) -> None:
         """Save the log to `path` and say where (or why not) under the button."""
@@ -132,7 +132,7 @@ class LogTab(QWidget):
         self.message.setStyleSheet("color: #0d652d;")
         self.message.setText(f"Log saved to {written} ({len(self.log_view.rows)} rows)")
 
-    def _save_clicked(self) -> None:
+    def save_dialog(self) -> None:
         stamp = utc_now_iso().replace(":", "").replace("-", "")[:15]
         name, _ = QFileDialog.getSaveFileName(self, "Save the log", str(self.default_folder / f"panel-{stamp}.log.jsonl"),
                                               "JSON lines (*.jsonl);;Text (*.txt)")

@@ -36,10 +36,11 @@ from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import normalised_gain_function
-from hopkinson.reports.data import G_M_S2, CompensationCheck
+from hopkinson.reports.data import CompensationCheck
+from hopkinson.rig.shot_verdict import ShotJudgement, judge, settings_of, shot_judgement
 from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QWidget
 
 LEVEL_KEYS = ("5", "10")
 BAND_COLOURS = {"5": (46, 157, 67, 45), "10": (224, 160, 16, 35)}
@@ -96,6 +97,7 @@ class ShotView:
     compensation: CompensationCheck | None = None  # the DCM's check on the shot, when stored
     analysis_error: str | None = None
     response_band: dict[str, Any] | None = None  # the model's response with its 95 % band (analysis.uncertainty)
+    judgement: ShotJudgement | None = None  # the verdict and the sensitivity in the sensor's unit (rig.shot_verdict)
 
 
 def frequency_grid_hz(sample_interval_s: float, lowest_hz: float = 100.0, points: int = 1500) -> np.ndarray:
@@ -113,8 +115,10 @@ def magnitudes(model: DiscreteModel, dcm: DCM | None, frequency_hz: np.ndarray) 
     return model_mag, model_mag * np.abs(dcm.frequency_response(frequency_hz)) / abs(dcm.dc_gain)
 
 
-def view_from_results(results: dict[str, Any], record: Record | None = None) -> ShotView:
-    """A ShotView of an analysis results dict (and its record, when known); no raw channels."""
+def view_from_results(results: dict[str, Any], record: Record | None = None,
+                      settings: dict[str, Any] | None = None) -> ShotView:
+    """A ShotView of an analysis results dict (and its record, when known; the shot settings it
+    was fired with, for its verdict and units); no raw channels."""
     from hopkinson.analysis.shot_analysis import ShotAnalysis
 
     analysis = ShotAnalysis.from_dict(results, record)
@@ -135,6 +139,7 @@ def view_from_results(results: dict[str, Any], record: Record | None = None) -> 
         frequency_hz=f, magnitude=mag, compensated_magnitude=comp, record=record,
         figures=figures, compensation=CompensationCheck.of(figures),
         response_band=(results.get("uncertainty") or {}).get("response_band"),
+        judgement=judge(results, settings or {}),
     )
 
 
@@ -144,9 +149,10 @@ def load_shot_view(path: str | Path) -> ShotView:
 
     shot = read_shot(path)
     if shot.results and shot.analysis_error is None:
-        view = view_from_results(shot.results, shot.record)
+        view = view_from_results(shot.results, shot.record, settings_of(shot))
     else:
-        view = ShotView(analysis_error=shot.analysis_error or "the shot has not been analysed")
+        view = ShotView(analysis_error=shot.analysis_error or "the shot has not been analysed",
+                        judgement=shot_judgement(shot))
     view.path = Path(path)
     meta = shot.meta
     view.title = (f"{Path(path).name} — {meta.accelerometer_model or 'accelerometer'} "
@@ -177,15 +183,15 @@ def pulse_window_s(time_s: np.ndarray, reference: np.ndarray, response: np.ndarr
     return float(max(time_s[0], time_s[start] - 0.15 * span)), float(min(time_s[-1], time_s[end] + 0.15 * span))
 
 
-def set_y_with_legend_room(plot: pg.PlotWidget, *curves: np.ndarray) -> None:
-    """Y range of the curves with a third of free space on top, where the legend sits."""
+def set_y_to_curves(plot: pg.PlotWidget, *curves: np.ndarray) -> None:
+    """Y range of the curves with a little room above and below (the legends sit under the plots)."""
     values = np.concatenate([np.asarray(c, dtype=float).ravel() for c in curves])
     values = values[np.isfinite(values)]
     if values.size == 0:
         return
     lo, hi = float(values.min()), float(values.max())
     span = hi - lo if hi > lo else 1.0
-    plot.setYRange(lo - 0.05 * span, hi + 0.5 * span, padding=0)
+    plot.setYRange(lo - 0.05 * span, hi + 0.08 * span, padding=0)
 
 
 def _true_poles(truth: dict[str, Any], sample_interval_s: float) -> np.ndarray | None:
@@ -215,6 +221,19 @@ def configure_plot(widget: pg.PlotWidget, title: str, left: str, bottom: str, le
             axis.setWidth(56)
     widget.setMinimumSize(200, 150)
     return widget
+
+
+def legend_below(widget: pg.PlotWidget, columns: int = 2) -> pg.LegendItem:
+    """A legend in its own row under the plot's x axis, never over the data: the curves and
+    scatters added afterwards with a name join it (pyqtgraph's PlotItem.legend). Its width is
+    part of the plot's least width: two columns of short names keep a plot narrow."""
+    item = widget.getPlotItem()
+    legend = pg.LegendItem(colCount=columns, labelTextSize="8pt", verSpacing=-10, horSpacing=2,
+                           pen=pg.mkPen(None), brush=pg.mkBrush(None))
+    legend.layout.setContentsMargins(0, 0, 0, 0)
+    item.layout.addItem(legend, 4, 1)
+    item.legend = legend
+    return legend
 
 
 def _plot(title: str, left: str, bottom: str, left_units: str | None = None,
@@ -263,11 +282,12 @@ class MagnitudePlot(pg.PlotWidget):
 
     Y_MAX = 2.0
 
-    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "") -> None:
+    def __init__(self, title: str, model_name: str, compensated_name: str, edge_prefix: str = "",
+                 legend_columns: int = 2) -> None:
         super().__init__(axisItems={"bottom": PlainLogAxis("bottom")})
         configure_plot(self, title, "normalised magnitude", "frequency (kHz)")
         self.setLogMode(x=True, y=False)
-        self.addLegend(offset=(5, -5), labelTextSize="8pt")
+        legend_below(self, legend_columns)
         self.edge_prefix = edge_prefix
         for key in ("10", "5"):
             level = int(key) / 100
@@ -296,7 +316,9 @@ class MagnitudePlot(pg.PlotWidget):
             self.addItem(line)
             self.fbsd_lines[key] = line
         # on a white ground: the resonance's rising curve runs through the note's corner of the plot
-        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(1, 1), fill=(255, 255, 255, 220))
+        # bottom left, under the magnitude's flat start (near 1): it covers neither the resonance's rise
+        # nor the FBSD edges' labels at the top
+        self.peak_note = pg.TextItem("", color="#3c4043", anchor=(0, 1), fill=(255, 255, 255, 220))
         self.peak_note.setZValue(20)
         self.addItem(self.peak_note, ignoreBounds=True)
         self.setYRange(0, self.Y_MAX, padding=0)
@@ -320,7 +342,7 @@ class MagnitudePlot(pg.PlotWidget):
         f_khz = np.asarray(band["frequency_hz"], dtype=float) / KILO
         self.band_low.setData(f_khz, np.asarray(band["magnitude_rel_low"], dtype=float))
         self.band_high.setData(f_khz, np.asarray(band["magnitude_rel_high"], dtype=float))
-        legend.addItem(self.band_sample, f"{100 * band.get('coverage_probability', 0.95):.0f} % band of the model")
+        legend.addItem(self.band_sample, f"{100 * band.get('coverage_probability', 0.95):.0f} % band")
 
     def show_curves(self, frequency_hz: np.ndarray, magnitude: np.ndarray, compensated: np.ndarray | None,
                     fbsd_hz: dict[str, float], band: dict[str, Any] | None = None) -> None:
@@ -339,8 +361,8 @@ class MagnitudePlot(pg.PlotWidget):
         self.setYRange(0, self.Y_MAX, padding=0)
         i = int(np.nanargmax(magnitude))
         if magnitude[i] > self.Y_MAX:
-            self.peak_note.setText(f"peak ×{magnitude[i]:.1f}\nat {f_khz[i]:.1f} kHz ↑")
-            self.peak_note.setPos(hi, 0.8 * self.Y_MAX)
+            self.peak_note.setText(f"peak ×{magnitude[i]:.1f} at {f_khz[i]:.1f} kHz\n(above the scale)")
+            self.peak_note.setPos(lo, 0.02 * self.Y_MAX)
         else:
             self.peak_note.setText("")
 
@@ -348,307 +370,6 @@ class MagnitudePlot(pg.PlotWidget):
 # What the DCM's band limit is, as its tooltips say (the strip here, the DCM tab).
 BAND_LIMIT_TIP = ("the cut-off (−3 dB) of its linear-phase low-pass (4th-order Butterworth magnitude); its ±5 % edge "
                   "is the top of what the shot vouches for")
-
-
-class ResultsStrip(QFrame):
-    """The shot's key figures (analysis.key_figures): FBSD before and with the DCM, model,
-    resonance, sensitivities and pulse, each as value ± U (k ≈ 2) when the shot carries its
-    uncertainty; the DCM's check on the shot and, when it is not recommended, why."""
-
-    FIELDS = (
-        ("fbsd_5", "FBSD ±5 %"),
-        ("fbsd_10", "FBSD ±10 %"),
-        ("resonance", "Resonance"),
-        ("comp_5", "DCM ±5 %"),
-        ("comp_10", "DCM ±10 %"),
-        ("damping", "Damping ζ"),
-        ("model", "Model"),
-        ("sensitivity", "Sensitivity"),
-        ("shock", "Shock sens."),
-        ("peak", "Peak"),
-        ("pulse", "Pulse width"),
-        ("band_limit", "DCM low-pass"),
-        ("check_rms", "DCM RMS error"),
-        ("check_peak", "DCM peak error"),
-        ("noise_gain", "DCM noise gain"),
-    )  # peak and width apart: "489 km/s² (49904 g), 36.0 µs" in one cell was cut off at 1280 × 800
-    COLUMNS = 3
-
-    def __init__(self, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
-        self.setFrameShape(QFrame.Shape.StyledPanel)
-        self.setStyleSheet("ResultsStrip { background: #f8f9fa; border: 1px solid #dadce0; border-radius: 4px; }")
-        layout = QGridLayout(self)
-        layout.setContentsMargins(10, 3, 10, 3)
-        layout.setHorizontalSpacing(8)
-        layout.setVerticalSpacing(1)
-        self.values: dict[str, QLabel] = {}
-        for i, (key, caption) in enumerate(self.FIELDS):
-            row, col = divmod(i, self.COLUMNS)
-            title = QLabel(caption)
-            title.setStyleSheet("color: #5f6368; font-size: 9pt;")
-            title.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
-            value = QLabel("—")
-            value.setStyleSheet("font-size: 10pt; font-weight: 600;")
-            value.setWordWrap(True)  # a figure wider than its column wraps at a space instead of being cut off
-            value.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-            layout.addWidget(title, row, 2 * col)
-            layout.addWidget(value, row, 2 * col + 1)
-            layout.setColumnStretch(2 * col + 1, 1)
-            self.values[key] = value
-        self.grid = layout
-        rows = -(-len(self.FIELDS) // self.COLUMNS)
-        self.verdict = QLabel("")
-        self.verdict.setWordWrap(True)
-        self.verdict.setStyleSheet("color: #b3261e; font-size: 9pt; font-weight: 700;")
-        self.verdict.setVisible(False)
-        layout.addWidget(self.verdict, rows, 0, 1, 2 * self.COLUMNS)
-        self.warnings = QLabel("")
-        self.warnings.setWordWrap(True)
-        self.warnings.setStyleSheet("color: #8a5a00; font-size: 9pt;")
-        self.warnings.setVisible(False)
-        layout.addWidget(self.warnings, rows + 1, 0, 1, 2 * self.COLUMNS)
-
-    def clear(self) -> None:
-        for label in self.values.values():
-            label.setText("—")
-            label.setToolTip("")
-        for label in (self.verdict, self.warnings):
-            label.setText("")
-            label.setVisible(False)
-
-    def _set(self, key: str, text: str, tooltip: str = "") -> None:
-        self.values[key].setText(text)
-        self.values[key].setToolTip(tooltip)
-
-    def show_figures(self, kf: KeyFigures | None, check: CompensationCheck | None = None,
-                     dcm_ratio: float | None = None) -> None:
-        """Show a shot's key figures (and the DCM's check on it, when stored)."""
-        self.clear()
-        if kf is None:
-            return
-        for level in LEVEL_KEYS:
-            bound = kf.fbsd_bounds.get(level)
-            figure = kf.fbsd_hz.get(level)
-            if bound is not None:
-                self._set(f"fbsd_{level}", f"> {bound.lower_bound_hz / KILO:.1f} kHz", bound.reason)
-            else:
-                self._set(f"fbsd_{level}", format_figure(figure, KILO, "kHz"), figure_tooltip(figure, KILO, "kHz"))
-            self._set(f"comp_{level}", format_khz(kf.compensated_fbsd_hz.get(level)),
-                      f"DCM r = {dcm_ratio:.3g}" if dcm_ratio else "")
-        self._set("model", f"order {kf.order}" + (f", fit {kf.fit_percent:.1f} %" if kf.fit_percent is not None else "")
-                  if kf.order is not None else "—", "model order; fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)")
-        self._set("resonance", format_figure(kf.natural_frequency_hz, KILO, "kHz"),
-                  "main mode: the lowest supported complex pole pair; "
-                  + figure_tooltip(kf.natural_frequency_hz, KILO, "kHz"))
-        self._set("damping", format_figure(kf.damping_ratio, decimals=3), figure_tooltip(kf.damping_ratio))
-        per = "× nominal" if kf.response_unit == "m/s^2" else "V/(m/s²)" if kf.response_unit == "V" else ""
-        self._set("sensitivity", format_figure(kf.sensitivity, unit=per, decimals=4),
-                  "DC gain of the model; " + figure_tooltip(kf.sensitivity, unit=per))
-        self._set("shock", format_figure(kf.shock_sensitivity, unit=per, decimals=4),
-                  "ISO 16063-13 peak ratio; " + figure_tooltip(kf.shock_sensitivity, unit=per))
-        if kf.peak_acceleration_m_s2 is not None and kf.peak_acceleration_m_s2.value is not None:
-            peak = kf.peak_acceleration_m_s2.value  # as the report: km/s² and g
-            self._set("peak", f"{peak / KILO:.0f} km/s² ({peak / G_M_S2:.0f} g)",
-                      "peak acceleration of the reference pulse")
-        if kf.pulse_width_s is not None and kf.pulse_width_s.value is not None:
-            self._set("pulse", f"{kf.pulse_width_s.value * 1e6:.1f} µs",
-                      "pulse width at 10 % of the peak (ISO 16063-22)")
-        if check is not None:
-            self._show_check(check)
-        warnings = check.other_warnings(kf.warnings) if check is not None else list(kf.warnings)
-        self.warnings.setText("⚠ " + "; ".join(warnings) if warnings else "")
-        self.warnings.setVisible(bool(warnings))
-        self._share_width()
-
-    def _share_width(self) -> None:
-        """Give each column of figures a share of the width in proportion to its longest figure
-        (equal shares wrapped "1.6073 ± 0.0091 × nominal" beside a half-empty column)."""
-        keys = [key for key, _caption in self.FIELDS]
-        for col in range(self.COLUMNS):
-            widths = []
-            for key in keys[col::self.COLUMNS]:
-                label = self.values[key]
-                label.ensurePolished()  # the style sheet's font
-                widths.append(label.fontMetrics().horizontalAdvance(label.text()))
-            self.grid.setColumnStretch(2 * col + 1, max(1, *widths))
-
-    def _show_check(self, check: CompensationCheck) -> None:
-        tip = "error over the pulse relative to its peak: without → with the DCM, on this shot itself"
-        for key, pair in (("check_rms", check.rms_error_pct), ("check_peak", check.peak_error_pct)):
-            self._set(key, "—" if pair is None else f"{_pct(pair[0])} → {_pct(pair[1])}", tip)
-        self._set("band_limit", "—" if check.band_limit_hz is None else f"{check.band_limit_hz / KILO:.1f} kHz",
-                  f"band limit of the compensation: {BAND_LIMIT_TIP}")
-        if check.noise_gain is not None:
-            self._set("noise_gain", f"×{check.noise_gain:.3g}" + (f" (limit ×{check.noise_gain_limit:.3g})"
-                                                                  if check.noise_gain_limit else ""),
-                      "RMS amplification of white noise by the DCM at the analysis rate")
-        if check.not_recommended_text is not None:
-            self.verdict.setText(f"DCM NOT RECOMMENDED: {check.not_recommended_text}")
-            self.verdict.setVisible(True)
-
-
-def _pct(value: float | None) -> str:
-    return "—" if value is None else f"{value:.3g} %"
-
-
-class ShotPlots(QWidget):
-    """The last shot: results strip over a 2 × 3 grid of plots (module docstring)."""
-
-    def __init__(self, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
-        self.view: ShotView | None = None
-        self.title = QLabel("No shot yet — set up the shot and press ARM.")
-        self.title.setStyleSheet("font-size: 10pt; color: #3c4043;")
-        self.title.setWordWrap(True)
-        self.strip = ResultsStrip()
-
-        self.pm_plot = _plot("PM beat (Doppler channel)", "PM signal", "time from trigger", "V", "s")
-        self.pm_curve = self.pm_plot.plot([], [], pen=PM_PEN)
-        self.pm_curve.setDownsampling(auto=True, method="peak")
-        self.pm_curve.setClipToView(True)
-        self.pm_plot.setMouseEnabled(x=True, y=False)
-
-        self.accel_plot = _plot("Reference and response", "acceleration (km/s²)", "time", None, "s")
-        self.accel_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
-        self.response_curve = self.accel_plot.plot([], [], pen=RESP_PEN, name="accelerometer response")
-        self.reference_curve = self.accel_plot.plot([], [], pen=REF_PEN, name="reference (interferometer)")
-        self.reference_curve.setZValue(5)
-        self.accel_note = pg.TextItem("", color="#b3261e", anchor=(0, 0))
-        self.accel_plot.addItem(self.accel_note, ignoreBounds=True)
-
-        self.loss_plot = _plot("Loss by model order", "loss (response units²)", "model order")
-        self.loss_plot.setLogMode(x=False, y=True)
-        self.loss_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
-        self.loss_curve = self.loss_plot.plot([], [], pen=pg.mkPen("#1f6fd1", width=2), symbol="o", symbolSize=6,
-                                              symbolBrush="#1f6fd1", name="bias-corrected (order choice)")
-        self.arx_curve = self.loss_plot.plot([], [], pen=pg.mkPen("#9aa0a6", width=1.5), symbol="t", symbolSize=6,
-                                             symbolBrush="#9aa0a6", name="plain least squares")
-        self.order_line = pg.InfiniteLine(angle=90, pen=pg.mkPen("#d0312d", width=2),
-                                          label="chosen order",
-                                          labelOpts={"position": 0.12, "color": "#d0312d", "fill": (255, 255, 255, 200)})
-        self.order_line.setVisible(False)
-        self.loss_plot.addItem(self.order_line)
-
-        self.mag_plot = MagnitudePlot("Magnitude |H(f)/H(0)|", "identified model", "with DCM")
-        self.fbsd_lines = self.mag_plot.fbsd_lines
-
-        self.pz_plot = _plot("Pole-zero map (z-plane)", "imaginary", "real")
-        self.pz_plot.setAspectLocked(True)
-        self.pz_plot.addLegend(offset=(5, 5), labelTextSize="8pt")
-        theta = np.linspace(0, 2 * np.pi, 721)
-        self.pz_plot.plot(np.cos(theta), np.sin(theta), pen=pg.mkPen("#9aa0a6", width=1))
-        self.pole_scatter = pg.ScatterPlotItem(symbol="x", size=11, pen=pg.mkPen("#1f6fd1", width=2),
-                                               brush=pg.mkBrush("#1f6fd1"), name="model poles")
-        self.zero_scatter = pg.ScatterPlotItem(symbol="o", size=9, pen=pg.mkPen("#1f6fd1", width=1.5),
-                                               brush=pg.mkBrush(None), name="model zeros")
-        self.dcm_scatter = pg.ScatterPlotItem(symbol="+", size=11, pen=pg.mkPen("#d0312d", width=2),
-                                              brush=pg.mkBrush("#d0312d"), name="DCM poles")
-        self.truth_scatter = pg.ScatterPlotItem(symbol="d", size=10, pen=pg.mkPen("#2e9d43", width=1.5),
-                                                brush=pg.mkBrush(None), name="true poles (sim.)")
-        for item in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
-            self.pz_plot.addItem(item)
-
-        self.trend = LiveTrend()
-
-        grid = QGridLayout()
-        grid.setSpacing(6)
-        grid.addWidget(self.pm_plot, 0, 0)
-        grid.addWidget(self.accel_plot, 0, 1)
-        grid.addWidget(self.trend, 0, 2)
-        grid.addWidget(self.loss_plot, 1, 0)
-        grid.addWidget(self.mag_plot, 1, 1)
-        grid.addWidget(self.pz_plot, 1, 2)
-        for column in range(3):
-            grid.setColumnStretch(column, 1)
-        layout = QVBoxLayout(self)
-        layout.setContentsMargins(4, 4, 4, 4)
-        layout.setSpacing(4)
-        layout.addWidget(self.title)
-        layout.addWidget(self.strip)
-        layout.addLayout(grid, 1)
-
-    # -- drawing ---------------------------------------------------------------------------------
-    def clear(self, title: str = "") -> None:
-        """Forget the last shot's plots (the live trend keeps running)."""
-        self.view = None
-        for curve in (self.pm_curve, self.reference_curve, self.response_curve, self.loss_curve, self.arx_curve):
-            curve.setData([], [])
-        for scatter in (self.pole_scatter, self.zero_scatter, self.dcm_scatter, self.truth_scatter):
-            scatter.setData([], [])
-        self.order_line.setVisible(False)
-        self.mag_plot.clear_curves()
-        self.accel_note.setText("")
-        self.strip.clear()
-        if title:
-            self.title.setText(title)
-
-    def show_view(self, view: ShotView) -> None:
-        """Draw a prepared shot (ShotView)."""
-        self.clear()
-        self.view = view
-        self.title.setText(view.title or (str(view.path) if view.path else "shot"))
-        if view.pm_time_s is not None and view.pm_volts is not None:
-            self.pm_curve.setData(view.pm_time_s, view.pm_volts)
-            self.pm_plot.getPlotItem().enableAutoRange()
-        window = None
-        record = view.record
-        if record is not None:
-            t, reference, response = record.time_s, np.asarray(record.reference), np.asarray(record.response)
-            self.accel_plot.setLabel("left", "acceleration (km/s²)")
-            self.reference_curve.setData(t, reference / KILO)
-            self.response_curve.setData(t, response / KILO)
-            window = pulse_window_s(t, reference, response)
-        elif view.raw_response_v is not None and view.pm_time_s is not None:
-            self.accel_plot.setLabel("left", "amplifier output", units="V")
-            self.response_curve.setData(view.pm_time_s, view.raw_response_v)
-        if view.analysis_error:
-            self.accel_note.setText(f"not analysed: {_short(view.analysis_error)}")
-            self.accel_note.setPos(0, 0)
-        self.accel_plot.getPlotItem().enableAutoRange()
-        if window is not None:
-            self.accel_plot.setXRange(*window, padding=0)
-            set_y_with_legend_room(self.accel_plot, reference / KILO, response / KILO)
-        self._show_losses(view)
-        self._show_magnitude(view)
-        self._show_poles(view)
-        design = view.dcm.design if view.dcm is not None else None
-        self.strip.show_figures(view.figures, view.compensation, (design or {}).get("ratio"))
-
-    def _show_losses(self, view: ShotView) -> None:
-        def finite(values: list[float | None]) -> tuple[np.ndarray, np.ndarray]:
-            orders = np.array([i + 1 for i, v in enumerate(values) if v is not None and v > 0 and math.isfinite(v)])
-            losses = np.array([v for v in values if v is not None and v > 0 and math.isfinite(v)], dtype=float)
-            return orders, losses
-
-        self.loss_curve.setData(*finite(view.loss_by_order))
-        self.arx_curve.setData(*finite(view.arx_loss_by_order))
-        if view.order is not None and view.loss_by_order:
-            self.order_line.setVisible(True)  # (an InfiniteLine's label only updates while visible)
-            self.order_line.setValue(view.order)
-            self.order_line.label.setFormat(f"chosen order {view.order}")
-        self.loss_plot.getPlotItem().enableAutoRange()
-
-    def _show_magnitude(self, view: ShotView) -> None:
-        if view.frequency_hz is None or view.magnitude is None:
-            return
-        self.mag_plot.show_curves(view.frequency_hz, view.magnitude, view.compensated_magnitude, view.fbsd_hz,
-                                  view.response_band)
-
-    def _show_poles(self, view: ShotView) -> None:
-        if view.model is None:
-            return
-        p, z = view.model.poles, view.model.zeros
-        self.pole_scatter.setData(p.real, p.imag)
-        self.zero_scatter.setData(z.real, z.imag)
-        if view.dcm is not None:
-            d = view.dcm.poles
-            self.dcm_scatter.setData(d.real, d.imag)
-        if view.true_poles is not None:
-            t = view.true_poles
-            self.truth_scatter.setData(t.real, t.imag)
-        self.pz_plot.setXRange(-1.1, 1.1, padding=0)
-        self.pz_plot.setYRange(-1.1, 1.1, padding=0)
 
 
 def show_fbsd(lines: dict[str, pg.InfiniteLine], fbsd_hz: dict[str, float], prefix: str = "") -> None:
@@ -678,9 +399,9 @@ class LiveTrend(pg.PlotWidget):
         self.samples: deque[tuple[float, float, float]] = deque(maxlen=4000)
         item = self.getPlotItem()
         item.setTitle("<span style='font-size:10pt; font-weight:600'>Live gauges</span>")
-        item.setLabel("left", "reservoir pressure (bar)", color="#1f6fd1")
+        item.setLabel("left", "reservoir (bar)", color="#1f6fd1")
         item.setLabel("bottom", "time", units="s")
-        item.setLabel("right", "fixture vacuum (mbar)", color="#c98a00")
+        item.setLabel("right", "vacuum (mbar)", color="#c98a00")
         item.showGrid(x=True, y=True, alpha=0.25)
         item.getAxis("left").setWidth(56)
         item.getAxis("left").enableAutoSIPrefix(False)

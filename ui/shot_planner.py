@@ -11,7 +11,8 @@ from html import escape
 
 from hopkinson.analysis.bar import G_M_S2, ShotPlan, plan_shot
 from hopkinson.rig.config import RigConfig
-from PySide6.QtWidgets import QDoubleSpinBox, QLabel, QPushButton, QVBoxLayout, QWidget
+from hopkinson.ui.inputs import UnitSpinBox
+from PySide6.QtWidgets import QLabel, QPushButton, QVBoxLayout, QWidget
 
 
 class ShotPlanner(QWidget):
@@ -27,22 +28,12 @@ class ShotPlanner(QWidget):
         self._limits = config.limits
         self._apply = apply
         self.plan: ShotPlan | None = None
-        self.target_g = QDoubleSpinBox()
-        self.target_g.setDecimals(0)
-        self.target_g.setRange(0.0, 1e7)
-        self.target_g.setSingleStep(1000.0)
-        self.target_g.setSuffix(" g")
-        self.target_g.setSpecialValueText("—")
-        self.target_g.setToolTip("the peak acceleration the shot should reach (9.80665 m/s² per g)")
-        self.target_g.setValue(50_000.0)
-        self.sensor_fn_khz = QDoubleSpinBox()
-        self.sensor_fn_khz.setDecimals(1)
-        self.sensor_fn_khz.setRange(0.0, 1e4)
-        self.sensor_fn_khz.setSuffix(" kHz")
-        self.sensor_fn_khz.setSpecialValueText("not named")
-        self.sensor_fn_khz.setToolTip("the sensor's natural frequency: is δ ≤ 1.06/f_n (the paper's Eq. 36)?")
-        for spin in (self.target_g, self.sensor_fn_khz):
-            spin.setKeyboardTracking(False)
+        self.target_g = UnitSpinBox("Target peak", "g", (10.0, 2e6), 50_000.0, decimals=0, step=1000.0, special="—",
+                                    tip="the peak acceleration the shot should reach (9.80665 m/s² per g)")
+        self.sensor_fn_khz = UnitSpinBox("Sensor f_n", "kHz", (1.0, 2000.0), 0.0, decimals=1, step=1.0,
+                                         special="not named",
+                                         tip="the sensor's natural frequency in kHz: is δ ≤ 1.06/f_n (the paper's "
+                                             "Eq. 36)?")
         self.use_button = QPushButton("Use")
         self.use_button.setToolTip("set the form's projectile and pressure to the plan's choice")
         self.use_button.setEnabled(False)
@@ -57,8 +48,8 @@ class ShotPlanner(QWidget):
         layout.setSpacing(2)
         layout.addWidget(self.result)
         layout.addWidget(self.use_button)
-        self.target_g.valueChanged.connect(self.update_plan)
-        self.sensor_fn_khz.valueChanged.connect(self.update_plan)
+        self.target_g.value_accepted.connect(self.update_plan)
+        self.sensor_fn_khz.value_accepted.connect(self.update_plan)
         self.update_plan()
 
     def update_plan(self) -> None:

@@ -1,11 +1,12 @@
 """The sequencer's progress as a row of steps, CHECK → … → DONE: done steps green, the current
-one blue (red when the shot was aborted or faulted), with the current state's text beside."""
+one blue (red when the shot was aborted or faulted), with the current state's text beside; and
+the window's header: that row, the simulation badge and the ARM / FIRE / ABORT buttons."""
 
 from __future__ import annotations
 
 from hopkinson.rig.sequencer import State
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 STEPS = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE, State.SAFE,
          State.STORE, State.ANALYSE, State.DONE)
@@ -17,6 +18,15 @@ _STYLES = {
     "current": _CHIP.format(bg="#1f6fd1", fg="white"),
     "failed": _CHIP.format(bg="#d0312d", fg="white"),
     "skipped": _CHIP.format(bg="#f6e1e0", fg="#b3261e"),
+}
+# What the message line says while the rig works through a shot (states not named: unchanged).
+STATE_MESSAGES = {
+    State.CHECK: "Preparing the shot: checking the interlocks, then evacuating and charging. ABORT (Esc) stands down.",
+    State.FIRE: "FIRED — capturing the shot.",
+    State.CAPTURE: "FIRED — capturing the shot.",
+    State.SAFE: "Making the rig safe after the shot (valves closed, reservoir vented).",
+    State.STORE: "Storing the raw shot.",
+    State.ANALYSE: "Shot stored; analysing it (the result follows here).",
 }
 _STATE_COLOURS = {State.DONE: "#1e6b2e", State.ABORTED: "#b3261e", State.FAULT: "#b3261e", State.IDLE: "#3c4043"}
 
@@ -103,3 +113,41 @@ class StateBar(QWidget):
         """The step the shot was aborted in (the last one visited before SAFE)."""
         before_safe = [s for s in self._visited if s in STEPS[:6]]
         return before_safe[-1] if before_safe else None
+
+
+_BUTTON = ("QPushButton {{ font-size: 15pt; font-weight: 700; padding: 8px 18px; border-radius: 6px; "
+           "color: white; background: {bg}; border: 2px solid {border}; min-width: 96px; }} "
+           "QPushButton:disabled {{ background: #e8eaed; color: #9aa0a6; border: 2px solid #dadce0; }} "
+           "QPushButton:pressed {{ background: {border}; }}")
+ARM_STYLE = _BUTTON.format(bg="#1f6fd1", border="#174ea6")
+FIRE_STYLE = _BUTTON.format(bg="#e8710a", border="#b45309")
+ABORT_STYLE = _BUTTON.format(bg="#d0312d", border="#8c1d18")
+
+
+def action_buttons() -> tuple[QPushButton, QPushButton, QPushButton]:
+    """ARM, FIRE and ABORT, big and coloured, each saying what it does and its shortcut."""
+    arm, fire, abort = QPushButton("ARM"), QPushButton("FIRE"), QPushButton("ABORT")
+    for button, style, tip in (
+            (arm, ARM_STYLE, "check, evacuate, charge and arm the rig for the shot set up on the left (F5)"),
+            (fire, FIRE_STYLE, "fire the armed shot (asks for confirmation); needs every interlock (Ctrl+Shift+F)"),
+            (abort, ABORT_STYLE, "stop now and make the rig safe: fire and fill closed, reservoir vented (Esc)")):
+        button.setStyleSheet(style)
+        button.setToolTip(tip)
+    return arm, fire, abort
+
+
+def header_row(state_bar: StateBar, note: str, buttons: tuple[QPushButton, ...]) -> QHBoxLayout:
+    """The state bar, the simulation badge (when `note`) and the buttons in one row."""
+    header = QHBoxLayout()
+    header.setContentsMargins(10, 8, 10, 4)
+    header.addWidget(state_bar, 1)
+    badge = QLabel(note)
+    badge.setStyleSheet("QLabel { background: #fef7e0; color: #7a4f01; border: 1px solid #f9d97c; "
+                        "border-radius: 4px; padding: 3px 8px; font-weight: 700; font-size: 9pt; }")
+    badge.setVisible(bool(note))
+    badge.setToolTip("the panel drives a simulated rig: nothing real moves")
+    header.addWidget(badge, 0, Qt.AlignmentFlag.AlignTop)
+    header.addSpacing(12)
+    for button in buttons:
+        header.addWidget(button)
+    return header

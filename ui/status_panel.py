@@ -1,5 +1,6 @@
-"""Rig status at a glance: each instrument's connection and identity, the reservoir pressure
-and fixture vacuum (live), and the interlocks as lamps.
+"""Rig status at a glance: each instrument's connection (its identity in the lamp's tooltip, what
+is wrong under it when it is not connected), the reservoir pressure and fixture vacuum (live),
+and the interlocks as lamps.
 
 Lamp colours: green = holds; red = does not hold where it must (door open, e-stop tripped,
 overpressure, amplifier overloaded, or vacuum/digitizer lost while armed); amber = not reached
@@ -121,7 +122,9 @@ class StatusPanel(QWidget):
                 text = "connecting…"
             detail.setText(text)
             detail.setToolTip(link.address)
-            lamp.set_state(levels[link.status], f"{link.label}: {link.status}\n{link.address}\n{link.problem}")
+            detail.setVisible(link.status != "connected")  # connected: its identity is in the lamp's tooltip
+            lamp.set_state(levels[link.status], f"{link.label}: {link.status}\n{link.identity or link.address}"
+                                                f"\n{link.problem}".rstrip())
 
     def show_reading(self, event: Reading) -> None:
         """Update the gauges and lamps from a Reading event."""
@@ -154,7 +157,7 @@ class StatusPanel(QWidget):
         self.vacuum_value.setStyleSheet(_BIG + ("color: #2e9d43;" if good else ""))
 
 
-_BIG = "font-size: 17pt; font-weight: 600; font-family: 'DejaVu Sans Mono', monospace;"
+_BIG = "font-size: 15pt; font-weight: 600; font-family: 'DejaVu Sans Mono', monospace;"
 
 
 def _big_value() -> QLabel:

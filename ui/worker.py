@@ -44,7 +44,6 @@ import contextlib
 import logging
 import threading
 import time
-import traceback
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
@@ -148,6 +147,7 @@ class RigLink(QObject):
         self._shot_future: Future[None] | None = None  # a shot or a campaign
         self._active_sequencer: Sequencer = self.sequencer
         self.campaign_runner: Any = None  # rig.campaign.CampaignRunner while a campaign runs
+        self.shot_authorisation: FireAuthorisation | None = None  # a campaign shot confirmed one by one
         self._closed = False
         self._timer = QTimer(self)
         self._timer.setInterval(poll_interval_ms)
@@ -224,6 +224,13 @@ class RigLink(QObject):
             return
         self._poll_future = self._io.submit(self._guarded, self._poll_task)
 
+    def retry_now(self) -> None:
+        """Try every instrument that is not answering at the next poll (not in RECONNECT_INTERVAL_S)."""
+        for key, link in self.links.items():
+            if not link.usable:
+                self._last_try[key] = -1e9
+        self.poll()
+
     def start_shot(self, request: ShotRequest, conditioner: dict[str, Any] | None = None) -> FireAuthorisation:
         """Run `request` on the I/O thread; returns the authorisation FIRE gives. `conditioner`:
         the values of a conditioner set by hand (module docstring), entered first.
@@ -239,18 +246,31 @@ class RigLink(QObject):
                                             lambda: self._shot_task(request, authorisation, conditioner))
         return authorisation
 
-    def start_campaign(self, run: Any, plan: Any, conditioner: dict[str, Any] | None = None) -> None:
+    def start_campaign(self, run: Any, plan: Any, conditioner: dict[str, Any] | None = None,
+                       confirm_each_s: float | None = None) -> None:
         """Run a campaign (rig.campaign.CampaignRunner on `run`, a RunFolder, and `plan`) on the
         I/O thread; `campaign_finished` or `campaign_failed` tells how it ended. Firing must
-        have been authorised by the caller (rig.campaign.check_authorisation). `conditioner`:
-        as for start_shot."""
+        have been authorised by the caller (rig.campaign.check_authorisation), or
+        `confirm_each_s` given: each shot then waits armed (at most that long) for its own
+        authorisation, `shot_authorisation` (the panel's FIRE gives it, as for a single shot).
+        `conditioner`: as for start_shot."""
         from hopkinson.rig.campaign import CampaignRunner
 
         self._use_conditioner(conditioner)
-        runner = CampaignRunner(run, plan, self.instruments, self.config, self.bus)
+        self.shot_authorisation = None
+        confirm = {} if confirm_each_s is None else {"confirm_each": self._new_authorisation,
+                                                      "confirm_timeout_s": confirm_each_s}
+        runner = CampaignRunner(run, plan, self.instruments, self.config, self.bus, **confirm)
         self.campaign_runner = runner
         self._active_sequencer = runner.sequencer
         self._shot_future = self._io.submit(self._guarded, lambda: self._campaign_task(runner, conditioner))
+
+    def _new_authorisation(self, _shot: Any) -> FireAuthorisation:
+        """A campaign shot's own authorisation (I/O thread), kept for the panel's FIRE: set
+        before the shot's events go out, so the GUI thread sees it when FIRE lights."""
+        authorisation = FireAuthorisation()
+        self.shot_authorisation = authorisation
+        return authorisation
 
     def pause_campaign(self) -> None:
         """Stop the campaign after the shot now running (resume later)."""
@@ -266,6 +286,8 @@ class RigLink(QObject):
                 runner.abort(reason)  # aborts its shot and stops the campaign
             else:
                 self._active_sequencer.abort(reason)  # thread-safe; held until the shot honours it
+            return
+        if self._closed:  # closing: shutdown() made the rig safe already
             return
         self._io.submit(self._guarded, self._make_safe_task)
 
@@ -293,9 +315,9 @@ class RigLink(QObject):
         try:
             task()
         except Exception as exc:  # a bug, not an instrument error: show it, keep the panel alive
-            _log.exception("rig I/O task failed")
-            self.message.emit("error", f"internal error in the rig link: {type(exc).__name__}: {exc} "
-                                       f"({traceback.format_exc(limit=1).strip().splitlines()[-1]})")
+            _log.exception("rig I/O task failed")  # the traceback goes to the log file, not to the technician
+            self.message.emit("error", f"The panel's rig link met an internal error ({exc or type(exc).__name__}); "
+                                       "the rig is unaffected. Report it with the panel's log.")
 
     def _on_bus_event(self, event: RigEvent) -> None:
         """Bus subscriber (sequencer's thread): forward to the GUI thread."""
@@ -486,6 +508,7 @@ class Background(QObject):
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="panel-worker")
         self._finished.connect(self._deliver)
         self._pending = 0
+        self._closed = False
 
     @property
     def busy(self) -> bool:
@@ -493,6 +516,10 @@ class Background(QObject):
 
     def run(self, fn: Callable[[], Any], on_done: Callable[[Any], None],
             on_error: Callable[[BaseException], None] | None = None) -> None:
+        """Run `fn` off the GUI thread; after `shutdown` (the panel closing) nothing more runs."""
+        if self._closed:
+            _log.info("background task not run: the panel is closing")
+            return
         self._pending += 1
 
         def task() -> None:
@@ -509,10 +536,13 @@ class Background(QObject):
     def _deliver(self, item: tuple[Any, Any, Any, BaseException | None]) -> None:
         self._pending -= 1
         on_done, on_error, result, error = item
+        if self._closed:  # the window is closing: its widgets are not drawn on any more
+            return
         if error is None:
             on_done(result)
         elif on_error is not None:
             on_error(error)
 
     def shutdown(self) -> None:
+        self._closed = True
         self._pool.shutdown(wait=False, cancel_futures=True)

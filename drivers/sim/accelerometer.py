@@ -8,17 +8,23 @@ truth that identification must recover; the simulator uses it to make the respon
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from hopkinson.drivers.sim.config_fields import SECTION, Number
+from pydantic import Field
 from scipy import signal
 
 
 @dataclass(frozen=True)
 class Mode:
-    """One lightly damped mechanical resonance: natural frequency (Hz) and damping ratio."""
+    """One lightly damped mechanical resonance: natural frequency (Hz) and damping ratio.
 
-    natural_frequency_hz: float
-    damping_ratio: float
+    The bounds are those of a sim.toml's [[world.*.modes]] (checked on load only)."""
+
+    __pydantic_config__ = SECTION
+    natural_frequency_hz: Annotated[Number, Field(gt=0, le=1e7)]
+    damping_ratio: Annotated[Number, Field(gt=0, le=10)]
 
 
 @dataclass(frozen=True)

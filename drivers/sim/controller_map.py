@@ -27,13 +27,22 @@ TYPES: dict[str, tuple[str, int, float, float]] = {
 
 # The signals the simulated controller has, per table.
 SIGNALS: dict[str, tuple[str, ...]] = {
-    "coils": ("fire_valve", "fill_valve", "vent_valve", "vacuum_pump"),
+    "coils": ("fire_valve", "fill_valve", "vent_valve", "vacuum_pump", "fire_command"),
     "discrete_inputs": ("door_closed", "fixture_clamped", "estop_healthy",
                         "fire_valve_open", "fill_valve_open", "vent_valve_open"),
-    "holding_registers": ("pressure_setpoint", "projectile", "heartbeat", "watchdog_ms", "fire_pulse_ms"),
+    "holding_registers": ("pressure_setpoint", "projectile", "heartbeat", "watchdog_ms", "fire_pulse_ms",
+                          "fire_command"),
     "input_registers": ("reservoir_pressure", "fixture_vacuum", "watchdog_state", "fire_pulse_count"),
 }
 BIT_TABLES = ("coils", "discrete_inputs")
+
+# How the simulated PLC fires (the simulator's own reading of docs/plc-fire-styles.md):
+# pulse_register: a write to fire_pulse_ms fires a pulse that long; preset_and_coil and
+# plc_preset_coil: fire_pulse_ms holds a preset (starting at SimModbusServer's fire_preset_ms)
+# and a rising edge of the fire coil (coils.fire_command, else coils.fire_valve) fires it;
+# preset_and_command: the preset, fired when fire_command is written the command value;
+# host_timed_coil: the fire_valve coil is the valve itself.
+FIRE_STYLES = ("pulse_register", "preset_and_coil", "preset_and_command", "plc_preset_coil", "host_timed_coil")
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,14 @@ watchdog state, the pulse counter); writes go to the world (valves, set-point, p
 heartbeat, watchdog time, fire pulse) and a refusal by the controller (interlock chain,
 tripped watchdog) is exception 0x04 (device failure).
 
+It fires in one of the fire styles of controller_map.FIRE_STYLES (`fire_style`): a pulse
+length written to fire_pulse_ms fires at once (pulse_register), or it is a preset that a
+rising edge of the fire coil (coils.fire_command, else coils.fire_valve) or a command word
+(holding_registers.fire_command = `fire_command_value`) fires; plc_preset_coil starts with
+its own preset (`fire_preset_ms`); host_timed_coil has only the fire valve's coil. A style
+that has no use for a signal leaves it a plain memory cell (written, read back, no effect),
+as a PLC whose program ignores it would.
+
 RTU runs on a `PtyLine` (drivers/sim/serial_line.py) at the configured baud rate: the host
 opens `address` (a pty path) with pyserial as it would a USB-RS485 adapter.
 
@@ -35,7 +43,13 @@ import asyncio
 import threading
 from typing import Any
 
-from hopkinson.drivers.sim.controller_map import BIT_TABLES, ControllerMap, Point, default_map
+from hopkinson.drivers.sim.controller_map import (
+    BIT_TABLES,
+    FIRE_STYLES,
+    ControllerMap,
+    Point,
+    default_map,
+)
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.serial_line import PtyLine, byte_time_s
 from hopkinson.drivers.sim.world import World
@@ -99,9 +113,18 @@ class SimModbusServer:
         stopbits: int = 1,
         serial_link: str = "",
         slow_delay_s: float = 2.0,
+        fire_style: str = "pulse_register",
+        fire_preset_ms: float = 150.0,
+        fire_command_value: int = 1,
     ) -> None:
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
+        if fire_style not in FIRE_STYLES:
+            raise ValueError(f"fire style must be one of {', '.join(FIRE_STYLES)}, got {fire_style!r}")
+        if not 0 < fire_preset_ms <= 60_000:
+            raise ValueError(f"fire preset must be in (0, 60000] ms, got {fire_preset_ms!r}")
+        self.fire_style = fire_style
+        self.fire_command_value = int(fire_command_value)
         self.world = world
         self.faults = faults
         self.map = controller_map or default_map()
@@ -114,6 +137,8 @@ class SimModbusServer:
         self.line = PtyLine(byte_time_s(baudrate, 8, parity, stopbits), link_path=serial_link or None,
                             name="sim-modbus-line") if transport == "rtu" else None
         self.last_written: dict[str, float] = {}
+        if fire_style != "pulse_register":
+            self.last_written["fire_pulse_ms"] = float(fire_preset_ms)  # the PLC's preset at power-on
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -289,6 +314,8 @@ class SimModbusServer:
     def _read(self, table: str, name: str) -> float:
         w = self.world
         if table == "coils":
+            if name == "fire_command" or (name == "fire_valve" and self._fire_coil() == "fire_valve"):
+                return self.last_written.get(name, 0.0)  # a memory bit of the PLC's program
             return w.coils()[_COIL_KEYS[name]]
         if table == "discrete_inputs":
             if name.endswith("_open"):
@@ -309,8 +336,16 @@ class SimModbusServer:
 
     def _write(self, table: str, name: str, value: float) -> ExcCodes | None:
         w = self.world
+        previous = self.last_written.get(name, 0.0)
         self.last_written[name] = float(value)
         if table == "coils":
+            if name == self._fire_coil():
+                refused = self._fire_edge(bool(value) and not previous)
+                if refused is not None:
+                    self.last_written[name] = previous  # refused: the bit stays as it was
+                return refused
+            if name == "fire_command":
+                return None  # a memory bit this PLC's program does not use
             setter = {"fire_valve": w.set_fire_valve, "fill_valve": w.set_fill_valve,
                       "vent_valve": w.set_vent_valve, "vacuum_pump": w.set_pump}[name]
             refusal = setter(bool(value))
@@ -331,9 +366,31 @@ class SimModbusServer:
             w.set_watchdog_s(value / 1000.0)
         elif name == "fire_pulse_ms":
             if not 0 < value <= 60_000:
+                self.last_written[name] = previous
                 return ExcCodes.ILLEGAL_VALUE
-            if w.fire_pulse(value / 1000.0):
+            if self.fire_style == "pulse_register" and w.fire_pulse(value / 1000.0):
                 return ExcCodes.DEVICE_FAILURE
+        elif name == "fire_command" and self.fire_style == "preset_and_command":
+            refused = ExcCodes.ILLEGAL_VALUE if value not in (0, self.fire_command_value) else \
+                self._fire_edge(value == self.fire_command_value and previous != value)
+            if refused is not None:
+                self.last_written[name] = previous
+            return refused
+        return None
+
+    def _fire_coil(self) -> str:
+        """The coil whose rising edge fires the preset ("" in the styles without one)."""
+        if self.fire_style not in ("preset_and_coil", "plc_preset_coil"):
+            return ""
+        return "fire_command" if "fire_command" in self.map.get("coils", {}) else "fire_valve"
+
+    def _fire_edge(self, rising: bool) -> ExcCodes | None:
+        """A fire coil or command word switched on: a pulse of the preset (refused: 0x04)."""
+        preset_ms = self.last_written.get("fire_pulse_ms", 0.0)
+        if not rising or preset_ms <= 0:
+            return None  # no preset: the PLC's timer has nothing to run
+        if self.world.fire_pulse(preset_ms / 1000.0):
+            return ExcCodes.DEVICE_FAILURE
         return None
 
 

@@ -34,78 +34,106 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any, Protocol
+from typing import Annotated, Any, Literal, Protocol
 
 import numpy as np
 from hopkinson.analysis.bar.geometry import MOUNTS
 from hopkinson.drivers.sim.accelerometer import fractional_delay
+from hopkinson.drivers.sim.config_fields import SECTION, Flag, Int, Number
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.shock import bipolar_m_s2, bipolar_velocity_m_s, velocity_m_s
+from pydantic import Field
 from scipy import signal
 
 PULSE_SOURCES = ("ideal", "bar")
 
 
+Rel = Annotated[Number, Field(ge=0, le=0.5)]
+Positive = Annotated[Number, Field(gt=0)]
+
+
 @dataclass(frozen=True)
 class BarRingingParams:
-    """Bar motion after the pulse, seen by the spot (whole) and the sensor's base (× base_gain)."""
+    """[world.realism.bar_ringing]: bar motion after the pulse, seen by the spot (whole) and the
+    sensor's base (× base_gain)."""
 
-    enabled: bool = True
-    amplitude_rel: float = 0.015  # largest value of the ringing ÷ the pulse's peak
-    frequencies_hz: tuple[float, ...] = (2_300.0, 6_900.0, 12_400.0, 17_900.0, 23_600.0)
-    decay_s: float = 1.5e-3  # 1/e time of each mode's envelope
-    rise_s: float = 20e-6  # smooth start after the pulse's end
-    base_gain: float = 0.85  # what the sensor's base sees ÷ what the spot sees
+    __pydantic_config__ = SECTION
+    enabled: Flag = True
+    amplitude_rel: Annotated[Rel, Field(description="largest value of the ringing ÷ the pulse's peak")] = 0.015
+    frequencies_hz: tuple[Annotated[Number, Field(gt=0, le=1e6)], ...] = (2_300.0, 6_900.0, 12_400.0, 17_900.0,
+                                                                          23_600.0)
+    decay_s: Annotated[Positive, Field(description="1/e time of each mode's envelope")] = 1.5e-3
+    rise_s: Annotated[Positive, Field(description="smooth start after the pulse's end")] = 20e-6
+    base_gain: Annotated[Number, Field(ge=0, le=2, description="what the sensor's base sees ÷ what the spot "
+                                                               "sees")] = 0.85
 
 
 @dataclass(frozen=True)
 class MountParams:
-    """The sensor's mounting: a stiffer-than-sine resonance and a tension/compression asymmetry."""
+    """[world.realism.mount]: the sensor's mounting: a stiffer-than-sine resonance and a
+    tension/compression asymmetry."""
 
-    enabled: bool = True
-    frequency_ratio: float = 1.10  # mounted resonance ÷ sine-calibrated resonance
-    asymmetry_rel: float = 0.02  # relative gain lost in tension (a < 0)
+    __pydantic_config__ = SECTION
+    enabled: Flag = True
+    frequency_ratio: Annotated[Number, Field(ge=0.5, le=2, description="mounted resonance ÷ sine-calibrated "
+                                                                      "resonance")] = 1.10
+    asymmetry_rel: Annotated[Number, Field(ge=-0.5, le=0.5, description="relative gain lost in tension "
+                                                                        "(a < 0)")] = 0.02
 
 
 @dataclass(frozen=True)
 class TransverseParams:
-    """A second drive path into the sensor's mode: lateral motion × transverse sensitivity."""
+    """[world.realism.transverse]: a second drive path into the sensor's mode: lateral motion ×
+    transverse sensitivity."""
 
-    enabled: bool = True
-    sensitivity_rel: float = 0.03  # transverse sensitivity ÷ axial (1–5 %)
-    lateral_peak_rel: float = 3.5  # peak lateral acceleration ÷ the axial peak
-    lateral_width_s: float = 3e-6  # its time scale (the velocity pulse's standard deviation)
-    lateral_delay_s: float = 4e-6  # its centre after the pulse's start
+    __pydantic_config__ = SECTION
+    enabled: Flag = True
+    sensitivity_rel: Annotated[Rel, Field(description="transverse sensitivity ÷ axial (1–5 %)")] = 0.03
+    lateral_peak_rel: Annotated[Number, Field(ge=0, le=100, description="peak lateral acceleration ÷ the axial "
+                                                                        "peak")] = 3.5
+    lateral_width_s: Annotated[Positive, Field(description="its time scale (the velocity pulse's standard "
+                                                           "deviation)")] = 3e-6
+    lateral_delay_s: Annotated[Positive, Field(description="its centre after the pulse's start")] = 4e-6
 
 
 @dataclass(frozen=True)
 class ReferenceChainParams:
-    """The interferometer's errors: f² noise, the demodulator's low-pass, a delay, onset errors."""
+    """[world.realism.reference]: the interferometer's errors: f² noise, the demodulator's
+    low-pass, a delay, onset errors."""
 
-    noise: bool = True
-    noise_rel: float = 0.004  # rms of the reference's acceleration noise in flight ÷ the peak
-    flight_noise_factor: float = 6.0  # in flight ÷ at rest
-    noise_bandwidth_hz: float = 2.0e6
-    lowpass: bool = True
-    lowpass_hz: float = 200_000.0
-    lowpass_order: int = 2
-    delay: bool = True
-    delay_s: float = 0.5e-6  # the reference later than the response (0.2–0.9 µs)
-    onset_errors: bool = True
-    onset_glitches: int = 3  # phase glitches in the first onset_window_s
-    onset_glitch_rad: float = 1.0  # each one's size (sign drawn)
-    onset_window_s: float = 4e-6
-    onset_dip: float = 0.7  # the beat's amplitude drops by this fraction at the onset
+    __pydantic_config__ = SECTION
+    noise: Flag = True
+    noise_rel: Annotated[Rel, Field(description="rms of the reference's acceleration noise in flight ÷ the "
+                                                "peak")] = 0.004
+    flight_noise_factor: Annotated[Number, Field(ge=1, le=1000, description="in flight ÷ at rest")] = 6.0
+    noise_bandwidth_hz: Positive = 2.0e6
+    lowpass: Flag = True
+    lowpass_hz: Positive = 200_000.0
+    lowpass_order: Annotated[Int, Field(ge=1, le=8)] = 2
+    delay: Flag = True
+    delay_s: Annotated[Number, Field(ge=-1e-5, le=1e-5, description="the reference later than the response "
+                                                                    "(0.2–0.9 µs)")] = 0.5e-6
+    onset_errors: Flag = True
+    onset_glitches: Annotated[Int, Field(ge=0, le=100, description="phase glitches in the first "
+                                                                   "onset_window_s")] = 3
+    onset_glitch_rad: Annotated[Number, Field(ge=0, le=100, description="each one's size (sign drawn)")] = 1.0
+    onset_window_s: Positive = 4e-6
+    onset_dip: Annotated[Number, Field(ge=0, le=0.99, description="the beat's amplitude drops by this fraction "
+                                                                  "at the onset")] = 0.7
 
 
 @dataclass(frozen=True)
 class RealismParams:
     """[world.realism]: `enabled` false is the idealised world (closed-form pulses, no effect)."""
 
-    enabled: bool = False
-    pulse_source: str = "ideal"  # "ideal" (closed form) | "bar" (the bar model of hopkinson.analysis)
-    bar_mount: str = "bonded"  # with "bar": how the object sits on the bar's end (analysis.bar.geometry.MOUNTS)
-    speed_scatter_rel: float = 0.01  # shot-to-shot scatter of the projectile's speed (1σ)
+    __pydantic_config__ = SECTION
+    enabled: Flag = False
+    pulse_source: Annotated[Literal["ideal", "bar"], Field(description=(
+        "ideal: the closed form of [world.launcher]; bar: the bar model of hopkinson.analysis.bar"))] = "ideal"
+    bar_mount: Annotated[Literal["separating", "bonded"], Field(description=(
+        "with bar: how the object sits on the bar's end (analysis.bar.geometry.MOUNTS)"))] = "bonded"
+    speed_scatter_rel: Annotated[Number, Field(ge=0, le=0.2, description="shot-to-shot scatter of the "
+                                                                         "projectile's speed (1σ)")] = 0.01
     bar_ringing: BarRingingParams = field(default_factory=BarRingingParams)
     mount: MountParams = field(default_factory=MountParams)
     transverse: TransverseParams = field(default_factory=TransverseParams)

@@ -22,11 +22,10 @@ import threading
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.serial_line import PtyLine, byte_time_s
 from hopkinson.drivers.sim.world import World
+from hopkinson.drivers.sim.world_params import AMP_EXCITATION_RANGE_V as EXCITATION_RANGE_V
+from hopkinson.drivers.sim.world_params import AMP_GAINS as GAINS
+from hopkinson.drivers.sim.world_params import AMP_LOWPASS_HZ as LOWPASS_HZ
 
-# What the simulated amplifier accepts (its data sheet).
-GAINS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
-LOWPASS_HZ = (1e3, 2e3, 5e3, 10e3, 20e3, 50e3, 100e3, 200e3)
-EXCITATION_RANGE_V = (0.5, 10.0)
 MAX_LINE_BYTES = 256  # a longer line without an end is dropped
 
 

@@ -36,37 +36,58 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Annotated, Any, Literal, TextIO
 
-from hopkinson.drivers.sim.controller_map import ControllerMap, default_map
+from hopkinson.drivers.sim.config_fields import (
+    SECTION,
+    Baud,
+    Int,
+    Number,
+    Parity,
+    StopBits,
+    Transport,
+)
+from hopkinson.drivers.sim.controller_map import FIRE_STYLES, ControllerMap, default_map
 from hopkinson.drivers.sim.faults import FAULTS, FaultSet
 from hopkinson.drivers.sim.modbus_server import SimModbusServer
-from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
+from hopkinson.drivers.sim.scpi_digitizer import SIM_DIALECTS, SimDigitizerServer
 from hopkinson.drivers.sim.serial_amplifier import SimSerialAmplifier
 from hopkinson.drivers.sim.world import World, WorldParams
+from pydantic import Field
 
 from hopkinson.fileio import atomic_write, private_runtime_dir
 
 ADDRESSES_FILE = "sim-addresses.json"  # in the runtime folder: the running `hopkinson sim`
 STATE_PERIOD_S = 0.2
 DIGITIZER_CHANNELS = {"doppler": 1, "response": 2}  # role -> channel number (World.capture)
+SimFireStyle = Literal[FIRE_STYLES]  # type: ignore[valid-type]  # controller_map.FIRE_STYLES
+SimDialect = Literal[tuple(SIM_DIALECTS)]  # type: ignore[valid-type]  # generic | keysight | tektronix | lecroy
 
 
 @dataclass(frozen=True)
 class ServerParams:
-    """How the simulated instruments are reached (port 0 = any free port)."""
+    """[servers] of config/sim.toml: how the simulated instruments are reached (port 0 = any free port)."""
 
+    __pydantic_config__ = SECTION
     host: str = "127.0.0.1"
-    modbus_transport: str = "tcp"  # "tcp" | "rtu" (RTU: on a simulated serial line)
-    modbus_port: int = 0
-    modbus_unit_id: int = 1
-    modbus_baudrate: int = 19200
-    modbus_parity: str = "N"
-    modbus_stopbits: int = 1
-    digitizer_port: int = 0
-    digitizer_dialect: str = "generic"  # generic | keysight | tektronix | lecroy (scpi_digitizer.SIM_DIALECTS)
-    amplifier_baudrate: int = 115200
-    modbus_slow_delay_s: float = 2.0
+    modbus_transport: Annotated[Transport, Field(description="the controller on Modbus TCP, or RTU on a "
+                                                             "simulated serial line")] = "tcp"
+    modbus_port: Annotated[Int, Field(ge=0, le=65535, description="TCP port; 0 = any free port")] = 0
+    modbus_unit_id: Annotated[Int, Field(ge=1, le=247, description="the controller answers only this unit id")] = 1
+    modbus_baudrate: Baud = 19200
+    modbus_parity: Parity = "N"
+    modbus_stopbits: StopBits = 1
+    digitizer_port: Annotated[Int, Field(ge=0, le=65535, description="SCPI socket; 0 = any free port")] = 0
+    digitizer_dialect: Annotated[SimDialect, Field(description="the simulated digitizer's command set")] = "generic"
+    amplifier_baudrate: Baud = 115200
+    modbus_slow_delay_s: Annotated[Number, Field(ge=0, le=60, description="reply delay under the modbus-slow "
+                                                                          "fault")] = 2.0
+    modbus_fire_style: Annotated[SimFireStyle, Field(description="how the simulated PLC fires "
+                                                                 "(docs/plc-fire-styles.md)")] = "pulse_register"
+    modbus_fire_preset_ms: Annotated[Number, Field(gt=0, le=60_000, description=(
+        "the PLC's own pulse preset, ms (the preset and preset-coil styles)"))] = 150.0
+    modbus_fire_command_value: Annotated[Int, Field(ge=1, le=65535, description=(
+        "preset_and_command: the command word that fires"))] = 1
 
 
 @dataclass(frozen=True)
@@ -145,7 +166,9 @@ class SimulatedRig:
             self.world, self.faults, self.config.register_map, transport=s.modbus_transport,
             unit_id=s.modbus_unit_id, host=s.host, port=s.modbus_port, baudrate=s.modbus_baudrate,
             parity=s.modbus_parity, stopbits=s.modbus_stopbits,
-            serial_link=f"{link_prefix}controller" if link_prefix else "", slow_delay_s=s.modbus_slow_delay_s)
+            serial_link=f"{link_prefix}controller" if link_prefix else "", slow_delay_s=s.modbus_slow_delay_s,
+            fire_style=s.modbus_fire_style, fire_preset_ms=s.modbus_fire_preset_ms,
+            fire_command_value=s.modbus_fire_command_value)
         self.digitizer = SimDigitizerServer(self.world.capture, self.faults, host=s.host, port=s.digitizer_port,
                                             dialect=s.digitizer_dialect)
         self.amplifier = SimSerialAmplifier(self.world, self.faults, baudrate=s.amplifier_baudrate,
@@ -197,8 +220,8 @@ class SimulatedRig:
 
     def state(self) -> dict[str, Any]:
         """The rig as it is: what the valves were told and where they really are, pressures,
-        interlocks, watchdog, shots (JSON-ready)."""
-        return world_state(self.world)
+        interlocks, watchdog, shots, and the digitizer's acquisition state (JSON-ready)."""
+        return {**world_state(self.world), "digitizer_state": self.digitizer.state}
 
 
 def world_state(world: World) -> dict[str, Any]:
@@ -316,6 +339,7 @@ def run_simulator(
         if a.modbus_transport == "rtu":
             modbus += f", link {prefix}controller"
         out.write(modbus + "\n")
+        out.write(f'        fire_style = "{config.servers.modbus_fire_style}" (docs/plc-fire-styles.md)\n')
         channels = ", ".join(f"{role} on channel {n}" for role, n in a.digitizer_channels.items())
         out.write(f"visa    {a.visa_resource}\n")
         out.write(f"        {a.digitizer_dialect} dialect: {channels}\n")

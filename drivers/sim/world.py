@@ -1,5 +1,10 @@
 """The one physics model behind the simulated rig (DESIGN.md, "Physics of the simulated rig").
 
+Longer than 600 lines, for a reason: `World` is one object whose single lock guards the whole
+physical state (pneumatics, controller, amplifier, the pending shot), and every method below
+takes it; split across modules, which state a method may touch under the lock would no longer
+be visible in one place. Its configuration ([world] of sim.toml) is drivers/sim/world_params.py.
+
 The Modbus controller, the SCPI digitizer and the serial amplifier of the simulated rig all
 read and change this one World, so a fired shot gives consistent pressures, trigger and
 waveforms.
@@ -64,7 +69,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -74,169 +79,33 @@ from hopkinson.drivers.sim.accelerometer import (
     coloured_noise,
     white_noise,
 )
-from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput, pm_beat
+from hopkinson.drivers.sim.doppler_beat import pm_beat
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.real_records import (
-    IdealPulseSource,
     MountParams,
     PulseShape,
-    PulseSource,
-    RealismParams,
     ShotMotion,
     mounted_input_m_s2,
     shot_motion,
 )
 from hopkinson.drivers.sim.sensor_truth import sensor_truth
 from hopkinson.drivers.sim.shock import G_M_S2, velocity_m_s
+from hopkinson.drivers.sim.world_params import (
+    CHANNELS,
+    PROJECTILES,
+    AccelerometerParams,
+    AmplifierParams,
+    LauncherParams,
+    PneumaticsParams,
+    SecondSensorParams,
+    SignalParams,
+    WorldParams,
+)
 
-PROJECTILES = (1, 2, 3)
 _NO_MOUNT = MountParams(enabled=False)  # the idealised world: the sensor as sine-calibrated
-# The digitizer's channel of each signal (World.capture's keys): the PM beat, the amplifier
-# output, and when configured the quadrature photodetector and the second sensor.
-CHANNELS = {"doppler": 1, "response": 2, "doppler_quadrature": 3, "response_2": 4}
-
-
-@dataclass(frozen=True)
-class PneumaticsParams:
-    """Reservoir, valves, vacuum fixture and interlock inputs."""
-
-    supply_pressure_bar: float = 10.0
-    fill_rate_bar_s: float = 0.5
-    vent_time_constant_s: float = 1.0
-    fire_exhaust_time_constant_s: float = 0.05
-    min_fire_pressure_bar: float = 0.05
-    atmosphere_mbar: float = 1013.25
-    pump_time_constant_s: float = 2.0
-    pump_floor_mbar: float = 2.0
-    leak_rate_mbar_s: float = 1.0
-    fault_leak_floor_mbar: float = 500.0
-    door_closed: bool = True
-    fixture_clamped: bool = True
-    estop_healthy: bool = True
-    watchdog_s: float = 3.0  # the controller's own watchdog time until a host writes another
-
-
-@dataclass(frozen=True)
-class LauncherParams:
-    """Projectile launch: pressure → speed → velocity change and pulse width of the object."""
-
-    projectile: int = 3
-    speed_m_s_per_sqrt_bar: float = 10.0
-    velocity_transfer: float = 0.85
-    pulse_width_s: tuple[float, float, float] = (120e-6, 75e-6, 38.6e-6)  # projectiles No. 1, 2, 3
-
-
-@dataclass(frozen=True)
-class AccelerometerParams:
-    """The true accelerometer: modes, zero shift and bridge sensitivity."""
-
-    modes: tuple[Mode, ...] = (Mode(27_000.0, 0.05),)
-    zero_shift_m_s2: float = 0.0
-    sensitivity_v_per_m_s2: float = 2.0e-7  # bridge output at the nominal excitation
-    nominal_excitation_v: float = 5.0
-    shunt_equivalent_m_s2: float = 490_332.5  # 50 000 g
-    bridge_offset_v: float = 0.002  # bridge unbalance at the amplifier input until auto-zero
-    # Amplitude non-linearity: the sensitivity changes by this fraction per m/s² of |a| (e.g.
-    # -1e-7: -1 % per 100 km/s²); applied to the acceleration the sensor's mass is driven by.
-    nonlinearity_per_m_s2: float = 0.0
-
-
-@dataclass(frozen=True)
-class AmplifierParams:
-    """The bridge amplifier's identity, power-on settings and limits."""
-
-    identity: str = "Hopkinson-Sim,SIMAMP-1,SIM0002,1.0"
-    gain: float = 10.0
-    excitation_v: float = 5.0
-    lowpass_hz: float = 200_000.0  # 0 = filter off
-    lowpass_order: int = 2
-    output_limit_v: float = 10.0
-    auto_zero_residual_v: float = 0.0
-
-
-@dataclass(frozen=True)
-class SignalParams:
-    """Doppler channel and noise of the response channel."""
-
-    grating_pitch_m: float = DEFAULT_GRATING_PITCH_M
-    orders: tuple[int, int] = (1, -1)
-    pm_amplitude_v: float = 0.4
-    pm_dc_offset_v: float = 0.15
-    pm_fluctuation: float = 0.1
-    pm_snr_db: float = 30.0  # every *_snr_db: 0 = no noise
-    response_white_snr_db: float = 60.0
-    response_coloured_snr_db: float = 50.0
-    response_coloured_pole: float = 0.9
-    response_rate_hz: float = 10e6  # internal rate of the response model (see _response_v)
-    # Hard parts of real records (issue 10): a bipolar pulse (a negative half-sine of this ratio
-    # of the peak follows at once; 0 = a half-sine), the response channel's skew against the
-    # Doppler channel (s; negative: it leads) and a drift of the amplifier output (V/s).
-    pulse_bipolar_ratio: float = 0.0
-    channel_skew_s: float = 0.0
-    response_drift_v_per_s: float = 0.0
-    # A quadrature interferometer (ISO 16063-11 method 3): a second photodetector 90° from the
-    # PM beat on channel 3 (role doppler_quadrature), with its own offset (V), amplitude ÷ the
-    # first's and departure from 90° (degrees): the ellipse the analysis' Heydemann fit undoes.
-    quadrature: bool = False
-    quadrature_offset_v: float = 0.12
-    quadrature_gain_ratio: float = 0.85
-    quadrature_error_deg: float = 4.0
-
-    def quadrature_output(self) -> QuadratureOutput:
-        return QuadratureOutput(self.quadrature_offset_v, self.quadrature_gain_ratio,
-                                math.radians(self.quadrature_error_deg))
-
-
-@dataclass(frozen=True)
-class SecondSensorParams:
-    """An optional second accelerometer beside the first, on channel 4 (role response_2), with
-    its own conditioner set by hand (fixed gain and low-pass): its own true model, recorded
-    with every shot as simulation truth. Its noise follows [world.signals] like the first's."""
-
-    enabled: bool = False
-    modes: tuple[Mode, ...] = (Mode(33_000.0, 0.03),)
-    zero_shift_m_s2: float = 0.0
-    sensitivity_v_per_m_s2: float = 1.0e-7  # output at the conditioner's input per m/s2
-    conditioner_gain: float = 20.0
-    lowpass_hz: float = 200_000.0  # the conditioner's Butterworth low-pass; 0 = off
-    lowpass_order: int = 2
-
-    def truth(self) -> AccelerometerTruth:
-        return AccelerometerTruth(modes=tuple(self.modes), lowpass_hz=self.lowpass_hz,
-                                  lowpass_order=self.lowpass_order, sensitivity=1.0, zero_shift=self.zero_shift_m_s2)
-
-
-@dataclass(frozen=True)
-class WorldParams:
-    """Everything config/sim.toml sets about the physics."""
-
-    time_scale: float = 1.0
-    seed: int = 0
-    pneumatics: PneumaticsParams = field(default_factory=PneumaticsParams)
-    launcher: LauncherParams = field(default_factory=LauncherParams)
-    accelerometer: AccelerometerParams = field(default_factory=AccelerometerParams)
-    amplifier: AmplifierParams = field(default_factory=AmplifierParams)
-    signals: SignalParams = field(default_factory=SignalParams)
-    accelerometer_2: SecondSensorParams = field(default_factory=SecondSensorParams)
-    realism: RealismParams = field(default_factory=RealismParams)  # off: the idealised world
-
-    def pulse_source(self) -> PulseSource:
-        """What makes each shot's pulse: the closed form, or the bar model ([world.realism])."""
-        if self.realism.enabled and self.realism.pulse_source == "bar":
-            from hopkinson.drivers.sim.bar_source import BarPulseSource
-
-            return BarPulseSource.mounted(self.realism.bar_mount)
-        return IdealPulseSource(self.launcher.speed_m_s_per_sqrt_bar, self.launcher.velocity_transfer,
-                                tuple(self.launcher.pulse_width_s), self.signals.pulse_bipolar_ratio)
-
-    def channels(self) -> dict[str, int]:
-        """role -> the simulated digitizer's channel, for the signals this world makes."""
-        roles = ["doppler", "response"]
-        if self.signals.quadrature:
-            roles.append("doppler_quadrature")
-        if self.accelerometer_2.enabled:
-            roles.append("response_2")
-        return {role: CHANNELS[role] for role in roles}
+__all__ = ["CHANNELS", "PROJECTILES", "AccelerometerParams", "AmplifierParams", "CaptureSettings", "LauncherParams",
+           "PneumaticsParams", "SecondSensorParams", "SignalParams", "World", "WorldParams", "accelerometer_truth",
+           "simulate_shot"]
 
 
 @dataclass

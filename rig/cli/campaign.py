@@ -16,11 +16,15 @@ plain lines ("[3/8] s002-r1 CHARGE 1.20 bar"); at the end stdout names the run f
 report (report/report.pdf and report/report.html in the run folder, written also when the
 campaign stopped early, from the shots done so far).
 
-Exit codes: 0 every planned shot done (analysed, analysis failed, or skipped); 2 bad input or
-configuration, or firing not authorised (nothing fired); 3 the campaign stopped with shots
-left: a shot aborted to the safe state, a FAULT, or shots that may have been fired without a
-record (UNKNOWN: decide them with `campaign decide`, then --resume); 130 Ctrl-C or SIGTERM
-(the current shot is aborted to the safe state first).
+Exit codes (docs/exit-codes.md, `hopkinson campaign run --help`): 0 every planned shot done
+(analysed or skipped); 2 bad input or configuration, or firing not authorised (nothing fired);
+3 the campaign stopped with shots left: a shot aborted to the safe state, a FAULT, shots that
+may have been fired without a record (UNKNOWN: decide them with `campaign decide`, then
+--resume), or a signal (SIGINT, SIGTERM, SIGHUP: the current shot is aborted to the safe state
+first); 4 every planned shot done but some analyses failed (the message says how many and
+which); 5 every planned shot done but a lab record is in neither the database nor the spool
+(`hopkinson lab import` it). The --json object's `exit_code` is always the exit code, and
+`analyses_failed` lists the shots whose analysis failed.
 
 status: the journal's summary (counts by state, shots needing a decision). It opens the
 journal, so it refuses while a campaign runs in that folder.
@@ -37,7 +41,7 @@ from typing import Any
 
 from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
 from hopkinson.rig.cli.shot import add_log_arguments
-from hopkinson.rig.errors import EXIT_ABORTED, ConfigError
+from hopkinson.rig.errors import EXIT_ABORTED, ConfigError, exit_codes_help
 from hopkinson.rig.plan import CONFIRM_ABOVE_SHOTS
 
 REPORT_FORMATS = ("pdf", "html")
@@ -52,7 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     run = sub.add_parser("run", help="fire a plan's shots into a run folder (--resume continues one)",
                          description="Fire the shots of PLAN.toml in order, journaled in a run folder; "
-                                     "--resume continues after a crash or kill with no shot lost or fired twice.")
+                                     "--resume continues after a crash or kill with no shot lost or fired twice.",
+                         epilog=exit_codes_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     run.add_argument("plan", type=Path, metavar="PLAN.toml", help="campaign plan (config/campaigns/example.toml)")
     add_rig_arguments(run)
     run.add_argument("--sim-fire-log", type=Path, metavar="PATH",
@@ -109,7 +114,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         check_plan,
         prepare_run,
     )
-    from hopkinson.rig.cli.shot import report_reclaimed, subscribe_outputs
+    from hopkinson.rig.cli.shot import not_recorded_exit, report_reclaimed, subscribe_outputs
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig
     from hopkinson.rig.events import EventBus
@@ -147,7 +152,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         if printer is not None:
             bus.subscribe(printer)
         subscribe_outputs(stack, bus, args, what=f"campaign {run.path.name}", lines=False)
-        attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
+        recorder = attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
         report_reclaimed(control)
         runner = CampaignRunner(run, plan, control.instruments, config, bus,
                                 on_shot_start=fire_log.set_shot if fire_log is not None else None)
@@ -163,8 +168,10 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     reports: list[str] = []
     if formats:
         reports = _write_report(run.path, formats)
-    if args.json:
-        emit_json({**outcome.to_dict(), "reports": reports,
+    recorded = not_recorded_exit(recorder, outcome.exit_code)  # 5 for a done campaign whose lab record is lost
+    exit_code = EXIT_ABORTED if latch.received is not None else recorded
+    if args.json:  # its exit_code is the process's
+        emit_json({**outcome.to_dict(), "exit_code": exit_code, "reports": reports,
                    "interrupted": latch.reason if latch.received is not None else None})
     elif not args.json_events:
         print(f"run folder: {run.path}", flush=True)
@@ -174,10 +181,10 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
         rig = ("SAFE NOT CONFIRMED: check the rig by hand" if safe_again is not None and not safe_again[0]
                else "the current shot was aborted and the rig made safe")
         sys.stderr.write(f"hopkinson: error: {latch.reason}: {rig}; {outcome.message}\n")
-        return EXIT_ABORTED
+        return exit_code
     if outcome.exit_code != 0:
         sys.stderr.write(f"hopkinson: error: {outcome.message}\n")
-    return outcome.exit_code
+    return exit_code
 
 
 def _write_report(run_folder: Path, formats: list[str]) -> list[str]:

@@ -1,13 +1,14 @@
 """`hopkinson dcm` (design a dynamic compensation model) and `hopkinson compensate` (apply one).
 
     hopkinson dcm (--model model.json | --poles P,P,… --sample-interval S) [--ratio auto|R]
-                  [--damping Z] [--widening W] [--noise-gain-limit G] [--band-limit auto|off|HZ]
+                  [--damping Z] [--widening auto|W] [--noise-gain-limit G] [--band-limit auto|off|HZ]
                   [--extra-poles P,…] [--record RECORD] [--json] [-o dcm.json]
     hopkinson compensate RECORD --dcm dcm.json -o out.csv [--causal] [--force]
                   [--block-samples N] [--initial steady|rest] [--json]
 
-The design (analysis.dcm_design) cancels only the modes the shot supports, chooses r for the
-band widening within the noise-gain limit (or takes --ratio), band-limits at the top of the
+The design (analysis.dcm_design) cancels only the modes the shot supports, chooses r
+(analysis.dcm_ratio: sized to the record's pulse with --record, else to the supported band, or
+for --widening W; within the noise-gain limit; or takes --ratio), band-limits at the top of the
 supported band and reports the latency; --record checks it on the shot it came from
 (analysis.compensation). `compensate` brings the record to the DCM's rate, removes the
 latency (unless --causal) and refuses a DCM marked not recommended (unless --force).
@@ -53,9 +54,10 @@ def _checked_output(output: str | None, inputs: list[str]) -> Path | None:
 
 def _load_support(path: str, record: Record | None) -> tuple[DiscreteModel, ShotSupport]:
     """The model of a model JSON (`identify -o`, a shot's results) and what it says the shot
-    supports (with its record: also where the response stands above its noise, as the shot
-    analysis judges it); any malformed content is one clear message."""
-    from hopkinson.analysis.dcm_design import ShotSupport, response_band_top_hz
+    supports (with its record: also its pulse, which the automatic ratio sizes the DCM to, and
+    where the response stands above its noise, as the shot analysis judges it); any malformed
+    content is one clear message."""
+    from hopkinson.analysis.dcm_design import ShotSupport, pulse_of, response_band_top_hz
     from hopkinson.analysis.model import DiscreteModel, load_json_object
 
     data = load_json_object(path, "model")
@@ -65,9 +67,11 @@ def _load_support(path: str, record: Record | None) -> tuple[DiscreteModel, Shot
         ident = ident if isinstance(ident, dict) else {}
         support = ShotSupport.from_dict(ident, model)
         rms = (ident.get("noise") or {}).get("response_rms")
-        if record is not None and isinstance(rms, (int, float)) and rms > 0:
+        if record is not None:
             record = _at_rate(record, model)
-            support = replace(support, response_band_top_hz=response_band_top_hz(record, model, float(rms)))
+            support = replace(support, pulse=pulse_of(record))
+            if isinstance(rms, (int, float)) and rms > 0:
+                support = replace(support, response_band_top_hz=response_band_top_hz(record, model, float(rms)))
     except AnalysisError as exc:
         raise AnalysisError(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None
     except (TypeError, ValueError, IndexError, KeyError) as exc:
@@ -196,7 +200,7 @@ def _design(args: argparse.Namespace, record: Record | None
     options = DcmOptions(
         ratio=number_or_word(args.ratio, "--ratio", {"auto": None}, "a positive number"),
         damping=args.damping,
-        widening=args.widening,
+        widening=number_or_word(args.widening, "--widening", {"auto": None}, "a number above 1"),
         noise_gain_limit=args.noise_gain_limit,
         band_limit_hz=number_or_word(args.band_limit, "--band-limit", {"auto": None, "off": 0.0},
                                       "a positive frequency in Hz"),
@@ -356,7 +360,8 @@ def register(subparsers: Any) -> None:
         help="design a dynamic compensation model (DCM) from a model or its poles",
         description="Design the DCM of the paper's Eqs. (13)-(25) from what the shot supports: zeros at the "
         "supported model poles, new poles from the response-time ratio r (auto: the r that widens the ±5 %% band "
-        "by --widening within --noise-gain-limit) and damping zeta_e, a band limit at the top of the supported "
+        "sized to the --record's pulse, or to the supported band, or for --widening; within --noise-gain-limit) "
+        "and damping zeta_e, a band limit at the top of the supported "
         "band, unit DC gain; reports noise gain and latency. Poles as 0.974+0.1396j, both members of each "
         "conjugate pair; a list starting with '-' needs --poles=-0.5,…",
     )
@@ -365,11 +370,12 @@ def register(subparsers: Any) -> None:
     src.add_argument("--poles", metavar="P,P,...", help="the model's discrete poles, comma-separated")
     p.add_argument("--sample-interval", type=float, metavar="S", help="sample interval in s (with --poles)")
     p.add_argument("--ratio", default="auto", metavar="auto|R",
-                   help="response-time ratio r (> 0), or 'auto' (default): the r that reaches --widening")
+                   help="response-time ratio r (> 0), or 'auto' (default): chosen as --widening says")
     p.add_argument("--damping", type=float, default=0.707, metavar="Z",
                    help="damping ratio zeta_e of the new poles, (0, 1] (default %(default)s)")
-    p.add_argument("--widening", type=float, default=3.0, metavar="W",
-                   help="auto ratio: widen the ±5 %% band this many times (default %(default)s)")
+    p.add_argument("--widening", default="auto", metavar="auto|W",
+                   help="auto ratio: 'auto' (default: the band the --record's pulse needs, else the widest the "
+                   "supported band allows) or widen the model's ±5 %% band W times (W > 1)")
     p.add_argument("--noise-gain-limit", type=float, default=4.0, metavar="G",
                    help="auto ratio: largest white-noise RMS gain allowed (default %(default)s)")
     p.add_argument("--band-limit", default="auto", metavar="auto|off|HZ",

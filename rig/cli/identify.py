@@ -158,7 +158,7 @@ def run_identify(args: argparse.Namespace) -> int:
     params = _checked_params(args)
     out = check_output_path(args.output, [args.record] + ([args.sine] if args.sine else []), what="model file") if args.output else None
     record = read_record(args.record)
-    from hopkinson.analysis.doppler import flat_top_warnings
+    from hopkinson.analysis.flat_top import flat_top_warnings
 
     clipped = flat_top_warnings(record, str(args.record))  # a table file has no full scale to judge by
     if args.method == "paper":

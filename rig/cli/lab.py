@@ -1,24 +1,39 @@
 """`hopkinson lab`: the lab's record (hopkinson.lab) from the command line.
 
     hopkinson lab status                       where the record is, its schema, its rows, the spool
-    hopkinson lab upgrade                      migrate the schema to this software's (first use creates it)
-    hopkinson lab import RUN_FOLDER|SHOT.h5…   record shots measured before (idempotent), and the spool
-    hopkinson lab sensor SERIAL [--json] [--plot FILE.png] [--model … --owner … --nominal-sensitivity …
-                         --sensitivity-unit … --tolerance-percent … --interval-days …]
-                                               a sensor's history: every calibration, drift (E_n),
-                                               tolerance and due date; the options record its data
-    hopkinson lab certificate RUN_FOLDER|CAMPAIGN -o cert.pdf|.html --authorised-by NAME
-                         [--customer …] [--replaces NUMBER] [--specimen]
-                                               issue a numbered certificate (<prefix>-<year>-<NNNN>);
-                                               a campaign with simulated shots gets only a specimen
-                                               (--specimen: <prefix>-SIM-<year>-<NNNN>, marked so)
+                                               and the quarantine
+    hopkinson lab upgrade                      migrate the schema (as the database's owner role)
+    hopkinson lab import [RUN_FOLDER|SHOT.h5…] record shots measured before (idempotent); with no
+                                               path: the spool (this database's records, and those
+                                               spooled before records named their database)
+    hopkinson lab sensor SERIAL [--json] [--plot FILE.png] [--include-simulated] [--new]
+                         [--model … --owner … --nominal-sensitivity … --sensitivity-unit …
+                          --tolerance-percent … --interval-days …]
+                                               a sensor's calibrations (campaigns): drift (E_n at
+                                               like levels), tolerance, due date; the options
+                                               record its data (--new: a serial no shot named yet)
+    hopkinson lab job CAMPAIGN --received DATE --condition … --location … [--customer …
+                         --customer-contact … --mounting … --environment …]
+                                               a campaign's job record (ISO/IEC 17025 §7.8.2.1)
+    hopkinson lab certificate RUN_FOLDER|CAMPAIGN -o cert.pdf [-o cert.xml] [-o cert.html]
+                         --authorised-by NAME [--customer …] [--replaces NUMBER] [--specimen]
+                         [--deviation TEXT]
+                                               issue a numbered certificate and its documents (the
+                                               DCC as .xml); the number exists only once they are
+                                               written; simulated shots get only a specimen
+    hopkinson lab reprint NUMBER -o FILE…      an issued certificate's documents again, from its
+                                               stored content
+    hopkinson lab verify [--json]              re-check every certificate's stored hash and every
+                                               analysis against its shot file
+    hopkinson lab grants RIG_ROLE [--owner ROLE] the SQL a DBA runs for the rig's role (PostgreSQL)
     hopkinson lab audit [--subject S] [--json]  the audit trail, newest first
 
 The database: --database, else HOPKINSON_DATABASE_URL, else the rig configuration's
 [database] url, else SQLite in the user's data folder. The lab's name, certificate prefix,
-decision rule and this rig's reference chain come from the configuration's [lab].
-Exit codes: 0 done; 2 bad input, a database that cannot be reached or has another schema, a
-tampered shot file (one line each, no traceback).
+country, decision rule, signatories and this rig's reference chain come from the
+configuration's [lab] (docs/lab-record.md).
+Exit codes: 0 done; 1 `lab verify` found a discrepancy; 2 bad input, a database that cannot be
+reached or has another schema, a tampered shot file (one line each, no traceback).
 """
 
 from __future__ import annotations
@@ -43,22 +58,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         p.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG,
                        help="rig TOML with [lab] and [database] (default %(default)s)")
         p.add_argument("--database", default="", metavar="URL",
-                       help="database URL (sqlite:///FILE or postgresql://…); else HOPKINSON_DATABASE_URL, else "
-                            "the configuration's [database] url")
+                       help="database URL (sqlite:////ABSOLUTE/FILE or postgresql://…); else HOPKINSON_DATABASE_URL, "
+                            "else the configuration's [database] url")
         p.set_defaults(func=func)
         return p
 
-    command("status", "where the lab's record is, its schema version, its rows and the spool", status_command) \
-        .add_argument("--json", action="store_true", help="one JSON object")
+    command("status", "where the lab's record is, its schema version, its rows, the spool and the quarantine",
+            status_command).add_argument("--json", action="store_true", help="one JSON object")
     command("upgrade", "migrate the database's schema to this software's version", upgrade_command)
-    p = command("import", "record shot files measured before (idempotent), and any spooled records", import_command)
-    p.add_argument("paths", nargs="+", type=Path, metavar="RUN_FOLDER|SHOT.h5")
+    p = command("import", "record shot files measured before (idempotent); with no path, the spool", import_command)
+    p.add_argument("paths", nargs="*", type=Path, metavar="RUN_FOLDER|SHOT.h5")
     p.add_argument("--by", default="", help="who imports (default: the login name)")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("sensor", "a sensor's calibration history: drift, tolerance, due date", sensor_command)
     p.add_argument("serial", metavar="SERIAL")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.add_argument("--plot", type=Path, metavar="FILE.png", help="also draw the history to a PNG")
+    p.add_argument("--include-simulated", action="store_true",
+                   help="judge simulated calibrations too (they are shown, marked, and left out by default)")
+    p.add_argument("--new", action="store_true", help="record a sensor no shot has named yet")
     p.add_argument("--by", default="", help="who records the sensor's data (default: the login name)")
     p.add_argument("--model")
     p.add_argument("--owner", help="the sensor's owner (the certificate's customer by default)")
@@ -67,21 +85,46 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--tolerance-percent", type=float, metavar="PERCENT",
                    help="allowed deviation of the sensitivity from nominal (±%%)")
     p.add_argument("--interval-days", type=int, metavar="DAYS", help="calibration interval")
+    p = command("job", "a campaign's job record: receipt, condition, location", job_command)
+    p.add_argument("campaign", metavar="RUN_FOLDER|CAMPAIGN")
+    p.add_argument("--received", metavar="YYYY-MM-DD", help="date the item was received")
+    p.add_argument("--condition", help="condition of the item as received")
+    p.add_argument("--location", help="where the calibration was done")
+    p.add_argument("--customer")
+    p.add_argument("--customer-contact", metavar="TEXT")
+    p.add_argument("--mounting", help="how the accelerometer was mounted (torque, adapter, couplant)")
+    p.add_argument("--environment", help="e.g. '(23 ± 2) °C, (45 ± 10) %% r.h.'")
+    p.add_argument("--by", default="", help="who records it (default: the login name)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("certificate", "issue a numbered calibration certificate of a campaign", certificate_command)
-    p.add_argument("source", metavar="RUN_FOLDER|CAMPAIGN", help="a run folder (imported first) or a campaign's name")
+    p.add_argument("source", metavar="RUN_FOLDER|CAMPAIGN", help="a run folder (imported first), or a campaign's "
+                                                                 "UUID or unambiguous name")
     p.add_argument("-o", "--output", type=Path, action="append", required=True, metavar="PATH",
-                   help="certificate file, .pdf or .html (repeatable)")
-    p.add_argument("--authorised-by", required=True, metavar="NAME", help="the person who authorises it")
-    p.add_argument("--customer", default="", help="default: the sensor's owner")
+                   help="a document: .pdf, .html, or .xml (PTB's Digital Calibration Certificate); repeatable")
+    p.add_argument("--authorised-by", required=True, metavar="NAME", help="an authorised signatory ([[lab.signatories]])")
+    p.add_argument("--customer", default="", help="default: the job record's, else the sensor's owner")
     p.add_argument("--conditions", default="", metavar="TEXT",
-                   help="environmental conditions of the calibration, e.g. '(23 ± 2) °C, (45 ± 10) %% r.h.'")
-    p.add_argument("--replaces", default="", metavar="NUMBER", help="the certificate this one replaces")
+                   help="environmental conditions, e.g. '(23 ± 2) °C, (45 ± 10) %% r.h.' (default: the job record's)")
+    p.add_argument("--deviation", action="append", default=[], metavar="TEXT",
+                   help="a deviation from the method to state (repeatable; those beyond the standard's scope are "
+                        "stated by themselves)")
+    p.add_argument("--replaces", default="", metavar="NUMBER", help="the valid certificate this one replaces")
     p.add_argument("--specimen", action="store_true",
                    help="a specimen, marked as simulated data on every page and numbered <prefix>-SIM-…: the "
                         "only document a campaign with simulated shots gets")
     p.add_argument("--json", action="store_true", help="one JSON object")
+    p = command("reprint", "an issued certificate's documents again, from its stored content", reprint_command)
+    p.add_argument("number", metavar="NUMBER")
+    p.add_argument("-o", "--output", type=Path, action="append", required=True, metavar="PATH")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p = command("verify", "re-check every certificate's hash and every analysis against its shot file", verify_command)
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p = command("grants", "the SQL that gives the rig's role INSERT and SELECT only (PostgreSQL)", grants_command)
+    p.add_argument("rig_role", metavar="RIG_ROLE")
+    p.add_argument("--owner", default="", metavar="ROLE", help="the role that owns the tables and runs `lab upgrade`")
+    p.add_argument("--json", action="store_true", help="one JSON object")
     p = command("audit", "the audit trail, newest first", audit_command)
-    p.add_argument("--subject", help="only entries about this shot UUID, certificate number or serial")
+    p.add_argument("--subject", help="only entries about this shot UUID, certificate number, campaign UUID or serial")
     p.add_argument("--limit", type=int, default=50)
     p.add_argument("--json", action="store_true", help="one JSON object")
 
@@ -107,42 +150,52 @@ def _config(args: argparse.Namespace) -> Any:
     return load_rig_config(args.config)
 
 
-def _repository(args: argparse.Namespace, config: Any = None) -> Any:
+def _repository(args: argparse.Namespace, config: Any = None, create: bool = True) -> Any:
     from hopkinson.lab.repository import open_repository
 
     config = config or _config(args)
-    return open_repository(config.database.url, explicit=args.database)
+    return open_repository(config.database.url, explicit=args.database, create=create)
 
 
 def status_command(args: argparse.Namespace) -> int:
     from hopkinson.lab import spool
     from hopkinson.lab.database import current_revision, head_revision
 
-    with _repository(args) as repo:
+    with _repository(args, create=False) as repo:
         out = {"database": repo.where, "schema": current_revision(repo.engine), "software_schema": head_revision(),
-               "rows": repo.counts(), "spooled": len(spool.pending()), "spool": str(spool.spool_path())}
+               "rows": repo.counts(), "spooled": spool.waiting_records(repo.where),
+               "spooled_for_other_databases": spool.waiting_records() - spool.waiting_records(repo.where),
+               "spool": str(spool.spool_path()),
+               "quarantined": [{"shot": q.record.uuid, "path": q.record.path, "database": q.database,
+                                "reason": q.reason, "utc": q.utc} for q in spool.quarantined()],
+               "quarantine": str(spool.quarantine_path())}
     if args.json:
         emit_json(out)
     else:
         for key, value in out.items():
-            print(f"{key}: {value}")
+            if key == "quarantined":
+                print(f"quarantined: {len(value)}")
+                for q in value:
+                    print(f"  {q['path']}: {q['reason']}")
+            else:
+                print(f"{key}: {value}")
     return 0
 
 
 def upgrade_command(args: argparse.Namespace) -> int:
     from hopkinson.lab.database import database_url, make_engine, redacted, upgrade_database
+    from hopkinson.lab.errors import LabError
 
     config = _config(args)
     url = database_url(config.database.url, explicit=args.database)
     engine = make_engine(url)
     try:
         before, after = upgrade_database(engine)
+    except LabError:
+        raise
     except Exception as exc:
-        from hopkinson.lab.errors import LabError
-
-        if isinstance(exc, LabError):
-            raise
-        raise LabError(f"database {redacted(url)}: {str(exc).splitlines()[0]}") from None
+        raise LabError(f"database {redacted(url)}: {str(exc).splitlines()[0]} (run `lab upgrade` as the role that "
+                       f"owns the tables: docs/lab-record.md)") from None
     finally:
         engine.dispose()
     print(f"database {redacted(url)}: schema {before or '(empty)'} -> {after}"
@@ -157,21 +210,24 @@ def import_command(args: argparse.Namespace) -> int:
 
     refused, rows = 0, []
     with _repository(args) as repo:
-        for path, outcome in import_shots(repo, args.paths, args.by or getpass.getuser()):
+        for path, outcome in import_shots(repo, args.paths, args.by or getpass.getuser(), legacy_spool=not args.paths):
             rows.append({"path": str(path), "outcome": outcome})
             if outcome.startswith("refused: "):
                 refused += 1
                 sys.stderr.write(f"hopkinson: error: {outcome.removeprefix('refused: ')}\n")
             elif not args.json:
                 print(f"{outcome}: {path}")
+    if not rows and not args.json:
+        print("nothing to import: the spool holds nothing for this database")
     if args.json:
-        emit_json({"shots": rows, "refused": refused})
+        emit_json({"shots": [r for r in rows if r["path"] != "spool"], "refused": refused,
+                   "spool": next((r["outcome"] for r in rows if r["path"] == "spool"), "")})
     return 2 if refused else 0
 
 
 def sensor_command(args: argparse.Namespace) -> int:
     from hopkinson.lab.errors import LabError
-    from hopkinson.lab.history import sensor_history
+    from hopkinson.lab.history import load_sensor_history
 
     config = _config(args)
     fields = {"model": args.model, "owner": args.owner, "nominal_sensitivity": args.nominal_sensitivity,
@@ -180,14 +236,11 @@ def sensor_command(args: argparse.Namespace) -> int:
     for key in ("tolerance_percent", "interval_days", "nominal_sensitivity"):
         if fields[key] is not None and not fields[key] > 0:
             raise LabError(f"--{key.replace('_', '-')}: must be > 0, got {fields[key]}")
-    with _repository(args, config) as repo:
-        if any(v is not None for v in fields.values()):
-            repo.register_sensor(args.serial, args.by or getpass.getuser(), **fields)
-        sensor = repo.sensor(args.serial)
-        if sensor is None:
-            raise LabError(f"sensor {args.serial}: not in the lab's record")
-        history = sensor_history(sensor, repo.calibrations(args.serial), config.lab.decision_rule)
-        certificates = repo.certificates(args.serial)
+    changing = any(v is not None for v in fields.values()) or args.new
+    with _repository(args, config, create=changing) as repo:
+        if changing:
+            repo.register_sensor(args.serial, args.by or getpass.getuser(), create=args.new, **fields)
+        history = load_sensor_history(repo, args.serial, config.lab.decision_rule, args.include_simulated)
     if args.plot is not None:
         from hopkinson.lab.history_plot import history_figure
 
@@ -196,94 +249,185 @@ def sensor_command(args: argparse.Namespace) -> int:
         fig = history_figure(history)
         atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png", dpi=90))
     if args.json:
-        emit_json(dict(history.to_dict(), certificates=certificates))
+        emit_json(history.to_dict())
         return 0
-    print(history_text(history, certificates))
+    print(history_text(history))
     return 0
 
 
-def history_text(history: Any, certificates: list[dict[str, str]]) -> str:
-    """The history for people: the sensor, one line per calibration, drift and flags."""
+def history_text(history: Any) -> str:
+    """The history for people: the sensor, one line per calibration (simulated ones marked),
+    drift and flags."""
     from hopkinson.lab.history_plot import SHOWN
 
     s = history.sensor
     lines = [f"sensor {s.serial}: {s.model or 'model unknown'}, owner {s.owner or '—'}, tolerance "
              f"{f'±{s.tolerance_percent:g} %' if s.tolerance_percent is not None else '—'}, interval "
              f"{f'{s.interval_days} days' if s.interval_days else '—'}",
-             f"{len(history.calibrations)} calibration(s)" + (f"; due {history.due}" if history.due else "")]
-    header = ["UTC", "rig", "campaign"] + [label for _key, label, _scale, _unit in SHOWN]
+             f"{len(history.calibrations)} calibration(s)" + (f"; due {history.due} (UTC)" if history.due else "")]
+    header = ["last shot (UTC)", "rig", "campaign", "shots", "stated sensitivity"] + [
+        label for key, label, _scale, _unit in SHOWN if key != "sensitivity"]
     lines.append("  ".join(header))
     for c in history.calibrations:
-        cells = [c.utc_time[:19], c.rig, c.campaign or "—"]
+        absolute = c.absolute.format(unit=c.absolute_unit) if c.absolute is not None else \
+            (c.figures["sensitivity"].format() if c.figures.get("sensitivity") else "—")
+        cells = [c.utc_time[:19] + "Z", c.rig, c.campaign or "—", str(len(c.shots)), absolute]
         for key, _label, scale, unit in SHOWN:
-            figure = c.figures.get(key)
-            cells.append(figure.format(scale, unit=unit) if figure is not None else "—")
-        lines.append("  ".join(cells))
+            if key != "sensitivity":
+                figure = c.figures.get(key)
+                cells.append(figure.format(scale, unit=unit) if figure is not None else "—")
+        lines.append("  ".join(cells) + ("  SIMULATED" if c.simulated else ""))
     for key, d in history.drift.items():
-        lines.append(f"drift {key}: E_n = {d.e_n:+.2f} ({'DRIFTED' if d.drifted else 'consistent'}; newest "
-                     f"against {d.history_n} earlier)" if d.e_n is not None else f"drift {key}: no uncertainty")
+        lines.append(f"drift {key}: E_n = {d.e_n:+.2f} ({'DRIFTED' if d.drifted else 'consistent'}; newest against "
+                     f"the previous calibration at {d.levels} like level(s))" if d.e_n is not None
+                     else f"drift {key}: no uncertainty")
     if history.conformity is not None:
         lines.append(history.conformity.statement())
-    for c in certificates:
-        lines.append(f"certificate {c['number']} issued {c['issued_utc'][:10]}"
-                     + (f", replaces {c['replaces']}" if c["replaces"] else "") + f": {c['conformity']}")
+    for c in history.certificates:
+        lines.append(f"certificate {c['number']} issued {c['issued_utc'][:10]} (UTC)"
+                     + (f", replaces {c['replaces']}" if c["replaces"] else "")
+                     + (f", withdrawn (replaced by {c['withdrawn_by']})" if c["withdrawn_by"] else "")
+                     + f": {c['conformity']}")
     lines.append("flags: " + ("; ".join(history.flags) if history.flags else "none"))
     return "\n".join(lines)
 
 
-def certificate_command(args: argparse.Namespace) -> int:
-    from hopkinson.lab.certificate import (
-        LabIdentity,
-        certificate_content,
-        with_number,
-        write_certificate,
-    )
+def _campaign_ref(repo: Any, source: str, actor: str) -> str:
+    from hopkinson.rig.lab_record import campaign_ref
+
+    return campaign_ref(repo, source, actor)
+
+
+def job_command(args: argparse.Namespace) -> int:
+    from datetime import date
+
     from hopkinson.lab.errors import LabError
-    from hopkinson.rig.lab_record import import_shots
-    from hopkinson.rig.shotfile import software_version
+
+    if args.received:
+        try:
+            date.fromisoformat(args.received)
+        except ValueError:
+            raise LabError(f"--received: a date YYYY-MM-DD, got {args.received!r}") from None
+    fields = {k: getattr(args, k) for k in ("received", "condition", "location", "customer", "customer_contact",
+                                            "mounting", "environment")}
+    if all(v is None for v in fields.values()):
+        raise LabError("lab job: nothing to record (--received, --condition, --location, …)")
+    actor = args.by or getpass.getuser()
+    with _repository(args) as repo:
+        ref = _campaign_ref(repo, args.campaign, actor)
+        job = repo.transact(actor, lambda uow: _job_dict(uow.campaigns.record_job(uow.campaigns.find(ref), **fields)))
+    if args.json:
+        emit_json({"campaign": str(ref), "job": job})
+        return 0
+    print(f"job recorded for campaign {ref}: " + ", ".join(f"{k} {v!r}" for k, v in job.items() if v))
+    return 0
+
+
+def _job_dict(job: Any) -> dict[str, str]:
+    return {k: getattr(job, k) for k in ("received", "condition", "location", "customer", "customer_contact",
+                                         "mounting", "environment")}
+
+
+def _identity(config: Any) -> Any:
+    from hopkinson.rig.lab_record import lab_identity
+
+    return lab_identity(config)
+
+
+def _check_documents(outputs: list[Path]) -> None:
+    from hopkinson.lab.certificate import DOCUMENT_SUFFIXES
+    from hopkinson.lab.errors import LabError
 
     from hopkinson.fileio import check_output_path
 
-    for out in args.output:
-        if out.suffix.lower() not in (".pdf", ".html"):
-            raise LabError(f"-o {out}: a certificate is .pdf or .html")
+    for out in outputs:
+        if out.suffix.lower() not in DOCUMENT_SUFFIXES:
+            raise LabError(f"-o {out}: a certificate is written as {', '.join(DOCUMENT_SUFFIXES)}")
         if not out.parent.is_dir():
             raise LabError(f"-o {out}: folder {out.parent} does not exist")
         check_output_path(out, [], what="certificate")
+
+
+def certificate_command(args: argparse.Namespace) -> int:
+    from hopkinson.lab.certificate import Request, certificate_content, write_documents
+    from hopkinson.lab.issuing import issue
+    from hopkinson.rig.shotfile import software_version
+
+    _check_documents(args.output)
     config = _config(args)
-    lab = config.lab
-    identity = LabIdentity(lab.name, lab.address, lab.accreditation, lab.certificate_prefix, lab.decision_rule)
-    source = Path(args.source)
+    identity = _identity(config)
+    identity.role_of(args.authorised_by, args.specimen)  # refused before anything is imported
+    request = Request(args.authorised_by, software_version(), args.customer, args.conditions, tuple(args.deviation),
+                      args.specimen)
     with _repository(args, config) as repo:
-        if source.is_dir():
-            refused = [o for _p, o in import_shots(repo, [source], getpass.getuser()) if o.startswith("refused")]
-            if refused:
-                raise LabError(refused[0].removeprefix("refused: "))
-            campaign = source.resolve().name
-        else:
-            campaign = args.source
-        content = certificate_content(repo, campaign, identity, customer=args.customer, conditions=args.conditions,
-                                      authorised_by=args.authorised_by, software_version=software_version(),
-                                      specimen=args.specimen)
-        prefix = f"{identity.certificate_prefix}-SIM" if args.specimen else identity.certificate_prefix
-        issued = repo.issue_certificate(
-            prefix, content, serial=content["serial"], subject=campaign,
-            authorised_by=args.authorised_by, replaces=args.replaces,
-            number_into=lambda c, number, utc: with_number(c, number, utc, args.replaces))
-    written = [str(write_certificate(issued.content, out)) for out in args.output]
+        ref = _campaign_ref(repo, args.source, getpass.getuser())
+        issued = issue(repo, campaign=ref, prefix=identity.certificate_prefix, authorised_by=args.authorised_by,
+                       specimen=args.specimen, replaces=args.replaces,
+                       content=lambda uow, campaign: certificate_content(uow, campaign, identity, request),
+                       documents=lambda content: write_documents(content, list(args.output), identity))
+    written = [str(p) for p in args.output]
     if args.json:
         emit_json({"number": issued.number, "replaces": issued.replaces or None, "files": written,
-                   "conformity": issued.content["conformity"]})
+                   "conformity": issued.content["conformity"], "campaign_uuid": issued.content["campaign_uuid"]})
     else:
         print(("specimen " if args.specimen else "") + f"certificate {issued.number}"
-              + (f" (replaces {issued.replaces})" if issued.replaces else ""))
+              + (f" (replaces {issued.replaces}, now withdrawn)" if issued.replaces else ""))
         for path in written:
             print(f"written: {path}")
     return 0
 
 
+def reprint_command(args: argparse.Namespace) -> int:
+    from hopkinson.lab.certificate import write_documents
+    from hopkinson.lab.errors import LabError
+
+    _check_documents(args.output)
+    config = _config(args)
+    with _repository(args, config, create=False) as repo:
+        issued = repo.certificate(args.number)
+    if issued is None:
+        raise LabError(f"certificate {args.number}: not in the lab's record")
+    written = write_documents(issued.content, list(args.output), _identity(config))
+    if args.json:
+        emit_json({"number": args.number, "written": [str(p) for p in written],
+                   "withdrawn_by": issued.withdrawn_by or None})
+        return 0
+    for path in written:
+        print(f"written: {path}" + (f" (withdrawn: replaced by {issued.withdrawn_by})" if issued.withdrawn_by else ""))
+    return 0
+
+
+def verify_command(args: argparse.Namespace) -> int:
+    from hopkinson.rig.lab_record import verify_record
+
+    with _repository(args, create=False) as repo:
+        report = verify_record(repo)
+    if args.json:
+        emit_json(report)
+    else:
+        print(f"certificates: {report['certificates']} checked; shots: {report['shots']} checked, "
+              f"{len(report['missing_files'])} file(s) not found")
+        for line in report["problems"]:
+            print(f"PROBLEM: {line}")
+        for path in report["missing_files"]:
+            print(f"not found: {path}")
+        print("verified: no discrepancy" if not report["problems"] else f"{len(report['problems'])} discrepancies")
+    return 1 if report["problems"] else 0
+
+
+def grants_command(args: argparse.Namespace) -> int:
+    from hopkinson.lab.roles import grants_sql
+
+    sql = grants_sql(args.rig_role, args.owner)
+    if args.json:
+        emit_json({"rig_role": args.rig_role, "owner": args.owner or None, "sql": sql})
+    else:
+        print(sql)
+    return 0
+
+
 def audit_command(args: argparse.Namespace) -> int:
-    with _repository(args) as repo:
+    with _repository(args, create=False) as repo:
         entries = repo.audit_trail(args.subject, limit=args.limit)
     if args.json:
         emit_json({"audit": entries})

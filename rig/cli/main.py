@@ -3,7 +3,8 @@
 Each command module has `register(subparsers)`, which adds its parser(s) and sets
 `func(args) -> int` as the default. Known errors become one line on stderr and an exit
 code (2: bad input or configuration, an output that would destroy an input, a file that
-cannot be read or written; 3: shot aborted to the safe state); no traceback.
+cannot be read or written; 3: shot aborted to the safe state; every code: rig/errors.py
+EXIT_CODES, docs/exit-codes.md, `hopkinson --help`); no traceback.
 
 Signals. The commands that drive the rig (shot, campaign run, panel, safe) catch SIGINT,
 SIGTERM and SIGHUP themselves (rig/signals.py: every way out goes SAFE, exit code 3). Every
@@ -47,6 +48,7 @@ COMMAND_MODULES = [
     "hopkinson.rig.cli.report",
     "hopkinson.rig.cli.lab",
     "hopkinson.rig.cli.demo",
+    "hopkinson.rig.cli.config",
 ]
 
 # The shared rig options live here, not in rig.config: building the parser must not load the
@@ -104,9 +106,12 @@ class _VersionAction(argparse.Action):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every registered sub-command."""
+    from hopkinson.rig.errors import exit_codes_help
+
     parser = argparse.ArgumentParser(
         prog="hopkinson",
         description="Hopkinson-bar shock calibration of high-g accelerometers.",
+        epilog=exit_codes_help(), formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -147,10 +152,19 @@ def check_write_flags(args: argparse.Namespace) -> None:
     if not outputs:
         return
     inputs = [p for name, value in vars(args).items() if name not in WRITE_FLAGS
-              for p in paths(value) if Path(p).is_file()]
+              for p in paths(value) if _is_file(p)]
     if hasattr(args, "sim") and hasattr(args, "config"):
         inputs.append(rig_config_path(args))  # read even when not named
     check_writes(outputs, inputs)
+
+
+def _is_file(value: Any) -> bool:
+    """Whether an argument names an existing file (a text no file can be named, e.g. longer
+    than the system's name limit, is not one)."""
+    try:
+        return Path(value).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -6,10 +6,17 @@
    computer (the names rig.toml wants);
 2. opens each configured instrument;
 3. reads every mapped signal of the controller one by one (each coil, discrete input and
-   register, with its address and type), its identity and watchdog; the digitizer's identity,
+   register, with its address and type), its identity and watchdog, and judges every value
+   against what it can physically be (rig/plausibility.py): a reading that cannot be true
+   fails, naming the value, its register and the likely cause (word order, register type,
+   unit or scale, with the rig.toml change that makes it plausible); the pulse counter is
+   read twice and must not move (unless another process holds the rig); the digitizer's identity,
    every acquisition and channel setting, each recorded channel's on/off state (a scope
    acquires only the channels that are on) and, when it holds a record, each recorded
-   channel's transfer; the amplifier's identity, settings and overload flag;
+   channel's transfer and whether it carries its signal (analysis.channel_content: a
+   quadrature role must carry the beat, a sensor role the pulse; one that holds only noise
+   fails, with the fix, e.g. "unmap the quadrature channel"); the amplifier's identity,
+   settings and overload flag;
 4. prints each step as ok or FAIL; every failure names the instrument, the command and the
    reply, and a line "fix:" says what to check. A digitizer that does not answer its dialect's
    commands is asked a plain *IDN? (IEEE 488.2, which every dialect answers): its maker then
@@ -18,7 +25,8 @@
 It only reads (never the heartbeat, never a coil). While another process holds the rig, it
 asks only what can be shared (as `status` does). Once a step has lost an instrument's link, its
 remaining steps are listed as not tried (one failure, one fix). Exit code 0 when everything
-answered, 1 when something failed (the lines say what to fix), 2 for a bad configuration.
+answered and could be true, 1 when something failed or read a value that cannot be true (the
+lines say what to fix), 2 for a bad configuration (docs/exit-codes.md).
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 from hopkinson.rig.cli.main import DEFAULT_RIG_CONFIG
 from hopkinson.rig.dialect_hint import dialect_fix, plain_identity
+from hopkinson.rig.errors import exit_codes_help
 
 if TYPE_CHECKING:
     from hopkinson.rig.config import RigConfig
@@ -47,7 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     probe = subparsers.add_parser(
         "probe", help="bring up a rig: list ports, open each instrument, read every signal, say what to fix",
         description="List VISA resources and serial ports, open each configured instrument, read every mapped "
-                    "register and channel setting, and print what works and what does not, with the fix.")
+                    "register and channel setting, and print what works and what does not, with the fix.",
+        epilog=exit_codes_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     probe.add_argument("--config", type=Path, default=DEFAULT_RIG_CONFIG, help="rig TOML (default %(default)s)")
     probe.add_argument("--json", action="store_true", help="one JSON object on stdout")
     probe.set_defaults(func=run_probe)
@@ -92,7 +102,8 @@ def probe_rig(config: RigConfig) -> dict[str, Any]:
     report: dict[str, Any] = {"config": config.path, "held_by": holder,
                               "visa_resources": visa_resources(getattr(config.digitizer, "visa_library", "@py")),
                               "serial_ports": serial_ports(), "instruments": {}}
-    probes = {"valve_controller": _probe_controller, "digitizer": _probe_digitizer, "amplifier": _probe_amplifier}
+    probes = {"valve_controller": lambda c: _probe_controller(c, held=holder is not None),
+              "digitizer": _probe_digitizer, "amplifier": _probe_amplifier}
     for role, probe in probes.items():
         entry: dict[str, Any] = {"address": instrument_address(config, role)}
         if holder is not None and not shareable(config, role):
@@ -123,18 +134,60 @@ def _probe(config: RigConfig, role: str, body: Callable[[_Steps, Any], None]) ->
     return steps
 
 
-def _probe_controller(config: RigConfig) -> _Steps:
+def _probe_controller(config: RigConfig, held: bool = False) -> _Steps:
+    from hopkinson.rig.plausibility import CHECKED_AT_CHECK, PULSE_COUNT
+
     def body(steps: _Steps, vc: Any) -> None:
         steps.run("identity (read device identification)", vc.identity)
         register_map = getattr(vc, "map", None)
-        if register_map is None or not hasattr(vc, "read_bits"):  # a lab's driver: its role's reads
+        if register_map is None or not hasattr(vc, "read_bits"):  # a lab's driver: its role's reads, judged
             steps.run("status", vc.status)
-            return
-        for table, entries in register_map.blocks().items():
-            for name, entry in entries.items():
-                steps.run(_signal_step(table, name, entry), lambda t=table, e=entry: _read_signal(vc, t, e))
+            for signal in CHECKED_AT_CHECK:
+                if signal != PULSE_COUNT or getattr(vc, "has_pulse_counter", True):
+                    steps.run(f"{signal} (plausible?)", lambda s=signal: _judged(vc, config, s))
+        else:
+            for table, entries in register_map.blocks().items():
+                for name, entry in entries.items():
+                    steps.run(_signal_step(table, name, entry),
+                              lambda t=table, n=name, e=entry: _read_signal(vc, config, t, n, e))
+        counted = [st["ok"] for st in steps.steps if st["step"].startswith(PULSE_COUNT)]
+        if not held and counted and all(counted):  # read once, and it could be true: must not move
+            steps.run(f"{PULSE_COUNT} still (read again after {COUNTER_GAP_S:g} s, nothing fired)",
+                      lambda: _counter_still(vc, config))
 
     return _probe(config, "valve_controller", body)
+
+
+COUNTER_GAP_S = 0.5  # probe reads the pulse counter twice this far apart: it must not move
+
+
+def _judged(vc: Any, config: RigConfig, signal: str) -> float:
+    """The signal's value; ImplausibleReading (naming the cause and the fix) when it cannot be true."""
+    from hopkinson.rig.plausibility import ImplausibleReading, read_and_judge
+
+    value, finding = read_and_judge(vc, config, signal)
+    if finding is not None:
+        raise ImplausibleReading(finding)
+    return value
+
+
+def _counter_still(vc: Any, config: RigConfig) -> int:
+    import time
+
+    from hopkinson.rig.plausibility import (
+        PULSE_COUNT,
+        ImplausibleReading,
+        counter_moved,
+        plausible_ranges,
+    )
+
+    before = vc.fire_pulse_count()
+    time.sleep(COUNTER_GAP_S)
+    after = vc.fire_pulse_count()
+    finding = counter_moved(plausible_ranges(config)[PULSE_COUNT], before, after, COUNTER_GAP_S)
+    if finding is not None:
+        raise ImplausibleReading(finding)
+    return after
 
 
 def _signal_step(table: str, name: str, entry: Any) -> str:
@@ -148,15 +201,20 @@ def _signal_step(table: str, name: str, entry: Any) -> str:
     return f"{table}.{name} ({table.replace('_', ' ').rstrip('s')} {entry})"
 
 
-def _read_signal(vc: Any, table: str, entry: Any) -> Any:
-    from hopkinson.drivers.registers import Register
+def _read_signal(vc: Any, config: RigConfig, table: str, name: str, entry: Any) -> Any:
+    """A bit, or a register's value judged for plausibility (rig/plausibility.py)."""
+    from hopkinson.rig.plausibility import plausible_ranges
 
     function = table.replace("_", " ")
     if table in ("coils", "discrete_inputs"):
         return vc.read_bits(function, [entry])[entry]
-    if isinstance(entry, Register):
-        return vc.read_values(function, {"value": entry})["value"]
-    return vc.read_words(function, [entry])[entry]
+    signal = f"{table}.{name}"
+    if signal in plausible_ranges(config):
+        value = _judged(vc, config, signal)
+        return int(value) if isinstance(entry, int) else value
+    if isinstance(entry, int):
+        return vc.read_words(function, [entry])[entry]
+    return vc.read_values(function, {"value": entry})["value"]
 
 
 def _probe_digitizer(config: RigConfig) -> _Steps:
@@ -170,10 +228,19 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
         if settings is not None and getattr(settings, "channels_on", None) is not None:
             steps.run("recorded channels on", lambda: channel_states(settings.channels_on, roles))
         state = steps.run("acquisition state", dig.acquisition_state)
-        if state == "TRIGGERED":  # the instrument holds a record: try each role's transfer
+        if state == "TRIGGERED":  # the instrument holds a record: each role's transfer, and what it carries
+            volts: dict[str, Any] = {}
+
+            def transfer(role: str) -> str:
+                waveform = dig.fetch_waveform(role)
+                volts[role] = waveform.volts()
+                return f"{waveform.codes.size} samples"
+
             for role, channel in roles.items():
-                steps.run(f"transfer of {channel} ({role})",
-                          lambda role=role: f"{dig.fetch_waveform(role).codes.size} samples")
+                steps.run(f"transfer of {channel} ({role})", lambda role=role: transfer(role))
+            for role, channel in roles.items():
+                if role != "doppler" and role in volts and "doppler" in volts:
+                    steps.run(f"{role} ({channel}) carries its signal", lambda role=role: _content(role, volts))
 
     steps = _probe(config, "digitizer", body)
     opened = [s for s in steps.steps if s["step"] == "open"]
@@ -185,6 +252,29 @@ def _probe_digitizer(config: RigConfig) -> _Steps:
             if fix is not None:
                 opened[0]["fix"] = fix
     return steps
+
+
+class EmptyChannel(ValueError):
+    """A recorded channel that carries nothing for its role (analysis.channel_content)."""
+
+    def __init__(self, message: str, fix: str) -> None:
+        super().__init__(message)
+        self.fix = fix
+
+
+def _content(role: str, volts: dict[str, Any]) -> str:
+    """How much the role's channel rises while the doppler channel's beat runs; EmptyChannel
+    when it carries nothing (a quadrature role on a one-photodetector interferometer, a sensor
+    role with no sensor)."""
+    from hopkinson.analysis.channel_content import beat_content, pulse_content
+
+    judge = beat_content if role == "doppler_quadrature" else pulse_content
+    content = judge(volts[role], volts["doppler"], role)
+    if content is None:
+        return "not judged: the doppler channel shows no motion in this record"
+    if content.carries_nothing:
+        raise EmptyChannel(content.message(), content.fix())
+    return f"rises {content.rise_db:.0f} dB while the object moves"
 
 
 def channel_states(channels_on: dict[str, bool], roles: dict[str, str]) -> str:
@@ -267,7 +357,10 @@ FIXES: list[tuple[str, str]] = [  # (text in the error, what to check), first ma
 
 
 def fix_for(exc: BaseException) -> str:
-    """What to check for this failure (FIXES), or the general advice."""
+    """What to check for this failure (its own fix, FIXES), or the general advice."""
+    own = getattr(exc, "fix", None)
+    if isinstance(own, str) and own:
+        return own
     text = str(exc)
     off = re.search(r"(\S+) is off on the instrument", text)
     if off:

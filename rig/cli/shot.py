@@ -36,10 +36,13 @@ happens (the last one is the outcome). The shot's JSON-lines log is written besi
 file (<name>.log.jsonl, rig/logbook.py), also for a shot aborted before anything was recorded;
 --log-file writes a copy elsewhere; --trace adds every instrument command and reply to the logs.
 
-Exit codes: 0 done (also when the analysis failed: the shot is recorded, the analysis error is
-printed on stderr); 2 bad input or configuration, or the rig held by another process (nothing
-was moved); 3 the shot was aborted to the safe state or interrupted by a signal (one line on
-stderr: which state, which instrument, why).
+Exit codes (docs/exit-codes.md, `hopkinson shot --help`): 0 fired, recorded and analysed; 2 bad
+input or configuration, or the rig held by another process (nothing was moved); 3 the shot was
+aborted to the safe state, ended in FAULT, or was interrupted by a signal (one line on stderr:
+which state, which instrument, why); 4 the shot is recorded but its analysis failed (one line
+on stderr; the raw shot is kept); 5 the shot is done but its lab record is in neither the
+database nor the spool (`hopkinson lab import` it). The --json object's `exit_code` is always
+the exit code.
 """
 
 from __future__ import annotations
@@ -52,7 +55,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
-from hopkinson.rig.errors import EXIT_ABORTED, ConfigError
+from hopkinson.rig.errors import EXIT_ABORTED, EXIT_DONE, ConfigError, exit_codes_help
 
 PROMPT_TIMEOUT_S = 60.0
 
@@ -62,7 +65,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "shot", help="fire one calibration shot (CHECK..FIRE..ANALYSE), store and analyse it",
         description="Fire one shot: check, evacuate, charge, arm, fire, capture, make safe, store the "
-                    "raw data, analyse. Fires only with --yes or a 'yes' typed at the prompt.")
+                    "raw data, analyse. Fires only with --yes or a 'yes' typed at the prompt.",
+        epilog=exit_codes_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     add_rig_arguments(p)
     p.add_argument("--sim-state-file", type=Path, metavar="PATH",
                    help="with --sim: write the simulator's final state as JSON here (also on failures)")
@@ -81,8 +85,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-order", type=int, help="highest model order tried by the identification")
     p.add_argument("--sample-rate", type=float, dest="sample_rate_hz", help="analysis sample rate, Hz")
     p.add_argument("--dcm-ratio", default="auto", metavar="auto|R",
-                   help="DCM response-time ratio r (> 0), or 'auto' (default): the r that widens the ±5 %% band "
-                        "[analysis] dcm_widening times within dcm_noise_gain_limit (rig config)")
+                   help="DCM response-time ratio r (> 0), or 'auto' (default): sized to the shot's pulse (or the "
+                        "±5 %% band widened [analysis] dcm_widening times) within dcm_noise_gain_limit (rig config)")
     p.add_argument("--dcm-damping", type=float, help="DCM damping of the new poles")
     p.add_argument("--draws", type=int, help="Monte Carlo draws of the uncertainty (default: the analysis' own)")
     p.add_argument("--no-uncertainty", dest="uncertainty", action="store_false", default=None,
@@ -152,7 +156,7 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     sim_state: dict[str, Any] | None = None
     with contextlib.ExitStack() as stack:
         subscribe_outputs(stack, bus, args, what=f"shot {request.shot_path().name}")
-        attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
+        recorder = attach_recorder(bus, config, stack)  # the lab's record (hopkinson.lab)
         truth = None
         if args.sim:
             from hopkinson.rig.sim_session import sim_session
@@ -177,7 +181,18 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
                                  message=f"{latch.reason} after the shot ended: the command exits {EXIT_ABORTED}"))
         if args.sim:
             sim_state = session.state()
-    return _report(args, shot.outcome, sim_state, latch, shot.safe_again)
+    kept = not_recorded_exit(recorder, EXIT_DONE) == EXIT_DONE  # (says which record is lost)
+    return _report(args, shot.outcome, sim_state, latch, shot.safe_again, record_lost=not kept)
+
+
+def not_recorded_exit(recorder: Any, code: int) -> int:
+    """A shot whose lab record is in neither the database nor the spool never exits 0."""
+    from hopkinson.rig.lab_record import EXIT_NOT_RECORDED
+
+    for path in recorder.not_kept:
+        sys.stderr.write(f"hopkinson: error: the lab record of {path} is in neither the database nor the spool; "
+                         f"the shot file is kept: run `hopkinson lab import {path}`\n")
+    return EXIT_NOT_RECORDED if recorder.not_kept and code == 0 else code
 
 
 def subscribe_outputs(stack: contextlib.ExitStack, bus: Any, args: argparse.Namespace, what: str,
@@ -208,14 +223,19 @@ def report_reclaimed(control: Any) -> None:
 
 
 def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | None, latch: Any,
-            safe_again: tuple[bool, str | None] | None) -> int:
+            safe_again: tuple[bool, str | None] | None, record_lost: bool = False) -> int:
+    """Print the outcome; the exit code (docs/exit-codes.md), which the --json object carries too."""
+    from hopkinson.rig.lab_record import EXIT_NOT_RECORDED
+
+    exit_code = EXIT_ABORTED if latch.received is not None else \
+        EXIT_NOT_RECORDED if record_lost and outcome.exit_code == EXIT_DONE else outcome.exit_code
     if args.json:
         out = outcome.to_dict()
         if sim_state is not None:
             out["sim_state"] = sim_state
         if latch.received is not None:
             out["interrupted"] = latch.reason
-            out["exit_code"] = EXIT_ABORTED  # as the process exits
+        out["exit_code"] = exit_code  # as the process exits
         emit_json(out)
     elif outcome.shot_path is not None and not args.json_events:
         print(f"shot file: {outcome.shot_path}", flush=True)
@@ -232,10 +252,11 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
                 print(f"{role}: {text}", flush=True)
     for warning in outcome.warnings:
         sys.stderr.write(f"hopkinson: warning: {warning}\n")
-    if outcome.done and outcome.analysis_error:
-        sys.stderr.write(f"hopkinson: warning: the shot is recorded but its {outcome.analysis_error}\n"
-                         if outcome.analysis_error.startswith("analysis")
-                         else f"hopkinson: warning: {outcome.analysis_error}\n")
+    if outcome.done and outcome.analysis_error and latch.received is None:
+        what = outcome.analysis_error if outcome.analysis_error.startswith("analysis") else \
+            f"analysis failed: {outcome.analysis_error}"
+        sys.stderr.write(f"hopkinson: error: the shot is recorded in {outcome.shot_path} but its {what} "
+                         f"(exit {outcome.exit_code}: `hopkinson analyse` it again once the cause is fixed)\n")
     if latch.received is not None:
         before = "the shot was recorded before it; " if outcome.done else (f"{outcome.error}; " if outcome.error else "")
         if safe_again is None and not outcome.done:
@@ -249,7 +270,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         sys.stderr.write(f"hopkinson: error: {latch.reason}: {line}\n")
         return EXIT_ABORTED
     outcome.raise_for_outcome()
-    return 0
+    return exit_code  # 0; 4: recorded, its analysis failed; 5: done, its lab record lost
 
 
 def _make_out_dir(out: Path) -> None:

@@ -166,13 +166,15 @@ class ShotContext:
     deadline: float = 0.0
     # what the steps learn
     setpoint_bar: float | None = None
-    fired: bool = False
+    fired: bool = False  # the fire command went out (the projectile may be on its way)
+    fire_confirmed_by: str | None = None  # what confirmed the shot (pulse counter, valve read-back, trigger)
     pulse_count: int | None = None
     captured: CapturedShot | None = None
     identities: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     controller_timed_out: bool = False
+    untrusted_gauge: Any = None  # CHECK's Implausible reading of the reservoir gauge: SAFE trusts it no more
     interrupt: BaseException | None = None
     last_report: InterlockReport | None = None
 

@@ -18,7 +18,7 @@ STORE: whenever data was captured (also after an abort or a fault following the 
 raw shot file written atomically (rig/shot.py, rig/shotfile.py). ANALYSE: in a worker thread,
 bounded by timeouts.analyse_s; its result or its failure stored in the shot file
 (rig.shot.analyse_and_record, the same code a campaign uses for a stored shot). An analysis
-failure ends DONE with analysis_error set.
+failure ends DONE with analysis_error set and exit code 4 (docs/exit-codes.md).
 
 No printing: progress goes to the EventBus (rig/events.py).
 """
@@ -36,7 +36,13 @@ from typing import Any
 
 from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
 from hopkinson.rig.config import RigConfig
-from hopkinson.rig.errors import HINT_SAFE_NOT_CONFIRMED, instrument_hint
+from hopkinson.rig.errors import (
+    EXIT_ABORTED,
+    EXIT_ANALYSIS_FAILED,
+    EXIT_DONE,
+    HINT_SAFE_NOT_CONFIRMED,
+    instrument_hint,
+)
 from hopkinson.rig.events import Analysed, EventBus, RigError, ShotFinished, StateEntered, Stored
 from hopkinson.rig.instruments import Instruments
 from hopkinson.rig.interlocks import InterlockReport, evaluate, read_readings
@@ -56,8 +62,6 @@ from hopkinson.rig.sequencer.safe import DISPLAY_INTERLOCKS, SafeResult, make_ri
 from hopkinson.rig.sequencer.states import STATE_TEXT, State, check_transition
 from hopkinson.rig.sequencer.steps import STEPS
 from hopkinson.rig.shot import (
-    EXIT_ABORTED,
-    EXIT_DONE,
     AnalyseFn,
     RecordedAnalysis,
     ShotOutcome,
@@ -269,7 +273,8 @@ class Sequencer:
                      f"{path}" + ("; its analysis was not finished (`hopkinson analyse` it)" if analysis_to_redo else ""))
         if not analysis_stored:
             error = f"{analysis_error}; the raw shot is kept in {path} (free space, then `hopkinson analyse` it)"
-        hint = (failure.hint if failure is not None else "") if safe.confirmed else HINT_SAFE_NOT_CONFIRMED
+        cause_hint = failure.hint if failure is not None else ""
+        hint = cause_hint if safe.confirmed else " ".join(filter(None, (HINT_SAFE_NOT_CONFIRMED, cause_hint)))
         aborted_in = failure.state.value if failure is not None else (
             State.SAFE.value if not safe.confirmed else State.STORE.value if store_error else None)
         outcome = ShotOutcome(
@@ -277,9 +282,10 @@ class Sequencer:
             shot_path=path,
             results=results,
             error=error,
-            exit_code=EXIT_DONE if final == State.DONE else EXIT_ABORTED,
+            exit_code=(EXIT_ABORTED if final != State.DONE else EXIT_ANALYSIS_FAILED if analysis_error else EXIT_DONE),
             aborted_in=aborted_in,
             fired=ctx.fired,
+            fire_confirmed_by=ctx.fire_confirmed_by,
             analysis_error=analysis_error,
             analysis_to_redo=analysis_to_redo,
             safe_confirmed=safe.confirmed,
@@ -322,7 +328,8 @@ class Sequencer:
         disarm = ctx is None or ctx.captured is None  # a captured record stays in the digitizer
         result = make_rig_safe(self.instruments.valves, self.config, self._events,
                                digitizer=self.instruments.digitizer if disarm else None,
-                               controller_timed_out=controller_timed_out, poll_s=self._poll_s)
+                               controller_timed_out=controller_timed_out, poll_s=self._poll_s,
+                               untrusted_gauge=ctx.untrusted_gauge if ctx is not None else None)
         return result
 
     def _in_worker(self, ctx: ShotContext, work: Callable[[], Any], timeout_s: float, abandon_on_abort: bool,
@@ -456,6 +463,8 @@ def _message(ctx: ShotContext, failure: _Failure | None, safe: SafeResult, path:
             parts.append("rig safe (fire and fill valves closed, reservoir vented)")
     elif path is not None:
         parts.append(f"the recorded data is kept in {path}")
+    elif ctx.fire_confirmed_by is not None:
+        parts.append(f"the shot was fired but nothing was recorded (confirmed by {ctx.fire_confirmed_by})")
     elif ctx.fired:
-        parts.append("the shot was fired but nothing was recorded")
+        parts.append("the fire command was sent but nothing confirms a shot, and nothing was recorded")
     return "; ".join(parts)

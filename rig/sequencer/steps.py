@@ -1,6 +1,9 @@
 """The steps of a shot, CHECK to CAPTURE: each a function of the shot's context.
 
-- CHECK: a held abort stops here before anything moves; identities; fire and fill closed; a
+- CHECK: a held abort stops here before anything moves; identities; fire and fill closed; every
+  reading it relies on must be able to be true (rig/plausibility.py: reservoir, vacuum,
+  set-point, pulse count; the count must not move during CHECK), else the shot is refused
+  naming the value, its register and the likely cause, before any venting; a
   tripped link watchdog gets a new heartbeat session; pressure left in the reservoir is vented
   first (and said so); the amplifier configured (read back) and zeroed; the digitizer
   configured; the projectile set where the controller has a register; door, clamp, e-stop and
@@ -14,9 +17,14 @@
   compared with what this shot needs (another client may have changed them).
 - FIRE: confirmation still given, every interlock holds (read again), the `before_fire` hook
   (a campaign journals FIRING), then the controller is told to fire a pulse of
-  `valve_controller.fire_pulse_s`: the controller opens the fire valve and closes it itself.
-  Its pulse counter, read before and after, confirms the shot.
-- CAPTURE: the digitizer's trigger, then every configured channel fetched by role (one retry on
+  `valve_controller.fire_pulse_s` in its fire style (docs/plc-fire-styles.md). "Fired" is
+  said (the Fired event) only when something confirms it: the pulse counter rising by one,
+  the fire valve read back open, or the digitizer's trigger. When the counter stayed or the
+  valve read back shut and the digitizer did not trigger: Abort "not fired: the PLC did not
+  start the pulse", naming the fire style (nothing was launched). A counter that moves by
+  other than one is not trusted (a word-order mistake moves it by 65536).
+- CAPTURE: the digitizer's trigger (which confirms a shot nothing else confirmed), then every
+  configured channel fetched by role (one retry on
   a fresh session), an amplifier overload noted, the simulated truth taken (simulation). An
   abort asked for after the fire command does not stop CAPTURE (still bounded by
   timeouts.capture_s): the projectile is on its way, and its record is worth keeping.
@@ -30,8 +38,16 @@ import time
 from typing import Any
 
 from hopkinson.drivers.errors import InstrumentError
+from hopkinson.drivers.fire_styles import FIRE_STYLE_DOC
 from hopkinson.rig.errors import HINT_NOT_CONFIRMED
 from hopkinson.rig.events import AwaitingConfirmation, Fired, Identified
+from hopkinson.rig.plausibility import (
+    PULSE_COUNT,
+    RESERVOIR,
+    controller_findings,
+    counter_moved,
+    plausible_ranges,
+)
 from hopkinson.rig.sequencer.context import Abort, ShotContext
 from hopkinson.rig.sequencer.states import State
 from hopkinson.rig.shot import CapturedShot, digitizer_channels
@@ -39,6 +55,10 @@ from hopkinson.rig.shot import CapturedShot, digitizer_channels
 HINT_SETTINGS_CHANGED = ("Another program may be using the instrument: close it (hopkinson status only reads), "
                          "then ARM again.")
 HINT_NOT_FIRED = "The controller refused the fire pulse: read why above, fix it, then ARM again."
+HINT_IMPLAUSIBLE = ("A reading that cannot be true is a mistake in the register map, not a pressure: fix rig.toml, "
+                    "check every signal with `hopkinson probe`, then start again.")
+HINT_NOT_FIRED_STYLE = (f"Nothing was launched: set valve_controller.fire_style to the way the PLC fires "
+                        f"({FIRE_STYLE_DOC}), then fire again.")
 PULSE_COUNT_WAIT_S = 1.0  # how long FIRE waits for the controller to count the pulse
 
 
@@ -54,6 +74,7 @@ def check(ctx: ShotContext) -> None:
     valves.set_fire_valve(False)
     valves.set_fill_valve(False)
     ctx.checkpoint(valves.name, "closing the valves")
+    count_at_check = _check_plausible(ctx)
     _restart_tripped_watchdog(ctx)
     _vent_leftover_pressure(ctx)
     amp = cfg.amplifier
@@ -73,7 +94,34 @@ def check(ctx: ShotContext) -> None:
     else:
         ctx.events.note(f"the controller has no projectile register: make sure projectile No. {projectile} is loaded")
     ctx.watch(State.CHECK)
+    _check_counter_still(ctx, count_at_check)
     ctx.checkpoint(valves.name, "checking the interlocks")
+
+
+def _check_plausible(ctx: ShotContext) -> tuple[float, float] | None:
+    """Every reading CHECK relies on must be able to be true (rig/plausibility.py), before any
+    venting or charging: a word-order or scale mistake is named as such, never taken for a
+    pressure to vent. Returns (pulse count, when read) for `_check_counter_still`."""
+    valves = ctx.instruments.valves
+    readings, findings = controller_findings(valves, ctx.config)
+    ctx.untrusted_gauge = next((f for f in findings if f.signal == RESERVOIR), None)
+    if findings:
+        raise Abort(valves.name, "shot refused: " + "; ".join(f.message for f in findings),
+                    " ".join([HINT_IMPLAUSIBLE, *(f"Fix: {f.fix}." for f in findings)]))
+    count = readings.get(PULSE_COUNT)
+    return (count, time.monotonic()) if count is not None else None
+
+
+def _check_counter_still(ctx: ShotContext, count_at_check: tuple[float, float] | None) -> None:
+    """A pulse counter that moved during CHECK, with nothing fired, is not a pulse counter."""
+    if count_at_check is None:
+        return
+    valves = ctx.instruments.valves
+    before, when = count_at_check
+    finding = counter_moved(plausible_ranges(ctx.config)[PULSE_COUNT], before, float(valves.fire_pulse_count()),
+                            time.monotonic() - when)
+    if finding is not None:
+        raise Abort(valves.name, f"shot refused: {finding.message}", f"{HINT_IMPLAUSIBLE} Fix: {finding.fix}.")
 
 
 def _restart_tripped_watchdog(ctx: ShotContext) -> None:
@@ -229,7 +277,7 @@ def fire(ctx: ShotContext) -> None:
     ctx.settings["pressure_at_fire_bar"] = report.readings.reservoir_pressure_bar
     ctx.settings["fixture_vacuum_at_fire_mbar"] = report.readings.fixture_vacuum_mbar
     pulse_s = float(ctx.config.valve_controller.fire_pulse_s)
-    count_before = valves.fire_pulse_count()
+    count_before = valves.fire_pulse_count() if _has_counter(valves) else None
     if ctx.before_fire is not None:
         try:
             ctx.before_fire(ctx)
@@ -240,24 +288,93 @@ def fire(ctx: ShotContext) -> None:
     ctx.checkpoint(valves.name, "before firing")
     ctx.fired = True  # from here on the projectile may be on its way
     try:
-        valves.fire_pulse(pulse_s)
+        seen_open = valves.fire_pulse(pulse_s)
     except InstrumentError:
         ctx.fired = _pulse_count_rose(ctx, count_before) is not False  # unknown counts as fired
         raise
-    count = _wait_for_pulse_count(ctx, count_before)
+    ctx.settings["fire_pulse_s"] = float(getattr(valves, "last_pulse_s", None) or pulse_s)  # a PLC preset's own
+    ctx.settings["fire_style"] = str(getattr(valves, "fire_style", ctx.config.valve_controller.fire_style))
+    count = _wait_for_pulse_count(ctx, count_before) if count_before is not None else None
     ctx.pulse_count = count
-    if count is None:
-        ctx.warn(f"the controller did not count the fire pulse (count stayed {count_before}): the shot may not "
-                 "have been fired; the digitizer's trigger decides")
-    ctx.settings["fire_pulse_s"] = pulse_s
-    p = report.readings.reservoir_pressure_bar
+    jumped = count is not None and count_before is not None and count - count_before != 1
+    if jumped:
+        ctx.warn(f"the controller's pulse counter went from {count_before} to {count} for one pulse: it cannot be "
+                 f"trusted ({counter_jump_cause(count_before, count)}); not taken as confirming the shot")
+    if count is not None and not jumped:
+        confirm_fired(ctx, f"the controller's pulse counter ({count_before} → {count})")
+    elif seen_open:
+        confirm_fired(ctx, "the fire valve's read-back")
+    elif _digitizer_triggered(ctx):
+        confirm_fired(ctx, "the digitizer's trigger")
+    else:
+        _not_fired_or_unknown(ctx, count_before, count, jumped, seen_open)
+
+
+def confirm_fired(ctx: ShotContext, witness: str) -> None:
+    """The shot is known fired (by `witness`): say so once (the Fired event)."""
+    if ctx.fire_confirmed_by is not None:
+        return
+    ctx.fire_confirmed_by = witness
+    pulse_s = float(ctx.settings.get("fire_pulse_s", ctx.config.valve_controller.fire_pulse_s))
+    p = float(ctx.settings.get("pressure_at_fire_bar", math.nan))
+    timer = "this computer" if ctx.settings.get("fire_style") == "host_timed_coil" else "the controller"
     ctx.events.publish(Fired(state=ctx.state, message=f"fired at {p:.3f} bar (pulse {pulse_s * 1e3:g} ms, timed by "
-                                                      "the controller)",
-                             reservoir_pressure_bar=p, pulse_s=pulse_s, pulse_count=count))
+                                                      f"{timer}; confirmed by {witness})",
+                             reservoir_pressure_bar=p, pulse_s=pulse_s, pulse_count=ctx.pulse_count,
+                             confirmed_by=witness))
 
 
-def _pulse_count_rose(ctx: ShotContext, before: int) -> bool | None:
-    """Did the controller count a pulse since `before`? None when it cannot be read."""
+def _not_fired_or_unknown(ctx: ShotContext, count_before: int | None, count: int | None, jumped: bool,
+                          seen_open: bool | None) -> None:
+    """Nothing confirmed the shot. When the counter stayed or the valve read back shut (and
+    nothing else moved): not fired, Abort naming the fire style. Otherwise the trigger decides
+    in CAPTURE."""
+    valves = ctx.instruments.valves
+    evidence = []
+    if count_before is not None and count is None:
+        evidence.append(f"its pulse count stayed at {count_before}")
+    if seen_open is False:
+        evidence.append("the fire valve read back shut")
+    if evidence and not jumped:
+        ctx.fired = False
+        raise Abort(valves.name, f"not fired: the PLC did not start the pulse ({', '.join(evidence)}, the digitizer "
+                                 f"did not trigger): check the fire style: {_how_it_fires(ctx)}", HINT_NOT_FIRED_STYLE)
+    ctx.warn("the fire command was sent but nothing confirms the shot yet (no pulse counter or valve read-back "
+             "says so): the digitizer's trigger decides")
+
+
+def _how_it_fires(ctx: ShotContext) -> str:
+    how = getattr(ctx.instruments.valves, "how_it_fires", None)
+    if callable(how):
+        return str(how())
+    return f'valve_controller.fire_style = "{ctx.config.valve_controller.fire_style}" ({FIRE_STYLE_DOC})'
+
+
+def counter_jump_cause(before: int, after: int) -> str:
+    """Why a pulse counter may move by other than one (a word-order mistake moves it by 65536)."""
+    step = after - before
+    if step and step % 65536 == 0:
+        return f"it moved by {step} = {step // 65536} × 65536: its two words are in the wrong order (word_order)"
+    if step < 0:
+        return "it went back: a counter that was reset, or not a counter (register address or type)"
+    return f"it moved by {step}: another program firing, or not a counter (register address or type)"
+
+
+def _has_counter(valves: Any) -> bool:
+    return bool(getattr(valves, "has_pulse_counter", True))
+
+
+def _digitizer_triggered(ctx: ShotContext) -> bool:
+    try:
+        return ctx.instruments.digitizer.acquisition_state() == "TRIGGERED"
+    except InstrumentError:
+        return False
+
+
+def _pulse_count_rose(ctx: ShotContext, before: int | None) -> bool | None:
+    """Did the controller count a pulse since `before`? None when it cannot be read (or has no counter)."""
+    if before is None:
+        return None
     try:
         return ctx.instruments.valves.fire_pulse_count() > before
     except InstrumentError:
@@ -270,7 +387,7 @@ def _wait_for_pulse_count(ctx: ShotContext, before: int) -> int | None:
     deadline = time.monotonic() + PULSE_COUNT_WAIT_S
     while True:
         count = valves.fire_pulse_count()
-        if count > before:
+        if count != before:
             return count
         if time.monotonic() >= deadline:
             return None
@@ -279,15 +396,17 @@ def _wait_for_pulse_count(ctx: ShotContext, before: int) -> int | None:
 
 def capture(ctx: ShotContext) -> None:
     dig = ctx.instruments.digitizer
+    fired = (f"the shot was fired, confirmed by {ctx.fire_confirmed_by}" if ctx.fire_confirmed_by is not None
+             else "the fire command was sent but nothing confirms a shot")
     while True:
         state = dig.acquisition_state()
         if state == "TRIGGERED":
+            confirm_fired(ctx, "the digitizer's trigger")
             break
         if state != "ARMED":
             raise Abort(dig.instrument, f"the digitizer left the armed state before a trigger (state {state})")
         time.sleep(min(ctx.poll_s, 0.01))
-        ctx.checkpoint(dig.instrument, "waiting for the trigger (the shot was fired; nothing recorded)",
-                       honour_abort=False)
+        ctx.checkpoint(dig.instrument, f"waiting for the trigger ({fired}; nothing recorded)", honour_abort=False)
     channels = {role: _fetch(ctx, channel) for role, channel in digitizer_channels(ctx.config).items()}
     ctx.checkpoint(dig.instrument, "fetching the record", honour_abort=False)
     overloaded = False

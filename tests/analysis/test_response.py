@@ -23,6 +23,7 @@ from hopkinson.analysis.response import (
 )
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from scipy import signal
+from scipy.optimize import brentq
 
 TABLE1_POLES = np.array([0.9740 + 0.1396j, 0.9740 - 0.1396j, 0.8174 + 0.0518j, 0.8174 - 0.0518j])
 
@@ -85,7 +86,8 @@ def test_fbsd_lightly_damped_is_two_sided_not_a_drop():
     fn, zeta = 30_000.0, 0.05
     edge = band_edges(second_order_gain(fn, zeta), 5 * fn, (0.05,))["5"]
     assert edge.crossing == "above"
-    assert edge.frequency_hz < 0.25 * fn  # analytic: x = 0.2189
+    assert edge.frequency_hz == pytest.approx(analytic_edge(fn, zeta, 0.05)[0], rel=1e-9)
+    assert edge.frequency_hz < 0.25 * fn  # far below the resonance, where a drop-only band would put it
 
 
 def test_fbsd_of_discrete_model_matches_continuous_truth():
@@ -108,22 +110,59 @@ def test_fbsd_never_leaving_band_reports_nyquist_json_safe():
     assert fbsd_hz(model) == {"5": pytest.approx(5e5), "10": pytest.approx(5e5)}
 
 
-def test_fbsd_finds_a_notch_narrower_than_the_grid():
-    """A notch ~3 Hz wide at 100 kHz: found because the zero angles are searched too."""
-    b, a = signal.iirnotch(100_000.0, 30_000.0, fs=1e6)
-    model = DiscreteModel(1e-6, a, b)
+def notch_edge_hz(b: np.ndarray, a: np.ndarray, f0_hz: float, level: float, fs_hz: float) -> float:
+    """The notch's lower band edge: |H(f)/H(0)| = 1 − level just below f0, found on scipy's
+    freqz (not on the code under test) by bisection between f0 − 1 kHz and f0."""
+    dc = abs(np.sum(b) / np.sum(a))
+
+    def offset(f: float) -> float:
+        return abs(signal.freqz(b, a, worN=[f], fs=fs_hz)[1][0]) / dc - (1.0 - level)
+
+    return brentq(offset, f0_hz - 1_000.0, f0_hz, xtol=1e-9)
+
+
+@pytest.mark.parametrize("f0_hz", [100_010.0, 123_456.7])
+def test_fbsd_finds_a_notch_narrower_than_the_grid(f0_hz):
+    """A notch ~3 Hz wide, off the 25 Hz search grid (Nyquist / 20 000): found only because the
+    zeros' angles are searched too; the edge is the notch's own, to a millihertz."""
+    fs = 1e6
+    assert (f0_hz / (0.5 * fs / 20_000)) % 1 > 0.1  # not on a grid point
+    b, a = signal.iirnotch(f0_hz, 30_000.0, fs=fs)
+    model = DiscreteModel(1 / fs, a, b)
+    f_grid = np.linspace(0.0, 0.5 * fs, 20_001)
+    assert np.all(np.abs(np.abs(signal.freqz(b, a, worN=f_grid, fs=fs)[1]) - 1) < 0.05)  # the grid alone misses it
     edge = fbsd_report(model)["5"]
     assert edge["crossing"] == "below"
-    assert abs(edge["frequency_hz"] - 100_000.0) < 10.0
+    assert edge["frequency_hz"] == pytest.approx(notch_edge_hz(b, a, f0_hz, 0.05, fs), abs=1e-3)
+
+
+def test_fbsd_from_sampled_response_is_exact_for_a_linear_gain():
+    """Linear interpolation between the bracketing samples is exact where the gain is linear:
+    g(f) = 1 − f/F leaves 1 − L at f = L·F, here between grid points."""
+    f = np.linspace(0.0, 10_000.0, 201)  # 50 Hz steps; the edges at 537.5 and 1 075 Hz fall between
+    edges = fbsd_from_response(f, 1.0 - f / 10_750.0)
+    assert edges["5"].frequency_hz == pytest.approx(0.05 * 10_750.0, abs=1e-9)
+    assert edges["10"].frequency_hz == pytest.approx(0.10 * 10_750.0, abs=1e-9)
+    assert edges["5"].crossing == edges["10"].crossing == "below"
 
 
 def test_fbsd_from_sampled_response_interpolates():
+    """On the closed-form second-order gain sampled every 50 Hz, each edge is within the linear
+    interpolation's error bound h²·max|g''| / (8·|g'|) over its bracket (~0.1 Hz here), far
+    inside one grid step, so an edge read one sample off fails."""
     fn, zeta = 30_000.0, 0.05
-    f = np.linspace(0, 100_000, 2001)
-    edges = fbsd_from_response(f, second_order_gain(fn, zeta)(f))
+    h = 50.0
+    f = np.arange(0.0, 100_000.0 + h, h)
+    gain = second_order_gain(fn, zeta)
+    edges = fbsd_from_response(f, gain(f))
     for key, level in (("5", 0.05), ("10", 0.10)):
         f_true, side = analytic_edge(fn, zeta, level)
-        assert abs(edges[key].frequency_hz - f_true) < 50.0  # the grid step
+        fine = np.linspace(f_true - h, f_true + h, 2001)
+        slope = np.gradient(gain(fine), fine)
+        curvature = np.gradient(slope, fine)
+        bound = h**2 * np.max(np.abs(curvature)) / (8 * np.min(np.abs(slope)))
+        assert bound < 0.01 * h
+        assert abs(edges[key].frequency_hz - f_true) <= bound
         assert edges[key].crossing == side
 
 

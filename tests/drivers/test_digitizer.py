@@ -406,13 +406,12 @@ def test_setting_is_sent_with_the_error_query_in_one_message(scripted: Callable[
         ":TRIGger:SOURce EXT;:TRIGger:LEVel 1.5;:TRIGger:SLOPe NEG;:SYSTem:ERRor?")
 
 
+@pytest.mark.timeout(60)  # a driver waiting forever fails here (the reply never completes)
 def test_truncated_block_then_silence_is_a_timeout(scripted: Callable[..., ScriptedServer]) -> None:
     srv = scripted({PRE: b"INT16,LSBF,6,1e-08,0,0.001,0.0;1\n", ":WAVeform:DATA?": b"#212" + b"\n" * 5})
     with connected(srv, timeout_s=0.3) as d:
-        start = time.monotonic()
-        with pytest.raises(InstrumentTimeout, match=r"':WAVeform:DATA\?'.*no complete reply"):
+        with pytest.raises(InstrumentTimeout, match=r"':WAVeform:DATA\?'.*no complete reply within 0.3 s"):
             d.fetch_waveform(1)
-        assert time.monotonic() - start < 5.0
         assert not d.connected
 
 
@@ -442,12 +441,14 @@ def _endless(conn: socket.socket) -> None:
 
 
 def _trickle(conn: socket.socket) -> None:
-    """One byte every 20 ms, never a newline."""
-    for _ in range(500):
+    """One byte every 20 ms, never a newline, until the client hangs up: a timeout per read
+    would never end it; only a deadline for the whole reply does."""
+    while True:
         conn.sendall(b"7")
         time.sleep(0.02)
 
 
+@pytest.mark.timeout(60)  # both streams go on until the driver hangs up: one that never does fails here
 @pytest.mark.parametrize(("stream", "error", "words"), [
     (_endless, InstrumentError, "reply longer than 4096 bytes"),
     (_trickle, InstrumentTimeout, "no complete reply within 0.5 s"),
@@ -456,12 +457,9 @@ def test_an_endless_or_slow_reply_is_bounded(scripted: Callable[..., ScriptedSer
                                              error: type, words: str) -> None:
     srv = scripted({":ACQuire:STATe?": stream})
     with connected(srv, timeout_s=0.5, max_reply_bytes=4096) as d:
-        start = time.monotonic()
         with pytest.raises(error, match=words) as info:
             d.acquisition_state()
-        elapsed = time.monotonic() - start
     assert info.value.command == ":ACQuire:STATe?" and info.value.instrument == d.instrument
-    assert elapsed < 3.0  # within the timeout (plus a loaded machine's margin), not forever
 
 
 @pytest.mark.parametrize(

@@ -7,7 +7,13 @@ import math
 import struct
 
 import pytest
-from hopkinson.drivers.registers import Register, RegisterMap, RegisterRangeError, contiguous_runs
+from hopkinson.drivers.registers import (
+    CoilMap,
+    Register,
+    RegisterMap,
+    RegisterRangeError,
+    contiguous_runs,
+)
 from hopkinson.drivers.sim.controller_map import Point
 
 
@@ -91,3 +97,45 @@ def test_overlapping_values_are_found() -> None:
     clash = RegisterMap(input_registers=InputRegisterMap(fixture_vacuum=Register(4, "float32")))
     assert clash.overlaps() == ["input_registers.fixture_vacuum and input_registers.fire_pulse_count both use address 4",
                                 "input_registers.fixture_vacuum and input_registers.fire_pulse_count both use address 5"]
+
+
+# -- the other readings of the same words (for rig/plausibility.py's likely cause) ----------------------
+def test_reinterpretations_try_the_other_word_order_first_then_the_other_types() -> None:
+    register = Register(5, "float32", "big", scale=0.5)
+    others = register.reinterpretations()
+    assert others[0] == Register(5, "float32", "little", scale=0.5)  # the classic mistake first
+    assert set(others[1:]) == {Register(5, t, o, scale=0.5) for t in ("int32", "uint32") for o in ("big", "little")}
+    assert Register(0, "uint16").reinterpretations() == [Register(0, "int16")]
+    assert Register(0, "int16", scale=0.1).reinterpretations() == [Register(0, "uint16", scale=0.1)]
+    words = words_of("f", 2.0)[::-1]  # low word first, as a PLC that sends it so
+    assert Register(0, "float32", "little").decode(words) == 2.0
+    assert Register(0, "float32", "big").decode(words) == pytest.approx(2.2958874e-41, rel=1e-6)
+    assert Register(0, "float32").changes_from(Register(0, "float32", "little")) == 'word_order = "big"'
+    assert Register(0, "int32", "little").changes_from(Register(0, "float32")) == \
+        'type = "int32", word_order = "little"'
+
+
+def test_a_float_too_close_to_zero_is_no_reading_but_zero_is() -> None:
+    register = Register(0, "float32")
+    assert register.implausibly_small(words_of("f", 2.0)[::-1])  # 2.3e-41
+    assert register.implausibly_small(words_of("f", 5e-10))
+    assert not register.implausibly_small([0, 0])
+    assert not register.implausibly_small(words_of("f", 2e-9))  # a tiny but possible reading
+    assert not Register(0, "uint32").implausibly_small([0, 1])  # integers are judged by their range
+    assert register.raw(words_of("f", 1.5)) == 1.5
+
+
+def test_describe_says_where_and_how_a_value_is_read() -> None:
+    assert Register(1, "float32", "little").describe("input_registers") == "input registers 1..2, float32 little"
+    assert Register(0, "uint16", scale=0.001, offset=-1.0).describe("holding_registers") == \
+        "holding registers 0, uint16, x0.001 -1"
+
+
+def test_the_fire_command_entries_are_optional_and_never_read_as_actuators() -> None:
+    default = RegisterMap()
+    assert default.coils.fire_command == -1 and default.holding_registers.fire_command == -1
+    assert "fire_command" not in default.blocks()["coils"]  # absent: neither read nor checked
+    mapped = RegisterMap(coils=CoilMap(fire_command=6))
+    assert mapped.blocks()["coils"]["fire_command"] == 6
+    assert RegisterMap(coils=CoilMap(fire_command=3)).overlaps() == [
+        "coils.vacuum_pump and coils.fire_command both use address 3"]

@@ -14,7 +14,7 @@ import pytest
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.controller_map import Point, default_map
-from hopkinson.drivers.sim.simulated_rig import SimulatedRig
+from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
 from hopkinson.drivers.valve_controller import (
     CoilMap,
     DiscreteInputMap,
@@ -342,11 +342,30 @@ def test_the_watchdog_vents_when_the_heartbeat_stops_and_stays_tripped(transport
         assert rig.world.watchdog_state() == "off" and rig.world.coils()["fill"] is True  # disarmed
 
 
+def _count_beats(rig: SimulatedRig) -> list[int]:
+    """Every value written to the heartbeat register from now on (the world's own record)."""
+    beats: list[int] = []
+    write = rig.world.heartbeat
+
+    def counted(value: int) -> None:
+        beats.append(value)
+        write(value)
+
+    rig.world.heartbeat = counted  # type: ignore[method-assign]
+    return beats
+
+
 def test_the_heartbeat_thread_keeps_the_watchdog_fed_in_real_time() -> None:
     # the wall clock; 0.8 s: a beat (every 0.2 s) delayed by a loaded machine must not trip it
     with SimulatedRig(sim_config()) as rig, controller(rig, watchdog_s=0.8) as vc:
+        beats = _count_beats(rig)
         vc.start_heartbeat()
-        time.sleep(2.4)  # three watchdog times: fed by the driver's thread
+        # 13 beats written by the driver's thread (every 0.2 s: three watchdog times and more),
+        # waited for as events with a generous timeout, and the watchdog never tripped meanwhile
+        deadline = time.monotonic() + 60.0
+        while len(beats) < 13 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert len(beats) >= 13 and rig.world.watchdog_trips == 0
         assert vc.heartbeat_running and vc.watchdog_state() == "armed"
         vc.stop_heartbeat_thread()
         deadline = time.monotonic() + 10.0
@@ -484,3 +503,132 @@ def test_every_exchange_is_traced(rig: SimulatedRig) -> None:
     assert [r.direction for r in records] == ["->", "<-"]
     assert "ReadInputRegistersRequest" in records[0].text and "address=0" in records[0].text
     assert all(r.instrument == vc.name and r.utc.endswith("+00:00") for r in records)
+
+
+# -- fire styles (drivers/fire_styles.py, docs/plc-fire-styles.md) -------------------------------------
+def styled_sim(style: str, transport: str = "tcp", preset_ms: float = 150.0, **coils_and_words: int) -> SimConfig:
+    """A simulated controller that fires in `style`; `fire_command=...` maps a fire coil (coils)
+    and `fire_command_word=...` a command word (holding registers)."""
+    base = sim_config(modbus_transport=transport)
+    layout = default_map()
+    if "fire_command" in coils_and_words:
+        layout["coils"]["fire_command"] = Point(coils_and_words["fire_command"])
+    if "fire_command_word" in coils_and_words:
+        layout["holding_registers"]["fire_command"] = Point(coils_and_words["fire_command_word"])
+    servers = replace(base.servers, modbus_fire_style=style, modbus_fire_preset_ms=preset_ms,
+                      modbus_fire_command_value=0x5AF1)
+    return replace(base, servers=servers, register_map=layout)
+
+
+def driver_map(fire_command: int = -1, fire_command_word: int = -1) -> RegisterMap:
+    """The driver's side of `styled_sim`'s layout."""
+    return RegisterMap(coils=CoilMap(fire_command=fire_command),
+                       holding_registers=HoldingRegisterMap(fire_command=fire_command_word))
+
+
+def assert_pulse_of(rig: SimulatedRig, clock: FakeClock, length_s: float) -> None:
+    """One pulse, counted, open until `length_s` of the controller's time and shut after."""
+    assert rig.world.fire_pulses == 1 and rig.world.shots_fired == 1
+    assert rig.world.valve_positions()["fire"] is True
+    clock.advance(length_s - 0.005)
+    assert rig.world.valve_positions()["fire"] is True
+    clock.advance(0.01)
+    assert rig.world.valve_positions()["fire"] is False
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_preset_and_coil_writes_the_preset_then_switches_the_fire_coil(transport: str, clock: FakeClock) -> None:
+    config = styled_sim("preset_and_coil", transport, fire_command=6)
+    with SimulatedRig(config, clock=clock) as rig, \
+            controller(rig, register_map=driver_map(fire_command=6), fire_style="preset_and_coil") as vc:
+        charge(vc, clock, 2.0)
+        vc.write_value(vc.map.holding_registers.fire_pulse_ms, 250.0, "preset alone")
+        assert rig.world.fire_pulses == 0  # in this style a preset fires nothing
+        assert vc.fire_pulse(0.2) is True  # read back open (position input)
+        assert rig.modbus.last_written["fire_pulse_ms"] == 200.0
+        assert rig.modbus.last_written["fire_command"] == 0.0  # the fire coil is off again after the pulse
+        assert_pulse_of(rig, clock, 0.2)
+        assert vc.fire_pulse_count() == 1
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_preset_and_command_word_fires_on_the_command_value(transport: str, clock: FakeClock) -> None:
+    config = styled_sim("preset_and_command", transport, fire_command_word=7)
+    with SimulatedRig(config, clock=clock) as rig, \
+            controller(rig, register_map=driver_map(fire_command_word=7), fire_style="preset_and_command",
+                       fire_command_value=0x5AF1) as vc:
+        charge(vc, clock, 2.0)
+        assert vc.fire_pulse(0.3) is True
+        assert rig.modbus.last_written["fire_command"] == 0.0  # back to "no command"
+        assert_pulse_of(rig, clock, 0.3)
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_plc_preset_coil_fires_for_the_plcs_own_preset_and_never_writes_it(transport: str, clock: FakeClock) -> None:
+    config = styled_sim("plc_preset_coil", transport, preset_ms=120.0)  # the fire valve's coil is the fire coil
+    with SimulatedRig(config, clock=clock) as rig, \
+            controller(rig, fire_style="plc_preset_coil") as vc:
+        charge(vc, clock, 2.0)
+        writes_before = dict(rig.modbus.last_written)
+        assert vc.fire_pulse(0.5) is True  # 0.5 s asked; the PLC's preset rules
+        assert rig.modbus.last_written["fire_pulse_ms"] == writes_before["fire_pulse_ms"] == 120.0
+        assert rig.modbus.last_written["fire_valve"] == 0.0  # the coil is off again
+        assert_pulse_of(rig, clock, 0.12)
+
+
+def test_host_timed_coil_needs_the_labs_word_and_a_heartbeat(clock: FakeClock) -> None:
+    config = styled_sim("host_timed_coil")
+    with SimulatedRig(config, clock=clock) as rig:
+        charge_with = controller(rig, fire_style="host_timed_coil")
+        with charge_with as refused:
+            charge(refused, clock, 2.0)
+            with pytest.raises(InstrumentError, match="the lab has not allowed it"):
+                refused.fire_pulse(0.2)
+        with controller(rig, fire_style="host_timed_coil", host_timed_fire_allowed=True, watchdog_s=2.0) as vc:
+            with pytest.raises(InstrumentError, match="no heartbeat runs, so the watchdog cannot back it"):
+                vc.fire_pulse(0.2)
+            assert rig.world.shots_fired == 0 and rig.world.coils()["fire"] is False
+            vc.start_heartbeat()
+            started = time.monotonic()
+            assert vc.fire_pulse(0.2) is True  # seen open on the position input, then shut by the host
+            assert time.monotonic() - started >= 0.2  # the host held it (no upper bound asserted)
+            assert rig.world.shots_fired == 1 and rig.world.coils()["fire"] is False
+            vc.stop_heartbeat()
+
+
+def test_a_host_timed_valve_the_host_cannot_close_is_left_to_the_watchdog(clock: FakeClock) -> None:
+    """The link drops mid-pulse: the close cannot be written, so the driver stops beating and
+    the controller's watchdog (which backs this style) closes the valve."""
+    config = styled_sim("host_timed_coil")
+    with SimulatedRig(config, clock=clock) as rig, \
+            controller(rig, fire_style="host_timed_coil", host_timed_fire_allowed=True, watchdog_s=2.0,
+                       timeout_s=0.2) as vc:
+        charge(vc, clock, 2.0)
+        vc.start_heartbeat()
+        threading.Timer(0.05, rig.faults.inject, args=("modbus-disconnect",)).start()
+        with pytest.raises(InstrumentError, match="the controller's watchdog closes it within 2 s"):
+            vc.fire_pulse(0.2)
+        assert not vc.heartbeat_running and rig.world.coils()["fire"] is True  # still open: the link is gone
+        clock.advance(2.1)
+        assert rig.world.watchdog_state() == "tripped" and rig.world.coils()["fire"] is False
+
+
+def test_a_driver_in_the_wrong_style_fires_nothing_and_says_the_valve_stayed_shut(clock: FakeClock) -> None:
+    """The PLC wants preset-then-coil; the host writes the preset only (today's default style)."""
+    config = styled_sim("preset_and_coil", fire_command=6)
+    with SimulatedRig(config, clock=clock) as rig, controller(rig, register_map=driver_map(fire_command=6)) as vc:
+        charge(vc, clock, 2.0)
+        assert vc.fire_style == "pulse_register"
+        assert vc.fire_pulse(0.2) is False  # watched through the pulse: the valve never opened
+        assert rig.world.fire_pulses == 0 and rig.world.shots_fired == 0 and vc.fire_pulse_count() == 0
+        assert "holding register 4 and expects that write to start the pulse" in vc.how_it_fires()
+
+
+def test_safe_withdraws_a_fire_command_left_on(clock: FakeClock) -> None:
+    config = styled_sim("preset_and_command", fire_command_word=7)
+    with SimulatedRig(config, clock=clock) as rig, \
+            controller(rig, register_map=driver_map(fire_command_word=7), fire_style="preset_and_command",
+                       fire_command_value=0x5AF1) as vc:
+        vc.write_word(7, 0x5AF1, "a command left on by another program")
+        vc.set_fire_valve(False)
+        assert rig.modbus.last_written["fire_command"] == 0.0

@@ -33,13 +33,19 @@ def test_a_killed_controlling_process_leaves_the_rig_vented(tmp_path: Path) -> N
     script = tmp_path / "controller.py"
     script.write_text(CONTROLLER)
     with SimulatedRig(sim_config(time_scale=20.0)) as rig:
+        beats: list[int] = []
+        write = rig.world.heartbeat
+        rig.world.heartbeat = lambda value: (beats.append(value), write(value))  # type: ignore[method-assign]
         child = subprocess.Popen([sys.executable, str(script), str(rig.addresses.modbus_port)],
                                  stdout=subprocess.PIPE, text=True)
         try:
             assert child.stdout is not None and child.stdout.readline().strip() == "charging"
-            time.sleep(1.0)  # two watchdog times: the child's heartbeat keeps it armed
-            assert rig.world.watchdog_state() == "armed" and rig.world.coils()["fill"] is True
-            assert rig.world.reservoir_pressure_bar() > 1.0
+            # the child charging, its heartbeat (every 0.125 s) keeping it armed: events, waited for
+            deadline = time.monotonic() + 60.0
+            while not (rig.world.reservoir_pressure_bar() > 1.0 and len(beats) >= 9) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert rig.world.reservoir_pressure_bar() > 1.0 and len(beats) >= 9  # 9 beats: two watchdog times and more
+            assert rig.world.watchdog_trips == 0 and rig.world.watchdog_state() == "armed" and rig.world.coils()["fill"] is True
             os.kill(child.pid, signal.SIGKILL)  # no SAFE, no close: the process is just gone
             child.wait(10.0)
         finally:

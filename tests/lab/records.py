@@ -16,7 +16,11 @@ def figure(value: float, u: float) -> Figure:
 
 def made_up_record(serial: str = "SN-7", *, utc: str = "2026-03-01T10:00:00Z", sensitivity: float = 1.0,
                    u: float = 0.002, campaign: str = "", rig: str = "HB-1", uid: str | None = None,
-                   raw: bytes | None = None, state: str = "analysed", analysis: str = "a") -> ShotRecord:
+                   raw: bytes | None = None, state: str = "analysed", analysis: str = "a",
+                   campaign_uuid: str | None = None, simulated: bool = False, operator: str = "tech A",
+                   peak_m_s2: float = 4.9e5, context: dict | None = None) -> ShotRecord:
+    """A made-up shot record; a campaign named but not given a UUID gets one derived from its
+    name (so the tests' campaigns by name stay one campaign each)."""
     uid = uid or str(uuid_module.uuid4())
     raw_sha = hashlib.sha256(raw if raw is not None else uid.encode()).hexdigest()
     figures = {"sensitivity": figure(sensitivity, u), "shock_sensitivity": figure(1.6 * sensitivity, u),
@@ -24,9 +28,11 @@ def made_up_record(serial: str = "SN-7", *, utc: str = "2026-03-01T10:00:00Z", s
                "fbsd_5_hz": figure(5.9e3, 2.0), "fbsd_10_hz": None} if state == "analysed" else {}
     return ShotRecord(
         uuid=uid, raw_sha256=raw_sha, file_sha256=hashlib.sha256((uid + analysis).encode()).hexdigest(),
-        path=f"/shots/{uid}.h5", state=state, operator="tech A", utc_time=utc, accelerometer_model="ACC-20k",
+        path=f"/shots/{uid}.h5", state=state, operator=operator, utc_time=utc, accelerometer_model="ACC-20k",
         accelerometer_serial=serial, pressure_bar=2.0, projectile=3, rig=rig, campaign=campaign,
-        shot_name=uid[:8], response_unit="m/s^2", peak_acceleration_m_s2=4.9e5, figures=figures,
+        campaign_uuid=campaign_uuid or (str(uuid_module.uuid5(uuid_module.NAMESPACE_URL, campaign)) if campaign else ""),
+        simulated_marks=("simulator's truth",) if simulated else (), pulse_width_s=40e-6, context=context or {},
+        shot_name=uid[:8], response_unit="m/s^2", peak_acceleration_m_s2=peak_m_s2, figures=figures,
         reference_chain=(ReferenceLink("interferometer", "PTB-1234", "PTB", 5e-4, "2027-06-30"),),
     )
 
@@ -49,7 +55,8 @@ def made_up_results(sensitivity: float, u: float, f_n_hz: float = 27e3) -> dict:
 
 def write_made_up_shot(path, *, serial: str = "SN-7", campaign: str | None = None, sensitivity: float = 1.0,
                        u: float = 0.002, utc: str = "2026-03-01T10:00:00Z", config: dict | None = None,
-                       simulated: bool = False):
+                       simulated: bool = False, campaign_uuid: str | None = None, instruments: dict | None = None,
+                       operator: str = "tech A"):
     """A real shot file (rig.shotfile) with short made-up channels and made-up results; its meta."""
     import numpy as np
     from hopkinson.rig.shotfile import RawShot, ShotMeta, add_analysis, write_raw_shot
@@ -57,8 +64,11 @@ def write_made_up_shot(path, *, serial: str = "SN-7", campaign: str | None = Non
     rng = np.random.default_rng(abs(hash(str(path))) % 2**32)
     raw = RawShot({"doppler": (rng.integers(-2000, 2000, 512).astype(np.int16), 1e-3, 0.0),
                    "response": (rng.integers(-2000, 2000, 512).astype(np.int16), 2e-3, 0.01)}, 1e-8, 64)
-    meta = ShotMeta(operator="tech A", accelerometer_model="ACC-20k", accelerometer_serial=serial, pressure_bar=2.0,
+    meta = ShotMeta(operator=operator, accelerometer_model="ACC-20k", accelerometer_serial=serial, pressure_bar=2.0,
                     projectile=3, campaign_id=campaign, shot_id=path.stem, utc_time=utc, config=config or {},
+                    campaign_uuid=campaign_uuid or (campaign and str(uuid_module.uuid5(uuid_module.NAMESPACE_URL,
+                                                                                       str(path.parent.parent)))),
+                    instruments=instruments or {"digitizer": "ACME,SCOPE-9,123,1.0"},
                     simulated_truth={"made_up": True} if simulated else None)
     write_raw_shot(path, raw, meta)
     add_analysis(path, made_up_results(sensitivity, u))

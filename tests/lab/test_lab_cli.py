@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 import sqlalchemy as sa
-from hopkinson.lab.database import make_engine
+from hopkinson.lab.database import head_revision, make_engine
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.shotfile import add_analysis
 from scipy.stats import t as student_t
@@ -28,6 +28,15 @@ accreditation = "ISO/IEC 17025, accreditation No. D-K-00000-00-00 (example)"
 certificate_prefix = "XL"
 rig = "HB-1"
 decision_rule = "guarded"
+country = "DE"
+
+[[lab.signatories]]
+name = "Dr. Q. Manager"
+role = "Head of the shock laboratory"
+
+[[lab.signatories]]
+name = "Q"
+role = "Deputy head"
 
 [[lab.reference_chain]]
 item = "laser Doppler interferometer (grating pitch)"
@@ -65,6 +74,53 @@ def lab(capsys: pytest.CaptureFixture[str], url: str, *args: str) -> tuple[int, 
     return code, out, err
 
 
+def save_pages(url: str, number: str, pdf: Path, stem: Path) -> None:
+    """The PDF's pages as PNG for people to look at (pdftoppm, else the same pages drawn by
+    matplotlib), and the PDF's own page count against its "page n of N" footers."""
+    from hopkinson.lab.repository import open_repository
+    from hopkinson.reports.certificate_pages import png_pages
+
+    with open_repository(url) as repo:
+        content = repo.certificate(number).content
+    if shutil.which("pdftoppm"):
+        subprocess.run(["pdftoppm", "-png", "-r", "60", str(pdf), str(stem)], check=True)
+    else:
+        for i, png in enumerate(png_pages(content), start=1):
+            stem.with_name(f"{stem.name}-{i}.png").write_bytes(png)
+    assert pdf.read_bytes().count(b"/Type /Page\n") == len(png_pages(content)) or b"/Count" in pdf.read_bytes()
+
+
+def assert_valid_dcc(xml: bytes, number: str, expanded: float) -> None:
+    """The DCC validates against PTB's released schema 3.2.0 (loaded here from the shipped copies,
+    independently of the writer) and states the number and the sensitivity with its U and k."""
+    from lxml import etree
+
+    schemas = REPO / "lab" / "schemas"
+    tree = etree.parse(str(schemas / "dcc_3_2_0.xsd"))
+    for imp in tree.getroot().iter("{http://www.w3.org/2001/XMLSchema}import"):
+        local = {"https://ptb.de/si/v2.1.0/SI_Format.xsd": "SI_Format_2_1_0.xsd"}.get(imp.get("schemaLocation"),
+                                                                                   "xmldsig-core-schema.xsd")
+        imp.set("schemaLocation", (schemas / local).as_uri())
+    schema = etree.XMLSchema(tree)
+    doc = etree.fromstring(xml)
+    assert schema.validate(doc), schema.error_log
+    ns = {"dcc": "https://ptb.de/dcc", "si": "https://ptb.de/si"}
+    assert doc.get("schemaVersion") == "3.2.0"
+    assert doc.findtext(".//dcc:coreData/dcc:uniqueIdentifier", namespaces=ns) == number
+    assert doc.findtext(".//dcc:coreData/dcc:receiptDate", namespaces=ns) == "2026-02-20"
+    stated = doc.find(".//dcc:result/dcc:data/dcc:quantity/si:real", namespaces=ns)
+    assert float(stated.findtext("si:value", namespaces=ns)) == pytest.approx(1.002)
+    assert stated.findtext("si:unit", namespaces=ns) == r"\one"
+    assert float(stated.findtext("si:expandedUnc/si:uncertainty", namespaces=ns)) == pytest.approx(expanded)
+    assert doc.findtext(".//dcc:respPerson/dcc:role", namespaces=ns) == "Head of the shock laboratory"
+
+
+def record_job(capsys: pytest.CaptureFixture[str], url: str, run: Path, config: Path) -> None:
+    code, _out, err = lab(capsys, url, "job", str(run), "--received", "2026-02-20", "--condition",
+                          "as new, no visible damage", "--location", "shock lab, room 0.12", "--config", str(config))
+    assert code == 0, err
+
+
 def test_import_is_idempotent_and_records_each_analysis(run_folder: Path, lab_url: str, lab_config: Path,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = lab(capsys, lab_url, "import", str(run_folder), "--json", "--config", str(lab_config))
@@ -81,14 +137,23 @@ def test_import_is_idempotent_and_records_each_analysis(run_folder: Path, lab_ur
                        "--interval-days", "365", "--plot", str(plot), "--config", str(lab_config))
     history = json.loads(out)
     assert plot.read_bytes().startswith(b"\x89PNG")
-    sensitivities = [c["figures"]["sensitivity"]["value"] for c in history["calibrations"]]
+    (calibration,) = history["calibrations"]  # a calibration is the campaign: its three shots
+    sensitivities = [s["figures"]["sensitivity"]["value"] for s in calibration["shots"]]
     assert sensitivities == pytest.approx([1.010, 1.004, 1.002])  # the newest analysis of each shot
-    assert history["calibrations"][0]["figures"]["sensitivity"]["U"] == pytest.approx(0.004)
-    assert history["calibrations"][0]["rig"] == "HB-1"
+    assert calibration["shots"][0]["figures"]["sensitivity"]["U"] == pytest.approx(0.004)
+    assert calibration["rig"] == "HB-1" and not calibration["simulated"]
     assert history["sensor"]["tolerance_percent"] == 0.5
     assert history["conformity"]["rule"] == "guarded"  # from the configuration's [lab]
-    # 1.002 with U 0.4 %: 0.2 + 0.4 > 0.5 ≥ 0.2 -> a conditional pass under guarded acceptance
-    assert history["conformity"]["verdict"] == "conditional pass"
+    # the campaign combined (GUM G.4): mean 1.00533, s = 0.004163, ū = 0.002, ν_eff = 5.7
+    values = [1.010, 1.004, 1.002]
+    mean = sum(values) / 3
+    s = (sum((v - mean) ** 2 for v in values) / 2) ** 0.5
+    u_c = (s ** 2 / 3 + 0.002 ** 2) ** 0.5
+    expanded = student_t.ppf(0.975, u_c ** 4 / ((s ** 2 / 3) ** 2 / 2)) * u_c
+    assert history["conformity"]["deviation_percent"] == pytest.approx(100 * (mean - 1))
+    assert history["conformity"]["expanded_percent"] == pytest.approx(100 * expanded)
+    # 0.533 % with U 0.78 %: 0.533 − 0.78 ≤ 0.5 < 0.533 -> a conditional fail under guarded acceptance
+    assert history["conformity"]["verdict"] == "conditional fail"
 
 
 @pytest.fixture
@@ -117,8 +182,9 @@ def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
     lab(capsys, sqlite_url, "import", str(run_folder), "--config", str(lab_config))
     lab(capsys, sqlite_url, "sensor", "SN-7", "--owner", "ACME Aerospace", "--model", "ACC-20k",
         "--tolerance-percent", "2", "--interval-days", "365", "--config", str(lab_config))
-    pdf, page = tmp_path / "cert.pdf", tmp_path / "cert.html"
-    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(pdf), "-o", str(page),
+    record_job(capsys, sqlite_url, run_folder, lab_config)
+    pdf, page, dcc = tmp_path / "cert.pdf", tmp_path / "cert.html", tmp_path / "cert.xml"
+    code, out, err = lab(capsys, sqlite_url, "certificate", str(run_folder), "-o", str(pdf), "-o", str(page), "-o", str(dcc),
                          "--authorised-by", "Dr. Q. Manager", "--conditions", "(23 ± 2) °C", "--json",
                          "--config", str(lab_config))
     assert code == 0, err
@@ -133,10 +199,11 @@ def test_a_certificate_is_numbered_immutable_and_reissued_under_a_new_number(
     # the three shots combined (GUM G.4): mean 1.002, s = 0.002, ū = 0.002, ν_eff = 32
     u_c = (0.002 ** 2 / 3 + 0.002 ** 2) ** 0.5
     k = student_t.ppf(0.975, u_c ** 4 / ((0.002 ** 2 / 3) ** 2 / 2))
-    assert f"<td>sensitivity (model DC gain)</td><td>1.0020</td><td>{k * u_c:.4f}</td><td>{k:.2f}</td>" in text
+    assert f"<td>stated sensitivity</td><td>1.0020 ± {k * u_c:.4f} × nominal</td>" in text
+    assert f"<td>coverage factor k</td><td>{k:.2f}</td>" in text
     assert pdf.read_bytes().startswith(b"%PDF")
-    if shutil.which("pdftoppm"):
-        subprocess.run(["pdftoppm", "-png", "-r", "60", str(pdf), str(artifacts_dir / "lab-certificate")], check=True)
+    save_pages(sqlite_url, first["number"], pdf, artifacts_dir / "lab-certificate")
+    assert_valid_dcc(dcc.read_bytes(), first["number"], k * u_c)
 
     again = tmp_path / "cert-2.html"
     code, out, _ = lab(capsys, sqlite_url, "certificate", run_folder.name, "-o", str(again), "--authorised-by",
@@ -180,6 +247,7 @@ def test_a_simulated_campaign_gets_no_certificate_only_a_marked_specimen(
     other = tmp_path / "run-2026-04"
     (other / "shots").mkdir(parents=True)
     write_made_up_shot(other / "shots" / "r000.h5", campaign=other.name, utc="2026-04-01T10:00:00Z")
+    record_job(capsys, sqlite_url, other, lab_config)
     code, out, err = lab(capsys, sqlite_url, "certificate", str(other), "-o", str(tmp_path / "real.html"),
                          "--authorised-by", "Dr. Q. Manager", "--json", "--config", str(lab_config))
     assert code == 0, err
@@ -203,13 +271,13 @@ def test_bad_input_is_one_line_and_exit_2(case: str, tmp_path: Path, lab_config:
         with engine.begin() as connection:
             connection.execute(sa.text("UPDATE alembic_version SET version_num = '0042'"))
         engine.dispose()
-        expected = "schema version 0042 is newer than this software's (0001); use a newer hopkinson"
+        expected = f"schema version 0042 is newer than this software's ({head_revision()}); use a newer hopkinson"
     elif case == "unknown campaign":
         args, expected = ["certificate", "no-such-run", "-o", str(tmp_path / "c.pdf"), "--authorised-by", "Q"], \
             "campaign no-such-run: not in the lab's record"
     else:
         args, expected = ["certificate", "x", "-o", str(tmp_path / "c.docx"), "--authorised-by", "Q"], \
-            "a certificate is .pdf or .html"
+            "a certificate is written as .pdf, .html, .xml"
     capsys.readouterr()
     code, out, err = lab(capsys, url, *args, "--config", str(lab_config))
     assert code == 2
@@ -241,6 +309,7 @@ def test_no_certificate_rests_on_an_overdue_reference(tmp_path: Path, sqlite_url
     snapshot = {"lab": {"rig": "HB-2", "reference_chain": [
         {"item": "digitizer gain", "certificate": "DKD-1", "u_rel": 0.002, "due": "2026-02-28"}]}}
     write_made_up_shot(run / "shots" / "s000.h5", campaign=run.name, utc="2026-03-01T10:00:00Z", config=snapshot)
+    record_job(capsys, sqlite_url, run, lab_config)
     code, out, err = lab(capsys, sqlite_url, "certificate", str(run), "-o", str(tmp_path / "c.html"),
                          "--authorised-by", "Q", "--config", str(lab_config))
     assert code == 2 and not (tmp_path / "c.html").exists()

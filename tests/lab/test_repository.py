@@ -11,9 +11,17 @@ import pytest
 import sqlalchemy as sa
 from hopkinson.lab.database import head_revision, make_engine
 from hopkinson.lab.errors import LabError, TamperedShotError
+from hopkinson.lab.issuing import issue
 from hopkinson.lab.repository import LabRepository, open_repository
 
 from tests.lab.records import made_up_record
+
+
+def issue_for(repo: LabRepository, campaign: str, content: dict | None = None, *, replaces: str = "",
+              specimen: bool = False, authorised_by: str = "Q", prefix: str = "HB"):
+    """A certificate of `campaign` with fixed content (the record's rules, not the document)."""
+    return issue(repo, campaign=campaign, prefix=prefix, authorised_by=authorised_by, specimen=specimen,
+                 replaces=replaces, content=lambda _uow, _campaign: dict(content or {}))
 
 
 @pytest.fixture
@@ -29,7 +37,7 @@ def test_first_use_creates_the_schema_and_a_shot_is_recorded_once(repo: LabRepos
     reanalysed = made_up_record(uid=record.uuid, sensitivity=1.001, u=0.003, analysis="b")
     assert repo.record_shot(reanalysed) == "analysis added"  # the file's SHA-256 names the analysis
     assert repo.counts()["shots"] == 1 and repo.counts()["analyses"] == 2
-    (calibration,) = repo.calibrations("SN-7")  # the newest analysis of the one shot
+    (calibration,) = repo.shot_results("SN-7")  # the newest analysis of the one shot
     assert calibration.figures["sensitivity"].value == pytest.approx(1.001)
     assert calibration.figures["sensitivity"].expanded == pytest.approx(0.006)
     assert calibration.figures["fbsd_10_hz"] is None
@@ -50,7 +58,7 @@ def test_a_known_uuid_with_other_raw_data_is_refused(repo: LabRepository) -> Non
 
 def test_audit_trail_and_certificates_cannot_be_changed_in_the_database(repo: LabRepository) -> None:
     repo.record_shot(made_up_record(campaign="run-1"))
-    repo.issue_certificate("HB", {"customer": "ACME"}, serial="SN-7", subject="run-1", authorised_by="Q. Manager")
+    issue_for(repo, "run-1", {"customer": "ACME"}, authorised_by="Q. Manager")
     for statement in ("UPDATE audit SET actor = 'someone else'", "DELETE FROM audit",
                       "UPDATE certificates SET customer = 'other'", "DELETE FROM certificates"):
         with pytest.raises(sa.exc.DBAPIError, match="append-only"), repo.engine.begin() as connection:
@@ -61,18 +69,19 @@ def test_audit_trail_and_certificates_cannot_be_changed_in_the_database(repo: La
 
 def test_certificate_numbers_are_sequential_and_a_reissue_names_the_one_it_replaces(repo: LabRepository) -> None:
     repo.record_shot(made_up_record(campaign="run-1"))
-    first = repo.issue_certificate("HB", {"x": 1}, serial="SN-7", subject="run-1", authorised_by="Q")
-    second = repo.issue_certificate("HB", {"x": 2}, serial="SN-7", subject="run-1", authorised_by="Q",
-                                    replaces=first.number)
+    first = issue_for(repo, "run-1", {"x": 1})
+    second = issue_for(repo, "run-1", {"x": 2}, replaces=first.number)
     year = first.issued_utc[:4]
     assert (first.number, second.number) == (f"HB-{year}-0001", f"HB-{year}-0002")
-    assert repo.certificate(first.number).content == {"x": 1, "number": first.number}  # unchanged
+    assert repo.certificate(first.number).content == {"x": 1, "number": first.number, "issued_utc": first.issued_utc,
+                                                      "replaces": ""}  # unchanged
+    assert repo.certificate(first.number).withdrawn_by == second.number
     assert repo.certificate(second.number).replaces == first.number
     assert [a["action"] for a in repo.audit_trail()[:2]] == ["certificate replaced", "certificate issued"]
     with pytest.raises(LabError, match="HB-1999-0001: not in the record"):
-        repo.issue_certificate("HB", {}, serial="SN-7", subject="run-1", authorised_by="Q", replaces="HB-1999-0001")
+        issue_for(repo, "run-1", replaces="HB-1999-0001")
     with pytest.raises(LabError, match="authorises"):
-        repo.issue_certificate("HB", {}, serial="SN-7", subject="run-1", authorised_by=" ")
+        issue_for(repo, "run-1", authorised_by=" ")
 
 
 def test_a_newer_schema_is_refused_naming_both_versions(lab_url: str) -> None:
@@ -113,9 +122,14 @@ def test_many_writers_at_once_lose_nothing(lab_url: str) -> None:
         with LabRepository(lab_url) as repo:
             repo.record_shot(made_up_record(serial="SN-0", campaign="run-0"))
             barrier.wait()
-            for _ in range(certificates_per_desk):
-                numbers.append(repo.issue_certificate("HB", {}, serial="SN-0", subject="run-0",
-                                                      authorised_by="Q").number)
+            for _ in range(certificates_per_desk):  # each re-issues the valid one (one valid per campaign)
+                while True:
+                    valid = [c for c in repo.certificates("SN-0") if not c["withdrawn_by"]]
+                    try:
+                        numbers.append(issue_for(repo, "run-0", replaces=valid[0]["number"] if valid else "").number)
+                        break
+                    except LabError as exc:  # the other desk re-issued it first: replace the new one
+                        assert "is valid" in str(exc) or "already withdrawn" in str(exc), exc
 
     def guarded(target, *args) -> None:
         try:

@@ -444,7 +444,10 @@ def test_combined_uncertainty_covers_the_truth_and_is_not_needlessly_wide() -> N
         covered += abs(c.mean - truth) <= c.expanded
         widths.append(c.expanded)
     coverage = covered / trials
-    assert coverage >= 0.94  # at least the 95 % promised (conservative by construction)
+    # At least the 95 % promised (conservative by construction). Power, 2000 trials, pass at >= 1880
+    # covered (binomial): a true coverage of 90 % passes with probability 1e-10, 93 % with 4.1 %;
+    # an exact 95 % fails with 2.0 %. The seed is not chosen: any seed has these odds.
+    assert coverage >= 0.94
     ideal = 1.96 * np.sqrt(u_sys ** 2 + sigma ** 2 / n)  # U if the split of u were known
     assert np.mean(widths) < 1.9 * ideal  # conservative, not absurd
 

@@ -156,12 +156,61 @@ class Rig:
     def run(self, authorisation: FireAuthorisation | None = None, **request: object):
         return self.sequencer.run_shot(self.request(**request), authorisation or FireAuthorisation.pre_given())
 
-    def assert_safe(self, vented: bool = True) -> None:
-        """The world's own coils: fire closed, fill closed, vent open; reservoir vented."""
-        coils = self.world.coils()
-        assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True, coils
-        if vented:
-            assert self.world.reservoir_pressure_bar() <= self.config.limits.vent_done_bar
+    def assert_safe(self, vented: bool = True, stuck: tuple[str, ...] = (), read_back: bool = True,
+                    digitizer: bool = True) -> None:
+        """Everything SAFE promises, judged from the simulated rig itself (`assert_safe`), the
+        reservoir also as the controller reads it back (read_back=False: the link is down);
+        digitizer=False only for a digitizer that hangs (SAFE cannot disarm it, and says so)."""
+        before = self.world.reservoir_pressure_bar()  # the world may still be venting: bracket the reading
+        reading = self.instruments.valves.reservoir_pressure_bar() if read_back and vented else None
+        assert_safe(self.world, self.config, digitizer_state=self.session.rig.digitizer.state if digitizer else None,
+                    reservoir_read_back_bar=reading, vented=vented, stuck=stuck, world_before_bar=before)
+
+
+def assert_safe(world: Any, config: RigConfig, *, digitizer_state: str | None,
+                reservoir_read_back_bar: float | None = None, vented: bool = True,
+                stuck: tuple[str, ...] = (), world_before_bar: float | None = None) -> None:
+    """What SAFE promises (rig/sequencer/safe.py), from the simulated world's own state, never
+    from what the sequencer says: fire and fill commanded shut and shut, vent commanded open and
+    open (a valve in `stuck` is physically stuck open: only its command is judged), the vacuum
+    pump off, the digitizer not left armed (IDLE, or TRIGGERED holding the shot's record), and,
+    when `vented`, the reservoir at or below limits.vent_done_bar in the world and as the
+    controller reads it back (`reservoir_read_back_bar`, within one gauge count of the world's
+    pressure between `world_before_bar`, read before it, and now).
+    Every fault-injection test ends with it."""
+    coils = world.coils()
+    assert coils == {"fire": False, "fill": False, "vent": True, "pump": False}, f"coils {coils}"
+    positions = world.valve_positions()
+    for valve, wanted in (("fire", False), ("fill", False), ("vent", True)):
+        if valve not in stuck:
+            assert positions[valve] is wanted, f"{valve} valve {'open' if positions[valve] else 'shut'}: {positions}"
+    if digitizer_state is not None:
+        assert digitizer_state in ("IDLE", "TRIGGERED"), f"the digitizer was left {digitizer_state}"
+    if vented:
+        limit = config.limits.vent_done_bar
+        pressure = world.reservoir_pressure_bar()
+        assert pressure <= limit, f"reservoir {pressure:.4f} bar in the world, not vented (limit {limit:g} bar)"
+        if reservoir_read_back_bar is not None:
+            count = max(config.valve_controller.gauge_resolution_bar, 1e-6)
+            low, high = sorted((pressure, pressure if world_before_bar is None else world_before_bar))
+            assert reservoir_read_back_bar <= limit, f"reservoir read back at {reservoir_read_back_bar:.4f} bar"
+            assert low - count <= reservoir_read_back_bar <= high + count, \
+                f"read back {reservoir_read_back_bar:.4f} bar, the world had {low:.4f} .. {high:.4f} bar"
+
+
+def assert_state_safe(state: dict[str, Any], config: RigConfig, *, vented: bool = True,
+                      stuck: tuple[str, ...] = ()) -> None:
+    """`assert_safe` on the simulator's state as `--sim-state-file` or `hopkinson sim` writes it
+    (drivers/sim/simulated_rig.py world_state), for tests of commands in their own process."""
+    commanded = {v: state[f"{v}_valve_commanded"] for v in ("fire", "fill", "vent")}
+    assert commanded == {"fire": False, "fill": False, "vent": True}, f"commanded {commanded}"
+    assert state["vacuum_pump_on"] is False, "the vacuum pump was left on"
+    for valve, wanted in (("fire", False), ("fill", False), ("vent", True)):
+        if valve not in stuck:
+            assert state[f"{valve}_valve_open"] is wanted, f"{valve} valve: {state}"
+    assert state["digitizer_state"] in ("IDLE", "TRIGGERED"), f"the digitizer was left {state['digitizer_state']}"
+    if vented:
+        assert state["reservoir_pressure_bar"] <= config.limits.vent_done_bar, state["reservoir_pressure_bar"]
 
 
 @pytest.fixture
@@ -170,11 +219,20 @@ def make_rig(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     stacks: list[contextlib.ExitStack] = []
 
     def make(faults: tuple[str, ...] = (), config: RigConfig | None = None,
-             time_scale: float = TIME_SCALE) -> Rig:
+             time_scale: float = TIME_SCALE, sim: SimConfig | None = None,
+             adjust: Callable[[RigConfig], RigConfig] | None = None, heartbeat: bool = False) -> Rig:
+        """sim: the simulator's config (default `fast_sim_config`); adjust: changes the rig
+        config that reaches it (e.g. another fire style than the simulated PLC's);
+        heartbeat: run a heartbeat session, as `hopkinson shot` does."""
         stack = contextlib.ExitStack()
         stacks.append(stack)
-        session = stack.enter_context(sim_session(config or short_timeouts_config(), fast_sim_config(time_scale), faults))
+        session = stack.enter_context(sim_session(config or short_timeouts_config(),
+                                                  sim or fast_sim_config(time_scale), faults))
+        if adjust is not None:
+            session.config = adjust(session.config)
         instruments = stack.enter_context(open_instruments(session.config, session.simulated_truth))
+        if heartbeat:
+            instruments.valves.start_heartbeat()
         out = tmp_path / f"shots{len(stacks)}"
         out.mkdir()
         return Rig(session, instruments, out)

@@ -10,6 +10,7 @@ journal, is the witness of how often each shot was fired.
 from __future__ import annotations
 
 import contextlib
+import json
 import re
 import time
 from collections.abc import Iterator
@@ -396,3 +397,64 @@ def test_a_rescued_raw_shot_is_journaled_with_where_it_is_and_a_resume_records_i
     assert outcome.exit_code == 0 and outcome.complete
     assert states(run)["s001-r1"] == ("ANALYSED", 1)  # recorded, never fired again
     assert rig.fired() == ["s001-r1", "s001-r1"]  # once per campaign
+
+
+# -- exit codes a script can trust (issue 44; docs/exit-codes.md) -------------------------------------------
+def test_a_campaign_with_failed_analyses_exits_4_and_says_how_many(tmp_path: Path, sim_files, capsys) -> None:
+    """Every shot is fired and recorded; one entry's analysis rate (20 kS/s: 40 samples) cannot be
+    analysed. A script must not take the campaign for a calibration that worked."""
+    entries = ("[[shots]]\npressure_bar = 1.5\n"
+               "[[shots]]\npressure_bar = 1.5\nrepeats = 2\n[shots.analysis]\nsample_rate_hz = 20000.0\n")
+    plan = write_plan(tmp_path, entries=entries)
+    out = tmp_path / "run"
+    rc = main(cli_args(plan, out, sim_files, "--no-report", "--json"))
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert rc == 4 and result["exit_code"] == rc and result["complete"] is True
+    assert result["analyses_failed"] == ["s002-r1", "s002-r2"]
+    assert result["message"].startswith("campaign complete: 3 of 3 shots done (2 with a failed analysis: "
+                                        "s002-r1, s002-r2; the raw shots are kept, `hopkinson analyse` them)")
+    assert captured.err.strip().splitlines()[-1] == f"hopkinson: error: {result['message']}"
+    assert states(out_run(out)) == {"s001-r1": ("ANALYSED", 1), "s002-r1": ("ANALYSIS_FAILED", 1),
+                                    "s002-r2": ("ANALYSIS_FAILED", 1)}
+
+
+def test_the_campaign_json_exit_code_is_the_process_exit_code_after_a_signal(tmp_path: Path, sim_files, capsys,
+                                                                             monkeypatch) -> None:
+    """A signal that lands as the last shot ends: the campaign is complete (its outcome says 0),
+    the command exits 3, and so does its JSON."""
+    import signal as signals
+
+    import hopkinson.rig.cli.campaign as cli
+
+    class LateSignal:
+        received = signals.SIGHUP
+        reason = "interrupted (SIGHUP)"
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc: object) -> None:
+            return None
+
+        def on_signal(self, action) -> None:
+            pass
+
+    monkeypatch.setattr("hopkinson.rig.signals.SignalLatch", LateSignal)
+    plan = write_plan(tmp_path, entries="[[shots]]\npressure_bar = 1.5\n")
+    rc = cli.run_campaign_command(cli_namespace(plan, tmp_path / "run", sim_files))
+    result = json.loads(capsys.readouterr().out)
+    assert rc == 3 and result["exit_code"] == 3 and result["complete"] is True
+    assert result["interrupted"] == "interrupted (SIGHUP)"
+
+
+def out_run(folder: Path):
+    from hopkinson.rig.run_folder import open_run_folder
+
+    return open_run_folder(folder)
+
+
+def cli_namespace(plan: Path, out: Path, sim_files: dict[str, Path]):
+    from hopkinson.rig.cli.main import build_parser
+
+    return build_parser().parse_args(cli_args(plan, out, sim_files, "--no-report", "--json"))

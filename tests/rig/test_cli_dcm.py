@@ -196,14 +196,18 @@ def test_auto_is_the_default_and_reports_the_widening(tmp_path, capsys):
     model_path.write_text(json.dumps({"model": model.to_dict(), "supported_band_hz": [0.0, 36_000.0]}))
     result = run_json(capsys, ["dcm", "--model", str(model_path), "--record", str(rec_path), "--json"])
     dcm = result["dcm"]
-    assert dcm["target_widening"] == 3.0 and dcm["widening_note"] is None
-    assert dcm["reached_widening"] == pytest.approx(3.0, rel=2e-3)
-    assert result["compensated_fbsd_hz"]["5"] == pytest.approx(3.0 * result["fbsd_hz"]["5"], rel=2e-3)
+    # with the record: sized to its pulse (analysis.dcm_ratio), no widening aimed for
+    assert dcm["sized_to"] == "pulse" and dcm["target_widening"] is None
+    assert "sized to the pulse" in dcm["widening_note"] and abs(dcm["predicted_peak_error_pct"]) < 1.0
+    assert result["compensated_fbsd_hz"]["5"] == pytest.approx(dcm["reached_widening"] * result["fbsd_hz"]["5"])
     assert 0 < dcm["noise_gain"] <= dcm["noise_gain_limit"] == 4.0
     # checked on its own shot: far better than the raw response, so recommended
     check = dcm["check"]
     assert check["rms_error_pct"]["compensated"] < 0.2 * check["rms_error_pct"]["uncompensated"]
     assert dcm["recommended"] is True and dcm["not_recommended_reason"] is None
+    # without the record: sized to the band the model file says the shot supports
+    band = run_json(capsys, ["dcm", "--model", str(model_path), "--json"])["dcm"]
+    assert band["sized_to"] == "band" and "no pulse to size it to" in band["widening_note"]
     # asking for more than the band limit allows: reached, aimed for, and why not
     text = run_text(capsys, ["dcm", "--model", str(model_path), "--widening", "10"])
     assert "aimed for ×10, reached ×" in text and "±5 % up to 36 kHz" in text and "caps it" in text

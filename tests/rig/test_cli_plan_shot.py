@@ -121,9 +121,9 @@ def test_a_projectile_the_loader_cannot_take_is_refused_in_one_line(capsys, tmp_
 def test_the_readmes_bar_table_is_a_valid_rig_configuration(capsys, tmp_path: Path) -> None:
     """The README's `[bar]` example, appended to the simulated rig's file, loads and plans: its one
     projectile (the paper's No. 3 written out) gives No. 3's pressure for 50 000 g."""
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[2] / "docs" / "bar-physics.md").read_text(encoding="utf-8")
     block = re.search(r"```toml\n(\[bar\]\n.*?)```", readme, re.S)
-    assert block, "README has no ```toml [bar] example"
+    assert block, "docs/bar-physics.md has no ```toml [bar] example"
     config = tmp_path / "rig.toml"
     config.write_text(DEFAULT_SIM_RIG_CONFIG.read_text() + "\n" + block[1])
     code, out, err = plan(capsys, "--peak-g", "50000", "--json", config=config)

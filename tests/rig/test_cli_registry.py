@@ -30,5 +30,16 @@ def test_the_commands_without_json_are_the_ones_the_readme_names() -> None:
 
     walk(build_parser(), [])
     assert sorted(without) == ["campaign decide", "demo", "lab upgrade", "panel", "sim"]
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[2] / "docs" / "commands.md").read_text(encoding="utf-8")
     assert "all but `demo`, `sim`, `panel`, `campaign decide` and `lab upgrade`" in readme
+
+
+def test_lab_grants_json_is_one_object_holding_the_sql(capsys) -> None:
+    import json
+
+    from hopkinson.rig.cli.main import main
+
+    assert main(["lab", "grants", "lab_rig", "--owner", "lab_owner", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["rig_role"] == "lab_rig" and out["owner"] == "lab_owner"
+    assert "GRANT" in out["sql"].upper() and "lab_rig" in out["sql"]

@@ -214,7 +214,7 @@ def test_a_damaged_shot_is_refused_by_report_and_analyse(run_folder: Path, tmp_p
     line = one_error_line(capsys)
     assert f"{shot}: damaged shot file: " in line and damage in line
     assert not (tmp_path / "r.html").exists()
-    assert main(["analyse", str(shot)]) == 3
+    assert main(["analyse", str(shot)]) == 4  # its analysis failed (docs/exit-codes.md)
     out = capsys.readouterr().out
     assert out.startswith(f"{shot}: FAILED: {shot}: damaged shot file") and damage in out
 

@@ -16,7 +16,7 @@ from hopkinson.rig.cli.main import main
 from hopkinson.rig.lock import current_holder
 from hopkinson.rig.sim_session import sim_session
 
-from tests.rig.conftest import REPO, fast_sim_config, rig_toml, short_timeouts_config
+from tests.rig.conftest import REPO, assert_safe, fast_sim_config, rig_toml, short_timeouts_config
 
 
 def _charge(world, stuck: bool = False) -> None:
@@ -49,8 +49,7 @@ def test_safe_vents_a_charged_rig_and_confirms_it_by_reading_back(sim, capsys) -
     assert report["valves"]["fill_valve"] == "shut (commanded), shut (limit switch)"
     assert report["valves"]["vent_valve"] == "open (commanded), open (limit switch)"
     world = session.world
-    assert world.coils() == {"fire": False, "fill": False, "vent": True, "pump": False}
-    assert world.reservoir_pressure_bar() <= session.config.limits.vent_done_bar
+    assert_safe(world, session.config, digitizer_state=session.rig.digitizer.state)
     assert world.watchdog_state() == "off" and current_holder(session.config) is None
 
 
@@ -62,7 +61,8 @@ def test_safe_says_what_it_could_not_confirm(sim, capsys) -> None:
     assert err.count("\n") == 1 and err.startswith("hopkinson: error: SAFE NOT CONFIRMED: ")
     assert "fill valve open (commanded shut)" in err and "check the rig by hand" in err
     assert "fill valve" in out and "shut (commanded), open (limit switch)" in out
-    assert session.world.coils()["fill"] is False  # commanded shut; the valve itself is stuck
+    assert_safe(session.world, session.config, digitizer_state=session.rig.digitizer.state, vented=False,
+                stuck=("fill",))  # commanded shut; the valve itself is stuck
 
 
 def test_stop_holder_asks_the_running_shot_to_go_safe_then_confirms(sim, tmp_path: Path, capsys) -> None:
@@ -83,7 +83,7 @@ def test_stop_holder_asks_the_running_shot_to_go_safe_then_confirms(sim, tmp_pat
     _, shot_err = shot.communicate(timeout=30)
     assert shot.returncode == 3 and f"interrupted ({signal.SIGTERM.name})" in shot_err
     assert session.world.shots_fired == 0
-    assert session.world.coils() == {"fire": False, "fill": False, "vent": True, "pump": False}
+    assert_safe(session.world, session.config, digitizer_state=session.rig.digitizer.state)
 
 
 def test_safe_with_no_controller_listening_is_not_confirmed_exit_3(tmp_path: Path, capsys) -> None:

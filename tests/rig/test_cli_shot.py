@@ -13,9 +13,10 @@ from pathlib import Path
 
 import pytest
 from hopkinson.rig.cli.main import main
+from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.shotfile import read_shot
 
-from tests.rig.conftest import read_until
+from tests.rig.conftest import assert_state_safe, read_until
 
 REPO = Path(__file__).resolve().parents[2]
 LINE = re.compile(r"^(\d\d:\d\d:\d\d\.\d\d\d) (\S+)")  # every event line: its UTC time, then the state
@@ -52,9 +53,9 @@ def _state(c: dict[str, Path]) -> dict:
     return json.loads(c["state"].read_text(encoding="utf-8"))
 
 
-def _assert_safe(state: dict) -> None:
-    assert state["fire_valve_open"] is False and state["fill_valve_open"] is False
-    assert state["vent_valve_open"] is True and state["reservoir_pressure_bar"] <= 0.05
+def _assert_safe(state: dict, **kw: object) -> None:
+    """tests/rig/conftest.py's assert_safe, on the simulator's state file."""
+    assert_state_safe(state, load_rig_config(REPO / "config" / "rig-sim.toml"), **kw)  # type: ignore[arg-type]
 
 
 def test_shot_with_yes_fires_stores_and_reports_json(configs, capsys) -> None:
@@ -76,13 +77,15 @@ def test_shot_with_yes_fires_stores_and_reports_json(configs, capsys) -> None:
     assert result["results"]["fbsd_hz"]["5"] > 0
 
 
-def test_analysis_failure_still_exits_0_and_says_why(configs, capsys) -> None:
+def test_analysis_failure_exits_4_and_says_why(configs, capsys) -> None:
+    """Issue 44: it exited 0, and `hopkinson shot && next-step` went on as if calibrated."""
     # A 20 kS/s analysis rate leaves 40 samples of the 2 ms record: too few to identify a model.
     rc = main(_args(configs, "--yes", "--json", "--sample-rate", "20000"))
     out, err = capsys.readouterr()
     result = json.loads(out)
-    assert rc == 0 and result["final_state"] == "DONE" and result["analysis_error"]
-    assert err.startswith("hopkinson: warning: the shot is recorded but its analysis failed")
+    assert rc == 4 and result["exit_code"] == rc and result["final_state"] == "DONE" and result["analysis_error"]
+    assert err.startswith(f"hopkinson: error: the shot is recorded in {result['shot_path']} but its analysis failed")
+    assert "(exit 4: `hopkinson analyse` it again once the cause is fixed)" in err
     assert "too short" in result["analysis_error"] and err.count("\n") == 1
     assert read_shot(result["shot_path"]).state == "analysis_failed"
 
@@ -211,3 +214,30 @@ def test_a_late_signal_is_reported_as_what_happened(safe_again, expected, capsys
     args = argparse.Namespace(json=False, json_events=True)
     assert _report(args, ShotOutcome(final_state="DONE"), None, latch, safe_again) == EXIT_ABORTED
     assert capsys.readouterr().err.strip().splitlines()[-1] == f"hopkinson: error: interrupted (SIGHUP): {expected}"
+
+
+def test_the_json_exit_code_is_the_exit_code_also_when_the_lab_record_is_lost(capsys) -> None:
+    import argparse
+
+    from hopkinson.rig.cli.shot import _report
+    from hopkinson.rig.shot import ShotOutcome
+
+    no_signal = argparse.Namespace(received=None, reason="")
+    args = argparse.Namespace(json=True, json_events=False)
+    assert _report(args, ShotOutcome(final_state="DONE"), None, no_signal, None, record_lost=True) == 5
+    assert json.loads(capsys.readouterr().out)["exit_code"] == 5
+    failed = ShotOutcome(final_state="DONE", analysis_error="analysis failed: too short", exit_code=4)
+    assert _report(args, failed, None, no_signal, None, record_lost=True) == 4  # the analysis says more
+    assert json.loads(capsys.readouterr().out)["exit_code"] == 4
+
+
+def test_every_exit_code_is_in_the_one_table() -> None:
+    import hopkinson.rig.errors as errors
+    from hopkinson.rig.campaign import EXIT_ANALYSIS_FAILED, EXIT_COMPLETE, EXIT_STOPPED
+    from hopkinson.rig.lab_record import EXIT_NOT_RECORDED
+
+    codes = {v for k, v in vars(errors).items() if k.startswith("EXIT_") and isinstance(v, int)}
+    codes |= {EXIT_ANALYSIS_FAILED, EXIT_COMPLETE, EXIT_STOPPED, EXIT_NOT_RECORDED}
+    assert {str(c) for c in codes} <= set(errors.EXIT_CODES)
+    text = (REPO / "docs" / "exit-codes.md").read_text(encoding="utf-8")
+    assert all(f"| {code} |" in text for code in errors.EXIT_CODES)

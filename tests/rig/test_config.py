@@ -62,9 +62,7 @@ def edited(tmp_path: Path, source: str, old: str, new: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize(
-    ("old", "new", "key", "reason"),
-    [
+BAD_RIG = [  # (old, new, key, reason): one edit of config/rig.toml and the error it gives
         ("[limits]", "[limit]", "limit", "unknown section in top level"),
         ("port = 502\n", "port = 502\nprot = 5\n", "valve_controller.prot", "unknown key"),
         ("port = 502\n", 'port = "502"\n', "valve_controller.port", "must be an integer, got a string ('502')"),
@@ -129,8 +127,11 @@ def edited(tmp_path: Path, source: str, old: str, new: str) -> Path:
         ("orders = [1, -1]", "orders = [1, 1]", "analysis.orders", "must differ"),
         ("orders = [1, -1]", "orders = [1, -1, 2]", "analysis.orders", "must have 2 items, got 3"),
         ("orders = [1, -1]", 'orders = [1, "-1"]', "analysis.orders[1]", "must be an integer"),
-    ],
-)
+        ("# dcm_widening = 3.0", "dcm_widening = 0.5", "analysis.dcm_widening", "must be greater than 1"),
+    ]
+
+
+@pytest.mark.parametrize(("old", "new", "key", "reason"), BAD_RIG)
 def test_bad_rig_config_names_file_key_and_reason(tmp_path: Path, old: str, new: str, key: str, reason: str) -> None:
     path = edited(tmp_path, "rig.toml", old, new)
     with pytest.raises(ConfigError) as caught:
@@ -241,9 +242,7 @@ def _config_error(path: Path) -> str:
     return "no error"
 
 
-@pytest.mark.parametrize(
-    ("old", "new", "key", "reason"),
-    [
+BAD_SIM = [  # (old, new, key, reason): one edit of config/sim.toml and the error it gives
         ("time_scale = 10.0", "time_scale = 0.0", "world.time_scale", "must be greater than 0"),
         ("projectile = 3", "projectile = 4", "world.launcher.projectile", "must be one of 1, 2, 3"),
         ("pulse_width_s = [120e-6, 75e-6, 38.6e-6]", "pulse_width_s = [120e-6, 75e-6]",
@@ -256,8 +255,10 @@ def _config_error(path: Path) -> str:
         ("door_closed = true", "door_closed = 1", "world.pneumatics.door_closed", "must be true or false"),
         ("pm_snr_db = 30.0", "pm_snr_db = -5.0", "world.signals.pm_snr_db", "0 (no noise)"),
         ("orders = [1, -1]", "orders = [2, 2]", "world.signals.orders", "must differ"),
-    ],
-)
+    ]
+
+
+@pytest.mark.parametrize(("old", "new", "key", "reason"), BAD_SIM)
 def test_bad_sim_config_names_file_key_and_reason(tmp_path: Path, old: str, new: str, key: str, reason: str) -> None:
     path = edited(tmp_path, "sim.toml", old, new)
     with pytest.raises(ConfigError) as caught:
@@ -285,8 +286,7 @@ def test_sim_register_map_override(tmp_path: Path) -> None:
 
 
 def test_the_readmes_instruments_example_loads(tmp_path: Path) -> None:
-    readme = (CONFIG.parent / "README.md").read_text(encoding="utf-8")
-    section = readme[readme.index("## Instruments"):readme.index("## Files and formats")]
+    section = (CONFIG.parent / "docs" / "instruments.md").read_text(encoding="utf-8")
     example = section[section.index("```toml\n") + 8:section.index("```\n", section.index("```toml"))]
     text = (CONFIG / "rig.toml").read_text()
     path = tmp_path / "rig.toml"
@@ -320,3 +320,25 @@ def test_a_rig_file_must_state_its_safety_limits(tmp_path: Path, source: str, dr
     assert message.startswith(f"{path}: {named}: the rig must state its safety limits")
     assert (f"{drop} = …" in message) if drop != "section" else ("max_pressure_bar = …" in message)
     load_rig_config(CONFIG / source)  # the shipped files state them
+
+
+@pytest.mark.parametrize(("lab", "key", "reason"), [
+    ('[[lab.reference_chain]]\nitem = "grating"\ncertificate = "C-1"\nbudget = "grating_rel"\n',
+     "lab.reference_chain[0].budget", "one of grating_pitch_rel, interferometer_rel, amplifier_gain_rel"),
+    ('[[lab.signatories]]\nname = "A. Head"\nrole = " "\n', "lab.signatories[0].role", "must not be empty"),
+    ('[[lab.signatories]]\nname = "A. Head"\n', "lab.signatories[0].role", "missing key"),
+    ('[lab]\ncountry = "Germany"\n', "lab.country", 'an ISO 3166-1 alpha-2 code such as "DE"'),
+])
+def test_the_labs_signatories_country_and_budget_inputs_are_checked(tmp_path: Path, lab: str, key: str,
+                                                                   reason: str) -> None:
+    path = tmp_path / "rig.toml"
+    path.write_text((CONFIG / "rig.toml").read_text() + lab)
+    with pytest.raises(ConfigError) as caught:
+        load_rig_config(path)
+    assert str(caught.value).startswith(f"{path}: {key}: ") and reason in str(caught.value), str(caught.value)
+    good = ('[lab]\ncountry = "DE"\n[[lab.signatories]]\nname = "A. Head"\nrole = "head of lab"\n'
+            '[[lab.reference_chain]]\nitem = "grating"\ncertificate = "C-1"\nbudget = "grating_pitch_rel"\n')
+    path.write_text((CONFIG / "rig.toml").read_text() + good)
+    lab_config = load_rig_config(path).lab
+    assert lab_config.country == "DE" and lab_config.signatories[0].role == "head of lab"
+    assert lab_config.reference_chain[0].budget == "grating_pitch_rel"

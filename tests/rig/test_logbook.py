@@ -19,6 +19,7 @@ from hopkinson.fileio import UnsafeOutputError, atomic_write
 
 REPO = Path(__file__).resolve().parents[2]
 QUICK = ("--sample-rate", "20000")  # an analysis that fails at once (too few samples): not what is tested here
+ANALYSIS_FAILED = 4  # so such a shot exits 4 (docs/exit-codes.md): recorded, its analysis failed
 
 
 def _fast_sim(tmp_path: Path) -> Path:
@@ -31,7 +32,7 @@ def test_shot_log_trace_json_events_and_log_file(tmp_path: Path, capsys) -> None
     extra = tmp_path / "all.log.jsonl"
     assert main(["shot", "--sim", "--sim-config", str(_fast_sim(tmp_path)), "--yes", "--pressure-bar", "1.0",
                  "--out", str(tmp_path / "shots"), "--shot-name", "s1", "--trace", "--json-events",
-                 "--log-file", str(extra), *QUICK]) == 0
+                 "--log-file", str(extra), *QUICK]) == ANALYSIS_FAILED
     out = capsys.readouterr().out
     stream = [json.loads(line) for line in out.splitlines()]  # every line of stdout is one JSON event
     assert stream[0]["type"] == "StateEntered" and stream[-1]["type"] == "ShotFinished"
@@ -58,7 +59,7 @@ def test_shot_log_trace_json_events_and_log_file(tmp_path: Path, capsys) -> None
 
 def test_verbose_lines_carry_times_readings_and_identities(tmp_path: Path, capsys) -> None:
     assert main(["shot", "--sim", "--sim-config", str(_fast_sim(tmp_path)), "--yes", "--pressure-bar", "1.0",
-                 "--out", str(tmp_path), "-v", *QUICK]) == 0
+                 "--out", str(tmp_path), "-v", *QUICK]) == ANALYSIS_FAILED
     lines = capsys.readouterr().out.splitlines()  # (the quick analysis failed: no results line)
     timed = [ln for ln in lines if re.match(r"\d\d:\d\d:\d\d\.\d{3} [A-Z]+ ", ln)]
     assert any(" CHECK     instruments: " in ln for ln in timed)

@@ -22,6 +22,5 @@ def test_safe_names_the_stuck_valve_it_read_before_the_link_failed(make_rig) -> 
     assert confirmed is False
     assert problem.startswith(rig.instruments.valves.name), problem  # the error of the last round ...
     assert problem.endswith("; last read back: fill valve commanded shut but open"), problem  # ... and the valve
-    coils = rig.world.coils()  # SAFE's commands reached the controller before the link went
-    assert coils["fill"] is False and coils["fire"] is False and coils["vent"] is True
+    rig.assert_safe(vented=False, stuck=("fill",), read_back=False)  # SAFE's commands came before the link went
     assert rig.world.valve_positions()["fill"] is True  # the valve itself is stuck open

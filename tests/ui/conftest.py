@@ -42,6 +42,13 @@ def rig_config_for_tests() -> RigConfig:
     )
 
 
+def quick_config(draws: int = 60) -> RigConfig:
+    """The test configuration with fewer Monte Carlo draws (the least analysis.params takes): for
+    tests of what the panel shows, not of the uncertainty itself."""
+    base = rig_config_for_tests()
+    return dataclasses.replace(base, uncertainty=dataclasses.replace(base.uncertainty, draws=draws))
+
+
 def free_port() -> int:
     """A loopback port nothing listens on (bound, then released)."""
     with socket.socket() as sock:
@@ -117,6 +124,11 @@ def make_panel(qtbot: Any, tmp_path: Path) -> Iterator[Callable[..., Panel]]:
         window = MainWindow(rig_config, settings=QSettings(str(settings_path), QSettings.Format.IniFormat),
                             simulated_truth=truth, out_dir=out_dir, runs_dir=runs_dir, poll_interval_ms=150)
         windows.append(window)
+        # the dialogs a test does not answer itself: a set-up off its target is armed (the tests of
+        # that check answer it), and closing with a shot running aborts it (as before the question)
+        window.set_up_answers = []
+        window.confirm_setup = lambda problems: window.set_up_answers.append(problems) or True
+        window.ask_close = lambda: "abort"
         window.resize(1280, 800)
         window.show()
         window.start()

@@ -9,7 +9,9 @@ from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.analysis.linearity import fit_linearity
 from hopkinson.rig.events import CampaignShotStarted, Reading
 from hopkinson.rig.journal import Journal
+from hopkinson.rig.shot_verdict import judge
 from hopkinson.rig.shotfile import read_shot
+from hopkinson.ui.campaign_table import COL
 from PySide6.QtCore import Qt
 
 from tests.ui.conftest import save_shot
@@ -48,10 +50,6 @@ def write_plan(folder: Path, authorise: bool = True) -> Path:
     return path
 
 
-def column(tab, col: int) -> list[str]:
-    return [tab.table.item(r, col).text() if tab.table.item(r, col) else "" for r in range(tab.table.rowCount())]
-
-
 def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artifacts_dir):
     panel = make_panel(time_scale=5.0)  # charging 1.5 bar takes ~0.6 s: time to press Abort
     w = panel.window
@@ -59,7 +57,7 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     w.tabs.setCurrentWidget(tab)
     assert tab.progress.text() == "no plan loaded"  # it read "0 of 1 shots done" without a plan
     tab.load_plan(write_plan(tmp_path))
-    assert column(tab, 1) == ["s001-r1", "s001-r2", "s002-r1"] and set(column(tab, 4)) == {"PLANNED"}
+    assert tab.column("Shot") == ["s001-r1", "s001-r2", "s002-r1"] and set(tab.column("State")) == {"PLANNED"}
     assert tab.progress.text() == "0 of 3 shots done"
     assert tab.run_button.isEnabled() and not tab.pause_button.isEnabled()
 
@@ -73,7 +71,7 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
         assert w.busy and not w.arm_button.isEnabled() and tab.pause_button.isEnabled()
     w.link.event.disconnect(pause_on_first_shot)
     assert tab.last_outcome.exit_code == 3 and "paused" in tab.last_outcome.message
-    assert column(tab, 4) == ["ANALYSED", "PLANNED", "PLANNED"]
+    assert tab.column("State") == ["ANALYSED", "PLANNED", "PLANNED"]
     assert panel.world.shots_fired == 1
     # the worker's "shot ended" and the lamps' state reach the window as their own events, maybe just
     # after `ended` on a loaded machine: wait for them (the buttons must still come right)
@@ -99,7 +97,7 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     w.link.event.disconnect(abort_in_charge)
     assert filling_when_pressed == [True]  # Abort was pressed while the reservoir was charging
     assert tab.last_outcome.exit_code == 3
-    assert column(tab, 4) == ["ANALYSED", "ABORTED", "PLANNED"]
+    assert tab.column("State") == ["ANALYSED", "ABORTED", "PLANNED"]
     assert panel.world.shots_fired == 1
     coils = panel.world.coils()
     assert coils["fire"] is False and coils["fill"] is False and coils["vent"] is True
@@ -108,23 +106,33 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     with qtbot.waitSignal(tab.ended, timeout=CAMPAIGN_TIMEOUT_MS):
         qtbot.mouseClick(tab.resume_button, Qt.MouseButton.LeftButton)
     assert tab.last_outcome.exit_code == 0 and tab.last_outcome.complete
-    qtbot.waitUntil(lambda: all(column(tab, 8)), timeout=10_000)  # results read from the shot files
-    assert column(tab, 4) == ["ANALYSED"] * 3 and panel.world.shots_fired == 3
+    qtbot.waitUntil(lambda: all(tab.column("FBSD")), timeout=10_000)  # results read from the shot files
+    assert tab.column("State") == ["ANALYSED"] * 3 and panel.world.shots_fired == 3
     assert tab.progress.value() == tab.progress.maximum() == 3
     run = tab.run_folder
     for row, sid in enumerate(("s001-r1", "s001-r2", "s002-r1")):
         results = read_shot(run.shot_path(sid), load_raw=False).results
-        assert tab.table.item(row, 8).text().replace("\n", " ") + " kHz" == expected_khz(results["fbsd_hz"]["5"],
-                                                                                     results, "5")
+        assert tab.column("FBSD")[row].replace("\n", " ") + " kHz" == expected_khz(results["fbsd_hz"]["5"],
+                                                                                  results, "5")
         verdict = results["dcm"].get("recommended")  # the DCM's check on the shot (issue 11)
         if verdict is not None:
-            assert tab.table.item(row, 11).text() == ("recommended" if verdict else "NOT recommended")
-        assert tab.table.item(row, 5).text() == str(results["identification"]["order"])
-        assert tab.table.item(row, 12).text() == f"{sid}.h5"
+            assert tab.column("DCM")[row] == ("recommended" if verdict else "NOT recommended")
+        assert tab.column("Order")[row] == str(results["identification"]["order"])
+        assert tab.column("File")[row] == f"{sid}.h5"
+        assert tab.column("p")[row] == f"{read_shot(run.shot_path(sid), load_raw=False).meta.pressure_bar:.3g}"
+        # the shot's verdict and its sensitivity in the sensor's unit (µV/(m/s²): the plan names none)
+        judgement = judge(results, {})
+        assert tab.column("Verdict")[row] == judgement.verdict.decision.value
+        nominal_uv = results["params"]["sensitivity_v_per_m_s2"] * 1e6
+        shown = float(tab.column("Sensitivity")[row].split("\n")[0])
+        assert abs(shown - KeyFigures.from_results(results).sensitivity.value * nominal_uv) < 1e-3
     header = [tab.table.horizontalHeaderItem(c).text() for c in range(tab.table.columnCount())]
-    assert header[6] == "f_n (kHz)" and header[11] == "DCM" and "kHz" not in tab.table.item(0, 6).text()
-    # the DCM's verdict in view at the panel's 1280 × 800, no scrolling (it was behind the scroll bar)
-    assert tab.table.columnViewportPosition(11) + tab.table.columnWidth(11) <= tab.table.viewport().width()
+    assert header[COL["f_n"]] == "f_n (kHz)" and header[COL["DCM"]] == "DCM" and "kHz" not in tab.column("f_n")[0]
+    assert header[COL["Sensitivity"]] == "Sensitivity\n(µV/(m/s²))" and header[COL["Peak"]] == "Peak (g)"
+    # the verdict and the DCM's in view at the panel's 1280 × 800, no scrolling (it was behind the scroll bar)
+    for name in ("Verdict", "DCM"):
+        assert tab.table.columnViewportPosition(COL[name]) + tab.table.columnWidth(COL[name]) <= \
+            tab.table.viewport().width(), name
     with Journal.open(run) as journal:
         assert [s.fire_count for s in journal.statuses()] == [1, 1, 1]
     assert not tab.resume_button.isEnabled()  # nothing left to do
@@ -144,7 +152,7 @@ def test_a_plan_without_authorisation_fires_nothing_unless_confirmed(qtbot, make
     tab = panel.window.campaign_tab
     tab.load_plan(write_plan(tmp_path, authorise=False))
     asked = []
-    tab.confirm_campaign = lambda plan: asked.append(plan.name) or False
+    tab.confirm_campaign = lambda plan: asked.append(plan.name) or "cancel"
     qtbot.mouseClick(tab.run_button, Qt.MouseButton.LeftButton)
     assert asked == ["ui-test"] and not tab.running
     assert "not authorised" in tab.message.text() and tab.run_folder is None

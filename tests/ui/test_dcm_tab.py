@@ -146,3 +146,23 @@ def test_the_panels_exports_never_write_over_a_shot_file(qtbot, tab, tmp_path):
     with pytest.raises(UnsafeOutputError, match="HDF5 shot file"):
         LogView().save(shot)
     assert shot.read_bytes() == before
+
+
+def test_a_design_error_after_an_export_is_red_and_in_plain_words(qtbot, tab, tmp_path):
+    """After a DCM export (green), a later design error showed green with Python text: "DCM:
+    DCM: … got ((0.6+0.1j),)" (issue 42)."""
+    tab.set_model(second_order_model(FN_HZ, ZETA), ratio=2.0, damping=0.707)
+    target = tmp_path / "dcm.json"
+    tab.export_dcm(target)
+    tab.say("ok", f"DCM written to {target}")
+    assert tab.message_level == "ok" and "#1e6b2e" in tab.message.styleSheet()
+    tab.extra.setText("0.6+0.1j")  # one pole of a pair without its conjugate
+    tab.redesign()
+    text = tab.message.text()
+    assert tab.message_level == "error" and "#b3261e" in tab.message.styleSheet()
+    assert text == "Cannot design this DCM: extra poles must be both members of every complex pair " \
+                   "(0.6+0.1j has no conjugate partner)"
+    assert "DCM: DCM" not in text and "got (" not in text and "extra_poles" not in text
+    tab.extra.setText("")
+    tab.redesign()
+    assert tab.message.text() == "" and not tab.export_dcm_button.isHidden()

@@ -15,7 +15,7 @@ def test_pulse_figures_come_from_the_excitation_without_a_reduction(qtbot):
     """A record analysed without an interferometer reduction: peak and 10 % width of the
     reference pulse, checked against the half-sine's closed form."""
     from hopkinson.analysis.key_figures import KeyFigures
-    from hopkinson.ui.plots import ResultsStrip
+    from hopkinson.ui.shot_tab import ResultsStrip
 
     dt, width_s, peak = 1e-7, 50e-6, 2.0e5
     t = np.arange(3000) * dt
@@ -34,7 +34,7 @@ def test_pulse_figures_come_from_the_excitation_without_a_reduction(qtbot):
 def test_the_strip_shows_value_plus_minus_u_and_the_dcm_verdict(qtbot):
     from hopkinson.analysis.key_figures import KeyFigures
     from hopkinson.reports.data import CompensationCheck
-    from hopkinson.ui.plots import ResultsStrip
+    from hopkinson.ui.shot_tab import ResultsStrip
 
     u_fn = 108.0  # Hz: U = 1.96 u = 211.7 Hz -> two significant digits: 0.21 kHz
     results = {
@@ -78,6 +78,7 @@ def test_every_figure_of_the_strip_shows_whole_in_the_smallest_window(qtbot, mak
     column when peak and width shared one cell."""
     from hopkinson.analysis.key_figures import KeyFigures
     from hopkinson.reports.data import CompensationCheck
+    from hopkinson.rig.shot_verdict import judge
     from PySide6.QtCore import QCoreApplication
 
     from tests.ui.conftest import save_shot, unreachable_config
@@ -88,7 +89,9 @@ def test_every_figure_of_the_strip_shows_whole_in_the_smallest_window(qtbot, mak
     results = {  # the widest figures a shot of a 100 000 g sensor gives (five-digit values ± U)
         "model": {"order": 12, "dc_gain": 0.99993, "sample_interval_s": 1e-6},
         "identification": {"fit_percent": 99.871, "main_mode": {"natural_frequency_hz": 126999.91,
-                                                                "damping_ratio": 0.050027}},
+                                                                "damping_ratio": 0.050027},
+                           "supported_band_hz": [61.04, 166_314.7]},
+        "params": {"sensitivity_v_per_m_s2": 0.312e-6},  # the nominal: the sensitivity shows in its unit
         "reduction": {"response_unit": "m/s^2", "shock_sensitivity": 1.60731},
         "excitation": {"peak_m_s2": 1.23456e6, "pulse_width_s": 111.8e-6},
         "fbsd_hz": {"5": 25906.7, "10": 38162.3},
@@ -105,7 +108,8 @@ def test_every_figure_of_the_strip_shows_whole_in_the_smallest_window(qtbot, mak
     window = make_panel(simulate=False, connect=False, config=unreachable_config(tmp_path)).window
     strip = window.plots.strip
     kf = KeyFigures.from_results(results)
-    strip.show_figures(kf, CompensationCheck.of(kf))
+    settings = {"sensitivity_unit": "µV/(m/s²)", "sensitivity_tolerance_percent": 5.0}  # as long as any unit
+    strip.show_figures(kf, CompensationCheck.of(kf), None, judge(results, settings))
     window.resize(1280, 800)
     QCoreApplication.processEvents()
     assert window.width() == 1280 and strip.isVisible()
@@ -120,7 +124,7 @@ def test_every_figure_of_the_strip_shows_whole_in_the_smallest_window(qtbot, mak
     results["excitation"]["peak_m_s2"] = 4.894e5
     results["dcm"]["check"]["peak_error_pct"]["uncompensated"] = 60.7
     kf = KeyFigures.from_results(results)
-    strip.show_figures(kf, CompensationCheck.of(kf))
+    strip.show_figures(kf, CompensationCheck.of(kf), None, judge(results, settings))
     QCoreApplication.processEvents()
     for key, label in strip.values.items():
         assert_shows_whole(label, key, one_line=True)
@@ -162,7 +166,7 @@ def test_log_axes_are_labelled_in_plain_numbers(qtbot):
 def test_the_strip_says_the_dcm_verdict_once(qtbot):
     from hopkinson.analysis.key_figures import KeyFigures
     from hopkinson.reports.data import CompensationCheck
-    from hopkinson.ui.plots import ResultsStrip
+    from hopkinson.ui.shot_tab import ResultsStrip
 
     reason = "nothing to compensate: no pole of the model is one the shot supports"
     results = {"model": {"order": 2, "dc_gain": 1.0, "sample_interval_s": 1e-6},
@@ -202,7 +206,7 @@ def test_the_model_magnitude_is_shown_with_its_95_percent_band(qtbot, artifacts_
     low, high = plot.band_low.getData(), plot.band_high.getData()
     assert np.allclose(high[1] - low[1], 2 * half * centre)  # the band as given, around the model
     legend = [label.text for _item, label in plot.getPlotItem().legend.items]
-    assert "95 % band of the model" in legend
+    assert "95 % band" in legend
     image = save_shot(plot, artifacts_dir / "panel-magnitude-band.png")
     # shaded: the band's blue tint fills the plot between its edges where the model is near 1
     from PySide6.QtGui import QImage
@@ -215,7 +219,7 @@ def test_the_model_magnitude_is_shown_with_its_95_percent_band(qtbot, artifacts_
     assert colour.blue() > colour.red() + 20, colour.name()  # tinted blue, not the white ground
     plot.show_curves(f_hz, model, None, {"5": 11.4e3}, None)
     assert plot.band_low.getData()[0] is None or len(plot.band_low.getData()[0]) == 0
-    assert "95 % band of the model" not in [label.text for _item, label in plot.getPlotItem().legend.items]
+    assert "95 % band" not in [label.text for _item, label in plot.getPlotItem().legend.items]
 
 
 def pg_point(x: float, y: float):

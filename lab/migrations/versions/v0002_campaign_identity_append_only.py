@@ -1,0 +1,139 @@
+"""Campaigns keyed by UUID, sensors' data and jobs as appended rows, certificate lineage, and
+every table append-only in the database itself (UPDATE, DELETE and, on PostgreSQL, TRUNCATE
+refused by triggers for every role; the rig's role has no such privilege either).
+
+Revision ID: 0002
+Revises: 0001
+"""
+
+from __future__ import annotations
+
+import uuid
+
+import sqlalchemy as sa
+from alembic import op
+
+revision = "0002"
+down_revision = "0001"
+branch_labels = None
+depends_on = None
+
+MESSAGE = "is append-only: rows are never updated or deleted"
+TABLES = ("sensors", "sensor_data", "rigs", "reference_items", "campaigns", "jobs", "shots", "analyses",
+          "certificates", "audit")
+NAMING = {"uq": "uq_%(table_name)s_%(column_0_name)s"}  # names SQLite's unnamed constraints in batch mode
+
+
+def _postgres() -> bool:
+    return op.get_bind().dialect.name == "postgresql"
+
+
+def _drop_old_triggers() -> None:
+    for table in ("audit", "certificates"):
+        if _postgres():
+            op.execute(f"DROP TRIGGER {table}_append_only ON {table}")
+            op.execute(f"DROP FUNCTION {table}_append_only()")
+        else:
+            op.execute(f"DROP TRIGGER {table}_no_update")
+            op.execute(f"DROP TRIGGER {table}_no_delete")
+
+
+def upgrade() -> None:
+    bind = op.get_bind()
+    _drop_old_triggers()
+    op.create_table(
+        "sensor_data",
+        sa.Column("id", sa.Integer(), primary_key=True),
+        sa.Column("sensor_id", sa.Integer(), sa.ForeignKey("sensors.id"), nullable=False, index=True),
+        sa.Column("utc", sa.String(40), nullable=False),
+        sa.Column("actor", sa.String(200), nullable=False),
+        sa.Column("model", sa.String(200), nullable=False),
+        sa.Column("owner", sa.String(200), nullable=False),
+        sa.Column("nominal_sensitivity", sa.Float(), nullable=True),
+        sa.Column("sensitivity_unit", sa.String(40), nullable=False),
+        sa.Column("tolerance_percent", sa.Float(), nullable=True),
+        sa.Column("interval_days", sa.Integer(), nullable=True),
+    )
+    sensors = bind.execute(sa.text("SELECT id, model, owner, nominal_sensitivity, sensitivity_unit, "
+                                   "tolerance_percent, interval_days, created_utc FROM sensors")).mappings().all()
+    for s in sensors:
+        bind.execute(sa.text("INSERT INTO sensor_data (sensor_id, utc, actor, model, owner, nominal_sensitivity, "
+                             "sensitivity_unit, tolerance_percent, interval_days) VALUES (:id, :created_utc, "
+                             "'migration 0002', :model, :owner, :nominal_sensitivity, :sensitivity_unit, "
+                             ":tolerance_percent, :interval_days)"), dict(s))
+    with op.batch_alter_table("sensors") as batch:
+        for column in ("model", "owner", "nominal_sensitivity", "sensitivity_unit", "tolerance_percent",
+                       "interval_days"):
+            batch.drop_column(column)
+
+    with op.batch_alter_table("campaigns", naming_convention=NAMING) as batch:
+        batch.add_column(sa.Column("uuid", sa.String(36), nullable=True))
+        batch.drop_constraint("campaigns_name_key" if _postgres() else "uq_campaigns_name", type_="unique")
+    for (cid,) in bind.execute(sa.text("SELECT id FROM campaigns")).all():
+        bind.execute(sa.text("UPDATE campaigns SET uuid = :u WHERE id = :id"), {"u": str(uuid.uuid4()), "id": cid})
+    with op.batch_alter_table("campaigns") as batch:
+        batch.alter_column("uuid", existing_type=sa.String(36), nullable=False)
+        batch.create_unique_constraint("uq_campaigns_uuid", ["uuid"])
+
+    op.create_table(
+        "jobs",
+        sa.Column("id", sa.Integer(), primary_key=True),
+        sa.Column("campaign_id", sa.Integer(), sa.ForeignKey("campaigns.id"), nullable=False, index=True),
+        sa.Column("utc", sa.String(40), nullable=False),
+        sa.Column("actor", sa.String(200), nullable=False),
+        *(sa.Column(name, sa.Text(), nullable=False) for name in (
+            "condition", "location", "customer_contact", "mounting", "environment")),
+        sa.Column("received", sa.String(20), nullable=False),
+        sa.Column("customer", sa.String(200), nullable=False),
+    )
+
+    with op.batch_alter_table("shots") as batch:
+        batch.alter_column("sensor_id", existing_type=sa.Integer(), nullable=True)
+        batch.add_column(sa.Column("simulated_marks", sa.Text(), nullable=False, server_default=""))
+        batch.add_column(sa.Column("context_json", sa.Text(), nullable=False, server_default="{}"))
+    with op.batch_alter_table("analyses") as batch:
+        batch.add_column(sa.Column("pulse_width_s", sa.Float(), nullable=True))
+
+    with op.batch_alter_table("certificates", naming_convention=NAMING) as batch:
+        batch.add_column(sa.Column("campaign_id", sa.Integer(), nullable=True))
+        batch.add_column(sa.Column("specimen", sa.Boolean(), nullable=False, server_default=sa.false()))
+        batch.add_column(sa.Column("revision", sa.Integer(), nullable=False, server_default="0"))
+        batch.alter_column("replaces", existing_type=sa.String(40), nullable=True)
+    bind.execute(sa.text("UPDATE certificates SET replaces = NULL WHERE replaces = ''"))
+    rows = bind.execute(sa.text("SELECT c.id, c.prefix, k.id AS campaign_id FROM certificates c "
+                                "LEFT JOIN campaigns k ON k.name = c.subject ORDER BY c.id")).mappings().all()
+    revisions: dict[tuple[int | None, bool], int] = {}
+    for row in rows:
+        specimen = "-SIM" in row["prefix"]
+        key = (row["campaign_id"], specimen)
+        revisions[key] = revisions.get(key, -1) + 1
+        bind.execute(sa.text("UPDATE certificates SET campaign_id = :c, specimen = :s, revision = :r WHERE id = :id"),
+                     {"c": row["campaign_id"], "s": specimen, "r": revisions[key], "id": row["id"]})
+    with op.batch_alter_table("certificates") as batch:
+        batch.create_foreign_key("fk_certificates_campaign", "campaigns", ["campaign_id"], ["id"])
+        batch.create_index("ix_certificates_campaign_id", ["campaign_id"])
+        batch.create_unique_constraint("uq_certificates_replaces", ["replaces"])
+        batch.create_unique_constraint("uq_certificates_lineage", ["campaign_id", "specimen", "revision"])
+
+    for table in TABLES:
+        _append_only(table)
+
+
+def _append_only(table: str) -> None:
+    """Refuse UPDATE, DELETE (and TRUNCATE on PostgreSQL) on `table` inside the database."""
+    message = f"{table} {MESSAGE}"
+    if _postgres():
+        op.execute("CREATE OR REPLACE FUNCTION hopkinson_append_only() RETURNS trigger LANGUAGE plpgsql AS $$ "
+                   f"BEGIN RAISE EXCEPTION '% {MESSAGE}', TG_TABLE_NAME; END $$")
+        op.execute(f"CREATE TRIGGER {table}_append_only BEFORE UPDATE OR DELETE ON {table} "
+                   f"FOR EACH ROW EXECUTE FUNCTION hopkinson_append_only()")
+        op.execute(f"CREATE TRIGGER {table}_no_truncate BEFORE TRUNCATE ON {table} "
+                   f"FOR EACH STATEMENT EXECUTE FUNCTION hopkinson_append_only()")
+    else:
+        for verb in ("UPDATE", "DELETE"):
+            op.execute(f"CREATE TRIGGER {table}_no_{verb.lower()} BEFORE {verb} ON {table} "
+                       f"BEGIN SELECT RAISE(ABORT, '{message}'); END")
+
+
+def downgrade() -> None:
+    raise NotImplementedError("the lab record is append-only: restore a backup taken before `lab upgrade`")

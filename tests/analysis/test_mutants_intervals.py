@@ -1,0 +1,198 @@
+"""The uncertainty's interval logic (analysis/uncertainty.py: Estimate.of_draws, Estimate.normal,
+response_band) against its definitions, on draws whose quantiles are exact: 1 001 evenly spaced
+values, whose 2.5 % and 97.5 % points are the 26th and 976th (numpy's linear interpolation lands
+on a sample), and models whose responses are closed forms. These kill the mutants of the
+interval logic (docs/mutation-testing.md); the coverage of the intervals is tested statistically
+in test_uncertainty.py."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.uncertainty import Estimate, response_band
+from scipy import stats
+
+GRID = np.arange(1001.0)  # exact quantiles: 2.5 % → 25, 97.5 % → 975, 5 % → 50, 95 % → 950
+
+
+def test_normal_interval_is_value_plus_minus_the_normal_quantile() -> None:
+    k = stats.norm.ppf(0.975)
+    est = Estimate.normal(10.0, 2.0)
+    assert (est.value, est.u) == (10.0, 2.0)
+    assert est.interval == (pytest.approx(10.0 - 2.0 * k, abs=1e-12), pytest.approx(10.0 + 2.0 * k, abs=1e-12))
+
+
+def test_reflected_interval_of_all_draws() -> None:
+    """The basic bootstrap interval: (2v − q₉₇.₅, 2v − q₂.₅); u the draws' standard deviation
+    (ddof 1; for 0 … N it is √((N + 1)(N + 2)/12))."""
+    est = Estimate.of_draws(400.0, GRID)
+    assert est.value == 400.0
+    assert est.interval == (pytest.approx(800.0 - 975.0), pytest.approx(800.0 - 25.0))
+    assert est.u == pytest.approx(math.sqrt(1001 * 1002 / 12), rel=1e-12)
+    narrow = Estimate.of_draws(400.0, GRID, coverage=0.90)
+    assert narrow.interval == (pytest.approx(800.0 - 950.0), pytest.approx(800.0 - 50.0))
+    assert Estimate.of_draws(400.0, GRID, reflect=np.ones(1001, dtype=bool)) == est
+
+
+def test_draws_on_another_branch_are_taken_as_they_are() -> None:
+    """Unflagged draws enter the quantiles as they are, flagged ones reflected about the value."""
+    est = Estimate.of_draws(400.0, GRID, reflect=np.zeros(1001, dtype=bool))
+    assert est.interval == (pytest.approx(25.0), pytest.approx(975.0))  # the percentile interval
+    flags = GRID >= 500  # the upper half reflected about 400: 300 … −200; the lower half kept
+    mixed = np.sort(np.where(flags, 800.0 - GRID, GRID))
+    est = Estimate.of_draws(400.0, GRID, reflect=flags)
+    assert est.interval == (pytest.approx(mixed[25]), pytest.approx(mixed[975]))
+    assert est.u == pytest.approx(float(np.std(GRID, ddof=1)))  # u of the draws as drawn
+
+
+def test_non_finite_draws_are_left_out_with_their_flags() -> None:
+    draws = np.concatenate([[np.nan], GRID[:500], [np.inf, -np.inf], GRID[500:]])
+    flags = np.concatenate([[True], GRID[:500] >= 500, [False, True], GRID[500:] >= 500])
+    assert Estimate.of_draws(400.0, draws, reflect=flags) == Estimate.of_draws(400.0, GRID, reflect=GRID >= 500)
+    assert Estimate.of_draws(400.0, np.concatenate([GRID, [np.nan]])) == Estimate.of_draws(400.0, GRID)
+
+
+@pytest.mark.parametrize("draws", [np.array([]), np.array([3.0]), np.array([3.0, np.nan, np.inf])])
+def test_fewer_than_two_finite_draws_give_no_interval(draws: np.ndarray) -> None:
+    est = Estimate.of_draws(7.0, draws)
+    assert est.value == 7.0 and math.isnan(est.u) and all(math.isnan(x) for x in est.interval)
+    assert Estimate.of_draws(7.0, np.array([1.0, 2.0])).interval[0] == pytest.approx(14.0 - 1.975)
+
+
+def test_a_positive_figure_is_reflected_on_a_log_scale() -> None:
+    """log draws evenly spaced: the interval is (v²/q₉₇.₅, v²/q₂.₅) and stays above zero, where a
+    linear reflection would go below it."""
+    draws = 2.0 ** ((GRID - 500.0) / 250.0)  # 1/4 … 4
+    v = 1.5
+    est = Estimate.of_draws(v, draws, positive=True)
+    q_lo, q_hi = 2.0 ** ((25.0 - 500.0) / 250.0), 2.0 ** ((975.0 - 500.0) / 250.0)
+    assert est.interval == (pytest.approx(v * v / q_hi, rel=1e-12), pytest.approx(v * v / q_lo, rel=1e-12))
+    assert est.u == pytest.approx(float(np.std(draws, ddof=1)), rel=1e-12)
+    assert Estimate.of_draws(v, draws).interval[0] < 0 < est.interval[0]
+    small = Estimate.of_draws(0.05, 0.05 / 1.5 * draws, positive=True)  # a damping ratio: below 1 too
+    assert small.interval == (pytest.approx(est.interval[0] * 0.05 / 1.5, rel=1e-12),
+                              pytest.approx(est.interval[1] * 0.05 / 1.5, rel=1e-12))
+
+
+def test_a_positive_figure_leaves_out_draws_at_or_below_zero() -> None:
+    draws = 2.0 ** ((GRID - 500.0) / 250.0)
+    with_bad = np.concatenate([draws, [0.0, -1.0]])
+    got = Estimate.of_draws(1.5, with_bad, positive=True)
+    want = Estimate.of_draws(1.5, draws, positive=True)
+    assert got.interval == want.interval and got.u == pytest.approx(want.u, rel=1e-12)
+    two = Estimate.of_draws(1.5, np.array([1.0, 2.0, -1.0]), positive=True)
+    assert two.u == pytest.approx(math.sqrt(0.5), rel=1e-12)
+    one = Estimate.of_draws(1.5, np.array([2.0, -1.0, 0.0]), positive=True)
+    assert math.isnan(one.u) and all(math.isnan(x) for x in one.interval)
+
+
+def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
+    draws = 2.0 ** ((GRID - 500.0) / 250.0)
+    flags = GRID >= 500
+    logs = np.log(draws)
+    mixed = np.sort(np.where(flags, 2 * math.log(1.5) - logs, logs))
+    est = Estimate.of_draws(1.5, draws, reflect=flags, positive=True)
+    assert est.interval == (pytest.approx(math.exp(mixed[25]), rel=1e-12), pytest.approx(math.exp(mixed[975]), rel=1e-12))
+    linear = Estimate.of_draws(0.0, GRID, positive=True)  # a value at zero: the linear reflection
+    assert linear.interval == (pytest.approx(-975.0), pytest.approx(-25.0))
+    below = Estimate.of_draws(-100.0, GRID, positive=True)  # and below zero (no log of it)
+    assert below.interval == (pytest.approx(-1175.0), pytest.approx(-225.0))
+
+
+def test_estimate_to_dict_turns_non_finite_numbers_into_none() -> None:
+    assert Estimate(1.0, math.nan, (-math.inf, 2.0)).to_dict() == {"value": 1.0, "u": None, "interval": [None, 2.0]}
+    assert Estimate(0.0, 0.5, (-1.0, 1.0)).to_dict() == {"value": 0.0, "u": 0.5, "interval": [-1.0, 1.0]}
+
+
+# -- the response band ------------------------------------------------------------------------------------
+DT = 1e-6
+
+
+def zero_model(c: float, delay: float = 0.0) -> DiscreteModel:
+    """B = 1 + c·z⁻¹, A = 1: |H(f)/H(0)| = |1 + c·e^(−jω)|/(1 + c), closed form."""
+    return DiscreteModel(DT, np.array([1.0]), np.array([1.0, c]), delay_samples=delay)
+
+
+def rel_gain(c: float, f: np.ndarray) -> np.ndarray:
+    return np.abs(1 + c * np.exp(-2j * np.pi * f * DT)) / (1 + c)
+
+
+def test_response_band_needs_two_draws_and_a_dc_gain() -> None:
+    assert response_band(zero_model(0.2), [zero_model(0.2)], (1e3, 1e5)) is None
+    assert response_band(DiscreteModel(DT, np.array([1.0]), np.array([1.0, -1.0])), [zero_model(0.1)] * 2, None) is None
+
+
+def test_response_band_from_two_draws_and_of_a_negative_dc_gain() -> None:
+    """Two draws are enough; a sensor read with inverted polarity (negative DC gain) has the same
+    band, each response taken relative to its own DC gain."""
+    assert response_band(zero_model(0.2), [zero_model(0.1), zero_model(0.3)], (1e3, 1e5), points=5) is not None
+    cs = GRID / 2000.0
+
+    def inverted(c: float) -> DiscreteModel:
+        return DiscreteModel(DT, np.array([1.0]), np.array([-1.0, -c]))
+
+    want = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5), points=10)
+    got = response_band(inverted(0.25), [inverted(c) for c in cs], (1e3, 1e5), points=10)
+    for key in ("magnitude_rel", "magnitude_rel_low", "magnitude_rel_high", "phase_low_deg", "phase_high_deg"):
+        np.testing.assert_allclose(got[key], want[key], rtol=1e-12, atol=1e-9)
+
+
+def test_response_band_grid() -> None:
+    band = response_band(zero_model(0.2), [zero_model(0.2)] * 3, (1e3, 1e5), points=50)
+    np.testing.assert_allclose(band["frequency_hz"], np.geomspace(1e3, 2e5, 50), rtol=1e-12)
+    assert band["coverage_probability"] == 0.95
+    band = response_band(zero_model(0.2), [zero_model(0.2)] * 3, (10.0, 4e5), points=20)  # at most 0.98 Nyquist
+    np.testing.assert_allclose(band["frequency_hz"], np.geomspace(100.0, 0.98 * 5e5, 20), rtol=1e-12)
+    band = response_band(zero_model(0.2), [zero_model(0.2)] * 3, None, points=20)  # no band: to Nyquist / 2
+    np.testing.assert_allclose(band["frequency_hz"], np.geomspace(100.0, 2.5e5, 20), rtol=1e-12)
+    band = response_band(zero_model(0.2), [zero_model(0.2)] * 3, (0.0, 1e5), points=20)
+    assert band["frequency_hz"][0] == pytest.approx(100.0)
+
+
+def test_response_band_magnitude_reflected_on_a_log_scale() -> None:
+    """Draws 1 + c·z⁻¹, c = 0 … 0.5 evenly (1 001), about the model c₀ = 0.25: at each frequency the
+    DC-relative gain falls as c grows, so its quantiles are those of c: the 2.5 % point is c = 0.0125
+    and the band (reflected about the model on a log scale) is g₀²/g(c) at the two ends."""
+    cs = GRID / 2000.0
+    band = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5), points=30)
+    f = np.asarray(band["frequency_hz"])
+    g0 = rel_gain(0.25, f)
+    np.testing.assert_allclose(band["magnitude_rel"], g0, rtol=1e-12)
+    np.testing.assert_allclose(band["magnitude_rel_low"], g0**2 / rel_gain(cs[25], f), rtol=1e-9)
+    np.testing.assert_allclose(band["magnitude_rel_high"], g0**2 / rel_gain(cs[975], f), rtol=1e-9)
+    unreflected = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5),
+                                reflect=np.zeros(cs.size, dtype=bool), points=30)
+    np.testing.assert_allclose(unreflected["magnitude_rel_low"], rel_gain(cs[975], f), rtol=1e-9)
+    np.testing.assert_allclose(unreflected["magnitude_rel_high"], rel_gain(cs[25], f), rtol=1e-9)
+
+
+def test_response_band_phase_with_the_delay() -> None:
+    """Pure delays d + δ, δ = 0 … 1 sample (1 001): the phase is −360°·f·T·d (unwrapped); the
+    reflected band is the phase + 360°·f·T·(δ₂.₅, δ₉₇.₅); taken as they are, − 360°·f·T·(δ₉₇.₅, δ₂.₅)."""
+    d = 3.3
+    deltas = GRID / 1000.0
+    draws = [DiscreteModel(DT, np.array([1.0]), np.array([1.0]), delay_samples=d + x) for x in deltas]
+    model = DiscreteModel(DT, np.array([1.0]), np.array([1.0]), delay_samples=d)
+    band = response_band(model, draws, (1e3, 1e5), points=25)
+    f = np.asarray(band["frequency_hz"])
+    turn = 360.0 * f * DT
+    np.testing.assert_allclose(band["phase_deg"], -turn * d, rtol=1e-9)
+    np.testing.assert_allclose(band["phase_low_deg"], -turn * d + turn * 0.025, rtol=1e-9)
+    np.testing.assert_allclose(band["phase_high_deg"], -turn * d + turn * 0.975, rtol=1e-9)
+    np.testing.assert_allclose(band["magnitude_rel_low"], 1.0, rtol=1e-12)
+    taken = response_band(model, draws, (1e3, 1e5), reflect=np.zeros(deltas.size, dtype=bool), points=25)
+    np.testing.assert_allclose(taken["phase_low_deg"], -turn * d - turn * 0.975, rtol=1e-9)
+    np.testing.assert_allclose(taken["phase_high_deg"], -turn * d - turn * 0.025, rtol=1e-9)
+
+
+def test_response_band_leaves_out_draws_without_a_dc_gain_with_their_flags() -> None:
+    cs = GRID / 2000.0
+    flags = GRID >= 500
+    dead = DiscreteModel(DT, np.array([1.0]), np.array([1.0, -1.0]))
+    base = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5), reflect=flags, points=10)
+    padded = response_band(zero_model(0.25), [dead, *(zero_model(c) for c in cs), dead], (1e3, 1e5),
+                           reflect=np.concatenate([[False], flags, [True]]), points=10)
+    assert padded == base
