@@ -23,7 +23,12 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand, pulse_width, supported_band
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
 from hopkinson.analysis.input_terms import ONSET, InputTerms, input_terms
-from hopkinson.analysis.noise import COHERENCE_SEGMENT, WELCH_SEGMENT, NoiseSpectrum, first_motion, is_motion
+from hopkinson.analysis.noise import (
+    COHERENCE_SEGMENT,
+    WELCH_SEGMENT,
+    NoiseSpectrum,
+    first_motion,
+)
 from hopkinson.analysis.numerics import next_fast_len
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
