@@ -59,7 +59,16 @@ def test_non_finite_draws_are_left_out_with_their_flags() -> None:
 def test_fewer_than_two_finite_draws_give_no_interval(draws: np.ndarray) -> None:
     est = Estimate.of_draws(7.0, draws)
     assert est.value == 7.0 and math.isnan(est.u) and all(math.isnan(x) for x in est.interval)
-    assert Estimate.of_draws(7.0, np.array([1.0, 2.0])).interval[0] == pytest.approx(14.0 - 1.975)
+    # two finite draws are enough: 6 and 8 about 7 give (14 − 7.95, 14 − 6.05), which holds 7
+    assert Estimate.of_draws(7.0, np.array([6.0, 8.0])).interval == (pytest.approx(6.05), pytest.approx(7.95))
+
+
+def test_an_interval_is_extended_to_hold_its_value() -> None:
+    """Issue 40 item 3: an interval always contains its own value. Draws 1 and 2 about a value
+    of 7 reflect to (14 − 1.975, 14 − 1.025) = (12.025, 12.975), wholly above 7: the interval is
+    extended to 7 on that side and keeps its other end."""
+    assert Estimate.of_draws(7.0, np.array([1.0, 2.0])).interval == (7.0, pytest.approx(12.975))
+    assert Estimate.of_draws(7.0, np.array([12.0, 13.0])).interval == (pytest.approx(1.025), 7.0)
 
 
 def test_a_positive_figure_is_reflected_on_a_log_scale() -> None:
@@ -96,10 +105,14 @@ def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
     mixed = np.sort(np.where(flags, 2 * math.log(1.5) - logs, logs))
     est = Estimate.of_draws(1.5, draws, reflect=flags, positive=True)
     assert est.interval == (pytest.approx(math.exp(mixed[25]), rel=1e-12), pytest.approx(math.exp(mixed[975]), rel=1e-12))
-    linear = Estimate.of_draws(0.0, GRID, positive=True)  # a value at zero: the linear reflection
-    assert linear.interval == (pytest.approx(-975.0), pytest.approx(-25.0))
-    below = Estimate.of_draws(-100.0, GRID, positive=True)  # and below zero (no log of it)
-    assert below.interval == (pytest.approx(-1175.0), pytest.approx(-225.0))
+    # a value at zero: the linear reflection (draws about it: −500 … 500 reflect to −475 … 475) ...
+    linear = Estimate.of_draws(0.0, GRID - 500.0, positive=True)
+    assert linear.interval == (pytest.approx(-475.0), pytest.approx(475.0))
+    # ... whose interval, where the draws all lie on one side, is extended to hold the value
+    # (issue 40 item 3): 0 … 1000 reflect to (−975, −25), held to (−975, 0)
+    assert Estimate.of_draws(0.0, GRID, positive=True).interval == (pytest.approx(-975.0), 0.0)
+    below = Estimate.of_draws(-100.0, GRID, positive=True)  # and below zero (no log of it): (−1175, −225) → −100
+    assert below.interval == (pytest.approx(-1175.0), -100.0)
 
 
 def test_estimate_to_dict_turns_non_finite_numbers_into_none() -> None:
