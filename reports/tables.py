@@ -118,6 +118,11 @@ def figure_text(figure: Figure | None, scale: float = 1.0, unit: str = "", digit
     return figure.format(scale, digits, unit)
 
 
+# The results' sensitivity row: the model's DC gain as the mean of both directions (compression and
+# tension, analysis.input_terms), the sensitivity every page and certificate reports.
+SENSITIVITY_ROW = "sensitivity (model DC gain, mean of both directions)"
+
+
 def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
     """The key results of one shot as (label, text) rows (value ± U where it has its uncertainty)."""
     a, kf = entry.analysis, entry.key_figures
@@ -128,7 +133,7 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
         return [("analysis", kf.not_a_result_reason)]
     rows = [
         ("model order", f"{kf.order} ({kf.order_how})"),
-        ("sensitivity (model DC gain, mean of both directions)",
+        (SENSITIVITY_ROW,
          figure_text(kf.sensitivity) if kf.sensitivity.not_determined else
          sensitivity_text(kf.sensitivity, kf, entry.nominal_sensitivity_v_per_m_s2)),
         *asymmetry_rows(entry.stored),
