@@ -526,17 +526,18 @@ class CampaignTab(QWidget):
         self.update_buttons()
 
     def _update_linearity(self) -> None:
-        """The line through the analysed shots' shock sensitivities (reports.statistics), shown
-        once they cover two or more levels; each point with its U in the tooltip."""
+        """The line through the analysed shots' sensitivities (their models' DC gains, at the amplitude
+        each is measured at: reports.statistics), shown once they cover two or more levels; each
+        point with its U in the tooltip."""
         points = [self._linearity[sid] for sid in self.rows if sid in self._linearity]
         fit, _note = campaign_linearity(points)
         if fit is None:
             self.linearity_label.setText("")
             self.linearity_label.setToolTip("")
             return
-        self.linearity_label.setText(f"Amplitude linearity (ISO 16063-22), shock sensitivity against the peak: "
-                                     f"slope {fit.text()}")
-        lines = [f"{p.label}: {p.peak_m_s2 / G_M_S2:,.0f} g, S_sh {p.sensitivity:.5g}"
+        self.linearity_label.setText(f"Amplitude linearity (ISO 16063-22), sensitivity (DC gain) against the "
+                                     f"amplitude: slope {fit.text()}")
+        lines = [f"{p.label}: {p.peak_m_s2 / G_M_S2:,.0f} g, S {p.sensitivity:.5g}"
                  + (f" ± {p.expanded:.2g}" if p.expanded is not None else "") + f" ({100 * r:+.2f} % from the line)"
                  for p, r in zip(points, fit.residuals_rel, strict=True)]
         self.linearity_label.setToolTip("\n".join(lines))

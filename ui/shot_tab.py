@@ -254,7 +254,7 @@ class ResultsStrip(QFrame):
         """A figure as value ± U; "not determined" (with its reason in the tooltip) when the
         analysis could not estimate it."""
         if figure is not None and (figure.value is None or not math.isfinite(figure.value)):
-            reason = getattr(figure, "reason", None) or not_determined
+            reason = figure.not_determined or not_determined
             self._set(key, "not determined", f"{tip}: not determined" + (f" — {reason}" if reason else ""),
                       TEXT_COLOURS["warning"])
             return
@@ -312,7 +312,8 @@ class ResultsStrip(QFrame):
         if absolute is None:
             per = "× nominal" if kf.response_unit == "m/s^2" else "V/(m/s²)" if kf.response_unit == "V" else ""
             self._figure("sensitivity", kf.sensitivity, 1.0, per, 4, "DC gain of the model")
-            self._figure("shock", kf.shock_sensitivity, 1.0, per, 4, "ISO 16063-13 peak ratio")
+            self._figure("shock", kf.shock_sensitivity, 1.0, per, 4, "ISO 16063-13 peak ratio",
+                         kf.not_determined.get("shock_sensitivity", ""))
             return
         assert judgement is not None
         unit = judgement.unit
@@ -321,7 +322,8 @@ class ResultsStrip(QFrame):
         if shock is not None:
             self._set("shock", shock.text(), f"ISO 16063-13 peak ratio, in {unit.name}")
         else:
-            self._figure("shock", kf.shock_sensitivity, 1.0, "", 4, "ISO 16063-13 peak ratio")
+            self._figure("shock", kf.shock_sensitivity, 1.0, "", 4, "ISO 16063-13 peak ratio",
+                         kf.not_determined.get("shock_sensitivity", ""))
         if absolute.ratio is None:
             return
         finding = judgement.verdict.finding(Check.SENSITIVITY)
