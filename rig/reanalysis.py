@@ -46,7 +46,7 @@ def snapshot_config(shot: Shot) -> RigConfig | None:
     snapshot does not load as a configuration today."""
     import tomli_w
 
-    table = {k: v for k, v in shot.meta.config.items() if k not in SNAPSHOT_EXTRAS}
+    table = _without_none({k: v for k, v in shot.meta.config.items() if k not in SNAPSHOT_EXTRAS})
     try:
         with tempfile.TemporaryDirectory() as folder:
             path = Path(folder) / "rig.toml"
@@ -54,6 +54,12 @@ def snapshot_config(shot: Shot) -> RigConfig | None:
             return load_rig_config(path)
     except (ConfigError, TypeError, ValueError, OSError):
         return None
+
+
+def _without_none(table: dict[str, Any]) -> dict[str, Any]:
+    """The snapshot's table without its None values (TOML has no null; a key left out takes the
+    default None stood for: the DCM's widening "sized to the pulse")."""
+    return {k: _without_none(v) if isinstance(v, dict) else v for k, v in table.items() if v is not None}
 
 
 def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisParams:
