@@ -340,10 +340,11 @@ def delayed_model_output(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
 
 def simulate_from_rest(a: np.ndarray, b: np.ndarray, delay_samples: float, u: np.ndarray) -> np.ndarray:
     """(B/A)·u(k − τ) from rest, in the frequency domain: the record padded with zeros past the
-    slowest pole's decay (to 1e-12, at most four record lengths), so the circular convolution is
-    the linear one; the fractional delay τ is the linear phase the identification fits (the
-    signal taken as zero before its start). NumPy only: scipy.signal.lfilter would load
-    scipy.signal (~0.4 s) on the identification's path for this alone."""
+    slowest pole's decay (to 1e-12, at most four record lengths), the delay and B's length, so the
+    circular convolution is the linear one; the fractional delay τ is the linear phase the
+    identification fits (the signal taken as zero before its start). NumPy only:
+    scipy.signal.lfilter would load scipy.signal (~0.4 s) on the identification's path for this
+    alone."""
     from hopkinson.analysis.numerics import next_fast_len
     from numpy import fft
 
@@ -352,7 +353,7 @@ def simulate_from_rest(a: np.ndarray, b: np.ndarray, delay_samples: float, u: np
     n = u.size
     radius = float(np.max(np.abs(np.roots(a)))) if a.size > 1 else 0.0
     decay = int(min(4 * n, 27.7 / max(-math.log(max(radius, 1e-300)), 1e-12))) if radius > 0 else 0
-    size = next_fast_len(n + decay + int(math.ceil(delay_samples)) + 1)
+    size = next_fast_len(n + decay + int(math.ceil(delay_samples)) + b.size)
     omega = 2.0 * np.pi * fft.rfftfreq(size)
     z = np.exp(-1j * omega)
     h = np.polyval(b[::-1], z) / np.polyval(a[::-1], z) * np.exp(-1j * omega * delay_samples)
