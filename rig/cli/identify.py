@@ -60,6 +60,7 @@ def _figure_text(data: Any, scale: float = 1.0, unit: str = "", digits: int = 6)
 def _summary(report: dict[str, Any], result: Identification) -> str:
     """A short human-readable account of the identification and its uncertainty."""
     from hopkinson.analysis.key_figures import ORDER_SELECTION_TEXT, KeyFigures
+    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, claimed
 
     unc = report.get("uncertainty") or {}
     figures = KeyFigures.from_results({"model": report, "identification": report, "fbsd_hz": report["fbsd_hz"],
@@ -89,8 +90,10 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
                      f"ζ = {figures.damping_ratio.format() if figures.damping_ratio else zeta}  (main mode)")
         else:
             where = f"f_n = {f_n / 1e3:.4g} kHz, ζ = {zeta:.4g}"
-        note = ("" if mode["supported"] else ", nearly cancelled by a zero (a doublet): not claimed"
-                if mode.get("cancelled") else ", outside the supported band: not claimed")
+        note = ("" if claimed(mode) else ", nearly cancelled by a zero (a doublet): not claimed"
+                if mode.get("cancelled") else ", outside the supported band: not claimed" if not mode["supported"]
+                else f", damped ζ > {RESONANCE_MAX_DAMPING:g}: no resonance, not claimed" if mode["kind"] == "complex"
+                else "")
         lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode['kind']}{note}): {where}")
     lines.append(f"  FBSD: ±5 % up to {figures.fbsd_text('5')}, ±10 % up to {figures.fbsd_text('10')}")
     lines.append(f"  DC gain {figures.sensitivity.format()} (response units per m/s²)")
@@ -243,6 +246,8 @@ def explain(report: dict[str, Any]) -> str:
     measured and its levels, motion left out of it, the band, V by order and the order test's
     comparisons, the model error, and what was claimed or not and why. Read from the report
     (the JSON), so it says what the stages recorded, not a second account of them."""
+    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, claimed
+
     noise = report.get("noise") or {}
     pre = report.get("preprocessing") or {}
     lines = ["how this identification was decided:"]
@@ -307,8 +312,9 @@ def explain(report: dict[str, Any]) -> str:
         if m.get("kind") != "complex":
             continue
         f_n = m["natural_frequency_hz"] / 1e3
-        why = ("claimed (inside the band)" if m.get("supported")
+        why = ("claimed (inside the band)" if claimed(m)
                else "not claimed: a pole–zero doublet" if m.get("cancelled")
+               else f"not claimed: damped more than ζ = {RESONANCE_MAX_DAMPING:g}, no resonance" if m.get("supported")
                else "not claimed: beyond the band, placed by the rise it gives inside it" if m.get("shapes_band")
                else "not claimed: outside the supported band")
         lines.append(f"  pole pair at {f_n:.4g} kHz, ζ {m['damping_ratio']:.3g}: {why}")
