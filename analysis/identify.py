@@ -62,8 +62,8 @@ Steps (paper §2.1, made well-posed for real records; README "The method"):
 
 Each stage is its own function with typed inputs and outputs, in its own module:
 record_preparation (steps 1–4: `locate_pulse`, `measure_noise`, `fitted_band`), order_search
-(steps 5–6: `fit_orders`, `fit_structures`, `settle_order`, `best_delay_branch`), model_error
-(step 5b) and claims (step 7); `identify` runs them in turn and records what each decided
+(steps 5–6: `fit_orders`, `fit_structures`, `settle_order`, `best_delay_branch`), onset_choice
+(step 5: whether the onset's disturbances are fitted), model_error (step 5b) and claims (step 7); `identify` runs them in turn and records what each decided
 (`hopkinson identify --explain` prints that trail).
 
 The plain least-squares loss ||g2||² of every order (one factorisation of the augmented
@@ -89,7 +89,7 @@ from hopkinson.analysis.frequency_fit import (
     predicted_bins,
     response,
 )
-from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, ONSET, InputTerms, term_summary
+from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, InputTerms, term_summary
 from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.loss import arx_loss_by_order, long_dot
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
@@ -102,6 +102,7 @@ from hopkinson.analysis.model_error import (
 from hopkinson.analysis.modes import has_doublet, main_mode
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
+from hopkinson.analysis.onset_choice import onset_beyond_the_model_error, onset_fitted
 from hopkinson.analysis.order_choice import FRF_TOLERANCE, SIGNIFICANCE, choose_order
 from hopkinson.analysis.order_search import (
     FREE,
@@ -503,12 +504,9 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     model_error = ModelError.none(prep.bin_hz.size)
     if sweep.chosen is None:
         return sweep, model_error, data
-    with_onset = onset_shows(prep, data, sweep, setup)
+    with_onset = onset_fitted(prep, data, sweep, setup)
     if with_onset is not None:  # the onset's disturbances are fitted with every order
-        data = with_onset
-        sweep = fit_orders(data, FREE, setup)
-        if sweep.chosen is None:
-            return sweep, model_error, data
+        data, sweep = with_onset
     settled = undetermined_terms_dropped(prep, data, sweep, setup)
     if settled is not None:  # a term the record does not call for is not fitted
         data = settled
@@ -540,32 +538,6 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     if model_error.significant or doublet:  # a doublet can take the model error in: its residual reads as noise
         sweep = fit_structures(data, setup)
     return sweep, model_error, data
-
-
-def onset_beyond_the_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, delay_mode: str | float,
-                                 setup: SearchSetup) -> SpectralData:
-    """The data weighed with the model error, without the onset's terms where, so weighed, they no
-    longer lower the cost beyond chance: the F test that kept them read a residual that was
-    mostly model error, which a few free bumps always lower (PTB's record with 1 % more noise: bumps
-    of 2 % of its peak, and its FBSD ±5 % interval half as wide again)."""
-    cols = prep.terms.columns(ONSET)
-    if not cols.size or fit.inputs.size != prep.terms.count:
-        return data
-    with_bumps = OrderProblem.for_fit(data, fit, delay_mode, setup.max_delay).solve(replace(fit, cost=math.nan), 200,
-                                                                                   1e-9)
-    kept = prep.terms.without(ONSET, "")
-    without = replace(prep.with_terms(kept), var_y=data.var_y, sine=data.sine)
-    start = replace(with_bumps, inputs=np.delete(with_bumps.inputs, cols), cost=math.nan)
-    plain = OrderProblem.for_fit(without, start, delay_mode, setup.max_delay).solve(start, 200, 1e-9)
-    problem = OrderProblem.for_fit(data, with_bumps, delay_mode, setup.max_delay)
-    dof = problem.residual_size() - problem.size
-    statistic = ((plain.cost - with_bumps.cost) / cols.size) / (with_bumps.cost / dof) if dof > 0 else math.inf
-    if statistic > f_quantile(1.0 - ONSET_SIGNIFICANCE, cols.size, max(dof, 1)):
-        return data
-    prep.terms = replace(kept, not_fitted={**prep.terms.not_fitted, ONSET: (
-        f"the onset's disturbances do not show beyond the model error (F = {statistic:.2g} for {cols.size} terms)")})
-    prep.spectral = replace(prep.with_terms(kept), var_y=prep.spectral.var_y)
-    return without
 
 
 # ε (tension/compression) and γ (motion after the pulse) are fitted where the chosen order's fit
@@ -607,47 +579,6 @@ def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderS
     prep.terms = terms
     prep.spectral = replace(prep.with_terms(terms), var_y=prep.spectral.var_y)
     return replace(prep.spectral, var_y=data.var_y, sine=data.sine)
-
-
-# The onset terms are kept where they lower the chosen order's cost beyond chance at this level
-# (an F test on V for their K parameters) and the correction they make stands this many times above
-# the reference's noise RMS (on a record whose residual is mostly model error, the F test alone took
-# bumps of 7× the noise on PTB's record with 1 % more noise: fitted noise, not a disturbance; the
-# simulated bar's glitches and transverse kick stand 100–1000× above it).
-ONSET_SIGNIFICANCE = 1e-3
-ONSET_ABOVE_NOISE = 10.0
-
-
-def onset_shows(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup) -> SpectralData | None:
-    """The data with the onset's input terms (analysis.input_terms) where they lower the chosen
-    order's cost beyond chance (an F test at ONSET_SIGNIFICANCE for their parameters) and their
-    correction stands ONSET_ABOVE_NOISE × above the reference's noise; None where they do not,
-    and `prep` then records why. `prep.terms` and `prep.spectral` take them on."""
-    onset = prep.onset_terms
-    if onset is None or sweep.chosen is None:
-        return None
-    extra = onset.count - prep.terms.count
-    fit = sweep.fits[sweep.chosen]
-    trial = replace(prep.with_terms(onset), var_y=data.var_y, sine=data.sine)
-    problem = OrderProblem.for_fit(trial, fit, sweep.delay_mode, setup.max_delay)
-    start = replace(fit, inputs=np.concatenate((fit.inputs, np.zeros(extra))), cost=math.nan)
-    refit = problem.solve(start, 200, 1e-9)
-    dof = problem.residual_size() - problem.size
-    statistic = ((fit.cost - refit.cost) / extra) / (refit.cost / dof) if dof > 0 and refit.cost > 0 else 0.0
-    bumps = np.zeros(onset.count)
-    if refit.inputs.size == onset.count:
-        bumps[onset.columns(ONSET)] = refit.inputs[onset.columns(ONSET)]
-    size = float(np.max(np.abs(onset.correction(bumps))))
-    noise = prep.draw_noise_u.rms if prep.draw_noise_u.samples else 0.0
-    significant = dof > 0 and statistic > f_quantile(1.0 - ONSET_SIGNIFICANCE, extra, dof)
-    if significant and size > ONSET_ABOVE_NOISE * noise:
-        prep.terms, prep.spectral = onset, replace(prep.spectral, inputs=trial.inputs, input_prior=trial.input_prior)
-        return trial
-    why = (f"F = {statistic:.2g} for {extra} terms" if not significant else
-           f"the correction, {size / max(noise, 1e-300):.2g}× the reference's noise, does not stand above it")
-    prep.terms = replace(prep.terms, not_fitted={**prep.terms.not_fitted,
-                                                 ONSET: f"the onset's disturbances do not show ({why})"})
-    return None
 
 
 def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchSetup, settled: SettledOrder,

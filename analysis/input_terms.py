@@ -32,9 +32,10 @@ so the sensor is taken as driven by u + Σ c_k·v_k (analysis.frequency_fit, `Sp
   ONSET_AFTER_S after it. The reference there is taken as unknown and fitted: the interferometer's demodulation errors while the
   object jerks away (phase glitches, the beat's dip) and the lateral motion at the impact that
   reaches the sensor's mode through its transverse sensitivity, both short bursts the reference
-  does not show truly, through the sensor's own dynamics. Kept only where they lower the fit's
-  cost beyond chance (an F test: identify), so a record without them fits as before; never where
-  the pulse peaks inside the window (a pulse that short is its own onset).
+  does not show truly, through the sensor's own dynamics. Kept only where the record is explained
+  better with them than by any order of the model without them that it supports
+  (analysis.onset_choice), so a record without them fits as before; never where the pulse peaks
+  inside the window (a pulse that short is its own onset).
 
 Pure NumPy.
 """
