@@ -40,9 +40,10 @@ def test_the_test_rejects_a_coverage_of_90_percent() -> None:
     assert binom.sf(SHOTS - MAX_MISSES - 1, SHOTS, 0.98) >= 0.7
 
 
-NOT_YET = ("measured 46 of 48 on this plan (docs/coverage_realistic.py): above the issue's 90 % but not the ≤ 1 miss "
-           "of 50 that rejects a 90 % coverage with 95 % probability; the misses are biases of the low-order discrete "
-           "model against the continuous sensor (f_n +0.006 %, FBSD ±5 % +0.28 %) a little beyond its bound")
+NOT_YET = ("measured on this plan: f_n 48, FBSD ±5 % 47, ±10 % 46 of 50 (docs/coverage_realistic.py): above the "
+           "issue's 90 % but not the ≤ 1 miss of 50 that rejects a 90 % coverage with 95 % probability; the misses are "
+           "biases of the low-order discrete model against the continuous sensor (f_n +0.006 %, FBSD ±5 % +0.28 %: "
+           "the all-pole structure's fixed numerator) a little beyond its bound, each within 2 U")
 
 
 @pytest.mark.parametrize("name", [
