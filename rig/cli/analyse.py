@@ -19,7 +19,7 @@ stored, the journals record them.
 
 One line per shot, in the order found (its file, the new version, its key figures or why it
 failed); --json one object {"shots": [{"path", "version", "ok", "error", "key_figures",
-"summary", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes
+"summary", "verdict", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes
 (docs/exit-codes.md): 0 every shot analysed and stored; 2 bad input (no such file, a folder with no shot file, a run folder
 whose campaign is running, a journal that could not be updated); 4 a shot could not be
 analysed or its analysis not stored (the others still are; each line says which and why).
@@ -182,7 +182,7 @@ def _row_of(path: Path, future: Future) -> dict[str, Any]:
     try:
         return future.result()
     except Exception as exc:  # noqa: BLE001 - a dead worker fails its shots, not the command
-        return {"path": str(path), "version": None, "ok": False, "summary": None, "key_figures": None,
+        return {"path": str(path), "version": None, "ok": False, "summary": None, "verdict": None, "key_figures": None,
                 "cpu_s": None, "journal": None, "error": f"{path}: the analysis process failed: {type(exc).__name__}: {exc}"}
 
 
@@ -190,4 +190,6 @@ def _line(row: dict[str, Any]) -> str:
     where = f"{row['path']}: analysis version {row['version']}" if row["version"] else row["path"]
     if not row["ok"]:
         return f"{where}: FAILED: {row['error']}"
-    return f"{where}: {row['summary'] or 'analysed'}"
+    verdict = row.get("verdict") or {}
+    line = f"{where}: {row['summary'] or 'analysed'}"
+    return f"{line}\n  verdict: {verdict['line']}" if verdict.get("line") else line

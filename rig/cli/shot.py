@@ -222,6 +222,17 @@ def report_reclaimed(control: Any) -> None:
                          "which is no longer running\n")
 
 
+def _verdict_line(shot_path: Any) -> str | None:
+    """'ACCEPT — fit … · band …' for the stored shot (rig.shot_verdict), None when unreadable."""
+    from hopkinson.rig.shot_verdict import shot_judgement
+    from hopkinson.rig.shotfile import ShotFileError, read_shot
+
+    try:
+        return shot_judgement(read_shot(shot_path, load_raw=False)).verdict.line()
+    except (ShotFileError, OSError):
+        return None
+
+
 def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | None, latch: Any,
             safe_again: tuple[bool, str | None] | None, record_lost: bool = False) -> int:
     """Print the outcome; the exit code (docs/exit-codes.md), which the --json object carries too."""
@@ -247,6 +258,9 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
             )
 
             print(f"results:   {result_line(outcome.results)}", flush=True)
+            verdict = _verdict_line(outcome.shot_path)
+            if verdict:
+                print(f"verdict:   {verdict}", flush=True)
             for role, sensor in (outcome.results.get("sensors") or {}).items():  # further sensors, by role
                 text = result_line(sensor) if "model" in sensor else f"not analysed: {sensor.get('error')}"
                 print(f"{role}: {text}", flush=True)
