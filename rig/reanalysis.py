@@ -46,7 +46,7 @@ def snapshot_config(shot: Shot) -> RigConfig | None:
     snapshot does not load as a configuration today."""
     import tomli_w
 
-    table = {k: v for k, v in shot.meta.config.items() if k not in SNAPSHOT_EXTRAS}
+    table = _without_none({k: v for k, v in shot.meta.config.items() if k not in SNAPSHOT_EXTRAS})
     try:
         with tempfile.TemporaryDirectory() as folder:
             path = Path(folder) / "rig.toml"
@@ -54,6 +54,15 @@ def snapshot_config(shot: Shot) -> RigConfig | None:
             return load_rig_config(path)
     except (ConfigError, TypeError, ValueError, OSError):
         return None
+
+
+def _without_none(value: Any) -> Any:
+    """The snapshot with its unset keys (None: TOML has no null) left out, as the file had them."""
+    if isinstance(value, dict):
+        return {k: _without_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list | tuple):
+        return [_without_none(v) for v in value]
+    return value
 
 
 def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisParams:

@@ -17,7 +17,8 @@ worker process with single-threaded BLAS; a journal is written by this process o
 run's shots are done. Ctrl-C or SIGTERM: no new shot starts, the ones running finish and are
 stored, the journals record them.
 
-One line per shot, in the order found (its file, the new version, its key figures or why it
+One line per shot, in the order found (its file, the new version, its key figures and verdict
+("| ACCEPT: …" or "| REPEAT: …", its main reason) or why it
 failed); --json one object {"shots": [{"path", "version", "ok", "error", "key_figures",
 "summary", "verdict", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes
 (docs/exit-codes.md): 0 every shot analysed and stored; 2 bad input (no such file, a folder with no shot file, a run folder
@@ -192,4 +193,5 @@ def _line(row: dict[str, Any]) -> str:
         return f"{where}: FAILED: {row['error']}"
     verdict = row.get("verdict") or {}
     line = f"{where}: {row['summary'] or 'analysed'}"
-    return f"{line}\n  verdict: {verdict['line']}" if verdict.get("line") else line
+    # still one line per shot: the decision and its main reason (the findings: --json, the report)
+    return f"{line} | {verdict['decision']}: {verdict['reason']}" if verdict.get("decision") else line
