@@ -30,14 +30,15 @@ def _is_worker(config: pytest.Config) -> bool:
 
 
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    if config.getvalue("dist") != "loadscope" or config.cache is None:
+    cache = getattr(config, "cache", None)  # (none with -p no:cacheprovider)
+    if config.getvalue("dist") != "loadscope" or cache is None:
         return None
     from xdist.scheduler import LoadScopeScheduling
 
-    known: dict[str, float] = config.cache.get(CACHE_KEY, {})
+    known: dict[str, float] = cache.get(CACHE_KEY, {})
     if not known or not hasattr(LoadScopeScheduling, "_assign_work_unit"):
         return None  # a first run (or another xdist): its own order
-    tests_known = config.cache.get(CACHE_KEY + "-tests", {})
+    tests_known = cache.get(CACHE_KEY + "-tests", {})
     per_test_s = sum(known.values()) / max(1, sum(tests_known.values()))
 
     class LongestFirst(LoadScopeScheduling):  # type: ignore[misc, valid-type]
@@ -72,9 +73,10 @@ def pytest_configure(config: pytest.Config) -> None:
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
     config = session.config
+    cache = getattr(config, "cache", None)
     recorder = config.pluginmanager.get_plugin("hopkinson-module-seconds")
-    if _is_worker(config) or config.cache is None or not isinstance(recorder, _ModuleSeconds) or not recorder.seconds:
+    if _is_worker(config) or cache is None or not isinstance(recorder, _ModuleSeconds) or not recorder.seconds:
         return
     # the modules run this time replace their old figures; the rest are kept
-    config.cache.set(CACHE_KEY, {**config.cache.get(CACHE_KEY, {}), **{k: round(v, 2) for k, v in recorder.seconds.items()}})
-    config.cache.set(CACHE_KEY + "-tests", {**config.cache.get(CACHE_KEY + "-tests", {}), **recorder.tests})
+    cache.set(CACHE_KEY, {**cache.get(CACHE_KEY, {}), **{k: round(v, 2) for k, v in recorder.seconds.items()}})
+    cache.set(CACHE_KEY + "-tests", {**cache.get(CACHE_KEY + "-tests", {}), **recorder.tests})
