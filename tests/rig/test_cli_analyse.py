@@ -27,12 +27,25 @@ from tests.rig.conftest import read_until
 from tests.rig.test_cli_shot import _args, configs  # noqa: F401 (fixture)
 
 
+@pytest.fixture(scope="module")
+def fired(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Where the module keeps its one fired shot (`shot_file` fires it the first time)."""
+    return {"folder": tmp_path_factory.mktemp("fired")}
+
+
 @pytest.fixture
-def shot_file(configs, capsys) -> Path:  # noqa: F811
-    assert main(_args(configs, "--yes")) == 0
-    capsys.readouterr()
-    (path,) = configs["out"].glob("*.h5")
-    return path
+def shot_file(configs, capsys, fired: dict[str, Path]) -> Path:  # noqa: F811
+    """A shot fired with `hopkinson shot --sim` (once per module: each test gets its own copy of
+    the shot folder, the shot file and its log, as the shot left them)."""
+    if "shot" not in fired:
+        assert main(_args(configs, "--yes")) == 0
+        capsys.readouterr()
+        (path,) = configs["out"].glob("*.h5")
+        shutil.copytree(configs["out"], fired["folder"] / "shots")
+        fired["shot"] = fired["folder"] / "shots" / path.name
+        return path
+    shutil.copytree(fired["folder"] / "shots", configs["out"])
+    return configs["out"] / fired["shot"].name
 
 
 def test_a_stored_shot_gets_a_new_analysis_version_and_keeps_the_old_one(shot_file: Path, capsys) -> None:

@@ -26,6 +26,7 @@ serial = "R1"
 projectile = 3
 [defaults.analysis]
 max_order = 6
+draws = 50  # the uncertainty shown in the report, with the fewest draws allowed
 [[shots]]
 pressure_bar = 1.3
 [[shots]]
