@@ -63,6 +63,8 @@ def test_a_stored_shot_gets_a_new_analysis_version_and_keeps_the_old_one(shot_fi
     # the same method on the same data: the same model (the simulated sensor: 27 kHz, ζ 0.05)
     f_n = row["key_figures"]["natural_frequency_hz"]["value"]
     assert f_n == pytest.approx(27e3, rel=1e-3)
+    # its verdict, as the panel shows it: the resonance it names is the simulated sensor's
+    assert row["verdict"]["decision"] in ("ACCEPT", "REPEAT") and "resonance excited (27" in row["verdict"]["line"]
 
 
 def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Path, capsys) -> None:
@@ -73,6 +75,7 @@ def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Pat
     assert main(["analyse", str(shot_file)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{shot_file}: analysis version 1: order 2, f_n ") and out.count("\n") == 1
+    assert re.search(r" \| (ACCEPT|REPEAT): \S.*\n$", out), out  # the verdict closes the shot's one line
     f_n_khz = float(re.search(r"f_n ([0-9.]+) ± ", out).group(1))
     assert f_n_khz == pytest.approx(27.0, rel=1e-3)  # the simulated sensor's 27 kHz
     shot = read_shot(shot_file)
