@@ -144,7 +144,7 @@ class FurtherAccelerometer:
 @dataclass(frozen=True)
 class AnalysisOptions:
     """[defaults.analysis] and [shots.analysis]: analysis settings of a shot (defaults from
-    DESIGN.md and the paper's example); a table gives only the keys it changes."""
+    docs/method.md and the paper's example); a table gives only the keys it changes."""
 
     __pydantic_config__ = SECTION
     max_order: Annotated[Order, Field(description="highest model order tried")] = 12

@@ -90,7 +90,7 @@ def test_raw_round_trip_and_layout(tmp_path: Path) -> None:
     assert shot.volts("doppler")[1] == 32767 * 3.0517578125e-05 - 0.0125
     assert shot.raw.time_s[TRIGGER] == 0.0 and shot.raw.time_s[0] == pytest.approx(-TRIGGER * 1e-8)
 
-    # The layout DESIGN.md promises, readable without this module.
+    # The layout docs/files-and-formats.md promises, readable without this module.
     with h5py.File(path, "r") as f:
         ds = f["raw/doppler"]
         assert ds.dtype == np.int16 and ds.fletcher32
