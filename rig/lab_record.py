@@ -12,7 +12,7 @@ spooled, and the operator is told where each record is. `not_kept` lists the sho
 whose record is in neither the database nor the spool (a full data folder): the command
 exits EXIT_NOT_RECORDED then.
 
-A shot file is verified before it is read into a record (rig.shotfile.verify_shot: the HDF5
+A shot file is verified before it is read into a record (rig.shotfile_integrity.verify_shot: the HDF5
 checksums and the raw channels' SHA-256), and it is simulated when any of its marks says so:
 the simulator's truth, the file's flag, an instrument identifying itself as the simulator.
 """
@@ -40,7 +40,8 @@ from hopkinson.rig.config import RigConfig
 from hopkinson.rig.events import Analysed, CampaignFinished, EventBus, RigEvent, RigWarning, Stored
 from hopkinson.rig.journal import read_campaign_uuid
 from hopkinson.rig.run_folder import JOURNAL_NAME, SHOTS_DIR
-from hopkinson.rig.shotfile import ShotFileError, ShotMeta, raw_sha256, read_shot, verify_shot
+from hopkinson.rig.shotfile import ShotFileError, ShotMeta, read_shot
+from hopkinson.rig.shotfile_integrity import raw_sha256, verify_shot
 
 _log = logging.getLogger(__name__)
 CLOSE_WAIT_S = 15.0  # at exit, how long the recorder finishes its queue before spooling the rest
@@ -87,7 +88,7 @@ def shot_context(meta: ShotMeta) -> dict[str, Any]:
 
 def shot_record(path: str | Path, recorded_raw_sha256: str | None = None) -> ShotRecord:
     """A shot file as the lab's record holds it, after the one verification
-    (rig.shotfile.verify_shot). TamperedShotError when it fails; ShotFileError when it
+    (rig.shotfile_integrity.verify_shot). TamperedShotError when it fails; ShotFileError when it
     cannot be read."""
     path = Path(path).resolve()
     problems = verify_shot(path, recorded_raw_sha256)

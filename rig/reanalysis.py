@@ -35,7 +35,8 @@ from hopkinson.rig.shot import (
     analysis_params,
     shot_analyser,
 )
-from hopkinson.rig.shotfile import Shot, ShotFileError, analysis_results, read_shot, require_sound
+from hopkinson.rig.shotfile import Shot, ShotFileError, analysis_results, read_shot
+from hopkinson.rig.shotfile_integrity import require_sound
 
 SNAPSHOT_EXTRAS = ("path", "shot_settings")
 SHOT_SUFFIX = ".h5"  # keys of a shot's config snapshot that rig.toml has not

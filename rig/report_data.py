@@ -30,7 +30,8 @@ from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
 from hopkinson.rig.shot_verdict import judge, settings_of
-from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, require_sound, sensor_records
+from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, sensor_records
+from hopkinson.rig.shotfile_integrity import require_sound
 
 REPORT_NAME = "report"
 

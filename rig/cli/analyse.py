@@ -6,7 +6,7 @@
 Each shot is analysed from its raw channels with the options of its first analysis (or, never
 analysed, its rig configuration's), changed only by the options given here; the result is
 stored as a new analysis version beside the earlier ones, the file rewritten atomically
-(rig/reanalysis.py, rig/shotfile.py), never replacing raw data. A folder is searched through:
+(rig/reanalysis.py, rig/shotfile_writer.py), never replacing raw data. A folder is searched through:
 a campaign run folder gives its plan's shot files, and its journal follows (ANALYSED, or
 ANALYSIS_FAILED with the reason), so `campaign run --resume` and the report see the new
 analysis; every other `*.h5` file in the tree is analysed as it stands. This is how a lab

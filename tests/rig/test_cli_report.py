@@ -13,7 +13,8 @@ import pytest
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.cli.report import default_outputs
-from hopkinson.rig.shotfile import add_analysis, read_shot
+from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.shotfile_writer import add_analysis
 
 PLAN = """
 name = "rep"

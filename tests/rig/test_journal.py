@@ -26,7 +26,8 @@ from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.journal import Journal, JournalError, ShotState
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder, open_run_folder
-from hopkinson.rig.shotfile import read_shot, write_raw_shot
+from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.shotfile_writer import write_raw_shot
 
 from tests.rig.journal_fakes import meta_for, raw_for
 
@@ -65,7 +66,7 @@ CHILD = textwrap.dedent(
     """
     import os, random, signal, sys, uuid
     from pathlib import Path
-    import hopkinson.rig.shotfile as sf
+    import hopkinson.rig.shotfile_writer as sf
     from hopkinson.rig.journal import Journal
     from tests.rig.journal_fakes import meta_for, raw_for
 

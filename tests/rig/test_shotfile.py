@@ -21,12 +21,11 @@ from hopkinson.rig.shotfile import (
     RawShot,
     ShotFileError,
     ShotMeta,
-    add_analysis,
     read_shot,
     read_shot_meta,
     software_version,
-    write_raw_shot,
 )
+from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
 N = 5000
 TRIGGER = 1200
@@ -225,7 +224,7 @@ CRASH_CHILD = textwrap.dedent(
     """
     import os, signal, sys
     import numpy as np
-    import hopkinson.rig.shotfile as sf
+    import hopkinson.rig.shotfile_writer as sf
     from tests.rig.test_shotfile import known_raw, known_meta
     path, step = sys.argv[1], sys.argv[2]
     if step == "analysis":
