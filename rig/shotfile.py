@@ -72,6 +72,7 @@ from typing import Any, NamedTuple
 import h5py
 import numpy as np
 from hopkinson.analysis.errors import RecordError
+from hopkinson.analysis.full_scale import full_scale_volts
 from hopkinson.analysis.records import Record
 from hopkinson.rig.events import utc_now_iso
 
@@ -103,8 +104,6 @@ class RawChannel(NamedTuple):
         None when they are not known (a file written before they were stored)."""
         if self.code_range is None:
             return None
-        from hopkinson.analysis.doppler import full_scale_volts  # SciPy: loaded when asked
-
         return full_scale_volts(self.code_range, self.scale_v, self.offset_v)
 
 
