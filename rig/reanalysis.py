@@ -194,7 +194,7 @@ def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     `journal` (what its run's journal records, or None when nothing was stored). A bad file is a
     failed row, never an exception: many shots are analysed in one go, in worker processes."""
     from hopkinson.analysis.key_figures import KeyFigures
-    from hopkinson.rig.campaign import result_info, result_line
+    from hopkinson.rig.campaign_results import result_info, result_line
     from hopkinson.rig.shot import analysis_error_text
 
     row: dict[str, Any] = {"path": str(path), "version": None, "ok": False, "error": None, "key_figures": None,

@@ -71,7 +71,8 @@ def demo_plan_text(shots: int) -> str:
 
 def demo_command(args: argparse.Namespace) -> int:
     from hopkinson.reports.data import truth_comparison
-    from hopkinson.rig.campaign import CampaignRunner, prepare_run
+    from hopkinson.rig.campaign import CampaignRunner
+    from hopkinson.rig.campaign_setup import prepare_run
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.events import EventBus
     from hopkinson.rig.instruments import open_instruments

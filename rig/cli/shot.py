@@ -253,7 +253,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         if outcome.log_path is not None:
             print(f"log:       {outcome.log_path}", flush=True)
         if outcome.results:
-            from hopkinson.rig.campaign import (
+            from hopkinson.rig.campaign_results import (
                 result_line,  # the campaign's one-line summary of the figures
             )
 
