@@ -244,10 +244,11 @@ def write_sim_shot(path: Path, world: Any, config: Any, projectile: int, pressur
                    draws: str | None) -> Path:
     """One simulated shot as a shot file: the channels quantised as the simulated digitizer sends
     them (int16 over each role's range), the rig's configuration snapshot, fixed identities."""
-    from hopkinson.drivers.sim.scpi_digitizer import quantise
+    from hopkinson.drivers.sim.scpi_instrument import quantise
     from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
     from hopkinson.rig.shot import digitizer_channels
-    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, write_raw_shot
+    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
+    from hopkinson.rig.shotfile_writer import write_raw_shot
 
     d = config.digitizer
     pre_trigger = int(d.record_length * d.pre_trigger_fraction)
