@@ -186,7 +186,8 @@ def check_schema(engine: Engine, url: str) -> None:
         raise LabError(f"database {where}: schema version {revision} is newer than this software's "
                        f"({head}); use a newer hopkinson")
     raise LabError(f"database {where}: schema version {revision} is older than this software's ({head}); "
-                   f"run `hopkinson lab upgrade` (back the database up first)")
+                   f"run `hopkinson lab upgrade` (it backs a SQLite file up first; PostgreSQL: pg_dump first, "
+                   f"docs/lab-record.md)")
 
 
 def upgrade_database(engine: Engine) -> tuple[str | None, str]:
