@@ -169,6 +169,11 @@ def _notes(engine: sa.Engine, after_id: int) -> list[str]:
             notes.append(f"campaigns: {len(origins) - new} took the UUID their run folder's journal gives, {new} a new "
                          f"one (run folder not found from here)" + (f"; `hopkinson lab audit --subject {subject} "
                                                                     f"--json` lists them" if new else ""))
+        for old, normal in sorted((told.get("serials_normalised") or {}).items()):
+            notes.append(f"sensor {old!r} is now {normal} (serials are normalised)")
+        for old, normal in sorted((told.get("serials_left_apart") or {}).items()):
+            notes.append(f"sensor {old!r} kept apart from sensor {normal}, which the record already had: "
+                         f"`lab sensor {normal}` shows {normal}'s shots only")
         for number, replaced in sorted((told.get("second_successors") or {}).items()):
             notes.append(f"certificate {number} replaced {replaced}, which another certificate had replaced before "
                          f"(0001 allowed it): both kept as issued")

@@ -100,7 +100,9 @@ def fill_0001(connection: sa.Connection, run_folder: Path) -> dict[str, list[dic
             ("SN-7", "ACC-20k", "ACME Aerospace", 0.1234567890123, "mV/g", 2.0, 365, "2025-01-10T08:00:00.000001Z"),
             ("SN-8", "ACC-60k", "", None, "", None, None, "2025-02-11T09:30:00.250000Z"),
             ("SN-9", "", "Bar Labs", 2.5e-7, "V/(m/s²)", 0.5, 730, "2025-03-12T10:45:00.999999Z"),
-            ("", "", "", None, "", None, None, "2025-04-13T11:00:00.000000Z")):  # 0001's sensor of serial-less shots
+            ("", "", "", None, "", None, None, "2025-04-13T11:00:00.000000Z"),  # 0001's sensor of serial-less shots
+            ("sn-10 ", "ACC-20k", "", None, "", None, None, "2025-05-14T12:00:00.5Z"),  # 0001 kept serials as typed
+            ("sn-7", "", "", None, "", None, None, "2025-06-15T13:00:00.5Z")):  # SN-7 spelled otherwise
         sensor[serial] = add("sensors", serial=serial, model=model, owner=owner, nominal_sensitivity=nominal,
                              sensitivity_unit=unit, tolerance_percent=tolerance, interval_days=interval,
                              created_utc=created)
@@ -119,7 +121,8 @@ def fill_0001(connection: sa.Connection, run_folder: Path) -> dict[str, list[dic
 
     n = 0
     for name, serial, rig, shots in (("run-2026-03", "SN-7", hb1, 3), ("camp", "SN-8", hb1, 4),
-                                     ("run-2026-04", "SN-9", hb2, 2), (None, "", hb2, 1), (None, "SN-7", hb1, 1)):
+                                     ("run-2026-04", "SN-9", hb2, 2), (None, "", hb2, 1), (None, "SN-7", hb1, 1),
+                                     (None, "sn-10 ", hb1, 2), (None, "sn-7", hb2, 1)):
         for i in range(shots):
             n += 1
             uid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"legacy-shot-{n}"))
@@ -230,6 +233,15 @@ def test_a_populated_0001_record_upgrades_with_nothing_lost_or_changed(
     assert (entry["actor"], entry["action"], entry["subject"]) == ("migration 0002", "schema upgraded", "0002")
     told = json.loads(entry["detail"])
     assert told["second_successors"] == {"HB-2026-0005": "HB-2026-0001"}
+    assert told["serials_normalised"] == {"sn-10 ": "SN-10"} and told["serials_left_apart"] == {"sn-7": "SN-7"}
+    for line in ("sensor 'sn-10 ' is now SN-10 (serials are normalised)",
+                 "sensor 'sn-7' kept apart from sensor SN-7, which the record already had: `lab sensor SN-7` shows "
+                 "SN-7's shots only",
+                 "campaigns: 1 took the UUID their run folder's journal gives, 2 a new one (run folder not found from "
+                 "here); `hopkinson lab audit --subject 0002 --json` lists them",
+                 "certificate HB-2026-0005 replaced HB-2026-0001, which another certificate had replaced before (0001 "
+                 "allowed it): both kept as issued"):
+        assert line in out.splitlines(), out
     assert {v["campaign"]: v["from"] for v in told["campaign_uuids"].values()} == {
         "run-2026-03": "run folder's journal", "camp": "new (run folder not found)",
         "run-2026-04": "new (run folder not found)"}
@@ -242,6 +254,8 @@ def test_a_populated_0001_record_upgrades_with_nothing_lost_or_changed(
             now = after[table][row["id"]]
             kept = {k: v for k, v in row.items() if not (table == "sensors" and k in moved)
                     and not (table == "certificates" and k == "replaces")}
+            if table == "sensors" and row["serial"] == "sn-10 ":
+                kept["serial"] = "SN-10"  # normalised: the one value 0002 changes besides replaces '' -> NULL
             assert {k: now[k] for k in kept} == kept, (table, row["id"])
     assert {k for k in after["sensors"][1]} == {"id", "serial", "created_utc"}
 
@@ -310,6 +324,7 @@ def test_the_upgraded_record_works_on(legacy: tuple[str, dict[str, list[dict[str
         info = repo.sensor("SN-7")
         assert (info.model, info.owner, info.nominal_sensitivity, info.tolerance_percent, info.interval_days) == \
             ("ACC-20k", "ACME Aerospace", 0.1234567890123, 2.0, 365)
+        assert [r.shot_name for r in repo.shot_results("sn-10")] == ["s013"]  # by its normal serial (s012: raw)
         before = repo.counts()
         assert repo.record_shot(made_up_record("SN-7", campaign="run-2026-03", campaign_uuid=derived)) == "new"
         assert repo.counts()["campaigns"] == before["campaigns"]  # the resumed campaign is the same one

@@ -6,6 +6,8 @@ What a record written by 0001 becomes (no row of it is lost or changed but as sa
 
 - each sensor's model, owner, nominal sensitivity, unit, tolerance and interval become its first
   `sensor_data` row, dated the sensor's `created_utc`, actor "migration 0002";
+- a sensor's serial is normalised as the software keys it from now on ("sn-7 " becomes SN-7),
+  unless another sensor already has that serial (then it is left apart, and said);
 - each campaign gets the UUID its run folder's journal gives (`campaign_uuid`, or for a journal
   from before campaign UUIDs the one rig.journal.legacy_campaign_uuid derives), so shots of
   that run folder recorded later join it; a new random UUID when the journal cannot be read at
@@ -17,7 +19,8 @@ What a record written by 0001 becomes (no row of it is lost or changed but as sa
   certificate from now on has one successor at most (a unique index on `replaces` that leaves
   out only those later legacy successors);
 - one audit entry (action "schema upgraded", subject "0002") says what was done: the campaigns'
-  UUIDs and where each came from, the legacy second successors (none in a new, empty record).
+  UUIDs and where each came from, the serials normalised or left apart, the legacy second
+  successors (none in a new, empty record).
 
 The upgrade runs in one transaction (hopkinson.lab.database.upgrade_database): it happens whole
 or not at all, on PostgreSQL and SQLite alike.
@@ -85,6 +88,7 @@ def upgrade() -> None:
                              "sensitivity_unit, tolerance_percent, interval_days) VALUES (:id, :created_utc, "
                              "'migration 0002', :model, :owner, :nominal_sensitivity, :sensitivity_unit, "
                              ":tolerance_percent, :interval_days)"), dict(s))
+    serials = _normalise_serials(bind)
     with op.batch_alter_table("sensors") as batch:
         for column in ("model", "owner", "nominal_sensitivity", "sensitivity_unit", "tolerance_percent",
                        "interval_days"):
@@ -157,9 +161,30 @@ def upgrade() -> None:
     bind.execute(sa.text("INSERT INTO audit (utc, actor, action, subject, detail) VALUES (:utc, 'migration 0002', "
                          "'schema upgraded', '0002', :detail)"),
                  {"utc": datetime.now(UTC).isoformat(timespec="microseconds").replace("+00:00", "Z"),
-                  "detail": json.dumps({"from": "0001", "campaign_uuids": identities,
+                  "detail": json.dumps({"from": "0001", "campaign_uuids": identities, **serials,
                                         "second_successors": {r["number"]: r["replaces"] for r in later}},
                                        sort_keys=True)})
+
+
+def _normalise_serials(bind: sa.Connection) -> dict[str, dict[str, str]]:
+    """Serials as the software keys them from 0002 on (hopkinson.lab.records.normal_serial,
+    frozen here: spaces collapsed, upper case), so a sensor 0001 recorded as "sn-7 " is found
+    as SN-7. A serial whose normal form another sensor already has is left as it was (its
+    history apart: merging would move shots between sensors). What was done, for the audit."""
+    rows = bind.execute(sa.text("SELECT id, serial FROM sensors ORDER BY id")).all()
+    taken = {serial for _id, serial in rows}
+    renamed, apart = {}, {}
+    for sensor_id, serial in rows:
+        normal = " ".join(serial.split()).upper()
+        if normal == serial or not normal:
+            continue
+        if normal in taken:
+            apart[serial] = normal
+            continue
+        bind.execute(sa.text("UPDATE sensors SET serial = :n WHERE id = :id"), {"n": normal, "id": sensor_id})
+        taken.add(normal)
+        renamed[serial] = normal
+    return {"serials_normalised": renamed, "serials_left_apart": apart}
 
 
 def _journal_uuid(run_folder: str) -> str | None:
