@@ -240,7 +240,7 @@ class LabRecorder:
             self.spooled += delivery.outcome == "spooled"
             self.quarantined += delivery.outcome == "quarantined"
             if not delivery.kept:
-                self.not_kept.append(str(path))
+                self._not_kept(path)
             self._warn(f"lab record: {path.name}: {delivery.message}")
         return delivery.outcome
 
@@ -272,7 +272,7 @@ class LabRecorder:
             self._warn(f"lab record: {path.name}: the database {self.database} did not take it within "
                        f"{CLOSE_WAIT_S:g} s; queued in {where} (taken in by `hopkinson lab import`)")
         except (OSError, ShotFileError, RecordRejected) as exc:
-            self.not_kept.append(str(path))
+            self._not_kept(path)
             self._warn(f"lab record: {path.name}: not recorded and not queued ({exc}); the shot file is kept: run "
                        f"`hopkinson lab import {path}`")
 
@@ -285,7 +285,7 @@ class LabRecorder:
             try:
                 self.record_now(path)
             except Exception as exc:  # never let the recorder die with shots still to come
-                self.not_kept.append(str(path))
+                self._not_kept(path)
                 self._warn(f"lab record: {path.name}: not recorded ({exc}); run `hopkinson lab import {path}`")
             finally:
                 self._current = None
@@ -301,8 +301,16 @@ class LabRecorder:
                 self._repo.close()
             self._repo = None
 
+    def _not_kept(self, path: Path) -> None:
+        if str(path) not in self.not_kept:  # a shot's raw and analysed records are one shot file to import
+            self.not_kept.append(str(path))
+
     def _warn(self, message: str) -> None:
-        """Once: on the bus when there is one (its printers show it), else in the log."""
+        """Once per event: on the bus when there is one (its printers show it), else in the log.
+        A shot's records (raw, analysed, the campaign's catch-up) meeting the same refusal are
+        one event for the operator: the same message is told once."""
+        if message in self.messages:
+            return
         self.messages.append(message)
         if self.bus is not None:
             self.bus.publish(RigWarning(state="STORE", message=message))

@@ -181,8 +181,22 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
                                  message=f"{latch.reason} after the shot ended: the command exits {EXIT_ABORTED}"))
         if args.sim:
             sim_state = session.state()
+    tell_unshown_warnings(args, recorder.messages)  # the lab record's, when no event line showed them
     kept = not_recorded_exit(recorder, EXIT_DONE) == EXIT_DONE  # (says which record is lost)
     return _report(args, shot.outcome, sim_state, latch, shot.safe_again, record_lost=not kept)
+
+
+def events_shown(args: argparse.Namespace) -> bool:
+    """Whether the command printed its events as lines for people (not --json, --json-events)."""
+    return not (getattr(args, "json", False) or getattr(args, "json_events", False))
+
+
+def tell_unshown_warnings(args: argparse.Namespace, warnings: Any) -> None:
+    """Warnings on stderr, once each, when no event line has shown them (--json: stdout is one
+    object; --json-events: the events are for a script). With event lines they were told there."""
+    if not events_shown(args):
+        for warning in dict.fromkeys(warnings):
+            sys.stderr.write(f"hopkinson: warning: {warning}\n")
 
 
 def not_recorded_exit(recorder: Any, code: int) -> int:
@@ -264,8 +278,7 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
             for role, sensor in (outcome.results.get("sensors") or {}).items():  # further sensors, by role
                 text = result_line(sensor) if "model" in sensor else f"not analysed: {sensor.get('error')}"
                 print(f"{role}: {text}", flush=True)
-    for warning in outcome.warnings:
-        sys.stderr.write(f"hopkinson: warning: {warning}\n")
+    tell_unshown_warnings(args, outcome.warnings)  # the sequencer's (RigWarning events too)
     if outcome.done and outcome.analysis_error and latch.received is None:
         what = outcome.analysis_error if outcome.analysis_error.startswith("analysis") else \
             f"analysis failed: {outcome.analysis_error}"
