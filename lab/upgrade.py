@@ -33,6 +33,7 @@ from hopkinson.lab.database import (
     failure_of,
     first_line,
     head_revision,
+    known_revision,
     make_engine,
     redacted,
     upgrade_database,
@@ -108,6 +109,9 @@ def upgrade_record(url: str, have_backup: bool = False) -> UpgradeOutcome:
         before = current_revision(engine)
         if before == head_revision():
             return UpgradeOutcome(before, before, engine.dialect.name)
+        if before is not None and not known_revision(before):
+            raise LabError(f"database {redacted(url)}: schema version {before} is newer than this software's "
+                           f"({head_revision()}); use a newer hopkinson; nothing changed")
         backup = _backup_first(engine, url, before, have_backup) if before is not None else None
         last_audit = _last_audit_id(engine) if before is not None else 0
         try:

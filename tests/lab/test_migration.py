@@ -423,3 +423,15 @@ def test_an_upgrade_that_fails_part_way_leaves_the_record_as_it_was(
     assert snapshot(url) == before
     monkeypatch.setattr(alembic.op, "execute", execute)
     assert upgrade(url, capsys)[0] == 0  # once the cause is gone, the upgrade goes through
+
+
+def test_a_newer_record_is_neither_backed_up_nor_touched(lab_url: str, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    engine = at_0001(lab_url)
+    with engine.begin() as connection:
+        connection.execute(sa.text("UPDATE alembic_version SET version_num = '0042'"))
+    engine.dispose()
+    before = snapshot(lab_url)
+    code, _out, err = upgrade(lab_url, capsys)
+    assert code == 2 and "schema version 0042 is newer than this software's" in err and "nothing changed" in err
+    assert snapshot(lab_url) == before and not list(tmp_path.glob("lab.schema-*"))
