@@ -17,9 +17,11 @@ demo: $(STAMP)
 
 # --dist loadscope: a module's tests share one worker, so a module's fixture (the 140-shot
 # coverage study, PTB's analysed record) is computed once, not once per worker (stop 38:
-# 505 s against 539 s, 812 against 881 s of CPU on 2 cores).
+# 505 s against 539 s, 812 against 881 s of CPU on 2 cores). The longest modules of the last
+# run start first (tests/scope_order.py). --durations=15: the 15 slowest tests, to keep the
+# suite short.
 test: $(STAMP)
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 2 --dist loadscope
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 2 --dist loadscope --durations=15
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -2,7 +2,7 @@
 loads it for every table file, and the identification path loads no SciPy module).
 
 A shot file's clipping is judged against its digitizer's full scale
-(analysis.doppler.check_not_clipped); a table file (CSV, NPZ) carries none, so a channel that
+(analysis.full_scale.check_not_clipped); a table file (CSV, NPZ) carries none, so a channel that
 holds its extreme value much longer than a smooth peak would is warned about instead.
 """
 

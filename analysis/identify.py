@@ -254,7 +254,7 @@ class Identification:
         return np.array(poles, dtype=complex)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready fields: the model JSON (DESIGN.md) plus the fit details; inf/NaN → None."""
+        """JSON-ready fields: the model JSON (docs/files-and-formats.md) plus the fit details; inf/NaN → None."""
         out = self.model.to_dict()
         out.update(
             {

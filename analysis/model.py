@@ -95,7 +95,7 @@ class DiscreteModel:
         return bool(np.all(np.abs(self.poles) < 1.0))
 
     def to_dict(self) -> dict[str, Any]:
-        """The model JSON fields (DESIGN.md, 'Model / DCM JSON')."""
+        """The model JSON fields (docs/files-and-formats.md, 'Model / DCM JSON')."""
         return {
             "sample_interval_s": self.sample_interval_s,
             "order": self.order,

@@ -6,7 +6,7 @@ record `identify` reads (time_s, reference in m/s², response) at the analysis r
 
 1. Reference phase (`reference_phase`), box-car decimated by M raw samples, from either
    - the photomultiplier beat of the differential Doppler interferometer alone (method
-     "pm_beat", `analysis.doppler.beat_phase`), or
+     "pm_beat", `analysis.beat_phase.beat_phase`), or
    - a quadrature interferometer's two photodetectors 90° apart (method "quadrature", ISO
      16063-11 method 3 / 16063-13): `analysis.quadrature.demodulate_quadrature`, the
      arctangent after the Heydemann ellipse correction (offsets, unequal gains, quadrature
@@ -54,22 +54,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from hopkinson.analysis.channel_content import beat_content, pulse_content
-from hopkinson.analysis.doppler import (
+from hopkinson.analysis.beat_phase import (
     DECIMATED_RATE_HZ,
     BeatPhase,
-    Demodulated,
-    FullScale,
     beat_phase,
-    check_not_clipped,
     decimated_rate_for,
+)
+from hopkinson.analysis.channel_content import beat_content, pulse_content
+from hopkinson.analysis.differentiating_lowpass import (
+    Demodulated,
     differentiate,
     displacement_to_rate,
     lowpass,
-    metres_per_radian,
 )
+from hopkinson.analysis.doppler import metres_per_radian
 from hopkinson.analysis.errors import AnalysisError, RecordError
 from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width
+from hopkinson.analysis.full_scale import FullScale, check_not_clipped
 from hopkinson.analysis.params import DEFAULT_GRATING_PITCH_M
 from hopkinson.analysis.quadrature import demodulate_quadrature
 from hopkinson.analysis.records import Record, column_names, read_columns, validated_columns
@@ -219,7 +220,7 @@ def reduce_raw(
     two-channel record at `sample_rate_hz`; see the module docstring for the steps.
     `quadrature_v`: a quadrature interferometer's second photodetector (None: `doppler_v` is a
     single-channel PM beat). `full_scale_v`: role ("doppler", "doppler_quadrature",
-    "response") -> the digitizer's full scale in volts (analysis.doppler.full_scale_volts):
+    "response") -> the digitizer's full scale in volts (analysis.full_scale.full_scale_volts):
     a channel with samples there is clipped and refused; a role not given is not judged."""
     return reduce_sensors(
         doppler_v, {"response": SensorChannel(response_v, amp_gain, sensitivity_v_per_m_s2)}, sample_interval_s,

@@ -17,6 +17,7 @@ Light: no NumPy.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 G_M_S2 = 9.80665  # standard gravity: 1 g in m/s²
@@ -77,12 +78,41 @@ def canonical_name(name: str) -> str:
     return text
 
 
+# Any "<prefix><V|C>/<acceleration unit>" a certificate may write (pC/(km/s²), nV/g …), parsed
+# by hand: the few units a shock accelerometer's sensitivity is stated in need no units library.
+PREFIXES = {"f": 1e-15, "p": 1e-12, "n": 1e-9, "µ": 1e-6, "μ": 1e-6, "u": 1e-6, "m": 1e-3, "": 1.0, "k": 1e3}
+PER = {"m/s²": 1.0, "m/s^2": 1.0, "m/s2": 1.0, "(m/s²)": 1.0, "(m/s^2)": 1.0, "(m/s2)": 1.0, "ms^-2": 1.0,
+       "g": G_M_S2, "g_n": G_M_S2, "gn": G_M_S2, "km/s²": 1e3, "(km/s²)": 1e3, "km/s^2": 1e3, "(km/s^2)": 1e3}
+_UNIT = re.compile(r"^\s*([fpnµμumk]?)(V|C)\s*/\s*(.+?)\s*$")
+
+
+def parse(unit: str) -> tuple[float, str, float] | None:
+    """(numerator prefix factor, "V" or "C", m/s² per denominator unit), or None when unknown."""
+    m = _UNIT.match(unit or "")
+    if m is None or m.group(3).replace(" ", "") not in PER:
+        return None
+    return PREFIXES[m.group(1)], m.group(2), PER[m.group(3).replace(" ", "")]
+
+
+def factor(from_unit: str, to_unit: str) -> float | None:
+    """x [from_unit] · factor = x [to_unit]; None when either is unknown or their kinds differ."""
+    a, b = parse(from_unit), parse(to_unit)
+    if a is None or b is None or a[1] != b[1]:
+        return None
+    return (a[0] / a[2]) / (b[0] / b[2])
+
+
 def sensitivity_unit(name: str) -> SensitivityUnit:
-    """The unit called `name` (ASCII spellings accepted); ValueError naming the known ones."""
+    """The unit called `name` (ASCII spellings accepted; any unit `parse` reads beyond the
+    offered UNITS); ValueError naming the offered ones."""
     found = UNITS.get(canonical_name(name))
-    if found is None:
+    if found is not None:
+        return found
+    parsed = parse(name)
+    if parsed is None:
         raise ValueError(f"sensitivity unit {name!r} is not known; use one of {', '.join(UNITS)}")
-    return found
+    prefix, kind, per = parsed
+    return SensitivityUnit(name.strip(), kind, prefix / per)
 
 
 def check_plausible(value: float, unit: SensitivityUnit) -> None:

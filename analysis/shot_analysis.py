@@ -225,7 +225,7 @@ def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_inter
     volts) to a record, then analyse it. `more_sensors`: role -> (volts, that sensor's
     AnalysisParams: its amp_gain and sensitivity; the reference's constants are `params`'),
     each analysed like the first against the same reference (module docstring).
-    `full_scale_v`: role -> the digitizer's full scale in volts (analysis.doppler.
+    `full_scale_v`: role -> the digitizer's full scale in volts (analysis.full_scale.
     full_scale_volts from the shot file's code_min/code_max): a channel with samples there is
     refused as clipped; without it clipping is not judged here (the rig judged the shot)."""
     params = AnalysisParams() if params is None else params

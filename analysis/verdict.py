@@ -249,8 +249,10 @@ def _g(value_m_s2: float) -> str:
 
 
 def _signed(value: float) -> str:
-    """'+1.2', '−37.3' (a typographic minus, as the panel writes numbers)."""
-    return f"{value:+.1f}".replace("-", "−")
+    """'+1.2', '−37.3' (a typographic minus, as the panel writes numbers); '0.0' for what rounds to
+    zero (no '−0.0')."""
+    text = f"{value:+.1f}"
+    return "0.0" if float(text) == 0.0 else text.replace("-", "−")
 
 
 def _one_line(text: str) -> str:

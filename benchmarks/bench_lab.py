@@ -28,7 +28,8 @@ import numpy as np
 from hopkinson.lab.history import sensor_history
 from hopkinson.lab.repository import open_repository
 from hopkinson.rig.lab_record import LabRecorder, shot_record
-from hopkinson.rig.shotfile import RawShot, ShotMeta, add_analysis, write_raw_shot
+from hopkinson.rig.shotfile import RawShot, ShotMeta
+from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from tests.lab.pg_cluster import ClusterUnavailable, new_postgres_database, throwaway_cluster  # noqa: E402

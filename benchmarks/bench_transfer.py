@@ -28,7 +28,8 @@ import pyvisa
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.sim.faults import FaultSet
-from hopkinson.drivers.sim.scpi_digitizer import AcquisitionSettings, SimDigitizerServer
+from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
+from hopkinson.drivers.sim.scpi_instrument import AcquisitionSettings
 
 RANGE_V = 10.0
 DIALECTS = {  # channel names (1, 2); the data query of channel 2; bytes before the samples

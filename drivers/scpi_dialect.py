@@ -22,7 +22,7 @@ InstrumentError naming the instrument. The transfer format (`TransferFormat`: in
 int16, uint16 or float32, little or big endian) is the dialect's constructor argument; each
 dialect lists the formats its instruments can send.
 
-Generic SCPI (`GenericScpiDialect`, the simulator drivers/sim/scpi_digitizer.py's dialect):
+Generic SCPI (`GenericScpiDialect`, the simulator drivers/sim/digitizer_generic.py's dialect):
     :ACQuire:SRATe/POINts/PRETrigger (samples), :CHANnel<n>:RANGe (full scale, ±V),
     :CHANnel<n>:DISPlay ON|OFF | ? (1|0: a channel that is off is not acquired),
     :TRIGger:SOURce CH<n>|EXT, :TRIGger:LEVel, :TRIGger:SLOPe POS|NEG, :SINGle, :ABORt,

@@ -1,4 +1,4 @@
-"""The lab's record: every calibration in one database (DESIGN.md, "The lab's record").
+"""The lab's record: every calibration in one database (docs/architecture.md, docs/decisions/0015).
 
 `database` opens it (SQLite in the user's data folder by default, PostgreSQL for a lab) and
 keeps its schema at the version this software knows (Alembic migrations in `migrations/`);

@@ -152,7 +152,8 @@ def current_revision(engine: Engine) -> str | None:
         return MigrationContext.configure(connection).get_current_revision()
 
 
-def _known(revision: str) -> bool:
+def known_revision(revision: str) -> bool:
+    """Whether `revision` is one of this software's migrations (else: written by newer software)."""
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
     try:
@@ -182,11 +183,12 @@ def check_schema(engine: Engine, url: str) -> None:
             raise LabError(f"database {where}: the schema cannot be created with this role ({first_line(exc)}); "
                            f"run `hopkinson lab upgrade` as the database's owner role (docs/lab-record.md)") from None
         return
-    if not _known(revision):
+    if not known_revision(revision):
         raise LabError(f"database {where}: schema version {revision} is newer than this software's "
                        f"({head}); use a newer hopkinson")
     raise LabError(f"database {where}: schema version {revision} is older than this software's ({head}); "
-                   f"run `hopkinson lab upgrade` (back the database up first)")
+                   f"run `hopkinson lab upgrade` (it backs a SQLite file up first; PostgreSQL: pg_dump first, "
+                   f"docs/lab-record.md)")
 
 
 def upgrade_database(engine: Engine) -> tuple[str | None, str]:
@@ -194,7 +196,7 @@ def upgrade_database(engine: Engine) -> tuple[str | None, str]:
     from alembic import command
 
     before = current_revision(engine)
-    if before is not None and not _known(before):
+    if before is not None and not known_revision(before):
         raise LabError(f"database schema version {before} is newer than this software's ({head_revision()}); "
                        f"use a newer hopkinson")
     with engine.connect() as connection:

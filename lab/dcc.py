@@ -23,7 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from hopkinson.lab import units
+from hopkinson.analysis import sensitivity_units as units
 from hopkinson.lab.errors import LabError
 
 DCC = "https://ptb.de/dcc"
@@ -72,7 +72,7 @@ def _num(x: float) -> str:
 
 
 def d_si_unit(unit: str) -> tuple[str, float] | None:
-    """(D-SI unit, factor) for a sensitivity unit (lab.units): value·factor in the D-SI unit,
+    """(D-SI unit, factor) for a sensitivity unit (analysis.sensitivity_units): value·factor in the D-SI unit,
     e.g. "mV/g" -> (r"\\milli\\volt\\second\\tothe{2}\\metre\\tothe{-1}", 1/9.80665); a ratio -> \\one."""
     if unit in ("× nominal", "", "1"):
         return r"\one", 1.0

@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 from datetime import UTC, date, datetime, timedelta
 from typing import TYPE_CHECKING, Any
 
+from hopkinson.analysis import sensitivity_units as units
 from hopkinson.analysis.key_figures import Figure
-from hopkinson.lab import units
 from hopkinson.lab.errors import LabError
 from hopkinson.lab.repositories import SensorInfo, ShotResult
 from hopkinson.lab.schema import FIGURE_KEYS

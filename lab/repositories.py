@@ -357,8 +357,10 @@ class Certificates:
             raise LabError(f"certificate {replaces}: was issued for another campaign; not replaced")
         if valid is None or valid.number != old.number:
             by = self.session.scalar(sa.select(t.Certificate.number).where(t.Certificate.replaces == replaces))
-            raise LabError(f"certificate {replaces}: already withdrawn (replaced by {by}); "
-                           f"only the valid {kind} {valid.number if valid else '—'} can be replaced")
+            raise LabError(f"certificate {replaces}: " + (f"already withdrawn (replaced by {by})" if by else
+                                                          "not the campaign's valid one (a later one replaced the same "
+                                                          "certificate; schema 0001 allowed that)")
+                           + f"; only the valid {kind} {valid.number if valid else '—'} can be replaced")
         return old.revision + 1
 
     def next_number(self, prefix: str, year: int) -> tuple[int, str]:

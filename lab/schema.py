@@ -14,7 +14,7 @@ PostgreSQL). Key figures are stored as value, standard uncertainty u and the 95 
 
 from __future__ import annotations
 
-from sqlalchemy import Boolean, Float, ForeignKey, Integer, String, Text, UniqueConstraint
+from sqlalchemy import Boolean, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 # The key figures kept per analysis (reports.statistics.COMBINED's keys)
@@ -151,18 +151,20 @@ class Analysis(Base):
 
 class Certificate(Base):
     """A certificate as issued: immutable. A re-issue is a new row naming this one in
-    `replaces` (unique: one successor), with the next `revision` of the same campaign and kind
+    `replaces` (unique: one successor; migration 0002 leaves out only a second successor 0001
+    had let be issued), with the next `revision` of the same campaign and kind
     (unique: one first issue, one line of re-issues); the one not replaced is valid."""
 
     __tablename__ = "certificates"
     __table_args__ = (UniqueConstraint("prefix", "year", "sequence"),
-                      UniqueConstraint("campaign_id", "specimen", "revision", name="uq_certificates_lineage"))
+                      UniqueConstraint("campaign_id", "specimen", "revision", name="uq_certificates_lineage"),
+                      Index("uq_certificates_replaces", "replaces", unique=True))
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     number: Mapped[str] = mapped_column(String(40), unique=True)
     prefix: Mapped[str] = mapped_column(String(16))
     year: Mapped[int] = mapped_column(Integer)
     sequence: Mapped[int] = mapped_column(Integer)
-    replaces: Mapped[str | None] = mapped_column(String(40), nullable=True, unique=True)
+    replaces: Mapped[str | None] = mapped_column(String(40), nullable=True)
     sensor_id: Mapped[int] = mapped_column(ForeignKey("sensors.id"), index=True)
     campaign_id: Mapped[int | None] = mapped_column(ForeignKey("campaigns.id"), nullable=True, index=True)
     specimen: Mapped[bool] = mapped_column(Boolean, default=False)

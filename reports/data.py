@@ -23,6 +23,7 @@ from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import delayed_model_output, model_output
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.analysis.sine_comparison import SineCalibration
+from hopkinson.analysis.verdict import ShotVerdict
 
 G_M_S2 = 9.80665  # standard gravity: accelerations are also shown in g
 
@@ -44,6 +45,7 @@ class ShotEntry:
     nominal_sensitivity_v_per_m_s2: float | None = None
     pressure_bar: float | None = None
     results: dict[str, Any] | None = None
+    verdict: ShotVerdict | None = None  # ACCEPT/REPEAT with its findings (analysis.verdict), where judged
 
     @cached_property
     def stored(self) -> dict[str, Any]:

@@ -170,6 +170,8 @@ def results_rows(entry: ShotEntry) -> list[tuple[str, str]]:
                                                f"{cmp['pole_error_percent']:.3f} %"))
     for w in check.other_warnings(kf.warnings) if check is not None else kf.warnings:
         rows.append(("warning", w))
+    if entry.verdict is not None:  # first: what the technician does next
+        rows.insert(0, ("verdict", entry.verdict.line()))
     return rows
 
 

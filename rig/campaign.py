@@ -6,6 +6,8 @@
         runner = CampaignRunner(run, plan, instruments, config, bus)
     outcome = runner.run()                                          # blocking; outcome.exit_code 0 / 3 / 4
 
+`prepare_run` and `check_authorisation` are rig/campaign_setup.py's.
+
 How a shot moves through the journal (rig/journal.py has the rules):
 
 - the sequencer's before-fire hook (called after every check, immediately before the fire
@@ -34,24 +36,28 @@ and stops the campaign before the next shot moves anything. Outcome exit codes (
 analyses failed (the message and `analyses_failed` name them); 3 the campaign stopped with
 shots left (aborted, paused, or waiting for an operator decision).
 
-Simulation only: `attach_fire_log` makes the simulated world append one JSON line per
-projectile launch (fsynced), tagged with the campaign shot being fired. It is an independent
-witness that no shot was fired twice across kills and resumes.
+What a run tells (its progress, its outcome, each shot's result line) is rig/campaign_results.py's;
+the simulation's fire log, an independent witness of every launch, rig/sim_fire_log.py's.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
-import os
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hopkinson.analysis.key_figures import KeyFigures
+from hopkinson.rig.campaign_results import (
+    CampaignOutcome,
+    CampaignProgress,
+    analyses_failed,
+    result_info,
+    resume_text,
+    shot_end_text,
+)
+from hopkinson.rig.campaign_setup import check_plan, shot_request
 from hopkinson.rig.errors import EXIT_BAD_INPUT, ConfigError
 from hopkinson.rig.events import (
     CAMPAIGN_STATE,
@@ -62,7 +68,7 @@ from hopkinson.rig.events import (
     Note,
     RigWarning,
 )
-from hopkinson.rig.journal import Journal, ShotState, ShotStatus
+from hopkinson.rig.journal import Journal, ShotState
 from hopkinson.rig.level_control import (
     LevelChoice,
     LevelPoint,
@@ -70,17 +76,15 @@ from hopkinson.rig.level_control import (
     choose_pressure,
     history_path,
     measured_peak_m_s2,
-    needed_pressure_bar,
     read_history,
 )
 from hopkinson.rig.lock import command_line
 from hopkinson.rig.logbook import CAMPAIGN_LOG_NAME, Logbook
-from hopkinson.rig.plan import CampaignPlan, PlannedShot, load_plan
-from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, create_run_folder, open_run_folder
+from hopkinson.rig.plan import CampaignPlan, PlannedShot
+from hopkinson.rig.run_folder import RunFolder
 from hopkinson.rig.shot import (
     AnalyseFn,
     ShotOutcome,
-    ShotRequest,
     analyse_and_record,
     analysis_params,
     record_analysis,
@@ -88,191 +92,16 @@ from hopkinson.rig.shot import (
 )
 from hopkinson.rig.shotfile import ShotFileError, read_shot, read_shot_meta, utc_now_iso
 
-from hopkinson.fileio import append_json_line
-
 if TYPE_CHECKING:
-    from hopkinson.drivers.sim.world import World
     from hopkinson.rig.config import RigConfig
     from hopkinson.rig.instruments import Instruments
     from hopkinson.rig.sequencer import FireAuthorisation
 
-DEFAULT_RUNS_DIR = Path("runs")
 EXIT_COMPLETE = 0
 EXIT_STOPPED = 3
 EXIT_ANALYSIS_FAILED = 4  # complete, but some analyses failed (rig/errors.py, docs/exit-codes.md)
 
 S = ShotState
-
-
-class CampaignNotAuthorised(ConfigError):
-    """Neither the plan (authorise_firing = true) nor the operator (--yes) authorised firing."""
-
-
-def check_authorisation(plan: CampaignPlan, yes: bool) -> None:
-    """Raise CampaignNotAuthorised (exit code 2, nothing fired) unless firing is authorised."""
-    if not (plan.authorise_firing or yes):
-        raise CampaignNotAuthorised(
-            f"{plan.path}: firing is not authorised: set authorise_firing = true in the plan or give "
-            "--yes; nothing was fired"
-        )
-
-
-def prepare_run(plan_path: str | Path, out: str | Path | None = None, resume: bool = False,
-                runs_dir: str | Path = DEFAULT_RUNS_DIR) -> tuple[RunFolder, CampaignPlan]:
-    """The run folder to use and the validated plan.
-
-    New run: `out` is the run folder to create (it must not exist yet, or be an empty
-    folder); without `out`, `<runs_dir>/<plan name>-<UTC time>`. Resume: `out` is the run folder
-    to continue; without `out`, the newest `<runs_dir>/<plan name>-*` folder. The plan must
-    be the one the run started with (the journal checks it when it opens).
-    """
-    plan = load_plan(plan_path)
-    if out is not None:
-        folder = Path(out)
-        has_plan = (folder / PLAN_NAME).is_file()
-        if resume:
-            if has_plan:
-                return open_run_folder(folder), plan
-            if not folder.is_dir():
-                raise ConfigError(f"{folder}: no such run folder to resume")
-            if any(p.name != "run.lock" for p in _files(folder)):
-                raise ConfigError(f"{folder}: not a campaign run folder (no {PLAN_NAME})")
-            # A run that died while creating its folder: start it afresh in the same place.
-        elif has_plan:
-            raise ConfigError(f"{folder}: this run folder exists; give --resume to continue it")
-        elif folder.is_dir() and any(folder.iterdir()):
-            raise ConfigError(f"{folder}: the folder exists and is not empty; choose a new --out")
-        if folder.is_dir():
-            _remove_empty_tree(folder)
-        return create_run_folder(plan_path, folder.parent, folder.name), plan
-    runs = Path(runs_dir)
-    if resume:
-        candidates = sorted(p for p in runs.glob(f"{plan.name}-*") if (p / PLAN_NAME).is_file())
-        if not candidates:
-            raise ConfigError(f"{runs}: no run folder of plan {plan.name!r} to resume (give --out RUN_FOLDER)")
-        return open_run_folder(max(candidates, key=lambda p: p.stat().st_mtime)), plan
-    return create_run_folder(plan_path, runs), plan
-
-
-def _files(folder: Path) -> list[Path]:
-    return [p for p in folder.rglob("*") if p.is_file()]
-
-
-def _remove_empty_tree(folder: Path) -> None:
-    """Remove a folder holding nothing but empty folders (and a stale lock file)."""
-    for path in sorted(folder.rglob("*"), key=lambda p: len(p.parts), reverse=True):
-        if path.is_dir():
-            path.rmdir()
-        else:
-            path.unlink()
-    folder.rmdir()
-
-
-@dataclass(frozen=True)
-class CampaignProgress:
-    """Where the campaign is: shot `index` (1-based) of `total`, its id and attempt."""
-
-    index: int
-    total: int
-    shot_id: str
-    pressure_bar: float
-    projectile: int
-
-    @property
-    def prefix(self) -> str:
-        """"[3/8] s002-r1": what every progress line starts with."""
-        return f"[{self.index}/{self.total}] {self.shot_id}"
-
-
-@dataclass
-class CampaignOutcome:
-    """How a campaign run ended."""
-
-    run_folder: Path
-    exit_code: int
-    message: str
-    summary: dict[str, Any]  # Journal.summary() at the end
-    fired_this_run: list[str] = field(default_factory=list)
-    resume_report: list[dict[str, Any]] = field(default_factory=list)
-    last_shot: ShotOutcome | None = None
-
-    @property
-    def complete(self) -> bool:
-        return bool(self.summary.get("complete"))
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "run_folder": str(self.run_folder),
-            "exit_code": self.exit_code,
-            "message": self.message,
-            "complete": self.complete,
-            "fired_this_run": list(self.fired_this_run),
-            "resume_report": list(self.resume_report),
-            "analyses_failed": analyses_failed(self.summary),
-            "summary": self.summary,
-            "last_shot": self.last_shot.to_dict() if self.last_shot is not None else None,
-        }
-
-
-def analyses_failed(summary: dict[str, Any]) -> list[str]:
-    """The ids of the shots whose analysis failed (journal state ANALYSIS_FAILED)."""
-    return [shot["id"] for shot in summary.get("shots", []) if shot.get("state") == S.ANALYSIS_FAILED.value]
-
-
-def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: LevelChoice | None = None,
-                 pressure_bar: float | None = None, campaign_uuid: str | None = None) -> ShotRequest:
-    """The sequencer's request for a planned shot: file `shots/<id>.h5`, the plan's settings
-    (for a target level, the pressure `level` chose, or the `pressure_bar` it was fired at).
-
-    `confirm_timeout_s` 0: the runner only ever fires with the authorisation already given.
-    """
-    a = shot.analysis
-    pressure = level.pressure_bar if level is not None else pressure_bar if pressure_bar is not None else shot.pressure_bar
-    assert pressure is not None, f"{shot.id}: a target level needs its pressure chosen"
-    return ShotRequest(
-        pressure_bar=pressure, projectile=shot.projectile, operator=plan.operator,
-        accelerometer_model=plan.accelerometer.model, accelerometer_serial=plan.accelerometer.serial,
-        sensor_identities=plan.sensor_identities(),
-        sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
-        order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
-        uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
-        transverse_sensitivity_rel=plan.accelerometer.transverse_sensitivity_rel,
-        out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, campaign_uuid=campaign_uuid,
-        shot_id=shot.id,
-        shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
-        sensitivity_unit=plan.accelerometer.sensitivity_unit, tolerance_percent=plan.accelerometer.tolerance_percent,
-    )
-
-
-def check_plan(plan: CampaignPlan, config: RigConfig, history: list[LevelPoint] | None = None) -> None:
-    """The whole plan against the rig, before anything moves: every shot's request (pressure
-    within the rig's limits, projectile, every analysis option) is checked, and a target level
-    the bar model (corrected by the rig's `history`) says needs more than the rig's
-    maximum pressure is refused; ConfigError (exit 2) names the plan, the entry and the reason."""
-    limits = config.limits
-    rig = config.bar.rig()
-    for shot in plan.shots:
-        level = None
-        if shot.target_peak_m_s2 is not None:
-            try:
-                level = needed_pressure_bar(shot.target_peak_m_s2, shot.projectile, history or (), rig)
-            except ValueError as exc:  # e.g. a projectile the rig's [bar] does not describe
-                raise ConfigError(f"{plan.path}: shots[{shot.entry}] ({shot.id}): a target level needs the bar model: "
-                                  f"{exc} ({config.path or 'configuration'} [bar]); nothing was fired") from None
-            if level.pressure_bar > limits.max_pressure_bar:
-                raise ConfigError(
-                    f"{plan.path}: shots[{shot.entry}] ({shot.id}): target peak {shot.target_peak_m_s2:.4g} m/s² "
-                    f"({shot.target_peak_m_s2 / 9.80665:.4g} g) needs {level.pressure_bar:.3g} bar with projectile "
-                    f"No. {shot.projectile} (bar model, {level.basis}), above the rig's maximum "
-                    f"{limits.max_pressure_bar:g} bar ({config.path or 'configuration'} [limits]); nothing was fired")
-            level = choose_pressure(shot.target_peak_m_s2, shot.projectile, history or (),
-                                    min_pressure_bar=limits.min_pressure_bar, max_pressure_bar=limits.max_pressure_bar,
-                                    rig=rig)
-        request = dataclasses.replace(shot_request(plan, shot, RunFolder(Path(".")), level), out_dir=Path("."))
-        try:
-            request.check(config)
-        except ConfigError as exc:
-            raise ConfigError(f"{plan.path}: shots[{shot.entry}] ({shot.id}): {exc}") from None
 
 
 class CampaignRunner:
@@ -348,7 +177,7 @@ class CampaignRunner:
             self.bus.publish(RigWarning(state=CAMPAIGN_STATE, message=f"the campaign log cannot be written: {exc}"))
         try:
             for item in journal.resume_report:
-                self._note(_resume_text(item))
+                self._note(resume_text(item))
             for shot in journal.pending_analysis():
                 self._analyse_from_file(shot)
             stop_message = ""
@@ -548,7 +377,7 @@ class CampaignRunner:
                 journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted")
         elif state in (S.PLANNED, S.ABORTED):
             journal.mark(sid, S.ABORTED, reason=outcome.error or self._mark_failure or "aborted before FIRE")
-        self._shot_ended(shot, _shot_end_text(journal.status(sid), outcome), outcome.final_state)
+        self._shot_ended(shot, shot_end_text(journal.status(sid), outcome), outcome.final_state)
 
     def _shot_ended(self, shot: PlannedShot, message: str, final_state: str | None) -> None:
         assert self._journal is not None
@@ -600,93 +429,3 @@ class CampaignRunner:
     def _note(self, message: str) -> None:
         self.bus.publish(Note(state=CAMPAIGN_STATE, message=message))
 
-
-def result_info(results: dict[str, Any] | None) -> dict[str, Any]:
-    """A few figures of an analysis for the journal's info (the shot file holds the rest)."""
-    if not results:
-        return {}
-    info: dict[str, Any] = {}
-    model = results.get("model") or {}
-    if "order" in model:
-        info["order"] = model["order"]
-    if results.get("fbsd_hz"):
-        info["fbsd_hz"] = results["fbsd_hz"]
-    peak = measured_peak_m_s2(results)
-    if peak is not None:  # the level control's measure of the shot
-        info["peak_m_s2"] = peak
-    return info
-
-
-def _resume_text(item: dict[str, Any]) -> str:
-    if item.get("shot_id") is None:
-        return f"resume: {item.get('action', 'note')}: {item.get('path', '')}"
-    if item.get("from") == item.get("to"):
-        return f"resume: {item['shot_id']}: {item['reason']}"
-    return f"resume: {item['shot_id']}: {item['from']} -> {item['to']}: {item['reason']}"
-
-
-def _shot_end_text(status: ShotStatus, outcome: ShotOutcome) -> str:
-    text = status.state.value
-    if status.state == S.ANALYSED and outcome.results:
-        text += " " + result_line(outcome.results)
-    elif outcome.analysis_error:
-        text += f": {outcome.analysis_error}"
-    elif outcome.error:
-        text += f": {outcome.error}"
-    return text
-
-
-def result_line(results: dict[str, Any]) -> str:
-    """One line of an analysis' key figures (analysis.key_figures, as the report and the panel
-    show them): order, f_n and ζ of the main mode as value ± U (k ≈ 2), or why there is none,
-    FBSD ±5 %/±10 % (a bound where the excitation does not support the edge)."""
-    kf = KeyFigures.from_results(results)
-    parts = [f"order {kf.order}"] if kf.order is not None else []
-    f_n = kf.natural_frequency_hz
-    if f_n is not None and f_n.value is not None:
-        parts.append(f"f_n {f_n.format(1e3, unit='kHz')}")
-        if kf.damping_ratio is not None and kf.damping_ratio.value is not None:
-            parts.append(f"zeta {kf.damping_ratio.format()}")
-    else:
-        band = kf.supported_band_hz
-        parts.append("no resonance in the supported band"
-                     + (f" ({band[0] / 1e3:.3g}-{band[1] / 1e3:.3g} kHz): f_n not claimed" if band else ""))
-    if kf.fbsd_hz or kf.fbsd_bounds:
-        parts.append(f"FBSD ±5 % {kf.fbsd_text('5')}, ±10 % {kf.fbsd_text('10')}")
-    return ", ".join(parts)
-
-
-# -- simulation: the fire log ------------------------------------------------------------------
-class FireLog:
-    """Append-only JSON lines, one per simulated launch, each fsynced before the call returns."""
-
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        if not self.path.parent.is_dir():
-            raise ConfigError(f"--sim-fire-log: folder {self.path.parent} does not exist")
-        self.shot_id: str | None = None  # the campaign shot being fired, set by the runner
-
-    def append(self, entry: dict[str, Any]) -> None:
-        append_json_line(self.path, {"shot_id": self.shot_id, "pid": os.getpid(), "utc": utc_now_iso(), **entry})
-
-    def set_shot(self, shot: PlannedShot | None) -> None:
-        self.shot_id = shot.id if shot is not None else None
-
-
-def attach_fire_log(world: World, log: FireLog) -> None:
-    """Make the simulated `world` log every launch to `log` (test witness; simulation only).
-
-    The line is written by the world's launch listener, in the simulator's server thread
-    before the Modbus reply goes back, so the sequencer cannot have seen the shot fired
-    without the line.
-    """
-    world.launch_listeners.append(lambda truth: log.append(
-        {k: truth.get(k) for k in ("shot_number", "pressure_bar", "fired_at_sim_s")}))
-
-
-def read_fire_log(path: str | Path) -> list[dict[str, Any]]:
-    """The entries of a fire log (a missing file: none)."""
-    path = Path(path)
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]

@@ -13,7 +13,7 @@ The rules that make "no planned shot lost, none fired twice" hold:
 
 1. FIRING is committed (synchronous=FULL: on disk) before the fire command is sent, and at
    most one shot is FIRING at a time.
-2. The raw shot file gets its final name (rig.shotfile: tmp, fsync, rename) before RECORDED
+2. The raw shot file gets its final name (rig.shotfile_writer: tmp, fsync, rename) before RECORDED
    is committed. Its name is fixed by the shot id: `shots/<id>.h5`.
 3. Only PLANNED shots and ABORTED shots (fewer than `max_aborts` aborts) are handed out by
    `next_shot()`. UNKNOWN is never handed out: a shot that may have been fired is re-fired

@@ -12,7 +12,7 @@ spooled, and the operator is told where each record is. `not_kept` lists the sho
 whose record is in neither the database nor the spool (a full data folder): the command
 exits EXIT_NOT_RECORDED then.
 
-A shot file is verified before it is read into a record (rig.shotfile.verify_shot: the HDF5
+A shot file is verified before it is read into a record (rig.shotfile_integrity.verify_shot: the HDF5
 checksums and the raw channels' SHA-256), and it is simulated when any of its marks says so:
 the simulator's truth, the file's flag, an instrument identifying itself as the simulator.
 """
@@ -40,7 +40,8 @@ from hopkinson.rig.config import RigConfig
 from hopkinson.rig.events import Analysed, CampaignFinished, EventBus, RigEvent, RigWarning, Stored
 from hopkinson.rig.journal import read_campaign_uuid
 from hopkinson.rig.run_folder import JOURNAL_NAME, SHOTS_DIR
-from hopkinson.rig.shotfile import ShotFileError, ShotMeta, raw_sha256, read_shot, verify_shot
+from hopkinson.rig.shotfile import ShotFileError, ShotMeta, read_shot
+from hopkinson.rig.shotfile_integrity import raw_sha256, verify_shot
 
 _log = logging.getLogger(__name__)
 CLOSE_WAIT_S = 15.0  # at exit, how long the recorder finishes its queue before spooling the rest
@@ -87,7 +88,7 @@ def shot_context(meta: ShotMeta) -> dict[str, Any]:
 
 def shot_record(path: str | Path, recorded_raw_sha256: str | None = None) -> ShotRecord:
     """A shot file as the lab's record holds it, after the one verification
-    (rig.shotfile.verify_shot). TamperedShotError when it fails; ShotFileError when it
+    (rig.shotfile_integrity.verify_shot). TamperedShotError when it fails; ShotFileError when it
     cannot be read."""
     path = Path(path).resolve()
     problems = verify_shot(path, recorded_raw_sha256)
@@ -239,7 +240,7 @@ class LabRecorder:
             self.spooled += delivery.outcome == "spooled"
             self.quarantined += delivery.outcome == "quarantined"
             if not delivery.kept:
-                self.not_kept.append(str(path))
+                self._not_kept(path)
             self._warn(f"lab record: {path.name}: {delivery.message}")
         return delivery.outcome
 
@@ -271,7 +272,7 @@ class LabRecorder:
             self._warn(f"lab record: {path.name}: the database {self.database} did not take it within "
                        f"{CLOSE_WAIT_S:g} s; queued in {where} (taken in by `hopkinson lab import`)")
         except (OSError, ShotFileError, RecordRejected) as exc:
-            self.not_kept.append(str(path))
+            self._not_kept(path)
             self._warn(f"lab record: {path.name}: not recorded and not queued ({exc}); the shot file is kept: run "
                        f"`hopkinson lab import {path}`")
 
@@ -284,7 +285,7 @@ class LabRecorder:
             try:
                 self.record_now(path)
             except Exception as exc:  # never let the recorder die with shots still to come
-                self.not_kept.append(str(path))
+                self._not_kept(path)
                 self._warn(f"lab record: {path.name}: not recorded ({exc}); run `hopkinson lab import {path}`")
             finally:
                 self._current = None
@@ -300,8 +301,16 @@ class LabRecorder:
                 self._repo.close()
             self._repo = None
 
+    def _not_kept(self, path: Path) -> None:
+        if str(path) not in self.not_kept:  # a shot's raw and analysed records are one shot file to import
+            self.not_kept.append(str(path))
+
     def _warn(self, message: str) -> None:
-        """Once: on the bus when there is one (its printers show it), else in the log."""
+        """Once per event: on the bus when there is one (its printers show it), else in the log.
+        A shot's records (raw, analysed, the campaign's catch-up) meeting the same refusal are
+        one event for the operator: the same message is told once."""
+        if message in self.messages:
+            return
         self.messages.append(message)
         if self.bus is not None:
             self.bus.publish(RigWarning(state="STORE", message=message))

@@ -51,7 +51,7 @@ Entries expand in order into planned shots with stable ids "s<entry>-r<repeat>"
 (s001-r1, s001-r2, s002-r1, ...). Entry numbers in ids and in error messages count from 1:
 "shots[2].pressure_bar" is the pressure of the second [[shots]] table, whose ids are s002-*.
 An entry gives one of pressure_bar, peak_m_s2 or peak_g (its own overrides what [defaults] gives).
-Pressure upper limits belong to the rig (config/rig.toml [limits]): `rig.campaign.check_plan`
+Pressure upper limits belong to the rig (config/rig.toml [limits]): `rig.campaign_setup.check_plan`
 checks every entry against them before the first shot moves anything.
 
 Shot counts. A plan may hold at most MAX_TOTAL_SHOTS shots (checked from the repeats before any
@@ -147,7 +147,7 @@ class FurtherAccelerometer:
 @dataclass(frozen=True)
 class AnalysisOptions:
     """[defaults.analysis] and [shots.analysis]: analysis settings of a shot (defaults from
-    DESIGN.md and the paper's example); a table gives only the keys it changes."""
+    docs/method.md and the paper's example); a table gives only the keys it changes."""
 
     __pydantic_config__ = SECTION
     max_order: Annotated[Order, Field(description="highest model order tried")] = 12

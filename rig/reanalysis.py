@@ -35,7 +35,8 @@ from hopkinson.rig.shot import (
     analysis_params,
     shot_analyser,
 )
-from hopkinson.rig.shotfile import Shot, ShotFileError, analysis_results, read_shot, require_sound
+from hopkinson.rig.shotfile import Shot, ShotFileError, analysis_results, read_shot
+from hopkinson.rig.shotfile_integrity import require_sound
 
 SNAPSHOT_EXTRAS = ("path", "shot_settings")
 SHOT_SUFFIX = ".h5"  # keys of a shot's config snapshot that rig.toml has not
@@ -56,10 +57,13 @@ def snapshot_config(shot: Shot) -> RigConfig | None:
         return None
 
 
-def _without_none(table: dict[str, Any]) -> dict[str, Any]:
-    """The snapshot's table without its None values (TOML has no null; a key left out takes the
-    default None stood for: the DCM's widening "sized to the pulse")."""
-    return {k: _without_none(v) if isinstance(v, dict) else v for k, v in table.items() if v is not None}
+def _without_none(value: Any) -> Any:
+    """The snapshot with its unset keys (None: TOML has no null) left out, as the file had them."""
+    if isinstance(value, dict):
+        return {k: _without_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list | tuple):
+        return [_without_none(v) for v in value]
+    return value
 
 
 def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisParams:
@@ -190,11 +194,11 @@ def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     `journal` (what its run's journal records, or None when nothing was stored). A bad file is a
     failed row, never an exception: many shots are analysed in one go, in worker processes."""
     from hopkinson.analysis.key_figures import KeyFigures
-    from hopkinson.rig.campaign import result_info, result_line
+    from hopkinson.rig.campaign_results import result_info, result_line
     from hopkinson.rig.shot import analysis_error_text
 
     row: dict[str, Any] = {"path": str(path), "version": None, "ok": False, "error": None, "key_figures": None,
-                           "summary": None, "cpu_s": None, "journal": None}
+                           "summary": None, "verdict": None, "cpu_s": None, "journal": None}
     started = time.process_time()
     try:
         recorded = reanalyse(path, overrides)
@@ -216,9 +220,21 @@ def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     if recorded.results is not None:
         row["key_figures"] = KeyFigures.from_results(recorded.results).to_dict()
         row["summary"] = result_line(recorded.results)
+    row["verdict"] = _verdict(path, recorded.results, recorded.error)
     if recorded.stored:
         row["journal"] = {"error": recorded.error, "info": result_info(recorded.results)}
     return row
+
+
+def _verdict(path: Path, results: dict[str, Any] | None, error: str | None) -> dict[str, Any] | None:
+    """The shot's ACCEPT/REPEAT verdict (rig.shot_verdict) with the settings it was fired with."""
+    from hopkinson.rig.shot_verdict import judge, settings_of
+
+    try:
+        settings = settings_of(read_shot(path, load_raw=False))
+    except (ShotFileError, OSError):
+        settings = {}
+    return judge(results, settings, error).verdict.to_dict()
 
 
 class RunJournals:

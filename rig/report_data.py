@@ -29,7 +29,9 @@ from hopkinson.reports.writers import write_report
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, open_run_folder
-from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, require_sound, sensor_records
+from hopkinson.rig.shot_verdict import judge, settings_of
+from hopkinson.rig.shotfile import Shot, ShotFileError, read_shot, sensor_records
+from hopkinson.rig.shotfile_integrity import require_sound
 
 REPORT_NAME = "report"
 
@@ -137,6 +139,7 @@ def shot_entry(path: str | Path, state: str | None = None, label: str | None = N
         nominal_sensitivity_v_per_m_s2=_sensitivity(shot),
         pressure_bar=shot.meta.pressure_bar,
         results=shot.results if analysis is not None else None,
+        verdict=judge(shot.results, settings_of(shot), error).verdict,
     )
 
 

@@ -57,10 +57,9 @@ from hopkinson.rig.shotfile import (
     RawShot,
     ShotFileError,
     ShotMeta,
-    add_analysis,
     sensor_response_name,
-    write_raw_shot,
 )
+from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
 QUADRATURE_ROLE = "doppler_quadrature"
 PROJECTILES = (1, 2, 3)  # the projectiles the rig's loader takes

@@ -20,7 +20,7 @@ from hopkinson.analysis.sensitivity_units import (
     AbsoluteSensitivity,
     SensitivityUnit,
     absolute_sensitivity,
-    canonical_name,
+    sensitivity_unit,
 )
 from hopkinson.analysis.verdict import ShotVerdict, VerdictCriteria, shot_verdict
 from hopkinson.rig.shotfile import Shot
@@ -77,9 +77,10 @@ def shot_judgement(shot: Shot, criteria: VerdictCriteria | None = None) -> ShotJ
 
 def _unit(name: Any) -> SensitivityUnit:
     if isinstance(name, str):
-        found = UNITS.get(canonical_name(name))
-        if found is not None:
-            return found
+        try:
+            return sensitivity_unit(name)
+        except ValueError:
+            pass
     return UNITS[DEFAULT_UNIT]
 
 

@@ -14,6 +14,8 @@ from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
+pytest_plugins = ("tests.scope_order",)  # longest modules first on the xdist workers
+
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 
 

@@ -1,6 +1,7 @@
-"""The documentation holds together: every relative link in README.md and docs/*.md resolves
-(file and #anchor), every docs page can be reached from the README or docs/index.md, and every
-`hopkinson …` command the pages quote parses with the real argument parser (nothing is run).
+"""The documentation holds together: every relative link in README.md, docs/*.md and
+docs/decisions/*.md resolves (file and #anchor), every docs page can be reached from the README
+or docs/index.md, and every `hopkinson …` command the pages quote parses with the real argument
+parser (nothing is run).
 
 A quoted command may be a synopsis: `[--opt V]` is read as given, `A|B` as its first
 alternative (at a sub-command, each), `…` dropped (or, as an option's value, a placeholder), a
@@ -25,7 +26,9 @@ import pytest
 from hopkinson.rig.cli.main import build_parser
 
 REPO = Path(__file__).resolve().parents[1]
-PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+# docs/decisions/ holds the design's decision records (docs/architecture.md), one page each
+PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")),
+         *sorted((REPO / "docs" / "decisions").glob("*.md"))]
 
 FENCE = re.compile(r"^(```|~~~)(.*)$")
 INLINE_LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")

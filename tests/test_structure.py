@@ -1,5 +1,5 @@
-"""The architecture's rules (DESIGN.md, Layout), checked on the source: the import direction
-between the packages, and the one import name the installed package has."""
+"""The architecture's rules (docs/architecture.md, docs/decisions/0002), checked on the source:
+the import direction between the packages, and the one import name the installed package has."""
 
 from __future__ import annotations
 

@@ -42,7 +42,7 @@ def read_shot_row(path: Path) -> ShotRow:
 def reanalyse_shot(run: RunFolder, plan: CampaignPlan, shot_id: str) -> tuple[str, str | None]:
     """Analyse a campaign shot again from its raw data (a new analysis version in its file, as
     `hopkinson analyse`) and record the outcome in the run's journal: (journal state, error)."""
-    from hopkinson.rig.campaign import result_info
+    from hopkinson.rig.campaign_results import result_info
     from hopkinson.rig.reanalysis import reanalyse
 
     recorded = reanalyse(run.shot_path(shot_id))

@@ -5,7 +5,7 @@ shot, open a row's shot (double-click), write the campaign's report and issue it
 
 The campaign runs through rig.campaign (the same runner as `hopkinson campaign run`) on the
 panel's rig I/O thread (ui.worker.RigLink.start_campaign), journaled in the run folder:
-- Run: a new run folder under the runs folder (rig.campaign.prepare_run);
+- Run: a new run folder under the runs folder (rig.campaign_setup.prepare_run);
 - Pause: the runner stops after the shot now running (nothing is cut short);
 - Resume: the same run folder again (the journal's resume rules: no shot lost or fired twice);
 - Abort: the shot now running is aborted (the sequencer makes the rig safe) and the campaign stops.
@@ -26,10 +26,11 @@ from typing import Any
 
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
 from hopkinson.reports.statistics import LinearityPoint, campaign_linearity, linearity_points
-from hopkinson.rig.campaign import CAMPAIGN_STATE, prepare_run
+from hopkinson.rig.campaign_setup import prepare_run
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import (
+    CAMPAIGN_STATE,
     AwaitingConfirmation,
     CampaignShotEnded,
     CampaignShotStarted,

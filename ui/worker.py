@@ -109,7 +109,7 @@ class RigLink(QObject):
     links_changed = Signal(object)  # dict[str, InstrumentLink]
     shot_finished = Signal(object)  # ShotOutcome
     shot_failed = Signal(str)  # a shot that could not start or crashed: one line
-    campaign_finished = Signal(object)  # rig.campaign.CampaignOutcome
+    campaign_finished = Signal(object)  # rig.campaign_results.CampaignOutcome
     campaign_failed = Signal(str)  # a campaign that could not start or crashed: one line
     message = Signal(str, str)  # level ("info" | "warning" | "error"), text
     safe_done = Signal(bool, str)  # idle ABORT: confirmed?, what was done
@@ -250,7 +250,7 @@ class RigLink(QObject):
                        confirm_each_s: float | None = None) -> None:
         """Run a campaign (rig.campaign.CampaignRunner on `run`, a RunFolder, and `plan`) on the
         I/O thread; `campaign_finished` or `campaign_failed` tells how it ended. Firing must
-        have been authorised by the caller (rig.campaign.check_authorisation), or
+        have been authorised by the caller (rig.campaign_setup.check_authorisation), or
         `confirm_each_s` given: each shot then waits armed (at most that long) for its own
         authorisation, `shot_authorisation` (the panel's FIRE gives it, as for a single shot).
         `conditioner`: as for start_shot."""

@@ -31,15 +31,8 @@ their short form ("CHAN1", "POS", "LSBF").
 from __future__ import annotations
 
 import numpy as np
-from hopkinson.drivers.sim.scpi_digitizer import (
-    RECORD_LENGTH_LIMITS,
-    Block,
-    Call,
-    Handler,
-    Reply,
-    SimDigitizer,
-    SimError,
-)
+from hopkinson.drivers.sim.scpi_instrument import RECORD_LENGTH_LIMITS, SimDigitizer
+from hopkinson.drivers.sim.scpi_messages import Block, Call, Handler, Reply, SimError
 
 _REFERENCES = {"LEFT": 0.0, "CENTer": 0.5, "RIGHt": 1.0}
 

@@ -29,7 +29,8 @@ import struct
 from collections.abc import Callable
 
 import numpy as np
-from hopkinson.drivers.sim.scpi_digitizer import Block, Call, Handler, Reply, SimDigitizer, SimError
+from hopkinson.drivers.sim.scpi_instrument import SimDigitizer
+from hopkinson.drivers.sim.scpi_messages import Block, Call, Handler, Reply, SimError
 
 WAVEDESC_BYTES = 346
 _MULTIPLIERS = {"": 1.0, "K": 1e3, "MA": 1e6, "M": 1e-3, "U": 1e-6, "N": 1e-9, "P": 1e-12, "G": 1e9}

@@ -33,15 +33,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from hopkinson.drivers.sim.scpi_digitizer import (
-    Block,
-    Call,
-    Handler,
-    Reply,
-    SimDigitizer,
-    SimError,
-    long_header,
-)
+from hopkinson.drivers.sim.scpi_instrument import SimDigitizer
+from hopkinson.drivers.sim.scpi_messages import Block, Call, Handler, Reply, SimError, long_header
 
 DIVISIONS = 10
 _ENCODINGS = {  # DATa:ENCdg -> (binary format, byte order)

@@ -1,4 +1,4 @@
-"""The one physics model behind the simulated rig (DESIGN.md, "Physics of the simulated rig").
+"""The one physics model behind the simulated rig (docs/bar-physics.md; docs/decisions/0004).
 
 Longer than 600 lines, for a reason: `World` is one object whose single lock guards the whole
 physical state (pneumatics, controller, amplifier, the pending shot), and every method below

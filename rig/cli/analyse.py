@@ -6,7 +6,7 @@
 Each shot is analysed from its raw channels with the options of its first analysis (or, never
 analysed, its rig configuration's), changed only by the options given here; the result is
 stored as a new analysis version beside the earlier ones, the file rewritten atomically
-(rig/reanalysis.py, rig/shotfile.py), never replacing raw data. A folder is searched through:
+(rig/reanalysis.py, rig/shotfile_writer.py), never replacing raw data. A folder is searched through:
 a campaign run folder gives its plan's shot files, and its journal follows (ANALYSED, or
 ANALYSIS_FAILED with the reason), so `campaign run --resume` and the report see the new
 analysis; every other `*.h5` file in the tree is analysed as it stands. This is how a lab
@@ -17,9 +17,10 @@ worker process with single-threaded BLAS; a journal is written by this process o
 run's shots are done. Ctrl-C or SIGTERM: no new shot starts, the ones running finish and are
 stored, the journals record them.
 
-One line per shot, in the order found (its file, the new version, its key figures or why it
+One line per shot, in the order found (its file, the new version, its key figures and verdict
+("| ACCEPT: …" or "| REPEAT: …", its main reason) or why it
 failed); --json one object {"shots": [{"path", "version", "ok", "error", "key_figures",
-"summary", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes
+"summary", "verdict", "cpu_s"}]} (cpu_s: the CPU seconds the shot's analysis took). Exit codes
 (docs/exit-codes.md): 0 every shot analysed and stored; 2 bad input (no such file, a folder with no shot file, a run folder
 whose campaign is running, a journal that could not be updated); 4 a shot could not be
 analysed or its analysis not stored (the others still are; each line says which and why).
@@ -182,7 +183,7 @@ def _row_of(path: Path, future: Future) -> dict[str, Any]:
     try:
         return future.result()
     except Exception as exc:  # noqa: BLE001 - a dead worker fails its shots, not the command
-        return {"path": str(path), "version": None, "ok": False, "summary": None, "key_figures": None,
+        return {"path": str(path), "version": None, "ok": False, "summary": None, "verdict": None, "key_figures": None,
                 "cpu_s": None, "journal": None, "error": f"{path}: the analysis process failed: {type(exc).__name__}: {exc}"}
 
 
@@ -190,4 +191,7 @@ def _line(row: dict[str, Any]) -> str:
     where = f"{row['path']}: analysis version {row['version']}" if row["version"] else row["path"]
     if not row["ok"]:
         return f"{where}: FAILED: {row['error']}"
-    return f"{where}: {row['summary'] or 'analysed'}"
+    verdict = row.get("verdict") or {}
+    line = f"{where}: {row['summary'] or 'analysed'}"
+    # still one line per shot: the decision and its main reason (the findings: --json, the report)
+    return f"{line} | {verdict['decision']}: {verdict['reason']}" if verdict.get("decision") else line

@@ -106,15 +106,14 @@ def run_campaign_command(args: argparse.Namespace) -> int:
 
 
 def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
-    from hopkinson.rig.campaign import (
-        CampaignRunner,
-        FireLog,
-        attach_fire_log,
-        check_authorisation,
-        check_plan,
-        prepare_run,
+    from hopkinson.rig.campaign import CampaignRunner
+    from hopkinson.rig.campaign_setup import check_authorisation, check_plan, prepare_run
+    from hopkinson.rig.cli.shot import (
+        not_recorded_exit,
+        report_reclaimed,
+        subscribe_outputs,
+        tell_unshown_warnings,
     )
-    from hopkinson.rig.cli.shot import not_recorded_exit, report_reclaimed, subscribe_outputs
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig
     from hopkinson.rig.events import EventBus
@@ -122,6 +121,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     from hopkinson.rig.lab_record import attach_recorder
     from hopkinson.rig.lock import command_line
     from hopkinson.rig.plan import check_shot_count, load_plan
+    from hopkinson.rig.sim_fire_log import FireLog, attach_fire_log
 
     if not args.sim and (args.sim_fault or args.sim_fire_log):
         raise ConfigError("--sim-fault and --sim-fire-log need --sim")
@@ -168,6 +168,7 @@ def _run_campaign(args: argparse.Namespace, latch: Any) -> int:
     reports: list[str] = []
     if formats:
         reports = _write_report(run.path, formats)
+    tell_unshown_warnings(args, recorder.messages)  # the lab record's, when no progress line showed them
     recorded = not_recorded_exit(recorder, outcome.exit_code)  # 5 for a done campaign whose lab record is lost
     exit_code = EXIT_ABORTED if latch.received is not None else recorded
     if args.json:  # its exit_code is the process's

@@ -146,7 +146,8 @@ def _shot_truth(path: Path) -> dict[str, Any] | None:
 
 
 def demo_command(args: argparse.Namespace) -> int:
-    from hopkinson.rig.campaign import CampaignRunner, prepare_run
+    from hopkinson.rig.campaign import CampaignRunner
+    from hopkinson.rig.campaign_setup import prepare_run
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.events import EventBus
     from hopkinson.rig.instruments import open_instruments

@@ -2,7 +2,10 @@
 
     hopkinson lab status                       where the record is, its schema, its rows, the spool
                                                and the quarantine
-    hopkinson lab upgrade                      migrate the schema (as the database's owner role)
+    hopkinson lab upgrade [--yes-i-have-a-backup]
+                                               migrate the schema (as the database's owner role):
+                                               a SQLite file is copied beside itself first; on
+                                               PostgreSQL, pg_dump first (the command is printed)
     hopkinson lab import [RUN_FOLDER|SHOT.h5…] record shots measured before (idempotent); with no
                                                path: the spool (this database's records, and those
                                                spooled before records named their database)
@@ -65,7 +68,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     command("status", "where the lab's record is, its schema version, its rows, the spool and the quarantine",
             status_command).add_argument("--json", action="store_true", help="one JSON object")
-    command("upgrade", "migrate the database's schema to this software's version", upgrade_command)
+    p = command("upgrade", "migrate the database's schema to this software's version (a SQLite file is copied beside "
+                           "itself first; PostgreSQL asks for a pg_dump first)", upgrade_command)
+    p.add_argument("--yes-i-have-a-backup", action="store_true",
+                   help="PostgreSQL: the database was backed up with pg_dump (without this, the command only prints "
+                        "the pg_dump to run)")
     p = command("import", "record shot files measured before (idempotent); with no path, the spool", import_command)
     p.add_argument("paths", nargs="*", type=Path, metavar="RUN_FOLDER|SHOT.h5")
     p.add_argument("--by", default="", help="who imports (default: the login name)")
@@ -183,23 +190,20 @@ def status_command(args: argparse.Namespace) -> int:
 
 
 def upgrade_command(args: argparse.Namespace) -> int:
-    from hopkinson.lab.database import database_url, make_engine, redacted, upgrade_database
-    from hopkinson.lab.errors import LabError
+    from hopkinson.lab.database import database_url, redacted
+    from hopkinson.lab.upgrade import upgrade_record
 
     config = _config(args)
     url = database_url(config.database.url, explicit=args.database)
-    engine = make_engine(url)
-    try:
-        before, after = upgrade_database(engine)
-    except LabError:
-        raise
-    except Exception as exc:
-        raise LabError(f"database {redacted(url)}: {str(exc).splitlines()[0]} (run `lab upgrade` as the role that "
-                       f"owns the tables: docs/lab-record.md)") from None
-    finally:
-        engine.dispose()
-    print(f"database {redacted(url)}: schema {before or '(empty)'} -> {after}"
-          + (" (already current)" if before == after else ""))
+    outcome = upgrade_record(url, have_backup=args.yes_i_have_a_backup)
+    print(f"database {redacted(url)}: schema {outcome.before or '(empty)'} -> {outcome.after}"
+          + (" (already current)" if outcome.before == outcome.after else ""))
+    if outcome.backup is not None:
+        print(f"backup taken before: {outcome.backup}")
+    for note in outcome.notes:
+        print(note)
+    if outcome.dialect == "postgresql" and outcome.before != outcome.after:
+        print("run `hopkinson lab grants RIG_ROLE --owner OWNER_ROLE` again for the new tables (docs/lab-record.md)")
     return 0
 
 

@@ -181,8 +181,22 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
                                  message=f"{latch.reason} after the shot ended: the command exits {EXIT_ABORTED}"))
         if args.sim:
             sim_state = session.state()
+    tell_unshown_warnings(args, recorder.messages)  # the lab record's, when no event line showed them
     kept = not_recorded_exit(recorder, EXIT_DONE) == EXIT_DONE  # (says which record is lost)
     return _report(args, shot.outcome, sim_state, latch, shot.safe_again, record_lost=not kept)
+
+
+def events_shown(args: argparse.Namespace) -> bool:
+    """Whether the command printed its events as lines for people (not --json, --json-events)."""
+    return not (getattr(args, "json", False) or getattr(args, "json_events", False))
+
+
+def tell_unshown_warnings(args: argparse.Namespace, warnings: Any) -> None:
+    """Warnings on stderr, once each, when no event line has shown them (--json: stdout is one
+    object; --json-events: the events are for a script). With event lines they were told there."""
+    if not events_shown(args):
+        for warning in dict.fromkeys(warnings):
+            sys.stderr.write(f"hopkinson: warning: {warning}\n")
 
 
 def not_recorded_exit(recorder: Any, code: int) -> int:
@@ -222,6 +236,17 @@ def report_reclaimed(control: Any) -> None:
                          "which is no longer running\n")
 
 
+def _verdict_line(shot_path: Any) -> str | None:
+    """'ACCEPT — fit … · band …' for the stored shot (rig.shot_verdict), None when unreadable."""
+    from hopkinson.rig.shot_verdict import shot_judgement
+    from hopkinson.rig.shotfile import ShotFileError, read_shot
+
+    try:
+        return shot_judgement(read_shot(shot_path, load_raw=False)).verdict.line()
+    except (ShotFileError, OSError):
+        return None
+
+
 def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | None, latch: Any,
             safe_again: tuple[bool, str | None] | None, record_lost: bool = False) -> int:
     """Print the outcome; the exit code (docs/exit-codes.md), which the --json object carries too."""
@@ -242,16 +267,18 @@ def _report(args: argparse.Namespace, outcome: Any, sim_state: dict[str, Any] | 
         if outcome.log_path is not None:
             print(f"log:       {outcome.log_path}", flush=True)
         if outcome.results:
-            from hopkinson.rig.campaign import (
+            from hopkinson.rig.campaign_results import (
                 result_line,  # the campaign's one-line summary of the figures
             )
 
             print(f"results:   {result_line(outcome.results)}", flush=True)
+            verdict = _verdict_line(outcome.shot_path)
+            if verdict:
+                print(f"verdict:   {verdict}", flush=True)
             for role, sensor in (outcome.results.get("sensors") or {}).items():  # further sensors, by role
                 text = result_line(sensor) if "model" in sensor else f"not analysed: {sensor.get('error')}"
                 print(f"{role}: {text}", flush=True)
-    for warning in outcome.warnings:
-        sys.stderr.write(f"hopkinson: warning: {warning}\n")
+    tell_unshown_warnings(args, outcome.warnings)  # the sequencer's (RigWarning events too)
     if outcome.done and outcome.analysis_error and latch.received is None:
         what = outcome.analysis_error if outcome.analysis_error.startswith("analysis") else \
             f"analysis failed: {outcome.analysis_error}"

@@ -15,7 +15,7 @@ the analysis (the shot is kept). A held abort is used up when the shot (or `make
 `clear_abort()` forgets one (a new operator intent).
 
 STORE: whenever data was captured (also after an abort or a fault following the capture): the
-raw shot file written atomically (rig/shot.py, rig/shotfile.py). ANALYSE: in a worker thread,
+raw shot file written atomically (rig/shot.py, rig/shotfile_writer.py). ANALYSE: in a worker thread,
 bounded by timeouts.analyse_s; its result or its failure stored in the shot file
 (rig.shot.analyse_and_record, the same code a campaign uses for a stored shot). An analysis
 failure ends DONE with analysis_error set and exit code 4 (docs/exit-codes.md).

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hopkinson.analysis import doppler
+from hopkinson.analysis import differentiating_lowpass, doppler
+from hopkinson.analysis.beat_phase import beat_phase
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import pulse_width
 from hopkinson.drivers.sim.doppler_beat import (
@@ -144,11 +145,11 @@ def test_bandwidth_is_chosen_from_the_pulse_and_can_be_given() -> None:
         d = doppler.demodulate(beat, DT, DEFAULT_GRATING_PITCH_M)
         # Half-sine: 10–90 % velocity rise time 0.59·δ, so B = 5/(0.59·δ) ≈ 8.5/δ.
         rise = width_s * (np.arccos(-0.8) - np.arccos(0.8)) / np.pi
-        assert d.bandwidth_hz == pytest.approx(doppler.BANDWIDTH_RISE_PRODUCT / rise, rel=0.03)
+        assert d.bandwidth_hz == pytest.approx(differentiating_lowpass.BANDWIDTH_RISE_PRODUCT / rise, rel=0.03)
     given = doppler.demodulate(beat, DT, DEFAULT_GRATING_PITCH_M, bandwidth_hz=50e3)
     assert given.bandwidth_hz == 50e3
-    capped = doppler.bandwidth_for_rise_time(1e-7, 1e6)
-    assert capped == pytest.approx(doppler.MAX_BANDWIDTH_FRACTION * 1e6)
+    capped = differentiating_lowpass.bandwidth_for_rise_time(1e-7, 1e6)
+    assert capped == pytest.approx(differentiating_lowpass.MAX_BANDWIDTH_FRACTION * 1e6)
 
 
 def test_differentiating_lowpass_is_the_derivative_of_the_lowpass() -> None:
@@ -156,53 +157,53 @@ def test_differentiating_lowpass_is_the_derivative_of_the_lowpass() -> None:
     # scaled by L's gain, which is 1 in the pass band and falls in the stop band.
     rate, bandwidth = 1e6, 200e3
     t = np.arange(4000) / rate
-    d_taps = doppler.derivative_taps(bandwidth, rate)
+    d_taps = differentiating_lowpass.derivative_taps(bandwidth, rate)
     for f in (5e3, 50e3, 120e3):
         x = np.sin(2 * np.pi * f * t)
-        dx = doppler.apply_zero_phase(x, d_taps)
+        dx = differentiating_lowpass.apply_zero_phase(x, d_taps)
         expected = 2 * np.pi * f * np.cos(2 * np.pi * f * t)
         assert np.max(np.abs(dx - expected)[300:-300]) < 2e-4 * 2 * np.pi * f
     x = np.sin(2 * np.pi * 330e3 * t)  # well into the stop band (L: −6 dB at B, stop from 1.25·B)
-    assert np.max(np.abs(doppler.apply_zero_phase(x, d_taps))[300:-300]) < 1e-3 * 2 * np.pi * 330e3
+    assert np.max(np.abs(differentiating_lowpass.apply_zero_phase(x, d_taps))[300:-300]) < 1e-3 * 2 * np.pi * 330e3
     ramp = 3.0 * t
-    assert np.allclose(doppler.apply_zero_phase(ramp, d_taps), 3.0, rtol=1e-9)  # ends included
+    assert np.allclose(differentiating_lowpass.apply_zero_phase(ramp, d_taps), 3.0, rtol=1e-9)  # ends included
 
 
 # --------------------------------------------------------------------------- bad input
 def test_no_beat_is_a_clear_error() -> None:
     noise = np.random.default_rng(0).standard_normal(200_000) * 0.01
     with pytest.raises(AnalysisError, match="no Doppler beat"):
-        doppler.beat_phase(noise + 0.2, DT)
+        beat_phase(noise + 0.2, DT)
 
 
 def test_clipped_signal_is_a_clear_error() -> None:
     """Clipped = samples at the digitizer's full scale (given), never the record's own extremes."""
     t, acc, vel, beat = half_sine_shot(100_000, 38.6e-6, 30.0, 1.0)
     with pytest.raises(AnalysisError, match=r"clipped: \d+ samples at the digitizer's full scale \(-0.5 .. 0.4 V\)"):
-        doppler.beat_phase(np.clip(beat, -0.5, 0.4), DT, full_scale_v=(-0.5, 0.4))
+        beat_phase(np.clip(beat, -0.5, 0.4), DT, full_scale_v=(-0.5, 0.4))
     # The same beat inside a wider full scale is demodulated.
-    assert doppler.beat_phase(beat, DT, full_scale_v=(-2.0, 2.0)).phase_rad.size > 0
+    assert beat_phase(beat, DT, full_scale_v=(-2.0, 2.0)).phase_rad.size > 0
 
 
 def test_wrong_sample_rate_is_a_clear_error() -> None:
     t, acc, vel, beat = half_sine_shot(100_000, 38.6e-6, 30.0, 1.0)
     with pytest.raises(AnalysisError, match="sampled at 1 MS/s"):
-        doppler.beat_phase(beat[::100], 1e-6)
+        beat_phase(beat[::100], 1e-6)
     # A beat above 45 % of the rate is (about to be) aliased: 23.5 m/s at 2 µm pitch beats at
     # 23.5 MHz, 47 % of 50 MS/s.
     fast = pm_beat(np.concatenate([np.zeros(20_000), np.linspace(0, 23.5, 2_000), np.full(78_000, 23.5)]), 2e-8,
                    snr_db=30.0, rng=np.random.default_rng(1))
     with pytest.raises(AnalysisError, match="aliased"):
-        doppler.beat_phase(fast, 2e-8)
+        beat_phase(fast, 2e-8)
 
 
 def test_too_short_and_no_rest_are_clear_errors() -> None:
     t, acc, vel, beat = half_sine_shot(100_000, 38.6e-6, 30.0, 1.0)
     with pytest.raises(AnalysisError, match="only 1000 samples"):
-        doppler.beat_phase(beat[:1000], DT)
+        beat_phase(beat[:1000], DT)
     moving = pm_beat(np.full(200_000, 10.0), DT, snr_db=30.0, rng=np.random.default_rng(2))
     with pytest.raises(AnalysisError, match="no rest before the pulse"):
-        doppler.beat_phase(moving, DT)
+        beat_phase(moving, DT)
 
 
 def test_bad_grating_or_orders_are_clear_errors() -> None:

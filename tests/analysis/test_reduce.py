@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hopkinson.analysis.doppler import full_scale_volts
 from hopkinson.analysis.errors import AnalysisError, RecordError
+from hopkinson.analysis.full_scale import full_scale_volts
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.reduce import read_raw_table, reduce_raw, write_raw_table
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode

@@ -150,6 +150,19 @@ def test_units_convert_by_their_definitions() -> None:
         sensitivity_unit("furlongs")
 
 
+def test_one_parser_reads_a_certificates_units_for_the_panel_and_the_lab() -> None:
+    """analysis.sensitivity_units is the only unit parser (lab.history and lab.dcc use it): units
+    beyond those offered, by their definitions; kinds never mixed."""
+    from hopkinson.analysis.sensitivity_units import factor, parse
+
+    assert sensitivity_unit("pC/(km/s²)").to_si(1.0) == pytest.approx(1e-15)
+    assert sensitivity_unit("nV/g").input_unit == "V"
+    assert factor("mV/g", "V/(m/s²)") == pytest.approx(1e-3 / 9.80665)
+    assert factor("pC/(m/s²)", "fC/(m/s^2)") == pytest.approx(1e3)
+    assert factor("pC/g", "mV/g") is None and factor("mV/furlong", "mV/g") is None
+    assert parse("kV/(km/s²)") == (1e3, "V", 1e3)
+
+
 def test_implausible_sensitivities_are_refused_naming_the_unit() -> None:
     check_plausible(0.312, UNITS["µV/(m/s²)"])
     check_plausible(4.0, UNITS["pC/g"])

@@ -59,7 +59,8 @@ def write_made_up_shot(path, *, serial: str = "SN-7", campaign: str | None = Non
                        operator: str = "tech A"):
     """A real shot file (rig.shotfile) with short made-up channels and made-up results; its meta."""
     import numpy as np
-    from hopkinson.rig.shotfile import RawShot, ShotMeta, add_analysis, write_raw_shot
+    from hopkinson.rig.shotfile import RawShot, ShotMeta
+    from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
     rng = np.random.default_rng(abs(hash(str(path))) % 2**32)
     raw = RawShot({"doppler": (rng.integers(-2000, 2000, 512).astype(np.int16), 1e-3, 0.0),

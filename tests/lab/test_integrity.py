@@ -18,7 +18,7 @@ from hopkinson.lab.errors import LabError
 from hopkinson.lab.repository import open_repository
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.lab_record import LabRecorder, shot_record
-from hopkinson.rig.shotfile import RAW_MISMATCH, verify_shot
+from hopkinson.rig.shotfile_integrity import RAW_MISMATCH, verify_shot
 
 from tests.lab.records import made_up_record, write_made_up_shot
 from tests.lab.test_lab_cli import LAB_SECTION, REPO, lab, record_job
@@ -232,7 +232,8 @@ def test_one_verification_serves_report_analyse_and_import(tmp_path: Path, url: 
         codes[7] += 3
         f["raw/response"][...] = codes
     assert verify_shot(edited) == [RAW_MISMATCH]
-    from hopkinson.rig.shotfile import ShotFileError, require_sound
+    from hopkinson.rig.shotfile import ShotFileError
+    from hopkinson.rig.shotfile_integrity import require_sound
 
     with pytest.raises(ShotFileError, match="tampered"):
         require_sound(edited)  # what `report` and `analyse` call
@@ -336,7 +337,8 @@ def test_report_and_analyse_check_the_raw_sha256_the_lab_record_kept(
     """Channels and the SHA-256 written beside them, both rewritten with h5py, pass the file's own
     checks; `report` and `analyse` still refuse the file, against the SHA-256 the lab's record
     kept from its first import (the record in force: HOPKINSON_DATABASE_URL)."""
-    from hopkinson.rig.shotfile import raw_sha256, read_shot
+    from hopkinson.rig.shotfile import read_shot
+    from hopkinson.rig.shotfile_integrity import raw_sha256
 
     shot = tmp_path / "shot.h5"
     write_made_up_shot(shot, serial="SN-K")

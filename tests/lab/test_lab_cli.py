@@ -14,7 +14,7 @@ import pytest
 import sqlalchemy as sa
 from hopkinson.lab.database import head_revision, make_engine
 from hopkinson.rig.cli.main import main
-from hopkinson.rig.shotfile import add_analysis
+from hopkinson.rig.shotfile_writer import add_analysis
 from scipy.stats import t as student_t
 
 from tests.lab.records import made_up_results, write_made_up_shot
@@ -286,7 +286,8 @@ def test_bad_input_is_one_line_and_exit_2(case: str, tmp_path: Path, lab_config:
 
 
 def test_the_raw_hash_ignores_the_analysis_and_follows_the_codes(tmp_path: Path) -> None:
-    from hopkinson.rig.shotfile import raw_sha256, read_shot
+    from hopkinson.rig.shotfile import read_shot
+    from hopkinson.rig.shotfile_integrity import raw_sha256
 
     path = tmp_path / "one.h5"
     write_made_up_shot(path)

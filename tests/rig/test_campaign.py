@@ -3,7 +3,7 @@ journaled, an aborted shot stops the campaign and a resume finishes it, a shot f
 record waits for an operator, a recorded shot is analysed on resume without being fired again,
 and `hopkinson campaign run` (authorisation, progress lines, bad input).
 
-The simulated world logs every launch (rig.campaign.attach_fire_log): that log, not the
+The simulated world logs every launch (rig.sim_fire_log.attach_fire_log): that log, not the
 journal, is the witness of how often each shot was fired.
 """
 
@@ -17,13 +17,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from hopkinson.rig.campaign import (
-    CampaignRunner,
-    FireLog,
-    attach_fire_log,
-    read_fire_log,
-    shot_request,
-)
+from hopkinson.rig.campaign import CampaignRunner
+from hopkinson.rig.campaign_setup import shot_request
 from hopkinson.rig.cli.campaign import ProgressPrinter
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.events import (
@@ -41,6 +36,7 @@ from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder
 from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.sim_fire_log import FireLog, attach_fire_log, read_fire_log
 from hopkinson.rig.sim_session import SimSession, sim_session
 
 from tests.rig.conftest import fast_sim_config, short_timeouts_config

@@ -16,12 +16,12 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from hopkinson.rig.campaign import read_fire_log
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.logbook import read_log
 from hopkinson.rig.run_folder import open_run_folder
 from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.sim_fire_log import read_fire_log
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = """

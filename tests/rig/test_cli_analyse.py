@@ -27,12 +27,25 @@ from tests.rig.conftest import read_until
 from tests.rig.test_cli_shot import _args, configs  # noqa: F401 (fixture)
 
 
+@pytest.fixture(scope="module")
+def fired(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Where the module keeps its one fired shot (`shot_file` fires it the first time)."""
+    return {"folder": tmp_path_factory.mktemp("fired")}
+
+
 @pytest.fixture
-def shot_file(configs, capsys) -> Path:  # noqa: F811
-    assert main(_args(configs, "--yes")) == 0
-    capsys.readouterr()
-    (path,) = configs["out"].glob("*.h5")
-    return path
+def shot_file(configs, capsys, fired: dict[str, Path]) -> Path:  # noqa: F811
+    """A shot fired with `hopkinson shot --sim` (once per module: each test gets its own copy of
+    the shot folder, the shot file and its log, as the shot left them)."""
+    if "shot" not in fired:
+        assert main(_args(configs, "--yes")) == 0
+        capsys.readouterr()
+        (path,) = configs["out"].glob("*.h5")
+        shutil.copytree(configs["out"], fired["folder"] / "shots")
+        fired["shot"] = fired["folder"] / "shots" / path.name
+        return path
+    shutil.copytree(fired["folder"] / "shots", configs["out"])
+    return configs["out"] / fired["shot"].name
 
 
 def test_a_stored_shot_gets_a_new_analysis_version_and_keeps_the_old_one(shot_file: Path, capsys) -> None:
@@ -50,6 +63,8 @@ def test_a_stored_shot_gets_a_new_analysis_version_and_keeps_the_old_one(shot_fi
     # the same method on the same data: the same model (the simulated sensor: 27 kHz, ζ 0.05)
     f_n = row["key_figures"]["natural_frequency_hz"]["value"]
     assert f_n == pytest.approx(27e3, rel=1e-3)
+    # its verdict, as the panel shows it: the resonance it names is the simulated sensor's
+    assert row["verdict"]["decision"] in ("ACCEPT", "REPEAT") and "resonance excited (27" in row["verdict"]["line"]
 
 
 def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Path, capsys) -> None:
@@ -60,6 +75,7 @@ def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Pat
     assert main(["analyse", str(shot_file)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{shot_file}: analysis version 1: order 2, f_n ") and out.count("\n") == 1
+    assert re.search(r" \| (ACCEPT|REPEAT): \S.*\n$", out), out  # the verdict closes the shot's one line
     f_n_khz = float(re.search(r"f_n ([0-9.]+) ± ", out).group(1))
     assert f_n_khz == pytest.approx(27.0, rel=1e-3)  # the simulated sensor's 27 kHz
     shot = read_shot(shot_file)

@@ -131,7 +131,7 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
     a further sensor never inherits it, and an unreadable file is refused before anything moves."""
     from hopkinson.analysis.params import AnalysisParams
     from hopkinson.analysis.shot_analysis import analyse_record
-    from hopkinson.rig.campaign import shot_request
+    from hopkinson.rig.campaign_setup import shot_request
     from hopkinson.rig.config import load_rig_config
     from hopkinson.rig.plan import load_plan
     from hopkinson.rig.run_folder import RunFolder

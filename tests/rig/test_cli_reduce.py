@@ -15,7 +15,8 @@ from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.doppler_beat import raw_shot
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
 from hopkinson.rig.cli.main import main
-from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, write_raw_shot
+from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
+from hopkinson.rig.shotfile_writer import write_raw_shot
 
 DT = 1e-8
 N = 120_000

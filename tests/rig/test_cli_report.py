@@ -13,7 +13,8 @@ import pytest
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.cli.report import default_outputs
-from hopkinson.rig.shotfile import add_analysis, read_shot
+from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.shotfile_writer import add_analysis
 
 PLAN = """
 name = "rep"
@@ -26,6 +27,7 @@ serial = "R1"
 projectile = 3
 [defaults.analysis]
 max_order = 6
+draws = 50  # the uncertainty shown in the report, with the fewest draws allowed
 [[shots]]
 pressure_bar = 1.3
 [[shots]]

@@ -97,6 +97,10 @@ def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
     assert [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s] == [
         "CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE", "CAPTURE", "SAFE", "STORE", "ANALYSE", "DONE"]
     assert re.search(r"^results: .*f_n 2\d\.\d+ ± 0\.\d+ kHz, zeta 0\.0\d+ ± 0\.\d+, FBSD ±5 % \d\.\d+ ± 0\.\d+ kHz", out, flags=re.M)
+    # the verdict the panel shows, on its own line; the resonance it names is the simulated sensor's (27 kHz)
+    verdict = re.search(r"^verdict: +(ACCEPT|REPEAT) — fit .* resonance excited \((\d+(?:\.\d+)?) kHz\)", out, flags=re.M)
+    assert verdict is not None, out
+    assert abs(float(verdict.group(2)) / 27.0 - 1.0) < 0.01
 
 
 def test_a_controller_unreachable_at_session_start_is_named_with_a_fix(configs, capsys) -> None:

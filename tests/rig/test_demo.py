@@ -19,11 +19,24 @@ from tests.sim_truth import true_fbsd_hz
 REPO = Path(__file__).resolve().parents[2]
 
 
+def rig_config_with_few_draws(tmp_path: Path) -> Path:
+    """config/rig-sim.toml with the fewest Monte Carlo draws allowed (50): the demo still prints
+    every figure as value ± U, in a fraction of the time (the intervals' coverage is tested in
+    tests/analysis)."""
+    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    text, n = re.subn(r"^draws = \d+", "draws = 50", text, count=1, flags=re.M)
+    assert n == 1
+    path = tmp_path / "rig-sim-50-draws.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
 def test_demo_fires_a_short_campaign_and_its_models_match_the_truth(tmp_path: Path, capsys) -> None:
     sim = tmp_path / "sim-fast.toml"
     sim.write_text("[world]\ntime_scale = 100.0\n", encoding="utf-8")
     out = tmp_path / "demo-output"
-    assert main(["demo", "--shots", "2", "--out", str(out), "--sim-config", str(sim), "--report", "html"]) == 0
+    assert main(["demo", "--shots", "2", "--out", str(out), "--sim-config", str(sim), "--report", "html",
+                 "--config", str(rig_config_with_few_draws(tmp_path))]) == 0
     stdout = capsys.readouterr().out
     report = re.search(r"^report: (.+report\.html)$", stdout, re.M)
     assert report is not None, stdout
@@ -75,7 +88,8 @@ def test_demo_on_the_shipped_simulator_prints_intervals_that_hold_their_truths(t
     sim = tmp_path / "sim-shipped-fast.toml"
     sim.write_text(re.sub(r"^time_scale = .*$", "time_scale = 100.0", text, count=1, flags=re.M), encoding="utf-8")
     out = tmp_path / "demo-output"
-    assert main(["demo", "--shots", "2", "--out", str(out), "--sim-config", str(sim), "--report", "html"]) == 0
+    assert main(["demo", "--shots", "2", "--out", str(out), "--sim-config", str(sim), "--report", "html",
+                 "--config", str(rig_config_with_few_draws(tmp_path))]) == 0
     stdout = capsys.readouterr().out
     intervals = printed_intervals(stdout)
     assert {name for name, *_ in intervals} == {"sensitivity", "f_n", "ζ", "FBSD ±5 %", "FBSD ±10 %",

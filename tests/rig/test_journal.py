@@ -26,7 +26,10 @@ from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.journal import Journal, JournalError, ShotState
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder, open_run_folder
-from hopkinson.rig.shotfile import RawShot, ShotMeta, read_shot, write_raw_shot
+from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.shotfile_writer import write_raw_shot
+
+from tests.rig.journal_fakes import meta_for, raw_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,25 +60,15 @@ def plan_path(tmp_path: Path) -> Path:
     return path
 
 
-def raw_for(index: int) -> RawShot:
-    """The fake digitizer's record of shot `index` (known, so the file can be checked)."""
-    codes = (np.arange(256) * (index + 1) % 30000).astype(np.int16)
-    return RawShot({"doppler": (codes, 1e-3, 0.0), "response": (-codes, 2e-3, 0.1)}, 1e-8, 10)
-
-
-def meta_for(shot_id: str, uuid: str, campaign: str, pressure: float) -> ShotMeta:
-    return ShotMeta("op", "M", "S", pressure, 3, shot_id=shot_id, campaign_id=campaign, uuid=uuid)
-
-
 # ---------------------------------------------------------------------------- the fake runner
 
 CHILD = textwrap.dedent(
     """
     import os, random, signal, sys, uuid
     from pathlib import Path
-    import hopkinson.rig.shotfile as sf
+    import hopkinson.rig.shotfile_writer as sf
     from hopkinson.rig.journal import Journal
-    from tests.rig.test_journal import meta_for, raw_for
+    from tests.rig.journal_fakes import meta_for, raw_for
 
     folder, die_at, die_shot = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
     rng = random.Random(int(sys.argv[4]))

@@ -15,7 +15,8 @@ import pytest
 from hopkinson.drivers.sim.real_records import RealismParams
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import LauncherParams, WorldParams
-from hopkinson.rig.campaign import CampaignRunner, check_plan
+from hopkinson.rig.campaign import CampaignRunner
+from hopkinson.rig.campaign_setup import check_plan
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import CampaignFinished, CampaignShotStarted, EventBus

@@ -175,7 +175,7 @@ def test_dcm_ratio_auto_is_the_default_and_can_be_written(tmp_path):
 def test_a_second_accelerometer_is_named_in_the_plan_and_checked_against_the_rigs_channels(tmp_path: Path) -> None:
     import dataclasses
 
-    from hopkinson.rig.campaign import check_plan
+    from hopkinson.rig.campaign_setup import check_plan
     from hopkinson.rig.config import load_rig_config
 
     shots = "[[shots]]\npressure_bar = 2.0\nprojectile = 3\n"

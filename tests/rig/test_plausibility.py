@@ -277,7 +277,10 @@ def test_safe_never_calls_a_swapped_charged_reservoir_vented(make_rig) -> None:
         return dataclasses.replace(config, valve_controller=dataclasses.replace(config.valve_controller,
                                                                                 **register_tables(wrong)))
 
-    slow = WorldParams(time_scale=1.0, pneumatics=PneumaticsParams(fill_rate_bar_s=40.0))  # SAFE's vent takes s
+    # SAFE's vent takes 1000 s here: whenever SAFE first reads (a loaded CI machine reads late), the
+    # reservoir still holds ~2 bar, whose swapped reading is the implausible 2.3e-41 (with the
+    # default 1 s vent a late read met a pressure whose swapped value looked plausible)
+    slow = WorldParams(time_scale=1.0, pneumatics=PneumaticsParams(fill_rate_bar_s=40.0, vent_time_constant_s=1000.0))
     rig = make_rig(sim=imitation_sim(slow), adjust=reservoir_big)
     rig.world.set_pressure_setpoint_bar(2.0)
     rig.world.set_fill_valve(True)

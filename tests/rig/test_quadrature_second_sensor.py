@@ -252,3 +252,16 @@ def test_a_simulated_world_with_one_photodetector_drops_the_shipped_quadrature_c
     two = sim_digitizer_config(base, "TCPIP::127.0.0.1::5025::SOCKET", "keysight",
                                {"doppler": 1, "response": 2, "doppler_quadrature": 3})
     assert two.channels["doppler_quadrature"] == "CHAN3" and two.ranges_v["doppler_quadrature"] == 1.0
+
+
+def test_the_report_opens_each_shot_with_its_verdict(fired) -> None:
+    """The shot's results table starts with its ACCEPT/REPEAT line (rig.shot_verdict), the one the
+    panel and `hopkinson shot` print: the resonance it names is the simulated sensor's (27 kHz)."""
+    first = shot_report(fired.shot.path).shots[0]
+    assert first.verdict is not None
+    label, line = results_rows(first)[0]
+    assert label == "verdict" and line == first.verdict.line()
+    excited = re.search(r"resonance excited \((\d+(?:\.\d+)?) kHz\)", line)
+    assert line.startswith(("ACCEPT — ", "REPEAT — ")) and excited is not None, line
+    assert abs(float(excited.group(1)) / 27.0 - 1.0) < 0.01
+    assert "−0.0 %" not in line  # a deviation that rounds to zero has no sign

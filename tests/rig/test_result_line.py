@@ -3,7 +3,7 @@ report says: value ± U, and no natural frequency for a mode the excitation does
 
 from __future__ import annotations
 
-from hopkinson.rig.campaign import result_line
+from hopkinson.rig.campaign_results import result_line
 
 MODE = {"kind": "complex", "natural_frequency_hz": 27_110.0, "damping_ratio": 0.0449}
 

@@ -80,7 +80,7 @@ def test_the_shot_file_settings_record_them(tmp_path: Path) -> None:
 def test_a_campaign_shot_carries_the_plans_unit_and_tolerance(tmp_path: Path) -> None:
     from types import SimpleNamespace
 
-    from hopkinson.rig.campaign import shot_request
+    from hopkinson.rig.campaign_setup import shot_request
 
     plan = load_plan(plan_with(tmp_path, 'sensitivity_unit = "mV/g"\ntolerance_percent = 2.5'))
     run = SimpleNamespace(shots_dir=tmp_path, campaign_id="t-run")

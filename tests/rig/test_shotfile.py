@@ -21,12 +21,11 @@ from hopkinson.rig.shotfile import (
     RawShot,
     ShotFileError,
     ShotMeta,
-    add_analysis,
     read_shot,
     read_shot_meta,
     software_version,
-    write_raw_shot,
 )
+from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
 N = 5000
 TRIGGER = 1200
@@ -90,7 +89,7 @@ def test_raw_round_trip_and_layout(tmp_path: Path) -> None:
     assert shot.volts("doppler")[1] == 32767 * 3.0517578125e-05 - 0.0125
     assert shot.raw.time_s[TRIGGER] == 0.0 and shot.raw.time_s[0] == pytest.approx(-TRIGGER * 1e-8)
 
-    # The layout DESIGN.md promises, readable without this module.
+    # The layout docs/files-and-formats.md promises, readable without this module.
     with h5py.File(path, "r") as f:
         ds = f["raw/doppler"]
         assert ds.dtype == np.int16 and ds.fletcher32
@@ -225,7 +224,7 @@ CRASH_CHILD = textwrap.dedent(
     """
     import os, signal, sys
     import numpy as np
-    import hopkinson.rig.shotfile as sf
+    import hopkinson.rig.shotfile_writer as sf
     from tests.rig.test_shotfile import known_raw, known_meta
     path, step = sys.argv[1], sys.argv[2]
     if step == "analysis":

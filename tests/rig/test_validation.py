@@ -18,7 +18,8 @@ from hopkinson.rig.instruments import make_instrument
 from hopkinson.rig.plan import check_shot_count, load_plan
 from hopkinson.rig.sequencer import FireAuthorisation
 from hopkinson.rig.shot import analyse_and_record, analyse_raw
-from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, read_shot, write_raw_shot
+from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, read_shot
+from hopkinson.rig.shotfile_writer import write_raw_shot
 from hopkinson.rig.sim_session import sim_session
 
 from tests.rig.conftest import fast_sim_config, rig_toml, short_timeouts_config

@@ -10,7 +10,8 @@ from types import SimpleNamespace
 
 from hopkinson.rig.journal import Journal, ShotState
 from hopkinson.rig.plan import load_plan
-from hopkinson.rig.shotfile import add_analysis, read_shot
+from hopkinson.rig.shotfile import read_shot
+from hopkinson.rig.shotfile_writer import add_analysis
 from PySide6.QtCore import QCoreApplication
 
 from tests.ui.conftest import quick_config

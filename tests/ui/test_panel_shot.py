@@ -151,7 +151,8 @@ def test_fire_not_confirmed_keeps_the_rig_armed_then_abort_stands_down(qtbot, ma
 
 
 def test_a_shot_whose_analysis_failed_still_shows_its_raw_channels(qtbot, make_panel, tmp_path):
-    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
+    from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
     n = 5000
     t = np.arange(n)
@@ -192,7 +193,8 @@ def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel,
     """A shot whose results carry the uncertainty and the DCM's check (the JSON contracts of
     issues 10 and 11): the strip shows value ± U and a DCM not recommended with its reason."""
     from hopkinson.analysis.shot_analysis import AnalysisParams, analyse_record
-    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, add_analysis, write_raw_shot
+    from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
+    from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 
     from tests.reports.contract import contract_results
     from tests.reports.test_report import SENSOR_A, simulated_record
