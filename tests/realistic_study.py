@@ -214,7 +214,7 @@ def coverage(outcomes: list[ShotOutcome]) -> dict[str, FigureCoverage]:
         errors, widths = [], []
         for o, _ in claimed:
             v, iv = o.value.get(name), o.interval.get(name)
-            if v is None or iv is None:
+            if v is None or iv is None or not o.truth[name]:  # no relative error of a zero truth (ε of a symmetric mount)
                 continue
             errors.append(v / o.truth[name] - 1.0)
             widths.append(0.5 * (iv[1] - iv[0]) / abs(o.truth[name]))
