@@ -196,14 +196,16 @@ def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     from hopkinson.analysis.key_figures import KeyFigures
     from hopkinson.rig.campaign_results import result_info, result_line
     from hopkinson.rig.shot import analysis_error_text
+    from hopkinson.rig.shot_verdict import judge, settings_of
 
     row: dict[str, Any] = {"path": str(path), "version": None, "ok": False, "error": None, "key_figures": None,
                            "summary": None, "verdict": None, "cpu_s": None, "journal": None}
     started = time.process_time()
     try:
         recorded = reanalyse(path, overrides)
+        shot = read_shot(path, load_raw=False)  # once: the version stored and the settings the verdict reads
         if recorded.stored:
-            row["version"] = read_shot(path, load_raw=False).analyses[-1]["version"]
+            row["version"] = shot.analyses[-1]["version"]
     except (ShotFileError, ConfigError) as exc:
         row["error"] = str(exc)
         return row
@@ -220,21 +222,10 @@ def reanalysis_row(path: Path, overrides: dict[str, Any]) -> dict[str, Any]:
     if recorded.results is not None:
         row["key_figures"] = KeyFigures.from_results(recorded.results).to_dict()
         row["summary"] = result_line(recorded.results)
-    row["verdict"] = _verdict(path, recorded.results, recorded.error)
+    row["verdict"] = judge(recorded.results, settings_of(shot), recorded.error).verdict.to_dict()
     if recorded.stored:
         row["journal"] = {"error": recorded.error, "info": result_info(recorded.results)}
     return row
-
-
-def _verdict(path: Path, results: dict[str, Any] | None, error: str | None) -> dict[str, Any] | None:
-    """The shot's ACCEPT/REPEAT verdict (rig.shot_verdict) with the settings it was fired with."""
-    from hopkinson.rig.shot_verdict import judge, settings_of
-
-    try:
-        settings = settings_of(read_shot(path, load_raw=False))
-    except (ShotFileError, OSError):
-        settings = {}
-    return judge(results, settings, error).verdict.to_dict()
 
 
 class RunJournals:
