@@ -1,7 +1,27 @@
 """Issue 17: the default identification on PTB's real shock record, and on hybrids (the real
 reference drives a known sensor, with a real-shaped disturbance injected): motion after the
 pulse is not taken as noise, the model error is detected and carried into the intervals, and
-the intervals contain the independent truth (the sine calibration's edges, the hybrid's model)."""
+the intervals contain the independent truth (the sine calibration's edges, the hybrid's model).
+
+Seeds not picked to pass (issue 45 item 3). Each record is identified once per session
+(tests/analysis/ptb_fixtures.py) and its Monte Carlo drawn on seeds fixed before any result was
+seen; containment is counted over them with a stated threshold, whose pass probabilities
+(scipy.stats.binom) `test_the_thresholds_have_the_stated_power` asserts:
+
+- PTB's record: the sine's FBSD ±5 %, ±10 % and sensitivity in their intervals on each of the
+  EN_SEEDS (400 draws, a user's analysis): 15 trials, at most PTB_MAX_MISSES = 2 misses.
+  P(pass | 95 %) = 0.964; P(pass | 90 %) = 0.816, P(pass | 70 %) = 0.127. One record: the seeds
+  vary only the Monte Carlo, not the data, so no seed count turns this into a coverage test;
+  it shows the holding is no accident of one seed. The variants (test_ptb_variants.py) and the
+  simulated studies (test_coverage_realistic.py) count coverage over data.
+- The hybrids (a known sensor): each of HYBRIDS on each of HYBRID_SEEDS (60 draws): the FBSD
+  ±5 % and ±10 % edges, the sensitivity, f_n, ζ and the response band throughout the supported
+  band, and ε where the lobes' gains differ: 99 trials, at most HYBRID_MAX_MISSES = 9 misses.
+  P(pass | 95 %) = 0.973; P(pass | 90 %) = 0.464 (99 trials cannot reject 90 %: that needs about
+  300 at ~0.5 s each), P(pass | 80 %) = 0.003. The lobe-gain hybrids are known to miss on 1–2 of
+  8 noise seeds (benchmarks/coverage_ptb_hybrids.py, docs/ptb-record.md): the threshold admits
+  that, and the count names every miss.
+"""
 
 from __future__ import annotations
 
@@ -13,17 +33,41 @@ import numpy as np
 import pytest
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.shot_analysis import analyse_record
 from scipy import signal
+from scipy.stats import binom
 
-from tests.ptb_shock import SINE_FBSD_5_HZ, SINE_FBSD_10_HZ, against_sine, ptb_record, ptb_sine
+from tests.analysis.ptb_fixtures import seeds
+from tests.ptb_shock import against_sine, ptb_record, ptb_sine
 
 DRAWS = 60
+USER_DRAWS = AnalysisParams().draws  # what a user's analysis takes (400)
+EN_SEEDS = seeds(1, 5)
+PTB_MAX_MISSES = 2
+HYBRID_SEEDS = seeds(1, 3)
+HYBRID_MAX_MISSES = 9
 
 
 @pytest.fixture(scope="module")
-def ptb():
-    return analyse_record(ptb_record(), AnalysisParams(draws=DRAWS, seed=1))
+def ptb(analyses):
+    return analyses.analysed("ptb", ptb_record, seed=1, draws=DRAWS)
+
+
+@pytest.fixture(scope="module")
+def ptb_seeds(analyses):
+    """PTB's record on each of EN_SEEDS with a user's draws (the band's 2.5 % ends from 10 draws
+    each, not 1.5 as at 60)."""
+    return [analyses.analysed("ptb", ptb_record, seed=seed, draws=USER_DRAWS) for seed in EN_SEEDS]
+
+
+def test_the_thresholds_have_the_stated_power() -> None:
+    trials = 3 * len(EN_SEEDS)
+    assert binom.cdf(PTB_MAX_MISSES, trials, 0.05) >= 0.95  # 0.964
+    assert binom.cdf(PTB_MAX_MISSES, trials, 0.30) <= 0.13  # 0.127 at 70 %
+    trials = len(HYBRID_SEEDS) * sum(len(hybrid_figures(case)) for case in HYBRIDS)
+    assert trials == 99
+    assert binom.cdf(HYBRID_MAX_MISSES, trials, 0.05) >= 0.95  # 0.973
+    assert binom.cdf(HYBRID_MAX_MISSES, trials, 0.20) <= 0.005  # 0.003 at 80 %
+    assert binom.cdf(HYBRID_MAX_MISSES, trials, 0.10) <= 0.5  # 0.464 at 90 %: stated, not rejected
 
 
 def test_motion_after_the_pulse_is_not_taken_as_noise(ptb):
@@ -42,22 +86,18 @@ def test_the_model_error_is_detected_and_sized(ptb):
     assert any(row["source"] == "model error" for row in ptb.uncertainty["budget"])
 
 
-def test_the_intervals_contain_the_sine_calibration(ptb):
-    fbsd = ptb.uncertainty["fbsd_hz"]
-    for level, sine_hz in (("5", SINE_FBSD_5_HZ), ("10", SINE_FBSD_10_HZ)):
-        lo, hi = fbsd[level]["interval"]
-        assert lo <= sine_hz <= hi, (level, lo, hi)
-    lo, hi = ptb.uncertainty["dc_gain"]["interval"]
-    assert lo <= ptb_sine().magnitude[0] <= hi  # the 0.5 kHz point: the sensitivity
+def test_the_intervals_contain_the_sine_calibration(ptb_seeds):
+    """The sine's FBSD edges and its 0.5 kHz point (the sensitivity), on each seed: at most
+    PTB_MAX_MISSES misses of 15 (module docstring)."""
+    misses = [(seed, figure, j["interval"], j["truth"]) for seed, analysis in zip(EN_SEEDS, ptb_seeds, strict=True)
+              for figure, j in against_sine(analysis.uncertainty).items() if not j["contains"]]
+    assert len(misses) <= PTB_MAX_MISSES, misses
 
 
-def test_the_intervals_are_as_narrow_as_the_issue_asks(ptb):
-    fbsd = ptb.uncertainty["fbsd_hz"]
-    for level in ("5", "10"):
-        lo, hi = fbsd[level]["interval"]
-        assert (hi - lo) / 2 <= 0.25 * fbsd[level]["value"]
-    lo, hi = ptb.uncertainty["dc_gain"]["interval"]
-    assert (hi - lo) / 2 <= 0.02 * ptb.uncertainty["dc_gain"]["value"]
+def test_the_intervals_are_as_narrow_as_the_issue_asks(ptb_seeds):
+    """Issue 17's half-widths (FBSD 25 %, sensitivity 2 %) on every seed."""
+    for analysis in ptb_seeds:
+        assert all(j["half_width_ok"] for j in against_sine(analysis.uncertainty).values()), analysis.uncertainty
 
 
 def test_the_model_follows_the_sine_calibration(ptb):
@@ -87,16 +127,17 @@ def test_no_mode_is_claimed_inside_the_band(ptb):
 
 
 def test_intervals_stay_inside_physical_bounds(ptb):
-    main = ptb.uncertainty["main_mode"]
-    if main is not None:
-        assert main["natural_frequency_hz"]["interval"][0] > 0
-        assert main["damping_ratio"]["interval"][0] >= 0
+    """PTB's record claims no mode (its resonance lies beyond the band), so it carries no f_n or ζ
+    interval: those bounds are checked on the hybrids, whose mode is claimed."""
+    assert ptb.uncertainty["main_mode"] is None
     for e in ptb.uncertainty["fbsd_hz"].values():
         assert e["interval"][0] > 0
 
 
 # ---------------------------------------------------------------------------- hybrids
 F_N_HZ, ZETA, SENSITIVITY = 55e3, 0.03, 0.23  # a sensor like PTB's (sine: mode near 51–57 kHz)
+_WN = 2 * np.pi * F_N_HZ
+TRUTH = signal.lti([SENSITIVITY * _WN**2], [1.0, 2 * ZETA * _WN, _WN**2])  # the known sensor of every hybrid
 
 
 def hybrid_record(tension: float = 1.0, compression: float = 1.0, seed: int = 5) -> tuple[Record, signal.lti]:
@@ -104,8 +145,7 @@ def hybrid_record(tension: float = 1.0, compression: float = 1.0, seed: int = 5)
     continuous sensor, each lobe of the pulse with its own gain (issue 17 measured ×0.993 in
     tension and ×1.0145 in compression), plus white noise at 0.01 % of the response's peak."""
     rec = ptb_record()
-    wn = 2 * np.pi * F_N_HZ
-    truth = signal.lti([SENSITIVITY * wn**2], [1.0, 2 * ZETA * wn, wn**2])
+    truth = TRUTH
     ref = rec.reference
     drive = np.where(ref >= 0, tension, compression) * ref
     _, y, _ = signal.lsim(truth, drive, rec.time_s - rec.time_s[0])
@@ -121,38 +161,29 @@ def truth_fbsd_hz(truth: signal.lti) -> dict[str, float]:
     return {"5": float(np.interp(1.05, rel, f)), "10": float(np.interp(1.10, rel, f))}
 
 
-@pytest.fixture(scope="module")
-def clean_hybrid():
+def motion_record() -> Record:
+    """The clean hybrid with the bar's motion after the pulse (from 0.7 ms) reaching the sensor
+    at ×0.75 of what the reference sees (issue 17 measured ×0.75 on the real record)."""
     rec, truth = hybrid_record()
-    return analyse_record(rec, AnalysisParams(draws=DRAWS, seed=2)), truth
+    after = rec.time_s - rec.time_s[0] >= 7.0e-4
+    _, extra, _ = signal.lsim(truth, np.where(after, -0.25 * rec.reference, 0.0), rec.time_s - rec.time_s[0])
+    return Record(rec.sample_interval_s, rec.reference, rec.response + extra, response_unit="pC")
 
 
-def test_a_hybrid_with_the_real_reference_is_recovered(clean_hybrid):
-    analysis, truth = clean_hybrid
-    ident = analysis.identification
-    assert ident.noise["motion_after_pulse"]  # the real reference's motion, seen by both channels
-    assert not ident.noise["model_error"]["detected"]  # a linear sensor: nothing beyond the noise
-    for level, edge in truth_fbsd_hz(truth).items():
-        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
-        assert lo <= edge <= hi, (level, edge, lo, hi)
-    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
-    assert lo <= SENSITIVITY <= hi
-    assert_mode_between_the_nulls(analysis)
+def lobe_gains(scale: float) -> tuple[float, float]:
+    """Issue 17's measured lobe gains (×0.993 in tension, ×1.0145 in compression) scaled by `scale`."""
+    return 1 - 0.007 * scale, 1 + 0.0145 * scale
 
 
-def assert_mode_between_the_nulls(analysis) -> None:
-    """Issue 40 item 4: the 55 kHz mode lies between the pulse's spectral nulls (its stretches
-    45.3-51.1 and 53.6-60.5 kHz, a null between): the band runs across the nulls, so the mode is
-    claimed, within 0.5 % and inside its interval, and so is its damping (until issue 40 the band
-    stopped at the first null, 28 kHz, and the mode was only bounded from below)."""
-    ident, u = analysis.identification, analysis.uncertainty["main_mode"]
-    assert ident.supported_band_hz[1] > F_N_HZ and len(ident.supported_band.intervals_hz) > 1
-    main = ident.main_mode
-    assert main is not None and abs(main["natural_frequency_hz"] / F_N_HZ - 1) < 0.005, main
-    lo, hi = u["natural_frequency_hz"]["interval"]
-    assert lo <= F_N_HZ <= hi, (lo, hi)
-    lo, hi = u["damping_ratio"]["interval"]
-    assert lo <= ZETA <= hi, (lo, hi)
+# case -> (the record, the gains in tension and in compression); the known sensor is the same in all
+HYBRIDS = {
+    "clean": (lambda: hybrid_record()[0], (1.0, 1.0)),
+    "lobe": (lambda: hybrid_record(*lobe_gains(1.0), seed=1)[0], lobe_gains(1.0)),
+    # a quarter of the measured asymmetry (the free fit's doublet at 12.7 kHz once took it in) and twice it
+    "lobe x0.25": (lambda: hybrid_record(*lobe_gains(0.25), seed=6)[0], lobe_gains(0.25)),
+    "lobe x2": (lambda: hybrid_record(*lobe_gains(2.0), seed=6)[0], lobe_gains(2.0)),
+    "motion": (motion_record, (1.0, 1.0)),
+}
 
 
 # The sensitivity reported is the mean of both directions (analysis.input_terms), what PTB's sine
@@ -166,94 +197,129 @@ def epsilon_truth(tension: float, compression: float) -> float:
     return compression / tension - 1.0
 
 
-@pytest.fixture(scope="module")
-def lobe_hybrid():
-    rec, truth = hybrid_record(tension=0.993, compression=1.0145, seed=1)
-    return analyse_record(rec, AnalysisParams(draws=DRAWS, seed=2)), truth
+def hybrid(analyses, case: str, seed: int):
+    return analyses.analysed(("hybrid", case), HYBRIDS[case][0], seed=seed, draws=DRAWS)
 
 
-def test_a_lobe_dependent_gain_is_measured_as_the_asymmetry(lobe_hybrid):
-    """Issue 40 item 1: the gain that differs between the pulse's lobes (issue 17 measured ×0.993
-    and ×1.0145 on PTB's record) is fitted as ε, inside its interval; the rest of the model is then
-    what the sensor is, no model error is left, and its mode between the nulls is claimed. Until
-    issue 40 it was weighed and drawn as model error (issue 17: before that, "no order gives a
-    stable model")."""
-    analysis, _ = lobe_hybrid
-    ident = analysis.identification
-    assert not ident.noise["model_error"]["detected"]
-    epsilon = analysis.uncertainty["input_terms"]["asymmetry"]
-    lo, hi = epsilon["interval"]
-    assert lo <= epsilon_truth(0.993, 1.0145) <= hi and hi - lo < 0.02, epsilon
-    assert_mode_between_the_nulls(analysis)
-
-
-def test_a_lobe_dependent_gain_is_carried_into_the_intervals(lobe_hybrid):
-    analysis, truth = lobe_hybrid
-    for level, edge in truth_fbsd_hz(truth).items():
-        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
-        assert lo <= edge <= hi, (level, edge, lo, hi)
-    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
-    assert lo <= mean_truth(0.993, 1.0145) <= hi
-
-
-@pytest.mark.parametrize("scale", [0.25, 2.0])
-def test_a_weaker_or_stronger_lobe_dependent_gain_is_carried_into_the_intervals(scale):
-    """A quarter of the measured gain asymmetry (the free fit's doublet at 12.7 kHz once took it in)
-    and twice it: ε inside its interval, the mode between the nulls claimed, the FBSD edges and the
-    sensitivity (the mean of both directions) inside theirs."""
-    tension, compression = 1 - 0.007 * scale, 1 + 0.0145 * scale
-    rec, truth = hybrid_record(tension=tension, compression=compression, seed=6)
-    analysis = analyse_record(rec, AnalysisParams(draws=DRAWS, seed=4))
-    lo, hi = analysis.uncertainty["input_terms"]["asymmetry"]["interval"]
-    assert lo <= epsilon_truth(tension, compression) <= hi, (lo, hi)
-    assert_mode_between_the_nulls(analysis)
-    for level, edge in truth_fbsd_hz(truth).items():
-        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
-        assert lo <= edge <= hi and (hi - lo) / 2 <= 0.25 * edge, (level, edge, lo, hi)
-    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
-    assert lo <= mean_truth(tension, compression) <= hi
-
-
-@pytest.fixture(scope="module")
-def motion_hybrid():
-    """The clean hybrid with the bar's motion after the pulse (from 0.7 ms) reaching the sensor
-    at ×0.75 of what the reference sees (issue 17 measured ×0.75 on the real record)."""
-    rec, truth = hybrid_record()
-    after = rec.time_s - rec.time_s[0] >= 7.0e-4
-    _, extra, _ = signal.lsim(truth, np.where(after, -0.25 * rec.reference, 0.0), rec.time_s - rec.time_s[0])
-    moved = Record(rec.sample_interval_s, rec.reference, rec.response + extra, response_unit="pC")
-    return analyse_record(moved, AnalysisParams(draws=DRAWS, seed=3)), truth
-
-
-def test_motion_that_differs_between_the_channels_is_corrected_and_carried(motion_hybrid):
-    """The sensor sees the bar's motion after 0.7 ms at ×0.75: the motion term (analysis.input_terms,
-    from the pulse's end on) takes most of it (γ below zero), what it cannot follow is model error
-    (not noise), and every interval holds the known sensor, its mode between the nulls included."""
-    analysis, truth = motion_hybrid
-    ident = analysis.identification
-    assert ident.noise["model_error"]["detected"]
-    lo, hi = analysis.uncertainty["input_terms"]["motion after the pulse"]["interval"]
-    assert -0.25 < lo <= hi < 0.0, (lo, hi)
-    for level, edge in truth_fbsd_hz(truth).items():
-        lo, hi = analysis.uncertainty["fbsd_hz"][level]["interval"]
-        assert lo <= edge <= hi, (level, edge, lo, hi)
-    lo, hi = analysis.uncertainty["dc_gain"]["interval"]
-    assert lo <= SENSITIVITY <= hi
-    lo, hi = analysis.uncertainty["main_mode"]["natural_frequency_hz"]["interval"]
-    assert lo <= F_N_HZ <= hi
-
-
-@pytest.mark.parametrize("case", ["clean_hybrid", "motion_hybrid"])
-def test_the_response_band_holds_the_known_sensor_throughout_the_band(case, request):
-    analysis, truth = request.getfixturevalue(case)
+def band_holds(analysis) -> bool:
+    """The response band holds the known sensor's |H(f)/H(0)| throughout the supported band."""
     band = analysis.uncertainty["response_band"]
     f = np.array(band["frequency_hz"])
-    _, h = signal.freqresp(truth, 2 * np.pi * f)
+    _, h = signal.freqresp(TRUTH, 2 * np.pi * f)
     relative = np.abs(h) / SENSITIVITY
     inside = f <= analysis.identification.supported_band_hz[1]
     low, high = np.array(band["magnitude_rel_low"]), np.array(band["magnitude_rel_high"])
-    assert np.all((low[inside] <= relative[inside]) & (relative[inside] <= high[inside]))
-    assert np.all(low <= np.array(band["magnitude_rel"])) and np.all(np.array(band["magnitude_rel"]) <= high)
+    return bool(np.all((low[inside] <= relative[inside]) & (relative[inside] <= high[inside])))
+
+
+def hybrid_figures(case: str) -> dict[str, float | None]:
+    """The figures counted on a hybrid and their known values (None: judged by `band_holds`)."""
+    tension, compression = HYBRIDS[case][1]
+    edges = truth_fbsd_hz(TRUTH)
+    out = {"fbsd_5": edges["5"], "fbsd_10": edges["10"], "dc_gain": mean_truth(tension, compression),
+           "natural_frequency_hz": F_N_HZ, "damping_ratio": ZETA, "response_band": None}
+    if tension != compression:
+        out["asymmetry"] = epsilon_truth(tension, compression)
+    return out
+
+
+def hybrid_holds(analysis, case: str) -> dict[str, bool]:
+    u = analysis.uncertainty
+    intervals = {"fbsd_5": u["fbsd_hz"]["5"], "fbsd_10": u["fbsd_hz"]["10"], "dc_gain": u["dc_gain"],
+                 **(u["main_mode"] or {}), **({"asymmetry": u["input_terms"]["asymmetry"]}
+                                              if "asymmetry" in u["input_terms"] else {})}
+    out = {}
+    for name, truth in hybrid_figures(case).items():
+        if truth is None:
+            out[name] = band_holds(analysis)
+        else:
+            lo, hi = intervals[name]["interval"] if name in intervals else (math.nan, math.nan)
+            out[name] = bool(lo <= truth <= hi)
+    return out
+
+
+def test_the_hybrids_intervals_hold_the_known_sensor(analyses):
+    """Every figure of every hybrid on each of HYBRID_SEEDS: at most HYBRID_MAX_MISSES misses of
+    99 (module docstring); a figure the hybrid does not report counts as a miss."""
+    misses = [(case, seed, name) for case in HYBRIDS for seed in HYBRID_SEEDS
+              for name, held in hybrid_holds(hybrid(analyses, case, seed), case).items() if not held]
+    assert len(misses) <= HYBRID_MAX_MISSES, misses
+
+
+@pytest.mark.parametrize("case", list(HYBRIDS))
+def test_a_hybrids_mode_is_claimed_between_the_nulls(analyses, case):
+    """Issue 40 item 4: the 55 kHz mode lies between the pulse's spectral nulls (its stretches
+    45.3-51.1 and 53.6-60.5 kHz, a null between): the band runs across the nulls, so the mode is
+    claimed, within 0.5 %, and its f_n and ζ carry intervals within physical bounds (until issue
+    40 the band stopped at the first null, 28 kHz, and the mode was only bounded from below)."""
+    analysis = hybrid(analyses, case, HYBRID_SEEDS[0])
+    ident = analysis.identification
+    assert ident.supported_band_hz[1] > F_N_HZ and len(ident.supported_band.intervals_hz) > 1
+    main = ident.main_mode
+    assert main is not None and abs(main["natural_frequency_hz"] / F_N_HZ - 1) < 0.005, main
+    for seed in HYBRID_SEEDS:
+        u = hybrid(analyses, case, seed).uncertainty["main_mode"]
+        assert u["natural_frequency_hz"]["interval"][0] > 0 and u["damping_ratio"]["interval"][0] >= 0, u
+
+
+def test_a_hybrid_with_the_real_reference_is_recovered(analyses):
+    ident = hybrid(analyses, "clean", HYBRID_SEEDS[0]).identification
+    assert ident.noise["motion_after_pulse"]  # the real reference's motion, seen by both channels
+    assert not ident.noise["model_error"]["detected"]  # a linear sensor: nothing beyond the noise
+
+
+@pytest.mark.parametrize("case", ["lobe", "lobe x0.25", "lobe x2"])
+def test_a_lobe_dependent_gain_is_measured_as_the_asymmetry(analyses, case):
+    """Issue 40 item 1: the gain that differs between the pulse's lobes (issue 17 measured ×0.993
+    and ×1.0145 on PTB's record; here also a quarter and twice that) is fitted as ε, not weighed
+    and drawn as model error (issue 17: before that, "no order gives a stable model"): no model
+    error is left, and on every seed ε's interval excludes zero (the asymmetry is resolved) and,
+    at the measured asymmetry and twice it, is narrower than the asymmetry it measures (its
+    containment is counted above)."""
+    tension, compression = HYBRIDS[case][1]
+    assert not hybrid(analyses, case, HYBRID_SEEDS[0]).identification.noise["model_error"]["detected"]
+    for seed in HYBRID_SEEDS:
+        u = hybrid(analyses, case, seed).uncertainty
+        lo, hi = u["input_terms"]["asymmetry"]["interval"]
+        assert 0 < lo, (seed, lo, hi)  # the asymmetry is resolved
+        if case != "lobe x0.25":  # the measured one and twice it: resolved to better than its size
+            assert hi - lo < epsilon_truth(tension, compression), (seed, lo, hi)
+
+
+RUNAWAY = ("on the lobe-gain hybrids, Monte Carlo seed 3 of 60 draws (3 of them refitted at order 3) gives FBSD "
+           "intervals reaching 20-250 kHz (±5 %: lobe [11.5, 29.5], x0.25 [11.7, 244], x2 [11.6, 251] kHz), beyond "
+           "issue 17's half-width of 25 %; about 1 seed in 8 per case (the clean hybrid's ±10 % on seed 4 too): the "
+           "single seeds before hid it (analysis.uncertainty, the order-switching draws' FBSD edges)")
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=RUNAWAY))
+                                  if c.startswith("lobe") else c for c in HYBRIDS])
+def test_the_hybrids_fbsd_intervals_are_as_narrow_as_the_issue_asks(analyses, case):
+    """Issue 17's half-width (25 % of the edge) on every seed."""
+    for seed in HYBRID_SEEDS:
+        u = hybrid(analyses, case, seed).uncertainty
+        for level, edge in truth_fbsd_hz(TRUTH).items():
+            lo, hi = u["fbsd_hz"][level]["interval"]
+            assert (hi - lo) / 2 <= 0.25 * edge, (seed, level, lo, hi)
+
+
+def test_motion_that_differs_between_the_channels_is_corrected_and_carried(analyses):
+    """The sensor sees the bar's motion after 0.7 ms at ×0.75: the motion term (analysis.input_terms,
+    from the pulse's end on) takes most of it (γ below zero, above the −0.25 injected on a window
+    the term does not share), what it cannot follow is model error (not noise); its intervals'
+    containment of the known sensor is counted above."""
+    assert hybrid(analyses, "motion", HYBRID_SEEDS[0]).identification.noise["model_error"]["detected"]
+    for seed in HYBRID_SEEDS:
+        lo, hi = hybrid(analyses, "motion", seed).uncertainty["input_terms"]["motion after the pulse"]["interval"]
+        assert -0.25 < lo <= hi < 0.0, (seed, lo, hi)
+
+
+@pytest.mark.parametrize("case", list(HYBRIDS))
+def test_the_response_band_is_ordered(analyses, case):
+    for seed in HYBRID_SEEDS:
+        band = hybrid(analyses, case, seed).uncertainty["response_band"]
+        middle = np.array(band["magnitude_rel"])
+        assert np.all(np.array(band["magnitude_rel_low"]) <= middle) and np.all(middle <= band["magnitude_rel_high"])
 
 
 def test_the_sine_points_are_judged_against_the_response_band(ptb):
@@ -267,20 +333,14 @@ def test_the_sine_points_are_judged_against_the_response_band(ptb):
     assert judged["e_n"][0] < 1e-6
 
 
-EN_SEEDS = range(1, 6)
-
-
 @pytest.fixture(scope="module")
-def sine_e_n():
+def sine_e_n(ptb_seeds):
     """The sine points judged against the response band, on each of EN_SEEDS, with the draws a
-    user's analysis takes (400: the band's 2.5 % ends from 10 draws each, not 1.5 as at 60)."""
+    user's analysis takes."""
     from hopkinson.analysis.sine_comparison import band_consistency, compare_sine
 
-    out = []
-    for seed in EN_SEEDS:
-        result = analyse_record(ptb_record(), AnalysisParams(seed=seed))
-        out.append(band_consistency(compare_sine(result.model, ptb_sine()), result.uncertainty["response_band"]))
-    return out
+    return [band_consistency(compare_sine(result.model, ptb_sine()), result.uncertainty["response_band"])
+            for result in ptb_seeds]
 
 
 def sine_own_jumps(sine) -> np.ndarray:
@@ -298,25 +358,23 @@ def sine_own_jumps(sine) -> np.ndarray:
 
 
 def test_the_sine_points_lie_near_the_response_band(sine_e_n):
-    """E_n ≤ 0.5 at every sine point its neighbours agree with, on every seed; at the sine's own
-    jumps (9.0–10.5, 14 and 18.5 kHz: 9.0 → 9.5 kHz +1.2 %, 10.0 → 10.5 kHz −0.9 %, 14 kHz +1.7 %
-    off its neighbours, against a stated u of 0.15–0.25 %) at most 1. Measured: at most 0.39 at
-    the agreeing points, 0.80–0.93 at the jumps (9.5 and 14 kHz). Until stop 38 the points' u
-    left out the 0.5 % of the 500 Hz point they are normalised by (analysis.sine_comparison),
-    and the jumps reached 1.49; 2.6 before the band's parts were drawn
-    (analysis.uncertainty.BAND_TOPS)."""
+    """The sine's own jumps, found on the sine data alone, include 9.5 and 14 kHz (9.0 → 9.5 kHz
+    +1.2 %, 14 kHz +1.7 % off its neighbours, against a stated u of 0.15–0.25 %). A smooth sensor
+    cannot follow them, so on every seed the largest E_n is at one of them: the points the sine's
+    neighbours agree with lie nearer the band than the points they contradict. (Measured: at most
+    0.39 at the agreeing points, 0.80–0.93 at the jumps; until stop 38 the points' u left out the
+    0.5 % of the 500 Hz point they are normalised by, and the jumps reached 1.49.)"""
     sine = ptb_sine()
     jumps = sine_own_jumps(sine)
     assert {9.5, 14.0} <= {round(f / 1e3, 1) for f in sine.frequency_hz[jumps]} and jumps.sum() <= 6
     for judged in sine_e_n:
         e_n = np.array([np.nan if e is None else e for e in judged["e_n"]])
         agree = ~jumps & np.isfinite(e_n)
-        assert np.all(e_n[agree] <= 0.5), sine.frequency_hz[agree][e_n[agree] > 0.5]
-        assert np.all(e_n[jumps] <= 1.0), e_n[jumps]
+        assert np.max(e_n[agree]) < np.nanmax(e_n[jumps]), (e_n[agree], e_n[jumps])
 
 
 def test_the_sine_points_lie_inside_the_response_band(sine_e_n):
-    """Issue 17 item 3: E_n ≤ 1 at every sine point, on every seed."""
+    """Issue 17 item 3: E_n ≤ 1 (agreement at k = 2, by definition) at every sine point, on every seed."""
     assert all(judged["consistent"] for judged in sine_e_n)
     assert all(judged["max_e_n"] <= 1.0 for judged in sine_e_n)
 
@@ -424,7 +482,7 @@ def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
     assert "that motion is not taken as noise" not in gone
 
 
-def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(ptb):
+def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(ptb, analyses):
     """PTB's response shifted 10 µs earlier (a deskew or trigger error, or the delay of an
     interferometer's demodulation): no sensor answers before it is excited and, as recorded, no
     model followed it (every fit unstable, refused until stop 38). It is realigned by whole
@@ -436,7 +494,7 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
 
     from tests.ptb_shock import skewed
 
-    shifted = analyse_record(skewed(-100), AnalysisParams(draws=DRAWS, seed=1))
+    shifted = analyses.analysed("ptb skewed -100", lambda: skewed(-100), seed=1, draws=DRAWS)
     warning = next(w for w in shifted.warnings if "realigned" in w)
     lead = re.search(r"the response leads the reference by about [0-9.]+ samples \(([0-9.]+) µs\)", warning)
     assert lead and 9.0 <= float(lead.group(1)) <= 10.5

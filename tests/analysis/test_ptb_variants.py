@@ -1,18 +1,32 @@
 """Issue 17 item 3: the intervals hold the sine calibration's values on variants of PTB's record
 too, not only on the file as published: another sample rate, a shorter capture, a skew between
 the channels, more noise. The truth is independent (the sine calibration of the same sensor);
-the variants are made the way a lab's other recordings of the same shot would differ."""
+the variants are made the way a lab's other recordings of the same shot would differ.
+
+Seeds not picked to pass (issue 45 item 3): variant i (in the order of VARIANTS) draws its
+DRAWS Monte Carlo draws with seed FIRST_SEED + i, a rule fixed before any result was seen. Each
+variant's three intervals (FBSD ±5 %, ±10 %, the sensitivity) are three trials, 78 in all, and
+the variants pass together with at most MAX_MISSES misses. Power (scipy.stats.binom, asserted in
+`test_the_threshold_has_the_stated_power`): were each interval to hold with 95 % (the claim),
+the test passes with P(X ≤ 7 | n = 78, p = 0.05) = 0.959; at a coverage of 80 % with 0.007. At
+90 % it still passes with 0.475: 78 trials cannot tell 90 % from 95 % (that needs about 300),
+and each trial costs an identification (~1 s): the powered coverage study is on simulated
+shots (test_coverage_realistic.py). The trials are not independent (one shot, one truth: a bias
+on PTB's record would miss on many variants at once, which this count catches, not excuses).
+Each variant's half-widths stay within issue 17's (25 %, 2 %) on its own seed.
+"""
 
 from __future__ import annotations
 
 import pytest
-from hopkinson.analysis.params import AnalysisParams
-from hopkinson.analysis.shot_analysis import analyse_record
+from scipy.stats import binom
 
+from tests.analysis.ptb_fixtures import Analyses
 from tests.ptb_shock import against_sine, cut, decimated, noisier, skewed, started_late
 
 DRAWS = 60
-
+FIRST_SEED = 1
+MAX_MISSES = 7
 
 VARIANTS = {
     "5 MS/s": lambda: decimated(2),
@@ -75,13 +89,30 @@ VARIANTS = {
 # 11.2-11.35 kHz on them.
 
 
-def holds_the_sine(make) -> None:
-    judged = against_sine(analyse_record(make(), AnalysisParams(draws=DRAWS, seed=1)).uncertainty)
-    for figure, j in judged.items():
-        assert j["contains"] and j["half_width_ok"], (figure, j)
+SEED = {name: FIRST_SEED + i for i, name in enumerate(VARIANTS)}
+FIGURES = ("fbsd_5", "fbsd_10", "dc_gain")
+
+
+def judged_on(analyses: Analyses, name: str) -> dict[str, dict]:
+    """The variant's intervals beside the sine calibration's values, on the variant's own seed."""
+    return against_sine(analyses.analysed(name, VARIANTS[name], SEED[name], DRAWS).uncertainty)
+
+
+def test_the_threshold_has_the_stated_power() -> None:
+    trials = len(VARIANTS) * len(FIGURES)
+    assert trials == 78
+    assert binom.cdf(MAX_MISSES, trials, 0.05) >= 0.95  # 0.959 at the claimed 95 %
+    assert binom.cdf(MAX_MISSES, trials, 0.20) <= 0.01  # 0.007 at 80 %
+    assert 0.45 <= binom.cdf(MAX_MISSES, trials, 0.10) <= 0.5  # 0.475 at 90 %: not rejected (see above)
 
 
 @pytest.mark.parametrize("name", list(VARIANTS))
-def test_the_intervals_hold_the_sine_calibration_on_a_variant(name):
-    holds_the_sine(VARIANTS[name])
+def test_the_intervals_are_as_narrow_as_the_issue_asks_on_a_variant(analyses, name):
+    for figure, j in judged_on(analyses, name).items():
+        assert j["half_width_ok"], (figure, j)
 
+
+def test_the_intervals_hold_the_sine_calibration_on_the_variants(analyses):
+    misses = [(name, figure, j["interval"], j["truth"]) for name in VARIANTS
+              for figure, j in judged_on(analyses, name).items() if not j["contains"]]
+    assert len(misses) <= MAX_MISSES, misses
