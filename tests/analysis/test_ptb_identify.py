@@ -71,11 +71,16 @@ def test_the_thresholds_have_the_stated_power() -> None:
 
 
 def test_motion_after_the_pulse_is_not_taken_as_noise(ptb):
+    """The reference's noise is the lead-in's at rest (before the pulse), not the bar's motion
+    after it (11.8× before issue 17): on a log scale it lies nearer the lead-in's standard
+    deviation than the motion's, both read here from the record itself."""
     noise = ptb.identification.noise
     assert noise["motion_after_pulse"], "the coherent motion after the pulse was not detected"
-    peak = float(np.max(np.abs(ptb_record().reference)))
-    # the lead-in's noise (~0.07 % of the peak), not the motion's (~0.8 %: 11.8× before issue 17)
-    assert noise["reference_rms"] < 0.002 * peak
+    rec = ptb_record()
+    t = rec.time_s - rec.time_s[0]
+    lead_in = float(np.std(rec.reference[t < 0.2e-3]))  # before the pulse's foot (beyond 0.3 ms)
+    motion = float(np.std(rec.reference[t >= 1.0e-3]))  # the pulse over, the bar still moving
+    assert abs(math.log(noise["reference_rms"] / lead_in)) < abs(math.log(noise["reference_rms"] / motion))
 
 
 def test_the_model_error_is_detected_and_sized(ptb):
@@ -101,16 +106,22 @@ def test_the_intervals_are_as_narrow_as_the_issue_asks(ptb_seeds):
 
 
 def test_the_model_follows_the_sine_calibration(ptb):
-    """The independent truth, the sine calibration (its own ripple ±1.7 %): the shock's model, an
-    all-pole one whose resonance lies beyond the band, follows it. Before, the free structure's
-    pole–zero doublet at 15 kHz was 6 % off below 20 kHz (issue 17)."""
+    """The independent truth, the sine calibration: the shock's model, an all-pole one whose
+    resonance lies beyond the band, follows it at every point within the point's expanded
+    uncertainty (k = 2, the 0.5 kHz point's 0.5 % in it: both are normalised there) plus the
+    point's own distance from its neighbours' quadratic (up to 1.7 %: scatter no smooth response
+    follows). Before, the free structure's pole–zero doublet at 15 kHz was 6 % off below 20 kHz
+    (issue 17)."""
     from hopkinson.analysis.sine_comparison import compare_sine
 
     assert ptb.identification.order_evidence["structure"] == "all_pole"
-    comparison = compare_sine(ptb.model, ptb_sine())
-    assert comparison.max_magnitude_error_below_pct(10e3) <= 1.5
-    assert comparison.max_magnitude_error_below_pct(20e3) <= 3.5
-    assert float(np.median(np.abs(comparison.magnitude_error_pct))) <= 0.5
+    sine = ptb_sine()
+    comparison = compare_sine(ptb.model, sine)
+    u = np.hypot(sine.u_magnitude_rel, sine.u_magnitude_rel[0])
+    u[0] = 0.0  # the normalisation point itself
+    allowed_pct = 100.0 * (2.0 * u + sine_off_its_neighbours(sine))
+    error_pct = np.abs(comparison.magnitude_error_pct)
+    assert np.all(error_pct <= allowed_pct), sine.frequency_hz[error_pct > allowed_pct]
     # the lead of the reference chain (PTB's response leads by ~0.35 µs) is fitted, not absorbed
     assert -1.0 < ptb.identification.delay_samples < 0.0
     assert any("fitted as a negative delay" in w for w in ptb.warnings)
@@ -343,18 +354,23 @@ def sine_e_n(ptb_seeds):
             for result in ptb_seeds]
 
 
-def sine_own_jumps(sine) -> np.ndarray:
-    """The sine points their own neighbours contradict (one flag per point), judged on the sine
-    data alone: off a quadratic through the three neighbours on each side by more than 3 of the
-    point's stated u. A smooth sensor (its resonance beyond 50 kHz) cannot follow them, and no
-    model's band should: they are where the sine's stated u understates its scatter."""
-    f, m, u = sine.frequency_hz, sine.magnitude / sine.magnitude[0], sine.u_magnitude_rel
-    out = np.zeros(f.size, dtype=bool)
+def sine_off_its_neighbours(sine) -> np.ndarray:
+    """Each sine point's relative distance from a quadratic through its three neighbours on each
+    side (normalised at the 0.5 kHz point), judged on the sine data alone."""
+    f, m = sine.frequency_hz, sine.magnitude / sine.magnitude[0]
+    out = np.zeros(f.size)
     for k in range(f.size):
         near = [j for j in range(max(0, k - 3), min(f.size, k + 4)) if j != k]
-        smooth = np.polyval(np.polyfit(f[near], m[near], 2), f[k])
-        out[k] = abs(m[k] / smooth - 1.0) > 3.0 * u[k]
+        out[k] = abs(m[k] / np.polyval(np.polyfit(f[near], m[near], 2), f[k]) - 1.0)
     return out
+
+
+def sine_own_jumps(sine) -> np.ndarray:
+    """The sine points their own neighbours contradict (one flag per point): off their
+    neighbours' quadratic by more than 3 of the point's stated u. A smooth sensor (its resonance
+    beyond 50 kHz) cannot follow them, and no model's band should: they are where the sine's
+    stated u understates its scatter."""
+    return sine_off_its_neighbours(sine) > 3.0 * sine.u_magnitude_rel
 
 
 def test_the_sine_points_lie_near_the_response_band(sine_e_n):
