@@ -397,14 +397,25 @@ def test_the_sine_points_lie_inside_the_response_band(sine_e_n):
     assert all(judged["max_e_n"] <= 1.0 for judged in sine_e_n)
 
 
-def test_identify_explain_prints_the_trail_on_the_real_record(tmp_path, capsys):
+_EXPLAINED: dict[str, str] = {}
+
+
+def explained(tmp_path, capsys, name: str, record: Record | None = None) -> str:
+    """What `identify FILE --no-uncertainty --explain` prints for `record` (PTB's: None) written as
+    the interchange CSV; run once per name in the module."""
     from hopkinson.rig.cli.main import main
 
     from tests.ptb_shock import write_ptb_record_csv
 
-    record = write_ptb_record_csv(tmp_path / "ptb.csv")
-    assert main(["identify", str(record), "--no-uncertainty", "--explain"]) == 0
-    out = capsys.readouterr().out
+    if name not in _EXPLAINED:
+        path = write_ptb_record_csv(tmp_path / f"{name}.csv", record)
+        assert main(["identify", str(path), "--no-uncertainty", "--explain"]) == 0
+        _EXPLAINED[name] = capsys.readouterr().out
+    return _EXPLAINED[name]
+
+
+def test_identify_explain_prints_the_trail_on_the_real_record(tmp_path, capsys):
+    out = explained(tmp_path, capsys, "ptb")
     trail = out[out.index("how this identification was decided:"):]
     assert "motion, not noise:" in trail  # the stretch after the pulse, left out of the noise
     assert "band:" in trail and "V by order:" in trail
@@ -466,9 +477,8 @@ def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
     warning claims it was left out. The foot and the width are read here from the raw 10 MS/s
     record: where either channel's 50-sample mean |x| first stands 4 lead-in σ above its baseline,
     and the reference's span above half its peak."""
-    from hopkinson.rig.cli.main import main
 
-    from tests.ptb_shock import started_late, write_ptb_record_csv
+    from tests.ptb_shock import started_late
 
     rec = ptb_record()
     dt = rec.sample_interval_s
@@ -482,13 +492,11 @@ def test_identify_explain_tells_where_the_lead_in_ends(tmp_path, capsys):
     width_s = np.count_nonzero(rec.reference > 0.5 * np.max(rec.reference)) * dt
 
     def lead_in_ms(record, name: str) -> tuple[str, float]:
-        assert main(["identify", str(write_ptb_record_csv(tmp_path / f"{name}.csv", record)), "--no-uncertainty",
-                     "--explain"]) == 0
-        out = capsys.readouterr().out
+        out = explained(tmp_path, capsys, name, record)
         found = re.search(r"lead-in at rest: 0–([0-9.]+) ms", out)
         return out, float(found.group(1)) if found else math.nan
 
-    published, stop_ms = lead_in_ms(rec, "ptb")
+    published, stop_ms = lead_in_ms(None, "ptb")
     assert "(to the window's margin before the pulse)" in published
     assert stop_ms * 1e-3 <= foot_s - 3 * width_s
     late, stop_ms = lead_in_ms(started_late(2_000), "late")
