@@ -305,15 +305,36 @@ RUNAWAY = ("on the lobe-gain hybrids, Monte Carlo seed 3 of 60 draws (3 of them 
            "single seeds before hid it (analysis.uncertainty, the order-switching draws' FBSD edges)")
 
 
-@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=RUNAWAY))
-                                  if c.startswith("lobe") else c for c in HYBRIDS])
-def test_the_hybrids_fbsd_intervals_are_as_narrow_as_the_issue_asks(analyses, case):
-    """Issue 17's half-width (25 % of the edge) on every seed."""
+def _runaway_seeds(analyses, case: str) -> list[tuple[int, str, float, float]]:
+    """The (seed, level, low, high) of the FBSD intervals wider than issue 17's half-width (25 % of the edge)."""
+    out = []
     for seed in HYBRID_SEEDS:
         u = hybrid(analyses, case, seed).uncertainty
         for level, edge in truth_fbsd_hz(TRUTH).items():
             lo, hi = u["fbsd_hz"][level]["interval"]
-            assert (hi - lo) / 2 <= 0.25 * edge, (seed, level, lo, hi)
+            if (hi - lo) / 2 > 0.25 * edge:
+                out.append((seed, level, lo, hi))
+    return out
+
+
+# The defect RUNAWAY names comes on about 1 seed in 8 per case (seeds 1-8 measured). Held here at
+# most on one seed of the three: were the rate 1/8, two or more of three seeds run away with
+# probability 0.043; a regression that lets it come on most seeds fails at once.
+RUNAWAY_RATE = 1 / 8
+
+
+@pytest.mark.parametrize("case", list(HYBRIDS))
+def test_the_hybrids_fbsd_intervals_run_away_on_at_most_one_seed(analyses, case):
+    """Issue 17's half-width (25 % of the edge) on all seeds but at most one (RUNAWAY)."""
+    assert binom.sf(1, len(HYBRID_SEEDS), RUNAWAY_RATE) <= 0.05
+    assert len({seed for seed, *_ in _runaway_seeds(analyses, case)}) <= 1, _runaway_seeds(analyses, case)
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=RUNAWAY))
+                                  if c.startswith("lobe") else c for c in HYBRIDS])
+def test_the_hybrids_fbsd_intervals_are_as_narrow_as_the_issue_asks(analyses, case):
+    """Issue 17's half-width (25 % of the edge) on every seed."""
+    assert _runaway_seeds(analyses, case) == []
 
 
 def test_motion_that_differs_between_the_channels_is_corrected_and_carried(analyses):
