@@ -183,7 +183,7 @@ def hybrid_goldens(work: Path) -> Iterator[Golden]:
 
     for name, (tension, compression, seed, motion, draws) in HYBRIDS.items():
         rec, truth = hybrid_record(tension, compression, seed)
-        if motion:  # as test_ptb_identify.motion_hybrid: the motion from 0.7 ms at ×0.75
+        if motion:  # as test_ptb_identify.motion_record: the motion from 0.7 ms at ×0.75
             t = rec.time_s - rec.time_s[0]
             _, extra, _ = signal.lsim(truth, np.where(t >= 7.0e-4, -0.25 * rec.reference, 0.0), t)
             rec = Record(rec.sample_interval_s, rec.reference, rec.response + extra, response_unit="pC")
