@@ -12,8 +12,8 @@ G(f) = H(f)/H(0) (with its delay) stays within QUASI_STATIC of 1 (the sensor is 
 there: a model's error in f_n or ζ moves G little), the compensated response Y/G is fitted by
 least squares, weighted by its noise, as g_main·U_main + g_other·U_other: U_main the DFT of the
 reference's samples of the main pulse's sign, U_other of the rest (the opposite lobe and the bar's
-motion of that sign; one regressor when the pulse has no opposite lobe the identification fits ε
-for). g_main is the gain in the main pulse's direction. For a sensor driven by a·(1 + c·|a|),
+motion of that sign; one regressor when the opposite sign holds less than OTHER_LOBE of the
+reference's energy). g_main is the gain in the main pulse's direction. For a sensor driven by a·(1 + c·|a|),
 g_main = S₀(1 + c·a_s) exactly, with a_s the same least squares' coefficient of the
 DFT of a_main·|a| (+ g_other/g_main times that of a_other·|a|): `amplitude_m_s2`, the amplitude
 the gain is measured at, computed from the reference alone. The onset's fitted input terms are
@@ -40,11 +40,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from hopkinson.analysis.input_terms import ASYMMETRY, MOTION
+from hopkinson.analysis.input_terms import MOTION
 from hopkinson.analysis.model import DiscreteModel
 
 QUASI_STATIC = 0.1  # the bins used: |G(f) − 1| ≤ this (G the model's unit-DC-gain response)
 MIN_BINS = 4  # fewer quasi-static bins: not determined
+OTHER_LOBE = 0.01  # the reference's energy of the opposite sign, at least this share, is fitted a gain of its own
 
 
 @dataclass(frozen=True)
@@ -107,7 +108,8 @@ def static_gain(identification: Any, draws: Sequence[DiscreteModel] = ()) -> tup
     cols = terms.columns(MOTION)
     if cols.size and fitted is not None:
         motion = float(fitted[cols[0]]) * terms.signals[cols[0]][prep.start : prep.start + n]
-    split = ASYMMETRY in terms.names
+    opposite = np.where(polarity * u > 0, 0.0, u)
+    split = float(opposite @ opposite) >= OTHER_LOBE * float(u @ u)
     corrected = u + motion
     main = np.where(polarity * u > 0, corrected, 0.0) if split else corrected
     spectra = np.column_stack([np.fft.rfft(c)[index] for c in [main] + ([corrected - main] if split else [])])
