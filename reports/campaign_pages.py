@@ -225,7 +225,7 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
     ax_r.set_ylabel("sensitivity − fit (%)")
     ax_r.set_title("Deviation of each shot from the line (± U)", fontsize=9)
     ax_r.grid(alpha=0.3)
-    header = ["shot", "a (g)", "a (km/s²)", f"{what} (× nom.)", "U (95 %)", "− fit (%)"]
+    header = ["shot", "a (g)", "a (km/s²)", "S (× nom.)", "U (95 %)", "− fit (%)"]  # S: the ylabel says which
     rows = [[p.label, f"{p.peak_m_s2 / G_M_S2:,.0f}", f"{p.peak_m_s2 / 1e3:.4g}", f"{p.sensitivity:.5g}",
              "—" if p.expanded is None else sig(p.expanded), f"{100 * r:+.2f}"]
             for p, r in zip(points, fit.residuals_rel, strict=True)]
