@@ -89,6 +89,16 @@ def static_gain(identification: Any, draws: Sequence[DiscreteModel] = ()) -> tup
     prep = getattr(ctx, "prep", None) if ctx is not None else None
     if prep is None or prep.y_bins is None or prep.bin_hz.size == 0:
         return None, "the identification's fitted bins are not at hand"
+    if not (np.size(ctx.var_y) == np.size(ctx.var_u) == prep.bin_hz.size == prep.y_bins.size):
+        return None, "the fitted bins' noise is not given bin by bin"
+    try:
+        return _static_gain(identification, ctx, prep, draws)
+    except (np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
+        return None, f"the least squares on the quasi-static bins failed: {exc}"
+
+
+def _static_gain(identification: Any, ctx: Any, prep: Any, draws: Sequence[DiscreteModel]
+                 ) -> tuple[StaticGain | None, str]:
     model = identification.model
     dt = model.sample_interval_s
     n = prep.u.size
@@ -133,6 +143,8 @@ def static_gain(identification: Any, draws: Sequence[DiscreteModel] = ()) -> tup
     dof = xr.shape[0] - xr.shape[1]
     chi2 = float(resid @ resid) / dof if dof > 0 else math.inf
     cov = np.linalg.inv(xr.T @ xr) * max(1.0, chi2)
+    if not (np.isfinite(coef[0]) and coef[0] != 0 and np.all(np.isfinite(cov))):
+        return None, "the least squares on the quasi-static bins gave no finite gain"
     u_noise = math.sqrt(float(cov[0, 0])) * abs(scale)
     ratio = float(coef[1] / coef[0]) if split and coef[0] else 0.0
     d = distortion[keep, 0] + (ratio * distortion[keep, 1] if split else 0.0)
