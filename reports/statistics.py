@@ -210,15 +210,21 @@ def linearity_points(labelled: Iterable[tuple[str, KeyFigures | None]]) -> list[
     return out
 
 
+def fitted_points(points: Sequence[LinearityPoint]) -> list[LinearityPoint]:
+    """The points a line goes through: points of both kinds (shots analysed before the quasi-static
+    gain among newer ones) are not one sensitivity, and only the quasi-static gains are kept."""
+    if len({p.kind for p in points}) > 1:
+        return [p for p in points if p.kind == STATIC_GAIN]
+    return list(points)
+
+
 def campaign_linearity(points: Sequence[LinearityPoint]) -> tuple[LinearityFit | None, str]:
-    """The straight line through the points (analysis.linearity), or None and why not. Points of
-    both kinds (shots analysed before the quasi-static gain among newer ones) are not one
-    sensitivity: the line goes through the quasi-static gains only, and the note says so."""
-    kinds = {p.kind for p in points}
+    """The straight line through `fitted_points(points)` (analysis.linearity), or None and why not;
+    the note names the shots left out."""
     notes = []
-    if len(kinds) > 1:
+    if len({p.kind for p in points}) > 1:
         left = [p.label for p in points if p.kind != STATIC_GAIN]
-        points = [p for p in points if p.kind == STATIC_GAIN]
+        points = fitted_points(points)
         notes.append(f"amplitude linearity: {len(left)} shot(s) without a quasi-static gain (analysed before it) left "
                      f"out ({', '.join(left)}): analyse them again")
     if len(points) < 2:
@@ -316,5 +322,6 @@ def campaign_statistics(entries: Sequence[ShotEntry], sine: SineCalibration | No
     comparisons, notes = sine_comparisons(analysed, sine) if sine is not None else ([], [])
     points = linearity_points((e.label, e.key_figures) for e in analysed)
     fit, note = campaign_linearity(points)
+    points = fitted_points(points)  # the page tables the points the line goes through
     return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined, comparisons, notes,
                               points, fit, note)

@@ -16,6 +16,7 @@ from hopkinson.reports.statistics import (
     CampaignStatistics,
     LinearityPoint,
     campaign_linearity,
+    fitted_points,
 )
 
 G = 9.80665
@@ -77,6 +78,7 @@ def test_a_line_goes_through_one_kind_of_sensitivity_and_says_which() -> None:
     fit, note = campaign_linearity(old + points[2:])
     assert fit is not None and fit.n == 2 and fit.slope_rel_per_m_s2 == pytest.approx(C, rel=1e-9)
     assert "2 shot(s) without a quasi-static gain" in note and "s001-r1, s002-r1" in note
+    assert fitted_points(old + points[2:]) == points[2:]
     fit, note = campaign_linearity([LinearityPoint(p.label, p.peak_m_s2, p.sensitivity, p.u, p.expanded, DC_GAIN)
                                     for p in points])
     assert fit is not None and fit.n == 4 and "DC gain" in note
