@@ -84,8 +84,8 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
             page.paragraph(note, colour="#a00000")
         if stats.linearity is not None:  # shots at two or more levels
             page.heading("Amplitude linearity (ISO 16063-22)")
-            page.paragraph(f"fitted to {linearity_sensitivity(stats.linearity_points)}: slope {stats.linearity.text()} "
-                           "(95 %; plot and table on the linearity page)")
+            page.paragraph(f"{linearity_sensitivity(stats.linearity_points, short=True)} against the amplitude it is "
+                           f"measured at: slope {stats.linearity.text()} (95 %; plot and table on the linearity page)")
             if stats.linearity_note:
                 page.paragraph(stats.linearity_note, colour="0.25")
         text = cross_validation_summary(stats)

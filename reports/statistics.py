@@ -246,9 +246,12 @@ def campaign_linearity(points: Sequence[LinearityPoint]) -> tuple[LinearityFit |
     return fit, "; ".join(notes)
 
 
-def linearity_sensitivity(points: Sequence[LinearityPoint]) -> str:
-    """Which sensitivity the line is fitted to, in words (the report says it)."""
+def linearity_sensitivity(points: Sequence[LinearityPoint], short: bool = False) -> str:
+    """Which sensitivity the line is fitted to, in words (the report says it); `short`: its name
+    ("quasi-static gain", "sensitivity (DC gain)") for the summary."""
     kind = STATIC_GAIN if any(p.kind == STATIC_GAIN for p in points) else DC_GAIN
+    if short:
+        return "quasi-static gain" if kind == STATIC_GAIN else "sensitivity (DC gain)"
     return LINEARITY_SENSITIVITY[kind]
 
 
