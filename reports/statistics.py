@@ -9,9 +9,9 @@
   prepared them (its baselines and input delay, stored in its results);
 - the campaign's value of each uncertain key figure (`combine`): the mean of the shots, their
   repeatability and a combined expanded uncertainty (see `combine` for how);
-- amplitude linearity (ISO 16063-22): each shot's shock sensitivity against its peak
-  acceleration with its U, and the straight line through them (analysis.linearity), when the
-  shots cover two or more levels.
+- amplitude linearity (ISO 16063-22): each shot's quasi-static gain (analysis.static_gain)
+  against the amplitude it is measured at with its U, and the straight line through them
+  (analysis.linearity), when the shots cover two or more levels.
 """
 
 from __future__ import annotations
