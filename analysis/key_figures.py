@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from hopkinson.analysis.shot_analysis import ShotAnalysis
 
+Z95 = 1.959963984540054  # the normal distribution's 95 % coverage factor
 LEVELS = ("5", "10")  # FBSD band levels in per cent (keys of fbsd_hz)
 # Budget rows every shot of one sensor on one rig shares (KeyFigures.shot_specific_u)
 COMMON_SOURCES = ("grating pitch", "interferometer", "amplifier gain", "digitizer gain",
@@ -150,6 +151,12 @@ class KeyFigures:
     # the tension/compression asymmetry ε and the other input terms' estimates (analysis.input_terms)
     input_terms: dict[str, Any] = field(default_factory=dict)
     gain_amplitude_m_s2: float | None = None  # the amplitude the DC gain is measured at (excitation.gain_amplitude)
+    # the quasi-static gain in the main pulse's direction and the amplitude it is measured at
+    # (analysis.static_gain: what the amplitude linearity is fitted to; u shot-specific); None: not
+    # determined (static_gain_not_determined says why) or results written before it
+    static_gain: Figure | None = None
+    static_gain_amplitude_m_s2: float | None = None
+    static_gain_not_determined: str | None = None
 
     @property
     def order_how(self) -> str:
@@ -165,6 +172,8 @@ class KeyFigures:
         """The standard uncertainty of `figure` (budget key: "dc_gain", …) less the Type B rows
         every shot of one sensor on one rig shares (the reference chain, the transverse row): what
         differs from shot to shot, for comparing shots (a linearity's slope, a repeatability)."""
+        if figure == "static_gain":  # analysis.static_gain: shot-specific already
+            return self.static_gain.u if self.static_gain is not None else None
         own = {"dc_gain": self.sensitivity, "shock_sensitivity": self.shock_sensitivity}.get(figure)
         if own is None or own.u is None or not own.value:
             return None
@@ -252,6 +261,12 @@ class KeyFigures:
         for level in list(fbsd):
             if f"fbsd_{level}_hz" in undetermined and level not in bounds:
                 fbsd[level] = Figure.undetermined(undetermined[f"fbsd_{level}_hz"])
+        static = results.get("static_gain") or {}
+        static_value, static_u = _number(static.get("value")), _number(static.get("u"))
+        static_gain = None
+        if static_value is not None:
+            static_gain = Figure(static_value, static_u, None if static_u is None else
+                                 (static_value - Z95 * static_u, static_value + Z95 * static_u))
         verdict = results.get("result") or {}
         warnings = list(results.get("warnings") or [])
         for w in unc.get("warnings") or []:
@@ -295,6 +310,9 @@ class KeyFigures:
             not_a_result_reason=str(verdict.get("reason") or ""),
             input_terms=dict(ident.get("input_terms") or {}),
             gain_amplitude_m_s2=_number(excitation.get("gain_amplitude_m_s2")),
+            static_gain=static_gain,
+            static_gain_amplitude_m_s2=_number(static.get("amplitude_m_s2")) if static_gain is not None else None,
+            static_gain_not_determined=str(static["not_determined"]) if static.get("not_determined") else None,
         )
 
 

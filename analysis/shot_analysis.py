@@ -50,6 +50,7 @@ from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 from hopkinson.analysis.sine_comparison import read_sine_calibration
 from hopkinson.analysis.sine_joint import with_draws
+from hopkinson.analysis.static_gain import static_gain
 from hopkinson.analysis.uncertainty import shot_uncertainty
 
 # Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
@@ -84,6 +85,9 @@ class ShotAnalysis:
     # further sensors against the same reference (role -> their analysis), and why one has none
     sensors: dict[str, ShotAnalysis] = field(default_factory=dict)
     sensor_errors: dict[str, str] = field(default_factory=dict)
+    # the quasi-static gain at the amplitude it is measured at (analysis.static_gain; what the linearity
+    # is fitted to), or {"not_determined": why}; None for results written before it
+    static_gain: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready results (stored in shot files, printed by --json); a "sensors" object
@@ -122,6 +126,7 @@ class ShotAnalysis:
                 "settling_time_ratio": self.settling_time_ratio,
             },
             "peak_overshoot": self.peak_overshoot,
+            "static_gain": self.static_gain,
             "warnings": list(self.warnings),
         }
 
@@ -151,7 +156,7 @@ class ShotAnalysis:
                 peak_overshoot=data.get("peak_overshoot"), warnings=list(data.get("warnings", [])),
                 compensation={k: data["dcm"][k] for k in COMPENSATION_KEYS if k in data["dcm"]},
                 uncertainty=data.get("uncertainty"), fbsd_bounds=dict(data.get("fbsd_bounds") or {}),
-                sensors=sensors, sensor_errors=sensor_errors,
+                sensors=sensors, sensor_errors=sensor_errors, static_gain=data.get("static_gain"),
             )
         except (KeyError, TypeError) as exc:
             raise AnalysisError(f"shot analysis results are incomplete: missing {exc}") from None
@@ -175,6 +180,7 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
     warnings = list(ident.warnings)
     uncertainty, model_draws = shot_uncertainty(ident, params, reduction, warnings)
     with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
+    static, why_not = static_gain(ident, model_draws)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
     compensation = compensate_shot(ident, record, DcmOptions.from_params(params), draws=model_draws,
                                    seed=params.seed)
@@ -201,6 +207,7 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
         rise_time_ratio=float(rtr), settling_time_ratio=float(settling), peak_overshoot=overshoot,
         warnings=warnings, compensation=compensation.to_dict(), uncertainty=uncertainty,
         fbsd_bounds=fbsd_bounds(edges, ident.supported_band_hz),
+        static_gain=static.to_dict() if static is not None else {"not_determined": why_not},
     )
 
 

@@ -14,7 +14,7 @@ from hopkinson.analysis.sine_comparison import SineCalibration, SineComparison
 from hopkinson.reports.data import G_M_S2, ShotEntry
 from hopkinson.reports.layout import plain_log_ticks, plot_page, table_in_axes
 from hopkinson.reports.shot_pages import BAND_LEVELS, frequency_grid, normalised
-from hopkinson.reports.statistics import CampaignStatistics
+from hopkinson.reports.statistics import STATIC_GAIN, CampaignStatistics, linearity_sensitivity
 from hopkinson.reports.tables import fmt, sig, sine_rows, to_decimals_of
 from matplotlib.figure import Figure
 
@@ -172,11 +172,11 @@ def sine_page(comparisons: Sequence[tuple[str, SineComparison]], sine: SineCalib
 
 
 LINEARITY_CAPTION = "Campaign: amplitude linearity"
-LINEARITY_NOTE = ("ISO 16063-22: each shot's sensitivity (its model's DC gain, which means the same at every level; "
-                  "a peak ratio S_sh reads the resonance's ringing when the pulse excites it) against the amplitude "
-                  "it is measured at, Σ|a|³/Σa² over the pulse (for a sensitivity S₀(1 + c·|a|) the gain a linear "
-                  "model measures), error bars U (95 %) of what differs from shot to shot (the reference chain and "
-                  "the transverse row, common to all shots, left out: they move S₀, not c); the line "
+LINEARITY_NOTE = ("ISO 16063-22: fitted to {sensitivity} (a sensitivity that means the same at every level: for "
+                  "S₀(1 + c·|a|) it reads S₀(1 + c·a) at that amplitude; a peak ratio S_sh reads the resonance's "
+                  "ringing when the pulse excites it, and a model's DC gain gives part of the change to the dynamics), "
+                  "error bars U (95 %) of what differs from shot to shot (the reference chain and the transverse "
+                  "row, common to all shots, left out: they move S₀, not c); the line "
                   "S(a) = S₀(1 + c·a) fitted with weights 1/u² (analysis.linearity); the linearity deviation is "
                   "c·(a_max − a_min), the fitted change of S over the levels covered.")
 
@@ -187,7 +187,7 @@ def _signed(text: str) -> str:
 
 
 def linearity_page(stats: CampaignStatistics) -> Figure:
-    """The sensitivity (DC gain) against the amplitude it is measured at, with each point's U and
+    """The sensitivity (statistics.linearity_sensitivity) against the amplitude it is measured at, with each point's U and
     the fitted line, the deviations from the line, and the table of the points."""
     fit = stats.linearity
     assert fit is not None
@@ -197,7 +197,11 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
     peak_g = np.array([p.peak_m_s2 for p in points]) / G_M_S2
     s = np.array([p.sensitivity for p in points])
     big_u = np.array([np.nan if p.expanded is None else p.expanded for p in points])
-    ax_s.errorbar(peak_g, s, yerr=np.nan_to_num(big_u), fmt="o", color="tab:green", capsize=3, label="sensitivity (DC gain) ± U per shot")
+    static = any(p.kind == STATIC_GAIN for p in points)
+    what = "quasi-static gain" if static else "DC gain"
+    abscissa = "amplitude it is measured at" if static else "amplitude Σ|a|³/Σa²"
+    ax_s.errorbar(peak_g, s, yerr=np.nan_to_num(big_u), fmt="o", color="tab:green", capsize=3,
+                  label=f"sensitivity ({what}) ± U per shot")
     grid = np.linspace(0.0, 1.05 * float(np.max(peak_g)), 100)
     ax_s.plot(grid, fit.sensitivity_at(grid * G_M_S2), color="0.2", lw=1,
               label=f"fit: S₀ = {to_decimals_of(fit.reference_sensitivity, fit.k * fit.u_reference_sensitivity)}, "
@@ -208,8 +212,8 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
         base = fit.sensitivity_at(centre)
         ax_s.plot(grid, base * (1 + slope * (grid * G_M_S2 - centre)), color="0.5", lw=0.8, ls="--",
                   label="slope ± U" if sign < 0 else None)
-    ax_s.set_xlabel("amplitude Σ|a|³/Σa² (g)")
-    ax_s.set_ylabel("sensitivity, DC gain (× nominal)")
+    ax_s.set_xlabel(f"{abscissa} (g)")
+    ax_s.set_ylabel(f"sensitivity, {what} (× nominal)")
     ax_s.set_title("Sensitivity against the shock level", fontsize=9)
     ax_s.grid(alpha=0.3)
     ax_s.legend(fontsize=7)
@@ -217,11 +221,11 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
     rel_u = 100 * big_u / s
     ax_r.errorbar(peak_g, resid, yerr=np.nan_to_num(rel_u), fmt="o", color="tab:green", capsize=3)
     ax_r.axhline(0.0, color="0.3", lw=0.8)
-    ax_r.set_xlabel("amplitude Σ|a|³/Σa² (g)")
+    ax_r.set_xlabel(f"{abscissa} (g)")
     ax_r.set_ylabel("sensitivity − fit (%)")
     ax_r.set_title("Deviation of each shot from the line (± U)", fontsize=9)
     ax_r.grid(alpha=0.3)
-    header = ["shot", "a (g)", "a (km/s²)", "DC gain (× nom.)", "U (95 %)", "− fit (%)"]  # a = Σ|a|³/Σa²
+    header = ["shot", "a (g)", "a (km/s²)", "S (× nom.)", "U (95 %)", "− fit (%)"]  # S: the ylabel says which
     rows = [[p.label, f"{p.peak_m_s2 / G_M_S2:,.0f}", f"{p.peak_m_s2 / 1e3:.4g}", f"{p.sensitivity:.5g}",
              "—" if p.expanded is None else sig(p.expanded), f"{100 * r:+.2f}"]
             for p, r in zip(points, fit.residuals_rel, strict=True)]
@@ -231,5 +235,5 @@ def linearity_page(stats: CampaignStatistics) -> Figure:
                  f"Birge ratio {fit.birge_ratio:.2f}" if fit.birge_ratio is not None else ""])
     table_in_axes(ax_t, header, rows, fontsize=7.0, line_heights=True)
     ax_note.axis("off")
-    ax_note.text(0.0, 0.0, LINEARITY_NOTE, fontsize=6.5, color="0.3", wrap=True, va="bottom", transform=ax_note.transAxes)
+    ax_note.text(0.0, 0.0, LINEARITY_NOTE.format(sensitivity=linearity_sensitivity(points)), fontsize=6.5, color="0.3", wrap=True, va="bottom", transform=ax_note.transAxes)
     return fig

@@ -18,7 +18,12 @@ from hopkinson.reports.campaign_pages import (
 from hopkinson.reports.data import CalibrationReport, ShotEntry
 from hopkinson.reports.layout import TextPages, freeze_layout, new_figure
 from hopkinson.reports.shot_pages import shot_pages
-from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
+from hopkinson.reports.statistics import (
+    COMBINATION_NOTE,
+    CampaignStatistics,
+    campaign_statistics,
+    linearity_sensitivity,
+)
 from hopkinson.reports.tables import (
     BUDGET_NOTE,
     budget_rows,
@@ -79,8 +84,8 @@ def title_pages(report: CalibrationReport, stats: CampaignStatistics | None) -> 
             page.paragraph(note, colour="#a00000")
         if stats.linearity is not None:  # shots at two or more levels
             page.heading("Amplitude linearity (ISO 16063-22)")
-            page.paragraph(f"sensitivity (DC gain) against the amplitude it is measured at: slope {stats.linearity.text()} "
-                           "(95 %; plot and table on the linearity page)")
+            page.paragraph(f"{linearity_sensitivity(stats.linearity_points, short=True)} against the amplitude it is "
+                           f"measured at: slope {stats.linearity.text()} (95 %; plot and table on the linearity page)")
             if stats.linearity_note:
                 page.paragraph(stats.linearity_note, colour="0.25")
         text = cross_validation_summary(stats)

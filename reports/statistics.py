@@ -9,9 +9,9 @@
   prepared them (its baselines and input delay, stored in its results);
 - the campaign's value of each uncertain key figure (`combine`): the mean of the shots, their
   repeatability and a combined expanded uncertainty (see `combine` for how);
-- amplitude linearity (ISO 16063-22): each shot's shock sensitivity against its peak
-  acceleration with its U, and the straight line through them (analysis.linearity), when the
-  shots cover two or more levels.
+- amplitude linearity (ISO 16063-22): each shot's quasi-static gain (analysis.static_gain)
+  against the amplitude it is measured at with its U, and the straight line through them
+  (analysis.linearity), when the shots cover two or more levels.
 """
 
 from __future__ import annotations
@@ -156,55 +156,103 @@ def combined_figures(key_figures: Sequence[KeyFigures]) -> dict[str, Combined]:
     return out
 
 
+STATIC_GAIN = "quasi-static gain (main pulse's direction)"
+DC_GAIN = "DC gain"
+LINEARITY_SENSITIVITY = {
+    STATIC_GAIN: "each shot's quasi-static gain in the main pulse's direction (analysis.static_gain: the response "
+                 "compensated by the model's dynamics where the sensor is quasi-static, its least-squares gain on the "
+                 "reference's main lobe) at the amplitude it is measured at",
+    DC_GAIN: "each shot's model DC gain at Σ|a|³/Σa² (shots analysed before the quasi-static gain: on a non-linear "
+             "sensor the fit's dynamics take up part of the change, so the slope reads short; analyse them again)",
+}
+
+
 @dataclass(frozen=True)
 class LinearityPoint:
-    """One shot's sensitivity (its model's DC gain: what means the same at every level, where a
-    peak ratio reads the resonance's ringing) at the amplitude it is measured at
-    (analysis.excitation.gain_amplitude; the peak for files written before), with the u (and U,
-    95 %) that differs from shot to shot (KeyFigures.shot_specific_u)."""
+    """One shot's sensitivity at the amplitude it is measured at, with the u (and U, 95 %) that
+    differs from shot to shot: its quasi-static gain in the main pulse's direction
+    (analysis.static_gain, `kind` STATIC_GAIN), or for results written before it the model's DC
+    gain at analysis.excitation.gain_amplitude (`kind` DC_GAIN; KeyFigures.shot_specific_u)."""
 
     label: str
     peak_m_s2: float
     sensitivity: float
     u: float | None
     expanded: float | None
+    kind: str = STATIC_GAIN
 
 
 MIN_LEVEL_SPAN_REL = 0.05  # levels closer than this (relative) are one level: no line through them
 
 
 def linearity_points(labelled: Iterable[tuple[str, KeyFigures | None]]) -> list[LinearityPoint]:
-    """The shots that are results, with a DC gain and the amplitude it was measured at."""
+    """The shots that are results, with a sensitivity and the amplitude it was measured at
+    (LinearityPoint)."""
     out = []
     for label, kf in labelled:
-        if kf is None or not kf.is_result or kf.sensitivity.value is None:
+        if kf is None or not kf.is_result:
             continue
-        s = kf.sensitivity
-        a = kf.gain_amplitude_m_s2
-        if a is None and kf.peak_acceleration_m_s2 is not None:
-            a = kf.peak_acceleration_m_s2.value
-        if a is None or not (math.isfinite(s.value) and math.isfinite(a)):
+        if kf.static_gain is not None and kf.static_gain.value is not None and kf.static_gain_amplitude_m_s2:
+            s, a, kind = kf.static_gain.value, kf.static_gain_amplitude_m_s2, STATIC_GAIN
+            u = kf.shot_specific_u("static_gain")
+        elif kf.sensitivity.value is not None and kf.static_gain_not_determined is None:
+            s, kind = kf.sensitivity.value, DC_GAIN
+            a = kf.gain_amplitude_m_s2
+            if a is None and kf.peak_acceleration_m_s2 is not None:
+                a = kf.peak_acceleration_m_s2.value
+            u = kf.shot_specific_u("dc_gain")
+        else:
             continue
-        u = kf.shot_specific_u("dc_gain")
-        out.append(LinearityPoint(label, abs(float(a)), float(s.value), u, None if u is None else 1.959963984540054 * u))
+        if a is None or not (math.isfinite(s) and math.isfinite(a)):
+            continue
+        out.append(LinearityPoint(label, abs(float(a)), float(s), u, None if u is None else 1.959963984540054 * u,
+                                  kind))
     return out
 
 
+def fitted_points(points: Sequence[LinearityPoint]) -> list[LinearityPoint]:
+    """The points a line goes through: points of both kinds (shots analysed before the quasi-static
+    gain among newer ones) are not one sensitivity, and only the quasi-static gains are kept."""
+    if len({p.kind for p in points}) > 1:
+        return [p for p in points if p.kind == STATIC_GAIN]
+    return list(points)
+
+
 def campaign_linearity(points: Sequence[LinearityPoint]) -> tuple[LinearityFit | None, str]:
-    """The straight line through the points (analysis.linearity), or None and why not."""
+    """The straight line through `fitted_points(points)` (analysis.linearity), or None and why not;
+    the note names the shots left out."""
+    notes = []
+    if len({p.kind for p in points}) > 1:
+        left = [p.label for p in points if p.kind != STATIC_GAIN]
+        points = fitted_points(points)
+        notes.append(f"amplitude linearity: {len(left)} shot(s) without a quasi-static gain (analysed before it) left "
+                     f"out ({', '.join(left)}): analyse them again")
     if len(points) < 2:
-        return None, "amplitude linearity: needs analysed shots at two or more levels"
+        return None, "; ".join([*notes, "amplitude linearity: needs analysed shots at two or more levels"])
     peaks = np.array([p.peak_m_s2 for p in points])
     if np.ptp(peaks) < MIN_LEVEL_SPAN_REL * float(np.max(peaks)):
-        return None, "amplitude linearity: every shot is at one level (within 5 %): fire several levels"
+        return None, "; ".join([*notes, "amplitude linearity: every shot is at one level (within 5 %): fire "
+                                        "several levels"])
     us = [p.u for p in points]
     known = all(u is not None and u > 0 for u in us)
     try:
         fit = fit_linearity(peaks, [p.sensitivity for p in points], us if known else None)  # type: ignore[arg-type]
     except AnalysisError as exc:
-        return None, f"amplitude linearity: {exc}"
-    note = "" if known else "amplitude linearity: some shots have no uncertainty: equal weights, u from the scatter"
-    return fit, note
+        return None, "; ".join([*notes, f"amplitude linearity: {exc}"])
+    if not known:
+        notes.append("amplitude linearity: some shots have no uncertainty: equal weights, u from the scatter")
+    if points[0].kind != STATIC_GAIN:
+        notes.append(f"amplitude linearity: fitted to {LINEARITY_SENSITIVITY[points[0].kind]}")
+    return fit, "; ".join(notes)
+
+
+def linearity_sensitivity(points: Sequence[LinearityPoint], short: bool = False) -> str:
+    """Which sensitivity the line is fitted to, in words (the report says it); `short`: its name
+    ("quasi-static gain", "sensitivity (DC gain)") for the summary."""
+    kind = STATIC_GAIN if any(p.kind == STATIC_GAIN for p in points) else DC_GAIN
+    if short:
+        return "quasi-static gain" if kind == STATIC_GAIN else "sensitivity (DC gain)"
+    return LINEARITY_SENSITIVITY[kind]
 
 
 @dataclass
@@ -277,5 +325,6 @@ def campaign_statistics(entries: Sequence[ShotEntry], sine: SineCalibration | No
     comparisons, notes = sine_comparisons(analysed, sine) if sine is not None else ([], [])
     points = linearity_points((e.label, e.key_figures) for e in analysed)
     fit, note = campaign_linearity(points)
+    points = fitted_points(points)  # the page tables the points the line goes through
     return CampaignStatistics([e.label for e in analysed], figures, stats, matrix, combined, comparisons, notes,
                               points, fit, note)

@@ -25,7 +25,13 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
-from hopkinson.reports.statistics import LinearityPoint, campaign_linearity, linearity_points
+from hopkinson.reports.statistics import (
+    STATIC_GAIN,
+    LinearityPoint,
+    campaign_linearity,
+    fitted_points,
+    linearity_points,
+)
 from hopkinson.rig.campaign_setup import prepare_run
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError
@@ -527,16 +533,18 @@ class CampaignTab(QWidget):
         self.update_buttons()
 
     def _update_linearity(self) -> None:
-        """The line through the analysed shots' sensitivities (their models' DC gains, at the amplitude
-        each is measured at: reports.statistics), shown once they cover two or more levels; each
-        point with its U in the tooltip."""
+        """The line through the analysed shots' sensitivities (their quasi-static gains, at the
+        amplitude each is measured at: reports.statistics), shown once they cover two or more levels;
+        each point with its U in the tooltip."""
         points = [self._linearity[sid] for sid in self.rows if sid in self._linearity]
         fit, _note = campaign_linearity(points)
+        points = fitted_points(points)
         if fit is None:
             self.linearity_label.setText("")
             self.linearity_label.setToolTip("")
             return
-        self.linearity_label.setText(f"Amplitude linearity (ISO 16063-22), sensitivity (DC gain) against the "
+        what = "quasi-static gain" if points[0].kind == STATIC_GAIN else "DC gain"
+        self.linearity_label.setText(f"Amplitude linearity (ISO 16063-22), sensitivity ({what}) against the "
                                      f"amplitude: slope {fit.text()}")
         lines = [f"{p.label}: {p.peak_m_s2 / G_M_S2:,.0f} g, S {p.sensitivity:.5g}"
                  + (f" ± {p.expanded:.2g}" if p.expanded is not None else "") + f" ({100 * r:+.2f} % from the line)"

@@ -59,3 +59,15 @@ def test_old_results_without_uncertainty_still_give_figures() -> None:
     assert figures.natural_frequency_hz == Figure(27e3)
     assert figures.fbsd_text("5") == "6 kHz"
     assert figures.shock_sensitivity is None
+
+
+def test_the_quasi_static_gain_is_read_with_its_amplitude_or_why_not() -> None:
+    figures = KeyFigures.from_results({**RESULTS, "static_gain": {"value": 2.01e-7, "u": 1e-10,
+                                                                  "amplitude_m_s2": 3.5e5}})
+    assert figures.static_gain.value == 2.01e-7 and figures.static_gain.u == 1e-10
+    assert figures.static_gain.interval == pytest.approx((2.01e-7 - 1.96e-10, 2.01e-7 + 1.96e-10), rel=1e-4)
+    assert figures.static_gain_amplitude_m_s2 == 3.5e5 and figures.shot_specific_u("static_gain") == 1e-10
+    why = KeyFigures.from_results({**RESULTS, "static_gain": {"not_determined": "fewer than 4 fitted bins"}})
+    assert why.static_gain is None and why.static_gain_not_determined == "fewer than 4 fitted bins"
+    old = KeyFigures.from_results(RESULTS)  # results written before it
+    assert old.static_gain is None and old.static_gain_not_determined is None

@@ -10,7 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hopkinson.reports.campaign_pages import LINEARITY_CAPTION, linearity_page
-from hopkinson.reports.statistics import CampaignStatistics, LinearityPoint, campaign_linearity
+from hopkinson.reports.statistics import (
+    DC_GAIN,
+    STATIC_GAIN,
+    CampaignStatistics,
+    LinearityPoint,
+    campaign_linearity,
+    fitted_points,
+)
 
 G = 9.80665
 PEAKS_G = (20_000, 40_000, 60_000, 80_000)
@@ -60,3 +67,19 @@ def test_the_linearity_page_plots_and_tables_every_point(artifacts_dir: Path) ->
     line = next(ln for ax in fig.axes for ln in ax.get_lines() if ln.get_label().startswith("fit:"))
     x, y = line.get_data()
     assert np.interp(60_000, x, y) == pytest.approx(1.5 * (1 + C * 60_000 * G), rel=1e-3)
+
+
+def test_a_line_goes_through_one_kind_of_sensitivity_and_says_which() -> None:
+    """Shots analysed before the quasi-static gain (their DC gain at Σ|a|³/Σa²) are not mixed with
+    newer ones: left out with a note; a campaign of only older shots is fitted to their DC gains and
+    says so."""
+    points = _points()
+    old = [LinearityPoint(p.label, p.peak_m_s2, 1.1 * p.sensitivity, p.u, p.expanded, DC_GAIN) for p in points[:2]]
+    fit, note = campaign_linearity(old + points[2:])
+    assert fit is not None and fit.n == 2 and fit.slope_rel_per_m_s2 == pytest.approx(C, rel=1e-9)
+    assert "2 shot(s) without a quasi-static gain" in note and "s001-r1, s002-r1" in note
+    assert fitted_points(old + points[2:]) == points[2:]
+    fit, note = campaign_linearity([LinearityPoint(p.label, p.peak_m_s2, p.sensitivity, p.u, p.expanded, DC_GAIN)
+                                    for p in points])
+    assert fit is not None and fit.n == 4 and "DC gain" in note
+    assert all(p.kind == STATIC_GAIN for p in points)

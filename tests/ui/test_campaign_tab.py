@@ -137,15 +137,15 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
         assert [s.fire_count for s in journal.statuses()] == [1, 1, 1]
     assert not tab.resume_button.isEnabled()  # nothing left to do
     # amplitude linearity over the plan's two levels (issue 19): the line through the stored shots'
-    # sensitivities (DC gains) at the amplitude each is measured at, with the u that differs from shot
-    # to shot (docs/systematic-effects.md: S_sh, a peak ratio, reads the resonance's ringing on these
-    # pulses and is not determined here)
+    # quasi-static gains (analysis.static_gain; issue 40 item 5) at the amplitude each is measured at,
+    # with the u that differs from shot to shot (docs/systematic-effects.md: S_sh, a peak ratio, reads
+    # the resonance's ringing on these pulses and is not determined here)
     figures = [KeyFigures.from_results(read_shot(run.shot_path(sid), load_raw=False).results)
                for sid in ("s001-r1", "s001-r2", "s002-r1")]
     assert all(kf.shock_sensitivity is None and "not the sensitivity for this pulse" in
                kf.not_determined["shock_sensitivity"] for kf in figures)
-    fit = fit_linearity([kf.gain_amplitude_m_s2 for kf in figures], [kf.sensitivity.value for kf in figures],
-                        [kf.shot_specific_u("dc_gain") for kf in figures])
+    fit = fit_linearity([kf.static_gain_amplitude_m_s2 for kf in figures], [kf.static_gain.value for kf in figures],
+                        [kf.shot_specific_u("static_gain") for kf in figures])
     assert tab.linearity_label.text().endswith(f"slope {fit.text()}") and "n = 3" in tab.linearity_label.text()
     tips = tab.linearity_label.toolTip().splitlines()
     assert [t.split(":")[0] for t in tips] == ["s001-r1", "s001-r2", "s002-r1"] and "% from the line" in tips[0]
