@@ -99,13 +99,12 @@ from hopkinson.analysis.model_error import (
     ModelError,
     measure_model_error,
 )
-from hopkinson.analysis.modes import has_doublet, main_mode
+from hopkinson.analysis.modes import Mode, ModeKind, has_doublet, main_mode
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.onset_choice import onset_beyond_the_model_error, onset_fitted
 from hopkinson.analysis.order_choice import FRF_TOLERANCE, SIGNIFICANCE, choose_order
 from hopkinson.analysis.order_search import (
-    FREE,
     OrderSweep,
     SearchSetup,
     SettledOrder,
@@ -126,6 +125,7 @@ from hopkinson.analysis.record_preparation import (
 )
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import simulate_from_rest
+from hopkinson.analysis.structure import DelayMode, Structure
 
 if TYPE_CHECKING:
     from hopkinson.analysis.sine_comparison import SineCalibration
@@ -158,7 +158,7 @@ class FitContext:
     noise_u: NoiseSpectrum  # normalised units
     noise_y: NoiseSpectrum
     fits: dict[int, OrderFit]  # every order evaluated
-    delay_mode: str | float
+    delay_mode: DelayMode | float
     significance: float
     knee_tolerance: float
     max_delay: int
@@ -204,7 +204,7 @@ class Identification:
     bic_by_order: list[float]
     fit_percent: float  # 100·(1 − ||y − ŷ|| / ||y − ȳ||) of the final model over the fitted window
     delay_samples: float  # causal fractional input delay τ ≥ 0 (samples at the analysis rate)
-    modes: list[dict[str, Any]]  # per pole pair / real pole: natural_frequency_hz, damping_ratio, kind, supported
+    modes: list[Mode]  # per pole pair / real pole (analysis.modes)
     warnings: list[str]
     converged: bool
     iterations: int
@@ -232,7 +232,7 @@ class Identification:
         return self.model.zeros
 
     @property
-    def main_mode(self) -> dict[str, Any] | None:
+    def main_mode(self) -> Mode | None:
         """The lowest supported complex pole pair (the sensor's main resonance), or None."""
         return main_mode(self.modes)
 
@@ -243,13 +243,13 @@ class Identification:
         if self.main_mode is not None or self.supported_band_hz is None:
             return None
         top = self.supported_band_hz[1]
-        beyond = any(m["kind"] == "complex" and not m.get("cancelled") and (m["natural_frequency_hz"] or 0.0) > top
+        beyond = any(m.kind == ModeKind.COMPLEX and not m.cancelled and (m.natural_frequency_hz or 0.0) > top
                      for m in self.modes)
         return float(top) if beyond else None
 
     def supported_poles(self) -> np.ndarray:
         """The poles of the supported modes (both poles of a pair): what a DCM may cancel."""
-        keep = [complex(*m["pole"]) for m in self.modes if m["supported"]]
+        keep = [m.pole_z for m in self.modes if m.supported]
         poles = [p for q in keep for p in ((q, q.conjugate()) if q.imag > 0 else (q,))]
         return np.array(poles, dtype=complex)
 
@@ -265,12 +265,12 @@ class Identification:
                 "order_selection": self.order_selection,
                 "knee_tolerance": self.knee_tolerance,
                 "fit_percent": jsonable(self.fit_percent),
-                "modes": [dict(m) for m in self.modes],
+                "modes": [m.to_dict() for m in self.modes],
                 "converged": self.converged,
                 "iterations": self.iterations,
                 "warnings": list(self.warnings),
                 "preprocessing": dict(self.preprocessing),
-                "main_mode": dict(self.main_mode) if self.main_mode is not None else None,
+                "main_mode": self.main_mode.to_dict() if self.main_mode is not None else None,
                 "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
                 "supported_band": self.supported_band.to_dict() if self.supported_band else None,
                 "nonminimum_phase_zeros": complex_pairs(self.model.nonminimum_phase_zeros),
@@ -411,7 +411,7 @@ def _identified(prepared: PreparedRecord, max_order: int, order: int | None, kne
     mean = prep.terms.mean_gain_factor(final.inputs)
     model = DiscreteModel(dt, final.a, final.b * (mean * prepared.scale_y / prepared.scale_u),
                           float(final.delay) - prepared.realigned_samples,
-                          info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure})
+                          info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure.value})
     band_cut = stretches_beyond_the_model(prep, data, final, dt) if band_top_hz is None else None
     modes = claimed_modes(model, prep.band, sweep.structure)
     warnings += claims_warnings(modes, prep.band)
@@ -500,7 +500,7 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     measured again on a lower order's residual, the model error would take in what that order
     lacks (on PTB's record it then fell to order 1).
     Returns the sweep, the model error and the data as weighed."""
-    sweep = fit_orders(data, FREE, setup)
+    sweep = fit_orders(data, Structure.FREE, setup)
     model_error = ModelError.none(prep.bin_hz.size)
     if sweep.chosen is None:
         return sweep, model_error, data
@@ -510,7 +510,7 @@ def fit_weighing_model_error(prep: Prepared, data: SpectralData, setup: SearchSe
     settled = undetermined_terms_dropped(prep, data, sweep, setup)
     if settled is not None:  # a term the record does not call for is not fitted
         data = settled
-        sweep = fit_orders(data, FREE, setup)
+        sweep = fit_orders(data, Structure.FREE, setup)
         if sweep.chosen is None:
             return sweep, model_error, data
     order = setup.asked_order
@@ -582,7 +582,7 @@ def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderS
 
 
 def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchSetup, settled: SettledOrder,
-                    final: OrderFit, others: list[OrderFit], model: DiscreteModel, modes: list[dict[str, Any]],
+                    final: OrderFit, others: list[OrderFit], model: DiscreteModel, modes: list[Mode],
                     model_error: ModelError, evidence: dict[str, Any], warnings: list[str],
                     knee_tolerance: float) -> Identification:
     """The identification with everything the report and the uncertainty need: the fit's
@@ -610,7 +610,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
     noise = _noise_report(prepared, noise_y, residual, ratio, model_error)
     evidence.update({
         "comparisons": sweep.comparisons,
-        "structure": sweep.structure,
+        "structure": sweep.structure.value,
         "structure_reason": sweep.why,
         "criterion": "the smallest order no higher order beats, both beyond chance (F test on the "
                      f"errors-in-variables cost V at {setup.significance:.0%}, Bonferroni-corrected over the fitted "

@@ -20,7 +20,6 @@ from hopkinson.analysis.input_terms import ONSET
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.order_choice import choose_order
 from hopkinson.analysis.order_search import (
-    FREE,
     POLISH_EVALUATIONS,
     OrderSweep,
     SearchSetup,
@@ -28,6 +27,7 @@ from hopkinson.analysis.order_search import (
     fit_orders,
 )
 from hopkinson.analysis.record_preparation import Prepared
+from hopkinson.analysis.structure import DelayMode, Structure
 
 # The onset's bumps are kept only where the correction they make stands this many times above the
 # reference's noise RMS (on a record whose residual is mostly model error, a few free bumps always
@@ -62,7 +62,7 @@ def onset_fitted(prep: Prepared, plain: SpectralData, plain_sweep: OrderSweep, s
     if onset is None or plain_sweep.chosen is None:
         return None
     trial = replace(prep.with_terms(onset), var_y=plain.var_y, sine=plain.sine)
-    sweep = fit_orders(trial, FREE, setup)
+    sweep = fit_orders(trial, Structure.FREE, setup)
     why = "no model with them is stable"
     if sweep.chosen is not None:
         chosen = sweep.fits[sweep.chosen]  # at its optimum (a copy: the sweep goes on as the search left it)
@@ -100,7 +100,7 @@ def _stands(fit: OrderFit, other: OrderFit, bins: int, significance: float) -> b
     return fits[chosen if chosen is not None else 0] is fit
 
 
-def onset_beyond_the_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, delay_mode: str | float,
+def onset_beyond_the_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, delay_mode: DelayMode | float,
                                  setup: SearchSetup) -> SpectralData:
     """The data weighed with the model error, without the onset's terms where, so weighed, they no
     longer lower the cost beyond chance: the F test that kept them read a residual that was

@@ -29,7 +29,7 @@ from hopkinson.analysis.frequency_fit import (
     delay_branches,
     predicted_bins,
 )
-from hopkinson.analysis.modes import has_doublet, modes_of
+from hopkinson.analysis.modes import ModeKind, has_doublet, modes_of
 from hopkinson.analysis.order_choice import (
     NoiseDraws,
     Refitter,
@@ -42,8 +42,8 @@ from hopkinson.analysis.order_choice import (
 )
 from hopkinson.analysis.record_preparation import Alignment, Prepared
 from hopkinson.analysis.resample import estimate_delay_samples
+from hopkinson.analysis.structure import DelayMode, Structure
 
-FREE, ALL_POLE = "free", "all_pole"  # the model structures: B free, or B = g·(1 + z⁻¹)ⁿ/2ⁿ (no finite zeros)
 # A final model with a pole this close to the unit circle sits on the stability boundary.
 MARGINAL_POLE = 1e-6
 # Levenberg–Marquardt evaluations that polish the chosen order to tight convergence (a band across
@@ -78,7 +78,7 @@ class SearchSetup:
     band_hz: tuple[float, float]  # the band the excitation supports
     alignment: Alignment = field(default_factory=Alignment)  # what record_preparation.realigned did
 
-    def delay_mode(self, structure: str) -> str | float:
+    def delay_mode(self, structure: Structure) -> DelayMode | float:
         """The free structure keeps its delay causal (its zeros can take up a lead: the lead
         warning); the all-pole structure has no zeros to do so, and the reference chain's own
         delay (an interferometer's demodulation and low-pass, 0.2–0.9 µs; PTB's record leads by
@@ -86,7 +86,7 @@ class SearchSetup:
         takes either sign."""
         if not self.remove_delay:
             return 0.0
-        return "free" if structure == ALL_POLE else "causal"
+        return DelayMode.FREE if structure == Structure.ALL_POLE else DelayMode.CAUSAL
 
 
 def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | None, dt: float, *,
@@ -116,8 +116,8 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
 class OrderSweep:
     """Every order of one structure fitted, and the order test's choice among them."""
 
-    structure: str  # FREE or ALL_POLE
-    delay_mode: str | float
+    structure: Structure
+    delay_mode: DelayMode | float
     fits: dict[int, OrderFit]  # by order
     parameters: dict[int, int]
     costs: dict[int, float]  # V of each candidate order (inf: no candidate: unstable, or a pole below the band)
@@ -136,7 +136,7 @@ class OrderSweep:
         if n not in self._polished:
             fit = self.fits[n]
             done = OrderProblem.for_fit(data, fit, self.delay_mode, setup.max_delay).solve(fit, POLISH_EVALUATIONS, 1e-11)
-            if self.delay_mode == "causal" and done.delay < 1e-2 and not done.converged:
+            if self.delay_mode == DelayMode.CAUSAL and done.delay < 1e-2 and not done.converged:
                 at_zero = OrderProblem.for_fit(data, fit, 0.0, setup.max_delay).solve(done, POLISH_EVALUATIONS, 1e-11)
                 if at_zero.cost <= done.cost * (1 + 1e-9):
                     done = at_zero
@@ -149,7 +149,7 @@ class OrderSweep:
         return acceptable(self.polished(n, data, setup), data.bins)
 
 
-def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderSweep:
+def fit_orders(data: SpectralData, structure: Structure, setup: SearchSetup) -> OrderSweep:
     """Every order n = 1 … n_max of `structure` fitted on `data` (from 2 for the all-pole
     structure: it stands for a resonance beyond the band, and its order 1, a real pole, is a
     low-pass that cannot rise towards one), and the order test's choice. Each order starts from
@@ -167,8 +167,8 @@ def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderS
     tau, tau0 = setup.tau0, setup.tau0
     delay_mode = setup.delay_mode(structure)
     previous: OrderFit | None = None
-    for n in range(2 if structure == ALL_POLE else 1, setup.n_max + 1):
-        shape = all_pole_numerator(n) if structure == ALL_POLE else None
+    for n in range(2 if structure == Structure.ALL_POLE else 1, setup.n_max + 1):
+        shape = all_pole_numerator(n) if structure == Structure.ALL_POLE else None
         problem = OrderProblem(data, n, delay_mode, setup.max_delay, numerator=shape)
         held = previous.inputs if previous is not None else None  # the input terms as the order below found them
         starts = [problem.linear_start(tau, inputs=held)]
@@ -246,10 +246,10 @@ def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
     record: free order 1 claimed no mode in the band, every higher order unstable, and the
     all-pole order 2 settled on the unit circle). An asked order keeps the free structure, as
     does an all-pole sweep with no stable order."""
-    free = fit_orders(data, FREE, setup)
+    free = fit_orders(data, Structure.FREE, setup)
     if setup.asked_order is not None:
         return free
-    all_pole = fit_orders(data, ALL_POLE, setup)
+    all_pole = fit_orders(data, Structure.ALL_POLE, setup)
     if all_pole.chosen is None:
         return free
     if free.chosen is None:
@@ -300,7 +300,7 @@ def _exhausted_without_mode(sweep: OrderSweep, setup: SearchSetup) -> bool:
         return False
     fit = sweep.fits[chosen]
     modes = modes_of(np.roots(fit.a) if fit.a.size > 1 else np.zeros(0), setup.sample_interval_s, setup.band_hz)
-    return not any(m["kind"] == "complex" and m["supported"] for m in modes)
+    return not any(m.kind == ModeKind.COMPLEX and m.supported for m in modes)
 
 
 @dataclass(frozen=True)
@@ -353,8 +353,8 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
     # rule as fit_structures' (PTB's record cut at 0.75 ms: orders 1–2 unstable once converged,
     # order 4 a doublet at 16.8 kHz, FBSD ±5 % 13.3 kHz against the sine's 11.4 kHz).
     doublet = fallback is not None and has_doublet(sweep.fits[fallback].a, sweep.fits[fallback].b)
-    if (fallback is None or doublet) and sweep.structure == FREE and setup.asked_order is None:
-        all_pole = fit_orders(data, ALL_POLE, setup)
+    if (fallback is None or doublet) and sweep.structure == Structure.FREE and setup.asked_order is None:
+        all_pole = fit_orders(data, Structure.ALL_POLE, setup)
         if all_pole.chosen is not None and all_pole.acceptable(all_pole.chosen, data, setup):
             if doublet:
                 why = (f"the stable orders with free zeros hold a pole–zero doublet (order {fallback}, after "
@@ -384,7 +384,7 @@ def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: 
     order from one delay and can miss it); the others are kept for the Monte Carlo, whose draws
     re-run this choice. Only a causal delay has branches. The sweep keeps the final fit."""
     final = sweep.fits[order]
-    others = delay_branches(data, final, setup.max_delay) if sweep.delay_mode == "causal" else []
+    others = delay_branches(data, final, setup.max_delay) if sweep.delay_mode == DelayMode.CAUSAL else []
     if others and others[0].cost < final.cost and acceptable(others[0], data.bins):
         final, others = replace(others[0], start_unstable=final.start_unstable), sorted(
             [final, *others[1:]], key=lambda f: f.cost)
@@ -435,7 +435,7 @@ def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: in
     except AnalysisError:
         xcorr = 0.0
     top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
-    problem = OrderProblem(data, order, "causal", max_delay)
+    problem = OrderProblem(data, order, DelayMode.CAUSAL, max_delay)
     refined = [problem.solve(start, 40) for start in delay_grid_starts(problem, top, 2)]
     return min(refined, key=lambda f: f.cost).delay if refined else 0.0
 

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, is_stable
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, ONSET
+from hopkinson.analysis.structure import DelayMode
 
 if TYPE_CHECKING:
     from hopkinson.analysis.identify import FitContext, Identification
@@ -147,7 +148,7 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         return []
     prep, fit = ctx.prep, ctx.fits[ident.order]
     main = ident.main_mode
-    pole = complex(*main["pole"]) if main else None
+    pole = main.pole_z if main else None
     nominal = figures_of(fit, ctx, pole)
     terms = ctx.terms
     window = (prep.start, prep.start + prep.u.size)
@@ -233,7 +234,7 @@ def _other_structure(ctx: FitContext, fit: OrderFit, pole: complex | None) -> li
     from hopkinson.analysis.model import all_pole_numerator
     from hopkinson.analysis.modes import has_doublet
 
-    delay_mode = "free" if ctx.delay_mode != 0.0 else 0.0
+    delay_mode = DelayMode.FREE if ctx.delay_mode != 0.0 else 0.0
     out: list[OrderFit] = []
     start = fit
     for n in (fit.order, fit.order + 1):

@@ -247,7 +247,7 @@ def evaluate(
     dc_draws = np.full(len(fits), np.nan)
     delay_draws = np.full(len(fits), np.nan)
     main = ident.main_mode
-    main_pole = complex(*main["pole"]) if main else None
+    main_pole = main.pole_z if main else None
     fn_draws = np.full(len(fits), np.nan)
     zeta_draws = np.full(len(fits), np.nan)
     model_draws: list[DiscreteModel] = []
@@ -282,9 +282,9 @@ def evaluate(
                 added_shock += shift
 
     dc = Estimate.of_draws(model.dc_gain, dc_draws, reflect=reflect, signed=True)
-    fn = Estimate.of_draws(main["natural_frequency_hz"], fn_draws, reflect=reflect, positive=True) if main \
+    fn = Estimate.of_draws(main.natural_frequency_hz, fn_draws, reflect=reflect, positive=True) if main \
         else None
-    zeta = Estimate.of_draws(main["damping_ratio"], zeta_draws, reflect=reflect, positive=True) if main \
+    zeta = Estimate.of_draws(main.damping_ratio, zeta_draws, reflect=reflect, positive=True) if main \
         else None
     fbsd = {k: Estimate.of_draws(fbsd_values[k], fbsd_draws[k], reflect=reflect, positive=True)
             for k in fbsd_values}
@@ -295,8 +295,8 @@ def evaluate(
     peaks = _peak_figures(ctx, reduction, options, rng, inflate, reference_factor, gain_factor, added_shock)
 
     # -- budget -------------------------------------------------------------------------------
-    nominal = {"dc_gain": model.dc_gain, "natural_frequency_hz": main["natural_frequency_hz"] if main else None,
-               "damping_ratio": main["damping_ratio"] if main else None,
+    nominal = {"dc_gain": model.dc_gain, "natural_frequency_hz": main.natural_frequency_hz if main else None,
+               "damping_ratio": main.damping_ratio if main else None,
                **{f"fbsd_{k}_hz": v for k, v in fbsd_values.items()}}
     draws_by_figure = {"dc_gain": dc_draws, "natural_frequency_hz": fn_draws, "damping_ratio": zeta_draws,
                        **{f"fbsd_{k}_hz": fbsd_draws[k] for k in fbsd_values}}
@@ -782,7 +782,7 @@ def _figure_gradients(
 ) -> dict[str, np.ndarray | None]:
     """∂figure/∂θ by central differences (figures of the model built from θ)."""
     main = ident.main_mode
-    pole = complex(*main["pole"]) if main else None
+    pole = main.pole_z if main else None
     dt = ctx.sample_interval_s
     scale = ctx.scale_y / ctx.scale_u
 

@@ -17,8 +17,6 @@ from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.model_error import measure_model_error
 from hopkinson.analysis.modes import has_doublet
 from hopkinson.analysis.order_search import (
-    ALL_POLE,
-    FREE,
     best_delay_branch,
     fit_orders,
     fit_structures,
@@ -34,6 +32,7 @@ from hopkinson.analysis.record_preparation import (
     realigned,
 )
 from hopkinson.analysis.records import Record
+from hopkinson.analysis.structure import DelayMode, Structure
 from scipy import signal
 
 DT = 1e-6  # the record is taken at the analysis rate (sample_rate_hz=None: no resampling)
@@ -345,12 +344,12 @@ def test_fitted_band_crosses_the_pulses_nulls_and_weighs_each_bin_by_its_noise()
 @pytest.fixture(scope="module")
 def clean():
     prep_rec, setup = prepared(record(seed=6))
-    return prep_rec, setup, fit_orders(prep_rec.prep.spectral, FREE, setup)
+    return prep_rec, setup, fit_orders(prep_rec.prep.spectral, Structure.FREE, setup)
 
 
 def test_fit_orders_chooses_the_known_order_and_finds_its_mode(clean):
     _, _, sweep = clean
-    assert sweep.structure == FREE and sweep.chosen == 2
+    assert sweep.structure == Structure.FREE and sweep.chosen == 2
     f_n, zeta = mode_of(sweep.fits[2])
     assert f_n == pytest.approx(F_N_HZ, rel=0.01)
     assert zeta == pytest.approx(ZETA, rel=0.15)
@@ -363,7 +362,7 @@ def test_fit_structures_takes_the_all_pole_model_when_free_zeros_do_not_beat_it(
     is the known one."""
     prep_rec, setup, _ = clean
     sweep = fit_structures(prep_rec.prep.spectral, setup)
-    assert sweep.structure == ALL_POLE and sweep.chosen == 2 and "order test between the two" in sweep.why
+    assert sweep.structure == Structure.ALL_POLE and sweep.chosen == 2 and "order test between the two" in sweep.why
     f_n, zeta = mode_of(sweep.fits[2])
     assert f_n == pytest.approx(F_N_HZ, rel=0.01)
     assert zeta == pytest.approx(ZETA, rel=0.15)
@@ -397,13 +396,13 @@ def test_fit_structures_keeps_free_zeros_where_the_sensor_has_one():
     y = y0 + SIGMA_Y * float(np.max(np.abs(y0))) * rng.standard_normal(N)
     prep_rec, setup = prepared(Record(DT, u0 + SIGMA_U * rng.standard_normal(N), y))
     sweep = fit_structures(prep_rec.prep.spectral, setup)
-    assert sweep.structure == FREE and not sweep.why
+    assert sweep.structure == Structure.FREE and not sweep.why
     assert not has_doublet(sweep.fits[sweep.chosen].a, sweep.fits[sweep.chosen].b)
 
 
 def test_the_all_pole_structure_has_no_finite_zeros_and_a_pole_pair_at_least(clean):
     prep_rec, setup, _ = clean
-    sweep = fit_orders(prep_rec.prep.spectral, ALL_POLE, setup)
+    sweep = fit_orders(prep_rec.prep.spectral, Structure.ALL_POLE, setup)
     assert min(sweep.fits) == 2
     for n, fit in sweep.fits.items():
         shape = all_pole_numerator(n)
@@ -415,7 +414,7 @@ def test_the_all_pole_structure_has_no_finite_zeros_and_a_pole_pair_at_least(cle
 def test_settle_order_keeps_an_asked_order_and_says_the_data_support_fewer():
     warnings: list[str] = []
     prep_rec, setup = prepared(record(seed=7), order=4, warnings=warnings)
-    sweep = fit_orders(prep_rec.prep.spectral, FREE, setup)
+    sweep = fit_orders(prep_rec.prep.spectral, Structure.FREE, setup)
     settled = settle_order(sweep, prep_rec.prep.spectral, setup, warnings)
     assert (settled.order, settled.selection) == (4, "asked")
     assert any("data support only order 2" in w for w in warnings)
@@ -492,7 +491,7 @@ def pair(f_hz: float, zeta: float) -> np.ndarray:
 def test_claims_mark_a_doublet_and_keep_it_from_the_modes():
     poles = pair(17e3, 0.05)
     model = DiscreteModel(DT, np.real(np.poly(poles)), np.real(np.poly(poles * 1.001)), 0.0)
-    modes = claimed_modes(model, (500.0, 28e3), FREE)
+    modes = claimed_modes(model, (500.0, 28e3), Structure.FREE)
     (m,) = [m for m in modes if m["kind"] == "complex"]
     assert m["cancelled"] and not m["supported"]
     assert m["natural_frequency_hz"] == pytest.approx(17e3, rel=1e-6)
@@ -501,18 +500,18 @@ def test_claims_mark_a_doublet_and_keep_it_from_the_modes():
 def test_claims_of_the_all_pole_structure_mark_a_resonance_beyond_the_band():
     a = np.real(np.poly(pair(55e3, 0.02)))
     model = DiscreteModel(DT, a, all_pole_numerator(2) * np.sum(a) / 1.0, 0.0)
-    (m,) = claimed_modes(model, (500.0, 28e3), ALL_POLE)
+    (m,) = claimed_modes(model, (500.0, 28e3), Structure.ALL_POLE)
     assert m["shapes_band"] and not m["supported"] and not m["cancelled"]
-    (free,) = claimed_modes(model, (500.0, 28e3), FREE)
+    (free,) = claimed_modes(model, (500.0, 28e3), Structure.FREE)
     assert "shapes_band" not in free
 
 
 def test_a_negative_all_pole_delay_is_reported_as_a_lead():
     a = np.real(np.poly(pair(55e3, 0.02)))
     fit = OrderFit(a, all_pole_numerator(2), -0.35, np.zeros(0), 1.0, 1.0, 5, 2, True, False)
-    (text,) = delay_warnings(None, fit, ALL_POLE, DT, 0.05)  # type: ignore[arg-type]
+    (text,) = delay_warnings(None, fit, Structure.ALL_POLE, DT, 0.05)  # type: ignore[arg-type]
     assert "leads the reference by 0.35 samples (0.35 µs)" in text
-    assert delay_warnings(None, replace(fit, delay=0.1), ALL_POLE, DT, 0.05) == []  # type: ignore[arg-type]
+    assert delay_warnings(None, replace(fit, delay=0.1), Structure.ALL_POLE, DT, 0.05) == []  # type: ignore[arg-type]
 
 
 def test_the_all_pole_structure_is_tried_when_free_zeros_claim_no_mode_and_cannot_go_higher(clean):
@@ -525,7 +524,7 @@ def test_the_all_pole_structure_is_tried_when_free_zeros_claim_no_mode_and_canno
 
     def sweep(fit: OrderFit, higher_cost: float) -> OrderSweep:
         n = fit.order
-        return OrderSweep(FREE, "causal", {n: fit}, {n: 2 * n + 2}, {n: 1.0, n + 1: higher_cost, n + 2: math.inf},
+        return OrderSweep(Structure.FREE, DelayMode.CAUSAL, {n: fit}, {n: 2 * n + 2}, {n: 1.0, n + 1: higher_cost, n + 2: math.inf},
                           {}, n, None)
 
     assert _exhausted_without_mode(sweep(real, math.inf), setup)  # a real pole, every higher order unstable
