@@ -78,9 +78,10 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from hopkinson.analysis.claims import claimed_modes, claims_warnings, delay_warnings
+from hopkinson.analysis.claims import claim_findings, claimed_modes, delay_findings
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand
+from hopkinson.analysis.findings import Finding, FindingCode, texts
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
@@ -205,7 +206,7 @@ class Identification:
     fit_percent: float  # 100·(1 − ||y − ŷ|| / ||y − ȳ||) of the final model over the fitted window
     delay_samples: float  # causal fractional input delay τ ≥ 0 (samples at the analysis rate)
     modes: list[Mode]  # per pole pair / real pole (analysis.modes)
-    warnings: list[str]
+    findings: list[Finding]  # what the stages found, in the order they ran
     converged: bool
     iterations: int
     order_selection: str  # "order_test" (chosen by the order test) or "asked" (files before: "knee")
@@ -222,6 +223,11 @@ class Identification:
     @property
     def sample_interval_s(self) -> float:
         return self.model.sample_interval_s
+
+    @property
+    def warnings(self) -> list[str]:
+        """The findings' texts (the results' `warnings`)."""
+        return texts(self.findings)
 
     @property
     def poles(self) -> np.ndarray:
@@ -268,7 +274,7 @@ class Identification:
                 "modes": [m.to_dict() for m in self.modes],
                 "converged": self.converged,
                 "iterations": self.iterations,
-                "warnings": list(self.warnings),
+                "warnings": self.warnings,
                 "preprocessing": dict(self.preprocessing),
                 "main_mode": self.main_mode.to_dict() if self.main_mode is not None else None,
                 "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
@@ -343,7 +349,7 @@ def identify(
         if cut is None:
             return result
     again = _identify(record, **options, band_top_hz=cut.top_hz)
-    again.warnings.insert(0, cut.text)
+    again.findings.insert(0, Finding(FindingCode.BAND_CUT, cut.text))
     again.preprocessing["band_cut"] = cut.to_dict()
     return again
 
@@ -353,14 +359,13 @@ def _identify(record: Record, max_order: int, order: int | None, sample_rate_hz:
               max_evaluations: int, stability_draws: int, sine_terms: SineTerms | None,
               band_top_hz: float | None = None) -> Identification:
     """Steps 1–7 once, on the band the excitation supports (capped at `band_top_hz`)."""
-    warnings: list[str] = []
     # Steps 1–4: rate, scale, baselines and noise, window and band.
-    prepared = prepare_record(record, sample_rate_hz, max(max_order, order or 0), order, max_delay_samples, warnings,
+    prepared = prepare_record(record, sample_rate_hz, max(max_order, order or 0), order, max_delay_samples,
                               realign=remove_delay, band_top_hz=band_top_hz)
     prep = prepared.prep
     try:
         return _identified(prepared, max_order, order, knee_tolerance, significance, max_delay_samples, remove_delay,
-                           patience, max_evaluations, stability_draws, sine_terms, band_top_hz, warnings)
+                           patience, max_evaluations, stability_draws, sine_terms, band_top_hz)
     except AnalysisError as exc:
         stretches = prep.support.intervals_hz if prep.support is not None else ()
         if band_top_hz is not None or len(stretches) < 2:
@@ -379,21 +384,24 @@ class _BeyondTheFirstNull(AnalysisError):
 def _identified(prepared: PreparedRecord, max_order: int, order: int | None, knee_tolerance: float,
                 significance: float, max_delay_samples: int, remove_delay: bool, patience: int | None,
                 max_evaluations: int, stability_draws: int, sine_terms: SineTerms | None,
-                band_top_hz: float | None, warnings: list[str]) -> Identification:
+                band_top_hz: float | None) -> Identification:
     """Steps 5–7 on a prepared record."""
+    findings = list(prepared.findings)
     prep, dt = prepared.prep, prepared.record.sample_interval_s
     data = prep.spectral if sine_terms is None else replace(prep.spectral, sine=sine_terms)
     setup = search_setup(data, prep, max(max_order, order or 0), order, dt, remove_delay=remove_delay,
                          max_delay=max_delay_samples, patience=patience, max_evaluations=max_evaluations,
-                         significance=significance, warnings=warnings,
-                         alignment=prepared.alignment)
+                         significance=significance, alignment=prepared.alignment)
+    findings += setup.findings
     # Steps 5–5b: every order fitted, the model error measured and weighed.
     sweep, model_error, data = fit_weighing_model_error(prep, data, setup, sine_terms)
     evidence: dict[str, Any] = {}
     if order is None and stability_draws > 0 and sweep.chosen is not None:
-        evidence["stability"] = order_stability_evidence(prep, data, sweep, setup, stability_draws, warnings)
+        evidence["stability"], found = order_stability_evidence(prep, data, sweep, setup, stability_draws)
+        findings += found
     # Step 6: the order.
-    settled = settle_order(sweep, data, setup, warnings)
+    settled = settle_order(sweep, data, setup)
+    findings += settled.findings
     sweep, chosen = settled.sweep, settled.order
     if settled.unstable_when_converged:
         evidence["unstable_when_converged"] = settled.unstable_when_converged
@@ -404,8 +412,9 @@ def _identified(prepared: PreparedRecord, max_order: int, order: int | None, kne
     if model_error.significant:  # its size is what the final model leaves unexplained (detection stays above)
         model_error = measure_model_error(prep, data, final, sweep.parameters[chosen], dt, threshold=0.0)
     if not final.converged:
-        warnings.append(f"the order-{chosen} fit stopped before converging in {final.evaluations} evaluations "
-                        "(its cost was the lowest reached)")
+        findings.append(Finding(FindingCode.NOT_CONVERGED,
+                                f"the order-{chosen} fit stopped before converging in {final.evaluations} "
+                                "evaluations (its cost was the lowest reached)"))
     # Step 7: the model in the record's units (the scales go back into B) and its claims.
     # B/A holds the main direction's gain; the model reported, the mean of both directions' (input_terms)
     mean = prep.terms.mean_gain_factor(final.inputs)
@@ -414,14 +423,15 @@ def _identified(prepared: PreparedRecord, max_order: int, order: int | None, kne
                           info={"fit_method": "eiv-frequency-oe", "structure": sweep.structure.value})
     band_cut = stretches_beyond_the_model(prep, data, final, dt) if band_top_hz is None else None
     modes = claimed_modes(model, prep.band, sweep.structure)
-    warnings += claims_warnings(modes, prep.band)
+    findings += claim_findings(modes, prep.band)
     if remove_delay:
-        warnings += delay_warnings(data, final, sweep.structure, dt, significance, prepared.realigned_samples)
+        findings += delay_findings(data, final, sweep.structure, dt, significance, prepared.realigned_samples)
         if prepared.alignment.at_edge:
-            warnings.append(f"{prepared.alignment.not_taken_text(dt)}: if the channels are skewed by that much, "
-                            "this model is not the sensor's; correct the skew and analyse again")
+            findings.append(Finding(FindingCode.SKEW_NOT_TAKEN,
+                                    f"{prepared.alignment.not_taken_text(dt)}: if the channels are skewed by that "
+                                    "much, this model is not the sensor's; correct the skew and analyse again"))
     ident = _identification(prepared, data, setup, settled, final, others, model, modes, model_error, evidence,
-                            warnings, knee_tolerance)
+                            findings, knee_tolerance)
     if ident.context is not None:
         ident.context.band_cut = band_cut
     return ident
@@ -583,7 +593,7 @@ def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderS
 
 def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchSetup, settled: SettledOrder,
                     final: OrderFit, others: list[OrderFit], model: DiscreteModel, modes: list[Mode],
-                    model_error: ModelError, evidence: dict[str, Any], warnings: list[str],
+                    model_error: ModelError, evidence: dict[str, Any], findings: list[Finding],
                     knee_tolerance: float) -> Identification:
     """The identification with everything the report and the uncertainty need: the fit's
     quality, the noise and where it was measured, the order's evidence, the fit context."""
@@ -597,7 +607,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
     pre["response_offset_fitted"] = float(np.mean(residual) * scale_y)
     dof = 2 * data.bins - sweep.parameters[chosen]
     ratio = 2.0 * final.cost / dof if dof > 0 else math.inf
-    warnings += _residual_warnings(model_error, prep, ratio, fit)
+    findings += _residual_findings(model_error, prep, ratio, fit)
     loss_list = [sweep.fits[n].cost if n in sweep.fits else math.nan for n in range(1, n_max + 1)]
     aic, bic = _information_criteria(loss_list, [sweep.parameters.get(n, 0) for n in range(1, n_max + 1)], data.bins)
     arx_u, arx_y = remove_input_delay(prepared.u_all, prepared.y_all, int(math.floor(final.delay)))
@@ -605,8 +615,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
         arx_losses = [float(v) for v in arx_loss_by_order(arx_u, arx_y, n_max)]
     except AnalysisError:
         arx_losses = [math.nan] * n_max
-    model.info.update({"loss_by_order": loss_list, "fit_percent": fit, "converged": final.converged,
-                       "warnings": warnings})
+    model.info.update({"loss_by_order": loss_list, "fit_percent": fit, "converged": final.converged})
     noise = _noise_report(prepared, noise_y, residual, ratio, model_error)
     evidence.update({
         "comparisons": sweep.comparisons,
@@ -635,7 +644,7 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
     )
     return Identification(
         model=model, order=chosen, loss_by_order=loss_list, arx_loss_by_order=arx_losses, aic_by_order=aic,
-        bic_by_order=bic, fit_percent=fit, delay_samples=model.delay_samples, modes=modes, warnings=warnings,
+        bic_by_order=bic, fit_percent=fit, delay_samples=model.delay_samples, modes=modes, findings=findings,
         converged=final.converged, iterations=final.evaluations, order_selection=settled.selection,
         knee_tolerance=knee_tolerance, preprocessing=pre, supported_band_hz=prep.band, noise=noise,
         order_evidence=evidence, context=context, supported_band=prep.support,
@@ -643,34 +652,38 @@ def _identification(prepared: PreparedRecord, data: SpectralData, setup: SearchS
     )
 
 
-def _residual_warnings(model_error: ModelError, prep: Prepared, ratio: float, fit: float) -> list[str]:
+def _residual_findings(model_error: ModelError, prep: Prepared, ratio: float, fit: float) -> list[Finding]:
     """What the residual says: model error measured, motion left out of the noise, a residual far
     beyond the noise, a poor fit."""
     out = []
     if model_error.significant:
         lo_hz, hi_hz = model_error.range_hz
-        out.append(
+        out.append(Finding(
+            FindingCode.MODEL_ERROR,
             f"model error: the residual is {model_error.ratio:.3g}× what the measured noise explains, "
             f"{100 * model_error.rms_of_peak:.2g} % of the response's peak (RMS), mostly at "
             f"{lo_hz / 1e3:.3g}–{hi_hz / 1e3:.3g} kHz; it is weighed in the fit and drawn in the uncertainty "
             "as its own source (budget row 'model error')"
-        )
+        ))
     coherent = [m["coherence"] for m in prep.motion if m["coherence"] is not None]
     if coherent and prep.lead_in:  # without a lead-in the motion is the noise (record_preparation's warning)
-        out.append("the channels keep moving together after the pulse (coherence "
-                   f"{max(coherent):.2f}): that motion is not taken as noise; the noise is measured on the "
-                   "lead-in at rest")
+        out.append(Finding(FindingCode.MOTION_LEFT_OUT,
+                           "the channels keep moving together after the pulse (coherence "
+                           f"{max(coherent):.2f}): that motion is not taken as noise; the noise is measured on the "
+                           "lead-in at rest"))
     if ratio > MODEL_ERROR_RATIO:
-        out.append(
+        out.append(Finding(
+            FindingCode.RESIDUAL_BEYOND_NOISE,
             f"the model leaves {ratio:.1f}× the residual the measured noise explains (V per degree of freedom): "
             "the residual is mostly model error (unmodelled dynamics of the sensor or the reference chain, or "
             "noise the quiet parts of the record did not show); the uncertainty is widened by √ of that factor"
-        )
+        ))
     if fit < POOR_FIT_PERCENT:
-        out.append(
+        out.append(Finding(
+            FindingCode.POOR_FIT,
             f"the model explains only {fit:.1f} % of the response (fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖)): "
             "check that the channels belong together and that the response is not mostly noise"
-        )
+        ))
     return out
 
 

@@ -30,6 +30,9 @@ SIGNIFICANCE = 0.01
 # ... and change the excitation-weighted frequency response by more than this (RMS, relative):
 # below it, it only mends the discrete model's own approximation of a continuous sensor.
 FRF_TOLERANCE = 1e-3
+# Below this share of noise draws re-choosing it, the order choice is reported as not stable
+# (analysis.order_search.order_stability_evidence, analysis.uncertainty).
+ORDER_STABILITY_WARNING = 0.5
 
 
 def choose_order(

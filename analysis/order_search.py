@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
@@ -31,6 +32,7 @@ from hopkinson.analysis.frequency_fit import (
 )
 from hopkinson.analysis.modes import ModeKind, has_doublet, modes_of
 from hopkinson.analysis.order_choice import (
+    ORDER_STABILITY_WARNING,
     NoiseDraws,
     Refitter,
     candidates_around,
@@ -54,10 +56,9 @@ POLISH_EVALUATIONS = 400
 UNSTABLE_MODEL_ERROR = 100.0
 # identify(stability_draws=…): noise draws that re-run the order choice to measure its
 # stability, from a fixed seed (the same record always gives the same evidence); the
-# uncertainty's Monte Carlo measures it anyway, so identify alone does not by default. Below
-# this share of draws choosing it, the choice is reported as unstable.
+# uncertainty's Monte Carlo measures it anyway, so identify alone does not by default
+# (order_choice.ORDER_STABILITY_WARNING: the share below which the choice is reported unstable).
 STABILITY_SEED = 16_063
-ORDER_STABILITY_WARNING = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,7 @@ class SearchSetup:
     sample_interval_s: float
     band_hz: tuple[float, float]  # the band the excitation supports
     alignment: Alignment = field(default_factory=Alignment)  # what record_preparation.realigned did
+    findings: tuple[Finding, ...] = ()  # the orders capped by the band's bins
 
     def delay_mode(self, structure: Structure) -> DelayMode | float:
         """The free structure keeps its delay causal (its zeros can take up a lead: the lead
@@ -91,7 +93,7 @@ class SearchSetup:
 
 def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | None, dt: float, *,
                  remove_delay: bool, max_delay: int, patience: int | None, max_evaluations: int,
-                 significance: float, warnings: list[str], alignment: Alignment | None = None) -> SearchSetup:
+                 significance: float, alignment: Alignment | None = None) -> SearchSetup:
     """The delay's start (the causal delay that best fits a second-order model, on a coarse grid)
     and the orders the band allows: each order needs more real residuals (two per bin) than
     parameters (2n + 2, and n more with a transient term)."""
@@ -104,12 +106,13 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
             f"the supported band holds only {data.bins} frequency bins: too few for "
             f"{'order ' + str(order) if order is not None else 'any model'} (a longer record or a shorter pulse)"
         )
+    findings: tuple[Finding, ...] = ()
     if n_max > allowed:
-        warnings.append(f"orders above {allowed} were not tried: the supported band holds only {data.bins} "
-                        "frequency bins")
+        findings = (Finding(FindingCode.ORDERS_CAPPED, f"orders above {allowed} were not tried: the supported band "
+                                                       f"holds only {data.bins} frequency bins"),)
         n_max = allowed
     return SearchSetup(n_max, order, tau0, remove_delay, max_delay, patience, max_evaluations, significance,
-                       float(prep.bin_hz[0]), dt, prep.band, alignment or Alignment())
+                       float(prep.bin_hz[0]), dt, prep.band, alignment or Alignment(), findings)
 
 
 @dataclass
@@ -312,9 +315,10 @@ class SettledOrder:
     order: int
     selection: str  # "order_test" or "asked"
     unstable_when_converged: list[int]
+    findings: tuple[Finding, ...] = ()
 
 
-def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warnings: list[str]) -> SettledOrder:
+def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup) -> SettledOrder:
     """The order test's choice (or the asked order) iterated to convergence and checked stable.
 
     An unstable choice falls back to the test's choice among the stable orders; with none, from
@@ -338,11 +342,12 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
         if sweep.chosen < order:
             low, costs = sweep.chosen, sweep.costs
             drop = (costs[low] - costs[order]) / costs[low] if costs[low] > 0 else 0.0
-            warnings.append(
+            return SettledOrder(sweep, order, "asked", [], (Finding(
+                FindingCode.ASKED_ORDER_UNSUPPORTED,
                 f"order {order} was asked but the data support only order {low}: V falls by {drop:.2%} from "
                 f"order {low} to {order}, within chance or without changing the response where the pulse has "
                 "energy; the extra poles are not determined by this record (a mode beyond the excitation's band?)"
-            )
+            ),))
         return SettledOrder(sweep, order, "asked", [])
     chosen = sweep.chosen
     if sweep.acceptable(chosen, data, setup):
@@ -352,6 +357,7 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
     # A stable free order that holds a pole–zero doublet is the fit following a ripple: the same
     # rule as fit_structures' (PTB's record cut at 0.75 ms: orders 1–2 unstable once converged,
     # order 4 a doublet at 16.8 kHz, FBSD ±5 % 13.3 kHz against the sine's 11.4 kHz).
+    findings = []
     doublet = fallback is not None and has_doublet(sweep.fits[fallback].a, sweep.fits[fallback].b)
     if (fallback is None or doublet) and sweep.structure == Structure.FREE and setup.asked_order is None:
         all_pole = fit_orders(data, Structure.ALL_POLE, setup)
@@ -363,8 +369,9 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
                 why = "no model with free zeros is stable" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
             sweep, chosen = all_pole, all_pole.chosen
             sweep.why = why
-            warnings.append(why + "; the all-pole model (a resonance beyond the band, its damping not determined) "
-                            "is used")
+            findings.append(Finding(FindingCode.ALL_POLE_FALLBACK,
+                                    why + "; the all-pole model (a resonance beyond the band, its damping not "
+                                    "determined) is used"))
             fallback, dropped = chosen, []
     if fallback is None:
         raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
@@ -372,9 +379,10 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
                             + ")" + _lead_hint(setup))
     if dropped:
         unstable = ", ".join(str(n) for n in dropped)
-        warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
-                        f"{fallback} (the order test's choice among the stable orders) is used")
-    return SettledOrder(sweep, fallback, "order_test", list(dropped))
+        findings.append(Finding(FindingCode.UNSTABLE_WHEN_CONVERGED,
+                                f"the fit of order {unstable} became unstable when iterated to convergence; order "
+                                f"{fallback} (the order test's choice among the stable orders) is used"))
+    return SettledOrder(sweep, fallback, "order_test", list(dropped), tuple(findings))
 
 
 def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: SearchSetup
@@ -392,12 +400,12 @@ def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: 
     return final, others
 
 
-def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup, draws: int,
-                             warnings: list[str]) -> dict[str, Any]:
+def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup, draws: int
+                             ) -> tuple[dict[str, Any], tuple[Finding, ...]]:
     """Stability of the order test's choice across resampled noise: the test re-run on the chosen
     model's response with fresh noise of the record's own level (a parametric bootstrap;
     analysis.uncertainty does the same for the order's PDF and reports it). Below
-    ORDER_STABILITY_WARNING a warning."""
+    ORDER_STABILITY_WARNING a finding. Returns the evidence and the findings."""
     assert sweep.chosen is not None
     chosen = sweep.chosen
     omega_bins = 2.0 * np.pi * prep.bin_hz * setup.sample_interval_s
@@ -407,13 +415,15 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
     refitter = Refitter(data, sweep.fits, sweep.delay_mode, setup.max_delay)
     candidates = [m for m in candidates_around(chosen, sweep.fits) if math.isfinite(sweep.costs[m])]
     fractions, _, _ = order_stability(noise_draws, refitter, candidates, draws, setup.significance)
+    findings: tuple[Finding, ...] = ()
     if fractions.get(chosen, 0.0) < ORDER_STABILITY_WARNING:
-        warnings.append(
+        findings = (Finding(
+            FindingCode.ORDER_UNSTABLE,
             f"the order choice is not stable under the record's own noise: the test chose order {chosen}, "
             f"fresh noise of the same level gives {fractions_text(fractions)}; the uncertainty includes the "
             "other orders"
-        )
-    return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
+        ),)
+    return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}, findings
 
 
 def _lead_hint(setup: SearchSetup) -> str:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand, pulse_width, supported_band
+from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
 from hopkinson.analysis.input_terms import ONSET, InputTerms, input_terms
 from hopkinson.analysis.noise import (
@@ -115,6 +116,7 @@ class Prepared:
     onset_terms: InputTerms | None = None
     terms_source: tuple = ()  # input_terms' arguments (analysis.systematics makes its variants from them)
     unseen: dict[str, float] = field(default_factory=dict)  # term not seen beyond chance -> its standard uncertainty
+    findings: tuple[Finding, ...] = ()  # the band stage's (a record cut short)
 
     def terms_variant(self, **options: Any) -> InputTerms:
         """The candidate input terms made with other `options` (input_terms' keywords), with the same
@@ -184,6 +186,7 @@ class PreparedRecord:
     y_all: np.ndarray
     preprocessing: dict[str, Any]
     alignment: Alignment = field(default_factory=Alignment)  # what `realigned` did
+    findings: tuple[Finding, ...] = ()  # the noise's and the band's, in that order
 
     @property
     def realigned_samples(self) -> int:
@@ -193,12 +196,12 @@ class PreparedRecord:
 
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
-                   warnings: list[str], realign: bool = True, band_top_hz: float | None = None) -> PreparedRecord:
+                   realign: bool = True, band_top_hz: float | None = None) -> PreparedRecord:
     """Resample to the analysis rate (None: the record's), realign a response that leads by
     several samples (`realigned`; not when `realign` is False: the delay held at 0;
-    claims.delay_warnings says so), check and scale both channels, and run the prepare, noise
-    and band stages (the band capped at `band_top_hz`: identify's cut). Warnings are appended to
-    `warnings`."""
+    claims.delay_findings says so), check and scale both channels, and run the prepare, noise
+    and band stages (the band capped at `band_top_hz`: identify's cut); their findings in
+    `findings`."""
     pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
@@ -224,8 +227,8 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     scale_y = _scale(resp)
     u_all, y_all = (ref - np.median(ref)) / scale_u, (resp - np.median(resp)) / scale_y
     activity = locate_pulse(u_all, y_all, dt, max_delay)
-    noise = measure_noise(activity, dt, warnings)
-    prep = fitted_band(activity, noise, dt, warnings, band_top_hz)
+    noise = measure_noise(activity, dt)
+    prep = fitted_band(activity, noise, dt, band_top_hz)
     pre.update(
         {
             "reference_baseline": float(np.median(ref) + prep.baseline_u * scale_u),
@@ -247,7 +250,7 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
             "scale_response": scale_y,
         }
     )
-    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, alignment)
+    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, alignment, noise.findings + prep.findings)
 
 
 def realigned(rec: Record, max_delay: int) -> tuple[Record, Alignment]:
@@ -376,15 +379,16 @@ class NoiseLooks:
     noise_y: NoiseSpectrum
     draw_noise_u: NoiseSpectrum  # the unbiased look (the uncertainty's draws)
     draw_noise_y: NoiseSpectrum
+    findings: tuple[Finding, ...] = ()
 
 
-def measure_noise(activity: Activity, dt: float, warnings: list[str]) -> NoiseLooks:
+def measure_noise(activity: Activity, dt: float) -> NoiseLooks:
     """The quiet stretches less the bar's coherent motion (_without_motion), a drift removed
     when quiet stretches before the first and after the last activity pin it (the line through
     the quiet samples), and each channel's noise spectrum there (analysis.noise)."""
     u, y = activity.u.copy(), activity.y.copy()
     n = u.size
-    u_segments, y_segments, motion = _without_motion(u, y, dt, activity.u_segments, activity.y_segments, warnings)
+    u_segments, y_segments, motion, findings = _without_motion(u, y, dt, activity.u_segments, activity.y_segments)
     drift = False
     lines = {"reference": (0.0, 0.0), "response": (0.0, 0.0)}  # (slope per sample, intercept), removed
     for name, x, segs in (("reference", u, u_segments), ("response", y, y_segments)):
@@ -402,17 +406,19 @@ def measure_noise(activity: Activity, dt: float, warnings: list[str]) -> NoiseLo
     draw_noise_u = NoiseSpectrum.measure(u, rate, u_segments)
     draw_noise_y = NoiseSpectrum.measure(y, rate, y_segments)
     if noise_u.samples == 0:
-        warnings.append("the reference has no quiet stretch (before the pulse or in flight after it) to measure "
-                        "its noise: it is taken as noise-free, which understates the uncertainty")
+        findings.append(Finding(FindingCode.NO_QUIET_REFERENCE,
+                                "the reference has no quiet stretch (before the pulse or in flight after it) to "
+                                "measure its noise: it is taken as noise-free, which understates the uncertainty"))
     if noise_y.samples == 0:
         noise_y = draw_noise_y = NoiseSpectrum.white(activity.noise_y0, rate, "record tail (robust)", 0)
-        warnings.append("the response has no quiet stretch to measure its noise: a robust level from the end of "
-                        "the record is used")
+        findings.append(Finding(FindingCode.NO_QUIET_RESPONSE,
+                                "the response has no quiet stretch to measure its noise: a robust level from the "
+                                "end of the record is used"))
     return NoiseLooks(u, y, u_segments, y_segments, motion, drift, lines, noise_u, noise_y, draw_noise_u,
-                      draw_noise_y)
+                      draw_noise_y, tuple(findings))
 
 
-def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list[str],
+def fitted_band(activity: Activity, noise: NoiseLooks, dt: float,
                 band_top_hz: float | None = None) -> Prepared:
     """The band the excitation supports (where the reference's spectrum stands 20 dB above its
     noise and within 40 dB of its maximum, across the pulse's narrow spectral nulls:
@@ -475,9 +481,11 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
         terms = terms.without(ONSET, "")
     inputs = terms.bins(start, end, np.flatnonzero(keep))
     ramp = None
+    findings: tuple[Finding, ...] = ()
     if truncated:
-        warnings.append("the record ends before the response has died away: a transient term is fitted with the "
-                        "model, and the uncertainty is larger than a complete record would give")
+        findings = (Finding(FindingCode.CUT_SHORT,
+                            "the record ends before the response has died away: a transient term is fitted with "
+                            "the model, and the uncertainty is larger than a complete record would give"),)
     if transient:
         t = np.arange(length, dtype=float)
         ramp = fft.rfft((t - t.mean()) / length)[keep]
@@ -495,7 +503,7 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
                     band, bin_hz, u_spec, y_spec, var_u, var_y, group, spectral, activity.pulse_start, u, y,
                     noise.y_segments, activity.ref_busy, draw_noise_u, draw_noise_y, draw_var_u, draw_var_y,
                     noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot, support,
-                    np.flatnonzero(keep), ramp, terms, onset_terms, terms_source)
+                    np.flatnonzero(keep), ramp, terms, onset_terms, terms_source, findings=findings)
 
 
 def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:
@@ -550,8 +558,8 @@ def _busy(x: np.ndarray, level: float, widen: int) -> np.ndarray:
     return loud
 
 
-def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[slice], y_segments: list[slice],
-                    warnings: list[str]) -> tuple[list[slice], list[slice], list[dict[str, Any]]]:
+def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[slice], y_segments: list[slice]
+                    ) -> tuple[list[slice], list[slice], list[dict[str, Any]], list[Finding]]:
     """The quiet stretches with those after the pulse where the channels move together taken
     out (analysis.noise.is_motion): the bar keeps moving after the pulse (PTB's record: 1–2 %
     of the peak for > 1 ms, coherence 0.88), and that motion, taken as noise, inflated the
@@ -611,15 +619,17 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
                     split[key] = []
         return split[key]
 
-    out = []
+    out, findings = [], []
     for name, segs, other in (("reference", u_segments, y_segments), ("response", y_segments, u_segments)):
         kept = [part for r in segs for part in at_rest(r, other)]
         if kept != segs and not any(r.start == 0 for r in kept):
-            warnings.append(f"the {name} is not at rest after the pulse (it moves with the other channel) and has "
-                            "no lead-in at rest: its noise is measured on that motion, which overstates it")
+            findings.append(Finding(FindingCode.NOT_AT_REST,
+                                    f"the {name} is not at rest after the pulse (it moves with the other channel) "
+                                    "and has no lead-in at rest: its noise is measured on that motion, which "
+                                    "overstates it"))
             kept = segs
         out.append(kept)
-    return out[0], out[1], motion
+    return out[0], out[1], motion, findings
 
 
 def _moving_over(r: slice, other_quiet: list[slice]) -> bool:

@@ -35,6 +35,7 @@ from hopkinson.analysis.dcm_design import DcmOptions
 from hopkinson.analysis.determination import is_result, not_determined
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
+from hopkinson.analysis.findings import texts
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
@@ -173,7 +174,8 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
     warnings = list(ident.warnings)
-    uncertainty, model_draws = shot_uncertainty(ident, params, reduction, warnings)
+    uncertainty, model_draws, found = shot_uncertainty(ident, params, reduction)
+    warnings += [text for text in texts(found) if text not in warnings]
     with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
     compensation = compensate_shot(ident, record, DcmOptions.from_params(params), draws=model_draws,

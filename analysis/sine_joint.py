@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import OrderProblem, SineTerms
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.numerics import bracketed_root
@@ -190,8 +191,9 @@ def identify_joint(record: Any, sine: SineCalibration, **options: Any) -> Any:
         except AnalysisError as exc:
             if ident is None:
                 raise AnalysisError(f"the fit of one model to the record and {sine.source} failed: {exc}") from None
-            ident.warnings.append(f"the joint fit with the sine's re-estimated weights failed ({exc}); the "
-                                  "previous weights are kept")
+            ident.findings.append(Finding(FindingCode.SINE_REWEIGHING_FAILED,
+                                          f"the joint fit with the sine's re-estimated weights failed ({exc}); "
+                                          "the previous weights are kept"))
             break
         weights = _reweighted(ident, sine, weights)
     assert ident is not None

@@ -73,6 +73,7 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.estimate import COVERAGE, Estimate
 from hopkinson.analysis.excitation import peak_estimate, pulse_width
+from hopkinson.analysis.findings import Finding, FindingCode, texts
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
@@ -88,6 +89,7 @@ from hopkinson.analysis.input_terms import ASYMMETRY, MOTION
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.modes import has_doublet
 from hopkinson.analysis.order_choice import (
+    ORDER_STABILITY_WARNING,
     NoiseDraws,
     Refitter,
     candidates_around,
@@ -110,8 +112,6 @@ FBSD_GRID = 2000
 PEAK_SEGMENT = 256  # samples around a peak that get fresh noise for the peak figures
 # Below this share of stable refits the draws cannot stand for the estimator.
 MIN_GOOD_FRACTION = 0.9
-# Stability of the order choice below which a warning is given.
-ORDER_STABILITY_WARNING = 0.5
 # Where the model error is detected, the draws are refitted on the fitted band and on these
 # fractions of its top (_band_variants): a right model gives one answer on every part of the band
 # its excitation supports; a model that leaves error there bends towards whichever part is
@@ -170,12 +170,17 @@ class UncertaintyResult:
     reference: dict[str, Estimate]
     budget: list[dict[str, Any]]
     order: dict[str, Any]
-    warnings: list[str] = field(default_factory=list)
+    findings: list[Finding] = field(default_factory=list)
     failed_draws: int = 0
     model_draws: list[DiscreteModel] = field(default_factory=list, repr=False)
     response_band: dict[str, Any] | None = None  # the model's response with its 95 % band (response_band)
     band_tops_hz: list[float] = field(default_factory=list)  # the band's tops the draws were refitted on
     input_terms: dict[str, Estimate] = field(default_factory=dict)  # ε and γ (analysis.input_terms), refitted per draw
+
+    @property
+    def warnings(self) -> list[str]:
+        """The findings' texts (the results' `warnings`)."""
+        return texts(self.findings)
 
     def to_dict(self) -> dict[str, Any]:
         main = None
@@ -197,7 +202,7 @@ class UncertaintyResult:
             "order": dict(self.order),
             "seed": self.seed,
             "failed_draws": self.failed_draws,
-            "warnings": list(self.warnings),
+            "warnings": self.warnings,
             "response_band": self.response_band,
             "band_tops_hz": list(self.band_tops_hz),
         }
@@ -217,7 +222,7 @@ def evaluate(
         raise AnalysisError(f"uncertainty: at least 2 draws are needed, got {options.draws}")
     seed = options.seed if options.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
     rng = np.random.default_rng(seed)
-    warnings: list[str] = []
+    findings: list[Finding] = []
     n_hat = ident.order
     dt = ctx.sample_interval_s
     inflate = _noise_inflation(ctx, n_hat)
@@ -240,8 +245,9 @@ def evaluate(
     good = np.array([f is not None and is_stable(f.a) for f in fits])
     failed = int(np.sum(~good))
     if good.mean() < MIN_GOOD_FRACTION:
-        warnings.append(f"{failed} of {len(fits)} draws gave no stable refit: the uncertainty stands for the "
-                        "draws that did and may understate it")
+        findings.append(Finding(FindingCode.DRAWS_FAILED,
+                                f"{failed} of {len(fits)} draws gave no stable refit: the uncertainty stands for "
+                                "the draws that did and may understate it"))
     scale = ctx.scale_y / ctx.scale_u
     model = ident.model
     dc_draws = np.full(len(fits), np.nan)
@@ -306,18 +312,19 @@ def evaluate(
     order_info = {"chosen": n_hat, "selection": ident.order_selection, "fraction_by_order": orders["fractions"],
                   "draws": orders["decided"]}
     stability = orders["fractions"].get(str(n_hat))
-    flagged = any("order choice is not stable" in w for w in ident.warnings)
+    flagged = any(f.code == FindingCode.ORDER_UNSTABLE for f in ident.findings)
     if stability is not None and orders["decided"] and stability < ORDER_STABILITY_WARNING and not flagged:
-        warnings.append(
+        findings.append(Finding(
+            FindingCode.ORDER_UNSTABLE,
             f"the order choice is not stable under the record's own noise: order {n_hat} is chosen in only "
             f"{stability:.0%} of {orders['decided']} noise draws ({fractions_text(orders['fractions'])}); the "
             "intervals include the other orders"
-        )
+        ))
     return UncertaintyResult(
         draws=int(np.sum(good)), coverage_probability=COVERAGE, seed=seed, dc_gain=dc,
         shock_sensitivity=peaks.get("shock_sensitivity"), natural_frequency_hz=fn, damping_ratio=zeta,
         fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=budget, order=order_info,
-        warnings=warnings, failed_draws=failed, model_draws=model_draws,
+        findings=findings, failed_draws=failed, model_draws=model_draws,
         response_band=response_band(model, model_draws, ident.supported_band_hz, reflect[good],
                                     systematic=[row.models for row in type_b if row.models], seed=seed),
         band_tops_hz=bands.tops_hz, input_terms=terms,
@@ -343,23 +350,22 @@ def _term_estimates(ident: Identification, fits: list[OrderFit | None], good: np
 
 
 def shot_uncertainty(
-    ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None, warnings: list[str]
-) -> tuple[dict[str, Any] | None, list[DiscreteModel]]:
-    """The uncertainty of a shot as its JSON and its model draws; switched off, or failed, it is
-    None with a warning in `warnings`: the values stand, never silently without it."""
+    ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None
+) -> tuple[dict[str, Any] | None, list[DiscreteModel], list[Finding]]:
+    """The uncertainty of a shot as its JSON, its model draws and its findings; switched off, or
+    failed, it is None with a finding that says so: the values stand, never silently without it."""
     if not params.uncertainty:
-        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
-        return None, []
+        return None, [], [Finding(FindingCode.UNCERTAINTY_OFF,
+                                  "uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")]
     try:
         result = evaluate(ident, UncertaintyOptions.from_params(params), reduction)
     except (AnalysisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-        warnings.append(f"the uncertainty could not be evaluated ({exc}): the figures are reported without it")
-        return None, []
-    warnings += [w for w in result.warnings if w not in warnings]
+        return None, [], [Finding(FindingCode.UNCERTAINTY_FAILED, f"the uncertainty could not be evaluated ({exc}): "
+                                                                   "the figures are reported without it")]
     if result.order.get("draws"):  # the order choice's stability, measured by the draws
         ident.order_evidence.setdefault("stability", {"draws": result.order["draws"],
                                                       "fraction_by_order": dict(result.order["fraction_by_order"])})
-    return result.to_dict(), result.model_draws
+    return result.to_dict(), result.model_draws, result.findings
 
 
 # ------------------------------------------------------------------------------ response band

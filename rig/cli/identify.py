@@ -177,15 +177,13 @@ def run_identify(args: argparse.Namespace) -> int:
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}{' with ' + args.sine if sine else ''}: {exc}") from None
     warnings = clipped + list(result.warnings)
-    uncertainty = None
-    if params.uncertainty:
-        from hopkinson.analysis.sine_joint import with_draws
-        from hopkinson.analysis.uncertainty import shot_uncertainty
+    from hopkinson.analysis.findings import texts
+    from hopkinson.analysis.sine_joint import with_draws
+    from hopkinson.analysis.uncertainty import shot_uncertainty
 
-        uncertainty, model_draws = shot_uncertainty(result, params, None, warnings)
-        with_draws(result, model_draws)
-    else:
-        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
+    uncertainty, model_draws, found = shot_uncertainty(result, params, None)
+    warnings += [text for text in texts(found) if text not in warnings]
+    with_draws(result, model_draws)
     report = identification_report(result, str(args.record), uncertainty, warnings)
     if out is not None:
         try:

@@ -15,7 +15,7 @@ import json
 
 import numpy as np
 import pytest
-from hopkinson.analysis.claims import claimed_modes, claims_warnings
+from hopkinson.analysis.claims import claim_findings, claimed_modes
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import supported_band_hz
 from hopkinson.analysis.identify import Identification, identify
@@ -305,7 +305,7 @@ def test_a_mode_where_the_reference_has_no_energy_is_flagged() -> None:
         s = 2 * np.pi * f_hz * (-zeta + 1j * np.sqrt(1 - zeta**2))
         a = np.real(np.poly(np.exp(np.array([s, np.conj(s)]) * T)))
         modes = claimed_modes(DiscreteModel(T, a, np.array([np.sum(a)]), 0.0), band, Structure.FREE)
-        return modes, claims_warnings(modes, band)
+        return modes, [f.text for f in claim_findings(modes, band)]
 
     modes, warnings = claims(300e3, 0.03)
     assert not modes[0]["supported"]

@@ -95,7 +95,7 @@ def test_the_noise_stage_decides_on_ptbs_record_as_the_literal_scan_does(monkeyp
         return literal_scan(x, y, [o for o in onsets if stop - o >= 2.5 * COHERENCE_SEGMENT], stop, rate)
 
     def prepared() -> record_preparation.Prepared:
-        return record_preparation.prepare_record(record(), 1e6, 12, None, 32, []).prep
+        return record_preparation.prepare_record(record(), 1e6, 12, None, 32).prep
 
     fast = prepared()
     monkeypatch.setattr(record_preparation, "first_motion", literal)
