@@ -1,4 +1,4 @@
-"""Stage 7 of analysis.identify, "claims": what the identified model may be said to show.
+"""The claim stage of analysis.identify_stages: what the identified model may be said to show.
 
 Modes outside the band the excitation supports are flagged `supported: False` (a DCM may only
 cancel supported poles; the main mode is the lowest supported complex pair); a pair nearly

@@ -1,4 +1,4 @@
-"""The modes of a discrete model (stage 7 of analysis.identify, "claims"): each pole pair or real
+"""The modes of a discrete model (the claim stage of analysis.identify_stages): each pole pair or real
 pole as a natural frequency and damping ratio, whether the excitation's band supports it, and
 whether a zero nearly cancels it (a pole–zero doublet: no mode)."""
 

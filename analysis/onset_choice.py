@@ -72,7 +72,7 @@ def onset_fitted(prep: Prepared, plain: SpectralData, plain_sweep: OrderSweep, s
         if bumped.inputs.size == onset.count:
             bumps[onset.columns(ONSET)] = bumped.inputs[onset.columns(ONSET)]
         size = float(np.max(np.abs(onset.correction(bumps))))
-        noise = prep.draw_noise_u.rms if prep.draw_noise_u.samples else 0.0
+        noise = prep.noise.draw_noise_u.rms if prep.noise.draw_noise_u.samples else 0.0
         richest = cost_test_fit(plain_sweep, plain, setup)
         assert richest is not None
         if size <= ONSET_ABOVE_NOISE * noise:

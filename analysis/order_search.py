@@ -1,5 +1,5 @@
-"""Stages 5–6 of analysis.identify: every order fitted ("fit per order") and one chosen ("order
-choice").
+"""The order search of analysis.identify_stages (search_orders, weigh_model_error, settle):
+every order fitted and one chosen (docs/decisions/0011).
 
 - `search_setup`: the delay's start and the orders the band's bins allow.
 - `fit_orders`: each order n = 1 … n_max of one model structure fitted on the prepared bins

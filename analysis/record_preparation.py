@@ -1,15 +1,15 @@
-"""Stages 1–4 of analysis.identify: the record made ready for the fit.
+"""The prepare stage of analysis.identify: the record made ready for the fit (normalised units:
+each channel divided by its largest excursion).
 
-- `prepare_record`: the analysis rate, each channel checked and scaled by its largest
-  excursion (so nothing below depends on units or gains), then the three stages below.
-- `locate_pulse` ("prepare"): where the reference carries the pulse and the response rings,
-  each channel's pre-pulse baseline, the fitted window and whether the record is cut short.
-- `measure_noise` ("noise"): the quiet stretches, less those where both channels move together
-  after the pulse (the bar's motion, analysis.noise.is_motion: not noise), a drift pinned by
-  quiet stretches before and after, and each channel's noise spectrum there (two looks: the
-  conservative one weighs the fit, the unbiased one is what the uncertainty draws).
-- `fitted_band` ("band"): the band the excitation supports (analysis.excitation), the window's
-  DFT bins inside it and each bin's noise variance (`Prepared`, what every later stage fits).
+- `prepare_record` → `PreparedRecord`: the analysis rate, a response that leads realigned
+  (`realigned` → `Alignment`), the channels checked and scaled, then:
+- `locate_pulse` → `Activity`: the pulse, each channel's baseline, the fitted window;
+- `measure_noise` → `NoiseLooks`: the quiet stretches less the bar's motion after the pulse, a
+  drift pinned by them, each channel's noise spectrum in two looks (conservative: weighs the
+  fit; unbiased: what the uncertainty draws);
+- `fitted_band` → `Prepared`: the supported band's DFT bins and each bin's noise variance.
+
+Each returns its findings (analysis.findings). Why: docs/decisions/0010, 0012.
 """
 
 from __future__ import annotations
@@ -73,41 +73,26 @@ FOOT_LEVEL = 2.0
 
 @dataclass
 class Prepared:
-    """The record as the fit sees it (normalised units): the window, its DFT bins in the supported
-    band, each bin's noise variance, and what the later stages measure noise on again."""
+    """Stage "band": the record as the fit sees it (normalised units): the fitted window, its DFT
+    bins in the supported band and each bin's noise variance in two looks (the conservative one
+    weighs the fit, the unbiased one is what the uncertainty draws), with the stages it was made
+    from. The search stage sets the input terms fitted (`terms`, `spectral`, `unseen`)."""
 
-    u: np.ndarray
+    activity: Activity  # where the pulse is and each channel's baseline (locate_pulse)
+    noise: NoiseLooks  # each channel's noise and where it was measured (measure_noise)
+    u: np.ndarray  # the fitted window [start, start + u.size), baseline and drift removed
     y: np.ndarray
     start: int
-    baseline_u: float
-    baseline_y: float
-    drift_removed: bool
-    noise_u: NoiseSpectrum
-    noise_y: NoiseSpectrum
-    band: tuple[float, float]  # the supported band's hull (low, top)
-    bin_hz: np.ndarray
-    u_bins: np.ndarray
+    band: tuple[float, float]  # the supported band's hull (low, top), Hz
+    bin_hz: np.ndarray  # the fitted bins' frequencies
+    u_bins: np.ndarray  # the window's DFT at those bins
     y_bins: np.ndarray
-    var_u: np.ndarray
+    var_u: np.ndarray  # each bin's noise variance, the conservative look
     var_y: np.ndarray
-    group: int
-    spectral: SpectralData
-    pulse_start: int
-    u_full: np.ndarray  # the whole record, normalised, baseline and drift removed
-    y_full: np.ndarray
-    y_segments: list[slice]  # the response's quiet stretches (its noise was measured there)
-    ref_busy: np.ndarray  # where the reference carries the pulse (bool per sample)
-    # The unbiased look at the noise (analysis.noise), for the uncertainty's draws; the fields
-    # noise_u … var_y above are the conservative look the fit is weighted by.
-    draw_noise_u: NoiseSpectrum
-    draw_noise_y: NoiseSpectrum
-    draw_var_u: np.ndarray
+    draw_var_u: np.ndarray  # the unbiased look
     draw_var_y: np.ndarray
-    drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed, normalised
-    # stretches after the pulse left out of the noise as motion (start_sample, stop_sample, coherence, reason)
-    motion: list[dict[str, Any]] = field(default_factory=list)
-    lead_in: int = 0  # the lead-in at rest is samples [0, lead_in) (0: none)
-    lead_in_to_foot: bool = False  # it reaches the pulse's foot (the window's margins left none)
+    group: int  # bins per group in `spectral` (1: per bin)
+    spectral: SpectralData
     support: SupportedBand | None = None  # the supported stretches (the nulls between them are not fitted)
     bin_index: np.ndarray | None = None  # each fitted bin's index in the window's DFT
     ramp: np.ndarray | None = None  # the drift ramp's DFT at the fitted bins (with a transient term)
@@ -194,6 +179,10 @@ class PreparedRecord:
         model's τ − realigned_samples."""
         return self.alignment.shift
 
+    def model_delay(self, fit_delay_samples: float) -> float:
+        """The model's delay (samples) of a fit's (on the realigned record)."""
+        return float(fit_delay_samples) - self.realigned_samples
+
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
                    realign: bool = True, band_top_hz: float | None = None) -> PreparedRecord:
@@ -231,16 +220,16 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     prep = fitted_band(activity, noise, dt, band_top_hz)
     pre.update(
         {
-            "reference_baseline": float(np.median(ref) + prep.baseline_u * scale_u),
-            "response_baseline": float(np.median(resp) + prep.baseline_y * scale_y),
+            "reference_baseline": float(np.median(ref) + prep.activity.baseline_u * scale_u),
+            "response_baseline": float(np.median(resp) + prep.activity.baseline_y * scale_y),
             "baseline_removed": True,
-            "drift_removed": prep.drift_removed,
+            "drift_removed": prep.noise.drift_removed,
             # What was taken off each channel, in its own units, at time t of the record:
             # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
             # (the response, realigned, starts `shift` samples before the record: `realigned`)
             **{f"{name}_drift": {"intercept": line[1] * scale, "slope_per_s": line[0] * scale / dt,
                                  "origin_s": rec.start_time_s - (shift * dt if name == "response" else 0.0)}
-               for (name, line), scale in zip(prep.drift_lines.items(), (scale_u, scale_y), strict=True)},
+               for (name, line), scale in zip(prep.noise.drift_lines.items(), (scale_u, scale_y), strict=True)},
             "window_start_s": rec.start_time_s + prep.start * dt,
             "window_samples": int(prep.u.size),
             "fitted_bins": prep.spectral.bins,
@@ -499,11 +488,9 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float,
                                input_prior=terms.prior)
         else:
             spectral = SpectralData.grouped_from(omega, u_spec, y_spec, var_u, var_y, group)
-    return Prepared(uw, yw, start, activity.baseline_u, activity.baseline_y, noise.drift_removed, noise_u, noise_y,
-                    band, bin_hz, u_spec, y_spec, var_u, var_y, group, spectral, activity.pulse_start, u, y,
-                    noise.y_segments, activity.ref_busy, draw_noise_u, draw_noise_y, draw_var_u, draw_var_y,
-                    noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot, support,
-                    np.flatnonzero(keep), ramp, terms, onset_terms, terms_source, findings=findings)
+    return Prepared(activity, noise, uw, yw, start, band, bin_hz, u_spec, y_spec, var_u, var_y, draw_var_u, draw_var_y,
+                    group, spectral, support, np.flatnonzero(keep), ramp, terms, onset_terms, terms_source,
+                    findings=findings)
 
 
 def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:
@@ -515,16 +502,16 @@ def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tupl
     the model is not measured (a spare pole near z = 1 predicts a tail the record does not
     have), and there taking it out would add power instead. Returns the spectrum and its
     variance per fitted bin (the first look's when there was no stretch to measure)."""
-    if prep.draw_noise_y.samples == 0 or prep.draw_noise_y.source.startswith("record tail"):
-        return prep.draw_noise_y, prep.draw_var_y
+    if prep.noise.draw_noise_y.samples == 0 or prep.noise.draw_noise_y.source.startswith("record tail"):
+        return prep.noise.draw_noise_y, prep.draw_var_y
     # The model driven by the pulse alone: driven by the whole reference it would add the
     # reference's noise through G, counted as response noise (~15 % too much at 2 % each).
-    drive = prep.u_full + prep.terms.correction(fit.inputs) if prep.terms.count else prep.u_full
-    residual = prep.y_full - simulate_from_rest(fit.a, fit.b, fit.delay, np.where(prep.ref_busy, drive, 0.0))
-    second = NoiseSpectrum.measure(residual, 1.0 / dt, prep.y_segments)
+    drive = prep.noise.u + prep.terms.correction(fit.inputs) if prep.terms.count else prep.noise.u
+    residual = prep.noise.y - simulate_from_rest(fit.a, fit.b, fit.delay, np.where(prep.activity.ref_busy, drive, 0.0))
+    second = NoiseSpectrum.measure(residual, 1.0 / dt, prep.noise.y_segments)
     if second.samples == 0:
-        return prep.draw_noise_y, prep.draw_var_y
-    noise = second.lower_of(prep.draw_noise_y)
+        return prep.noise.draw_noise_y, prep.draw_var_y
+    noise = second.lower_of(prep.noise.draw_noise_y)
     var_y = noise.bin_variance(prep.bin_hz, prep.u.size)
     return noise, np.maximum(var_y, 1e-12 * float(np.mean(np.abs(prep.y_bins) ** 2)))
 

@@ -153,8 +153,8 @@ def named_by_flag(exc: AnalysisError, flags: dict[str, str]) -> AnalysisError:
 def run_identify(args: argparse.Namespace) -> int:
     """Identify the model of RECORD with its uncertainty; print a summary or the JSON; optionally
     write the JSON (never over the record or a shot file; atomically)."""
-    from hopkinson.analysis.identify import identify
     from hopkinson.analysis.records import read_record
+    from hopkinson.analysis.shot_analysis import identify_with_uncertainty
 
     from hopkinson.fileio import atomic_write, check_output_path
 
@@ -172,18 +172,10 @@ def run_identify(args: argparse.Namespace) -> int:
 
         sine = read_sine_calibration(args.sine)
     try:
-        result = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz,
-                          sine=sine)
+        fitted = identify_with_uncertainty(record, params, None, sine)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}{' with ' + args.sine if sine else ''}: {exc}") from None
-    warnings = clipped + list(result.warnings)
-    from hopkinson.analysis.findings import texts
-    from hopkinson.analysis.sine_joint import with_draws
-    from hopkinson.analysis.uncertainty import shot_uncertainty
-
-    uncertainty, model_draws, found = shot_uncertainty(result, params, None)
-    warnings += [text for text in texts(found) if text not in warnings]
-    with_draws(result, model_draws)
+    result, uncertainty, warnings = fitted.identification, fitted.uncertainty, clipped + fitted.warnings
     report = identification_report(result, str(args.record), uncertainty, warnings)
     if out is not None:
         try:

@@ -13,7 +13,7 @@ from hopkinson.analysis.claims import claimed_modes, delay_findings
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import FindingCode
 from hopkinson.analysis.frequency_fit import OrderFit, all_pole_numerator
-from hopkinson.analysis.identify import fit_weighing_model_error
+from hopkinson.analysis.identify_stages import search_orders, weigh_model_error
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.model_error import measure_model_error
 from hopkinson.analysis.modes import has_doublet
@@ -24,6 +24,7 @@ from hopkinson.analysis.order_search import (
     search_setup,
     settle_order,
 )
+from hopkinson.analysis.params import IdentifyOptions
 from hopkinson.analysis.record_preparation import (
     Alignment,
     fitted_band,
@@ -442,7 +443,8 @@ def test_model_error_is_found_where_a_second_drive_path_puts_it():
                      0.0)
     prep_rec, setup = prepared(record(seed=8, extra_y=burst))
     prep = prep_rec.prep
-    sweep, model_error, data = fit_weighing_model_error(prep, prep.spectral, setup, None)
+    weighed = weigh_model_error(prep_rec, search_orders(prep_rec, IdentifyOptions(max_order=8, significance=0.05)))
+    model_error, data = weighed.model_error, weighed.data
     assert model_error.significant
     lo, hi = model_error.range_hz
     assert lo <= 12e3 <= hi

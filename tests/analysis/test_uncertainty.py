@@ -27,6 +27,8 @@ import math
 
 import numpy as np
 import pytest
+from hopkinson.analysis import uncertainty
+from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import FindingCode
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import AnalysisParams
@@ -149,9 +151,13 @@ def test_draws_are_reproducible_from_the_seed_and_feed_the_dcm() -> None:
     assert len(a.model_draws) == a.draws and all(m.is_stable for m in a.model_draws)
 
 
-def test_a_failed_uncertainty_keeps_the_values_and_warns() -> None:
+def test_a_failed_uncertainty_keeps_the_values_and_warns(monkeypatch: pytest.MonkeyPatch) -> None:
     ident = identify(record(CASE, 9))
-    ident.context = None  # e.g. an identification rebuilt from a file
+
+    def failing(*args: object, **kwargs: object) -> None:
+        raise AnalysisError("no stable refit")  # the Monte Carlo failing, whatever the cause
+
+    monkeypatch.setattr(uncertainty, "evaluate", failing)
     data, draws, found = shot_uncertainty(ident, AnalysisParams(), None)
     assert data is None and draws == []
     assert [f.code for f in found] == [FindingCode.UNCERTAINTY_FAILED] and "could not be evaluated" in found[0].text
