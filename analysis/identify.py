@@ -45,7 +45,7 @@ from hopkinson.analysis.modes import Mode, ModeKind, main_mode
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.order_choice import FRF_TOLERANCE
 from hopkinson.analysis.params import IdentifyOptions
-from hopkinson.analysis.record_preparation import PreparedRecord, prepare_record
+from hopkinson.analysis.record_preparation import Prepared, PreparedRecord, prepare_record
 from hopkinson.analysis.records import Record
 
 if TYPE_CHECKING:
@@ -86,6 +86,11 @@ class Identification:
         return self.claim.model
 
     @property
+    def prep(self) -> Prepared:
+        """The prepared record with the input terms the model was fitted with."""
+        return self.weighed.prep
+
+    @property
     def order(self) -> int:
         return self.settlement.order
 
@@ -120,12 +125,12 @@ class Identification:
     @property
     def supported_band_hz(self) -> tuple[float, float]:
         """The band the excitation supports: (low, top), Hz, nulls included."""
-        return self.prepared.prep.band
+        return self.prep.band
 
     @property
     def supported_band(self) -> SupportedBand | None:
         """Its stretches (the pulse's nulls between them are not fitted)."""
-        return self.prepared.prep.support
+        return self.prep.support
 
     @property
     def sample_interval_s(self) -> float:
@@ -237,7 +242,7 @@ def _identify(record: Record, options: IdentifyOptions, sine_terms: SineTerms | 
         search = search_orders(prepared, options, sine_terms)
         weighed = weigh_model_error(prepared, search, sine_terms)
         settlement = settle(prepared, search, weighed, options)
-        claimed = claim(prepared, settlement, options, cut_band=band_top_hz is None)
+        claimed = claim(prepared, weighed, settlement, options, cut_band=band_top_hz is None)
     except AnalysisError as exc:
         support = prepared.prep.support
         stretches = support.intervals_hz if support is not None else ()
@@ -268,7 +273,7 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
                     claimed: Claim) -> Identification:
     """The Identification: the stage results and the report made of them (losses by order, the
     noise and where it was measured, the order's evidence, the input terms)."""
-    prep, setup, data = prepared.prep, settlement.setup, settlement.data
+    prep, setup, data = weighed.prep, settlement.setup, settlement.data
     sweep, final, n_max = settlement.sweep, settlement.final, setup.n_max
     pre = dict(prepared.preprocessing)
     pre["response_offset_fitted"] = float(np.mean(claimed.residual) * prepared.scale_y)

@@ -79,6 +79,7 @@ class OrderSearch:
     record calls for them and ε, γ only where the fit sees them."""
 
     setup: SearchSetup
+    prep: Prepared  # the prepared record with the input terms the search fits (`terms`, `spectral`, `unseen`)
     data: SpectralData  # the bins as fitted
     sweep: OrderSweep
     findings: tuple[Finding, ...] = ()
@@ -90,6 +91,7 @@ class WeighedSearch:
     significant (or the choice holds a doublet), every order fitted again with it weighed and
     the structure chosen."""
 
+    prep: Prepared  # the prepared record with the input terms fitted once the model error is weighed
     data: SpectralData  # the bins as weighed
     sweep: OrderSweep
     model_error: ModelError
@@ -153,7 +155,7 @@ def search_orders(prepared: PreparedRecord, options: IdentifyOptions, sine_terms
                   ) -> OrderSearch:
     """Every order of the free structure fitted on the prepared bins (with `sine_terms`: the sine
     points of analysis.sine_joint), the onset's bumps where they stand, and ε, γ dropped where the
-    chosen order's fit does not call for them (`prepared.prep` records the terms fitted)."""
+    chosen order's fit does not call for them (the result's `prep` holds the terms fitted)."""
     prep, dt = prepared.prep, prepared.record.sample_interval_s
     data = prep.spectral if sine_terms is None else replace(prep.spectral, sine=sine_terms)
     setup = search_setup(data, prep, options.n_max, options.order, dt, remove_delay=options.remove_delay,
@@ -162,21 +164,21 @@ def search_orders(prepared: PreparedRecord, options: IdentifyOptions, sine_terms
                          alignment=prepared.alignment)
     sweep = fit_orders(data, Structure.FREE, setup)
     if sweep.chosen is not None:
-        with_onset = onset_fitted(prep, data, sweep, setup)
+        prep, with_onset = onset_fitted(prep, data, sweep, setup)
         if with_onset is not None:  # the onset's disturbances are fitted with every order
             data, sweep = with_onset
         dropped = undetermined_terms_dropped(prep, data, sweep, setup)
         if dropped is not None:  # a term the record does not call for is not fitted
-            data = dropped
+            prep, data = dropped
             sweep = fit_orders(data, Structure.FREE, setup)
-    return OrderSearch(setup, data, sweep, setup.findings)
+    return OrderSearch(setup, prep, data, sweep, setup.findings)
 
 
 def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup
-                               ) -> SpectralData | None:
-    """The data without the input terms ε and γ the chosen order's fit does not call for (TERM_Z,
-    UNDETERMINED_U), or None when it keeps both; `prep.terms` and `prep.spectral` take the change,
-    with the reason (the estimate and its standard uncertainty)."""
+                               ) -> tuple[Prepared, SpectralData] | None:
+    """The prepared record and the data without the input terms ε and γ the chosen order's fit
+    does not call for (TERM_Z, UNDETERMINED_U), each with the reason (the estimate and its
+    standard uncertainty); None when it keeps both."""
     if sweep.chosen is None or not prep.terms.count:
         return None
     fit = sweep.fits[sweep.chosen]
@@ -185,7 +187,7 @@ def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderS
     dof = max(problem.residual_size() - problem.size, 1)
     cov = np.linalg.pinv(jac.T @ jac) * max(2.0 * fit.cost / dof, 1.0)
     first = problem._k_inputs
-    terms = prep.terms
+    terms, unseen = prep.terms, dict(prep.unseen)
     for name, limit in UNDETERMINED_U.items():
         cols = prep.terms.columns(name)
         if not cols.size:
@@ -196,12 +198,12 @@ def undetermined_terms_dropped(prep: Prepared, data: SpectralData, sweep: OrderS
             terms = terms.without(name, f"the record does not determine it ({value:+.2g}, standard uncertainty {u:.2g})")
         elif abs(value) < TERM_Z * u:
             terms = terms.without(name, f"not seen beyond chance: {value:+.2g} with a standard uncertainty of {u:.2g}")
-            prep.unseen[name] = u  # analysis.systematics bounds its effect by 2u
+            unseen[name] = u  # analysis.systematics bounds its effect by 2u
     if terms.count == prep.terms.count:
         return None
-    prep.terms = terms
-    prep.spectral = replace(prep.with_terms(terms), var_y=prep.spectral.var_y)
-    return replace(prep.spectral, var_y=data.var_y, sine=data.sine)
+    prep = replace(prep, terms=terms, spectral=replace(prep.with_terms(terms), var_y=prep.spectral.var_y),
+                   unseen=unseen)
+    return prep, replace(prep.spectral, var_y=data.var_y, sine=data.sine)
 
 
 # ------------------------------------------------------------------------------ weigh_model_error
@@ -212,10 +214,10 @@ def weigh_model_error(prepared: PreparedRecord, search: OrderSearch, sine_terms:
     leave half) and, when significant, weighed as an output error of its own with every order
     fitted again; the structure chosen where it is significant or the choice holds a doublet
     (docs/decisions/0013)."""
-    prep, setup, data, sweep = prepared.prep, search.setup, search.data, search.sweep
+    prep, setup, data, sweep = search.prep, search.setup, search.data, search.sweep
     model_error = ModelError.none(prep.bin_hz.size)
     if sweep.chosen is None:
-        return WeighedSearch(data, sweep, model_error)
+        return WeighedSearch(prep, data, sweep, model_error)
     order = setup.asked_order
     pick = order if order is not None and order in sweep.fits else sweep.chosen
     if order is None and sweep.parameters[pick] > data.bins:  # measured on a choice that leaves half
@@ -232,10 +234,10 @@ def weigh_model_error(prepared: PreparedRecord, search: OrderSearch, sine_terms:
         data = with_output_variance(prep, prep.var_y + model_error.var_bins)
         if sine_terms is not None:  # the joint fit keeps its sine points (analysis.sine_joint)
             data = replace(data, sine=sine_terms)
-        data = onset_beyond_the_model_error(prep, data, converged, sweep.delay_mode, setup)
+        prep, data = onset_beyond_the_model_error(prep, data, converged, sweep.delay_mode, setup)
     if model_error.significant or doublet:  # a doublet can take the model error in: its residual reads as noise
         sweep = fit_structures(data, setup)
-    return WeighedSearch(data, sweep, model_error)
+    return WeighedSearch(prep, data, sweep, model_error)
 
 
 # ------------------------------------------------------------------------------ settle
@@ -244,7 +246,7 @@ def settle(prepared: PreparedRecord, search: OrderSearch, weighed: WeighedSearch
     """The order's stability on noise draws (options.stability_draws), the order settled
     (order_search.settle_order), the best delay branch, and the model error's size on the final
     fit (its detection stays with weigh_model_error)."""
-    prep, setup, data, sweep = prepared.prep, search.setup, weighed.data, weighed.sweep
+    prep, setup, data, sweep = weighed.prep, search.setup, weighed.data, weighed.sweep
     findings: list[Finding] = []
     stability = None
     if options.order is None and options.stability_draws > 0 and sweep.chosen is not None:
@@ -265,12 +267,12 @@ def settle(prepared: PreparedRecord, search: OrderSearch, weighed: WeighedSearch
 
 
 # ------------------------------------------------------------------------------ claim
-def claim(prepared: PreparedRecord, settlement: Settlement, options: IdentifyOptions, cut_band: bool = True
-          ) -> Claim:
+def claim(prepared: PreparedRecord, weighed: WeighedSearch, settlement: Settlement, options: IdentifyOptions,
+          cut_band: bool = True) -> Claim:
     """The model in the record's units (the scales back into B, the mean of both directions'
     gains: analysis.input_terms), its modes and their claims, the delay's, the residual against
     the noise, and (`cut_band`) where the band past the pulse's first null stops being explained."""
-    prep, rec, data, final = prepared.prep, prepared.record, settlement.data, settlement.final
+    prep, rec, data, final = weighed.prep, prepared.record, settlement.data, settlement.final
     dt, structure = rec.sample_interval_s, settlement.sweep.structure
     mean = prep.terms.mean_gain_factor(final.inputs)
     model = DiscreteModel(dt, final.a, final.b * (mean * prepared.scale_y / prepared.scale_u),

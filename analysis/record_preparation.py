@@ -71,12 +71,13 @@ FOOT_BOX = 5
 FOOT_LEVEL = 2.0
 
 
-@dataclass
+@dataclass(frozen=True)
 class Prepared:
     """Stage "band": the record as the fit sees it (normalised units): the fitted window, its DFT
     bins in the supported band and each bin's noise variance in two looks (the conservative one
     weighs the fit, the unbiased one is what the uncertainty draws), with the stages it was made
-    from. The search stage sets the input terms fitted (`terms`, `spectral`, `unseen`)."""
+    from. The search stages return it with the input terms they fit (`terms`, `spectral`,
+    `unseen`: analysis.identify_stages), never change it."""
 
     activity: Activity  # where the pulse is and each channel's baseline (locate_pulse)
     noise: NoiseLooks  # each channel's noise and where it was measured (measure_noise)
@@ -159,7 +160,7 @@ class Alignment:
                 "cross-correlation, too near the record's start to be realigned")
 
 
-@dataclass
+@dataclass(frozen=True)
 class PreparedRecord:
     """Stage 1–4's result: the prepared data and what the report says about how it was made."""
 
@@ -274,7 +275,7 @@ def realigned(rec: Record, max_delay: int) -> tuple[Record, Alignment]:
             Alignment(shift, -lag))
 
 
-@dataclass
+@dataclass(frozen=True)
 class Activity:
     """Stage "prepare": where the pulse is and where each channel is quiet (normalised units)."""
 
@@ -353,7 +354,7 @@ def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Act
                     y_segments, pre_end > first)
 
 
-@dataclass
+@dataclass(frozen=True)
 class NoiseLooks:
     """Stage "noise": each channel's noise, measured where it is at rest."""
 

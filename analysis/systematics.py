@@ -98,7 +98,7 @@ def figures_of(fit: OrderFit, ident: Identification, main_pole: complex | None, 
     from hopkinson.analysis.response import fbsd_edges
 
     dt = ident.sample_interval_s
-    scale = ident.prepared.scale_y / ident.prepared.scale_u * (terms or ident.prepared.prep.terms).mean_gain_factor(fit.inputs)
+    scale = ident.prepared.scale_y / ident.prepared.scale_u * (terms or ident.prep.terms).mean_gain_factor(fit.inputs)
     out = {"dc_gain": float(np.sum(fit.b) * scale / np.sum(fit.a))}
     if main_pole is not None:
         roots = np.roots(fit.a)
@@ -126,7 +126,7 @@ def _refit(data: SpectralData, ident: Identification, start: OrderFit) -> OrderF
 def _model_of(fit: OrderFit, ident: Identification, terms: Any = None) -> Any:
     from hopkinson.analysis.model import DiscreteModel
 
-    scale = ident.prepared.scale_y / ident.prepared.scale_u * (terms or ident.prepared.prep.terms).mean_gain_factor(fit.inputs)
+    scale = ident.prepared.scale_y / ident.prepared.scale_u * (terms or ident.prep.terms).mean_gain_factor(fit.inputs)
     return DiscreteModel(ident.sample_interval_s, fit.a, fit.b * scale, ident.prepared.model_delay(fit.delay))
 
 
@@ -143,13 +143,13 @@ def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) 
 def variant_bounds(ident: Identification) -> list[TypeB]:
     """The Type B rows made by refitting the chosen order with each correction made another way,
     and on parts of the band where the model error is detected (module docstring)."""
-    if not ident.prepared.prep.terms_source:
+    if not ident.prep.terms_source:
         return []
-    prep, fit = ident.prepared.prep, ident.settlement.sweep.fits[ident.order]
+    prep, fit = ident.prep, ident.settlement.sweep.fits[ident.order]
     main = ident.main_mode
     pole = main.pole_z if main else None
     nominal = figures_of(fit, ident, pole)
-    terms = ident.prepared.prep.terms
+    terms = ident.prep.terms
     window = (prep.start, prep.start + prep.u.size)
 
     def refitted(**options: Any) -> tuple[OrderFit, Any] | None:
@@ -214,7 +214,7 @@ def _defensible(variant: OrderFit, nominal: OrderFit, ident: Identification) -> 
 
     if not variant.cost <= DEFENSIBLE_COST * max(nominal.cost, 1.0):
         return False
-    lowest = float(np.min(ident.prepared.prep.bin_hz)) if ident.prepared.prep.bin_hz.size else 0.0
+    lowest = float(np.min(ident.prep.bin_hz)) if ident.prep.bin_hz.size else 0.0
     return not pole_below_band(variant, lowest, ident.sample_interval_s)
 
 
@@ -284,14 +284,14 @@ def _with_asymmetry(prep: Any, ident: Identification, fit: OrderFit, window: tup
     from hopkinson.analysis.input_terms import input_terms
 
     made = input_terms(*prep.terms_source)
-    keep = [k for k, n in enumerate(made.names) if n in ident.prepared.prep.terms.names or n == ASYMMETRY]
+    keep = [k for k, n in enumerate(made.names) if n in ident.prep.terms.names or n == ASYMMETRY]
     if not any(made.names[k] == ASYMMETRY for k in keep):
         return None
     made = replace(made, names=tuple(made.names[k] for k in keep), signals=made.signals[keep])
-    if made.columns(ONSET).size != ident.prepared.prep.terms.columns(ONSET).size:
+    if made.columns(ONSET).size != ident.prep.terms.columns(ONSET).size:
         return None
     data = replace(ident.settlement.data, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-    refit = _refit(data, ident, replace(fit, inputs=_matched(ident.prepared.prep.terms, made, fit.inputs)))
+    refit = _refit(data, ident, replace(fit, inputs=_matched(ident.prep.terms, made, fit.inputs)))
     return None if refit is None else (refit, made)
 
 

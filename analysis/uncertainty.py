@@ -150,7 +150,7 @@ def evaluate(
     for r, f in enumerate(fits):
         if f is None or not good[r]:
             continue
-        b = f.b * scale * gain_factor[r] * ident.prepared.prep.terms.mean_gain_factor(f.inputs)  # the mean of both directions
+        b = f.b * scale * gain_factor[r] * ident.prep.terms.mean_gain_factor(f.inputs)  # the mean of both directions
         dc_draws[r] = float(np.sum(b) / np.sum(f.a))
         delay_draws[r] = (ident.prepared.model_delay(f.delay) - skews[r]) * dt
         # fitted with a sine calibration: the sine's level ÷ the model's (analysis.sine_joint)
@@ -226,7 +226,7 @@ def _term_estimates(ident: Identification, fits: list[OrderFit | None], good: np
     """ε and γ (analysis.input_terms) with their uncertainty: each draw refits them with the model."""
     out = {}
     for name in (ASYMMETRY, MOTION):
-        cols = ident.prepared.prep.terms.columns(name)
+        cols = ident.prep.terms.columns(name)
         value = ident.input_terms.get(name)
         if not cols.size or not isinstance(value, float):
             continue
@@ -376,7 +376,7 @@ def _peak_figures(
     ref = np.asarray(record.reference, dtype=float)
     resp = np.asarray(record.response, dtype=float)
     count = options.draws
-    noise_u = ident.prepared.prep.noise.draw_noise_u.scaled(ident.prepared.scale_u)
+    noise_u = ident.prep.noise.draw_noise_u.scaled(ident.prepared.scale_u)
     noise_y = ident.claim.response_noise.scaled(ident.prepared.scale_y)
     dt = record.sample_interval_s
     try:

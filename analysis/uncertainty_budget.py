@@ -109,7 +109,7 @@ def _linear_noise_shares(
     s2 = pieces["s2"]  # each residual's variance as the fit weighs it (the conservative look)
     # The variance each source really gives each residual, over the weight: the noise measured
     # without bias (what the draws add), in the fit's layout (per bin or per group of bins).
-    var_u, var_y = data.in_layout(ident.prepared.prep.draw_var_u), data.in_layout(ident.claim.draw_var_y(ident.settlement.model_error))
+    var_u, var_y = data.in_layout(ident.prep.draw_var_u), data.in_layout(ident.claim.draw_var_y(ident.settlement.model_error))
     rows = 3 if data.grouped else 2
     d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
     var_me = (np.zeros_like(var_y) if ident.settlement.model_error.var_bins is None
@@ -142,7 +142,7 @@ def _linear_noise_shares(
             out[source][figure] = math.sqrt(max(float(g @ c @ g), 0.0)) / abs(ref)
         out["channel skew"][figure] = abs(float(g @ skew_step)) / abs(ref)
     if problem.n_inputs:  # the fitted corrections' shares (analysis.systematics)
-        out.update(fitted_shares(jac, gradients, nominal, problem._k_inputs, ident.prepared.prep.terms, inflate))
+        out.update(fitted_shares(jac, gradients, nominal, problem._k_inputs, ident.prep.terms, inflate))
     return out
 
 
@@ -168,7 +168,7 @@ def _figure_gradients(
 
     def figures(th: np.ndarray) -> dict[str, float]:
         a, b, tau, _, _ = problem.unpack(th)
-        mean = ident.prepared.prep.terms.mean_gain_factor(problem.input_coefficients(th))  # the mean of both directions
+        mean = ident.prep.terms.mean_gain_factor(problem.input_coefficients(th))  # the mean of both directions
         out = {"dc_gain": float(np.sum(b) * scale * mean / np.sum(a))}
         if pole is not None:
             out["natural_frequency_hz"], out["damping_ratio"] = nearest_mode(a, pole, dt)

@@ -72,7 +72,7 @@ class Draws:
 def draw(ident: Identification, options: UncertaintyOptions, seed: int, rng: np.random.Generator) -> Draws:
     """Every input's draws for `options.draws` Monte Carlo trials of `ident` (the noise from
     `seed`, the rest from `rng`, in a fixed order)."""
-    prep, fitted = ident.prepared.prep, ident.settlement
+    prep, fitted = ident.prep, ident.settlement
     dt = ident.sample_interval_s
     inflate = _noise_inflation(ident)
     chain = _chain_draws(options, options.draws, rng)
@@ -119,7 +119,7 @@ def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitt
     if ident.order_selection not in ("order_test", "knee") or len(candidates) < 2:
         return {"per_draw": [n_hat] * count, "fractions": {}, "decided": 0}
     bootstrap = replace(draws, seed=draws.seed + 1, skew_sd=0.0,
-                        centre_y=predicted_bins(ident.settlement.sweep.fits[n_hat], ident.settlement.data, draws.omega, ident.prepared.prep.u_bins))
+                        centre_y=predicted_bins(ident.settlement.sweep.fits[n_hat], ident.settlement.data, draws.omega, ident.prep.u_bins))
     subset = min(options.order_draws, count)
     fractions, choices, _ = order_stability(bootstrap, refitter, candidates, subset, ident.settlement.setup.significance)
     decided = [c if c is not None else n_hat for c in choices]
