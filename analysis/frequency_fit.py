@@ -38,6 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from hopkinson.analysis.model import all_pole_numerator
 from hopkinson.analysis.numerics import levenberg_marquardt
+from hopkinson.analysis.structure import DelayMode
 
 # A pole this close to the unit circle is on the stability boundary (treated as unstable).
 STABILITY_MARGIN = 1e-8
@@ -312,19 +313,19 @@ class OrderProblem:
     """
 
     @classmethod
-    def for_fit(cls, data: SpectralData, fit: OrderFit, delay: str | float = "causal", max_delay: float = 32.0
-                ) -> OrderProblem:
+    def for_fit(cls, data: SpectralData, fit: OrderFit, delay: DelayMode | float = DelayMode.CAUSAL,
+                max_delay: float = 32.0) -> OrderProblem:
         """The problem `fit` solves (its order and B's structure) on `data`."""
         return cls(data, fit.order, delay, max_delay, numerator=fit.numerator)
 
-    def __init__(self, data: SpectralData, order: int, delay: str | float = "causal", max_delay: float = 32.0,
+    def __init__(self, data: SpectralData, order: int, delay: DelayMode | float = DelayMode.CAUSAL, max_delay: float = 32.0,
                  numerator: np.ndarray | None = None) -> None:
         self.max_delay = float(max_delay)
         self.data = data
         self.n = order
-        self.delay_mode = delay if isinstance(delay, str) else "fixed"
-        if self.delay_mode not in ("causal", "free", "fixed"):
+        if isinstance(delay, str) and delay not in DelayMode.__members__.values():
             raise ValueError(f"unknown delay mode {delay!r}")
+        self.delay_mode = DelayMode(delay) if isinstance(delay, str) else DelayMode.FIXED
         self.fixed_delay = None if isinstance(delay, str) else float(delay)
         self.powers = np.exp(-1j * np.outer(data.omega, np.arange(order + 1)))  # z_k^{-i}
         self.numerator = None if numerator is None else np.asarray(numerator, dtype=float)
@@ -353,11 +354,11 @@ class OrderProblem:
     def pack(self, fit: OrderFit) -> np.ndarray:
         b = fit.b if self.numerator is None else [float(fit.b @ self.numerator) / float(self.numerator @ self.numerator)]
         parts = [fit.a[1:], b]
-        if self.delay_mode == "causal":
+        if self.delay_mode == DelayMode.CAUSAL:
             # τ = τmax·sin²t: a start on a bound would have no gradient in t, so it starts just off it.
             x = min(max(fit.delay, CAUSAL_START), self.max_delay - CAUSAL_START) / self.max_delay
             parts.append([math.asin(math.sqrt(x))])
-        elif self.delay_mode == "free":
+        elif self.delay_mode == DelayMode.FREE:
             parts.append([fit.delay])
         if self.n_transient:
             t = fit.transient if fit.transient.size == self.n_transient else np.zeros(self.n_transient)
@@ -379,10 +380,10 @@ class OrderProblem:
         a = np.concatenate(([1.0], theta[:n]))
         k = self.k_delay
         b = self.b_map @ theta[n:k]
-        if self.delay_mode == "fixed":
+        if self.delay_mode == DelayMode.FIXED:
             tau = float(self.fixed_delay)
         else:
-            tau = self.max_delay * math.sin(theta[k]) ** 2 if self.delay_mode == "causal" else float(theta[k])
+            tau = self.max_delay * math.sin(theta[k]) ** 2 if self.delay_mode == DelayMode.CAUSAL else float(theta[k])
             k += 1
         transient = theta[k : k + self.n_transient]
         k += self.n_transient
@@ -557,7 +558,7 @@ class OrderProblem:
 
     def _dtau(self, theta: np.ndarray) -> float:
         """∂τ/∂(delay parameter): τmax·sin 2t for τ = τmax·sin²t, else 1."""
-        return self.max_delay * math.sin(2.0 * theta[self.k_delay]) if self.delay_mode == "causal" else 1.0
+        return self.max_delay * math.sin(2.0 * theta[self.k_delay]) if self.delay_mode == DelayMode.CAUSAL else 1.0
 
     def cost(self, theta: np.ndarray) -> float:
         r = self.residual(theta)
@@ -752,7 +753,7 @@ def delay_branches(data: SpectralData, fit: OrderFit, max_delay: float) -> list[
     starts on a grid of delays from 0 to a few samples past `fit`'s, each refined; optima
     whose delay lies within a sample of one already kept are the same branch. Sorted by cost
     (the best may beat `fit`: the order search started each order from one delay)."""
-    problem = OrderProblem.for_fit(data, fit, "causal", max_delay)
+    problem = OrderProblem.for_fit(data, fit, DelayMode.CAUSAL, max_delay)
     top = min(float(max_delay) - CAUSAL_START, math.ceil(fit.delay) + 4.0)
     step = max(1.0, top / BRANCH_STARTS)
     found: list[OrderFit] = []

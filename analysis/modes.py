@@ -1,9 +1,12 @@
-"""The modes of a discrete model (stage 7 of analysis.identify, "claims"): each pole pair or real
+"""The modes of a discrete model (the claim stage of analysis.identify_stages): each pole pair or real
 pole as a natural frequency and damping ratio, whether the excitation's band supports it, and
 whether a zero nearly cancels it (a pole–zero doublet: no mode)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, fields, replace
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -16,9 +19,73 @@ RESONANCE_MAX_DAMPING = 0.3
 DOUBLET_DISTANCE = 0.5
 
 
+class ModeKind(StrEnum):
+    """A complex pole pair (listed once, by its pole of positive imaginary part) or a real pole."""
+
+    COMPLEX = "complex"
+    REAL = "real"
+
+
+@dataclass(frozen=True)
+class Mode(Mapping[str, Any]):
+    """One pole pair or real pole of a model and what may be claimed of it.
+
+    natural_frequency_hz, damping_ratio: of s = ln(z)/T (None for a pole at the origin).
+    nyquist: a negative real pole (an artefact of the discretisation, never supported).
+    supported: the natural frequency lies inside the band the excitation supports.
+    resonance: a complex pair damped at most RESONANCE_MAX_DAMPING (None: not judged).
+    cancelled: a zero nearly cancels it (`mark_doublets`; None: not yet judged).
+    shapes_band: the all-pole structure's resonance beyond the band (analysis.claims).
+    Read like its JSON entry (`mode["supported"]`, `to_dict`): a field that is None (False for
+    shapes_band) is not in it.
+    """
+
+    kind: ModeKind
+    pole: tuple[float, float]
+    natural_frequency_hz: float | None
+    damping_ratio: float | None
+    nyquist: bool
+    supported: bool
+    resonance: bool | None = None
+    cancelled: bool | None = None
+    shapes_band: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON entry: the fields set, the pole as [re, im]."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None and f.name in ("resonance", "cancelled") or f.name == "shapes_band" and not value:
+                continue
+            out[f.name] = list(value) if f.name == "pole" else str(value) if f.name == "kind" else value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Mode:
+        """From a JSON entry (a results file's or a model file's; older ones lack some keys)."""
+        pole = data["pole"]
+        return cls(ModeKind(data.get("kind", "complex" if float(pole[1]) else "real")),
+                   (float(pole[0]), float(pole[1])), data.get("natural_frequency_hz"),
+                   data.get("damping_ratio"), bool(data.get("nyquist", False)), bool(data.get("supported", True)),
+                   data.get("resonance"), data.get("cancelled"), bool(data.get("shapes_band", False)))
+
+    @property
+    def pole_z(self) -> complex:
+        return complex(*self.pole)
+
+    def __getitem__(self, key: str) -> Any:
+        return self.to_dict()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.to_dict())
+
+    def __len__(self) -> int:
+        return len(self.to_dict())
+
+
 def modes_of(
     poles: np.ndarray, sample_interval_s: float, supported_band_hz: tuple[float, float] | None = None
-) -> list[dict[str, Any]]:
+) -> list[Mode]:
     """Natural frequency (Hz) and damping ratio per complex pole pair or real pole (s = ln(z)/T).
 
     Sorted by natural frequency. `kind` is "complex" (a pair, listed once with its positive
@@ -34,8 +101,7 @@ def modes_of(
         if p.imag < 0:
             continue
         if p == 0:
-            modes.append({"kind": "real", "pole": [0.0, 0.0], "natural_frequency_hz": None, "damping_ratio": None,
-                          "nyquist": False, "supported": False})
+            modes.append(Mode(ModeKind.REAL, (0.0, 0.0), None, None, nyquist=False, supported=False))
             continue
         s = np.log(p) / sample_interval_s
         wn = float(abs(s))
@@ -45,21 +111,13 @@ def modes_of(
             supported_band_hz is None or supported_band_hz[0] <= f_n <= supported_band_hz[1]
         )
         zeta = float(-s.real / wn) if wn > 0 else None
-        modes.append(
-            {
-                "kind": "complex" if p.imag > 0 else "real",
-                "pole": [float(p.real), float(p.imag)],
-                "natural_frequency_hz": f_n,
-                "damping_ratio": zeta,
-                "nyquist": nyquist,
-                "supported": bool(supported),
-                "resonance": bool(p.imag > 0 and zeta is not None and zeta <= RESONANCE_MAX_DAMPING),
-            }
-        )
-    return sorted(modes, key=lambda m: m["natural_frequency_hz"] or 0.0)
+        modes.append(Mode(ModeKind.COMPLEX if p.imag > 0 else ModeKind.REAL, (float(p.real), float(p.imag)), f_n, zeta,
+                          nyquist, bool(supported),
+                          bool(p.imag > 0 and zeta is not None and zeta <= RESONANCE_MAX_DAMPING)))
+    return sorted(modes, key=lambda m: m.natural_frequency_hz or 0.0)
 
 
-def mark_doublets(modes: list[dict[str, Any]], zeros: np.ndarray) -> list[dict[str, Any]]:
+def mark_doublets(modes: list[Mode], zeros: np.ndarray) -> list[Mode]:
     """Each complex mode with `cancelled` (a zero within DOUBLET_DISTANCE of the pole's distance
     to the unit circle: a pole–zero doublet, whose effect on the response is at most that
     fraction — the fit following a ripple of the data, not a resonance; issue 17's 17 kHz "main
@@ -68,28 +126,27 @@ def mark_doublets(modes: list[dict[str, Any]], zeros: np.ndarray) -> list[dict[s
     z = np.asarray(zeros, dtype=complex)
     out = []
     for m in modes:
-        m = dict(m)
-        m["cancelled"] = False
-        if m["kind"] == "complex" and z.size:
-            p = complex(*m["pole"])
+        m = replace(m, cancelled=False)
+        if m.kind == ModeKind.COMPLEX and z.size:
+            p = m.pole_z
             if float(np.min(np.abs(z - p))) < DOUBLET_DISTANCE * (1.0 - abs(p)):
-                m["cancelled"], m["supported"] = True, False
+                m = replace(m, cancelled=True, supported=False)
         out.append(m)
     return out
 
 
-def claimed(mode: dict[str, Any]) -> bool:
+def claimed(mode: Mode) -> bool:
     """Whether a mode is claimed: a resonance (ζ ≤ RESONANCE_MAX_DAMPING) the band supports, not
     cancelled by a zero (results written before `resonance` was kept: judged by its damping)."""
-    zeta = mode.get("damping_ratio")
-    resonance = mode.get("resonance", zeta is not None and zeta <= RESONANCE_MAX_DAMPING)
-    return mode["kind"] == "complex" and bool(mode["supported"]) and bool(resonance) and not mode.get("cancelled")
+    zeta = mode.damping_ratio
+    resonance = mode.resonance if mode.resonance is not None else zeta is not None and zeta <= RESONANCE_MAX_DAMPING
+    return mode.kind == ModeKind.COMPLEX and mode.supported and resonance and not mode.cancelled
 
 
-def main_mode(modes: list[dict[str, Any]]) -> dict[str, Any] | None:
+def main_mode(modes: list[Mode]) -> Mode | None:
     """The sensor's main mode: the lowest claimed resonance (`claimed`; None if there is none)."""
     pairs = [m for m in modes if claimed(m)]
-    return min(pairs, key=lambda m: m["natural_frequency_hz"]) if pairs else None
+    return min(pairs, key=lambda m: m.natural_frequency_hz or 0.0) if pairs else None
 
 
 def has_doublet(a: np.ndarray, b: np.ndarray) -> bool:
@@ -97,4 +154,4 @@ def has_doublet(a: np.ndarray, b: np.ndarray) -> bool:
     test; the sample interval does not enter it, so any is given)."""
     if a.size < 2 or b.size < 2:
         return False
-    return any(m["cancelled"] for m in mark_doublets(modes_of(np.roots(a), 1.0), np.roots(b)))
+    return any(m.cancelled for m in mark_doublets(modes_of(np.roots(a), 1.0), np.roots(b)))

@@ -20,7 +20,6 @@ from hopkinson.analysis.input_terms import ONSET
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.order_choice import choose_order
 from hopkinson.analysis.order_search import (
-    FREE,
     POLISH_EVALUATIONS,
     OrderSweep,
     SearchSetup,
@@ -28,6 +27,7 @@ from hopkinson.analysis.order_search import (
     fit_orders,
 )
 from hopkinson.analysis.record_preparation import Prepared
+from hopkinson.analysis.structure import DelayMode, Structure
 
 # The onset's bumps are kept only where the correction they make stands this many times above the
 # reference's noise RMS (on a record whose residual is mostly model error, a few free bumps always
@@ -40,10 +40,10 @@ ONSET_SIGNIFICANCE = 1e-3
 
 
 def onset_fitted(prep: Prepared, plain: SpectralData, plain_sweep: OrderSweep, setup: SearchSetup
-                 ) -> tuple[SpectralData, OrderSweep] | None:
-    """The data with the onset's bumps (analysis.input_terms) and every order fitted with them,
-    where the record calls for them; None where it does not, and `prep` then records why
-    (`prep.terms` and `prep.spectral` take the bumps on where they are kept).
+                 ) -> tuple[Prepared, tuple[SpectralData, OrderSweep] | None]:
+    """The prepared record with the onset's bumps (analysis.input_terms) where the record calls
+    for them (its `terms` and `spectral` take them on), and the data with them and every order
+    fitted with them; else the prepared record with the reason in its terms, and None.
 
     Two accounts of the record are compared, each at its optimum and each with the order its own
     order test gives: with the bumps, the order test's choice; without them, the richest order the
@@ -60,9 +60,9 @@ def onset_fitted(prep: Prepared, plain: SpectralData, plain_sweep: OrderSweep, s
     must also stand ONSET_ABOVE_NOISE × above the reference's noise."""
     onset = prep.onset_terms
     if onset is None or plain_sweep.chosen is None:
-        return None
+        return prep, None
     trial = replace(prep.with_terms(onset), var_y=plain.var_y, sine=plain.sine)
-    sweep = fit_orders(trial, FREE, setup)
+    sweep = fit_orders(trial, Structure.FREE, setup)
     why = "no model with them is stable"
     if sweep.chosen is not None:
         chosen = sweep.fits[sweep.chosen]  # at its optimum (a copy: the sweep goes on as the search left it)
@@ -72,22 +72,21 @@ def onset_fitted(prep: Prepared, plain: SpectralData, plain_sweep: OrderSweep, s
         if bumped.inputs.size == onset.count:
             bumps[onset.columns(ONSET)] = bumped.inputs[onset.columns(ONSET)]
         size = float(np.max(np.abs(onset.correction(bumps))))
-        noise = prep.draw_noise_u.rms if prep.draw_noise_u.samples else 0.0
+        noise = prep.noise.draw_noise_u.rms if prep.noise.draw_noise_u.samples else 0.0
         richest = cost_test_fit(plain_sweep, plain, setup)
         assert richest is not None
         if size <= ONSET_ABOVE_NOISE * noise:
             why = f"the correction, {size / max(noise, 1e-300):.2g}× the reference's noise, does not stand above it"
         elif _stands(bumped, richest, plain.bins, setup.significance):
-            prep.terms, prep.spectral = onset, replace(prep.spectral, inputs=trial.inputs,
-                                                       input_prior=trial.input_prior)
-            return trial, sweep
+            spectral = replace(prep.spectral, inputs=trial.inputs, input_prior=trial.input_prior)
+            return replace(prep, terms=onset, spectral=spectral), (trial, sweep)
         else:
             why = (f"order {richest.order} without them explains the record (V {richest.cost:.4g}, "
                    f"{richest.parameters} parameters) as well as order {bumped.order} with them (V "
                    f"{bumped.cost:.4g}, {bumped.parameters})")
-    prep.terms = replace(prep.terms, not_fitted={**prep.terms.not_fitted,
-                                                 ONSET: f"the onset's disturbances do not show ({why})"})
-    return None
+    terms = replace(prep.terms, not_fitted={**prep.terms.not_fitted,
+                                            ONSET: f"the onset's disturbances do not show ({why})"})
+    return replace(prep, terms=terms), None
 
 
 def _stands(fit: OrderFit, other: OrderFit, bins: int, significance: float) -> bool:
@@ -100,15 +99,15 @@ def _stands(fit: OrderFit, other: OrderFit, bins: int, significance: float) -> b
     return fits[chosen if chosen is not None else 0] is fit
 
 
-def onset_beyond_the_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, delay_mode: str | float,
-                                 setup: SearchSetup) -> SpectralData:
-    """The data weighed with the model error, without the onset's terms where, so weighed, they no
-    longer lower the cost beyond chance: the F test that kept them read a residual that was
+def onset_beyond_the_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, delay_mode: DelayMode | float,
+                                 setup: SearchSetup) -> tuple[Prepared, SpectralData]:
+    """The prepared record and the data weighed with the model error, without the onset's terms
+    where, so weighed, they no longer lower the cost beyond chance: the F test that kept them read a residual that was
     mostly model error, which a few free bumps always lower (PTB's record with 1 % more noise: bumps
     of 2 % of its peak, and its FBSD ±5 % interval half as wide again)."""
     cols = prep.terms.columns(ONSET)
     if not cols.size or fit.inputs.size != prep.terms.count:
-        return data
+        return prep, data
     with_bumps = OrderProblem.for_fit(data, fit, delay_mode, setup.max_delay).solve(replace(fit, cost=math.nan), 200,
                                                                                    1e-9)
     kept = prep.terms.without(ONSET, "")
@@ -119,8 +118,7 @@ def onset_beyond_the_model_error(prep: Prepared, data: SpectralData, fit: OrderF
     dof = problem.residual_size() - problem.size
     statistic = ((plain.cost - with_bumps.cost) / cols.size) / (with_bumps.cost / dof) if dof > 0 else math.inf
     if statistic > f_quantile(1.0 - ONSET_SIGNIFICANCE, cols.size, max(dof, 1)):
-        return data
-    prep.terms = replace(kept, not_fitted={**prep.terms.not_fitted, ONSET: (
+        return prep, data
+    terms = replace(kept, not_fitted={**prep.terms.not_fitted, ONSET: (
         f"the onset's disturbances do not show beyond the model error (F = {statistic:.2g} for {cols.size} terms)")})
-    prep.spectral = replace(prep.with_terms(kept), var_y=prep.spectral.var_y)
-    return without
+    return replace(prep, terms=terms, spectral=replace(prep.with_terms(kept), var_y=prep.spectral.var_y)), without

@@ -23,13 +23,15 @@ import numpy as np
 from hopkinson.analysis.frequency_fit import OrderFit, QuickRefit, SpectralData, is_stable, response
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
+from hopkinson.analysis.params import SIGNIFICANCE
 
-# The order test: a higher order must be significant at this level (F test on V, corrected for
-# the number of bins a pole pair could be placed at) ...
-SIGNIFICANCE = 0.01
-# ... and change the excitation-weighted frequency response by more than this (RMS, relative):
+# The order test: a higher order must be significant at params.SIGNIFICANCE (F test on V,
+# corrected for the number of bins a pole pair could be placed at) and change the excitation-weighted frequency response by more than this (RMS, relative):
 # below it, it only mends the discrete model's own approximation of a continuous sensor.
 FRF_TOLERANCE = 1e-3
+# Below this share of noise draws re-choosing it, the order choice is reported as not stable
+# (analysis.order_search.order_stability_evidence, analysis.uncertainty).
+ORDER_STABILITY_WARNING = 0.5
 
 
 def choose_order(

@@ -1,5 +1,5 @@
-"""Stages 5–6 of analysis.identify: every order fitted ("fit per order") and one chosen ("order
-choice").
+"""The order search of analysis.identify_stages (search_orders, weigh_model_error, settle):
+every order fitted and one chosen (docs/decisions/0011).
 
 - `search_setup`: the delay's start and the orders the band's bins allow.
 - `fit_orders`: each order n = 1 … n_max of one model structure fitted on the prepared bins
@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
@@ -29,8 +30,9 @@ from hopkinson.analysis.frequency_fit import (
     delay_branches,
     predicted_bins,
 )
-from hopkinson.analysis.modes import has_doublet, modes_of
+from hopkinson.analysis.modes import ModeKind, has_doublet, modes_of
 from hopkinson.analysis.order_choice import (
+    ORDER_STABILITY_WARNING,
     NoiseDraws,
     Refitter,
     candidates_around,
@@ -42,8 +44,8 @@ from hopkinson.analysis.order_choice import (
 )
 from hopkinson.analysis.record_preparation import Alignment, Prepared
 from hopkinson.analysis.resample import estimate_delay_samples
+from hopkinson.analysis.structure import DelayMode, Structure
 
-FREE, ALL_POLE = "free", "all_pole"  # the model structures: B free, or B = g·(1 + z⁻¹)ⁿ/2ⁿ (no finite zeros)
 # A final model with a pole this close to the unit circle sits on the stability boundary.
 MARGINAL_POLE = 1e-6
 # Levenberg–Marquardt evaluations that polish the chosen order to tight convergence (a band across
@@ -54,10 +56,9 @@ POLISH_EVALUATIONS = 400
 UNSTABLE_MODEL_ERROR = 100.0
 # identify(stability_draws=…): noise draws that re-run the order choice to measure its
 # stability, from a fixed seed (the same record always gives the same evidence); the
-# uncertainty's Monte Carlo measures it anyway, so identify alone does not by default. Below
-# this share of draws choosing it, the choice is reported as unstable.
+# uncertainty's Monte Carlo measures it anyway, so identify alone does not by default
+# (order_choice.ORDER_STABILITY_WARNING: the share below which the choice is reported unstable).
 STABILITY_SEED = 16_063
-ORDER_STABILITY_WARNING = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,8 +78,9 @@ class SearchSetup:
     sample_interval_s: float
     band_hz: tuple[float, float]  # the band the excitation supports
     alignment: Alignment = field(default_factory=Alignment)  # what record_preparation.realigned did
+    findings: tuple[Finding, ...] = ()  # the orders capped by the band's bins
 
-    def delay_mode(self, structure: str) -> str | float:
+    def delay_mode(self, structure: Structure) -> DelayMode | float:
         """The free structure keeps its delay causal (its zeros can take up a lead: the lead
         warning); the all-pole structure has no zeros to do so, and the reference chain's own
         delay (an interferometer's demodulation and low-pass, 0.2–0.9 µs; PTB's record leads by
@@ -86,12 +88,12 @@ class SearchSetup:
         takes either sign."""
         if not self.remove_delay:
             return 0.0
-        return "free" if structure == ALL_POLE else "causal"
+        return DelayMode.FREE if structure == Structure.ALL_POLE else DelayMode.CAUSAL
 
 
 def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | None, dt: float, *,
                  remove_delay: bool, max_delay: int, patience: int | None, max_evaluations: int,
-                 significance: float, warnings: list[str], alignment: Alignment | None = None) -> SearchSetup:
+                 significance: float, alignment: Alignment | None = None) -> SearchSetup:
     """The delay's start (the causal delay that best fits a second-order model, on a coarse grid)
     and the orders the band allows: each order needs more real residuals (two per bin) than
     parameters (2n + 2, and n more with a transient term)."""
@@ -104,20 +106,21 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
             f"the supported band holds only {data.bins} frequency bins: too few for "
             f"{'order ' + str(order) if order is not None else 'any model'} (a longer record or a shorter pulse)"
         )
+    findings: tuple[Finding, ...] = ()
     if n_max > allowed:
-        warnings.append(f"orders above {allowed} were not tried: the supported band holds only {data.bins} "
-                        "frequency bins")
+        findings = (Finding(FindingCode.ORDERS_CAPPED, f"orders above {allowed} were not tried: the supported band "
+                                                       f"holds only {data.bins} frequency bins"),)
         n_max = allowed
     return SearchSetup(n_max, order, tau0, remove_delay, max_delay, patience, max_evaluations, significance,
-                       float(prep.bin_hz[0]), dt, prep.band, alignment or Alignment())
+                       float(prep.bin_hz[0]), dt, prep.band, alignment or Alignment(), findings)
 
 
 @dataclass
 class OrderSweep:
     """Every order of one structure fitted, and the order test's choice among them."""
 
-    structure: str  # FREE or ALL_POLE
-    delay_mode: str | float
+    structure: Structure
+    delay_mode: DelayMode | float
     fits: dict[int, OrderFit]  # by order
     parameters: dict[int, int]
     costs: dict[int, float]  # V of each candidate order (inf: no candidate: unstable, or a pole below the band)
@@ -136,7 +139,7 @@ class OrderSweep:
         if n not in self._polished:
             fit = self.fits[n]
             done = OrderProblem.for_fit(data, fit, self.delay_mode, setup.max_delay).solve(fit, POLISH_EVALUATIONS, 1e-11)
-            if self.delay_mode == "causal" and done.delay < 1e-2 and not done.converged:
+            if self.delay_mode == DelayMode.CAUSAL and done.delay < 1e-2 and not done.converged:
                 at_zero = OrderProblem.for_fit(data, fit, 0.0, setup.max_delay).solve(done, POLISH_EVALUATIONS, 1e-11)
                 if at_zero.cost <= done.cost * (1 + 1e-9):
                     done = at_zero
@@ -149,7 +152,7 @@ class OrderSweep:
         return acceptable(self.polished(n, data, setup), data.bins)
 
 
-def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderSweep:
+def fit_orders(data: SpectralData, structure: Structure, setup: SearchSetup) -> OrderSweep:
     """Every order n = 1 … n_max of `structure` fitted on `data` (from 2 for the all-pole
     structure: it stands for a resonance beyond the band, and its order 1, a real pole, is a
     low-pass that cannot rise towards one), and the order test's choice. Each order starts from
@@ -167,8 +170,8 @@ def fit_orders(data: SpectralData, structure: str, setup: SearchSetup) -> OrderS
     tau, tau0 = setup.tau0, setup.tau0
     delay_mode = setup.delay_mode(structure)
     previous: OrderFit | None = None
-    for n in range(2 if structure == ALL_POLE else 1, setup.n_max + 1):
-        shape = all_pole_numerator(n) if structure == ALL_POLE else None
+    for n in range(2 if structure == Structure.ALL_POLE else 1, setup.n_max + 1):
+        shape = all_pole_numerator(n) if structure == Structure.ALL_POLE else None
         problem = OrderProblem(data, n, delay_mode, setup.max_delay, numerator=shape)
         held = previous.inputs if previous is not None else None  # the input terms as the order below found them
         starts = [problem.linear_start(tau, inputs=held)]
@@ -246,10 +249,10 @@ def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
     record: free order 1 claimed no mode in the band, every higher order unstable, and the
     all-pole order 2 settled on the unit circle). An asked order keeps the free structure, as
     does an all-pole sweep with no stable order."""
-    free = fit_orders(data, FREE, setup)
+    free = fit_orders(data, Structure.FREE, setup)
     if setup.asked_order is not None:
         return free
-    all_pole = fit_orders(data, ALL_POLE, setup)
+    all_pole = fit_orders(data, Structure.ALL_POLE, setup)
     if all_pole.chosen is None:
         return free
     if free.chosen is None:
@@ -300,7 +303,7 @@ def _exhausted_without_mode(sweep: OrderSweep, setup: SearchSetup) -> bool:
         return False
     fit = sweep.fits[chosen]
     modes = modes_of(np.roots(fit.a) if fit.a.size > 1 else np.zeros(0), setup.sample_interval_s, setup.band_hz)
-    return not any(m["kind"] == "complex" and m["supported"] for m in modes)
+    return not any(m.kind == ModeKind.COMPLEX and m.supported for m in modes)
 
 
 @dataclass(frozen=True)
@@ -312,9 +315,10 @@ class SettledOrder:
     order: int
     selection: str  # "order_test" or "asked"
     unstable_when_converged: list[int]
+    findings: tuple[Finding, ...] = ()
 
 
-def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warnings: list[str]) -> SettledOrder:
+def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup) -> SettledOrder:
     """The order test's choice (or the asked order) iterated to convergence and checked stable.
 
     An unstable choice falls back to the test's choice among the stable orders; with none, from
@@ -338,11 +342,12 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
         if sweep.chosen < order:
             low, costs = sweep.chosen, sweep.costs
             drop = (costs[low] - costs[order]) / costs[low] if costs[low] > 0 else 0.0
-            warnings.append(
+            return SettledOrder(sweep, order, "asked", [], (Finding(
+                FindingCode.ASKED_ORDER_UNSUPPORTED,
                 f"order {order} was asked but the data support only order {low}: V falls by {drop:.2%} from "
                 f"order {low} to {order}, within chance or without changing the response where the pulse has "
                 "energy; the extra poles are not determined by this record (a mode beyond the excitation's band?)"
-            )
+            ),))
         return SettledOrder(sweep, order, "asked", [])
     chosen = sweep.chosen
     if sweep.acceptable(chosen, data, setup):
@@ -352,9 +357,10 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
     # A stable free order that holds a pole–zero doublet is the fit following a ripple: the same
     # rule as fit_structures' (PTB's record cut at 0.75 ms: orders 1–2 unstable once converged,
     # order 4 a doublet at 16.8 kHz, FBSD ±5 % 13.3 kHz against the sine's 11.4 kHz).
+    findings = []
     doublet = fallback is not None and has_doublet(sweep.fits[fallback].a, sweep.fits[fallback].b)
-    if (fallback is None or doublet) and sweep.structure == FREE and setup.asked_order is None:
-        all_pole = fit_orders(data, ALL_POLE, setup)
+    if (fallback is None or doublet) and sweep.structure == Structure.FREE and setup.asked_order is None:
+        all_pole = fit_orders(data, Structure.ALL_POLE, setup)
         if all_pole.chosen is not None and all_pole.acceptable(all_pole.chosen, data, setup):
             if doublet:
                 why = (f"the stable orders with free zeros hold a pole–zero doublet (order {fallback}, after "
@@ -363,8 +369,9 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
                 why = "no model with free zeros is stable" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
             sweep, chosen = all_pole, all_pole.chosen
             sweep.why = why
-            warnings.append(why + "; the all-pole model (a resonance beyond the band, its damping not determined) "
-                            "is used")
+            findings.append(Finding(FindingCode.ALL_POLE_FALLBACK,
+                                    why + "; the all-pole model (a resonance beyond the band, its damping not "
+                                    "determined) is used"))
             fallback, dropped = chosen, []
     if fallback is None:
         raise AnalysisError("no order gives a stable model for this record (every fit settles with a pole on "
@@ -372,9 +379,10 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup, warn
                             + ")" + _lead_hint(setup))
     if dropped:
         unstable = ", ".join(str(n) for n in dropped)
-        warnings.append(f"the fit of order {unstable} became unstable when iterated to convergence; order "
-                        f"{fallback} (the order test's choice among the stable orders) is used")
-    return SettledOrder(sweep, fallback, "order_test", list(dropped))
+        findings.append(Finding(FindingCode.UNSTABLE_WHEN_CONVERGED,
+                                f"the fit of order {unstable} became unstable when iterated to convergence; order "
+                                f"{fallback} (the order test's choice among the stable orders) is used"))
+    return SettledOrder(sweep, fallback, "order_test", list(dropped), tuple(findings))
 
 
 def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: SearchSetup
@@ -384,7 +392,7 @@ def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: 
     order from one delay and can miss it); the others are kept for the Monte Carlo, whose draws
     re-run this choice. Only a causal delay has branches. The sweep keeps the final fit."""
     final = sweep.fits[order]
-    others = delay_branches(data, final, setup.max_delay) if sweep.delay_mode == "causal" else []
+    others = delay_branches(data, final, setup.max_delay) if sweep.delay_mode == DelayMode.CAUSAL else []
     if others and others[0].cost < final.cost and acceptable(others[0], data.bins):
         final, others = replace(others[0], start_unstable=final.start_unstable), sorted(
             [final, *others[1:]], key=lambda f: f.cost)
@@ -392,12 +400,12 @@ def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: 
     return final, others
 
 
-def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup, draws: int,
-                             warnings: list[str]) -> dict[str, Any]:
+def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup, draws: int
+                             ) -> tuple[dict[str, Any], tuple[Finding, ...]]:
     """Stability of the order test's choice across resampled noise: the test re-run on the chosen
     model's response with fresh noise of the record's own level (a parametric bootstrap;
     analysis.uncertainty does the same for the order's PDF and reports it). Below
-    ORDER_STABILITY_WARNING a warning."""
+    ORDER_STABILITY_WARNING a finding. Returns the evidence and the findings."""
     assert sweep.chosen is not None
     chosen = sweep.chosen
     omega_bins = 2.0 * np.pi * prep.bin_hz * setup.sample_interval_s
@@ -407,13 +415,15 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
     refitter = Refitter(data, sweep.fits, sweep.delay_mode, setup.max_delay)
     candidates = [m for m in candidates_around(chosen, sweep.fits) if math.isfinite(sweep.costs[m])]
     fractions, _, _ = order_stability(noise_draws, refitter, candidates, draws, setup.significance)
+    findings: tuple[Finding, ...] = ()
     if fractions.get(chosen, 0.0) < ORDER_STABILITY_WARNING:
-        warnings.append(
+        findings = (Finding(
+            FindingCode.ORDER_UNSTABLE,
             f"the order choice is not stable under the record's own noise: the test chose order {chosen}, "
             f"fresh noise of the same level gives {fractions_text(fractions)}; the uncertainty includes the "
             "other orders"
-        )
-    return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}
+        ),)
+    return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}, findings
 
 
 def _lead_hint(setup: SearchSetup) -> str:
@@ -435,7 +445,7 @@ def _initial_delay(data: SpectralData, prep: Prepared, order: int, max_delay: in
     except AnalysisError:
         xcorr = 0.0
     top = float(np.clip(math.ceil(xcorr) + 1, 0, max_delay))
-    problem = OrderProblem(data, order, "causal", max_delay)
+    problem = OrderProblem(data, order, DelayMode.CAUSAL, max_delay)
     refined = [problem.solve(start, 40) for start in delay_grid_starts(problem, top, 2)]
     return min(refined, key=lambda f: f.cost).delay if refined else 0.0
 

@@ -24,6 +24,9 @@ from typing import Any
 from hopkinson.analysis.errors import AnalysisError
 
 DEFAULT_ANALYSIS_RATE_HZ = 1e6
+# The order test's level: a higher order must beat a lower one beyond chance at this level
+# (analysis.order_choice; docs/decisions/0011).
+SIGNIFICANCE = 0.01
 DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/doppler_beat.py)
 # The DCM's defaults and the rules its options obey live here, once: analysis.dcm_design's
 # DcmOptions and AnalysisParams.check() both apply `dcm_option_problem`, so the rig's check
@@ -41,6 +44,34 @@ DEFAULT_DRAWS = 400
 MAX_ORDER_LIMIT = 60
 MAX_DRAWS = 1_000_000
 MIN_DRAWS = 50  # fewer cannot locate the ends of a 95 % interval
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """What the identification may try.
+
+    max_order: the largest order tried; order: fit exactly this order (None: the order test).
+    sample_rate_hz: the analysis rate, Hz (None: the record's).
+    significance: the order test's level. max_delay_samples: the largest input delay searched.
+    remove_delay: False holds the delay at 0. patience: stop this many orders past the choice
+    without gain (None: try every order). max_evaluations: each order's search budget.
+    stability_draws: noise draws that re-run the order choice (0: none; the uncertainty does).
+    """
+
+    max_order: int = 12
+    order: int | None = None
+    sample_rate_hz: float | None = DEFAULT_ANALYSIS_RATE_HZ
+    significance: float = SIGNIFICANCE
+    max_delay_samples: int = 32
+    remove_delay: bool = True
+    patience: int | None = 3
+    max_evaluations: int = 60
+    stability_draws: int = 0
+
+    @property
+    def n_max(self) -> int:
+        """The largest order the search may reach (an asked order above max_order included)."""
+        return max(self.max_order, self.order or 0)
 
 
 @dataclass(frozen=True)
@@ -144,6 +175,10 @@ class AnalysisParams:
             _finite(getattr(self, name), name, at_least=0.0, at_most=1.0)
         if self.sine_calibration is not None and not (isinstance(self.sine_calibration, str) and self.sine_calibration):
             raise AnalysisError(f"analysis option sine_calibration: a file name, got {self.sine_calibration!r}")
+
+    def identify_options(self) -> IdentifyOptions:
+        """What analysis.identify may try, from these options."""
+        return IdentifyOptions(max_order=self.max_order, order=self.order, sample_rate_hz=self.sample_rate_hz)
 
     def reference_chain(self) -> dict[str, float]:
         """Relative standard uncertainties of the reference chain, by source name."""

@@ -1,15 +1,16 @@
-"""Stages 1–4 of analysis.identify: the record made ready for the fit.
+"""The prepare stage of analysis.identify: the record made ready for the fit (normalised units:
+each channel divided by its largest excursion).
 
-- `prepare_record`: the analysis rate, each channel checked and scaled by its largest
-  excursion (so nothing below depends on units or gains), then the three stages below.
-- `locate_pulse` ("prepare"): where the reference carries the pulse and the response rings,
-  each channel's pre-pulse baseline, the fitted window and whether the record is cut short.
-- `measure_noise` ("noise"): the quiet stretches, less those where both channels move together
-  after the pulse (the bar's motion, analysis.noise.is_motion: not noise), a drift pinned by
-  quiet stretches before and after, and each channel's noise spectrum there (two looks: the
-  conservative one weighs the fit, the unbiased one is what the uncertainty draws).
-- `fitted_band` ("band"): the band the excitation supports (analysis.excitation), the window's
-  DFT bins inside it and each bin's noise variance (`Prepared`, what every later stage fits).
+- `prepare_record` → `PreparedRecord`: the analysis rate, a response that leads realigned
+  (`realigned` → `Alignment`), the channels checked and scaled, then:
+- `locate_pulse` (analysis.pulse_location) → `Activity`: the pulse, each channel's baseline, the
+  fitted window;
+- `measure_noise` → `NoiseLooks`: the quiet stretches less the bar's motion after the pulse, a
+  drift pinned by them, each channel's noise spectrum in two looks (conservative: weighs the
+  fit; unbiased: what the uncertainty draws);
+- `fitted_band` → `Prepared`: the supported band's DFT bins and each bin's noise variance.
+
+Each returns its findings (analysis.findings). Why: docs/decisions/0010, 0012.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.excitation import SupportedBand, pulse_width, supported_band
+from hopkinson.analysis.excitation import SupportedBand, supported_band
+from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
 from hopkinson.analysis.input_terms import ONSET, InputTerms, input_terms
 from hopkinson.analysis.noise import (
@@ -30,6 +32,7 @@ from hopkinson.analysis.noise import (
     first_motion,
 )
 from hopkinson.analysis.numerics import next_fast_len
+from hopkinson.analysis.pulse_location import MIN_QUIET, Activity, locate_pulse
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
 from hopkinson.analysis.response import simulate_from_rest
@@ -43,8 +46,6 @@ MAX_BINS = 512
 # last fifth below it holds the resampling's anti-alias transition, which no model of the sensor
 # follows (a 10 µs half-sine's sidelobes reach 450 kHz at 1 MS/s).
 NULLS_CROSSED_TO = 0.8
-# Quiet stretches shorter than this are not used for a noise spectrum.
-MIN_QUIET = 32
 # Motion after the pulse (_without_motion): a stretch's tails are judged from its start in steps
 # of MOTION_STEP samples, down to MOTION_TAIL samples (9 coherence segments: 4/K = 0.44).
 MOTION_STEP = 64
@@ -64,49 +65,31 @@ RESPONSE_ABOVE_NOISE = 2.0
 # such a lead from the fit's start (PTB's response shifted 7-10 µs earlier: every fit unstable), so
 # the response is realigned by whole samples first (`realigned`); the model's delay keeps the lead.
 SKEWED_LEAD_SAMPLES = 2.0
-# The lead-in's end (_foot): where a FOOT_BOX-sample box-car of |x| last stands at FOOT_LEVEL × its
-# median before the pulse.
-FOOT_BOX = 5
-FOOT_LEVEL = 2.0
 
 
-@dataclass
+@dataclass(frozen=True)
 class Prepared:
-    """The record as the fit sees it (normalised units): the window, its DFT bins in the supported
-    band, each bin's noise variance, and what the later stages measure noise on again."""
+    """Stage "band": the record as the fit sees it (normalised units): the fitted window, its DFT
+    bins in the supported band and each bin's noise variance in two looks (the conservative one
+    weighs the fit, the unbiased one is what the uncertainty draws), with the stages it was made
+    from. The search stages return it with the input terms they fit (`terms`, `spectral`,
+    `unseen`: analysis.identify_stages), never change it."""
 
-    u: np.ndarray
+    activity: Activity  # where the pulse is and each channel's baseline (locate_pulse)
+    noise: NoiseLooks  # each channel's noise and where it was measured (measure_noise)
+    u: np.ndarray  # the fitted window [start, start + u.size), baseline and drift removed
     y: np.ndarray
     start: int
-    baseline_u: float
-    baseline_y: float
-    drift_removed: bool
-    noise_u: NoiseSpectrum
-    noise_y: NoiseSpectrum
-    band: tuple[float, float]  # the supported band's hull (low, top)
-    bin_hz: np.ndarray
-    u_bins: np.ndarray
+    band: tuple[float, float]  # the supported band's hull (low, top), Hz
+    bin_hz: np.ndarray  # the fitted bins' frequencies
+    u_bins: np.ndarray  # the window's DFT at those bins
     y_bins: np.ndarray
-    var_u: np.ndarray
+    var_u: np.ndarray  # each bin's noise variance, the conservative look
     var_y: np.ndarray
-    group: int
-    spectral: SpectralData
-    pulse_start: int
-    u_full: np.ndarray  # the whole record, normalised, baseline and drift removed
-    y_full: np.ndarray
-    y_segments: list[slice]  # the response's quiet stretches (its noise was measured there)
-    ref_busy: np.ndarray  # where the reference carries the pulse (bool per sample)
-    # The unbiased look at the noise (analysis.noise), for the uncertainty's draws; the fields
-    # noise_u … var_y above are the conservative look the fit is weighted by.
-    draw_noise_u: NoiseSpectrum
-    draw_noise_y: NoiseSpectrum
-    draw_var_u: np.ndarray
+    draw_var_u: np.ndarray  # the unbiased look
     draw_var_y: np.ndarray
-    drift_lines: dict[str, tuple[float, float]]  # channel -> (slope per sample, intercept) removed, normalised
-    # stretches after the pulse left out of the noise as motion (start_sample, stop_sample, coherence, reason)
-    motion: list[dict[str, Any]] = field(default_factory=list)
-    lead_in: int = 0  # the lead-in at rest is samples [0, lead_in) (0: none)
-    lead_in_to_foot: bool = False  # it reaches the pulse's foot (the window's margins left none)
+    group: int  # bins per group in `spectral` (1: per bin)
+    spectral: SpectralData
     support: SupportedBand | None = None  # the supported stretches (the nulls between them are not fitted)
     bin_index: np.ndarray | None = None  # each fitted bin's index in the window's DFT
     ramp: np.ndarray | None = None  # the drift ramp's DFT at the fitted bins (with a transient term)
@@ -115,6 +98,7 @@ class Prepared:
     onset_terms: InputTerms | None = None
     terms_source: tuple = ()  # input_terms' arguments (analysis.systematics makes its variants from them)
     unseen: dict[str, float] = field(default_factory=dict)  # term not seen beyond chance -> its standard uncertainty
+    findings: tuple[Finding, ...] = ()  # the band stage's (a record cut short)
 
     def terms_variant(self, **options: Any) -> InputTerms:
         """The candidate input terms made with other `options` (input_terms' keywords), with the same
@@ -172,7 +156,7 @@ class Alignment:
                 "cross-correlation, too near the record's start to be realigned")
 
 
-@dataclass
+@dataclass(frozen=True)
 class PreparedRecord:
     """Stage 1–4's result: the prepared data and what the report says about how it was made."""
 
@@ -184,6 +168,7 @@ class PreparedRecord:
     y_all: np.ndarray
     preprocessing: dict[str, Any]
     alignment: Alignment = field(default_factory=Alignment)  # what `realigned` did
+    findings: tuple[Finding, ...] = ()  # the noise's and the band's, in that order
 
     @property
     def realigned_samples(self) -> int:
@@ -191,14 +176,18 @@ class PreparedRecord:
         model's τ − realigned_samples."""
         return self.alignment.shift
 
+    def model_delay(self, fit_delay_samples: float) -> float:
+        """The model's delay (samples) of a fit's (on the realigned record)."""
+        return float(fit_delay_samples) - self.realigned_samples
+
 
 def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, order: int | None, max_delay: int,
-                   warnings: list[str], realign: bool = True, band_top_hz: float | None = None) -> PreparedRecord:
+                   realign: bool = True, band_top_hz: float | None = None) -> PreparedRecord:
     """Resample to the analysis rate (None: the record's), realign a response that leads by
     several samples (`realigned`; not when `realign` is False: the delay held at 0;
-    claims.delay_warnings says so), check and scale both channels, and run the prepare, noise
-    and band stages (the band capped at `band_top_hz`: identify's cut). Warnings are appended to
-    `warnings`."""
+    claims.delay_findings says so), check and scale both channels, and run the prepare, noise
+    and band stages (the band capped at `band_top_hz`: identify's cut); their findings in
+    `findings`."""
     pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
     if rec is not record:
@@ -224,20 +213,20 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     scale_y = _scale(resp)
     u_all, y_all = (ref - np.median(ref)) / scale_u, (resp - np.median(resp)) / scale_y
     activity = locate_pulse(u_all, y_all, dt, max_delay)
-    noise = measure_noise(activity, dt, warnings)
-    prep = fitted_band(activity, noise, dt, warnings, band_top_hz)
+    noise = measure_noise(activity, dt)
+    prep = fitted_band(activity, noise, dt, band_top_hz)
     pre.update(
         {
-            "reference_baseline": float(np.median(ref) + prep.baseline_u * scale_u),
-            "response_baseline": float(np.median(resp) + prep.baseline_y * scale_y),
+            "reference_baseline": float(np.median(ref) + prep.activity.baseline_u * scale_u),
+            "response_baseline": float(np.median(resp) + prep.activity.baseline_y * scale_y),
             "baseline_removed": True,
-            "drift_removed": prep.drift_removed,
+            "drift_removed": prep.noise.drift_removed,
             # What was taken off each channel, in its own units, at time t of the record:
             # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
             # (the response, realigned, starts `shift` samples before the record: `realigned`)
             **{f"{name}_drift": {"intercept": line[1] * scale, "slope_per_s": line[0] * scale / dt,
                                  "origin_s": rec.start_time_s - (shift * dt if name == "response" else 0.0)}
-               for (name, line), scale in zip(prep.drift_lines.items(), (scale_u, scale_y), strict=True)},
+               for (name, line), scale in zip(prep.noise.drift_lines.items(), (scale_u, scale_y), strict=True)},
             "window_start_s": rec.start_time_s + prep.start * dt,
             "window_samples": int(prep.u.size),
             "fitted_bins": prep.spectral.bins,
@@ -247,7 +236,7 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
             "scale_response": scale_y,
         }
     )
-    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, alignment)
+    return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, alignment, noise.findings + prep.findings)
 
 
 def realigned(rec: Record, max_delay: int) -> tuple[Record, Alignment]:
@@ -282,86 +271,7 @@ def realigned(rec: Record, max_delay: int) -> tuple[Record, Alignment]:
             Alignment(shift, -lag))
 
 
-@dataclass
-class Activity:
-    """Stage "prepare": where the pulse is and where each channel is quiet (normalised units)."""
-
-    u: np.ndarray  # the whole record, each channel's pre-pulse baseline removed
-    y: np.ndarray
-    baseline_u: float
-    baseline_y: float
-    pulse_start: int  # first sample of the reference's pulse (analysis.excitation.pulse_width)
-    ref_busy: np.ndarray  # where the reference carries the pulse (bool per sample)
-    start: int  # the fitted window [start, end)
-    end: int
-    truncated: bool  # the record ends before the response has died away
-    cold_start: bool  # the pulse starts within the record's first samples
-    noise_y0: float  # the response's rough noise level (pre-pulse RMS, or a robust level of the tail)
-    u_segments: list[slice]  # the stretches where each channel is quiet (before motion is judged)
-    y_segments: list[slice]
-    lead_in_to_foot: bool = False  # the lead-in reaches the pulse's foot (the window's margins left none)
-
-    @property
-    def lead_in(self) -> int:
-        """The lead-in at rest is samples [0, lead_in) (0: none)."""
-        return self.u_segments[0].stop if self.u_segments and self.u_segments[0].start == 0 else 0
-
-
-def locate_pulse(u: np.ndarray, y: np.ndarray, dt: float, max_delay: int) -> Activity:
-    """Where each channel is busy: the reference above 2 % of its peak and 4× its noise floor
-    (every pulse of a train, not only the largest), the response above 4 noise RMS until it
-    stays quiet; each widened by the margins the filters and the delay need. The rest is quiet:
-    there the noise is measured. The window runs from just before the pulse to where the
-    response has died into its noise."""
-    n = u.size
-    try:
-        pulse = pulse_width(u, dt)
-    except AnalysisError as exc:
-        raise AnalysisError(f"the reference has no pulse to identify from: {exc}") from None
-    width = max(1, int(round(pulse.width_s / dt)))
-    i_start = int(math.floor(pulse.start_s / dt))
-    floor = float(np.median(np.convolve(np.abs(u), np.full(5, 0.2), mode="same")))  # the noise's level
-    level = max(0.02 * float(np.max(np.abs(u))), 4.0 * floor)
-    ref_busy = _busy(u, level, 2 * width + max_delay)
-    first = int(np.argmax(ref_busy)) if np.any(ref_busy) else i_start
-    pre_end = first
-    if np.any(ref_busy) and first < MIN_QUIET:  # the margins leave no lead-in: it reaches the pulse's foot
-        pre_end = max(first, _lead_in_end(u, y, int(np.argmax(_busy(u, level, 0))), width))
-    base_u = float(np.mean(u[:pre_end])) if pre_end >= 16 else 0.0
-    base_y = float(np.mean(y[:pre_end])) if pre_end >= 16 else 0.0
-    u = u - base_u
-    y = y - base_y
-    noise_y0 = float(np.std(y[:pre_end])) if pre_end >= 16 else 0.0
-    if noise_y0 == 0.0:  # no lead-in: a robust level from the record's last tenth
-        tail = y[-max(n // 10, 16):]
-        noise_y0 = float(1.4826 * np.median(np.abs(tail - np.median(tail))))
-    resp_busy = ref_busy.copy()
-    loud = _busy(y - _provisional_drift(y, pre_end, ref_busy), 4.0 * noise_y0, 0)
-    for run in _runs(ref_busy):  # the response rings after each pulse until it stays quiet
-        resp_busy[run.start : _settles(loud, run.start, max(50, 10 * width))] = True
-    last_runs = _runs(resp_busy)
-    last = last_runs[-1] if last_runs else slice(i_start, i_start + width)
-    post_margin = max(20, 2 * width, (last.stop - last.start) // 4)
-    end = min(n, last.stop + post_margin)
-    truncated = last.stop + post_margin > n
-    pre_window = max(3 * width, 32) + max_delay
-    start = max(0, first - pre_window + 2 * width + max_delay) if np.any(ref_busy) else max(0, i_start - pre_window)
-    cold_start = first < 16
-
-    def quiet(busy: np.ndarray) -> list[slice]:
-        """The runs outside `busy`, the first being the lead-in [0, pre_end) (to the margins, or to the
-        pulse's foot when they leave none), each at least MIN_QUIET long."""
-        runs = _runs(~busy)
-        if np.any(ref_busy):
-            runs = [slice(0, pre_end)] + [r for r in runs if r.start > 0]
-        return [r for r in runs if r.stop - r.start >= MIN_QUIET]
-
-    u_segments, y_segments = quiet(ref_busy), quiet(resp_busy)
-    return Activity(u, y, base_u, base_y, i_start, ref_busy, start, end, truncated, cold_start, noise_y0, u_segments,
-                    y_segments, pre_end > first)
-
-
-@dataclass
+@dataclass(frozen=True)
 class NoiseLooks:
     """Stage "noise": each channel's noise, measured where it is at rest."""
 
@@ -376,15 +286,16 @@ class NoiseLooks:
     noise_y: NoiseSpectrum
     draw_noise_u: NoiseSpectrum  # the unbiased look (the uncertainty's draws)
     draw_noise_y: NoiseSpectrum
+    findings: tuple[Finding, ...] = ()
 
 
-def measure_noise(activity: Activity, dt: float, warnings: list[str]) -> NoiseLooks:
+def measure_noise(activity: Activity, dt: float) -> NoiseLooks:
     """The quiet stretches less the bar's coherent motion (_without_motion), a drift removed
     when quiet stretches before the first and after the last activity pin it (the line through
     the quiet samples), and each channel's noise spectrum there (analysis.noise)."""
     u, y = activity.u.copy(), activity.y.copy()
     n = u.size
-    u_segments, y_segments, motion = _without_motion(u, y, dt, activity.u_segments, activity.y_segments, warnings)
+    u_segments, y_segments, motion, findings = _without_motion(u, y, dt, activity.u_segments, activity.y_segments)
     drift = False
     lines = {"reference": (0.0, 0.0), "response": (0.0, 0.0)}  # (slope per sample, intercept), removed
     for name, x, segs in (("reference", u, u_segments), ("response", y, y_segments)):
@@ -402,17 +313,19 @@ def measure_noise(activity: Activity, dt: float, warnings: list[str]) -> NoiseLo
     draw_noise_u = NoiseSpectrum.measure(u, rate, u_segments)
     draw_noise_y = NoiseSpectrum.measure(y, rate, y_segments)
     if noise_u.samples == 0:
-        warnings.append("the reference has no quiet stretch (before the pulse or in flight after it) to measure "
-                        "its noise: it is taken as noise-free, which understates the uncertainty")
+        findings.append(Finding(FindingCode.NO_QUIET_REFERENCE,
+                                "the reference has no quiet stretch (before the pulse or in flight after it) to "
+                                "measure its noise: it is taken as noise-free, which understates the uncertainty"))
     if noise_y.samples == 0:
         noise_y = draw_noise_y = NoiseSpectrum.white(activity.noise_y0, rate, "record tail (robust)", 0)
-        warnings.append("the response has no quiet stretch to measure its noise: a robust level from the end of "
-                        "the record is used")
+        findings.append(Finding(FindingCode.NO_QUIET_RESPONSE,
+                                "the response has no quiet stretch to measure its noise: a robust level from the "
+                                "end of the record is used"))
     return NoiseLooks(u, y, u_segments, y_segments, motion, drift, lines, noise_u, noise_y, draw_noise_u,
-                      draw_noise_y)
+                      draw_noise_y, tuple(findings))
 
 
-def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list[str],
+def fitted_band(activity: Activity, noise: NoiseLooks, dt: float,
                 band_top_hz: float | None = None) -> Prepared:
     """The band the excitation supports (where the reference's spectrum stands 20 dB above its
     noise and within 40 dB of its maximum, across the pulse's narrow spectral nulls:
@@ -475,9 +388,11 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
         terms = terms.without(ONSET, "")
     inputs = terms.bins(start, end, np.flatnonzero(keep))
     ramp = None
+    findings: tuple[Finding, ...] = ()
     if truncated:
-        warnings.append("the record ends before the response has died away: a transient term is fitted with the "
-                        "model, and the uncertainty is larger than a complete record would give")
+        findings = (Finding(FindingCode.CUT_SHORT,
+                            "the record ends before the response has died away: a transient term is fitted with "
+                            "the model, and the uncertainty is larger than a complete record would give"),)
     if transient:
         t = np.arange(length, dtype=float)
         ramp = fft.rfft((t - t.mean()) / length)[keep]
@@ -491,11 +406,9 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float, warnings: list
                                input_prior=terms.prior)
         else:
             spectral = SpectralData.grouped_from(omega, u_spec, y_spec, var_u, var_y, group)
-    return Prepared(uw, yw, start, activity.baseline_u, activity.baseline_y, noise.drift_removed, noise_u, noise_y,
-                    band, bin_hz, u_spec, y_spec, var_u, var_y, group, spectral, activity.pulse_start, u, y,
-                    noise.y_segments, activity.ref_busy, draw_noise_u, draw_noise_y, draw_var_u, draw_var_y,
-                    noise.drift_lines, noise.motion, activity.lead_in, activity.lead_in_to_foot, support,
-                    np.flatnonzero(keep), ramp, terms, onset_terms, terms_source)
+    return Prepared(activity, noise, uw, yw, start, band, bin_hz, u_spec, y_spec, var_u, var_y, draw_var_u, draw_var_y,
+                    group, spectral, support, np.flatnonzero(keep), ramp, terms, onset_terms, terms_source,
+                    findings=findings)
 
 
 def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tuple[NoiseSpectrum, np.ndarray]:
@@ -507,16 +420,16 @@ def response_noise_on_residual(prep: Prepared, fit: OrderFit, dt: float) -> tupl
     the model is not measured (a spare pole near z = 1 predicts a tail the record does not
     have), and there taking it out would add power instead. Returns the spectrum and its
     variance per fitted bin (the first look's when there was no stretch to measure)."""
-    if prep.draw_noise_y.samples == 0 or prep.draw_noise_y.source.startswith("record tail"):
-        return prep.draw_noise_y, prep.draw_var_y
+    if prep.noise.draw_noise_y.samples == 0 or prep.noise.draw_noise_y.source.startswith("record tail"):
+        return prep.noise.draw_noise_y, prep.draw_var_y
     # The model driven by the pulse alone: driven by the whole reference it would add the
     # reference's noise through G, counted as response noise (~15 % too much at 2 % each).
-    drive = prep.u_full + prep.terms.correction(fit.inputs) if prep.terms.count else prep.u_full
-    residual = prep.y_full - simulate_from_rest(fit.a, fit.b, fit.delay, np.where(prep.ref_busy, drive, 0.0))
-    second = NoiseSpectrum.measure(residual, 1.0 / dt, prep.y_segments)
+    drive = prep.noise.u + prep.terms.correction(fit.inputs) if prep.terms.count else prep.noise.u
+    residual = prep.noise.y - simulate_from_rest(fit.a, fit.b, fit.delay, np.where(prep.activity.ref_busy, drive, 0.0))
+    second = NoiseSpectrum.measure(residual, 1.0 / dt, prep.noise.y_segments)
     if second.samples == 0:
-        return prep.draw_noise_y, prep.draw_var_y
-    noise = second.lower_of(prep.draw_noise_y)
+        return prep.noise.draw_noise_y, prep.draw_var_y
+    noise = second.lower_of(prep.noise.draw_noise_y)
     var_y = noise.bin_variance(prep.bin_hz, prep.u.size)
     return noise, np.maximum(var_y, 1e-12 * float(np.mean(np.abs(prep.y_bins) ** 2)))
 
@@ -542,16 +455,8 @@ def checked_channels(rec: Record) -> tuple[np.ndarray, np.ndarray]:
     return ref, resp
 
 
-def _busy(x: np.ndarray, level: float, widen: int) -> np.ndarray:
-    """Samples where a 5-sample box-car of |x| exceeds `level`, widened by `widen` each side."""
-    loud = np.convolve(np.abs(x), np.full(5, 0.2), mode="same") > level
-    if widen > 0 and np.any(loud):
-        loud = np.convolve(loud.astype(float), np.ones(2 * widen + 1), mode="same") > 0
-    return loud
-
-
-def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[slice], y_segments: list[slice],
-                    warnings: list[str]) -> tuple[list[slice], list[slice], list[dict[str, Any]]]:
+def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[slice], y_segments: list[slice]
+                    ) -> tuple[list[slice], list[slice], list[dict[str, Any]], list[Finding]]:
     """The quiet stretches with those after the pulse where the channels move together taken
     out (analysis.noise.is_motion): the bar keeps moving after the pulse (PTB's record: 1–2 %
     of the peak for > 1 ms, coherence 0.88), and that motion, taken as noise, inflated the
@@ -611,15 +516,17 @@ def _without_motion(u: np.ndarray, y: np.ndarray, dt: float, u_segments: list[sl
                     split[key] = []
         return split[key]
 
-    out = []
+    out, findings = [], []
     for name, segs, other in (("reference", u_segments, y_segments), ("response", y_segments, u_segments)):
         kept = [part for r in segs for part in at_rest(r, other)]
         if kept != segs and not any(r.start == 0 for r in kept):
-            warnings.append(f"the {name} is not at rest after the pulse (it moves with the other channel) and has "
-                            "no lead-in at rest: its noise is measured on that motion, which overstates it")
+            findings.append(Finding(FindingCode.NOT_AT_REST,
+                                    f"the {name} is not at rest after the pulse (it moves with the other channel) "
+                                    "and has no lead-in at rest: its noise is measured on that motion, which "
+                                    "overstates it"))
             kept = segs
         out.append(kept)
-    return out[0], out[1], motion
+    return out[0], out[1], motion, findings
 
 
 def _moving_over(r: slice, other_quiet: list[slice]) -> bool:
@@ -627,69 +534,3 @@ def _moving_over(r: slice, other_quiet: list[slice]) -> bool:
     stretch r: the bar or the sensor is still moving there."""
     quiet = sum(max(0, min(r.stop, q.stop) - max(r.start, q.start)) for q in other_quiet)
     return quiet < 0.5 * (r.stop - r.start)
-
-
-def _lead_in_end(u: np.ndarray, y: np.ndarray, cross: int, width: int) -> int:
-    """Where the lead-in at rest ends when the window's margins leave none: before the earlier of
-    the two channels' feet (_foot) ahead of `cross` (the reference's first sample at the pulse's
-    level), less a guard of a quarter of the pulse's width and the box-car's length. The pulse's
-    busy stretch is widened by twice its width and the delay for the window's margins, and the
-    lead-in ends there when that leaves one (MIN_QUIET): the samples nearer the foot may hold its
-    rise below the noise (on PTB's record the last 40 before its foot lift the reference's
-    low-frequency noise 13 %, and taken always, the all-pole order on its hybrids went from 2 to 3
-    and the FBSD ±5 % interval missed the known sensor on 7 of 8 seeds with half its lobe gain).
-    A capture started 0.2 ms later than PTB's (the pulse's foot 0.16 ms in) had no lead-in left:
-    its reference's noise was measured on the bar's motion after the pulse, ×11, the band stopped
-    at 20 kHz and the FBSD intervals missed the sine's edges."""
-    foot = min(_foot(u, cross), _foot(y, cross))
-    end = foot - width // 4 - FOOT_BOX
-    return end if end >= MIN_QUIET else 0  # a few samples are no lead-in (its noise, nor its baseline)
-
-
-def _foot(x: np.ndarray, cross: int) -> int:
-    """Where the pulse's foot leaves the lead-in's noise: scanning back from `cross` (past the
-    foot), the last sample whose FOOT_BOX-sample box-car of |x| (its lead-in median removed) is
-    at the lead-in's own level, FOOT_LEVEL × the box-car's median before `cross` (robust while
-    the foot is the shorter part)."""
-    if cross < 2 * MIN_QUIET:
-        return 0
-    part = x[:cross] - np.median(x[:cross])
-    box = np.convolve(np.abs(part), np.full(FOOT_BOX, 1.0 / FOOT_BOX), mode="same")
-    at_level = np.flatnonzero(box <= FOOT_LEVEL * np.median(box))
-    return int(at_level[-1]) + 1 if at_level.size else 0
-
-
-def _provisional_drift(y: np.ndarray, pre_end: int, ref_busy: np.ndarray) -> np.ndarray:
-    """The line through the response's pre-pulse stretch and the record's last tenth (when both
-    are clear of the reference's activity), against which its loudness is judged. A drifting
-    response (a charge amplifier's drift, a zero shift after the shock) never returns to its
-    pre-pulse level: judged against that level it stays loud to the record's end, the record is
-    taken as cut short, its drift is never removed, and the fit chases the drift with a spare
-    low-frequency pole-zero pair that moves the DC gain and the FBSD. Where the response still
-    rings at the end, the ringing averages to the baseline: the line stays flat and the
-    ringing stays loud."""
-    n = y.size
-    tail = max(n // 10, MIN_QUIET)
-    busy = np.flatnonzero(ref_busy)
-    if pre_end < 16 or busy.size == 0 or n - tail <= busy[-1]:
-        return np.zeros(n)
-    idx = np.concatenate((np.arange(pre_end), np.arange(n - tail, n)))
-    slope, intercept = np.polyfit(idx, y[idx], 1)
-    return slope * np.arange(n) + intercept
-
-
-def _settles(loud: np.ndarray, start: int, quiet: int) -> int:
-    """One past the last loud sample after `start` that is followed by `quiet` quiet samples (a
-    stray loud sample of the noise further on does not count)."""
-    idx = np.flatnonzero(loud[start:])
-    if idx.size == 0:
-        return start
-    gaps = np.flatnonzero(np.diff(idx) > quiet)
-    last = idx[gaps[0]] if gaps.size else idx[-1]
-    return int(start + last + 1)
-
-
-def _runs(mask: np.ndarray) -> list[slice]:
-    """The contiguous runs of True in `mask`, as slices."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]

@@ -35,7 +35,8 @@ from hopkinson.analysis.dcm_design import DcmOptions
 from hopkinson.analysis.determination import is_result, not_determined
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
-from hopkinson.analysis.identify import Identification, identify
+from hopkinson.analysis.findings import texts
+from hopkinson.analysis.identify import Identification, identify, identify_with_sine
 from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import AnalysisParams
@@ -48,7 +49,7 @@ from hopkinson.analysis.reduce import (
 )
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
-from hopkinson.analysis.sine_comparison import read_sine_calibration
+from hopkinson.analysis.sine_comparison import SineCalibration, read_sine_calibration
 from hopkinson.analysis.sine_joint import with_draws
 from hopkinson.analysis.static_gain import static_gain
 from hopkinson.analysis.uncertainty import shot_uncertainty
@@ -167,19 +168,43 @@ class ShotAnalysis:
         return None if self.reduction is None else self.reduction.get("shock_sensitivity")
 
 
+@dataclass(frozen=True)
+class ModelWithUncertainty:
+    """The identified model and its Monte Carlo uncertainty: what `hopkinson identify` reports
+    and what a shot's analysis goes on from."""
+
+    identification: Identification
+    uncertainty: dict[str, Any] | None  # analysis.uncertainty's JSON (None: switched off or failed)
+    model_draws: list[DiscreteModel]  # the Monte Carlo's models (empty without the uncertainty)
+    warnings: list[str]  # the identification's and the uncertainty's, in that order
+
+
+def identify_with_uncertainty(record: Record, params: AnalysisParams, reduction: dict[str, Any] | None = None,
+                              sine: SineCalibration | None = None) -> ModelWithUncertainty:
+    """Identify the model of `record` (with `sine`: fitted with that sinusoidal calibration) and
+    evaluate its uncertainty (`reduction`: the interferometer's shock quantities, whose
+    uncertainty it also gives). The one sequence of the shot analysis, `hopkinson identify` and
+    the panel."""
+    options = params.identify_options()
+    ident = identify(record, options) if sine is None else identify_with_sine(record, sine, options)
+    warnings = list(ident.warnings)
+    uncertainty, model_draws, found = shot_uncertainty(ident, params, reduction)
+    warnings += [text for text in texts(found) if text not in warnings]
+    with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
+    return ModelWithUncertainty(ident, uncertainty, model_draws, warnings)
+
+
 def analyse_record(record: Record, params: AnalysisParams | None = None,
                    reduction: dict[str, Any] | None = None) -> ShotAnalysis:
     """Analyse a two-channel record (reference m/s², response in any unit)."""
     params = AnalysisParams() if params is None else params
     params.check()
     sine = read_sine_calibration(params.sine_calibration) if params.sine_calibration else None
-    ident = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz,
-                     sine=sine)
+    fitted = identify_with_uncertainty(record, params, reduction, sine)
+    ident, uncertainty, model_draws, warnings = fitted.identification, fitted.uncertainty, fitted.model_draws, \
+        list(fitted.warnings)
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
-    warnings = list(ident.warnings)
-    uncertainty, model_draws = shot_uncertainty(ident, params, reduction, warnings)
-    with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
     static, why_not = static_gain(ident, model_draws)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
     compensation = compensate_shot(ident, record, DcmOptions.from_params(params), draws=model_draws,

@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import OrderProblem, SineTerms
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.numerics import bracketed_root
@@ -173,11 +174,12 @@ class SineJoint:
         }
 
 
-def identify_joint(record: Any, sine: SineCalibration, **options: Any) -> Any:
-    """`analysis.identify.identify` on the record and the sine points together (module docstring)."""
+def identify_joint(record: Any, sine: SineCalibration, options: Any = None) -> Any:
+    """`analysis.identify.identify` on the record and the sine points together (module docstring);
+    `options`: analysis.identify_stages.IdentifyOptions."""
     from hopkinson.analysis.identify import identify
 
-    shock = identify(record, **options)
+    shock = identify(record, options)
     dt = shock.sample_interval_s
     nyquist = 0.5 / dt
     if np.any(sine.frequency_hz >= nyquist):
@@ -186,12 +188,13 @@ def identify_joint(record: Any, sine: SineCalibration, **options: Any) -> Any:
     ident, used = None, weights
     for _ in range(WEIGHT_ITERATIONS):
         try:
-            ident, used = identify(record, **options, sine_terms=sine_terms(sine, dt, weights)), weights
+            ident, used = identify(record, options, sine_terms=sine_terms(sine, dt, weights)), weights
         except AnalysisError as exc:
             if ident is None:
                 raise AnalysisError(f"the fit of one model to the record and {sine.source} failed: {exc}") from None
-            ident.warnings.append(f"the joint fit with the sine's re-estimated weights failed ({exc}); the "
-                                  "previous weights are kept")
+            ident.findings.append(Finding(FindingCode.SINE_REWEIGHING_FAILED,
+                                          f"the joint fit with the sine's re-estimated weights failed ({exc}); "
+                                          "the previous weights are kept"))
             break
         weights = _reweighted(ident, sine, weights)
     assert ident is not None
@@ -272,13 +275,13 @@ def _stated(sine: SineCalibration) -> tuple[np.ndarray, np.ndarray]:
 def _joint_error(ident: Any) -> tuple[np.ndarray, float, float]:
     """The chosen fit's complex log-error at the sine points (SineTerms), κ in the record's
     units and τ_s (samples; on the record's own alignment, as the model's delay)."""
-    ctx = ident.context
-    if ctx is None or ctx.spectral.sine is None:
+    fitted, prepared = ident.settlement, ident.prepared
+    if fitted.data.sine is None:
         raise AnalysisError("the identification was not fitted with a sine calibration")
-    fit = ctx.fits[ident.order]
-    problem = OrderProblem.for_fit(ctx.spectral, fit, ctx.delay_mode, ctx.max_delay)
+    fit = fitted.sweep.fits[fitted.order]
+    problem = OrderProblem.for_fit(fitted.data, fit, fitted.sweep.delay_mode, fitted.setup.max_delay)
     error = problem._sine_error(problem.pack(fit))
-    return error, gain_ratio_of(fit, ctx.scale_y / ctx.scale_u), ctx.model_delay(fit.sine_skew)
+    return error, gain_ratio_of(fit, prepared.scale_y / prepared.scale_u), prepared.model_delay(fit.sine_skew)
 
 
 def _shock_only_error(ident: Any, sine: SineCalibration) -> np.ndarray:
@@ -294,12 +297,10 @@ def _shock_only_error(ident: Any, sine: SineCalibration) -> np.ndarray:
 
 def _reweighted(ident: Any, sine: SineCalibration, previous: JointWeights | None) -> JointWeights:
     """The weights from a fit: the shock's R² (its own residual) and the sine's s (Paule–Mandel)."""
-    ctx = ident.context
-    assert ctx is not None
-    fit = ctx.fits[ident.order]
+    data, fit = ident.settlement.data, ident.settlement.sweep.fits[ident.order]
     error = _shock_only_error(ident, sine) if previous is None else _joint_error(ident)[0]
-    shock_bins = ctx.spectral.bins - (ctx.spectral.sine.size if ctx.spectral.sine is not None else 0)
-    shock_params = fit.parameters - (2 if ctx.spectral.sine is not None else 0)
+    shock_bins = data.bins - (data.sine.size if data.sine is not None else 0)
+    shock_params = fit.parameters - (2 if data.sine is not None else 0)
     dof = 2 * shock_bins - shock_params
     ratio = 2.0 * (fit.cost - fit.sine_cost) / dof if dof > 0 else 1.0
     # model error as analysis.uncertainty judges it: significantly above 1, else the noise explains it

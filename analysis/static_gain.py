@@ -82,13 +82,33 @@ def unit_response(model: DiscreteModel, omega: np.ndarray, delay_samples: float)
     return np.exp(-1j * omega * delay_samples) * h / (float(np.sum(b)) / float(np.sum(a)))
 
 
+@dataclass(frozen=True)
+class _Fitted:
+    """What the quasi-static gain reads of an identification's fit (analysis.identify_stages)."""
+
+    var_y: np.ndarray  # the response's variance per fitted bin (its noise and the model error)
+    var_u: np.ndarray  # the reference's, unbiased (what the Monte Carlo draws)
+    realigned_samples: float
+    scale_y: float
+    scale_u: float
+    fits: tuple[Any, ...]  # every order's fit and the chosen order's other delay branches
+
+
+def _fitted(identification: Any) -> _Fitted:
+    settlement, prepared = identification.settlement, identification.prepared
+    return _Fitted(var_y=identification.claim.draw_var_y(settlement.model_error),
+                   var_u=identification.prep.draw_var_u, realigned_samples=float(prepared.realigned_samples),
+                   scale_y=prepared.scale_y, scale_u=prepared.scale_u,
+                   fits=(*settlement.sweep.fits.values(), *(f for group in settlement.branches.values() for f in group)))
+
+
 def static_gain(identification: Any, draws: Sequence[DiscreteModel] = ()) -> tuple[StaticGain | None, str]:
-    """The shot's quasi-static gain (module docstring) from its identification (with its fit
-    context) and the Monte Carlo model draws; None and why where the shot does not determine it."""
-    ctx = getattr(identification, "context", None)
-    prep = getattr(ctx, "prep", None) if ctx is not None else None
+    """The shot's quasi-static gain (module docstring) from its identification (its stages'
+    results) and the Monte Carlo model draws; None and why where the shot does not determine it."""
+    prep = getattr(identification, "prep", None)
     if prep is None or prep.y_bins is None or prep.bin_hz.size == 0:
         return None, "the identification's fitted bins are not at hand"
+    ctx = _fitted(identification)
     if not (np.size(ctx.var_y) == np.size(ctx.var_u) == prep.bin_hz.size == prep.y_bins.size):
         return None, "the fitted bins' noise is not given bin by bin"
     try:
@@ -97,7 +117,7 @@ def static_gain(identification: Any, draws: Sequence[DiscreteModel] = ()) -> tup
         return None, f"the least squares on the quasi-static bins failed: {exc}"
 
 
-def _static_gain(identification: Any, ctx: Any, prep: Any, draws: Sequence[DiscreteModel]
+def _static_gain(identification: Any, ctx: _Fitted, prep: Any, draws: Sequence[DiscreteModel]
                  ) -> tuple[StaticGain | None, str]:
     model = identification.model
     dt = model.sample_interval_s
@@ -114,7 +134,7 @@ def _static_gain(identification: Any, ctx: Any, prep: Any, draws: Sequence[Discr
     terms = prep.terms
     polarity = terms.polarity if terms.count else (1.0 if u[int(np.argmax(np.abs(u)))] >= 0 else -1.0)
     motion = np.zeros(n)
-    fitted = _fitted_inputs(identification)
+    fitted = _fitted_inputs(identification, ctx)
     cols = terms.columns(MOTION)
     if cols.size and fitted is not None:
         motion = float(fitted[cols[0]]) * terms.signals[cols[0]][prep.start : prep.start + n]
@@ -175,12 +195,10 @@ def _quasi_static_bins(g: np.ndarray, limit: float) -> np.ndarray:
     return np.arange(int(np.argmin(inside)) if not np.all(inside) else inside.size)
 
 
-def _fitted_inputs(identification: Any) -> np.ndarray | None:
+def _fitted_inputs(identification: Any, ctx: _Fitted) -> np.ndarray | None:
     """The final fit's input-term coefficients (the order fit whose A is the model's)."""
-    ctx = identification.context
     a = np.asarray(identification.model.a, dtype=float)
-    fits = [*ctx.fits.values(), *(f for group in ctx.branches.values() for f in group)]
-    for fit in fits:
+    for fit in ctx.fits:
         if fit.a.size == a.size and np.allclose(fit.a, a, rtol=0.0, atol=1e-12):
             return np.asarray(fit.inputs, dtype=float)
     return None

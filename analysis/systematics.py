@@ -42,9 +42,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, is_stable
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, ONSET
+from hopkinson.analysis.structure import DelayMode
 
 if TYPE_CHECKING:
-    from hopkinson.analysis.identify import FitContext, Identification
+    from hopkinson.analysis.identify import Identification
 
 MOTION_RAMPS_S = (30e-6, 60e-6)  # the motion term's alternative switch-on times (nominal 40 µs: input_terms)
 # The onset window widened (before, after the foot): a window that already holds the disturbances
@@ -88,7 +89,7 @@ class Systematics:
                                                     "note": t.note} for t in self.type_b]}
 
 
-def figures_of(fit: OrderFit, ctx: FitContext, main_pole: complex | None, terms: Any = None) -> dict[str, float]:
+def figures_of(fit: OrderFit, ident: Identification, main_pole: complex | None, terms: Any = None) -> dict[str, float]:
     """The figures of a fit (DC gain in the record's units, the mean of both directions with the
     fit's `terms` (None: the identification's), the mode nearest the nominal main pole, both FBSD
     edges): what the variants are compared by."""
@@ -96,8 +97,8 @@ def figures_of(fit: OrderFit, ctx: FitContext, main_pole: complex | None, terms:
     from hopkinson.analysis.model import DiscreteModel
     from hopkinson.analysis.response import fbsd_edges
 
-    dt = ctx.sample_interval_s
-    scale = ctx.scale_y / ctx.scale_u * (terms or ctx.terms).mean_gain_factor(fit.inputs)
+    dt = ident.sample_interval_s
+    scale = ident.prepared.scale_y / ident.prepared.scale_u * (terms or ident.prep.terms).mean_gain_factor(fit.inputs)
     out = {"dc_gain": float(np.sum(fit.b) * scale / np.sum(fit.a))}
     if main_pole is not None:
         roots = np.roots(fit.a)
@@ -109,24 +110,24 @@ def figures_of(fit: OrderFit, ctx: FitContext, main_pole: complex | None, terms:
             out["natural_frequency_hz"] = float(abs(nearest) / (2 * np.pi))
             out["damping_ratio"] = float(-nearest.real / abs(nearest))
     try:
-        for key, edge in fbsd_edges(DiscreteModel(dt, fit.a, fit.b * scale, ctx.model_delay(fit.delay))).items():
+        for key, edge in fbsd_edges(DiscreteModel(dt, fit.a, fit.b * scale, ident.prepared.model_delay(fit.delay))).items():
             out[f"fbsd_{key}_hz"] = edge.frequency_hz
     except AnalysisError:
         pass
     return out
 
 
-def _refit(data: SpectralData, ctx: FitContext, start: OrderFit) -> OrderFit | None:
-    fit = OrderProblem.for_fit(data, start, ctx.delay_mode, ctx.max_delay).solve(replace(start, cost=math.nan), 100,
+def _refit(data: SpectralData, ident: Identification, start: OrderFit) -> OrderFit | None:
+    fit = OrderProblem.for_fit(data, start, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay).solve(replace(start, cost=math.nan), 100,
                                                                                  1e-9)
     return fit if is_stable(fit.a) else None
 
 
-def _model_of(fit: OrderFit, ctx: FitContext, terms: Any = None) -> Any:
+def _model_of(fit: OrderFit, ident: Identification, terms: Any = None) -> Any:
     from hopkinson.analysis.model import DiscreteModel
 
-    scale = ctx.scale_y / ctx.scale_u * (terms or ctx.terms).mean_gain_factor(fit.inputs)
-    return DiscreteModel(ctx.sample_interval_s, fit.a, fit.b * scale, ctx.model_delay(fit.delay))
+    scale = ident.prepared.scale_y / ident.prepared.scale_u * (terms or ident.prep.terms).mean_gain_factor(fit.inputs)
+    return DiscreteModel(ident.sample_interval_s, fit.a, fit.b * scale, ident.prepared.model_delay(fit.delay))
 
 
 def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) -> dict[str, float]:
@@ -142,30 +143,29 @@ def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) 
 def variant_bounds(ident: Identification) -> list[TypeB]:
     """The Type B rows made by refitting the chosen order with each correction made another way,
     and on parts of the band where the model error is detected (module docstring)."""
-    ctx = ident.context
-    if ctx is None or ctx.prep is None or not ctx.prep.terms_source:
+    if not ident.prep.terms_source:
         return []
-    prep, fit = ctx.prep, ctx.fits[ident.order]
+    prep, fit = ident.prep, ident.settlement.sweep.fits[ident.order]
     main = ident.main_mode
-    pole = complex(*main["pole"]) if main else None
-    nominal = figures_of(fit, ctx, pole)
-    terms = ctx.terms
+    pole = main.pole_z if main else None
+    nominal = figures_of(fit, ident, pole)
+    terms = ident.prep.terms
     window = (prep.start, prep.start + prep.u.size)
 
     def refitted(**options: Any) -> tuple[OrderFit, Any] | None:
         made = prep.terms_variant(**options)
         if options.get("with_onset") and not made.columns(ONSET).size:
             return None  # that window would reach the pulse's peak (input_terms fits no onset there)
-        data = replace(ctx.spectral, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-        refit = _refit(data, ctx, replace(fit, inputs=_matched(terms, made, fit.inputs)))
+        data = replace(ident.settlement.data, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
+        refit = _refit(data, ident, replace(fit, inputs=_matched(terms, made, fit.inputs)))
         return None if refit is None else (refit, made)
 
     def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0) -> None:
-        found = [f for f in refits if f is not None and _defensible(f[0], fit, ctx)]
+        found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
         if found:
-            shifts = _largest_shift(nominal, [figures_of(f, ctx, pole, made) for f, made in found])
+            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found])
             rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
-                              tuple(_model_of(f, ctx, made) for f, made in found)))
+                              tuple(_model_of(f, ident, made) for f, made in found)))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -178,7 +178,7 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         row("reference's onset and demodulation errors", [refitted(with_onset=True)],
             "not seen beyond chance: the figures with the onset's disturbances fitted")
     if not terms.columns(ASYMMETRY).size and ASYMMETRY in prep.unseen:
-        found = _with_asymmetry(prep, ctx, fit, window)
+        found = _with_asymmetry(prep, ident, fit, window)
         if found is not None:  # the effect of ε at twice its standard uncertainty (linear in ε)
             refit, made = found
             epsilon = float(refit.inputs[made.columns(ASYMMETRY)[0]])
@@ -186,16 +186,16 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
             row("tension/compression asymmetry (not seen)", [found],
                 "not seen beyond chance: the figures' change with ε at twice its standard uncertainty",
                 2.0 * u / abs(epsilon) if abs(epsilon) > 0.1 * u else 1.0)
-    shapes = [*_other_structure(ctx, fit, pole), *[f for f in (_more_poles(ctx, ident.order, pole),) if f is not None]]
+    shapes = [*_other_structure(ident, fit, pole), *[f for f in (_more_poles(ident, ident.order, pole),) if f is not None]]
     if shapes:
         row("model (its structure and order)", [(f, terms) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
             "Nyquist), and the order with one more pole pair")
-    if ctx.model_error_detected:  # the Monte Carlo draws these as its "band part"; here for the response band
-        top = float(np.max(ctx.spectral.omega))
-        parts = [ctx.spectral.below(part * top) for part in BAND_PARTS]
-        found = [_refit(data, ctx, fit) for data in parts if data.bins >= fit.parameters]
-        models = tuple(_model_of(f, ctx) for f in found if f is not None)
+    if ident.settlement.model_error_detected:  # the Monte Carlo draws these as its "band part"; here for the response band
+        top = float(np.max(ident.settlement.data.omega))
+        parts = [ident.settlement.data.below(part * top) for part in BAND_PARTS]
+        found = [_refit(data, ident, fit) for data in parts if data.bins >= fit.parameters]
+        models = tuple(_model_of(f, ident) for f in found if f is not None)
         if models:
             rows.append(TypeB(MODEL_ERROR_BOUND, {}, "the model refitted on 0.9 and 0.8 of the band's top", models))
     return rows
@@ -206,7 +206,7 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
 DEFENSIBLE_COST = 2.0
 
 
-def _defensible(variant: OrderFit, nominal: OrderFit, ctx: FitContext) -> bool:
+def _defensible(variant: OrderFit, nominal: OrderFit, ident: Identification) -> bool:
     """Whether a variant fit is an alternative the record allows: it fits about as well as the
     nominal, and has no real pole far below the lowest fitted bin (which the data cannot place:
     a spare pole near DC moved a variant's DC gain to a quarter)."""
@@ -214,11 +214,11 @@ def _defensible(variant: OrderFit, nominal: OrderFit, ctx: FitContext) -> bool:
 
     if not variant.cost <= DEFENSIBLE_COST * max(nominal.cost, 1.0):
         return False
-    lowest = float(np.min(ctx.bin_frequency_hz)) if ctx.bin_frequency_hz.size else 0.0
-    return not pole_below_band(variant, lowest, ctx.sample_interval_s)
+    lowest = float(np.min(ident.prep.bin_hz)) if ident.prep.bin_hz.size else 0.0
+    return not pole_below_band(variant, lowest, ident.sample_interval_s)
 
 
-def _other_structure(ctx: FitContext, fit: OrderFit, pole: complex | None) -> list[OrderFit]:
+def _other_structure(ident: Identification, fit: OrderFit, pole: complex | None) -> list[OrderFit]:
     """The chosen order, and the order with one more pole, refitted in the other structure
     (analysis.order_search: B free, or B = g·(1 + z⁻¹)ⁿ/2ⁿ), each where it is stable, holds no
     pole–zero doublet and keeps the main mode: defensible shapes whose difference the record does
@@ -233,7 +233,7 @@ def _other_structure(ctx: FitContext, fit: OrderFit, pole: complex | None) -> li
     from hopkinson.analysis.model import all_pole_numerator
     from hopkinson.analysis.modes import has_doublet
 
-    delay_mode = "free" if ctx.delay_mode != 0.0 else 0.0
+    delay_mode = DelayMode.FREE if ident.settlement.sweep.delay_mode != 0.0 else 0.0
     out: list[OrderFit] = []
     start = fit
     for n in (fit.order, fit.order + 1):
@@ -242,10 +242,10 @@ def _other_structure(ctx: FitContext, fit: OrderFit, pole: complex | None) -> li
         if fit.numerator is None:  # the all-pole structure
             shape = all_pole_numerator(n)
             start = replace(start, b=float(np.sum(start.b)) * shape, numerator=shape, cost=math.nan)
-            problem = OrderProblem(ctx.spectral, n, delay_mode, ctx.max_delay, numerator=shape)
+            problem = OrderProblem(ident.settlement.data, n, delay_mode, ident.settlement.setup.max_delay, numerator=shape)
         else:
             start = replace(start, numerator=None, cost=math.nan)
-            problem = OrderProblem(ctx.spectral, n, delay_mode, ctx.max_delay)
+            problem = OrderProblem(ident.settlement.data, n, delay_mode, ident.settlement.setup.max_delay)
         start = problem.solve(start, 100, 1e-9)
         if is_stable(start.a) and not has_doublet(start.a, start.b) and _keeps(start, pole):
             out.append(start)
@@ -260,7 +260,7 @@ def _keeps(fit: OrderFit, pole: complex | None) -> bool:
     return bool(roots.size) and float(np.min(np.abs(roots - pole))) <= 0.5 * (1.0 - abs(pole))
 
 
-def _more_poles(ctx: FitContext, order: int, pole: complex | None) -> OrderFit | None:
+def _more_poles(ident: Identification, order: int, pole: complex | None) -> OrderFit | None:
     """The fit of the order with one more pole pair (the order search's, iterated to convergence
     where its short budget stopped it: an unconverged fit read as no defensible variant, V 97
     against its optimum 40), where it is stable, holds no pole–zero doublet and keeps the main mode:
@@ -269,29 +269,29 @@ def _more_poles(ctx: FitContext, order: int, pole: complex | None) -> OrderFit |
     at order 2, 6509 at 4, truth 6498)."""
     from hopkinson.analysis.modes import has_doublet
 
-    fit = ctx.fits.get(order + 2)
+    fit = ident.settlement.sweep.fits.get(order + 2)
     if fit is not None and not fit.converged:
-        refit = _refit(ctx.spectral, ctx, fit)
+        refit = _refit(ident.settlement.data, ident, fit)
         fit = refit if refit is not None and refit.cost <= fit.cost else fit
     if fit is None or not is_stable(fit.a) or has_doublet(fit.a, fit.b) or not _keeps(fit, pole):
         return None
     return fit
 
 
-def _with_asymmetry(prep: Any, ctx: FitContext, fit: OrderFit, window: tuple[int, int]
+def _with_asymmetry(prep: Any, ident: Identification, fit: OrderFit, window: tuple[int, int]
                     ) -> tuple[OrderFit, Any] | None:
     """The fit with ε fitted (where identify found it not beyond chance), and its terms."""
     from hopkinson.analysis.input_terms import input_terms
 
     made = input_terms(*prep.terms_source)
-    keep = [k for k, n in enumerate(made.names) if n in ctx.terms.names or n == ASYMMETRY]
+    keep = [k for k, n in enumerate(made.names) if n in ident.prep.terms.names or n == ASYMMETRY]
     if not any(made.names[k] == ASYMMETRY for k in keep):
         return None
     made = replace(made, names=tuple(made.names[k] for k in keep), signals=made.signals[keep])
-    if made.columns(ONSET).size != ctx.terms.columns(ONSET).size:
+    if made.columns(ONSET).size != ident.prep.terms.columns(ONSET).size:
         return None
-    data = replace(ctx.spectral, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
-    refit = _refit(data, ctx, replace(fit, inputs=_matched(ctx.terms, made, fit.inputs)))
+    data = replace(ident.settlement.data, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
+    refit = _refit(data, ident, replace(fit, inputs=_matched(ident.prep.terms, made, fit.inputs)))
     return None if refit is None else (refit, made)
 
 

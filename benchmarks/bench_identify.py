@@ -265,7 +265,7 @@ def bench_preparation(u: np.ndarray, y: np.ndarray, max_order: int, repeats: int
 
     record_preparation.measure_noise = timed_stage
     try:
-        prep = best_cpu_time(lambda: record_preparation.prepare_record(record, 1.0 / DT, max_order, None, 32, []),
+        prep = best_cpu_time(lambda: record_preparation.prepare_record(record, 1.0 / DT, max_order, None, 32),
                              repeats)
     finally:
         record_preparation.measure_noise = stage
@@ -285,7 +285,7 @@ def motion_stretches(u: np.ndarray, y: np.ndarray, max_order: int) -> list[tuple
 
     record_preparation.first_motion = recording
     try:
-        record_preparation.prepare_record(Record(DT, u, y), 1.0 / DT, max_order, None, 32, [])
+        record_preparation.prepare_record(Record(DT, u, y), 1.0 / DT, max_order, None, 32)
     finally:
         record_preparation.first_motion = scan
     return seen

@@ -26,7 +26,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hopkinson.analysis.identify import identify  # noqa: E402
+from hopkinson.analysis.identify import identify, identify_with_sine  # noqa: E402
 from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate  # noqa: E402
 
 from tests.analysis.hard_records import Case, record, truth_figures  # noqa: E402
@@ -52,12 +52,12 @@ def run(seeds: int, draws: int) -> dict[str, Any]:
         rec = record(case, 1000 + seed)
         options = UncertaintyOptions(draws=draws, seed=seed)
         for name, sine in (("shock", None), ("joint", synthetic_sine(case.truth, 1000 + seed))):
-            ident = identify(rec, sine=sine)
+            ident = identify(rec) if sine is None else identify_with_sine(rec, sine)
             for k, ok in contains(evaluate(ident, options), truth).items():
                 hits[name][k] += ok
             if sine is not None:
                 false_alarms += not ident.sine_joint.consistent
-        misses += identify(rec, sine=synthetic_sine(OTHER, 1000 + seed)).sine_joint.consistent
+        misses += identify_with_sine(rec, synthetic_sine(OTHER, 1000 + seed)).sine_joint.consistent
     out = {
         "benchmark": "sine_joint_coverage",
         "seeds": seeds,

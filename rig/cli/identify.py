@@ -60,7 +60,7 @@ def _figure_text(data: Any, scale: float = 1.0, unit: str = "", digits: int = 6)
 def _summary(report: dict[str, Any], result: Identification) -> str:
     """A short human-readable account of the identification and its uncertainty."""
     from hopkinson.analysis.key_figures import ORDER_SELECTION_TEXT, KeyFigures
-    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, claimed
+    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, ModeKind, claimed
 
     unc = report.get("uncertainty") or {}
     figures = KeyFigures.from_results({"model": report, "identification": report, "fbsd_hz": report["fbsd_hz"],
@@ -80,21 +80,21 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
         lines.append(f"  supported band (the excitation's): {lo / 1e3:.4g}–{hi / 1e3:.4g} kHz")
     main = result.main_mode
     for mode in result.modes:
-        pole = complex(*mode["pole"])
-        sign = "±" if mode["kind"] == "complex" else ""
-        f_n, zeta = mode["natural_frequency_hz"], mode["damping_ratio"]
+        pole = mode.pole_z
+        sign = "±" if mode.kind == ModeKind.COMPLEX else ""
+        f_n, zeta = mode.natural_frequency_hz, mode.damping_ratio
         if f_n is None or zeta is None:
             where = "at the origin"
-        elif main is not None and mode["pole"] == main["pole"] and figures.natural_frequency_hz is not None:
+        elif main is not None and mode.pole == main.pole and figures.natural_frequency_hz is not None:
             where = (f"f_n = {figures.natural_frequency_hz.format(1e3, unit='kHz')}, "
                      f"ζ = {figures.damping_ratio.format() if figures.damping_ratio else zeta}  (main mode)")
         else:
             where = f"f_n = {f_n / 1e3:.4g} kHz, ζ = {zeta:.4g}"
         note = ("" if claimed(mode) else ", nearly cancelled by a zero (a doublet): not claimed"
-                if mode.get("cancelled") else ", outside the supported band: not claimed" if not mode["supported"]
-                else f", damped ζ > {RESONANCE_MAX_DAMPING:g}: no resonance, not claimed" if mode["kind"] == "complex"
+                if mode.cancelled else ", outside the supported band: not claimed" if not mode.supported
+                else f", damped ζ > {RESONANCE_MAX_DAMPING:g}: no resonance, not claimed" if mode.kind == ModeKind.COMPLEX
                 else "")
-        lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode['kind']}{note}): {where}")
+        lines.append(f"  pole {pole.real:.6f} {sign}{abs(pole.imag):.6f}j  ({mode.kind}{note}): {where}")
     lines.append(f"  FBSD: ±5 % up to {figures.fbsd_text('5')}, ±10 % up to {figures.fbsd_text('10')}")
     lines.append(f"  DC gain {figures.sensitivity.format()} (response units per m/s²)")
     if unc.get("shock_sensitivity"):
@@ -153,8 +153,8 @@ def named_by_flag(exc: AnalysisError, flags: dict[str, str]) -> AnalysisError:
 def run_identify(args: argparse.Namespace) -> int:
     """Identify the model of RECORD with its uncertainty; print a summary or the JSON; optionally
     write the JSON (never over the record or a shot file; atomically)."""
-    from hopkinson.analysis.identify import identify
     from hopkinson.analysis.records import read_record
+    from hopkinson.analysis.shot_analysis import identify_with_uncertainty
 
     from hopkinson.fileio import atomic_write, check_output_path
 
@@ -172,20 +172,10 @@ def run_identify(args: argparse.Namespace) -> int:
 
         sine = read_sine_calibration(args.sine)
     try:
-        result = identify(record, max_order=params.max_order, order=params.order, sample_rate_hz=params.sample_rate_hz,
-                          sine=sine)
+        fitted = identify_with_uncertainty(record, params, None, sine)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}{' with ' + args.sine if sine else ''}: {exc}") from None
-    warnings = clipped + list(result.warnings)
-    uncertainty = None
-    if params.uncertainty:
-        from hopkinson.analysis.sine_joint import with_draws
-        from hopkinson.analysis.uncertainty import shot_uncertainty
-
-        uncertainty, model_draws = shot_uncertainty(result, params, None, warnings)
-        with_draws(result, model_draws)
-    else:
-        warnings.append("uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")
+    result, uncertainty, warnings = fitted.identification, fitted.uncertainty, clipped + fitted.warnings
     report = identification_report(result, str(args.record), uncertainty, warnings)
     if out is not None:
         try:
@@ -246,7 +236,8 @@ def explain(report: dict[str, Any]) -> str:
     measured and its levels, motion left out of it, the band, V by order and the order test's
     comparisons, the model error, and what was claimed or not and why. Read from the report
     (the JSON), so it says what the stages recorded, not a second account of them."""
-    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, claimed
+    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, Mode, ModeKind, claimed
+    from hopkinson.analysis.structure import Structure
 
     noise = report.get("noise") or {}
     pre = report.get("preprocessing") or {}
@@ -295,7 +286,7 @@ def explain(report: dict[str, Any]) -> str:
                          f"response change {c['response_change']:.2%}")
     lines.append(f"  order {report.get('order')} ({report.get('order_selection')}): "
                  f"{evidence.get('criterion', '')}")
-    if evidence.get("structure") == "all_pole":
+    if evidence.get("structure") == Structure.ALL_POLE:
         why = evidence.get("structure_reason") or "chosen over the model with free zeros"
         lines.append(f"  structure: all-pole (no finite zeros, delay of either sign): {why}")
     error = noise.get("model_error") or {}
@@ -308,16 +299,16 @@ def explain(report: dict[str, Any]) -> str:
     else:
         lines.append(f"  model error: none beyond the noise (residual {error.get('residual_over_noise', 1.0):.3g}× "
                      "the noise's)")
-    for m in report.get("modes") or []:
-        if m.get("kind") != "complex":
+    for m in map(Mode.from_dict, report.get("modes") or []):
+        if m.kind != ModeKind.COMPLEX:
             continue
-        f_n = m["natural_frequency_hz"] / 1e3
+        f_n = (m.natural_frequency_hz or 0.0) / 1e3
         why = ("claimed (inside the band)" if claimed(m)
-               else "not claimed: a pole–zero doublet" if m.get("cancelled")
-               else f"not claimed: damped more than ζ = {RESONANCE_MAX_DAMPING:g}, no resonance" if m.get("supported")
-               else "not claimed: beyond the band, placed by the rise it gives inside it" if m.get("shapes_band")
+               else "not claimed: a pole–zero doublet" if m.cancelled
+               else f"not claimed: damped more than ζ = {RESONANCE_MAX_DAMPING:g}, no resonance" if m.supported
+               else "not claimed: beyond the band, placed by the rise it gives inside it" if m.shapes_band
                else "not claimed: outside the supported band")
-        lines.append(f"  pole pair at {f_n:.4g} kHz, ζ {m['damping_ratio']:.3g}: {why}")
+        lines.append(f"  pole pair at {f_n:.4g} kHz, ζ {m.damping_ratio:.3g}: {why}")
     if report.get("resonance_above_hz"):
         lines.append(f"  resonance: > {report['resonance_above_hz'] / 1e3:.4g} kHz, in a null of the excitation")
     return "\n".join(lines)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pytest
+from hopkinson.analysis.findings import texts
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import AnalysisParams
@@ -55,8 +56,9 @@ class Analyses:
         `analyse_record(record(), AnalysisParams(draws=draws, seed=seed))` gives them."""
         if (key, draws, seed) not in self._analysed:
             ident = self.identification(key, record)
-            warnings = list(ident.warnings)
-            uncertainty, _ = shot_uncertainty(ident, AnalysisParams(draws=draws, seed=seed), None, warnings)
+            warnings = list(ident.warnings)  # and the uncertainty's findings after them, as analyse_record lists them
+            uncertainty, _, found = shot_uncertainty(ident, AnalysisParams(draws=draws, seed=seed), None)
+            warnings += [text for text in texts(found) if text not in warnings]
             assert uncertainty is not None, (key, seed, warnings)
             self._analysed[(key, draws, seed)] = Analysed(ident, uncertainty, warnings)
         return self._analysed[(key, draws, seed)]

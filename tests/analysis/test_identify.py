@@ -15,17 +15,17 @@ import json
 
 import numpy as np
 import pytest
-from hopkinson.analysis.claims import claimed_modes, claims_warnings
+from hopkinson.analysis.claims import claim_findings, claimed_modes
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import supported_band_hz
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.loss import arx_coefficients_by_order, arx_fit, arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.modes import modes_of
-from hopkinson.analysis.order_search import FREE
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import shift_samples
 from hopkinson.analysis.response import band_edges, fbsd_hz, frequency_response
+from hopkinson.analysis.structure import Structure
 from hopkinson.drivers.sim.accelerometer import (
     AccelerometerTruth,
     Mode,
@@ -304,8 +304,8 @@ def test_a_mode_where_the_reference_has_no_energy_is_flagged() -> None:
     def claims(f_hz: float, zeta: float) -> tuple[list[dict], list[str]]:
         s = 2 * np.pi * f_hz * (-zeta + 1j * np.sqrt(1 - zeta**2))
         a = np.real(np.poly(np.exp(np.array([s, np.conj(s)]) * T)))
-        modes = claimed_modes(DiscreteModel(T, a, np.array([np.sum(a)]), 0.0), band, FREE)
-        return modes, claims_warnings(modes, band)
+        modes = claimed_modes(DiscreteModel(T, a, np.array([np.sum(a)]), 0.0), band, Structure.FREE)
+        return modes, [f.text for f in claim_findings(modes, band)]
 
     modes, warnings = claims(300e3, 0.03)
     assert not modes[0]["supported"]

@@ -9,22 +9,22 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hopkinson.analysis.claims import claimed_modes, delay_warnings
+from hopkinson.analysis.claims import claimed_modes, delay_findings
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.findings import FindingCode
 from hopkinson.analysis.frequency_fit import OrderFit, all_pole_numerator
-from hopkinson.analysis.identify import fit_weighing_model_error
+from hopkinson.analysis.identify_stages import search_orders, weigh_model_error
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.model_error import measure_model_error
 from hopkinson.analysis.modes import has_doublet
 from hopkinson.analysis.order_search import (
-    ALL_POLE,
-    FREE,
     best_delay_branch,
     fit_orders,
     fit_structures,
     search_setup,
     settle_order,
 )
+from hopkinson.analysis.params import IdentifyOptions
 from hopkinson.analysis.record_preparation import (
     Alignment,
     fitted_band,
@@ -34,6 +34,7 @@ from hopkinson.analysis.record_preparation import (
     realigned,
 )
 from hopkinson.analysis.records import Record
+from hopkinson.analysis.structure import DelayMode, Structure
 from scipy import signal
 
 DT = 1e-6  # the record is taken at the analysis rate (sample_rate_hz=None: no resampling)
@@ -65,11 +66,10 @@ def record(**kwargs) -> Record:
     return Record(DT, u, y)
 
 
-def prepared(rec: Record, order: int | None = None, warnings: list[str] | None = None):
-    warnings = [] if warnings is None else warnings
-    prep_rec = prepare_record(rec, None, 8, order, 32, warnings)
+def prepared(rec: Record, order: int | None = None):
+    prep_rec = prepare_record(rec, None, 8, order, 32)
     setup = search_setup(prep_rec.prep.spectral, prep_rec.prep, 8, order, DT, remove_delay=True, max_delay=32,
-                         patience=3, max_evaluations=60, significance=0.05, warnings=warnings)
+                         patience=3, max_evaluations=60, significance=0.05)
     return prep_rec, setup
 
 
@@ -92,7 +92,7 @@ def test_locate_pulse_finds_the_pulse_and_its_window():
 
 def test_prepare_record_removes_each_channels_baseline():
     u, y = channels()
-    pre = prepare_record(Record(DT, u + 0.3, y - 0.2), None, 8, None, 32, []).preprocessing
+    pre = prepare_record(Record(DT, u + 0.3, y - 0.2), None, 8, None, 32).preprocessing
     assert pre["reference_baseline"] == pytest.approx(0.3, abs=3 * SIGMA_U)
     assert pre["response_baseline"] == pytest.approx(-0.2, abs=0.01)
 
@@ -154,7 +154,7 @@ def test_locate_pulse_tells_a_record_cut_short():
 def test_measure_noise_reads_the_known_levels():
     u, y = channels(seed=3)
     scale_y = float(np.max(np.abs(y)))
-    noise = measure_noise(locate_pulse(u, y / scale_y, DT, 32), DT, [])
+    noise = measure_noise(locate_pulse(u, y / scale_y, DT, 32), DT)
     assert noise.draw_noise_u.rms == pytest.approx(SIGMA_U, rel=0.15)
     # y's peak is the noise-free peak within a few σ of the noise
     assert noise.draw_noise_y.rms * scale_y == pytest.approx(SIGMA_Y * scale_y, rel=0.15)
@@ -170,7 +170,7 @@ def test_measure_noise_leaves_coherent_motion_out():
     u, y = channels(seed=4)
     u, y = u + motion, y + motion * GAIN
     scale_y = float(np.max(np.abs(y)))
-    noise = measure_noise(locate_pulse(u, y / scale_y, DT, 32), DT, [])
+    noise = measure_noise(locate_pulse(u, y / scale_y, DT, 32), DT)
     # the stretch after the pulse starts with the sensor still ringing (12 % of the peak in the
     # response): judged whole it is not coherent, so the motion is found as its tail
     assert noise.motion, "the coherent motion after the pulse was taken as noise"
@@ -195,7 +195,7 @@ def test_measure_noise_leaves_out_a_short_stretch_while_the_other_channel_moves(
     activity = locate_pulse(u, y / scale_y, DT, 32)
     after_pulse = [r for r in activity.u_segments if r.start > 0]
     assert after_pulse and all(r.stop - r.start < 544 for r in after_pulse)  # the case: a short stretch
-    noise = measure_noise(activity, DT, [])
+    noise = measure_noise(activity, DT)
     assert [m["reason"] for m in noise.motion] == ["too short to judge by coherence, the other channel not at rest"]
     assert noise.u_segments == [r for r in activity.u_segments if r.start == 0]
     # the lead-in's known white level, not the motion's (~0.6 % RMS)
@@ -220,7 +220,7 @@ def test_measure_noise_leaves_out_the_head_of_a_moving_stretch_while_the_sensor_
     y = y0 + motion * GAIN + SIGMA_Y * peak_y * rng.standard_normal(N)
     scale_y = float(np.max(np.abs(y)))
     activity = locate_pulse(u, y / scale_y, DT, 32)
-    noise = measure_noise(activity, DT, [])
+    noise = measure_noise(activity, DT)
     found = [m for m in noise.motion if m["reason"] == "coherent"]
     assert found, "the coherent motion after the pulse was not found"
     after_pulse = [r for r in activity.u_segments if r.start > 0]
@@ -256,7 +256,7 @@ def test_measure_noise_leaves_out_a_short_head_where_weak_motion_has_begun():
     u = u0 + motion + sigma * rng.standard_normal(samples)
     y = y0 + motion * GAIN + sigma * peak_y * rng.standard_normal(samples)
     activity = locate_pulse(u, y / float(np.max(np.abs(y))), DT, 32)
-    noise = measure_noise(activity, DT, [])
+    noise = measure_noise(activity, DT)
     after_pulse = [r for r in activity.u_segments if r.start > 0]
     found = [m for m in noise.motion if m["reason"] == "coherent" and m["start_sample"] > after_pulse[0].start]
     assert found, "the case: the motion found as a tail, after a head"
@@ -293,9 +293,8 @@ def test_the_lead_in_reaches_the_pulses_foot():
     width = 60  # the half-sine's width at half its height, µs: 2/3 of its base
     assert lead.start == 0 and start_s / DT - width // 4 - 12 <= lead.stop <= start_s / DT
     assert activity.y_segments[0] == lead
-    warnings: list[str] = []
-    noise = measure_noise(activity, DT, warnings)
-    assert not any("no lead-in at rest" in w for w in warnings)
+    noise = measure_noise(activity, DT)
+    assert not any("no lead-in at rest" in f.text for f in noise.findings)
     # both looks at the reference's noise are the known white level, not the motion's (0.014 RMS)
     assert noise.noise_u.rms == pytest.approx(sigma, rel=0.25)
     assert noise.draw_noise_u.rms == pytest.approx(sigma, rel=0.2)
@@ -314,7 +313,7 @@ def test_measure_noise_removes_a_drift_pinned_before_and_after_the_pulse():
     y = y + slope_per_s * t
     scale_y = float(np.max(np.abs(y)))
     activity = locate_pulse(u, y / scale_y, DT, 32)
-    noise = measure_noise(activity, DT, [])
+    noise = measure_noise(activity, DT)
     assert noise.drift_removed
     assert noise.drift_lines["response"][0] * scale_y / DT == pytest.approx(slope_per_s, rel=0.05)
     # the reference has no drift (its unit is its own: no scale was applied)
@@ -329,7 +328,7 @@ def test_fitted_band_crosses_the_pulses_nulls_and_weighs_each_bin_by_its_noise()
     and its first stretch ends before the first null (it stopped there before)."""
     u, y = channels(seed=5)
     activity = locate_pulse(u, y, DT, 32)
-    prep = fitted_band(activity, measure_noise(activity, DT, []), DT, [])
+    prep = fitted_band(activity, measure_noise(activity, DT), DT)
     first_null_hz = 1.5 / WIDTH_S  # a half-sine of width w has its first spectral zero at 1.5/w
     assert prep.support.intervals_hz[0][1] < first_null_hz < prep.band[1]
     assert prep.band[1] >= 2.5 / WIDTH_S  # past its second null
@@ -345,12 +344,12 @@ def test_fitted_band_crosses_the_pulses_nulls_and_weighs_each_bin_by_its_noise()
 @pytest.fixture(scope="module")
 def clean():
     prep_rec, setup = prepared(record(seed=6))
-    return prep_rec, setup, fit_orders(prep_rec.prep.spectral, FREE, setup)
+    return prep_rec, setup, fit_orders(prep_rec.prep.spectral, Structure.FREE, setup)
 
 
 def test_fit_orders_chooses_the_known_order_and_finds_its_mode(clean):
     _, _, sweep = clean
-    assert sweep.structure == FREE and sweep.chosen == 2
+    assert sweep.structure == Structure.FREE and sweep.chosen == 2
     f_n, zeta = mode_of(sweep.fits[2])
     assert f_n == pytest.approx(F_N_HZ, rel=0.01)
     assert zeta == pytest.approx(ZETA, rel=0.15)
@@ -363,7 +362,7 @@ def test_fit_structures_takes_the_all_pole_model_when_free_zeros_do_not_beat_it(
     is the known one."""
     prep_rec, setup, _ = clean
     sweep = fit_structures(prep_rec.prep.spectral, setup)
-    assert sweep.structure == ALL_POLE and sweep.chosen == 2 and "order test between the two" in sweep.why
+    assert sweep.structure == Structure.ALL_POLE and sweep.chosen == 2 and "order test between the two" in sweep.why
     f_n, zeta = mode_of(sweep.fits[2])
     assert f_n == pytest.approx(F_N_HZ, rel=0.01)
     assert zeta == pytest.approx(ZETA, rel=0.15)
@@ -397,13 +396,13 @@ def test_fit_structures_keeps_free_zeros_where_the_sensor_has_one():
     y = y0 + SIGMA_Y * float(np.max(np.abs(y0))) * rng.standard_normal(N)
     prep_rec, setup = prepared(Record(DT, u0 + SIGMA_U * rng.standard_normal(N), y))
     sweep = fit_structures(prep_rec.prep.spectral, setup)
-    assert sweep.structure == FREE and not sweep.why
+    assert sweep.structure == Structure.FREE and not sweep.why
     assert not has_doublet(sweep.fits[sweep.chosen].a, sweep.fits[sweep.chosen].b)
 
 
 def test_the_all_pole_structure_has_no_finite_zeros_and_a_pole_pair_at_least(clean):
     prep_rec, setup, _ = clean
-    sweep = fit_orders(prep_rec.prep.spectral, ALL_POLE, setup)
+    sweep = fit_orders(prep_rec.prep.spectral, Structure.ALL_POLE, setup)
     assert min(sweep.fits) == 2
     for n, fit in sweep.fits.items():
         shape = all_pole_numerator(n)
@@ -413,18 +412,18 @@ def test_the_all_pole_structure_has_no_finite_zeros_and_a_pole_pair_at_least(cle
 
 
 def test_settle_order_keeps_an_asked_order_and_says_the_data_support_fewer():
-    warnings: list[str] = []
-    prep_rec, setup = prepared(record(seed=7), order=4, warnings=warnings)
-    sweep = fit_orders(prep_rec.prep.spectral, FREE, setup)
-    settled = settle_order(sweep, prep_rec.prep.spectral, setup, warnings)
+    prep_rec, setup = prepared(record(seed=7), order=4)
+    sweep = fit_orders(prep_rec.prep.spectral, Structure.FREE, setup)
+    settled = settle_order(sweep, prep_rec.prep.spectral, setup)
     assert (settled.order, settled.selection) == (4, "asked")
-    assert any("data support only order 2" in w for w in warnings)
+    assert [f.code for f in settled.findings] == [FindingCode.ASKED_ORDER_UNSUPPORTED]
+    assert any("data support only order 2" in f.text for f in settled.findings)
 
 
 def test_settle_order_refuses_a_sweep_with_no_stable_order(clean):
     prep_rec, setup, sweep = clean
     with pytest.raises(AnalysisError, match="no stable model"):
-        settle_order(replace(sweep, chosen=None), prep_rec.prep.spectral, setup, [])
+        settle_order(replace(sweep, chosen=None), prep_rec.prep.spectral, setup)
 
 
 def test_best_delay_branch_keeps_the_lowest_cost(clean):
@@ -444,7 +443,8 @@ def test_model_error_is_found_where_a_second_drive_path_puts_it():
                      0.0)
     prep_rec, setup = prepared(record(seed=8, extra_y=burst))
     prep = prep_rec.prep
-    sweep, model_error, data = fit_weighing_model_error(prep, prep.spectral, setup, None)
+    weighed = weigh_model_error(prep_rec, search_orders(prep_rec, IdentifyOptions(max_order=8, significance=0.05)))
+    model_error, data = weighed.model_error, weighed.data
     assert model_error.significant
     lo, hi = model_error.range_hz
     assert lo <= 12e3 <= hi
@@ -492,7 +492,7 @@ def pair(f_hz: float, zeta: float) -> np.ndarray:
 def test_claims_mark_a_doublet_and_keep_it_from_the_modes():
     poles = pair(17e3, 0.05)
     model = DiscreteModel(DT, np.real(np.poly(poles)), np.real(np.poly(poles * 1.001)), 0.0)
-    modes = claimed_modes(model, (500.0, 28e3), FREE)
+    modes = claimed_modes(model, (500.0, 28e3), Structure.FREE)
     (m,) = [m for m in modes if m["kind"] == "complex"]
     assert m["cancelled"] and not m["supported"]
     assert m["natural_frequency_hz"] == pytest.approx(17e3, rel=1e-6)
@@ -501,18 +501,19 @@ def test_claims_mark_a_doublet_and_keep_it_from_the_modes():
 def test_claims_of_the_all_pole_structure_mark_a_resonance_beyond_the_band():
     a = np.real(np.poly(pair(55e3, 0.02)))
     model = DiscreteModel(DT, a, all_pole_numerator(2) * np.sum(a) / 1.0, 0.0)
-    (m,) = claimed_modes(model, (500.0, 28e3), ALL_POLE)
+    (m,) = claimed_modes(model, (500.0, 28e3), Structure.ALL_POLE)
     assert m["shapes_band"] and not m["supported"] and not m["cancelled"]
-    (free,) = claimed_modes(model, (500.0, 28e3), FREE)
+    (free,) = claimed_modes(model, (500.0, 28e3), Structure.FREE)
     assert "shapes_band" not in free
 
 
 def test_a_negative_all_pole_delay_is_reported_as_a_lead():
     a = np.real(np.poly(pair(55e3, 0.02)))
     fit = OrderFit(a, all_pole_numerator(2), -0.35, np.zeros(0), 1.0, 1.0, 5, 2, True, False)
-    (text,) = delay_warnings(None, fit, ALL_POLE, DT, 0.05)  # type: ignore[arg-type]
-    assert "leads the reference by 0.35 samples (0.35 µs)" in text
-    assert delay_warnings(None, replace(fit, delay=0.1), ALL_POLE, DT, 0.05) == []  # type: ignore[arg-type]
+    (finding,) = delay_findings(None, fit, Structure.ALL_POLE, DT, 0.05)  # type: ignore[arg-type]
+    assert finding.code == FindingCode.NEGATIVE_DELAY
+    assert "leads the reference by 0.35 samples (0.35 µs)" in finding.text
+    assert delay_findings(None, replace(fit, delay=0.1), Structure.ALL_POLE, DT, 0.05) == []  # type: ignore[arg-type]
 
 
 def test_the_all_pole_structure_is_tried_when_free_zeros_claim_no_mode_and_cannot_go_higher(clean):
@@ -525,7 +526,7 @@ def test_the_all_pole_structure_is_tried_when_free_zeros_claim_no_mode_and_canno
 
     def sweep(fit: OrderFit, higher_cost: float) -> OrderSweep:
         n = fit.order
-        return OrderSweep(FREE, "causal", {n: fit}, {n: 2 * n + 2}, {n: 1.0, n + 1: higher_cost, n + 2: math.inf},
+        return OrderSweep(Structure.FREE, DelayMode.CAUSAL, {n: fit}, {n: 2 * n + 2}, {n: 1.0, n + 1: higher_cost, n + 2: math.inf},
                           {}, n, None)
 
     assert _exhausted_without_mode(sweep(real, math.inf), setup)  # a real pole, every higher order unstable

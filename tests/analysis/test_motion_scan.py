@@ -95,13 +95,13 @@ def test_the_noise_stage_decides_on_ptbs_record_as_the_literal_scan_does(monkeyp
         return literal_scan(x, y, [o for o in onsets if stop - o >= 2.5 * COHERENCE_SEGMENT], stop, rate)
 
     def prepared() -> record_preparation.Prepared:
-        return record_preparation.prepare_record(record(), 1e6, 12, None, 32, []).prep
+        return record_preparation.prepare_record(record(), 1e6, 12, None, 32).prep
 
     fast = prepared()
     monkeypatch.setattr(record_preparation, "first_motion", literal)
     slow = prepared()
-    assert fast.motion and any(m["reason"] == "coherent" for m in fast.motion)  # the bar's motion is found
-    assert fast.motion == slow.motion and fast.y_segments == slow.y_segments and fast.lead_in == slow.lead_in
+    assert fast.noise.motion and any(m["reason"] == "coherent" for m in fast.noise.motion)  # the bar's motion is found
+    assert fast.noise.motion == slow.noise.motion and fast.noise.y_segments == slow.noise.y_segments and fast.activity.lead_in == slow.activity.lead_in
     assert fast.band == slow.band
     for name in ("var_u", "var_y", "draw_var_u", "draw_var_y", "bin_hz"):
         np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)

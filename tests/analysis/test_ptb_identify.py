@@ -536,7 +536,7 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     samples before the fit and the lead kept in the model's delay. The truth is the shift made:
     the model, its delay draws and the joint fit's skew move by exactly 10 µs against the
     published record's; the intervals hold the sine's; the warning names the lead."""
-    from hopkinson.analysis.identify import identify
+    from hopkinson.analysis.identify import identify_with_sine
     from hopkinson.rig.cli.identify import explain
 
     from tests.ptb_shock import skewed
@@ -556,7 +556,7 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     assert all(j["contains"] and j["half_width_ok"] for j in judged.values()), judged
     trail = explain(shifted.identification.to_dict())
     assert f"realigned: the response delayed by {shift} samples before the fit" in trail
-    skews = [identify(rec, sine=ptb_sine()).sine_joint.skew_s for rec in (skewed(-100), ptb_record())]
+    skews = [identify_with_sine(rec, ptb_sine()).sine_joint.skew_s for rec in (skewed(-100), ptb_record())]
     assert skews[0] == pytest.approx(skews[1] - 10e-6, abs=0.1e-6)
 
 

@@ -146,12 +146,12 @@ def test_the_delay_branch_the_noise_flips_is_inside_the_fbsd_interval(seed: int)
     # the branch the record happened to take. (Since issue 40 the band runs across the pulse's
     # nulls, to 84 kHz: on seed 101 its bins tell the branches apart, V 84.4 against 91.4, and the
     # draws stay on the better one; on seed 113 they stay within chance, 50.5 against 50.7.)
-    ctx = ident.context
-    problem = OrderProblem(ctx.spectral, ident.order, "causal", ctx.max_delay)
+    fitted = ident.settlement
+    problem = OrderProblem(fitted.data, ident.order, "causal", fitted.setup.max_delay)
     fits = [problem.solve(problem.linear_start(tau), 200, 1e-10) for tau in (0.0, 4.0)]
     optima = [f.delay for f in fits]
     assert abs(optima[1] - optima[0]) > 2.0
-    lo, hi = (x / ctx.sample_interval_s for x in result.delay_s.interval)
+    lo, hi = (x / ident.sample_interval_s for x in result.delay_s.interval)
     if abs(fits[1].cost - fits[0].cost) <= 2.0:  # within chance (V is half a χ²: ΔV 2 is p ≈ 0.05)
         assert lo <= min(optima) + 0.1 and hi >= max(optima) - 0.1, (lo, hi, optima)
     else:
@@ -182,8 +182,8 @@ def test_each_delay_branch_is_a_distinct_optimum_of_the_cost() -> None:
     # optimum (the valley is flat): a duplicate at the same delay and cost, whose draws the
     # interval then took unreflected as another branch's.
     ident = identify(record(PIEZO, 2))
-    ctx = ident.context
-    fit = ctx.fits[ident.order]
-    for branch in ctx.branches.get(ident.order, []):
+    fitted = ident.settlement
+    fit = fitted.sweep.fits[ident.order]
+    for branch in fitted.branches.get(ident.order, []):
         assert abs(branch.delay - fit.delay) >= 1.0, (branch.delay, fit.delay)
         assert branch.cost >= fit.cost

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.frequency_fit import OrderProblem
-from hopkinson.analysis.identify import identify
+from hopkinson.analysis.identify import identify_with_sine
 from hopkinson.analysis.sine_comparison import SineCalibration
 from hopkinson.analysis.sine_joint import JointWeights, paule_mandel, sine_terms, with_draws
 from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
@@ -38,7 +38,7 @@ def synthetic_sine(truth: AccelerometerTruth, seed: int) -> SineCalibration:
 @pytest.fixture(scope="module")
 def joint():
     """The joint identification of one seed, with its Monte Carlo (shared by the assertions)."""
-    ident = identify(record(CASE, 3), sine=synthetic_sine(CASE.truth, 3))
+    ident = identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
     result = evaluate(ident, UncertaintyOptions(draws=100, seed=5, order_draws=10))
     with_draws(ident, result.model_draws)
     return ident, result
@@ -71,7 +71,7 @@ def test_a_sine_of_the_same_sensor_is_consistent(joint) -> None:
 
 
 def test_a_sine_of_another_sensor_is_flagged_inconsistent() -> None:
-    ident = identify(record(CASE, 3), sine=synthetic_sine(OTHER, 3))
+    ident = identify_with_sine(record(CASE, 3), synthetic_sine(OTHER, 3))
     report = ident.to_dict()["sine_joint"]
     assert report["consistent"] is False and report["verdict"].startswith("inconsistent")
     e_n = np.array(report["e_n"])
@@ -87,16 +87,16 @@ def test_the_verdict_holds_its_false_alarm_rate_over_seeds() -> None:
     half the seeds fails with probability 0.96; a correct one passes with 0.994."""
     flagged = 0
     for seed in range(8):
-        ident = identify(record(CASE, 100 + seed), sine=synthetic_sine(CASE.truth, 100 + seed))
+        ident = identify_with_sine(record(CASE, 100 + seed), synthetic_sine(CASE.truth, 100 + seed))
         flagged += not ident.sine_joint.consistent
     assert flagged <= 2
 
 
 def test_the_sine_rows_jacobian_matches_the_residual() -> None:
-    ident = identify(record(CASE, 3), sine=synthetic_sine(CASE.truth, 3))
-    ctx = ident.context
-    problem = OrderProblem(ctx.spectral, ident.order, ctx.delay_mode, ctx.max_delay)
-    theta = problem.pack(ctx.fits[ident.order]) * (1 + 1e-4)
+    ident = identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
+    fitted = ident.settlement
+    problem = OrderProblem(fitted.data, ident.order, fitted.sweep.delay_mode, fitted.setup.max_delay)
+    theta = problem.pack(fitted.sweep.fits[ident.order]) * (1 + 1e-4)
     jac = problem.jacobian(theta)
     numeric = np.empty_like(jac)
     for i in range(theta.size):
@@ -122,5 +122,5 @@ def test_sine_points_beyond_the_analysis_nyquist_are_refused() -> None:
     sine = synthetic_sine(CASE.truth, 1)
     far = replace(sine, frequency_hz=sine.frequency_hz * 40)  # up to 800 kHz at 1 MS/s
     with pytest.raises(AnalysisError, match="Nyquist"):
-        identify(record(CASE, 3), sine=far)
+        identify_with_sine(record(CASE, 3), far)
     assert sine_terms(sine, 1e-6, JointWeights(4.0, 0.0, 0.0)).weight == 2.0

@@ -27,6 +27,9 @@ import math
 
 import numpy as np
 import pytest
+from hopkinson.analysis import uncertainty
+from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.findings import FindingCode
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.uncertainty import Estimate, UncertaintyOptions, evaluate, shot_uncertainty
@@ -148,16 +151,19 @@ def test_draws_are_reproducible_from_the_seed_and_feed_the_dcm() -> None:
     assert len(a.model_draws) == a.draws and all(m.is_stable for m in a.model_draws)
 
 
-def test_a_failed_uncertainty_keeps_the_values_and_warns() -> None:
+def test_a_failed_uncertainty_keeps_the_values_and_warns(monkeypatch: pytest.MonkeyPatch) -> None:
     ident = identify(record(CASE, 9))
-    ident.context = None  # e.g. an identification rebuilt from a file
-    warnings: list[str] = []
-    data, draws = shot_uncertainty(ident, AnalysisParams(), None, warnings)
+
+    def failing(*args: object, **kwargs: object) -> None:
+        raise AnalysisError("no stable refit")  # the Monte Carlo failing, whatever the cause
+
+    monkeypatch.setattr(uncertainty, "evaluate", failing)
+    data, draws, found = shot_uncertainty(ident, AnalysisParams(), None)
     assert data is None and draws == []
-    assert len(warnings) == 1 and "could not be evaluated" in warnings[0]
-    warnings.clear()
-    assert shot_uncertainty(ident, AnalysisParams(uncertainty=False), None, warnings) == (None, [])
-    assert "switched off" in warnings[0]
+    assert [f.code for f in found] == [FindingCode.UNCERTAINTY_FAILED] and "could not be evaluated" in found[0].text
+    data, draws, found = shot_uncertainty(ident, AnalysisParams(uncertainty=False), None)
+    assert (data, draws) == (None, []) and [f.code for f in found] == [FindingCode.UNCERTAINTY_OFF]
+    assert "switched off" in found[0].text
 
 
 def test_draws_on_another_delay_branch_are_taken_as_they_are_not_reflected() -> None:
