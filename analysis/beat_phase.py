@@ -7,10 +7,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import fft, ndimage
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.fringe_tracker import onset_phase
 from hopkinson.analysis.full_scale import FullScale, check_not_clipped
-from scipy import fft, ndimage
 
 # --- documented constants of the method ------------------------------------------------------
 BLOCK_SAMPLES = 2**16  # FFT length of one analytic-signal block

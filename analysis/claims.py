@@ -14,6 +14,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+
 from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import ZETA_FLOOR, OrderFit, OrderProblem, SpectralData
 from hopkinson.analysis.model import DiscreteModel

@@ -48,6 +48,8 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.dcm import DCM, apply, passband_delay_samples
 from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport, design_compensation
 from hopkinson.analysis.dcm_ratio import ShotPulse
@@ -57,7 +59,6 @@ from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate, resampling_factors, shift_samples
 from hopkinson.analysis.response import fbsd_hz, frequency_response
-from scipy import signal
 
 # A compensated peak error this much larger (percentage points) than the uncompensated one
 # counts as worse: below it the difference is within what the reference's own noise moves.

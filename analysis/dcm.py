@@ -38,6 +38,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel, complex_pairs, from_pairs, load_json_object
 from hopkinson.analysis.params import CONJUGATE_TOLERANCE
@@ -52,7 +54,6 @@ from hopkinson.analysis.response import (
     response_times_samples,
     zpk_to_sos,
 )
-from scipy import signal
 
 _CONJ_TOL = CONJUGATE_TOLERANCE  # the rule AnalysisParams.check() applies to extra poles too
 _MAX_STEP_SAMPLES = 4_000_000  # longest step response simulated for a rise time

@@ -47,6 +47,8 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.dcm import DCM, compare_steps, compensated_fbsd_edges, design_dcm
 from hopkinson.analysis.dcm_ratio import (
     FALLBACK_WIDENING,
@@ -71,7 +73,6 @@ from hopkinson.analysis.response import (
     frequency_response,
     pole_analysis,
 )
-from scipy import signal
 
 # The automatic design keeps the DCM's white-noise RMS gain at the analysis rate below
 # DEFAULT_DCM_NOISE_GAIN_LIMIT (analysis.params, with the other defaults and the options'

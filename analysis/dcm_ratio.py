@@ -33,13 +33,14 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.dcm import DCM, apply_rows, compensated_fbsd_edges, passband_delay_samples
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import peak_estimate, pulse_width, pulse_window
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import frequency_response, model_output, response_times_samples
-from scipy import signal
 
 PEAK_SETTLED = 0.0005  # widening further changes the pulse's compensated peak by less than this
 PULSE_CUT = 0.01  # the widest design allowed changes the pulse's peak by more: a cap cuts the pulse

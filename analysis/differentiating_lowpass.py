@@ -8,11 +8,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.beat_phase import BeatPhase
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate
-from scipy import signal
 
 BANDWIDTH_RISE_PRODUCT = 5.0  # B = this / (10–90 % rise time of the velocity)
 MAX_BANDWIDTH_FRACTION = 0.4  # B ≤ this × the analysis rate (the low-pass must fit below Nyquist)

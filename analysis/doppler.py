@@ -64,6 +64,7 @@ A velocity history that reverses (the object comes back) cannot be demodulated f
 from __future__ import annotations
 
 import numpy as np
+
 from hopkinson.analysis.beat_phase import beat_phase, decimated_rate_for
 from hopkinson.analysis.differentiating_lowpass import (
     Demodulated,

@@ -28,9 +28,10 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from numpy import fft
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.numerics import bracketed_root, next_fast_len
-from numpy import fft
 
 WIDTH_FRACTION = 0.10  # ISO 16063-22: pulse duration at 10 % of the peak
 MINUS_3DB = 10 ** (-3 / 20)  # amplitude ratio at −3 dB (0.7079)

@@ -36,6 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+
 from hopkinson.analysis.model import all_pole_numerator
 from hopkinson.analysis.numerics import levenberg_marquardt
 from hopkinson.analysis.structure import DelayMode

@@ -7,8 +7,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from hopkinson.analysis.errors import AnalysisError
 from scipy import signal
+
+from hopkinson.analysis.errors import AnalysisError
 
 
 def onset_phase(x: np.ndarray, dt: float, m: int, phase: np.ndarray, k_h: int, handover_hz: float,

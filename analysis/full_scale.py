@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 
 # The volts of a channel's lowest and highest digitizer codes (its full scale).

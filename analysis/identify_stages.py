@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.claims import claim_findings, claimed_modes, delay_findings
 from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import (

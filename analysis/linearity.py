@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 
 COVERAGE = 0.95

@@ -22,8 +22,9 @@ numpy/scipy have no routine for the nested losses of an augmented matrix, hence 
 from __future__ import annotations
 
 import numpy as np
-from hopkinson.analysis.errors import AnalysisError
 from numpy.lib.stride_tricks import sliding_window_view
+
+from hopkinson.analysis.errors import AnalysisError
 
 # Below this ratio of residual to column energy a Cholesky pivot has lost too many digits
 # (its relative error is ~ eps / ratio); the QR path is then used.

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.frequency_fit import OrderFit, SpectralData, predicted_bins, response
 from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.record_preparation import Prepared

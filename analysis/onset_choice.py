@@ -15,6 +15,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData
 from hopkinson.analysis.input_terms import ONSET
 from hopkinson.analysis.numerics import f_quantile

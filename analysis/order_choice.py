@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.frequency_fit import OrderFit, QuickRefit, SpectralData, is_stable, response
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import (

@@ -24,13 +24,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.loss import arx_coefficients_by_order, arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate
-from scipy import signal
 
 STABLE_DROP = 0.01  # ‖g₂‖² "remains stable": it falls by less than 1 % per order
 TOL = 1e-9

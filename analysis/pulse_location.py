@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import pulse_width
 

@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 
 MAX_FIT_POINTS = 100_000  # the ellipse is fitted on at most this many samples (a random subset)

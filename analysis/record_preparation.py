@@ -20,6 +20,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy import fft
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand, supported_band
 from hopkinson.analysis.findings import Finding, FindingCode
@@ -36,7 +38,6 @@ from hopkinson.analysis.pulse_location import MIN_QUIET, Activity, locate_pulse
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
 from hopkinson.analysis.response import simulate_from_rest
-from numpy import fft
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10

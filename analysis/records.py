@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from hopkinson.analysis.errors import RecordError
 
+from hopkinson.analysis.errors import RecordError
 from hopkinson.fileio import atomic_open
 
 RECORD_KEYS = ("time_s", "reference", "response")

@@ -54,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.beat_phase import (
     DECIMATED_RATE_HZ,
     BeatPhase,

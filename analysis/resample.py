@@ -13,11 +13,12 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
+from numpy import fft
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.numerics import next_fast_len
 from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
-from numpy import fft
 
 # Largest denominator of the rational resampling ratio: keeps the polyphase filter small
 # while the achieved rate stays within ~0.1 % of the one asked for any sane pair of rates.

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.numerics import bracketed_root
@@ -345,8 +346,9 @@ def simulate_from_rest(a: np.ndarray, b: np.ndarray, delay_samples: float, u: np
     identification fits (the signal taken as zero before its start). NumPy only:
     scipy.signal.lfilter would load scipy.signal (~0.4 s) on the identification's path for this
     alone."""
-    from hopkinson.analysis.numerics import next_fast_len
     from numpy import fft
+
+    from hopkinson.analysis.numerics import next_fast_len
 
     u = np.asarray(u, dtype=float)
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.compensation import compensate_shot
 from hopkinson.analysis.dcm import DCM, compare_steps
 from hopkinson.analysis.dcm_design import DcmOptions

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.dcm import DCM
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel

@@ -58,13 +58,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.special import chdtrc
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import OrderProblem, SineTerms
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.numerics import bracketed_root
 from hopkinson.analysis.sine_comparison import SineCalibration
-from scipy.special import chdtrc
 
 # Paule–Mandel re-estimates of the weights (shock's R, sine's s) after the shock-only start.
 WEIGHT_ITERATIONS = 2

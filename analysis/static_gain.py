@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.input_terms import MOTION
 from hopkinson.analysis.model import DiscreteModel
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, is_stable
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, ONSET
 from hopkinson.analysis.structure import DelayMode

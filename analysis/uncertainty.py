@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.estimate import COVERAGE, Estimate
 from hopkinson.analysis.excitation import peak_estimate, pulse_width

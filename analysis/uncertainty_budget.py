@@ -9,6 +9,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.frequency_fit import OrderProblem, SpectralData
 from hopkinson.analysis.identify import Identification

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.frequency_fit import OrderProblem, SpectralData, is_stable, predicted_bins
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.modes import has_doublet

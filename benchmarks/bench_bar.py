@@ -19,6 +19,7 @@ import json
 import time
 
 import numpy as np
+
 from hopkinson.analysis.bar import PAPER_RIG, predict_shot
 from hopkinson.analysis.bar import predict as predict_module
 from hopkinson.analysis.bar.dispersion import _table

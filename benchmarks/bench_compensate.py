@@ -27,11 +27,12 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.dcm import DcmStream, apply
 from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
-from scipy import signal
 
 
 def best_rate(run: Callable[[], np.ndarray], samples: int, repeats: int) -> tuple[float, np.ndarray]:

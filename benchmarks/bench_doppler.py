@@ -17,10 +17,11 @@ import json
 import time
 
 import numpy as np
+from scipy import signal
+
 from hopkinson.analysis.doppler import demodulate
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, pm_beat
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2, velocity_m_s
-from scipy import signal
 
 DT = 1e-8
 PULSE_START_S = 1e-3

@@ -55,13 +55,14 @@ from collections.abc import Callable  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+from scipy.optimize import linear_sum_assignment  # noqa: E402
+
 from hopkinson.analysis.identify import identify  # noqa: E402
 from hopkinson.analysis.loss import arx_fit, arx_loss_by_order  # noqa: E402
 from hopkinson.analysis.noise import first_motion, is_motion  # noqa: E402
 from hopkinson.analysis.records import Record  # noqa: E402
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise  # noqa: E402
 from hopkinson.drivers.sim.shock import half_sine_m_s2  # noqa: E402
-from scipy.optimize import linear_sum_assignment  # noqa: E402
 
 DT = 1e-6
 TRUTH = AccelerometerTruth(modes=(Mode(27_000.0, 0.05), Mode(70_000.0, 0.03)))

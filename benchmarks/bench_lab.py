@@ -25,6 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
 from hopkinson.lab.history import sensor_history
 from hopkinson.lab.repository import open_repository
 from hopkinson.rig.lab_record import LabRecorder, shot_record

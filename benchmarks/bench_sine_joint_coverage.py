@@ -28,7 +28,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hopkinson.analysis.identify import identify, identify_with_sine  # noqa: E402
 from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate  # noqa: E402
-
 from tests.analysis.hard_records import Case, record, truth_figures  # noqa: E402
 from tests.analysis.test_sine_joint import OTHER, synthetic_sine  # noqa: E402
 

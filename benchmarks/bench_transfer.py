@@ -25,6 +25,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pyvisa
+
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.sim.faults import FaultSet

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 from bench_identify import best_time  # the same timing rule (best of N)
+
 from hopkinson.analysis.identify import identify, identify_with_sine
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
 from hopkinson.analysis.reduce import reduce_raw

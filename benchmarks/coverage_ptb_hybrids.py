@@ -22,12 +22,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from scipy import signal  # noqa: E402
+
 from hopkinson.analysis.errors import AnalysisError  # noqa: E402
 from hopkinson.analysis.params import AnalysisParams  # noqa: E402
 from hopkinson.analysis.records import Record  # noqa: E402
 from hopkinson.analysis.shot_analysis import analyse_record  # noqa: E402
-from scipy import signal  # noqa: E402
-
 from tests.analysis.test_ptb_identify import SENSITIVITY, hybrid_record, truth_fbsd_hz  # noqa: E402
 
 

@@ -35,7 +35,6 @@ from hopkinson.analysis.params import AnalysisParams  # noqa: E402
 from hopkinson.analysis.records import Record  # noqa: E402
 from hopkinson.analysis.shot_analysis import analyse_record  # noqa: E402
 from hopkinson.analysis.sine_comparison import band_consistency, compare_sine  # noqa: E402
-
 from tests.ptb_shock import (  # noqa: E402
     against_sine,
     cut,

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 from typing import Annotated
 
+from pydantic import Strict
+
 from hopkinson.drivers.sim.config_fields import (
     SECTION,
     Baud,
@@ -33,7 +35,6 @@ from hopkinson.drivers.sim.config_fields import (
     StopBits,
     Transport,
 )
-from pydantic import Strict
 
 Text = Annotated[str, Strict()]
 __all__ = ["SECTION", "Baud", "Flag", "Hint", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]

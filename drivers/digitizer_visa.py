@@ -36,6 +36,7 @@ from collections.abc import Callable
 import pyvisa
 import pyvisa.constants
 import pyvisa.errors
+
 from hopkinson.drivers.base import Deadline, read_bounded
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.ieee488_block import BlockFormatError, digit_count, payload_length

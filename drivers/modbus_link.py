@@ -27,12 +27,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import serial
-from hopkinson.drivers.base import InstrumentDriver, TraceHook
-from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
-from hopkinson.drivers.registers import Register, RegisterRangeError, contiguous_runs
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+
+from hopkinson.drivers.base import InstrumentDriver, TraceHook
+from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
+from hopkinson.drivers.registers import Register, RegisterRangeError, contiguous_runs
 
 # pymodbus logs each failed request at ERROR level, with a hex dump of the last frames, before
 # raising; our InstrumentErrors carry the same facts in one line. Quiet it unless the

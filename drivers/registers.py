@@ -28,9 +28,10 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Annotated, Any, Literal
 
-from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number
 from pydantic import BeforeValidator, Field
 from pymodbus.client.mixin import ModbusClientMixin
+
+from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number
 
 _DT = ModbusClientMixin.DATATYPE
 REGISTER_TYPES: dict[str, tuple[_DT, int, float, float]] = {

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
 import numpy as np
+
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.digitizer_waveform import (
     BYTE_ORDERS,

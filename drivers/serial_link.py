@@ -13,6 +13,7 @@ driver and of a lab's own serial instrument.
 from __future__ import annotations
 
 import serial
+
 from hopkinson.drivers.base import InstrumentDriver, TraceHook, read_bounded
 from hopkinson.drivers.errors import InstrumentConnectionError
 

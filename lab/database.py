@@ -30,8 +30,9 @@ import sqlalchemy as sa
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from hopkinson.lab.errors import DatabaseAway, LabError
 from sqlalchemy.engine import URL, Engine, make_url
+
+from hopkinson.lab.errors import DatabaseAway, LabError
 
 URL_ENV = "HOPKINSON_DATABASE_URL"
 MIGRATIONS = Path(__file__).with_name("migrations")

@@ -6,9 +6,10 @@ from __future__ import annotations
 from datetime import datetime
 
 import matplotlib.dates as mdates
-from hopkinson.lab.history import SensorHistory
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
+from hopkinson.lab.history import SensorHistory
 
 # key, label, display scale, unit: the figures a history shows (lab.schema.FIGURE_KEYS' headline ones)
 SHOWN = (("sensitivity", "sensitivity", 1.0, ""), ("shock_sensitivity", "shock sensitivity", 1.0, ""),

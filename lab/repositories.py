@@ -16,11 +16,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
 from hopkinson.analysis.key_figures import Figure
 from hopkinson.lab import schema as t
 from hopkinson.lab.errors import LabError, RecordRejected, TamperedShotError
 from hopkinson.lab.records import ShotRecord, check_record, normal_serial
-from sqlalchemy.orm import Session
 
 SENSOR_FIELDS = ("model", "owner", "nominal_sensitivity", "sensitivity_unit", "tolerance_percent", "interval_days")
 FROM_SHOT = "recorded with a shot"  # SensorData written from a shot file (its model): audited with the shot

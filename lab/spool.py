@@ -30,10 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hopkinson.fileio import atomic_write
 from hopkinson.lab.database import Failure, data_folder, failure_of, first_line
 from hopkinson.lab.records import ShotRecord
-
-from hopkinson.fileio import atomic_write
 
 SPOOL_NAME = "lab-spool.jsonl"
 QUARANTINE_NAME = "lab-quarantine.jsonl"

@@ -23,6 +23,9 @@ from datetime import UTC, datetime
 from typing import Any, TypeVar
 
 import sqlalchemy as sa
+from sqlalchemy import event
+from sqlalchemy.orm import Session, sessionmaker
+
 from hopkinson.lab import schema as t
 from hopkinson.lab.database import (
     WRITER,
@@ -34,8 +37,6 @@ from hopkinson.lab.database import (
     sqlite_missing,
 )
 from hopkinson.lab.errors import DatabaseAway, LabError
-from sqlalchemy import event
-from sqlalchemy.orm import Session, sessionmaker
 
 T = TypeVar("T")
 RETRIES = 8  # a transaction that lost a race on a unique key is run again

@@ -27,6 +27,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import sqlalchemy as sa
+from sqlalchemy.engine import make_url
+
 from hopkinson.lab.database import (
     Failure,
     current_revision,
@@ -39,7 +41,6 @@ from hopkinson.lab.database import (
     upgrade_database,
 )
 from hopkinson.lab.errors import LabError
-from sqlalchemy.engine import make_url
 
 BACKUP_FLAG = "--yes-i-have-a-backup"
 

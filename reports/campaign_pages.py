@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
+
 from hopkinson.analysis.response import frequency_response, nyquist_hz
 from hopkinson.analysis.sine_comparison import SineCalibration, SineComparison
 from hopkinson.reports.data import G_M_S2, ShotEntry
@@ -16,7 +18,6 @@ from hopkinson.reports.layout import plain_log_ticks, plot_page, table_in_axes
 from hopkinson.reports.shot_pages import BAND_LEVELS, frequency_grid, normalised
 from hopkinson.reports.statistics import STATIC_GAIN, CampaignStatistics, linearity_sensitivity
 from hopkinson.reports.tables import fmt, sig, sine_rows, to_decimals_of
-from matplotlib.figure import Figure
 
 
 def cross_validation_page(stats: CampaignStatistics, entries: Sequence[ShotEntry]) -> Figure:

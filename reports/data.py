@@ -16,6 +16,7 @@ from functools import cached_property
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import remove_input_delay
 from hopkinson.analysis.key_figures import Figure, KeyFigures

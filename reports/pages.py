@@ -8,6 +8,8 @@ laid out by `layout.TextPages`, so it continues on a second page rather than run
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.figure import Figure
+
 from hopkinson.reports.campaign_pages import (
     LINEARITY_CAPTION,
     campaign_responses_page,
@@ -36,7 +38,6 @@ from hopkinson.reports.tables import (
     uncertainty_method,
     uncertainty_rows,
 )
-from matplotlib.figure import Figure
 
 SUBTITLE = ("Hopkinson-bar shock calibration: dynamic model, band of small distortion (FBSD) and dynamic "
             "compensation model (DCM)")

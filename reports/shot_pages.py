@@ -11,6 +11,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
+
 from hopkinson.analysis.dcm import step_responses as dcm_step_responses
 from hopkinson.analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
 from hopkinson.analysis.model import DiscreteModel
@@ -37,7 +39,6 @@ from hopkinson.reports.layout import (
     wrap_to_width,
 )
 from hopkinson.reports.tables import compensation_rows, dcm_rows, fmt, pole_rows
-from matplotlib.figure import Figure
 
 BAND_LEVELS = (("5", 0.05, "tab:green"), ("10", 0.10, "tab:orange"))
 DCM_TABLE_COLUMNS = (0.36, 0.64)  # the DCM page's table: label, value

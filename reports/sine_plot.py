@@ -9,12 +9,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from hopkinson.analysis.sine_comparison import SineComparison
-from hopkinson.reports.layout import plain_log_ticks
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from hopkinson.analysis.sine_comparison import SineComparison
 from hopkinson.fileio import atomic_write
+from hopkinson.reports.layout import plain_log_ticks
 
 
 def sine_figure(comparison: SineComparison, title: str = "") -> Figure:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.identify import fit_percent
 from hopkinson.analysis.key_figures import Figure, KeyFigures

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.response import natural_frequency_damping
 from hopkinson.analysis.shot_analysis import ShotAnalysis

@@ -11,7 +11,11 @@ import io
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from matplotlib.backends.backend_pdf import PdfPages
+from matplotlib.figure import Figure
+
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.fileio import UnsafeOutputError, atomic_write, check_output_path
 from hopkinson.reports.data import CalibrationReport
 from hopkinson.reports.pages import SINE_CAPTION, report_pages
 from hopkinson.reports.statistics import COMBINATION_NOTE, CampaignStatistics, campaign_statistics
@@ -30,10 +34,6 @@ from hopkinson.reports.tables import (
     uncertainty_method,
     uncertainty_rows,
 )
-from matplotlib.backends.backend_pdf import PdfPages
-from matplotlib.figure import Figure
-
-from hopkinson.fileio import UnsafeOutputError, atomic_write, check_output_path
 
 PNG_DPI = 90
 FORMATS = ("pdf", "html")

@@ -29,6 +29,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
+from pydantic import AfterValidator, Field, ValidationInfo
+from pydantic.json_schema import SkipJsonSchema
+
 from hopkinson.drivers import config_fields as fields
 from hopkinson.drivers import registers
 from hopkinson.drivers.amplifier import EXCITATION
@@ -53,8 +56,6 @@ from hopkinson.rig.config_lab import (
 )
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
-from pydantic import AfterValidator, Field, ValidationInfo
-from pydantic.json_schema import SkipJsonSchema
 
 if typing.TYPE_CHECKING:
     from hopkinson.drivers.sim.simulated_rig import SimConfig

@@ -21,11 +21,12 @@ from pathlib import Path
 from typing import Any
 
 import annotated_types
-from hopkinson.drivers.config_fields import Hint
-from hopkinson.rig.errors import ConfigError
 from pydantic import TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
 from pydantic.json_schema import SkipJsonSchema
+
+from hopkinson.drivers.config_fields import Hint
+from hopkinson.rig.errors import ConfigError
 
 _TYPE_WORDS = {"int_type": "an integer", "int_parsing": "an integer", "int_from_float": "an integer",
                "float_type": "a number", "float_parsing": "a number", "string_type": "a string",

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 from datetime import date
 from typing import Annotated, Any, Literal
 
-from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
 from pydantic import AfterValidator, Field
+
+from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
 
 # The names of analysis.bar.MATERIALS, written here so that reading a configuration does not
 # import the bar model (NumPy and SciPy: half a second for every command); a test holds the two

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import h5py
+
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.lab import spool
 from hopkinson.lab.database import database_url, redacted

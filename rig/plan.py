@@ -70,12 +70,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+from pydantic import AfterValidator, BeforeValidator, Field
+
 from hopkinson.analysis.params import MAX_ORDER_LIMIT  # one range for a plan and the command line
 from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
 from hopkinson.rig.config_errors import validate
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
-from pydantic import AfterValidator, BeforeValidator, Field
 
 MIN_DRAWS, MAX_DRAWS = 50, 1_000_000  # as analysis.params checks them
 LATER_OPTIONS = {"uncertainty": True, "draws": None}  # analysis options added after plans were in use

@@ -28,10 +28,9 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from hopkinson.fileio import atomic_write
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan, load_plan
-
-from hopkinson.fileio import atomic_write
 
 PLAN_NAME = "plan.toml"
 JOURNAL_NAME = "journal.sqlite"

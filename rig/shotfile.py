@@ -71,6 +71,7 @@ from typing import Any, NamedTuple
 
 import h5py
 import numpy as np
+
 from hopkinson.analysis.errors import RecordError
 from hopkinson.analysis.full_scale import full_scale_volts
 from hopkinson.analysis.records import Record

@@ -9,6 +9,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+
 from hopkinson.rig.shotfile import RawChannel, RawShot, ShotFileError, open_shot
 
 RAW_MISMATCH = "raw channels do not match their SHA-256 written with the shot (tampered or damaged)"

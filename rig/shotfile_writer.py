@@ -32,7 +32,9 @@ from typing import Any
 
 import h5py
 import numpy as np
+
 from hopkinson.analysis.records import Record
+from hopkinson.fileio import UnsafeOutputError, atomic_write
 from hopkinson.rig.events import utc_now_iso
 from hopkinson.rig.shotfile import (
     FORMAT,
@@ -47,8 +49,6 @@ from hopkinson.rig.shotfile import (
     software_version,
 )
 from hopkinson.rig.shotfile_integrity import raw_sha256
-
-from hopkinson.fileio import UnsafeOutputError, atomic_write
 
 REQUIRED_CHANNELS = ("doppler", "response")
 CODE_DTYPES = tuple(np.dtype(t) for t in ("int8", "uint8", "int16", "uint16", "float32"))  # as digitizers send them

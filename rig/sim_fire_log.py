@@ -11,11 +11,10 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from hopkinson.fileio import append_json_line
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import utc_now_iso
 from hopkinson.rig.plan import PlannedShot
-
-from hopkinson.fileio import append_json_line
 
 if TYPE_CHECKING:
     from hopkinson.drivers.sim.world import World

@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.sine_comparison import SineCalibration
-from scipy import signal
 
 SAMPLE_INTERVAL_S = 1e-7  # 10 MS/s
 SINE_FBSD_5_HZ = 11.37e3  # the sine calibration's +5 % edge (interpolated), issue 17

@@ -5,6 +5,7 @@ analysis found."""
 from __future__ import annotations
 
 import numpy as np
+
 from hopkinson.analysis.response import band_edges
 from hopkinson.drivers.sim.world import accelerometer_truth
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import build_parser
 
 REPO = Path(__file__).resolve().parents[1]

@@ -26,11 +26,10 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from hopkinson.fileio import atomic_write
 from hopkinson.rig.config import load_rig_config, load_sim_config
 from hopkinson.rig.config_paths import DEFAULT_SIM_RIG_CONFIG, default_rig_config
 from hopkinson.rig.errors import ConfigError
-
-from hopkinson.fileio import atomic_write
 
 SCREENSHOT_SIZE = (1280, 800)
 DEMO_TIMEOUT_S = 180.0

@@ -24,6 +24,18 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (
+    QFileDialog,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QProgressBar,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
+)
+
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
 from hopkinson.reports.statistics import (
     STATIC_GAIN,
@@ -68,17 +80,6 @@ from hopkinson.ui.dialogs import ask_campaign_authorisation, ask_name, ask_shot_
 from hopkinson.ui.plan_editor import PlanEditor
 from hopkinson.ui.widgets import TEXT_COLOURS, section_title
 from hopkinson.ui.worker import Background, RigLink
-from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (
-    QFileDialog,
-    QHBoxLayout,
-    QLabel,
-    QLineEdit,
-    QProgressBar,
-    QPushButton,
-    QVBoxLayout,
-    QWidget,
-)
 
 _DONE = frozenset(state.value for state in DONE_STATES)
 

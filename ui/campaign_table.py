@@ -13,13 +13,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.key_figures import Figure, KeyFigures
-from hopkinson.analysis.verdict import Decision
-from hopkinson.reports.data import CompensationCheck
-from hopkinson.rig.plan import G_M_S2, CampaignPlan
-from hopkinson.ui.campaign_actions import ShotRow
-from hopkinson.ui.plots import KILO, figure_tooltip, format_figure
-from hopkinson.ui.widgets import TEXT_COLOURS
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -28,6 +21,14 @@ from PySide6.QtWidgets import (
     QTableWidgetItem,
     QWidget,
 )
+
+from hopkinson.analysis.key_figures import Figure, KeyFigures
+from hopkinson.analysis.verdict import Decision
+from hopkinson.reports.data import CompensationCheck
+from hopkinson.rig.plan import G_M_S2, CampaignPlan
+from hopkinson.ui.campaign_actions import ShotRow
+from hopkinson.ui.plots import KILO, figure_tooltip, format_figure
+from hopkinson.ui.widgets import TEXT_COLOURS
 
 # units in the headers (the sensitivity's is the plan's), a figure's ± U under its value: at
 # 1280 × 800 every column, the verdict and the DCM's included, is in view without scrolling

@@ -22,6 +22,20 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import (
+    QFileDialog,
+    QFormLayout,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QSlider,
+    QVBoxLayout,
+    QWidget,
+)
+
 from hopkinson.analysis.dcm import DCM, apply, format_complex, parse_poles, step_responses
 from hopkinson.analysis.dcm_design import (
     DcmOptions,
@@ -33,6 +47,7 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
+from hopkinson.fileio import atomic_write, check_output_path
 from hopkinson.ui.inputs import UnitSpinBox
 from hopkinson.ui.plots import (
     BAND_LIMIT_TIP,
@@ -52,21 +67,6 @@ from hopkinson.ui.plots import (
     set_y_to_curves,
 )
 from hopkinson.ui.widgets import TEXT_COLOURS, plain_message, section_title
-from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import (
-    QFileDialog,
-    QFormLayout,
-    QGridLayout,
-    QHBoxLayout,
-    QLabel,
-    QLineEdit,
-    QPushButton,
-    QSlider,
-    QVBoxLayout,
-    QWidget,
-)
-
-from hopkinson.fileio import atomic_write, check_output_path
 
 DEBOUNCE_MS = 60
 RATIO_RANGE = (0.1, 200.0)

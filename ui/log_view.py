@@ -10,7 +10,6 @@ import json
 from collections import deque
 from pathlib import Path
 
-from hopkinson.rig.events import Reading, RigEvent, utc_now_iso
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -26,6 +25,7 @@ from PySide6.QtWidgets import (
 )
 
 from hopkinson.fileio import atomic_write, check_output_path
+from hopkinson.rig.events import Reading, RigEvent, utc_now_iso
 
 MAX_ROWS = 5000
 _COLOURS = {"error": "#b3261e", "warning": "#8a5a00", "result": "#0b57d0"}

@@ -35,6 +35,20 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from PySide6.QtCore import QSettings, Qt, QTimer, Signal
+from PySide6.QtGui import QCloseEvent
+from PySide6.QtWidgets import (
+    QFileDialog,
+    QFrame,
+    QHBoxLayout,
+    QMainWindow,
+    QScrollArea,
+    QSplitter,
+    QTabWidget,
+    QVBoxLayout,
+    QWidget,
+)
+
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError, with_hint
 from hopkinson.rig.events import (
@@ -65,19 +79,6 @@ from hopkinson.ui.state_bar import STATE_MESSAGES, StateBar, action_buttons, hea
 from hopkinson.ui.status_panel import StatusPanel
 from hopkinson.ui.widgets import Banner
 from hopkinson.ui.worker import Background, InstrumentLink, RigLink
-from PySide6.QtCore import QSettings, Qt, QTimer, Signal
-from PySide6.QtGui import QCloseEvent
-from PySide6.QtWidgets import (
-    QFileDialog,
-    QFrame,
-    QHBoxLayout,
-    QMainWindow,
-    QScrollArea,
-    QSplitter,
-    QTabWidget,
-    QVBoxLayout,
-    QWidget,
-)
 
 _log = logging.getLogger(__name__)
 

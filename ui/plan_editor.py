@@ -16,12 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS
-from hopkinson.rig.errors import ConfigError
-from hopkinson.rig.plan import CampaignPlan, plan_from_dict
-from hopkinson.rig.shot import PROJECTILES
-from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
-from hopkinson.ui.widgets import TEXT_COLOURS
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -39,6 +33,13 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
+
+from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS
+from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan import CampaignPlan, plan_from_dict
+from hopkinson.rig.shot import PROJECTILES
+from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
+from hopkinson.ui.widgets import TEXT_COLOURS
 
 PRESSURE, TARGET = "pressure (bar)", "target (g)"
 

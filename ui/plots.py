@@ -30,6 +30,10 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
+from pyqtgraph.util.garbage_collector import GarbageCollector
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QWidget
+
 from hopkinson.analysis.dcm import DCM
 from hopkinson.analysis.dcm_design import ShotSupport
 from hopkinson.analysis.key_figures import Figure, KeyFigures
@@ -38,9 +42,6 @@ from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import normalised_gain_function
 from hopkinson.reports.data import CompensationCheck
 from hopkinson.rig.shot_verdict import ShotJudgement, judge, settings_of, shot_judgement
-from pyqtgraph.util.garbage_collector import GarbageCollector
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QWidget
 
 LEVEL_KEYS = ("5", "10")
 BAND_COLOURS = {"5": (46, 157, 67, 45), "10": (224, 160, 16, 35)}

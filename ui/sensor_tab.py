@@ -19,15 +19,6 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from hopkinson.analysis.key_figures import Figure
-from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
-from hopkinson.lab.history import RATIO_UNITS, SensorHistory, load_sensor_history
-from hopkinson.lab.history_plot import SHOWN
-from hopkinson.lab.repository import SensorInfo, open_repository
-from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
-from hopkinson.ui.plots import configure_plot
-from hopkinson.ui.widgets import TEXT_COLOURS, section_title
-from hopkinson.ui.worker import Background
 from PySide6.QtWidgets import (
     QGridLayout,
     QHBoxLayout,
@@ -40,6 +31,16 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
+
+from hopkinson.analysis.key_figures import Figure
+from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
+from hopkinson.lab.history import RATIO_UNITS, SensorHistory, load_sensor_history
+from hopkinson.lab.history_plot import SHOWN
+from hopkinson.lab.repository import SensorInfo, open_repository
+from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
+from hopkinson.ui.plots import configure_plot
+from hopkinson.ui.widgets import TEXT_COLOURS, section_title
+from hopkinson.ui.worker import Background
 
 POINT_BRUSH = pg.mkBrush("#1a73e8")
 SIMULATED_BRUSH = pg.mkBrush("#bdc1c6")

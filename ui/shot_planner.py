@@ -9,10 +9,11 @@ from __future__ import annotations
 from collections.abc import Callable, Collection
 from html import escape
 
+from PySide6.QtWidgets import QLabel, QPushButton, QVBoxLayout, QWidget
+
 from hopkinson.analysis.bar import G_M_S2, ShotPlan, plan_shot
 from hopkinson.rig.config import RigConfig
 from hopkinson.ui.inputs import UnitSpinBox
-from PySide6.QtWidgets import QLabel, QPushButton, QVBoxLayout, QWidget
 
 
 class ShotPlanner(QWidget):

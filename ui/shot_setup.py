@@ -31,15 +31,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS, SensitivityUnit
-from hopkinson.rig.config import RigConfig
-from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
-from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
-from hopkinson.ui.sensor_lookup import RecordAdvice, record_advice
-from hopkinson.ui.setup_check import SetupPrediction, predict_setup
-from hopkinson.ui.shot_planner import ShotPlanner
-from hopkinson.ui.widgets import TEXT_COLOURS, section_title
-from hopkinson.ui.worker import Background
 from PySide6.QtCore import QSettings, QTimer, Signal
 from PySide6.QtWidgets import (
     QFileDialog,
@@ -52,6 +43,16 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
+
+from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS, SensitivityUnit
+from hopkinson.rig.config import RigConfig
+from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
+from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
+from hopkinson.ui.sensor_lookup import RecordAdvice, record_advice
+from hopkinson.ui.setup_check import SetupPrediction, predict_setup
+from hopkinson.ui.shot_planner import ShotPlanner
+from hopkinson.ui.widgets import TEXT_COLOURS, section_title
+from hopkinson.ui.worker import Background
 
 KILO = 1e3
 DEFAULT_MAX_ORDER = 12

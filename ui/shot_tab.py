@@ -19,6 +19,19 @@ import math
 
 import numpy as np
 import pyqtgraph as pg
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import (
+    QFrame,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QScrollArea,
+    QSplitter,
+    QVBoxLayout,
+    QWidget,
+)
+
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.sensitivity_units import G_M_S2
 from hopkinson.analysis.verdict import (
@@ -51,18 +64,6 @@ from hopkinson.ui.plots import (
     set_y_to_curves,
 )
 from hopkinson.ui.widgets import TEXT_COLOURS
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import (
-    QFrame,
-    QGridLayout,
-    QHBoxLayout,
-    QLabel,
-    QPushButton,
-    QScrollArea,
-    QSplitter,
-    QVBoxLayout,
-    QWidget,
-)
 
 _DECISION_STYLE = {
     Decision.ACCEPT: "background: #1e8e3e; color: white;",

@@ -4,9 +4,10 @@ the window's header: that row, the simulation badge and the ARM / FIRE / ABORT b
 
 from __future__ import annotations
 
-from hopkinson.rig.sequencer import State
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+
+from hopkinson.rig.sequencer import State
 
 STEPS = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE, State.SAFE,
          State.STORE, State.ANALYSE, State.DONE)

@@ -10,13 +10,14 @@ ARM); grey = not read in this state. The tooltip says what the rig reported.
 
 from __future__ import annotations
 
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
+
 from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.events import Reading
 from hopkinson.rig.interlocks import INTERLOCKS
 from hopkinson.ui.widgets import LampLabel, section_title
 from hopkinson.ui.worker import INSTRUMENT_KEYS, INSTRUMENT_LABELS, InstrumentLink
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QFrame, QGridLayout, QLabel, QVBoxLayout, QWidget
 
 INTERLOCK_CAPTIONS = {
     "door": "Door / guard closed",

@@ -49,6 +49,8 @@ from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
 from typing import Any
 
+from PySide6.QtCore import QObject, QTimer, Signal, Slot
+
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import instrument_hint, with_hint
@@ -60,7 +62,6 @@ from hopkinson.rig.lock import RigLock, command_line, rig_address
 from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.shot import ShotOutcome, ShotRequest
 from hopkinson.rig.signals import SignalLatch
-from PySide6.QtCore import QObject, QTimer, Signal, Slot
 
 _log = logging.getLogger(__name__)
 

@@ -22,8 +22,9 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from hopkinson.analysis.bar.materials import Material
 from scipy import optimize, special
+
+from hopkinson.analysis.bar.materials import Material
 
 GRID_POINTS = 240
 GRID_TOP = 3.0  # f·a/c_T: beyond, the first mode is at the Rayleigh speed to < 0.1 %

@@ -28,6 +28,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from hopkinson.analysis.bar.geometry import CONTACT_REFERENCE_M, Segment
 
 MIN_CELLS = 8  # the shortest segment is cut into at least this many cells

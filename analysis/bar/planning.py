@@ -22,6 +22,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
 from hopkinson.analysis.bar.geometry import G_M_S2, BarRig, Projectile
 from hopkinson.analysis.bar.predict import ShotPrediction, predict_shot, speed_for_peak
 from hopkinson.analysis.excitation import supported_band

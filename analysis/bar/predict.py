@@ -15,10 +15,11 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from scipy import optimize
+
 from hopkinson.analysis.bar.dispersion import disperse
 from hopkinson.analysis.bar.geometry import REFERENCE_PRESSURE_BAR, BarRig
 from hopkinson.analysis.bar.lattice import impact_force, object_motion
-from scipy import optimize
 
 DEFAULT_SAMPLE_INTERVAL_S = 1e-7
 DEFAULT_DURATION_S = 2e-3

@@ -11,9 +11,10 @@ from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
-from hopkinson.drivers.sim.config_fields import SECTION, Number
 from pydantic import Field
 from scipy import signal
+
+from hopkinson.drivers.sim.config_fields import SECTION, Number
 
 
 @dataclass(frozen=True)

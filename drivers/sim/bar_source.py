@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+
 from hopkinson.analysis.bar import PAPER_RIG, BarRig, predict_shot
 from hopkinson.drivers.sim.real_records import PulseShape, tabulated_pulse
 

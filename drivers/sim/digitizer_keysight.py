@@ -31,6 +31,7 @@ their short form ("CHAN1", "POS", "LSBF").
 from __future__ import annotations
 
 import numpy as np
+
 from hopkinson.drivers.sim.scpi_instrument import RECORD_LENGTH_LIMITS, SimDigitizer
 from hopkinson.drivers.sim.scpi_messages import Block, Call, Handler, Reply, SimError
 

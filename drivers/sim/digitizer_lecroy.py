@@ -29,6 +29,7 @@ import struct
 from collections.abc import Callable
 
 import numpy as np
+
 from hopkinson.drivers.sim.scpi_instrument import SimDigitizer
 from hopkinson.drivers.sim.scpi_messages import Block, Call, Handler, Reply, SimError
 

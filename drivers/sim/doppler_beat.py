@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from hopkinson.drivers.sim import shock
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, white_noise
 

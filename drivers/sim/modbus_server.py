@@ -43,6 +43,13 @@ import asyncio
 import threading
 from typing import Any
 
+from pymodbus import FramerType
+from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
+from pymodbus.pdu.device import ModbusDeviceIdentification
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
 from hopkinson.drivers.sim.controller_map import (
     BIT_TABLES,
     FIRE_STYLES,
@@ -53,12 +60,6 @@ from hopkinson.drivers.sim.controller_map import (
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.serial_line import PtyLine, byte_time_s
 from hopkinson.drivers.sim.world import World
-from pymodbus import FramerType
-from pymodbus.constants import ExcCodes
-from pymodbus.exceptions import NoSuchIdException
-from pymodbus.pdu.device import ModbusDeviceIdentification
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
 
 IDENTITY = ("Hopkinson-Sim", "SIMVAC-1", "1.0")  # vendor, product code, revision
 

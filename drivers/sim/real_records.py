@@ -37,13 +37,14 @@ from dataclasses import asdict, dataclass, field
 from typing import Annotated, Any, Literal, Protocol
 
 import numpy as np
+from pydantic import Field
+from scipy import signal
+
 from hopkinson.analysis.bar.geometry import MOUNTS
 from hopkinson.drivers.sim.accelerometer import fractional_delay
 from hopkinson.drivers.sim.config_fields import SECTION, Flag, Int, Number
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.shock import bipolar_m_s2, bipolar_velocity_m_s, velocity_m_s
-from pydantic import Field
-from scipy import signal
 
 PULSE_SOURCES = ("ideal", "bar")
 

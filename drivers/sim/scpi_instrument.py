@@ -35,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.scpi_messages import (
     Block,

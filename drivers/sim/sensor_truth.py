@@ -18,8 +18,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from hopkinson.drivers.sim.accelerometer import AccelerometerTruth
 from scipy.optimize import brentq
+
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth
 
 FBSD_LEVELS = (0.05, 0.10)
 REPORTED = "the mean of both directions (compression and tension)"

@@ -38,6 +38,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, TextIO
 
+from pydantic import Field
+
 from hopkinson.drivers.sim.config_fields import (
     SECTION,
     Baud,
@@ -53,8 +55,6 @@ from hopkinson.drivers.sim.modbus_server import SimModbusServer
 from hopkinson.drivers.sim.scpi_digitizer import SIM_DIALECTS, SimDigitizerServer
 from hopkinson.drivers.sim.serial_amplifier import SimSerialAmplifier
 from hopkinson.drivers.sim.world import World, WorldParams
-from pydantic import Field
-
 from hopkinson.fileio import atomic_write, private_runtime_dir
 
 ADDRESSES_FILE = "sim-addresses.json"  # in the runtime folder: the running `hopkinson sim`

@@ -73,6 +73,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+
 from hopkinson.drivers.sim.accelerometer import (
     AccelerometerTruth,
     Mode,

@@ -12,11 +12,12 @@ import math
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
+from pydantic import AfterValidator, Field
+
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.config_fields import SECTION, Flag, Hint, Int, Number, Orders, one_of
 from hopkinson.drivers.sim.doppler_beat import DEFAULT_GRATING_PITCH_M, QuadratureOutput
 from hopkinson.drivers.sim.real_records import IdealPulseSource, PulseSource, RealismParams
-from pydantic import AfterValidator, Field
 
 PROJECTILES = (1, 2, 3)
 # The digitizer's channel of each signal (World.capture's keys): the PM beat, the amplifier

@@ -4,6 +4,7 @@ connection (config.attributes["connection"]); no alembic.ini, no URL of its own.
 from __future__ import annotations
 
 from alembic import context
+
 from hopkinson.lab.schema import Base
 
 connection = context.config.attributes["connection"]

@@ -16,9 +16,8 @@ import sys
 from typing import Any
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.rig.cli.main import emit_json
-
 from hopkinson.fileio import UnsafeOutputError, check_output_path
+from hopkinson.rig.cli.main import emit_json
 
 
 def run_compare_sine(args: argparse.Namespace) -> int:

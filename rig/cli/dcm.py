@@ -28,12 +28,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.rig.cli.main import emit_json
-
 from hopkinson.fileio import UnsafeOutputError, atomic_open, atomic_write, check_output_path
+from hopkinson.rig.cli.main import emit_json
 
 if TYPE_CHECKING:
     import numpy as np
+
     from hopkinson.analysis.dcm import DCM
     from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport
     from hopkinson.analysis.model import DiscreteModel
@@ -328,6 +328,7 @@ def _write_stream(output: Path, record: Any, parts: Any, flush: Any) -> None:
     """Write time, reference and the compensated response as the blocks come (CSV rows block
     by block; NPZ at the end), atomically: an error leaves no file."""
     import numpy as np
+
     from hopkinson.analysis.records import RECORD_KEYS, header_cell
 
     units = {"time_s": "s", "reference": "m/s^2", "response": getattr(record, "response_unit", None)}

@@ -146,6 +146,7 @@ def _shot_truth(path: Path) -> dict[str, Any] | None:
 
 
 def demo_command(args: argparse.Namespace) -> int:
+    from hopkinson.fileio import atomic_write
     from hopkinson.rig.campaign import CampaignRunner
     from hopkinson.rig.campaign_setup import prepare_run
     from hopkinson.rig.config import load_rig_config, load_sim_config
@@ -153,8 +154,6 @@ def demo_command(args: argparse.Namespace) -> int:
     from hopkinson.rig.instruments import open_instruments
     from hopkinson.rig.report_data import run_report, write_run_report
     from hopkinson.rig.sim_session import sim_session
-
-    from hopkinson.fileio import atomic_write
 
     if not 1 <= args.shots <= MAX_SHOTS:
         raise ConfigError(f"--shots: must be 1..{MAX_SHOTS}, got {args.shots}")

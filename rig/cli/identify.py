@@ -155,7 +155,6 @@ def run_identify(args: argparse.Namespace) -> int:
     write the JSON (never over the record or a shot file; atomically)."""
     from hopkinson.analysis.records import read_record
     from hopkinson.analysis.shot_analysis import identify_with_uncertainty
-
     from hopkinson.fileio import atomic_write, check_output_path
 
     params = _checked_params(args)
@@ -198,7 +197,6 @@ def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any, cli
     the record's flat-top warnings."""
     from hopkinson.analysis.paper_method import paper_identify
     from hopkinson.analysis.response import fbsd_hz
-
     from hopkinson.fileio import atomic_write
 
     if args.sine:

@@ -140,6 +140,7 @@ def _one_line_database_errors(func: Any) -> Any:
     """A database error anywhere in a command becomes one line (LabError: exit 2), never a traceback."""
     def run(args: argparse.Namespace) -> int:
         import sqlalchemy as sa
+
         from hopkinson.lab.database import first_line
         from hopkinson.lab.errors import LabError
 
@@ -246,9 +247,8 @@ def sensor_command(args: argparse.Namespace) -> int:
             repo.register_sensor(args.serial, args.by or getpass.getuser(), create=args.new, **fields)
         history = load_sensor_history(repo, args.serial, config.lab.decision_rule, args.include_simulated)
     if args.plot is not None:
-        from hopkinson.lab.history_plot import history_figure
-
         from hopkinson.fileio import atomic_write
+        from hopkinson.lab.history_plot import history_figure
 
         fig = history_figure(history)
         atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png", dpi=90))
@@ -339,10 +339,9 @@ def _identity(config: Any) -> Any:
 
 
 def _check_documents(outputs: list[Path]) -> None:
+    from hopkinson.fileio import check_output_path
     from hopkinson.lab.certificate import DOCUMENT_SUFFIXES
     from hopkinson.lab.errors import LabError
-
-    from hopkinson.fileio import check_output_path
 
     for out in outputs:
         if out.suffix.lower() not in DOCUMENT_SUFFIXES:

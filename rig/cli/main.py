@@ -74,10 +74,9 @@ def rig_config_path(args: argparse.Namespace) -> Path:
 
 def _known_errors() -> tuple[type[BaseException], ...]:
     from hopkinson.analysis.errors import AnalysisError
+    from hopkinson.fileio import UnsafeOutputError
     from hopkinson.lab.errors import LabError
     from hopkinson.rig.errors import ConfigError, ShotAborted
-
-    from hopkinson.fileio import UnsafeOutputError
 
     errors: list[type[BaseException]] = [AnalysisError, ConfigError, LabError, ShotAborted, UnsafeOutputError]
     try:

@@ -173,7 +173,6 @@ def run_reduce(args: argparse.Namespace) -> int:
     from hopkinson.analysis.records import write_record
     from hopkinson.analysis.reduce import DEFAULT_GRATING_PITCH_M, interferometer_text, reduce_raw
     from hopkinson.analysis.resample import DEFAULT_ANALYSIS_RATE_HZ
-
     from hopkinson.fileio import check_output_path
 
     _check_numbers(args)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import band_edges
 from hopkinson.drivers.sim.accelerometer import (

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pytest
+
 from hopkinson.analysis.findings import texts
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.model import DiscreteModel

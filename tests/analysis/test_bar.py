@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.bar import (
     PAPER_RIG,
     Launcher,

@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import dataclasses
 
+from scipy.stats import binom
+
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
-from scipy.stats import binom
-
 from tests.rig.conftest import REPO
 from tests.sim_truth import true_fbsd_hz
 

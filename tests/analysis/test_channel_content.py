@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.channel_content import EMPTY_RISE_DB, beat_content, pulse_content
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.params import AnalysisParams

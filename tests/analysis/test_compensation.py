@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.compensation import (
     check_compensation,
     compensate_shot,
@@ -29,7 +31,6 @@ from hopkinson.drivers.sim.accelerometer import (
     white_noise,
 )
 from hopkinson.drivers.sim.shock import half_sine_m_s2
-from scipy import signal
 
 DT = 1e-6
 N = 4000

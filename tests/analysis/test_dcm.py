@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.dcm import (
     DCM,
     DcmStream,
@@ -22,7 +24,6 @@ from hopkinson.analysis.dcm import (
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import fbsd_hz
-from scipy import signal
 
 TABLE1_POLES = np.array([0.9740 + 0.1396j, 0.9740 - 0.1396j, 0.8174 + 0.0518j, 0.8174 - 0.0518j])
 EXTRA = [0.6 + 0.1j, 0.6 - 0.1j]  # the paper's text says 0.4 ± 0.1j: a typo (PAPER-NOTES)

@@ -8,6 +8,8 @@ import re
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.dcm import compensated_fbsd_hz
 from hopkinson.analysis.dcm_design import (
     DcmOptions,
@@ -19,7 +21,6 @@ from hopkinson.analysis.dcm_design import (
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import fbsd_hz, response_times_samples
-from scipy import signal
 
 DT = 1e-6
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.determination import SHOCK_OVERSHOOT_LIMIT, is_result, not_determined
 from hopkinson.analysis.estimate import Estimate
 from hopkinson.analysis.key_figures import KeyFigures

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis import differentiating_lowpass, doppler
 from hopkinson.analysis.beat_phase import beat_phase
 from hopkinson.analysis.errors import AnalysisError

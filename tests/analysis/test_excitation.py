@@ -6,11 +6,12 @@ import json
 
 import numpy as np
 import pytest
+from scipy import optimize
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import amplitude_spectrum, excitation_summary, pulse_width
 from hopkinson.drivers.sim.accelerometer import white_noise
 from hopkinson.drivers.sim.shock import G_M_S2, dipole_m_s2, gaussian_velocity_m_s2, half_sine_m_s2
-from scipy import optimize
 
 MINUS_3DB = 10 ** (-3 / 20)
 EQ35 = 10 ** (-3 / 40)

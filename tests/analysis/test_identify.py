@@ -15,6 +15,9 @@ import json
 
 import numpy as np
 import pytest
+from scipy import signal
+from scipy.optimize import linear_sum_assignment
+
 from hopkinson.analysis.claims import claim_findings, claimed_modes
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import supported_band_hz
@@ -33,8 +36,6 @@ from hopkinson.drivers.sim.accelerometer import (
     white_noise,
 )
 from hopkinson.drivers.sim.shock import dipole_m_s2, gaussian_velocity_m_s2, half_sine_m_s2
-from scipy import signal
-from scipy.optimize import linear_sum_assignment
 
 T = 1e-6  # analysis sample interval, s
 N = 20_000  # samples per record (20 ms at 1 MS/s)

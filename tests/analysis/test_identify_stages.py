@@ -9,6 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.claims import claimed_modes, delay_findings
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import FindingCode
@@ -35,7 +37,6 @@ from hopkinson.analysis.record_preparation import (
 )
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.structure import DelayMode, Structure
-from scipy import signal
 
 DT = 1e-6  # the record is taken at the analysis rate (sample_rate_hz=None: no resampling)
 N = 4096

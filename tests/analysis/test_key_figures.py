@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 
 RESULTS = {

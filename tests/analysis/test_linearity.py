@@ -23,6 +23,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.analysis.linearity import fit_linearity
@@ -30,7 +31,6 @@ from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
-
 from tests.rig.conftest import REPO
 
 NONLINEARITY = -1.0e-7  # −1 % per 100 km/s²

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel, load_model
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis import noise, record_preparation
 from hopkinson.analysis.noise import COHERENCE_SEGMENT, first_motion, is_motion
-
 from tests.ptb_shock import noisier, ptb_record
 
 RATE_HZ = 1e6

@@ -10,6 +10,9 @@ import math
 
 import numpy as np
 import pytest
+from scipy import signal
+from scipy.optimize import brentq
+
 from hopkinson.analysis.dcm import (
     DCM,
     StepComparison,
@@ -24,8 +27,6 @@ from hopkinson.analysis.dcm import (
 )
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
-from scipy import signal
-from scipy.optimize import brentq
 
 DT = 1e-6
 

@@ -11,9 +11,10 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats
+
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.uncertainty import Estimate, response_band
-from scipy import stats
 
 GRID = np.arange(1001.0)  # exact quantiles: 2.5 % → 25, 97.5 % → 975, 5 % → 50, 95 % → 950
 

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import (
@@ -27,7 +29,6 @@ from hopkinson.analysis.response import (
     to_continuous,
     zpk_to_sos,
 )
-from scipy import signal
 
 
 def test_level_keys_and_band_edge_dict() -> None:

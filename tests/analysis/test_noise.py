@@ -11,10 +11,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.resample import resample_to_rate
-
 from tests.analysis.hard_records import ANALYSIS_DT, Case, record
 
 RATE = 1e6

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import fft, optimize, special
+
 from hopkinson.analysis.numerics import (
     bracketed_root,
     f_quantile,
     levenberg_marquardt,
     next_fast_len,
 )
-from scipy import fft, optimize, special
 
 
 @pytest.mark.parametrize("p", [0.5, 0.99, 1 - 0.01 / 512])

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.loss import arx_coefficients_by_order
 from hopkinson.analysis.paper_method import inflexions, paper_order, prefiltered_arx
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.shock import half_sine_m_s2
 from hopkinson.rig.cli.main import main
-from scipy import signal
-
 from tests.ptb_shock import write_ptb_record_csv
 
 

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.params import AnalysisParams
 
@@ -68,6 +69,7 @@ def _design_refuses(option: str, value: object) -> bool:
     """Whether the DCM design (DcmOptions, design_compensation on a 27 kHz sensor's shot at
     1 MS/s with room for two extra poles) refuses the option."""
     import numpy as np
+
     from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
     from hopkinson.analysis.model import DiscreteModel
 

@@ -33,11 +33,11 @@ import re
 
 import numpy as np
 import pytest
-from hopkinson.analysis.params import AnalysisParams
-from hopkinson.analysis.records import Record
 from scipy import signal
 from scipy.stats import binom
 
+from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.records import Record
 from tests.analysis.ptb_fixtures import seeds
 from tests.ptb_shock import against_sine, ptb_record, ptb_sine
 
@@ -425,7 +425,6 @@ def explained(tmp_path, capsys, name: str, record: Record | None = None) -> str:
     """What `identify FILE --no-uncertainty --explain` prints for `record` (PTB's: None) written as
     the interchange CSV; run once per name in the module."""
     from hopkinson.rig.cli.main import main
-
     from tests.ptb_shock import write_ptb_record_csv
 
     if name not in _EXPLAINED:
@@ -538,7 +537,6 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     published record's; the intervals hold the sine's; the warning names the lead."""
     from hopkinson.analysis.identify import identify_with_sine
     from hopkinson.rig.cli.identify import explain
-
     from tests.ptb_shock import skewed
 
     shifted = analyses.analysed("ptb skewed -100", lambda: skewed(-100), seed=1, draws=DRAWS)
@@ -565,7 +563,6 @@ def test_a_lead_beyond_the_realignments_search_is_refused_with_its_cause(tmp_pat
     is unstable, and the refusal says the channels' cross-correlation peaked at its search's edge
     and what to do (until stop 38 it named no cause); one line naming the file, exit code 2."""
     from hopkinson.rig.cli.main import main
-
     from tests.ptb_shock import skewed, write_ptb_record_csv
 
     path = write_ptb_record_csv(tmp_path / "skewed.csv", skewed(-700))
@@ -583,7 +580,6 @@ def test_a_table_file_whose_response_is_clipped_is_warned_about(tmp_path, capsys
     same record quantised in 12 bits over 1.25× or in 8 bits over 4× its peak, whose extreme
     code repeats too."""
     from hopkinson.rig.cli.main import main
-
     from tests.ptb_shock import write_ptb_record_csv
 
     rec = ptb_record()

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.quadrature import (
     Ellipse,

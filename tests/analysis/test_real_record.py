@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.order_choice import choose_stable_order
@@ -23,8 +25,6 @@ from hopkinson.drivers.sim.accelerometer import (
 )
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.shock import bipolar_m_s2
-from scipy import signal
-
 from tests.analysis.hard_records import DT, Case, record, truth_figures
 
 PIEZO = Case(

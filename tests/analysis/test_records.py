@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import RecordError
 from hopkinson.analysis.records import Record, read_record, record_from_arrays, write_record
 

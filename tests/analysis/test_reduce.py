@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError, RecordError
 from hopkinson.analysis.full_scale import full_scale_volts
 from hopkinson.analysis.identify import identify

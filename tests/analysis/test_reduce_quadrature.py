@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.reduce import SensorChannel, reduce_raw, reduce_sensors

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import (

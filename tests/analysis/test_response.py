@@ -7,6 +7,9 @@ import json
 
 import numpy as np
 import pytest
+from scipy import signal
+from scipy.optimize import brentq
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import (
@@ -22,8 +25,6 @@ from hopkinson.analysis.response import (
     to_continuous,
 )
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
-from scipy import signal
-from scipy.optimize import brentq
 
 TABLE1_POLES = np.array([0.9740 + 0.1396j, 0.9740 - 0.1396j, 0.8174 + 0.0518j, 0.8174 - 0.0518j])
 

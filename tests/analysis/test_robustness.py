@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import DEFAULT_DRAWS
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import fbsd_hz
 from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
-
 from tests.analysis.hard_records import Case, record, truth_figures
 
 NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0,

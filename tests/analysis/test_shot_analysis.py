@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_raw_shot
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
@@ -64,9 +65,10 @@ def test_incomplete_results_are_a_clear_error():
 def test_peak_overshoot_against_closed_form_second_order():
     """A half-sine much longer than the resonance period barely overshoots; a short one rings.
     Independent truth: the continuous system's response to the pulse by scipy's lsim."""
+    from scipy import signal
+
     from hopkinson.analysis.model import DiscreteModel
     from hopkinson.analysis.shot_analysis import peak_overshoot
-    from scipy import signal
 
     truth = AccelerometerTruth(modes=(Mode(27_000.0, 0.05),))
     b, a = truth.discrete_tf(1e-6)

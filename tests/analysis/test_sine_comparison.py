@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel

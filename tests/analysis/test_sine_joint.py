@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import identify_with_sine
@@ -16,7 +17,6 @@ from hopkinson.analysis.sine_comparison import SineCalibration
 from hopkinson.analysis.sine_joint import JointWeights, paule_mandel, sine_terms, with_draws
 from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
-
 from tests.analysis.hard_records import Case, record, truth_figures
 
 CASE = Case()  # 27 kHz, ζ 0.05, a 20 µs half-sine: the mode inside the supported band

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.shot_analysis import analyse_record

@@ -27,13 +27,13 @@ import math
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis import uncertainty
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import FindingCode
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.uncertainty import Estimate, UncertaintyOptions, evaluate, shot_uncertainty
-
 from tests.analysis.hard_records import Case, record, truth_figures
 
 NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 
 import pytest
+
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.analysis.sensitivity_units import (
     G_M_S2,

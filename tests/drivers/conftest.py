@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from dataclasses import replace
 
 import pytest
+
 from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
 from hopkinson.drivers.sim.world import WorldParams
 from hopkinson.drivers.valve_controller import ModbusTarget, ValveController

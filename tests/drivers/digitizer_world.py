@@ -8,6 +8,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+
 from hopkinson.drivers.sim.scpi_instrument import AcquisitionSettings
 
 # dialect -> its names of channels 1..4 and what the sim calls its channels

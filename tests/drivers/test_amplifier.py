@@ -12,6 +12,7 @@ from functools import reduce
 
 import pytest
 import serial
+
 from hopkinson.drivers.amplifier import (
     BridgeAmplifier,
     FramingError,

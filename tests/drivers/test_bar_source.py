@@ -9,11 +9,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.bar import PAPER_RIG, predict_shot
 from hopkinson.analysis.reduce import SensorChannel, reduce_sensors
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
-
 from tests.rig.conftest import REPO
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.base import TraceRecord
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
@@ -24,7 +25,6 @@ from hopkinson.drivers.digitizer_visa import _SocketReader
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
-
 from tests.drivers.digitizer_world import World, expected_codes
 
 N_SMALL = 20_000

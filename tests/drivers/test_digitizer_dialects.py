@@ -13,12 +13,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 import pyvisa
+
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.errors import InstrumentError
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
-
 from tests.drivers.digitizer_world import CHANNELS, FORMATS, STEP_V, World, expected_codes, rails
 
 N = 4_000

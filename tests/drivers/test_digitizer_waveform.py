@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.digitizer_waveform import (
     SampleFormatError,

@@ -7,13 +7,13 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.amplifier import BridgeAmplifier
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.sim.faults import FAULTS
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 from hopkinson.drivers.valve_controller import ValveController
-
 from tests.drivers.conftest import FakeClock
 
 

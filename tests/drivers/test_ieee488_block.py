@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from hopkinson.drivers.ieee488_block import BlockFormatError, digit_count, payload_length
 
 

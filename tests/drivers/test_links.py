@@ -13,6 +13,9 @@ from collections.abc import Iterator
 
 import pytest
 import serial
+from pymodbus.server import ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
 from hopkinson.drivers.amplifier import BridgeAmplifier
 from hopkinson.drivers.base import read_bounded, trace_text
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
@@ -21,9 +24,6 @@ from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.serial_line import PtyLine, byte_time_s
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 from hopkinson.drivers.valve_controller import ValveController
-from pymodbus.server import ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
-
 from tests.drivers.conftest import controller_for, sim_config
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.errors import InstrumentError
 from hopkinson.drivers.manual_conditioner import ManualConditioner
 from hopkinson.drivers.roles import AmplifierRole, AmplifierSettings, missing_members

@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.analysis.reduce import SensorChannel, reduce_sensors
 from hopkinson.drivers.sim.real_records import (
     BarRingingParams,
@@ -31,8 +33,6 @@ from hopkinson.drivers.sim.real_records import (
 )
 from hopkinson.drivers.sim.world import CaptureSettings, WorldParams, simulate_shot
 from hopkinson.rig.config import load_sim_config
-from scipy import signal
-
 from tests.rig.conftest import REPO
 
 DT = 1e-7  # the internal grid of the simulated world: 10 MS/s

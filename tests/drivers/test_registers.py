@@ -7,6 +7,7 @@ import math
 import struct
 
 import pytest
+
 from hopkinson.drivers.registers import (
     CoilMap,
     Register,

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import signal
+
 from hopkinson.drivers.sim.accelerometer import (
     AccelerometerTruth,
     Mode,
     coloured_noise,
     white_noise,
 )
-from scipy import signal
 
 
 def test_single_mode_matches_second_order_closed_form():

@@ -7,12 +7,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.sim.accelerometer import baseline_drift, fractional_delay
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.faults import FaultSet
 from hopkinson.drivers.sim.shock import bipolar_m_s2, bipolar_velocity_m_s, velocity_m_s
 from hopkinson.drivers.sim.world import SignalParams, World, WorldParams
-
 from tests.drivers.conftest import FakeClock
 
 

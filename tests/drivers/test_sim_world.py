@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.sim.accelerometer import Mode
 from hopkinson.drivers.sim.faults import FaultSet
@@ -22,7 +23,6 @@ from hopkinson.drivers.sim.world import (
     accelerometer_truth,
 )
 from hopkinson.drivers.valve_controller import ValveController
-
 from tests.drivers.conftest import FakeClock, sim_config
 
 

@@ -11,6 +11,8 @@ import time
 from dataclasses import replace
 
 import pytest
+from pymodbus.client import ModbusTcpClient
+
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.controller_map import Point, default_map
@@ -23,8 +25,6 @@ from hopkinson.drivers.valve_controller import (
     RegisterMap,
     ValveController,
 )
-from pymodbus.client import ModbusTcpClient
-
 from tests.drivers.conftest import FakeClock, controller_for, sim_config
 
 

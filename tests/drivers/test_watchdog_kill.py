@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
-
 from tests.drivers.conftest import sim_config
 
 CONTROLLER = textwrap.dedent("""

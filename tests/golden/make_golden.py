@@ -176,9 +176,9 @@ def hybrid_goldens(work: Path) -> Iterator[Golden]:
     """PTB's real reference driving a known sensor (tests/analysis/test_ptb_identify.py): clean,
     with the lobe-dependent gain PTB's record shows (with its uncertainty), with the bar's motion."""
     import numpy as np
-    from hopkinson.analysis.records import Record
     from scipy import signal
 
+    from hopkinson.analysis.records import Record
     from tests.analysis.test_ptb_identify import hybrid_record
 
     for name, (tension, compression, seed, motion, draws) in HYBRIDS.items():

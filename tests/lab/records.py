@@ -59,6 +59,7 @@ def write_made_up_shot(path, *, serial: str = "SN-7", campaign: str | None = Non
                        operator: str = "tech A"):
     """A real shot file (rig.shotfile) with short made-up channels and made-up results; its meta."""
     import numpy as np
+
     from hopkinson.rig.shotfile import RawShot, ShotMeta
     from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 

@@ -8,10 +8,10 @@ import math
 from datetime import date
 
 import pytest
-from hopkinson.lab.history import calibrations_of, conformity_of, sensor_history
-from hopkinson.lab.repositories import SensorInfo, ShotResult
 from scipy.stats import t as student_t
 
+from hopkinson.lab.history import calibrations_of, conformity_of, sensor_history
+from hopkinson.lab.repositories import SensorInfo, ShotResult
 from tests.lab.records import figure
 
 

@@ -13,13 +13,13 @@ from pathlib import Path
 import h5py
 import pytest
 import sqlalchemy as sa
+
 from hopkinson.lab import spool
 from hopkinson.lab.errors import LabError
 from hopkinson.lab.repository import open_repository
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.lab_record import LabRecorder, shot_record
 from hopkinson.rig.shotfile_integrity import RAW_MISMATCH, verify_shot
-
 from tests.lab.records import made_up_record, write_made_up_shot
 from tests.lab.test_lab_cli import LAB_SECTION, REPO, lab, record_job
 from tests.lab.test_repository import issue_for

@@ -12,11 +12,11 @@ import h5py
 import numpy as np
 import pytest
 import sqlalchemy as sa
+from scipy.stats import t as student_t
+
 from hopkinson.lab.database import head_revision, make_engine
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.shotfile_writer import add_analysis
-from scipy.stats import t as student_t
-
 from tests.lab.records import made_up_results, write_made_up_shot
 
 REPO = Path(__file__).resolve().parents[2]

@@ -17,11 +17,11 @@ from typing import Any
 import pytest
 import sqlalchemy as sa
 from alembic import command
+
 from hopkinson.lab.database import _alembic_config, current_revision, head_revision, make_engine
 from hopkinson.lab.repository import open_repository
 from hopkinson.lab.schema import APPEND_ONLY_TABLES
 from hopkinson.rig.cli.main import main
-
 from tests.lab.records import made_up_record
 from tests.lab.test_repository import issue_for
 

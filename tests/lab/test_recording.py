@@ -11,6 +11,7 @@ from pathlib import Path
 
 import h5py
 import pytest
+
 from hopkinson.lab import spool
 from hopkinson.lab.database import redacted
 from hopkinson.lab.repository import open_repository
@@ -18,7 +19,6 @@ from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import DatabaseConfig
 from hopkinson.rig.events import RigWarning
 from hopkinson.rig.lab_record import LabRecorder, attach_recorder
-
 from tests.rig.conftest import Rig, short_timeouts_config
 
 UNREACHABLE = "postgresql://nobody@127.0.0.1:9/lab"  # port 9 (discard): nothing listens on loopback

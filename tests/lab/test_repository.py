@@ -9,11 +9,11 @@ import threading
 
 import pytest
 import sqlalchemy as sa
+
 from hopkinson.lab.database import head_revision, make_engine
 from hopkinson.lab.errors import LabError, TamperedShotError
 from hopkinson.lab.issuing import issue
 from hopkinson.lab.repository import LabRepository, open_repository
-
 from tests.lab.records import made_up_record
 
 

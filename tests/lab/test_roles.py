@@ -9,11 +9,11 @@ import contextlib
 import psycopg
 import pytest
 import sqlalchemy as sa
+
 from hopkinson.lab.errors import LabError
 from hopkinson.lab.repository import open_repository
 from hopkinson.lab.roles import grants_sql
 from hopkinson.rig.cli.main import main
-
 from tests.lab.records import made_up_record
 from tests.lab.test_repository import issue_for
 

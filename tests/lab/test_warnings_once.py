@@ -13,9 +13,9 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+
 from hopkinson.lab import spool
 from hopkinson.rig.cli.main import main
-
 from tests.lab.pg_cluster import new_postgres_database
 from tests.lab.records import write_made_up_shot
 from tests.lab.test_lab_cli import LAB_SECTION, REPO

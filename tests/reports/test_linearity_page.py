@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.reports.campaign_pages import LINEARITY_CAPTION, linearity_page
 from hopkinson.reports.statistics import (
     DC_GAIN,

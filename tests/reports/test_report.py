@@ -13,6 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.lines import Line2D
+from matplotlib.text import Text
+
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.records import Record
@@ -38,9 +41,6 @@ from hopkinson.reports.tables import (
     uncertainty_rows,
 )
 from hopkinson.reports.writers import write_pngs, write_report
-from matplotlib.lines import Line2D
-from matplotlib.text import Text
-
 from tests.reports.contract import contract_results
 
 DT = 1e-6

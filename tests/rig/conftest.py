@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import WorldParams

@@ -5,6 +5,7 @@ start-up)."""
 from __future__ import annotations
 
 import numpy as np
+
 from hopkinson.rig.shotfile import RawShot, ShotMeta
 
 

@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.campaign import CampaignRunner
 from hopkinson.rig.campaign_setup import shot_request
 from hopkinson.rig.cli.campaign import ProgressPrinter
@@ -38,7 +39,6 @@ from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.shotfile import read_shot
 from hopkinson.rig.sim_fire_log import FireLog, attach_fire_log, read_fire_log
 from hopkinson.rig.sim_session import SimSession, sim_session
-
 from tests.rig.conftest import fast_sim_config, short_timeouts_config
 
 S = ShotState

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 from hopkinson.rig.campaign import CampaignRunner
@@ -19,7 +20,6 @@ from hopkinson.rig.journal import Journal
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder
 from hopkinson.rig.shotfile import read_shot
-
 from tests.drivers.digitizer_world import CHANNELS
 from tests.rig.conftest import fast_sim_config, quick_analysis, short_timeouts_config
 

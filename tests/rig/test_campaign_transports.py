@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.sim.controller_map import Point, default_map
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig, SimulatedRig
 from hopkinson.drivers.sim.world import WorldParams
@@ -17,7 +18,6 @@ from hopkinson.rig.instruments import sim_rig_config
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder
-
 from tests.rig.conftest import quick_analysis, short_timeouts_config
 from tests.rig.test_campaign_dialects import PLAN  # two shots at 1.5 bar, firing authorised
 

@@ -18,11 +18,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.run_folder import RunFolder
 from hopkinson.rig.shotfile import analysis_results, read_shot
-
 from tests.rig.conftest import read_until
 from tests.rig.test_cli_shot import _args, configs  # noqa: F401 (fixture)
 

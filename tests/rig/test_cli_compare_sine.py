@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.rig.cli.main import main

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.model import load_model
 from hopkinson.analysis.records import Record, write_record
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise

@@ -8,8 +8,8 @@ import json
 
 import numpy as np
 import pytest
-from hopkinson.rig.cli.main import main
 
+from hopkinson.rig.cli.main import main
 from tests.analysis.hard_records import Case, record
 from tests.analysis.test_sine_joint import OTHER, synthetic_sine
 from tests.ptb_shock import write_ptb_record_csv, write_ptb_sine_csv

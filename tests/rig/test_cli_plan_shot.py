@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from hopkinson.analysis.bar import predict_shot
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import load_rig_config

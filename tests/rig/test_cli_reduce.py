@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.records import read_record
 from hopkinson.analysis.reduce import write_raw_table
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode

@@ -10,6 +10,7 @@ import zlib
 from pathlib import Path
 
 import pytest
+
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.cli.report import default_outputs
@@ -160,6 +161,7 @@ def test_a_plan_naming_a_sine_calibration_gets_the_comparison(run_folder: Path, 
     """The plan copy names the sensor's sine calibration (here: the simulated sensor's true
     response, as a lab's sine calibrator would measure it): the report compares every shot's model."""
     import numpy as np
+
     from hopkinson.drivers.sim.world import accelerometer_truth
 
     run = tmp_path / "run"

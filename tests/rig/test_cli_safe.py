@@ -12,10 +12,10 @@ import time
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.lock import current_holder
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import REPO, assert_safe, fast_sim_config, rig_toml, short_timeouts_config
 
 

@@ -12,10 +12,10 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.shotfile import read_shot
-
 from tests.rig.conftest import assert_state_safe, read_until
 
 REPO = Path(__file__).resolve().parents[2]

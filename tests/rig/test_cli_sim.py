@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 import serial
+
 from hopkinson.drivers.sim.faults import FAULTS
 from hopkinson.drivers.sim.simulated_rig import SimAddresses, SimulatedRig
 from hopkinson.rig.cli.main import main
@@ -328,11 +329,11 @@ def test_probe_reports_each_recorded_channels_state_and_names_an_off_channel_in_
     # turning channel 2 on; the probe says which recorded channel is off, and its transfer (an
     # empty block) gets a fix naming the channel.
     import pyvisa
+
     from hopkinson.drivers.sim.faults import FaultSet
     from hopkinson.drivers.sim.scpi_digitizer import SimDigitizerServer
     from hopkinson.rig.cli.probe import _probe_digitizer
     from hopkinson.rig.config import load_rig_config
-
     from tests.drivers.digitizer_world import World
 
     world = World()

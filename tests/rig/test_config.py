@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.accelerometer import Mode
 from hopkinson.drivers.sim.controller_map import Point, default_map

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.rig.config import load_rig_config

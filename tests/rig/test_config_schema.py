@@ -10,12 +10,12 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import load_rig_config, load_sim_config
 from hopkinson.rig.config_schema import KINDS, schema_text
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import load_plan
-
 from tests.rig.test_config import BAD_RIG, BAD_SIM
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError

@@ -7,13 +7,13 @@ import re
 from pathlib import Path
 
 import numpy as np
+
 from hopkinson.drivers.sim.world import accelerometer_truth
 from hopkinson.rig.cli.demo import demo_plan_text
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.plan import plan_from_dict
 from hopkinson.rig.shotfile import read_shot
-
 from tests.sim_truth import true_fbsd_hz
 
 REPO = Path(__file__).resolve().parents[2]

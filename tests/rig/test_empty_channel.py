@@ -10,11 +10,11 @@ import json
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.sequencer import Sequencer
 from hopkinson.rig.shot import shot_analyser
-
 from tests.rig.conftest import rig_toml
 
 

@@ -8,12 +8,12 @@ import dataclasses
 from dataclasses import replace
 
 import pytest
+
 from hopkinson.drivers.sim.controller_map import Point, default_map
 from hopkinson.drivers.sim.simulated_rig import SimConfig
 from hopkinson.rig.config import RigConfig, load_rig_config
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import Fired
-
 from tests.rig.conftest import REPO, fast_sim_config, short_timeouts_config
 
 # style -> the extra signals its PLC has (a fire coil of its own, a command word)

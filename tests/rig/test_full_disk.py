@@ -15,10 +15,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.shot import RESCUE_FOLDER, ShotRequestError
 from hopkinson.rig.shotfile import read_shot
-
 from tests.rig.test_cli_shot import _args, _assert_safe, _state, configs  # noqa: F401 (fixture)
 
 Mount = Callable[[int], Path]

@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.journal import Journal, JournalError, ShotState
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import create_run_folder, open_run_folder
 from hopkinson.rig.shotfile import read_shot
 from hopkinson.rig.shotfile_writer import write_raw_shot
-
 from tests.rig.journal_fakes import meta_for, raw_for
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.sim.real_records import RealismParams
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import LauncherParams, WorldParams
@@ -35,7 +36,6 @@ from hopkinson.rig.report_data import shot_identity
 from hopkinson.rig.run_folder import create_run_folder
 from hopkinson.rig.shotfile import read_shot, read_shot_meta
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import REPO, short_timeouts_config
 
 G = 9.80665

@@ -12,6 +12,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.lock import (
     RigLock,
@@ -22,7 +23,6 @@ from hopkinson.rig.lock import (
     rig_address,
 )
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import fast_sim_config, rig_toml, short_timeouts_config
 
 PLAN = """

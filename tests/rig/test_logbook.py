@@ -12,10 +12,9 @@ import re
 import signal
 from pathlib import Path
 
+from hopkinson.fileio import UnsafeOutputError, atomic_write
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.logbook import Logbook, read_log
-
-from hopkinson.fileio import UnsafeOutputError, atomic_write
 
 REPO = Path(__file__).resolve().parents[2]
 QUICK = ("--sample-rate", "20000")  # an analysis that fails at once (too few samples): not what is tested here

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
+
 from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
 from hopkinson.drivers.roles import Interlocks, ValveStates
 from hopkinson.rig.config import LimitsConfig

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import AnalysisOptions, load_plan
 

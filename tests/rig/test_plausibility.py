@@ -16,6 +16,7 @@ import struct
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.controller_map import Point, default_map
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
@@ -32,7 +33,6 @@ from hopkinson.rig.plausibility import (
     judge,
     plausible_ranges,
 )
-
 from tests.rig.conftest import REPO, short_timeouts_config
 
 RANGES = plausible_ranges(load_rig_config(REPO / "config" / "rig-sim.toml"))  # reservoir -1 .. 16 bar

@@ -16,6 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.reduce import reduce_raw
 from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode

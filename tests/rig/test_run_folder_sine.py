@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.run_folder import create_run_folder, plan_naming_sine_calibration

@@ -4,7 +4,6 @@ the valve was seen stuck (the last round ends in an instrument error, not a read
 from __future__ import annotations
 
 from hopkinson.rig.events import Reading, RigEvent
-
 from tests.rig.conftest import short_timeouts_config
 from tests.rig.test_sequencer import _leave_the_rig_charged
 

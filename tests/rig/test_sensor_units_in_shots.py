@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError

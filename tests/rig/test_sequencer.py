@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.errors import ShotAborted
@@ -31,7 +32,6 @@ from hopkinson.rig.interlocks import INTERLOCKS, REQUIRED, RigReadings, evaluate
 from hopkinson.rig.sequencer import FINAL_STATES, TRANSITIONS, FireAuthorisation, Sequencer, State
 from hopkinson.rig.shot import AnalysisResult, ShotRequestError
 from hopkinson.rig.shotfile import RawShot, read_shot
-
 from tests.rig.conftest import short_timeouts_config
 
 ACTIVE = (State.CHECK, State.EVACUATE, State.CHARGE, State.ARM, State.FIRE, State.CAPTURE)

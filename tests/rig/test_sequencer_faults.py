@@ -24,12 +24,12 @@ import threading
 import time
 
 import pytest
+
 from hopkinson.drivers.sim.faults import FAULTS
 from hopkinson.rig.events import Reading, RigEvent
 from hopkinson.rig.logbook import read_log
 from hopkinson.rig.sequencer import FireAuthorisation
 from hopkinson.rig.shotfile import read_shot
-
 from tests.rig.conftest import SLOW_DELAY_S, Rig, short_timeouts_config
 
 STATES = ("CHECK", "EVACUATE", "CHARGE", "ARM", "FIRE")

@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.shotfile import read_shot
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+
 from hopkinson.analysis.records import Record
 from hopkinson.rig.run_folder import RunFolder
 from hopkinson.rig.shotfile import (

@@ -16,11 +16,11 @@ import signal
 import time
 
 import pytest
+
 from hopkinson.rig.control import run_shot_under_signals
 from hopkinson.rig.events import RigEvent, StateEntered
 from hopkinson.rig.sequencer import FireAuthorisation, Sequencer
 from hopkinson.rig.signals import SignalLatch
-
 from tests.rig.conftest import quick_analysis
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)

@@ -15,11 +15,11 @@ import time
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.lock import current_holder
 from hopkinson.rig.logbook import read_log
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import (
     REPO,
     assert_safe,

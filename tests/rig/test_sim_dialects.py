@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.drivers.sim.scpi_digitizer import SIM_DIALECTS
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import WorldParams
@@ -26,7 +27,6 @@ from hopkinson.rig.events import RigError, RigWarning
 from hopkinson.rig.instruments import open_instruments
 from hopkinson.rig.shotfile import read_shot
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import TIME_SCALE, Rig, short_timeouts_config
 from tests.rig.test_cli_sim import rig_toml_for, sim_process, stop_with_ctrl_c
 
@@ -147,7 +147,6 @@ def test_a_shot_whose_digitizer_speaks_another_dialect_names_the_dialect_to_set(
     # issue 18: `probe` named the dialect to set, `shot` gave no fix. The rig config says generic,
     # the (simulated) instrument is a Keysight scope: refused before anything moves, with the fix.
     from hopkinson.rig.sim_session import sim_session
-
     from tests.rig.conftest import fast_sim_config, rig_toml, short_timeouts_config
 
     sim = dataclasses.replace(fast_sim_config(), servers=ServerParams(digitizer_dialect="keysight"))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
@@ -21,7 +22,6 @@ from hopkinson.rig.shot import analyse_and_record, analyse_raw
 from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta, read_shot
 from hopkinson.rig.shotfile_writer import write_raw_shot
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import fast_sim_config, rig_toml, short_timeouts_config
 
 PLAN = """

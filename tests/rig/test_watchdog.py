@@ -16,10 +16,10 @@ import time
 from pathlib import Path
 
 import pytest
+
 from hopkinson.rig.events import AwaitingConfirmation, RigWarning
 from hopkinson.rig.sequencer import FireAuthorisation
 from hopkinson.rig.sim_session import sim_session
-
 from tests.rig.conftest import (
     REPO,
     assert_safe,

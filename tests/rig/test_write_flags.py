@@ -10,9 +10,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-from hopkinson.rig.cli.main import main
 
 from hopkinson.fileio import HDF5_SIGNATURE
+from hopkinson.rig.cli.main import main
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 

@@ -11,6 +11,7 @@ from importlib import metadata
 from pathlib import Path
 
 import pytest
+
 from hopkinson.drivers.roles import AmplifierRole, AmplifierSettings
 from hopkinson.drivers.sim.serial_line import PtyLine, byte_time_s
 from hopkinson.rig.config import load_rig_config

@@ -14,11 +14,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from PySide6.QtCore import QCoreApplication, QSettings
+
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import WorldParams
 from hopkinson.rig.config import RigConfig, load_rig_config
 from hopkinson.rig.sim_session import SimSession, sim_session
-from PySide6.QtCore import QCoreApplication, QSettings
 
 REPO = Path(__file__).resolve().parents[2]
 TIME_SCALE = 100.0
@@ -75,6 +76,7 @@ def dispose(widget: Any) -> None:
     """Close and delete a widget now (ui.app.dispose; see the module docstring); a deleted one
     is left alone."""
     import shiboken6
+
     from hopkinson.ui.app import dispose as dispose_now
 
     if shiboken6.isValid(widget):

@@ -8,12 +8,12 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
+from PySide6.QtCore import QCoreApplication
+
 from hopkinson.rig.journal import Journal, ShotState
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.shotfile import read_shot
 from hopkinson.rig.shotfile_writer import add_analysis
-from PySide6.QtCore import QCoreApplication
-
 from tests.ui.conftest import quick_config
 
 CAMPAIGN_TIMEOUT_MS = 120_000

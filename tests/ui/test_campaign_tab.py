@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from PySide6.QtCore import Qt
+
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.analysis.linearity import fit_linearity
 from hopkinson.rig.events import CampaignShotStarted, Reading
@@ -12,8 +14,6 @@ from hopkinson.rig.journal import Journal
 from hopkinson.rig.shot_verdict import judge
 from hopkinson.rig.shotfile import read_shot
 from hopkinson.ui.campaign_table import COL
-from PySide6.QtCore import Qt
-
 from tests.ui.conftest import save_shot
 from tests.ui.test_panel_shot import expected_khz
 

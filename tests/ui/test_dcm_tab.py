@@ -9,10 +9,10 @@ import math
 
 import numpy as np
 import pytest
-from hopkinson.analysis.dcm import load_dcm
-from hopkinson.analysis.model import DiscreteModel
 from PySide6.QtCore import Qt
 
+from hopkinson.analysis.dcm import load_dcm
+from hopkinson.analysis.model import DiscreteModel
 from tests.ui.conftest import dispose, save_shot
 
 DT = 1e-6
@@ -133,9 +133,8 @@ def test_the_shots_verdict_shows_only_for_a_dcm_not_recommended(qtbot, tab):
 
 def test_the_panels_exports_never_write_over_a_shot_file(qtbot, tab, tmp_path):
     # issue 18: the panel's save dialogs go through the same check as the command line's -o
-    from hopkinson.ui.log_view import LogView
-
     from hopkinson.fileio import HDF5_SIGNATURE, UnsafeOutputError
+    from hopkinson.ui.log_view import LogView
 
     shot = tmp_path / "shot.h5"
     shot.write_bytes(HDF5_SIGNATURE + b"\0" * 64)

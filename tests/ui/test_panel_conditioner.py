@@ -9,11 +9,11 @@ import dataclasses
 from pathlib import Path
 
 import pytest
+from PySide6.QtCore import QSettings, Qt
+
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.events import StateEntered
 from hopkinson.rig.shotfile import read_shot
-from PySide6.QtCore import QSettings, Qt
-
 from tests.ui.conftest import dispose, rig_config_for_tests, save_shot
 from tests.ui.test_campaign_tab import CAMPAIGN_TIMEOUT_MS, write_plan
 from tests.ui.test_panel_shot import SHOT_TIMEOUT_MS

@@ -91,10 +91,10 @@ def test_the_message_line_keeps_its_height_and_colours(qtbot):
 
 
 def test_the_panel_remembers_its_window_and_tab_and_has_menus(qtbot, make_panel, tmp_path):
-    from hopkinson.ui.main_window import MainWindow
-    from hopkinson.ui.menus import about_text
     from PySide6.QtCore import QSettings
 
+    from hopkinson.ui.main_window import MainWindow
+    from hopkinson.ui.menus import about_text
     from tests.ui.conftest import unreachable_config
 
     config = unreachable_config(tmp_path)
@@ -140,7 +140,6 @@ def test_the_set_up_prediction_is_the_planners_inverse_and_names_its_problems():
     set-up's prediction reaches that target; 7 bar instead is over it and over a 100 000 g range."""
     from hopkinson.analysis.bar import plan_shot
     from hopkinson.ui.setup_check import fire_question, predict_setup
-
     from tests.ui.conftest import rig_config_for_tests
 
     rig = rig_config_for_tests().bar.rig()

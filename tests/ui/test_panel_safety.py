@@ -4,11 +4,11 @@ through the real widgets, against the simulated rig with its faults."""
 from __future__ import annotations
 
 import pytest
+from PySide6.QtCore import QObject, Qt, Slot
+
 from hopkinson.rig.events import Reading
 from hopkinson.rig.interlocks import INTERLOCKS
 from hopkinson.rig.sequencer import FireAuthorisation
-from PySide6.QtCore import QObject, Qt, Slot
-
 from tests.ui.conftest import unreachable_config
 
 SHOT_TIMEOUT_MS = 60_000

@@ -79,7 +79,6 @@ def test_no_instruments_show_disconnected_and_arm_is_refused(qtbot, make_panel, 
 
 def test_one_missing_instrument_keeps_the_others_live(qtbot, make_panel, tmp_path):
     from hopkinson.rig.sim_session import sim_session
-
     from tests.ui.conftest import fast_sim_config
 
     with sim_session(rig_config_for_tests(), fast_sim_config(), ()) as session:
@@ -188,7 +187,6 @@ def test_the_planner_sets_projectile_and_pressure_for_a_target_peak(qtbot, tmp_p
     rig's physics says reaches the target. A target beyond the rig's maximum is said, and "Use" is off."""
     from hopkinson.analysis.bar import predict_shot
     from hopkinson.ui.shot_setup import ShotSetup
-
     from tests.ui.conftest import save_shot
 
     config = rig_config_for_tests()

@@ -10,9 +10,9 @@ import threading
 
 import numpy as np
 import pytest
-from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import Qt, QTimer
 
+from hopkinson.rig.shotfile import read_shot
 from tests.sim_truth import true_fbsd_hz
 from tests.ui.conftest import save_shot, unreachable_config
 
@@ -195,7 +195,6 @@ def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel,
     from hopkinson.analysis.shot_analysis import AnalysisParams, analyse_record
     from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
     from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
-
     from tests.reports.contract import contract_results
     from tests.reports.test_report import SENSOR_A, simulated_record
 

@@ -9,8 +9,9 @@ import os
 import signal
 import time
 
-from hopkinson.rig.events import Reading
 from PySide6.QtCore import Qt
+
+from hopkinson.rig.events import Reading
 
 SHOT_TIMEOUT_MS = 60_000
 

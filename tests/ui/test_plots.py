@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+
 from hopkinson.analysis.excitation import excitation_summary
 from hopkinson.drivers.sim.shock import half_sine_m_s2
 
@@ -76,11 +77,11 @@ def test_every_figure_of_the_strip_shows_whole_in_the_smallest_window(qtbot, mak
     """At the panel's smallest size (1280 × 800) a long shot's figures, each with its
     uncertainty, fit their cells: "489 km/s² (49904 g), 36.0 µs" lost its unit under the next
     column when peak and width shared one cell."""
+    from PySide6.QtCore import QCoreApplication
+
     from hopkinson.analysis.key_figures import KeyFigures
     from hopkinson.reports.data import CompensationCheck
     from hopkinson.rig.shot_verdict import judge
-    from PySide6.QtCore import QCoreApplication
-
     from tests.ui.conftest import save_shot, unreachable_config
 
     def fig(value: float, u: float) -> dict:
@@ -186,7 +187,6 @@ def test_the_model_magnitude_is_shown_with_its_95_percent_band(qtbot, artifacts_
     response_band), shaded under the model's curve and named in the legend; a shot without one
     shows none."""
     from hopkinson.ui.plots import MagnitudePlot, configure_pyqtgraph
-
     from tests.ui.conftest import save_shot
 
     configure_pyqtgraph()  # the panel's white ground

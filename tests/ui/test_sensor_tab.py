@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from hopkinson.lab.repository import open_repository
 
+from hopkinson.lab.repository import open_repository
 from tests.lab.records import made_up_record
 from tests.ui.conftest import dispose, save_shot
 
@@ -93,7 +93,6 @@ def test_the_set_up_is_checked_against_the_sensors_record(qtbot, database) -> No
 
     from hopkinson.ui.shot_setup import ShotSetup
     from hopkinson.ui.worker import Background
-
     from tests.ui.conftest import rig_config_for_tests
 
     with open_repository(database) as repo:

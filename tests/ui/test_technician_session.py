@@ -12,12 +12,12 @@ import sys
 from pathlib import Path
 
 import pytest
-from hopkinson.analysis.key_figures import KeyFigures
-from hopkinson.rig.journal import Journal
-from hopkinson.rig.shotfile import read_shot
 from PySide6.QtCore import QCoreApplication, QPoint, QPointF, Qt
 from PySide6.QtGui import QWheelEvent
 
+from hopkinson.analysis.key_figures import KeyFigures
+from hopkinson.rig.journal import Journal
+from hopkinson.rig.shotfile import read_shot
 from tests.ui.conftest import quick_config, save_shot
 
 SHOT_TIMEOUT_MS = 60_000
