@@ -28,8 +28,9 @@ from cosmic_ray.work_db import WorkDB
 from cosmic_ray.work_item import WorkerOutcome, WorkResult
 
 
-def function_lines(path: Path, names: list[str]) -> list[tuple[int, int]]:
-    """(first, last) line of each named function or method ("Class.method"), decorators included."""
+def function_lines(path: Path, names: list[str]) -> dict[str, tuple[int, int]]:
+    """{name: (first, last) line} of the named functions or methods ("Class.method") that `path`
+    defines, decorators included."""
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     found: dict[str, tuple[int, int]] = {}
 
@@ -42,10 +43,7 @@ def function_lines(path: Path, names: list[str]) -> list[tuple[int, int]]:
                 found[f"{prefix}{node.name}"] = (first, node.end_lineno or node.lineno)
 
     visit(tree.body, "")
-    missing = [name for name in names if name not in found]
-    if missing:
-        raise SystemExit(f"{path}: no function named {', '.join(missing)} (update the target's scope)")
-    return [found[name] for name in names]
+    return {name: found[name] for name in names if name in found}
 
 
 def annotation_spans(path: Path) -> list[tuple[tuple[int, int], tuple[int, int]]]:
@@ -90,10 +88,14 @@ class ScopeFilter(FilterApp):
         names = list(config.sub("filters", "scope").get("functions", ()))
         if not names:
             return
-        (path,) = paths  # a scope names one module's functions
-        ranges = function_lines(Path(path), names)
+        # the scope's functions, each in whichever of the target's modules defines it
+        ranges = {Path(p): function_lines(Path(p), names) for p in paths}
+        missing = [n for n in names if not any(n in found for found in ranges.values())]
+        if missing:
+            raise SystemExit(f"{', '.join(paths)}: no function named {', '.join(missing)} (update the target's scope)")
         outside = [item.job_id for item in work_db.pending_work_items
-                   if not any(lo <= m.start_pos[0] <= hi for m in item.mutations for lo, hi in ranges)]
+                   if not any(lo <= m.start_pos[0] <= hi for m in item.mutations
+                              for lo, hi in ranges.get(Path(m.module_path), {}).values())]
         if outside:
             work_db.set_multiple_results(
                 outside, WorkResult(output="outside the target's scope", worker_outcome=WorkerOutcome.SKIPPED))
