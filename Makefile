@@ -21,7 +21,7 @@ demo: $(STAMP)
 # run start first (tests/scope_order.py). --durations=15: the 15 slowest tests, to keep the
 # suite short.
 test: $(STAMP)
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 2 --dist loadscope --durations=15
+	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 3 --dist loadscope --durations=15
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

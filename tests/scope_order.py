@@ -1,4 +1,4 @@
-"""Longest modules first on the xdist workers (`make test`: -n 2 --dist loadscope).
+"""Longest modules first on the xdist workers (`make test`: -n 3 --dist loadscope).
 
 xdist's loadscope hands each worker a whole module (its module fixtures are computed once) in
 the order of their test counts. A module with a long fixture and few tests then starts last
