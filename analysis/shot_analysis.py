@@ -188,6 +188,13 @@ def identify_with_uncertainty(record: Record, params: AnalysisParams, reduction:
     the panel."""
     options = params.identify_options()
     ident = identify(record, options) if sine is None else identify_with_sine(record, sine, options)
+    return with_uncertainty(ident, params, reduction)
+
+
+def with_uncertainty(ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None = None
+                     ) -> ModelWithUncertainty:
+    """`ident` with its Monte Carlo uncertainty (`identify_with_uncertainty`'s second half: for
+    an identification already at hand)."""
     warnings = list(ident.warnings)
     uncertainty, model_draws, found = shot_uncertainty(ident, params, reduction)
     warnings += [text for text in texts(found) if text not in warnings]

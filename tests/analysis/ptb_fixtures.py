@@ -1,9 +1,9 @@
 """Analyses of PTB's record, its variants, its hybrids and simulated shots, shared by the test
 session: a record is identified once (the identification is deterministic) and its Monte Carlo
 uncertainty evaluated once per (draws, seed), so a test over several seeds re-runs only the
-draws. The uncertainty is analysis.uncertainty's own entry point for a shot (`shot_uncertainty`,
-what `analyse_record` calls), so the intervals are those `analyse_record` gives with the same
-draws and seed; the DCM, which these tests do not read, is not designed.
+draws. The uncertainty is the shot analysis's own (`shot_analysis.with_uncertainty`, what
+`analyse_record` calls after identifying), so the intervals and warnings are those `analyse_record`
+gives with the same draws and seed; the DCM, which these tests do not read, is not designed.
 
 Seeds here are fixed before any result is seen (`seeds(first, count)`), never picked to pass:
 each test states how many may miss and what that threshold's pass probability is.
@@ -17,12 +17,11 @@ from typing import Any
 
 import pytest
 
-from hopkinson.analysis.findings import texts
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.uncertainty import shot_uncertainty
+from hopkinson.analysis.shot_analysis import with_uncertainty
 
 
 @dataclass
@@ -56,12 +55,9 @@ class Analyses:
         """`record()` identified and its uncertainty drawn with `draws` and `seed`, as
         `analyse_record(record(), AnalysisParams(draws=draws, seed=seed))` gives them."""
         if (key, draws, seed) not in self._analysed:
-            ident = self.identification(key, record)
-            warnings = list(ident.warnings)  # and the uncertainty's findings after them, as analyse_record lists them
-            uncertainty, _, found = shot_uncertainty(ident, AnalysisParams(draws=draws, seed=seed), None)
-            warnings += [text for text in texts(found) if text not in warnings]
-            assert uncertainty is not None, (key, seed, warnings)
-            self._analysed[(key, draws, seed)] = Analysed(ident, uncertainty, warnings)
+            fitted = with_uncertainty(self.identification(key, record), AnalysisParams(draws=draws, seed=seed))
+            assert fitted.uncertainty is not None, (key, seed, fitted.warnings)
+            self._analysed[(key, draws, seed)] = Analysed(fitted.identification, fitted.uncertainty, fitted.warnings)
         return self._analysed[(key, draws, seed)]
 
 
