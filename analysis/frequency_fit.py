@@ -289,18 +289,43 @@ def is_stable(a: np.ndarray, margin: float = STABILITY_MARGIN) -> bool:
 
     The Schur–Cohn step-down recursion (reflection coefficients |k| < 1) on A(ρz⁻¹)/…, i.e. on
     a_i/ρ^i: O(n²) arithmetic, several times faster than the roots for the small orders here.
+    Written on Python floats: the fits call it at every trial step, and for these few
+    coefficients NumPy's per-call overhead is most of its cost (the same IEEE operations).
     """
     n = a.size - 1
     if n <= 0:
         return True
-    p = np.asarray(a, dtype=float) / ((1.0 - margin) ** np.arange(n + 1))
-    p = p / p[0]
+    rho = 1.0 - margin
+    p = [float(x) / rho**i for i, x in enumerate(np.asarray(a, dtype=float).tolist())]
+    p0 = p[0]
+    p = [x / p0 for x in p]
     for m in range(n, 0, -1):
         k = p[m]
         if not abs(k) < 1.0:
             return False
-        p = (p[:m] - k * p[m:0:-1]) / (1.0 - k * k)
+        d = 1.0 - k * k
+        p = [(p[i] - k * p[m - i]) / d for i in range(m)]
     return True
+
+
+_POWERS: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+_POWERS_KEPT = 32
+
+
+def z_powers(omega: np.ndarray, order: int) -> np.ndarray:
+    """z_k^{−i} = e^{−jω_k i}, i = 0…order (bins × order+1). The Monte Carlo draws build a problem
+    per draw on the same bins (`SpectralData.perturbed` keeps the ω array): the last few tables
+    are kept, keyed by the array itself (held, so its id is not reused) and the order."""
+    key = (id(omega), order)
+    kept = _POWERS.get(key)
+    if kept is not None and kept[0] is omega:
+        return kept[1]
+    powers = np.exp(-1j * np.outer(omega, np.arange(order + 1)))
+    powers.flags.writeable = False
+    if len(_POWERS) >= _POWERS_KEPT:
+        _POWERS.pop(next(iter(_POWERS), None), None)
+    _POWERS[key] = (omega, powers)
+    return powers
 
 
 class OrderProblem:
@@ -328,7 +353,7 @@ class OrderProblem:
             raise ValueError(f"unknown delay mode {delay!r}")
         self.delay_mode = DelayMode(delay) if isinstance(delay, str) else DelayMode.FIXED
         self.fixed_delay = None if isinstance(delay, str) else float(delay)
-        self.powers = np.exp(-1j * np.outer(data.omega, np.arange(order + 1)))  # z_k^{-i}
+        self.powers = z_powers(data.omega, order)  # z_k^{-i}
         self.numerator = None if numerator is None else np.asarray(numerator, dtype=float)
         if self.numerator is not None and self.numerator.size != order + 1:
             raise ValueError(f"a numerator shape of order {order} has {order + 1} coefficients")
@@ -350,6 +375,7 @@ class OrderProblem:
             self.sine_powers = np.exp(-1j * np.outer(self.sine.omega, np.arange(order + 1)))
             self.size += 2
         self._rejected: np.ndarray | None = None
+        self._last_pieces: tuple[bytes, dict[str, np.ndarray | float]] | None = None
 
     # -- parameter vector ------------------------------------------------------------------
     def pack(self, fit: OrderFit) -> np.ndarray:
@@ -417,6 +443,16 @@ class OrderProblem:
 
     # -- model pieces ------------------------------------------------------------------------
     def _pieces(self, theta: np.ndarray) -> dict[str, np.ndarray | float]:
+        """A, B, G, the delay, the weights' s² and the corrected input at θ; the last θ's are
+        kept (the Jacobian is asked for at the point whose residual was just evaluated)."""
+        key = theta.tobytes()
+        if self._last_pieces is not None and self._last_pieces[0] == key:
+            return self._last_pieces[1]
+        pieces = self._evaluate_pieces(theta)
+        self._last_pieces = (key, pieces)
+        return pieces
+
+    def _evaluate_pieces(self, theta: np.ndarray) -> dict[str, np.ndarray | float]:
         a, b, tau, transient, drift = self.unpack(theta)
         d = self.data
         pw = self.powers

@@ -52,11 +52,12 @@ def levenberg_marquardt(
         return LeastSquaresResult(x, cost, evaluations, False)
     j = jac(x)
     scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
+    r_j, qt_r = _triangular(j, r)
     mu, nu = 1e-3, 2.0
     while evaluations < max_evaluations:
         gradient = j.T @ r
-        system = np.vstack((j, np.diag(math.sqrt(mu) * scale)))
-        rhs = np.concatenate((-r, np.zeros(x.size)))
+        system = np.vstack((r_j, np.diag(math.sqrt(mu) * scale)))
+        rhs = np.concatenate((-qt_r, np.zeros(x.size)))
         try:
             step = np.linalg.lstsq(system, rhs, rcond=None)[0]
         except np.linalg.LinAlgError:
@@ -79,6 +80,7 @@ def levenberg_marquardt(
                 return LeastSquaresResult(x, cost, evaluations, True)
             j = jac(x)
             scale = np.maximum(scale, np.linalg.norm(j, axis=0))
+            r_j, qt_r = _triangular(j, r)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         else:
@@ -87,6 +89,18 @@ def levenberg_marquardt(
             if mu > 1e16:
                 break
     return LeastSquaresResult(x, cost, evaluations, False)
+
+
+def _triangular(j: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R and Qᵀr of J = QR, from one Householder QR of [J | r] (Q never formed).
+
+    ‖J·h + r‖² = ‖R·h + Qᵀr‖² + a constant, so each damped step solves the small system
+    [R; √μ·D]·h = [−Qᵀr; 0] instead of [J; √μ·D] (MINPACK's lmpar does the same): one
+    factorisation of the tall Jacobian per Jacobian, not per trial μ, and a QR, not an SVD.
+    """
+    k = min(j.shape[0], j.shape[1])
+    augmented = np.linalg.qr(np.column_stack((j, r)), mode="r")
+    return augmented[:k, :-1], augmented[:k, -1]
 
 
 def bracketed_root(f: Callable[[float], float], a: float, b: float, xtol: float) -> float:
