@@ -5,9 +5,9 @@ The check compensates the shot's own response and compares both estimates of the
 acceleration with the reference over the pulse window (the main pulse widened by two pulse
 widths on each side, analysis.excitation.pulse_window):
 - uncompensated: response ÷ DC gain, advanced by its own latency (channel delay + the model's
-  delay over its ±5 % band, analysis.dcm.passband_delay_samples), so that the comparison is
+  delay over its ±5 % band, analysis.group_delay.passband_delay_samples), so that the comparison is
   not won by alignment alone;
-- compensated: the DCM's output (analysis.dcm.apply with align: the latency removed) ÷ DC gain.
+- compensated: the DCM's output (analysis.dcm_stream.apply with align: the latency removed) ÷ DC gain.
 Figures relative to the reference's peak: the RMS error over the window and the error of the
 peak of the reference's polarity, every peak read by analysis.excitation.peak_estimate (a fit
 over the peak's lobe: a noisy reference's largest sample stands up to 2 % above its peak).
@@ -50,11 +50,13 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm import DCM, apply, passband_delay_samples
+from hopkinson.analysis.dcm import DCM
 from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport, design_compensation
 from hopkinson.analysis.dcm_ratio import ShotPulse
+from hopkinson.analysis.dcm_stream import apply
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width, pulse_window
+from hopkinson.analysis.group_delay import passband_delay_samples
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate, resampling_factors, shift_samples

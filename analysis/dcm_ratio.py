@@ -35,9 +35,12 @@ from enum import StrEnum
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm import DCM, apply_rows, compensated_fbsd_edges, passband_delay_samples
+from hopkinson.analysis.dcm import DCM
+from hopkinson.analysis.dcm_figures import compensated_fbsd_edges
+from hopkinson.analysis.dcm_stream import apply_rows
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import peak_estimate, pulse_width, pulse_window
+from hopkinson.analysis.group_delay import passband_delay_samples
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import frequency_response, model_output, response_times_samples
@@ -66,7 +69,7 @@ def compensated_delay_samples(model: DiscreteModel, dcm: DCM, model_fbsd5_hz: fl
                               ) -> float:
     """Delay (samples) of model × DCM over the band it passes flat (the wider of the two ±5 %
     bands, at most 0.4 × the rate): what aligning the compensated output removes besides the
-    channel delay (analysis.dcm.passband_delay_samples)."""
+    channel delay (analysis.group_delay.passband_delay_samples)."""
     dt = model.sample_interval_s
     band = min(max(compensated_fbsd5_hz, model_fbsd5_hz), 0.4 / dt)
     return passband_delay_samples(lambda f: frequency_response(model, f) * dcm.frequency_response(f), band, dt)

@@ -31,8 +31,9 @@ from typing import Any
 import numpy as np
 
 from hopkinson.analysis.compensation import compensate_shot
-from hopkinson.analysis.dcm import DCM, compare_steps
+from hopkinson.analysis.dcm import DCM
 from hopkinson.analysis.dcm_design import DcmOptions
+from hopkinson.analysis.dcm_figures import compare_steps
 from hopkinson.analysis.determination import is_result, not_determined
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary

@@ -6,8 +6,8 @@ a linear-phase FIR)
 four ways in the same run:
     lfilter whole    scipy.signal.lfilter(b, a, x) on the whole record (the baseline; b holds the
                      FIR stage's taps too)
-    apply whole      analysis.dcm.apply: second-order sections, then the FIR stage, one call
-    stream           analysis.dcm.DcmStream, blocks of --block samples with carried state (what
+    apply whole      analysis.dcm_stream.apply: second-order sections, then the FIR stage, one call
+    stream           analysis.dcm_stream.DcmStream, blocks of --block samples with carried state (what
                      `hopkinson compensate` does), latency kept (--causal)
     stream aligned   the same with the latency removed (fractional-delay FIR, held-back tail)
 The stream's output equals the whole-record filter (checked). Figures are samples per second
@@ -29,8 +29,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm import DcmStream, apply
 from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.dcm_stream import DcmStream, apply
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 

@@ -3,7 +3,7 @@ every mutation inside an annotation of a module that has `from __future__ import
 (annotations are then strings never evaluated: `float | None` → `float - None` is equivalent by
 construction).
 
-Used where a target is part of a module (the DCM's figures in analysis/dcm.py, the interval
+Used where a target is part of a module (the DCM's noise gain in analysis/dcm.py, the interval
 logic in analysis/uncertainty.py). The functions are named in the target's configuration,
 
     [cosmic-ray.filters.scope]

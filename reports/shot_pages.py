@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from hopkinson.analysis.dcm import step_responses as dcm_step_responses
+from hopkinson.analysis.dcm_figures import step_responses as dcm_step_responses
 from hopkinson.analysis.excitation import amplitude_spectrum, pulse_width, pulse_window
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import (

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from hopkinson.analysis.response import band_edges
-from hopkinson.drivers.sim.world import accelerometer_truth
+from hopkinson.drivers.sim.shot_truth import accelerometer_truth
 
 
 def true_fbsd_hz(truth: dict, level: float) -> float:

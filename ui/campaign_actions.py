@@ -119,3 +119,12 @@ def campaign_end_message(outcome: Any, failure: str = "") -> tuple[str, str]:
     why = last.error if last is not None and last.error else outcome.message.split("; ")[1] \
         if "; " in outcome.message else "stopped"
     return "warning", f"Campaign stopped ({why}): {done} of {total} shots done. Resume continues it."
+
+
+def journal_summary(run: RunFolder, plan: CampaignPlan) -> dict[str, Any]:
+    """The journal's summary of a run folder (opens it briefly: takes and releases the run lock)."""
+    journal = Journal.open(run, plan)
+    try:
+        return journal.summary()
+    finally:
+        journal.close()

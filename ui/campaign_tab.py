@@ -37,13 +37,6 @@ from PySide6.QtWidgets import (
 )
 
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, UNITS
-from hopkinson.reports.statistics import (
-    STATIC_GAIN,
-    LinearityPoint,
-    campaign_linearity,
-    fitted_points,
-    linearity_points,
-)
 from hopkinson.rig.campaign_setup import prepare_run
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.errors import ConfigError
@@ -56,10 +49,9 @@ from hopkinson.rig.events import (
     RigEvent,
     StateEntered,
 )
-from hopkinson.rig.journal import DONE_STATES, Journal
+from hopkinson.rig.journal import DONE_STATES
 from hopkinson.rig.plan import (
     CONFIRM_ABOVE_SHOTS,
-    G_M_S2,
     MAX_TOTAL_SHOTS,
     CampaignPlan,
     check_shot_count,
@@ -71,12 +63,14 @@ from hopkinson.ui.campaign_actions import (
     ShotRow,
     campaign_end_message,
     issue_certificate,
+    journal_summary,
     read_shot_row,
     reanalyse_shot,
     write_campaign_report,
 )
 from hopkinson.ui.campaign_table import CampaignTable
 from hopkinson.ui.dialogs import ask_campaign_authorisation, ask_name, ask_shot_count
+from hopkinson.ui.linearity_line import LinearityLine
 from hopkinson.ui.plan_editor import PlanEditor
 from hopkinson.ui.widgets import TEXT_COLOURS, section_title
 from hopkinson.ui.worker import Background, RigLink
@@ -149,10 +143,7 @@ class CampaignTab(QWidget):
         self.current_label.setStyleSheet("font-weight: 600;")
         self.message = QLabel("")
         self.message.setWordWrap(True)
-        # amplitude linearity (ISO 16063-22) over the analysed shots' levels; each point in the tooltip
-        self.linearity_label = QLabel("")
-        self.linearity_label.setWordWrap(True)
-        self._linearity: dict[str, LinearityPoint] = {}
+        self.linearity_label = LinearityLine()
 
         self.table = CampaignTable()
         self.rows = self.table.rows
@@ -267,7 +258,7 @@ class CampaignTab(QWidget):
         self._fill_table(plan)
         self._describe()
         self.update_buttons()
-        self.background.run(lambda: _journal_summary(run, plan), self._show_summary,
+        self.background.run(lambda: journal_summary(run, plan), self._show_summary,
                             lambda exc: self._say(f"Journal not read: {exc}", error=True))
 
     def _describe(self) -> None:
@@ -289,8 +280,8 @@ class CampaignTab(QWidget):
 
     def _fill_table(self, plan: CampaignPlan) -> None:
         self.states.clear()
-        self._linearity.clear()
-        self._update_linearity()
+        self.linearity_label.clear_points()
+        self.linearity_label.show_line(self.rows)
         self.table.fill(plan, self.unit_name())
         for shot in plan.shots:
             self._set_state(shot.id, "PLANNED")
@@ -528,29 +519,9 @@ class CampaignTab(QWidget):
         self.table.show_shot(sid, path, shot, failed=self.states.get(sid) == "ANALYSIS_FAILED")
         kf = shot.judgement.figures
         if kf is not None and sid in self.rows:
-            for point in linearity_points([(sid, kf)]):
-                self._linearity[sid] = point
-            self._update_linearity()
+            self.linearity_label.add(sid, kf)
+            self.linearity_label.show_line(self.rows)
         self.update_buttons()
-
-    def _update_linearity(self) -> None:
-        """The line through the analysed shots' sensitivities (their quasi-static gains, at the
-        amplitude each is measured at: reports.statistics), shown once they cover two or more levels;
-        each point with its U in the tooltip."""
-        points = [self._linearity[sid] for sid in self.rows if sid in self._linearity]
-        fit, _note = campaign_linearity(points)
-        points = fitted_points(points)
-        if fit is None:
-            self.linearity_label.setText("")
-            self.linearity_label.setToolTip("")
-            return
-        what = "quasi-static gain" if points[0].kind == STATIC_GAIN else "DC gain"
-        self.linearity_label.setText(f"Amplitude linearity (ISO 16063-22), sensitivity ({what}) against the "
-                                     f"amplitude: slope {fit.text()}")
-        lines = [f"{p.label}: {p.peak_m_s2 / G_M_S2:,.0f} g, S {p.sensitivity:.5g}"
-                 + (f" ± {p.expanded:.2g}" if p.expanded is not None else "") + f" ({100 * r:+.2f} % from the line)"
-                 for p, r in zip(points, fit.residuals_rel, strict=True)]
-        self.linearity_label.setToolTip("\n".join(lines))
 
     def _show_summary(self, summary: dict[str, Any]) -> None:
         for shot in summary.get("shots", []):
@@ -597,11 +568,3 @@ class CampaignTab(QWidget):
         if folder:
             self.open_run_folder(Path(folder))
 
-
-def _journal_summary(run: RunFolder, plan: CampaignPlan) -> dict[str, Any]:
-    """The journal's summary of a run folder (opens it briefly: takes and releases the run lock)."""
-    journal = Journal.open(run, plan)
-    try:
-        return journal.summary()
-    finally:
-        journal.close()

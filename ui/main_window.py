@@ -35,18 +35,12 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from PySide6.QtCore import QSettings, Qt, QTimer, Signal
+from PySide6.QtCore import QSettings, QTimer, Signal
 from PySide6.QtGui import QCloseEvent
 from PySide6.QtWidgets import (
     QFileDialog,
-    QFrame,
-    QHBoxLayout,
     QMainWindow,
-    QScrollArea,
-    QSplitter,
     QTabWidget,
-    QVBoxLayout,
-    QWidget,
 )
 
 from hopkinson.rig.config import RigConfig
@@ -78,6 +72,7 @@ from hopkinson.ui.shot_tab import ShotPlots, verdict_level
 from hopkinson.ui.state_bar import STATE_MESSAGES, StateBar, action_buttons, header_row
 from hopkinson.ui.status_panel import StatusPanel
 from hopkinson.ui.widgets import Banner
+from hopkinson.ui.window_layout import central_widget, left_column
 from hopkinson.ui.worker import Background, InstrumentLink, RigLink
 
 _log = logging.getLogger(__name__)
@@ -140,24 +135,7 @@ class MainWindow(QMainWindow):
         self.status_panel = StatusPanel(config.limits)
         self.setup = ShotSetup(config, out_dir, background=self.background)
         self.setup.load(self.settings)
-        left = QWidget()
-        left_layout = QVBoxLayout(left)
-        left_layout.setContentsMargins(0, 0, 0, 0)
-        left_layout.setSpacing(2)
-        left_layout.addWidget(self.status_panel)
-        rule = QFrame()
-        rule.setFrameShape(QFrame.Shape.HLine)
-        rule.setStyleSheet("color: #dadce0;")
-        left_layout.addWidget(rule)
-        left_layout.addWidget(self.setup)
-        left_layout.addStretch(1)
-        self.left_scroll = scroll = QScrollArea()
-        scroll.setWidget(left)
-        scroll.setWidgetResizable(True)
-        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        scroll.setMinimumWidth(350)
-        scroll.setMaximumWidth(420)
-        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        self.left_scroll = left_column(self.status_panel, self.setup)
 
         # tabs
         self.plots = ShotPlots()
@@ -175,24 +153,7 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(self.sensor_tab, "Sensor history")
         self.tabs.addTab(self.log_tab, "Log")
 
-        splitter = QSplitter(Qt.Orientation.Horizontal)
-        splitter.addWidget(scroll)
-        splitter.addWidget(self.tabs)
-        splitter.setStretchFactor(0, 0)
-        splitter.setStretchFactor(1, 1)
-        splitter.setSizes([360, 920])
-
-        central = QWidget()
-        layout = QVBoxLayout(central)
-        layout.setContentsMargins(0, 0, 0, 0)
-        layout.setSpacing(0)
-        layout.addLayout(header)
-        banner_row = QHBoxLayout()
-        banner_row.setContentsMargins(10, 0, 10, 4)
-        banner_row.addWidget(self.banner)
-        layout.addLayout(banner_row)
-        layout.addWidget(splitter, 1)
-        self.setCentralWidget(central)
+        self.setCentralWidget(central_widget(header, self.banner, self.left_scroll, self.tabs))
         self.statusBar().showMessage("connecting to the rig…")
         self.actions = build_menus(self)
 

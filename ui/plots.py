@@ -198,7 +198,7 @@ def set_y_to_curves(plot: pg.PlotWidget, *curves: np.ndarray) -> None:
 def _true_poles(truth: dict[str, Any], sample_interval_s: float) -> np.ndarray | None:
     """The simulated accelerometer's discrete poles at the analysis interval (simulation only)."""
     try:
-        from hopkinson.drivers.sim.world import accelerometer_truth
+        from hopkinson.drivers.sim.shot_truth import accelerometer_truth
 
         return accelerometer_truth(truth).discrete_poles(sample_interval_s)
     except Exception:  # an older or partial truth record: the map simply goes without it

@@ -1,9 +1,9 @@
 """The one physics model behind the simulated rig (docs/bar-physics.md; docs/decisions/0004).
 
-Longer than 600 lines, for a reason: `World` is one object whose single lock guards the whole
-physical state (pneumatics, controller, amplifier, the pending shot), and every method below
-takes it; split across modules, which state a method may touch under the lock would no longer
-be visible in one place. Its configuration ([world] of sim.toml) is drivers/sim/world_params.py.
+`World` is one object whose single lock guards the whole physical state (pneumatics,
+controller, amplifier, the pending shot); every method below takes it. What a shot puts on the
+channels is drivers/sim/shot_signals.py, its truth drivers/sim/shot_truth.py, and the
+configuration ([world] of sim.toml) drivers/sim/world_params.py.
 
 The Modbus controller, the SCPI digitizer and the serial amplifier of the simulated rig all
 read and change this one World, so a fired shot gives consistent pressures, trigger and
@@ -30,17 +30,12 @@ pulse of the projectile's width δ (No. 3: 38.6 µs; wider for No. 1 and 2) and 
 π·Δv/(2δ); then the object flies off at constant speed. With [world.realism] enabled
 (`RealismParams`, drivers/sim/real_records.py) the pulse comes from the world's pulse source
 (`WorldParams.pulse_source`: the closed form above or the bar model) with a shot-to-shot scatter
-of the speed, and the records carry the effects of a real rig (bar motion after the pulse, the
-mount, a transverse drive, the interferometer chain), every one recorded in the shot's truth. The hardware interlock chain of the
-controller keeps the fire valve shut while the door is open or the e-stop is tripped.
-If the digitizer is armed at that moment, the next `capture(settings)` returns the
-two channels around the digitizer's own trigger (a real crossing of its level, with its slope,
-on its source; none, and the shot passes unrecorded): PM beat (drivers/sim/doppler_beat.pm_beat)
-and amplifier output (the true accelerometer model with the amplifier's gain, low-pass, offset
-and noise) on channels 1 and 2; with [world.signals] quadrature, the quadrature interferometer's
-second photodetector on channel 3 (drivers/sim/doppler_beat.pm_beat with `quadrature`); with
-[world.accelerometer_2] enabled, a second sensor's conditioner output on channel 4 (`CHANNELS`,
-`WorldParams.channels()`). The truth of the last shot is kept in `last_shot_truth` (JSON-ready); every callable in
+of the speed, and the records carry the effects of a real rig, every one recorded in the shot's
+truth. The hardware interlock chain of the controller keeps the fire valve shut while the door
+is open or the e-stop is tripped. If the digitizer is armed at that moment, the next
+`capture(settings)` returns the channels around the digitizer's own trigger (a real crossing of
+its level, with its slope, on its source; none, and the shot passes unrecorded; `CHANNELS`,
+`WorldParams.channels()`). The truth of the last shot is kept in `last_shot_truth`; every callable in
 `launch_listeners` is called with it at each launch (a witness such as a fire log).
 
 Controller. Like a real PLC, the controller keeps a link watchdog and times the fire pulse:
@@ -74,23 +69,11 @@ from typing import Any
 
 import numpy as np
 
-from hopkinson.drivers.sim.accelerometer import (
-    AccelerometerTruth,
-    Mode,
-    coloured_noise,
-    white_noise,
-)
-from hopkinson.drivers.sim.doppler_beat import pm_beat
+from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.faults import FaultSet
-from hopkinson.drivers.sim.real_records import (
-    MountParams,
-    PulseShape,
-    ShotMotion,
-    mounted_input_m_s2,
-    shot_motion,
-)
-from hopkinson.drivers.sim.sensor_truth import sensor_truth
-from hopkinson.drivers.sim.shock import G_M_S2, velocity_m_s
+from hopkinson.drivers.sim.shock import velocity_m_s
+from hopkinson.drivers.sim.shot_signals import response_rate_hz, shot_channels
+from hopkinson.drivers.sim.shot_truth import FiredShot, reference_dict, truth_dict
 from hopkinson.drivers.sim.world_params import (
     CHANNELS,
     PROJECTILES,
@@ -103,10 +86,8 @@ from hopkinson.drivers.sim.world_params import (
     WorldParams,
 )
 
-_NO_MOUNT = MountParams(enabled=False)  # the idealised world: the sensor as sine-calibrated
 __all__ = ["CHANNELS", "PROJECTILES", "AccelerometerParams", "AmplifierParams", "CaptureSettings", "LauncherParams",
-           "PneumaticsParams", "SecondSensorParams", "SignalParams", "World", "WorldParams", "accelerometer_truth",
-           "simulate_shot"]
+           "PneumaticsParams", "SecondSensorParams", "SignalParams", "World", "WorldParams", "simulate_shot"]
 
 
 @dataclass
@@ -119,27 +100,6 @@ class AmplifierState:
     shunt_on: bool = False
     overload_latched: bool = False
     bridge_offset_v: float = 0.0
-
-
-@dataclass(frozen=True)
-class _Shot:
-    number: int
-    fired_at_s: float
-    pressure_bar: float
-    projectile: int
-    speed_m_s: float
-    delta_v_m_s: float
-    width_s: float
-    peak_m_s2: float
-    truth: AccelerometerTruth
-    gain: float
-    excitation_v: float
-    bridge_sensitivity_v_per_m_s2: float
-    output_offset_v: float
-    truth_2: AccelerometerTruth | None = None  # the second sensor's, when there is one
-    pulse: PulseShape | None = None  # the object's acceleration (the pulse source's)
-    speed_factor: float = 1.0  # the shot-to-shot scatter drawn for the projectile's speed
-    sine_modes: tuple[Mode, ...] | None = None  # the sensor's modes before mounting (realism's mount)
 
 
 class World:
@@ -179,7 +139,7 @@ class World:
         self.shots_fired = 0
         self.fire_refusals: list[str] = []
         self.last_shot_truth: dict[str, Any] | None = None
-        self._pending: _Shot | None = None
+        self._pending: FiredShot | None = None
         # Set by the simulated rig: is the digitizer armed right now? None = always armed.
         self.digitizer_armed: Callable[[], bool] | None = None
         # Called once per launch with a copy of that shot's `last_shot_truth` (taken before any
@@ -527,7 +487,7 @@ class World:
         )
         self.shots_fired += 1
         shunt = self._shunt_bridge_v() if a.shunt_on else 0.0
-        shot = _Shot(
+        shot = FiredShot(
             number=self.shots_fired, fired_at_s=self._sim_s, pressure_bar=pressure,
             projectile=self._projectile, speed_m_s=speed, delta_v_m_s=delta_v, width_s=width,
             peak_m_s2=peak, truth=truth, gain=a.gain, excitation_v=a.excitation_v,
@@ -536,7 +496,7 @@ class World:
             truth_2=self.params.accelerometer_2.truth() if self.params.accelerometer_2.enabled else None,
             pulse=pulse, speed_factor=factor, sine_modes=sine_modes,
         )
-        shot_truth = self.last_shot_truth = _truth_dict(shot, self.params)
+        shot_truth = self.last_shot_truth = truth_dict(shot, self.params)
         # The static peak output latches the overload even when nobody records the shot;
         # capture() checks the actual waveform (resonance overshoot included).
         peak_out = abs(shot.output_offset_v) + shot.gain * shot.bridge_sensitivity_v_per_m_s2 * peak
@@ -566,33 +526,7 @@ class World:
         locate = getattr(settings, "trigger_index", None)
         lead = n // 2 if callable(locate) else 0  # served before and after: the trigger may fall there
         time_s = (np.arange(n + 2 * lead) - pre - lead) / fs
-        rng = np.random.default_rng([self.params.seed, shot.number])
-        sig = self.params.signals
-        assert shot.pulse is not None
-        motion = self._motion(shot, time_s, fs)
-        if motion is None:
-            velocity = shot.pulse.velocity_m_s(time_s)
-        else:  # what the interferometer reports, integrated from rest and brought to the digitizer's grid
-            velocity = np.interp(time_s, motion.time_s, velocity_m_s(motion.measured_reference_m_s2,
-                                                                      float(motion.time_s[1] - motion.time_s[0])))
-        beat_options: dict[str, Any] = dict(amplitude_v=sig.pm_amplitude_v, dc_offset_v=sig.pm_dc_offset_v,
-                                            fluctuation=sig.pm_fluctuation, snr_db=sig.pm_snr_db or None, rng=rng)
-        channels: dict[int, np.ndarray] = {}
-        if sig.quadrature:  # the extra channels draw from their own generators: channels 1, 2 stay as they were
-            channels[1], channels[3] = pm_beat(
-                velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders), quadrature=sig.quadrature_output(),
-                quadrature_rng=np.random.default_rng([self.params.seed, shot.number, 1]), **beat_options)
-        else:
-            channels[1] = pm_beat(velocity, 1.0 / fs, sig.grating_pitch_m, tuple(sig.orders), **beat_options)
-        if motion is not None:  # the demodulator loses the beat's amplitude while the object jerks away
-            gain = np.interp(time_s, motion.time_s, motion.beat_gain)
-            channels[1] = sig.pm_dc_offset_v + (channels[1] - sig.pm_dc_offset_v) * gain
-            if 3 in channels:
-                channels[3] = sig.quadrature_offset_v + (channels[3] - sig.quadrature_offset_v) * gain
-        channels[2] = self._response_v(shot, time_s, fs, rng, motion)
-        if shot.truth_2 is not None:
-            channels[4] = self._response_2_v(shot, time_s, fs, np.random.default_rng([self.params.seed, shot.number, 2]),
-                                             motion)
+        channels, velocity, motion = shot_channels(self.params, shot, time_s, fs)
         first = 0
         if callable(locate):
             k = locate(channels, pre, pre + 2 * lead)
@@ -612,183 +546,16 @@ class World:
                     "pulse_start_index": pre + lead - first,
                 }
                 if motion is None:
-                    self.last_shot_truth["reference"] = _reference_dict(time_s, velocity, shot.pulse.acceleration_m_s2)
+                    self.last_shot_truth["reference"] = reference_dict(time_s, velocity, shot.pulse.acceleration_m_s2)
                 else:
-                    self.last_shot_truth["reference"] = _reference_dict(
-                        time_s, np.interp(time_s, motion.time_s, velocity_m_s(motion.spot_m_s2, 1.0 / self._rate(fs))),
+                    self.last_shot_truth["reference"] = reference_dict(
+                        time_s, np.interp(time_s, motion.time_s, velocity_m_s(motion.spot_m_s2, 1.0 / response_rate_hz(self.params, fs))),
                         lambda t: np.interp(t, motion.time_s, motion.spot_m_s2))
                     self.last_shot_truth["realism"]["drawn"] = motion.drawn
             if np.any(np.abs(response) >= self.params.amplifier.output_limit_v):
                 self.amplifier.overload_latched = True
         return channels
 
-    def _rate(self, fs: float) -> float:
-        """The internal rate of the response model and of the realistic motions."""
-        return min(fs, self.params.signals.response_rate_hz)
-
-    def _internal_grid(self, time_s: np.ndarray, fs: float) -> np.ndarray:
-        rate = self._rate(fs)
-        n_int = int(np.ceil((time_s[-1] - time_s[0]) * rate)) + 2
-        return time_s[0] + np.arange(n_int) / rate
-
-    def _motion(self, shot: _Shot, time_s: np.ndarray, fs: float) -> ShotMotion | None:
-        """The shot's realistic motions on the internal grid (None in the idealised world)."""
-        realism = self.params.realism
-        if not realism.enabled:
-            return None
-        assert shot.pulse is not None
-        sig = self.params.signals
-        wavenumber = 2.0 * math.pi * (sig.orders[0] - sig.orders[1]) / sig.grating_pitch_m
-        return shot_motion(self._internal_grid(time_s, fs), shot.pulse, realism,
-                           np.random.default_rng([self.params.seed, shot.number, 3]), abs(wavenumber))
-
-    def _response_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator,
-                    motion: ShotMotion | None = None) -> np.ndarray:
-        """Amplifier output (V) at the digitizer's times (`_sensor_output_v` of the first sensor)."""
-        sig = self.params.signals
-        return self._sensor_output_v(shot, shot.truth, shot.gain * shot.bridge_sensitivity_v_per_m_s2, time_s, fs,
-                                     rng, offset_v=shot.output_offset_v, skew_s=sig.channel_skew_s,
-                                     drift_v_per_s=sig.response_drift_v_per_s, motion=motion,
-                                     nonlinearity_per_m_s2=self.params.accelerometer.nonlinearity_per_m_s2)
-
-    def _response_2_v(self, shot: _Shot, time_s: np.ndarray, fs: float, rng: np.random.Generator,
-                      motion: ShotMotion | None = None) -> np.ndarray:
-        """The second sensor's conditioner output (V): its own model, gain and sensitivity."""
-        s2 = self.params.accelerometer_2
-        assert shot.truth_2 is not None
-        return self._sensor_output_v(shot, shot.truth_2, s2.conditioner_gain * s2.sensitivity_v_per_m_s2, time_s,
-                                     fs, rng, motion=motion)
-
-    def _sensor_output_v(self, shot: _Shot, truth: AccelerometerTruth, scale_v_per_m_s2: float,
-                         time_s: np.ndarray, fs: float, rng: np.random.Generator, *, offset_v: float = 0.0,
-                         skew_s: float = 0.0, drift_v_per_s: float = 0.0, motion: ShotMotion | None = None,
-                         nonlinearity_per_m_s2: float = 0.0) -> np.ndarray:
-        """A sensor's conditioned output (V) at the digitizer's times: `truth` applied to the
-        shot's acceleration, times `scale_v_per_m_s2`, with the noise of [world.signals].
-
-        The accelerometer + low-pass model is run at `response_rate_hz` (≤ fs) and linearly
-        interpolated to the digitizer's grid: its transfer-function form loses precision for
-        6th-order models at 100 MS/s (poles within 1e-3 of z = 1), and the channel carries
-        nothing above a few hundred kHz, so 10 MS/s with linear interpolation is exact to
-        ~1e-4 of the signal.
-        """
-        sig = self.params.signals
-        rate = self._rate(fs)
-        assert shot.pulse is not None
-        if motion is None:
-            t_int = self._internal_grid(time_s, fs)
-            accel = mounted_input_m_s2(shot.pulse.acceleration_m_s2(t_int), _NO_MOUNT, nonlinearity_per_m_s2)
-            clean = truth.respond(accel, 1.0 / rate)
-        else:  # the base's motion through the mount, and the transverse path into the same mode
-            t_int = motion.time_s
-            accel = mounted_input_m_s2(motion.base_m_s2, self.params.realism.mount, nonlinearity_per_m_s2)
-            clean = truth.respond(accel, 1.0 / rate)
-            transverse = self.params.realism.transverse
-            if transverse.enabled and transverse.sensitivity_rel:
-                clean = clean + transverse.sensitivity_rel * (truth.respond(motion.lateral_m_s2, 1.0 / rate)
-                                                              - truth.zero_shift)
-        clean = clean * scale_v_per_m_s2
-        if sig.response_coloured_snr_db > 0:
-            clean = clean + coloured_noise(clean, sig.response_coloured_snr_db, rng, sig.response_coloured_pole)
-        # A skew shifts the response channel's sampling instants against the Doppler channel's.
-        out = np.interp(time_s - skew_s, t_int, clean) + offset_v
-        out = out + drift_v_per_s * (time_s - time_s[0])
-        if sig.response_white_snr_db > 0:
-            out = out + white_noise(out - offset_v, sig.response_white_snr_db, rng)
-        limit = self.params.amplifier.output_limit_v
-        return np.clip(out, -limit, limit)
-
-
-def _truth_dict(shot: _Shot, params: WorldParams) -> dict[str, Any]:
-    signals = params.signals
-    out = _shot_truth_dict(shot, signals)
-    if signals.quadrature:  # the Heydemann parameters of the (doppler, doppler_quadrature) ellipse
-        q = signals.quadrature_output()
-        out["quadrature"] = {"offset_1_v": signals.pm_dc_offset_v, "offset_2_v": q.offset_v,
-                             "amplitude_v": signals.pm_amplitude_v, "amplitude_ratio": 1.0 / q.gain_ratio,
-                             "phase_error_rad": q.phase_error_rad}
-    out["accelerometer"]["nonlinearity_per_m_s2"] = params.accelerometer.nonlinearity_per_m_s2
-    realism = params.realism
-    out["sensor"] = sensor_truth(  # the figures as the analysis reports them (drivers/sim/sensor_truth.py)
-        shot.truth, realism.mount.asymmetry_rel if realism.enabled and realism.mount.enabled else 0.0,
-        realism.transverse.sensitivity_rel if realism.enabled and realism.transverse.enabled else 0.0,
-        params.accelerometer.nonlinearity_per_m_s2)
-    assert shot.pulse is not None
-    out["pulse_source"] = "ideal" if not params.realism.enabled else params.realism.pulse_source
-    out["pulse"]["shape"] = shot.pulse.shape
-    if params.realism.enabled:  # every effect's switch and size, and (at capture) what was drawn
-        out["realism"] = {**params.realism.to_dict(), "speed_factor": shot.speed_factor}
-        if shot.sine_modes is not None:
-            out["accelerometer_sine_calibrated"] = {
-                "modes": [{"natural_frequency_hz": m.natural_frequency_hz, "damping_ratio": m.damping_ratio}
-                          for m in shot.sine_modes]}
-    if shot.truth_2 is not None:
-        s2 = params.accelerometer_2
-        out["accelerometer_2"] = {**_model_dict(shot.truth_2), "sensitivity_v_per_m_s2": s2.sensitivity_v_per_m_s2,
-                                  "conditioner_gain": s2.conditioner_gain}
-    return out
-
-
-def _model_dict(truth: AccelerometerTruth) -> dict[str, Any]:
-    return {
-        "modes": [{"natural_frequency_hz": m.natural_frequency_hz, "damping_ratio": m.damping_ratio}
-                  for m in truth.modes],
-        "lowpass_hz": truth.lowpass_hz,
-        "lowpass_order": truth.lowpass_order,
-        "sensitivity": truth.sensitivity,
-        "zero_shift": truth.zero_shift,
-    }
-
-
-def _shot_truth_dict(shot: _Shot, signals: SignalParams) -> dict[str, Any]:
-    return {
-        "shot_number": shot.number,
-        "fired_at_sim_s": shot.fired_at_s,
-        "pressure_bar": shot.pressure_bar,
-        "projectile": shot.projectile,
-        "projectile_speed_m_s": shot.speed_m_s,
-        "pulse": {"shape": "bipolar" if signals.pulse_bipolar_ratio else "half_sine", "peak_m_s2": shot.peak_m_s2,
-                  "width_s": shot.width_s, "start_s": 0.0, "bipolar_ratio": signals.pulse_bipolar_ratio},
-        "channel_skew_s": signals.channel_skew_s,
-        "response_drift_v_per_s": signals.response_drift_v_per_s,
-        "peak_acceleration_m_s2": shot.peak_m_s2,
-        "peak_g": shot.peak_m_s2 / G_M_S2,
-        "pulse_width_s": shot.width_s,
-        "delta_velocity_m_s": shot.delta_v_m_s,
-        "accelerometer": _model_dict(shot.truth),
-        "amplifier_gain": shot.gain,
-        "excitation_v": shot.excitation_v,
-        "sensitivity_v_per_m_s2": shot.bridge_sensitivity_v_per_m_s2,
-        "output_offset_v": shot.output_offset_v,
-        "grating_pitch_m": signals.grating_pitch_m,
-        "orders": list(signals.orders),
-    }
-
-
-def _reference_dict(time_s: np.ndarray, velocity: np.ndarray, acceleration: Callable[[np.ndarray], np.ndarray]
-                    ) -> dict[str, list[float]]:
-    """The true reference decimated to at most ~1 MS/s (JSON-sized)."""
-    fs = 1.0 / (time_s[1] - time_s[0]) if time_s.size > 1 else 1.0
-    step = max(1, int(round(fs / 1e6)))
-    t = time_s[::step]
-    return {
-        "time_s": t.tolist(),
-        "velocity_m_s": velocity[::step].tolist(),
-        "acceleration_m_s2": acceleration(t).tolist(),
-    }
-
-
-def accelerometer_truth(truth: dict[str, Any], key: str = "accelerometer") -> AccelerometerTruth:
-    """The AccelerometerTruth of a shot from its `last_shot_truth` dict (round trip); key
-    "accelerometer_2" for the second sensor."""
-    acc = truth[key]
-    return AccelerometerTruth(
-        modes=tuple(Mode(m["natural_frequency_hz"], m["damping_ratio"]) for m in acc["modes"]),
-        lowpass_hz=acc["lowpass_hz"],
-        lowpass_order=acc["lowpass_order"],
-        sensitivity=acc["sensitivity"],
-        zero_shift=acc["zero_shift"],
-    )
 
 
 @dataclass(frozen=True)

@@ -108,7 +108,7 @@ def _poly_text(coeffs: np.ndarray) -> str:
 
 
 def _print_design(result: dict[str, Any], dcm: DCM) -> None:
-    from hopkinson.analysis.dcm import format_complex
+    from hopkinson.analysis.pole_checks import format_complex
 
     out = sys.stdout
     out.write(f"Model: {result['source']} (sample interval {dcm.sample_interval_s:g} s)\n")
@@ -192,8 +192,8 @@ def _at_rate(record: Record, model: DiscreteModel) -> Record:
 def _design(args: argparse.Namespace, record: Record | None
             ) -> tuple[np.ndarray, DcmDesign, DiscreteModel | None, str]:
     """(poles shown in the pole analysis, the design, the model to report or None, source)."""
-    from hopkinson.analysis.dcm import check_conjugate_pairs, parse_poles
     from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, poles_only_model
+    from hopkinson.analysis.pole_checks import check_conjugate_pairs, parse_poles
 
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
@@ -276,7 +276,8 @@ def run_dcm(args: argparse.Namespace) -> int:
 def run_compensate(args: argparse.Namespace) -> int:
     """Apply a DCM to a record's response, streamed block by block, and write the result."""
     from hopkinson.analysis.compensation import to_rate
-    from hopkinson.analysis.dcm import DCM, DcmStream
+    from hopkinson.analysis.dcm import DCM
+    from hopkinson.analysis.dcm_stream import DcmStream
     from hopkinson.analysis.model import load_json_object
     from hopkinson.analysis.records import read_record
 

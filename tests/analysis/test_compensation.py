@@ -18,8 +18,8 @@ from hopkinson.analysis.compensation import (
     recommendation,
     to_rate,
 )
-from hopkinson.analysis.dcm import compensated_fbsd_hz
 from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.dcm_figures import compensated_fbsd_hz
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import Record
@@ -206,7 +206,7 @@ def _compensated_peak_one_draw_at_a_time(record, model, dcm, channel_delay_sampl
     import dataclasses
 
     from hopkinson.analysis.compensation import COVERAGE, _pulse_of
-    from hopkinson.analysis.dcm import apply
+    from hopkinson.analysis.dcm_stream import apply
     from hopkinson.analysis.excitation import peak_estimate
     from hopkinson.analysis.response import model_output
 

@@ -10,17 +10,14 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from hopkinson.analysis.dcm import (
-    DCM,
-    DcmStream,
-    apply,
+from hopkinson.analysis.dcm import DCM, design_dcm, load_dcm
+from hopkinson.analysis.dcm_figures import (
     compensated_fbsd_edges,
     compensated_fbsd_hz,
-    design_dcm,
-    load_dcm,
     rise_time_ratio,
     rise_times_samples,
 )
+from hopkinson.analysis.dcm_stream import DcmStream, apply
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import fbsd_hz
@@ -192,7 +189,7 @@ def test_aligned_output_is_the_unaligned_one_moved_by_the_latency(latency):
     same from apply_rows (the compensated peak's draws)."""
     from dataclasses import replace
 
-    from hopkinson.analysis.dcm import apply_rows
+    from hopkinson.analysis.dcm_stream import apply_rows
     from hopkinson.analysis.resample import shift_samples
 
     dcm = replace(design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA), latency_samples=latency)
@@ -284,7 +281,7 @@ def test_ratio_for_widening_reaches_the_asked_band():
 def test_settling_time_ratio_of_a_second_order_pair_against_its_envelope():
     """A lightly damped pair settles to ±5 % in about 3/(ζ·ω_n) (the paper's T_r, Eq. 21);
     compensated to a well damped pair, the settling time ratio approaches the envelope ratio."""
-    from hopkinson.analysis.dcm import settling_time_ratio
+    from hopkinson.analysis.dcm_figures import settling_time_ratio
 
     dt = 1e-6
     wn, zeta = 2 * np.pi * 27_000.0, 0.05
@@ -334,7 +331,7 @@ def test_settling_and_rise_times_of_a_first_order_sensor_in_closed_form(fir_taps
     with it."""
     from dataclasses import replace
 
-    from hopkinson.analysis.dcm import compare_steps
+    from hopkinson.analysis.dcm_figures import compare_steps
 
     p = 0.9
     model = DiscreteModel(1e-6, [1.0, -p], [1.0 - p])
@@ -354,7 +351,7 @@ def test_settling_time_of_a_lightly_damped_pair_against_its_closed_form_step_res
     R = K/((p − p̄)(p − 1)), K = (1 − p)(1 − p̄) (the residue at the pole p), evaluated in closed
     form; it settles to ±5 % one sample after its last excursion. So do the model compensated
     by a DCM with ζ_e = 0.707: model × DCM is the all-pole pair of the designed poles."""
-    from hopkinson.analysis.dcm import compare_steps
+    from hopkinson.analysis.dcm_figures import compare_steps
 
     def closed_form_settling(pair: np.ndarray) -> float:
         p = pair[np.argmax(pair.imag)]

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from hopkinson.analysis.dcm import compensated_fbsd_hz
 from hopkinson.analysis.dcm_design import (
     DcmOptions,
     ShotSupport,
@@ -18,6 +17,7 @@ from hopkinson.analysis.dcm_design import (
     choose_poles,
     design_compensation,
 )
+from hopkinson.analysis.dcm_figures import compensated_fbsd_hz
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import fbsd_hz, response_times_samples
@@ -190,7 +190,7 @@ def test_latency_lines_the_compensated_output_up_with_the_input():
     """A pulse through the exact model, delayed 2.4 samples on the way (a channel skew), then the
     DCM with its latency removed: the input comes back in place; the latency is the shift that
     minimises the mismatch (half a sample either way is worse)."""
-    from hopkinson.analysis.dcm import apply
+    from hopkinson.analysis.dcm_stream import apply
     from hopkinson.analysis.resample import shift_samples
     from hopkinson.analysis.response import model_output
 
@@ -254,7 +254,7 @@ def true_peak_ratio(support: ShotSupport, dcm) -> float:
     """The pulse through the exact sensor and the DCM: the output's peak over the input's, each
     read as the largest value of its band-limited interpolation ×16 (scipy.signal.resample_poly),
     independently of ShotPulse.peak_ratios (which reads peaks by analysis.excitation's fit)."""
-    from hopkinson.analysis.dcm import apply
+    from hopkinson.analysis.dcm_stream import apply
     from hopkinson.analysis.response import model_output
 
     u = support.pulse.reference_m_s2

@@ -1,7 +1,7 @@
 """The DCM's figures against closed forms: the noise gain of a known impulse response, the
 compensated FBSD of a model whose resonance the DCM cancels exactly (the edge found on scipy's
 freqz, not by the code under test), and the step responses, rise and settling times of
-first-order systems (exact). They kill the mutants of analysis/dcm.py's figures that the DCM's own
+first-order systems (exact). They kill the mutants of the DCM's figures (analysis/dcm_figures.py, DCM.noise_gain) that the DCM's own
 tests let survive (docs/mutation-testing.md)."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import pytest
 from scipy import signal
 from scipy.optimize import brentq
 
-from hopkinson.analysis.dcm import (
-    DCM,
+from hopkinson.analysis.dcm import DCM
+from hopkinson.analysis.dcm_figures import (
     StepComparison,
     compare_steps,
     compensated_fbsd_edges,

@@ -83,7 +83,7 @@ def test_a_response_leading_the_reference_is_reported_even_where_the_zeros_absor
     # lead beyond 2 samples by the channels' cross-correlation (here −3 and −6) is realigned
     # before the fit and kept in the model's delay, which goes negative where the zeros do not
     # take it all.
-    from hopkinson.analysis.dcm import model_dc_group_delay_samples
+    from hopkinson.analysis.group_delay import model_dc_group_delay_samples
 
     ident = identify(record(PIEZO.scaled(skew_samples=skew_samples), 1))
     said = [w for w in ident.warnings if "leads the reference" in w]

@@ -14,14 +14,9 @@ import pytest
 from hopkinson.drivers.digitizer import Digitizer
 from hopkinson.drivers.sim.accelerometer import Mode
 from hopkinson.drivers.sim.faults import FaultSet
+from hopkinson.drivers.sim.shot_truth import accelerometer_truth
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
-from hopkinson.drivers.sim.world import (
-    AmplifierParams,
-    LauncherParams,
-    World,
-    WorldParams,
-    accelerometer_truth,
-)
+from hopkinson.drivers.sim.world import AmplifierParams, LauncherParams, World, WorldParams
 from hopkinson.drivers.valve_controller import ValveController
 from tests.drivers.conftest import FakeClock, sim_config
 

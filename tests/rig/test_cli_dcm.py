@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hopkinson.analysis.dcm import apply, load_dcm
+from hopkinson.analysis.dcm import load_dcm
+from hopkinson.analysis.dcm_stream import apply
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import read_record, record_from_arrays, write_record
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode

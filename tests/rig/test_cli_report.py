@@ -162,7 +162,7 @@ def test_a_plan_naming_a_sine_calibration_gets_the_comparison(run_folder: Path, 
     response, as a lab's sine calibrator would measure it): the report compares every shot's model."""
     import numpy as np
 
-    from hopkinson.drivers.sim.world import accelerometer_truth
+    from hopkinson.drivers.sim.shot_truth import accelerometer_truth
 
     run = tmp_path / "run"
     shutil.copytree(run_folder, run)

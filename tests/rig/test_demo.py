@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopkinson.drivers.sim.world import accelerometer_truth
+from hopkinson.drivers.sim.shot_truth import accelerometer_truth
 from hopkinson.rig.cli.demo import demo_plan_text
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.journal import Journal

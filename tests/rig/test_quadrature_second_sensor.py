@@ -22,7 +22,7 @@ from hopkinson.analysis.shot_analysis import ShotAnalysis
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.doppler_beat import QuadratureOutput, pm_beat
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2, velocity_m_s
-from hopkinson.drivers.sim.world import accelerometer_truth
+from hopkinson.drivers.sim.shot_truth import accelerometer_truth
 from hopkinson.reports.pages import report_pages
 from hopkinson.reports.tables import SENSITIVITY_ROW, results_rows
 from hopkinson.reports.writers import write_pngs, write_report
