@@ -24,7 +24,6 @@ import numpy as np
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand
 from hopkinson.analysis.findings import Finding, texts
-from hopkinson.analysis.frequency_fit import SineTerms
 from hopkinson.analysis.identify_stages import (
     BandCut,
     Claim,
@@ -48,6 +47,7 @@ from hopkinson.analysis.order_choice import FRF_TOLERANCE
 from hopkinson.analysis.params import IdentifyOptions
 from hopkinson.analysis.record_preparation import Prepared, PreparedRecord, prepare_record
 from hopkinson.analysis.records import Record
+from hopkinson.analysis.spectral_data import SineTerms
 
 if TYPE_CHECKING:
     from hopkinson.analysis.sine_comparison import SineCalibration

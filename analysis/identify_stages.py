@@ -17,14 +17,7 @@ import numpy as np
 
 from hopkinson.analysis.claims import claim_findings, claimed_modes, delay_findings
 from hopkinson.analysis.findings import Finding, FindingCode
-from hopkinson.analysis.frequency_fit import (
-    OrderFit,
-    OrderProblem,
-    SineTerms,
-    SpectralData,
-    predicted_bins,
-    response,
-)
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, predicted_bins, response
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION
 from hopkinson.analysis.loss import long_dot
 from hopkinson.analysis.model import DiscreteModel
@@ -58,6 +51,7 @@ from hopkinson.analysis.record_preparation import (
     with_output_variance,
 )
 from hopkinson.analysis.response import simulate_from_rest
+from hopkinson.analysis.spectral_data import SineTerms, SpectralData
 from hopkinson.analysis.structure import Structure
 
 # Below this fit percentage the model is reported as explaining little of the response.

@@ -80,7 +80,7 @@ class InputTerms:
 
     @property
     def prior(self) -> np.ndarray:
-        """Each coefficient's prior weight (frequency_fit.SpectralData.input_prior): the onset's
+        """Each coefficient's prior weight (spectral_data.SpectralData.input_prior): the onset's
         bumps c ~ N(0, 1) in units of the pulse's peak (a disturbance no larger than the pulse),
         which settles the combinations of bumps the fitted bins do not see and costs a plausible
         disturbance nearly nothing; ε ~ N(0, ASYMMETRY_PRIOR_SD²) and γ ~ N(0, MOTION_PRIOR_SD²),

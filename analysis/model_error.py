@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from hopkinson.analysis.frequency_fit import OrderFit, SpectralData, predicted_bins, response
+from hopkinson.analysis.frequency_fit import OrderFit, predicted_bins, response
 from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.record_preparation import Prepared
+from hopkinson.analysis.spectral_data import SpectralData
 
 # Model error is taken as detected when the residual exceeds this many times what the noise
 # explains. A right model reads about 1: the coverage study's simulated shots median 0.69, 139

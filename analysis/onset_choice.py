@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem
 from hopkinson.analysis.input_terms import ONSET
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.order_choice import choose_order
@@ -28,6 +28,7 @@ from hopkinson.analysis.order_search import (
     fit_orders,
 )
 from hopkinson.analysis.record_preparation import Prepared
+from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.structure import DelayMode, Structure
 
 # The onset's bumps are kept only where the correction they make stands this many times above the

@@ -8,7 +8,7 @@
   added to the record (analysis.uncertainty's Monte Carlo draws of the figures) or, for the
   order's stability, to the chosen model's response (a parametric bootstrap: noise added to a
   noisy record doubles it and would favour the lowest orders).
-- `Refitter`: each order refitted on a draw from its nominal fit (frequency_fit.QuickRefit).
+- `Refitter`: each order refitted on a draw from its nominal fit (quick_refit.QuickRefit).
 - `order_stability`: the whole order choice re-run on draws; the fraction choosing each order.
 """
 
@@ -21,10 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from hopkinson.analysis.frequency_fit import OrderFit, QuickRefit, SpectralData, is_stable, response
+from hopkinson.analysis.frequency_fit import OrderFit, is_stable, response
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.params import SIGNIFICANCE
+from hopkinson.analysis.quick_refit import QuickRefit
+from hopkinson.analysis.spectral_data import SpectralData
 
 # The order test: a higher order must be significant at params.SIGNIFICANCE (F test on V,
 # corrected for the number of bins a pole pair could be placed at) and change the excitation-weighted frequency response by more than this (RMS, relative):

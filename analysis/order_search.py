@@ -26,9 +26,7 @@ from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import (
     OrderFit,
     OrderProblem,
-    SpectralData,
     all_pole_numerator,
-    delay_branches,
     predicted_bins,
 )
 from hopkinson.analysis.modes import ModeKind, has_doublet, modes_of
@@ -43,8 +41,10 @@ from hopkinson.analysis.order_choice import (
     order_stability,
     response_change,
 )
+from hopkinson.analysis.quick_refit import delay_branches
 from hopkinson.analysis.record_preparation import Alignment, Prepared
 from hopkinson.analysis.resample import estimate_delay_samples
+from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.structure import DelayMode, Structure
 
 # A final model with a pole this close to the unit circle sits on the stability boundary.
@@ -389,7 +389,7 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup) -> S
 def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: SearchSetup
                       ) -> tuple[OrderFit, list[OrderFit]]:
     """The chosen order's final fit and the other optima of its delay–zeros valley
-    (frequency_fit.delay_branches): the estimate is the lowest of them (the search started each
+    (quick_refit.delay_branches): the estimate is the lowest of them (the search started each
     order from one delay and can miss it); the others are kept for the Monte Carlo, whose draws
     re-run this choice. Only a causal delay has branches. The sweep keeps the final fit."""
     final = sweep.fits[order]

@@ -25,7 +25,7 @@ from numpy import fft
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SupportedBand, supported_band
 from hopkinson.analysis.findings import Finding, FindingCode
-from hopkinson.analysis.frequency_fit import OrderFit, SpectralData
+from hopkinson.analysis.frequency_fit import OrderFit
 from hopkinson.analysis.input_terms import ONSET, InputTerms, input_terms
 from hopkinson.analysis.noise import (
     COHERENCE_SEGMENT,
@@ -38,6 +38,7 @@ from hopkinson.analysis.pulse_location import MIN_QUIET, Activity, locate_pulse
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
 from hopkinson.analysis.response import simulate_from_rest
+from hopkinson.analysis.spectral_data import SpectralData
 
 # Samples per model parameter below which a record is too short for an order.
 MIN_SAMPLES_PER_PARAMETER = 10

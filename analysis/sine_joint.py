@@ -2,7 +2,7 @@
 the two agree (issue 17, `hopkinson identify RECORD --sine SINE.csv`).
 
 The fit. The sine points join the shock's frequency-domain fit as extra residuals of the same
-model (frequency_fit.SineTerms): at each point the complex log-error of κ·H(f)·e^{j2πfτ_s}
+model (spectral_data.SineTerms): at each point the complex log-error of κ·H(f)·e^{j2πfτ_s}
 against S·e^{jφ}, its real part (the magnitude's relative error) over σ_mag and its imaginary
 part (the phase error) over σ_phase. κ is a free relative gain and τ_s a free skew: the sine
 constrains the model's shape only; the DC gain (the sensitivity) stays the shock's, and
@@ -62,10 +62,11 @@ from scipy.special import chdtrc
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import Finding, FindingCode
-from hopkinson.analysis.frequency_fit import OrderProblem, SineTerms
+from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.numerics import bracketed_root
 from hopkinson.analysis.sine_comparison import SineCalibration
+from hopkinson.analysis.spectral_data import SineTerms
 
 # Paule–Mandel re-estimates of the weights (shock's R, sine's s) after the shock-only start.
 WEIGHT_ITERATIONS = 2

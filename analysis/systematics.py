@@ -41,8 +41,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, SpectralData, is_stable
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, is_stable
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION, ONSET
+from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.structure import DelayMode
 
 if TYPE_CHECKING:

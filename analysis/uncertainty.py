@@ -25,10 +25,7 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.estimate import COVERAGE, Estimate
 from hopkinson.analysis.excitation import peak_estimate, pulse_width
 from hopkinson.analysis.findings import Finding, FindingCode, texts
-from hopkinson.analysis.frequency_fit import (
-    OrderFit,
-    is_stable,
-)
+from hopkinson.analysis.frequency_fit import OrderFit, is_stable
 from hopkinson.analysis.identify import (
     Identification,
 )

@@ -11,10 +11,11 @@ from typing import Any
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.frequency_fit import OrderProblem, SpectralData
+from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import fbsd_edges
+from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.systematics import MODEL_ERROR_BOUND, TypeB, fitted_shares
 from hopkinson.analysis.uncertainty_draws import UncertaintyOptions
 

@@ -13,11 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from hopkinson.analysis.frequency_fit import OrderProblem, SpectralData, is_stable, predicted_bins
+from hopkinson.analysis.frequency_fit import OrderProblem, is_stable, predicted_bins
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.modes import has_doublet
 from hopkinson.analysis.order_choice import NoiseDraws, Refitter, candidates_around, order_stability
 from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
+from hopkinson.analysis.spectral_data import SpectralData
 
 ORDER_DRAWS = 40  # draws that re-run the whole order choice (its PDF's resolution: 2.5 %)
 # Where the model error is detected, the draws are refitted on the fitted band and on these
