@@ -2,8 +2,8 @@
 prints.
 
 `stage_trail` reads the stage results (analysis.record_preparation, analysis.identify_stages)
-when the identification is assembled; each stage's account is a function of that stage's result
-alone. The JSON report carries the same figures (`noise`, `order_evidence`, `modes`).
+when the identification is assembled, one function per stage's account. The JSON report
+carries the same figures (`noise`, `order_evidence`, `modes`), not the text.
 """
 
 from __future__ import annotations
