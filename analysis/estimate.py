@@ -1,45 +1,96 @@
-"""A reported figure with its uncertainty (GUM Supplement 1): the value, its standard
-uncertainty and its 95 % coverage interval from Monte Carlo draws, or the reason it is not
-determined.
+"""A figure with its uncertainty (GUM Supplement 1): the value, its standard uncertainty and its
+95 % coverage interval, or why the shot does not determine it. One type for the Monte Carlo's
+results (`Estimate.of_draws`), the key figures, the reports and the lab record.
 
-Invariants every interval keeps (issue 40): it contains its own value, and a figure bounded by
+Invariants every interval from draws keeps: it contains its own value, and a figure bounded by
 physics stays inside its bound (a frequency or a damping ratio above zero, a DC gain of the
 value's sign): such a figure's draws are reflected on a log scale. A figure the record cannot
-determine is not given a number with an absurd interval: `NotDetermined` says why.
+determine is not given a number with an absurd interval: `Estimate.undetermined` says why.
+Light: NumPy is imported only to evaluate draws.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 COVERAGE = 0.95
 
 
 @dataclass(frozen=True)
-class NotDetermined:
-    """A figure the shot does not determine, and why (a typed result, never a magic number)."""
-
-    reason: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"not_determined": self.reason}
-
-
-@dataclass(frozen=True)
 class Estimate:
-    """One figure: the reported value, its standard uncertainty and 95 % coverage interval."""
+    """A value with its standard uncertainty and 95 % coverage interval (None: without), or the
+    reason the shot does not determine it (value None then)."""
 
-    value: float
-    u: float
-    interval: tuple[float, float]
+    value: float | None
+    u: float | None = None
+    interval: tuple[float, float] | None = None
+    not_determined: str | None = None
+
+    @property
+    def expanded(self) -> float | None:
+        """U: half the width of the 95 % coverage interval (k ≈ 2 for a normal distribution)."""
+        if self.interval is None:
+            return None
+        return 0.5 * (self.interval[1] - self.interval[0])
+
+    @property
+    def u_rel(self) -> float | None:
+        if self.u is None or not self.value:
+            return None
+        return abs(self.u / self.value)
+
+    def format(self, scale: float = 1.0, digits: int = 4, unit: str = "") -> str:
+        """'27.01 ± 0.12 kHz' (value ± U, 95 %), or the value alone without uncertainty; "not
+        determined" where the shot does not determine it."""
+        if self.not_determined:
+            return "not determined"
+        if self.value is None:
+            return "—"
+        suffix = f" {unit}" if unit else ""
+        big = self.expanded
+        if big is None:
+            return f"{self.value / scale:.{digits}g}{suffix}"
+        # As many decimals as the two significant digits of U need (GUM 7.2.6).
+        decimals = _decimals_for(big / scale)
+        return f"{self.value / scale:.{decimals}f} ± {big / scale:.{decimals}f}{suffix}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"value": _finite(self.value), "u": _finite(self.u),
-                "interval": [_finite(self.interval[0]), _finite(self.interval[1])]}
+        """{"value", "u", "interval"} (inf and NaN as None), and "not_determined" when set."""
+        interval = None if self.interval is None else [_finite(self.interval[0]), _finite(self.interval[1])]
+        out = {"value": _finite(self.value), "u": _finite(self.u), "interval": interval}
+        if self.not_determined:
+            out["not_determined"] = self.not_determined
+        return out
+
+    @classmethod
+    def of(cls, data: Any) -> Estimate | None:
+        """From a number, a {"value", "u", "interval"} dict (`to_dict`'s), or None."""
+        if data is None:
+            return None
+        if isinstance(data, dict):
+            value = finite_number(data.get("value"))
+            interval = data.get("interval")
+            pair = None
+            if isinstance(interval, (list, tuple)) and len(interval) == 2:
+                lo, hi = finite_number(interval[0]), finite_number(interval[1])
+                pair = (lo, hi) if lo is not None and hi is not None else None
+            why = data.get("not_determined")
+            return cls(value, finite_number(data.get("u")), pair, str(why) if why else None)
+        return cls(finite_number(data))
+
+    def with_value(self, value: float | None) -> Estimate:
+        """The same uncertainty around another reported value (the value elsewhere wins)."""
+        return Estimate(value, self.u, self.interval, self.not_determined)
+
+    @classmethod
+    def undetermined(cls, reason: str) -> Estimate:
+        """A figure the shot does not determine (analysis.determination), with why."""
+        return cls(None, None, None, reason)
 
     @classmethod
     def of_draws(cls, value: float, draws: np.ndarray, coverage: float = COVERAGE,
@@ -65,6 +116,8 @@ class Estimate:
 
         The interval always contains `value`: where the draws lie all on one side of it (they do
         not bracket the estimate), the interval is extended to it."""
+        import numpy as np
+
         if signed and value != 0:
             sign = 1.0 if value > 0 else -1.0
             mag = cls.of_draws(abs(value), sign * np.asarray(draws, dtype=float), coverage, reflect, positive=True)
@@ -74,6 +127,8 @@ class Estimate:
 
     def holding_value(self) -> Estimate:
         """The same estimate with its interval extended to hold the value (where it did not)."""
+        if self.interval is None or self.value is None:
+            return self
         lo, hi = self.interval
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo <= self.value <= hi:
             return self
@@ -82,6 +137,8 @@ class Estimate:
     @classmethod
     def _of_draws(cls, value: float, draws: np.ndarray, coverage: float, reflect: np.ndarray | None,
                   positive: bool) -> Estimate:
+        import numpy as np
+
         if positive and value > 0:
             d = np.asarray(draws, dtype=float)
             d = np.where(d > 0, d, np.nan)
@@ -109,7 +166,19 @@ class Estimate:
         return cls(float(value), float(u), (float(value - k * u), float(value + k * u)))
 
 
-
-
 def _finite(value: float | None) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
+
+
+def finite_number(value: Any) -> float | None:
+    """A finite int or float as float; anything else (a bool, text, inf, NaN) as None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _decimals_for(expanded: float) -> int:
+    """Decimals that show two significant digits of `expanded` (at least 0, at most 12)."""
+    if not (expanded > 0 and math.isfinite(expanded)):
+        return 4
+    return int(min(12, max(0, 1 - math.floor(math.log10(expanded)))))

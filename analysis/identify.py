@@ -41,13 +41,18 @@ from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.loss import arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.model_error import ModelError
-from hopkinson.analysis.modes import Mode, ModeKind, main_mode
-from hopkinson.analysis.noise import NoiseSpectrum
-from hopkinson.analysis.order_choice import FRF_TOLERANCE
+from hopkinson.analysis.modes import Mode, main_mode, resonance_above_hz
 from hopkinson.analysis.params import IdentifyOptions
 from hopkinson.analysis.record_preparation import Prepared, PreparedRecord, prepare_record
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.spectral_data import SineTerms
+from hopkinson.analysis.trail import (
+    NoiseLevels,
+    Trail,
+    order_criterion,
+    stage_trail,
+    stretches_after_pulse,
+)
 
 if TYPE_CHECKING:
     from hopkinson.analysis.sine_comparison import SineCalibration
@@ -57,9 +62,11 @@ if TYPE_CHECKING:
 KNEE_TOLERANCE = 0.01
 
 
-@dataclass
+@dataclass(frozen=True)
 class Identification:
     """The identified model and the stage results that chose it (analysis.identify_stages).
+    Frozen: a later result (the uncertainty's order stability, the sine's consistency) gives a
+    new one (`with_order_stability`, `dataclasses.replace`).
 
     Losses are the errors-in-variables output-error cost V (dimensionless: each fitted DFT bin
     adds its error over its noise; ≈ the number of bins for the right model); index 0 of every
@@ -71,11 +78,12 @@ class Identification:
     weighed: WeighedSearch
     settlement: Settlement
     claim: Claim
-    findings: list[Finding]  # what the stages found, in the order they ran
+    findings: tuple[Finding, ...]  # what the stages found, in the order they ran
     loss_by_order: list[float]  # V_n (the order choice uses it)
     arx_loss_by_order: list[float]  # plain least-squares ||g2||², one factorisation (normalised units)
     aic_by_order: list[float]  # on V
     bic_by_order: list[float]
+    trail: Trail  # what decided it, stage by stage (`hopkinson identify --explain`)
     preprocessing: dict[str, Any] = field(default_factory=dict)
     noise: dict[str, Any] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
     order_evidence: dict[str, Any] = field(default_factory=dict)  # why this order
@@ -159,18 +167,22 @@ class Identification:
     def resonance_above_hz(self) -> float | None:
         """With no mode inside the supported band but one beyond it: the band's top, a lower bound
         of the resonance (it lies in a null of the excitation); else None."""
-        if self.main_mode is not None or self.supported_band_hz is None:
-            return None
-        top = self.supported_band_hz[1]
-        beyond = any(m.kind == ModeKind.COMPLEX and not m.cancelled and (m.natural_frequency_hz or 0.0) > top
-                     for m in self.modes)
-        return float(top) if beyond else None
+        return resonance_above_hz(self.modes, self.supported_band_hz)
 
     def supported_poles(self) -> np.ndarray:
         """The poles of the supported modes (both poles of a pair): what a DCM may cancel."""
         keep = [m.pole_z for m in self.modes if m.supported]
         poles = [p for q in keep for p in ((q, q.conjugate()) if q.imag > 0 else (q,))]
         return np.array(poles, dtype=complex)
+
+    def with_order_stability(self, draws: int, fraction_by_order: dict[str, float]) -> Identification:
+        """This identification with the order choice's stability measured on `draws` noise draws
+        (`fraction_by_order`: order -> share of the draws that chose it); unchanged where the
+        settle stage measured it already."""
+        if "stability" in self.order_evidence:
+            return self
+        stability = {"draws": draws, "fraction_by_order": dict(fraction_by_order)}
+        return replace(self, order_evidence={**self.order_evidence, "stability": stability})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready fields: the model JSON (docs/files-and-formats.md) plus the fit details; inf/NaN → None."""
@@ -229,9 +241,8 @@ def identify(record: Record, options: IdentifyOptions | None = None, *, sine_ter
             return result
         cut = result.claim.band_cut
     again = _identify(record, options, sine_terms, band_top_hz=cut.top_hz)
-    again.findings.insert(0, cut.finding)
-    again.preprocessing["band_cut"] = cut.to_dict()
-    return again
+    return replace(again, findings=(cut.finding, *again.findings),
+                   preprocessing={**again.preprocessing, "band_cut": cut.to_dict()})
 
 
 def _identify(record: Record, options: IdentifyOptions, sine_terms: SineTerms | None,
@@ -285,8 +296,8 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
         arx_losses = [float(v) for v in arx_loss_by_order(arx_u, arx_y, n_max)]
     except AnalysisError:
         arx_losses = [math.nan] * n_max
-    claimed.model.info.update({"loss_by_order": loss_list, "fit_percent": claimed.fit_percent,
-                               "converged": final.converged})
+    info = {"loss_by_order": loss_list, "fit_percent": claimed.fit_percent, "converged": final.converged}
+    claimed = replace(claimed, model=replace(claimed.model, info={**claimed.model.info, **info}))
     evidence: dict[str, Any] = {}
     if settlement.stability is not None:
         evidence["stability"] = settlement.stability
@@ -299,9 +310,7 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
         "comparisons": sweep.comparisons,
         "structure": sweep.structure.value,
         "structure_reason": sweep.why,
-        "criterion": "the smallest order no higher order beats, both beyond chance (F test on the "
-                     f"errors-in-variables cost V at {setup.significance:.0%}, Bonferroni-corrected over the fitted "
-                     f"bins) and in the excitation-weighted frequency response (by more than {FRF_TOLERANCE:.1%} RMS)",
+        "criterion": order_criterion(setup.significance),
         "chosen": sweep.chosen,
         "selection": settlement.settled.selection,
         "bins": data.bins,
@@ -310,36 +319,32 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
         "response_change_to_next_order": {str(n): sweep.changes[(n, n + 1)] for n in sorted(sweep.fits)
                                           if (n, n + 1) in sweep.changes},
     })
-    findings = [*prepared.findings, *search.findings, *settlement.findings, *claimed.findings]
+    findings = (*prepared.findings, *search.findings, *settlement.findings, *claimed.findings)
+    levels = NoiseLevels.of(prepared, claimed.response_noise)
+    trail = stage_trail(prepared, settlement, claimed, levels,
+                        resonance_above_hz(claimed.modes, prep.band))
     return Identification(
         prepared, search, weighed, settlement, claimed, findings, loss_by_order=loss_list,
-        arx_loss_by_order=arx_losses, aic_by_order=aic, bic_by_order=bic, preprocessing=pre,
-        noise=_noise_report(prepared, claimed.response_noise, claimed.residual, claimed.v_per_dof,
-                            settlement.model_error),
+        arx_loss_by_order=arx_losses, aic_by_order=aic, bic_by_order=bic, trail=trail, preprocessing=pre,
+        noise=_noise_report(prepared, levels, claimed, settlement.model_error),
         order_evidence=evidence, input_terms=term_summary(prep.terms, final.inputs, prepared.scale_u),
     )
 
 
-def _noise_report(prepared: PreparedRecord, noise_y: NoiseSpectrum, residual: np.ndarray, ratio: float,
-                  model_error: ModelError) -> dict[str, Any]:
+def _noise_report(prepared: PreparedRecord, levels: NoiseLevels, claimed: Claim, model_error: ModelError
+                  ) -> dict[str, Any]:
     """The noise levels (channel units) and where they were measured, the residual, the model
     error and the motion left out of the noise."""
     prep, rec = prepared.prep, prepared.record
-    dt, scale_u, scale_y = rec.sample_interval_s, prepared.scale_u, prepared.scale_y
+    dt = rec.sample_interval_s
     return {
-        "reference_rms": prep.noise.draw_noise_u.rms * scale_u if prep.noise.draw_noise_u.samples else None,
-        "response_rms": noise_y.rms * scale_y if noise_y.samples else None,
-        "reference_source": prep.noise.draw_noise_u.source,
-        "response_source": noise_y.source + (" less the model's response" if noise_y is not prep.noise.draw_noise_y else ""),
-        "residual_rms": float(np.std(residual) * scale_y),
-        "v_per_degree_of_freedom": ratio,
+        **levels.to_dict(),
+        "residual_rms": float(np.std(claimed.residual) * prepared.scale_y),
+        "v_per_degree_of_freedom": claimed.v_per_dof,
         "model_error": model_error.to_dict(),
         "lead_in": {"start_s": rec.start_time_s, "stop_s": rec.start_time_s + prep.activity.lead_in * dt,
                     "to_foot": prep.activity.lead_in_to_foot} if prep.activity.lead_in else None,
-        "motion_after_pulse": [{"start_s": rec.start_time_s + m["start_sample"] * dt,
-                                "stop_s": rec.start_time_s + m["stop_sample"] * dt, "coherence": m["coherence"],
-                                "reason": m["reason"]}
-                               for m in prep.noise.motion],
+        "motion_after_pulse": [m.to_dict() for m in stretches_after_pulse(prepared)],
     }
 
 

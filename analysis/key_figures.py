@@ -3,9 +3,9 @@ the panel and the commands read (never the results dict itself).
 
 `KeyFigures.from_results(results)` builds it from a results dict (`ShotAnalysis.to_dict()`,
 a shot file's /analysis, old files included); `from_analysis(ShotAnalysis)` from the object.
-Each uncertain figure is a `Figure(value, u, interval)`: the value reported everywhere, its
-standard uncertainty and its 95 % coverage interval (GUM Supplement 1), u and interval None
-when the shot was analysed without uncertainty. Light: no NumPy at import.
+Each uncertain figure is an `Estimate(value, u, interval)` (analysis.estimate; also named `Figure`):
+the value reported everywhere, its standard uncertainty and its 95 % coverage interval (GUM
+Supplement 1), u and interval None when the shot was analysed without uncertainty. Light: no NumPy at import.
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
+
+from hopkinson.analysis.estimate import Estimate, finite_number
 
 if TYPE_CHECKING:
     from hopkinson.analysis.shot_analysis import ShotAnalysis
@@ -22,79 +24,12 @@ LEVELS = ("5", "10")  # FBSD band levels in per cent (keys of fbsd_hz)
 # Budget rows every shot of one sensor on one rig shares (KeyFigures.shot_specific_u)
 COMMON_SOURCES = ("grating pitch", "interferometer", "amplifier gain", "digitizer gain",
                   "transverse sensitivity × transverse motion")
+# The name the key figures, the reports, the lab and the panel use for an Estimate
+Figure = Estimate
 # How the order was chosen, in words (results' order_selection: "knee" is the order test's
 # stored name, kept for the files' sake)
 ORDER_SELECTION_TEXT = {"order_test": "chosen by the order test", "asked": "as asked",
                         "knee": "chosen by the order test"}  # "knee": the name results stored before
-
-
-@dataclass(frozen=True)
-class Figure:
-    """A value with its standard uncertainty and 95 % coverage interval (None without)."""
-
-    value: float | None
-    u: float | None = None
-    interval: tuple[float, float] | None = None
-    not_determined: str | None = None  # why the shot does not determine it (value None then)
-
-    @property
-    def expanded(self) -> float | None:
-        """U: half the width of the 95 % coverage interval (k ≈ 2 for a normal distribution)."""
-        if self.interval is None:
-            return None
-        return 0.5 * (self.interval[1] - self.interval[0])
-
-    @property
-    def u_rel(self) -> float | None:
-        if self.u is None or not self.value:
-            return None
-        return abs(self.u / self.value)
-
-    def format(self, scale: float = 1.0, digits: int = 4, unit: str = "") -> str:
-        """'27.01 ± 0.12 kHz' (value ± U, 95 %), or the value alone without uncertainty; "not
-        determined" where the shot does not determine it."""
-        if self.not_determined:
-            return "not determined"
-        if self.value is None:
-            return "—"
-        suffix = f" {unit}" if unit else ""
-        big = self.expanded
-        if big is None:
-            return f"{self.value / scale:.{digits}g}{suffix}"
-        # As many decimals as the two significant digits of U need (GUM 7.2.6).
-        decimals = _decimals_for(big / scale)
-        return f"{self.value / scale:.{decimals}f} ± {big / scale:.{decimals}f}{suffix}"
-
-    def to_dict(self) -> dict[str, Any]:
-        out = {"value": self.value, "u": self.u, "interval": list(self.interval) if self.interval is not None else None}
-        if self.not_determined:
-            out["not_determined"] = self.not_determined
-        return out
-
-    @classmethod
-    def of(cls, data: Any) -> Figure | None:
-        """From a number, a {"value", "u", "interval"} dict, or None."""
-        if data is None:
-            return None
-        if isinstance(data, dict):
-            value = _number(data.get("value"))
-            interval = data.get("interval")
-            pair = None
-            if isinstance(interval, (list, tuple)) and len(interval) == 2:
-                lo, hi = _number(interval[0]), _number(interval[1])
-                pair = (lo, hi) if lo is not None and hi is not None else None
-            why = data.get("not_determined")
-            return cls(value, _number(data.get("u")), pair, str(why) if why else None)
-        return cls(_number(data))
-
-    def with_value(self, value: float | None) -> Figure:
-        """The same uncertainty around another reported value (the value elsewhere wins)."""
-        return Figure(value, self.u, self.interval, self.not_determined)
-
-    @classmethod
-    def undetermined(cls, reason: str) -> Figure:
-        """A figure the shot does not determine (analysis.determination), with why."""
-        return cls(None, None, None, reason)
 
 
 @dataclass(frozen=True)
@@ -109,26 +44,26 @@ class FbsdBound:
 class KeyFigures:
     """The shot's headline numbers (see the module docstring)."""
 
-    sensitivity: Figure  # DC gain, response units per m/s²
+    sensitivity: Estimate  # DC gain, response units per m/s²
     response_unit: str
-    shock_sensitivity: Figure | None  # ISO 16063-13 peak ratio, response units per m/s²
-    natural_frequency_hz: Figure | None  # main mode: lowest supported complex pole pair
-    damping_ratio: Figure | None
-    fbsd_hz: dict[str, Figure]  # "5", "10": the model's edge
+    shock_sensitivity: Estimate | None  # ISO 16063-13 peak ratio, response units per m/s²
+    natural_frequency_hz: Estimate | None  # main mode: lowest supported complex pole pair
+    damping_ratio: Estimate | None
+    fbsd_hz: dict[str, Estimate]  # "5", "10": the model's edge
     fbsd_bounds: dict[str, FbsdBound]  # edges beyond the supported band (report "> bound")
     supported_band_hz: tuple[float, float] | None
     order: int | None
     order_selection: str | None
     fit_percent: float | None
     delay_s: float | None
-    pulse_width_s: Figure | None
-    peak_acceleration_m_s2: Figure | None
-    peak_velocity_m_s: Figure | None
+    pulse_width_s: Estimate | None
+    peak_acceleration_m_s2: Estimate | None
+    peak_velocity_m_s: Estimate | None
     compensated_fbsd_hz: dict[str, float]
     dcm_recommended: bool | None
     dcm_not_recommended_reason: str | None
     compensation_check: dict[str, Any] | None
-    compensated_peak: Figure | None
+    compensated_peak: Estimate | None
     uncertainty_method: str | None
     draws: int | None
     coverage_probability: float | None
@@ -144,7 +79,7 @@ class KeyFigures:
     dcm_band_limit_hz: float | None = None
     dcm_latency_s: float | None = None
     # figure -> why the shot does not determine it (analysis.determination; those figures read None
-    # or Figure.undetermined), and whether the shot is a result at all (its DC gain determined)
+    # or Estimate.undetermined), and whether the shot is a result at all (its DC gain determined)
     not_determined: dict[str, str] = field(default_factory=dict)
     is_result: bool = True
     not_a_result_reason: str = ""
@@ -154,7 +89,7 @@ class KeyFigures:
     # the quasi-static gain in the main pulse's direction and the amplitude it is measured at
     # (analysis.static_gain: what the amplitude linearity is fitted to; u shot-specific); None: not
     # determined (static_gain_not_determined says why) or results written before it
-    static_gain: Figure | None = None
+    static_gain: Estimate | None = None
     static_gain_amplitude_m_s2: float | None = None
     static_gain_not_determined: str | None = None
 
@@ -194,7 +129,7 @@ class KeyFigures:
         out = asdict(self)
         for key in list(out):
             attr = getattr(self, key)
-            if isinstance(attr, Figure):
+            if isinstance(attr, Estimate):
                 out[key] = attr.to_dict()
             elif key == "fbsd_hz":
                 out[key] = {k: f.to_dict() for k, f in attr.items()}
@@ -222,50 +157,50 @@ class KeyFigures:
         unc_main = unc.get("main_mode") or {}
         unc_fbsd = unc.get("fbsd_hz") or {}
 
-        dc_gain = _number(model.get("dc_gain", ident.get("dc_gain")))
+        dc_gain = finite_number(model.get("dc_gain", ident.get("dc_gain")))
         sensitivity = _figure(dc_gain, unc.get("dc_gain"))
-        shock_value = _number(reduction.get("shock_sensitivity"))
+        shock_value = finite_number(reduction.get("shock_sensitivity"))
         shock = _figure(shock_value, unc.get("shock_sensitivity")) if shock_value is not None else None
 
         main = main_mode_of(ident)
-        f_n = _figure(_number(main.get("natural_frequency_hz")), unc_main.get("natural_frequency_hz")) if main else None
-        zeta = _figure(_number(main.get("damping_ratio")), unc_main.get("damping_ratio")) if main else None
+        f_n = _figure(finite_number(main.get("natural_frequency_hz")), unc_main.get("natural_frequency_hz")) if main else None
+        zeta = _figure(finite_number(main.get("damping_ratio")), unc_main.get("damping_ratio")) if main else None
 
         fbsd_values = results.get("fbsd_hz") or {}
-        fbsd = {k: _figure(_number(fbsd_values.get(k)), unc_fbsd.get(k)) for k in LEVELS if k in fbsd_values}
+        fbsd = {k: _figure(finite_number(fbsd_values.get(k)), unc_fbsd.get(k)) for k in LEVELS if k in fbsd_values}
         bounds = {}
         for k, b in (results.get("fbsd_bounds") or {}).items():
-            if isinstance(b, dict) and _number(b.get("lower_bound_hz")) is not None:
+            if isinstance(b, dict) and finite_number(b.get("lower_bound_hz")) is not None:
                 bounds[str(k)] = FbsdBound(float(b["lower_bound_hz"]), str(b.get("reason", "")))
         band = ident.get("supported_band_hz")
         band_pair = (float(band[0]), float(band[1])) if isinstance(band, (list, tuple)) and len(band) == 2 else None
 
-        dt = _number(model.get("sample_interval_s"))
-        delay = _number(model.get("delay_samples", ident.get("delay_samples")))
+        dt = finite_number(model.get("sample_interval_s"))
+        delay = finite_number(model.get("delay_samples", ident.get("delay_samples")))
         ref_unc = unc.get("reference") or {}
-        pulse_width = _number(reduction.get("pulse_width_s", excitation.get("pulse_width_s")))
-        peak_acc = _number(reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")))
-        peak_vel = _number(reduction.get("peak_velocity_m_s"))
+        pulse_width = finite_number(reduction.get("pulse_width_s", excitation.get("pulse_width_s")))
+        peak_acc = finite_number(reduction.get("peak_acceleration_m_s2", excitation.get("peak_m_s2")))
+        peak_vel = finite_number(reduction.get("peak_velocity_m_s"))
         comp = dcm.get("compensated_fbsd_hz") or {}
         undetermined = {str(k): str(v) for k, v in (results.get("not_determined") or {}).items()}
         if "dc_gain" in undetermined:
-            sensitivity = Figure.undetermined(undetermined["dc_gain"])
+            sensitivity = Estimate.undetermined(undetermined["dc_gain"])
         if "shock_sensitivity" in undetermined:
             shock = None
         for key in ("natural_frequency_hz", "damping_ratio"):
             if key in undetermined and (f_n if key == "natural_frequency_hz" else zeta) is not None:
                 if key == "natural_frequency_hz":
-                    f_n = Figure.undetermined(undetermined[key])
+                    f_n = Estimate.undetermined(undetermined[key])
                 else:
-                    zeta = Figure.undetermined(undetermined[key])
+                    zeta = Estimate.undetermined(undetermined[key])
         for level in list(fbsd):
             if f"fbsd_{level}_hz" in undetermined and level not in bounds:
-                fbsd[level] = Figure.undetermined(undetermined[f"fbsd_{level}_hz"])
+                fbsd[level] = Estimate.undetermined(undetermined[f"fbsd_{level}_hz"])
         static = results.get("static_gain") or {}
-        static_value, static_u = _number(static.get("value")), _number(static.get("u"))
+        static_value, static_u = finite_number(static.get("value")), finite_number(static.get("u"))
         static_gain = None
         if static_value is not None:
-            static_gain = Figure(static_value, static_u, None if static_u is None else
+            static_gain = Estimate(static_value, static_u, None if static_u is None else
                                  (static_value - Z95 * static_u, static_value + Z95 * static_u))
         verdict = results.get("result") or {}
         warnings = list(results.get("warnings") or [])
@@ -283,35 +218,35 @@ class KeyFigures:
             supported_band_hz=band_pair,
             order=_int(model.get("order", ident.get("order"))),
             order_selection=ident.get("order_selection"),
-            fit_percent=_number(ident.get("fit_percent")),
+            fit_percent=finite_number(ident.get("fit_percent")),
             delay_s=delay * dt if delay is not None and dt is not None else None,
             pulse_width_s=_figure(pulse_width, ref_unc.get("pulse_width_s")) if pulse_width is not None else None,
             peak_acceleration_m_s2=_figure(peak_acc, ref_unc.get("peak_acceleration_m_s2")) if peak_acc is not None else None,
             peak_velocity_m_s=_figure(peak_vel, ref_unc.get("peak_velocity_m_s")) if peak_vel is not None else None,
-            compensated_fbsd_hz={k: float(v) for k, v in comp.items() if _number(v) is not None},
+            compensated_fbsd_hz={k: float(v) for k, v in comp.items() if finite_number(v) is not None},
             dcm_recommended=dcm.get("recommended"),
             dcm_not_recommended_reason=dcm.get("not_recommended_reason"),
             compensation_check=dcm.get("check"),
-            compensated_peak=Figure.of(dcm.get("compensated_peak")),
-            dcm_target_widening=_number(dcm.get("target_widening")),
-            dcm_reached_widening=_number(dcm.get("reached_widening")),
+            compensated_peak=Estimate.of(dcm.get("compensated_peak")),
+            dcm_target_widening=finite_number(dcm.get("target_widening")),
+            dcm_reached_widening=finite_number(dcm.get("reached_widening")),
             dcm_widening_note=dcm.get("widening_note"),
-            dcm_noise_gain=_number(dcm.get("noise_gain")),
-            dcm_noise_gain_limit=_number(dcm.get("noise_gain_limit")),
-            dcm_band_limit_hz=_number(dcm.get("band_limit_hz")),
-            dcm_latency_s=_number(dcm.get("latency_s")),
+            dcm_noise_gain=finite_number(dcm.get("noise_gain")),
+            dcm_noise_gain_limit=finite_number(dcm.get("noise_gain_limit")),
+            dcm_band_limit_hz=finite_number(dcm.get("band_limit_hz")),
+            dcm_latency_s=finite_number(dcm.get("latency_s")),
             uncertainty_method=unc.get("method"),
             draws=_int(unc.get("draws")),
-            coverage_probability=_number(unc.get("coverage_probability")),
+            coverage_probability=finite_number(unc.get("coverage_probability")),
             budget=tuple(dict(b) for b in unc.get("budget") or [] if isinstance(b, dict)),
             warnings=tuple(warnings),
             not_determined=undetermined,
             is_result=bool(verdict.get("valid", True)),
             not_a_result_reason=str(verdict.get("reason") or ""),
             input_terms=dict(ident.get("input_terms") or {}),
-            gain_amplitude_m_s2=_number(excitation.get("gain_amplitude_m_s2")),
+            gain_amplitude_m_s2=finite_number(excitation.get("gain_amplitude_m_s2")),
             static_gain=static_gain,
-            static_gain_amplitude_m_s2=_number(static.get("amplitude_m_s2")) if static_gain is not None else None,
+            static_gain_amplitude_m_s2=finite_number(static.get("amplitude_m_s2")) if static_gain is not None else None,
             static_gain_not_determined=str(static["not_determined"]) if static.get("not_determined") else None,
         )
 
@@ -324,30 +259,19 @@ def main_mode_of(identification: dict[str, Any]) -> dict[str, Any] | None:
         return dict(main) if isinstance(main, dict) else None
     pairs = [
         m for m in identification.get("modes") or []
-        if m.get("kind") in ("complex", "pair") and m.get("supported", True) and _number(m.get("natural_frequency_hz"))
-        and (_number(m.get("damping_ratio")) or 0.0) <= 0.3  # a pair damped more is no resonance (analysis.modes)
+        if m.get("kind") in ("complex", "pair") and m.get("supported", True) and finite_number(m.get("natural_frequency_hz"))
+        and (finite_number(m.get("damping_ratio")) or 0.0) <= 0.3  # a pair damped more is no resonance (analysis.modes)
     ]
     return dict(min(pairs, key=lambda m: m["natural_frequency_hz"])) if pairs else None
 
 
-def _figure(value: float | None, uncertainty: Any) -> Figure:
+def _figure(value: float | None, uncertainty: Any) -> Estimate:
     """The reported value with the uncertainty stored beside it (if any)."""
-    found = Figure.of(uncertainty) if isinstance(uncertainty, dict) else None
-    return found.with_value(value) if found is not None else Figure(value)
-
-
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value) if math.isfinite(value) else None
+    found = Estimate.of(uncertainty) if isinstance(uncertainty, dict) else None
+    return found.with_value(value) if found is not None else Estimate(value)
 
 
 def _int(value: Any) -> int | None:
     return int(value) if isinstance(value, int) and not isinstance(value, bool) else None
 
 
-def _decimals_for(expanded: float) -> int:
-    """Decimals that show two significant digits of `expanded` (at least 0, at most 12)."""
-    if not (expanded > 0 and math.isfinite(expanded)):
-        return 4
-    return int(min(12, max(0, 1 - math.floor(math.log10(expanded)))))

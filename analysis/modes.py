@@ -149,6 +149,17 @@ def main_mode(modes: list[Mode]) -> Mode | None:
     return min(pairs, key=lambda m: m.natural_frequency_hz or 0.0) if pairs else None
 
 
+def resonance_above_hz(modes: list[Mode], band_hz: tuple[float, float] | None) -> float | None:
+    """With no claimed mode but one beyond the band: the band's top (Hz), a lower bound of the
+    resonance (it lies in a null of the excitation); else None."""
+    if main_mode(modes) is not None or band_hz is None:
+        return None
+    top = band_hz[1]
+    beyond = any(m.kind == ModeKind.COMPLEX and not m.cancelled and (m.natural_frequency_hz or 0.0) > top
+                 for m in modes)
+    return float(top) if beyond else None
+
+
 def has_doublet(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether a complex pole pair of A(z) = 0 is nearly cancelled by a zero of B (`mark_doublets`'s
     test; the sample interval does not enter it, so any is given)."""

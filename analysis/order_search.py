@@ -116,9 +116,10 @@ def search_setup(data: SpectralData, prep: Prepared, n_max: int, order: int | No
                        float(prep.bin_hz[0]), dt, prep.band, alignment or Alignment(), findings)
 
 
-@dataclass
+@dataclass(frozen=True)
 class OrderSweep:
-    """Every order of one structure fitted, and the order test's choice among them."""
+    """Every order of one structure fitted, and the order test's choice among them (frozen; its
+    `polished` fits are kept in `fits`)."""
 
     structure: Structure
     delay_mode: DelayMode | float
@@ -256,20 +257,20 @@ def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
     all_pole = fit_orders(data, Structure.ALL_POLE, setup)
     if all_pole.chosen is None:
         return free
+    why = ""
     if free.chosen is None:
-        all_pole.why = "no model with free zeros is stable"
+        why = "no model with free zeros is stable"
     elif has_doublet(free.fits[free.chosen].a, free.fits[free.chosen].b):
-        all_pole.why = "the model with free zeros followed a ripple with a pole–zero doublet"
+        why = "the model with free zeros followed a ripple with a pole–zero doublet"
     elif not all_pole.acceptable(all_pole.chosen, data, setup):
         pass  # the free choice is sound and the all-pole one unstable once converged: nothing to prefer
     elif _exhausted_without_mode(free, setup):
-        all_pole.why = ("the model with free zeros claims no mode in the band and every higher order of it is "
-                        "unstable")
+        why = "the model with free zeros claims no mode in the band and every higher order of it is unstable"
     elif _all_pole_preferred(free, all_pole, data, setup):
-        all_pole.why = (f"it fits as well as free zeros do, or better (V {all_pole.costs[all_pole.chosen]:.4g} with "
-                        f"{all_pole.parameters[all_pole.chosen]} parameters against {free.costs[free.chosen]:.4g} "
-                        f"with {free.parameters[free.chosen]}: the order test between the two)")
-    return all_pole if all_pole.why else free
+        why = (f"it fits as well as free zeros do, or better (V {all_pole.costs[all_pole.chosen]:.4g} with "
+               f"{all_pole.parameters[all_pole.chosen]} parameters against {free.costs[free.chosen]:.4g} "
+               f"with {free.parameters[free.chosen]}: the order test between the two)")
+    return replace(all_pole, why=why) if why else free
 
 
 def _all_pole_preferred(free: OrderSweep, all_pole: OrderSweep, data: SpectralData, setup: SearchSetup) -> bool:
@@ -368,8 +369,7 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup) -> S
                        f"order {', '.join(str(n) for n in dropped)} became unstable when iterated to convergence)")
             else:
                 why = "no model with free zeros is stable" + marginal_modes_text(sweep.polished(chosen, data, setup), dt)
-            sweep, chosen = all_pole, all_pole.chosen
-            sweep.why = why
+            sweep, chosen = replace(all_pole, why=why), all_pole.chosen
             findings.append(Finding(FindingCode.ALL_POLE_FALLBACK,
                                     why + "; the all-pole model (a resonance beyond the band, its damping not "
                                     "determined) is used"))

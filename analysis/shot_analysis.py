@@ -180,6 +180,16 @@ class ModelWithUncertainty:
     model_draws: list[DiscreteModel]  # the Monte Carlo's models (empty without the uncertainty)
     warnings: list[str]  # the identification's and the uncertainty's, in that order
 
+    def to_dict(self) -> dict[str, Any]:
+        """The model file's JSON (`hopkinson identify`'s, docs/files-and-formats.md): the
+        identification, its FBSD (edges beyond the supported band as bounds), the pole analysis,
+        the uncertainty and the warnings."""
+        ident = self.identification
+        edges = fbsd_hz(ident.model)
+        return {**ident.to_dict(), "fbsd_hz": edges, "fbsd_bounds": fbsd_bounds(edges, ident.supported_band_hz),
+                "pole_analysis": pole_analysis(ident.poles), "uncertainty": self.uncertainty,
+                "warnings": list(self.warnings)}
+
 
 def identify_with_uncertainty(record: Record, params: AnalysisParams, reduction: dict[str, Any] | None = None,
                               sine: SineCalibration | None = None) -> ModelWithUncertainty:
@@ -199,7 +209,10 @@ def with_uncertainty(ident: Identification, params: AnalysisParams, reduction: d
     warnings = list(ident.warnings)
     uncertainty, model_draws, found = shot_uncertainty(ident, params, reduction)
     warnings += [text for text in texts(found) if text not in warnings]
-    with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
+    order = (uncertainty or {}).get("order") or {}
+    if order.get("draws"):  # the order choice's stability, measured by the draws
+        ident = ident.with_order_stability(order["draws"], order["fraction_by_order"])
+    ident = with_draws(ident, model_draws)  # the sine's consistency with the model's uncertainty (when fitted with one)
     return ModelWithUncertainty(ident, uncertainty, model_draws, warnings)
 
 
@@ -234,13 +247,13 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
             "the peak reference, so a peak-ratio shock sensitivity (ISO 16063-13) reads that much high; the "
             "model's DC gain is the sensitivity without the overshoot (or use a longer pulse)"
         )
-    edges = fbsd_hz(model)
+    report = fitted.to_dict()
     return ShotAnalysis(
         params=params, record=record, reduction=reduction, excitation=exc, identification=ident, model=model,
-        fbsd_hz=edges, pole_analysis=pole_analysis(model.poles), dcm=dcm, compensated_fbsd_hz=comp,
+        fbsd_hz=report["fbsd_hz"], pole_analysis=report["pole_analysis"], dcm=dcm, compensated_fbsd_hz=comp,
         rise_time_ratio=float(rtr), settling_time_ratio=float(settling), peak_overshoot=overshoot,
         warnings=warnings, compensation=compensation.to_dict(), uncertainty=uncertainty,
-        fbsd_bounds=fbsd_bounds(edges, ident.supported_band_hz),
+        fbsd_bounds=report["fbsd_bounds"],
         static_gain=static.to_dict() if static is not None else {"not_determined": why_not},
     )
 

@@ -54,7 +54,7 @@ with the points beyond E_n = 1 and the extra scatter it took to reconcile them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -194,15 +194,15 @@ def identify_joint(record: Any, sine: SineCalibration, options: Any = None) -> A
         except AnalysisError as exc:
             if ident is None:
                 raise AnalysisError(f"the fit of one model to the record and {sine.source} failed: {exc}") from None
-            ident.findings.append(Finding(FindingCode.SINE_REWEIGHING_FAILED,
-                                          f"the joint fit with the sine's re-estimated weights failed ({exc}); "
-                                          "the previous weights are kept"))
+            failed = Finding(FindingCode.SINE_REWEIGHING_FAILED,
+                             f"the joint fit with the sine's re-estimated weights failed ({exc}); "
+                             "the previous weights are kept")
+            ident = replace(ident, findings=(*ident.findings, failed))
             break
         weights = _reweighted(ident, sine, weights)
     assert ident is not None
-    ident.sine_joint = consistency(ident, sine, used)
-    ident.model.info["fit_method"] = "eiv-frequency-oe + sine calibration"
-    return ident
+    model = replace(ident.model, info={**ident.model.info, "fit_method": "eiv-frequency-oe + sine calibration"})
+    return replace(ident, claim=replace(ident.claim, model=model), sine_joint=consistency(ident, sine, used))
 
 
 def sine_terms(sine: SineCalibration, dt: float, weights: JointWeights) -> SineTerms:
@@ -248,12 +248,14 @@ def consistency(ident: Any, sine: SineCalibration, weights: JointWeights,
     )
 
 
-def with_draws(ident: Any, model_draws: list[DiscreteModel]) -> None:
-    """Redo `ident`'s consistency with the Monte Carlo model draws (their shape uncertainty
-    joins each point's E_n, their κ the gain ratio's u)."""
+def with_draws(ident: Any, model_draws: list[DiscreteModel]) -> Any:
+    """`ident` with its consistency redone with the Monte Carlo model draws (their shape
+    uncertainty joins each point's E_n, their κ the gain ratio's u); `ident` itself without a
+    sine calibration or draws."""
     joint = getattr(ident, "sine_joint", None)
-    if joint is not None and model_draws:
-        ident.sine_joint = consistency(ident, joint.sine, joint.weights, model_draws)
+    if joint is None or not model_draws:
+        return ident
+    return replace(ident, sine_joint=consistency(ident, joint.sine, joint.weights, model_draws))
 
 
 def gain_ratio_of(fit: Any, scale: float) -> float:

@@ -248,9 +248,6 @@ def shot_uncertainty(
     except (AnalysisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return None, [], [Finding(FindingCode.UNCERTAINTY_FAILED, f"the uncertainty could not be evaluated ({exc}): "
                                                                    "the figures are reported without it")]
-    if result.order.get("draws"):  # the order choice's stability, measured by the draws
-        ident.order_evidence.setdefault("stability", {"draws": result.order["draws"],
-                                                      "fraction_by_order": dict(result.order["fraction_by_order"])})
     return result.to_dict(), result.model_draws, result.findings
 
 

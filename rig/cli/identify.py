@@ -30,30 +30,23 @@ from hopkinson.rig.cli.main import emit_json
 
 if TYPE_CHECKING:
     from hopkinson.analysis.identify import Identification
+    from hopkinson.analysis.shot_analysis import ModelWithUncertainty
 
 # The command's flags by AnalysisParams option, so a bad value is named as it was typed.
 FLAGS = {"max_order": "--max-order", "order": "--order", "sample_rate_hz": "--sample-rate", "draws": "--draws",
          "seed": "--seed"}
 
 
-def identification_report(result: Identification, source: str, uncertainty: dict[str, Any] | None = None,
-                          warnings: list[str] | None = None) -> dict[str, Any]:
-    """The JSON object of `hopkinson identify` (also what -o writes)."""
-    from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, pole_analysis
-
-    report = {"source": source, **result.to_dict()}
-    report["fbsd_hz"] = fbsd_hz(result.model)
-    report["fbsd_bounds"] = fbsd_bounds(report["fbsd_hz"], result.supported_band_hz)
-    report["pole_analysis"] = pole_analysis(result.poles)
-    report["uncertainty"] = uncertainty
-    report["warnings"] = list(warnings if warnings is not None else result.warnings)
-    return report
+def identification_report(fitted: ModelWithUncertainty, source: str, warnings: list[str]) -> dict[str, Any]:
+    """The JSON object of `hopkinson identify` (also what -o writes): the model file of
+    `fitted` (ModelWithUncertainty.to_dict) from `source`, with `warnings` in place of its own."""
+    return {"source": source, **fitted.to_dict(), "warnings": list(warnings)}
 
 
 def _figure_text(data: Any, scale: float = 1.0, unit: str = "", digits: int = 6) -> str:
-    from hopkinson.analysis.key_figures import Figure
+    from hopkinson.analysis.estimate import Estimate
 
-    figure = Figure.of(data)
+    figure = Estimate.of(data)
     return figure.format(scale, digits, unit) if figure is not None else "—"
 
 
@@ -174,8 +167,8 @@ def run_identify(args: argparse.Namespace) -> int:
         fitted = identify_with_uncertainty(record, params, None, sine)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.record}{' with ' + args.sine if sine else ''}: {exc}") from None
-    result, uncertainty, warnings = fitted.identification, fitted.uncertainty, clipped + fitted.warnings
-    report = identification_report(result, str(args.record), uncertainty, warnings)
+    result = fitted.identification
+    report = identification_report(fitted, str(args.record), clipped + fitted.warnings)
     if out is not None:
         try:
             atomic_write(out, json.dumps(report, indent=2, allow_nan=False) + "\n")
@@ -186,7 +179,7 @@ def run_identify(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(_summary(report, result) + "\n")
         if args.explain:
-            sys.stdout.write(explain(report) + "\n")
+            sys.stdout.write(result.trail.text() + "\n")
         if out is not None:
             sys.stdout.write(f"model written to {out}\n")
     return 0
@@ -227,89 +220,6 @@ def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any, cli
     if out is not None:
         sys.stdout.write(f"model written to {out}\n")
     return 0
-
-
-def explain(report: dict[str, Any]) -> str:
-    """The trail of what decided the identification (issue 17, `--explain`): where the noise was
-    measured and its levels, motion left out of it, the band, V by order and the order test's
-    comparisons, the model error, and what was claimed or not and why. Read from the report
-    (the JSON), so it says what the stages recorded, not a second account of them."""
-    from hopkinson.analysis.modes import RESONANCE_MAX_DAMPING, Mode, ModeKind, claimed
-    from hopkinson.analysis.structure import Structure
-
-    noise = report.get("noise") or {}
-    pre = report.get("preprocessing") or {}
-    lines = ["how this identification was decided:"]
-    def rms(v: Any) -> str:
-        return "not measured" if v is None else f"{v:.4g}"
-
-    lines.append(f"  noise (RMS, channel units): reference {rms(noise.get('reference_rms'))} "
-                 f"({noise.get('reference_source')}), response {rms(noise.get('response_rms'))} "
-                 f"({noise.get('response_source')})")
-    lead = noise.get("lead_in")
-    if lead:
-        to = ("to a quarter of the pulse's width before its foot: the window's margins left none" if lead["to_foot"]
-              else "to the window's margin before the pulse")
-        lines.append(f"  lead-in at rest: {lead['start_s'] * 1e3:.4g}–{lead['stop_s'] * 1e3:.4g} ms ({to})")
-    elif "lead_in" in noise:
-        lines.append("  lead-in at rest: none (the pulse starts too near the record's start)")
-    # without a lead-in at rest the noise is measured on the motion all the same (with a warning)
-    kept = "lead_in" in noise and not lead
-    for m in noise.get("motion_after_pulse") or []:
-        why = (f"moves coherently in both channels (power-weighted coherence {m['coherence']:.2f})"
-               if m.get("coherence") is not None else m.get("reason") or "too short to judge by coherence")
-        lines.append(f"  motion{'' if kept else ', not noise'}: {m['start_s'] * 1e3:.4g}–{m['stop_s'] * 1e3:.4g} ms "
-                     f"{why}: " + ("measured as noise all the same, there being no lead-in at rest" if kept
-                                   else "left out of the noise"))
-    shift = pre.get("response_realigned_samples")
-    if shift:
-        lines.append(f"  realigned: the response delayed by {shift} samples before the fit (it led the reference by "
-                     f"{pre.get('response_lead_by_cross_correlation_samples', 0.0):.3g} samples by their "
-                     f"cross-correlation); the model's delay, {report.get('delay_samples', 0.0):.3g} samples, "
-                     "carries the lead")
-    band = report.get("supported_band_hz")
-    if band:
-        lines.append(f"  band: {band[0] / 1e3:.4g}–{band[1] / 1e3:.4g} kHz, where the reference's spectrum stands "
-                     "20 dB above its noise and within 40 dB of its maximum; "
-                     f"{pre.get('fitted_bins')} bins fitted over {pre.get('window_samples')} samples"
-                     + (" (a transient term fitted: the record ends before the response settles)"
-                        if pre.get("transient_term") else ""))
-    evidence = report.get("order_evidence") or {}
-    costs = evidence.get("cost_by_order") or {}
-    if costs:
-        lines.append("  V by order: " + ", ".join(f"{n}: {v:.4g}" for n, v in costs.items() if v is not None))
-    for c in evidence.get("comparisons") or []:
-        if c.get("beaten"):
-            lines.append(f"  order {c['order']} beaten by {c['against']}: F {c['f']:.3g} > {c['f_critical']:.3g}, "
-                         f"response change {c['response_change']:.2%}")
-    lines.append(f"  order {report.get('order')} ({report.get('order_selection')}): "
-                 f"{evidence.get('criterion', '')}")
-    if evidence.get("structure") == Structure.ALL_POLE:
-        why = evidence.get("structure_reason") or "chosen over the model with free zeros"
-        lines.append(f"  structure: all-pole (no finite zeros, delay of either sign): {why}")
-    error = noise.get("model_error") or {}
-    if error.get("detected"):
-        lo, hi = error.get("range_hz") or (None, None)
-        lines.append(f"  model error: the residual is {error['residual_over_noise']:.3g}× the noise's, "
-                     f"{error['rms_percent_of_peak']:.2g} % of the peak RMS, mostly "
-                     f"{(lo or 0) / 1e3:.3g}–{(hi or 0) / 1e3:.3g} kHz, its power ∝ |U|^{2 * (error.get('drive_exponent') or 0.0):.2g} "
-                     "(0: independent of the drive): weighed in a second fit and drawn in the uncertainty")
-    else:
-        lines.append(f"  model error: none beyond the noise (residual {error.get('residual_over_noise', 1.0):.3g}× "
-                     "the noise's)")
-    for m in map(Mode.from_dict, report.get("modes") or []):
-        if m.kind != ModeKind.COMPLEX:
-            continue
-        f_n = (m.natural_frequency_hz or 0.0) / 1e3
-        why = ("claimed (inside the band)" if claimed(m)
-               else "not claimed: a pole–zero doublet" if m.cancelled
-               else f"not claimed: damped more than ζ = {RESONANCE_MAX_DAMPING:g}, no resonance" if m.supported
-               else "not claimed: beyond the band, placed by the rise it gives inside it" if m.shapes_band
-               else "not claimed: outside the supported band")
-        lines.append(f"  pole pair at {f_n:.4g} kHz, ζ {m.damping_ratio:.3g}: {why}")
-    if report.get("resonance_above_hz"):
-        lines.append(f"  resonance: > {report['resonance_above_hz'] / 1e3:.4g} kHz, in a null of the excitation")
-    return "\n".join(lines)
 
 
 def register(subparsers: Any) -> None:

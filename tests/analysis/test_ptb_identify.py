@@ -475,14 +475,14 @@ def test_a_pole_nearly_cancelled_by_a_zero_is_no_mode():
 def test_identify_explain_gives_each_left_out_stretch_its_own_reason():
     """The trail says why each stretch after the pulse was left out of the noise, as the noise
     stage recorded it (a head before motion and a short stretch beside a busy channel differ)."""
-    from hopkinson.rig.cli.identify import explain
+    from hopkinson.analysis.trail import Stretch, motion_lines
 
     head = "too short to judge by coherence, and the motion that follows may have begun in it"
     beside = "too short to judge by coherence, the other channel not at rest"
-    trail = explain({"noise": {"motion_after_pulse": [
-        {"start_s": 1.188e-3, "stop_s": 1.8e-3, "coherence": 0.29, "reason": "coherent"},
-        {"start_s": 0.868e-3, "stop_s": 1.188e-3, "coherence": None, "reason": head},
-        {"start_s": 0.2e-3, "stop_s": 0.3e-3, "coherence": None, "reason": beside}]}})
+    lines = motion_lines([Stretch(1.188e-3, 1.8e-3, 0.29, "coherent"), Stretch(0.868e-3, 1.188e-3, None, head),
+                          Stretch(0.2e-3, 0.3e-3, None, beside)], kept=False)
+    assert len(lines) == 3 and all(line.startswith("motion, not noise: ") for line in lines)
+    trail = "\n".join(lines)
     assert "1.188–1.8 ms moves coherently in both channels (power-weighted coherence 0.29)" in trail
     assert f"0.868–1.188 ms {head}: left out of the noise" in trail
     assert f"0.2–0.3 ms {beside}: left out of the noise" in trail
@@ -536,7 +536,7 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     the model, its delay draws and the joint fit's skew move by exactly 10 µs against the
     published record's; the intervals hold the sine's; the warning names the lead."""
     from hopkinson.analysis.identify import identify_with_sine
-    from hopkinson.rig.cli.identify import explain
+    from hopkinson.analysis.trail import Stage
     from tests.ptb_shock import skewed
 
     shifted = analyses.analysed("ptb skewed -100", lambda: skewed(-100), seed=1, draws=DRAWS)
@@ -552,8 +552,10 @@ def test_a_response_that_leads_by_microseconds_is_realigned_and_its_lead_kept(pt
     assert np.allclose(delay["interval"], np.array(published["interval"]) - 10e-6, atol=0.2e-6)
     judged = against_sine(shifted.uncertainty)
     assert all(j["contains"] and j["half_width_ok"] for j in judged.values()), judged
-    trail = explain(shifted.identification.to_dict())
+    trail = shifted.identification.trail.text()
     assert f"realigned: the response delayed by {shift} samples before the fit" in trail
+    assert any(line.startswith(f"realigned: the response delayed by {shift} samples")
+               for line in shifted.identification.trail.of(Stage.PREPARE))
     skews = [identify_with_sine(rec, ptb_sine()).sine_joint.skew_s for rec in (skewed(-100), ptb_record())]
     assert skews[0] == pytest.approx(skews[1] - 10e-6, abs=0.1e-6)
 

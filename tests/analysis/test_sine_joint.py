@@ -40,8 +40,7 @@ def joint():
     """The joint identification of one seed, with its Monte Carlo (shared by the assertions)."""
     ident = identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
     result = evaluate(ident, UncertaintyOptions(draws=100, seed=5, order_draws=10))
-    with_draws(ident, result.model_draws)
-    return ident, result
+    return with_draws(ident, result.model_draws), result
 
 
 def test_the_joint_figures_contain_the_truth(joint) -> None:
