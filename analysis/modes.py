@@ -160,9 +160,18 @@ def resonance_above_hz(modes: list[Mode], band_hz: tuple[float, float] | None) -
     return float(top) if beyond else None
 
 
-def has_doublet(a: np.ndarray, b: np.ndarray) -> bool:
+def has_doublet(a: np.ndarray, b: np.ndarray, real: bool = False) -> bool:
     """Whether a complex pole pair of A(z) = 0 is nearly cancelled by a zero of B (`mark_doublets`'s
-    test; the sample interval does not enter it, so any is given)."""
+    test; the sample interval does not enter it, so any is given). `real`: a real pole nearly
+    cancelled by a zero counts too (the same distance test): an order that adds such a pair to a
+    lower one adds no feature the data determine — where the pair sits below the record's lowest
+    bin, only how far apart its pole and zero lie, which sets the gain between DC and that bin
+    (PTB's hybrids: order 2 plus a pair at 250–440 Hz, the lowest bin 606 Hz)."""
     if a.size < 2 or b.size < 2:
         return False
-    return any(m.cancelled for m in mark_doublets(modes_of(np.roots(a), 1.0), np.roots(b)))
+    zeros = np.roots(b)
+    if any(m.cancelled for m in mark_doublets(modes_of(np.roots(a), 1.0), zeros)):
+        return True
+    poles = np.roots(a)
+    single = poles[np.abs(poles.imag) <= 1e-12 * np.maximum(1.0, np.abs(poles))].real
+    return real and any(float(np.min(np.abs(zeros - p))) < DOUBLET_DISTANCE * (1.0 - abs(p)) for p in single)

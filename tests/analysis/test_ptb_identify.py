@@ -299,16 +299,10 @@ def test_a_lobe_dependent_gain_is_measured_as_the_asymmetry(analyses, case):
             assert hi - lo < epsilon_truth(tension, compression), (seed, lo, hi)
 
 
-RUNAWAY = ("on the lobe-gain hybrids, Monte Carlo seed 3 of 60 draws (3 of them refitted at order 3) gives FBSD "
-           "intervals reaching 20-250 kHz (±5 %: lobe [11.5, 29.5], x0.25 [11.7, 244], x2 [11.6, 251] kHz), beyond "
-           "issue 17's half-width of 25 %; about 1 seed in 8 per case (the clean hybrid's ±10 % on seed 4 too): the "
-           "single seeds before hid it (analysis.uncertainty, the order-switching draws' FBSD edges)")
-
-
-def _runaway_seeds(analyses, case: str) -> list[tuple[int, str, float, float]]:
+def _runaway_seeds(analyses, case: str, seeds_: list[int] = HYBRID_SEEDS) -> list[tuple[int, str, float, float]]:
     """The (seed, level, low, high) of the FBSD intervals wider than issue 17's half-width (25 % of the edge)."""
     out = []
-    for seed in HYBRID_SEEDS:
+    for seed in seeds_:
         u = hybrid(analyses, case, seed).uncertainty
         for level, edge in truth_fbsd_hz(TRUTH).items():
             lo, hi = u["fbsd_hz"][level]["interval"]
@@ -317,24 +311,38 @@ def _runaway_seeds(analyses, case: str) -> list[tuple[int, str, float, float]]:
     return out
 
 
-# The defect RUNAWAY names comes on about 1 seed in 8 per case (seeds 1-8 measured). Held here at
-# most on one seed of the three: were the rate 1/8, two or more of three seeds run away with
-# probability 0.043; a regression that lets it come on most seeds fails at once.
+# Until the draws' candidate orders left out an order whose fit holds a real pole cancelled by a
+# zero (analysis.uncertainty_draws._order_assignment), about 1 seed in 8 per case ran away: 3-5
+# of 60 draws refitted at order 3 (order 2 plus a pole-zero pair below the lowest bin) put the
+# FBSD edges at 20-50 Hz and the reflected intervals reached 20-250 kHz (±5 %: x0.25 [11.7,
+# 244] kHz). Held at most on one seed of the three: were the rate 1/8, two or more of three
+# seeds run away with probability 0.043; a regression that lets it come on most seeds fails at once.
 RUNAWAY_RATE = 1 / 8
+LOBES = ["lobe", "lobe x0.25", "lobe x2"]
+RUNAWAY_SEEDS = seeds(1, 8)  # the lobe hybrids' runs counted together: 24 trials
 
 
 @pytest.mark.parametrize("case", list(HYBRIDS))
 def test_the_hybrids_fbsd_intervals_run_away_on_at_most_one_seed(analyses, case):
-    """Issue 17's half-width (25 % of the edge) on all seeds but at most one (RUNAWAY)."""
+    """Issue 17's half-width (25 % of the edge) on all seeds but at most one."""
     assert binom.sf(1, len(HYBRID_SEEDS), RUNAWAY_RATE) <= 0.05
     assert len({seed for seed, *_ in _runaway_seeds(analyses, case)}) <= 1, _runaway_seeds(analyses, case)
 
 
-@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=RUNAWAY))
-                                  if c.startswith("lobe") else c for c in HYBRIDS])
+@pytest.mark.parametrize("case", list(HYBRIDS))
 def test_the_hybrids_fbsd_intervals_are_as_narrow_as_the_issue_asks(analyses, case):
     """Issue 17's half-width (25 % of the edge) on every seed."""
     assert _runaway_seeds(analyses, case) == []
+
+
+def test_the_lobe_hybrids_fbsd_intervals_never_run_away_over_eight_seeds(analyses):
+    """Issue 40 item 3 (no impossible claims): the lobe-gain hybrids, where the order-3 draws ran
+    away, on each of RUNAWAY_SEEDS: no interval wider than issue 17's half-width. Were the
+    runaway rate still RUNAWAY_RATE, all 24 runs would pass with probability 0.041 (measured:
+    none of 24, and none of 32 with the clean hybrid)."""
+    runs = len(LOBES) * len(RUNAWAY_SEEDS)
+    assert binom.pmf(0, runs, RUNAWAY_RATE) <= 0.05
+    assert [(case, *r) for case in LOBES for r in _runaway_seeds(analyses, case, RUNAWAY_SEEDS)] == []
 
 
 def test_motion_that_differs_between_the_channels_is_corrected_and_carried(analyses):
@@ -470,6 +478,21 @@ def test_a_pole_nearly_cancelled_by_a_zero_is_no_mode():
     far = mark_doublets(modes, np.array([0.5, -0.3]))
     assert near[0]["cancelled"] and not near[0]["supported"] and main_mode(near) is None
     assert not far[0]["cancelled"] and main_mode(far)["natural_frequency_hz"] > 16e3
+
+
+def test_a_real_pole_nearly_cancelled_by_a_zero_is_a_doublet_only_when_asked():
+    """modes.has_doublet's `real`: order 2 plus a real pole at 250 Hz (1 − p ≈ 1.6e-3) with a zero
+    2e-4 from it is a doublet (the draws leave such an order out); a zero 5e-3 away, or a real
+    pole alone, is none; without `real` (identify's own rule) only a complex pair is judged."""
+    from hopkinson.analysis.modes import has_doublet
+
+    pair = np.exp((-0.03 + 1j) * 2 * np.pi * 55e3 * 1e-6)
+    p = np.exp(-2 * np.pi * 250.0 * 1e-6)
+    a = np.poly([pair, pair.conjugate(), p]).real
+    near, far = np.poly([-0.5, p + 2e-4]).real, np.poly([-0.5, p - 5e-3]).real
+    assert has_doublet(a, near, real=True) and not has_doublet(a, near)
+    assert not has_doublet(a, far, real=True)
+    assert not has_doublet(np.poly([pair, pair.conjugate()]).real, np.poly([-0.5, p]).real, real=True)
 
 
 def test_identify_explain_gives_each_left_out_stretch_its_own_reason():
