@@ -9,7 +9,8 @@ analysis states; a deviations section, filled in automatically where the shots l
 scope of ISO 16063-13 (peak acceleration above 100 km/s², pulse shorter than 0.05 ms); the
 conditions (amplifier, mounting, environment); the results in the sensor's own unit: one
 stated sensitivity (the one the shots' key figures state, and the one the statement of
-conformity judges) with U and k, a per-level table with the linearity, the shock sensitivity
+conformity judges) with U and k, a per-level table, the amplitude linearity of the quasi-static
+gain (the campaign statistics' line: reports.statistics.campaign_linearity), the shock sensitivity
 S_sh only at levels within ISO 16063-13's scope; the reference chain, whose u values must be
 the ones the uncertainty budget used (refused otherwise); who authorised it, with their role
 from the lab's list of signatories (anyone else is refused); the shot files it rests on.
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from hopkinson.analysis.key_figures import Figure
+from hopkinson.analysis.static_gain import QUASI_STATIC
 from hopkinson.lab import schema as t
 from hopkinson.lab.errors import LabError
 from hopkinson.lab.history import (
@@ -34,7 +36,12 @@ from hopkinson.lab.history import (
 )
 from hopkinson.lab.repositories import SensorInfo, ShotResult
 from hopkinson.lab.uow import UnitOfWork
-from hopkinson.reports.statistics import COMBINATION_NOTE, COMBINED
+from hopkinson.reports.statistics import (
+    COMBINATION_NOTE,
+    COMBINED,
+    campaign_linearity,
+    static_gain_point,
+)
 
 METHOD = ("Primary shock calibration by comparison of the accelerometer's response with the acceleration of "
           "the end face of a Hopkinson bar measured by laser Doppler interferometry, after the principle of "
@@ -138,7 +145,7 @@ def certificate_content(uow: UnitOfWork, campaign: t.Campaign, lab: LabIdentity,
         "results_note": COMBINATION_NOTE + " U is the expanded uncertainty for a coverage probability of about 95 %.",
         "levels": _level_table(levels, stated, calibration, unit),
         "levels_raw": _level_values(levels, stated, calibration),
-        "linearity": _linearity(levels),
+        "linearity": _linearity(calibration.shots),
         "fbsd": {k: _figure_dict(calibration.figures.get(f"fbsd_{k}_hz")) for k in ("5", "10")},
         "traceability": {"header": ["reference item", "certificate", "issued by", "u (k = 1)", "due",
                                     "budget input"],
@@ -323,19 +330,29 @@ def _level_values(levels: tuple[Level, ...], stated: Figure, calibration: Calibr
     return out
 
 
-def _linearity(levels: tuple[Level, ...]) -> dict[str, Any]:
-    """The largest deviation of a level's sensitivity from the levels' mean, % (ISO 16063-22's
-    linearity statement), over the range of peaks it covers."""
-    values = [(lv.peak_m_s2, lv.combined("sensitivity")) for lv in levels]
-    values = [(p, f) for p, f in values if f is not None and f.value]
-    if len(values) < 2:
-        return {"text": "not stated: the shots cover one level only", "max_deviation_percent": None}
-    mean = sum(f.value for _p, f in values) / len(values)
-    worst = max(abs(f.value / mean - 1) for _p, f in values) * 100
-    lo, hi = min(p for p, _f in values), max(p for p, _f in values)
-    return {"text": f"largest deviation of a level's sensitivity from their mean: {worst:.2f} % over "
-                    f"{lo / 1e3:,.4g} to {hi / 1e3:,.4g} km/s² ({len(values)} levels)",
-            "max_deviation_percent": worst}
+def _linearity(shots: tuple[ShotResult, ...] | list[ShotResult]) -> dict[str, Any]:
+    """The amplitude linearity (ISO 16063-22) the campaign's statistics give
+    (reports.statistics.campaign_linearity): the straight line through each shot's quasi-static
+    gain in the main pulse's direction against the amplitude it is measured at, with its U. Not
+    the stated sensitivity (the model's DC gain) nor S_sh: neither means the same at every level.
+    Shots recorded without a quasi-static gain (analysed, or imported, before it) are left out."""
+    points = [p for r in shots if (p := static_gain_point(r.shot_name, r.static_gain, r.static_gain_amplitude_m_s2))]
+    missing = [r.shot_name for r in shots if r.static_gain is None]
+    fit, note = campaign_linearity(points)
+    left = (f"; {len(missing)} of {len(shots)} shots hold no quasi-static gain in the record (analysed or imported "
+            f"before it: analyse and import them again) and are left out ({', '.join(missing)})") if missing else ""
+    sensitivity = (f"of the quasi-static sensitivity in the main pulse's direction: each shot's response, corrected "
+                   f"for the sensor's identified dynamics, fitted to the reference acceleration over the frequencies "
+                   f"where the sensor is quasi-static (its response within {100 * QUASI_STATIC:g} % of the static "
+                   f"one), at the amplitude that gain is measured at (a weighted mean of |a| over the main pulse, "
+                   f"below its peak). The stated sensitivity above is the model's DC gain: neither it nor S_sh "
+                   f"means the same at every level, so neither is fitted here")
+    if fit is None:
+        why = note.rpartition("amplitude linearity: ")[2] or "no line"
+        return {"text": f"not stated ({why}{left})", "sensitivity": sensitivity, "fit": None,
+                "points": [vars(p) for p in points]}
+    return {"text": f"{fit.text()}, U for about 95 % (ISO 16063-22), {sensitivity}{left}",
+            "sensitivity": sensitivity, "fit": fit.to_dict(), "points": [vars(p) for p in points]}
 
 
 def _reference_chain(uow: UnitOfWork, results: list[ShotResult]) -> list[dict[str, Any]]:

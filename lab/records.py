@@ -65,6 +65,9 @@ class ShotRecord:
     peak_acceleration_m_s2: float | None = None
     pulse_width_s: float | None = None
     figures: dict[str, Figure | None] = field(default_factory=dict)  # FIGURE_KEYS -> Figure
+    # the quasi-static gain (analysis.static_gain, u shot-specific) and the amplitude it is measured at
+    static_gain: Figure | None = None
+    static_gain_amplitude_m_s2: float | None = None
     # what a certificate states besides the figures: amplifier settings and identities, the
     # sensitivity the response was scaled by, the uncertainty budget's reference inputs
     context: dict[str, Any] = field(default_factory=dict)
@@ -81,6 +84,7 @@ class ShotRecord:
         """JSON-ready (the spool's line)."""
         out = asdict(self)
         out["figures"] = {k: f.to_dict() if f is not None else None for k, f in self.figures.items()}
+        out["static_gain"] = self.static_gain.to_dict() if self.static_gain is not None else None
         return out
 
     @classmethod
@@ -92,6 +96,7 @@ class ShotRecord:
         data["simulated_marks"] = tuple(data.get("simulated_marks") or ())
         data["reference_chain"] = tuple(ReferenceLink(**r) for r in data.get("reference_chain") or ())
         data["figures"] = {k: Figure.of(v) for k, v in (data.get("figures") or {}).items()}
+        data["static_gain"] = Figure.of(data.get("static_gain"))
         known = set(cls.__dataclass_fields__)
         return cls(**{k: v for k, v in data.items() if k in known})
 

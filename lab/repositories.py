@@ -60,6 +60,8 @@ class ShotResult:
     response_unit: str
     figures: dict[str, Figure | None]
     simulated_marks: tuple[str, ...] = ()
+    static_gain: Figure | None = None  # analysis.static_gain (u shot-specific); None: not in the record
+    static_gain_amplitude_m_s2: float | None = None
     context: dict[str, Any] = field(default_factory=dict)
     file_sha256: str = ""
     path: str = ""
@@ -252,6 +254,9 @@ class Shots:
             if figure.interval is not None:
                 setattr(row, key + "_lo", figure.interval[0])
                 setattr(row, key + "_hi", figure.interval[1])
+        if record.static_gain is not None and record.static_gain.value is not None:
+            row.static_gain, row.static_gain_u = record.static_gain.value, record.static_gain.u
+            row.static_gain_amplitude_m_s2 = record.static_gain_amplitude_m_s2
         return row
 
     def reference_chain(self, rig: str) -> list[dict[str, Any]]:
@@ -309,6 +314,8 @@ def _shot_result(row: Any) -> ShotResult:
         campaign=row.campaign or "", rig=row.rig, operator=shot.operator,
         peak_acceleration_m_s2=analysis.peak_acceleration_m_s2, pulse_width_s=analysis.pulse_width_s,
         response_unit=analysis.response_unit or "", figures=analysis_figures(analysis),
+        static_gain=Figure(analysis.static_gain, analysis.static_gain_u) if analysis.static_gain is not None else None,
+        static_gain_amplitude_m_s2=analysis.static_gain_amplitude_m_s2,
         simulated_marks=tuple(m for m in shot.simulated_marks.split("; ") if m) or (("flag",) if shot.simulated else ()),
         context=json.loads(shot.context_json or "{}"), file_sha256=analysis.file_sha256, path=shot.path,
         analysis_software=analysis.software_version or "")

@@ -147,6 +147,11 @@ class Analysis(Base):
     # one column per key figure and part: sensitivity, sensitivity_u, sensitivity_lo, ...
     locals().update({key + part: mapped_column(Float, nullable=True)
                      for key in FIGURE_KEYS for part in FIGURE_PARTS})
+    # the quasi-static gain in the main pulse's direction (analysis.static_gain: what the amplitude
+    # linearity is fitted to), its shot-specific u and the amplitude it is measured at (migration 0003)
+    static_gain: Mapped[float | None] = mapped_column(Float, nullable=True)
+    static_gain_u: Mapped[float | None] = mapped_column(Float, nullable=True)
+    static_gain_amplitude_m_s2: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 
 class Certificate(Base):

@@ -186,6 +186,19 @@ class LinearityPoint:
 MIN_LEVEL_SPAN_REL = 0.05  # levels closer than this (relative) are one level: no line through them
 
 
+def static_gain_point(label: str, gain: Figure | None, amplitude_m_s2: float | None) -> LinearityPoint | None:
+    """A shot's quasi-static gain (analysis.static_gain, its u shot-specific) at the amplitude it
+    is measured at, as a point of the line (`kind` STATIC_GAIN); None where it has none. The one
+    source of the points a campaign's statistics and a certificate (lab.certificate) fit."""
+    if gain is None or gain.value is None or not amplitude_m_s2:
+        return None
+    if not (math.isfinite(gain.value) and math.isfinite(amplitude_m_s2)):
+        return None
+    u = gain.u
+    return LinearityPoint(label, abs(float(amplitude_m_s2)), float(gain.value), u,
+                          None if u is None else 1.959963984540054 * u, STATIC_GAIN)
+
+
 def linearity_points(labelled: Iterable[tuple[str, KeyFigures | None]]) -> list[LinearityPoint]:
     """The shots that are results, with a sensitivity and the amplitude it was measured at
     (LinearityPoint)."""
@@ -193,10 +206,11 @@ def linearity_points(labelled: Iterable[tuple[str, KeyFigures | None]]) -> list[
     for label, kf in labelled:
         if kf is None or not kf.is_result:
             continue
-        if kf.static_gain is not None and kf.static_gain.value is not None and kf.static_gain_amplitude_m_s2:
-            s, a, kind = kf.static_gain.value, kf.static_gain_amplitude_m_s2, STATIC_GAIN
-            u = kf.shot_specific_u("static_gain")
-        elif kf.sensitivity.value is not None and kf.static_gain_not_determined is None:
+        static = static_gain_point(label, kf.static_gain, kf.static_gain_amplitude_m_s2)
+        if static is not None:
+            out.append(static)
+            continue
+        if kf.sensitivity.value is not None and kf.static_gain_not_determined is None:
             s, kind = kf.sensitivity.value, DC_GAIN
             a = kf.gain_amplitude_m_s2
             if a is None and kf.peak_acceleration_m_s2 is not None:

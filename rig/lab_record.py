@@ -31,7 +31,7 @@ from typing import Any
 
 import h5py
 
-from hopkinson.analysis.key_figures import KeyFigures
+from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.lab import spool
 from hopkinson.lab.database import database_url, redacted
 from hopkinson.lab.errors import LabError, RecordRejected, TamperedShotError
@@ -125,6 +125,8 @@ def shot_record(path: str | Path, recorded_raw_sha256: str | None = None) -> Sho
                                 if key_figures and key_figures.peak_acceleration_m_s2 else None),
         pulse_width_s=(key_figures.pulse_width_s.value if key_figures and key_figures.pulse_width_s else None),
         figures=figures_of(key_figures) if key_figures else {},
+        static_gain=key_figures.static_gain if key_figures else None,
+        static_gain_amplitude_m_s2=key_figures.static_gain_amplitude_m_s2 if key_figures else None,
         context=shot_context(meta),
     )
 
@@ -363,11 +365,16 @@ def verify_record(repo: LabRepository) -> dict[str, Any]:
         for version in read_shot(path, load_raw=False).analyses:
             results = analysis_results(path, int(version["version"]))
             if results:
-                held.append(figures_of(KeyFigures.from_results(results)))
+                kf = KeyFigures.from_results(results)
+                held.append({**figures_of(kf), "static_gain": kf.static_gain,
+                             "static_gain_amplitude_m_s2": Figure(kf.static_gain_amplitude_m_s2)})
         for a in analyses:
             if a.state != "analysed":
                 continue
             stored = analysis_figures(a)
+            if a.static_gain is not None:  # recorded since schema 0003 (before: not in the row, nothing to check)
+                stored.update(static_gain=Figure(a.static_gain, a.static_gain_u),
+                              static_gain_amplitude_m_s2=Figure(a.static_gain_amplitude_m_s2))
             if not any(_same_figures(stored, h) for h in held):
                 problems.append(f"shot {shot.uuid} ({path}): analysis {a.id} (file {a.file_sha256[:12]}…) holds "
                                 f"figures no analysis in the shot file has (changed in the database)")
@@ -375,8 +382,13 @@ def verify_record(repo: LabRepository) -> dict[str, Any]:
 
 
 def _same_figures(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    """Whether the figures `a` stores are `b`'s; a figure without a value (not determined: the row
+    holds no number) is the same as none."""
+    def known(f: Any) -> Any:
+        return f if f is not None and f.value is not None else None
+
     for key in a:
-        x, y = a.get(key), b.get(key)
+        x, y = known(a.get(key)), known(b.get(key))
         if (x is None) != (y is None):
             return False
         if x is None:

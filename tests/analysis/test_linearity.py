@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -70,6 +71,13 @@ def test_the_95_percent_interval_of_the_slope_holds_the_truth_95_percent_of_the_
 
 def _campaign(nonlinearity: float, seed: int) -> list[KeyFigures]:
     """The SHOTS through a sensor of `nonlinearity`, in the shipped world with its seed moved by `seed`."""
+    return [KeyFigures.from_results(results) for results in campaign_results(nonlinearity, seed)]
+
+
+@functools.cache
+def campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ...]:
+    """Each of `_campaign`'s shots' results as analyse_raw_shot gives them (computed once per
+    process: tests/lab/test_certificate_linearity.py certifies the same campaign)."""
     world = load_sim_config(REPO / "config" / "sim.toml").world
     assert world.realism.enabled  # the shipped simulator makes realistic records
     params = dataclasses.replace(world, seed=world.seed + seed, accelerometer=dataclasses.replace(
@@ -82,8 +90,8 @@ def _campaign(nonlinearity: float, seed: int) -> list[KeyFigures]:
         result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             max_order=4, draws=60), quadrature_v=channels.get(3))
-        figures.append(KeyFigures.from_results(result.to_dict()))
-    return figures
+        figures.append(result.to_dict())
+    return tuple(figures)
 
 
 @pytest.fixture(scope="module")
