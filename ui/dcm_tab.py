@@ -38,13 +38,13 @@ from PySide6.QtWidgets import (
 
 from hopkinson.analysis.dcm import DCM, apply, format_complex, parse_poles, step_responses
 from hopkinson.analysis.dcm_design import (
-    DcmOptions,
     ShotSupport,
     design_compensation,
     design_report,
 )
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions, OptionError
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
 from hopkinson.fileio import atomic_write, check_output_path
@@ -95,8 +95,12 @@ def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_pol
     """Design the DCM for the shot's support (the model alone when None: every stable mode
     counts as supported) and sample what the plots show (AnalysisError for an impossible design).
     band_limit_hz: the band limit (None: chosen from the support; 0: none)."""
-    options = DcmOptions(ratio=ratio, damping=damping, band_limit_hz=band_limit_hz,
-                         extra_poles=tuple(complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel()))
+    try:  # the model's own rate bounds the band limit (the design checks it)
+        options = AnalysisOptions(sample_rate_hz=None, dcm_ratio=ratio, dcm_damping=damping,
+                                  dcm_band_limit_hz=band_limit_hz,
+                                  extra_poles=tuple(complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel()))
+    except OptionError as exc:
+        raise AnalysisError(f"DCM: {exc.option} must be {exc.need}") from None
     design = design_compensation(support or ShotSupport(model), options)
     dcm = design.dcm
     report = design_report(design.poles.cancelled, dcm, model, "panel", design)
