@@ -222,7 +222,7 @@ def identify(record: Record, options: AnalysisOptions | None = None, *, sine_ter
     """Identify a discrete model of the accelerometer from a two-channel record (reference m/s²,
     response in any unit).
 
-    options: what the identification may try (params.AnalysisOptions); `changes` replace its
+    options: the analysis options (analysis.options.AnalysisOptions); `changes` replace its
     fields (``identify(record, order=4)``).
     sine_terms: the sine points as analysis.sine_joint weighed them (its own passes; internal).
     Returns the Identification, which holds each stage's result.
