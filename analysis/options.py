@@ -115,7 +115,7 @@ class AnalysisOptions:
     sensitivity_v_per_m_s2: float = option(1.0, "V/(m/s²)", "accelerometer nominal sensitivity at the amplifier "
                                            "input", Rule(nonzero=True))
     sample_rate_hz: float | None = option(DEFAULT_ANALYSIS_RATE_HZ, "Hz", "analysis rate after alignment and "
-                                          "resampling (none: the record's own)", Rule(ge=1e3, le=1e10, optional=True))
+                                          "resampling (none: the record's own)", Rule(gt=0.0, le=1e10, optional=True))
     # Identification (analysis.identify)
     max_order: int = option(12, "", "highest model order tried", Rule(int, ge=1, le=MAX_ORDER_LIMIT))
     order: int | None = option(None, "", "a fixed order instead of the order test's choice (none: the test's)",
