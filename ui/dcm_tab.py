@@ -44,7 +44,7 @@ from hopkinson.analysis.dcm_design import (
 )
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
-from hopkinson.analysis.options import AnalysisOptions, OptionError
+from hopkinson.analysis.options import AnalysisOptions, OptionError, declared
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
 from hopkinson.fileio import atomic_write, check_output_path
@@ -132,7 +132,7 @@ class DcmTab(QWidget):
         self.error: str | None = None
         self._record_kilo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # t, reference, response (10³)
         self._record_window: tuple[float, float] | None = None
-        self._initial: tuple[float, float, str] = (1.0, 0.707, "")
+        self._initial: tuple[float, float, str] = (1.0, declared("dcm_damping"), "")
         self._export_report = export_report
         self._syncing = False
 
@@ -142,7 +142,7 @@ class DcmTab(QWidget):
         self.ratio_slider = QSlider(Qt.Orientation.Horizontal)
         self.ratio_slider.setRange(0, SLIDER_STEPS)
         self.ratio_slider.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
-        self.damping = UnitSpinBox("Damping ζₑ", "", (0.01, 1.0), 0.707, decimals=3, step=0.05,
+        self.damping = UnitSpinBox("Damping ζₑ", "", (0.01, 1.0), declared("dcm_damping"), decimals=3, step=0.05,
                                    tip="damping of the DCM's new poles")
         self.extra = QLineEdit()
         self.extra.setPlaceholderText("e.g. 0.6+0.1j, 0.6-0.1j (both of a pair)")
@@ -298,7 +298,7 @@ class DcmTab(QWidget):
         if view.model is None or view.dcm is None:
             return
         design = view.dcm.design or {}
-        self.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
+        self.set_model(view.model, design.get("ratio", 1.0), design.get("damping", declared("dcm_damping")),
                        [complex(*p) for p in design.get("extra_poles", [])], view.record,
                        source=view.path.name if view.path else "", shot_path=view.path, support=view.support,
                        band_limit_hz=view.band_limit_hz,
