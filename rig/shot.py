@@ -351,25 +351,13 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
     """Everything the analysis needs besides the channels: the rig's constants (its [analysis]
     DCM limits and [uncertainty] reference chain too), the request's options and the amplifier
     gain read back at the shot (in `settings`), checked (AnalysisError naming the option)."""
-    a = config.analysis
-    chain = config.uncertainty.analysis_options()  # the reference chain and the rig's draws
-    return AnalysisOptions.from_options(
-        **chain | {"draws": request.draws if request.draws is not None else chain["draws"]},
-        dcm_widening=a.dcm_widening,  # None (unset): sized to the pulse
-        dcm_noise_gain_limit=a.dcm_noise_gain_limit,
-        grating_pitch_m=a.grating_pitch_m,
-        orders=tuple(a.orders),
-        amp_gain=float(settings.get("amplifier_gain", config.amplifier.gain)),
-        sensitivity_v_per_m_s2=request.sensitivity(config),
-        sample_rate_hz=a.sample_rate_hz if request.sample_rate_hz is None else request.sample_rate_hz,
-        max_order=request.max_order,
-        order=request.order,
-        dcm_ratio=request.dcm_ratio,
-        dcm_damping=request.dcm_damping,
-        uncertainty=request.uncertainty,
-        sine_calibration=request.sine_calibration,
-        transverse_sensitivity_rel=request.transverse_sensitivity_rel,
-    )
+    given = config.analysis.analysis_options() | config.uncertainty.analysis_options() | request.analysis_options()
+    return AnalysisOptions.from_options(**given | {
+        "amp_gain": float(settings.get("amplifier_gain", config.amplifier.gain)),
+        "sensitivity_v_per_m_s2": request.sensitivity(config),
+        "sine_calibration": request.sine_calibration,
+        "transverse_sensitivity_rel": request.transverse_sensitivity_rel,
+    })
 
 
 def sensor_params(params: AnalysisOptions, config: RigConfig) -> dict[str, AnalysisOptions]:
