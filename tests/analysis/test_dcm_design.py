@@ -183,7 +183,7 @@ def test_band_limit_choice():
     _, gd = signal.group_delay((taps, [1.0]), w=f[1:200], fs=1 / DT)
     np.testing.assert_allclose(gd, (taps.size - 1) / 2, atol=1e-6)
     with pytest.raises(AnalysisError, match="below Nyquist"):
-        design_compensation(ShotSupport(model), AnalysisOptions(dcm_band_limit_hz=600e3))
+        design_compensation(ShotSupport(model), AnalysisOptions(sample_rate_hz=None, dcm_band_limit_hz=600e3))
 
 
 def test_latency_lines_the_compensated_output_up_with_the_input():
