@@ -60,7 +60,7 @@ from hopkinson.analysis.dcm_ratio import (
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SUPPORT_SNR, amplitude_spectrum, pulse_width, pulse_window
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
-from hopkinson.analysis.options import DEFAULT_DCM_DAMPING, AnalysisOptions
+from hopkinson.analysis.options import DCM_OPTIONS, DEFAULT_DCM_DAMPING, AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import (
     fbsd_bounds,
@@ -375,6 +375,7 @@ class DcmDesign:
 def design_compensation(support: ShotSupport, options: AnalysisOptions | None = None) -> DcmDesign:
     """Design the DCM this shot supports (module docstring)."""
     options = AnalysisOptions() if options is None else options
+    options.check(DCM_OPTIONS)
     model = support.model
     choice = choose_poles(support)
     limit = choose_band_limit(support, options.dcm_band_limit_hz)

@@ -227,10 +227,11 @@ def identify(record: Record, options: AnalysisOptions | None = None, *, sine_ter
     sine_terms: the sine points as analysis.sine_joint weighed them (its own passes; internal).
     Returns the Identification, which holds each stage's result.
     """
-    for name in ("max_order", "order"):  # in the identification's words (AnalysisOptions checks the rest)
-        if isinstance(changes.get(name), int) and changes[name] < 1:
-            raise AnalysisError(f"{name} must be at least 1, got {changes[name]}")
     options = replace(options or AnalysisOptions(), **changes)
+    if options.max_order < 1:
+        raise AnalysisError(f"max_order must be at least 1, got {options.max_order}")
+    if options.order is not None and options.order < 1:
+        raise AnalysisError(f"order must be at least 1, got {options.order}")
     try:
         result = _identify(record, options, sine_terms)
     except _BeyondTheFirstNull as failed:  # no model past the first null: fitted below it

@@ -5,9 +5,11 @@ metadata). The same declaration serves every place options come from: the rig's 
 (rig/config_analysis.py derives its [analysis] and [uncertainty] sections from it), a campaign
 plan's [defaults.analysis], the command line, the panel, the shot file (/analysis/params,
 `to_dict()` / `from_dict()`), and it is what `identify(record, options)`, the uncertainty's
-`evaluate(ident, options)` and the DCM's `design_compensation(support, options)` take. An
-instance is checked when made (`check()`: AnalysisError naming the option), so the sequencer's
-check before FIRE refuses exactly what the analysis would refuse after it.
+`evaluate(ident, options)` and the DCM's `design_compensation(support, options)` take.
+`check()` (AnalysisError naming the option) runs wherever options come in from outside:
+`from_dict` / `from_options` (config, plan, command line, shot file), the shot analysis, and
+the DCM design for its own options (`DCM_OPTIONS`); so the sequencer's check before FIRE refuses
+exactly what the analysis would refuse after it.
 
 Light on purpose: no NumPy or SciPy at import (the rig imports it early). Reference-chain
 uncertainties (GUM: relative standard uncertainties, k = 1) are the lab's own, from its
@@ -104,7 +106,7 @@ FRACTION = Rule(ge=0.0, le=1.0)
 
 @dataclass(frozen=True)
 class AnalysisOptions:
-    """Rig constants and analysis options of one shot (module docstring); checked when made."""
+    """Rig constants and analysis options of one shot (module docstring)."""
 
     # The reference and the sensor (analysis.reduce)
     grating_pitch_m: float = option(DEFAULT_GRATING_PITCH_M, "m", "interferometer grating pitch d",
@@ -171,9 +173,6 @@ class AnalysisOptions:
     sine_calibration: str | None = option(None, "", "a sine calibration CSV of the sensor (none: no joint fit)",
                                           Rule(str, optional=True))
 
-    def __post_init__(self) -> None:
-        self.check()
-
     @property
     def n_max(self) -> int:
         """The largest order the search may reach (an asked order above max_order included)."""
@@ -205,7 +204,9 @@ class AnalysisOptions:
                 values["extra_poles"] = tuple(_complex(p) for p in values["extra_poles"] or ())
         except (TypeError, ValueError):
             raise AnalysisError("analysis option orders / extra_poles: expected a list of numbers") from None
-        return cls(**values)
+        options = cls(**values)
+        options.check()
+        return options
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: tuples as lists, complex poles as [re, im]. The options of the first shot
@@ -219,9 +220,12 @@ class AnalysisOptions:
                 del d[name]
         return d
 
-    def check(self) -> None:
-        """Raise AnalysisError naming the first option whose value cannot be used."""
+    def check(self, names: tuple[str, ...] | None = None) -> None:
+        """Raise AnalysisError (OptionError) naming the first option whose value cannot be used;
+        `names`: only these options (default: all)."""
         for f in fields(self):
+            if names is not None and f.name not in names:
+                continue
             value = getattr(self, f.name)
             need = _special_problem(self, f.name, value) if f.name in _SPECIAL else f.metadata["rule"].problem(value)
             if need is not None:
@@ -250,6 +254,8 @@ class OptionError(AnalysisError):
         self.option, self.need, self.value = option, need, value
 
 
+# The DCM design's own options (analysis.dcm_design checks them before it designs).
+DCM_OPTIONS = ("dcm_ratio", "dcm_damping", "dcm_widening", "extra_poles", "dcm_noise_gain_limit", "dcm_band_limit_hz")
 # Options added after shot files were first written (to_dict leaves them out at their default).
 LATER = ("significance", "max_delay_samples", "remove_delay", "patience", "max_evaluations", "stability_draws",
          "order_draws")

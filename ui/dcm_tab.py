@@ -44,7 +44,7 @@ from hopkinson.analysis.dcm_design import (
 )
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
-from hopkinson.analysis.options import AnalysisOptions, OptionError, declared
+from hopkinson.analysis.options import DCM_OPTIONS, AnalysisOptions, OptionError, declared
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
 from hopkinson.fileio import atomic_write, check_output_path
@@ -99,6 +99,7 @@ def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_pol
         options = AnalysisOptions(sample_rate_hz=None, dcm_ratio=ratio, dcm_damping=damping,
                                   dcm_band_limit_hz=band_limit_hz,
                                   extra_poles=tuple(complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel()))
+        options.check(DCM_OPTIONS)
     except OptionError as exc:
         raise AnalysisError(f"DCM: {exc.option} must be {exc.need}") from None
     design = design_compensation(support or ShotSupport(model), options)

@@ -198,7 +198,7 @@ def _design(args: argparse.Namespace, record: Record | None
             ) -> tuple[np.ndarray, DcmDesign, DiscreteModel | None, str]:
     """(poles shown in the pole analysis, the design, the model to report or None, source)."""
     from hopkinson.analysis.dcm_design import ShotSupport, poles_only_model
-    from hopkinson.analysis.options import AnalysisOptions
+    from hopkinson.analysis.options import DCM_OPTIONS, AnalysisOptions
     from hopkinson.analysis.pole_checks import check_conjugate_pairs, parse_poles
     from hopkinson.rig.cli.identify import named_by_flag
 
@@ -215,6 +215,7 @@ def _design(args: argparse.Namespace, record: Record | None
                                              "a positive frequency in Hz"),
             extra_poles=tuple(parse_poles(args.extra_poles, "--extra-poles")) if args.extra_poles else (),
         )
+        options.check(DCM_OPTIONS)
     except AnalysisError as exc:
         raise named_by_flag(exc, DCM_FLAGS) from None
     if args.model is not None:
