@@ -51,13 +51,14 @@ import numpy as np
 from scipy import signal
 
 from hopkinson.analysis.dcm import DCM
-from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.dcm_design import DcmDesign, ShotSupport, design_compensation
 from hopkinson.analysis.dcm_ratio import ShotPulse
 from hopkinson.analysis.dcm_stream import apply
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width, pulse_window
 from hopkinson.analysis.group_delay import passband_delay_samples
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate, resampling_factors, shift_samples
 from hopkinson.analysis.response import fbsd_hz, frequency_response
@@ -184,7 +185,7 @@ def recommendation(design: DcmDesign, check: CompensationCheck | None) -> tuple[
     if design.poles.cancelled.size == 0:
         return False, "nothing to compensate: no pole of the model is one the shot supports"
     if design.noise_gain_exceeded:
-        return False, (f"its noise gain {design.noise_gain:.3g} exceeds the limit {design.options.noise_gain_limit:g}: "
+        return False, (f"its noise gain {design.noise_gain:.3g} exceeds the limit {design.options.dcm_noise_gain_limit:g}: "
                        "it amplifies the record's noise more than allowed")
     if design.reached_widening is not None and design.reached_widening <= 1.0:
         return False, f"it does not widen the ±5 % band (×{design.reached_widening:.2f})"
@@ -318,7 +319,7 @@ class ShotCompensation:
         return replace(self, compensated_peak=peak)
 
 
-def compensate_shot(identification: Any, record: Record, options: DcmOptions,
+def compensate_shot(identification: Any, record: Record, options: AnalysisOptions,
                     draws: Sequence[DiscreteModel] = (), seed: int | None = None) -> ShotCompensation:
     """Design the DCM the shot supports, check it on the shot, give the compensated peak its
     interval (with model draws) and judge it. A failed check is a warning, never a failed shot."""
@@ -327,7 +328,7 @@ def compensate_shot(identification: Any, record: Record, options: DcmOptions,
     support = ShotSupport.from_identification(identification, rec)
     design = design_compensation(support, options)
     warnings: list[str] = []
-    if design.widening_short and options.ratio is None:
+    if design.widening_short and options.dcm_ratio is None:
         warnings.append(f"DCM widening: {design.widening_note}")
     check = None
     try:

@@ -60,12 +60,7 @@ from hopkinson.analysis.dcm_ratio import (
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import SUPPORT_SNR, amplitude_spectrum, pulse_width, pulse_window
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
-from hopkinson.analysis.params import (
-    DEFAULT_DCM_DAMPING,
-    DEFAULT_DCM_NOISE_GAIN_LIMIT,
-    DEFAULT_DCM_WIDENING,
-    dcm_option_problem,
-)
+from hopkinson.analysis.options import DCM_OPTIONS, DEFAULT_DCM_DAMPING, AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import (
     fbsd_bounds,
@@ -75,7 +70,7 @@ from hopkinson.analysis.response import (
 )
 
 # The automatic design keeps the DCM's white-noise RMS gain at the analysis rate below
-# DEFAULT_DCM_NOISE_GAIN_LIMIT (analysis.params, with the other defaults and the options'
+# DEFAULT_DCM_NOISE_GAIN_LIMIT (analysis.options, with the other defaults and the options'
 # rules): a compensated record at most 4× (12 dB) as noisy as the raw one.
 BAND_LIMIT_ORDER = 4
 
@@ -281,45 +276,6 @@ def response_band_top_hz(record: Record, model: DiscreteModel, noise_rms: float,
     return float(freq[i_max + below[0] - 1]) if below.size else float(freq[-1])
 
 
-_OPTION_FIELDS = {"dcm_ratio": "ratio", "dcm_damping": "damping", "dcm_widening": "widening",
-                  "dcm_noise_gain_limit": "noise_gain_limit", "dcm_band_limit_hz": "band_limit_hz",
-                  "extra_poles": "extra_poles"}
-
-
-@dataclass(frozen=True)
-class DcmOptions:
-    """How to design: ratio None = automatic (sized to the pulse, or for `widening` W when given);
-    band_limit_hz None = automatic, 0 = none; noise_gain_limit bounds the automatic design."""
-
-    ratio: float | None = None
-    damping: float = DEFAULT_DCM_DAMPING
-    widening: float | None = DEFAULT_DCM_WIDENING
-    noise_gain_limit: float = DEFAULT_DCM_NOISE_GAIN_LIMIT
-    band_limit_hz: float | None = None
-    extra_poles: tuple[complex, ...] = ()
-
-    def __post_init__(self) -> None:
-        """The rules AnalysisParams.check() applies before FIRE (analysis.params.dcm_option_problem)."""
-        problem = dcm_option_problem(self.ratio, self.damping, self.widening, self.noise_gain_limit,
-                                     self.band_limit_hz, self.extra_poles)
-        if problem is not None:
-            option, need = problem
-            value = getattr(self, _OPTION_FIELDS[option])
-            raise AnalysisError(f"DCM: {option} must be {need}, got {value!r}")
-
-    @classmethod
-    def from_params(cls, params: Any) -> DcmOptions:
-        """From analysis.params.AnalysisParams (its dcm_* fields and extra_poles)."""
-        return cls(
-            ratio=params.dcm_ratio,
-            damping=params.dcm_damping,
-            widening=params.dcm_widening,
-            noise_gain_limit=params.dcm_noise_gain_limit,
-            band_limit_hz=params.dcm_band_limit_hz,
-            extra_poles=tuple(params.extra_poles),
-        )
-
-
 @dataclass(frozen=True)
 class BandLimit:
     """The band-limiting low-pass: cut-off (None: none) and why it sits there."""
@@ -373,7 +329,7 @@ class DcmDesign:
     model: DiscreteModel
     poles: PoleChoice
     band_limit: BandLimit
-    options: DcmOptions
+    options: AnalysisOptions
     fbsd_hz: dict[str, float]
     compensated_fbsd_hz: dict[str, float]
     target_widening: float | None
@@ -386,7 +342,7 @@ class DcmDesign:
 
     @property
     def noise_gain_exceeded(self) -> bool:
-        return self.noise_gain > self.options.noise_gain_limit * (1 + 1e-9)
+        return self.noise_gain > self.options.dcm_noise_gain_limit * (1 + 1e-9)
 
     @property
     def widening_short(self) -> bool:
@@ -408,7 +364,7 @@ class DcmDesign:
             "sized_to": None if choice is None else choice.sized_to.value,
             "predicted_peak_error_pct": error,
             "noise_gain": self.noise_gain,
-            "noise_gain_limit": self.options.noise_gain_limit,
+            "noise_gain_limit": self.options.dcm_noise_gain_limit,
             "band_limit_hz": self.band_limit.cutoff_hz,
             "band_limit_reason": self.band_limit.reason,
             "latency_s": self.latency_s,
@@ -416,38 +372,39 @@ class DcmDesign:
         }
 
 
-def design_compensation(support: ShotSupport, options: DcmOptions | None = None) -> DcmDesign:
+def design_compensation(support: ShotSupport, options: AnalysisOptions | None = None) -> DcmDesign:
     """Design the DCM this shot supports (module docstring)."""
-    options = DcmOptions() if options is None else options
+    options = AnalysisOptions() if options is None else options
+    options.check(DCM_OPTIONS)
     model = support.model
     choice = choose_poles(support)
-    limit = choose_band_limit(support, options.band_limit_hz)
+    limit = choose_band_limit(support, options.dcm_band_limit_hz)
     before = {k: e.frequency_hz for k, e in fbsd_edges(model).items()}
     if choice.cancelled.size == 0:
         dcm = _assemble(model, choice, limit, None, options)
         note = "nothing to compensate: no pole of the model is one the shot supports"
         return _finish(dcm, model, choice, limit, options, before, support, note, [note])
-    if options.ratio is not None:
-        dcm = _assemble(model, choice, limit, options.ratio, options)
-        note = f"ratio r = {options.ratio:g} given: no widening was aimed for"
+    if options.dcm_ratio is not None:
+        dcm = _assemble(model, choice, limit, options.dcm_ratio, options)
+        note = f"ratio r = {options.dcm_ratio:g} given: no widening was aimed for"
         design = _finish(dcm, model, choice, limit, options, before, support, note, [])
         if design.noise_gain_exceeded:
             design.notes.append(
-                f"the noise gain {design.noise_gain:.3g} exceeds the limit {options.noise_gain_limit:g} at the given r"
+                f"the noise gain {design.noise_gain:.3g} exceeds the limit {options.dcm_noise_gain_limit:g} at the given r"
             )
         return design
     cap_edge = None if limit.cutoff_hz is None else _BAND_LIMIT_FBSD5 * limit.cutoff_hz
     cap = "none" if limit.cutoff_hz is None else f"at {limit.cutoff_hz / 1e3:.4g} kHz, {limit.reason}"
     ratio = choose_ratio(model, choice.cancelled, lambda r: _assemble(model, choice, limit, r, options),
-                         damping=options.damping, noise_gain_limit=options.noise_gain_limit,
-                         model_fbsd5_hz=before["5"], widening=options.widening, pulse=support.pulse,
+                         damping=options.dcm_damping, noise_gain_limit=options.dcm_noise_gain_limit,
+                         model_fbsd5_hz=before["5"], widening=options.dcm_widening, pulse=support.pulse,
                          band_known=limit.cutoff_hz is not None, cap=cap, cap_edge_hz=cap_edge)
     dcm = _assemble(model, choice, limit, ratio.ratio, options)
     return _finish(dcm, model, choice, limit, options, before, support, ratio.note, [], ratio)
 
 
 def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio: float | None,
-              options: DcmOptions) -> DCM:
+              options: AnalysisOptions) -> DCM:
     """Paper DCM for the cancelled poles at ratio r (None: nothing cancelled), cascaded with the
     band limit, unit DC gain (its latency is set by _finish)."""
     dt = model.sample_interval_s
@@ -456,7 +413,7 @@ def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio:
         zeros = poles = np.zeros(0, complex)
         gain, design = 1.0, {"method": "no compensation: nothing to cancel"}
     else:
-        core = design_dcm(choice.cancelled, dt, ratio, options.damping, options.extra_poles)
+        core = design_dcm(choice.cancelled, dt, ratio, options.dcm_damping, options.extra_poles)
         zeros, poles, gain, design = core.zeros, core.poles, core.gain, dict(core.design)
     design.update(choice.to_dict())
     design["band_limit"] = {"cutoff_hz": limit.cutoff_hz, "order": BAND_LIMIT_ORDER if fir is not None else 0,
@@ -467,7 +424,7 @@ def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio:
     return DCM(dt, zeros, poles, gain, design, fir=fir)
 
 
-def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit, options: DcmOptions,
+def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit, options: AnalysisOptions,
             before: dict[str, float], support: ShotSupport, note: str | None, notes: list[str],
             ratio: RatioChoice | None = None) -> DcmDesign:
     after = {k: e.frequency_hz for k, e in compensated_fbsd_edges(model, dcm).items()}
@@ -484,7 +441,7 @@ def _finish(dcm: DCM, model: DiscreteModel, choice: PoleChoice, limit: BandLimit
     figures = {
         "target_widening": target, "reached_widening": reached, "widening_note": note,
         "sized_to": None if ratio is None else ratio.sized_to.value,
-        "noise_gain": noise, "noise_gain_limit": options.noise_gain_limit,
+        "noise_gain": noise, "noise_gain_limit": options.dcm_noise_gain_limit,
         "latency": {
             "total_s": latency * dt,
             "channel_delay_s": support.channel_delay_samples * dt,
@@ -554,7 +511,8 @@ def ratio_for_widening(
 ) -> float:
     """The automatic r for a bare model: every stable pole cancelled, no band limit, no noise
     bound (the paper's design alone); `design_compensation` is the shot's full design."""
-    options = DcmOptions(damping=damping, widening=widening, noise_gain_limit=math.inf, band_limit_hz=0.0,
-                         extra_poles=tuple(complex(p) for p in np.atleast_1d(extra_poles)))
+    options = AnalysisOptions(sample_rate_hz=None, dcm_damping=damping, dcm_widening=widening,
+                              dcm_noise_gain_limit=math.inf, dcm_band_limit_hz=0.0,
+                              extra_poles=tuple(complex(p) for p in np.atleast_1d(extra_poles)))
     design = design_compensation(ShotSupport(model), options)
     return float(design.dcm.design["ratio"])

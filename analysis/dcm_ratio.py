@@ -16,7 +16,7 @@ by 9 % even with a perfect model. The automatic choice, in this order of what th
 - Without a pulse but with the supported band: the widest ±5 % band allowed (the smallest r
   within 1 % of it), so the DCM reaches what the shot vouches for.
 - With neither (a bare model or poles): FALLBACK_WIDENING (×3) of the model's ±5 % band, said so.
-- An explicit widening W (`DcmOptions.widening`): the smallest r reaching ×W, as before.
+- An explicit widening W (`AnalysisOptions.dcm_widening`): the smallest r reaching ×W, as before.
 
 Interface consumed (what identification provides): the model, the top edge of the supported
 band (`ShotSupport.supported_band_hz[1]`, where the band limit puts its ±5 % edge; a band made

@@ -42,7 +42,7 @@ from hopkinson.analysis.loss import arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.model_error import ModelError
 from hopkinson.analysis.modes import Mode, main_mode, resonance_above_hz
-from hopkinson.analysis.params import IdentifyOptions
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.record_preparation import Prepared, PreparedRecord, prepare_record
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.spectral_data import SineTerms
@@ -217,17 +217,17 @@ class Identification:
 
 
 # ------------------------------------------------------------------------------ identify
-def identify(record: Record, options: IdentifyOptions | None = None, *, sine_terms: SineTerms | None = None,
+def identify(record: Record, options: AnalysisOptions | None = None, *, sine_terms: SineTerms | None = None,
              **changes: Any) -> Identification:
     """Identify a discrete model of the accelerometer from a two-channel record (reference m/s²,
     response in any unit).
 
-    options: what the identification may try (params.IdentifyOptions); `changes` replace its
+    options: the analysis options (analysis.options.AnalysisOptions); `changes` replace its
     fields (``identify(record, order=4)``).
     sine_terms: the sine points as analysis.sine_joint weighed them (its own passes; internal).
     Returns the Identification, which holds each stage's result.
     """
-    options = replace(options or IdentifyOptions(), **changes)
+    options = replace(options or AnalysisOptions(), **changes)
     if options.max_order < 1:
         raise AnalysisError(f"max_order must be at least 1, got {options.max_order}")
     if options.order is not None and options.order < 1:
@@ -245,7 +245,7 @@ def identify(record: Record, options: IdentifyOptions | None = None, *, sine_ter
                    preprocessing={**again.preprocessing, "band_cut": cut.to_dict()})
 
 
-def _identify(record: Record, options: IdentifyOptions, sine_terms: SineTerms | None,
+def _identify(record: Record, options: AnalysisOptions, sine_terms: SineTerms | None,
               band_top_hz: float | None = None) -> Identification:
     """The stages once, on the band the excitation supports (capped at `band_top_hz`)."""
     prepared = prepare_record(record, options.sample_rate_hz, options.n_max, options.order,
@@ -264,13 +264,13 @@ def _identify(record: Record, options: IdentifyOptions, sine_terms: SineTerms | 
     return _identification(prepared, search, weighed, settlement, claimed)
 
 
-def identify_with_sine(record: Record, sine: SineCalibration, options: IdentifyOptions | None = None,
+def identify_with_sine(record: Record, sine: SineCalibration, options: AnalysisOptions | None = None,
                        **changes: Any) -> Identification:
     """One model fitted to the record and a sinusoidal calibration of the same sensor, each
     weighed by its own uncertainty (analysis.sine_joint); their consistency in `sine_joint`."""
     from hopkinson.analysis.sine_joint import identify_joint
 
-    return identify_joint(record, sine, replace(options or IdentifyOptions(), **changes))
+    return identify_joint(record, sine, replace(options or AnalysisOptions(), **changes))
 
 
 class _BeyondTheFirstNull(AnalysisError):

@@ -31,6 +31,7 @@ from hopkinson.analysis.modes import Mode, has_doublet
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.onset_choice import onset_beyond_the_model_error, onset_fitted
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.order_choice import choose_order
 from hopkinson.analysis.order_search import (
     OrderSweep,
@@ -43,7 +44,6 @@ from hopkinson.analysis.order_search import (
     search_setup,
     settle_order,
 )
-from hopkinson.analysis.params import IdentifyOptions
 from hopkinson.analysis.record_preparation import (
     Prepared,
     PreparedRecord,
@@ -146,7 +146,7 @@ class Claim:
 
 
 # ------------------------------------------------------------------------------ search_orders
-def search_orders(prepared: PreparedRecord, options: IdentifyOptions, sine_terms: SineTerms | None = None
+def search_orders(prepared: PreparedRecord, options: AnalysisOptions, sine_terms: SineTerms | None = None
                   ) -> OrderSearch:
     """Every order of the free structure fitted on the prepared bins (with `sine_terms`: the sine
     points of analysis.sine_joint), the onset's bumps where they stand, and ε, γ dropped where the
@@ -236,7 +236,7 @@ def weigh_model_error(prepared: PreparedRecord, search: OrderSearch, sine_terms:
 
 
 # ------------------------------------------------------------------------------ settle
-def settle(prepared: PreparedRecord, search: OrderSearch, weighed: WeighedSearch, options: IdentifyOptions
+def settle(prepared: PreparedRecord, search: OrderSearch, weighed: WeighedSearch, options: AnalysisOptions
            ) -> Settlement:
     """The order's stability on noise draws (options.stability_draws), the order settled
     (order_search.settle_order), the best delay branch, and the model error's size on the final
@@ -262,7 +262,7 @@ def settle(prepared: PreparedRecord, search: OrderSearch, weighed: WeighedSearch
 
 
 # ------------------------------------------------------------------------------ claim
-def claim(prepared: PreparedRecord, weighed: WeighedSearch, settlement: Settlement, options: IdentifyOptions,
+def claim(prepared: PreparedRecord, weighed: WeighedSearch, settlement: Settlement, options: AnalysisOptions,
           cut_band: bool = True) -> Claim:
     """The model in the record's units (the scales back into B, the mean of both directions'
     gains: analysis.input_terms), its modes and their claims, the delay's, the residual against

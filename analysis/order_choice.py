@@ -24,7 +24,7 @@ import numpy as np
 from hopkinson.analysis.frequency_fit import OrderFit, is_stable, response
 from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
-from hopkinson.analysis.params import SIGNIFICANCE
+from hopkinson.analysis.options import SIGNIFICANCE
 from hopkinson.analysis.quick_refit import QuickRefit
 from hopkinson.analysis.spectral_data import SpectralData
 

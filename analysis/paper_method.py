@@ -29,7 +29,7 @@ from scipy import signal
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.loss import arx_coefficients_by_order, arx_loss_by_order
 from hopkinson.analysis.model import DiscreteModel
-from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
+from hopkinson.analysis.options import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.params import CONJUGATE_TOLERANCE
+from hopkinson.analysis.options import CONJUGATE_TOLERANCE
 
-_CONJ_TOL = CONJUGATE_TOLERANCE  # the rule AnalysisParams.check() applies to extra poles too
+_CONJ_TOL = CONJUGATE_TOLERANCE  # the rule AnalysisOptions.check() applies to extra poles too
 
 
 def format_complex(value: complex) -> str:

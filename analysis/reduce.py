@@ -72,7 +72,7 @@ from hopkinson.analysis.doppler import metres_per_radian
 from hopkinson.analysis.errors import AnalysisError, RecordError
 from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width
 from hopkinson.analysis.full_scale import FullScale, check_not_clipped
-from hopkinson.analysis.params import DEFAULT_GRATING_PITCH_M
+from hopkinson.analysis.options import DEFAULT_GRATING_PITCH_M
 from hopkinson.analysis.quadrature import demodulate_quadrature
 from hopkinson.analysis.records import Record, column_names, read_columns, validated_columns
 from hopkinson.analysis.resample import (

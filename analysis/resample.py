@@ -17,7 +17,7 @@ from numpy import fft
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.numerics import next_fast_len
-from hopkinson.analysis.params import DEFAULT_ANALYSIS_RATE_HZ
+from hopkinson.analysis.options import DEFAULT_ANALYSIS_RATE_HZ
 from hopkinson.analysis.records import Record
 
 # Largest denominator of the rational resampling ratio: keeps the polyphase filter small

@@ -2,7 +2,7 @@
 
 The analysis scales a sensor's conditioner output by 1/(gain × nominal sensitivity): the gain
 is output volts per *input unit* (volts for a voltage sensor, coulombs for a charge sensor)
-and the sensitivity is input units per m/s² (`AnalysisParams.sensitivity_v_per_m_s2`, its SI
+and the sensitivity is input units per m/s² (`AnalysisOptions.sensitivity_v_per_m_s2`, its SI
 value). A lab writes sensitivities as its data sheets do: mV/g, pC/(m/s²), µV/(m/s²) …; each
 `SensitivityUnit` here says which input it measures and what one of it is in SI, so a value
 entered in the sensor's own unit becomes the SI value the analysis takes, and a DC gain

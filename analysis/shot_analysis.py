@@ -32,7 +32,6 @@ import numpy as np
 
 from hopkinson.analysis.compensation import compensate_shot
 from hopkinson.analysis.dcm import DCM
-from hopkinson.analysis.dcm_design import DcmOptions
 from hopkinson.analysis.dcm_figures import compare_steps
 from hopkinson.analysis.determination import is_result, not_determined
 from hopkinson.analysis.errors import AnalysisError
@@ -41,7 +40,7 @@ from hopkinson.analysis.findings import texts
 from hopkinson.analysis.identify import Identification, identify, identify_with_sine
 from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.reduce import (
     SensorChannel,
@@ -66,7 +65,7 @@ COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "si
 class ShotAnalysis:
     """Everything the analysis found for one shot."""
 
-    params: AnalysisParams
+    params: AnalysisOptions
     record: Record | None  # the two-channel record at the analysis rate (None when rebuilt from a dict)
     reduction: dict[str, Any] | None  # shock quantities of the interferometer reduction
     excitation: ExcitationSummary | dict[str, Any]
@@ -146,7 +145,7 @@ class ShotAnalysis:
             else:
                 sensors[role] = cls.from_dict(results, (sensor_records or {}).get(role))
         try:
-            params = AnalysisParams.from_dict(data["params"], ignore_unknown=True)
+            params = AnalysisOptions.from_dict(data["params"], ignore_unknown=True)
             model = DiscreteModel.from_dict(data["model"], source="shot analysis")
             dcm = DCM.from_dict(data["dcm"], source="shot analysis DCM")
             return cls(
@@ -191,18 +190,17 @@ class ModelWithUncertainty:
                 "warnings": list(self.warnings)}
 
 
-def identify_with_uncertainty(record: Record, params: AnalysisParams, reduction: dict[str, Any] | None = None,
+def identify_with_uncertainty(record: Record, params: AnalysisOptions, reduction: dict[str, Any] | None = None,
                               sine: SineCalibration | None = None) -> ModelWithUncertainty:
     """Identify the model of `record` (with `sine`: fitted with that sinusoidal calibration) and
     evaluate its uncertainty (`reduction`: the interferometer's shock quantities, whose
     uncertainty it also gives). The one sequence of the shot analysis, `hopkinson identify` and
     the panel."""
-    options = params.identify_options()
-    ident = identify(record, options) if sine is None else identify_with_sine(record, sine, options)
+    ident = identify(record, params) if sine is None else identify_with_sine(record, sine, params)
     return with_uncertainty(ident, params, reduction)
 
 
-def with_uncertainty(ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None = None
+def with_uncertainty(ident: Identification, params: AnalysisOptions, reduction: dict[str, Any] | None = None
                      ) -> ModelWithUncertainty:
     """`ident` with its Monte Carlo uncertainty (`identify_with_uncertainty`'s second half: for
     an identification already at hand)."""
@@ -216,10 +214,10 @@ def with_uncertainty(ident: Identification, params: AnalysisParams, reduction: d
     return ModelWithUncertainty(ident, uncertainty, model_draws, warnings)
 
 
-def analyse_record(record: Record, params: AnalysisParams | None = None,
+def analyse_record(record: Record, params: AnalysisOptions | None = None,
                    reduction: dict[str, Any] | None = None) -> ShotAnalysis:
     """Analyse a two-channel record (reference m/s², response in any unit)."""
-    params = AnalysisParams() if params is None else params
+    params = AnalysisOptions() if params is None else params
     params.check()
     sine = read_sine_calibration(params.sine_calibration) if params.sine_calibration else None
     fitted = identify_with_uncertainty(record, params, reduction, sine)
@@ -229,7 +227,7 @@ def analyse_record(record: Record, params: AnalysisParams | None = None,
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
     static, why_not = static_gain(ident, model_draws)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
-    compensation = compensate_shot(ident, record, DcmOptions.from_params(params), draws=model_draws,
+    compensation = compensate_shot(ident, record, params, draws=model_draws,
                                    seed=params.seed)
     warnings += compensation.warnings
     dcm, comp = compensation.design.dcm, compensation.design.compensated_fbsd_hz
@@ -272,21 +270,21 @@ def peak_overshoot(model: DiscreteModel, reference_m_s2: np.ndarray) -> float:
 
 
 def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_interval_s: float,
-                     params: AnalysisParams | None = None, *, quadrature_v: np.ndarray | None = None,
-                     more_sensors: Mapping[str, tuple[np.ndarray, AnalysisParams]] | None = None,
+                     params: AnalysisOptions | None = None, *, quadrature_v: np.ndarray | None = None,
+                     more_sensors: Mapping[str, tuple[np.ndarray, AnalysisOptions]] | None = None,
                      full_scale_v: Mapping[str, tuple[float, float]] | None = None) -> ShotAnalysis:
     """Reduce the raw channels (PM beat, or the quadrature pair with `quadrature_v`; amplifier
     volts) to a record, then analyse it. `more_sensors`: role -> (volts, that sensor's
-    AnalysisParams: its amp_gain and sensitivity; the reference's constants are `params`'),
+    AnalysisOptions: its amp_gain and sensitivity; the reference's constants are `params`'),
     each analysed like the first against the same reference (module docstring).
     `full_scale_v`: role -> the digitizer's full scale in volts (analysis.full_scale.
     full_scale_volts from the shot file's code_min/code_max): a channel with samples there is
     refused as clipped; without it clipping is not judged here (the rig judged the shot)."""
-    params = AnalysisParams() if params is None else params
+    params = AnalysisOptions() if params is None else params
     source = "raw shot"
     channels = {"response": SensorChannel(response_v, params.amp_gain, params.sensitivity_v_per_m_s2)}
     errors: dict[str, str] = {}
-    own_params: dict[str, AnalysisParams] = {}
+    own_params: dict[str, AnalysisOptions] = {}
     for role, (volts, own) in (more_sensors or {}).items():
         channel = SensorChannel(volts, own.amp_gain, own.sensitivity_v_per_m_s2)
         try:

@@ -178,7 +178,7 @@ class SineJoint:
 
 def identify_joint(record: Any, sine: SineCalibration, options: Any = None) -> Any:
     """`analysis.identify.identify` on the record and the sine points together (module docstring);
-    `options`: analysis.identify_stages.IdentifyOptions."""
+    `options`: analysis.options.AnalysisOptions."""
     from hopkinson.analysis.identify import identify
 
     shock = identify(record, options)

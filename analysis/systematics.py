@@ -25,7 +25,7 @@ refit moves them together) and added to every Monte Carlo draw:
   structure), and the order with one more pole pair, where those fits are sound: the figures'
   largest change is the bound (shapes the record does not tell apart from the chosen one);
 - **transverse sensitivity** (`transverse_row`): the sensor's stated transverse sensitivity S_t
-  (AnalysisParams.transverse_sensitivity_rel, the datasheet's limit) times the bar's transverse
+  (AnalysisOptions.transverse_sensitivity_rel, the datasheet's limit) times the bar's transverse
   motion share r_T (transverse_motion_rel): a transverse drive in proportion to the axial one
   scales the response by at most S_t·r_T, which no record of one axis can tell from the
   sensitivity (the DC gain and S_sh; the response's shape, so f_n, ζ and the FBSD, is not

@@ -31,17 +31,16 @@ from hopkinson.analysis.identify import (
 )
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.order_choice import (
     ORDER_STABILITY_WARNING,
     NoiseDraws,
     fractions_text,
 )
-from hopkinson.analysis.params import AnalysisParams
 from hopkinson.analysis.response import fbsd_edges, frequency_response
 from hopkinson.analysis.systematics import transverse_row, variant_bounds
 from hopkinson.analysis.uncertainty_budget import budget, nearest_mode
 from hopkinson.analysis.uncertainty_draws import BandVariants, draw
-from hopkinson.analysis.uncertainty_draws import UncertaintyOptions as UncertaintyOptions
 
 METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
 FBSD_GRID = 2000
@@ -107,11 +106,11 @@ class UncertaintyResult:
 
 def evaluate(
     ident: Identification,
-    options: UncertaintyOptions | None = None,
+    options: AnalysisOptions | None = None,
     reduction: dict[str, Any] | None = None,
 ) -> UncertaintyResult:
     """Monte Carlo uncertainty of `ident`'s figures (and of `reduction`'s, when given)."""
-    options = UncertaintyOptions() if options is None else options
+    options = AnalysisOptions() if options is None else options
     if options.draws < 2:
         raise AnalysisError(f"uncertainty: at least 2 draws are needed, got {options.draws}")
     seed = options.seed if options.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
@@ -236,7 +235,7 @@ def _term_estimates(ident: Identification, fits: list[OrderFit | None], good: np
 
 
 def shot_uncertainty(
-    ident: Identification, params: AnalysisParams, reduction: dict[str, Any] | None
+    ident: Identification, params: AnalysisOptions, reduction: dict[str, Any] | None
 ) -> tuple[dict[str, Any] | None, list[DiscreteModel], list[Finding]]:
     """The uncertainty of a shot as its JSON, its model draws and its findings; switched off, or
     failed, it is None with a finding that says so: the values stand, never silently without it."""
@@ -244,7 +243,7 @@ def shot_uncertainty(
         return None, [], [Finding(FindingCode.UNCERTAINTY_OFF,
                                   "uncertainty switched off (--no-uncertainty): the figures carry no uncertainty")]
     try:
-        result = evaluate(ident, UncertaintyOptions.from_params(params), reduction)
+        result = evaluate(ident, params, reduction)
     except (AnalysisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return None, [], [Finding(FindingCode.UNCERTAINTY_FAILED, f"the uncertainty could not be evaluated ({exc}): "
                                                                    "the figures are reported without it")]
@@ -362,7 +361,7 @@ def _fbsd_draws(fits: list[OrderFit | None], good: np.ndarray, nominal: dict, dt
 
 # ------------------------------------------------------------------------------ peak figures
 def _peak_figures(
-    ident: Identification, reduction: dict[str, Any] | None, options: UncertaintyOptions, rng: np.random.Generator,
+    ident: Identification, reduction: dict[str, Any] | None, options: AnalysisOptions, rng: np.random.Generator,
     inflate: float, reference_factor: np.ndarray, gain_factor: np.ndarray, added_shock: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Shock sensitivity, peak acceleration and pulse width: the same estimators on the record

@@ -14,10 +14,10 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.response import fbsd_edges
 from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.systematics import MODEL_ERROR_BOUND, TypeB, fitted_shares
-from hopkinson.analysis.uncertainty_draws import UncertaintyOptions
 
 
 def nearest_mode(a: np.ndarray, pole: complex, dt: float) -> tuple[float, float]:
@@ -34,7 +34,7 @@ def nearest_mode(a: np.ndarray, pole: complex, dt: float) -> tuple[float, float]
 
 
 def budget(
-    ident: Identification, options: UncertaintyOptions, inflate: float,
+    ident: Identification, options: AnalysisOptions, inflate: float,
     nominal: dict[str, float | None], draws: dict[str, np.ndarray], orders: list[int], good: np.ndarray,
     peak_shares: dict[str, dict[str, float]], nominal_branch: np.ndarray, band_variant: np.ndarray,
     type_b: list[TypeB] | None = None, nominal_with_shock: dict[str, float | None] | None = None,
@@ -96,7 +96,7 @@ def budget(
 
 
 def _linear_noise_shares(
-    ident: Identification, options: UncertaintyOptions, inflate: float,
+    ident: Identification, options: AnalysisOptions, inflate: float,
     nominal: dict[str, float | None],
 ) -> dict[str, dict[str, float]]:
     """Each noise source and the skew through the fit's Jacobian: Cov_i = H⁻¹ Jᵀ D_i J H⁻¹ with
@@ -133,7 +133,7 @@ def _linear_noise_shares(
     eps = 1e-3
     shifted = _shift_data(data, eps)
     dr = (OrderProblem.for_fit(shifted, fit, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay).residual(theta) - problem.residual(theta)) / eps
-    skew_step = -(proj @ dr) * (options.channel_skew_s / ident.sample_interval_s)
+    skew_step = -(proj @ dr) * (options.u_channel_skew_s / ident.sample_interval_s)
     gradients = _figure_gradients(problem, theta, ident, nominal)
     out: dict[str, dict[str, float]] = {source: {} for source in (*cov, "channel skew")}
     for figure, g in gradients.items():

@@ -16,47 +16,13 @@ import numpy as np
 from hopkinson.analysis.frequency_fit import OrderProblem, is_stable, predicted_bins
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.modes import has_doublet
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.order_choice import NoiseDraws, Refitter, candidates_around, order_stability
-from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
 from hopkinson.analysis.spectral_data import SpectralData
 
-ORDER_DRAWS = 40  # draws that re-run the whole order choice (its PDF's resolution: 2.5 %)
 # Where the model error is detected, the draws are refitted on the fitted band and on these
 # fractions of its top (_band_variants), each fraction an equal share of the draws.
 BAND_TOPS = (1.0, 0.9, 0.8)
-
-
-@dataclass(frozen=True)
-class UncertaintyOptions:
-    """What the Monte Carlo draws and from what PDFs (see the module docstring)."""
-
-    draws: int = DEFAULT_DRAWS
-    seed: int | None = None
-    u_grating_pitch_rel: float = 1e-4
-    u_interferometer_rel: float = 5e-4
-    u_amp_gain_rel: float = 2e-3
-    u_digitizer_gain_rel: float = 2e-3
-    channel_skew_s: float = 1e-9
-    order_draws: int = ORDER_DRAWS
-    transverse_sensitivity_rel: float = 0.05  # analysis.systematics.transverse_row
-    transverse_motion_rel: float = 0.02
-
-    @classmethod
-    def from_params(cls, params: AnalysisParams) -> UncertaintyOptions:
-        return cls(draws=params.draws, seed=params.seed, u_grating_pitch_rel=params.u_grating_pitch_rel,
-                   u_interferometer_rel=params.u_interferometer_rel, u_amp_gain_rel=params.u_amp_gain_rel,
-                   u_digitizer_gain_rel=params.u_digitizer_gain_rel, channel_skew_s=params.u_channel_skew_s,
-                   transverse_sensitivity_rel=params.transverse_sensitivity_rel,
-                   transverse_motion_rel=params.transverse_motion_rel)
-
-    def chain(self) -> dict[str, tuple[float, str]]:
-        """Reference-chain sources: (relative standard uncertainty, channel it scales)."""
-        return {
-            "grating pitch": (self.u_grating_pitch_rel, "reference"),
-            "interferometer": (self.u_interferometer_rel, "reference"),
-            "amplifier gain": (self.u_amp_gain_rel, "response"),
-            "digitizer gain": (self.u_digitizer_gain_rel, "response"),
-        }
 
 
 @dataclass(frozen=True)
@@ -71,7 +37,7 @@ class Draws:
     bands: BandVariants  # the part of the band each draw is refitted on
 
 
-def draw(ident: Identification, options: UncertaintyOptions, seed: int, rng: np.random.Generator) -> Draws:
+def draw(ident: Identification, options: AnalysisOptions, seed: int, rng: np.random.Generator) -> Draws:
     """Every input's draws for `options.draws` Monte Carlo trials of `ident` (the noise from
     `seed`, the rest from `rng`, in a fixed order)."""
     prep, fitted = ident.prep, ident.settlement
@@ -79,7 +45,7 @@ def draw(ident: Identification, options: UncertaintyOptions, seed: int, rng: np.
     inflate = _noise_inflation(ident)
     chain = _chain_draws(options, options.draws, rng)
     noise = NoiseDraws(fitted.data, prep.u_bins, prep.y_bins, prep.draw_var_u, ident.claim.draw_var_y(fitted.model_error),
-                       2.0 * np.pi * prep.bin_hz * dt, prep.group, seed, inflate, options.channel_skew_s / dt,
+                       2.0 * np.pi * prep.bin_hz * dt, prep.group, seed, inflate, options.u_channel_skew_s / dt,
                        level_u=prep.noise.draw_noise_u, level_y=ident.claim.response_noise, bin_hz=prep.bin_hz)
     refitter = Refitter(fitted.data, fitted.sweep.fits, fitted.sweep.delay_mode, fitted.setup.max_delay,
                         fitted.branches)
@@ -97,7 +63,7 @@ def _noise_inflation(ident: Identification) -> float:
     return 1.0
 
 
-def _chain_draws(options: UncertaintyOptions, count: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def _chain_draws(options: AnalysisOptions, count: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Scale factors of each channel per draw: Π (1 + δ_source), δ ~ N(0, u_rel²)."""
     out = {"reference": np.ones(count), "response": np.ones(count)}
     for u_rel, channel in options.chain().values():
@@ -106,7 +72,7 @@ def _chain_draws(options: UncertaintyOptions, count: int, rng: np.random.Generat
 
 
 # ------------------------------------------------------------------------------ refits
-def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitter, options: UncertaintyOptions,
+def _order_assignment(ident: Identification, draws: NoiseDraws, refitter: Refitter, options: AnalysisOptions,
                       rng: np.random.Generator) -> dict[str, Any]:
     """The order of each draw, drawn from the order choice's own PDF: the whole choice re-run on
     `order_draws` parametric-bootstrap draws (the chosen model's response with fresh noise of

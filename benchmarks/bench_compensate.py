@@ -29,9 +29,10 @@ from collections.abc import Callable
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
 from hopkinson.analysis.dcm_stream import DcmStream, apply
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 
 
@@ -56,7 +57,7 @@ def design_times(model: DiscreteModel, repeats: int) -> dict[str, float]:
     pulse = ShotPulse.of(Record(model.sample_interval_s, u, model_output(model, u)))
     support = ShotSupport(model, supported_band_hz=(0.0, 38_000.0), pulse=pulse)
     out = {}
-    for name, options in (("pulse", DcmOptions()), ("widening_3", DcmOptions(widening=3.0))):
+    for name, options in (("pulse", AnalysisOptions()), ("widening_3", AnalysisOptions(dcm_widening=3.0))):
         best = float("inf")
         for _ in range(repeats):
             start = time.perf_counter()

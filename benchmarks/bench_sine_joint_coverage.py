@@ -27,7 +27,8 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hopkinson.analysis.identify import identify, identify_with_sine  # noqa: E402
-from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate  # noqa: E402
+from hopkinson.analysis.options import AnalysisOptions  # noqa: E402
+from hopkinson.analysis.uncertainty import evaluate  # noqa: E402
 from tests.analysis.hard_records import Case, record, truth_figures  # noqa: E402
 from tests.analysis.test_sine_joint import OTHER, synthetic_sine  # noqa: E402
 
@@ -49,7 +50,7 @@ def run(seeds: int, draws: int) -> dict[str, Any]:
     start = time.perf_counter()
     for seed in range(seeds):
         rec = record(case, 1000 + seed)
-        options = UncertaintyOptions(draws=draws, seed=seed)
+        options = AnalysisOptions(draws=draws, seed=seed)
         for name, sine in (("shock", None), ("joint", synthetic_sine(case.truth, 1000 + seed))):
             ident = identify(rec) if sine is None else identify_with_sine(rec, sine)
             for k, ok in contains(evaluate(ident, options), truth).items():

@@ -33,11 +33,11 @@ import numpy as np
 from bench_identify import best_time  # the same timing rule (best of N)
 
 from hopkinson.analysis.identify import identify, identify_with_sine
-from hopkinson.analysis.params import DEFAULT_DRAWS, AnalysisParams
+from hopkinson.analysis.options import DEFAULT_DRAWS, AnalysisOptions
 from hopkinson.analysis.reduce import reduce_raw
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.analysis.sine_comparison import SineCalibration
-from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
+from hopkinson.analysis.uncertainty import evaluate
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.doppler_beat import raw_shot
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
@@ -73,11 +73,11 @@ def run(draws: int, repeats: int) -> dict[str, Any]:
     raw = simulated_shot()
     record = reduce_raw(raw.doppler_v, raw.response_v, DT, amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY).record
     ident_s, ident = best_time(lambda: identify(record), repeats)
-    options = UncertaintyOptions(draws=draws, seed=1)
+    options = AnalysisOptions(draws=draws, seed=1)
     unc_s, result = best_time(lambda: evaluate(ident, options), repeats)
-    params = AnalysisParams(amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY, draws=draws, seed=1)
+    params = AnalysisOptions(amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY, draws=draws, seed=1)
     shot_s, shot = best_time(lambda: analyse_raw_shot(raw.doppler_v, raw.response_v, DT, params), repeats)
-    no_unc = AnalysisParams(amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY, uncertainty=False)
+    no_unc = AnalysisOptions(amp_gain=GAIN, sensitivity_v_per_m_s2=SENSITIVITY, uncertainty=False)
     plain_s, _ = best_time(lambda: analyse_raw_shot(raw.doppler_v, raw.response_v, DT, no_unc), repeats)
     sine = simulated_sine()
     joint_s, joint = best_time(lambda: identify_with_sine(record, sine), repeats)

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from scipy import signal  # noqa: E402
 
 from hopkinson.analysis.errors import AnalysisError  # noqa: E402
-from hopkinson.analysis.params import AnalysisParams  # noqa: E402
+from hopkinson.analysis.options import AnalysisOptions  # noqa: E402
 from hopkinson.analysis.records import Record  # noqa: E402
 from hopkinson.analysis.shot_analysis import analyse_record  # noqa: E402
 from tests.analysis.test_ptb_identify import SENSITIVITY, hybrid_record, truth_fbsd_hz  # noqa: E402
@@ -57,7 +57,7 @@ def main() -> None:
         for seed in range(args.seeds):
             rec, truth = case_record(kind, scale, seed)
             try:
-                a = analyse_record(rec, AnalysisParams(draws=args.draws, seed=100 + seed))
+                a = analyse_record(rec, AnalysisOptions(draws=args.draws, seed=100 + seed))
             except AnalysisError:
                 row["failed"] += 1
                 continue

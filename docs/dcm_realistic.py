@@ -43,7 +43,7 @@ def world_of(kind: str):  # noqa: ANN201 (drivers' WorldParams)
 
 
 def study(shots: int, projectiles: list[int], kind: str, draws: int) -> list[dict]:
-    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.analysis.shot_analysis import analyse_raw_shot
     from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 
@@ -55,7 +55,7 @@ def study(shots: int, projectiles: list[int], kind: str, draws: int) -> list[dic
         projectile = projectiles[(n - 1) % len(projectiles)]
         channels, truth = simulate_shot(world, pressure, projectile, CaptureSettings(100e6, 200_000, 20_000),
                                         shot_number=n)
-        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
+        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             max_order=6, draws=draws, seed=n), quadrature_v=channels.get(3)).to_dict()["dcm"]
         check, peak = result.get("check"), result.get("compensated_peak")

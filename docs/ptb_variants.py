@@ -31,7 +31,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from hopkinson.analysis.params import AnalysisParams  # noqa: E402
+from hopkinson.analysis.options import AnalysisOptions  # noqa: E402
 from hopkinson.analysis.records import Record  # noqa: E402
 from hopkinson.analysis.shot_analysis import analyse_record  # noqa: E402
 from hopkinson.analysis.sine_comparison import band_consistency, compare_sine  # noqa: E402
@@ -94,7 +94,7 @@ def main() -> None:
     for name, make in variants().items():
         if args.only not in name:
             continue
-        analysis = analyse_record(make(), AnalysisParams(draws=args.draws, seed=1))
+        analysis = analyse_record(make(), AnalysisOptions(draws=args.draws, seed=1))
         judged = against_sine(analysis.uncertainty)
         e_n = band_consistency(compare_sine(analysis.model, sine), analysis.uncertainty["response_band"])
         intervals = all(j["contains"] and j["half_width_ok"] for j in judged.values())

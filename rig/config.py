@@ -40,7 +40,7 @@ from hopkinson.drivers.config_fields import SECTION, Hint, Int, Number, Text
 from hopkinson.drivers.digitizer_settings import DigitizerSettings
 from hopkinson.drivers.fire_styles import FIRE_STYLE_DOC, FIRE_STYLES
 from hopkinson.drivers.modbus_link import ModbusTarget
-from hopkinson.drivers.sim.config_fields import Orders
+from hopkinson.rig.config_analysis import options_section
 from hopkinson.rig.config_checks import check_limits_stated, check_register_map, check_rig
 from hopkinson.rig.config_errors import validate
 from hopkinson.rig.config_lab import (
@@ -66,7 +66,6 @@ __all__ = ["BAR_MATERIALS", "BAR_MOUNTS", "AmplifierConfig", "AnalysisConfig", "
            "controller_map_of", "load_rig_config", "load_sim_config", "register_map_of", "register_tables"]
 
 FireStyleName = typing.Literal[FIRE_STYLES]  # type: ignore[valid-type]  # drivers/fire_styles.py
-Positive = Annotated[Number, Field(gt=0)]
 Seconds = Annotated[Number, Field(gt=0, le=3600)]
 Retries = Annotated[Int, Field(ge=0, le=10, description="re-sends after a timeout or a garbled reply")]
 Port = Annotated[Int, Field(ge=1, le=65535)]
@@ -391,54 +390,21 @@ class TimeoutsConfig:
     analyse_s: Annotated[Seconds, Field(description="ANALYSE: the shot analysed")] = 120.0
 
 
-@dataclass(frozen=True)
-class AnalysisConfig:
-    """[analysis]: interferometer and sensor constants and the analysis sample rate."""
-
-    __pydantic_config__ = SECTION
-    grating_pitch_m: Annotated[Number, Field(gt=0, le=1e-3, description="interferometer grating pitch d")] = 2.0e-6
-    orders: Annotated[Orders, Field(description="diffraction orders (phi, xi): beat = v*(phi - xi)/d")] = (1, -1)
-    sensitivity_v_per_m_s2: Annotated[Positive, Field(description=(
-        "accelerometer nominal sensitivity at the amplifier input"))] = 2.0e-7
-    sample_rate_hz: Annotated[Number, Field(ge=1e3, le=1e9, description="analysis rate")] = 1e6
-    dcm_widening: Annotated[Annotated[Number, Field(gt=1, le=1e3)] | None, Field(description=(
-        "automatic DCM: unset sizes it to each shot's pulse (analysis.dcm_ratio); W widens the model's ±5 % "
-        "band W times instead"))] = None
-    dcm_noise_gain_limit: Annotated[Number, Field(gt=0, le=1e6, description=(
-        "DCM's white-noise RMS gain allowed at the analysis rate"))] = 4.0
-    # A second sensor (digitizer role response_2): its conditioner's gain (set by hand) and its
-    # nominal sensitivity at the conditioner input; both 1 leave its response in volts.
-    amp_gain_2: Annotated[Number, Field(gt=0, le=1e6, description="the second sensor's conditioner gain")] = 1.0
-    sensitivity_2_v_per_m_s2: Annotated[Positive, Field(description="the second sensor's nominal sensitivity")] = 1.0
-
-
-UncertaintyRel = Annotated[Number, Field(ge=0, le=0.5, description="relative standard uncertainty, k = 1")]
-
-
-@dataclass(frozen=True)
-class UncertaintyConfig:
-    """[uncertainty]: the reference chain's relative standard uncertainties (k = 1, from the
-    lab's calibration certificates; the defaults are typical values, analysis.params) and the
-    Monte Carlo draws per shot (analysis.uncertainty)."""
-
-    __pydantic_config__ = SECTION
-    grating_pitch_rel: UncertaintyRel = 1e-4
-    interferometer_rel: UncertaintyRel = 5e-4
-    amplifier_gain_rel: UncertaintyRel = 2e-3
-    digitizer_gain_rel: UncertaintyRel = 2e-3
-    channel_skew_s: Annotated[Number, Field(ge=0, le=1e-3, description=(
-        "timing skew between the two digitizer channels (standard uncertainty)"))] = 1e-9
-    draws: Annotated[Int, Field(ge=50, le=1_000_000, description="Monte Carlo draws per shot (GUM-S1)")] = 400
-    transverse_motion_rel: Annotated[Number, Field(ge=0, le=1, description=(
-        "the bar's transverse motion share at the sensor, a fraction (a Type B row with the sensor's stated "
-        "transverse sensitivity; analysis.systematics); 2 % for a well-aligned bar"))] = 0.02
-
-    def analysis_options(self) -> dict[str, Any]:
-        """The same values keyed as analysis.params.AnalysisParams options."""
-        return {"u_grating_pitch_rel": self.grating_pitch_rel, "u_interferometer_rel": self.interferometer_rel,
-                "u_amp_gain_rel": self.amplifier_gain_rel, "u_digitizer_gain_rel": self.digitizer_gain_rel,
-                "u_channel_skew_s": self.channel_skew_s, "draws": self.draws,
-                "transverse_motion_rel": self.transverse_motion_rel}
+# [analysis] and [uncertainty]: analysis options, each declared once in analysis/options.py
+# (type, default, unit, bounds, description); rig/config_analysis.py makes the sections.
+AnalysisConfig = options_section(
+    "AnalysisConfig", __name__, "[analysis]: interferometer and sensor constants, the analysis rate and the "
+    "automatic DCM's limits (analysis.options); amp_gain_2 and sensitivity_2_v_per_m_s2: a second sensor "
+    "(digitizer role response_2), through its own conditioner set by hand (both 1: its results in volts).",
+    ("grating_pitch_m", "orders", "sensitivity_v_per_m_s2", "sample_rate_hz", "dcm_widening", "dcm_noise_gain_limit"),
+    apart={"amp_gain_2": "amp_gain", "sensitivity_2_v_per_m_s2": "sensitivity_v_per_m_s2"})
+UncertaintyConfig = options_section(
+    "UncertaintyConfig", __name__, "[uncertainty]: the reference chain's relative standard uncertainties (k = 1, "
+    "from the lab's calibration certificates; the defaults are typical values), the channel skew, the bar's "
+    "transverse motion and the Monte Carlo draws per shot (analysis.uncertainty).",
+    {"grating_pitch_rel": "u_grating_pitch_rel", "interferometer_rel": "u_interferometer_rel",
+     "amplifier_gain_rel": "u_amp_gain_rel", "digitizer_gain_rel": "u_digitizer_gain_rel",
+     "channel_skew_s": "u_channel_skew_s", "draws": "draws", "transverse_motion_rel": "transverse_motion_rel"})
 
 
 @dataclass(frozen=True)

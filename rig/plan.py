@@ -68,17 +68,16 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
-from pydantic import AfterValidator, BeforeValidator, Field
+from pydantic import AfterValidator, Field
 
-from hopkinson.analysis.params import MAX_ORDER_LIMIT  # one range for a plan and the command line
 from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
+from hopkinson.rig.config_analysis import options_section
 from hopkinson.rig.config_errors import validate
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.toml_file import read_toml
 
-MIN_DRAWS, MAX_DRAWS = 50, 1_000_000  # as analysis.params checks them
 LATER_OPTIONS = {"uncertainty": True, "draws": None}  # analysis options added after plans were in use
 MAX_TOTAL_SHOTS = 10_000  # more is a typing error, not a campaign (a shot takes minutes)
 CONFIRM_ABOVE_SHOTS = 50  # a plan of more shots needs its number confirmed
@@ -97,10 +96,6 @@ def _folder_name(name: str) -> str:
     return name
 
 
-def _auto(value: Any) -> Any:
-    return None if value == "auto" else value
-
-
 def _unit_name(name: str | None) -> str | None:
     """A sensitivity unit as analysis.sensitivity_units names it ("uV/(m/s^2)" → "µV/(m/s²)")."""
     if name is None:
@@ -112,7 +107,6 @@ def _unit_name(name: str | None) -> str | None:
 
 Name = Annotated[Text, AfterValidator(_not_blank)]
 Positive = Annotated[Number, Field(gt=0)]
-Order = Annotated[Int, Field(ge=1, le=MAX_ORDER_LIMIT)]
 
 
 @dataclass(frozen=True)
@@ -145,23 +139,14 @@ class FurtherAccelerometer:
     serial: Name
 
 
-@dataclass(frozen=True)
-class AnalysisOptions:
-    """[defaults.analysis] and [shots.analysis]: analysis settings of a shot (defaults from
-    docs/method.md and the paper's example); a table gives only the keys it changes."""
-
-    __pydantic_config__ = SECTION
-    max_order: Annotated[Order, Field(description="highest model order tried")] = 12
-    order: Annotated[Order | None, Field(description=(
-        "a fixed order instead of the order test's choice"))] = None  # None: where the loss stops falling
-    sample_rate_hz: Annotated[Positive, Field(description="analysis rate after alignment and resampling")] = 1.0e6
-    dcm_ratio: Annotated[Annotated[Number, Field(ge=1)] | None, BeforeValidator(
-        _auto, json_schema_input_type=Annotated[float, Field(ge=1)] | Literal["auto"]), Field(description=(
-            'DCM response-time ratio r, or "auto": the r that widens the ±5 % band 3×'))] = None  # None: "auto"
-    dcm_damping: Annotated[Number, Field(gt=0, le=1, description="damping of the DCM's new poles")] = 0.707
-    uncertainty: Annotated[Flag, Field(description="the Monte Carlo (GUM-S1) uncertainty of the key figures")] = True
-    draws: Annotated[Annotated[Int, Field(ge=MIN_DRAWS, le=MAX_DRAWS)] | None, Field(description=(
-        "its number of draws (default: the analysis' own)"))] = None
+# [defaults.analysis] and [shots.analysis]: a shot's analysis options, each declared once in
+# analysis/options.py (rig/config_analysis.py makes the section); a table gives only the keys it
+# changes; draws not given: the rig's [uncertainty] draws. A plan asks a DCM ratio of at least 1.
+PlanAnalysis = options_section(
+    "PlanAnalysis", __name__, "[defaults.analysis] and [shots.analysis]: analysis settings of a shot (defaults "
+    "from analysis.options); a table gives only the keys it changes.",
+    ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws"),
+    unset=("draws",), words={"dcm_ratio": {"auto": None}}, narrower={"dcm_ratio": {"ge": 1}})
 
 
 @dataclass(frozen=True)
@@ -174,7 +159,7 @@ class PlannedShot:
     repeat: int  # 1-based repeat within the entry
     pressure_bar: float | None  # None: chosen at firing time for target_peak_m_s2
     projectile: int
-    analysis: AnalysisOptions
+    analysis: PlanAnalysis
     target_peak_m_s2: float | None = None  # automatic level control (rig/level_control.py)
 
     def to_dict(self) -> dict[str, Any]:
@@ -234,7 +219,7 @@ class ShotTable:
     peak_g: Annotated[Positive | None, Field(description="the target level in g")] = None
     projectile: Annotated[Annotated[Int, Field(ge=1, le=3)] | None, Field(description=(
         "1, 2 or 3; No. 3 gives the shortest pulse"))] = None
-    analysis: AnalysisOptions | None = None
+    analysis: PlanAnalysis | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -277,7 +262,7 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
         accelerometer = dataclasses.replace(accelerometer,
                                             sine_calibration=str(path.parent / accelerometer.sine_calibration))
     raw_defaults = doc.get("defaults", {})
-    base = _shot_settings(plan.defaults, raw_defaults, path, "defaults", {}, AnalysisOptions())
+    base = _shot_settings(plan.defaults, raw_defaults, path, "defaults", {}, PlanAnalysis())
     width = max(3, len(str(len(plan.shots))))
     shots: list[PlannedShot] = []
     expanded: list[tuple[int, dict[str, Any], int]] = []
@@ -323,7 +308,7 @@ def plan_from_dict(doc: dict[str, Any], path: Path, text: str = "") -> CampaignP
 
 
 def _shot_settings(table: ShotTable, raw: dict[str, Any], path: Path, key: str, inherited: dict[str, Any],
-                   analysis: AnalysisOptions) -> dict[str, Any]:
+                   analysis: PlanAnalysis) -> dict[str, Any]:
     """Pressure, projectile and analysis options of a validated table over what it inherits;
     `raw` (the table as written) tells which analysis keys it gives."""
     out = dict(inherited)
@@ -348,7 +333,7 @@ def _shot_settings(table: ShotTable, raw: dict[str, Any], path: Path, key: str, 
             bad = "order" if "order" in given else "max_order"
             raise ConfigError(f"{path}: {key}.analysis.{bad}: order {options['order']} exceeds max_order "
                               f"{options['max_order']}")
-    out["analysis"] = AnalysisOptions(**options)
+    out["analysis"] = PlanAnalysis(**options)
     return out
 
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.rig.config import RigConfig, load_rig_config
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import load_plan
@@ -66,13 +66,13 @@ def _without_none(value: Any) -> Any:
     return value
 
 
-def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisParams:
+def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisOptions:
     """The analysis options the shot was first analysed with (a later re-analysis' changed
     options are not inherited), or (never analysed) its rig's."""
     first = analysis_results(shot.path, shot.analyses[0]["version"]) if shot.analyses else None
     params = (first or {}).get("params")
     if isinstance(params, dict):
-        return AnalysisParams.from_dict(params, ignore_unknown=True)
+        return AnalysisOptions.from_dict(params, ignore_unknown=True)
     if config is None:
         raise ShotFileError(f"{shot.path}: no stored analysis options and no usable configuration snapshot: "
                             "it cannot be re-analysed as it was")
@@ -95,7 +95,7 @@ def reanalyse(path: str | Path, overrides: dict[str, Any] | None = None) -> Reco
     config = snapshot_config(shot)
     params = stored_params(shot, config)
     if overrides:
-        params = AnalysisParams.from_dict({**params.to_dict(), **overrides}, ignore_unknown=True)
+        params = AnalysisOptions.from_dict({**params.to_dict(), **overrides}, ignore_unknown=True)
     analyse: AnalyseFn = shot_analyser(config) if config is not None else analyse_raw
     settings = shot.meta.config.get("shot_settings", {})
     return analyse_and_record(path, shot.raw, params, analyse,

@@ -45,7 +45,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import RigConfig
@@ -347,32 +347,20 @@ class AnalysisResult:
     derived: dict[str, np.ndarray] = field(default_factory=dict)  # e.g. a further sensor's record response
 
 
-def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> AnalysisParams:
+def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str, Any]) -> AnalysisOptions:
     """Everything the analysis needs besides the channels: the rig's constants (its [analysis]
     DCM limits and [uncertainty] reference chain too), the request's options and the amplifier
     gain read back at the shot (in `settings`), checked (AnalysisError naming the option)."""
-    a = config.analysis
-    chain = config.uncertainty.analysis_options()  # the reference chain and the rig's draws
-    return AnalysisParams.from_options(
-        **chain | {"draws": request.draws if request.draws is not None else chain["draws"]},
-        dcm_widening=a.dcm_widening,  # None (unset): sized to the pulse
-        dcm_noise_gain_limit=a.dcm_noise_gain_limit,
-        grating_pitch_m=a.grating_pitch_m,
-        orders=tuple(a.orders),
-        amp_gain=float(settings.get("amplifier_gain", config.amplifier.gain)),
-        sensitivity_v_per_m_s2=request.sensitivity(config),
-        sample_rate_hz=a.sample_rate_hz if request.sample_rate_hz is None else request.sample_rate_hz,
-        max_order=request.max_order,
-        order=request.order,
-        dcm_ratio=request.dcm_ratio,
-        dcm_damping=request.dcm_damping,
-        uncertainty=request.uncertainty,
-        sine_calibration=request.sine_calibration,
-        transverse_sensitivity_rel=request.transverse_sensitivity_rel,
-    )
+    given = config.analysis.analysis_options() | config.uncertainty.analysis_options() | request.analysis_options()
+    return AnalysisOptions.from_options(**given | {
+        "amp_gain": float(settings.get("amplifier_gain", config.amplifier.gain)),
+        "sensitivity_v_per_m_s2": request.sensitivity(config),
+        "sine_calibration": request.sine_calibration,
+        "transverse_sensitivity_rel": request.transverse_sensitivity_rel,
+    })
 
 
-def sensor_params(params: AnalysisParams, config: RigConfig) -> dict[str, AnalysisParams]:
+def sensor_params(params: AnalysisOptions, config: RigConfig) -> dict[str, AnalysisOptions]:
     """role -> the analysis parameters of each further sensor: the first sensor's, with that
     sensor's conditioner gain and nominal sensitivity ([analysis] amp_gain_2,
     sensitivity_2_v_per_m_s2)."""
@@ -381,8 +369,8 @@ def sensor_params(params: AnalysisParams, config: RigConfig) -> dict[str, Analys
                                               sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2)}
 
 
-def analyse_raw(raw: RawShot, params: AnalysisParams,
-                more_params: Mapping[str, AnalysisParams] | None = None) -> AnalysisResult:
+def analyse_raw(raw: RawShot, params: AnalysisOptions,
+                more_params: Mapping[str, AnalysisOptions] | None = None) -> AnalysisResult:
     """ANALYSE, the computation only (pure; runs in a worker thread): the shared shot
     analysis (analysis.shot_analysis) of the raw channels in volts, by role: the quadrature
     pair when recorded, and each further sensor with its parameters from `more_params` (one
@@ -407,7 +395,7 @@ def analyse_raw(raw: RawShot, params: AnalysisParams,
 def shot_analyser(config: RigConfig) -> AnalyseFn:
     """The analysis of a shot on this rig: `analyse_raw` with the further sensors' parameters
     from its configuration (`sensor_params`)."""
-    def analyse(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+    def analyse(raw: RawShot, params: AnalysisOptions) -> AnalysisResult:
         return analyse_raw(raw, params, sensor_params(params, config))
 
     return analyse
@@ -430,7 +418,7 @@ def record_analysis(path: Path, outcome: AnalysisResult | None, error: str | Non
         add_analysis(path, outcome.results, record=outcome.record, derived=outcome.derived or None)
 
 
-AnalyseFn = Callable[[RawShot, AnalysisParams], AnalysisResult]
+AnalyseFn = Callable[[RawShot, AnalysisOptions], AnalysisResult]
 
 
 @dataclass(frozen=True)
@@ -469,7 +457,7 @@ class RecordedAnalysis(NamedTuple):
         return not (self.finished and self.stored)
 
 
-def analyse_and_record(path: Path, raw: RawShot, params: AnalysisParams, analyse: AnalyseFn, *,
+def analyse_and_record(path: Path, raw: RawShot, params: AnalysisOptions, analyse: AnalyseFn, *,
                        amplifier_overloaded: bool = False, run: Runner = run_here
                        ) -> RecordedAnalysis:
     """ANALYSE a stored shot and record the result (or why there is none) in its file. Never

@@ -116,7 +116,7 @@ def run_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int,
     """Simulate and analyse one shot as the rig does; its figures against the sensor's truth
     (`chain`: with the reference chain's default Type B inputs, as a rig's shot; else NO_CHAIN)."""
     from hopkinson.analysis.key_figures import Figure, KeyFigures
-    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.analysis.shot_analysis import analyse_raw_shot
     from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 
@@ -124,7 +124,7 @@ def run_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int,
                                     shot_number=shot_number)
     out = ShotOutcome(projectile, pressure_bar, shot_number, shot_truth_figures(truth))
     try:
-        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
+        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             draws=draws, seed=shot_number, **{**({} if chain else NO_CHAIN), **params}), quadrature_v=channels.get(3))
     except Exception as exc:  # noqa: BLE001 - a shot the analysis refuses counts as not holding its truth

@@ -38,13 +38,13 @@ from PySide6.QtWidgets import (
 
 from hopkinson.analysis.dcm import DCM, apply, format_complex, parse_poles, step_responses
 from hopkinson.analysis.dcm_design import (
-    DcmOptions,
     ShotSupport,
     design_compensation,
     design_report,
 )
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import DCM_OPTIONS, AnalysisOptions, OptionError, declared
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
 from hopkinson.fileio import atomic_write, check_output_path
@@ -95,8 +95,13 @@ def compute_design(model: DiscreteModel, ratio: float, damping: float, extra_pol
     """Design the DCM for the shot's support (the model alone when None: every stable mode
     counts as supported) and sample what the plots show (AnalysisError for an impossible design).
     band_limit_hz: the band limit (None: chosen from the support; 0: none)."""
-    options = DcmOptions(ratio=ratio, damping=damping, band_limit_hz=band_limit_hz,
-                         extra_poles=tuple(complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel()))
+    try:  # the model's own rate bounds the band limit (the design checks it)
+        options = AnalysisOptions(sample_rate_hz=None, dcm_ratio=ratio, dcm_damping=damping,
+                                  dcm_band_limit_hz=band_limit_hz,
+                                  extra_poles=tuple(complex(p) for p in np.asarray(extra_poles, dtype=complex).ravel()))
+        options.check(DCM_OPTIONS)
+    except OptionError as exc:
+        raise AnalysisError(f"DCM: {exc.option} must be {exc.need}") from None
     design = design_compensation(support or ShotSupport(model), options)
     dcm = design.dcm
     report = design_report(design.poles.cancelled, dcm, model, "panel", design)
@@ -128,7 +133,7 @@ class DcmTab(QWidget):
         self.error: str | None = None
         self._record_kilo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # t, reference, response (10³)
         self._record_window: tuple[float, float] | None = None
-        self._initial: tuple[float, float, str] = (1.0, 0.707, "")
+        self._initial: tuple[float, float, str] = (1.0, declared("dcm_damping"), "")
         self._export_report = export_report
         self._syncing = False
 
@@ -138,7 +143,7 @@ class DcmTab(QWidget):
         self.ratio_slider = QSlider(Qt.Orientation.Horizontal)
         self.ratio_slider.setRange(0, SLIDER_STEPS)
         self.ratio_slider.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
-        self.damping = UnitSpinBox("Damping ζₑ", "", (0.01, 1.0), 0.707, decimals=3, step=0.05,
+        self.damping = UnitSpinBox("Damping ζₑ", "", (0.01, 1.0), declared("dcm_damping"), decimals=3, step=0.05,
                                    tip="damping of the DCM's new poles")
         self.extra = QLineEdit()
         self.extra.setPlaceholderText("e.g. 0.6+0.1j, 0.6-0.1j (both of a pair)")
@@ -294,7 +299,7 @@ class DcmTab(QWidget):
         if view.model is None or view.dcm is None:
             return
         design = view.dcm.design or {}
-        self.set_model(view.model, design.get("ratio", 1.0), design.get("damping", 0.707),
+        self.set_model(view.model, design.get("ratio", 1.0), design.get("damping", declared("dcm_damping")),
                        [complex(*p) for p in design.get("extra_poles", [])], view.record,
                        source=view.path.name if view.path else "", shot_path=view.path, support=view.support,
                        band_limit_hz=view.band_limit_hz,

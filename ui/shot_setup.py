@@ -44,6 +44,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from hopkinson.analysis.options import declared
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS, SensitivityUnit
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
@@ -55,7 +56,7 @@ from hopkinson.ui.widgets import TEXT_COLOURS, section_title
 from hopkinson.ui.worker import Background
 
 KILO = 1e3
-DEFAULT_MAX_ORDER = 12
+DEFAULT_MAX_ORDER = declared("max_order")  # analysis.options, as every default of an analysis option
 PREDICTION_DELAY_MS = 150  # the prediction follows the fields after this pause (one takes ~0.1 s)
 
 
@@ -119,7 +120,8 @@ class ShotSetup(QWidget):
                                        decimals=0, step=100.0)
         self.dcm_ratio = UnitSpinBox("DCM ratio r", "", (0.1, 200.0), 0.0, step=0.5, special="auto",
                                      tip="0 = auto: the ratio that widens the ±5 % band as the rig asks")
-        self.dcm_damping = UnitSpinBox("DCM damping ζₑ", "", (0.01, 1.0), 0.707, decimals=3, step=0.05)
+        self.dcm_damping = UnitSpinBox("DCM damping ζₑ", "", (0.01, 1.0), declared("dcm_damping"), decimals=3,
+                                       step=0.05)
         self.out_dir = QLineEdit(str(out_dir))
         out_row = _with_browse(self.out_dir, "choose the folder for shot files", self._browse)
 

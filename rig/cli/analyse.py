@@ -86,14 +86,14 @@ def available_cpus() -> int:
 
 
 def analyse_command(args: argparse.Namespace) -> int:
-    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.rig.reanalysis import RunJournals, find_targets
 
     overrides = {k: v for k, v in (("max_order", args.max_order), ("order", args.order), ("draws", args.draws),
                                    ("uncertainty", args.uncertainty), ("sine_calibration", args.sine))
                  if v is not None}
     if overrides:
-        AnalysisParams.from_options(**overrides)  # checked before any shot is touched (AnalysisError: exit 2)
+        AnalysisOptions.from_options(**overrides)  # checked before any shot is touched (AnalysisError: exit 2)
     targets = find_targets(args.sources)
     journals = RunJournals(targets)
     journals.check_free()

@@ -35,11 +35,16 @@ if TYPE_CHECKING:
     import numpy as np
 
     from hopkinson.analysis.dcm import DCM
-    from hopkinson.analysis.dcm_design import DcmDesign, DcmOptions, ShotSupport
+    from hopkinson.analysis.dcm_design import DcmDesign, ShotSupport
     from hopkinson.analysis.model import DiscreteModel
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.analysis.records import Record
 
 DEFAULT_BLOCK_SAMPLES = 65_536
+# The command's flags by analysis option, so a bad value is named as it was typed.
+DCM_FLAGS = {"dcm_ratio": "--ratio", "dcm_damping": "--damping", "dcm_widening": "--widening",
+             "dcm_noise_gain_limit": "--noise-gain-limit", "dcm_band_limit_hz": "--band-limit",
+             "extra_poles": "--extra-poles"}
 
 
 def _checked_output(output: str | None, inputs: list[str]) -> Path | None:
@@ -192,20 +197,27 @@ def _at_rate(record: Record, model: DiscreteModel) -> Record:
 def _design(args: argparse.Namespace, record: Record | None
             ) -> tuple[np.ndarray, DcmDesign, DiscreteModel | None, str]:
     """(poles shown in the pole analysis, the design, the model to report or None, source)."""
-    from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, poles_only_model
+    from hopkinson.analysis.dcm_design import ShotSupport, poles_only_model
+    from hopkinson.analysis.options import DCM_OPTIONS, AnalysisOptions
     from hopkinson.analysis.pole_checks import check_conjugate_pairs, parse_poles
+    from hopkinson.rig.cli.identify import named_by_flag
 
     if (args.model is None) == (args.poles is None):
         raise AnalysisError("dcm: give either --model FILE or --poles P,P,… (with --sample-interval)")
-    options = DcmOptions(
-        ratio=number_or_word(args.ratio, "--ratio", {"auto": None}, "a positive number"),
-        damping=args.damping,
-        widening=number_or_word(args.widening, "--widening", {"auto": None}, "a number above 1"),
-        noise_gain_limit=args.noise_gain_limit,
-        band_limit_hz=number_or_word(args.band_limit, "--band-limit", {"auto": None, "off": 0.0},
-                                      "a positive frequency in Hz"),
-        extra_poles=tuple(parse_poles(args.extra_poles, "--extra-poles")) if args.extra_poles else (),
-    )
+    try:  # the model's own rate bounds the band limit (the design checks it)
+        options = AnalysisOptions(
+            sample_rate_hz=None,
+            dcm_ratio=number_or_word(args.ratio, "--ratio", {"auto": None}, "a positive number"),
+            dcm_damping=args.damping,
+            dcm_widening=number_or_word(args.widening, "--widening", {"auto": None}, "a number above 1"),
+            dcm_noise_gain_limit=args.noise_gain_limit,
+            dcm_band_limit_hz=number_or_word(args.band_limit, "--band-limit", {"auto": None, "off": 0.0},
+                                             "a positive frequency in Hz"),
+            extra_poles=tuple(parse_poles(args.extra_poles, "--extra-poles")) if args.extra_poles else (),
+        )
+        options.check(DCM_OPTIONS)
+    except AnalysisError as exc:
+        raise named_by_flag(exc, DCM_FLAGS) from None
     if args.model is not None:
         if args.sample_interval is not None:
             raise AnalysisError("dcm: --sample-interval goes with --poles; a model file carries its own")
@@ -221,7 +233,7 @@ def _design(args: argparse.Namespace, record: Record | None
     return poles, _designed(support, options, "--poles"), None, "--poles"
 
 
-def _designed(support: ShotSupport, options: DcmOptions, source: str) -> DcmDesign:
+def _designed(support: ShotSupport, options: AnalysisOptions, source: str) -> DcmDesign:
     """design_compensation, refusing a DCM with nothing to cancel (one line naming why)."""
     from hopkinson.analysis.dcm_design import design_compensation
 
@@ -357,6 +369,8 @@ def _chain(parts: Any, flush: Any) -> Any:
 
 def register(subparsers: Any) -> None:
     """Add the `dcm` and `compensate` sub-commands."""
+    from hopkinson.analysis.options import declared
+
     p = subparsers.add_parser(
         "dcm",
         help="design a dynamic compensation model (DCM) from a model or its poles",
@@ -373,12 +387,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--sample-interval", type=float, metavar="S", help="sample interval in s (with --poles)")
     p.add_argument("--ratio", default="auto", metavar="auto|R",
                    help="response-time ratio r (> 0), or 'auto' (default): chosen as --widening says")
-    p.add_argument("--damping", type=float, default=0.707, metavar="Z",
+    p.add_argument("--damping", type=float, default=declared("dcm_damping"), metavar="Z",
                    help="damping ratio zeta_e of the new poles, (0, 1] (default %(default)s)")
     p.add_argument("--widening", default="auto", metavar="auto|W",
                    help="auto ratio: 'auto' (default: the band the --record's pulse needs, else the widest the "
                    "supported band allows) or widen the model's ±5 %% band W times (W > 1)")
-    p.add_argument("--noise-gain-limit", type=float, default=4.0, metavar="G",
+    p.add_argument("--noise-gain-limit", type=float, default=declared("dcm_noise_gain_limit"), metavar="G",
                    help="auto ratio: largest white-noise RMS gain allowed (default %(default)s)")
     p.add_argument("--band-limit", default="auto", metavar="auto|off|HZ",
                    help="low-pass cut-off: 'auto' (default: the top of the band the shot supports), 'off' or Hz")

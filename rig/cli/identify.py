@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from hopkinson.analysis.identify import Identification
     from hopkinson.analysis.shot_analysis import ModelWithUncertainty
 
-# The command's flags by AnalysisParams option, so a bad value is named as it was typed.
+# The command's flags by AnalysisOptions option, so a bad value is named as it was typed.
 FLAGS = {"max_order": "--max-order", "order": "--order", "sample_rate_hz": "--sample-rate", "draws": "--draws",
          "seed": "--seed"}
 
@@ -123,20 +123,20 @@ def sine_joint_lines(joint: Any) -> list[str]:
 
 def _checked_params(args: argparse.Namespace) -> Any:
     """The analysis options of the command line, checked; a bad one is named by its flag."""
-    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.options import AnalysisOptions
 
     values: dict[str, Any] = {"max_order": args.max_order, "order": args.order, "draws": args.draws,
                               "seed": args.seed, "uncertainty": not args.no_uncertainty}
     if args.sample_rate is not None:
         values["sample_rate_hz"] = args.sample_rate
     try:
-        return AnalysisParams.from_options(**values)
+        return AnalysisOptions.from_options(**values)
     except AnalysisError as exc:
         raise named_by_flag(exc, FLAGS) from None
 
 
 def named_by_flag(exc: AnalysisError, flags: dict[str, str]) -> AnalysisError:
-    """The AnalysisParams check's error with each option named by the command's flag."""
+    """The AnalysisOptions check's error with each option named by the command's flag."""
     text = str(exc)
     for option, flag in flags.items():
         text = text.replace(f"analysis option {option}:", f"{flag}:")
@@ -224,6 +224,8 @@ def _run_paper(args: argparse.Namespace, params: Any, record: Any, out: Any, cli
 
 def register(subparsers: Any) -> None:
     """Add the `identify` sub-command."""
+    from hopkinson.analysis.options import declared
+
     p = subparsers.add_parser(
         "identify",
         help="identify the accelerometer's discrete model, with its uncertainty, from a two-channel record",
@@ -234,13 +236,14 @@ def register(subparsers: Any) -> None:
         "every key figure its GUM Supplement 1 (Monte Carlo) uncertainty.",
     )
     p.add_argument("record", metavar="RECORD", help="two-channel record (CSV or NPZ)")
-    p.add_argument("--max-order", type=int, default=12, metavar="N", help="largest order tried (default 12)")
+    p.add_argument("--max-order", type=int, default=declared("max_order"), metavar="N",
+                   help="largest order tried (default %(default)s)")
     p.add_argument("--order", type=int, metavar="n", help="fit exactly this order instead of choosing it")
     p.add_argument(
         "--sample-rate",
         type=float,
         metavar="HZ",
-        # None: analysis.params.DEFAULT_ANALYSIS_RATE_HZ (resolved by AnalysisParams)
+        # None: analysis.options.DEFAULT_ANALYSIS_RATE_HZ (resolved by AnalysisOptions)
         help="analysis rate: a record sampled faster is low-pass filtered and resampled (default 1e6)",
     )
     p.add_argument("--draws", type=int, metavar="N",

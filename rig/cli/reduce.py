@@ -146,19 +146,19 @@ def parse_orders(text: str) -> tuple[int, int]:
     return orders
 
 
-# The command's flags by AnalysisParams option, so a bad value is named as it was typed.
+# The command's flags by AnalysisOptions option, so a bad value is named as it was typed.
 FLAGS = {"grating_pitch_m": "--grating-pitch-m", "amp_gain": "--amp-gain",
          "sensitivity_v_per_m_s2": "--sensitivity-v-per-m-s2", "sample_rate_hz": "--sample-rate"}
 
 
 def _check_numbers(args: argparse.Namespace) -> None:
-    """Every numeric option finite and sensible (AnalysisParams.check), named by its flag."""
-    from hopkinson.analysis.params import AnalysisParams
+    """Every numeric option finite and sensible (AnalysisOptions.check), named by its flag."""
+    from hopkinson.analysis.options import AnalysisOptions
 
     values = {key: getattr(args, flag[2:].replace("-", "_")) for key, flag in FLAGS.items()}
     values = {k: v for k, v in values.items() if v is not None}
     try:
-        AnalysisParams.from_options(**values)
+        AnalysisOptions.from_options(**values)
     except AnalysisError as exc:
         from hopkinson.rig.cli.identify import named_by_flag
 

@@ -157,7 +157,7 @@ class ShotContext:
     config: RigConfig
     abort: AbortRequest
     events: Publisher
-    params: Any = None  # the AnalysisParams, checked before anything moves
+    params: Any = None  # the AnalysisOptions, checked before anything moves
     poll_s: float = POLL_INTERVAL_S
     before_fire: BeforeFire | None = None
     after_store: AfterStore | None = None

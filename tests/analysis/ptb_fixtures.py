@@ -19,7 +19,7 @@ import pytest
 
 from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.model import DiscreteModel
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.shot_analysis import with_uncertainty
 
@@ -53,9 +53,9 @@ class Analyses:
 
     def analysed(self, key: Hashable, record: Callable[[], Record], seed: int, draws: int) -> Analysed:
         """`record()` identified and its uncertainty drawn with `draws` and `seed`, as
-        `analyse_record(record(), AnalysisParams(draws=draws, seed=seed))` gives them."""
+        `analyse_record(record(), AnalysisOptions(draws=draws, seed=seed))` gives them."""
         if (key, draws, seed) not in self._analysed:
-            fitted = with_uncertainty(self.identification(key, record), AnalysisParams(draws=draws, seed=seed))
+            fitted = with_uncertainty(self.identification(key, record), AnalysisOptions(draws=draws, seed=seed))
             assert fitted.uncertainty is not None, (key, seed, fitted.warnings)
             self._analysed[(key, draws, seed)] = Analysed(fitted.identification, fitted.uncertainty, fitted.warnings)
         return self._analysed[(key, draws, seed)]

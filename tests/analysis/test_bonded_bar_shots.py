@@ -30,7 +30,7 @@ import dataclasses
 
 from scipy.stats import binom
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
@@ -54,7 +54,7 @@ def test_bonded_bar_shots_give_the_true_fbsd_and_measure_the_lobe_gain_asymmetry
     for number, pressure in SHOTS:
         channels, truth = simulate_shot(world, pressure, 3, CaptureSettings(100e6, 200_000, 20_000),
                                         shot_number=number)
-        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
+        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             max_order=4, draws=50), quadrature_v=channels[3]).to_dict()
         found.append((result["fbsd_hz"]["5"], true_fbsd_hz(truth, 0.05)))

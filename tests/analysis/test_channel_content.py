@@ -13,7 +13,7 @@ import pytest
 
 from hopkinson.analysis.channel_content import EMPTY_RISE_DB, beat_content, pulse_content
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, SignalParams, WorldParams, simulate_shot
 
@@ -72,7 +72,7 @@ def test_the_analysis_names_an_empty_quadrature_channel_not_a_lost_pulse() -> No
     world = WorldParams(signals=SignalParams(quadrature=False))
     channels, _ = simulate_shot(world, 2.0, settings=CAPTURE)
     assert 3 not in channels
-    params = AnalysisParams(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7, uncertainty=False, max_order=6)
+    params = AnalysisOptions(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7, uncertainty=False, max_order=6)
     with pytest.raises(AnalysisError) as caught:
         analyse_raw_shot(channels[1], channels[2], 1e-8, params, quadrature_v=noise(channels[1].size, 0.004, 0.12))
     text = str(caught.value)
@@ -84,7 +84,7 @@ def test_the_analysis_names_an_empty_quadrature_channel_not_a_lost_pulse() -> No
 
 
 def test_an_empty_second_sensor_is_named_and_the_first_still_analysed(shot) -> None:
-    params = AnalysisParams(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7, uncertainty=False, max_order=6)
+    params = AnalysisOptions(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7, uncertainty=False, max_order=6)
     analysis = analyse_raw_shot(shot[1], shot[2], 1e-8, params, quadrature_v=shot[3],
                                 more_sensors={"response_2": (noise(shot[1].size, 0.001), params)})
     assert analysis.record is not None and "response_2" not in analysis.sensors

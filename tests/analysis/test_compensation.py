@@ -18,10 +18,11 @@ from hopkinson.analysis.compensation import (
     recommendation,
     to_rate,
 )
-from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
 from hopkinson.analysis.dcm_figures import compensated_fbsd_hz
 from hopkinson.analysis.identify import identify
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import shift_samples
 from hopkinson.drivers.sim.accelerometer import (
@@ -77,7 +78,7 @@ TRUTHS = [  # main mode, a second mode in the pulse's sidelobes, the amplifier's
 def test_default_compensation_improves_the_shot_and_predicts_the_true_band(truth, width_s):
     record = shot(truth, width_s, seed=int(width_s * 1e6))
     ident = identify(record)
-    result = compensate_shot(ident, record, DcmOptions())
+    result = compensate_shot(ident, record, AnalysisOptions())
     check = result.check
     assert check is not None
     unc, comp = check.rms_error_pct
@@ -177,11 +178,11 @@ def test_records_are_brought_to_the_dcm_rate_either_way():
 
 def test_the_shot_analysis_carries_the_compensation_into_results_and_key_figures():
     from hopkinson.analysis.key_figures import KeyFigures
-    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.analysis.shot_analysis import ShotAnalysis, analyse_record
 
     truth, width_s = TRUTHS[0]
-    analysis = analyse_record(shot(truth, width_s, seed=11), AnalysisParams(uncertainty=False))
+    analysis = analyse_record(shot(truth, width_s, seed=11), AnalysisOptions(uncertainty=False))
     results = analysis.to_dict()
     dcm = results["dcm"]
     assert dcm["recommended"] is True and dcm["not_recommended_reason"] is None

@@ -11,7 +11,6 @@ import pytest
 from scipy import signal
 
 from hopkinson.analysis.dcm_design import (
-    DcmOptions,
     ShotSupport,
     band_limit_fir,
     choose_poles,
@@ -20,6 +19,7 @@ from hopkinson.analysis.dcm_design import (
 from hopkinson.analysis.dcm_figures import compensated_fbsd_hz
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.response import fbsd_hz, response_times_samples
 
 DT = 1e-6
@@ -105,11 +105,11 @@ def test_bare_model_still_refuses_artefacts_and_spare_pole_zero_pairs():
 
 def test_an_asked_widening_is_reached_and_says_so():
     model = model_of(MAIN)
-    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)), DcmOptions(widening=3.0))
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)), AnalysisOptions(dcm_widening=3.0))
     assert design.target_widening == 3.0 and design.widening_note is None
     assert design.compensated_fbsd_hz["5"] == pytest.approx(3.0 * fbsd_hz(model)["5"], rel=2e-3)
     assert design.reached_widening == pytest.approx(3.0, rel=2e-3)
-    assert design.noise_gain <= design.options.noise_gain_limit
+    assert design.noise_gain <= design.options.dcm_noise_gain_limit
     # the figures travel with the DCM (its JSON) and in the results' "dcm" keys
     assert design.dcm.design["reached_widening"] == design.reached_widening
     assert set(design.to_dict()) >= {"target_widening", "reached_widening", "widening_note", "noise_gain",
@@ -118,7 +118,7 @@ def test_an_asked_widening_is_reached_and_says_so():
 
 def test_a_target_beyond_the_band_limit_is_not_reached_and_the_note_says_why():
     model = model_of(MAIN)
-    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 36_000.0)), DcmOptions(widening=10))
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 36_000.0)), AnalysisOptions(dcm_widening=10))
     assert design.reached_widening < 10
     assert "±5 % up to 36 kHz, the top of the band the excitation supports" in design.widening_note
     assert "caps it" in design.widening_note
@@ -138,14 +138,14 @@ def test_a_target_beyond_the_band_limit_is_not_reached_and_the_note_says_why():
 def test_the_noise_gain_limit_bounds_the_automatic_ratio():
     model = model_of(MAIN)
     support = ShotSupport(model)  # no band known: no band limit, the noise gain grows with r
-    free = design_compensation(support, DcmOptions(widening=8, noise_gain_limit=math.inf))
+    free = design_compensation(support, AnalysisOptions(dcm_widening=8, dcm_noise_gain_limit=math.inf))
     assert free.widening_note is None and free.noise_gain > 3.0
-    bounded = design_compensation(support, DcmOptions(widening=8, noise_gain_limit=3.0))
+    bounded = design_compensation(support, AnalysisOptions(dcm_widening=8, dcm_noise_gain_limit=3.0))
     assert bounded.noise_gain <= 3.0 and bounded.noise_gain > 2.9  # at the limit, not far below it
     assert "noise gain limit 3" in bounded.widening_note
     assert bounded.reached_widening < free.reached_widening
     # an explicit ratio is designed as asked and flagged when it exceeds the limit
-    asked = design_compensation(support, DcmOptions(ratio=free.dcm.design["ratio"], noise_gain_limit=3.0))
+    asked = design_compensation(support, AnalysisOptions(dcm_ratio=free.dcm.design["ratio"], dcm_noise_gain_limit=3.0))
     assert asked.noise_gain_exceeded and "exceeds the limit" in asked.notes[-1]
 
 
@@ -167,9 +167,9 @@ def test_band_limit_choice():
     _, h = signal.freqz(taps, [1.0], worN=[42e3], fs=1 / DT)
     assert auto.band_limit.cutoff_hz == pytest.approx(42e3 / (1 / 0.95**2 - 1) ** 0.125, rel=1e-9)
     assert abs(h[0]) == pytest.approx(0.95, abs=1e-3)
-    asked = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), DcmOptions(band_limit_hz=30e3))
+    asked = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), AnalysisOptions(dcm_band_limit_hz=30e3))
     assert asked.band_limit.cutoff_hz == 30e3 and asked.dcm.design["band_limit"]["order"] == 4
-    off = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), DcmOptions(band_limit_hz=0))
+    off = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 50_000.0)), AnalysisOptions(dcm_band_limit_hz=0))
     assert off.band_limit.cutoff_hz is None and off.dcm.order == 2 and off.dcm.fir is None
     # the band limit is a linear-phase FIR: symmetric taps (a delay of exactly half its length at
     # every frequency), unit DC gain, the Butterworth's magnitude: −3 dB at the cut-off and
@@ -183,7 +183,7 @@ def test_band_limit_choice():
     _, gd = signal.group_delay((taps, [1.0]), w=f[1:200], fs=1 / DT)
     np.testing.assert_allclose(gd, (taps.size - 1) / 2, atol=1e-6)
     with pytest.raises(AnalysisError, match="below Nyquist"):
-        design_compensation(ShotSupport(model), DcmOptions(band_limit_hz=600e3))
+        design_compensation(ShotSupport(model), AnalysisOptions(sample_rate_hz=None, dcm_band_limit_hz=600e3))
 
 
 def test_latency_lines_the_compensated_output_up_with_the_input():
@@ -273,20 +273,20 @@ def test_the_ratio_is_sized_to_the_pulse_where_its_compensated_peak_settles(bipo
     from hopkinson.analysis.dcm_ratio import PEAK_SETTLED, max_ratio
 
     support = pulse_support(25e-6, 150e3, bipolar=bipolar)
-    free = DcmOptions(noise_gain_limit=math.inf)
+    free = AnalysisOptions(dcm_noise_gain_limit=math.inf)
     design = design_compensation(support, free)
     r = design.dcm.design["ratio"]
     assert design.ratio_choice.sized_to == "pulse" and not design.widening_short
     assert design.target_widening is None and "sized to the pulse" in design.widening_note
     settled = true_peak_ratio(support, design.dcm)
-    fastest = DcmOptions(ratio=max_ratio(design.poles.cancelled, design.options.damping), noise_gain_limit=math.inf)
+    fastest = AnalysisOptions(dcm_ratio=max_ratio(design.poles.cancelled, design.options.dcm_damping), dcm_noise_gain_limit=math.inf)
     widest = true_peak_ratio(support, design_compensation(support, fastest).dcm)
-    narrower = true_peak_ratio(support, design_compensation(support, DcmOptions(ratio=r / 1.3)).dcm)
+    narrower = true_peak_ratio(support, design_compensation(support, AnalysisOptions(dcm_ratio=r / 1.3)).dcm)
     assert abs(settled - widest) <= 2 * PEAK_SETTLED
     assert abs(narrower - widest) > PEAK_SETTLED
     assert design.to_dict()["predicted_peak_error_pct"] == pytest.approx(100 * (settled - 1), abs=0.02)
     bounded = design_compensation(support)
-    assert bounded.noise_gain <= bounded.options.noise_gain_limit < design.noise_gain
+    assert bounded.noise_gain <= bounded.options.dcm_noise_gain_limit < design.noise_gain
 
 
 def test_a_longer_pulse_gets_a_narrower_band_and_the_scale_does_not_matter():
@@ -317,7 +317,7 @@ def test_a_band_that_cuts_the_pulse_caps_the_ratio_and_the_note_says_so():
 def test_the_noise_gain_limit_caps_a_pulse_sized_ratio():
     support = pulse_support(25e-6, 150e3)
     free = design_compensation(support)
-    capped = design_compensation(support, DcmOptions(noise_gain_limit=0.5 * free.noise_gain))
+    capped = design_compensation(support, AnalysisOptions(dcm_noise_gain_limit=0.5 * free.noise_gain))
     assert capped.noise_gain <= 0.5 * free.noise_gain and capped.reached_widening < free.reached_widening
     assert capped.widening_short and "the noise gain limit" in capped.widening_note
 
@@ -328,7 +328,7 @@ def test_without_a_pulse_the_band_then_a_fallback_sizes_the_ratio():
     model = model_of(MAIN)
     band = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 40e3)))
     assert band.ratio_choice.sized_to == "band" and "no pulse to size it to" in band.widening_note
-    widest = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 40e3)), DcmOptions(ratio=400.0))
+    widest = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 40e3)), AnalysisOptions(dcm_ratio=400.0))
     assert band.compensated_fbsd_hz["5"] >= 0.99 * widest.compensated_fbsd_hz["5"]
     bare = design_compensation(ShotSupport(model))
     assert bare.ratio_choice.sized_to == "fallback" and bare.target_widening == 3.0

@@ -19,6 +19,7 @@ from hopkinson.analysis.identify_stages import search_orders, weigh_model_error
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.model_error import measure_model_error
 from hopkinson.analysis.modes import has_doublet
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.order_search import (
     best_delay_branch,
     fit_orders,
@@ -26,7 +27,6 @@ from hopkinson.analysis.order_search import (
     search_setup,
     settle_order,
 )
-from hopkinson.analysis.params import IdentifyOptions
 from hopkinson.analysis.record_preparation import (
     Alignment,
     fitted_band,
@@ -444,7 +444,7 @@ def test_model_error_is_found_where_a_second_drive_path_puts_it():
                      0.0)
     prep_rec, setup = prepared(record(seed=8, extra_y=burst))
     prep = prep_rec.prep
-    weighed = weigh_model_error(prep_rec, search_orders(prep_rec, IdentifyOptions(max_order=8, significance=0.05)))
+    weighed = weigh_model_error(prep_rec, search_orders(prep_rec, AnalysisOptions(max_order=8, significance=0.05)))
     model_error, data = weighed.model_error, weighed.data
     assert model_error.significant
     lo, hi = model_error.range_hz

@@ -28,7 +28,7 @@ import pytest
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.analysis.linearity import fit_linearity
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
@@ -87,7 +87,7 @@ def campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ...]:
         channels, truth = simulate_shot(params, pressure, projectile, CaptureSettings(100e6, 200_000, 20_000),
                                         shot_number=n)
         assert truth["accelerometer"]["nonlinearity_per_m_s2"] == nonlinearity
-        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisParams(
+        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
             max_order=4, draws=60), quadrature_v=channels.get(3))
         figures.append(result.to_dict())

@@ -1,4 +1,4 @@
-"""AnalysisParams: one object from plan / CLI to shot file, checked before FIRE."""
+"""AnalysisOptions: one object from plan / CLI to shot file, checked before FIRE."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import sys
 import pytest
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 
 
 def test_round_trip_through_json_keeps_every_field() -> None:
-    params = AnalysisParams(max_order=6, order=4, extra_poles=(0.6 + 0.1j, 0.6 - 0.1j), draws=200, seed=5,
+    params = AnalysisOptions(max_order=6, order=4, extra_poles=(0.6 + 0.1j, 0.6 - 0.1j), draws=200, seed=5,
                             u_amp_gain_rel=1e-3, uncertainty=False)
-    back = AnalysisParams.from_dict(json.loads(json.dumps(params.to_dict())))
+    back = AnalysisOptions.from_dict(json.loads(json.dumps(params.to_dict())))
     assert back == params
 
 
@@ -27,23 +27,23 @@ def test_round_trip_through_json_keeps_every_field() -> None:
 )
 def test_check_names_the_option(option: str, value: object) -> None:
     with pytest.raises(AnalysisError, match=f"analysis option {option}"):
-        AnalysisParams.from_options(**{option: value})
+        AnalysisOptions.from_options(**{option: value})
 
 
 def test_unknown_options_are_named_unless_reading_results() -> None:
     with pytest.raises(AnalysisError, match="unknown analysis option.*max_ordr"):
-        AnalysisParams.from_dict({"max_ordr": 4})
-    assert AnalysisParams.from_dict({"max_order": 4, "from_a_newer_version": 1}, ignore_unknown=True).max_order == 4
+        AnalysisOptions.from_dict({"max_ordr": 4})
+    assert AnalysisOptions.from_dict({"max_order": 4, "from_a_newer_version": 1}, ignore_unknown=True).max_order == 4
 
 
 def test_shot_analysis_re_exports_it() -> None:
-    from hopkinson.analysis.shot_analysis import AnalysisParams as Reexported
+    from hopkinson.analysis.shot_analysis import AnalysisOptions as Reexported
 
-    assert Reexported is AnalysisParams
+    assert Reexported is AnalysisOptions
 
 
 def test_importing_it_loads_no_numpy() -> None:
-    code = "import sys, hopkinson.analysis.params, hopkinson.analysis.key_figures; print('numpy' in sys.modules)"
+    code = "import sys, hopkinson.analysis.options, hopkinson.analysis.key_figures; print('numpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
@@ -66,11 +66,11 @@ DCM_CASES = (
 
 
 def _design_refuses(option: str, value: object) -> bool:
-    """Whether the DCM design (DcmOptions, design_compensation on a 27 kHz sensor's shot at
+    """Whether the DCM design (AnalysisOptions without a rate, design_compensation on a 27 kHz sensor's shot at
     1 MS/s with room for two extra poles) refuses the option."""
     import numpy as np
 
-    from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
+    from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
     from hopkinson.analysis.model import DiscreteModel
 
     dt = 1e-6
@@ -80,11 +80,8 @@ def _design_refuses(option: str, value: object) -> bool:
         poles += [np.exp(s * dt), np.exp(np.conj(s) * dt)]
     a = np.real(np.poly(poles))
     model = DiscreteModel(dt, a, np.array([np.sum(a)]))
-    fields = {"dcm_ratio": "ratio", "dcm_damping": "damping", "dcm_widening": "widening",
-              "dcm_noise_gain_limit": "noise_gain_limit", "dcm_band_limit_hz": "band_limit_hz",
-              "extra_poles": "extra_poles"}
-    try:
-        options = DcmOptions(**{fields[option]: value})
+    try:  # the design alone: no analysis rate given, the model's bounds the band limit
+        options = AnalysisOptions(sample_rate_hz=None, **{option: value})
         design_compensation(ShotSupport(model, None, supported_band_hz=(0.0, 60_000.0)), options)
     except AnalysisError:
         return True
@@ -94,7 +91,7 @@ def _design_refuses(option: str, value: object) -> bool:
 @pytest.mark.parametrize(("option", "value"), DCM_CASES)
 def test_check_refuses_exactly_what_the_dcm_design_refuses(option: str, value: object) -> None:
     try:
-        AnalysisParams.from_options(**{option: value}) if value is not None else AnalysisParams(**{option: value})
+        AnalysisOptions.from_options(**{option: value}) if value is not None else AnalysisOptions(**{option: value})
         refused = False
     except AnalysisError as exc:
         refused = True
@@ -103,11 +100,11 @@ def test_check_refuses_exactly_what_the_dcm_design_refuses(option: str, value: o
 
 
 def test_the_dcm_defaults_have_one_definition() -> None:
-    from hopkinson.analysis import dcm_design, params
+    from hopkinson.analysis import dcm_design
+    from hopkinson.analysis import options as declared
 
     assert not hasattr(dcm_design, "DEFAULT_WIDENING") and not hasattr(dcm_design, "DEFAULT_DAMPING")
-    options = dcm_design.DcmOptions()
-    assert (options.widening, options.damping, options.noise_gain_limit) == (
-        params.DEFAULT_DCM_WIDENING, params.DEFAULT_DCM_DAMPING, params.DEFAULT_DCM_NOISE_GAIN_LIMIT)
-    defaults = AnalysisParams()
-    assert (defaults.dcm_widening, defaults.dcm_damping) == (options.widening, options.damping)
+    assert not hasattr(dcm_design, "DcmOptions")  # the design takes the one options type
+    defaults = AnalysisOptions()
+    assert (defaults.dcm_widening, defaults.dcm_damping, defaults.dcm_noise_gain_limit) == (
+        declared.DEFAULT_DCM_WIDENING, declared.DEFAULT_DCM_DAMPING, declared.DEFAULT_DCM_NOISE_GAIN_LIMIT)

@@ -36,13 +36,13 @@ import pytest
 from scipy import signal
 from scipy.stats import binom
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from tests.analysis.ptb_fixtures import seeds
 from tests.ptb_shock import against_sine, ptb_record, ptb_sine
 
 DRAWS = 60
-USER_DRAWS = AnalysisParams().draws  # what a user's analysis takes (400)
+USER_DRAWS = AnalysisOptions().draws  # what a user's analysis takes (400)
 EN_SEEDS = seeds(1, 5)
 PTB_MAX_MISSES = 2
 HYBRID_SEEDS = seeds(1, 3)

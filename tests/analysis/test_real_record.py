@@ -12,11 +12,12 @@ from scipy import signal
 
 from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import identify
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.order_choice import choose_stable_order
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import fbsd_hz
 from hopkinson.analysis.sine_comparison import SineCalibration, compare_sine
-from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
+from hopkinson.analysis.uncertainty import evaluate
 from hopkinson.drivers.sim.accelerometer import (
     AccelerometerTruth,
     Mode,
@@ -137,7 +138,7 @@ def test_the_delay_branch_the_noise_flips_is_inside_the_fbsd_interval(seed: int)
     # truth (seed 113 on the first branch, 101 on the second; 15/20 seeds covered).
     truth = truth_figures(PIEZO)
     ident = identify(pulse_a(seed))
-    result = evaluate(ident, UncertaintyOptions(draws=200, seed=3))
+    result = evaluate(ident, AnalysisOptions(draws=200, seed=3))
     for key in ("5", "10"):
         lo, hi = result.fbsd_hz[key].interval
         assert lo <= truth[f"fbsd_{key}"] <= hi, (key, lo, hi, truth[f"fbsd_{key}"])

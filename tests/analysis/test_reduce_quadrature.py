@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.reduce import SensorChannel, reduce_raw, reduce_sensors
 from hopkinson.analysis.shot_analysis import ShotAnalysis, analyse_raw_shot
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
@@ -127,7 +127,7 @@ def test_a_failing_second_sensor_does_not_fail_the_first() -> None:
     rng = np.random.default_rng(9)
     first = truth.respond(acc, DT) * 10.0 * 2e-7
     first = first + rng.standard_normal(first.size) * 1e-5 * np.max(first)
-    params = AnalysisParams(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7, uncertainty=False, max_order=6)
+    params = AnalysisOptions(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7, uncertainty=False, max_order=6)
     broken = first.copy()
     broken[5000] = np.nan
     analysis = analyse_raw_shot(u1, first, DT, params, quadrature_v=u2, more_sensors={"response_2": (broken, params)})

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_raw_shot
+from hopkinson.analysis.shot_analysis import AnalysisOptions, ShotAnalysis, analyse_raw_shot
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from hopkinson.drivers.sim.doppler_beat import raw_shot
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
@@ -23,7 +23,7 @@ def analysed():
     peak = 50_000 * G_M_S2
     raw = raw_shot(half_sine_m_s2(t, 38.6e-6, peak, 1e-4), truth, DT_S, amp_gain=10.0,
                    sensitivity_v_per_m_s2=2e-7, rng=np.random.default_rng(3))
-    params = AnalysisParams(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7)
+    params = AnalysisOptions(amp_gain=10.0, sensitivity_v_per_m_s2=2e-7)
     return truth, peak, analyse_raw_shot(raw.doppler_v, raw.response_v, DT_S, params)
 
 
@@ -54,7 +54,7 @@ def test_results_round_trip_through_json(analysed):
 
 def test_unknown_option_is_named():
     with pytest.raises(AnalysisError, match="unknown analysis option.*max_ordr"):
-        AnalysisParams.from_options(max_ordr=4)
+        AnalysisOptions.from_options(max_ordr=4)
 
 
 def test_incomplete_results_are_a_clear_error():

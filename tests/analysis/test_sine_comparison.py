@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hopkinson.analysis.dcm_design import DcmOptions, ShotSupport, design_compensation
+from hopkinson.analysis.dcm_design import ShotSupport, design_compensation
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.sine_comparison import SineCalibration, compare_sine, read_sine_calibration
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 
@@ -54,7 +55,7 @@ def test_a_wrong_resonance_shows_as_its_closed_form_error():
 def test_compensated_magnitude_is_the_sine_sensor_times_the_dcm():
     model = model_of(TRUTH)
     # a widening asked for (×3): the compensated band's edge then lies inside the sine's range
-    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)), DcmOptions(widening=3.0))
+    design = design_compensation(ShotSupport(model, supported_band_hz=(0.0, 60_000.0)), AnalysisOptions(dcm_widening=3.0))
     c = compare_sine(model, sine_of(TRUTH), design.dcm)
     g = np.abs(design.dcm.frequency_response(F)) / abs(design.dcm.frequency_response([160.0])[0])
     np.testing.assert_allclose(c.compensated_magnitude, c.sine_magnitude * g, rtol=1e-12)

@@ -13,9 +13,10 @@ import pytest
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import identify_with_sine
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.sine_comparison import SineCalibration
 from hopkinson.analysis.sine_joint import JointWeights, paule_mandel, sine_terms, with_draws
-from hopkinson.analysis.uncertainty import UncertaintyOptions, evaluate
+from hopkinson.analysis.uncertainty import evaluate
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from tests.analysis.hard_records import Case, record, truth_figures
 
@@ -39,7 +40,7 @@ def synthetic_sine(truth: AccelerometerTruth, seed: int) -> SineCalibration:
 def joint():
     """The joint identification of one seed, with its Monte Carlo (shared by the assertions)."""
     ident = identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
-    result = evaluate(ident, UncertaintyOptions(draws=100, seed=5, order_draws=10))
+    result = evaluate(ident, AnalysisOptions(draws=100, seed=5, order_draws=10))
     return with_draws(ident, result.model_draws), result
 
 

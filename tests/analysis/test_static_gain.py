@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.shot_analysis import analyse_record
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
@@ -38,7 +38,7 @@ def _record(peak_m_s2: float, nonlinearity_per_m_s2: float, seed: int) -> Record
 
 
 def _static(record: Record) -> dict:
-    result = analyse_record(record, AnalysisParams(max_order=4, draws=50, seed=3))
+    result = analyse_record(record, AnalysisOptions(max_order=4, draws=50, seed=3))
     static = result.to_dict()["static_gain"]
     assert "value" in static, static
     return static

@@ -10,7 +10,7 @@ import re
 import pytest
 
 from hopkinson.analysis.identify import identify
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.shot_analysis import with_uncertainty
 from hopkinson.analysis.trail import HEADING, Stage, Step, Stretch, Trail, motion_lines
 from tests.analysis.test_identify_stages import F_N_HZ, ZETA, record
@@ -60,7 +60,7 @@ def test_the_identification_is_frozen_and_the_uncertainty_gives_a_new_one(ident)
     with pytest.raises(dataclasses.FrozenInstanceError):
         ident.settlement.sweep.why = "changed"  # type: ignore[misc]
     before = ident.to_dict()
-    fitted = with_uncertainty(ident, AnalysisParams(draws=40, seed=1))
+    fitted = with_uncertainty(ident, AnalysisOptions(draws=40, seed=1))
     assert ident.to_dict() == before  # the identification at hand (a session cache's) is left as it was
     assert "stability" not in ident.order_evidence
     stability = fitted.identification.order_evidence["stability"]

@@ -32,12 +32,12 @@ from hopkinson.analysis import uncertainty
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import FindingCode
 from hopkinson.analysis.identify import identify
-from hopkinson.analysis.params import AnalysisParams
-from hopkinson.analysis.uncertainty import Estimate, UncertaintyOptions, evaluate, shot_uncertainty
+from hopkinson.analysis.options import AnalysisOptions
+from hopkinson.analysis.uncertainty import Estimate, evaluate, shot_uncertainty
 from tests.analysis.hard_records import Case, record, truth_figures
 
 NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0,
-                channel_skew_s=0.0, transverse_motion_rel=0.0)  # the transverse row too: these records have none
+                u_channel_skew_s=0.0, transverse_motion_rel=0.0)  # the transverse row too: these records have none
 MIN_INSIDE = 133  # of SHOTS: see the module docstring for the test's power
 CASE = Case(reference_noise=0.02, response_noise=0.02, samples=10_000)
 SHOTS = 140
@@ -63,7 +63,7 @@ def shots() -> dict[str, object]:
     for shot in range(SHOTS):
         ident = identify(record(CASE, 1000 + shot))
         model_error.append(ident.noise["model_error"])
-        result = evaluate(ident, UncertaintyOptions(draws=DRAWS, order_draws=ORDER_DRAWS, seed=shot, **NO_CHAIN))
+        result = evaluate(ident, AnalysisOptions(draws=DRAWS, order_draws=ORDER_DRAWS, seed=shot, **NO_CHAIN))
         for name, e in _figures(result).items():
             row = out.setdefault(name, {"value": [], "lo": [], "hi": [], "u": []})
             row["value"].append(e.value)
@@ -133,8 +133,8 @@ def test_the_intervals_are_not_needlessly_wide(study) -> None:
 
 def test_reference_chain_adds_in_quadrature_to_the_dc_gain() -> None:
     ident = identify(record(CASE, 7))
-    noise_only = evaluate(ident, UncertaintyOptions(draws=DRAWS, seed=1, **NO_CHAIN))
-    chain = evaluate(ident, UncertaintyOptions(draws=DRAWS, seed=1))
+    noise_only = evaluate(ident, AnalysisOptions(draws=DRAWS, seed=1, **NO_CHAIN))
+    chain = evaluate(ident, AnalysisOptions(draws=DRAWS, seed=1))
     expected = math.sqrt((noise_only.dc_gain.u / noise_only.dc_gain.value) ** 2 + 1e-4**2 + 5e-4**2 + 2e-3**2 + 2e-3**2)
     assert chain.dc_gain.u / chain.dc_gain.value == pytest.approx(expected, rel=0.2)
     budget = {b["source"]: b for b in chain.to_dict()["budget"]}
@@ -145,8 +145,8 @@ def test_reference_chain_adds_in_quadrature_to_the_dc_gain() -> None:
 
 def test_draws_are_reproducible_from_the_seed_and_feed_the_dcm() -> None:
     ident = identify(record(CASE, 8))
-    a = evaluate(ident, UncertaintyOptions(draws=60, seed=3))
-    b = evaluate(ident, UncertaintyOptions(draws=60, seed=3))
+    a = evaluate(ident, AnalysisOptions(draws=60, seed=3))
+    b = evaluate(ident, AnalysisOptions(draws=60, seed=3))
     assert a.to_dict() == b.to_dict() and a.seed == 3
     assert len(a.model_draws) == a.draws and all(m.is_stable for m in a.model_draws)
 
@@ -158,10 +158,10 @@ def test_a_failed_uncertainty_keeps_the_values_and_warns(monkeypatch: pytest.Mon
         raise AnalysisError("no stable refit")  # the Monte Carlo failing, whatever the cause
 
     monkeypatch.setattr(uncertainty, "evaluate", failing)
-    data, draws, found = shot_uncertainty(ident, AnalysisParams(), None)
+    data, draws, found = shot_uncertainty(ident, AnalysisOptions(), None)
     assert data is None and draws == []
     assert [f.code for f in found] == [FindingCode.UNCERTAINTY_FAILED] and "could not be evaluated" in found[0].text
-    data, draws, found = shot_uncertainty(ident, AnalysisParams(uncertainty=False), None)
+    data, draws, found = shot_uncertainty(ident, AnalysisOptions(uncertainty=False), None)
     assert (data, draws) == (None, []) and [f.code for f in found] == [FindingCode.UNCERTAINTY_OFF]
     assert "switched off" in found[0].text
 

@@ -19,7 +19,7 @@ from matplotlib.text import Text
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.key_figures import Figure, KeyFigures
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.shot_analysis import AnalysisParams, ShotAnalysis, analyse_record
+from hopkinson.analysis.shot_analysis import AnalysisOptions, ShotAnalysis, analyse_record
 from hopkinson.analysis.sine_comparison import SineCalibration
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode, white_noise
 from hopkinson.drivers.sim.shock import G_M_S2, half_sine_m_s2
@@ -68,7 +68,7 @@ def entry(label: str, analysis: ShotAnalysis | None, truth: AccelerometerTruth |
 
 @pytest.fixture(scope="module")
 def analyses() -> dict[str, ShotAnalysis]:
-    params = AnalysisParams(max_order=6, draws=50, seed=1)  # the uncertainty with the fewest draws allowed
+    params = AnalysisOptions(max_order=6, draws=50, seed=1)  # the uncertainty with the fewest draws allowed
     return {
         "a1": analyse_record(simulated_record(SENSOR_A, 30_000, 1), params),
         "a2": analyse_record(simulated_record(SENSOR_A, 80_000, 2), params),

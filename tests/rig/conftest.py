@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.drivers.sim.simulated_rig import ServerParams, SimConfig
 from hopkinson.drivers.sim.world import WorldParams
 from hopkinson.rig.config import RigConfig, load_rig_config
@@ -122,7 +122,7 @@ class Recorder:
         return [e.state for e in self.of(StateEntered)]
 
 
-def quick_analysis(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+def quick_analysis(raw: RawShot, params: AnalysisOptions) -> AnalysisResult:
     """A stand-in for the shot analysis where a test is not about it (the real one takes ~1 s)."""
     return AnalysisResult({"peak_response_v": float(raw.volts("response").max()), "params": params.to_dict()})
 

@@ -290,8 +290,8 @@ def test_dcm_of_an_identified_model_with_its_record_is_the_shot_analysis_dcm(tmp
     """identify -o, then dcm --model --record: the same design (poles cancelled, band limit from
     the excitation and the response's noise, ratio, latency) and check as the shot analysis."""
     from hopkinson.analysis.compensation import compensate_shot
-    from hopkinson.analysis.dcm_design import DcmOptions
     from hopkinson.analysis.identify import identify
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.drivers.sim.accelerometer import white_noise
 
     dt, n = 1e-6, 4000
@@ -306,7 +306,7 @@ def test_dcm_of_an_identified_model_with_its_record_is_the_shot_analysis_dcm(tmp
     assert main(["identify", str(rec_path), "-o", str(model_path), "--json"]) == 0
     capsys.readouterr()
     result = run_json(capsys, ["dcm", "--model", str(model_path), "--record", str(rec_path), "--json"])
-    shot = compensate_shot(identify(read_record(rec_path)), read_record(rec_path), DcmOptions())
+    shot = compensate_shot(identify(read_record(rec_path)), read_record(rec_path), AnalysisOptions())
     assert result["dcm"]["band_limit_hz"] == pytest.approx(shot.design.band_limit.cutoff_hz, rel=1e-6)
     assert result["dcm"]["design"]["ratio"] == pytest.approx(shot.design.dcm.design["ratio"], rel=1e-3)
     np.testing.assert_allclose(result["dcm"]["num"], shot.design.dcm.num, rtol=1e-4)

@@ -129,7 +129,7 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
     """The route of a plan's [accelerometer] sine_calibration and the panel's shot set-up: the
     shot request's sine_calibration reaches the analysis options, the shot's analysis fits it,
     a further sensor never inherits it, and an unreadable file is refused before anything moves."""
-    from hopkinson.analysis.params import AnalysisParams
+    from hopkinson.analysis.options import AnalysisOptions
     from hopkinson.analysis.shot_analysis import analyse_record
     from hopkinson.rig.campaign_setup import shot_request
     from hopkinson.rig.config import load_rig_config
@@ -144,7 +144,7 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
     params = analysis_params(request, config, {})
     assert params.sine_calibration == str(sine)
     assert sensor_params(params, config)["response_2"].sine_calibration is None
-    analysis = analyse_record(record(Case(), 3), AnalysisParams(uncertainty=False, sine_calibration=str(sine)))
+    analysis = analyse_record(record(Case(), 3), AnalysisOptions(uncertainty=False, sine_calibration=str(sine)))
     joint = analysis.to_dict()["identification"]["sine_joint"]
     assert joint["consistent"] is True and joint["source"] == str(sine)
     bad = ShotRequest(pressure_bar=2.0, sine_calibration=str(tmp_path / "none.csv"), out_dir=tmp_path)

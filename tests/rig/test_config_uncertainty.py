@@ -1,5 +1,5 @@
 """rig.toml [uncertainty]: the reference chain's relative standard uncertainties, validated on load
-and passed to the analysis as AnalysisParams options."""
+and passed to the analysis as AnalysisOptions options."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError
 
@@ -16,7 +16,7 @@ RIG = Path(__file__).resolve().parents[2] / "config" / "rig.toml"
 
 def test_shipped_defaults_load_and_become_analysis_options() -> None:
     config = load_rig_config(RIG)
-    params = AnalysisParams.from_options(**config.uncertainty.analysis_options())
+    params = AnalysisOptions.from_options(**config.uncertainty.analysis_options())
     assert params.u_grating_pitch_rel == 1e-4 and params.u_amp_gain_rel == 2e-3 and params.draws == 400
 
 

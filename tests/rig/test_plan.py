@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from hopkinson.rig.errors import ConfigError
-from hopkinson.rig.plan import AnalysisOptions, load_plan
+from hopkinson.rig.plan import PlanAnalysis, load_plan
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -57,10 +57,10 @@ order = 4
         ("s001-r1", 0, 1, 1), ("s001-r2", 1, 1, 2), ("s002-r1", 2, 2, 1),
     ]
     assert plan.shots[0].pressure_bar == 2.0 and isinstance(plan.shots[0].pressure_bar, float)
-    assert plan.shots[0].analysis == AnalysisOptions(max_order=10, dcm_ratio=8.0)
+    assert plan.shots[0].analysis == PlanAnalysis(max_order=10, dcm_ratio=8.0)
     assert (plan.shots[2].pressure_bar, plan.shots[2].projectile) == (4.5, 1)
     # The entry's override keeps the inherited defaults it does not name.
-    assert plan.shots[2].analysis == AnalysisOptions(max_order=10, order=4, dcm_ratio=8.0)
+    assert plan.shots[2].analysis == PlanAnalysis(max_order=10, order=4, dcm_ratio=8.0)
     assert plan.shot("s002-r1") is plan.shots[2]
     assert plan.text.startswith("\nname")
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.errors import ShotAborted
 from hopkinson.rig.events import (
@@ -56,7 +56,7 @@ def test_transition_table_every_active_state_can_only_go_on_or_to_safe() -> None
 # -- a whole shot ----------------------------------------------------------------------------------
 def _peak_analysis(seen: dict):
     """An analysis that records what it was given and whether the raw file existed already."""
-    def analyse(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+    def analyse(raw: RawShot, params: AnalysisOptions) -> AnalysisResult:
         path = seen["path"]
         seen["file_state_during_analysis"] = read_shot(path, load_raw=False).state if path.exists() else None
         seen["params"] = params
@@ -128,7 +128,7 @@ def test_real_analysis_identifies_the_simulated_accelerometer(rig) -> None:
 
 
 def test_analysis_failure_is_recorded_and_the_shot_kept(rig) -> None:
-    def broken(raw: RawShot, params: AnalysisParams) -> AnalysisResult:
+    def broken(raw: RawShot, params: AnalysisOptions) -> AnalysisResult:
         raise ValueError("no beat found in the Doppler channel")
 
     rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus, analyse=broken)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hopkinson.analysis.params import AnalysisParams
+from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import AwaitingConfirmation, RigEvent
@@ -175,7 +175,7 @@ def _analysed(tmp_path: Path, raw: RawShot, overloaded: bool = False) -> str | N
     """The rig's ANALYSE of a stored shot (as a campaign re-analyses one): its error text."""
     meta = ShotMeta(operator="t", accelerometer_model="M", accelerometer_serial="S", pressure_bar=1.0, projectile=3)
     path = write_raw_shot(tmp_path / f"shot-{len(list(tmp_path.glob('*.h5')))}.h5", raw, meta)
-    results, error, *_ = analyse_and_record(path, read_shot(path).raw, AnalysisParams(uncertainty=False),
+    results, error, *_ = analyse_and_record(path, read_shot(path).raw, AnalysisOptions(uncertainty=False),
                                         lambda stored, params: analyse_raw(stored, params),
                                         amplifier_overloaded=overloaded)
     assert results is None and read_shot(path, load_raw=False).analysis_error == error  # the file says why

@@ -44,7 +44,7 @@ def rig_config_for_tests() -> RigConfig:
 
 
 def quick_config(draws: int = 60) -> RigConfig:
-    """The test configuration with fewer Monte Carlo draws (the least analysis.params takes): for
+    """The test configuration with fewer Monte Carlo draws (the least analysis.options takes): for
     tests of what the panel shows, not of the uncertainty itself."""
     base = rig_config_for_tests()
     return dataclasses.replace(base, uncertainty=dataclasses.replace(base.uncertainty, draws=draws))

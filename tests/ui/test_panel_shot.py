@@ -192,14 +192,14 @@ def test_export_report_of_the_shot_shown(qtbot, make_panel, tmp_path):
 def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel, tmp_path, artifacts_dir):
     """A shot whose results carry the uncertainty and the DCM's check (the JSON contracts of
     issues 10 and 11): the strip shows value ± U and a DCM not recommended with its reason."""
-    from hopkinson.analysis.shot_analysis import AnalysisParams, analyse_record
+    from hopkinson.analysis.shot_analysis import AnalysisOptions, analyse_record
     from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
     from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
     from tests.reports.contract import contract_results
     from tests.reports.test_report import SENSOR_A, simulated_record
 
     record = simulated_record(SENSOR_A, 30_000, 1)
-    results = contract_results(analyse_record(record, AnalysisParams(max_order=6)), recommended=False)
+    results = contract_results(analyse_record(record, AnalysisOptions(max_order=6)), recommended=False)
     n = record.n_samples
     codes = (1000 * np.sin(np.arange(n) / 7)).astype(np.int16)
     path = write_raw_shot(tmp_path / "u.h5", RawShot({"doppler": RawChannel(codes, 1e-4, 0.0),
