@@ -26,13 +26,10 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hopkinson.analysis.compensation import compensate_shot
-from hopkinson.analysis.dcm import DCM
-from hopkinson.analysis.dcm_figures import compare_steps
 from hopkinson.analysis.determination import is_result, not_determined
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.excitation import ExcitationSummary, excitation_summary
@@ -42,18 +39,16 @@ from hopkinson.analysis.key_figures import main_mode_of
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
-from hopkinson.analysis.reduce import (
-    SensorChannel,
-    check_carries_pulse,
-    check_sensor_channel,
-    reduce_sensors,
-)
 from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 from hopkinson.analysis.sine_comparison import SineCalibration, read_sine_calibration
 from hopkinson.analysis.sine_joint import with_draws
 from hopkinson.analysis.static_gain import static_gain
 from hopkinson.analysis.uncertainty import shot_uncertainty
+
+if TYPE_CHECKING:  # the DCM's modules import scipy.signal: loaded where a DCM is made or read, so
+    # `hopkinson identify` (which makes none) starts without them
+    from hopkinson.analysis.dcm import DCM
 
 # Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
 COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "sized_to", "predicted_peak_error_pct",
@@ -147,6 +142,8 @@ class ShotAnalysis:
         try:
             params = AnalysisOptions.from_dict(data["params"], ignore_unknown=True)
             model = DiscreteModel.from_dict(data["model"], source="shot analysis")
+            from hopkinson.analysis.dcm import DCM
+
             dcm = DCM.from_dict(data["dcm"], source="shot analysis DCM")
             return cls(
                 params=params, record=record, reduction=data.get("reduction"),
@@ -227,6 +224,9 @@ def analyse_record(record: Record, params: AnalysisOptions | None = None,
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
     static, why_not = static_gain(ident, model_draws)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
+    from hopkinson.analysis.compensation import compensate_shot
+    from hopkinson.analysis.dcm_figures import compare_steps
+
     compensation = compensate_shot(ident, record, params, draws=model_draws,
                                    seed=params.seed)
     warnings += compensation.warnings
@@ -280,6 +280,14 @@ def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_inter
     `full_scale_v`: role -> the digitizer's full scale in volts (analysis.full_scale.
     full_scale_volts from the shot file's code_min/code_max): a channel with samples there is
     refused as clipped; without it clipping is not judged here (the rig judged the shot)."""
+    # the demodulation imports scipy.signal: loaded for raw shots only (`hopkinson identify` reads a record)
+    from hopkinson.analysis.reduce import (
+        SensorChannel,
+        check_carries_pulse,
+        check_sensor_channel,
+        reduce_sensors,
+    )
+
     params = AnalysisOptions() if params is None else params
     source = "raw shot"
     channels = {"response": SensorChannel(response_v, params.amp_gain, params.sensitivity_v_per_m_s2)}

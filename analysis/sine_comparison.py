@@ -36,15 +36,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hopkinson.analysis.dcm import DCM
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.records import parse_header_cell, read_table
 from hopkinson.analysis.response import fbsd_from_response, frequency_response
+
+if TYPE_CHECKING:  # only a caller's DCM is used (the DCM's module imports scipy.signal)
+    from hopkinson.analysis.dcm import DCM
 
 SINE_KEYS = ("frequency_hz", "magnitude", "phase_deg")
 SINE_UNCERTAINTY_KEYS = ("u_magnitude_rel", "u_phase_deg")

@@ -76,11 +76,10 @@ from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Te
 from hopkinson.rig.config_analysis import options_section
 from hopkinson.rig.config_errors import validate
 from hopkinson.rig.errors import ConfigError
+from hopkinson.rig.plan_limits import CONFIRM_ABOVE_SHOTS, MAX_TOTAL_SHOTS
 from hopkinson.rig.toml_file import read_toml
 
 LATER_OPTIONS = {"uncertainty": True, "draws": None}  # analysis options added after plans were in use
-MAX_TOTAL_SHOTS = 10_000  # more is a typing error, not a campaign (a shot takes minutes)
-CONFIRM_ABOVE_SHOTS = 50  # a plan of more shots needs its number confirmed
 G_M_S2 = 9.80665
 
 

@@ -42,7 +42,7 @@ from typing import Any
 from hopkinson.rig.cli.main import add_rig_arguments, emit_json, rig_config_path
 from hopkinson.rig.cli.shot import add_log_arguments
 from hopkinson.rig.errors import EXIT_ABORTED, ConfigError, exit_codes_help
-from hopkinson.rig.plan import CONFIRM_ABOVE_SHOTS
+from hopkinson.rig.plan_limits import CONFIRM_ABOVE_SHOTS
 
 REPORT_FORMATS = ("pdf", "html")
 
