@@ -32,7 +32,7 @@ DEFAULT_GRATING_PITCH_M = 2.0e-6  # the simulated rig's grating (drivers/sim/dop
 DEFAULT_DCM_WIDENING: float | None = None  # None: the compensated band sized to the pulse (analysis.dcm_ratio)
 DEFAULT_DCM_NOISE_GAIN_LIMIT = 4.0  # DCM white-noise RMS gain allowed (12 dB; analysis.dcm_design)
 DEFAULT_DCM_DAMPING = 0.707  # ζ_e of the DCM's new poles
-# Two poles closer than this (relative) are one conjugate pair (analysis.dcm.check_conjugate_pairs).
+# Two poles closer than this (relative) are one conjugate pair (analysis.pole_checks.check_conjugate_pairs).
 CONJUGATE_TOLERANCE = 1e-9
 # Monte Carlo draws per shot (GUM-S1 §7.9: enough for the 95 % interval's ends to be stable
 # to about one significant digit of the standard uncertainty; see analysis.uncertainty).
