@@ -127,10 +127,8 @@ def mark_doublets(modes: list[Mode], zeros: np.ndarray) -> list[Mode]:
     out = []
     for m in modes:
         m = replace(m, cancelled=False)
-        if m.kind == ModeKind.COMPLEX and z.size:
-            p = m.pole_z
-            if float(np.min(np.abs(z - p))) < DOUBLET_DISTANCE * (1.0 - abs(p)):
-                m = replace(m, cancelled=True, supported=False)
+        if m.kind == ModeKind.COMPLEX and z.size and _nearly_cancelled(m.pole_z, z):
+            m = replace(m, cancelled=True, supported=False)
         out.append(m)
     return out
 
@@ -169,9 +167,13 @@ def has_doublet(a: np.ndarray, b: np.ndarray, real: bool = False) -> bool:
     (PTB's hybrids: order 2 plus a pair at 250–440 Hz, the lowest bin 606 Hz)."""
     if a.size < 2 or b.size < 2:
         return False
-    zeros = np.roots(b)
-    if any(m.cancelled for m in mark_doublets(modes_of(np.roots(a), 1.0), zeros)):
+    poles, zeros = np.roots(a), np.roots(b)
+    if any(m.cancelled for m in mark_doublets(modes_of(poles, 1.0), zeros)):
         return True
-    poles = np.roots(a)
     single = poles[np.abs(poles.imag) <= 1e-12 * np.maximum(1.0, np.abs(poles))].real
-    return real and any(float(np.min(np.abs(zeros - p))) < DOUBLET_DISTANCE * (1.0 - abs(p)) for p in single)
+    return real and any(_nearly_cancelled(complex(p), zeros) for p in single)
+
+
+def _nearly_cancelled(pole: complex, zeros: np.ndarray) -> bool:
+    """A zero lies within DOUBLET_DISTANCE of the pole's distance to the unit circle (a doublet)."""
+    return float(np.min(np.abs(zeros - pole))) < DOUBLET_DISTANCE * (1.0 - abs(pole))
