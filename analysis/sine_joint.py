@@ -58,7 +58,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.special import chdtrc
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import Finding, FindingCode
@@ -239,6 +238,9 @@ def consistency(ident: Any, sine: SineCalibration, weights: JointWeights,
     z_phase = error.imag / np.hypot(np.radians(u_phase), um_phase)
     chi2 = float(np.sum(z_mag ** 2) + np.sum(z_phase ** 2))
     dof = max(2 * omega.size - 2, 1)
+    # imported here, not at the top: `hopkinson identify` without a sine loads no SciPy
+    from scipy.special import chdtrc
+
     return SineJoint(
         sine=sine, weights=weights, birge_ratio=math.sqrt(chi2 / dof), chi2=chi2, dof=dof,
         p_value=float(chdtrc(dof, chi2)), error_mag_pct=100.0 * np.expm1(error.real),

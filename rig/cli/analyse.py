@@ -36,7 +36,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hopkinson.rig.cli.main import emit_json
+from hopkinson.rig.cli.main import BLAS_THREAD_VARIABLES, emit_json
 from hopkinson.rig.errors import EXIT_ANALYSIS_FAILED, ConfigError
 
 if TYPE_CHECKING:  # concurrent.futures is loaded by this command only, not by every command's parser
@@ -45,9 +45,6 @@ if TYPE_CHECKING:  # concurrent.futures is loaded by this command only, not by e
     from hopkinson.rig.reanalysis import Target
 
 EXIT_SOME_FAILED = EXIT_ANALYSIS_FAILED  # as a shot whose analysis failed: 4, never 3 (aborted to safe)
-# Set to one thread in the workers (unless the caller set them): N processes each with N BLAS
-# threads would oversubscribe the cores.
-BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -156,7 +153,9 @@ def _executor(jobs: int) -> Iterator[Executor]:
 
 @contextlib.contextmanager
 def _single_threaded_blas() -> Iterator[None]:
-    """The BLAS thread variables set to 1 (where unset) while the workers start."""
+    """The BLAS thread variables set to 1 (where unset) while the workers start: N processes each
+    with N BLAS threads would oversubscribe the cores (the `hopkinson` command sets them at its
+    start; this covers a caller in Python)."""
     unset = [name for name in BLAS_THREAD_VARIABLES if name not in os.environ]
     os.environ.update({name: "1" for name in unset})
     try:

@@ -24,7 +24,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hopkinson.rig.config_paths import (
+# The analysis is single-threaded by design: its matrices are tall and thin (bins × parameters),
+# where BLAS threads gain nothing, and on a busy machine they make each factorisation wait for
+# cores at random (`hopkinson identify` of benchmarks/bench_identify.py's 2·10⁵-sample record,
+# two other processes busy: its 550 QRs 0.1 s on one thread, 18 s threaded). Set before NumPy
+# loads (nothing above imports it); a value the user set is kept.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+for _variable in BLAS_THREAD_VARIABLES:
+    os.environ.setdefault(_variable, "1")
+
+from hopkinson.rig.config_paths import (  # noqa: E402 - after the BLAS variables above
     DEFAULT_SIM_CONFIG,
     DEFAULT_SIM_RIG_CONFIG,
     default_rig_config,

@@ -204,3 +204,23 @@ def test_outputs_never_overwrite_the_input_or_a_shot_file(files, tmp_path, capsy
 def test_bad_numbers_are_one_line(files, capsys, flag: str, value: str) -> None:
     line = _one_line_error(*_run(["identify", str(files["csv"]), flag, value], capsys))
     assert flag in line
+
+
+def test_the_command_runs_blas_on_one_thread_and_identify_loads_no_scipy(files) -> None:
+    """The `hopkinson` command sets the BLAS thread variables before NumPy loads (a value the
+    user set is kept), and `identify` without a sine imports no SciPy (its start-up is part of
+    the command's time: benchmarks/bench_identify.py)."""
+    import os
+    import subprocess
+    import sys
+
+    probe = ("import os, sys; import hopkinson.rig.cli.main as m; loaded = 'numpy' in sys.modules; "
+             f"code = m.main(['identify', {str(files['npz'])!r}, '--no-uncertainty', '--json']); "
+             "print(loaded, os.environ['OPENBLAS_NUM_THREADS'], os.environ['MKL_NUM_THREADS'], "
+             "any(k == 'scipy' or k.startswith('scipy.') for k in sys.modules), code, file=sys.stderr)")
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True)
+    assert done.stderr.split()[-5:] == ["False", "1", "1", "False", "0"], done.stderr
+    env["OPENBLAS_NUM_THREADS"] = "2"
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True)
+    assert done.stderr.split()[-5:-3] == ["False", "2"], done.stderr
