@@ -19,7 +19,7 @@ calibration certificates; the defaults are typical values (config/rig.toml [unce
 from __future__ import annotations
 
 import math
-from dataclasses import MISSING, asdict, dataclass, field, fields
+from dataclasses import MISSING, asdict, dataclass, field, fields, make_dataclass
 from typing import Any
 
 from hopkinson.analysis.errors import AnalysisError
@@ -252,6 +252,25 @@ class OptionError(AnalysisError):
     def __init__(self, option: str, need: str, value: Any) -> None:
         super().__init__(f"analysis option {option}: {need}, got {_shown(value)}")
         self.option, self.need, self.value = option, need, value
+
+
+def _given(self: Any) -> dict[str, Any]:
+    """The options given, in their declared order (None: not given, left out)."""
+    return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+
+
+def _overrides_repr(self: Any) -> str:
+    return f"AnalysisOverrides({', '.join(f'{k}={v!r}' for k, v in _given(self).items())})"
+
+
+# Every option of AnalysisOptions, None meaning "not given": what a shot request asks over the
+# rig's configuration (`given()` merged over it, then checked by AnalysisOptions.from_options).
+AnalysisOverrides = make_dataclass(
+    "AnalysisOverrides",
+    [(f.name, f"{f.type} | None", field(default=None, metadata=f.metadata)) for f in fields(AnalysisOptions)],
+    frozen=True, repr=False,
+    namespace={"__doc__": "Analysis options asked over the configuration's (None: not given); `given()`: "
+                          "the ones given.", "__module__": __name__, "given": _given, "__repr__": _overrides_repr})
 
 
 # The DCM design's own options (analysis.dcm_design checks them before it designs).

@@ -9,6 +9,7 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hopkinson.analysis.options import AnalysisOverrides
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.level_control import (
     LevelChoice,
@@ -98,21 +99,20 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
 
     `confirm_timeout_s` 0: the runner only ever fires with the authorisation already given.
     """
-    a = shot.analysis
+    sensor = plan.accelerometer
     pressure = level.pressure_bar if level is not None else pressure_bar if pressure_bar is not None else shot.pressure_bar
     assert pressure is not None, f"{shot.id}: a target level needs its pressure chosen"
     return ShotRequest(
         pressure_bar=pressure, projectile=shot.projectile, operator=plan.operator,
-        accelerometer_model=plan.accelerometer.model, accelerometer_serial=plan.accelerometer.serial,
+        accelerometer_model=sensor.model, accelerometer_serial=sensor.serial,
         sensor_identities=plan.sensor_identities(),
-        sensitivity_v_per_m_s2=plan.accelerometer.sensitivity_v_per_m_s2, max_order=a.max_order,
-        order=a.order, sample_rate_hz=a.sample_rate_hz, dcm_ratio=a.dcm_ratio, dcm_damping=a.dcm_damping,
-        uncertainty=a.uncertainty, draws=a.draws, sine_calibration=plan.accelerometer.sine_calibration,
-        transverse_sensitivity_rel=plan.accelerometer.transverse_sensitivity_rel,
+        analysis=AnalysisOverrides(
+            **shot.analysis.analysis_options(), sensitivity_v_per_m_s2=sensor.sensitivity_v_per_m_s2,
+            sine_calibration=sensor.sine_calibration, transverse_sensitivity_rel=sensor.transverse_sensitivity_rel),
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, campaign_uuid=campaign_uuid,
         shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,
-        sensitivity_unit=plan.accelerometer.sensitivity_unit, tolerance_percent=plan.accelerometer.tolerance_percent,
+        sensitivity_unit=sensor.sensitivity_unit, tolerance_percent=sensor.tolerance_percent,
     )
 
 

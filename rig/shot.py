@@ -2,8 +2,8 @@
 raw data stored first (atomically), then analysed; an analysis failure is recorded in the
 file and never loses the shot.
 
-- ShotRequest: what to fire (pressure, projectile), who and what is calibrated, analysis
-  options (None = the configuration's value), where the file goes, and how long ARM waits
+- ShotRequest: what to fire (pressure, projectile), who and what is calibrated, the analysis
+  options asked over the configuration's (`analysis`, analysis.options.AnalysisOverrides), where the file goes, and how long ARM waits
   for the fire confirmation.
 - ShotOutcome: how it ended (final state, file, results, error, exit code, the state it was
   aborted in, whether the fire command was sent). `raise_for_outcome()` raises ShotAborted
@@ -45,7 +45,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.options import AnalysisOptions
+from hopkinson.analysis.options import AnalysisOptions, AnalysisOverrides
 from hopkinson.analysis.records import Record
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import RigConfig
@@ -65,6 +65,10 @@ from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 QUADRATURE_ROLE = "doppler_quadrature"
 PROJECTILES = (1, 2, 3)  # the projectiles the rig's loader takes
 MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("response"), in this order
+# The sensor's own options (its nominal sensitivity, its sine calibration, its transverse
+# sensitivity) and the order of the options the first shot files' settings recorded.
+SENSOR_OPTIONS = ("sensitivity_v_per_m_s2", "sine_calibration", "transverse_sensitivity_rel")
+RECORDED_FIRST = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
 
 
 class ShotRequestError(ConfigError):
@@ -82,17 +86,8 @@ class ShotRequest:
     accelerometer_serial: str = ""
     # further sensors' identities, recorded with the shot: role (MORE_SENSOR_ROLES) -> {"model", "serial"}
     sensor_identities: dict[str, dict[str, str]] = field(default_factory=dict)
-    sensitivity_v_per_m_s2: float | None = None  # None -> config [analysis]
-    max_order: int | None = None  # analysis options; None -> the analysis' defaults
-    order: int | None = None  # a fixed model order (a campaign plan's); None -> chosen by the analysis
-    sample_rate_hz: float | None = None  # analysis rate; None -> config [analysis]
-    dcm_ratio: float | None = None
-    dcm_damping: float | None = None
-    uncertainty: bool | None = None  # the Monte Carlo uncertainty; None -> the analysis' default (on)
-    draws: int | None = None  # its draws; None -> the analysis' default
-    sine_calibration: str | None = None  # a sine calibration CSV of the sensor, fitted with the shot (analysis.sine_joint)
-    # issue 40: the sensor's stated transverse sensitivity (datasheet; None -> the analysis' 5 %)
-    transverse_sensitivity_rel: float | None = None
+    # the analysis options asked over the rig configuration's (analysis.options; None: not given)
+    analysis: AnalysisOverrides = field(default_factory=AnalysisOverrides)
     out_dir: Path = Path("shots")
     shot_name: str | None = None  # None -> "shot-<UTC time>-<8 hex>"
     campaign_id: str | None = None
@@ -125,11 +120,11 @@ class ShotRequest:
             analysis_params(self, config, {})
         except AnalysisError as exc:
             raise ShotRequestError(str(exc)) from None
-        if self.sine_calibration is not None:  # readable as a sine calibration, before anything moves
+        if self.analysis.sine_calibration is not None:  # readable as a sine calibration, before anything moves
             from hopkinson.analysis.sine_comparison import read_sine_calibration
 
             try:
-                read_sine_calibration(self.sine_calibration)
+                read_sine_calibration(self.analysis.sine_calibration)
             except AnalysisError as exc:
                 raise ShotRequestError(f"sine_calibration: {exc}") from None
         for role, identity in self.sensor_identities.items():
@@ -172,13 +167,16 @@ class ShotRequest:
         return Path(self.out_dir) / f"{name}.h5"
 
     def sensitivity(self, config: RigConfig) -> float:
-        return self.sensitivity_v_per_m_s2 if self.sensitivity_v_per_m_s2 is not None \
-            else config.analysis.sensitivity_v_per_m_s2
+        """The nominal sensitivity, V/(m/s²): the request's, else the configuration's [analysis]."""
+        given = self.analysis.sensitivity_v_per_m_s2
+        return given if given is not None else config.analysis.sensitivity_v_per_m_s2
 
-    def analysis_options(self) -> dict[str, Any]:
-        """The analysis options given (None left out)."""
-        keys = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
-        return {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
+    def recorded_options(self) -> dict[str, Any]:
+        """The analysis options given, as the shot file's settings record them ("analysis_options"):
+        the sensor's own left out (the sensitivity is recorded under its own key), in `RECORDED_FIRST`'s
+        order first."""
+        given = {k: v for k, v in self.analysis.given().items() if k not in SENSOR_OPTIONS}
+        return {k: given[k] for k in RECORDED_FIRST if k in given} | given
 
 
 def second_accelerometer(model: str | None, serial: str | None) -> dict[str, dict[str, str]]:
@@ -288,7 +286,7 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
     snapshot = config.snapshot()
     snapshot["shot_settings"] = dict(captured.settings,
                                      sensitivity_v_per_m_s2=request.sensitivity(config),
-                                     analysis_options=request.analysis_options())
+                                     analysis_options=request.recorded_options())
     if request.level is not None:
         snapshot["shot_settings"]["level_control"] = dict(request.level)
     if request.sensitivity_unit is not None:
@@ -351,12 +349,10 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
     """Everything the analysis needs besides the channels: the rig's constants (its [analysis]
     DCM limits and [uncertainty] reference chain too), the request's options and the amplifier
     gain read back at the shot (in `settings`), checked (AnalysisError naming the option)."""
-    given = config.analysis.analysis_options() | config.uncertainty.analysis_options() | request.analysis_options()
+    given = config.analysis.analysis_options() | config.uncertainty.analysis_options() | request.analysis.given()
     return AnalysisOptions.from_options(**given | {
         "amp_gain": float(settings.get("amplifier_gain", config.amplifier.gain)),
         "sensitivity_v_per_m_s2": request.sensitivity(config),
-        "sine_calibration": request.sine_calibration,
-        "transverse_sensitivity_rel": request.transverse_sensitivity_rel,
     })
 
 

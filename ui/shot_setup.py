@@ -44,7 +44,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from hopkinson.analysis.options import declared
+from hopkinson.analysis.options import AnalysisOverrides, declared
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS, SensitivityUnit
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
@@ -259,14 +259,15 @@ class ShotSetup(QWidget):
             accelerometer_model=self.accelerometer_model.text().strip(),
             accelerometer_serial=self.accelerometer_serial.text().strip(),
             sensor_identities=self._second_accelerometer(),
-            sensitivity_v_per_m_s2=self.unit.to_si(self.sensitivity.value()),
             sensitivity_unit=self.unit.name,
             tolerance_percent=tolerance or None,
-            max_order=self.max_order.value(),
-            sample_rate_hz=self.sample_rate.value() * 1e3,
-            dcm_ratio=ratio if ratio > 0 else None,
-            dcm_damping=self.dcm_damping.value(),
-            sine_calibration=self.sine_calibration.text().strip() or None,
+            analysis=AnalysisOverrides(
+                sensitivity_v_per_m_s2=self.unit.to_si(self.sensitivity.value()),
+                max_order=self.max_order.value(),
+                sample_rate_hz=self.sample_rate.value() * 1e3,
+                dcm_ratio=ratio if ratio > 0 else None,
+                dcm_damping=self.dcm_damping.value(),
+                sine_calibration=self.sine_calibration.text().strip() or None),
             out_dir=Path(self.out_dir.text().strip() or "."),
             confirm_timeout_s=confirm_timeout_s,
             level=_level(prediction),

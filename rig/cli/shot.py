@@ -117,6 +117,7 @@ def run_shot_command(args: argparse.Namespace) -> int:
 
 def _run_shot(args: argparse.Namespace, latch: Any) -> int:
     # Imported here: the drivers (pymodbus, pyvisa, pyserial) load only when a shot runs.
+    from hopkinson.analysis.options import AnalysisOverrides
     from hopkinson.rig.cli.dcm import number_or_word
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.control import controlled_rig, run_shot_under_signals
@@ -139,10 +140,12 @@ def _run_shot(args: argparse.Namespace, latch: Any) -> int:
         pressure_bar=args.pressure_bar, projectile=args.projectile, operator=args.operator,
         accelerometer_model=args.accelerometer_model, accelerometer_serial=args.accelerometer_serial,
         sensor_identities=second_accelerometer(args.accelerometer_2_model, args.accelerometer_2_serial),
-        sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
-        sample_rate_hz=args.sample_rate_hz, dcm_damping=args.dcm_damping,
-        dcm_ratio=number_or_word(args.dcm_ratio, "--dcm-ratio", {"auto": None}, "a positive number"),
-        uncertainty=args.uncertainty, draws=args.draws, out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
+        analysis=AnalysisOverrides(
+            sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2, max_order=args.max_order,
+            sample_rate_hz=args.sample_rate_hz, dcm_damping=args.dcm_damping,
+            dcm_ratio=number_or_word(args.dcm_ratio, "--dcm-ratio", {"auto": None}, "a positive number"),
+            uncertainty=args.uncertainty, draws=args.draws),
+        out_dir=args.out, shot_name=args.shot_name or generated_shot_name(),
         confirm_timeout_s=None if args.yes else PROMPT_TIMEOUT_S,
     )
     sim_config = load_sim_config(args.sim_config) if args.sim else None

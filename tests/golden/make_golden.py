@@ -219,6 +219,7 @@ def shot_goldens(work: Path) -> Iterator[Golden]:
     and `hopkinson reduce` of it."""
     import dataclasses
 
+    from hopkinson.analysis.options import AnalysisOverrides
     from hopkinson.rig.config import load_rig_config, load_sim_config
     from hopkinson.rig.shot import ShotRequest, analyse_and_record, analysis_params, shot_analyser
     from hopkinson.rig.shotfile import analysis_results, read_shot
@@ -229,8 +230,8 @@ def shot_goldens(work: Path) -> Iterator[Golden]:
         name = f"sim-shot-{number}"
         path = write_sim_shot(work / f"{name}.h5", world, config, projectile, pressure_bar, number, draws)
         shot = read_shot(path)
-        request = ShotRequest(pressure_bar, projectile, uncertainty=draws is not None,
-                              draws=None if draws is None else int(draws))
+        request = ShotRequest(pressure_bar, projectile, analysis=AnalysisOverrides(
+            uncertainty=draws is not None, draws=None if draws is None else int(draws)))
         params = analysis_params(request, config, shot.meta.config["shot_settings"])
         recorded = analyse_and_record(path, shot.raw, dataclasses.replace(params, seed=number), shot_analyser(config))
         if recorded.error is not None:

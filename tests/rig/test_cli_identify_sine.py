@@ -129,7 +129,7 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
     """The route of a plan's [accelerometer] sine_calibration and the panel's shot set-up: the
     shot request's sine_calibration reaches the analysis options, the shot's analysis fits it,
     a further sensor never inherits it, and an unreadable file is refused before anything moves."""
-    from hopkinson.analysis.options import AnalysisOptions
+    from hopkinson.analysis.options import AnalysisOptions, AnalysisOverrides
     from hopkinson.analysis.shot_analysis import analyse_record
     from hopkinson.rig.campaign_setup import shot_request
     from hopkinson.rig.config import load_rig_config
@@ -139,7 +139,7 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
 
     _, sine, _ = files
     config = load_rig_config("config/rig-sim.toml")
-    request = ShotRequest(pressure_bar=2.0, sine_calibration=str(sine), out_dir=tmp_path)
+    request = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(sine_calibration=str(sine)), out_dir=tmp_path)
     request.check(config)
     params = analysis_params(request, config, {})
     assert params.sine_calibration == str(sine)
@@ -147,10 +147,10 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
     analysis = analyse_record(record(Case(), 3), AnalysisOptions(uncertainty=False, sine_calibration=str(sine)))
     joint = analysis.to_dict()["identification"]["sine_joint"]
     assert joint["consistent"] is True and joint["source"] == str(sine)
-    bad = ShotRequest(pressure_bar=2.0, sine_calibration=str(tmp_path / "none.csv"), out_dir=tmp_path)
+    bad = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(sine_calibration=str(tmp_path / "none.csv")), out_dir=tmp_path)
     with pytest.raises(ShotRequestError, match="sine_calibration: .*none.csv: no such file"):
         bad.check(config)
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(PLAN.format(sine=sine))
     plan = load_plan(plan_file)
-    assert shot_request(plan, plan.shots[0], RunFolder(tmp_path)).sine_calibration == str(sine)
+    assert shot_request(plan, plan.shots[0], RunFolder(tmp_path)).analysis.sine_calibration == str(sine)

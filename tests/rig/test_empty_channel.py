@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from hopkinson.analysis.options import AnalysisOverrides
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.sequencer import Sequencer
@@ -30,7 +31,7 @@ def test_an_empty_quadrature_channel_is_named_at_analysis_and_at_probe(make_rig,
                                                                         capsys: pytest.CaptureFixture[str]) -> None:
     rig = make_rig(adjust=quadrature_mapped)
     rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus, analyse=shot_analyser(rig.config))
-    outcome = rig.run(pressure_bar=2.0, uncertainty=False, max_order=6)
+    outcome = rig.run(pressure_bar=2.0, analysis=AnalysisOverrides(uncertainty=False, max_order=6))
     assert outcome.final_state == "DONE" and outcome.exit_code == 4 and outcome.shot_path is not None
     assert "the doppler_quadrature channel carries no beat" in outcome.analysis_error
     assert "unmap the quadrature channel (digitizer.channels.doppler_quadrature" in outcome.analysis_error

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hopkinson.analysis.options import AnalysisOverrides
 from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError
@@ -55,12 +56,12 @@ def test_a_bad_unit_or_tolerance_is_refused_naming_the_key(tmp_path: Path, extra
 
 def test_a_request_checks_the_nominal_in_its_unit(tmp_path: Path) -> None:
     config = load_rig_config(REPO / "config" / "rig-sim.toml")
-    good = ShotRequest(pressure_bar=2.0, sensitivity_v_per_m_s2=2e-7, sensitivity_unit="µV/(m/s²)",
+    good = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(sensitivity_v_per_m_s2=2e-7), sensitivity_unit="µV/(m/s²)",
                        tolerance_percent=5.0, out_dir=tmp_path)
     good.check(config)
     # 0.2 µV/(m/s²) typed as pC/(m/s²): a charge sensor of 2e-7 C/(m/s²) = 200 000 pC/(m/s²) is not plausible
     with pytest.raises(ShotRequestError, match=r"sensitivity: sensitivity 200000 pC/\(m/s²\) is outside the plausible range 0.0001 … 1000 pC"):
-        ShotRequest(pressure_bar=2.0, sensitivity_v_per_m_s2=2e-7, sensitivity_unit="pC/(m/s²)",
+        ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(sensitivity_v_per_m_s2=2e-7), sensitivity_unit="pC/(m/s²)",
                     out_dir=tmp_path).check(config)
     with pytest.raises(ShotRequestError, match="tolerance_percent: must be between 0 and 100 %"):
         ShotRequest(pressure_bar=2.0, tolerance_percent=0.0, out_dir=tmp_path).check(config)

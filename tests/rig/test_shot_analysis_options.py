@@ -56,3 +56,26 @@ def test_a_bad_dcm_ratio_is_one_line_and_nothing_moves(tmp_path: Path, capsys, v
     assert out == "" and err.count("\n") == 1
     assert err == f"hopkinson: error: --dcm-ratio: 'auto' or a positive number, got '{value}'\n"
     assert not state.exists()  # the simulated rig was never started
+
+
+def test_a_requests_analysis_overrides_merge_over_the_config_and_name_a_bad_value(tmp_path: Path) -> None:
+    """ShotRequest.analysis: options given win over the configuration's, the others stay the
+    configuration's; a bad value is refused naming the option; an unknown option cannot be asked;
+    the shot file's settings record the given options (the sensor's own apart) in the first
+    files' order."""
+    from hopkinson.analysis.options import AnalysisOverrides
+    from hopkinson.rig.config import load_rig_config
+    from hopkinson.rig.shot import ShotRequest, ShotRequestError, analysis_params
+
+    config = load_rig_config(_rig_toml(tmp_path))
+    request = ShotRequest(pressure_bar=1.0, out_dir=tmp_path, analysis=AnalysisOverrides(
+        draws=80, dcm_damping=0.6, max_order=7, sensitivity_v_per_m_s2=3e-7, transverse_sensitivity_rel=0.1))
+    params = analysis_params(request, config, {"amplifier_gain": 20.0})
+    assert (params.draws, params.dcm_damping, params.max_order) == (80, 0.6, 7)
+    assert (params.sensitivity_v_per_m_s2, params.transverse_sensitivity_rel, params.amp_gain) == (3e-7, 0.1, 20.0)
+    assert params.dcm_widening == 5.0 and params.u_grating_pitch_rel == 3e-4  # the configuration's
+    assert list(request.recorded_options().items()) == [("max_order", 7), ("dcm_damping", 0.6), ("draws", 80)]
+    with pytest.raises(ShotRequestError, match=r"^analysis option max_order: an integer from 1 to 60, got 0$"):
+        ShotRequest(pressure_bar=1.0, out_dir=tmp_path, analysis=AnalysisOverrides(max_order=0)).check(config)
+    with pytest.raises(TypeError, match="no_such_option"):
+        AnalysisOverrides(no_such_option=1)

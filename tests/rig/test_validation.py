@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hopkinson.analysis.options import AnalysisOptions
+from hopkinson.analysis.options import AnalysisOptions, AnalysisOverrides
 from hopkinson.rig.cli.main import main
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.events import AwaitingConfirmation, RigEvent
@@ -214,7 +214,7 @@ def test_a_wide_pulse_is_analysed_not_rejected_as_clipped(make_rig) -> None:
     from hopkinson.rig.shotfile import read_shot
 
     rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus)  # the real analysis
-    outcome = rig.run(pressure_bar=2.0, projectile=1, uncertainty=False)
+    outcome = rig.run(pressure_bar=2.0, projectile=1, analysis=AnalysisOverrides(uncertainty=False))
     assert outcome.final_state == "DONE" and outcome.analysis_error is None, outcome.analysis_error
     raw = read_shot(outcome.shot_path).raw
     fmt = np.dtype(rig.config.digitizer.sample_format)

@@ -37,10 +37,10 @@ def test_setup_is_remembered_between_runs(qtbot, tmp_path):
     dispose(second)
     assert (request.operator, request.accelerometer_model, request.accelerometer_serial) == \
         ("A. Technician", "AYZ-3", "SN0042")
-    assert request.sensitivity_v_per_m_s2 == pytest.approx(0.35e-6)
+    assert request.analysis.sensitivity_v_per_m_s2 == pytest.approx(0.35e-6)
     assert request.pressure_bar == pytest.approx(3.25) and request.projectile == 1
-    assert request.max_order == 8 and request.dcm_ratio == pytest.approx(12.5)
-    assert request.dcm_damping == pytest.approx(0.6) and request.out_dir == tmp_path / "elsewhere"
+    assert request.analysis.max_order == 8 and request.analysis.dcm_ratio == pytest.approx(12.5)
+    assert request.analysis.dcm_damping == pytest.approx(0.6) and request.out_dir == tmp_path / "elsewhere"
     assert request.confirm_timeout_s == 60.0
 
 
@@ -48,7 +48,7 @@ def test_auto_dcm_ratio_means_none(qtbot, tmp_path):
     from hopkinson.ui.shot_setup import ShotSetup
 
     setup = ShotSetup(rig_config_for_tests(), tmp_path)
-    assert setup.dcm_ratio.text() == "auto" and setup.request(1.0).dcm_ratio is None
+    assert setup.dcm_ratio.text() == "auto" and setup.request(1.0).analysis.dcm_ratio is None
     dispose(setup)
 
 
@@ -170,14 +170,14 @@ def test_the_sine_calibration_field_reaches_the_request_and_is_remembered(qtbot,
     config = rig_config_for_tests()
     settings_file = str(tmp_path / "panel.ini")
     first = ShotSetup(config, tmp_path)
-    assert first.request(1.0).sine_calibration is None
+    assert first.request(1.0).analysis.sine_calibration is None
     first.sine_calibration.setText(f"  {tmp_path / 'sine.csv'}  ")
-    assert first.request(1.0).sine_calibration == str(tmp_path / "sine.csv")
+    assert first.request(1.0).analysis.sine_calibration == str(tmp_path / "sine.csv")
     first.save(QSettings(settings_file, QSettings.Format.IniFormat))
     dispose(first)
     second = ShotSetup(config, tmp_path)
     second.load(QSettings(settings_file, QSettings.Format.IniFormat))
-    assert second.request(1.0).sine_calibration == str(tmp_path / "sine.csv")
+    assert second.request(1.0).analysis.sine_calibration == str(tmp_path / "sine.csv")
     dispose(second)
 
 
