@@ -19,29 +19,12 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm_figures import (
-    MAX_SIMULATED_SAMPLES,
-    compare_steps,
-    compensated_fbsd_edges,
-    step_responses,
-)
-from hopkinson.analysis.dcm_stream import apply
+from hopkinson.analysis.dcm_figures import MAX_SIMULATED_SAMPLES
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.group_delay import dc_group_delay_samples
 from hopkinson.analysis.model import complex_pairs, from_pairs, load_json_object
-from hopkinson.analysis.pole_checks import (
-    check_conjugate_pairs,
-    check_inside_unit_circle,
-    format_complex,
-    parse_poles,
-)
+from hopkinson.analysis.pole_checks import check_conjugate_pairs, check_inside_unit_circle
 from hopkinson.analysis.response import response_times_samples, zpk_to_sos
-
-# apply, compare_steps, compensated_fbsd_edges, format_complex, parse_poles and step_responses
-# stay importable from here for analysis/dcm_design.py and ui/dcm_tab.py, which another branch
-# (options) is changing at the same time; everything else imports them from their own modules.
-__all__ = ["DCM", "apply", "compare_steps", "compensated_fbsd_edges", "design_dcm", "designed_poles",
-           "format_complex", "load_dcm", "parse_poles", "step_responses"]
 
 
 def _real_poly(roots: np.ndarray) -> np.ndarray:

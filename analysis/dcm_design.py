@@ -49,7 +49,8 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm import DCM, compare_steps, compensated_fbsd_edges, design_dcm
+from hopkinson.analysis.dcm import DCM, design_dcm
+from hopkinson.analysis.dcm_figures import compare_steps, compensated_fbsd_edges
 from hopkinson.analysis.dcm_ratio import (
     FALLBACK_WIDENING,
     RatioChoice,

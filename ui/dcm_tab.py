@@ -36,15 +36,18 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from hopkinson.analysis.dcm import DCM, apply, format_complex, parse_poles, step_responses
+from hopkinson.analysis.dcm import DCM
 from hopkinson.analysis.dcm_design import (
     ShotSupport,
     design_compensation,
     design_report,
 )
+from hopkinson.analysis.dcm_figures import step_responses
+from hopkinson.analysis.dcm_stream import apply
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.options import DCM_OPTIONS, AnalysisOptions, OptionError, declared
+from hopkinson.analysis.pole_checks import format_complex, parse_poles
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.response import response_times_samples
 from hopkinson.fileio import atomic_write, check_output_path

@@ -202,7 +202,7 @@ def test_the_shot_analysis_carries_the_compensation_into_results_and_key_figures
 
 def _compensated_peak_one_draw_at_a_time(record, model, dcm, channel_delay_samples, draws, noise_rms, seed):
     """The compensated peak written out plainly: each draw simulated through its sections and
-    compensated by its own DcmStream (dcm.apply), one record at a time — the slow reference.
+    compensated by its own DcmStream (dcm_stream.apply), one record at a time — the slow reference.
     Returns (value, u_draws, u, interval)."""
     import dataclasses
 
