@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import signal
@@ -62,6 +62,10 @@ from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import resample_to_rate, resampling_factors, shift_samples
 from hopkinson.analysis.response import fbsd_hz, frequency_response
+
+if TYPE_CHECKING:
+    from hopkinson.analysis.evidence import NoiseReport
+    from hopkinson.analysis.identify import Identification
 
 # A compensated peak error this much larger (percentage points) than the uncompensated one
 # counts as worse: below it the difference is within what the reference's own noise moves.
@@ -197,15 +201,14 @@ def recommendation(design: DcmDesign, check: CompensationCheck | None) -> tuple[
     return reason is None, reason
 
 
-def peak_error_u_pct(check: CompensationCheck, dcm: DCM, gain: float, noise: dict[str, Any] | None,
+def peak_error_u_pct(check: CompensationCheck, dcm: DCM, gain: float, noise: NoiseReport | None,
                      peak: dict[str, Any] | None) -> float:
     """Standard uncertainty (% of the reference peak) of the check's compensated peak error: the
     noise both channels carry at the peak (the reference's; the response's through the DCM's
     noise gain, ÷ the DC gain) and, with the model draws, the compensated peak's relative u from
     their spread (not the model error the check itself measures), in quadrature."""
-    noise = noise or {}
-    ref = float(noise.get("reference_rms") or 0.0)
-    resp = float(noise.get("response_rms") or 0.0) * dcm.noise_gain() / abs(gain)
+    ref = float((noise.reference_rms if noise is not None else None) or 0.0)
+    resp = float((noise.response_rms if noise is not None else None) or 0.0) * dcm.noise_gain() / abs(gain)
     draws = 0.0 if not peak else float(peak["u_draws"]) / abs(float(peak["value"]))
     return 100.0 * math.sqrt((ref / check.reference_peak_m_s2) ** 2 + (resp / check.reference_peak_m_s2) ** 2
                              + draws**2)
@@ -302,7 +305,7 @@ class ShotCompensation:
         }
 
 
-    def with_draws(self, identification: Any, record: Record, draws: Sequence[DiscreteModel],
+    def with_draws(self, identification: Identification, record: Record, draws: Sequence[DiscreteModel],
                    seed: int | None = None) -> ShotCompensation:
         """The same, with the compensated peak's interval from the uncertainty's model draws
         (UncertaintyResult.model_draws); a failure is a warning, never a failed shot."""
@@ -310,7 +313,7 @@ class ShotCompensation:
             return self
         model = identification.model
         rec, _ = to_rate(record, 1.0 / model.sample_interval_s)
-        noise = (getattr(identification, "noise", None) or {}).get("response_rms")
+        noise = identification.noise.response_rms
         try:
             peak = compensated_peak(rec, model, self.design.dcm, float(identification.delay_samples),
                                     draws, noise, seed)
@@ -319,7 +322,7 @@ class ShotCompensation:
         return replace(self, compensated_peak=peak)
 
 
-def compensate_shot(identification: Any, record: Record, options: AnalysisOptions,
+def compensate_shot(identification: Identification, record: Record, options: AnalysisOptions,
                     draws: Sequence[DiscreteModel] = (), seed: int | None = None) -> ShotCompensation:
     """Design the DCM the shot supports, check it on the shot, give the compensated peak its
     interval (with model draws) and judge it. A failed check is a warning, never a failed shot."""
@@ -338,8 +341,7 @@ def compensate_shot(identification: Any, record: Record, options: AnalysisOption
     result = ShotCompensation(design, check, None, None, None, tuple(warnings)).with_draws(
         identification, record, draws, seed)
     if check is not None:
-        noise = getattr(identification, "noise", None)
-        u = peak_error_u_pct(check, design.dcm, model.dc_gain, noise, result.compensated_peak)
+        u = peak_error_u_pct(check, design.dcm, model.dc_gain, identification.noise, result.compensated_peak)
         check = replace(check, peak_error_u_pct=u)
     recommended, reason = recommendation(design, check)
     more = (f"DCM not recommended for this shot: {reason}",) if recommended is False else ()

@@ -122,7 +122,7 @@ class ShotSupport:
         """From an analysis.identify.Identification (and the record at the model's rate, for
         the response's own signal-to-noise band and the pulse)."""
         top = None
-        rms = (getattr(ident, "noise", None) or {}).get("response_rms")
+        rms = ident.noise.response_rms
         if record is not None and rms:
             top = response_band_top_hz(record, ident.model, float(rms))
         pulse = None if record is None else pulse_of(record)

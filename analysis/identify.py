@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.evidence import DelayBranch, LeadIn, NoiseReport, OrderEvidence
 from hopkinson.analysis.excitation import SupportedBand
 from hopkinson.analysis.findings import Finding, texts
 from hopkinson.analysis.identify_stages import (
@@ -43,6 +44,8 @@ from hopkinson.analysis.model import DiscreteModel, complex_pairs
 from hopkinson.analysis.model_error import ModelError
 from hopkinson.analysis.modes import Mode, main_mode, resonance_above_hz
 from hopkinson.analysis.options import AnalysisOptions
+from hopkinson.analysis.order_choice import OrderStability
+from hopkinson.analysis.preprocessing import Preprocessing
 from hopkinson.analysis.record_preparation import Prepared, PreparedRecord, prepare_record
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.spectral_data import SineTerms
@@ -84,9 +87,9 @@ class Identification:
     aic_by_order: list[float]  # on V
     bic_by_order: list[float]
     trail: Trail  # what decided it, stage by stage (`hopkinson identify --explain`)
-    preprocessing: dict[str, Any] = field(default_factory=dict)
-    noise: dict[str, Any] = field(default_factory=dict)  # reference_rms, response_rms (channel units)
-    order_evidence: dict[str, Any] = field(default_factory=dict)  # why this order
+    preprocessing: Preprocessing  # how the record was prepared
+    noise: NoiseReport  # the channels' noise levels (channel units), the residual, the model error
+    order_evidence: OrderEvidence  # why this order
     input_terms: dict[str, Any] = field(default_factory=dict)  # what the input terms found (input_terms.term_summary)
     sine_joint: Any = None  # analysis.sine_joint.SineJoint when fitted with a sine calibration
 
@@ -179,10 +182,8 @@ class Identification:
         """This identification with the order choice's stability measured on `draws` noise draws
         (`fraction_by_order`: order -> share of the draws that chose it); unchanged where the
         settle stage measured it already."""
-        if "stability" in self.order_evidence:
-            return self
-        stability = {"draws": draws, "fraction_by_order": dict(fraction_by_order)}
-        return replace(self, order_evidence={**self.order_evidence, "stability": stability})
+        evidence = self.order_evidence.with_stability(OrderStability(draws, dict(fraction_by_order)))
+        return self if evidence is self.order_evidence else replace(self, order_evidence=evidence)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready fields: the model JSON (docs/files-and-formats.md) plus the fit details; inf/NaN → None."""
@@ -200,14 +201,14 @@ class Identification:
                 "converged": self.converged,
                 "iterations": self.iterations,
                 "warnings": self.warnings,
-                "preprocessing": dict(self.preprocessing),
+                "preprocessing": self.preprocessing.to_dict(),
                 "main_mode": self.main_mode.to_dict() if self.main_mode is not None else None,
                 "supported_band_hz": list(self.supported_band_hz) if self.supported_band_hz else None,
                 "supported_band": self.supported_band.to_dict() if self.supported_band else None,
                 "nonminimum_phase_zeros": complex_pairs(self.model.nonminimum_phase_zeros),
                 "resonance_above_hz": self.resonance_above_hz,
-                "noise": dict(self.noise),
-                "order_evidence": jsonable(self.order_evidence),
+                "noise": self.noise.to_dict(),
+                "order_evidence": jsonable(self.order_evidence.to_dict()),
                 "input_terms": jsonable(self.input_terms),
             }
         )
@@ -242,7 +243,7 @@ def identify(record: Record, options: AnalysisOptions | None = None, *, sine_ter
         cut = result.claim.band_cut
     again = _identify(record, options, sine_terms, band_top_hz=cut.top_hz)
     return replace(again, findings=(cut.finding, *again.findings),
-                   preprocessing={**again.preprocessing, "band_cut": cut.to_dict()})
+                   preprocessing=replace(again.preprocessing, band_cut=cut))
 
 
 def _identify(record: Record, options: AnalysisOptions, sine_terms: SineTerms | None,
@@ -287,8 +288,7 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
     noise and where it was measured, the order's evidence, the input terms)."""
     prep, setup, data = weighed.prep, settlement.setup, settlement.data
     sweep, final, n_max = settlement.sweep, settlement.final, setup.n_max
-    pre = dict(prepared.preprocessing)
-    pre["response_offset_fitted"] = float(np.mean(claimed.residual) * prepared.scale_y)
+    pre = replace(prepared.preprocessing, response_offset_fitted=float(np.mean(claimed.residual) * prepared.scale_y))
     loss_list = [sweep.fits[n].cost if n in sweep.fits else math.nan for n in range(1, n_max + 1)]
     aic, bic = _information_criteria(loss_list, [sweep.parameters.get(n, 0) for n in range(1, n_max + 1)], data.bins)
     arx_u, arx_y = remove_input_delay(prepared.u_all, prepared.y_all, int(math.floor(final.delay)))
@@ -298,27 +298,23 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
         arx_losses = [math.nan] * n_max
     info = {"loss_by_order": loss_list, "fit_percent": claimed.fit_percent, "converged": final.converged}
     claimed = replace(claimed, model=replace(claimed.model, info={**claimed.model.info, **info}))
-    evidence: dict[str, Any] = {}
-    if settlement.stability is not None:
-        evidence["stability"] = settlement.stability
-    if settlement.settled.unstable_when_converged:
-        evidence["unstable_when_converged"] = settlement.settled.unstable_when_converged
-    if settlement.others:
-        evidence["delay_branches"] = [{"delay_samples": f.delay - prepared.realigned_samples, "cost": f.cost}
-                                      for f in [final, *settlement.others]]
-    evidence.update({
-        "comparisons": sweep.comparisons,
-        "structure": sweep.structure.value,
-        "structure_reason": sweep.why,
-        "criterion": order_criterion(setup.significance),
-        "chosen": sweep.chosen,
-        "selection": settlement.settled.selection,
-        "bins": data.bins,
-        "parameters_by_order": {str(n): sweep.parameters[n] for n in sorted(sweep.parameters)},
-        "cost_by_order": {str(n): sweep.fits[n].cost for n in sorted(sweep.fits)},
-        "response_change_to_next_order": {str(n): sweep.changes[(n, n + 1)] for n in sorted(sweep.fits)
-                                          if (n, n + 1) in sweep.changes},
-    })
+    evidence = OrderEvidence(
+        comparisons=sweep.comparisons,
+        structure=sweep.structure,
+        structure_reason=sweep.why,
+        criterion=order_criterion(setup.significance),
+        chosen=sweep.chosen,
+        selection=settlement.settled.selection,
+        bins=data.bins,
+        parameters_by_order={n: sweep.parameters[n] for n in sorted(sweep.parameters)},
+        cost_by_order={n: sweep.fits[n].cost for n in sorted(sweep.fits)},
+        response_change_to_next_order={n: sweep.changes[(n, n + 1)] for n in sorted(sweep.fits)
+                                       if (n, n + 1) in sweep.changes},
+        settled_stability=settlement.stability,
+        unstable_when_converged=tuple(settlement.settled.unstable_when_converged),
+        delay_branches=tuple(DelayBranch(f.delay - prepared.realigned_samples, f.cost)
+                             for f in [final, *settlement.others]) if settlement.others else (),
+    )
     findings = (*prepared.findings, *search.findings, *settlement.findings, *claimed.findings)
     levels = NoiseLevels.of(prepared, claimed.response_noise)
     trail = stage_trail(prepared, settlement, claimed, levels,
@@ -332,20 +328,15 @@ def _identification(prepared: PreparedRecord, search: OrderSearch, weighed: Weig
 
 
 def _noise_report(prepared: PreparedRecord, levels: NoiseLevels, claimed: Claim, model_error: ModelError
-                  ) -> dict[str, Any]:
+                  ) -> NoiseReport:
     """The noise levels (channel units) and where they were measured, the residual, the model
     error and the motion left out of the noise."""
     prep, rec = prepared.prep, prepared.record
     dt = rec.sample_interval_s
-    return {
-        **levels.to_dict(),
-        "residual_rms": float(np.std(claimed.residual) * prepared.scale_y),
-        "v_per_degree_of_freedom": claimed.v_per_dof,
-        "model_error": model_error.to_dict(),
-        "lead_in": {"start_s": rec.start_time_s, "stop_s": rec.start_time_s + prep.activity.lead_in * dt,
-                    "to_foot": prep.activity.lead_in_to_foot} if prep.activity.lead_in else None,
-        "motion_after_pulse": [m.to_dict() for m in stretches_after_pulse(prepared)],
-    }
+    lead_in = LeadIn(rec.start_time_s, rec.start_time_s + prep.activity.lead_in * dt,
+                     prep.activity.lead_in_to_foot) if prep.activity.lead_in else None
+    return NoiseReport(levels, float(np.std(claimed.residual) * prepared.scale_y), claimed.v_per_dof, model_error,
+                       lead_in, tuple(stretches_after_pulse(prepared)))
 
 
 # ------------------------------------------------------------------------------ helpers

@@ -32,7 +32,7 @@ from hopkinson.analysis.noise import NoiseSpectrum
 from hopkinson.analysis.numerics import f_quantile
 from hopkinson.analysis.onset_choice import onset_beyond_the_model_error, onset_fitted
 from hopkinson.analysis.options import AnalysisOptions
-from hopkinson.analysis.order_choice import choose_order
+from hopkinson.analysis.order_choice import OrderStability, choose_order
 from hopkinson.analysis.order_search import (
     OrderSweep,
     SearchSetup,
@@ -103,7 +103,7 @@ class Settlement:
     final: OrderFit
     others: list[OrderFit]
     model_error: ModelError
-    stability: dict[str, Any] | None = None  # the order choice re-run on noise draws (stability_draws)
+    stability: OrderStability | None = None  # the order choice re-run on noise draws (stability_draws)
     findings: tuple[Finding, ...] = ()
 
     @property

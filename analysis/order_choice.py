@@ -37,6 +37,18 @@ FRF_TOLERANCE = 1e-3
 ORDER_STABILITY_WARNING = 0.5
 
 
+@dataclass(frozen=True)
+class OrderStability:
+    """The order choice re-run on `draws` noise draws: order (as text) -> share of the draws
+    that chose it."""
+
+    draws: int
+    fraction_by_order: dict[str, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"draws": self.draws, "fraction_by_order": self.fraction_by_order}
+
+
 def choose_order(
     costs: dict[int, float],
     parameters: dict[int, int],

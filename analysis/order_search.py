@@ -33,6 +33,7 @@ from hopkinson.analysis.modes import ModeKind, has_doublet, modes_of
 from hopkinson.analysis.order_choice import (
     ORDER_STABILITY_WARNING,
     NoiseDraws,
+    OrderStability,
     Refitter,
     candidates_around,
     choose_order,
@@ -402,7 +403,7 @@ def best_delay_branch(sweep: OrderSweep, order: int, data: SpectralData, setup: 
 
 
 def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSweep, setup: SearchSetup, draws: int
-                             ) -> tuple[dict[str, Any], tuple[Finding, ...]]:
+                             ) -> tuple[OrderStability, tuple[Finding, ...]]:
     """Stability of the order test's choice across resampled noise: the test re-run on the chosen
     model's response with fresh noise of the record's own level (a parametric bootstrap;
     analysis.uncertainty does the same for the order's PDF and reports it). Below
@@ -424,7 +425,7 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
             f"fresh noise of the same level gives {fractions_text(fractions)}; the uncertainty includes the "
             "other orders"
         ),)
-    return {"draws": draws, "fraction_by_order": {str(m): v for m, v in fractions.items()}}, findings
+    return OrderStability(draws, {str(m): v for m, v in fractions.items()}), findings
 
 
 def _lead_hint(setup: SearchSetup) -> str:

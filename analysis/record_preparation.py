@@ -34,6 +34,7 @@ from hopkinson.analysis.noise import (
     first_motion,
 )
 from hopkinson.analysis.numerics import next_fast_len
+from hopkinson.analysis.preprocessing import DriftLine, Preprocessing
 from hopkinson.analysis.pulse_location import MIN_QUIET, Activity, locate_pulse
 from hopkinson.analysis.records import Record
 from hopkinson.analysis.resample import estimate_delay_samples, resample_to_rate
@@ -168,7 +169,7 @@ class PreparedRecord:
     scale_y: float
     u_all: np.ndarray  # each whole channel normalised, its median removed (the ARX losses' input)
     y_all: np.ndarray
-    preprocessing: dict[str, Any]
+    preprocessing: Preprocessing
     alignment: Alignment = field(default_factory=Alignment)  # what `realigned` did
     findings: tuple[Finding, ...] = ()  # the noise's and the band's, in that order
 
@@ -190,17 +191,11 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     claims.delay_findings says so), check and scale both channels, and run the prepare, noise
     and band stages (the band capped at `band_top_hz`: identify's cut); their findings in
     `findings`."""
-    pre: dict[str, Any] = {"record_sample_rate_hz": record.sample_rate_hz}
     rec = record if sample_rate_hz is None else resample_to_rate(record, sample_rate_hz)
-    if rec is not record:
-        pre["resampled_to_hz"] = rec.sample_rate_hz
+    resampled_to_hz = rec.sample_rate_hz if rec is not record else None
     alignment = Alignment()
     if realign:  # (a channel with a NaN is not realigned: checked_channels below refuses it)
         rec, alignment = realigned(rec, max_delay)
-        if alignment.lead:
-            pre["response_lead_by_cross_correlation_samples"] = alignment.lead
-        if alignment.shift:
-            pre["response_realigned_samples"] = alignment.shift
     shift = alignment.shift
     ref, resp = checked_channels(rec)
     dt = rec.sample_interval_s
@@ -217,26 +212,29 @@ def prepare_record(record: Record, sample_rate_hz: float | None, n_max: int, ord
     activity = locate_pulse(u_all, y_all, dt, max_delay)
     noise = measure_noise(activity, dt)
     prep = fitted_band(activity, noise, dt, band_top_hz)
-    pre.update(
-        {
-            "reference_baseline": float(np.median(ref) + prep.activity.baseline_u * scale_u),
-            "response_baseline": float(np.median(resp) + prep.activity.baseline_y * scale_y),
-            "baseline_removed": True,
-            "drift_removed": prep.noise.drift_removed,
-            # What was taken off each channel, in its own units, at time t of the record:
-            # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
-            # (the response, realigned, starts `shift` samples before the record: `realigned`)
-            **{f"{name}_drift": {"intercept": line[1] * scale, "slope_per_s": line[0] * scale / dt,
-                                 "origin_s": rec.start_time_s - (shift * dt if name == "response" else 0.0)}
-               for (name, line), scale in zip(prep.noise.drift_lines.items(), (scale_u, scale_y), strict=True)},
-            "window_start_s": rec.start_time_s + prep.start * dt,
-            "window_samples": int(prep.u.size),
-            "fitted_bins": prep.spectral.bins,
-            "bin_group": prep.group,
-            "transient_term": prep.spectral.transient,
-            "scale_reference": scale_u,
-            "scale_response": scale_y,
-        }
+    # What was taken off each channel, in its own units, at time t of the record:
+    # <channel>_baseline + intercept + slope_per_s · (t − origin_s): the report redoes it.
+    # (the response, realigned, starts `shift` samples before the record: `realigned`)
+    drift = {name: DriftLine(line[1] * scale, line[0] * scale / dt,
+                             rec.start_time_s - (shift * dt if name == "response" else 0.0))
+             for (name, line), scale in zip(prep.noise.drift_lines.items(), (scale_u, scale_y), strict=True)}
+    pre = Preprocessing(
+        record_sample_rate_hz=record.sample_rate_hz,
+        resampled_to_hz=resampled_to_hz,
+        response_lead_by_cross_correlation_samples=alignment.lead or None,
+        response_realigned_samples=alignment.shift or None,
+        reference_baseline=float(np.median(ref) + prep.activity.baseline_u * scale_u),
+        response_baseline=float(np.median(resp) + prep.activity.baseline_y * scale_y),
+        drift_removed=prep.noise.drift_removed,
+        reference_drift=drift["reference"],
+        response_drift=drift["response"],
+        window_start_s=rec.start_time_s + prep.start * dt,
+        window_samples=int(prep.u.size),
+        fitted_bins=prep.spectral.bins,
+        bin_group=prep.group,
+        transient_term=prep.spectral.transient,
+        scale_reference=scale_u,
+        scale_response=scale_y,
     )
     return PreparedRecord(rec, prep, scale_u, scale_y, u_all, y_all, pre, alignment, noise.findings + prep.findings)
 

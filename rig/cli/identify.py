@@ -59,10 +59,9 @@ def _summary(report: dict[str, Any], result: Identification) -> str:
     figures = KeyFigures.from_results({"model": report, "identification": report, "fbsd_hz": report["fbsd_hz"],
                                        "fbsd_bounds": report["fbsd_bounds"], "uncertainty": unc})
     how = ORDER_SELECTION_TEXT.get(result.order_selection, result.order_selection)
-    stability = (result.order_evidence.get("stability") or {}).get("fraction_by_order") or {}
-    if str(result.order) in stability:
-        how += f", chosen in {stability[str(result.order)]:.0%} of {result.order_evidence['stability']['draws']} " \
-               "noise draws"
+    stability = result.order_evidence.stability
+    if stability is not None and str(result.order) in stability.fraction_by_order:
+        how += f", chosen in {stability.fraction_by_order[str(result.order)]:.0%} of {stability.draws} noise draws"
     dt = result.sample_interval_s
     lines = [
         f"{report['source']}: order {result.order} ({how}), fit {result.fit_percent:.2f} %, sample interval "

@@ -242,7 +242,7 @@ def test_record_at_10_ms_per_s_is_resampled_to_the_analysis_rate(noise: str) -> 
     record = make_record(TWO_RESONANCES, half_sine(n=100_000, dt=dt, start_s=200e-6), noise, seed=3, dt=dt)
     result = identify(record)  # default analysis rate 1 MS/s
     assert result.sample_interval_s == pytest.approx(1e-6)
-    assert result.preprocessing["resampled_to_hz"] == pytest.approx(1e6)
+    assert result.preprocessing.resampled_to_hz == pytest.approx(1e6)
     assert result.order == 4
     assert_matches_truth(result, TWO_RESONANCES, noise)
     # Another analysis rate (--sample-rate) gives the poles of that rate: exp(s·T) at T = 0.5 µs.

@@ -94,8 +94,8 @@ def test_locate_pulse_finds_the_pulse_and_its_window():
 def test_prepare_record_removes_each_channels_baseline():
     u, y = channels()
     pre = prepare_record(Record(DT, u + 0.3, y - 0.2), None, 8, None, 32).preprocessing
-    assert pre["reference_baseline"] == pytest.approx(0.3, abs=3 * SIGMA_U)
-    assert pre["response_baseline"] == pytest.approx(-0.2, abs=0.01)
+    assert pre.reference_baseline == pytest.approx(0.3, abs=3 * SIGMA_U)
+    assert pre.response_baseline == pytest.approx(-0.2, abs=0.01)
 
 
 def test_a_response_leading_by_many_samples_is_realigned_and_the_model_keeps_the_lead():

@@ -59,6 +59,6 @@ def test_the_response_noise_of_a_ringing_sensor_is_its_noise_not_its_ringing() -
         ident = identify(raw)
         true_u = float(np.std(at_rate.reference - clean.reference))
         true_y = float(np.std(at_rate.response - clean.response))
-        ratios.append((ident.noise["reference_rms"] / true_u, ident.noise["response_rms"] / true_y))
+        ratios.append((ident.noise.reference_rms / true_u, ident.noise.response_rms / true_y))
     mean = np.mean(ratios, axis=0)
     assert mean[0] == pytest.approx(1.0, abs=0.05) and mean[1] == pytest.approx(1.0, abs=0.05), mean

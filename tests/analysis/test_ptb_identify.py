@@ -77,16 +77,16 @@ def test_motion_after_the_pulse_is_not_taken_as_noise(ptb):
     after it (11.8× before issue 17): on a log scale it lies nearer the lead-in's standard
     deviation than the motion's, both read here from the record itself."""
     noise = ptb.identification.noise
-    assert noise["motion_after_pulse"], "the coherent motion after the pulse was not detected"
+    assert noise.motion_after_pulse, "the coherent motion after the pulse was not detected"
     rec = ptb_record()
     t = rec.time_s - rec.time_s[0]
     lead_in = float(np.std(rec.reference[t < 0.2e-3]))  # before the pulse's foot (beyond 0.3 ms)
     motion = float(np.std(rec.reference[t >= 1.0e-3]))  # the pulse over, the bar still moving
-    assert abs(math.log(noise["reference_rms"] / lead_in)) < abs(math.log(noise["reference_rms"] / motion))
+    assert abs(math.log(noise.reference_rms / lead_in)) < abs(math.log(noise.reference_rms / motion))
 
 
 def test_the_model_error_is_detected_and_sized(ptb):
-    error = ptb.identification.noise["model_error"]
+    error = ptb.identification.noise.model_error.to_dict()
     assert error["detected"]
     assert 0.25 < error["rms_percent_of_peak"] < 3.0  # issue 17 measured 1–2 % of the peak
     assert any("model error" in w for w in ptb.warnings)
@@ -116,7 +116,7 @@ def test_the_model_follows_the_sine_calibration(ptb):
     (issue 17)."""
     from hopkinson.analysis.sine_comparison import compare_sine
 
-    assert ptb.identification.order_evidence["structure"] == "all_pole"
+    assert ptb.identification.order_evidence.structure == "all_pole"
     sine = ptb_sine()
     comparison = compare_sine(ptb.model, sine)
     u = np.hypot(sine.u_magnitude_rel, sine.u_magnitude_rel[0])
@@ -277,8 +277,8 @@ def test_a_hybrids_mode_is_claimed_between_the_nulls(analyses, case):
 
 def test_a_hybrid_with_the_real_reference_is_recovered(analyses):
     ident = hybrid(analyses, "clean", HYBRID_SEEDS[0]).identification
-    assert ident.noise["motion_after_pulse"]  # the real reference's motion, seen by both channels
-    assert not ident.noise["model_error"]["detected"]  # a linear sensor: nothing beyond the noise
+    assert ident.noise.motion_after_pulse  # the real reference's motion, seen by both channels
+    assert not ident.noise.model_error.significant  # a linear sensor: nothing beyond the noise
 
 
 @pytest.mark.parametrize("case", ["lobe", "lobe x0.25", "lobe x2"])
@@ -290,7 +290,7 @@ def test_a_lobe_dependent_gain_is_measured_as_the_asymmetry(analyses, case):
     at the measured asymmetry and twice it, is narrower than the asymmetry it measures (its
     containment is counted above)."""
     tension, compression = HYBRIDS[case][1]
-    assert not hybrid(analyses, case, HYBRID_SEEDS[0]).identification.noise["model_error"]["detected"]
+    assert not hybrid(analyses, case, HYBRID_SEEDS[0]).identification.noise.model_error.significant
     for seed in HYBRID_SEEDS:
         u = hybrid(analyses, case, seed).uncertainty
         lo, hi = u["input_terms"]["asymmetry"]["interval"]
@@ -350,7 +350,7 @@ def test_motion_that_differs_between_the_channels_is_corrected_and_carried(analy
     from the pulse's end on) takes most of it (γ below zero, above the −0.25 injected on a window
     the term does not share), what it cannot follow is model error (not noise); its intervals'
     containment of the known sensor is counted above."""
-    assert hybrid(analyses, "motion", HYBRID_SEEDS[0]).identification.noise["model_error"]["detected"]
+    assert hybrid(analyses, "motion", HYBRID_SEEDS[0]).identification.noise.model_error.significant
     for seed in HYBRID_SEEDS:
         lo, hi = hybrid(analyses, "motion", seed).uncertainty["input_terms"]["motion after the pulse"]["interval"]
         assert -0.25 < lo <= hi < 0.0, (seed, lo, hi)

@@ -45,7 +45,7 @@ def test_a_drifting_response_is_detrended_not_fitted_with_spare_low_frequency_po
     truth = truth_figures(PIEZO)
     ident = identify(record(PIEZO, seed))
     assert not any("record ends before" in w for w in ident.warnings)
-    assert ident.preprocessing["response_drift"]["slope_per_s"] != 0.0
+    assert ident.preprocessing.response_drift.slope_per_s != 0.0
     assert all(m["natural_frequency_hz"] > 20_000.0 for m in ident.modes)
     # The pulse leaves the resonance nearly unexcited: claimed only as what it is, or flagged.
     main = ident.main_mode

@@ -56,14 +56,14 @@ def test_motion_measured_as_noise_all_the_same_says_so():
 
 def test_the_identification_is_frozen_and_the_uncertainty_gives_a_new_one(ident):
     with pytest.raises(dataclasses.FrozenInstanceError):
-        ident.order_evidence = {}  # type: ignore[misc]
+        ident.order_evidence = None  # type: ignore[misc]
     with pytest.raises(dataclasses.FrozenInstanceError):
         ident.settlement.sweep.why = "changed"  # type: ignore[misc]
     before = ident.to_dict()
     fitted = with_uncertainty(ident, AnalysisOptions(draws=40, seed=1))
     assert ident.to_dict() == before  # the identification at hand (a session cache's) is left as it was
-    assert "stability" not in ident.order_evidence
-    stability = fitted.identification.order_evidence["stability"]
-    assert stability["draws"] == fitted.uncertainty["order"]["draws"] > 0
-    assert stability["fraction_by_order"] == fitted.uncertainty["order"]["fraction_by_order"]
+    assert ident.order_evidence.stability is None
+    stability = fitted.identification.order_evidence.stability
+    assert stability.draws == fitted.uncertainty["order"]["draws"] > 0
+    assert stability.fraction_by_order == fitted.uncertainty["order"]["fraction_by_order"]
     assert fitted.identification.trail is ident.trail

@@ -62,7 +62,7 @@ def shots() -> dict[str, object]:
     model_error = []
     for shot in range(SHOTS):
         ident = identify(record(CASE, 1000 + shot))
-        model_error.append(ident.noise["model_error"])
+        model_error.append(ident.noise.model_error.to_dict())
         result = evaluate(ident, AnalysisOptions(draws=DRAWS, order_draws=ORDER_DRAWS, seed=shot, **NO_CHAIN))
         for name, e in _figures(result).items():
             row = out.setdefault(name, {"value": [], "lo": [], "hi": [], "u": []})
