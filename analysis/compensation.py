@@ -1,5 +1,5 @@
 """A DCM applied to records: every shot's check of its own compensation, the compensated peak
-with its uncertainty, and records brought to a DCM's rate (issue 11).
+with its uncertainty, and records brought to a DCM's rate.
 
 The check compensates the shot's own response and compares both estimates of the
 acceleration with the reference over the pulse window (the main pulse widened by two pulse
@@ -71,7 +71,7 @@ if TYPE_CHECKING:
 # counts as worse: below it the difference is within what the reference's own noise moves.
 PEAK_TOLERANCE_PCT = 0.5
 # A DCM whose compensated peak may lie further than this from the reference's (with U) is not
-# recommended (issue 40 item 6).
+# recommended (per cent of the reference's peak).
 PEAK_LIMIT_PCT = 5.0
 COVERAGE = 0.95
 
@@ -295,7 +295,7 @@ class ShotCompensation:
     warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The issue-11 keys of the results' "dcm" object (CONTRACTS)."""
+        """The keys of the results' "dcm" object this check gives (docs/files-and-formats.md)."""
         return {
             **self.design.to_dict(),
             "recommended": self.recommended,

@@ -1,5 +1,5 @@
 """The DCM a shot supports: which poles it cancels, the automatic ratio, the band limit, the
-noise-gain bound and the latency (issue 11). analysis.dcm holds the paper's design itself.
+noise-gain bound and the latency. analysis.dcm holds the paper's design itself.
 
 - **Cancelled poles.** Only modes the excitation supports (Identification.modes[i]["supported"]);
   never a pole at the origin, a negative real pole (at Nyquist: a discretisation artefact), a
@@ -323,7 +323,7 @@ def choose_band_limit(support: ShotSupport, asked_hz: float | None) -> BandLimit
 
 @dataclass(frozen=True)
 class DcmDesign:
-    """A DCM designed for a shot, with the figures issue 11 asks to report. `ratio_choice`: how
+    """A DCM designed for a shot, with the figures the results report. `ratio_choice`: how
     the automatic ratio was chosen (None: r given, or nothing to cancel)."""
 
     dcm: DCM
@@ -355,7 +355,7 @@ class DcmDesign:
         return self.dcm.latency_s
 
     def to_dict(self) -> dict[str, Any]:
-        """The design figures of the results' "dcm" object (issue 11 / CONTRACTS keys)."""
+        """The design figures of the results' "dcm" object (docs/files-and-formats.md)."""
         choice = self.ratio_choice
         error = None if choice is None or choice.peak_error is None else 100.0 * choice.peak_error
         return {

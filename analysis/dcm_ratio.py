@@ -1,9 +1,8 @@
-"""The automatic response-time ratio r of a shot's DCM, sized to the pulse (issue 40 item 6).
+"""The automatic response-time ratio r of a shot's DCM, sized to the pulse.
 
-The paper leaves r to its user (Eq. 40: T'_rr = T'_r1 / r). A fixed widening of the model's
-±5 % band (×3 until issue 40) ignores what the DCM is for: on a bar pulse whose content reaches
-60–70 kHz it stopped the compensated band near 20 kHz and lowered the pulse's compensated peak
-by 9 % even with a perfect model. The automatic choice, in this order of what the shot tells:
+The paper leaves r to its user (Eq. 40: T'_rr = T'_r1 / r); a fixed widening of the model's
+±5 % band ignores what the DCM is for (docs/decisions/0020). The automatic choice, in this
+order of what the shot tells:
 
 - **The pulse** (the shot's reference, `ShotPulse`): the smallest r beyond which widening no
   longer changes this pulse's compensated peak by more than PEAK_SETTLED (0.25 % of the peak),

@@ -1,5 +1,4 @@
-"""Which of a shot's figures the record determines, and why not where it does not (issue 40 item 3):
-a typed answer, never a number with an absurd interval.
+"""Which of a shot's figures the record determines, and why not where it does not: a typed answer, never a number with an absurd interval.
 
 A figure is not determined where:
 - its 95 % interval is wider than its value (U > DETERMINED_U_REL·|value|): the record does not

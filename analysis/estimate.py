@@ -109,10 +109,9 @@ class Estimate:
         is (the percentile interval); reflecting it would put that offset on the wrong side.
 
         `positive`: a figure bounded below by zero (a frequency, a damping ratio): reflected
-        about the value on a log scale (value²/draw), so the interval stays inside the bound
-        (issue 17: a reflected f_n interval read [−8.9, 19.9] kHz). `signed`: a figure that keeps
-        its value's sign (a DC gain): its magnitude is treated as `positive`, so the interval
-        never crosses zero (issue 40: a DC gain of 1.25 read [−728, 0.295]).
+        about the value on a log scale (value²/draw), so the interval stays inside the bound.
+        `signed`: a figure that keeps its value's sign (a DC gain): its magnitude is treated as
+        `positive`, so the interval never crosses zero (docs/decisions/0021).
 
         The interval always contains `value`: where the draws lie all on one side of it (they do
         not bracket the estimate), the interval is extended to it."""

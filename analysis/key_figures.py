@@ -69,7 +69,7 @@ class KeyFigures:
     coverage_probability: float | None
     budget: tuple[dict[str, Any], ...]
     warnings: tuple[str, ...] = field(default_factory=tuple)
-    # The DCM's design figures (issue 11; analysis.dcm_design): the ±5 % band widening aimed for
+    # The DCM's design figures (analysis.dcm_design): the ±5 % band widening aimed for
     # and reached (and why not), its white-noise gain and limit, its band limit, its latency.
     dcm_target_widening: float | None = None
     dcm_reached_widening: float | None = None

@@ -5,8 +5,7 @@ Model: S(a) = S₀·(1 + c·a), S one shot's sensitivity and a the amplitude it 
 The campaign (reports.statistics) gives each shot's quasi-static gain in the main pulse's
 direction at the amplitude it is measured at (analysis.static_gain): a sensitivity that means the
 same at every level, where a peak ratio S_sh reads the resonance's ringing on pulses that excite it
-(issue 40: a linear simulated sensor read −1.0 ± 0.75 % by S_sh) and a model's DC gain gives part
-of a non-linearity to the fitted dynamics. Fitted as S = β₀ + β₁·a by weighted least squares with weights 1/u(S)²
+and a model's DC gain gives part of a non-linearity to the fitted dynamics (docs/decisions/0023). Fitted as S = β₀ + β₁·a by weighted least squares with weights 1/u(S)²
 (each shot's standard uncertainty); c = β₁/β₀ with its standard uncertainty by first-order
 propagation through the fit's covariance. When the points scatter more than their
 uncertainties say (Birge ratio R = √(χ²/(n − 2)) > 1, e.g. a repeatability the shots' own Monte

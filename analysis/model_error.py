@@ -30,19 +30,11 @@ from hopkinson.analysis.jsonable import jsonable
 from hopkinson.analysis.record_preparation import Prepared
 from hopkinson.analysis.spectral_data import SpectralData
 
-# Model error is taken as detected when the residual exceeds this many times what the noise
-# explains. A right model reads about 1: the coverage study's simulated shots median 0.69, 139
-# of 140 below 1.4, one 3.2 (its response noise measured on 91 samples: a false alarm, ~1 %);
-# the simulated rig's Doppler shots 0.56-2.3, one of 8 seeds 10 (the demodulation's own error);
-# PTB's record reads 17 900×, its hybrids 5-120×. It was 4 until stop 35: PTB's record with 1 %
-# of its peak of added noise (each seed another noise) reads 2.2-8×, its real model error partly
-# masked by the noise, and at 2.2-3.8× it went undetected: then a spurious resonance near the
-# band's top (the ±5 % edge at 16.8 kHz, the sine's 11.4), a mode claimed inside the band, or
-# intervals drawn from the noise alone missed the sine on 6 of 20 seeds; none do at 2 (1.5).
+# Model error is detected when the residual exceeds this many times what the noise explains (a
+# right model reads about 1; docs/decisions/0013) ...
 MODEL_ERROR_DETECTED = 2.0
-# ... and this many times when the fit it is measured on holds a pole–zero doublet: the doublet is
-# itself a sign of a ripple the model follows (issue 17: PTB's record with 0.5 % more noise read
-# 3.0×, its order-4 fit a doublet at 16 kHz); above what a right model reads but for the rare one.
+# ... and this many times when the fit it is measured on holds a pole–zero doublet (itself a sign
+# of a ripple the model follows).
 MODEL_ERROR_WITH_DOUBLET = 1.5
 # The exponents β its spectrum c·|U|^(2β) may take (0: independent of the drive; 1: in proportion).
 MODEL_ERROR_EXPONENTS = np.linspace(0.0, 2.0, 9)
@@ -55,7 +47,7 @@ MODEL_ERROR_MIN_BINS = 5
 class ModelError:
     """The residual the noise does not explain (normalised units): what no model of the
     chosen order follows — a second drive path, a lobe-dependent gain, motion of the bar after
-    the pulse (issue 17). It is weighed in the fit and drawn in the Monte Carlo like an output
+    the pulse. It is weighed in the fit and drawn in the Monte Carlo like an output
     noise of its spectrum c·|U|^(2β) (a circular Gaussian per bin): an error of the model
     is not repeatable noise, but it is what the record leaves unexplained at each frequency,
     and drawing it is how its size reaches every figure's interval (the budget's "model

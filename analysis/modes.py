@@ -120,8 +120,8 @@ def modes_of(
 def mark_doublets(modes: list[Mode], zeros: np.ndarray) -> list[Mode]:
     """Each complex mode with `cancelled` (a zero within DOUBLET_DISTANCE of the pole's distance
     to the unit circle: a pole–zero doublet, whose effect on the response is at most that
-    fraction — the fit following a ripple of the data, not a resonance; issue 17's 17 kHz "main
-    mode" on PTB's record was one). A cancelled mode is not supported: it is no main mode and
+    fraction — the fit following a ripple of the data, not a resonance; docs/decisions/0013).
+    A cancelled mode is not supported: it is no main mode and
     no pole a DCM may cancel."""
     z = np.asarray(zeros, dtype=complex)
     out = []

@@ -244,10 +244,8 @@ def _levels_differ(p1: float, p2: float, dof1: float, dof2: float) -> bool:
     return abs(math.log(p1 / p2)) > 4.0 * math.sqrt(2.0 / dof1 + 2.0 / dof2)
 
 
-# Power-weighted magnitude-squared coherence above which a stretch after
-# the pulse carries motion of the bar seen by both channels, not noise (issue 17: PTB's record
-# moves at 1–2 % of the peak for > 1 ms after the pulse, coherence 0.88 below 25 kHz).
-# Independent noise gives ≈ 1/K over K averaged segments; the threshold is also at least 4/K.
+# Power-weighted magnitude-squared coherence above which a stretch after the pulse carries motion
+# of the bar seen by both channels, not noise (docs/decisions/0012). Independent noise gives ≈ 1/K over K averaged segments; the threshold is also at least 4/K.
 MOTION_COHERENCE = 0.25
 COHERENCE_SEGMENT = 64
 

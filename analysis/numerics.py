@@ -1,9 +1,8 @@
 """Small numerical tools the identification path needs, in NumPy and the standard library.
 
-Why not SciPy here: `hopkinson identify` must run in a tenth of the paper's literal QR scan,
-imports included (issue 10), and importing scipy.optimize, scipy.fft and scipy.special costs
-~0.4 s of the ~0.6 s allowed. Each tool below is a few lines of a textbook method, checked
-against SciPy's in tests/analysis/test_numerics.py:
+Why not SciPy here: docs/decisions/0022 (the start-up time of `hopkinson identify`). Each tool
+below is a few lines of a textbook method, checked against SciPy's in
+tests/analysis/test_numerics.py:
 
 - `levenberg_marquardt`: Marquardt's scaled damping with Nielsen's update (as MINPACK's lmder
   is used here: analytic Jacobian, stop on relative cost or step change);

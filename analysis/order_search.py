@@ -233,8 +233,7 @@ def cost_test_fit(sweep: OrderSweep, data: SpectralData, setup: SearchSetup) -> 
 def _candidate_cost(fit: OrderFit, data: SpectralData, setup: SearchSetup) -> float:
     """V of an order that is a candidate for the order test, else inf: an unstable or marginal
     order is none, nor one with a real pole far below the lowest fitted bin (the data cannot
-    place it; issue 17's lobe-gain hybrid used one at ~2 Hz to bend the lowest bins, and its DC
-    gain came out negative)."""
+    place it; docs/decisions/0011)."""
     candidate = acceptable(fit, data.bins) and not pole_below_band(fit, setup.lowest_bin_hz, setup.sample_interval_s)
     return fit.cost if candidate else math.inf
 

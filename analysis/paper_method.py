@@ -1,4 +1,4 @@
-"""The paper's identification, section 2.1 as written (issue 17 item 5): the reference a reader
+"""The paper's identification, section 2.1 as written: the reference a reader
 of the paper checks against, and what the default method (analysis.identify) is compared with.
 
 1. ARX, A(d⁻¹)·y(k) = B(d⁻¹)·u(k), by the QR decomposition of the augmented information matrix

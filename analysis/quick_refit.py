@@ -24,11 +24,9 @@ class QuickRefit:
 
     # Levenberg–Marquardt evaluations a draw that the quick iteration cannot settle may take: a
     # draw needs the optimum to the precision its noise sets, not to the last digit.
-    # Known limit (issue 17): where the data press an all-pole fit's damping beyond the band under
-    # ZETA_FLOOR (PTB's record: 373 of 400 draws), the quick iteration cannot settle and the
-    # draw stops here, on its way down the damping valley, not at an optimum; that stopping
-    # point's scatter is part of those records' intervals (settling such draws on the floor,
-    # branch wip/floored-refits, narrows PTB's FBSD intervals by 25-45 %).
+    # Known limit (docs/decisions/0014): where the data press an all-pole fit's damping beyond the
+    # band under ZETA_FLOOR, the quick iteration cannot settle and the draw stops here, short of an
+    # optimum; that stopping point's scatter is part of those records' intervals.
     fallback_evaluations = 20
 
     def __init__(self, data: SpectralData, fit: OrderFit, delay: str | float, max_delay: float) -> None:

@@ -50,7 +50,7 @@ if TYPE_CHECKING:  # the DCM's modules import scipy.signal: loaded where a DCM i
     # `hopkinson identify` (which makes none) starts without them
     from hopkinson.analysis.dcm import DCM
 
-# Keys of the results' "dcm" object that come from analysis.compensation (issue 11).
+# Keys of the results' "dcm" object that come from analysis.compensation.
 COMPENSATION_KEYS = ("target_widening", "reached_widening", "widening_note", "sized_to", "predicted_peak_error_pct",
                      "noise_gain", "noise_gain_limit", "band_limit_hz", "band_limit_reason", "latency_s", "recommended",
                      "not_recommended_reason", "check", "compensated_peak")

@@ -1,5 +1,5 @@
 """A shock-identified model checked against a sinusoidal calibration (ISO 16063-11/-21) of the
-same sensor, and what the DCM would make of the sensor the sine data describe (issue 11).
+same sensor, and what the DCM would make of the sensor the sine data describe.
 
 The sine file is a CSV with a header: frequency_hz, magnitude, phase_deg, and optionally
 u_magnitude_rel (relative standard uncertainty of the magnitude) and u_phase_deg. Magnitudes
@@ -15,10 +15,8 @@ At each frequency:
   shock record (plus any phase error of the model), which a sine calibration of the sensor
   alone does not have. The whole phase is what the shock record determines: τ and B's zeros
   share a flat valley of the fit's cost, and where the pulse barely reaches the phase that
-  tells them apart the fit puts a lag of a few samples in either (issue 10's rehearsed piezo
-  record: τ ≈ 0.4 or ≈ 3.1 samples at 1 MS/s by the noise, the whole phase the same to 1°).
-  The phase without τ, which moves with that split (22.6° at 20 kHz on the 3.1-sample
-  branch), is kept beside it as `phase_error_without_delay_deg`, with τ as `fitted_delay_s`;
+  tells them apart the fit puts a lag of a few samples in either (docs/decisions/0010).
+  The phase without τ, which moves with that split, is kept beside it as `phase_error_without_delay_deg`, with τ as `fitted_delay_s`;
   it is not a measure of the model;
 - consistent: |magnitude error| ≤ 2 × u (k = 2) when the file gives u, u the relative standard
   uncertainty of the NORMALISED point sine(f)/sine(f_ref): the point's stated u and the

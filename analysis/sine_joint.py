@@ -1,5 +1,5 @@
 """One model from a shock record and a sinusoidal calibration of the same sensor, and how well
-the two agree (issue 17, `hopkinson identify RECORD --sine SINE.csv`).
+the two agree (`hopkinson identify RECORD --sine SINE.csv`).
 
 The fit. The sine points join the shock's frequency-domain fit as extra residuals of the same
 model (spectral_data.SineTerms): at each point the complex log-error of κ·H(f)·e^{j2πfτ_s}

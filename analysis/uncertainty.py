@@ -51,8 +51,8 @@ MIN_GOOD_FRACTION = 0.9
 
 @dataclass
 class UncertaintyResult:
-    """The Monte Carlo result: figures, budget, order stability; `to_dict()` is the JSON
-    contract of issue 10 (plus the reference figures, the delay and the order evidence)."""
+    """The Monte Carlo result: figures, budget, order stability; `to_dict()` is the results'
+    "uncertainty" object (docs/files-and-formats.md)."""
 
     draws: int
     coverage_probability: float
@@ -258,7 +258,7 @@ def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tup
                    reflect: np.ndarray | None = None, points: int = BAND_POINTS,
                    systematic: list[tuple[DiscreteModel, ...]] | None = None, seed: int = 0) -> dict[str, Any] | None:
     """The model's frequency response with its 95 % band, from the same Monte Carlo draws as the
-    figures (issue 17): on a log grid from 100 Hz (or the band's start) to twice the supported
+    figures: on a log grid from 100 Hz (or the band's start) to twice the supported
     band's top (at most Nyquist), the magnitude relative to the DC gain (each draw relative to
     its own: what a sine calibration normalised at a low frequency compares with) and the whole
     phase in degrees (the fitted delay included), each as value, low and high. The band is the

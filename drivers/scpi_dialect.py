@@ -166,7 +166,7 @@ class DigitizerDialect:
         """Several message units as one message (one round trip)."""
         return self.separator.join(units)
 
-    # -- channels on or off (issue 21) ---------------------------------------------------------
+    # -- channels on or off ---------------------------------------------------------------------
     # An oscilloscope acquires only the channels that are on (displayed): after power-on or *RST
     # most have channel 1 alone on. A dialect whose instruments have that notion names its
     # command and query; `apply` turns on every channel the rig records and `read_settings`

@@ -62,7 +62,7 @@ class ShotEntry:
 
     @cached_property
     def compensation(self) -> CompensationCheck | None:
-        """How the DCM did on the shot itself (issue 11), None when the results do not say."""
+        """How the DCM did on the shot itself, None when the results do not say."""
         return CompensationCheck.of(self.key_figures) if self.key_figures is not None else None
 
 

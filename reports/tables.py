@@ -313,7 +313,7 @@ def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
     items = sorted(kf.budget, key=lambda b: -(_budget_share(b, "dc_gain") or 0.0))
     columns = [c for c in BUDGET_FIGURES if any(_budget_share(b, c[0]) is not None for b in items)
                and _reported(kf, c[2])]  # no column for a figure the shot does not report (an S_sh without S_sh)
-    kinds = any("kind" in b for b in items)  # results before issue 40 name no kind: no such column
+    kinds = any("kind" in b for b in items)  # older results name no kind: no such column
     header = ["source"] + (["type"] if kinds else []) + [label for _key, label, _attr in columns]
 
     def pct(value: float | None, largest: float = 0.0) -> str:
@@ -351,7 +351,7 @@ def _budget_share(item: dict[str, Any], key: str) -> float | None:
 
 
 def compensation_rows(entry: ShotEntry) -> list[tuple[str, str]]:
-    """The DCM's check on the shot itself (issue 11): errors before and with compensation, the
+    """The DCM's check on the shot itself: errors before and with compensation, the
     compensated band, the noise gain and band limit, the widening, the latency, the verdict."""
     check, kf = entry.compensation, entry.key_figures
     if check is None or kf is None:

@@ -1,4 +1,4 @@
-"""Automatic level control: the reservoir pressure for a campaign entry's target peak (issue 19).
+"""Automatic level control: the reservoir pressure for a campaign entry's target peak.
 
 A campaign entry may give `peak_m_s2` or `peak_g` instead of `pressure_bar`. Each of its shots is
 fired at a pressure chosen from what is known then:

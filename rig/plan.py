@@ -11,7 +11,7 @@ Example (config/campaigns/example.toml is the documented one)::
     model = "AYZ-3"
     serial = "SN0001"
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
-    transverse_sensitivity_rel = 0.05 # optional: its stated (datasheet) transverse sensitivity (issue 40; default 5 %)
+    transverse_sensitivity_rel = 0.05 # optional: its stated (datasheet) transverse sensitivity (default 5 %)
     sensitivity_unit = "µV/(m/s²)"    # optional: the unit results show it in (analysis.sensitivity_units)
     tolerance_percent = 5.0           # optional: the sensor's tolerance on its nominal (each shot's verdict)
     sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,

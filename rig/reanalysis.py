@@ -1,4 +1,4 @@
-"""Re-analysing stored shots with today's method (issue 18): `hopkinson analyse`, and how a lab
+"""Re-analysing stored shots with today's method: `hopkinson analyse`, and how a lab
 re-runs its archive after the method improves.
 
 A shot is re-analysed from its raw channels with the options it was first analysed with (the

@@ -280,8 +280,7 @@ def _atomic_write(final: Path, build: Callable[[h5py.File], None], seed: Path | 
 
     The file is built in memory and reaches the disk through plain os.write: HDF5 writing to a
     file that fills up (a full disk, a quota) fails inside its own clean-up, where h5py can only
-    print the error while the process goes on or crashes (a segfault on a 400 kB file system,
-    issue 18). In memory nothing can fail that way; the disk's failure is then an OSError of
+    print the error while the process goes on or crashes (docs/decisions/0007). In memory nothing can fail that way; the disk's failure is then an OSError of
     one write, and atomic_write removes the temporary."""
     try:
         image = io.BytesIO(seed.read_bytes() if seed is not None else b"")

@@ -453,7 +453,7 @@ class DcmTab(QWidget):
         """Write the current design as JSON (`hopkinson compensate --dcm` reads it)."""
         if self.design is None or self.model is None:
             raise AnalysisError("no DCM designed yet")
-        check_output_path(path, [p for p in (self.shot_path, self.source) if p], what="DCM export")  # issue 18
+        check_output_path(path, [p for p in (self.shot_path, self.source) if p], what="DCM export")  # never over a shot file
         data = dict(self.design.report)
         data["source"] = str(self.shot_path or self.source or "panel")
         data["model"] = self.model.to_dict()

@@ -2,7 +2,7 @@
 
 - The mouse wheel changes a spin box or a drop-down only when it has the keyboard focus
   (clicked or tabbed into): scrolling a form over its fields scrolls the form and changes
-  nothing (issue 42: Pressure went from 2.00 to 1.80 bar unnoticed).
+  nothing.
 - `UnitSpinBox` states its unit in the field (its suffix) and takes any number typed, then
   refuses one outside its plausible range: the field keeps its last good value and `refused`
   carries one line naming the field, the value, the range and the unit ("Sensor f_n: 27000 kHz

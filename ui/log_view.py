@@ -88,7 +88,7 @@ class LogView(QTableWidget):
     def save(self, path: str | Path) -> Path:
         """Write the rows, oldest first: JSON lines for a `.jsonl`/`.json` name, else
         tab-separated text with a header line; atomically (hopkinson.fileio)."""
-        path = check_output_path(path, what="log")  # never over a shot file (issue 18)
+        path = check_output_path(path, what="log")  # never over a shot file
         if path.suffix.lower() in (".jsonl", ".json"):
             text = "".join(json.dumps(row, ensure_ascii=False) + "\n" for row in self.rows)
         else:

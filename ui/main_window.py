@@ -550,7 +550,7 @@ class MainWindow(QMainWindow):
             return
         from hopkinson.fileio import UnsafeOutputError, check_output_path
 
-        try:  # never over the shot itself or another shot file (issue 18)
+        try:  # never over the shot itself or another shot file
             check_output_path(path, [view.path], what="report")
         except UnsafeOutputError as exc:
             self.show_banner("error", f"Report not written: {exc}")

@@ -1,8 +1,7 @@
 """The set-up's sensor against the lab's record: when the technician names a serial the record
 knows, its nominal sensitivity (in its unit) and tolerance are compared with the set-up's, before
-anything is fired. A nominal that differs by more than NOMINAL_MATCH_REL is said at once (the
-issue-42 technician typed another sensor's 0.312 µV/(m/s²) for one of 0.197); a tolerance the
-set-up lacks is taken from the record. Runs on the panel's background worker (`record_advice`)."""
+anything is fired. A nominal that differs by more than NOMINAL_MATCH_REL is said at once (another
+sensor's nominal typed in); a tolerance the set-up lacks is taken from the record. Runs on the panel's background worker (`record_advice`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The Hopkinson bar's physics (issue 19): materials, geometry and launcher, exact 1-D wave
+"""The Hopkinson bar's physics: materials, geometry and launcher, exact 1-D wave
 propagation with contacts that carry compression only, the bar's geometric dispersion, the
 calibrated object's acceleration and flight, and shot planning. Pure NumPy/SciPy."""
 

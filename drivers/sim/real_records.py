@@ -1,4 +1,4 @@
-"""What makes a simulated record look like a real one (issue 19, item 2): the pulse source and the
+"""What makes a simulated record look like a real one: the pulse source and the
 effects a real Hopkinson-bar record shows, each with its own switch and size ([world.realism] in
 config/sim.toml), all recorded in the shot's truth.
 

@@ -1,4 +1,4 @@
-"""What the simulated sensor truly is, in the terms the analysis reports (issue 40): recorded with
+"""What the simulated sensor truly is, in the terms the analysis reports: recorded with
 every simulated shot as the truth's "sensor" block, so a test, a study or the demo compares each
 reported figure with the same definition.
 
