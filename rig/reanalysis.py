@@ -12,6 +12,7 @@ ones); the raw data is never rewritten.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import tempfile
 import time
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hopkinson.analysis.options import AnalysisOptions
+from hopkinson.analysis.options import AnalysisOptions, AnalysisOverrides
 from hopkinson.rig.config import RigConfig, load_rig_config
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import load_plan
@@ -68,7 +69,8 @@ def _without_none(value: Any) -> Any:
 
 def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisOptions:
     """The analysis options the shot was first analysed with (a later re-analysis' changed
-    options are not inherited), or (never analysed) its rig's."""
+    options are not inherited), or (never analysed) its rig's with the options its request asked
+    and its sensor's sensitivity, as the shot file's settings recorded them."""
     first = analysis_results(shot.path, shot.analyses[0]["version"]) if shot.analyses else None
     params = (first or {}).get("params")
     if isinstance(params, dict):
@@ -76,9 +78,16 @@ def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisOptions:
     if config is None:
         raise ShotFileError(f"{shot.path}: no stored analysis options and no usable configuration snapshot: "
                             "it cannot be re-analysed as it was")
+    settings = dict(shot.meta.config.get("shot_settings", {}))
+    asked = dict(settings.get("analysis_options") or {})
+    for sensor_own in ("sensitivity_v_per_m_s2", "transverse_sensitivity_rel"):  # recorded under their own keys
+        if settings.get(sensor_own) is not None:
+            asked[sensor_own] = settings[sensor_own]
+    known = {f.name for f in dataclasses.fields(AnalysisOverrides)}
     request = ShotRequest(pressure_bar=shot.meta.pressure_bar, projectile=shot.meta.projectile,
-                          operator=shot.meta.operator, out_dir=shot.path.parent)
-    return analysis_params(request, config, dict(shot.meta.config.get("shot_settings", {})))
+                          operator=shot.meta.operator, out_dir=shot.path.parent,
+                          analysis=AnalysisOverrides(**{k: v for k, v in asked.items() if k in known}))
+    return analysis_params(request, config, settings)
 
 
 def reanalyse(path: str | Path, overrides: dict[str, Any] | None = None) -> RecordedAnalysis:

@@ -287,6 +287,8 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
     snapshot["shot_settings"] = dict(captured.settings,
                                      sensitivity_v_per_m_s2=request.sensitivity(config),
                                      analysis_options=request.recorded_options())
+    if request.analysis.transverse_sensitivity_rel is not None:  # the sensor's stated one (a plan's)
+        snapshot["shot_settings"]["transverse_sensitivity_rel"] = float(request.analysis.transverse_sensitivity_rel)
     if request.level is not None:
         snapshot["shot_settings"]["level_control"] = dict(request.level)
     if request.sensitivity_unit is not None:

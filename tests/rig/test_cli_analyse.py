@@ -67,11 +67,22 @@ def test_a_stored_shot_gets_a_new_analysis_version_and_keeps_the_old_one(shot_fi
     assert row["verdict"]["decision"] in ("ACCEPT", "REPEAT") and "resonance excited (27" in row["verdict"]["line"]
 
 
-def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Path, capsys) -> None:
-    with h5py.File(shot_file, "r+") as f:  # as a shot whose analysis a full disk did not let store
+def _never_analysed(shot_file: Path, **settings: object) -> None:
+    """The shot as one whose analysis a full disk did not let store (`settings`: changed in its
+    recorded shot settings)."""
+    with h5py.File(shot_file, "r+") as f:
         del f["analysis"], f["derived"], f["entry/record"]
         f.attrs["state"] = "raw"
+    if settings:
+        with h5py.File(shot_file, "r+") as f:
+            config = json.loads(f.attrs["config_json"])
+            config["shot_settings"].update(settings)
+            f.attrs["config_json"] = json.dumps(config)
     assert read_shot(shot_file).analyses == ()
+
+
+def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Path, capsys) -> None:
+    _never_analysed(shot_file, analysis_options={"uncertainty": True, "draws": 50})
     assert main(["analyse", str(shot_file)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{shot_file}: analysis version 1: order 2, f_n ") and out.count("\n") == 1
@@ -80,6 +91,20 @@ def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Pat
     assert f_n_khz == pytest.approx(27.0, rel=1e-3)  # the simulated sensor's 27 kHz
     shot = read_shot(shot_file)
     assert shot.state == "analysed" and shot.results["params"]["amp_gain"] > 0
+
+
+def test_a_shot_never_analysed_keeps_what_its_request_asked(shot_file: Path, capsys) -> None:
+    """The options the shot's request asked (recorded in its settings: a plan's order, the draws)
+    and its sensor's own sensitivity and stated transverse sensitivity are the re-analysis' too,
+    not the rig configuration's."""
+    _never_analysed(shot_file, analysis_options={"max_order": 5, "uncertainty": False},
+                    sensitivity_v_per_m_s2=3.0e-7, transverse_sensitivity_rel=0.02)
+    assert main(["analyse", str(shot_file), "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)["shots"]
+    assert row["ok"], row
+    params = read_shot(shot_file).results["params"]
+    assert params["max_order"] == 5 and params["uncertainty"] is False
+    assert params["sensitivity_v_per_m_s2"] == 3.0e-7 and params["transverse_sensitivity_rel"] == 0.02
 
 
 @pytest.mark.parametrize("make, message", [

@@ -77,6 +77,10 @@ def test_the_shot_file_settings_record_them(tmp_path: Path) -> None:
     assert settings["sensitivity_unit"] == "mV/g" and settings["sensitivity_tolerance_percent"] == 3.0
     plain = shot_meta(ShotRequest(pressure_bar=2.0, out_dir=tmp_path), config, {}, captured).config["shot_settings"]
     assert "sensitivity_unit" not in plain and "sensitivity_tolerance_percent" not in plain
+    assert "transverse_sensitivity_rel" not in plain
+    # the sensor's stated transverse sensitivity (a plan's): what a later re-analysis needs (rig.reanalysis)
+    stated = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(transverse_sensitivity_rel=0.03), out_dir=tmp_path)
+    assert shot_meta(stated, config, {}, captured).config["shot_settings"]["transverse_sensitivity_rel"] == 0.03
 
 
 def test_a_campaign_shot_carries_the_plans_unit_and_tolerance(tmp_path: Path) -> None:
