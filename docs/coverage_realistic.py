@@ -137,7 +137,7 @@ def draw(results: dict[str, dict], shots: int, draws: int, out: Path) -> None:
         ax.bar(x + (i - (len(worlds) - 1) / 2) * width, rates, width, label=world)
     ax.axhline(95, color="0.3", ls="--", lw=0.8, label="95 % (nominal)")
     ax.axhline(90, color="tab:red", ls=":", lw=0.8, label="90 % (as shipped, issue 40)")
-    ax.set_xticks(x, [LABELS[f] for f in FIGURES], fontsize=8)
+    ax.set_xticks(x, [LABELS[f].replace(" (", "\n(") for f in FIGURES], fontsize=8)  # ε's long label on two lines
     ax.set_ylim(0, 110)
     ax.set_ylabel("intervals holding the truth (%)")
     ax.set_title(f"Coverage of the 95 % intervals on the realistic simulator, {shots} shots per world "
