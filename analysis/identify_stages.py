@@ -211,6 +211,12 @@ def weigh_model_error(prepared: PreparedRecord, search: OrderSearch, sine_terms:
     (docs/decisions/0013)."""
     prep, setup, data, sweep = search.prep, search.setup, search.data, search.sweep
     model_error = ModelError.none(prep.bin_hz.size)
+    if sweep.chosen is None and setup.asked_order is None:
+        # no order with free zeros is a candidate (each presses a pole onto the unit circle: a
+        # resonance beyond the band whose damping free zeros leave undetermined): the all-pole
+        # structure, whose damping beyond the band is floored, as settle_order falls back from an
+        # unstable free choice (order_search.fit_structures: "no model with free zeros is stable")
+        sweep = fit_structures(data, setup)
     if sweep.chosen is None:
         return WeighedSearch(prep, data, sweep, model_error)
     order = setup.asked_order
