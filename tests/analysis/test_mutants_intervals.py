@@ -210,3 +210,46 @@ def test_response_band_leaves_out_draws_without_a_dc_gain_with_their_flags() -> 
     padded = response_band(zero_model(0.25), [dead, *(zero_model(c) for c in cs), dead], (1e3, 1e5),
                            reflect=np.concatenate([[False], flags, [True]]), points=10)
     assert padded == base
+
+
+def test_response_band_adds_each_type_b_rows_widest_variant_times_a_uniform_factor() -> None:
+    """Draws all equal to the model (no Monte Carlo spread), one Type B row: every draw departs
+    from the nominal by ξ·log|r| in magnitude and ξ·∠r in phase, r the row's widest variant's
+    response over the nominal's (c = 0.3 departs further from c₀ = 0.25 than c = 0.26 at every
+    frequency) and ξ ~ U(−1, 1), whose 2.5 % and 97.5 % points are ∓0.95. With 4 001 draws the
+    sample quantile's standard error is √(0.975·0.025/4001)/0.5 = 0.005: ±0.02 is 4 of them. A row
+    whose variants have no DC gain adds nothing, and the rows' departures add."""
+    n = 4001
+    model = zero_model(0.25)
+    nominal_only = response_band(model, [model] * n, (1e3, 1e5), points=12)
+    assert nominal_only["magnitude_rel_low"] == nominal_only["magnitude_rel"]
+    dead = DiscreteModel(DT, np.array([1.0]), np.array([1.0, -1.0]))
+    assert response_band(model, [model] * n, (1e3, 1e5), points=12, systematic=[(dead,)]) == nominal_only
+    band = response_band(model, [model] * n, (1e3, 1e5), points=12,
+                         systematic=[(dead,), (zero_model(0.26), zero_model(0.3))])
+    f = np.asarray(band["frequency_hz"])
+    g0 = rel_gain(0.25, f)
+    r = (1 + 0.3 * np.exp(-2j * np.pi * f * DT)) / (1 + 0.3) / ((1 + 0.25 * np.exp(-2j * np.pi * f * DT)) / 1.25)
+    log_r, turn = np.abs(np.log(np.abs(r))), np.abs(np.degrees(np.angle(r)))
+    np.testing.assert_allclose(band["magnitude_rel"], g0, rtol=1e-12)
+    for key, sign in (("magnitude_rel_low", -1.0), ("magnitude_rel_high", 1.0)):
+        factor = np.log(np.asarray(band[key]) / g0) / log_r  # ±0.95
+        np.testing.assert_allclose(factor, sign * 0.95, atol=0.02)
+    phase = np.asarray(band["phase_deg"])
+    for key, sign in (("phase_low_deg", -1.0), ("phase_high_deg", 1.0)):
+        np.testing.assert_allclose((np.asarray(band[key]) - phase) / turn, sign * 0.95, atol=0.02)
+    # two rows of the same variant: ξ₁ + ξ₂ has a triangular PDF on (−2, 2), whose 97.5 % point is
+    # 2 − 2√0.05 = 1.553 (the standard error: √(0.975·0.025/4001)/(√0.05/2) = 0.022; ±0.09 is 4 of them)
+    twice = response_band(model, [model] * n, (1e3, 1e5), points=12,
+                          systematic=[(zero_model(0.3),), (zero_model(0.3),)])
+    factor = np.log(np.asarray(twice["magnitude_rel_high"]) / g0) / log_r
+    np.testing.assert_allclose(factor, 2 - 2 * math.sqrt(0.05), atol=0.09)
+    # a sensor read with inverted polarity: its variants too have a negative DC gain, and each
+    # response is taken relative to its own, so the band is the same
+    def inverted(c: float) -> DiscreteModel:
+        return DiscreteModel(DT, np.array([1.0]), np.array([-1.0, -c]))
+
+    flipped = response_band(inverted(0.25), [inverted(0.25)] * n, (1e3, 1e5), points=12,
+                            systematic=[(dead,), (inverted(0.26), inverted(0.3))])
+    for key in ("magnitude_rel_low", "magnitude_rel_high", "phase_low_deg", "phase_high_deg"):
+        np.testing.assert_allclose(flipped[key], band[key], rtol=1e-12, atol=1e-9)
