@@ -116,6 +116,40 @@ def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
     assert below.interval == (pytest.approx(-1175.0), -100.0)
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_signed_figure_is_its_magnitude_reflected_on_a_log_scale_with_its_sign(sign: float) -> None:
+    """`signed` (a DC gain): the magnitude is treated as `positive`, so the interval is
+    sign·(v²/q₉₇.₅, v²/q₂.₅) in order and never crosses zero; u the draws' standard deviation.
+    A draw of the other sign has no magnitude of this sign and is left out. A value of 0 has no
+    sign: the linear reflection."""
+    draws = 2.0 ** ((GRID - 500.0) / 250.0)  # 1/4 … 4
+    v = 1.5
+    q_lo, q_hi = 2.0 ** ((25.0 - 500.0) / 250.0), 2.0 ** ((975.0 - 500.0) / 250.0)
+    est = Estimate.of_draws(sign * v, np.concatenate([sign * draws, [-sign * 2.0]]), signed=True)
+    ends = sorted((sign * v * v / q_hi, sign * v * v / q_lo))
+    assert est.value == sign * v
+    assert est.interval == (pytest.approx(ends[0], rel=1e-12), pytest.approx(ends[1], rel=1e-12))
+    assert est.interval[0] < est.interval[1] and est.interval[0] * est.interval[1] > 0
+    assert est.u == pytest.approx(float(np.std(draws, ddof=1)), rel=1e-12)
+    zero = Estimate.of_draws(0.0, sign * (GRID - 500.0), signed=True)
+    assert zero.interval == (pytest.approx(-475.0), pytest.approx(475.0))
+
+
+def test_the_expanded_uncertainty_is_half_the_interval() -> None:
+    assert Estimate(1.0, 0.1, (0.8, 1.4)).expanded == pytest.approx(0.3, rel=1e-15)
+    assert Estimate(1.0, 0.1).expanded is None
+    assert Estimate.normal(10.0, 2.0).expanded == pytest.approx(1.959963984540054 * 2.0, rel=1e-15)
+
+
+def test_holding_the_value_leaves_an_interval_that_holds_it_or_none() -> None:
+    held = Estimate(7.0, 1.0, (6.0, 8.0))
+    assert held.holding_value() == held
+    assert Estimate(7.0, 1.0, (7.0, 8.0)).holding_value() == Estimate(7.0, 1.0, (7.0, 8.0))
+    assert Estimate(7.0, 1.0, (8.0, 9.0)).holding_value() == Estimate(7.0, 1.0, (7.0, 9.0))
+    assert Estimate(7.0, 1.0, (5.0, 6.0)).holding_value() == Estimate(7.0, 1.0, (5.0, 7.0))
+    assert Estimate(7.0, 1.0).holding_value() == Estimate(7.0, 1.0)
+    assert Estimate(None, None, (1.0, 2.0)).holding_value() == Estimate(None, None, (1.0, 2.0))
+
 def test_estimate_to_dict_turns_non_finite_numbers_into_none() -> None:
     assert Estimate(1.0, math.nan, (-math.inf, 2.0)).to_dict() == {"value": 1.0, "u": None, "interval": [None, 2.0]}
     assert Estimate(0.0, 0.5, (-1.0, 1.0)).to_dict() == {"value": 0.0, "u": 0.5, "interval": [-1.0, 1.0]}
