@@ -222,6 +222,16 @@ def test_a_coil_that_will_not_change_without_position_inputs_is_named_as_a_coil(
     assert result.problem == f"{NAME}: fire valve open (coil), wanted shut after 0.3 s"
 
 
+def test_a_valve_open_behind_a_coil_that_reads_off_is_not_as_wanted() -> None:
+    """Both the coil and the valve must be as wanted (`_as_wanted`): a vent valve whose position
+    reads open while its coil reads off (a coil that will not energise; the valve held open by
+    something else) is not a vent SAFE commanded, and is named with what it was told."""
+    controller = Controller(stuck={"vent_valve": True})
+    controller.set_vent_valve = lambda value: None  # the coil stays off
+    result, _ = run(controller)
+    assert not result.confirmed
+    assert result.problem == f"{NAME}: vent valve open (commanded shut), wanted open after 0.3 s"
+
 def test_a_reservoir_still_under_pressure_is_not_confirmed_and_says_so() -> None:
     result, _ = run(Controller(pressure_bar=1.2345))
     assert not result.confirmed
