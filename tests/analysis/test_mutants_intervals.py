@@ -116,15 +116,15 @@ def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
     assert below.interval == (pytest.approx(-1175.0), -100.0)
 
 
+@pytest.mark.parametrize("v", [1.5, 1.0, 0.5])
 @pytest.mark.parametrize("sign", [1.0, -1.0])
-def test_a_signed_figure_is_its_magnitude_reflected_on_a_log_scale_with_its_sign(sign: float) -> None:
+def test_a_signed_figure_is_its_magnitude_reflected_on_a_log_scale_with_its_sign(sign: float, v: float) -> None:
     """`signed` (a DC gain): the magnitude is treated as `positive`, so the interval is
     sign·(v²/q₉₇.₅, v²/q₂.₅) in order and never crosses zero; u the draws' standard deviation.
     A draw of the other sign has no magnitude of this sign and is left out. A value of 0 has no
     sign: the linear reflection."""
-    draws = 2.0 ** ((GRID - 500.0) / 250.0)  # 1/4 … 4
-    v = 1.5
-    q_lo, q_hi = 2.0 ** ((25.0 - 500.0) / 250.0), 2.0 ** ((975.0 - 500.0) / 250.0)
+    draws = 1.2 * v * 2.0 ** ((GRID - 500.0) / 250.0)  # 0.3 v … 4.8 v: not symmetric on a log scale about 1
+    q_lo, q_hi = 1.2 * v * 2.0 ** ((25.0 - 500.0) / 250.0), 1.2 * v * 2.0 ** ((975.0 - 500.0) / 250.0)
     est = Estimate.of_draws(sign * v, np.concatenate([sign * draws, [-sign * 2.0]]), signed=True)
     ends = sorted((sign * v * v / q_hi, sign * v * v / q_lo))
     assert est.value == sign * v
@@ -149,6 +149,11 @@ def test_holding_the_value_leaves_an_interval_that_holds_it_or_none() -> None:
     assert Estimate(7.0, 1.0, (5.0, 6.0)).holding_value() == Estimate(7.0, 1.0, (5.0, 7.0))
     assert Estimate(7.0, 1.0).holding_value() == Estimate(7.0, 1.0)
     assert Estimate(None, None, (1.0, 2.0)).holding_value() == Estimate(None, None, (1.0, 2.0))
+    # an unbounded end is extended too: "always contains its value" (the docstring of of_draws)
+    assert Estimate(7.0, 1.0, (-math.inf, 5.0)).holding_value() == Estimate(7.0, 1.0, (-math.inf, 7.0))
+    assert Estimate(7.0, 1.0, (9.0, math.inf)).holding_value() == Estimate(7.0, 1.0, (7.0, math.inf))
+    undetermined = Estimate(7.0, math.nan, (math.nan, math.nan)).holding_value()
+    assert undetermined.value == 7.0 and all(math.isnan(x) for x in undetermined.interval)
 
 def test_estimate_to_dict_turns_non_finite_numbers_into_none() -> None:
     assert Estimate(1.0, math.nan, (-math.inf, 2.0)).to_dict() == {"value": 1.0, "u": None, "interval": [None, 2.0]}
