@@ -248,6 +248,14 @@ def test_rise_time_from_the_first_sample_and_its_errors() -> None:
     assert StepComparison(slow, jump).rise_time_ratio() == pytest.approx(16.0 / (0.8 / 0.95), rel=1e-12)
 
 
+def test_a_response_that_rests_on_a_level_crosses_it_where_it_first_reaches_it() -> None:
+    """The first crossing is the first sample at or above the level (docstring: first crossings):
+    a response that sits at exactly 10 % for two samples crosses 10 % at sample 0 (from the rest
+    before it: −1 + 0.1/0.1), not where it leaves the level; 90 % between 0.1 and 1 at
+    1 + 0.8/0.9."""
+    resting = np.concatenate([[0.1, 0.1], np.ones(38)])
+    assert StepComparison(resting, resting).rise_times_samples()[0] == pytest.approx(1.0 + 0.8 / 0.9, rel=1e-12)
+
 def test_touching_the_tolerance_is_settled() -> None:
     """|1.25 − 1| = 0.25 exactly (binary fractions): on the ±25 % line, not outside it."""
     steps = StepComparison(np.array([1.25, 0.75, 1.0, 1.0]), np.ones(4))
