@@ -129,7 +129,7 @@ class Estimate:
         if self.interval is None or self.value is None:
             return self
         lo, hi = self.interval
-        if not (math.isfinite(lo) and math.isfinite(hi)) or lo <= self.value <= hi:
+        if lo <= self.value <= hi:  # (NaN ends stay NaN: min and max keep them)
             return self
         return Estimate(self.value, self.u, (min(lo, self.value), max(hi, self.value)))
 

@@ -54,6 +54,18 @@ def test_noise_gain_with_a_fir_stage_and_with_a_pole_at_the_origin() -> None:
     assert at_origin.noise_gain() == pytest.approx(math.sqrt(5.0), rel=1e-12)
 
 
+def test_the_impulse_response_decays_below_1e_10_of_its_start_for_a_slow_resonance() -> None:
+    """impulse_response's promise, for a lightly damped pair at 0.99·e^(±0.01j): h_k is
+    0.99^k·sin((k + 1)·0.01)/sin(0.01) (zeros at the origin), whose envelope is 100 times 0.99^k:
+    the tail must cover the 1e-10 of the pole and the amplitude above its start, so at
+    0.99^k = 1e-10 alone it still reads ~1e-8 of h₀."""
+    pole = 0.99 * np.exp(0.01j)
+    dcm = DCM(DT, np.array([0.0, 0.0]), np.array([pole, pole.conjugate()]), 1.0)
+    h = dcm.impulse_response()
+    k = np.arange(h.size)
+    np.testing.assert_allclose(h, 0.99**k * np.sin((k + 1) * 0.01) / math.sin(0.01), atol=1e-9)
+    assert np.max(np.abs(h[-16:])) <= 1e-10 * abs(h[0])
+
 def test_noise_gain_of_a_pole_too_slow_is_an_error() -> None:
     with pytest.raises(AnalysisError, match="decays too slowly"):
         DCM(DT, np.array([0.5]), np.array([0.9999999]), 1.0).noise_gain()
@@ -247,6 +259,14 @@ def test_rise_time_from_the_first_sample_and_its_errors() -> None:
     # a compensated rise of 0.8/0.95 sample (under one, above none) still gives its ratio
     assert StepComparison(slow, jump).rise_time_ratio() == pytest.approx(16.0 / (0.8 / 0.95), rel=1e-12)
 
+
+def test_a_response_that_rests_on_a_level_crosses_it_where_it_first_reaches_it() -> None:
+    """The first crossing is the first sample at or above the level (docstring: first crossings):
+    a response that sits at exactly 10 % for two samples crosses 10 % at sample 0 (from the rest
+    before it: −1 + 0.1/0.1), not where it leaves the level; 90 % between 0.1 and 1 at
+    1 + 0.8/0.9."""
+    resting = np.concatenate([[0.1, 0.1], np.ones(38)])
+    assert StepComparison(resting, resting).rise_times_samples()[0] == pytest.approx(1.0 + 0.8 / 0.9, rel=1e-12)
 
 def test_touching_the_tolerance_is_settled() -> None:
     """|1.25 − 1| = 0.25 exactly (binary fractions): on the ±25 % line, not outside it."""

@@ -116,6 +116,45 @@ def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
     assert below.interval == (pytest.approx(-1175.0), -100.0)
 
 
+@pytest.mark.parametrize("v", [1.5, 1.0, 0.5])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_signed_figure_is_its_magnitude_reflected_on_a_log_scale_with_its_sign(sign: float, v: float) -> None:
+    """`signed` (a DC gain): the magnitude is treated as `positive`, so the interval is
+    sign·(v²/q₉₇.₅, v²/q₂.₅) in order and never crosses zero; u the draws' standard deviation.
+    A draw of the other sign has no magnitude of this sign and is left out. A value of 0 has no
+    sign: the linear reflection."""
+    draws = 1.2 * v * 2.0 ** ((GRID - 500.0) / 250.0)  # 0.3 v … 4.8 v: not symmetric on a log scale about 1
+    q_lo, q_hi = 1.2 * v * 2.0 ** ((25.0 - 500.0) / 250.0), 1.2 * v * 2.0 ** ((975.0 - 500.0) / 250.0)
+    est = Estimate.of_draws(sign * v, np.concatenate([sign * draws, [-sign * 2.0]]), signed=True)
+    ends = sorted((sign * v * v / q_hi, sign * v * v / q_lo))
+    assert est.value == sign * v
+    assert est.interval == (pytest.approx(ends[0], rel=1e-12), pytest.approx(ends[1], rel=1e-12))
+    assert est.interval[0] < est.interval[1] and est.interval[0] * est.interval[1] > 0
+    assert est.u == pytest.approx(float(np.std(draws, ddof=1)), rel=1e-12)
+    zero = Estimate.of_draws(0.0, sign * (GRID - 500.0), signed=True)
+    assert zero.interval == (pytest.approx(-475.0), pytest.approx(475.0))
+
+
+def test_the_expanded_uncertainty_is_half_the_interval() -> None:
+    assert Estimate(1.0, 0.1, (0.8, 1.4)).expanded == pytest.approx(0.3, rel=1e-15)
+    assert Estimate(1.0, 0.1).expanded is None
+    assert Estimate.normal(10.0, 2.0).expanded == pytest.approx(1.959963984540054 * 2.0, rel=1e-15)
+
+
+def test_holding_the_value_leaves_an_interval_that_holds_it_or_none() -> None:
+    held = Estimate(7.0, 1.0, (6.0, 8.0))
+    assert held.holding_value() == held
+    assert Estimate(7.0, 1.0, (7.0, 8.0)).holding_value() == Estimate(7.0, 1.0, (7.0, 8.0))
+    assert Estimate(7.0, 1.0, (8.0, 9.0)).holding_value() == Estimate(7.0, 1.0, (7.0, 9.0))
+    assert Estimate(7.0, 1.0, (5.0, 6.0)).holding_value() == Estimate(7.0, 1.0, (5.0, 7.0))
+    assert Estimate(7.0, 1.0).holding_value() == Estimate(7.0, 1.0)
+    assert Estimate(None, None, (1.0, 2.0)).holding_value() == Estimate(None, None, (1.0, 2.0))
+    # an unbounded end is extended too: "always contains its value" (the docstring of of_draws)
+    assert Estimate(7.0, 1.0, (-math.inf, 5.0)).holding_value() == Estimate(7.0, 1.0, (-math.inf, 7.0))
+    assert Estimate(7.0, 1.0, (9.0, math.inf)).holding_value() == Estimate(7.0, 1.0, (7.0, math.inf))
+    undetermined = Estimate(7.0, math.nan, (math.nan, math.nan)).holding_value()
+    assert undetermined.value == 7.0 and all(math.isnan(x) for x in undetermined.interval)
+
 def test_estimate_to_dict_turns_non_finite_numbers_into_none() -> None:
     assert Estimate(1.0, math.nan, (-math.inf, 2.0)).to_dict() == {"value": 1.0, "u": None, "interval": [None, 2.0]}
     assert Estimate(0.0, 0.5, (-1.0, 1.0)).to_dict() == {"value": 0.0, "u": 0.5, "interval": [-1.0, 1.0]}
@@ -210,3 +249,46 @@ def test_response_band_leaves_out_draws_without_a_dc_gain_with_their_flags() -> 
     padded = response_band(zero_model(0.25), [dead, *(zero_model(c) for c in cs), dead], (1e3, 1e5),
                            reflect=np.concatenate([[False], flags, [True]]), points=10)
     assert padded == base
+
+
+def test_response_band_adds_each_type_b_rows_widest_variant_times_a_uniform_factor() -> None:
+    """Draws all equal to the model (no Monte Carlo spread), one Type B row: every draw departs
+    from the nominal by ξ·log|r| in magnitude and ξ·∠r in phase, r the row's widest variant's
+    response over the nominal's (c = 0.3 departs further from c₀ = 0.25 than c = 0.26 at every
+    frequency) and ξ ~ U(−1, 1), whose 2.5 % and 97.5 % points are ∓0.95. With 4 001 draws the
+    sample quantile's standard error is √(0.975·0.025/4001)/0.5 = 0.005: ±0.02 is 4 of them. A row
+    whose variants have no DC gain adds nothing, and the rows' departures add."""
+    n = 4001
+    model = zero_model(0.25)
+    nominal_only = response_band(model, [model] * n, (1e3, 1e5), points=12)
+    assert nominal_only["magnitude_rel_low"] == nominal_only["magnitude_rel"]
+    dead = DiscreteModel(DT, np.array([1.0]), np.array([1.0, -1.0]))
+    assert response_band(model, [model] * n, (1e3, 1e5), points=12, systematic=[(dead,)]) == nominal_only
+    band = response_band(model, [model] * n, (1e3, 1e5), points=12,
+                         systematic=[(dead,), (zero_model(0.26), zero_model(0.3))])
+    f = np.asarray(band["frequency_hz"])
+    g0 = rel_gain(0.25, f)
+    r = (1 + 0.3 * np.exp(-2j * np.pi * f * DT)) / (1 + 0.3) / ((1 + 0.25 * np.exp(-2j * np.pi * f * DT)) / 1.25)
+    log_r, turn = np.abs(np.log(np.abs(r))), np.abs(np.degrees(np.angle(r)))
+    np.testing.assert_allclose(band["magnitude_rel"], g0, rtol=1e-12)
+    for key, sign in (("magnitude_rel_low", -1.0), ("magnitude_rel_high", 1.0)):
+        factor = np.log(np.asarray(band[key]) / g0) / log_r  # ±0.95
+        np.testing.assert_allclose(factor, sign * 0.95, atol=0.02)
+    phase = np.asarray(band["phase_deg"])
+    for key, sign in (("phase_low_deg", -1.0), ("phase_high_deg", 1.0)):
+        np.testing.assert_allclose((np.asarray(band[key]) - phase) / turn, sign * 0.95, atol=0.02)
+    # two rows of the same variant: ξ₁ + ξ₂ has a triangular PDF on (−2, 2), whose 97.5 % point is
+    # 2 − 2√0.05 = 1.553 (the standard error: √(0.975·0.025/4001)/(√0.05/2) = 0.022; ±0.09 is 4 of them)
+    twice = response_band(model, [model] * n, (1e3, 1e5), points=12,
+                          systematic=[(zero_model(0.3),), (zero_model(0.3),)])
+    factor = np.log(np.asarray(twice["magnitude_rel_high"]) / g0) / log_r
+    np.testing.assert_allclose(factor, 2 - 2 * math.sqrt(0.05), atol=0.09)
+    # a sensor read with inverted polarity: its variants too have a negative DC gain, and each
+    # response is taken relative to its own, so the band is the same
+    def inverted(c: float) -> DiscreteModel:
+        return DiscreteModel(DT, np.array([1.0]), np.array([-1.0, -c]))
+
+    flipped = response_band(inverted(0.25), [inverted(0.25)] * n, (1e3, 1e5), points=12,
+                            systematic=[(dead,), (inverted(0.26), inverted(0.3))])
+    for key in ("magnitude_rel_low", "magnitude_rel_high", "phase_low_deg", "phase_high_deg"):
+        np.testing.assert_allclose(flipped[key], band[key], rtol=1e-12, atol=1e-9)

@@ -29,6 +29,7 @@ from hopkinson.rig.interlocks import (
     pressure_check,
     read_readings,
 )
+from hopkinson.rig.plausibility import RESERVOIR, Implausible, judge, plausible_ranges
 from hopkinson.rig.sequencer import safe
 from hopkinson.rig.sequencer.context import Publisher
 from hopkinson.rig.sequencer.safe import gauge_half_count_bar, make_rig_safe, safe_hold_s
@@ -62,12 +63,14 @@ class Controller:
         self.pump_stays_on = pump_stays_on
         self.pressures = [pressure_bar]
         self.commands: list[tuple[str, bool]] = []
-        self.failures: dict[str, list[BaseException]] = {}
+        self.failures: dict[str, list[BaseException | None]] = {}
 
     def _maybe_fail(self, method: str) -> None:
         queue = self.failures.get(method)
         if queue:
-            raise queue.pop(0)
+            failure = queue.pop(0)
+            if failure is not None:  # None: this call succeeds
+                raise failure
 
     def _set(self, name: str, value: bool) -> None:
         self._maybe_fail(f"set_{name}")
@@ -218,6 +221,16 @@ def test_a_coil_that_will_not_change_without_position_inputs_is_named_as_a_coil(
     result, _ = run(controller)
     assert result.problem == f"{NAME}: fire valve open (coil), wanted shut after 0.3 s"
 
+
+def test_a_valve_open_behind_a_coil_that_reads_off_is_not_as_wanted() -> None:
+    """Both the coil and the valve must be as wanted (`_as_wanted`): a vent valve whose position
+    reads open while its coil reads off (a coil that will not energise; the valve held open by
+    something else) is not a vent SAFE commanded, and is named with what it was told."""
+    controller = Controller(stuck={"vent_valve": True})
+    controller.set_vent_valve = lambda value: None  # the coil stays off
+    result, _ = run(controller)
+    assert not result.confirmed
+    assert result.problem == f"{NAME}: vent valve open (commanded shut), wanted open after 0.3 s"
 
 def test_a_reservoir_still_under_pressure_is_not_confirmed_and_says_so() -> None:
     result, _ = run(Controller(pressure_bar=1.2345))
@@ -392,6 +405,13 @@ def test_a_timeout_of_another_instrument_is_no_reason_to_hold(other: str) -> Non
     result, _ = run(controller, config(safe_s=2.5), digitizer=digitizer)
     assert result.confirmed and not result.controller_timed_out
     assert result.elapsed_s < 1.0
+    # and the same timeout raised through the controller's role (a lab's driver that names the
+    # device behind it): only the valve controller's own timeout can leave a late request behind
+    controller = Controller()
+    controller.failures["valves"] = [InstrumentTimeout(other, "read coils", "no reply")]
+    result, _ = run(controller, config(safe_s=2.5))
+    assert result.confirmed and not result.controller_timed_out
+    assert result.elapsed_s < 1.0
 
 
 def test_a_valve_that_changes_late_is_caught_within_the_hold() -> None:
@@ -423,6 +443,115 @@ def test_a_safe_result_is_frozen_and_its_defaults_claim_nothing() -> None:
             result.interrupt, result.elapsed_s) == (None, None, None, False, None, 0.0)
     with pytest.raises(AttributeError):
         result.confirmed = False  # type: ignore[misc]
+
+
+# -- the untrusted gauge (module docstring, point 4) ------------------------------------------------------
+SAFE_BUT_UNKNOWN = "the valves read back safe (fire and fill closed, vent open, pump off), but "
+
+
+def reservoir_finding(value_bar: float) -> Implausible:
+    """What rig/plausibility.py says of a reservoir reading read through the role (no register)."""
+    finding = judge(RESERVOIR, value_bar, plausible_ranges(config())[RESERVOIR])
+    assert finding is not None
+    return finding
+
+
+@pytest.mark.parametrize("pressure_bar", [4.07e27, -5.0, 16.5])
+def test_a_reading_that_cannot_be_true_ends_safe_at_once_saying_the_pressure_is_unknown(pressure_bar) -> None:
+    """The default range is -1 .. 2 x max_pressure_bar (16 bar): outside it the reading is no
+    pressure at all; SAFE says so as soon as the valves read back safe, not after safe_s, and
+    never guesses "fill valve stuck open?"."""
+    controller = Controller(pressure_bar=pressure_bar)
+    result, events = run(controller, config(safe_s=2.5))
+    finding = reservoir_finding(pressure_bar)
+    assert finding.message.startswith("the reservoir pressure reads ") and "which cannot be true" in finding.message
+    assert not result.confirmed
+    assert result.problem == f"{NAME}: {SAFE_BUT_UNKNOWN}{finding.message}: the reservoir pressure is unknown"
+    assert result.elapsed_s < 1.0  # at once: one round, no waiting for a vent that cannot be seen
+    assert result.reservoir_pressure_bar == pressure_bar
+    assert controller.commands == [("fire_valve", False), ("fill_valve", False), ("vent_valve", True),
+                                   ("vacuum_pump", False)]
+    (error,) = events.of(RigError)
+    assert error.message == f"SAFE NOT CONFIRMED: {result.problem}"
+    assert not events.of(Note)
+
+
+def test_the_last_plausible_reading_is_vented_and_the_range_ends_are_plausible() -> None:
+    """-1 bar (the range's low end) is below vent_done_bar and plausible: vented."""
+    assert run(Controller(pressure_bar=-1.0))[0].confirmed
+    assert run(Controller(pressure_bar=16.0))[0].problem.startswith(f"{NAME}: reservoir still at 16.000 bar")
+
+
+def test_a_gauge_handed_in_as_untrusted_confirms_nothing() -> None:
+    """CHECK's finding: a later reading that looks vented does not confirm."""
+    finding = reservoir_finding(4.07e27)
+    result, _ = run(Controller(pressure_bar=0.01), config(safe_s=2.5), untrusted_gauge=finding)
+    assert not result.confirmed
+    assert result.problem == f"{NAME}: {SAFE_BUT_UNKNOWN}{finding.message}: the reservoir pressure is unknown"
+    assert result.elapsed_s < 1.0
+
+
+def test_a_gauge_once_untrusted_stays_untrusted_when_it_later_reads_vented() -> None:
+    controller = Controller(stuck={"vent_valve": False})  # the first round cannot end SAFE
+    controller.pressures = [4.07e27, 4.07e27, 0.01]  # read for the interlocks, read again to judge; then vented
+
+    def free_the_vent(_: float) -> None:
+        controller.stuck = {}
+
+    original = safe.time.sleep
+    try:
+        safe.time.sleep = free_the_vent
+        result = make_rig_safe(controller, config(safe_s=2.5), Events(), poll_s=POLL_S)
+    finally:
+        safe.time.sleep = original
+    assert not result.confirmed
+    assert result.problem == (f"{NAME}: {SAFE_BUT_UNKNOWN}{reservoir_finding(4.07e27).message}: the reservoir "
+                              "pressure is unknown")
+    assert result.reservoir_pressure_bar == 0.01
+
+
+def test_a_reading_that_is_not_a_number_is_waited_for() -> None:
+    """NaN is a gauge fault that may clear: SAFE goes on reading, and confirms once it reads vented;
+    a gauge that never clears is not confirmed at safe_s, with the reading."""
+    controller = Controller()
+    controller.pressures = [math.nan, math.nan, 0.01]
+    result, _ = run(controller)
+    assert result.confirmed and result.reservoir_pressure_bar == 0.01
+    result, _ = run(Controller(pressure_bar=math.nan))
+    assert not result.confirmed and result.elapsed_s >= 0.3
+    assert result.problem.startswith(f"{NAME}: reservoir still at nan bar after venting for 0.3 s")
+
+
+def test_a_stuck_valve_and_an_untrusted_gauge_are_both_named_at_safe_s() -> None:
+    result, _ = run(Controller(pressure_bar=4.07e27, stuck={"fill_valve": True}))
+    assert not result.confirmed and result.elapsed_s >= 0.3
+    assert result.problem == (f"{NAME}: fill valve open (commanded shut), wanted shut after 0.3 s; "
+                              f"{reservoir_finding(4.07e27).message}: the reservoir pressure is unknown")
+
+
+def test_after_a_controller_timeout_an_untrusted_gauge_is_said_after_the_hold() -> None:
+    """The valves may still change late: SAFE keeps re-checking them for the hold (1 s here)
+    before it ends on the untrusted gauge, and ends then, not at safe_s."""
+    result, _ = run(Controller(pressure_bar=4.07e27), config(safe_s=4.0), controller_timed_out=True)
+    assert not result.confirmed and result.controller_timed_out
+    assert 1.0 <= result.elapsed_s < 3.0
+    assert result.problem.startswith(f"{NAME}: {SAFE_BUT_UNKNOWN}the reservoir pressure reads 4.07e+27 bar")
+
+
+def test_a_vented_reading_that_cannot_be_judged_is_not_confirmed_until_it_can() -> None:
+    """The judge reads the gauge again (with its words where it can); an error there leaves the
+    round unclean, and a later clean round confirms."""
+    controller = Controller(pressure_bar=0.01)
+    controller.failures["reservoir_pressure_bar"] = [None, InstrumentError(NAME, "read gauge", "no reply")]
+    rounds = []
+    original = safe.time.sleep
+    try:
+        safe.time.sleep = rounds.append
+        result, _ = run(controller)
+    finally:
+        safe.time.sleep = original
+    assert result.confirmed
+    assert len(rounds) == 1  # the first round was not clean: one poll, then a clean round
 
 
 # -- interlock rules ------------------------------------------------------------------------------------
