@@ -377,3 +377,5 @@ def test_fbsd_bounds_above_the_supported_band() -> None:
     assert bounds == {"10": {"lower_bound_hz": 62_500.0,
                              "reason": "unsupported by the excitation (the pulse supports up to 62.5 kHz; the model "
                                        "puts the edge at 81.2 kHz)"}}
+    # 100.6 kHz shows as 101 kHz (three significant digits of the kHz)
+    assert fbsd_bounds({"30": 100_600.0}, (1_000.0, 62_500.0))["30"]["reason"].endswith("puts the edge at 101 kHz)")
