@@ -127,9 +127,18 @@ class Events(Publisher):
         return [e for e in self.seen if isinstance(e, kind)]
 
 
-def run(controller: Controller, cfg: Any = None, **kw: Any) -> tuple[safe.SafeResult, Events]:
-    events = Events()
-    result = make_rig_safe(controller, cfg or config(), events, poll_s=POLL_S, **kw)
+def run(controller: Controller, cfg: Any = None, sleep: Any = None, events: Events | None = None,
+        **kw: Any) -> tuple[safe.SafeResult, Events]:
+    """SAFE on the scripted controller; `sleep` stands in for time.sleep between polls (the
+    test moves the scripted rig there), restored afterwards."""
+    events = Events() if events is None else events
+    original = safe.time.sleep
+    if sleep is not None:
+        safe.time.sleep = sleep
+    try:
+        result = make_rig_safe(controller, cfg or config(), events, poll_s=POLL_S, **kw)
+    finally:
+        safe.time.sleep = original
     return result, events
 
 
@@ -184,12 +193,7 @@ def test_a_valve_read_back_wrong_is_commanded_again_until_it_moves() -> None:
     def free_the_vent(_: float) -> None:
         controller.stuck = {}
 
-    original = safe.time.sleep
-    try:
-        safe.time.sleep = free_the_vent  # the vent moves during the first poll
-        result = make_rig_safe(controller, config(), events, poll_s=POLL_S)
-    finally:
-        safe.time.sleep = original
+    result, _ = run(controller, sleep=free_the_vent, events=events)  # the vent moves during the first poll
     assert result.confirmed
     assert controller.commands.count(("vent_valve", True)) == 2  # the fast path, then once again
     assert controller.commands.count(("fire_valve", False)) == 1
@@ -343,12 +347,7 @@ def test_an_interrupt_while_polling_is_held() -> None:
             raise interrupt
         controller.stuck = {}
 
-    original = safe.time.sleep
-    try:
-        safe.time.sleep = sleep
-        result = make_rig_safe(controller, config(), Events(), poll_s=POLL_S)
-    finally:
-        safe.time.sleep = original
+    result, _ = run(controller, sleep=sleep)
     assert result.confirmed and result.interrupt is interrupt
 
 
@@ -364,12 +363,7 @@ def test_an_interrupt_while_polling_does_not_replace_one_already_held() -> None:
             raise KeyboardInterrupt()
         controller.stuck = {}
 
-    original = safe.time.sleep
-    try:
-        safe.time.sleep = sleep
-        result = make_rig_safe(controller, config(), Events(), poll_s=POLL_S)
-    finally:
-        safe.time.sleep = original
+    result, _ = run(controller, sleep=sleep)
     assert result.interrupt is first
 
 
@@ -426,12 +420,7 @@ def test_a_valve_that_changes_late_is_caught_within_the_hold() -> None:
         if len(rounds) == 3:
             controller.coils["fill_valve"] = True
 
-    original = safe.time.sleep
-    try:
-        safe.time.sleep = sleep
-        result = make_rig_safe(controller, config(safe_s=2.5), Events(), poll_s=POLL_S)
-    finally:
-        safe.time.sleep = original
+    result, _ = run(controller, config(safe_s=2.5), sleep=sleep)
     assert result.confirmed
     assert controller.commands.count(("fill_valve", False)) == 2
     assert controller.coils["fill_valve"] is False
@@ -462,12 +451,13 @@ def test_a_reading_that_cannot_be_true_ends_safe_at_once_saying_the_pressure_is_
     pressure at all; SAFE says so as soon as the valves read back safe, not after safe_s, and
     never guesses "fill valve stuck open?"."""
     controller = Controller(pressure_bar=pressure_bar)
-    result, events = run(controller, config(safe_s=2.5))
+    waits: list[float] = []
+    result, events = run(controller, config(safe_s=2.5), sleep=waits.append)
     finding = reservoir_finding(pressure_bar)
     assert finding.message.startswith("the reservoir pressure reads ") and "which cannot be true" in finding.message
     assert not result.confirmed
     assert result.problem == f"{NAME}: {SAFE_BUT_UNKNOWN}{finding.message}: the reservoir pressure is unknown"
-    assert result.elapsed_s < 1.0  # at once: one round, no waiting for a vent that cannot be seen
+    assert waits == []  # at once: one round, no waiting for a vent that cannot be seen
     assert result.reservoir_pressure_bar == pressure_bar
     assert controller.commands == [("fire_valve", False), ("fill_valve", False), ("vent_valve", True),
                                    ("vacuum_pump", False)]
@@ -485,10 +475,11 @@ def test_the_last_plausible_reading_is_vented_and_the_range_ends_are_plausible()
 def test_a_gauge_handed_in_as_untrusted_confirms_nothing() -> None:
     """CHECK's finding: a later reading that looks vented does not confirm."""
     finding = reservoir_finding(4.07e27)
-    result, _ = run(Controller(pressure_bar=0.01), config(safe_s=2.5), untrusted_gauge=finding)
+    waits: list[float] = []
+    result, _ = run(Controller(pressure_bar=0.01), config(safe_s=2.5), sleep=waits.append, untrusted_gauge=finding)
     assert not result.confirmed
     assert result.problem == f"{NAME}: {SAFE_BUT_UNKNOWN}{finding.message}: the reservoir pressure is unknown"
-    assert result.elapsed_s < 1.0
+    assert waits == []  # at once, not after safe_s
 
 
 def test_a_gauge_once_untrusted_stays_untrusted_when_it_later_reads_vented() -> None:
@@ -498,12 +489,7 @@ def test_a_gauge_once_untrusted_stays_untrusted_when_it_later_reads_vented() -> 
     def free_the_vent(_: float) -> None:
         controller.stuck = {}
 
-    original = safe.time.sleep
-    try:
-        safe.time.sleep = free_the_vent
-        result = make_rig_safe(controller, config(safe_s=2.5), Events(), poll_s=POLL_S)
-    finally:
-        safe.time.sleep = original
+    result, _ = run(controller, config(safe_s=2.5), sleep=free_the_vent)
     assert not result.confirmed
     assert result.problem == (f"{NAME}: {SAFE_BUT_UNKNOWN}{reservoir_finding(4.07e27).message}: the reservoir "
                               "pressure is unknown")
@@ -544,12 +530,7 @@ def test_a_vented_reading_that_cannot_be_judged_is_not_confirmed_until_it_can() 
     controller = Controller(pressure_bar=0.01)
     controller.failures["reservoir_pressure_bar"] = [None, InstrumentError(NAME, "read gauge", "no reply")]
     rounds = []
-    original = safe.time.sleep
-    try:
-        safe.time.sleep = rounds.append
-        result, _ = run(controller)
-    finally:
-        safe.time.sleep = original
+    result, _ = run(controller, sleep=rounds.append)
     assert result.confirmed
     assert len(rounds) == 1  # the first round was not clean: one poll, then a clean round
 
