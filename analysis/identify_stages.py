@@ -215,8 +215,11 @@ def weigh_model_error(prepared: PreparedRecord, search: OrderSearch, sine_terms:
         # no order with free zeros is a candidate (each presses a pole onto the unit circle: a
         # resonance beyond the band whose damping free zeros leave undetermined): the all-pole
         # structure, whose damping beyond the band is floored, as settle_order falls back from an
-        # unstable free choice (order_search.fit_structures: "no model with free zeros is stable")
-        sweep = fit_structures(data, setup)
+        # unstable free choice (the same rule as order_search.fit_structures', without refitting
+        # the free sweep this search has just made)
+        all_pole = fit_orders(data, Structure.ALL_POLE, setup)
+        if all_pole.chosen is not None:
+            sweep = replace(all_pole, why="no model with free zeros is stable")
     if sweep.chosen is None:
         return WeighedSearch(prep, data, sweep, model_error)
     order = setup.asked_order
