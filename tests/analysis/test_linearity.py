@@ -89,7 +89,7 @@ def campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ...]:
         assert truth["accelerometer"]["nonlinearity_per_m_s2"] == nonlinearity
         result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
             amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
-            max_order=4, draws=60), quadrature_v=channels.get(3))
+            max_order=4, draws=60, seed=n), quadrature_v=channels.get(3))
         figures.append(result.to_dict())
     return tuple(figures)
 
