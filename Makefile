@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test bench lint clean mutate
+.PHONY: demo test studies bench lint clean mutate
 
 # Byte-compile the sources (only what changed since the last time): where PYTHONDONTWRITEBYTECODE
 # is set, as on this project's CI machine, every `hopkinson` process a test or the demo starts
@@ -29,6 +29,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(COMPILE)
 	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 3 --dist loadscope --durations=15
+
+# Statistical studies too long for the suite (tests marked `study`: a 200-shot coverage study, ~5 min
+# of CPU), each with the power its docstring states (docs/testing.md). CI runs them after `make test`.
+studies: $(STAMP)
+	$(COMPILE)
+	$(BIN)/python -m pytest -q -m study -n 0 --timeout 1800 --durations=5 tests/studies
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
