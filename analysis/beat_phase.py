@@ -12,6 +12,7 @@ from scipy import fft, ndimage
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.fringe_tracker import onset_phase
 from hopkinson.analysis.full_scale import FullScale, check_not_clipped
+from hopkinson.analysis.sample_counts import floor_count
 
 # --- documented constants of the method ------------------------------------------------------
 BLOCK_SAMPLES = 2**16  # FFT length of one analytic-signal block
@@ -58,7 +59,7 @@ def beat_phase(doppler_v: np.ndarray, sample_interval_s: float, *, decimated_rat
     check_not_clipped(doppler_v, full_scale_v, source, "reduce the digitizer's gain or widen its range")
     x = np.asarray(doppler_v, dtype=np.float32).ravel()
     fs = _check_record(x, sample_interval_s, source)
-    m = max(1, int(fs // decimated_rate_hz))
+    m = max(1, floor_count(fs / decimated_rate_hz))
     n_blocks = x.size // m
     if n_blocks < 64:
         raise AnalysisError(f"{source}: {x.size} samples is too short to demodulate (needs ≥ {64 * m})")

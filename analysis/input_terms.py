@@ -42,11 +42,12 @@ Pure NumPy.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from hopkinson.analysis.sample_counts import ceil_count
 
 ASYMMETRY = "asymmetry"
 MOTION = "motion after the pulse"
@@ -165,8 +166,8 @@ def input_terms(u: np.ndarray, dt: float, pulse_start: int, noise_rms: float, bu
     else:
         not_fitted[MOTION] = "the channels do not move together after the pulse"
     foot = _foot(u, pulse_start, noise_rms)
-    first = max(0, foot - _whole(onset_s[0] / dt))
-    stop = min(end, foot + _whole(onset_s[1] / dt) + 1)
+    first = max(0, foot - ceil_count(onset_s[0] / dt))
+    stop = min(end, foot + ceil_count(onset_s[1] / dt) + 1)
     onset = None
     if stop > i_peak:
         not_fitted[ONSET] = ("the pulse peaks within the onset's window: its onset is the pulse itself, which a free "
@@ -189,20 +190,12 @@ def _lobe_samples(x: np.ndarray, peak: float) -> int:
     return hi - lo - 1 if lo < i else hi - lo
 
 
-def _whole(samples: float) -> int:
-    """The whole number of samples that holds `samples`, a ratio of floats rounded first: 8 µs at
-    1 µs (7.999999999999999) and at 0.9999999999999972 µs (8.000000000000002) are both 8, not 8 and
-    9 (the onset window and its bumps, hence the fit, differed between a record's two spellings of
-    one sample interval)."""
-    return int(math.ceil(round(samples, 6)))
-
-
 def onset_bumps(n: int, first: int, stop: int, spacing: float) -> list[np.ndarray]:
     """Hann bumps two `spacing`s wide (samples), centred every `spacing` from `first` on to past
     `stop`: a partition of unity over the window whose combinations hold nothing above about
     1/(2·spacing) that a unit impulse per sample would."""
     k = np.arange(n, dtype=float)
-    count = max(1, _whole((stop - first) / spacing) + 1)
+    count = max(1, ceil_count((stop - first) / spacing) + 1)
     out = []
     for i in range(count):
         x = (k - (first + i * spacing)) / spacing

@@ -80,6 +80,7 @@ from hopkinson.analysis.resample import (
     estimate_delay_samples,
     shift_samples,
 )
+from hopkinson.analysis.sample_counts import floor_count
 
 RAW_KEYS = ("time_s", "doppler", "response")
 QUADRATURE_KEY = "doppler_quadrature"  # the optional column of a quadrature interferometer
@@ -400,7 +401,7 @@ def quadrature_phase(u1_v: np.ndarray, u2_v: np.ndarray, sample_interval_s: floa
     content = beat_content(np.asarray(u2_v).ravel(), np.asarray(u1_v).ravel(), QUADRATURE_KEY)
     if content is not None and content.carries_nothing:  # one photodetector, its partner's role mapped: say so
         raise AnalysisError(f"{source}: {content.message()}")
-    m = max(1, int((1.0 / sample_interval_s) // decimated_rate_hz))
+    m = max(1, floor_count(1.0 / sample_interval_s / decimated_rate_hz))
     n_blocks = np.asarray(u1_v).size // m
     if n_blocks < 64:
         raise AnalysisError(f"{source}: {np.asarray(u1_v).size} samples is too short to demodulate "
