@@ -227,8 +227,10 @@ def analyse_record(record: Record, params: AnalysisOptions | None = None,
     from hopkinson.analysis.compensation import compensate_shot
     from hopkinson.analysis.dcm_figures import compare_steps
 
-    compensation = compensate_shot(ident, record, params, draws=model_draws,
-                                   seed=params.seed)
+    # the seed the Monte Carlo used (drawn fresh and stored where none was asked), so that a
+    # re-analysis with the stored seed gives the compensated peak's interval again
+    seed = params.seed if params.seed is not None else (uncertainty or {}).get("seed")
+    compensation = compensate_shot(ident, record, params, draws=model_draws, seed=seed)
     warnings += compensation.warnings
     dcm, comp = compensation.design.dcm, compensation.design.compensated_fbsd_hz
     steps = compare_steps(model, dcm)  # one simulation for both ratios

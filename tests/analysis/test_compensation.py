@@ -251,3 +251,21 @@ def test_compensated_peak_draws_at_once_equal_one_at_a_time():
     assert fast["value"] == pytest.approx(value, rel=1e-12)
     assert fast["u_draws"] == pytest.approx(spread, rel=1e-9) and fast["u"] == pytest.approx(u, rel=1e-9)
     assert fast["interval"] == pytest.approx(interval, rel=1e-11)
+
+
+def test_an_unseeded_analysis_is_reproduced_from_its_stored_seed_compensated_peak_included():
+    """With no seed asked, the Monte Carlo draws a fresh one and stores it with the result; the
+    compensated peak's noise draws took a fresh, unstored seed of their own, so analysing again
+    with the stored seed gave another interval. Now the whole result, that interval included,
+    comes back from the stored seed."""
+    from hopkinson.analysis.shot_analysis import analyse_record
+
+    truth, width_s = TRUTHS[0]
+    record = shot(truth, width_s, seed=11)
+    first = analyse_record(record, AnalysisOptions(draws=50)).to_dict()
+    seed = first["uncertainty"]["seed"]
+    again = analyse_record(record, AnalysisOptions(draws=50, seed=seed)).to_dict()
+    peak = first["dcm"]["compensated_peak"]
+    assert peak is not None and peak["u_draws"] > 0
+    assert again["dcm"]["compensated_peak"] == peak
+    assert again["uncertainty"]["dc_gain"] == first["uncertainty"]["dc_gain"]
