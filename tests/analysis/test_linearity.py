@@ -33,6 +33,7 @@ from hopkinson.analysis.shot_analysis import analyse_raw_shot
 from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 from hopkinson.rig.config import load_sim_config
 from tests.rig.conftest import REPO
+from tests.shared_results import once_per_run, run_folder
 
 NONLINEARITY = -1.0e-7  # −1 % per 100 km/s²
 SHOTS = ((3, 0.6), (2, 1.5), (3, 3.0), (2, 5.0))  # (projectile, bar): about 210 .. 680 km/s² peak, two pulse shapes
@@ -69,15 +70,20 @@ def test_the_95_percent_interval_of_the_slope_holds_the_truth_95_percent_of_the_
     assert 0.937 <= inside / campaigns <= 0.975, inside / campaigns
 
 
-def _campaign(nonlinearity: float, seed: int) -> list[KeyFigures]:
+def _campaign(nonlinearity: float, seed: int, tmp_path_factory: pytest.TempPathFactory) -> list[KeyFigures]:
     """The SHOTS through a sensor of `nonlinearity`, in the shipped world with its seed moved by `seed`."""
-    return [KeyFigures.from_results(results) for results in campaign_results(nonlinearity, seed)]
+    return [KeyFigures.from_results(results) for results in campaign_results(nonlinearity, seed, tmp_path_factory)]
 
 
-@functools.cache
-def campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ...]:
-    """Each of `_campaign`'s shots' results as analyse_raw_shot gives them (computed once per
-    process: tests/lab/test_certificate_linearity.py certifies the same campaign)."""
+def campaign_results(nonlinearity: float, seed: int, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, ...]:
+    """Each of `_campaign`'s shots' results as analyse_raw_shot gives them, computed once per
+    test run (tests/lab/test_certificate_linearity.py certifies the same campaign, often on
+    another xdist worker: tests/shared_results.py)."""
+    return once_per_run(run_folder(tmp_path_factory), f"linearity-campaign-{nonlinearity:g}-{seed}",
+                        functools.partial(_computed_campaign_results, nonlinearity, seed))
+
+
+def _computed_campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ...]:
     world = load_sim_config(REPO / "config" / "sim.toml").world
     assert world.realism.enabled  # the shipped simulator makes realistic records
     params = dataclasses.replace(world, seed=world.seed + seed, accelerometer=dataclasses.replace(
@@ -95,9 +101,9 @@ def campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ...]:
 
 
 @pytest.fixture(scope="module")
-def campaigns() -> dict[tuple[float, int], list[KeyFigures]]:
-    out = {(NONLINEARITY, seed): _campaign(NONLINEARITY, seed) for seed in NON_LINEAR_SEEDS}
-    out.update({(0.0, seed): _campaign(0.0, seed) for seed in LINEAR_SEEDS})
+def campaigns(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[float, int], list[KeyFigures]]:
+    out = {(NONLINEARITY, seed): _campaign(NONLINEARITY, seed, tmp_path_factory) for seed in NON_LINEAR_SEEDS}
+    out.update({(0.0, seed): _campaign(0.0, seed, tmp_path_factory) for seed in LINEAR_SEEDS})
     return out
 
 

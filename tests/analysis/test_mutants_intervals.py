@@ -292,3 +292,12 @@ def test_response_band_adds_each_type_b_rows_widest_variant_times_a_uniform_fact
                             systematic=[(dead,), (inverted(0.26), inverted(0.3))])
     for key in ("magnitude_rel_low", "magnitude_rel_high", "phase_low_deg", "phase_high_deg"):
         np.testing.assert_allclose(flipped[key], band[key], rtol=1e-12, atol=1e-9)
+
+
+def test_a_positive_figure_whose_reflected_end_passes_the_largest_float_is_unbounded_not_an_error() -> None:
+    """Reflected on a log scale, value²/draw: a value of 1e300 with draws down to 1e290 puts the
+    upper end at 1e310, beyond the largest float; math.exp raised OverflowError (a traceback)."""
+    draws = np.geomspace(1e290, 1e300, 50)
+    est = Estimate.of_draws(1e300, draws, positive=True)
+    assert est.interval is not None and est.interval[1] == math.inf
+    assert est.interval[0] <= 1e300 <= est.interval[1]

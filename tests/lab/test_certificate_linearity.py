@@ -29,8 +29,8 @@ from tests.lab.test_lab_cli import lab, lab_config, save_pages  # noqa: F401 (th
 
 
 @pytest.fixture(scope="module")
-def results() -> tuple[dict, ...]:
-    return campaign_results(NONLINEARITY, 0)
+def results(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, ...]:
+    return campaign_results(NONLINEARITY, 0, tmp_path_factory)
 
 
 def test_the_certificate_states_the_quasi_static_gains_line(results: tuple[dict, ...], tmp_path: Path,

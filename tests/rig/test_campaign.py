@@ -10,6 +10,7 @@ journal, is the witness of how often each shot was fired.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import re
 import time
@@ -175,8 +176,14 @@ def test_a_shot_fired_without_a_record_waits_for_an_operator(tmp_path: Path, rig
     run, plan = new_run(tmp_path, entries="[[shots]]\npressure_bar = 1.2\nrepeats = 2\n")
     faults = rig.session.rig.faults
     faults.inject("no-trigger")  # the projectile flies, the digitizer never triggers
+    # CAPTURE waits for a trigger that never comes until its timeout: 0.5 s, not the fixture's 3 s,
+    # for this run only (the shots that follow capture records under the fixture's timeouts)
+    configured = rig.config
+    rig.config = dataclasses.replace(configured, timeouts=dataclasses.replace(configured.timeouts, capture_s=0.5))
     outcome = rig.runner(run, plan).run()
+    rig.config = configured
     assert outcome.exit_code == 3 and outcome.last_shot.fired and outcome.last_shot.shot_path is None
+    assert "timed out after 0.5 s" in outcome.message  # (the shortened timeout is the one that ended it)
     assert "hopkinson campaign decide" in outcome.message and "s001-r1" in outcome.message
     assert rig.fired() == ["s001-r1"] and states(run)["s001-r1"] == ("UNKNOWN", 1)
 
