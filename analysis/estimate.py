@@ -142,8 +142,10 @@ class Estimate:
             d = np.asarray(draws, dtype=float)
             d = np.where(d > 0, d, np.nan)
             est = cls._of_draws(math.log(value), np.log(d), coverage, reflect, False)
-            return cls(float(value), float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan,
-                       (math.exp(est.interval[0]), math.exp(est.interval[1])))
+            with np.errstate(over="ignore"):  # an end beyond the largest float is unbounded (inf), not an error
+                ends = np.exp(np.asarray(est.interval, dtype=float))
+                spread = float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan
+            return cls(float(value), spread, (float(ends[0]), float(ends[1])))
         d = np.asarray(draws, dtype=float)
         flags = np.ones(d.size, dtype=bool) if reflect is None else np.asarray(reflect, dtype=bool)
         finite = np.isfinite(d)
