@@ -142,10 +142,9 @@ class Estimate:
             d = np.asarray(draws, dtype=float)
             d = np.where(d > 0, d, np.nan)
             est = cls._of_draws(math.log(value), np.log(d), coverage, reflect, False)
-            with np.errstate(over="ignore"):  # an end beyond the largest float is unbounded (inf), not an error
-                ends = np.exp(np.asarray(est.interval, dtype=float))
+            with np.errstate(over="ignore"):
                 spread = float(np.nanstd(d, ddof=1)) if np.sum(np.isfinite(d)) > 1 else math.nan
-            return cls(float(value), spread, (float(ends[0]), float(ends[1])))
+            return cls(float(value), spread, (_exp_or_inf(est.interval[0]), _exp_or_inf(est.interval[1])))
         d = np.asarray(draws, dtype=float)
         flags = np.ones(d.size, dtype=bool) if reflect is None else np.asarray(reflect, dtype=bool)
         finite = np.isfinite(d)
@@ -183,3 +182,12 @@ def _decimals_for(expanded: float) -> int:
     if not (expanded > 0 and math.isfinite(expanded)):
         return 4
     return int(min(12, max(0, 1 - math.floor(math.log10(expanded)))))
+
+
+def _exp_or_inf(x: float) -> float:
+    """exp(x) (math.exp: the goldens' bits), or inf where it passes the largest float: an
+    interval end beyond it is unbounded, not an error."""
+    try:
+        return math.exp(x)
+    except OverflowError:
+        return math.inf
