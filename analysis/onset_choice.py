@@ -75,9 +75,9 @@ def onset_fitted(prep: Prepared, plain: SpectralData, plain_sweep: OrderSweep, s
             bumps[onset.columns(ONSET)] = bumped.inputs[onset.columns(ONSET)]
         size = float(np.max(np.abs(onset.correction(bumps))))
         noise = prep.noise.draw_noise_u.rms if prep.noise.draw_noise_u.samples else 0.0
-        richest = cost_test_fit(plain_sweep, plain, setup)
-        assert richest is not None
-        if size <= ONSET_ABOVE_NOISE * noise:
+        # the richest order without them is fitted only where the bumps stand above the noise
+        richest = cost_test_fit(plain_sweep, plain, setup) if size > ONSET_ABOVE_NOISE * noise else None
+        if richest is None:
             why = f"the correction, {size / max(noise, 1e-300):.2g}× the reference's noise, does not stand above it"
         elif _stands(bumped, richest, plain.bins, setup.significance):
             spectral = replace(prep.spectral, inputs=trial.inputs, input_prior=trial.input_prior)
