@@ -240,6 +240,8 @@ class OrderProblem:
         if self.sine is not None:  # ln κ and τ_s of SineTerms, last
             self.sine_powers = np.exp(-1j * np.outer(self.sine.omega, np.arange(order + 1)))
             self.size += 2
+        self._prior_rows = np.zeros((self.n_prior, self.size))  # the prior's Jacobian rows (constant)
+        self._prior_rows[np.arange(self.n_prior), self._k_inputs + self.prior_columns] = self.prior_weights
         self._rejected: np.ndarray | None = None
         self._last_pieces: tuple[bytes, dict[str, np.ndarray | float]] | None = None
 
@@ -454,9 +456,7 @@ class OrderProblem:
             dpred[:, k : k + self.n_inputs] = (delay * g)[:, None] * d.inputs
         jac = math.sqrt(2.0) * (-dpred / sigma[:, None] - (err / (2.0 * s2 * sigma))[:, None] * ds2)
         if self.n_prior:
-            prior = np.zeros((self.n_prior, self.size))
-            prior[np.arange(self.n_prior), self._k_inputs + self.prior_columns] = self.prior_weights
-            return np.vstack((jac.real, jac.imag, prior))
+            return np.vstack((jac.real, jac.imag, self._prior_rows))
         return np.vstack((jac.real, jac.imag))
 
     def _dtau(self, theta: np.ndarray) -> float:
@@ -474,7 +474,8 @@ class OrderProblem:
         (`start.cost`, when it was evaluated on these data, else its cost here).
         `stop_at_delay(τ)` true after a step ends the search there."""
         theta0 = self.pack(start)
-        cost0 = self.cost(theta0)
+        r0 = self.residual(theta0)
+        cost0 = 0.5 * float(r0 @ r0)
         # (a start fitted without the sine terms has a cost of other data)
         same_data = self.sine is None or math.isfinite(start.sine_gain)
         if math.isfinite(start.cost) and start.cost < cost0 and start.a.size == self.n + 1 and same_data:
@@ -485,10 +486,10 @@ class OrderProblem:
             return fallback
         try:
             stop = None if stop_at_delay is None else (lambda theta: stop_at_delay(self.unpack(theta)[2]))
-            result = levenberg_marquardt(self.residual, self.jacobian, theta0, max_evaluations, tolerance, stop)
+            result = levenberg_marquardt(self.residual, self.jacobian, theta0, max_evaluations, tolerance, stop, r0)
         except (ValueError, np.linalg.LinAlgError):
             return fallback
-        cost = self.cost(result.x)
+        cost = result.cost  # ½‖r‖² of the residual at result.x, as the search evaluated it
         if not (np.isfinite(cost) and cost <= fallback.cost):
             return replace(fallback, evaluations=result.evaluations)
         return self.fit_of(result.x, cost, result.evaluations, result.converged)

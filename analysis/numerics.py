@@ -36,15 +36,17 @@ def levenberg_marquardt(
     max_evaluations: int = 100,
     tolerance: float = 1e-8,
     stop: Callable[[np.ndarray], bool] | None = None,
+    r0: np.ndarray | None = None,
 ) -> LeastSquaresResult:
     """Minimise ½‖fun(x)‖² from x0. Each step solves the damped system [J; √μ·D]·h = [−r; 0]
     (D the Jacobian's column norms: scale invariance) by least squares; a step that lowers the
     cost is taken and μ relaxed by Nielsen's rule, else μ grows. Converged when a taken step
     lowered the cost, or moved x, by less than `tolerance` (relative), or when the step's
     predicted gain is below 1 % of that. `stop(x)`, checked after each step taken, ends the
-    search there (not converged): the caller has seen where it is going."""
+    search there (not converged): the caller has seen where it is going. `r0`: fun(x0), when the
+    caller has it."""
     x = np.asarray(x0, dtype=float).copy()
-    r = fun(x)
+    r = fun(x) if r0 is None else r0
     cost = 0.5 * float(r @ r)
     evaluations = 1
     if not math.isfinite(cost):
@@ -53,8 +55,8 @@ def levenberg_marquardt(
     scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
     r_j, qt_r = _triangular(j, r)
     mu, nu = 1e-3, 2.0
+    gradient = j.T @ r
     while evaluations < max_evaluations:
-        gradient = j.T @ r
         system = np.vstack((r_j, np.diag(math.sqrt(mu) * scale)))
         rhs = np.concatenate((-qt_r, np.zeros(x.size)))
         try:
@@ -80,6 +82,7 @@ def levenberg_marquardt(
             j = jac(x)
             scale = np.maximum(scale, np.linalg.norm(j, axis=0))
             r_j, qt_r = _triangular(j, r)
+            gradient = j.T @ r
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         else:
