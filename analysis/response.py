@@ -63,29 +63,33 @@ class BandEdge:
         }
 
 
+def base_grid(f_max_hz: float) -> np.ndarray:
+    """The grid `band_edges` examines on [0, f_max_hz] before the frequencies of interest join it
+    (sorted, unique): a caller that finds many models' edges up to one f_max builds it once."""
+    return np.unique(np.concatenate([np.linspace(0.0, f_max_hz, _LINEAR_POINTS),
+                                     np.geomspace(f_max_hz * 10.0**-_LOG_DECADES, f_max_hz, _LOG_POINTS)]))
+
+
 def band_edges(
     gain: Callable[[np.ndarray], np.ndarray],
     f_max_hz: float,
     levels: Sequence[float] = DEFAULT_LEVELS,
     frequencies_of_interest_hz: Iterable[float] = (),
+    grid: np.ndarray | None = None,
 ) -> dict[str, BandEdge]:
     """Band edges of a normalised gain function g(f) = |H(f)/H(0)| on [0, f_max_hz].
 
     `gain` takes an array of frequencies (Hz) and returns the normalised magnitude. The
     first grid point outside 1 ± level brackets the crossing with the point before it;
     brentq then locates it to ~1e-12 relative. Narrow features can only be found if the
-    grid samples them: pass their frequencies in `frequencies_of_interest_hz`.
+    grid samples them: pass their frequencies in `frequencies_of_interest_hz`. `grid`:
+    `base_grid(f_max_hz)` when the caller has it already.
     """
     if not f_max_hz > 0:
         raise AnalysisError(f"band edges: f_max must be positive, got {f_max_hz}")
-    grid = np.concatenate(
-        [
-            np.linspace(0.0, f_max_hz, _LINEAR_POINTS),
-            np.geomspace(f_max_hz * 10.0**-_LOG_DECADES, f_max_hz, _LOG_POINTS),
-            np.asarray([f for f in frequencies_of_interest_hz if 0.0 < f < f_max_hz], dtype=float),
-        ]
-    )
-    grid = np.unique(grid)
+    base = base_grid(f_max_hz) if grid is None else grid
+    grid = np.unique(np.concatenate(
+        [base, np.asarray([f for f in frequencies_of_interest_hz if 0.0 < f < f_max_hz], dtype=float)]))
     g = np.asarray(gain(grid), dtype=float)
     if not np.all(np.isfinite(g)):
         raise AnalysisError("band edges: the gain is not finite on [0, f_max] (a pole on the unit circle?)")
@@ -185,11 +189,13 @@ def normalised_gain_function(
     return gain
 
 
-def fbsd_edges(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, BandEdge]:
-    """The model's band edges (BandEdge per level key), searched up to Nyquist."""
+def fbsd_edges(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS, grid: np.ndarray | None = None
+               ) -> dict[str, BandEdge]:
+    """The model's band edges (BandEdge per level key), searched up to Nyquist (`grid`:
+    `base_grid(nyquist_hz(model))`, when the caller has it)."""
     gain = normalised_gain_function(model.b, model.a, model.sample_interval_s)
     special = pole_zero_frequencies_hz(np.concatenate([model.poles, model.zeros]), model.sample_interval_s)
-    return band_edges(gain, nyquist_hz(model), levels, special)
+    return band_edges(gain, nyquist_hz(model), levels, special, grid)
 
 
 def fbsd_hz(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, float]:

@@ -15,7 +15,7 @@ from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.options import AnalysisOptions
-from hopkinson.analysis.response import fbsd_edges
+from hopkinson.analysis.response import base_grid, fbsd_edges
 from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.systematics import MODEL_ERROR_BOUND, TypeB, fitted_shares
 
@@ -167,6 +167,7 @@ def _figure_gradients(
     pole = main.pole_z if main else None
     dt = ident.sample_interval_s
     scale = ident.prepared.scale_y / ident.prepared.scale_u
+    grid = base_grid(0.5 / dt)  # every model here has the same Nyquist: its grid built once
 
     def figures(th: np.ndarray) -> dict[str, float]:
         a, b, tau, _, _ = problem.unpack(th)
@@ -175,7 +176,8 @@ def _figure_gradients(
         if pole is not None:
             out["natural_frequency_hz"], out["damping_ratio"] = nearest_mode(a, pole, dt)
         try:
-            for key, edge in fbsd_edges(DiscreteModel(dt, a, b * scale, ident.prepared.model_delay(tau))).items():
+            for key, edge in fbsd_edges(DiscreteModel(dt, a, b * scale, ident.prepared.model_delay(tau)),
+                                        grid=grid).items():
                 out[f"fbsd_{key}_hz"] = edge.frequency_hz
         except AnalysisError:
             pass

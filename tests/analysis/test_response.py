@@ -14,7 +14,9 @@ from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.response import (
     band_edges,
+    base_grid,
     continuous_tf,
+    fbsd_edges,
     fbsd_from_response,
     fbsd_hz,
     fbsd_report,
@@ -135,6 +137,18 @@ def test_fbsd_finds_a_notch_narrower_than_the_grid(f0_hz):
     edge = fbsd_report(model)["5"]
     assert edge["crossing"] == "below"
     assert edge["frequency_hz"] == pytest.approx(notch_edge_hz(b, a, f0_hz, 0.05, fs), abs=1e-3)
+
+
+def test_one_grid_shared_by_several_models_finds_each_models_own_edge():
+    """The budget builds `base_grid` once for all its models: each model's edges are still its own
+    (its zeros' angles join the shared grid per call), the narrow notches of both to a millihertz."""
+    fs = 1e6
+    grid = base_grid(0.5 * fs)
+    for f0_hz in (123_456.7, 100_010.0):
+        b, a = signal.iirnotch(f0_hz, 30_000.0, fs=fs)
+        edge = fbsd_edges(DiscreteModel(1 / fs, a, b), grid=grid)["5"]
+        assert edge.crossing == "below"
+        assert edge.frequency_hz == pytest.approx(notch_edge_hz(b, a, f0_hz, 0.05, fs), abs=1e-3)
 
 
 def test_fbsd_from_sampled_response_is_exact_for_a_linear_gain():
