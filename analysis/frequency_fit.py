@@ -244,6 +244,8 @@ class OrderProblem:
         self._prior_rows[np.arange(self.n_prior), self._k_inputs + self.prior_columns] = self.prior_weights
         self._rejected: np.ndarray | None = None
         self._last_pieces: tuple[bytes, dict[str, np.ndarray | float]] | None = None
+        self._last_residuals: list[tuple[bytes, np.ndarray]] = []
+        self._minus_j_omega = -1j * data.omega  # θ-independent, as the prior's rows
 
     # -- parameter vector ------------------------------------------------------------------
     def pack(self, fit: OrderFit) -> np.ndarray:
@@ -327,20 +329,26 @@ class OrderProblem:
         big_a = pw @ a
         big_b = pw @ b
         g = big_b / big_a
-        delay = np.exp(-1j * d.omega * tau)
+        delay = np.exp(self._minus_j_omega * tau)
         s2 = d.var_y + np.abs(g) ** 2 * d.var_u
         u = d.u
         if self.n_inputs:  # the corrected input U + V·c
             u = d.u + d.inputs @ self.input_coefficients(theta)
-        return {"A": big_a, "B": big_b, "G": g, "D": delay, "s2": s2, "tau": tau, "transient": transient,
-                "drift": drift, "U": u}
+        return {"A": big_a, "B": big_b, "G": g, "D": delay, "s2": s2, "sigma": np.sqrt(s2), "tau": tau,
+                "transient": transient, "drift": drift, "U": u}
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
-        """The shock's residuals, then the sine points' (SineTerms) when there are any."""
+        """The shock's residuals, then the sine points' (SineTerms) when there are any. The last
+        two θ's are kept (a solve evaluates its start, and its end, twice). Not to be written to."""
+        key = theta.tobytes()
+        for kept, r in self._last_residuals:
+            if kept == key:
+                return r
         r = self._shock_residual(theta)
-        if self.sine is None or r is self._rejected:
-            return r
-        return np.concatenate((r, self._sine_residual(theta)))
+        if self.sine is not None and r is not self._rejected:
+            r = np.concatenate((r, self._sine_residual(theta)))
+        self._last_residuals = [(key, r), *self._last_residuals[:1]]
+        return r
 
     def _sine_error(self, theta: np.ndarray) -> np.ndarray:
         """e of SineTerms at each sine point (imaginary part wrapped to ±π)."""
@@ -378,22 +386,30 @@ class OrderProblem:
             return self._reject()
         p = self._pieces(theta)
         d = self.data
-        sigma = np.sqrt(p["s2"])
-        gd = p["D"] * p["G"]
+        sigma = p["sigma"]
         if d.grouped:
+            gd = p["D"] * p["G"]
             ghat = d.syu / d.suu
             c = np.maximum(d.syy - np.abs(d.syu) ** 2 / d.suu, 0.0)
             r1 = math.sqrt(2.0) * np.sqrt(d.suu) * (gd - ghat) / sigma
             r2 = np.sqrt(2.0 * c) / sigma
             return np.concatenate((r1.real, r1.imag, r2))
-        err = self._error(p)
-        r = math.sqrt(2.0) * err / sigma
+        r = math.sqrt(2.0) * self._error(p) / sigma
+        m = r.size
+        out = np.empty(2 * m + self.n_prior)
+        out[:m] = r.real
+        out[m : 2 * m] = r.imag
         if self.n_prior:
-            c = self.input_coefficients(theta)[self.prior_columns]
-            return np.concatenate((r.real, r.imag, self.prior_weights * c))
-        return np.concatenate((r.real, r.imag))
+            out[2 * m :] = self.prior_weights * self.input_coefficients(theta)[self.prior_columns]
+        return out
 
     def _error(self, p: dict) -> np.ndarray:
+        """Y − the model's prediction at the pieces `p` (kept in them: the Jacobian at the same θ reads it)."""
+        if "error" not in p:
+            p["error"] = self._prediction_error(p)
+        return p["error"]
+
+    def _prediction_error(self, p: dict) -> np.ndarray:
         d = self.data
         pred = p["D"] * p["G"] * p["U"]
         if self.n_transient:
@@ -413,51 +429,74 @@ class OrderProblem:
         return jac if self.sine is None else np.vstack((jac, self._sine_jacobian(theta)))
 
     def _shock_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """∂r/∂θ of the shock's residuals. G depends on A's and B's parameters only (the first
+        `k_delay` columns): the weights' derivative is formed on those columns alone."""
         p = self._pieces(theta)
         d = self.data
-        n = self.n
+        n, k = self.n, self.k_delay
         big_a, g, delay = p["A"], p["G"], p["D"]
-        s2 = p["s2"]
-        sigma = np.sqrt(s2)
+        s2, sigma = p["s2"], p["sigma"]
         e_over_a = self.powers / big_a[:, None]  # z^{-i}/A
-        dg = np.empty((d.omega.size, self.size), dtype=complex)  # ∂G/∂θ for the weight
+        dg = np.empty((d.omega.size, k), dtype=complex)  # ∂G/∂(A's and B's parameters)
         dg[:, :n] = -g[:, None] * e_over_a[:, 1 : n + 1]
-        dg[:, n : self.k_delay] = e_over_a @ self.b_map
-        dg[:, self.k_delay :] = 0.0
+        dg[:, n:] = e_over_a if self.numerator is None else e_over_a @ self.b_map
         ds2 = 2.0 * d.var_u[:, None] * np.real(np.conj(g)[:, None] * dg)
         if d.grouped:
-            gd = delay * g
-            dgd = delay[:, None] * dg
-            if self.fixed_delay is None:
-                dgd[:, self.k_delay] = -1j * d.omega * gd * self._dtau(theta)
-            ghat = d.syu / d.suu
-            c = np.maximum(d.syy - np.abs(d.syu) ** 2 / d.suu, 0.0)
-            w = math.sqrt(2.0) * np.sqrt(d.suu)
-            j1 = w[:, None] * (dgd / sigma[:, None] - ((gd - ghat) / (2.0 * s2 * sigma))[:, None] * ds2)
-            j2 = -(np.sqrt(2.0 * c) / (2.0 * s2 * sigma))[:, None] * ds2
-            return np.vstack((j1.real, j1.imag, j2))
+            return self._grouped_jacobian(theta, p, dg, ds2)
         err = self._error(p)
         u = p["U"]
-        dpred = delay[:, None] * dg * u[:, None]
+        m = d.omega.size
+        dpred = np.empty((m, self.size), dtype=complex)  # ∂(the prediction)/∂θ
+        dpred[:, :k] = delay[:, None] * dg * u[:, None]
         if self.n_transient:
             trans = (self.powers[:, : self.n_transient] @ p["transient"]) / big_a
             dpred[:, :n] -= trans[:, None] * e_over_a[:, 1 : n + 1]
-        k = self.k_delay
+        j = k
         if self.fixed_delay is None:
-            dpred[:, k] = -1j * d.omega * delay * g * u * self._dtau(theta)
-            k += 1
+            dpred[:, j] = self._minus_j_omega * delay * g * u * self._dtau(theta)
+            j += 1
         if self.n_transient:
-            dpred[:, k : k + self.n_transient] = e_over_a[:, : self.n_transient]
-            k += self.n_transient
+            dpred[:, j : j + self.n_transient] = e_over_a[:, : self.n_transient]
+            j += self.n_transient
         if self.drift:
-            dpred[:, k] = d.ramp
-            k += 1
+            dpred[:, j] = d.ramp
+            j += 1
         if self.n_inputs:
-            dpred[:, k : k + self.n_inputs] = (delay * g)[:, None] * d.inputs
-        jac = math.sqrt(2.0) * (-dpred / sigma[:, None] - (err / (2.0 * s2 * sigma))[:, None] * ds2)
-        if self.n_prior:
-            return np.vstack((jac.real, jac.imag, self._prior_rows))
-        return np.vstack((jac.real, jac.imag))
+            dpred[:, j : j + self.n_inputs] = (delay * g)[:, None] * d.inputs
+            j += self.n_inputs
+        dpred[:, j:] = 0.0  # the sine terms' parameters (SineTerms) do not enter the shock's rows
+        # J = √2·(−∂pred/σ − err/(2s²σ)·∂s²) (∂s² on the first k columns only), real parts over
+        # imaginary parts, in real arithmetic with the complex expression's values: NumPy divides a
+        # complex number by a real σ as (x·(1/σ), y·(1/σ)) and multiplies it by a real one part by
+        # part, and √2·(−a − b) = −√2·(a + b) exactly.
+        out = np.empty((2 * m + self.n_prior, self.size))
+        inv_sigma = (1.0 / sigma)[:, None]
+        w = err * (1.0 / (2.0 * s2 * sigma))  # err/(2s²σ)
+        for half, part, w_part in ((out[:m], dpred.real, w.real), (out[m : 2 * m], dpred.imag, w.imag)):
+            np.multiply(part, inv_sigma, out=half)
+            half[:, :k] += w_part[:, None] * ds2
+            half *= -math.sqrt(2.0)
+        out[2 * m :] = self._prior_rows
+        return out
+
+    def _grouped_jacobian(self, theta: np.ndarray, p: dict, dg: np.ndarray, ds2: np.ndarray) -> np.ndarray:
+        """∂r/∂θ on grouped bins (`_shock_jacobian`'s ∂G and ∂s² on A's and B's parameters given)."""
+        d = self.data
+        k = self.k_delay
+        g, delay, s2, sigma = p["G"], p["D"], p["s2"], p["sigma"]
+        gd = delay * g
+        dgd = np.zeros((d.omega.size, self.size), dtype=complex)
+        dgd[:, :k] = delay[:, None] * dg
+        if self.fixed_delay is None:
+            dgd[:, k] = self._minus_j_omega * gd * self._dtau(theta)
+        full_ds2 = np.zeros((d.omega.size, self.size))
+        full_ds2[:, :k] = ds2
+        ghat = d.syu / d.suu
+        c = np.maximum(d.syy - np.abs(d.syu) ** 2 / d.suu, 0.0)
+        w = math.sqrt(2.0) * np.sqrt(d.suu)
+        j1 = w[:, None] * (dgd / sigma[:, None] - ((gd - ghat) / (2.0 * s2 * sigma))[:, None] * full_ds2)
+        j2 = -(np.sqrt(2.0 * c) / (2.0 * s2 * sigma))[:, None] * full_ds2
+        return np.vstack((j1.real, j1.imag, j2))
 
     def _dtau(self, theta: np.ndarray) -> float:
         """∂τ/∂(delay parameter): τmax·sin 2t for τ = τmax·sin²t, else 1."""

@@ -53,12 +53,11 @@ def levenberg_marquardt(
         return LeastSquaresResult(x, cost, evaluations, False)
     j = jac(x)
     scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
-    r_j, qt_r = _triangular(j, r)
+    system, rhs, gradient = _damped_system(j, r)
+    diagonal = (np.arange(system.shape[0] - x.size, system.shape[0]), np.arange(x.size))
     mu, nu = 1e-3, 2.0
-    gradient = j.T @ r
     while evaluations < max_evaluations:
-        system = np.vstack((r_j, np.diag(math.sqrt(mu) * scale)))
-        rhs = np.concatenate((-qt_r, np.zeros(x.size)))
+        system[diagonal] = math.sqrt(mu) * scale
         try:
             step = np.linalg.lstsq(system, rhs, rcond=None)[0]
         except np.linalg.LinAlgError:
@@ -81,8 +80,7 @@ def levenberg_marquardt(
                 return LeastSquaresResult(x, cost, evaluations, True)
             j = jac(x)
             scale = np.maximum(scale, np.linalg.norm(j, axis=0))
-            r_j, qt_r = _triangular(j, r)
-            gradient = j.T @ r
+            system, rhs, gradient = _damped_system(j, r)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         else:
@@ -91,6 +89,18 @@ def levenberg_marquardt(
             if mu > 1e16:
                 break
     return LeastSquaresResult(x, cost, evaluations, False)
+
+
+def _damped_system(j: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """[R; 0] and [−Qᵀr; 0] of the damped step's system at a Jacobian (`_triangular`; the
+    damping's diagonal goes into the zero block), and the gradient Jᵀr."""
+    r_j, qt_r = _triangular(j, r)
+    k, p = r_j.shape
+    system = np.zeros((k + p, p))
+    system[:k] = r_j
+    rhs = np.zeros(k + p)
+    rhs[:k] = -qt_r
+    return system, rhs, j.T @ r
 
 
 def _triangular(j: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
