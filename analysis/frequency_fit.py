@@ -121,14 +121,16 @@ def damping_floored(a: np.ndarray, omega_top: float) -> np.ndarray | None:
     return np.real(np.poly(np.where(pair, np.exp(s), poles)))
 
 
-def predicted_bins(fit: OrderFit, data: SpectralData, omega: np.ndarray, u_bins: np.ndarray) -> np.ndarray:
+def predicted_bins(fit: OrderFit, data: SpectralData, omega: np.ndarray, u_bins: np.ndarray,
+                   g: np.ndarray | None = None) -> np.ndarray:
     """The model's response spectrum at the fitted bins (before any grouping): e^{−jωτ}·B/A·U,
-    plus the transient and drift terms where the per-bin fit has them."""
+    plus the transient and drift terms where the per-bin fit has them (`g`: `response(fit, omega)`
+    where the caller has it already)."""
     if not data.grouped:
         problem = OrderProblem.for_fit(data, fit, fit.delay)
         theta = problem.pack(replace(fit, transient=fit.transient if fit.transient.size else np.zeros(0)))
         return data.y - problem._error(problem._pieces(theta))
-    return response(fit, omega) * u_bins
+    return (response(fit, omega) if g is None else g) * u_bins
 
 
 def stabilised(a: np.ndarray) -> np.ndarray:

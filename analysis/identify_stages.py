@@ -372,8 +372,9 @@ def stretches_beyond_the_model(prep: Prepared, data: SpectralData, fit: OrderFit
     if support is None or len(support.intervals_hz) < 2:
         return None
     omega = 2.0 * np.pi * prep.bin_hz * dt
-    residual = prep.y_bins - predicted_bins(fit, data, omega, prep.u_bins)
-    expected = prep.draw_var_y + np.abs(response(fit, omega)) ** 2 * prep.draw_var_u
+    g = response(fit, omega)
+    residual = prep.y_bins - predicted_bins(fit, data, omega, prep.u_bins, g)
+    expected = prep.draw_var_y + np.abs(g) ** 2 * prep.draw_var_u
     for k, (lo, hi) in enumerate(support.intervals_hz[1:], start=1):
         inside = (prep.bin_hz >= lo) & (prep.bin_hz <= hi)
         bins = int(np.sum(inside))

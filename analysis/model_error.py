@@ -81,8 +81,9 @@ def measure_model_error(prep: Prepared, data: SpectralData, fit: OrderFit, param
     smoothing over neighbouring bins (±MODEL_ERROR_OCTAVES, _log_smoothed). Significant when
     the residual exceeds `threshold` times the noise's (0: measure it whatever its size)."""
     omega = 2.0 * np.pi * prep.bin_hz * dt
-    residual = prep.y_bins - predicted_bins(fit, data, omega, prep.u_bins)
-    expected = prep.var_y + np.abs(response(fit, omega)) ** 2 * prep.var_u
+    g = response(fit, omega)
+    residual = prep.y_bins - predicted_bins(fit, data, omega, prep.u_bins, g)
+    expected = prep.var_y + np.abs(g) ** 2 * prep.var_u
     bins = prep.bin_hz.size
     dof = max(2 * bins - parameters, 1)
     power = np.abs(residual) ** 2 * (2.0 * bins / dof)

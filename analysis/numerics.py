@@ -52,7 +52,7 @@ def levenberg_marquardt(
     if not math.isfinite(cost):
         return LeastSquaresResult(x, cost, evaluations, False)
     j = jac(x)
-    scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
+    scale = np.maximum(_column_norms(j), 1e-300)
     system, rhs, gradient = _damped_system(j, r)
     diagonal = (np.arange(system.shape[0] - x.size, system.shape[0]), np.arange(x.size))
     mu, nu = 1e-3, 2.0
@@ -79,7 +79,7 @@ def levenberg_marquardt(
             if relative < tolerance or small_step:
                 return LeastSquaresResult(x, cost, evaluations, True)
             j = jac(x)
-            scale = np.maximum(scale, np.linalg.norm(j, axis=0))
+            scale = np.maximum(scale, _column_norms(j))
             system, rhs, gradient = _damped_system(j, r)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
@@ -89,6 +89,11 @@ def levenberg_marquardt(
             if mu > 1e16:
                 break
     return LeastSquaresResult(x, cost, evaluations, False)
+
+
+def _column_norms(j: np.ndarray) -> np.ndarray:
+    """‖J[:, i]‖ of each column: np.linalg.norm(j, axis=0)'s own sum, without its copies."""
+    return np.sqrt(np.add.reduce(j * j, axis=0))
 
 
 def _damped_system(j: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
