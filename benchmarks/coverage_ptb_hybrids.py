@@ -33,10 +33,10 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=13)
     parser.add_argument("--draws", type=int, default=study.DRAWS)
     args = parser.parse_args()
-    study.DRAWS = args.draws
     keys = [(case, seed) for case in study.CASES for seed in range(1, args.seeds + 1)]
+    cases, seeds = zip(*keys, strict=True)
     with ProcessPoolExecutor(os.cpu_count() or 1) as pool:
-        held = dict(zip(keys, pool.map(study.run, *zip(*keys, strict=True)), strict=True))
+        held = dict(zip(keys, pool.map(study.run, cases, seeds, [args.draws] * len(keys)), strict=True))
     totals: dict[str, list[int]] = {}
     per_case = []
     for case in study.CASES:

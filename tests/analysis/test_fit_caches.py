@@ -11,6 +11,7 @@ import pytest
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, all_pole_numerator
 from hopkinson.analysis.spectral_data import SineTerms, SpectralData
 from hopkinson.analysis.structure import DelayMode
+from tests.analysis.numeric_jacobian import central_differences
 
 BINS = 40
 
@@ -60,13 +61,7 @@ def test_the_shock_jacobian_is_the_residuals_derivative(case: str) -> None:
     problem = OrderProblem(data, order, delay, 8.0, numerator=numerator)
     theta = problem.pack(start(order, numerator))
     jac = problem.jacobian(theta)
-    numeric = np.empty_like(jac)
-    for i in range(theta.size):
-        h = 1e-6 * max(1.0, abs(theta[i]))
-        up, down = theta.copy(), theta.copy()
-        up[i] += h
-        down[i] -= h
-        numeric[:, i] = (problem.residual(up) - problem.residual(down)) / (2 * h)
+    numeric = central_differences(problem.residual, theta, 1e-6)
     assert jac.shape == (problem.residual_size(), problem.size)
     np.testing.assert_allclose(jac, numeric, rtol=1e-5, atol=1e-6 * np.max(np.abs(numeric)))
 

@@ -19,6 +19,7 @@ from hopkinson.analysis.sine_joint import JointWeights, paule_mandel, sine_terms
 from hopkinson.analysis.uncertainty import evaluate
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth, Mode
 from tests.analysis.hard_records import Case, record, truth_figures
+from tests.analysis.numeric_jacobian import central_differences
 
 CASE = Case()  # 27 kHz, ζ 0.05, a 20 µs half-sine: the mode inside the supported band
 OTHER = AccelerometerTruth(modes=(Mode(40_000.0, 0.05),), sensitivity=CASE.truth.sensitivity)
@@ -98,13 +99,7 @@ def test_the_sine_rows_jacobian_matches_the_residual() -> None:
     problem = OrderProblem(fitted.data, ident.order, fitted.sweep.delay_mode, fitted.setup.max_delay)
     theta = problem.pack(fitted.sweep.fits[ident.order]) * (1 + 1e-4)
     jac = problem.jacobian(theta)
-    numeric = np.empty_like(jac)
-    for i in range(theta.size):
-        h = 1e-7 * max(1.0, abs(theta[i]))
-        up, down = theta.copy(), theta.copy()
-        up[i] += h
-        down[i] -= h
-        numeric[:, i] = (problem.residual(up) - problem.residual(down)) / (2 * h)
+    numeric = central_differences(problem.residual, theta, 1e-7)
     rows = 2 * FREQUENCY_HZ.size
     np.testing.assert_allclose(jac[-rows:], numeric[-rows:], rtol=1e-5, atol=1e-6 * np.max(np.abs(numeric)))
 

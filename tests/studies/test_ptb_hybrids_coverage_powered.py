@@ -36,11 +36,11 @@ CASES: dict[str, tuple[float, float]] = {
 FIGURES = ("fbsd_5", "fbsd_10", "dc_gain", "natural_frequency_hz", "damping_ratio", "response_band", "asymmetry")
 
 
-def run(case: str, seed: int) -> dict[str, bool]:
+def run(case: str, seed: int, draws: int = DRAWS) -> dict[str, bool]:
     """One hybrid on one noise draw: whether each figure's interval holds its truth."""
     gains = CASES[case]
     record = motion_record(seed) if case == "motion" else hybrid_record(*gains, seed=seed)[0]
-    return hybrid_holds(analyse_record(record, AnalysisOptions(draws=DRAWS, seed=100 + seed)), gains)
+    return hybrid_holds(analyse_record(record, AnalysisOptions(draws=draws, seed=100 + seed)), gains)
 
 
 @pytest.fixture(scope="module")
