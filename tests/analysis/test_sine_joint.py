@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from functools import cache
 
 import numpy as np
 import pytest
@@ -37,10 +38,17 @@ def synthetic_sine(truth: AccelerometerTruth, seed: int) -> SineCalibration:
                            np.full(n, U_MAG_REL), np.full(n, U_PHASE_DEG), "synthetic")
 
 
+@cache
+def same_sensor_joint():
+    """The joint identification of seed 3's record and a sine calibration of the same sensor
+    (deterministic: identified once for the module's tests that read it)."""
+    return identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
+
+
 @pytest.fixture(scope="module")
 def joint():
     """The joint identification of one seed, with its Monte Carlo (shared by the assertions)."""
-    ident = identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
+    ident = same_sensor_joint()
     result = evaluate(ident, AnalysisOptions(draws=100, seed=5, order_draws=10))
     return with_draws(ident, result.model_draws), result
 
@@ -94,7 +102,7 @@ def test_the_verdict_holds_its_false_alarm_rate_over_seeds() -> None:
 
 
 def test_the_sine_rows_jacobian_matches_the_residual() -> None:
-    ident = identify_with_sine(record(CASE, 3), synthetic_sine(CASE.truth, 3))
+    ident = same_sensor_joint()
     fitted = ident.settlement
     problem = OrderProblem(fitted.data, ident.order, fitted.sweep.delay_mode, fitted.setup.max_delay)
     theta = problem.pack(fitted.sweep.fits[ident.order]) * (1 + 1e-4)
