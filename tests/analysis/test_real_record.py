@@ -6,12 +6,14 @@ charge amplifier's drift, a zero shift after the shock). Truth: the continuous m
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pytest
 from scipy import signal
 
 from hopkinson.analysis.frequency_fit import OrderProblem
-from hopkinson.analysis.identify import identify
+from hopkinson.analysis.identify import Identification, identify
 from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.order_choice import choose_stable_order
 from hopkinson.analysis.records import Record
@@ -36,6 +38,18 @@ PIEZO = Case(
 )
 
 
+# Two tests each read the identification of record(PIEZO, 2) and of pulse_a(101): identify is
+# deterministic, so each record is identified once for the module.
+@cache
+def piezo_identified(seed: int) -> Identification:
+    return identify(record(PIEZO, seed))
+
+
+@cache
+def pulse_a_identified(seed: int) -> Identification:
+    return identify(pulse_a(seed))
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_drifting_response_is_detrended_not_fitted_with_spare_low_frequency_poles(seed: int) -> None:
     # The drift (6 % of the peak by the record's end) kept the response 'loud' against its
@@ -43,7 +57,7 @@ def test_a_drifting_response_is_detrended_not_fitted_with_spare_low_frequency_po
     # the fit chased it with a real pole near DC (a negative DC gain, FBSD at 1 Hz) or a 'main
     # mode' at a few hundred hertz.
     truth = truth_figures(PIEZO)
-    ident = identify(record(PIEZO, seed))
+    ident = piezo_identified(seed)
     assert not any("record ends before" in w for w in ident.warnings)
     assert ident.preprocessing.response_drift.slope_per_s != 0.0
     assert all(m["natural_frequency_hz"] > 20_000.0 for m in ident.modes)
@@ -137,7 +151,7 @@ def test_the_delay_branch_the_noise_flips_is_inside_the_fbsd_interval(seed: int)
     # the nominal branch, so the 95 % interval held only one branch's scatter and missed the
     # truth (seed 113 on the first branch, 101 on the second; 15/20 seeds covered).
     truth = truth_figures(PIEZO)
-    ident = identify(pulse_a(seed))
+    ident = pulse_a_identified(seed)
     result = evaluate(ident, AnalysisOptions(draws=200, seed=3))
     for key in ("5", "10"):
         lo, hi = result.fbsd_hz[key].interval
@@ -167,7 +181,7 @@ def test_compare_sine_judges_the_models_whole_phase_not_the_part_left_by_an_unde
     # record: the simulator's sensor (its zero-order-hold filter at 10 MS/s, which lags the
     # continuous sensor by a sample) behind the 0.04 µs skew; a sine calibration of that
     # sensor and channel is what the model's whole phase must match.
-    ident = identify(pulse_a(101))
+    ident = pulse_a_identified(101)
     assert ident.delay_samples > 2.0  # the branch the bug showed on
     f = np.array([500.0, 1e3, 2e3, 4e3, 6.3e3, 8e3, 10e3, 12.5e3, 16e3, 20e3])
     _, h = signal.sosfreqz(PIEZO.truth.sections(DT, "zoh"), worN=f, fs=1.0 / DT)
@@ -182,7 +196,7 @@ def test_each_delay_branch_is_a_distinct_optimum_of_the_cost() -> None:
     # A branch found a sample away and iterated to convergence slid back onto the fit's own
     # optimum (the valley is flat): a duplicate at the same delay and cost, whose draws the
     # interval then took unreflected as another branch's.
-    ident = identify(record(PIEZO, 2))
+    ident = piezo_identified(2)
     fitted = ident.settlement
     fit = fitted.sweep.fits[ident.order]
     for branch in fitted.branches.get(ident.order, []):
