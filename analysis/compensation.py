@@ -233,7 +233,8 @@ def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_del
     nominal, ratios = float(ratios[0]), ratios[1:]
     if not np.all(np.isfinite(ratios)) or np.any(ratios <= 0) or not nominal > 0:
         raise AnalysisError("compensated peak: a model draw gives no peak of the reference's polarity")
-    rng = np.random.default_rng(seed)
+    # its own stream: default_rng(seed) is the Monte Carlo's (uncertainty.evaluate), whose first normals these would repeat
+    rng = np.random.default_rng(None if seed is None else [seed, 41])
     noise = (dcm.noise_gain() * response_noise_rms / abs(gain)) if response_noise_rms else 0.0
     truths = (value + noise * rng.standard_normal(ratios.size)) / ratios
     tail = 100 * (1 - COVERAGE) / 2
