@@ -214,6 +214,12 @@ def peak_error_u_pct(check: CompensationCheck, dcm: DCM, gain: float, noise: Noi
                              + draws**2)
 
 
+def peak_noise_rng(seed: int | None) -> np.random.Generator:
+    """The compensated peak's noise draws' generator: a stream of its own ([seed, 41]), since
+    default_rng(seed) is the Monte Carlo's (uncertainty.evaluate), whose normals it would repeat."""
+    return np.random.default_rng(None if seed is None else [seed, 41])
+
+
 def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float,
                      draws: Sequence[DiscreteModel], response_noise_rms: float | None,
                      seed: int | None = None) -> dict[str, Any] | None:
@@ -233,8 +239,7 @@ def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_del
     nominal, ratios = float(ratios[0]), ratios[1:]
     if not np.all(np.isfinite(ratios)) or np.any(ratios <= 0) or not nominal > 0:
         raise AnalysisError("compensated peak: a model draw gives no peak of the reference's polarity")
-    # its own stream: default_rng(seed) is the Monte Carlo's (uncertainty.evaluate), whose first normals these would repeat
-    rng = np.random.default_rng(None if seed is None else [seed, 41])
+    rng = peak_noise_rng(seed)
     noise = (dcm.noise_gain() * response_noise_rms / abs(gain)) if response_noise_rms else 0.0
     truths = (value + noise * rng.standard_normal(ratios.size)) / ratios
     tail = 100 * (1 - COVERAGE) / 2

@@ -15,6 +15,7 @@ from hopkinson.analysis.compensation import (
     check_compensation,
     compensate_shot,
     compensated_peak,
+    peak_noise_rng,
     recommendation,
     to_rate,
 )
@@ -224,7 +225,7 @@ def _compensated_peak_one_draw_at_a_time(record, model, dcm, channel_delay_sampl
 
     ratios = np.array([ratio(m) for m in draws])
     noise = dcm.noise_gain() * noise_rms / abs(model.dc_gain) if noise_rms else 0.0
-    truths = (value + noise * np.random.default_rng(seed).standard_normal(ratios.size)) / ratios
+    truths = (value + noise * peak_noise_rng(seed).standard_normal(ratios.size)) / ratios
     tail = 100 * (1 - COVERAGE) / 2
     lo, hi = np.percentile(truths, [tail, 100 - tail])
     shown = value / ratio(model) - peak_ref
