@@ -28,8 +28,11 @@ What the software cannot guarantee, the controller does:
   the controller opens the fire valve, closes it itself and counts the pulse
   (`fire_pulse_count()`). It watches the fire valve through the pulse and returns whether it
   was read back open (True), read back shut throughout (False), or could not be told apart
-  from the host's own command (None). A pulse the interlock chain refuses is answered with a
-  Modbus exception: InstrumentError naming why.
+  from the host's own command (None). The watch ends when the valve was seen open and then
+  shut, or, where the controller counts its pulses, once it counted this one (by exactly one)
+  and the valve reads shut with the PLC's own fire output off (without a readable output: once
+  the pulse's time has passed); else `PULSE_WATCH_MARGIN_S` after the pulse's time. A pulse
+  the interlock chain refuses is answered with a Modbus exception: InstrumentError naming why.
 
 Errors name the instrument, the Modbus function and address, and what came back.
 """
@@ -309,6 +312,7 @@ class ValveController(ModbusDriver):
                 if 0 < preset_s <= 60:
                     duration_s = preset_s
         self.last_pulse_s = duration_s
+        count_before = self._pulse_count_or_none()
         try:
             if style == FireStyle.PULSE_REGISTER:
                 self.write_value(h.fire_pulse_ms, duration_s * 1000.0, "fire pulse", "ms")
@@ -324,7 +328,7 @@ class ValveController(ModbusDriver):
             raise InstrumentError(self.name, exc.command, f"fire pulse refused by the controller: {self._why_refused()}",
                                   exc.reply) from exc
         try:
-            return self._watch_pulse(started, duration_s)
+            return self._watch_pulse(started, duration_s, count_before)
         finally:
             if style != FireStyle.PULSE_REGISTER:
                 self._end_fire_command()
@@ -353,16 +357,30 @@ class ValveController(ModbusDriver):
         position = self.map.discrete_inputs.fire_valve_open
         if position >= 0:
             return "discrete inputs", position
+        output = self._plc_fire_output()
+        return None if output is None else ("coils", output)
+
+    def _plc_fire_output(self) -> int | None:
+        """The fire valve's coil when it is the PLC's own output (the host did not write it to
+        fire); None when the host writes it."""
         written = (self.map.coils.fire_valve if self.fire_style == FireStyle.HOST_TIMED_COIL
                    else self.fire_coil if self.fire_style.uses_fire_coil else -1)
-        if written != self.map.coils.fire_valve:
-            return "coils", self.map.coils.fire_valve
-        return None
+        return None if written == self.map.coils.fire_valve else self.map.coils.fire_valve
 
-    def _watch_pulse(self, started: float, duration_s: float) -> bool | None:
-        """Read the fire valve back until the pulse is over (seen open, then shut) or its time
-        and a margin have passed; a host-timed pulse is ended here. A failed read is not a
-        failed shot: the pulse counter and the trigger still tell."""
+    def _pulse_count_or_none(self) -> int | None:
+        """The controller's pulse count, None without a counter or when it cannot be read."""
+        if not self.has_pulse_counter:
+            return None
+        try:
+            return self.fire_pulse_count()
+        except InstrumentError:
+            return None
+
+    def _watch_pulse(self, started: float, duration_s: float, count_before: int | None) -> bool | None:
+        """Read the fire valve back until the pulse is over (seen open, then shut; or counted
+        and shut, `_pulse_over`) or its time and a margin have passed; a host-timed pulse is
+        ended here. A failed read is not a failed shot: the pulse counter and the trigger still
+        tell."""
         source = self._fire_valve_readback()
         host_timed = self.fire_style == FireStyle.HOST_TIMED_COIL
         seen_open = False
@@ -377,6 +395,8 @@ class ValveController(ModbusDriver):
                     is_open = self.read_bits(source[0], [source[1]])[source[1]]
                     if seen_open and not is_open:
                         break  # open, then shut: the pulse is over
+                    if not is_open and not host_timed and self._pulse_over(count_before, source, now >= ends):
+                        break  # counted, and shut (a pulse shorter than one read-back)
                     seen_open = seen_open or is_open
             elif not host_timed:
                 break  # nothing to watch, nothing to time
@@ -384,6 +404,24 @@ class ValveController(ModbusDriver):
                 break
             time.sleep(PULSE_POLL_S)
         return seen_open if source is not None else None
+
+    def _pulse_over(self, count_before: int | None, source: tuple[str, int], past_its_time: bool) -> bool:
+        """With the fire valve read shut at `source`: is the PLC's pulse over? Yes when its
+        counter moved by exactly one since `count_before` (it started this pulse: a counter that
+        jumps is not trusted) and its own fire output is off (a valve that has not opened yet
+        has its output on); where the output is the host's command, once the pulse's time has
+        passed."""
+        if count_before is None or self._pulse_count_or_none() != count_before + 1:
+            return False
+        output = self._plc_fire_output()
+        if output is None:
+            return past_its_time
+        if source == ("coils", output):
+            return True  # `source` is that output, read shut
+        try:
+            return not self.read_bits("coils", [output])[output]
+        except InstrumentError:
+            return past_its_time
 
     def _close_host_timed_valve(self) -> None:
         """End a host-timed pulse. When the close cannot be written within a second, the

@@ -13,6 +13,7 @@ from dataclasses import replace
 import pytest
 from pymodbus.client import ModbusTcpClient
 
+from hopkinson.drivers.base import TraceRecord
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.controller_map import Point, default_map
@@ -622,6 +623,46 @@ def test_a_driver_in_the_wrong_style_fires_nothing_and_says_the_valve_stayed_shu
         assert vc.fire_pulse(0.2) is False  # watched through the pulse: the valve never opened
         assert rig.world.fire_pulses == 0 and rig.world.shots_fired == 0 and vc.fire_pulse_count() == 0
         assert "holding register 4 and expects that write to start the pulse" in vc.how_it_fires()
+
+
+def _fire_a_pulse_over_before_its_first_read_back(clock: FakeClock, also_counted: int = 0) -> tuple[bool | None, int]:
+    """A 0.2 s pulse whose controller time runs past its end as soon as the write that starts it
+    is answered (as on a simulator faster than the wall clock), `also_counted` further pulses
+    counted meanwhile (another program's); returns what `fire_pulse` said and how many times it
+    read the fire valve's position."""
+    with SimulatedRig(sim_config(), clock=clock) as rig, controller(rig) as vc:
+        charge(vc, clock, 2.0)
+        position_reads = []
+
+        def trace(record: TraceRecord) -> None:
+            if record.direction == "<-" and record.text.startswith("WriteSingleRegisterResponse") \
+                    and "address=4," in record.text:
+                clock.advance(0.25)
+                rig.world.fire_pulses += also_counted
+            if record.direction == "->" and record.text.startswith("ReadDiscreteInputsRequest") \
+                    and "address=8," in record.text:
+                position_reads.append(record)
+
+        vc.trace = trace
+        seen_open = vc.fire_pulse(0.2)
+        assert rig.world.shots_fired == 1 and vc.fire_pulse_count() == 1 + also_counted
+        assert rig.world.valve_positions()["fire"] is False
+        return seen_open, len(position_reads)
+
+
+def test_a_pulse_the_controller_counted_and_shut_ends_the_watch_at_once(clock: FakeClock) -> None:
+    """The pulse was over before the first read-back: the counter moved by one, the position
+    input and the PLC's fire output read shut, so the watch ends there (not after the pulse's
+    time and its margin), and says what it read: never open."""
+    seen_open, reads = _fire_a_pulse_over_before_its_first_read_back(clock)
+    assert seen_open is False and reads == 1
+
+
+def test_a_counter_that_jumps_does_not_end_the_watch(clock: FakeClock) -> None:
+    """Two pulses counted for one: the counter is not trusted, the valve is watched through
+    the pulse's time and its margin."""
+    seen_open, reads = _fire_a_pulse_over_before_its_first_read_back(clock, also_counted=1)
+    assert seen_open is False and reads > 1
 
 
 def test_safe_withdraws_a_fire_command_left_on(clock: FakeClock) -> None:
