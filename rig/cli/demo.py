@@ -1,6 +1,6 @@
 """`hopkinson demo`: a short campaign on an in-process simulated rig, with its report.
 
-    hopkinson demo [--shots N] [--out DIR] [--sim-config PATH] [--report pdf,html]
+    hopkinson demo [--shots N] [--out DIR] [--sim-config PATH] [--report pdf,html | --no-report]
 
 Starts the simulated rig (config/sim.toml: the three instruments on free loopback ports and a
 pty), writes a demo plan of N shots (default 3) at rising reservoir pressures into DIR (default
@@ -46,6 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, default=DEFAULT_SIM_RIG_CONFIG,
                    help="rig TOML for limits, timeouts and analysis constants (default %(default)s)")
     p.add_argument("--report", default="pdf,html", metavar="FORMATS", help="report formats (default %(default)s)")
+    p.add_argument("--no-report", action="store_true",
+                   help="do not write the report (the figures beside their truths are printed all the same)")
     p.set_defaults(func=demo_command)
 
 
@@ -157,7 +159,7 @@ def demo_command(args: argparse.Namespace) -> int:
 
     if not 1 <= args.shots <= MAX_SHOTS:
         raise ConfigError(f"--shots: must be 1..{MAX_SHOTS}, got {args.shots}")
-    formats = report_formats(args.report)
+    formats = [] if args.no_report else report_formats(args.report)
     config = load_rig_config(args.config)
     sim_config = load_sim_config(args.sim_config)
     try:
@@ -188,8 +190,9 @@ def demo_command(args: argparse.Namespace) -> int:
         truth = _shot_truth(run.shots_dir / f"{entry.label}.h5")
         for line in truth_lines(entry.label, kf, entry.stored, truth):
             print(line, flush=True)
-    for path in write_run_report(run.path, formats, report):
-        print(f"report: {path}", flush=True)
+    if formats:
+        for path in write_run_report(run.path, formats, report):
+            print(f"report: {path}", flush=True)
     print(f"shot files: {run.shots_dir}", flush=True)
     if outcome.exit_code != 0:
         print(f"demo: {outcome.message}", flush=True)
