@@ -303,7 +303,7 @@ def test_dcm_of_an_identified_model_with_its_record_is_the_shot_analysis_dcm(tmp
     record = record_from_arrays(t, reference + white_noise(reference, 40, rng), response + white_noise(response, 40, rng))
     rec_path = write_record(tmp_path / "shot.csv", record)
     model_path = tmp_path / "model.json"
-    assert main(["identify", str(rec_path), "-o", str(model_path), "--json"]) == 0
+    assert main(["identify", str(rec_path), "-o", str(model_path), "--json", "--draws", "50"]) == 0  # (the DCM's test)
     capsys.readouterr()
     result = run_json(capsys, ["dcm", "--model", str(model_path), "--record", str(rec_path), "--json"])
     shot = compensate_shot(identify(read_record(rec_path)), read_record(rec_path), AnalysisOptions())

@@ -91,7 +91,7 @@ def test_analysis_failure_exits_4_and_says_why(configs, capsys) -> None:
 
 
 def test_shot_prints_the_states_and_the_key_figures(configs, capsys) -> None:
-    assert main(_args(configs, "--yes", uncertainty=True)) == 0
+    assert main(_args(configs, "--yes", "--draws", "50", uncertainty=True)) == 0  # the line's shape, not the U
     out = capsys.readouterr().out
     states = _states(out)
     assert [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s] == [

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from hopkinson.analysis.options import AnalysisOptions
+from hopkinson.analysis.options import MIN_DRAWS, AnalysisOptions, AnalysisOverrides
 from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.errors import ShotAborted
 from hopkinson.rig.events import (
@@ -111,7 +111,7 @@ def test_real_analysis_identifies_the_simulated_accelerometer(rig) -> None:
     """The default analysis (analysis.shot_analysis) through the whole pipeline, judged against
     the simulator's truth recorded with the shot."""
     rig.sequencer = Sequencer(rig.instruments, rig.config, rig.bus)  # the default analysis
-    outcome = rig.run(pressure_bar=2.0)
+    outcome = rig.run(pressure_bar=2.0, analysis=AnalysisOverrides(draws=MIN_DRAWS))  # (its intervals: tests/analysis)
     assert outcome.final_state == "DONE" and outcome.analysis_error is None, outcome.analysis_error
     shot = read_shot(outcome.shot_path)
     assert shot.state == "analysed" and shot.results == outcome.results

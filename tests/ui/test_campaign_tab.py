@@ -34,6 +34,7 @@ projectile = 3
 max_order = 6
 dcm_ratio = 12.5
 dcm_damping = 0.707
+draws = 50  # the fewest: what the tab shows of the uncertainty, not the uncertainty itself
 
 [[shots]]
 pressure_bar = 1.5

@@ -14,7 +14,7 @@ from PySide6.QtCore import QSettings, Qt
 from hopkinson.rig.config import RigConfig
 from hopkinson.rig.events import StateEntered
 from hopkinson.rig.shotfile import read_shot
-from tests.ui.conftest import dispose, rig_config_for_tests, save_shot
+from tests.ui.conftest import dispose, quick_config, rig_config_for_tests, save_shot
 from tests.ui.test_campaign_tab import CAMPAIGN_TIMEOUT_MS, write_plan
 from tests.ui.test_panel_shot import SHOT_TIMEOUT_MS
 
@@ -24,7 +24,7 @@ ENTERED = {"gain": 10.0, "excitation_v": 5.0, "lowpass_hz": 200_000.0, "sensitiv
 
 def manual_config() -> RigConfig:
     """The test rig with its amplifier set by hand; rig.toml's values differ from what is entered."""
-    base = rig_config_for_tests()
+    base = quick_config()  # (the analysis is aborted: fewer draws left running in its abandoned thread)
     amp = dataclasses.replace(base.amplifier, driver="manual", gain=1.0, excitation_v=0.0, lowpass_hz=0.0,
                               sensitivity_v_per_m_s2=0.0, identity="as in rig.toml")
     return dataclasses.replace(base, amplifier=amp)

@@ -14,7 +14,7 @@ from PySide6.QtCore import Qt, QTimer
 
 from hopkinson.rig.shotfile import read_shot
 from tests.sim_truth import true_fbsd_hz
-from tests.ui.conftest import save_shot, unreachable_config
+from tests.ui.conftest import quick_config, save_shot, unreachable_config
 
 SHOT_TIMEOUT_MS = 60_000
 
@@ -52,7 +52,7 @@ def fire_one_shot(qtbot, panel, confirm: bool = True):
 
 
 def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_dir, tmp_path):
-    panel = make_panel()
+    panel = make_panel(config=quick_config())  # what the panel shows of the uncertainty, not the uncertainty
     w = panel.window
     save_shot(w, artifacts_dir / "panel-idle.png")
 
@@ -173,7 +173,7 @@ def test_a_shot_whose_analysis_failed_still_shows_its_raw_channels(qtbot, make_p
 
 
 def test_export_report_of_the_shot_shown(qtbot, make_panel, tmp_path):
-    panel = make_panel()
+    panel = make_panel(config=quick_config())
     w = panel.window
     with qtbot.waitSignal(w.shot_view_shown, timeout=SHOT_TIMEOUT_MS):
         fire_one_shot(qtbot, panel)
@@ -199,7 +199,8 @@ def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel,
     from tests.reports.test_report import SENSOR_A, simulated_record
 
     record = simulated_record(SENSOR_A, 30_000, 1)
-    results = contract_results(analyse_record(record, AnalysisOptions(max_order=6)), recommended=False)
+    results = contract_results(analyse_record(record, AnalysisOptions(max_order=6, uncertainty=False)),
+                               recommended=False)  # (contract_results gives it the contract's uncertainty)
     n = record.n_samples
     codes = (1000 * np.sin(np.arange(n) / 7)).astype(np.int16)
     path = write_raw_shot(tmp_path / "u.h5", RawShot({"doppler": RawChannel(codes, 1e-4, 0.0),
