@@ -71,6 +71,20 @@ def rig_toml(session: SimSession, path: Path, **timeouts: float) -> Path:
     return path
 
 
+def rig_config_with_few_draws(folder: Path) -> Path:
+    """config/rig-sim.toml with the fewest Monte Carlo draws allowed (50), written into `folder`:
+    for a command that still prints every figure as value ± U, in a fraction of the time (the
+    intervals' coverage is tested in tests/analysis)."""
+    import re
+
+    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
+    text, n = re.subn(r"^draws = \d+", "draws = 50", text, count=1, flags=re.M)
+    assert n == 1
+    path = folder / "rig-sim-50-draws.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
 def read_until(proc: Any, stream: Any, pattern: str, timeout_s: float = 60.0) -> str:
     """What a process writes on `stream` up to (at least) the first text matching `pattern`
     (regular expression, multi-line); the process is killed and the test fails when none comes

@@ -14,21 +14,10 @@ from hopkinson.rig.cli.main import main
 from hopkinson.rig.journal import Journal
 from hopkinson.rig.plan import plan_from_dict
 from hopkinson.rig.shotfile import read_shot
+from tests.rig.conftest import rig_config_with_few_draws
 from tests.sim_truth import true_fbsd_hz
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def rig_config_with_few_draws(tmp_path: Path) -> Path:
-    """config/rig-sim.toml with the fewest Monte Carlo draws allowed (50): the demo still prints
-    every figure as value ± U, in a fraction of the time (the intervals' coverage is tested in
-    tests/analysis)."""
-    text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
-    text, n = re.subn(r"^draws = \d+", "draws = 50", text, count=1, flags=re.M)
-    assert n == 1
-    path = tmp_path / "rig-sim-50-draws.toml"
-    path.write_text(text, encoding="utf-8")
-    return path
 
 
 def test_demo_fires_a_short_campaign_and_its_models_match_the_truth(tmp_path: Path, capsys) -> None:

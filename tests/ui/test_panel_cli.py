@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from hopkinson.rig.shotfile import read_shot
+from tests.rig.conftest import rig_config_with_few_draws
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -32,7 +33,8 @@ def test_demo_shot_fires_analyses_and_saves_the_window(tmp_path, artifacts_dir):
     shots = tmp_path / "shots"
     picture = tmp_path / "panel.png"
     result = hopkinson("panel", "--sim", "--sim-config", str(sim), "--demo-shot", "--screenshot", str(picture),
-                       "--out", str(shots), "--runs", str(tmp_path / "runs"))
+                       "--out", str(shots), "--runs", str(tmp_path / "runs"),
+                       "--config", str(rig_config_with_few_draws(tmp_path)))  # (what the window shows of U)
     assert result.returncode == 0, result.stderr
     assert f"screenshot: {picture}" in result.stdout
     width, height = png_size(picture)
