@@ -25,6 +25,7 @@ from typing import Annotated
 from pydantic import Strict
 
 from hopkinson.drivers.sim.config_fields import (
+    BAR_MOUNTS,
     SECTION,
     Baud,
     Flag,
@@ -37,4 +38,4 @@ from hopkinson.drivers.sim.config_fields import (
 )
 
 Text = Annotated[str, Strict()]
-__all__ = ["SECTION", "Baud", "Flag", "Hint", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]
+__all__ = ["BAR_MOUNTS", "SECTION", "Baud", "Flag", "Hint", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]
