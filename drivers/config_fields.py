@@ -25,7 +25,6 @@ from typing import Annotated
 from pydantic import Strict
 
 from hopkinson.drivers.sim.config_fields import (
-    BAR_MOUNTS,
     SECTION,
     Baud,
     Flag,
@@ -38,4 +37,4 @@ from hopkinson.drivers.sim.config_fields import (
 )
 
 Text = Annotated[str, Strict()]
-__all__ = ["BAR_MOUNTS", "SECTION", "Baud", "Flag", "Hint", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]
+__all__ = ["SECTION", "Baud", "Flag", "Hint", "Int", "Number", "Parity", "StopBits", "Text", "Transport"]

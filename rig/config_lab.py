@@ -13,12 +13,13 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, Field
 
-from hopkinson.drivers.config_fields import BAR_MOUNTS, SECTION, Flag, Hint, Int, Number, Text
+from hopkinson.drivers.config_fields import SECTION, Flag, Hint, Int, Number, Text
 
 # The names of analysis.bar.MATERIALS, written here so that reading a configuration does not
 # import the bar model (NumPy and SciPy: half a second for every command); a test holds the two
 # equal.
 BAR_MATERIALS = ("C45", "Ti-6Al-4V", "PA6", "Al-7075")
+BAR_MOUNTS = ("separating", "bonded")  # analysis.bar.geometry.MOUNTS, the same way
 Material = Annotated[Literal[BAR_MATERIALS], Field(description="analysis.bar.MATERIALS"),  # type: ignore[valid-type]
                      Hint("analysis.bar.MATERIALS")]
 Length = Annotated[Number, Field(gt=0, le=20)]

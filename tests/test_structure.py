@@ -156,18 +156,3 @@ def test_reading_a_configuration_or_a_campaign_does_not_load_the_bar_model() -> 
 
     assert set(BAR_MATERIALS) == set(MATERIALS)
     assert BAR_MOUNTS == MOUNTS
-
-
-def test_starting_the_ideal_simulator_loads_no_scipy() -> None:
-    """SciPy (~0.6 s of CPU to import, scipy.signal with scipy.stats) comes with the first simulated
-    shot, not with every command that starts the simulator (`hopkinson sim`, a shot refused in
-    CHECK, a status); the bar model's pulses ([world.realism] pulse_source = "bar") need it from
-    the start."""
-    import subprocess
-    import sys
-
-    probe = ("import sys\nfrom hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig\n"
-             "SimulatedRig(SimConfig()).world\n"
-             "print(sorted(m for m in ('scipy', 'hopkinson.analysis.bar') if m in sys.modules))")
-    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
-    assert loaded == "[]"

@@ -8,22 +8,13 @@ truth that identification must recover; the simulator uses it to make the respon
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import ModuleType
 from typing import Annotated
 
 import numpy as np
 from pydantic import Field
+from scipy import signal
 
 from hopkinson.drivers.sim.config_fields import SECTION, Number
-
-
-def scipy_signal() -> ModuleType:
-    """scipy.signal, imported when a shot is first simulated: its ~0.7 s of import (with
-    scipy.stats and scipy.interpolate) is not paid by every command that only starts the
-    simulator or reads its configuration."""
-    from scipy import signal
-
-    return signal
 
 
 @dataclass(frozen=True)
@@ -67,7 +58,7 @@ class AccelerometerTruth:
                 poles += [complex(-z * wn + r, 0), complex(-z * wn - r, 0)]
             gain *= wn * wn
         if self.lowpass_hz > 0:
-            _, p, k = scipy_signal().butter(self.lowpass_order, 2 * np.pi * self.lowpass_hz, analog=True, output="zpk")
+            _, p, k = signal.butter(self.lowpass_order, 2 * np.pi * self.lowpass_hz, analog=True, output="zpk")
             poles += list(p)
             gain *= float(np.real(k))
         return np.array([], dtype=complex), np.array(poles, dtype=complex), float(gain)
@@ -83,7 +74,7 @@ class AccelerometerTruth:
     def frequency_response(self, frequency_hz: np.ndarray) -> np.ndarray:
         """Complex H(j2πf) of the continuous model."""
         z, p, k = self.continuous_zpk()
-        _, h = scipy_signal().freqs_zpk(z, p, k, worN=2 * np.pi * np.asarray(frequency_hz, dtype=float))
+        _, h = signal.freqs_zpk(z, p, k, worN=2 * np.pi * np.asarray(frequency_hz, dtype=float))
         return h
 
     def discrete_tf(self, sample_interval_s: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
@@ -95,9 +86,9 @@ class AccelerometerTruth:
         """
         z, p, k = self.continuous_zpk()
         order = len(p)
-        scaled = scipy_signal().zpk2ss(z * sample_interval_s, p * sample_interval_s, k * sample_interval_s ** (order - len(z)))
-        ad, bd, cd, dd, _ = scipy_signal().cont2discrete(scaled, 1.0, method=method)
-        b, a = scipy_signal().ss2tf(ad, bd, cd, dd)
+        scaled = signal.zpk2ss(z * sample_interval_s, p * sample_interval_s, k * sample_interval_s ** (order - len(z)))
+        ad, bd, cd, dd, _ = signal.cont2discrete(scaled, 1.0, method=method)
+        b, a = signal.ss2tf(ad, bd, cd, dd)
         b = np.atleast_1d(np.squeeze(b))
         return np.real(b) / a[0], np.real(a) / a[0]
 
@@ -124,7 +115,7 @@ class AccelerometerTruth:
                 pair = [p] if real_partner is None else [p, remaining.pop(real_partner)]
                 den = np.real(np.poly(pair))
             num = np.array([den[-1]])  # unit DC gain
-            bd, ad, _ = scipy_signal().cont2discrete((num, den), 1.0, method=method)
+            bd, ad, _ = signal.cont2discrete((num, den), 1.0, method=method)
             bd = np.atleast_1d(np.squeeze(bd)) / ad[0]
             ad = ad / ad[0]
             bd = np.pad(bd, (0, 3 - bd.size))  # a first-order section: [b0, b1, 0] over [1, a1, 0]
@@ -137,7 +128,7 @@ class AccelerometerTruth:
     def respond(self, excitation: np.ndarray, sample_interval_s: float, method: str = "zoh") -> np.ndarray:
         """Noise-free response to a sampled excitation (m/s²) starting at rest."""
         sos = self.sections(sample_interval_s, method)
-        return scipy_signal().sosfilt(sos, np.asarray(excitation, dtype=float)) + self.zero_shift
+        return signal.sosfilt(sos, np.asarray(excitation, dtype=float)) + self.zero_shift
 
 
 def white_noise(clean: np.ndarray, snr_db: float, rng: np.random.Generator) -> np.ndarray:
@@ -150,7 +141,7 @@ def coloured_noise(
     clean: np.ndarray, snr_db: float, rng: np.random.Generator, pole: float = 0.9
 ) -> np.ndarray:
     """Low-pass coloured noise (white through 1/(1 − pole·z⁻¹)), scaled to `snr_db` below `clean`."""
-    raw = scipy_signal().lfilter([1.0], [1.0, -pole], rng.standard_normal(clean.shape))
+    raw = signal.lfilter([1.0], [1.0, -pole], rng.standard_normal(clean.shape))
     power = float(np.mean(np.square(clean)))
     return raw * np.sqrt(power / 10 ** (snr_db / 10) / float(np.mean(np.square(raw))))
 
@@ -181,7 +172,7 @@ def baseline_drift(n: int, sample_interval_s: float, slope_per_s: float, wander_
     out = slope_per_s * t
     if wander_rms > 0:
         rng = np.random.default_rng() if rng is None else rng
-        sos = scipy_signal().butter(2, wander_hz, fs=1.0 / sample_interval_s, output="sos")
-        wander = scipy_signal().sosfilt(sos, rng.standard_normal(n))
+        sos = signal.butter(2, wander_hz, fs=1.0 / sample_interval_s, output="sos")
+        wander = signal.sosfilt(sos, rng.standard_normal(n))
         out = out + wander * (wander_rms / max(float(np.std(wander)), 1e-300))
     return out

@@ -26,11 +26,6 @@ class Hint:
     text: str
 
 
-# How the calibrated object sits on the bar's end: the names of analysis.bar.geometry.MOUNTS,
-# written here so that reading a configuration or starting the simulator does not import the bar
-# model (NumPy and SciPy); tests/test_structure.py holds the two equal.
-BAR_MOUNTS = ("separating", "bonded")
-
 # A serial line and a Modbus link, as both ends name them.
 Baud = Literal[1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600]
 Parity = Literal["N", "E", "O"]

@@ -38,9 +38,11 @@ from typing import Annotated, Any, Literal, Protocol
 
 import numpy as np
 from pydantic import Field
+from scipy import signal
 
-from hopkinson.drivers.sim.accelerometer import fractional_delay, scipy_signal
-from hopkinson.drivers.sim.config_fields import BAR_MOUNTS, SECTION, Flag, Int, Number
+from hopkinson.analysis.bar.geometry import MOUNTS
+from hopkinson.drivers.sim.accelerometer import fractional_delay
+from hopkinson.drivers.sim.config_fields import SECTION, Flag, Int, Number
 from hopkinson.drivers.sim.doppler_beat import interferometer_noise_m_s2
 from hopkinson.drivers.sim.shock import bipolar_m_s2, bipolar_velocity_m_s, velocity_m_s
 
@@ -129,7 +131,7 @@ class RealismParams:
     enabled: Flag = False
     pulse_source: Annotated[Literal["ideal", "bar"], Field(description=(
         "ideal: the closed form of [world.launcher]; bar: the bar model of hopkinson.analysis.bar"))] = "ideal"
-    bar_mount: Annotated[Literal[BAR_MOUNTS], Field(description=(  # type: ignore[valid-type]
+    bar_mount: Annotated[Literal["separating", "bonded"], Field(description=(
         "with bar: how the object sits on the bar's end (analysis.bar.geometry.MOUNTS)"))] = "bonded"
     speed_scatter_rel: Annotated[Number, Field(ge=0, le=0.2, description="shot-to-shot scatter of the "
                                                                          "projectile's speed (1σ)")] = 0.01
@@ -141,8 +143,8 @@ class RealismParams:
     def __post_init__(self) -> None:
         if self.pulse_source not in PULSE_SOURCES:
             raise ValueError(f"pulse_source must be one of {', '.join(PULSE_SOURCES)}, got {self.pulse_source!r}")
-        if self.bar_mount not in BAR_MOUNTS:
-            raise ValueError(f"bar_mount must be one of {', '.join(BAR_MOUNTS)}, got {self.bar_mount!r}")
+        if self.bar_mount not in MOUNTS:
+            raise ValueError(f"bar_mount must be one of {', '.join(MOUNTS)}, got {self.bar_mount!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -274,8 +276,8 @@ def reference_chain_m_s2(time_s: np.ndarray, spot_m_s2: np.ndarray, peak_m_s2: f
     if p.delay and p.delay_s:
         out = fractional_delay(out, p.delay_s / dt)
     if p.lowpass and p.lowpass_hz > 0:
-        sos = scipy_signal().butter(p.lowpass_order, p.lowpass_hz, fs=1.0 / dt, output="sos")
-        out = scipy_signal().sosfilt(sos, out)
+        sos = signal.butter(p.lowpass_order, p.lowpass_hz, fs=1.0 / dt, output="sos")
+        out = signal.sosfilt(sos, out)
     if p.onset_errors and p.onset_glitches > 0:
         # A phase glitch of Δφ is a displacement step Δφ/k of the grating: here a velocity
         # impulse of the step's size, i.e. an acceleration doublet (a spike and its recoil).

@@ -18,6 +18,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.optimize import brentq
 
 from hopkinson.drivers.sim.accelerometer import AccelerometerTruth
 
@@ -28,8 +29,6 @@ REPORTED = "the mean of both directions (compression and tension)"
 def fbsd_hz(acc: AccelerometerTruth, level: float, f_max_hz: float = 500e3) -> float:
     """The first frequency where |H(f)/H(0)| of the continuous model leaves 1 ± level (f_max_hz
     when it never does below it)."""
-    from scipy.optimize import brentq  # (imported with the first simulated shot)
-
     dc = abs(acc.frequency_response(np.array([1e-3]))[0])
 
     def excess(f: float) -> float:
