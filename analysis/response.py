@@ -198,6 +198,35 @@ def fbsd_edges(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS, g
     return band_edges(gain, nyquist_hz(model), levels, special, grid)
 
 
+def edge_gradient(model: DiscreteModel, edge: BandEdge) -> tuple[np.ndarray, np.ndarray]:
+    """∂f_edge/∂a_i (i = 1…n; a_0 = 1 held) and ∂f_edge/∂b_i (i = 0…m) of a band edge of the
+    model's normalised gain g(f) = |H(f)/H(0)|, in Hz per unit coefficient: zeros for an edge
+    not reached (it sits at f_max whatever the model).
+
+    Implicit differentiation of g(f_edge; a, b) = 1 ± level: ∂f_edge/∂θ = −(∂ln g/∂θ)/(∂ln g/∂f)
+    at the edge, with (z_i = e^{−jωi}, ω = 2πf·T)
+
+        ∂ln g/∂a_i = −Re(z_i/A) + 1/ΣA,   ∂ln g/∂b_i = Re(z_i/B) − 1/ΣB,
+        ∂ln g/∂ω = Re(B′/B − A′/A),       A′ = Σ −j·i·a_i·z_i (and B′ so).
+
+    The exact derivative that central differences of the edge approximate (one model's edge
+    located once instead of two per coefficient)."""
+    a = np.asarray(model.a, dtype=float)
+    b = np.asarray(model.b, dtype=float)
+    if not edge.reached:
+        return np.zeros(a.size - 1), np.zeros(b.size)
+    dt = model.sample_interval_s
+    omega = 2.0 * np.pi * edge.frequency_hz * dt
+    za = np.exp(-1j * omega * np.arange(a.size))
+    zb = za[: b.size] if b.size <= a.size else np.exp(-1j * omega * np.arange(b.size))
+    big_a, big_b = za @ a, zb @ b
+    da = -np.real(za[1:] / big_a) + 1.0 / np.sum(a)
+    db = np.real(zb / big_b) - 1.0 / np.sum(b)
+    d_omega = np.real((-1j * np.arange(b.size) * zb) @ b / big_b - (-1j * np.arange(a.size) * za) @ a / big_a)
+    d_f = d_omega * 2.0 * np.pi * dt  # ∂ln g/∂f
+    return -da / d_f, -db / d_f
+
+
 def fbsd_hz(model: DiscreteModel, levels: Sequence[float] = DEFAULT_LEVELS) -> dict[str, float]:
     """FBSD in Hz per level: {"5": f5, "10": f10} for the default levels.
 

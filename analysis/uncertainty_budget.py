@@ -15,7 +15,7 @@ from hopkinson.analysis.frequency_fit import OrderProblem
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.options import AnalysisOptions
-from hopkinson.analysis.response import base_grid, fbsd_edges
+from hopkinson.analysis.response import edge_gradient, fbsd_edges
 from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.systematics import MODEL_ERROR_BOUND, TypeB, fitted_shares
 
@@ -162,28 +162,23 @@ def _figure_gradients(
     problem: OrderProblem, theta: np.ndarray, ident: Identification,
     nominal: dict[str, float | None],
 ) -> dict[str, np.ndarray | None]:
-    """∂figure/∂θ by central differences (figures of the model built from θ)."""
+    """∂figure/∂θ: the DC gain and the main mode's f_n and ζ by central differences (figures of
+    the model built from θ), the FBSD edges by implicit differentiation (response.edge_gradient;
+    the edges depend on A's and B's parameters only)."""
     main = ident.main_mode
     pole = main.pole_z if main else None
     dt = ident.sample_interval_s
     scale = ident.prepared.scale_y / ident.prepared.scale_u
-    grid = base_grid(0.5 / dt)  # every model here has the same Nyquist: its grid built once
 
     def figures(th: np.ndarray) -> dict[str, float]:
-        a, b, tau, _, _ = problem.unpack(th)
+        a, b, _, _, _ = problem.unpack(th)
         mean = ident.prep.terms.mean_gain_factor(problem.input_coefficients(th))  # the mean of both directions
         out = {"dc_gain": float(np.sum(b) * scale * mean / np.sum(a))}
         if pole is not None:
             out["natural_frequency_hz"], out["damping_ratio"] = nearest_mode(a, pole, dt)
-        try:
-            for key, edge in fbsd_edges(DiscreteModel(dt, a, b * scale, ident.prepared.model_delay(tau)),
-                                        grid=grid).items():
-                out[f"fbsd_{key}_hz"] = edge.frequency_hz
-        except AnalysisError:
-            pass
         return out
 
-    grads: dict[str, list[float]] = {k: [] for k in nominal}
+    grads: dict[str, list[float]] = {k: [] for k in nominal if not k.startswith("fbsd_")}
     for i in range(theta.size):
         h = 1e-6 * max(abs(theta[i]), 1e-3)
         up, down = theta.copy(), theta.copy()
@@ -192,7 +187,26 @@ def _figure_gradients(
         fu, fd = figures(up), figures(down)
         for k in grads:
             grads[k].append((fu.get(k, math.nan) - fd.get(k, math.nan)) / (2 * h))
-    return {k: (np.array(v) if np.all(np.isfinite(v)) else None) for k, v in grads.items()}
+    out: dict[str, np.ndarray | None] = {k: (np.array(grads[k]) if np.all(np.isfinite(grads[k])) else None)
+                                          if k in grads else None for k in nominal}
+    a, b, tau, _, _ = problem.unpack(theta)
+    model = DiscreteModel(dt, a, b * scale, ident.prepared.model_delay(tau))
+    try:
+        edges = fbsd_edges(model)
+    except AnalysisError:
+        edges = {}
+    for k in nominal:
+        if not k.startswith("fbsd_"):
+            continue
+        edge = edges.get(k.removeprefix("fbsd_").removesuffix("_hz"))
+        if edge is None:
+            continue
+        d_a, d_b = edge_gradient(model, edge)
+        g = np.zeros(theta.size)
+        g[: problem.n] = d_a
+        g[problem.n : problem.k_delay] = (d_b * scale) @ problem.b_map
+        out[k] = g if np.all(np.isfinite(g)) else None
+    return out
 
 
 # ------------------------------------------------------------------------------ helpers
