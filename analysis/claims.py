@@ -16,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from hopkinson.analysis.findings import Finding, FindingCode
-from hopkinson.analysis.frequency_fit import ZETA_FLOOR, OrderFit, OrderProblem
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.modes import (
     RESONANCE_MAX_DAMPING,
@@ -27,6 +27,7 @@ from hopkinson.analysis.modes import (
     modes_of,
 )
 from hopkinson.analysis.numerics import f_quantile
+from hopkinson.analysis.order_fit import ZETA_FLOOR
 from hopkinson.analysis.spectral_data import SpectralData
 from hopkinson.analysis.structure import DelayMode, Structure
 

@@ -23,12 +23,8 @@ import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import Finding, FindingCode
-from hopkinson.analysis.frequency_fit import (
-    OrderFit,
-    OrderProblem,
-    all_pole_numerator,
-    predicted_bins,
-)
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, predicted_bins
+from hopkinson.analysis.model import all_pole_numerator
 from hopkinson.analysis.modes import ModeKind, has_doublet, modes_of
 from hopkinson.analysis.order_choice import (
     ORDER_STABILITY_WARNING,
@@ -240,7 +236,7 @@ def _candidate_cost(fit: OrderFit, data: SpectralData, setup: SearchSetup) -> fl
 
 def fit_structures(data: SpectralData, setup: SearchSetup) -> OrderSweep:
     """Both structures' sweeps and the one chosen, its reason in `why` (empty: free). The
-    all-pole structure (frequency_fit.all_pole_numerator: no zero can follow a ripple) where the
+    all-pole structure (model.all_pole_numerator: no zero can follow a ripple) where the
     free choice is unstable or holds a pole–zero doublet (the fit following a ripple of the data:
     its one dynamic feature in the band is a smooth rise, a resonance beyond it, as on PTB's
     record), or claims no mode in the band while every higher order of it is unstable (the rise
@@ -326,7 +322,7 @@ def settle_order(sweep: OrderSweep, data: SpectralData, setup: SearchSetup) -> S
     An unstable choice falls back to the test's choice among the stable orders; with none, from
     the free structure to the all-pole one (on PTB's record with its sine: the sensor's mode
     beyond the band pressed onto the unit circle; its damping beyond the band is floored,
-    frequency_fit.damping_floored). An asked order that is unstable is an error; one above
+    order_fit.damping_floored). An asked order that is unstable is an error; one above
     what the data support is a warning."""
     dt = setup.sample_interval_s
     order = setup.asked_order

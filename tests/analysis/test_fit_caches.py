@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, all_pole_numerator
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem
+from hopkinson.analysis.model import all_pole_numerator
 from hopkinson.analysis.spectral_data import SineTerms, SpectralData
 from hopkinson.analysis.structure import DelayMode
 from tests.analysis.numeric_jacobian import central_differences

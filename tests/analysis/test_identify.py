@@ -407,7 +407,7 @@ def test_an_undamped_mode_that_stops_every_order_is_named_with_its_frequency() -
 
 
 def test_the_all_pole_structure_has_no_finite_zeros_and_unit_dc_gain() -> None:
-    from hopkinson.analysis.frequency_fit import all_pole_numerator
+    from hopkinson.analysis.model import all_pole_numerator
 
     for n in (2, 3, 4):
         shape = all_pole_numerator(n)
@@ -419,7 +419,7 @@ def test_damping_beyond_the_band_is_floored_and_inside_it_left_alone() -> None:
     """Closed-form poles: a ζ 0.001 pair at 50 kHz beyond a 28 kHz band is raised to the floor at
     the same natural frequency; the same pair inside the band, a better damped one and a pair
     past the unit circle (ζ < 0) are treated as the rule says."""
-    from hopkinson.analysis.frequency_fit import ZETA_FLOOR, damping_floored
+    from hopkinson.analysis.order_fit import ZETA_FLOOR, damping_floored
 
     dt = 1e-6
     top = 2 * np.pi * 28e3 * dt

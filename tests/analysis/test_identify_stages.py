@@ -14,9 +14,9 @@ from scipy import signal
 from hopkinson.analysis.claims import claimed_modes, delay_findings
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import FindingCode
-from hopkinson.analysis.frequency_fit import OrderFit, all_pole_numerator
+from hopkinson.analysis.frequency_fit import OrderFit
 from hopkinson.analysis.identify_stages import search_orders, weigh_model_error
-from hopkinson.analysis.model import DiscreteModel
+from hopkinson.analysis.model import DiscreteModel, all_pole_numerator
 from hopkinson.analysis.model_error import measure_model_error
 from hopkinson.analysis.modes import has_doublet
 from hopkinson.analysis.options import AnalysisOptions
