@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -146,9 +147,12 @@ def bracketed_root(f: Callable[[float], float], a: float, b: float, xtol: float)
     return c
 
 
+@lru_cache(maxsize=4096)
 def f_quantile(p: float, dfn: float, dfd: float) -> float:
     """The p quantile of Fisher's F(dfn, dfd): the root of its distribution function
-    I_x(dfn/2, dfd/2) = p with x = dfn·F/(dfn·F + dfd) (I the regularised incomplete beta)."""
+    I_x(dfn/2, dfd/2) = p with x = dfn·F/(dfn·F + dfd) (I the regularised incomplete beta).
+    Kept per arguments: a shot's order tests ask the same few quantiles at every Monte Carlo
+    draw (a realistic shot: 154 calls, 26 distinct; each a root search of ~0.6 ms)."""
     if not 0.0 < p < 1.0:
         raise ValueError(f"f_quantile: p must lie in (0, 1), got {p}")
     a, b = dfn / 2.0, dfd / 2.0
