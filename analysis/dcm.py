@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -148,9 +149,15 @@ class DCM:
 
     def noise_gain(self) -> float:
         """RMS amplification of white noise at the DCM's rate: sqrt(Σ h[k]²) over its impulse
-        response h (the H2 norm; equal to the RMS of |G| over the band 0 … Nyquist)."""
-        h = self.impulse_response()
-        return float(np.sqrt(np.dot(h, h)))
+        response h (the H2 norm; equal to the RMS of |G| over the band 0 … Nyquist). Computed
+        once per filter (its zeros, poles, gain and taps: `_filter_key`), however many DCMs
+        `dataclasses.replace` makes of it."""
+        return _noise_gain(*self._filter_key())
+
+    def _filter_key(self) -> tuple[bytes, bytes, float, bytes | None]:
+        """What the filter is (not its design notes or latency), as the caches' key."""
+        return (self.zeros.tobytes(), self.poles.tobytes(), self.gain,
+                None if self.fir is None else self.fir.tobytes())
 
     def impulse_response(self) -> np.ndarray:
         """h[k] until it has decayed below 1e-10 of its start (error if a pole is too slow)."""
@@ -165,8 +172,8 @@ class DCM:
 
     def sos(self) -> np.ndarray:
         """Second-order sections of the pole-zero part (what `apply` and `DcmStream` filter
-        with, then the FIR stage)."""
-        return zpk_to_sos(self.zeros, self.poles, self.gain)
+        with, then the FIR stage); built once per filter (`_filter_key`), a copy returned."""
+        return _sections(*self._filter_key()[:3]).copy()
 
     def filter(self, x: np.ndarray, axis: int = -1) -> np.ndarray:
         """The whole DCM from rest along `axis`: the sections, then the FIR stage."""
@@ -244,6 +251,27 @@ class DCM:
             if isinstance(exc, AnalysisError):
                 raise AnalysisError(f"{exc}" if str(exc).startswith(source) else f"{source}: {exc}") from None
             raise AnalysisError(f"{source}: DCM coefficients must be numbers") from None
+
+
+# The ratio search designs, filters and re-aligns the same filters many times (dataclasses.replace
+# makes new DCMs of one filter): its sections and noise gain are kept per filter, keyed by its
+# coefficients' bytes. Each entry is a few hundred bytes.
+_FILTER_CACHE_SIZE = 256
+
+
+@lru_cache(maxsize=_FILTER_CACHE_SIZE)
+def _sections(zeros: bytes, poles: bytes, gain: float) -> np.ndarray:
+    sos = zpk_to_sos(np.frombuffer(zeros, dtype=complex).copy(), np.frombuffer(poles, dtype=complex).copy(), gain)
+    sos.setflags(write=False)
+    return sos
+
+
+@lru_cache(maxsize=_FILTER_CACHE_SIZE)
+def _noise_gain(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> float:
+    z, p = np.frombuffer(zeros, dtype=complex), np.frombuffer(poles, dtype=complex)
+    taps = None if fir is None else np.frombuffer(fir, dtype=float)
+    h = DCM(1.0, z, p, gain, fir=taps).impulse_response()
+    return float(np.sqrt(np.dot(h, h)))
 
 
 def _check_same_filter(zeros: np.ndarray, poles: np.ndarray, gain: float, num: Any, den: Any, source: str,
