@@ -161,14 +161,7 @@ class DCM:
 
     def impulse_response(self) -> np.ndarray:
         """h[k] until it has decayed below 1e-10 of its start (error if a pole is too slow)."""
-        slowest = float(np.max(np.abs(self.poles))) if self.poles.size else 0.0
-        tail = 0 if slowest == 0 else math.ceil(2 * math.log(1e-10) / math.log(slowest))
-        n = self.order + 16 + tail
-        if n > MAX_SIMULATED_SAMPLES:
-            raise AnalysisError(f"DCM: a pole at |p| = {slowest:.9g} decays too slowly to evaluate its noise gain")
-        impulse = np.zeros(n)
-        impulse[0] = 1.0
-        return self.filter(impulse if self.fir is None else np.concatenate([impulse, np.zeros(self.fir.size - 1)]))
+        return _impulse_response(*self._filter_key())
 
     def sos(self) -> np.ndarray:
         """Second-order sections of the pole-zero part (what `apply` and `DcmStream` filter
@@ -177,8 +170,7 @@ class DCM:
 
     def filter(self, x: np.ndarray, axis: int = -1) -> np.ndarray:
         """The whole DCM from rest along `axis`: the sections, then the FIR stage."""
-        y = signal.sosfilt(self.sos(), x, axis=axis)
-        return y if self.fir is None else signal.lfilter(self.fir, [1.0], y, axis=axis)
+        return _filtered(self.sos(), self.fir, x, axis)
 
     def frequency_response(self, frequency_hz: np.ndarray) -> np.ndarray:
         """Complex G(e^{j2πfT}) at the given frequencies (Hz)."""
@@ -268,10 +260,28 @@ def _sections(zeros: bytes, poles: bytes, gain: float) -> np.ndarray:
 
 @lru_cache(maxsize=_FILTER_CACHE_SIZE)
 def _noise_gain(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> float:
-    z, p = np.frombuffer(zeros, dtype=complex), np.frombuffer(poles, dtype=complex)
-    taps = None if fir is None else np.frombuffer(fir, dtype=float)
-    h = DCM(1.0, z, p, gain, fir=taps).impulse_response()
+    h = _impulse_response(zeros, poles, gain, fir)
     return float(np.sqrt(np.dot(h, h)))
+
+
+def _impulse_response(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> np.ndarray:
+    """DCM.impulse_response of the filter `DCM._filter_key` names."""
+    p = np.frombuffer(poles, dtype=complex)
+    slowest = float(np.max(np.abs(p))) if p.size else 0.0
+    tail = 0 if slowest == 0 else math.ceil(2 * math.log(1e-10) / math.log(slowest))
+    n = p.size + 16 + tail
+    if n > MAX_SIMULATED_SAMPLES:
+        raise AnalysisError(f"DCM: a pole at |p| = {slowest:.9g} decays too slowly to evaluate its noise gain")
+    taps = None if fir is None else np.frombuffer(fir, dtype=float)
+    impulse = np.zeros(n if taps is None else n + taps.size - 1)
+    impulse[0] = 1.0
+    return _filtered(_sections(zeros, poles, gain).copy(), taps, impulse, -1)
+
+
+def _filtered(sos: np.ndarray, fir: np.ndarray | None, x: np.ndarray, axis: int) -> np.ndarray:
+    """x through the sections from rest, then the FIR stage (None: none)."""
+    y = signal.sosfilt(sos, x, axis=axis)
+    return y if fir is None else signal.lfilter(fir, [1.0], y, axis=axis)
 
 
 def _check_same_filter(zeros: np.ndarray, poles: np.ndarray, gain: float, num: Any, den: Any, source: str,
@@ -320,13 +330,24 @@ def design_dcm(
     damping: float,
     extra_poles: Sequence[complex] | np.ndarray = (),
 ) -> DCM:
-    """The paper's DCM for a model with these discrete poles: zeros at them, new poles from r and
+    """The paper's DCM (`designed_zpk`) as a DCM."""
+    return DCM(float(sample_interval_s), *designed_zpk(poles, sample_interval_s, ratio, damping, extra_poles))
+
+
+def designed_zpk(
+    poles: np.ndarray,
+    sample_interval_s: float,
+    ratio: float,
+    damping: float,
+    extra_poles: Sequence[complex] | np.ndarray = (),
+) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
+    """(zeros, poles, gain, design) of the paper's DCM for a model with these discrete poles: zeros at them, new poles from r and
     ζ_e, the rest at the origin, unit DC gain.
 
     ratio: r, how many times faster than the slowest model pole the compensated system responds
     (T'_rr = T'_r1 / r; r acts on the decay envelope ζ·ω_n, docs/decisions/0020); damping: ζ_e in
     (0, 1]; extra_poles: further poles, each complex one with its conjugate, inside the unit
-    circle. Returns the DCM, its design recorded in `DCM.design`.
+    circle. The design (ratio, ζ_e, designed poles, …) is what `DCM.design` records.
     """
     p = np.atleast_1d(np.asarray(poles, dtype=complex))
     if p.size == 0:
@@ -367,4 +388,4 @@ def design_dcm(
         "extra_poles": complex_pairs(extra),
         "origin_poles": int(origin),
     }
-    return DCM(float(sample_interval_s), p, all_poles, gain, design)
+    return p, all_poles, gain, design
