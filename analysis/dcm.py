@@ -152,7 +152,12 @@ class DCM:
         response h (the H2 norm; equal to the RMS of |G| over the band 0 … Nyquist). Computed
         once per filter (its zeros, poles, gain and taps: `_filter_key`), however many DCMs
         `dataclasses.replace` makes of it."""
-        return _noise_gain(*self._filter_key())
+        return _impulse_norms(*self._filter_key())[0]
+
+    def l1_gain(self) -> float:
+        """Σ |h[k]| over its impulse response: no output from rest exceeds this × the input's
+        largest magnitude (computed once per filter, as the noise gain)."""
+        return _impulse_norms(*self._filter_key())[1]
 
     def _filter_key(self) -> tuple[bytes, bytes, float, bytes | None]:
         """What the filter is (not its design notes or latency), as the caches' key."""
@@ -259,9 +264,10 @@ def _sections(zeros: bytes, poles: bytes, gain: float) -> np.ndarray:
 
 
 @lru_cache(maxsize=_FILTER_CACHE_SIZE)
-def _noise_gain(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> float:
+def _impulse_norms(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> tuple[float, float]:
+    """(noise gain, Σ |h[k]|) of the filter `DCM._filter_key` names."""
     h = _impulse_response(zeros, poles, gain, fir)
-    return float(np.sqrt(np.dot(h, h)))
+    return float(np.sqrt(np.dot(h, h))), float(np.sum(np.abs(h)))
 
 
 def _impulse_response(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> np.ndarray:

@@ -116,7 +116,7 @@ class ShotPulse:
         """`peak_ratios` from the models' responses (`responses`) and the first one's DC gain: for
         one model's response read through many DCMs (the ratio search)."""
         aligned = replace(dcm, latency_samples=delay_samples)
-        out = apply_rows(aligned, responses, align=True)[:, self.window]
+        out = apply_rows(aligned, responses, align=True, samples=self.window.stop)[:, self.window]
         peaks = np.array([peak_estimate(row, self.peak_m_s2)[0] for row in out])
         return peaks / (dc_gain * self.peak_m_s2)
 

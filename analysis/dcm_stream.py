@@ -160,11 +160,20 @@ class DcmStream:
         return y
 
 
-def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False) -> np.ndarray:
+# apply_rows filters only the samples asked for when no sample it leaves out could have
+# overflowed: the input's largest magnitude × the DCM's and the alignment's Σ|h| stays this far
+# below MAX_ABS_VALUE (the impulse response is cut where it has decayed to 1e-10: a wide margin).
+_BOUND_MARGIN = 1e6
+
+
+def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False, samples: int | None = None) -> np.ndarray:
     """`apply(dcm, row, align=align)` from rest for every row of `rows` (records of one length)
     in one filter call per stage: the same sections, FIR, held samples and tail (the input
     continued by its last sample) as DcmStream, so the same numbers; for many records (the
-    compensated peak's model draws) without a DcmStream, its sections and its FIR per record."""
+    compensated peak's model draws) without a DcmStream, its sections and its FIR per record.
+    `samples`: only the first this many output samples are returned (None: all): the filters
+    are causal, so the input past them is not filtered, unless an output there could overflow
+    (it would be refused, as over the whole record)."""
     x = np.atleast_2d(np.asarray(rows, dtype=float))
     stream = DcmStream(dcm, "rest", align)
     if x.shape[1] == 0:
@@ -172,6 +181,10 @@ def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False) -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise AnalysisError("DCM: NaN or infinite sample in a record to compensate")
     n, hold, delay = x.shape[1], stream.held_samples, stream.delayed_samples
+    keep = n if samples is None else min(n, max(int(samples), 0))
+    if keep + hold < n and _cannot_overflow(dcm, stream, x):
+        x = x[:, : keep + hold]
+        n = keep
     if hold:
         x = np.concatenate([x, np.repeat(x[:, -1:], hold, axis=1)], axis=1)
     if delay:  # from rest: the delayed output starts at zero (DcmStream._release)
@@ -185,7 +198,19 @@ def apply_rows(dcm: DCM, rows: np.ndarray, align: bool = False) -> np.ndarray:
             f"the DCM's output is not a finite number within ±{MAX_ABS_VALUE:g} (it overflows: gain {dcm.gain:g}, DC "
             f"gain {dcm.dc_gain:g}); this DCM cannot compensate this record"
         )
-    return y[:, hold : hold + n]
+    return y[:, hold : hold + keep]
+
+
+def _cannot_overflow(dcm: DCM, stream: DcmStream, x: np.ndarray) -> bool:
+    """No output of the DCM (and the stream's alignment) from rest can pass MAX_ABS_VALUE for
+    this input, by its Σ|h| (False: not known, or it could)."""
+    try:
+        gain = dcm.l1_gain()
+    except AnalysisError:
+        return False
+    if stream._fir is not None:
+        gain *= float(np.sum(np.abs(stream._fir)))
+    return float(np.max(np.abs(x))) * gain * _BOUND_MARGIN <= MAX_ABS_VALUE
 
 
 def apply(

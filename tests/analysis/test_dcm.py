@@ -211,6 +211,34 @@ def test_aligned_output_is_the_unaligned_one_moved_by_the_latency(latency):
                                atol=1e-12 * np.max(np.abs(aligned)))
 
 
+@pytest.mark.parametrize("latency", [-5.0, -32.4, 7.6, 40.3])
+def test_apply_rows_asked_for_the_first_samples_gives_exactly_those_of_the_whole(latency):
+    """apply_rows(samples=k) filters only what its first k outputs need (the compensated peak
+    reads the pulse window of 101 model draws): bit for bit the first k of the whole record's,
+    with the band limit's FIR, held samples or a delay, any k; and an input that would overflow
+    past the k samples is still refused (filtering fewer samples must not hide it)."""
+    from dataclasses import replace
+
+    from hopkinson.analysis.dcm_stream import apply_rows
+
+    core = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
+    taps = signal.firwin(41, 0.2)
+    dcm = replace(core, fir=taps, latency_samples=latency)
+    rng = np.random.default_rng(11)
+    rows = signal.lfilter(*signal.butter(4, 0.1), rng.standard_normal((5, 1_500)), axis=1)
+    whole = apply_rows(dcm, rows, align=True)
+    for k in (0, 1, 37, 400, 1_450, 1_500, 2_000):
+        part = apply_rows(dcm, rows, align=True, samples=k)
+        assert part.shape == (5, min(k, 1_500))
+        np.testing.assert_array_equal(part, whole[:, :k])
+    huge = rows.copy()
+    huge[:, -50:] = 1e31  # its output past sample 400 overflows ±1e30
+    with pytest.raises(AnalysisError, match="overflows"):
+        apply_rows(dcm, huge, align=True)
+    with pytest.raises(AnalysisError, match="overflows"):
+        apply_rows(dcm, huge, align=True, samples=400)
+
+
 def test_steady_start_has_no_transient_on_a_constant():
     dcm = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
     y = apply(dcm, np.full(500, 2.5), initial="steady")
