@@ -239,6 +239,26 @@ def test_apply_rows_asked_for_the_first_samples_gives_exactly_those_of_the_whole
         apply_rows(dcm, huge, align=True, samples=400)
 
 
+def test_fir_steady_state_is_scipys_lfilter_zi_bit_for_bit():
+    """The steady start of a stream's FIR stages (the band limit's up to 1001 taps, the
+    alignment's fractional delay) takes its state from a closed form instead of lfilter_zi's
+    linear solve: the same numbers, to the last bit, including signed zeros."""
+    from hopkinson.analysis.dcm_design import band_limit_fir
+    from hopkinson.analysis.dcm_stream import fir_steady_state, fractional_delay_fir
+
+    rng = np.random.default_rng(5)
+    cases = [band_limit_fir(f, dt) for f, dt in ((5e3, 1e-7), (2e4, 1e-7), (1e5, 1e-7), (3e3, 1e-6), (2e5, 1e-6))]
+    cases += [fractional_delay_fir(16 - f) for f in rng.uniform(0, 1, 5)]
+    cases += [rng.standard_normal(n) * 10.0 ** rng.integers(-5, 5) for n in (2, 3, 17, 400, 1200)]
+    cases += [np.array([-1.0, 0.0, -0.0, 2.0, 0.0])]
+    for taps in cases:
+        got, want = fir_steady_state(taps), signal.lfilter_zi(taps, [1.0])
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+    assert fir_steady_state(np.array([2.0])).size == 0  # a gain alone has no state (lfilter_zi refuses it)
+
+
 def test_steady_start_has_no_transient_on_a_constant():
     dcm = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
     y = apply(dcm, np.full(500, 2.5), initial="steady")
