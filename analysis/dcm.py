@@ -10,6 +10,7 @@ analysis.dcm_figures.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -87,6 +88,15 @@ class DCM:
             if not math.isfinite(self.latency_samples):
                 raise AnalysisError("DCM: latency must be a finite number of samples")
             object.__setattr__(self, "latency_samples", float(self.latency_samples))
+
+    def with_latency(self, latency_samples: float) -> DCM:
+        """The same DCM with this latency (samples): `dataclasses.replace(dcm, latency_samples=…)`
+        without validating the filter again (the ratio search re-aligns each candidate)."""
+        if not math.isfinite(latency_samples):
+            raise AnalysisError("DCM: latency must be a finite number of samples")
+        moved = copy.copy(self)
+        object.__setattr__(moved, "latency_samples", float(latency_samples))
+        return moved
 
     @property
     def pole_zero_num(self) -> np.ndarray:

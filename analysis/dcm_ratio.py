@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
@@ -115,7 +115,7 @@ class ShotPulse:
     def peak_ratios_of(self, responses: np.ndarray, dc_gain: float, dcm: DCM, delay_samples: float) -> np.ndarray:
         """`peak_ratios` from the models' responses (`responses`) and the first one's DC gain: for
         one model's response read through many DCMs (the ratio search)."""
-        aligned = replace(dcm, latency_samples=delay_samples)
+        aligned = dcm.with_latency(delay_samples)
         out = apply_rows(aligned, responses, align=True, samples=self.window.stop)[:, self.window]
         peaks = np.array([peak_estimate(row, self.peak_m_s2)[0] for row in out])
         return peaks / (dc_gain * self.peak_m_s2)

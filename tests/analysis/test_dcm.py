@@ -259,6 +259,21 @@ def test_fir_steady_state_is_scipys_lfilter_zi_bit_for_bit():
     assert fir_steady_state(np.array([2.0])).size == 0  # a gain alone has no state (lfilter_zi refuses it)
 
 
+def test_with_latency_is_replace_without_revalidating():
+    """DCM.with_latency (the ratio search's re-alignment of each candidate) is
+    dataclasses.replace(dcm, latency_samples=…): the same filter and design, that latency,
+    refused when not finite, the original untouched."""
+    from dataclasses import replace
+
+    dcm = replace(design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA), fir=signal.firwin(21, 0.3))
+    moved, want = dcm.with_latency(np.float64(7.25)), replace(dcm, latency_samples=7.25)
+    assert moved == want and type(moved.latency_samples) is float
+    assert moved.latency_s == want.latency_s and moved.noise_gain() == want.noise_gain()
+    assert dcm.latency_samples is None
+    with pytest.raises(AnalysisError, match="latency must be a finite"):
+        dcm.with_latency(math.nan)
+
+
 def test_steady_start_has_no_transient_on_a_constant():
     dcm = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
     y = apply(dcm, np.full(500, 2.5), initial="steady")
