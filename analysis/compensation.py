@@ -147,26 +147,68 @@ def _pulse_of(record: Record) -> _Pulse:
     return _Pulse(pulse, window, response - base)
 
 
+class _Shot:
+    """A record at the DCM's rate with what the check and the compensated peak both read off it
+    (its pulse, its reference pulse, its compensated estimate), each computed once when first
+    asked (a failure is raised again when asked again)."""
+
+    def __init__(self, record: Record, model: DiscreteModel, dcm: DCM, pulse: ShotPulse | None = None) -> None:
+        self.record, self.model, self.dcm = record, model, dcm
+        self._pulse: _Pulse | None = None
+        self._shot_pulse = pulse
+        self._compensated: np.ndarray | None = None
+
+    def same_rate(self) -> None:
+        _same_rate(self.record, self.dcm)
+
+    def pulse(self) -> _Pulse:
+        if self._pulse is None:
+            self._pulse = _pulse_of(self.record)
+        return self._pulse
+
+    def shot_pulse(self) -> ShotPulse:
+        if self._shot_pulse is None:
+            self._shot_pulse = ShotPulse.of(self.record)
+        return self._shot_pulse
+
+    def compensated(self) -> np.ndarray:
+        """The DCM's output (steady start, latency removed) ÷ DC gain, m/s²."""
+        if self._compensated is None:
+            response = self.pulse().response
+            self._compensated = apply(self.dcm, response, initial="steady", align=True) / self.model.dc_gain
+        return self._compensated
+
+
 def estimates(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float
               ) -> tuple[slice, np.ndarray, np.ndarray]:
     """(pulse window, uncompensated, compensated) estimates of the acceleration (m/s²), both
     aligned with the reference; the record at the DCM's rate."""
-    _same_rate(record, dcm)
-    p = _pulse_of(record)
+    return _estimates(_Shot(record, model, dcm), channel_delay_samples)
+
+
+def _estimates(shot: _Shot, channel_delay_samples: float, model_fbsd5_hz: float | None = None
+               ) -> tuple[slice, np.ndarray, np.ndarray]:
+    """`estimates`; `model_fbsd5_hz`: the model's ±5 % edge when known (None: found here)."""
+    shot.same_rate()
+    p = shot.pulse()
+    model = shot.model
     gain = model.dc_gain
     dt = model.sample_interval_s
-    own = channel_delay_samples + passband_delay_samples(
-        lambda f: frequency_response(model, f), min(fbsd_hz(model, (0.05,))["5"], 0.4 / dt), dt
-    )
+    f5 = fbsd_hz(model, (0.05,))["5"] if model_fbsd5_hz is None else model_fbsd5_hz
+    own = channel_delay_samples + passband_delay_samples(lambda f: frequency_response(model, f), min(f5, 0.4 / dt), dt)
     uncompensated = shift_samples(p.response / gain, -own)
-    compensated = apply(dcm, p.response, initial="steady", align=True) / gain
-    return p.window, uncompensated, compensated
+    return p.window, uncompensated, shot.compensated()
 
 
 def check_compensation(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float
                        ) -> CompensationCheck:
     """Compensate the shot's own response and compare with its reference (module docstring)."""
-    window, uncompensated, compensated = estimates(record, model, dcm, channel_delay_samples)
+    return _check(_Shot(record, model, dcm), channel_delay_samples)
+
+
+def _check(shot: _Shot, channel_delay_samples: float, model_fbsd5_hz: float | None = None) -> CompensationCheck:
+    record = shot.record
+    window, uncompensated, compensated = _estimates(shot, channel_delay_samples, model_fbsd5_hz)
     ref = np.asarray(record.reference, dtype=float)[window]
     peak = peak_estimate(ref)[0]
 
@@ -226,13 +268,19 @@ def compensated_peak(record: Record, model: DiscreteModel, dcm: DCM, channel_del
     """The compensated peak (m/s²) of the shot with the uncertainty of the model draws
     (module docstring): {"value", "u", "interval", "u_draws" (the draws' part of u),
     "dcm_residual_pct", "model_error_pct"}; None without draws."""
+    return _compensated_peak(_Shot(record, model, dcm), channel_delay_samples, draws, response_noise_rms, seed)
+
+
+def _compensated_peak(shot: _Shot, channel_delay_samples: float, draws: Sequence[DiscreteModel],
+                      response_noise_rms: float | None, seed: int | None) -> dict[str, Any] | None:
     if not draws:
         return None
-    _same_rate(record, dcm)
-    p = _pulse_of(record)
-    pulse = ShotPulse.of(record)
+    shot.same_rate()
+    model, dcm = shot.model, shot.dcm
+    p = shot.pulse()
+    pulse = shot.shot_pulse()
     gain = model.dc_gain
-    measured = apply(dcm, p.response, initial="steady", align=True) / gain
+    measured = shot.compensated()
     value = peak_estimate(measured[p.window], pulse.peak_m_s2)[0]
     # a draw's simulated response has no channel delay: remove only the rest of the latency
     ratios = pulse.peak_ratios((model, *draws), dcm, dcm.latency_s / dcm.sample_interval_s - channel_delay_samples)
@@ -319,10 +367,16 @@ class ShotCompensation:
             return self
         model = identification.model
         rec, _ = to_rate(record, 1.0 / model.sample_interval_s)
+        return self._with_peak(_Shot(rec, model, self.design.dcm), identification, draws, seed)
+
+    def _with_peak(self, shot: _Shot, identification: Identification, draws: Sequence[DiscreteModel],
+                   seed: int | None) -> ShotCompensation:
+        """`with_draws` on the shot at the model's rate (`shot`: what the check read off it, shared)."""
+        if not draws:
+            return self
         noise = identification.noise.response_rms
         try:
-            peak = compensated_peak(rec, model, self.design.dcm, float(identification.delay_samples),
-                                    draws, noise, seed)
+            peak = _compensated_peak(shot, float(identification.delay_samples), draws, noise, seed)
         except AnalysisError as exc:
             return replace(self, warnings=(*self.warnings, f"DCM: no interval for the compensated peak ({exc})"))
         return replace(self, compensated_peak=peak)
@@ -340,12 +394,13 @@ def compensate_shot(identification: Identification, record: Record, options: Ana
     if design.widening_short and options.dcm_ratio is None:
         warnings.append(f"DCM widening: {design.widening_note}")
     check = None
+    shot = _Shot(rec, model, design.dcm, support.pulse)  # read once for the check and the compensated peak
     try:
-        check = check_compensation(rec, model, design.dcm, support.channel_delay_samples)
+        check = _check(shot, support.channel_delay_samples, design.fbsd_hz["5"])
     except AnalysisError as exc:
         warnings.append(f"DCM: the compensation could not be checked on the shot ({exc})")
-    result = ShotCompensation(design, check, None, None, None, tuple(warnings)).with_draws(
-        identification, record, draws, seed)
+    result = ShotCompensation(design, check, None, None, None, tuple(warnings))._with_peak(
+        shot, identification, draws, seed)
     if check is not None:
         u = peak_error_u_pct(check, design.dcm, model.dc_gain, identification.noise, result.compensated_peak)
         check = replace(check, peak_error_u_pct=u)

@@ -10,9 +10,11 @@ analysis.dcm_figures.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -87,6 +89,15 @@ class DCM:
                 raise AnalysisError("DCM: latency must be a finite number of samples")
             object.__setattr__(self, "latency_samples", float(self.latency_samples))
 
+    def with_latency(self, latency_samples: float) -> DCM:
+        """The same DCM with this latency (samples): `dataclasses.replace(dcm, latency_samples=…)`
+        without validating the filter again (the ratio search re-aligns each candidate)."""
+        if not math.isfinite(latency_samples):
+            raise AnalysisError("DCM: latency must be a finite number of samples")
+        moved = copy.copy(self)
+        object.__setattr__(moved, "latency_samples", float(latency_samples))
+        return moved
+
     @property
     def pole_zero_num(self) -> np.ndarray:
         """The pole-zero part's numerator, descending powers of z: gain·Π(z − zᵢ)."""
@@ -148,30 +159,33 @@ class DCM:
 
     def noise_gain(self) -> float:
         """RMS amplification of white noise at the DCM's rate: sqrt(Σ h[k]²) over its impulse
-        response h (the H2 norm; equal to the RMS of |G| over the band 0 … Nyquist)."""
-        h = self.impulse_response()
-        return float(np.sqrt(np.dot(h, h)))
+        response h (the H2 norm; equal to the RMS of |G| over the band 0 … Nyquist). Computed
+        once per filter (its zeros, poles, gain and taps: `_filter_key`), however many DCMs
+        `dataclasses.replace` makes of it."""
+        return _impulse_norms(*self._filter_key())[0]
+
+    def l1_gain(self) -> float:
+        """Σ |h[k]| over its impulse response: no output from rest exceeds this × the input's
+        largest magnitude (computed once per filter, as the noise gain)."""
+        return _impulse_norms(*self._filter_key())[1]
+
+    def _filter_key(self) -> tuple[bytes, bytes, float, bytes | None]:
+        """What the filter is (not its design notes or latency), as the caches' key."""
+        return (self.zeros.tobytes(), self.poles.tobytes(), self.gain,
+                None if self.fir is None else self.fir.tobytes())
 
     def impulse_response(self) -> np.ndarray:
         """h[k] until it has decayed below 1e-10 of its start (error if a pole is too slow)."""
-        slowest = float(np.max(np.abs(self.poles))) if self.poles.size else 0.0
-        tail = 0 if slowest == 0 else math.ceil(2 * math.log(1e-10) / math.log(slowest))
-        n = self.order + 16 + tail
-        if n > MAX_SIMULATED_SAMPLES:
-            raise AnalysisError(f"DCM: a pole at |p| = {slowest:.9g} decays too slowly to evaluate its noise gain")
-        impulse = np.zeros(n)
-        impulse[0] = 1.0
-        return self.filter(impulse if self.fir is None else np.concatenate([impulse, np.zeros(self.fir.size - 1)]))
+        return _impulse_response(*self._filter_key())
 
     def sos(self) -> np.ndarray:
         """Second-order sections of the pole-zero part (what `apply` and `DcmStream` filter
-        with, then the FIR stage)."""
-        return zpk_to_sos(self.zeros, self.poles, self.gain)
+        with, then the FIR stage); built once per filter (`_filter_key`), a copy returned."""
+        return _sections(*self._filter_key()[:3]).copy()
 
     def filter(self, x: np.ndarray, axis: int = -1) -> np.ndarray:
         """The whole DCM from rest along `axis`: the sections, then the FIR stage."""
-        y = signal.sosfilt(self.sos(), x, axis=axis)
-        return y if self.fir is None else signal.lfilter(self.fir, [1.0], y, axis=axis)
+        return _filtered(self.sos(), self.fir, x, axis)
 
     def frequency_response(self, frequency_hz: np.ndarray) -> np.ndarray:
         """Complex G(e^{j2πfT}) at the given frequencies (Hz)."""
@@ -246,6 +260,46 @@ class DCM:
             raise AnalysisError(f"{source}: DCM coefficients must be numbers") from None
 
 
+# The ratio search designs, filters and re-aligns the same filters many times (dataclasses.replace
+# makes new DCMs of one filter): its sections and noise gain are kept per filter, keyed by its
+# coefficients' bytes. Each entry is a few hundred bytes.
+_FILTER_CACHE_SIZE = 256
+
+
+@lru_cache(maxsize=_FILTER_CACHE_SIZE)
+def _sections(zeros: bytes, poles: bytes, gain: float) -> np.ndarray:
+    sos = zpk_to_sos(np.frombuffer(zeros, dtype=complex).copy(), np.frombuffer(poles, dtype=complex).copy(), gain)
+    sos.setflags(write=False)
+    return sos
+
+
+@lru_cache(maxsize=_FILTER_CACHE_SIZE)
+def _impulse_norms(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> tuple[float, float]:
+    """(noise gain, Σ |h[k]|) of the filter `DCM._filter_key` names."""
+    h = _impulse_response(zeros, poles, gain, fir)
+    return float(np.sqrt(np.dot(h, h))), float(np.sum(np.abs(h)))
+
+
+def _impulse_response(zeros: bytes, poles: bytes, gain: float, fir: bytes | None) -> np.ndarray:
+    """DCM.impulse_response of the filter `DCM._filter_key` names."""
+    p = np.frombuffer(poles, dtype=complex)
+    slowest = float(np.max(np.abs(p))) if p.size else 0.0
+    tail = 0 if slowest == 0 else math.ceil(2 * math.log(1e-10) / math.log(slowest))
+    n = p.size + 16 + tail
+    if n > MAX_SIMULATED_SAMPLES:
+        raise AnalysisError(f"DCM: a pole at |p| = {slowest:.9g} decays too slowly to evaluate its noise gain")
+    taps = None if fir is None else np.frombuffer(fir, dtype=float)
+    impulse = np.zeros(n if taps is None else n + taps.size - 1)
+    impulse[0] = 1.0
+    return _filtered(_sections(zeros, poles, gain).copy(), taps, impulse, -1)
+
+
+def _filtered(sos: np.ndarray, fir: np.ndarray | None, x: np.ndarray, axis: int) -> np.ndarray:
+    """x through the sections from rest, then the FIR stage (None: none)."""
+    y = signal.sosfilt(sos, x, axis=axis)
+    return y if fir is None else signal.lfilter(fir, [1.0], y, axis=axis)
+
+
 def _check_same_filter(zeros: np.ndarray, poles: np.ndarray, gain: float, num: Any, den: Any, source: str,
                        fir: np.ndarray | None = None) -> None:
     """AnalysisError when num/den are not the filter that zeros/poles/gain (and the FIR stage)
@@ -292,13 +346,24 @@ def design_dcm(
     damping: float,
     extra_poles: Sequence[complex] | np.ndarray = (),
 ) -> DCM:
-    """The paper's DCM for a model with these discrete poles: zeros at them, new poles from r and
+    """The paper's DCM (`designed_zpk`) as a DCM."""
+    return DCM(float(sample_interval_s), *designed_zpk(poles, sample_interval_s, ratio, damping, extra_poles))
+
+
+def designed_zpk(
+    poles: np.ndarray,
+    sample_interval_s: float,
+    ratio: float,
+    damping: float,
+    extra_poles: Sequence[complex] | np.ndarray = (),
+) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
+    """(zeros, poles, gain, design) of the paper's DCM for a model with these discrete poles: zeros at them, new poles from r and
     ζ_e, the rest at the origin, unit DC gain.
 
     ratio: r, how many times faster than the slowest model pole the compensated system responds
     (T'_rr = T'_r1 / r; r acts on the decay envelope ζ·ω_n, docs/decisions/0020); damping: ζ_e in
     (0, 1]; extra_poles: further poles, each complex one with its conjugate, inside the unit
-    circle. Returns the DCM, its design recorded in `DCM.design`.
+    circle. The design (ratio, ζ_e, designed poles, …) is what `DCM.design` records.
     """
     p = np.atleast_1d(np.asarray(poles, dtype=complex))
     if p.size == 0:
@@ -339,4 +404,4 @@ def design_dcm(
         "extra_poles": complex_pairs(extra),
         "origin_poles": int(origin),
     }
-    return DCM(float(sample_interval_s), p, all_poles, gain, design)
+    return p, all_poles, gain, design

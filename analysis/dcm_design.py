@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from hopkinson.analysis.dcm import DCM, design_dcm
+from hopkinson.analysis.dcm import DCM, designed_zpk
 from hopkinson.analysis.dcm_figures import compare_steps, compensated_fbsd_edges
 from hopkinson.analysis.dcm_ratio import (
     FALLBACK_WIDENING,
@@ -396,31 +396,34 @@ def design_compensation(support: ShotSupport, options: AnalysisOptions | None = 
         return design
     cap_edge = None if limit.cutoff_hz is None else _BAND_LIMIT_FBSD5 * limit.cutoff_hz
     cap = "none" if limit.cutoff_hz is None else f"at {limit.cutoff_hz / 1e3:.4g} kHz, {limit.reason}"
-    ratio = choose_ratio(model, choice.cancelled, lambda r: _assemble(model, choice, limit, r, options),
+    nonminimum = complex_pairs(model.nonminimum_phase_zeros)
+    ratio = choose_ratio(model, choice.cancelled, lambda r: _assemble(model, choice, limit, r, options, nonminimum),
                          damping=options.dcm_damping, noise_gain_limit=options.dcm_noise_gain_limit,
                          model_fbsd5_hz=before["5"], widening=options.dcm_widening, pulse=support.pulse,
                          band_known=limit.cutoff_hz is not None, cap=cap, cap_edge_hz=cap_edge)
-    dcm = _assemble(model, choice, limit, ratio.ratio, options)
+    dcm = _assemble(model, choice, limit, ratio.ratio, options, nonminimum)
     return _finish(dcm, model, choice, limit, options, before, support, ratio.note, [], ratio)
 
 
 def _assemble(model: DiscreteModel, choice: PoleChoice, limit: BandLimit, ratio: float | None,
-              options: AnalysisOptions) -> DCM:
+              options: AnalysisOptions, nonminimum_phase_zeros: list[list[float]] | None = None) -> DCM:
     """Paper DCM for the cancelled poles at ratio r (None: nothing cancelled), cascaded with the
-    band limit, unit DC gain (its latency is set by _finish)."""
+    band limit, unit DC gain (its latency is set by _finish). `nonminimum_phase_zeros`: the
+    model's, as complex_pairs (None: found here; the ratio search passes them once)."""
     dt = model.sample_interval_s
     fir = limit.fir(dt)
     if ratio is None:
         zeros = poles = np.zeros(0, complex)
         gain, design = 1.0, {"method": "no compensation: nothing to cancel"}
     else:
-        core = design_dcm(choice.cancelled, dt, ratio, options.dcm_damping, options.extra_poles)
-        zeros, poles, gain, design = core.zeros, core.poles, core.gain, dict(core.design)
+        zeros, poles, gain, design = designed_zpk(choice.cancelled, dt, ratio, options.dcm_damping, options.extra_poles)
     design.update(choice.to_dict())
     design["band_limit"] = {"cutoff_hz": limit.cutoff_hz, "order": BAND_LIMIT_ORDER if fir is not None else 0,
                             "kind": "linear-phase FIR, Butterworth magnitude (least squares)",
                             "taps": 0 if fir is None else int(fir.size), "reason": limit.reason}
-    design["nonminimum_phase_zeros"] = complex_pairs(model.nonminimum_phase_zeros)
+    if nonminimum_phase_zeros is None:
+        nonminimum_phase_zeros = complex_pairs(model.nonminimum_phase_zeros)
+    design["nonminimum_phase_zeros"] = [list(z) for z in nonminimum_phase_zeros]
     design["zeros_inverted"] = False
     return DCM(dt, zeros, poles, gain, design, fir=fir)
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
@@ -106,11 +106,19 @@ class ShotPulse:
         the pulse window read by peak_estimate, as the reference's: the reference's noise passes
         through G·H_i too, and a largest sample would read it as signal): 1 when the compensation
         passes the pulse's peak unchanged."""
-        responses = np.array([model_response(m, self.reference_m_s2) for m in models])
-        aligned = replace(dcm, latency_samples=delay_samples)
-        out = apply_rows(aligned, responses, align=True)[:, self.window]
+        return self.peak_ratios_of(self.responses(models), models[0].dc_gain, dcm, delay_samples)
+
+    def responses(self, models: Sequence[DiscreteModel]) -> np.ndarray:
+        """H_i·u for each model H_i (model_response), one row each."""
+        return np.array([model_response(m, self.reference_m_s2) for m in models])
+
+    def peak_ratios_of(self, responses: np.ndarray, dc_gain: float, dcm: DCM, delay_samples: float) -> np.ndarray:
+        """`peak_ratios` from the models' responses (`responses`) and the first one's DC gain: for
+        one model's response read through many DCMs (the ratio search)."""
+        aligned = dcm.with_latency(delay_samples)
+        out = apply_rows(aligned, responses, align=True, samples=self.window.stop)[:, self.window]
         peaks = np.array([peak_estimate(row, self.peak_m_s2)[0] for row in out])
-        return peaks / (models[0].dc_gain * self.peak_m_s2)
+        return peaks / (dc_gain * self.peak_m_s2)
 
 
 class SizedTo(StrEnum):
@@ -222,14 +230,24 @@ def _sized_to_pulse(search: _Search, rs: list[float], noisy: bool, pulse: ShotPu
     # The widest design's delay over its band (as _finish aligns it); another r's differs by its
     # designed poles' own DC group delay (closed form): no band edge per reading.
     anchor = compensated_delay_samples(search.model, widest, search.model_fbsd5_hz, search.edge5(rs[-1]))
+    try:
+        response = pulse.responses([search.model])  # the same for every r: simulated once
+    except AnalysisError:  # no reading then: as a top that is not finite
+        return _widest(search, rs, noisy)
+    errors: dict[float, float] = {}  # r → error: the scan, the bisection and the result share readings
 
     def error(r: float) -> float:
+        if r not in errors:
+            errors[r] = _peak_error(r)
+        return errors[r]
+
+    def _peak_error(r: float) -> float:
         dcm, _ = search.design(r)
         if dcm is None:
             return math.nan
         delay = anchor + dcm.group_delay_samples - widest.group_delay_samples
         try:
-            return float(pulse.peak_ratios([search.model], dcm, delay)[0]) - 1.0
+            return float(pulse.peak_ratios_of(response, search.model.dc_gain, dcm, delay)[0]) - 1.0
         except AnalysisError:
             return math.nan
 

@@ -211,6 +211,69 @@ def test_aligned_output_is_the_unaligned_one_moved_by_the_latency(latency):
                                atol=1e-12 * np.max(np.abs(aligned)))
 
 
+@pytest.mark.parametrize("latency", [-5.0, -32.4, 7.6, 40.3])
+def test_apply_rows_asked_for_the_first_samples_gives_exactly_those_of_the_whole(latency):
+    """apply_rows(samples=k) filters only what its first k outputs need (the compensated peak
+    reads the pulse window of 101 model draws): bit for bit the first k of the whole record's,
+    with the band limit's FIR, held samples or a delay, any k; and an input that would overflow
+    past the k samples is still refused (filtering fewer samples must not hide it)."""
+    from dataclasses import replace
+
+    from hopkinson.analysis.dcm_stream import apply_rows
+
+    core = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
+    taps = signal.firwin(41, 0.2)
+    dcm = replace(core, fir=taps, latency_samples=latency)
+    rng = np.random.default_rng(11)
+    rows = signal.lfilter(*signal.butter(4, 0.1), rng.standard_normal((5, 1_500)), axis=1)
+    whole = apply_rows(dcm, rows, align=True)
+    for k in (0, 1, 37, 400, 1_450, 1_500, 2_000):
+        part = apply_rows(dcm, rows, align=True, samples=k)
+        assert part.shape == (5, min(k, 1_500))
+        np.testing.assert_array_equal(part, whole[:, :k])
+    huge = rows.copy()
+    huge[:, -50:] = 1e31  # its output past sample 400 overflows ±1e30
+    with pytest.raises(AnalysisError, match="overflows"):
+        apply_rows(dcm, huge, align=True)
+    with pytest.raises(AnalysisError, match="overflows"):
+        apply_rows(dcm, huge, align=True, samples=400)
+
+
+def test_fir_steady_state_is_scipys_lfilter_zi_bit_for_bit():
+    """The steady start of a stream's FIR stages (the band limit's up to 1001 taps, the
+    alignment's fractional delay) takes its state from a closed form instead of lfilter_zi's
+    linear solve: the same numbers, to the last bit, including signed zeros."""
+    from hopkinson.analysis.dcm_design import band_limit_fir
+    from hopkinson.analysis.dcm_stream import fir_steady_state, fractional_delay_fir
+
+    rng = np.random.default_rng(5)
+    cases = [band_limit_fir(f, dt) for f, dt in ((5e3, 1e-7), (2e4, 1e-7), (1e5, 1e-7), (3e3, 1e-6), (2e5, 1e-6))]
+    cases += [fractional_delay_fir(16 - f) for f in rng.uniform(0, 1, 5)]
+    cases += [rng.standard_normal(n) * 10.0 ** rng.integers(-5, 5) for n in (2, 3, 17, 400, 1200)]
+    cases += [np.array([-1.0, 0.0, -0.0, 2.0, 0.0])]
+    for taps in cases:
+        got, want = fir_steady_state(taps), signal.lfilter_zi(taps, [1.0])
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+    assert fir_steady_state(np.array([2.0])).size == 0  # a gain alone has no state (lfilter_zi refuses it)
+
+
+def test_with_latency_is_replace_without_revalidating():
+    """DCM.with_latency (the ratio search's re-alignment of each candidate) is
+    dataclasses.replace(dcm, latency_samples=…): the same filter and design, that latency,
+    refused when not finite, the original untouched."""
+    from dataclasses import replace
+
+    dcm = replace(design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA), fir=signal.firwin(21, 0.3))
+    moved, want = dcm.with_latency(np.float64(7.25)), replace(dcm, latency_samples=7.25)
+    assert moved == want and type(moved.latency_samples) is float
+    assert moved.latency_s == want.latency_s and moved.noise_gain() == want.noise_gain()
+    assert dcm.latency_samples is None
+    with pytest.raises(AnalysisError, match="latency must be a finite"):
+        dcm.with_latency(math.nan)
+
+
 def test_steady_start_has_no_transient_on_a_constant():
     dcm = design_dcm(TABLE1_POLES, 1e-6, 12.5, 0.707, EXTRA)
     y = apply(dcm, np.full(500, 2.5), initial="steady")
