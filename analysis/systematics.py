@@ -16,7 +16,7 @@ refit moves them together) and added to every Monte Carlo draw:
   30 or 60 µs instead of 40 µs; the onset window widened, or, where the record did
   not call for the onset's disturbances, with them fitted all the same (the reference's onset and
   demodulation errors as a Type B input where they do not show); where ε was not seen beyond
-  chance, the figures' change with ε at twice its standard uncertainty;
+  chance, the figures' change with ε at max(2u, |ε̂|) (`unseen_asymmetry_scale`);
 - **the model's error** (`variant_bounds`, where identify detected model error): the figures
   refitted on 0.9 and 0.8 of the band's top (a right model gives one answer on every part of
   the band its excitation supports; a model the data bend does not), its bound the largest shift;
