@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -150,33 +151,28 @@ def _pulse_of(record: Record) -> _Pulse:
 class _Shot:
     """A record at the DCM's rate with what the check and the compensated peak both read off it
     (its pulse, its reference pulse, its compensated estimate), each computed once when first
-    asked (a failure is raised again when asked again)."""
+    read (a failure is raised again when read again: cached_property keeps no exception)."""
 
     def __init__(self, record: Record, model: DiscreteModel, dcm: DCM, pulse: ShotPulse | None = None) -> None:
         self.record, self.model, self.dcm = record, model, dcm
-        self._pulse: _Pulse | None = None
-        self._shot_pulse = pulse
-        self._compensated: np.ndarray | None = None
+        if pulse is not None:
+            self.shot_pulse = pulse  # the design's, already read off this record
 
     def same_rate(self) -> None:
         _same_rate(self.record, self.dcm)
 
+    @cached_property
     def pulse(self) -> _Pulse:
-        if self._pulse is None:
-            self._pulse = _pulse_of(self.record)
-        return self._pulse
+        return _pulse_of(self.record)
 
+    @cached_property
     def shot_pulse(self) -> ShotPulse:
-        if self._shot_pulse is None:
-            self._shot_pulse = ShotPulse.of(self.record)
-        return self._shot_pulse
+        return ShotPulse.of(self.record)
 
+    @cached_property
     def compensated(self) -> np.ndarray:
         """The DCM's output (steady start, latency removed) ÷ DC gain, m/s²."""
-        if self._compensated is None:
-            response = self.pulse().response
-            self._compensated = apply(self.dcm, response, initial="steady", align=True) / self.model.dc_gain
-        return self._compensated
+        return apply(self.dcm, self.pulse.response, initial="steady", align=True) / self.model.dc_gain
 
 
 def estimates(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float
@@ -190,14 +186,14 @@ def _estimates(shot: _Shot, channel_delay_samples: float, model_fbsd5_hz: float 
                ) -> tuple[slice, np.ndarray, np.ndarray]:
     """`estimates`; `model_fbsd5_hz`: the model's ±5 % edge when known (None: found here)."""
     shot.same_rate()
-    p = shot.pulse()
+    p = shot.pulse
     model = shot.model
     gain = model.dc_gain
     dt = model.sample_interval_s
     f5 = fbsd_hz(model, (0.05,))["5"] if model_fbsd5_hz is None else model_fbsd5_hz
     own = channel_delay_samples + passband_delay_samples(lambda f: frequency_response(model, f), min(f5, 0.4 / dt), dt)
     uncompensated = shift_samples(p.response / gain, -own)
-    return p.window, uncompensated, shot.compensated()
+    return p.window, uncompensated, shot.compensated
 
 
 def check_compensation(record: Record, model: DiscreteModel, dcm: DCM, channel_delay_samples: float
@@ -277,10 +273,10 @@ def _compensated_peak(shot: _Shot, channel_delay_samples: float, draws: Sequence
         return None
     shot.same_rate()
     model, dcm = shot.model, shot.dcm
-    p = shot.pulse()
-    pulse = shot.shot_pulse()
+    p = shot.pulse
+    pulse = shot.shot_pulse
     gain = model.dc_gain
-    measured = shot.compensated()
+    measured = shot.compensated
     value = peak_estimate(measured[p.window], pulse.peak_m_s2)[0]
     # a draw's simulated response has no channel delay: remove only the rest of the latency
     ratios = pulse.peak_ratios((model, *draws), dcm, dcm.latency_s / dcm.sample_interval_s - channel_delay_samples)

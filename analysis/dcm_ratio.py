@@ -30,6 +30,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from functools import cache
 
 import numpy as np
 from scipy import signal
@@ -234,14 +235,8 @@ def _sized_to_pulse(search: _Search, rs: list[float], noisy: bool, pulse: ShotPu
         response = pulse.responses([search.model])  # the same for every r: simulated once
     except AnalysisError:  # no reading then: as a top that is not finite
         return _widest(search, rs, noisy)
-    errors: dict[float, float] = {}  # r → error: the scan, the bisection and the result share readings
-
+    @cache  # r → error: the scan, the bisection and the result share readings
     def error(r: float) -> float:
-        if r not in errors:
-            errors[r] = _peak_error(r)
-        return errors[r]
-
-    def _peak_error(r: float) -> float:
         dcm, _ = search.design(r)
         if dcm is None:
             return math.nan

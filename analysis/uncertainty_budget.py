@@ -187,8 +187,8 @@ def _figure_gradients(
         fu, fd = figures(up), figures(down)
         for k in grads:
             grads[k].append((fu.get(k, math.nan) - fd.get(k, math.nan)) / (2 * h))
-    out: dict[str, np.ndarray | None] = {k: (np.array(grads[k]) if np.all(np.isfinite(grads[k])) else None)
-                                          if k in grads else None for k in nominal}
+    out: dict[str, np.ndarray | None] = dict.fromkeys(nominal)
+    out.update({k: np.array(v) if np.all(np.isfinite(v)) else None for k, v in grads.items()})
     a, b, tau, _, _ = problem.unpack(theta)
     model = DiscreteModel(dt, a, b * scale, ident.prepared.model_delay(tau))
     try:
