@@ -45,6 +45,21 @@ def controller_for(rig: SimulatedRig, **kwargs: object) -> ValveController:
     return ValveController(target, **kwargs)  # type: ignore[arg-type]
 
 
+def controller(rig: SimulatedRig, **kwargs: object) -> ValveController:
+    """`controller_for` with a 2 s timeout unless told otherwise."""
+    kwargs.setdefault("timeout_s", 2.0)
+    return controller_for(rig, **kwargs)
+
+
+def charge(vc: ValveController, clock: FakeClock, pressure_bar: float) -> None:
+    """Charge the reservoir to `pressure_bar`: the fill valve open on `clock` for twice what the
+    default fill rate (0.5 bar/s) needs; the controller stops the fill at the set-point."""
+    vc.set_pressure_setpoint_bar(pressure_bar)
+    vc.set_fill_valve(True)
+    clock.advance(4.0 * pressure_bar)
+    vc.set_fill_valve(False)
+
+
 def _sim_threads() -> list[str]:
     return [t.name for t in threading.enumerate() if t.name.startswith("sim-")]
 

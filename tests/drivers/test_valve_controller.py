@@ -1,23 +1,23 @@
 """The valve/vacuum controller driver against the simulated controller, over Modbus TCP and
 Modbus RTU on a simulated serial line (the simulator implements its side of the register
-protocol on its own, drivers/sim/controller_map.py)."""
+protocol on its own, drivers/sim/controller_map.py): the coils, registers and inputs and the
+simulated world they move, the register map, errors and timeouts, and the trace. The link
+watchdog and the controller-timed fire pulse are test_valve_controller_watchdog.py's, the fire
+styles test_valve_controller_fire_styles.py's."""
 
 from __future__ import annotations
 
 import math
 import socket
-import threading
-import time
 from dataclasses import replace
 
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from hopkinson.drivers.base import TraceRecord
 from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError, InstrumentTimeout
 from hopkinson.drivers.registers import Register
 from hopkinson.drivers.sim.controller_map import Point, default_map
-from hopkinson.drivers.sim.simulated_rig import SimConfig, SimulatedRig
+from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 from hopkinson.drivers.valve_controller import (
     CoilMap,
     DiscreteInputMap,
@@ -26,19 +26,7 @@ from hopkinson.drivers.valve_controller import (
     RegisterMap,
     ValveController,
 )
-from tests.drivers.conftest import FakeClock, controller_for, sim_config
-
-
-def controller(rig: SimulatedRig, **kwargs: object) -> ValveController:
-    kwargs.setdefault("timeout_s", 2.0)
-    return controller_for(rig, **kwargs)
-
-
-def charge(vc: ValveController, clock: FakeClock, pressure_bar: float) -> None:
-    vc.set_pressure_setpoint_bar(pressure_bar)
-    vc.set_fill_valve(True)
-    clock.advance(4.0 * pressure_bar)
-    vc.set_fill_valve(False)
+from tests.drivers.conftest import FakeClock, charge, controller, sim_config
 
 
 @pytest.mark.parametrize("transport", ["tcp", "rtu"])
@@ -310,182 +298,6 @@ def test_status_reads_everything_at_once(rig: SimulatedRig, clock: FakeClock) ->
     assert status.watchdog == "off" and status.fire_pulse_count == 0
 
 
-# -- the link watchdog and the fire pulse, timed by the controller --------------------------------
-@pytest.mark.parametrize("transport", ["tcp", "rtu"])
-def test_the_watchdog_vents_when_the_heartbeat_stops_and_stays_tripped(transport: str, clock: FakeClock) -> None:
-    with SimulatedRig(sim_config(modbus_transport=transport), clock=clock) as rig, \
-            controller(rig, watchdog_s=2.0) as vc:
-        charge(vc, clock, 3.0)
-        vc.set_vacuum_pump(True)
-        vc.set_fill_valve(True)
-        vc.start_heartbeat()
-        assert rig.world.watchdog_s() == 2.0 and vc.watchdog_state() == "armed"
-        vc.stop_heartbeat_thread()  # the host freezes: no more beats, nobody disarms
-        clock.advance(1.9)
-        assert not vc.watchdog_tripped() and rig.world.coils()["fill"] is True
-        clock.advance(0.2)  # 2.1 s of silence
-        assert vc.watchdog_tripped()
-        assert rig.world.coils() == {"fire": False, "fill": False, "vent": True, "pump": False}
-        clock.advance(10.0)
-        assert vc.reservoir_pressure_bar() < 0.01  # vented
-        with pytest.raises(InstrumentError, match="refused by the controller: link watchdog tripped"):
-            vc.set_fill_valve(True)
-        with pytest.raises(InstrumentError, match="link watchdog tripped"):
-            vc.fire_pulse(0.2)
-        vc.write_word(vc.map.holding_registers.heartbeat, 5, "a late beat")
-        assert vc.watchdog_tripped()  # a late beat does not clear the trip: only a new session
-        vc.start_heartbeat()
-        assert vc.watchdog_state() == "armed"
-        vc.set_fill_valve(True)
-        vc.stop_heartbeat()
-        assert vc.watchdog_state() == "off"
-        clock.advance(60.0)
-        assert rig.world.watchdog_state() == "off" and rig.world.coils()["fill"] is True  # disarmed
-
-
-def _count_beats(rig: SimulatedRig) -> list[int]:
-    """Every value written to the heartbeat register from now on (the world's own record)."""
-    beats: list[int] = []
-    write = rig.world.heartbeat
-
-    def counted(value: int) -> None:
-        beats.append(value)
-        write(value)
-
-    rig.world.heartbeat = counted  # type: ignore[method-assign]
-    return beats
-
-
-def test_the_heartbeat_thread_keeps_the_watchdog_fed_in_real_time() -> None:
-    # the wall clock; 0.8 s: a beat (every 0.2 s) delayed by a loaded machine must not trip it
-    with SimulatedRig(sim_config()) as rig, controller(rig, watchdog_s=0.8) as vc:
-        beats = _count_beats(rig)
-        vc.start_heartbeat()
-        # 13 beats written by the driver's thread (every 0.2 s: three watchdog times and more),
-        # waited for as events with a generous timeout, and the watchdog never tripped meanwhile
-        deadline = time.monotonic() + 60.0
-        while len(beats) < 13 and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert len(beats) >= 13 and rig.world.watchdog_trips == 0
-        assert vc.heartbeat_running and vc.watchdog_state() == "armed"
-        vc.stop_heartbeat_thread()
-        deadline = time.monotonic() + 10.0
-        while rig.world.watchdog_state() != "tripped" and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert rig.world.watchdog_state() == "tripped" and rig.world.coils()["vent"] is True
-        vc.start_heartbeat()
-        vc.stop_heartbeat()
-        assert not vc.heartbeat_running and vc.watchdog_state() == "off"
-
-
-def test_stop_heartbeat_disarms_even_after_a_failure_closed_the_link(rig: SimulatedRig) -> None:
-    # A long watchdog: the beat thread (every 15 s) never runs during the test.
-    with controller(rig, watchdog_s=60.0) as vc:
-        vc.start_heartbeat()
-        assert rig.world.watchdog_state() == "armed"
-        rig.faults.inject("modbus-disconnect")
-        with pytest.raises(InstrumentConnectionError):
-            vc.reservoir_pressure_bar()
-        rig.faults.clear("modbus-disconnect")
-        assert not vc.connected  # the failure closed the link ...
-        vc.stop_heartbeat()
-        assert rig.world.watchdog_state() == "off"  # ... and the disarm reopened it
-
-
-class _WatchedLock:
-    """The driver's re-entrant lock, telling which threads wait for it."""
-
-    def __init__(self) -> None:
-        self._lock = threading.RLock()
-        self.waiting: set[str] = set()
-
-    def __enter__(self) -> None:
-        name = threading.current_thread().name
-        self.waiting.add(name)
-        self._lock.acquire()
-        self.waiting.discard(name)
-
-    def __exit__(self, *exc: object) -> None:
-        self._lock.release()
-
-
-def _hold_until_waiting(lock: _WatchedLock, thread: threading.Thread) -> None:
-    deadline = time.monotonic() + 10.0
-    while thread.name not in lock.waiting and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert thread.name in lock.waiting
-
-
-def test_a_beat_held_up_past_its_session_s_end_is_never_written(rig: SimulatedRig) -> None:
-    # The beat thread waits for the link while another transaction holds it; the session ends
-    # (the join gives up) and a new one starts. The old thread must neither beat on in the new
-    # session nor write its late beat after the stop (a beat re-arms a disarmed controller).
-    with controller(rig, watchdog_s=0.4, timeout_s=0.3) as vc:
-        vc.lock = _WatchedLock()  # type: ignore[assignment]
-        vc.start_heartbeat()
-        first = vc._beat_thread
-        assert first is not None
-        with vc.lock:  # a slow transaction: the next beat waits for it
-            _hold_until_waiting(vc.lock, first)
-            vc.stop_heartbeat()  # the join gives up after 1 s; the disarm is written
-            assert first.is_alive() and rig.world.watchdog_state() == "off"
-        first.join(5.0)
-        assert not first.is_alive()  # it ended instead of beating on
-        assert rig.world.watchdog_state() == "off"  # and its late beat did not re-arm the controller
-        vc.start_heartbeat()
-        second = vc._beat_thread
-        assert second is not None
-        with vc.lock:
-            _hold_until_waiting(vc.lock, second)
-            vc.start_heartbeat()  # a new session while the old thread still waits
-        second.join(5.0)
-        assert not second.is_alive()
-        assert [t for t in threading.enumerate() if t.name == f"heartbeat {vc.name}"] == [vc._beat_thread]
-        vc.stop_heartbeat()
-
-
-def test_a_read_only_client_neither_arms_nor_feeds_the_watchdog(rig: SimulatedRig, clock: FakeClock) -> None:
-    with controller(rig, watchdog_s=1.0) as shot, controller(rig) as status:
-        status.status()
-        clock.advance(5.0)
-        assert rig.world.watchdog_state() == "off"  # never armed by reads
-        shot.start_heartbeat()
-        shot.stop_heartbeat_thread()
-        for _ in range(5):  # the status client polls through the silence
-            clock.advance(0.3)
-            status.status()
-        assert status.watchdog_tripped()
-
-
-@pytest.mark.parametrize("transport", ["tcp", "rtu"])
-def test_the_controller_times_the_fire_pulse_and_counts_it(transport: str, clock: FakeClock) -> None:
-    with SimulatedRig(sim_config(modbus_transport=transport), clock=clock) as rig, controller(rig) as vc:
-        charge(vc, clock, 2.0)
-        before = vc.fire_pulse_count()
-        vc.fire_pulse(0.2)
-        assert vc.fire_pulse_count() == before + 1 and rig.world.shots_fired == 1
-        assert vc.valves().fire_valve is True  # open for the pulse ...
-        clock.advance(0.19)
-        assert vc.valves().fire_valve_position is True
-        clock.advance(0.02)
-        assert vc.valves().fire_valve is False  # ... and shut by the controller itself
-        rig.world.set_inputs(door_closed=False)
-        with pytest.raises(InstrumentError) as caught:
-            vc.fire_pulse(0.2)
-        assert "fire pulse refused by the controller: door/guard open" in str(caught.value)
-        assert caught.value.command == "write register 4 (fire pulse) = [200]"
-        assert vc.fire_pulse_count() == before + 1
-
-
-def test_the_heartbeat_and_pulse_need_their_registers() -> None:
-    bare = RegisterMap(holding_registers=HoldingRegisterMap(heartbeat=-1, fire_pulse_ms=Register()))
-    vc = ValveController.tcp("127.0.0.1", 1, register_map=bare)
-    with pytest.raises(InstrumentError, match="no heartbeat register"):
-        vc.start_heartbeat()
-    with pytest.raises(InstrumentError, match="no fire_pulse_ms register"):
-        vc.fire_pulse(0.2)
-
-
 def test_the_default_map_matches_the_simulators_own() -> None:
     driver = RegisterMap().blocks()
     sim = default_map()
@@ -504,172 +316,3 @@ def test_every_exchange_is_traced(rig: SimulatedRig) -> None:
     assert [r.direction for r in records] == ["->", "<-"]
     assert "ReadInputRegistersRequest" in records[0].text and "address=0" in records[0].text
     assert all(r.instrument == vc.name and r.utc.endswith("+00:00") for r in records)
-
-
-# -- fire styles (drivers/fire_styles.py, docs/plc-fire-styles.md) -------------------------------------
-def styled_sim(style: str, transport: str = "tcp", preset_ms: float = 150.0, **coils_and_words: int) -> SimConfig:
-    """A simulated controller that fires in `style`; `fire_command=...` maps a fire coil (coils)
-    and `fire_command_word=...` a command word (holding registers)."""
-    base = sim_config(modbus_transport=transport)
-    layout = default_map()
-    if "fire_command" in coils_and_words:
-        layout["coils"]["fire_command"] = Point(coils_and_words["fire_command"])
-    if "fire_command_word" in coils_and_words:
-        layout["holding_registers"]["fire_command"] = Point(coils_and_words["fire_command_word"])
-    servers = replace(base.servers, modbus_fire_style=style, modbus_fire_preset_ms=preset_ms,
-                      modbus_fire_command_value=0x5AF1)
-    return replace(base, servers=servers, register_map=layout)
-
-
-def driver_map(fire_command: int = -1, fire_command_word: int = -1) -> RegisterMap:
-    """The driver's side of `styled_sim`'s layout."""
-    return RegisterMap(coils=CoilMap(fire_command=fire_command),
-                       holding_registers=HoldingRegisterMap(fire_command=fire_command_word))
-
-
-def assert_pulse_of(rig: SimulatedRig, clock: FakeClock, length_s: float) -> None:
-    """One pulse, counted, open until `length_s` of the controller's time and shut after."""
-    assert rig.world.fire_pulses == 1 and rig.world.shots_fired == 1
-    assert rig.world.valve_positions()["fire"] is True
-    clock.advance(length_s - 0.005)
-    assert rig.world.valve_positions()["fire"] is True
-    clock.advance(0.01)
-    assert rig.world.valve_positions()["fire"] is False
-
-
-@pytest.mark.parametrize("transport", ["tcp", "rtu"])
-def test_preset_and_coil_writes_the_preset_then_switches_the_fire_coil(transport: str, clock: FakeClock) -> None:
-    config = styled_sim("preset_and_coil", transport, fire_command=6)
-    with SimulatedRig(config, clock=clock) as rig, \
-            controller(rig, register_map=driver_map(fire_command=6), fire_style="preset_and_coil") as vc:
-        charge(vc, clock, 2.0)
-        vc.write_value(vc.map.holding_registers.fire_pulse_ms, 250.0, "preset alone")
-        assert rig.world.fire_pulses == 0  # in this style a preset fires nothing
-        assert vc.fire_pulse(0.2) is True  # read back open (position input)
-        assert rig.modbus.last_written["fire_pulse_ms"] == 200.0
-        assert rig.modbus.last_written["fire_command"] == 0.0  # the fire coil is off again after the pulse
-        assert_pulse_of(rig, clock, 0.2)
-        assert vc.fire_pulse_count() == 1
-
-
-@pytest.mark.parametrize("transport", ["tcp", "rtu"])
-def test_preset_and_command_word_fires_on_the_command_value(transport: str, clock: FakeClock) -> None:
-    config = styled_sim("preset_and_command", transport, fire_command_word=7)
-    with SimulatedRig(config, clock=clock) as rig, \
-            controller(rig, register_map=driver_map(fire_command_word=7), fire_style="preset_and_command",
-                       fire_command_value=0x5AF1) as vc:
-        charge(vc, clock, 2.0)
-        assert vc.fire_pulse(0.3) is True
-        assert rig.modbus.last_written["fire_command"] == 0.0  # back to "no command"
-        assert_pulse_of(rig, clock, 0.3)
-
-
-@pytest.mark.parametrize("transport", ["tcp", "rtu"])
-def test_plc_preset_coil_fires_for_the_plcs_own_preset_and_never_writes_it(transport: str, clock: FakeClock) -> None:
-    config = styled_sim("plc_preset_coil", transport, preset_ms=120.0)  # the fire valve's coil is the fire coil
-    with SimulatedRig(config, clock=clock) as rig, \
-            controller(rig, fire_style="plc_preset_coil") as vc:
-        charge(vc, clock, 2.0)
-        writes_before = dict(rig.modbus.last_written)
-        assert vc.fire_pulse(0.5) is True  # 0.5 s asked; the PLC's preset rules
-        assert rig.modbus.last_written["fire_pulse_ms"] == writes_before["fire_pulse_ms"] == 120.0
-        assert rig.modbus.last_written["fire_valve"] == 0.0  # the coil is off again
-        assert_pulse_of(rig, clock, 0.12)
-
-
-def test_host_timed_coil_needs_the_labs_word_and_a_heartbeat(clock: FakeClock) -> None:
-    config = styled_sim("host_timed_coil")
-    with SimulatedRig(config, clock=clock) as rig:
-        charge_with = controller(rig, fire_style="host_timed_coil")
-        with charge_with as refused:
-            charge(refused, clock, 2.0)
-            with pytest.raises(InstrumentError, match="the lab has not allowed it"):
-                refused.fire_pulse(0.2)
-        with controller(rig, fire_style="host_timed_coil", host_timed_fire_allowed=True, watchdog_s=2.0) as vc:
-            with pytest.raises(InstrumentError, match="no heartbeat runs, so the watchdog cannot back it"):
-                vc.fire_pulse(0.2)
-            assert rig.world.shots_fired == 0 and rig.world.coils()["fire"] is False
-            vc.start_heartbeat()
-            started = time.monotonic()
-            assert vc.fire_pulse(0.2) is True  # seen open on the position input, then shut by the host
-            assert time.monotonic() - started >= 0.2  # the host held it (no upper bound asserted)
-            assert rig.world.shots_fired == 1 and rig.world.coils()["fire"] is False
-            vc.stop_heartbeat()
-
-
-def test_a_host_timed_valve_the_host_cannot_close_is_left_to_the_watchdog(clock: FakeClock) -> None:
-    """The link drops mid-pulse: the close cannot be written, so the driver stops beating and
-    the controller's watchdog (which backs this style) closes the valve."""
-    config = styled_sim("host_timed_coil")
-    with SimulatedRig(config, clock=clock) as rig, \
-            controller(rig, fire_style="host_timed_coil", host_timed_fire_allowed=True, watchdog_s=2.0,
-                       timeout_s=0.2) as vc:
-        charge(vc, clock, 2.0)
-        vc.start_heartbeat()
-        threading.Timer(0.05, rig.faults.inject, args=("modbus-disconnect",)).start()
-        with pytest.raises(InstrumentError, match="the controller's watchdog closes it within 2 s"):
-            vc.fire_pulse(0.2)
-        assert not vc.heartbeat_running and rig.world.coils()["fire"] is True  # still open: the link is gone
-        clock.advance(2.1)
-        assert rig.world.watchdog_state() == "tripped" and rig.world.coils()["fire"] is False
-
-
-def test_a_driver_in_the_wrong_style_fires_nothing_and_says_the_valve_stayed_shut(clock: FakeClock) -> None:
-    """The PLC wants preset-then-coil; the host writes the preset only (today's default style)."""
-    config = styled_sim("preset_and_coil", fire_command=6)
-    with SimulatedRig(config, clock=clock) as rig, controller(rig, register_map=driver_map(fire_command=6)) as vc:
-        charge(vc, clock, 2.0)
-        assert vc.fire_style == "pulse_register"
-        assert vc.fire_pulse(0.2) is False  # watched through the pulse: the valve never opened
-        assert rig.world.fire_pulses == 0 and rig.world.shots_fired == 0 and vc.fire_pulse_count() == 0
-        assert "holding register 4 and expects that write to start the pulse" in vc.how_it_fires()
-
-
-def _fire_a_pulse_over_before_its_first_read_back(clock: FakeClock, also_counted: int = 0) -> tuple[bool | None, int]:
-    """A 0.2 s pulse whose controller time runs past its end as soon as the write that starts it
-    is answered (as on a simulator faster than the wall clock), `also_counted` further pulses
-    counted meanwhile (another program's); returns what `fire_pulse` said and how many times it
-    read the fire valve's position."""
-    with SimulatedRig(sim_config(), clock=clock) as rig, controller(rig) as vc:
-        charge(vc, clock, 2.0)
-        position_reads = []
-
-        def trace(record: TraceRecord) -> None:
-            if record.direction == "<-" and record.text.startswith("WriteSingleRegisterResponse") \
-                    and "address=4," in record.text:
-                clock.advance(0.25)
-                rig.world.fire_pulses += also_counted
-            if record.direction == "->" and record.text.startswith("ReadDiscreteInputsRequest") \
-                    and "address=8," in record.text:
-                position_reads.append(record)
-
-        vc.trace = trace
-        seen_open = vc.fire_pulse(0.2)
-        assert rig.world.shots_fired == 1 and vc.fire_pulse_count() == 1 + also_counted
-        assert rig.world.valve_positions()["fire"] is False
-        return seen_open, len(position_reads)
-
-
-def test_a_pulse_the_controller_counted_and_shut_ends_the_watch_at_once(clock: FakeClock) -> None:
-    """The pulse was over before the first read-back: the counter moved by one, the position
-    input and the PLC's fire output read shut, so the watch ends there (not after the pulse's
-    time and its margin), and says what it read: never open."""
-    seen_open, reads = _fire_a_pulse_over_before_its_first_read_back(clock)
-    assert seen_open is False and reads == 1
-
-
-def test_a_counter_that_jumps_does_not_end_the_watch(clock: FakeClock) -> None:
-    """Two pulses counted for one: the counter is not trusted, the valve is watched through
-    the pulse's time and its margin."""
-    seen_open, reads = _fire_a_pulse_over_before_its_first_read_back(clock, also_counted=1)
-    assert seen_open is False and reads > 1
-
-
-def test_safe_withdraws_a_fire_command_left_on(clock: FakeClock) -> None:
-    config = styled_sim("preset_and_command", fire_command_word=7)
-    with SimulatedRig(config, clock=clock) as rig, \
-            controller(rig, register_map=driver_map(fire_command_word=7), fire_style="preset_and_command",
-                       fire_command_value=0x5AF1) as vc:
-        vc.write_word(7, 0x5AF1, "a command left on by another program")
-        vc.set_fire_valve(False)
-        assert rig.modbus.last_written["fire_command"] == 0.0

@@ -1,145 +1,28 @@
-"""SAFE (rig/sequencer/safe.py) and the interlock rules (rig/interlocks.py), unit by unit.
+"""SAFE (rig/sequencer/safe.py), unit by unit.
 
 These kill the mutants the sequencer's fault-injection tests let survive (docs/mutation-testing.md):
-each branch of SAFE's confirmation, its messages and its hold after a controller timeout, on a
-scripted controller (a unit test of SAFE's logic; the real protocols are tested in
-test_sequencer_faults.py and test_cli_safe.py), and every interlock rule at its bounds.
+each branch of SAFE's confirmation, its messages and its hold after a controller timeout, and its
+untrusted-gauge path, on a scripted controller (tests/rig/scripted_safe.py: a unit test of SAFE's
+logic; the real protocols are tested in test_sequencer_faults.py and test_cli_safe.py). The
+interlock rules are test_mutants_interlocks.py's.
 """
 
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
-from typing import Any
 
 import pytest
 
 from hopkinson.drivers.errors import InstrumentError, InstrumentTimeout
-from hopkinson.drivers.roles import Interlocks, ValveStates
-from hopkinson.rig.config import LimitsConfig
 from hopkinson.rig.errors import HINT_SAFE_NOT_CONFIRMED
-from hopkinson.rig.events import EventBus, Note, Reading, RigError, RigEvent, RigWarning
-from hopkinson.rig.interlocks import (
-    INTERLOCKS,
-    REQUIRED,
-    InterlockCode,
-    RigReadings,
-    controller_readings,
-    evaluate,
-    pressure_check,
-    read_readings,
-)
+from hopkinson.rig.events import Note, Reading, RigError, RigWarning
 from hopkinson.rig.plausibility import RESERVOIR, Implausible, judge, plausible_ranges
 from hopkinson.rig.sequencer import safe
-from hopkinson.rig.sequencer.context import Publisher
 from hopkinson.rig.sequencer.safe import gauge_half_count_bar, make_rig_safe, safe_hold_s
+from tests.rig.scripted_safe import NAME, Controller, Digitizer, Events, config, run
 
-NAME = "valve controller 127.0.0.1:5020"
-LIMITS = LimitsConfig(max_pressure_bar=8.0, min_pressure_bar=0.2, pressure_tolerance_bar=0.05,
-                      fixture_vacuum_max_mbar=100.0, vent_done_bar=0.05)
-POLL_S = 0.005
 # Each test here takes well under 2 s; a mutant that keeps SAFE from ever returning fails at 30 s.
 pytestmark = pytest.mark.timeout(30)
-
-
-def config(safe_s: float = 0.3, controller_timeout_s: float = 0.05, resolution_bar: float = 0.0) -> Any:
-    """The parts of a RigConfig SAFE reads."""
-    return SimpleNamespace(limits=LIMITS, timeouts=SimpleNamespace(safe_s=safe_s),
-                           valve_controller=SimpleNamespace(timeout_s=controller_timeout_s,
-                                                            gauge_resolution_bar=resolution_bar))
-
-
-class Controller:
-    """A scripted valve controller: coils follow commands unless a valve is stuck (its position
-    then stays); `failures` maps a method name to the exceptions its next calls raise."""
-
-    name = NAME
-
-    def __init__(self, pressure_bar: float = 0.0, stuck: dict[str, bool] | None = None, positions: bool = True,
-                 pump_stays_on: bool = False) -> None:
-        self.coils = {"fire_valve": True, "fill_valve": True, "vent_valve": False, "vacuum_pump": True}
-        self.stuck = stuck or {}
-        self.positions = positions
-        self.pump_stays_on = pump_stays_on
-        self.pressures = [pressure_bar]
-        self.commands: list[tuple[str, bool]] = []
-        self.failures: dict[str, list[BaseException | None]] = {}
-
-    def _maybe_fail(self, method: str) -> None:
-        queue = self.failures.get(method)
-        if queue:
-            failure = queue.pop(0)
-            if failure is not None:  # None: this call succeeds
-                raise failure
-
-    def _set(self, name: str, value: bool) -> None:
-        self._maybe_fail(f"set_{name}")
-        self.commands.append((name, value))
-        if not (name == "vacuum_pump" and self.pump_stays_on):
-            self.coils[name] = value
-
-    def set_fire_valve(self, value: bool) -> None:
-        self._set("fire_valve", value)
-
-    def set_fill_valve(self, value: bool) -> None:
-        self._set("fill_valve", value)
-
-    def set_vent_valve(self, value: bool) -> None:
-        self._set("vent_valve", value)
-
-    def set_vacuum_pump(self, value: bool) -> None:
-        self._set("vacuum_pump", value)
-
-    def valves(self) -> ValveStates:
-        self._maybe_fail("valves")
-        positions = {f"{v}_position": self.stuck.get(v, self.coils[v]) if self.positions else None
-                     for v in ("fire_valve", "fill_valve", "vent_valve")}
-        return ValveStates(**self.coils, **positions)
-
-    def interlocks(self) -> Interlocks:
-        self._maybe_fail("interlocks")
-        return Interlocks(door_closed=True, fixture_clamped=False, estop_healthy=True)
-
-    def reservoir_pressure_bar(self) -> float:
-        self._maybe_fail("reservoir_pressure_bar")
-        return self.pressures.pop(0) if len(self.pressures) > 1 else self.pressures[0]
-
-    def fixture_vacuum_mbar(self) -> float:
-        return 990.0
-
-
-class Digitizer:
-    def __init__(self, connected: bool = True) -> None:
-        self.connected = connected
-        self.aborts = 0
-
-    def abort(self) -> None:
-        self.aborts += 1
-
-
-class Events(Publisher):
-    def __init__(self) -> None:
-        super().__init__(EventBus())
-        self.seen: list[RigEvent] = []
-        self.bus.subscribe(self.seen.append)
-
-    def of(self, kind: type) -> list[Any]:
-        return [e for e in self.seen if isinstance(e, kind)]
-
-
-def run(controller: Controller, cfg: Any = None, sleep: Any = None, events: Events | None = None,
-        **kw: Any) -> tuple[safe.SafeResult, Events]:
-    """SAFE on the scripted controller; `sleep` stands in for time.sleep between polls (the
-    test moves the scripted rig there), restored afterwards."""
-    events = Events() if events is None else events
-    original = safe.time.sleep
-    if sleep is not None:
-        safe.time.sleep = sleep
-    try:
-        result = make_rig_safe(controller, cfg or config(), events, poll_s=POLL_S, **kw)
-    finally:
-        safe.time.sleep = original
-    return result, events
 
 
 # -- SAFE -----------------------------------------------------------------------------------------------
@@ -533,113 +416,3 @@ def test_a_vented_reading_that_cannot_be_judged_is_not_confirmed_until_it_can() 
     result, _ = run(controller, sleep=rounds.append)
     assert result.confirmed
     assert len(rounds) == 1  # the first round was not clean: one poll, then a clean round
-
-
-# -- interlock rules ------------------------------------------------------------------------------------
-def readings(**kw: Any) -> RigReadings:
-    base: dict[str, Any] = dict(reservoir_pressure_bar=2.0, fixture_vacuum_mbar=50.0, door_closed=True,
-                                fixture_clamped=True, estop_healthy=True, amplifier_overloaded=False,
-                                digitizer_state="ARMED")
-    base.update(kw)
-    return RigReadings(**base)
-
-
-@pytest.mark.parametrize(("pressure", "setpoint", "charging", "ok", "detail"), [
-    (8.0, None, False, True, "reservoir 8.000 bar"),                  # the limit itself holds
-    (8.001, None, False, False, "reservoir 8.001 bar above the limit 8 bar"),
-    (8.001, 9.0, True, False, "reservoir 8.001 bar above the limit 8 bar"),
-    (2.05, 2.0, False, True, "reservoir 2.050 bar"),                  # set-point + tolerance holds
-    (2.0501, 2.0, True, False,
-     "reservoir 2.050 bar above the set-point 2 bar + 0.05 bar (fill valve not closing?)"),
-    (1.95, 2.0, False, True, "reservoir 1.950 bar"),                  # set-point − tolerance holds
-    (1.9499, 2.0, False, False, "reservoir 1.950 bar below the set-point 2 bar - 0.05 bar (leaking?)"),
-    (0.5, 2.0, True, True, "reservoir 0.500 bar"),                    # still charging
-    (math.nan, None, False, False, "reservoir gauge reads nan (not a number: check the gauge and its register)"),
-])
-def test_pressure_check(pressure, setpoint, charging, ok, detail) -> None:
-    check = pressure_check(pressure, LIMITS, setpoint, charging)
-    assert (check.code, check.ok, check.detail) == (InterlockCode.PRESSURE, ok, detail)
-
-
-@pytest.mark.parametrize(("field", "value", "ok", "detail"), [
-    ("door_closed", True, True, "door/guard closed"), ("door_closed", False, False, "door/guard open"),
-    ("fixture_clamped", True, True, "fixture clamped"), ("fixture_clamped", False, False, "fixture not clamped"),
-    ("estop_healthy", True, True, "e-stop healthy"), ("estop_healthy", False, False, "e-stop tripped"),
-    ("fixture_vacuum_mbar", 100.0, True, "fixture vacuum 100.0 mbar at or below 100 mbar"),
-    ("fixture_vacuum_mbar", 100.05, False, "fixture vacuum 100.0 mbar above 100 mbar"),
-    ("fixture_vacuum_mbar", math.inf, False,
-     "fixture vacuum gauge reads inf (not a number: check the gauge and its register)"),
-    ("digitizer_state", "ARMED", True, "digitizer armed"),
-    ("digitizer_state", "TRIGGERED", False, "digitizer not armed (state TRIGGERED)"),
-    ("digitizer_state", None, False, "digitizer not armed (state None)"),
-    ("amplifier_overloaded", False, True, "amplifier not overloaded"),
-    ("amplifier_overloaded", True, False, "amplifier overloaded"),
-    ("amplifier_overloaded", None, False, "amplifier overload status not read"),
-])
-def test_each_rule_and_its_words(field, value, ok, detail) -> None:
-    name = {"door_closed": "door", "fixture_clamped": "clamp", "estop_healthy": "estop",
-            "fixture_vacuum_mbar": "vacuum", "digitizer_state": "digitizer", "amplifier_overloaded": "amplifier"}[field]
-    report = evaluate(readings(**{field: value}), LIMITS, (name,))
-    (check,) = report.checks
-    assert (check.name, check.ok, check.detail) == (name, ok, detail)
-    assert report.all_ok is ok
-    assert report.problems() == ([] if ok else [detail])
-    assert report.failing() == ([] if ok else [InterlockCode(name)])
-    assert report.hints() == ([] if ok else [InterlockCode(name).hint])
-
-
-def test_a_report_keeps_the_interlocks_order_and_only_those_required() -> None:
-    report = evaluate(readings(door_closed=False, digitizer_state="IDLE"), LIMITS,
-                      ("digitizer", "door", "pressure"), setpoint_bar=2.0)
-    assert [c.name for c in report.checks] == ["door", "pressure", "digitizer"]
-    assert report.as_dict() == {"door": False, "pressure": True, "digitizer": False}
-    assert report.details() == {"door": "door/guard open", "pressure": "reservoir 2.000 bar",
-                                "digitizer": "digitizer not armed (state IDLE)"}
-    assert report.hints() == [InterlockCode.DOOR.hint, InterlockCode.DIGITIZER.hint]
-    assert not report.all_ok
-    event = report.reading("ARM", idle=True)
-    assert (event.state, event.reservoir_pressure_bar, event.fixture_vacuum_mbar, event.idle) == ("ARM", 2.0, 50.0, True)
-    assert event.interlocks == report.as_dict() and event.details == report.details()
-    assert (event.amplifier_overloaded, event.digitizer_state) == (False, "IDLE")
-    assert report.reading("ARM").idle is False
-    with pytest.raises(TypeError):
-        report.reading("ARM", True)  # type: ignore[misc]  # idle is keyword-only
-    with pytest.raises(ValueError, match=r"unknown interlock\(s\) \['doors'\]"):
-        evaluate(readings(), LIMITS, ("door", "doors"))
-
-
-def test_readings_and_judgements_are_frozen() -> None:
-    report = evaluate(readings(), LIMITS, ("door",))
-    for value, field in ((report.readings, "door_closed"), (report.checks[0], "ok"), (report, "checks")):
-        with pytest.raises(AttributeError):
-            setattr(value, field, False)
-
-
-def test_evaluate_judges_a_charged_reservoir_unless_told_it_is_charging() -> None:
-    low = readings(reservoir_pressure_bar=1.0)
-    assert evaluate(low, LIMITS, ("pressure",), setpoint_bar=2.0).failing() == [InterlockCode.PRESSURE]
-    assert evaluate(low, LIMITS, ("pressure",), setpoint_bar=2.0, charging=True).all_ok
-
-
-def test_what_each_state_requires() -> None:
-    basic = ("door", "clamp", "estop", "amplifier")
-    assert REQUIRED == {"CHECK": basic, "EVACUATE": basic, "CHARGE": (*basic, "vacuum", "pressure"),
-                        "ARM": INTERLOCKS, "FIRE": INTERLOCKS}
-    assert INTERLOCKS == ("door", "clamp", "estop", "vacuum", "pressure", "digitizer", "amplifier")
-    assert all(code.hint.endswith(".") and len(code.hint) > 20 for code in InterlockCode)
-    assert len({code.hint for code in InterlockCode}) == len(InterlockCode)
-
-
-def test_reading_the_instruments() -> None:
-    controller = Controller(pressure_bar=3.5)
-    got = controller_readings(controller)
-    assert got == RigReadings(reservoir_pressure_bar=3.5, fixture_vacuum_mbar=990.0, door_closed=True,
-                              fixture_clamped=False, estop_healthy=True)
-    instruments = SimpleNamespace(valves=controller,
-                                  amplifier=SimpleNamespace(overloaded=lambda: True),
-                                  digitizer=SimpleNamespace(acquisition_state=lambda: "ARMED"))
-    assert read_readings(instruments) == RigReadings(3.5, 990.0, True, False, True, True, None)
-    assert read_readings(instruments, amplifier=False, digitizer=True) == RigReadings(3.5, 990.0, True, False, True,
-                                                                                       None, "ARMED")
-    with pytest.raises(TypeError):
-        read_readings(instruments, False)  # type: ignore[misc]  # the flags are keyword-only: no bare booleans
