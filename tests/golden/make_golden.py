@@ -8,7 +8,7 @@
 Each golden is the JSON a `hopkinson` command prints with --json (run in this process through
 its real parser, `hopkinson.rig.cli.main.main`), or the analysis a shot file stores, on fixed
 inputs: PTB's real record and sine calibration (tests/ptb_shock.py), the hybrids of PTB's
-reference driving a known sensor (tests/analysis/test_ptb_identify.py), the known-model corpus
+reference driving a known sensor (tests/analysis/ptb_hybrids.py), the known-model corpus
 of the robustness suite (tests/analysis/hard_records.py, tests/analysis/test_robustness.py) and
 three simulated shots of config/sim.toml's world (drivers/sim/world.simulate_shot) stored as
 shot files. Every Monte Carlo run has a fixed seed; the BLAS runs on one thread (a threaded sum
@@ -173,17 +173,17 @@ HYBRIDS = {  # name -> (tension gain, compression gain, noise seed, motion after
 
 
 def hybrid_goldens(work: Path) -> Iterator[Golden]:
-    """PTB's real reference driving a known sensor (tests/analysis/test_ptb_identify.py): clean,
+    """PTB's real reference driving a known sensor (tests/analysis/ptb_hybrids.py): clean,
     with the lobe-dependent gain PTB's record shows (with its uncertainty), with the bar's motion."""
     import numpy as np
     from scipy import signal
 
     from hopkinson.analysis.records import Record
-    from tests.analysis.test_ptb_identify import hybrid_record
+    from tests.analysis.ptb_hybrids import hybrid_record
 
     for name, (tension, compression, seed, motion, draws) in HYBRIDS.items():
         rec, truth = hybrid_record(tension, compression, seed)
-        if motion:  # as test_ptb_identify.motion_record: the motion from 0.7 ms at ×0.75
+        if motion:  # as ptb_hybrids.motion_record: the motion from 0.7 ms at ×0.75
             t = rec.time_s - rec.time_s[0]
             _, extra, _ = signal.lsim(truth, np.where(t >= 7.0e-4, -0.25 * rec.reference, 0.0), t)
             rec = Record(rec.sample_interval_s, rec.reference, rec.response + extra, response_unit="pC")

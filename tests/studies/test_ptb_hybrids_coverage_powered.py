@@ -1,5 +1,5 @@
 """The PTB hybrids' coverage over noise draws (issue 17, issue 45 item 3): PTB's real reference
-drives a known sensor (tests/analysis/test_ptb_identify.py `hybrid_record`: 55 kHz, ζ 0.03), clean,
+drives a known sensor (tests/analysis/ptb_hybrids.py `hybrid_record`: 55 kHz, ζ 0.03), clean,
 with a lobe-dependent gain (issue 17's measured asymmetry ×0.25, ×0.5, ×1, ×2) or with the bar's
 motion after the pulse reaching the sensor, each on NOISE_SEEDS fresh draws of its 0.01 %
 response noise (and its own Monte Carlo seed): every run is a new identification, so the count is
@@ -22,7 +22,7 @@ import pytest
 
 from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.shot_analysis import analyse_record
-from tests.analysis.test_ptb_identify import hybrid_holds, hybrid_record, lobe_gains, motion_record
+from tests.analysis.ptb_hybrids import hybrid_holds, hybrid_record, lobe_gains, motion_record
 from tests.studies.binomial import max_misses, pass_probability
 
 pytestmark = pytest.mark.study
