@@ -196,7 +196,7 @@ def test_the_shot_tab_shows_the_uncertainty_and_the_dcm_check(qtbot, make_panel,
     from hopkinson.rig.shotfile import RawChannel, RawShot, ShotMeta
     from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
     from tests.reports.contract import contract_results
-    from tests.reports.test_report import SENSOR_A, simulated_record
+    from tests.reports.simulated_shots import SENSOR_A, simulated_record
 
     record = simulated_record(SENSOR_A, 30_000, 1)
     results = contract_results(analyse_record(record, AnalysisOptions(max_order=6, uncertainty=False)),
