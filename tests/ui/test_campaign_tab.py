@@ -106,7 +106,7 @@ def test_run_pause_resume_abort_and_the_table(qtbot, make_panel, tmp_path, artif
     # Resume to the end: the aborted shot is retried, every shot fired exactly once
     with qtbot.waitSignal(tab.ended, timeout=CAMPAIGN_TIMEOUT_MS):
         qtbot.mouseClick(tab.resume_button, Qt.MouseButton.LeftButton)
-    assert tab.last_outcome.exit_code == 0 and tab.last_outcome.complete
+    assert tab.last_outcome.exit_code == 0 and tab.last_outcome.complete, tab.last_outcome.message
     qtbot.waitUntil(lambda: all(tab.column("FBSD")), timeout=10_000)  # results read from the shot files
     assert tab.column("State") == ["ANALYSED"] * 3 and panel.world.shots_fired == 3
     assert tab.progress.value() == tab.progress.maximum() == 3
