@@ -14,19 +14,9 @@ from hopkinson.drivers.errors import InstrumentConnectionError, InstrumentError,
 from hopkinson.drivers.sim.faults import FAULTS
 from hopkinson.drivers.sim.simulated_rig import SimulatedRig
 from hopkinson.drivers.valve_controller import ValveController
-from tests.drivers.conftest import FakeClock
+from tests.drivers.conftest import FakeClock, charge, controller
 
-
-def controller(rig: SimulatedRig, timeout_s: float = 2.0) -> ValveController:
-    a = rig.addresses
-    return ValveController.tcp(a.modbus_host, a.modbus_port, timeout_s=timeout_s)
-
-
-def charge(vc: ValveController, clock: FakeClock, pressure_bar: float = 3.0) -> None:
-    vc.set_pressure_setpoint_bar(pressure_bar)
-    vc.set_fill_valve(True)
-    clock.advance(60.0)
-    vc.set_fill_valve(False)
+CHARGE_BAR = 3.0
 
 
 def check_modbus_disconnect(rig: SimulatedRig, clock: FakeClock) -> None:
@@ -58,7 +48,7 @@ def check_modbus_slow(rig: SimulatedRig, clock: FakeClock) -> None:
 
 def arm_fire_and_wait(rig: SimulatedRig, clock: FakeClock, dig: Digitizer, vc: ValveController,
                       wait_s: float) -> bool:
-    charge(vc, clock)
+    charge(vc, clock, CHARGE_BAR)
     dig.arm_single()
     vc.set_fire_valve(True)
     try:
@@ -140,7 +130,7 @@ def check_vacuum_leak(rig: SimulatedRig, clock: FakeClock) -> None:
 
 def check_door_open(rig: SimulatedRig, clock: FakeClock) -> None:
     with controller(rig) as vc:
-        charge(vc, clock)
+        charge(vc, clock, CHARGE_BAR)
         rig.faults.inject("door-open")
         assert vc.interlocks().problems() == ["door/guard open"]
         vc.set_fire_valve(True)
@@ -153,7 +143,7 @@ def check_door_open(rig: SimulatedRig, clock: FakeClock) -> None:
 
 def check_estop(rig: SimulatedRig, clock: FakeClock) -> None:
     with controller(rig) as vc:
-        charge(vc, clock)
+        charge(vc, clock, CHARGE_BAR)
         rig.faults.inject("estop")
         assert vc.interlocks().problems() == ["e-stop tripped"]
         vc.set_fire_valve(True)

@@ -175,18 +175,10 @@ HYBRIDS = {  # name -> (tension gain, compression gain, noise seed, motion after
 def hybrid_goldens(work: Path) -> Iterator[Golden]:
     """PTB's real reference driving a known sensor (tests/analysis/ptb_hybrids.py): clean,
     with the lobe-dependent gain PTB's record shows (with its uncertainty), with the bar's motion."""
-    import numpy as np
-    from scipy import signal
-
-    from hopkinson.analysis.records import Record
-    from tests.analysis.ptb_hybrids import hybrid_record
+    from tests.analysis.ptb_hybrids import hybrid_record, motion_record
 
     for name, (tension, compression, seed, motion, draws) in HYBRIDS.items():
-        rec, truth = hybrid_record(tension, compression, seed)
-        if motion:  # as ptb_hybrids.motion_record: the motion from 0.7 ms at ×0.75
-            t = rec.time_s - rec.time_s[0]
-            _, extra, _ = signal.lsim(truth, np.where(t >= 7.0e-4, -0.25 * rec.reference, 0.0), t)
-            rec = Record(rec.sample_interval_s, rec.reference, rec.response + extra, response_unit="pC")
+        rec = motion_record(seed, tension, compression) if motion else hybrid_record(tension, compression, seed)[0]
         path = write_npz(work / f"{name}.npz", rec)
         options = ["--draws", draws, "--seed", "2"] if draws else ["--no-uncertainty"]
         yield name, hopkinson("identify", path, *options)
