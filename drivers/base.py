@@ -82,6 +82,13 @@ class Deadline:
         self.seconds = seconds
         self.end = time.monotonic() + seconds
 
+    def extended(self, extra_s: float) -> Deadline:
+        """The same limit made `extra_s` longer: it ends `extra_s` later and states
+        `seconds + extra_s` (a message names the limit the user set, not what was left of it)."""
+        longer = Deadline(self.seconds + extra_s)
+        longer.end = self.end + extra_s
+        return longer
+
     def remaining_s(self) -> float:
         """Seconds left (0 when past)."""
         return max(0.0, self.end - time.monotonic())

@@ -249,7 +249,7 @@ class VisaLink:
                 raise self._garbled(command, f"block announces {length} bytes, more than the {max_bytes} "
                                              "expected (an oversized reply)", prefix + digits)
             end = (term or "").encode("ascii")
-            block_deadline = Deadline(deadline.remaining_s() + length / MIN_BLOCK_RATE_BYTES_S)
+            block_deadline = deadline.extended(length / MIN_BLOCK_RATE_BYTES_S)
             body = self._read_exact(reader, command, length + len(end), block_deadline)
             if body[length:] != end:
                 raise self._garbled(command, f"block not followed by the terminator {end!r}: "

@@ -406,6 +406,22 @@ def test_setting_is_sent_with_the_error_query_in_one_message(scripted: Callable[
         ":TRIGger:SOURce EXT;:TRIGger:LEVel 1.5;:TRIGger:SLOPe NEG;:SYSTem:ERRor?")
 
 
+@pytest.mark.timeout(60)
+def test_a_timeout_names_the_limit_set_not_what_was_left_of_it(scripted: Callable[..., ScriptedServer]) -> None:
+    """Half the block's header, a pause of a third of the limit, the rest of the header and half
+    the block, then silence: the message names the 0.3 s the instrument was given (it read 0.2 s,
+    the time left when the header came, before the block's deadline was the overall one extended)."""
+    def header_pause_half(conn: socket.socket) -> None:
+        conn.sendall(b"#2")
+        time.sleep(0.1)
+        conn.sendall(b"12" + b"\x00" * 6)
+
+    srv = scripted({PRE: b"INT16,LSBF,6,1e-08,0,0.001,0.0;1\n", ":WAVeform:DATA?": header_pause_half})
+    with connected(srv, timeout_s=0.3) as d:
+        with pytest.raises(InstrumentTimeout, match=r"no complete reply within 0.3 s \(6 of 13 bytes came\)"):
+            d.fetch_waveform(1)
+
+
 @pytest.mark.timeout(60)  # a driver waiting forever fails here (the reply never completes)
 def test_truncated_block_then_silence_is_a_timeout(scripted: Callable[..., ScriptedServer]) -> None:
     srv = scripted({PRE: b"INT16,LSBF,6,1e-08,0,0.001,0.0;1\n", ":WAVeform:DATA?": b"#212" + b"\n" * 5})
