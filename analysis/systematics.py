@@ -20,10 +20,13 @@ refit moves them together) and added to every Monte Carlo draw:
 - **the model's error** (`variant_bounds`, where identify detected model error): the figures
   refitted on 0.9 and 0.8 of the band's top (a right model gives one answer on every part of
   the band its excitation supports; a model the data bend does not), its bound the largest shift;
-- **the model's structure and order** (`_other_structure`, `_more_poles`): the chosen order and
-  the order with one more pole refitted with their zeros free, or all at Nyquist (the all-pole
-  structure), and the order with one more pole pair, where those fits are sound: the figures'
-  largest change is the bound (shapes the record does not tell apart from the chosen one);
+- **the model's structure** (`_other_structure`, `_flat_numerator`): the chosen order and the
+  order with one more pole refitted with their zeros free, or all at Nyquist (the all-pole
+  structure), where those fits are sound: the figures' largest change is the bound (shapes whose
+  bias the record's likelihood does not show: docs/systematic-effects.md);
+- **the model's order** (`_more_poles`, `evidence_scale`): the order with one more pole pair, a
+  nested richer model the order test judged; its shift weighed by its Akaike weight (u = √w·|Δ|),
+  at most the rectangle of its whole shift;
 - **transverse sensitivity** (`transverse_row`): the sensor's stated transverse sensitivity S_t
   (AnalysisOptions.transverse_sensitivity_rel, the datasheet's limit) times the bar's transverse
   motion share r_T (transverse_motion_rel): a transverse drive in proportion to the axial one
@@ -75,6 +78,8 @@ class TypeB:
     shift_by_figure: dict[str, float]
     note: str = ""
     models: tuple = ()  # the variants' models (DiscreteModel), for the response's band
+    band_scale: float = 1.0  # the share of the variants' departure the response's band draws (`evidence_scale`)
+
     def u_rel_by_figure(self, nominal: dict[str, float | None]) -> dict[str, float]:
         return {k: abs(v) / SQRT3 / abs(nominal[k]) for k, v in self.shift_by_figure.items()
                 if nominal.get(k) and math.isfinite(v)}
@@ -168,12 +173,13 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         refit = _refit(data, ident, replace(fit, inputs=_matched(terms, made, fit.inputs)))
         return None if refit is None else (refit, made)
 
-    def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0) -> None:
+    def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0,
+            band_scale: float = 1.0) -> None:
         found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
         if found:
             shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found])
             rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
-                              tuple(_model_of(f, ident, made) for f, made in found)))
+                              tuple(_model_of(f, ident, made) for f, made in found), band_scale))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -194,12 +200,17 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
                 "not seen beyond chance: the figures' change with ε at twice its standard uncertainty, or at "
                 "its estimate where that is larger", unseen_asymmetry_scale(epsilon, prep.unseen[ASYMMETRY]))
     flat = _flat_numerator(ident, fit, pole)
-    shapes = [*_other_structure(ident, fit, pole), *[f for f in (_more_poles(ident, ident.order, pole), flat)
-                                                     if f is not None]]
+    shapes = [*_other_structure(ident, fit, pole), *([flat] if flat is not None else [])]
     if shapes:
-        row("model (its structure and order)", [(f, terms) for f in shapes],
+        row("model (its structure)", [(f, terms) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
-            "Nyquist), and the order with one more pole pair" + (", and with a flat numerator" if flat else ""))
+            "Nyquist)" + (", and with a flat numerator" if flat else ""))
+    richer = _more_poles(ident, ident.order, pole)
+    if richer is not None:
+        scale = evidence_scale(richer, fit, _half_dof(ident, fit))
+        row("model (one more pole pair, by its evidence)", [(richer, terms)],
+            f"the order with one more pole pair, its shift weighed by its evidence against the chosen order "
+            f"(Akaike weight {scale ** 2 / 3:.2g})", scale, scale)
     if ident.settlement.model_error_detected:  # the Monte Carlo draws these as its "band part"; here for the response band
         top = float(np.max(ident.settlement.data.omega))
         parts = [ident.settlement.data.below(part * top) for part in BAND_PARTS]
@@ -208,6 +219,31 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         if models:
             rows.append(TypeB(MODEL_ERROR_BOUND, {}, "the model refitted on 0.9 and 0.8 of the band's top", models))
     return rows
+
+
+def evidence_scale(richer: OrderFit, nominal: OrderFit, half_dof: float) -> float:
+    """The factor on a nested richer model's shift that makes the row's u = √w·|shift|: the
+    model-averaged variance about the chosen model's value (Burnham and Anderson, Model Selection
+    and Multimodel Inference, 2002, §4.3), w the richer model's Akaike weight against the chosen
+    one, exp(−ΔV/ĉ − Δk) / (1 + exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen
+    fit's over-dispersion, QAIC). The order test already judged the richer model; a rectangle of
+    its whole shift (u = |shift|/√3) counted a spare pole pair the record does not call for as
+    if it were as likely as the chosen order (the FBSD ±5 % of the simulator's shots moved by up
+    to 8 % where ΔV was −4 for 6 parameters). Returns min(√(3w), 1), the factor on the
+    rectangle's half-width: the evidence only narrows the bound of a richer model it disfavours
+    (w < 1/3); one it favours keeps the whole rectangle (where the order test and the evidence
+    disagree, PTB's record with 1 % more noise, √w·|shift| reached 1.7× the rectangle's u)."""
+    c_hat = max(1.0, nominal.cost / half_dof) if half_dof > 0 else 1.0
+    exponent = (richer.cost - nominal.cost) / c_hat + (richer.parameters - nominal.parameters)
+    weight = 1.0 / (1.0 + math.exp(min(exponent, 700.0)))
+    return min(1.0, math.sqrt(3.0 * weight))
+
+
+def _half_dof(ident: Identification, fit: OrderFit) -> float:
+    """Half the chosen fit's residual degrees of freedom: V's expectation at the truth."""
+    problem = OrderProblem.for_fit(ident.settlement.data, fit, ident.settlement.sweep.delay_mode,
+                                   ident.settlement.setup.max_delay)
+    return 0.5 * (problem.residual_size() - fit.parameters)
 
 
 def unseen_asymmetry_scale(epsilon: float, u: float) -> float:

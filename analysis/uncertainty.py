@@ -213,7 +213,8 @@ def evaluate(
         fbsd_hz=fbsd, delay_s=delay, reference=peaks.get("reference", {}), budget=figure_budget, order=order_info,
         findings=findings, failed_draws=failed, model_draws=model_draws,
         response_band=response_band(model, model_draws, ident.supported_band_hz, reflect[good],
-                                    systematic=[row.models for row in type_b if row.models], seed=seed),
+                                    systematic=[row.models for row in type_b if row.models],
+                                    systematic_scales=[row.band_scale for row in type_b if row.models], seed=seed),
         band_tops_hz=bands.tops_hz, input_terms=terms,
     )
 
@@ -256,7 +257,8 @@ BAND_POINTS = 160
 
 def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tuple[float, float] | None,
                    reflect: np.ndarray | None = None, points: int = BAND_POINTS,
-                   systematic: list[tuple[DiscreteModel, ...]] | None = None, seed: int = 0) -> dict[str, Any] | None:
+                   systematic: list[tuple[DiscreteModel, ...]] | None = None, seed: int = 0,
+                   systematic_scales: list[float] | None = None) -> dict[str, Any] | None:
     """The model's frequency response with its 95 % band, from the same Monte Carlo draws as the
     figures: on a log grid from 100 Hz (or the band's start) to twice the supported
     band's top (at most Nyquist), the magnitude relative to the DC gain (each draw relative to
@@ -287,12 +289,15 @@ def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tup
     # The Type B rows' variants (analysis.systematics): each draw takes each row's widest variant's
     # departure from the nominal times a shared ξ ~ U(−1, 1), as the figures take its shifts.
     rng = np.random.default_rng([seed, 40])
-    for variants in systematic or []:
+    scales = systematic_scales if systematic_scales is not None else [1.0] * len(systematic or [])
+    for variants, scale in zip(systematic or [], scales, strict=True):
         shapes = [whole(m) / nominal for m in variants if m.dc_gain != 0]
         if not shapes:
             continue
         widest = max(shapes, key=lambda r: float(np.max(np.abs(np.log(np.abs(r))))))
         xi = rng.uniform(-1.0, 1.0, (d_mag.shape[0], 1))
+        if scale != 1.0:
+            xi = scale * xi
         d_mag = d_mag + xi * np.log(np.abs(widest))[None, :]
         dphase = dphase + xi * np.degrees(np.angle(widest))[None, :]
     lo_m, hi_m = np.percentile(d_mag, [tail, 100.0 - tail], axis=0)

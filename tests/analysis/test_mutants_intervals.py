@@ -292,6 +292,12 @@ def test_response_band_adds_each_type_b_rows_widest_variant_times_a_uniform_fact
                             systematic=[(dead,), (inverted(0.26), inverted(0.3))])
     for key in ("magnitude_rel_low", "magnitude_rel_high", "phase_low_deg", "phase_high_deg"):
         np.testing.assert_allclose(flipped[key], band[key], rtol=1e-12, atol=1e-9)
+    # a row drawn at a share s of its variant's departure (systematics.evidence_scale): ξ·s, whose
+    # 97.5 % point is 0.95·s
+    shared = response_band(model, [model] * n, (1e3, 1e5), points=12, systematic=[(zero_model(0.3),)],
+                           systematic_scales=[0.4])
+    factor = np.log(np.asarray(shared["magnitude_rel_high"]) / g0) / log_r
+    np.testing.assert_allclose(factor, 0.95 * 0.4, atol=0.01)
 
 
 def test_a_positive_figure_whose_reflected_end_passes_the_largest_float_is_unbounded_not_an_error() -> None:
@@ -301,3 +307,32 @@ def test_a_positive_figure_whose_reflected_end_passes_the_largest_float_is_unbou
     est = Estimate.of_draws(1e300, draws, positive=True)
     assert est.interval is not None and est.interval[1] == math.inf
     assert est.interval[0] <= 1e300 <= est.interval[1]
+
+
+def test_a_richer_models_bound_is_its_akaike_weights_share_and_never_above_the_rectangle() -> None:
+    """systematics.evidence_scale: the nested richer model's shift Δ enters the budget with u =
+    √w·|Δ| (the model-averaged variance about the chosen model's value, Burnham and Anderson
+    2002), w = 1/(1 + exp(ΔV/ĉ + Δk)), ĉ = max(1, V/half_dof); as a rectangle's half-width factor
+    √(3w), at most 1 (the whole rectangle, u = |Δ|/√3, where the evidence favours the richer model)."""
+    from types import SimpleNamespace
+
+    from hopkinson.analysis.systematics import TypeB, evidence_scale
+
+    def fits(v_nominal: float, dv: float, dk: int) -> tuple[SimpleNamespace, SimpleNamespace]:
+        return SimpleNamespace(cost=v_nominal + dv, parameters=10 + dk), SimpleNamespace(cost=v_nominal, parameters=10)
+
+    w = 1.0 / (1.0 + math.exp(3.0 + 4.0))  # worse by 3 for 4 more parameters, no over-dispersion
+    assert evidence_scale(*fits(100.0, 3.0, 4), half_dof=1000.0) == pytest.approx(math.sqrt(3 * w), rel=1e-12)
+    row = TypeB("richer", {"dc_gain": 0.01 * evidence_scale(*fits(100.0, 3.0, 4), half_dof=1000.0)})
+    assert row.u_rel_by_figure({"dc_gain": 1.0})["dc_gain"] == pytest.approx(math.sqrt(w) * 0.01, rel=1e-12)
+    # over-dispersed (V three times its expectation): ΔV counts a third
+    w3 = 1.0 / (1.0 + math.exp(6.0 / 3.0 + 4.0))
+    assert evidence_scale(*fits(300.0, 6.0, 4), half_dof=100.0) == pytest.approx(math.sqrt(3 * w3), rel=1e-12)
+    # better by 4 for 6 more parameters: still disfavoured (w = 0.12)
+    assert evidence_scale(*fits(100.0, -4.0, 6), half_dof=1000.0) == pytest.approx(
+        math.sqrt(3.0 / (1.0 + math.e ** 2)), rel=1e-12)
+    # favoured (w ≥ 1/3): the whole rectangle, never more
+    assert evidence_scale(*fits(100.0, -20.0, 4), half_dof=1000.0) == 1.0
+    assert evidence_scale(*fits(100.0, math.log(2.0) - 4.0, 4), half_dof=1000.0) == pytest.approx(1.0, rel=1e-12)
+    # far worse: no overflow, a vanishing share
+    assert 0.0 <= evidence_scale(*fits(100.0, 5000.0, 4), half_dof=1000.0) < 1e-100
