@@ -24,7 +24,7 @@ refit moves them together) and added to every Monte Carlo draw:
   order with one more pole refitted with their zeros free, or all at Nyquist (the all-pole
   structure), where those fits are sound: the figures' largest change is the bound (shapes whose
   bias the record's likelihood does not show: docs/systematic-effects.md);
-- **the model's order** (`_more_poles`, `evidence_scale`): the order with one more pole pair, a
+- **the model's order** (`_more_poles`, `akaike_weight`, `evidence_scale`): the order with one more pole pair, a
   nested richer model the order test judged; its shift weighed by its Akaike weight (u = √w·|Δ|),
   at most the rectangle of its whole shift;
 - **transverse sensitivity** (`transverse_row`): the sensor's stated transverse sensitivity S_t
@@ -207,10 +207,12 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
             "Nyquist)" + (", and with a flat numerator" if flat else ""))
     richer = _more_poles(ident, ident.order, pole)
     if richer is not None:
-        scale = evidence_scale(richer, fit, _half_dof(ident, fit))
+        weight = akaike_weight(richer, fit, _half_dof(ident, fit))
+        scale = evidence_scale(weight)
         row("model (one more pole pair, by its evidence)", [(richer, terms)],
             f"the order with one more pole pair, its shift weighed by its evidence against the chosen order "
-            f"(Akaike weight {scale ** 2 / 3:.2g})", scale, scale)
+            f"(Akaike weight {weight:.2g}" + ("; at least 1/3, so its whole shift)" if scale == 1.0 else ")"),
+            scale, scale)
     if ident.settlement.model_error_detected:  # the Monte Carlo draws these as its "band part"; here for the response band
         top = float(np.max(ident.settlement.data.omega))
         parts = [ident.settlement.data.below(part * top) for part in BAND_PARTS]
@@ -221,21 +223,25 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     return rows
 
 
-def evidence_scale(richer: OrderFit, nominal: OrderFit, half_dof: float) -> float:
-    """The factor on a nested richer model's shift that makes the row's u = √w·|shift|: the
-    model-averaged variance about the chosen model's value (Burnham and Anderson, Model Selection
-    and Multimodel Inference, 2002, §4.3), w the richer model's Akaike weight against the chosen
-    one, exp(−ΔV/ĉ − Δk) / (1 + exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen
-    fit's over-dispersion, QAIC). The order test already judged the richer model; a rectangle of
-    its whole shift (u = |shift|/√3) counted a spare pole pair the record does not call for as
-    if it were as likely as the chosen order (the FBSD ±5 % of the simulator's shots moved by up
-    to 8 % where ΔV was −4 for 6 parameters). Returns min(√(3w), 1), the factor on the
-    rectangle's half-width: the evidence only narrows the bound of a richer model it disfavours
-    (w < 1/3); one it favours keeps the whole rectangle (where the order test and the evidence
-    disagree, PTB's record with 1 % more noise, √w·|shift| reached 1.7× the rectangle's u)."""
+def akaike_weight(richer: OrderFit, nominal: OrderFit, half_dof: float) -> float:
+    """A nested richer model's Akaike weight against the chosen one, exp(−ΔV/ĉ − Δk) / (1 +
+    exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen fit's over-dispersion, QAIC)."""
     c_hat = max(1.0, nominal.cost / half_dof) if half_dof > 0 else 1.0
     exponent = (richer.cost - nominal.cost) / c_hat + (richer.parameters - nominal.parameters)
-    weight = 1.0 / (1.0 + math.exp(min(exponent, 700.0)))
+    return 1.0 / (1.0 + math.exp(min(exponent, 700.0)))
+
+
+def evidence_scale(weight: float) -> float:
+    """The factor on a nested richer model's shift that makes its row's u = √w·|shift|, w its
+    `akaike_weight`: the model-averaged variance about the chosen model's value (Burnham and
+    Anderson, Model Selection and Multimodel Inference, 2002, §4.3). The order test already judged
+    the richer model; a rectangle of its whole shift (u = |shift|/√3) counted a spare pole pair the
+    record does not call for as if it were as likely as the chosen order (the FBSD ±5 % of the
+    simulator's shots moved by up to 8 % where ΔV was −4 for 6 parameters). Returns min(√(3w), 1),
+    the factor on the rectangle's half-width: the evidence only narrows the bound of a richer
+    model it disfavours (w < 1/3); one it favours keeps the whole rectangle (where the order test
+    and the evidence disagree, PTB's record with 1 % more noise, √w·|shift| reached 1.7× the
+    rectangle's u)."""
     return min(1.0, math.sqrt(3.0 * weight))
 
 

@@ -310,29 +310,31 @@ def test_a_positive_figure_whose_reflected_end_passes_the_largest_float_is_unbou
 
 
 def test_a_richer_models_bound_is_its_akaike_weights_share_and_never_above_the_rectangle() -> None:
-    """systematics.evidence_scale: the nested richer model's shift Δ enters the budget with u =
-    √w·|Δ| (the model-averaged variance about the chosen model's value, Burnham and Anderson
-    2002), w = 1/(1 + exp(ΔV/ĉ + Δk)), ĉ = max(1, V/half_dof); as a rectangle's half-width factor
-    √(3w), at most 1 (the whole rectangle, u = |Δ|/√3, where the evidence favours the richer model)."""
+    """systematics.akaike_weight and evidence_scale: the nested richer model's shift Δ enters the
+    budget with u = √w·|Δ| (the model-averaged variance about the chosen model's value, Burnham and
+    Anderson 2002), w = 1/(1 + exp(ΔV/ĉ + Δk)), ĉ = max(1, V/half_dof); as a rectangle's
+    half-width factor √(3w), at most 1 (the whole rectangle, u = |Δ|/√3, where the evidence favours
+    the richer model)."""
     from types import SimpleNamespace
 
-    from hopkinson.analysis.systematics import TypeB, evidence_scale
+    from hopkinson.analysis.systematics import TypeB, akaike_weight, evidence_scale
 
-    def fits(v_nominal: float, dv: float, dk: int) -> tuple[SimpleNamespace, SimpleNamespace]:
-        return SimpleNamespace(cost=v_nominal + dv, parameters=10 + dk), SimpleNamespace(cost=v_nominal, parameters=10)
+    def weight(v_nominal: float, dv: float, dk: int, half_dof: float = 1000.0) -> float:
+        richer = SimpleNamespace(cost=v_nominal + dv, parameters=10 + dk)
+        return akaike_weight(richer, SimpleNamespace(cost=v_nominal, parameters=10), half_dof)
 
     w = 1.0 / (1.0 + math.exp(3.0 + 4.0))  # worse by 3 for 4 more parameters, no over-dispersion
-    assert evidence_scale(*fits(100.0, 3.0, 4), half_dof=1000.0) == pytest.approx(math.sqrt(3 * w), rel=1e-12)
-    row = TypeB("richer", {"dc_gain": 0.01 * evidence_scale(*fits(100.0, 3.0, 4), half_dof=1000.0)})
+    assert weight(100.0, 3.0, 4) == pytest.approx(w, rel=1e-12)
+    assert evidence_scale(w) == pytest.approx(math.sqrt(3 * w), rel=1e-12)
+    row = TypeB("richer", {"dc_gain": 0.01 * evidence_scale(w)})
     assert row.u_rel_by_figure({"dc_gain": 1.0})["dc_gain"] == pytest.approx(math.sqrt(w) * 0.01, rel=1e-12)
     # over-dispersed (V three times its expectation): ΔV counts a third
-    w3 = 1.0 / (1.0 + math.exp(6.0 / 3.0 + 4.0))
-    assert evidence_scale(*fits(300.0, 6.0, 4), half_dof=100.0) == pytest.approx(math.sqrt(3 * w3), rel=1e-12)
+    assert weight(300.0, 6.0, 4, half_dof=100.0) == pytest.approx(1.0 / (1.0 + math.exp(6.0 / 3.0 + 4.0)), rel=1e-12)
     # better by 4 for 6 more parameters: still disfavoured (w = 0.12)
-    assert evidence_scale(*fits(100.0, -4.0, 6), half_dof=1000.0) == pytest.approx(
-        math.sqrt(3.0 / (1.0 + math.e ** 2)), rel=1e-12)
+    assert weight(100.0, -4.0, 6) == pytest.approx(1.0 / (1.0 + math.e ** 2), rel=1e-12)
     # favoured (w ≥ 1/3): the whole rectangle, never more
-    assert evidence_scale(*fits(100.0, -20.0, 4), half_dof=1000.0) == 1.0
-    assert evidence_scale(*fits(100.0, math.log(2.0) - 4.0, 4), half_dof=1000.0) == pytest.approx(1.0, rel=1e-12)
+    assert weight(100.0, -20.0, 4) > 0.99
+    assert evidence_scale(weight(100.0, -20.0, 4)) == 1.0
+    assert evidence_scale(weight(100.0, math.log(2.0) - 4.0, 4)) == pytest.approx(1.0, rel=1e-12)
     # far worse: no overflow, a vanishing share
-    assert 0.0 <= evidence_scale(*fits(100.0, 5000.0, 4), half_dof=1000.0) < 1e-100
+    assert 0.0 <= weight(100.0, 5000.0, 4) < 1e-200
