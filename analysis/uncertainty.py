@@ -295,9 +295,7 @@ def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tup
         if not shapes:
             continue
         widest = max(shapes, key=lambda r: float(np.max(np.abs(np.log(np.abs(r))))))
-        xi = rng.uniform(-1.0, 1.0, (d_mag.shape[0], 1))
-        if scale != 1.0:
-            xi = scale * xi
+        xi = scale * rng.uniform(-1.0, 1.0, (d_mag.shape[0], 1))  # × 1.0 is exact: a row drawn whole is unchanged
         d_mag = d_mag + xi * np.log(np.abs(widest))[None, :]
         dphase = dphase + xi * np.degrees(np.angle(widest))[None, :]
     lo_m, hi_m = np.percentile(d_mag, [tail, 100.0 - tail], axis=0)
