@@ -23,15 +23,19 @@ ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 # fast with other work beside it (seen: a coverage study in another checkout) that test outlasted
 # pyproject.toml's 300 s hang guard, whose thread method ends the xdist worker ("node down: Not
 # properly terminated"). The tests that use one get a longer guard; every other test keeps 300 s.
-STUDY_FIXTURES = {"test_coverage_realistic.py": "study", "test_uncertainty.py": "shots",
-                  "test_linearity.py": "campaigns"}
+# Keyed by the module's path under tests/ (a study of the same file name elsewhere, e.g. in
+# tests/studies, keeps the timeout `make studies` gives it); tests/test_structure.py checks that
+# each module still defines its fixture, so a rename cannot drop the guard unnoticed.
+STUDY_FIXTURES = {"analysis/test_coverage_realistic.py": "study", "analysis/test_uncertainty.py": "shots",
+                  "analysis/test_linearity.py": "campaigns"}
+TESTS = Path(__file__).resolve().parent
 STUDY_TIMEOUT_S = 1500
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """A longer hang guard for the tests that use a study's fixture (STUDY_FIXTURES)."""
     for item in items:
-        fixture = STUDY_FIXTURES.get(item.path.name)
+        fixture = STUDY_FIXTURES.get(item.path.relative_to(TESTS).as_posix()) if item.path.is_relative_to(TESTS) else None
         if fixture is not None and fixture in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.timeout(STUDY_TIMEOUT_S))
 

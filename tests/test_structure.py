@@ -156,3 +156,15 @@ def test_reading_a_configuration_or_a_campaign_does_not_load_the_bar_model() -> 
 
     assert set(BAR_MATERIALS) == set(MATERIALS)
     assert BAR_MOUNTS == MOUNTS
+
+
+def test_every_study_with_a_longer_hang_guard_still_defines_its_fixture() -> None:
+    """tests/conftest.py's STUDY_FIXTURES names each study's module and fixture: a renamed module
+    or fixture would silently give its tests back the 300 s guard the study outlasts."""
+    from tests.conftest import STUDY_FIXTURES, TESTS
+
+    for module, fixture in STUDY_FIXTURES.items():
+        tree = ast.parse((TESTS / module).read_text(encoding="utf-8"))
+        fixtures = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)
+                    and any("fixture" in ast.unparse(d) for d in node.decorator_list)}
+        assert fixture in fixtures, f"{module} defines no fixture {fixture!r} (tests/conftest.py STUDY_FIXTURES)"
