@@ -43,7 +43,6 @@ from hopkinson.analysis.resample import resample_to_rate
 from hopkinson.analysis.response import fbsd_bounds, fbsd_hz, model_output, pole_analysis
 from hopkinson.analysis.sine_comparison import SineCalibration, read_sine_calibration
 from hopkinson.analysis.sine_joint import with_draws
-from hopkinson.analysis.static_gain import static_gain
 from hopkinson.analysis.uncertainty import shot_uncertainty
 
 if TYPE_CHECKING:  # the DCM's modules import scipy.signal: loaded where a DCM is made or read, so
@@ -222,6 +221,9 @@ def analyse_record(record: Record, params: AnalysisOptions | None = None,
         list(fitted.warnings)
     model = ident.model
     exc = excitation_summary(record.reference, record.sample_interval_s, record.start_time_s)
+    # imported here: `hopkinson identify` never needs the static gain
+    from hopkinson.analysis.static_gain import static_gain
+
     static, why_not = static_gain(ident, model_draws)
     # DCM section (H4): design, check on the shot, verdict; the design's figures join "dcm".
     from hopkinson.analysis.compensation import compensate_shot

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,9 +38,9 @@ from hopkinson.analysis.order_choice import (
     fractions_text,
 )
 from hopkinson.analysis.response import fbsd_edges, frequency_response
-from hopkinson.analysis.systematics import transverse_row, variant_bounds
-from hopkinson.analysis.uncertainty_budget import budget, nearest_mode
-from hopkinson.analysis.uncertainty_draws import BandVariants, draw
+
+if TYPE_CHECKING:
+    from hopkinson.analysis.uncertainty_draws import BandVariants
 
 METHOD = "GUM Supplement 1 Monte Carlo (refit per draw)"
 FBSD_GRID = 2000
@@ -110,6 +110,12 @@ def evaluate(
     reduction: dict[str, Any] | None = None,
 ) -> UncertaintyResult:
     """Monte Carlo uncertainty of `ident`'s figures (and of `reduction`'s, when given)."""
+    # Imported here, not at the top: `hopkinson identify --no-uncertainty` never evaluates, and these
+    # modules (the systematic rows, the draws, the budget) are a sixth of the analysis' import time.
+    from hopkinson.analysis.systematics import transverse_row, variant_bounds
+    from hopkinson.analysis.uncertainty_budget import budget, nearest_mode
+    from hopkinson.analysis.uncertainty_draws import draw
+
     options = AnalysisOptions() if options is None else options
     if options.draws < 2:
         raise AnalysisError(f"uncertainty: at least 2 draws are needed, got {options.draws}")
