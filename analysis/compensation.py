@@ -27,7 +27,7 @@ the compensated peak q_i·peak(u), q_i = peak(G·H_i·u) / (S·peak(u)) (u the r
 analysis.dcm_ratio.ShotPulse.peak_ratios). Had the sensor been H_i, the reading â (the
 compensated record's peak) would stand for a pulse peak of â/q_i: the draws (â + e_i)/q_i, e_i
 the white response noise after the DCM (noise gain × response noise ÷ S, drawn normally), give
-u and the 95 % interval (2.5 and 97.5 percentiles, GUM-S1). The value stays â, the compensated
+u and the 95 % interval (the draws' coverage ends: analysis.estimate.coverage_ends). The value stays â, the compensated
 record's own peak; two known effects are carried rather than corrected in it, each widening the
 interval on its side (GUM F.2.4.5: an uncorrected known effect enlarges the interval; u adds it
 as a rectangular bound):
@@ -56,6 +56,7 @@ from hopkinson.analysis.dcm_design import DcmDesign, ShotSupport, design_compens
 from hopkinson.analysis.dcm_ratio import ShotPulse
 from hopkinson.analysis.dcm_stream import apply
 from hopkinson.analysis.errors import AnalysisError
+from hopkinson.analysis.estimate import coverage_ends
 from hopkinson.analysis.excitation import PulseWidth, peak_estimate, pulse_width, pulse_window
 from hopkinson.analysis.group_delay import passband_delay_samples
 from hopkinson.analysis.model import DiscreteModel
@@ -286,8 +287,7 @@ def _compensated_peak(shot: _Shot, channel_delay_samples: float, draws: Sequence
     rng = peak_noise_rng(seed)
     noise = (dcm.noise_gain() * response_noise_rms / abs(gain)) if response_noise_rms else 0.0
     truths = (value + noise * rng.standard_normal(ratios.size)) / ratios
-    tail = 100 * (1 - COVERAGE) / 2
-    lo, hi = np.percentile(truths, [tail, 100 - tail])
+    lo, hi = coverage_ends(truths, COVERAGE)
     shown = value / nominal - pulse.peak_m_s2  # the model's error this shot shows in the figure
     spread = float(np.std(truths, ddof=1))
     return {"value": value, "u": math.sqrt(spread**2 + shown**2 / 3.0), "u_draws": spread,

@@ -151,12 +151,11 @@ class Estimate:
         d, flags = d[finite], flags[finite]
         if d.size < 2:
             return cls(value, math.nan, (math.nan, math.nan))
-        tail = 50.0 * (1.0 - coverage)
         u = float(np.std(d, ddof=1))
         if flags.all():
-            lo, hi = np.percentile(d, [tail, 100.0 - tail])
+            lo, hi = coverage_ends(d, coverage)
             return cls(float(value), u, (float(2.0 * value - hi), float(2.0 * value - lo)))
-        lo, hi = np.percentile(np.where(flags, 2.0 * value - d, d), [tail, 100.0 - tail])
+        lo, hi = coverage_ends(np.where(flags, 2.0 * value - d, d), coverage)
         return cls(float(value), u, (float(lo), float(hi)))
 
     @classmethod
@@ -164,6 +163,22 @@ class Estimate:
         """A normal PDF's 95 % interval (k = 1.96)."""
         k = 1.959963984540054
         return cls(float(value), float(u), (float(value - k * u), float(value + k * u)))
+
+
+def coverage_ends(draws: np.ndarray, coverage: float = COVERAGE, axis: int | None = None) -> tuple[Any, Any]:
+    """The ends of the probabilistically symmetric `coverage` interval of M Monte Carlo draws
+    (along `axis`): the order statistics at ranks (M + 1)·(1 − coverage)/2 and (M + 1)·(1 + coverage)/2,
+    interpolated (NumPy's "weibull" quantiles). Between the r-th and the (M + 1 − r)-th smallest of M
+    exchangeable draws a further value of their distribution lies with probability (M + 1 − 2r)/(M + 1),
+    whatever the distribution, so these ranks hold it with the coverage asked for, with the few
+    hundred draws a shot affords. GUM-S1 §7.7's ranks hold it only as M grows (it asks M ≥ 10⁴/(1 − p)),
+    and NumPy's default quantiles, (M − 1)·p + 1, fall short: with 150 draws a 95 % interval held
+    93.8 % (tests/analysis/test_estimate_coverage.py; the 300-shot study's 92.3-95.3 %, README)."""
+    import numpy as np
+
+    tail = 50.0 * (1.0 - coverage)
+    lo, hi = np.percentile(draws, [tail, 100.0 - tail], axis=axis, method="weibull")
+    return lo, hi
 
 
 def _finite(value: float | None) -> float | None:

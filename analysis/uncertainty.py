@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.estimate import COVERAGE, Estimate
+from hopkinson.analysis.estimate import COVERAGE, Estimate, coverage_ends
 from hopkinson.analysis.excitation import peak_estimate, pulse_width
 from hopkinson.analysis.findings import Finding, FindingCode, texts
 from hopkinson.analysis.frequency_fit import OrderFit, is_stable
@@ -288,7 +288,6 @@ def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tup
     usable = np.array([m.dc_gain != 0 for m in draws])
     stack = np.array([whole(m) for m, ok in zip(draws, usable, strict=True) if ok])
     sign = np.where(flags[usable], -1.0, 1.0)[:, None]  # a reflected draw's deviation counts mirrored
-    tail = 50.0 * (1.0 - COVERAGE)
     centre = np.log(np.abs(nominal))
     d_mag = sign * (np.log(np.abs(stack)) - centre)
     dphase = sign * np.degrees(np.angle(stack / nominal))  # each draw's phase about the nominal, wrapped
@@ -304,8 +303,8 @@ def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tup
         xi = scale * rng.uniform(-1.0, 1.0, (d_mag.shape[0], 1))  # × 1.0 is exact: a row drawn whole is unchanged
         d_mag = d_mag + xi * np.log(np.abs(widest))[None, :]
         dphase = dphase + xi * np.degrees(np.angle(widest))[None, :]
-    lo_m, hi_m = np.percentile(d_mag, [tail, 100.0 - tail], axis=0)
-    lo_p, hi_p = np.percentile(dphase, [tail, 100.0 - tail], axis=0)
+    lo_m, hi_m = coverage_ends(d_mag, COVERAGE, axis=0)
+    lo_p, hi_p = coverage_ends(dphase, COVERAGE, axis=0)
     phase = np.degrees(np.unwrap(np.angle(nominal)))
 
     def floats(x: np.ndarray) -> list[float]:
