@@ -227,7 +227,7 @@ def _compensated_peak_one_draw_at_a_time(record, model, dcm, channel_delay_sampl
     noise = dcm.noise_gain() * noise_rms / abs(model.dc_gain) if noise_rms else 0.0
     truths = (value + noise * peak_noise_rng(seed).standard_normal(ratios.size)) / ratios
     tail = 100 * (1 - COVERAGE) / 2
-    lo, hi = np.percentile(truths, [tail, 100 - tail])
+    lo, hi = np.percentile(truths, [tail, 100 - tail], method="weibull")  # ranks (M + 1)p: decision 0025
     shown = value / ratio(model) - peak_ref
     spread = float(np.std(truths, ddof=1))
     interval = [min(lo, value, lo - shown), max(hi, value, hi - shown)]

@@ -1,7 +1,7 @@
 """The uncertainty's interval logic (analysis/uncertainty.py: Estimate.of_draws, Estimate.normal,
-response_band) against its definitions, on draws whose quantiles are exact: 1 001 evenly spaced
-values, whose 2.5 % and 97.5 % points are the 26th and 976th (numpy's linear interpolation lands
-on a sample), and models whose responses are closed forms. These kill the mutants of the
+response_band) against its definitions, on draws whose quantiles are exact: 999 evenly spaced
+values, whose 2.5 % and 97.5 % points are the 25th and 975th (the ranks (M + 1)p of
+analysis.estimate.coverage_ends land on a sample), and models whose responses are closed forms. These kill the mutants of the
 interval logic (docs/mutation-testing.md); the coverage of the intervals is tested statistically
 in test_uncertainty.py."""
 
@@ -16,7 +16,7 @@ from scipy import stats
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.uncertainty import Estimate, response_band
 
-GRID = np.arange(1001.0)  # exact quantiles: 2.5 % → 25, 97.5 % → 975, 5 % → 50, 95 % → 950
+GRID = np.arange(999.0)  # exact quantiles (ranks 1000·p): 2.5 % → 24, 97.5 % → 974, 5 % → 49, 95 % → 949
 
 
 def test_normal_interval_is_value_plus_minus_the_normal_quantile() -> None:
@@ -31,21 +31,21 @@ def test_reflected_interval_of_all_draws() -> None:
     (ddof 1; for 0 … N it is √((N + 1)(N + 2)/12))."""
     est = Estimate.of_draws(400.0, GRID)
     assert est.value == 400.0
-    assert est.interval == (pytest.approx(800.0 - 975.0), pytest.approx(800.0 - 25.0))
-    assert est.u == pytest.approx(math.sqrt(1001 * 1002 / 12), rel=1e-12)
+    assert est.interval == (pytest.approx(800.0 - 974.0), pytest.approx(800.0 - 24.0))
+    assert est.u == pytest.approx(math.sqrt(999 * 1000 / 12), rel=1e-12)
     narrow = Estimate.of_draws(400.0, GRID, coverage=0.90)
-    assert narrow.interval == (pytest.approx(800.0 - 950.0), pytest.approx(800.0 - 50.0))
-    assert Estimate.of_draws(400.0, GRID, reflect=np.ones(1001, dtype=bool)) == est
+    assert narrow.interval == (pytest.approx(800.0 - 949.0), pytest.approx(800.0 - 49.0))
+    assert Estimate.of_draws(400.0, GRID, reflect=np.ones(999, dtype=bool)) == est
 
 
 def test_draws_on_another_branch_are_taken_as_they_are() -> None:
     """Unflagged draws enter the quantiles as they are, flagged ones reflected about the value."""
-    est = Estimate.of_draws(400.0, GRID, reflect=np.zeros(1001, dtype=bool))
-    assert est.interval == (pytest.approx(25.0), pytest.approx(975.0))  # the percentile interval
-    flags = GRID >= 500  # the upper half reflected about 400: 300 … −200; the lower half kept
+    est = Estimate.of_draws(400.0, GRID, reflect=np.zeros(999, dtype=bool))
+    assert est.interval == (pytest.approx(24.0), pytest.approx(974.0))  # the percentile interval
+    flags = GRID >= 500  # the upper half reflected about 400: 300 … −198; the lower half kept
     mixed = np.sort(np.where(flags, 800.0 - GRID, GRID))
     est = Estimate.of_draws(400.0, GRID, reflect=flags)
-    assert est.interval == (pytest.approx(mixed[25]), pytest.approx(mixed[975]))
+    assert est.interval == (pytest.approx(mixed[24]), pytest.approx(mixed[974]))
     assert est.u == pytest.approx(float(np.std(GRID, ddof=1)))  # u of the draws as drawn
 
 
@@ -60,25 +60,26 @@ def test_non_finite_draws_are_left_out_with_their_flags() -> None:
 def test_fewer_than_two_finite_draws_give_no_interval(draws: np.ndarray) -> None:
     est = Estimate.of_draws(7.0, draws)
     assert est.value == 7.0 and math.isnan(est.u) and all(math.isnan(x) for x in est.interval)
-    # two finite draws are enough: 6 and 8 about 7 give (14 − 7.95, 14 − 6.05), which holds 7
-    assert Estimate.of_draws(7.0, np.array([6.0, 8.0])).interval == (pytest.approx(6.05), pytest.approx(7.95))
+    # two finite draws are enough: 6 and 8 about 7; the ranks 3·0.025 and 3·0.975 lie beyond the
+    # first and the second draw, so the ends are the draws, (14 − 8, 14 − 6), which holds 7
+    assert Estimate.of_draws(7.0, np.array([6.0, 8.0])).interval == (pytest.approx(6.0), pytest.approx(8.0))
 
 
 def test_an_interval_is_extended_to_hold_its_value() -> None:
     """Issue 40 item 3: an interval always contains its own value. Draws 1 and 2 about a value
-    of 7 reflect to (14 − 1.975, 14 − 1.025) = (12.025, 12.975), wholly above 7: the interval is
-    extended to 7 on that side and keeps its other end."""
-    assert Estimate.of_draws(7.0, np.array([1.0, 2.0])).interval == (7.0, pytest.approx(12.975))
-    assert Estimate.of_draws(7.0, np.array([12.0, 13.0])).interval == (pytest.approx(1.025), 7.0)
+    of 7 reflect to (14 − 2, 14 − 1) = (12, 13), wholly above 7: the interval is extended to 7 on
+    that side and keeps its other end."""
+    assert Estimate.of_draws(7.0, np.array([1.0, 2.0])).interval == (7.0, pytest.approx(13.0))
+    assert Estimate.of_draws(7.0, np.array([12.0, 13.0])).interval == (pytest.approx(1.0), 7.0)
 
 
 def test_a_positive_figure_is_reflected_on_a_log_scale() -> None:
     """log draws evenly spaced: the interval is (v²/q₉₇.₅, v²/q₂.₅) and stays above zero, where a
     linear reflection would go below it."""
-    draws = 2.0 ** ((GRID - 500.0) / 250.0)  # 1/4 … 4
+    draws = 2.0 ** ((GRID - 500.0) / 250.0)  # 1/4 … 2^(498/250)
     v = 1.5
     est = Estimate.of_draws(v, draws, positive=True)
-    q_lo, q_hi = 2.0 ** ((25.0 - 500.0) / 250.0), 2.0 ** ((975.0 - 500.0) / 250.0)
+    q_lo, q_hi = 2.0 ** ((24.0 - 500.0) / 250.0), 2.0 ** ((974.0 - 500.0) / 250.0)
     assert est.interval == (pytest.approx(v * v / q_hi, rel=1e-12), pytest.approx(v * v / q_lo, rel=1e-12))
     assert est.u == pytest.approx(float(np.std(draws, ddof=1)), rel=1e-12)
     assert Estimate.of_draws(v, draws).interval[0] < 0 < est.interval[0]
@@ -105,15 +106,15 @@ def test_a_positive_figure_with_flags_and_a_value_not_above_zero() -> None:
     logs = np.log(draws)
     mixed = np.sort(np.where(flags, 2 * math.log(1.5) - logs, logs))
     est = Estimate.of_draws(1.5, draws, reflect=flags, positive=True)
-    assert est.interval == (pytest.approx(math.exp(mixed[25]), rel=1e-12), pytest.approx(math.exp(mixed[975]), rel=1e-12))
-    # a value at zero: the linear reflection (draws about it: −500 … 500 reflect to −475 … 475) ...
-    linear = Estimate.of_draws(0.0, GRID - 500.0, positive=True)
+    assert est.interval == (pytest.approx(math.exp(mixed[24]), rel=1e-12), pytest.approx(math.exp(mixed[974]), rel=1e-12))
+    # a value at zero: the linear reflection (draws about it: −499 … 499 reflect to −475 … 475) ...
+    linear = Estimate.of_draws(0.0, GRID - 499.0, positive=True)
     assert linear.interval == (pytest.approx(-475.0), pytest.approx(475.0))
     # ... whose interval, where the draws all lie on one side, is extended to hold the value
-    # (issue 40 item 3): 0 … 1000 reflect to (−975, −25), held to (−975, 0)
-    assert Estimate.of_draws(0.0, GRID, positive=True).interval == (pytest.approx(-975.0), 0.0)
-    below = Estimate.of_draws(-100.0, GRID, positive=True)  # and below zero (no log of it): (−1175, −225) → −100
-    assert below.interval == (pytest.approx(-1175.0), -100.0)
+    # (issue 40 item 3): 0 … 998 reflect to (−974, −24), held to (−974, 0)
+    assert Estimate.of_draws(0.0, GRID, positive=True).interval == (pytest.approx(-974.0), 0.0)
+    below = Estimate.of_draws(-100.0, GRID, positive=True)  # and below zero (no log of it): (−1174, −224) → −100
+    assert below.interval == (pytest.approx(-1174.0), -100.0)
 
 
 @pytest.mark.parametrize("v", [1.5, 1.0, 0.5])
@@ -124,14 +125,14 @@ def test_a_signed_figure_is_its_magnitude_reflected_on_a_log_scale_with_its_sign
     A draw of the other sign has no magnitude of this sign and is left out. A value of 0 has no
     sign: the linear reflection."""
     draws = 1.2 * v * 2.0 ** ((GRID - 500.0) / 250.0)  # 0.3 v … 4.8 v: not symmetric on a log scale about 1
-    q_lo, q_hi = 1.2 * v * 2.0 ** ((25.0 - 500.0) / 250.0), 1.2 * v * 2.0 ** ((975.0 - 500.0) / 250.0)
+    q_lo, q_hi = 1.2 * v * 2.0 ** ((24.0 - 500.0) / 250.0), 1.2 * v * 2.0 ** ((974.0 - 500.0) / 250.0)
     est = Estimate.of_draws(sign * v, np.concatenate([sign * draws, [-sign * 2.0]]), signed=True)
     ends = sorted((sign * v * v / q_hi, sign * v * v / q_lo))
     assert est.value == sign * v
     assert est.interval == (pytest.approx(ends[0], rel=1e-12), pytest.approx(ends[1], rel=1e-12))
     assert est.interval[0] < est.interval[1] and est.interval[0] * est.interval[1] > 0
     assert est.u == pytest.approx(float(np.std(draws, ddof=1)), rel=1e-12)
-    zero = Estimate.of_draws(0.0, sign * (GRID - 500.0), signed=True)
+    zero = Estimate.of_draws(0.0, sign * (GRID - 499.0), signed=True)
     assert zero.interval == (pytest.approx(-475.0), pytest.approx(475.0))
 
 
@@ -206,25 +207,26 @@ def test_response_band_grid() -> None:
 
 
 def test_response_band_magnitude_reflected_on_a_log_scale() -> None:
-    """Draws 1 + c·z⁻¹, c = 0 … 0.5 evenly (1 001), about the model c₀ = 0.25: at each frequency the
-    DC-relative gain falls as c grows, so its quantiles are those of c: the 2.5 % point is c = 0.0125
+    """Draws 1 + c·z⁻¹, c = 0 … 0.499 evenly (999), about the model c₀ = 0.25: at each frequency the
+    DC-relative gain falls as c grows, so its quantiles are those of c: the 2.5 % point is c = 0.012
     and the band (reflected about the model on a log scale) is g₀²/g(c) at the two ends."""
     cs = GRID / 2000.0
     band = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5), points=30)
     f = np.asarray(band["frequency_hz"])
     g0 = rel_gain(0.25, f)
     np.testing.assert_allclose(band["magnitude_rel"], g0, rtol=1e-12)
-    np.testing.assert_allclose(band["magnitude_rel_low"], g0**2 / rel_gain(cs[25], f), rtol=1e-9)
-    np.testing.assert_allclose(band["magnitude_rel_high"], g0**2 / rel_gain(cs[975], f), rtol=1e-9)
+    np.testing.assert_allclose(band["magnitude_rel_low"], g0**2 / rel_gain(cs[24], f), rtol=1e-9)
+    np.testing.assert_allclose(band["magnitude_rel_high"], g0**2 / rel_gain(cs[974], f), rtol=1e-9)
     unreflected = response_band(zero_model(0.25), [zero_model(c) for c in cs], (1e3, 1e5),
                                 reflect=np.zeros(cs.size, dtype=bool), points=30)
-    np.testing.assert_allclose(unreflected["magnitude_rel_low"], rel_gain(cs[975], f), rtol=1e-9)
-    np.testing.assert_allclose(unreflected["magnitude_rel_high"], rel_gain(cs[25], f), rtol=1e-9)
+    np.testing.assert_allclose(unreflected["magnitude_rel_low"], rel_gain(cs[974], f), rtol=1e-9)
+    np.testing.assert_allclose(unreflected["magnitude_rel_high"], rel_gain(cs[24], f), rtol=1e-9)
 
 
 def test_response_band_phase_with_the_delay() -> None:
-    """Pure delays d + δ, δ = 0 … 1 sample (1 001): the phase is −360°·f·T·d (unwrapped); the
-    reflected band is the phase + 360°·f·T·(δ₂.₅, δ₉₇.₅); taken as they are, − 360°·f·T·(δ₉₇.₅, δ₂.₅)."""
+    """Pure delays d + δ, δ = 0 … 0.998 sample (999): the phase is −360°·f·T·d (unwrapped); the
+    reflected band is the phase + 360°·f·T·(δ₂.₅, δ₉₇.₅) = (0.024, 0.974); taken as they are,
+    − 360°·f·T·(δ₉₇.₅, δ₂.₅)."""
     d = 3.3
     deltas = GRID / 1000.0
     draws = [DiscreteModel(DT, np.array([1.0]), np.array([1.0]), delay_samples=d + x) for x in deltas]
@@ -233,12 +235,12 @@ def test_response_band_phase_with_the_delay() -> None:
     f = np.asarray(band["frequency_hz"])
     turn = 360.0 * f * DT
     np.testing.assert_allclose(band["phase_deg"], -turn * d, rtol=1e-9)
-    np.testing.assert_allclose(band["phase_low_deg"], -turn * d + turn * 0.025, rtol=1e-9)
-    np.testing.assert_allclose(band["phase_high_deg"], -turn * d + turn * 0.975, rtol=1e-9)
+    np.testing.assert_allclose(band["phase_low_deg"], -turn * d + turn * 0.024, rtol=1e-9)
+    np.testing.assert_allclose(band["phase_high_deg"], -turn * d + turn * 0.974, rtol=1e-9)
     np.testing.assert_allclose(band["magnitude_rel_low"], 1.0, rtol=1e-12)
     taken = response_band(model, draws, (1e3, 1e5), reflect=np.zeros(deltas.size, dtype=bool), points=25)
-    np.testing.assert_allclose(taken["phase_low_deg"], -turn * d - turn * 0.975, rtol=1e-9)
-    np.testing.assert_allclose(taken["phase_high_deg"], -turn * d - turn * 0.025, rtol=1e-9)
+    np.testing.assert_allclose(taken["phase_low_deg"], -turn * d - turn * 0.974, rtol=1e-9)
+    np.testing.assert_allclose(taken["phase_high_deg"], -turn * d - turn * 0.024, rtol=1e-9)
 
 
 def test_response_band_leaves_out_draws_without_a_dc_gain_with_their_flags() -> None:
