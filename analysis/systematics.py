@@ -23,7 +23,11 @@ refit moves them together) and added to every Monte Carlo draw:
 - **the model's structure** (`_other_structure`, `_flat_numerator`): the chosen order and the
   order with one more pole refitted with their zeros free, or all at Nyquist (the all-pole
   structure), where those fits are sound: the figures' largest change is the bound (shapes whose
-  bias the record's likelihood does not show: docs/systematic-effects.md);
+  bias the record's likelihood does not show: docs/systematic-effects.md); where the band reaches
+  an octave past the resonance (`band_tests_shape`: the chosen model's response fallen to a third of
+  its DC gain) the likelihood does judge the structures' shapes, and each variant's shift is
+  weighed by its Akaike weight against the chosen fit as the order row's (u = √w·|Δ|, at most the
+  rectangle);
 - **the model's order** (`_more_poles`, `akaike_weight`, `evidence_scale`): the order with one more pole pair, a
   nested richer model the order test judged; its shift weighed by its Akaike weight (u = √w·|Δ|),
   at most the rectangle of its whole shift;
@@ -143,13 +147,17 @@ def _model_of(fit: OrderFit, ident: Identification, terms: Any = None) -> Any:
     return DiscreteModel(ident.sample_interval_s, fit.a, fit.b * scale, ident.prepared.model_delay(fit.delay))
 
 
-def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) -> dict[str, float]:
-    """Per figure the variant's shift of largest magnitude (signed)."""
+def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]],
+                   scales: list[float] | None = None) -> dict[str, float]:
+    """Per figure the variant's shift of largest magnitude (signed), each variant's times its
+    factor in `scales` (None: whole)."""
     out: dict[str, float] = {}
-    for figures in variants:
+    for figures, scale in zip(variants, scales or [None] * len(variants), strict=True):
         for k, v in figures.items():
-            if k in nominal and math.isfinite(v) and abs(v - nominal[k]) > abs(out.get(k, 0.0)):
-                out[k] = v - nominal[k]
+            shift = v - nominal[k] if k in nominal else math.nan
+            shift = shift if scale is None else scale * shift
+            if math.isfinite(shift) and abs(shift) > abs(out.get(k, 0.0)):
+                out[k] = shift
     return out
 
 
@@ -174,12 +182,17 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         return None if refit is None else (refit, made)
 
     def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0,
-            band_scale: float = 1.0) -> None:
-        found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
+            band_scale: float = 1.0, scales: list[float] | None = None) -> None:
+        """`scales`: one factor per refit on its shift (its evidence), the row's band drawn at the largest."""
+        kept = [(f, s) for f, s in zip(refits, scales or [1.0] * len(refits), strict=True)
+                if f is not None and _defensible(f[0], fit, ident)]
+        found = [f for f, _ in kept]
         if found:
-            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found])
+            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found],
+                                    [s for _, s in kept] if scales is not None else None)
             rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
-                              tuple(_model_of(f, ident, made) for f, made in found), band_scale))
+                              tuple(_model_of(f, ident, made) for f, made in found),
+                              max(s for _, s in kept) if scales is not None else band_scale))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -202,9 +215,16 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     flat = _flat_numerator(ident, fit, pole)
     shapes = [*_other_structure(ident, fit, pole), *([flat] if flat is not None else [])]
     if shapes:
+        tested = band_tests_shape(ident, _model_of(fit, ident))
+        half_dof = _half_dof(ident, fit) if tested else 0.0
+        weights = [akaike_weight(f, fit, half_dof) for f in shapes] if tested else []
         row("model (its structure)", [(f, terms) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
-            "Nyquist)" + (", and with a flat numerator" if flat else ""))
+            "Nyquist)" + (", and with a flat numerator" if flat else "") +
+            ("; the band reaches an octave past the resonance, so each weighed by its evidence (Akaike weight "
+             f"at most {max(weights):.2g})" if tested else
+             "; the band ends within an octave of the resonance, so the largest shift whole"),
+            scales=[evidence_scale(w) for w in weights] if tested else None)
     richer = _more_poles(ident, ident.order, pole)
     if richer is not None:
         weight = akaike_weight(richer, fit, _half_dof(ident, fit))
@@ -223,9 +243,46 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     return rows
 
 
+# How far past the resonance the band must reach for the record's likelihood to judge the model's
+# structures: to where the chosen model's response has fallen to this share of its DC gain (module
+# docstring, `band_tests_shape`).
+SHAPE_FALL = 1.0 / 3.0
+
+
+def band_tests_shape(ident: Identification, model: Any) -> bool:
+    """Whether the supported band reaches past the main resonance to where the chosen model's
+    response has fallen to a third of its DC gain (`SHAPE_FALL`; a single mode's |H|/H(0) =
+    1/|1 − r²| is 1/3 at r = 2: an octave above it): then the record holds the response on both
+    sides of the resonance, the stiffness line below it and the mass line above it, and the
+    structures' numerators (zeros free, all at Nyquist, none) bend that roll-off differently from
+    their poles' f² term, so the likelihood tells them apart by their shape, and the structure
+    variants enter by their evidence (`akaike_weight`, `evidence_scale`). Where the band ends
+    nearer the resonance the numerator's curvature and the poles' bend the gain below it alike;
+    the likelihood then tells the structures apart only by what neither models (the simulator's
+    projectile 1, band ends at 1.1-1.6 f_n: the structure the likelihood rejected by ΔV 21-27 lay
+    nearer the truth) and the row keeps the rectangle of the largest shift. No resonance in the
+    band: the rectangle. The share is the model's own response, not fitted to any shots:
+    docs/systematic-effects.md has what it does on the coverage study's."""
+    from hopkinson.analysis.errors import AnalysisError
+    from hopkinson.analysis.response import frequency_response
+
+    main = ident.main_mode
+    band = ident.supported_band_hz
+    if main is None or not band or not band[1] > main.natural_frequency_hz:
+        return False
+    try:
+        h0 = abs(model.dc_gain)
+    except AnalysisError:
+        return False
+    f = np.linspace(main.natural_frequency_hz, band[1], 256)
+    return bool(h0 > 0 and np.any(np.abs(frequency_response(model, f)) <= SHAPE_FALL * h0))
+
+
 def akaike_weight(richer: OrderFit, nominal: OrderFit, half_dof: float) -> float:
     """A nested richer model's Akaike weight against the chosen one, exp(−ΔV/ĉ − Δk) / (1 +
-    exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen fit's over-dispersion, QAIC)."""
+    exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen fit's over-dispersion, QAIC).
+    Akaike weights need no nesting: a structure variant fitted to the same bins (fewer parameters
+    where its zeros are fixed, Δk < 0) is weighed the same way (`band_tests_shape`)."""
     c_hat = max(1.0, nominal.cost / half_dof) if half_dof > 0 else 1.0
     exponent = (richer.cost - nominal.cost) / c_hat + (richer.parameters - nominal.parameters)
     return 1.0 / (1.0 + math.exp(min(exponent, 700.0)))
