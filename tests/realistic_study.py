@@ -171,10 +171,14 @@ def planned_top_hz(projectile: int, pressure_bar: float, mount: str = "bonded") 
 
 
 def run_study(world_name: str, shots: int, draws: int = 100, workers: int = 1,
-              plan: Iterable[tuple[int, float, int]] | None = None, **params: Any) -> list[ShotOutcome]:
-    """Every shot of the plan in `world_name`'s world (in `workers` processes when > 1)."""
+              plan: Iterable[tuple[int, float, int]] | None = None, world_seed: int | None = None,
+              **params: Any) -> list[ShotOutcome]:
+    """Every shot of the plan in `world_name`'s world (in `workers` processes when > 1; `world_seed`:
+    the world's noise seed, else config/sim.toml's)."""
     plan = list(plan) if plan is not None else shot_plan(shots)
     world = world_params(world_name)
+    if world_seed is not None:
+        world = dataclasses.replace(world, seed=world_seed)
     if workers <= 1:
         return [run_shot(world, *p, draws=draws, **params) for p in plan]
     from concurrent.futures import ProcessPoolExecutor
