@@ -91,3 +91,24 @@ def test_a_structure_with_fewer_parameters_is_weighed_by_the_same_akaike_weight(
     chosen = SimpleNamespace(cost=100.0, parameters=18)
     other = SimpleNamespace(cost=121.6, parameters=16)
     assert akaike_weight(other, chosen, 1000.0) == pytest.approx(1 / (1 + math.exp(19.6)), rel=1e-12)
+
+
+def test_an_all_pole_choice_keeps_the_rectangle_whatever_the_band() -> None:
+    """evidence_judges_structure: evidence only where the band tests the shape and the chosen
+    model's zeros are free; the all-pole structure's numerator (1 + z⁻¹)²/4 is a bound. Its bias
+    against a continuous second-order sensor, in closed form: |H(f)|/|H(0)| of the bilinear
+    numerator is cos²(πf·T), a droop of (πfT)² at order 2, the same at any band's width."""
+    from hopkinson.analysis.systematics import evidence_judges_structure
+
+    free = SimpleNamespace(numerator=None)
+    all_pole = SimpleNamespace(numerator=np.array([1.0, 2.0, 1.0]) / 4.0)
+    assert evidence_judges_structure(free, True)
+    assert not evidence_judges_structure(free, False)
+    assert not evidence_judges_structure(all_pole, True)
+    assert not evidence_judges_structure(all_pole, False)
+    # the droop the likelihood would have to see: at 6.5 kHz and 1 MS/s, 4.2e-4 of the gain
+    f, t = 6.5e3, 1e-6
+    w = 2 * math.pi * f * t
+    droop = 1 - abs((1 + np.exp(-1j * w)) ** 2 / 4)
+    assert droop == pytest.approx(math.sin(math.pi * f * t) ** 2, rel=1e-9)
+    assert droop == pytest.approx((math.pi * f * t) ** 2, rel=1e-3)
