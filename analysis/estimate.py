@@ -173,7 +173,8 @@ def coverage_ends(draws: np.ndarray, coverage: float = COVERAGE, axis: int | Non
     whatever the distribution, so these ranks hold it with the coverage asked for, with the few
     hundred draws a shot affords. GUM-S1 §7.7's ranks hold it only as M grows (it asks M ≥ 10⁴/(1 − p)),
     and NumPy's default quantiles, (M − 1)·p + 1, fall short: with 150 draws a 95 % interval held
-    93.8 % (tests/analysis/test_estimate_coverage.py; the 300-shot study's 92.3-95.3 %, README)."""
+    93.8 % (tests/analysis/test_estimate_coverage.py; the 300-shot study's 92.3-95.3 %: docs/method.md,
+    docs/decisions/0025)."""
     import numpy as np
 
     tail = 50.0 * (1.0 - coverage)

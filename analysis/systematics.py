@@ -151,12 +151,11 @@ def _model_of(fit: OrderFit, ident: Identification, terms: Any = None) -> Any:
 def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]],
                    scales: list[float] | None = None) -> dict[str, float]:
     """Per figure the variant's shift of largest magnitude (signed), each variant's times its
-    factor in `scales` (None: whole)."""
+    factor in `scales` (None: whole; × 1.0 is exact)."""
     out: dict[str, float] = {}
-    for figures, scale in zip(variants, scales or [None] * len(variants), strict=True):
+    for figures, scale in zip(variants, scales or [1.0] * len(variants), strict=True):
         for k, v in figures.items():
-            shift = v - nominal[k] if k in nominal else math.nan
-            shift = shift if scale is None else scale * shift
+            shift = scale * (v - nominal[k]) if k in nominal else math.nan
             if math.isfinite(shift) and abs(shift) > abs(out.get(k, 0.0)):
                 out[k] = shift
     return out
@@ -187,13 +186,12 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         """`scales`: one factor per refit on its shift (its evidence), the row's band drawn at the largest."""
         kept = [(f, s) for f, s in zip(refits, scales or [1.0] * len(refits), strict=True)
                 if f is not None and _defensible(f[0], fit, ident)]
-        found = [f for f, _ in kept]
-        if found:
-            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found],
-                                    [s for _, s in kept] if scales is not None else None)
+        if kept:
+            found, factors = [f for f, _ in kept], [s for _, s in kept]
+            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found], factors)
             rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
                               tuple(_model_of(f, ident, made) for f, made in found),
-                              max(s for _, s in kept) if scales is not None else band_scale))
+                              band_scale if scales is None else max(factors)))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -216,18 +214,21 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     flat = _flat_numerator(ident, fit, pole)
     shapes = [*_other_structure(ident, fit, pole), *([flat] if flat is not None else [])]
     if shapes:
-        tested = evidence_judges_structure(fit, band_tests_shape(ident, _model_of(fit, ident)))
-        half_dof = _half_dof(ident, fit) if tested else 0.0
-        weights = [akaike_weight(f, fit, half_dof) for f in shapes] if tested else []
+        weights: list[float] = []
+        if evidence_judges_structure(fit, band_tests_shape(ident, _model_of(fit, ident))):
+            half_dof = _half_dof(ident, fit)
+            weights = [akaike_weight(f, fit, half_dof) for f in shapes]
+            how = ("the band reaches an octave past the resonance, so each weighed by its evidence (Akaike "
+                   f"weight at most {max(weights):.2g})")
+        elif fit.numerator is not None:
+            how = ("the chosen model is all-pole (its numerator's bias is one the likelihood does not see), so "
+                   "the largest shift whole")
+        else:
+            how = "the band ends within an octave of the resonance, so the largest shift whole"
         row("model (its structure)", [(f, terms) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
-            "Nyquist)" + (", and with a flat numerator" if flat else "") +
-            ("; the band reaches an octave past the resonance, so each weighed by its evidence (Akaike weight "
-             f"at most {max(weights):.2g})" if tested else
-             "; the chosen model is all-pole (its numerator's bias is one the likelihood does not see), so the "
-             "largest shift whole" if fit.numerator is not None else
-             "; the band ends within an octave of the resonance, so the largest shift whole"),
-            scales=[evidence_scale(w) for w in weights] if tested else None)
+            "Nyquist)" + (", and with a flat numerator" if flat else "") + "; " + how,
+            scales=[evidence_scale(w) for w in weights] if weights else None)
     richer = _more_poles(ident, ident.order, pole)
     if richer is not None:
         weight = akaike_weight(richer, fit, _half_dof(ident, fit))

@@ -13,7 +13,7 @@ from hopkinson.analysis.estimate import Estimate, coverage_ends
 REPEATS = 20_000  # the rate's standard error √(0.95·0.05/20 000) = 0.0015
 
 
-def rate_inside(draws: np.ndarray, new: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+def rate_inside(new: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     return float(np.mean((lo <= new) & (new <= hi)))
 
 
@@ -26,7 +26,7 @@ def test_the_interval_of_m_draws_holds_a_further_value_95_percent_of_the_time(dr
     lo, hi = coverage_ends(d, 0.95, axis=1)
     # never short by more than 3.3 standard errors; the ranks are interpolated between order
     # statistics, exact at integer ranks, a little over at 50 draws (measured 95.5 %)
-    assert 0.945 <= rate_inside(d, new, lo, hi) <= 0.96
+    assert 0.945 <= rate_inside(new, lo, hi) <= 0.96
 
 
 def test_numpys_default_quantiles_fall_short_with_150_draws() -> None:
@@ -34,7 +34,7 @@ def test_numpys_default_quantiles_fall_short_with_150_draws() -> None:
     93.7 % interval in the closed form; the corrected ends, at the 3.775-th, 95 %."""
     rng = np.random.default_rng(7)
     d, new = rng.standard_normal((REPEATS, 150)), rng.standard_normal(REPEATS)
-    default = rate_inside(d, new, *np.percentile(d, [2.5, 97.5], axis=1))
+    default = rate_inside(new, *np.percentile(d, [2.5, 97.5], axis=1))
     assert default == pytest.approx(1 - 2 * 4.725 / 151, abs=0.005)
     assert default < 0.945
 

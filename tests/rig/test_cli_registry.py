@@ -44,7 +44,7 @@ def test_a_named_command_builds_only_the_parser_of_the_module_that_registers_it(
 
 @pytest.mark.parametrize("words", [["identify", "r.csv", "--max-order", "7"], ["status", "--sim"],
                                    ["compensate", "--help"], ["lab", "--help"], ["plan-shot", "--help"],
-                                   ["--help"], ["idnetify"]])
+                                   ["identify", "--no-such-option"], ["lab", "no-such-subcommand"]])
 def test_a_command_line_parses_and_reads_the_same_with_the_one_module_as_with_all(words, capsys) -> None:
     def outcome(parser: argparse.ArgumentParser) -> tuple[object, str, str]:
         try:
