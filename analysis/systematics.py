@@ -23,12 +23,7 @@ refit moves them together) and added to every Monte Carlo draw:
 - **the model's structure** (`_other_structure`, `_flat_numerator`): the chosen order and the
   order with one more pole refitted with their zeros free, or all at Nyquist (the all-pole
   structure), where those fits are sound: the figures' largest change is the bound (shapes whose
-  bias the record's likelihood does not show: docs/systematic-effects.md); where the band reaches
-  an octave past the resonance (`band_tests_shape`: the chosen model's response fallen to a third of
-  its DC gain) and the chosen model's zeros are free (`evidence_judges_structure`: an all-pole
-  choice keeps the rectangle, its numerator's bias being one no likelihood sees) the likelihood
-  does judge the structures' shapes, and each variant's shift is weighed by its Akaike weight
-  against the chosen fit as the order row's (u = √w·|Δ|, at most the rectangle);
+  bias the record's likelihood does not show: docs/systematic-effects.md);
 - **the model's order** (`_more_poles`, `akaike_weight`, `evidence_scale`): the order with one more pole pair, a
   nested richer model the order test judged; its shift weighed by its Akaike weight (u = √w·|Δ|),
   at most the rectangle of its whole shift;
@@ -148,16 +143,13 @@ def _model_of(fit: OrderFit, ident: Identification, terms: Any = None) -> Any:
     return DiscreteModel(ident.sample_interval_s, fit.a, fit.b * scale, ident.prepared.model_delay(fit.delay))
 
 
-def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]],
-                   scales: list[float] | None = None) -> dict[str, float]:
-    """Per figure the variant's shift of largest magnitude (signed), each variant's times its
-    factor in `scales` (None: whole; × 1.0 is exact)."""
+def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) -> dict[str, float]:
+    """Per figure the variant's shift of largest magnitude (signed)."""
     out: dict[str, float] = {}
-    for figures, scale in zip(variants, scales or [1.0] * len(variants), strict=True):
+    for figures in variants:
         for k, v in figures.items():
-            shift = scale * (v - nominal[k]) if k in nominal else math.nan
-            if math.isfinite(shift) and abs(shift) > abs(out.get(k, 0.0)):
-                out[k] = shift
+            if k in nominal and math.isfinite(v) and abs(v - nominal[k]) > abs(out.get(k, 0.0)):
+                out[k] = v - nominal[k]
     return out
 
 
@@ -182,16 +174,12 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         return None if refit is None else (refit, made)
 
     def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0,
-            band_scale: float = 1.0, scales: list[float] | None = None) -> None:
-        """`scales`: one factor per refit on its shift (its evidence), the row's band drawn at the largest."""
-        kept = [(f, s) for f, s in zip(refits, scales or [1.0] * len(refits), strict=True)
-                if f is not None and _defensible(f[0], fit, ident)]
-        if kept:
-            found, factors = [f for f, _ in kept], [s for _, s in kept]
-            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found], factors)
+            band_scale: float = 1.0) -> None:
+        found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
+        if found:
+            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found])
             rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
-                              tuple(_model_of(f, ident, made) for f, made in found),
-                              band_scale if scales is None else max(factors)))
+                              tuple(_model_of(f, ident, made) for f, made in found), band_scale))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -214,21 +202,9 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     flat = _flat_numerator(ident, fit, pole)
     shapes = [*_other_structure(ident, fit, pole), *([flat] if flat is not None else [])]
     if shapes:
-        weights: list[float] = []
-        if evidence_judges_structure(fit, band_tests_shape(ident, _model_of(fit, ident))):
-            half_dof = _half_dof(ident, fit)
-            weights = [akaike_weight(f, fit, half_dof) for f in shapes]
-            how = ("the band reaches an octave past the resonance, so each weighed by its evidence (Akaike "
-                   f"weight at most {max(weights):.2g})")
-        elif fit.numerator is not None:
-            how = ("the chosen model is all-pole (its numerator's bias is one the likelihood does not see), so "
-                   "the largest shift whole")
-        else:
-            how = "the band ends within an octave of the resonance, so the largest shift whole"
         row("model (its structure)", [(f, terms) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
-            "Nyquist)" + (", and with a flat numerator" if flat else "") + "; " + how,
-            scales=[evidence_scale(w) for w in weights] if weights else None)
+            "Nyquist)" + (", and with a flat numerator" if flat else ""))
     richer = _more_poles(ident, ident.order, pole)
     if richer is not None:
         weight = akaike_weight(richer, fit, _half_dof(ident, fit))
@@ -247,64 +223,9 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     return rows
 
 
-# How far past the resonance the band must reach for the record's likelihood to judge the model's
-# structures: to where the chosen model's response has fallen to this share of its DC gain (module
-# docstring, `band_tests_shape`).
-SHAPE_FALL = 1.0 / 3.0
-
-
-def band_tests_shape(ident: Identification, model: Any) -> bool:
-    """Whether the supported band reaches past the main resonance to where the chosen model's
-    response has fallen to a third of its DC gain (`SHAPE_FALL`; a single mode's |H|/H(0) =
-    1/|1 − r²| is 1/3 at r = 2: an octave above it): then the record holds the response on both
-    sides of the resonance, the stiffness line below it and the mass line above it, and the
-    structures' numerators (zeros free, all at Nyquist, none) bend that roll-off differently from
-    their poles' f² term, so the likelihood tells them apart by their shape, and the structure
-    variants enter by their evidence (`akaike_weight`, `evidence_scale`). Where the band ends
-    nearer the resonance the numerator's curvature and the poles' bend the gain below it alike;
-    the likelihood then tells the structures apart only by what neither models (the simulator's
-    projectile 1, band ends at 1.1-1.6 f_n: the structure the likelihood rejected by ΔV 21-27 lay
-    nearer the truth) and the row keeps the rectangle of the largest shift. No resonance in the
-    band: the rectangle. The share is the model's own response, not fitted to any shots:
-    docs/systematic-effects.md has what it does on the coverage study's."""
-    from hopkinson.analysis.errors import AnalysisError
-    from hopkinson.analysis.response import frequency_response
-
-    main = ident.main_mode
-    band = ident.supported_band_hz
-    if main is None or not band or not band[1] > main.natural_frequency_hz:
-        return False
-    try:
-        h0 = abs(model.dc_gain)
-    except AnalysisError:
-        return False
-    f = np.linspace(main.natural_frequency_hz, band[1], 256)
-    return bool(h0 > 0 and np.any(np.abs(frequency_response(model, f)) <= SHAPE_FALL * h0))
-
-
-def evidence_judges_structure(chosen: OrderFit, band_tests: bool) -> bool:
-    """Whether the structure row weighs its variants by their evidence: where the band tests the
-    shape (`band_tests_shape`) and the chosen model's zeros are free (`chosen.numerator` None).
-    The evidence rule rests on the chosen model being the flexible one: a variant with its zeros
-    fixed (all at Nyquist, or none) that the likelihood rejects is rejected for a shape the record
-    shows. Where the order test chose the all-pole structure the chosen model is itself the fixed
-    one: its numerator (1 + z⁻¹)ⁿ/2ⁿ is not the sampled sensor's, and the bias it leaves (its
-    droop (πf/fs)²·n/4, ~0.03 % of the gain at the band's edge, the FBSD ±5 % 0.28 % high:
-    `_flat_numerator`, docs/decisions/0024) is below what any shot's likelihood resolves at its
-    noise, whatever the band; the variants that would correct it (free zeros, a flat numerator)
-    differ from it in likelihood by what neither models, not by that bias. So an all-pole choice
-    keeps the rectangle of the largest shift (decision 0024: the numerator is a bound). Measured:
-    the coverage study with seed 7 (40 shots), two all-pole shots whose band reached 2.3 and 6.6
-    f_n read the FBSD ±5 % +0.27 and +0.25 % high, held by the rectangle (U 0.37 %) and missed by
-    the evidence (U 0.14 and 0.05 %: 2 and 5 U): docs/systematic-effects.md."""
-    return band_tests and chosen.numerator is None
-
-
 def akaike_weight(richer: OrderFit, nominal: OrderFit, half_dof: float) -> float:
     """A nested richer model's Akaike weight against the chosen one, exp(−ΔV/ĉ − Δk) / (1 +
-    exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen fit's over-dispersion, QAIC).
-    Akaike weights need no nesting: a structure variant fitted to the same bins (fewer parameters
-    where its zeros are fixed, Δk < 0) is weighed the same way (`band_tests_shape`)."""
+    exp(−ΔV/ĉ − Δk)) (V is −ln L; ĉ = max(1, V/half_dof) the chosen fit's over-dispersion, QAIC)."""
     c_hat = max(1.0, nominal.cost / half_dof) if half_dof > 0 else 1.0
     exponent = (richer.cost - nominal.cost) / c_hat + (richer.parameters - nominal.parameters)
     return 1.0 / (1.0 + math.exp(min(exponent, 700.0)))
