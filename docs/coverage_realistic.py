@@ -102,6 +102,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="an independent study: plan generator, world noise seed S, shot numbers from 1001")
     p.add_argument("--out", type=Path, default=REPO / "docs" / "coverage-realistic.png")
     args = p.parse_args(argv)
+    if args.out:  # checked before the study, not after its minutes of work
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        kinds = FigureCanvasBase.get_supported_filetypes()
+        if args.out.suffix.lstrip(".").lower() not in kinds:
+            p.error(f"--out {args.out}: the figure's file must end in one of .{', .'.join(sorted(kinds))} "
+                    "(the tables go to the standard output)")
     results: dict[str, dict] = {}
     plan = shot_plan(args.shots) if args.seed is None else \
         [(projectile, bar, n + 1000) for projectile, bar, n in shot_plan(args.shots, args.seed)]

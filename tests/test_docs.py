@@ -329,3 +329,18 @@ def test_a_broken_link_and_a_missing_anchor_are_named(tmp_path: Path) -> None:
     assert "no heading #no-such-heading" in (_link_problem(REPO / "README.md", "docs/method.md#no-such-heading") or "")
     assert _link_problem(REPO / "README.md", "docs/method.md#uncertainty") is None
     assert _slug("The bar's physics, shot planning & the `[bar]` table") == "the-bars-physics-shot-planning--the-bar-table"
+
+
+def test_the_coverage_study_refuses_a_figure_file_it_cannot_write_before_it_starts(tmp_path: Path) -> None:
+    """A wrong --out (the tables are printed, the file is the figure) is named at once, exit 2,
+    not as a traceback after minutes of shots."""
+    import subprocess
+    import sys
+
+    script = REPO / "docs" / "coverage_realistic.py"
+    done = subprocess.run([sys.executable, str(script), "--shots", "1", "--out", str(tmp_path / "study.md")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert "study.md" in done.stderr and ".png" in done.stderr
+    assert "Traceback" not in done.stderr and not done.stdout
+    assert not (tmp_path / "study.md").exists()
