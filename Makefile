@@ -37,7 +37,7 @@ test: $(STAMP)
 	PYTHONDONTWRITEBYTECODE= QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 3 --dist loadscope --durations=15
 
 # Statistical studies too long for the suite (tests marked `study`: a 200-shot coverage study, ~5 min
-# of CPU), each with the power its docstring states (docs/testing.md). CI runs them after `make test`.
+# of CPU, and 60 shots in each of four one-effect worlds, ~7 min), each with the power its docstring states (docs/testing.md). CI runs them after `make test`.
 studies: $(STAMP)
 	$(COMPILE)
 	$(BIN)/python -m pytest -q -m study -n 0 --timeout 1800 --durations=5 tests/studies
