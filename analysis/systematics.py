@@ -7,7 +7,8 @@ disturbances. Their estimates' scatter reaches every figure through the Monte Ca
 draw refits them); their share of each figure's variance is the budget's "(fitted)" row:
 u²(figure, terms free) − u²(figure, terms held), from the fit's Jacobian (`fitted_shares`).
 
-Type B, rectangular (`TypeB`): a bound on a figure's shift, u = bound/√3, drawn as a uniform
+Type B, rectangular (`TypeB`): a bound on a figure's shift, u = bound/√3 (of a refit's shift, the
+part the record's noise does not explain: `beyond_noise`), drawn as a uniform
 variate ξ ∈ [−1, 1] shared by all figures of one source (its shifts are coherent: the same
 refit moves them together) and added to every Monte Carlo draw:
 
@@ -153,9 +154,11 @@ def _largest_shift(nominal: dict[str, float], variants: list[dict[str, float]]) 
     return out
 
 
-def variant_bounds(ident: Identification) -> list[TypeB]:
+def variant_bounds(ident: Identification, inflate: float = 1.0) -> list[TypeB]:
     """The Type B rows made by refitting the chosen order with each correction made another way,
-    and on parts of the band where the model error is detected (module docstring)."""
+    and on parts of the band where the model error is detected (module docstring); each variant's
+    shift less the part the record's noise explains (`beyond_noise`; `inflate`: the noise draws'
+    variance factor, analysis.uncertainty_draws)."""
     if not ident.prep.terms_source:
         return []
     prep, fit = ident.prep, ident.settlement.sweep.fits[ident.order]
@@ -165,21 +168,33 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     terms = ident.prep.terms
     window = (prep.start, prep.start + prep.u.size)
 
-    def refitted(**options: Any) -> tuple[OrderFit, Any] | None:
+    def refitted(**options: Any) -> tuple[OrderFit, Any, SpectralData] | None:
         made = prep.terms_variant(**options)
         if options.get("with_onset") and not made.columns(ONSET).size:
             return None  # that window would reach the pulse's peak (input_terms fits no onset there)
         data = replace(ident.settlement.data, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
         refit = _refit(data, ident, replace(fit, inputs=_matched(terms, made, fit.inputs)))
-        return None if refit is None else (refit, made)
+        return None if refit is None else (refit, made, data)
 
-    def row(source: str, refits: list[tuple[OrderFit, Any] | None], note: str, scale: float = 1.0,
-            band_scale: float = 1.0) -> None:
+    nominal_var: dict[str, float] = {}
+
+    def row(source: str, refits: list[tuple[OrderFit, Any, SpectralData] | None], note: str, scale: float = 1.0,
+            band_scale: float = 1.0, hypothetical: bool = False) -> None:
         found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
         if found:
-            shifts = _largest_shift(nominal, [figures_of(f, ident, pole, made) for f, made in found])
+            variants = [figures_of(f, ident, pole, made) for f, made, _ in found]
+            if not hypothetical:  # a shift the record made: less what its noise explains
+                if not nominal_var:
+                    nominal_var.update(_noise_or_none(ident, ident.settlement.data, fit, inflate, nominal, None))
+                variants = [beyond_noise(nominal, figures, nominal_var, _noise_or_none(ident, data, f, inflate, nominal, made))
+                            for figures, (f, made, data) in zip(variants, found, strict=True)]
+            shifts = _largest_shift(nominal, variants)
+            if not shifts:  # every shift within the noise: the row stays in the budget, at zero
+                note += "; every shift lies within what the record's noise explains (the Monte Carlo carries that)"
+            shifts = {**{k: 0.0 for figures in variants for k, v in figures.items() if k in nominal and math.isfinite(v)},
+                      **shifts}
             rows.append(TypeB(source, {k: scale * v for k, v in shifts.items()}, note,
-                              tuple(_model_of(f, ident, made) for f, made in found), band_scale))
+                              tuple(_model_of(f, ident, made) for f, made, _ in found), band_scale))
 
     rows: list[TypeB] = []
     if terms.columns(MOTION).size:
@@ -194,22 +209,23 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
     if not terms.columns(ASYMMETRY).size and ASYMMETRY in prep.unseen:
         found = _with_asymmetry(prep, ident, fit, window)
         if found is not None:
-            refit, made = found
+            refit, made, _ = found
             epsilon = float(refit.inputs[made.columns(ASYMMETRY)[0]])
             row("tension/compression asymmetry (not seen)", [found],
                 "not seen beyond chance: the figures' change with ε at twice its standard uncertainty, or at "
-                "its estimate where that is larger", unseen_asymmetry_scale(epsilon, prep.unseen[ASYMMETRY]))
+                "its estimate where that is larger", unseen_asymmetry_scale(epsilon, prep.unseen[ASYMMETRY]),
+                hypothetical=True)
     flat = _flat_numerator(ident, fit, pole)
     shapes = [*_other_structure(ident, fit, pole), *([flat] if flat is not None else [])]
     if shapes:
-        row("model (its structure)", [(f, terms) for f in shapes],
+        row("model (its structure)", [(f, terms, ident.settlement.data) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
             "Nyquist)" + (", and with a flat numerator" if flat else ""))
     richer = _more_poles(ident, ident.order, pole)
     if richer is not None:
         weight = akaike_weight(richer, fit, _half_dof(ident, fit))
         scale = evidence_scale(weight)
-        row("model (one more pole pair, by its evidence)", [(richer, terms)],
+        row("model (one more pole pair, by its evidence)", [(richer, terms, ident.settlement.data)],
             f"the order with one more pole pair, its shift weighed by its evidence against the chosen order "
             f"(Akaike weight {weight:.2g}" + ("; at least 1/3, so its whole shift)" if scale == 1.0 else ")"),
             scale, scale)
@@ -221,6 +237,38 @@ def variant_bounds(ident: Identification) -> list[TypeB]:
         if models:
             rows.append(TypeB(MODEL_ERROR_BOUND, {}, "the model refitted on 0.9 and 0.8 of the band's top", models))
     return rows
+
+
+def _noise_or_none(ident: Identification, data: SpectralData, fit: OrderFit, inflate: float,
+                   nominal: dict[str, float], terms: Any) -> dict[str, float]:
+    """uncertainty_budget.noise_variances, or none where the fit cannot be linearised (its
+    variant then keeps its whole shift)."""
+    from hopkinson.analysis.uncertainty_budget import noise_variances
+
+    try:
+        return noise_variances(ident, data, fit, inflate, nominal, terms)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return {}
+
+
+def beyond_noise(nominal: dict[str, float], variant: dict[str, float], nominal_var: dict[str, float],
+                 variant_var: dict[str, float]) -> dict[str, float]:
+    """A variant's figures with each shift Δ from the nominal shrunk to √max(Δ² − |u²(variant) −
+    u²(nominal)|, 0), its sign kept: two fits of one record differ by noise of that variance
+    (Hausman, Econometrica 46, 1978: the variance of the difference of two estimators, one of them
+    efficient, is the difference of their variances), which the Monte Carlo's draws already carry;
+    counted again in a Type B row, the same noise stood in U twice. What is left is the shift the
+    noise does not explain: an estimate of the bias between the two models. The u²'s are the
+    linearised noise variances (uncertainty_budget.noise_variances); a figure either lacks keeps
+    its whole shift."""
+    out = dict(variant)
+    for k, v in variant.items():
+        if k not in nominal or k not in nominal_var or k not in variant_var or not math.isfinite(v):
+            continue
+        delta = v - nominal[k]
+        left = delta * delta - abs(variant_var[k] - nominal_var[k])
+        out[k] = nominal[k] + math.copysign(math.sqrt(max(left, 0.0)), delta)
+    return out
 
 
 def akaike_weight(richer: OrderFit, nominal: OrderFit, half_dof: float) -> float:
@@ -359,8 +407,8 @@ def _more_poles(ident: Identification, order: int, pole: complex | None) -> Orde
 
 
 def _with_asymmetry(prep: Any, ident: Identification, fit: OrderFit, window: tuple[int, int]
-                    ) -> tuple[OrderFit, Any] | None:
-    """The fit with ε fitted (where identify found it not beyond chance), and its terms."""
+                    ) -> tuple[OrderFit, Any, SpectralData] | None:
+    """The fit with ε fitted (where identify found it not beyond chance), its terms and data."""
     from hopkinson.analysis.input_terms import input_terms
 
     made = input_terms(*prep.terms_source)
@@ -372,7 +420,7 @@ def _with_asymmetry(prep: Any, ident: Identification, fit: OrderFit, window: tup
         return None
     data = replace(ident.settlement.data, inputs=made.bins(*window, prep.bin_index), input_prior=made.prior)
     refit = _refit(data, ident, replace(fit, inputs=_matched(ident.prep.terms, made, fit.inputs)))
-    return None if refit is None else (refit, made)
+    return None if refit is None else (refit, made, data)
 
 
 def _matched(fitted: Any, made: Any, coefficients: np.ndarray) -> np.ndarray:

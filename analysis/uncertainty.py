@@ -166,7 +166,7 @@ def evaluate(
     fbsd_draws = _fbsd_draws(fits, good, nominal_edges, dt)
     # The Type B inputs (analysis.systematics): each a rectangular shift added to every draw.
     shock_value = (reduction or {}).get("shock_sensitivity")
-    type_b = variant_bounds(ident)
+    type_b = variant_bounds(ident, inflate)
     transverse = transverse_row(model.dc_gain, shock_value, options.transverse_sensitivity_rel,
                                 options.transverse_motion_rel)
     type_b += [transverse] if transverse is not None else []

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
-from hopkinson.analysis.frequency_fit import OrderProblem
+from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem
 from hopkinson.analysis.identify import Identification
 from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.options import AnalysisOptions
@@ -106,28 +106,10 @@ def _linear_noise_shares(
     data = ident.settlement.data
     problem = OrderProblem.for_fit(data, fit, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay)
     theta = problem.pack(fit)
-    jac = problem.jacobian(theta)
-    pieces = problem._pieces(theta)
-    s2 = pieces["s2"]  # each residual's variance as the fit weighs it (the conservative look)
-    # The variance each source really gives each residual, over the weight: the noise measured
-    # without bias (what the draws add), in the fit's layout (per bin or per group of bins).
-    var_u, var_y = data.in_layout(ident.prep.draw_var_u), data.in_layout(ident.claim.draw_var_y(ident.settlement.model_error))
-    rows = 3 if data.grouped else 2
-    d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
-    var_me = (np.zeros_like(var_y) if ident.settlement.model_error.var_bins is None
-              else data.in_layout(ident.settlement.model_error.var_bins))
-    d_y = np.tile((var_y - var_me) / s2, rows)
-    d_me = np.tile(var_me / s2, rows)
-    # the input terms' prior rows (frequency_fit), then a sine calibration's residuals (analysis.sine_joint), last
-    sine_rows = jac.shape[0] - d_u.size - problem.n_prior
-    pad = (0, problem.n_prior + sine_rows)
-    d_u, d_y, d_me = np.pad(d_u, pad), np.pad(d_y, pad), np.pad(d_me, pad)
-    h_inv = np.linalg.pinv(jac.T @ jac)
-    proj = h_inv @ jac.T
+    jac, proj, d_u, d_y, d_me, d_s = _noise_projection(ident, problem, theta)
     cov = {"reference noise": inflate * (proj * d_u) @ proj.T, "response noise": inflate * (proj * d_y) @ proj.T,
            "model error": inflate * (proj * d_me) @ proj.T}
-    if sine_rows:  # each sine residual's variance under the draws: its weight² (SineTerms)
-        d_s = np.concatenate((np.zeros(d_u.size - sine_rows), np.full(sine_rows, data.sine.weight ** 2)))
+    if d_s is not None:
         cov["sine calibration"] = (proj * d_s) @ proj.T
     # The skew: the residual's change per sample of reference delay, through the same projection.
     eps = 1e-3
@@ -148,6 +130,52 @@ def _linear_noise_shares(
     return out
 
 
+def noise_variances(ident: Identification, data: SpectralData, fit: OrderFit, inflate: float,
+                    nominal: dict[str, float | None], terms: Any = None) -> dict[str, float]:
+    """Each figure's variance under the noise the Monte Carlo draws (both channels, the model
+    error, a sine calibration; × `inflate` as the draws), linearised at `fit` on `data` with its
+    input `terms` (None: the identification's): what a fit's figures scatter by from the record's
+    noise alone (analysis.systematics subtracts it from a variant's shift)."""
+    problem = OrderProblem.for_fit(data, fit, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay)
+    theta = problem.pack(fit)
+    _, proj, d_u, d_y, d_me, d_s = _noise_projection(ident, problem, theta)
+    cov = inflate * (proj * (d_u + d_y + d_me)) @ proj.T
+    if d_s is not None:
+        cov = cov + (proj * d_s) @ proj.T
+    return {k: float(g @ cov @ g) for k, g in _figure_gradients(problem, theta, ident, nominal, terms).items()
+            if g is not None}
+
+
+def _noise_projection(ident: Identification, problem: OrderProblem, theta: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """The fit's Jacobian J, the projection (JᵀJ)⁺Jᵀ, and each source's variance per residual over
+    its weight: the reference's noise, the response's (less the model error), the model error, and
+    a sine calibration's (None without one)."""
+    data = problem.data
+    jac = problem.jacobian(theta)
+    pieces = problem._pieces(theta)
+    s2 = pieces["s2"]  # each residual's variance as the fit weighs it (the conservative look)
+    # The variance each source really gives each residual, over the weight: the noise measured
+    # without bias (what the draws add), in the fit's layout (per bin or per group of bins).
+    var_u, var_y = data.in_layout(ident.prep.draw_var_u), data.in_layout(ident.claim.draw_var_y(ident.settlement.model_error))
+    rows = 3 if data.grouped else 2
+    d_u = np.tile(np.abs(pieces["G"]) ** 2 * var_u / s2, rows)
+    var_me = (np.zeros_like(var_y) if ident.settlement.model_error.var_bins is None
+              else data.in_layout(ident.settlement.model_error.var_bins))
+    d_y = np.tile((var_y - var_me) / s2, rows)
+    d_me = np.tile(var_me / s2, rows)
+    # the input terms' prior rows (frequency_fit), then a sine calibration's residuals (analysis.sine_joint), last
+    sine_rows = jac.shape[0] - d_u.size - problem.n_prior
+    pad = (0, problem.n_prior + sine_rows)
+    d_u, d_y, d_me = np.pad(d_u, pad), np.pad(d_y, pad), np.pad(d_me, pad)
+    h_inv = np.linalg.pinv(jac.T @ jac)
+    proj = h_inv @ jac.T
+    d_s = None
+    if sine_rows:  # each sine residual's variance under the draws: its weight² (SineTerms)
+        d_s = np.concatenate((np.zeros(d_u.size - sine_rows), np.full(sine_rows, data.sine.weight ** 2)))
+    return jac, proj, d_u, d_y, d_me, d_s
+
+
 def _shift_data(data: SpectralData, samples: float) -> SpectralData:
     """The same data with the reference delayed by `samples` (per-bin or grouped)."""
     phase = np.exp(-1j * data.omega * samples)
@@ -160,7 +188,7 @@ def _shift_data(data: SpectralData, samples: float) -> SpectralData:
 
 def _figure_gradients(
     problem: OrderProblem, theta: np.ndarray, ident: Identification,
-    nominal: dict[str, float | None],
+    nominal: dict[str, float | None], terms: Any = None,
 ) -> dict[str, np.ndarray | None]:
     """∂figure/∂θ: the DC gain and the main mode's f_n and ζ by central differences (figures of
     the model built from θ), the FBSD edges by implicit differentiation (response.edge_gradient;
@@ -172,7 +200,7 @@ def _figure_gradients(
 
     def figures(th: np.ndarray) -> dict[str, float]:
         a, b, _, _, _ = problem.unpack(th)
-        mean = ident.prep.terms.mean_gain_factor(problem.input_coefficients(th))  # the mean of both directions
+        mean = (terms or ident.prep.terms).mean_gain_factor(problem.input_coefficients(th))  # the mean of both directions
         out = {"dc_gain": float(np.sum(b) * scale * mean / np.sum(a))}
         if pole is not None:
             out["natural_frequency_hz"], out["damping_ratio"] = nearest_mode(a, pole, dt)

@@ -67,15 +67,17 @@ def test_each_interval_holds_the_truth_on_the_realistic_simulator(study, name: s
 
 
 def test_the_intervals_are_not_needlessly_wide(study) -> None:
-    """The median U at most 8 × the median |error| (the issue asks 4 ×: not yet met; measured 6.2-7.4
-    since the interval's ends are the draws at ranks (M + 1)p (decision 0025), 5.8-6.5 before,
+    """The median U at most 7.5 × the median |error| (the issue asks 4 ×: not yet met; measured 5.4-6.7
+    since a refitted variant's Type B shift is what the record's noise does not explain
+    (systematics.beyond_noise), 6.2-7.4 before, when this asked 8 ×, since the interval's ends are
+    the draws at ranks (M + 1)p (decision 0025), 5.8-6.5 before,
     since the order's row is weighed by its evidence, 5.2-8.3 before, when this asked 10 ×; the
     structure row is most of what remains: docs/systematic-effects.md), and the
     shots that miss do so by a little (within 2 U): no interval is a point beside a biased value."""
     for name, row in coverage(study).items():
         if name == "asymmetry" or not row.claims:
             continue
-        assert row.median_expanded_rel <= 8.0 * row.median_abs_error_rel, (name, row)
+        assert row.median_expanded_rel <= 7.5 * row.median_abs_error_rel, (name, row)
     for outcome in study:
         for name in FIGURES:
             if outcome.holds(name) is False and outcome.value.get(name) is not None:
