@@ -260,7 +260,7 @@ def beyond_noise(nominal: dict[str, float], variant: dict[str, float], nominal_v
     counted again in a Type B row, the same noise stood in U twice. What is left is the shift the
     noise does not explain: an estimate of the bias between the two models. The u²'s are the
     linearised noise variances (uncertainty_budget.noise_variances); a figure either lacks keeps
-    its whole shift."""
+    its whole shift. Why: docs/decisions/0026."""
     out = dict(variant)
     for k, v in variant.items():
         if k not in nominal or k not in nominal_var or k not in variant_var or not math.isfinite(v):
