@@ -179,14 +179,15 @@ def variant_bounds(ident: Identification, inflate: float = 1.0) -> list[TypeB]:
     nominal_var: dict[str, float] = {}
 
     def row(source: str, refits: list[tuple[OrderFit, Any, SpectralData] | None], note: str, scale: float = 1.0,
-            band_scale: float = 1.0, hypothetical: bool = False) -> None:
+            band_scale: float = 1.0, hypothetical: bool = False, delay_mode: Any = None) -> None:
         found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
         if found:
             variants = [figures_of(f, ident, pole, made) for f, made, _ in found]
             if not hypothetical:  # a shift the record made: less what its noise explains
                 if not nominal_var:
                     nominal_var.update(_noise_or_none(ident, ident.settlement.data, fit, inflate, nominal, None))
-                variants = [beyond_noise(nominal, figures, nominal_var, _noise_or_none(ident, data, f, inflate, nominal, made))
+                variants = [beyond_noise(nominal, figures, nominal_var,
+                                         _noise_or_none(ident, data, f, inflate, nominal, made, delay_mode))
                             for figures, (f, made, data) in zip(variants, found, strict=True)]
             shifts = _largest_shift(nominal, variants)
             if not shifts:  # every shift within the noise: the row stays in the budget, at zero
@@ -220,7 +221,7 @@ def variant_bounds(ident: Identification, inflate: float = 1.0) -> list[TypeB]:
     if shapes:
         row("model (its structure)", [(f, terms, ident.settlement.data) for f in shapes],
             "the chosen order and the order with one more pole in the other structure (zeros free, or all at "
-            "Nyquist)" + (", and with a flat numerator" if flat else ""))
+            "Nyquist)" + (", and with a flat numerator" if flat else ""), delay_mode=_structure_delay_mode(ident))
     richer = _more_poles(ident, ident.order, pole)
     if richer is not None:
         weight = akaike_weight(richer, fit, _half_dof(ident, fit))
@@ -240,13 +241,14 @@ def variant_bounds(ident: Identification, inflate: float = 1.0) -> list[TypeB]:
 
 
 def _noise_or_none(ident: Identification, data: SpectralData, fit: OrderFit, inflate: float,
-                   nominal: dict[str, float], terms: Any) -> dict[str, float]:
-    """uncertainty_budget.noise_variances, or none where the fit cannot be linearised (its
-    variant then keeps its whole shift)."""
+                   nominal: dict[str, float], terms: Any, delay_mode: Any = None) -> dict[str, float]:
+    """uncertainty_budget.noise_variances (linearised in the delay mode the fit was made with:
+    None, the identification's), or none where the fit cannot be linearised (its variant then
+    keeps its whole shift)."""
     from hopkinson.analysis.uncertainty_budget import noise_variances
 
     try:
-        return noise_variances(ident, data, fit, inflate, nominal, terms)
+        return noise_variances(ident, data, fit, inflate, nominal, terms, delay_mode)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError):
         return {}
 
@@ -263,7 +265,8 @@ def beyond_noise(nominal: dict[str, float], variant: dict[str, float], nominal_v
     its whole shift. Why: docs/decisions/0026."""
     out = dict(variant)
     for k, v in variant.items():
-        if k not in nominal or k not in nominal_var or k not in variant_var or not math.isfinite(v):
+        known = (nominal_var.get(k), variant_var.get(k))
+        if k not in nominal or not math.isfinite(v) or not all(u is not None and math.isfinite(u) for u in known):
             continue
         delta = v - nominal[k]
         left = delta * delta - abs(variant_var[k] - nominal_var[k])
@@ -341,7 +344,7 @@ def _other_structure(ident: Identification, fit: OrderFit, pole: complex | None)
     from hopkinson.analysis.model import all_pole_numerator
     from hopkinson.analysis.modes import has_doublet
 
-    delay_mode = DelayMode.FREE if ident.settlement.sweep.delay_mode != 0.0 else 0.0
+    delay_mode = _structure_delay_mode(ident)
     out: list[OrderFit] = []
     start = fit
     for n in (fit.order, fit.order + 1):
@@ -360,6 +363,12 @@ def _other_structure(ident: Identification, fit: OrderFit, pole: complex | None)
     return out
 
 
+def _structure_delay_mode(ident: Identification) -> DelayMode | float:
+    """The delay mode the other structures are fitted in: free (of either sign), or held where
+    the identification held it (`_other_structure`)."""
+    return DelayMode.FREE if ident.settlement.sweep.delay_mode != 0.0 else 0.0
+
+
 def _flat_numerator(ident: Identification, fit: OrderFit, pole: complex | None) -> OrderFit | None:
     """The chosen all-pole order refitted with a flat numerator, B = g (the impulse-invariant
     image of a continuous system with no finite zeros), where the all-pole structure has B = g·(1 +
@@ -370,7 +379,7 @@ def _flat_numerator(ident: Identification, fit: OrderFit, pole: complex | None) 
     at the band edge), so the difference is a bound on the figures (docs/decisions/0024)."""
     if fit.numerator is None:  # zeros free: no numerator assumed
         return None
-    delay_mode = DelayMode.FREE if ident.settlement.sweep.delay_mode != 0.0 else 0.0
+    delay_mode = _structure_delay_mode(ident)
     shape = np.zeros(fit.order + 1)
     shape[0] = 1.0
     start = replace(fit, b=float(np.sum(fit.b)) * shape, numerator=shape, cost=math.nan)

@@ -131,12 +131,14 @@ def _linear_noise_shares(
 
 
 def noise_variances(ident: Identification, data: SpectralData, fit: OrderFit, inflate: float,
-                    nominal: dict[str, float | None], terms: Any = None) -> dict[str, float]:
+                    nominal: dict[str, float | None], terms: Any = None, delay_mode: Any = None) -> dict[str, float]:
     """Each figure's variance under the noise the Monte Carlo draws (both channels, the model
     error, a sine calibration; × `inflate` as the draws), linearised at `fit` on `data` with its
     input `terms` (None: the identification's): what a fit's figures scatter by from the record's
-    noise alone (analysis.systematics subtracts it from a variant's shift)."""
-    problem = OrderProblem.for_fit(data, fit, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay)
+    noise alone (analysis.systematics subtracts it from a variant's shift). `delay_mode`: the one
+    the fit was made in (None: the identification's)."""
+    mode = ident.settlement.sweep.delay_mode if delay_mode is None else delay_mode
+    problem = OrderProblem.for_fit(data, fit, mode, ident.settlement.setup.max_delay)
     theta = problem.pack(fit)
     _, proj, d_u, d_y, d_me, d_s = _noise_projection(ident, problem, theta)
     cov = inflate * (proj * (d_u + d_y + d_me)) @ proj.T

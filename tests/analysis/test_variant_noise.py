@@ -35,6 +35,9 @@ def test_a_shift_the_noise_explains_leaves_no_row_and_a_figure_without_variance_
                        {"dc_gain": 0.02}, {"dc_gain": 0.01})
     assert out["dc_gain"] == 1.0
     assert out["natural_frequency_hz"] == 26_990.0
+    # a variance that could not be computed (NaN) takes nothing away: the shift stays whole
+    kept = beyond_noise(NOMINAL, {"dc_gain": 1.04}, {"dc_gain": 0.0001}, {"dc_gain": math.nan})
+    assert kept["dc_gain"] == 1.04
 
 
 SEEDS = range(3000, 3040)  # 40 independent noise records: a spread known to ±11 % (1σ)
