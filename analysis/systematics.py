@@ -179,7 +179,7 @@ def variant_bounds(ident: Identification, inflate: float = 1.0) -> list[TypeB]:
     nominal_var: dict[str, float] = {}
 
     def row(source: str, refits: list[tuple[OrderFit, Any, SpectralData] | None], note: str, scale: float = 1.0,
-            band_scale: float = 1.0, hypothetical: bool = False, delay_mode: Any = None) -> None:
+            band_scale: float = 1.0, hypothetical: bool = False, delay_mode: DelayMode | float | None = None) -> None:
         found = [f for f in refits if f is not None and _defensible(f[0], fit, ident)]
         if found:
             variants = [figures_of(f, ident, pole, made) for f, made, _ in found]
@@ -241,7 +241,7 @@ def variant_bounds(ident: Identification, inflate: float = 1.0) -> list[TypeB]:
 
 
 def _noise_or_none(ident: Identification, data: SpectralData, fit: OrderFit, inflate: float,
-                   nominal: dict[str, float], terms: Any, delay_mode: Any = None) -> dict[str, float]:
+                   nominal: dict[str, float], terms: Any, delay_mode: DelayMode | float | None = None) -> dict[str, float]:
     """uncertainty_budget.noise_variances (linearised in the delay mode the fit was made with:
     None, the identification's), or none where the fit cannot be linearised (its variant then
     keeps its whole shift)."""
@@ -261,8 +261,8 @@ def beyond_noise(nominal: dict[str, float], variant: dict[str, float], nominal_v
     efficient, is the difference of their variances), which the Monte Carlo's draws already carry;
     counted again in a Type B row, the same noise stood in U twice. What is left is the shift the
     noise does not explain: an estimate of the bias between the two models. The u²'s are the
-    linearised noise variances (uncertainty_budget.noise_variances); a figure either lacks keeps
-    its whole shift. Why: docs/decisions/0026."""
+    linearised noise variances (uncertainty_budget.noise_variances); a figure either lacks, or has
+    as a non-finite number, keeps its whole shift. Why: docs/decisions/0026."""
     out = dict(variant)
     for k, v in variant.items():
         known = (nominal_var.get(k), variant_var.get(k))

@@ -17,6 +17,7 @@ from hopkinson.analysis.model import DiscreteModel
 from hopkinson.analysis.options import AnalysisOptions
 from hopkinson.analysis.response import edge_gradient, fbsd_edges
 from hopkinson.analysis.spectral_data import SpectralData
+from hopkinson.analysis.structure import DelayMode
 from hopkinson.analysis.systematics import MODEL_ERROR_BOUND, TypeB, fitted_shares
 
 
@@ -131,7 +132,8 @@ def _linear_noise_shares(
 
 
 def noise_variances(ident: Identification, data: SpectralData, fit: OrderFit, inflate: float,
-                    nominal: dict[str, float | None], terms: Any = None, delay_mode: Any = None) -> dict[str, float]:
+                    nominal: dict[str, float | None], terms: Any = None,
+                    delay_mode: DelayMode | float | None = None) -> dict[str, float]:
     """Each figure's variance under the noise the Monte Carlo draws (both channels, the model
     error, a sine calibration; × `inflate` as the draws), linearised at `fit` on `data` with its
     input `terms` (None: the identification's): what a fit's figures scatter by from the record's
