@@ -36,11 +36,16 @@ test: $(STAMP)
 	$(COMPILE)
 	PYTHONDONTWRITEBYTECODE= QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest -q -n 3 --dist loadscope --durations=15
 
-# Statistical studies too long for the suite (tests marked `study`: a 200-shot coverage study, ~5 min
-# of CPU, and 60 shots in each of four one-effect worlds, ~7 min), each with the power its docstring states (docs/testing.md). CI runs them after `make test`.
+# Statistical studies too long for the suite: the tests marked `study`, wherever they live (a
+# 200-shot coverage study, 60 shots in each of four one-effect worlds, PTB's hybrids over noise
+# draws, and the suite's former studies: the 50-shot realistic study, the 140-shot clean one and
+# the independent linearity campaigns), each with the power its docstring states (docs/testing.md).
+# One process (-n 0): the studies spread their shots over the machine's cores themselves, and the
+# 200-shot study takes the 50 shots test_coverage_realistic computed before it (tests/realistic_study.py).
+# CI runs them after `make test`.
 studies: $(STAMP)
 	$(COMPILE)
-	$(BIN)/python -m pytest -q -m study -n 0 --timeout 1800 --durations=5 tests/studies
+	$(BIN)/python -m pytest -q -m study -n 0 --timeout 1800 --durations=10 tests
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -179,13 +179,24 @@ def run_study(world_name: str, shots: int, draws: int = 100, workers: int = 1,
     world = world_params(world_name)
     if world_seed is not None:
         world = dataclasses.replace(world, seed=world_seed)
-    if workers <= 1:
-        return [run_shot(world, *p, draws=draws, **params) for p in plan]
-    from concurrent.futures import ProcessPoolExecutor
+    keys = {p: (repr(world), draws, repr(sorted(params.items())), p) for p in plan}
+    missing = [p for p in dict.fromkeys(plan) if keys[p] not in _OUTCOMES]
+    if workers <= 1 or len(missing) <= 1:
+        _OUTCOMES.update({keys[p]: run_shot(world, *p, draws=draws, **params) for p in missing})
+    else:
+        from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(workers) as pool:
-        futures = [pool.submit(run_shot, world, *p, draws=draws, **params) for p in plan]
-        return [f.result() for f in futures]
+        with ProcessPoolExecutor(workers) as pool:
+            futures = {p: pool.submit(run_shot, world, *p, draws=draws, **params) for p in missing}
+            _OUTCOMES.update({keys[p]: f.result() for p, f in futures.items()})
+    return [_OUTCOMES[keys[p]] for p in plan]
+
+
+# Each shot's outcome, once per process: a shot is a pure function of its world, plan entry, draws
+# and options (its noise and the Monte Carlo are seeded by its shot number), so the 200-shot study
+# of `make studies` takes the 50 shots tests/analysis/test_coverage_realistic.py's study computed
+# in the same process (its first 50: the same plan) instead of computing them again.
+_OUTCOMES: dict[tuple, ShotOutcome] = {}
 
 
 @dataclass(frozen=True)
@@ -239,3 +250,31 @@ def table(rows: dict[str, FigureCoverage], title: str = "") -> str:
                      f"{100 * r.median_error_rel:+.3f} % | {100 * r.median_abs_error_rel:.3f} % | "
                      f"{100 * r.median_expanded_rel:.3f} % | {r.u_over_error:.1f} |")
     return "\n".join(lines)
+
+
+def too_wide_or_far(outcomes: list[ShotOutcome], bound: float) -> list[tuple[str, Any]]:
+    """What fails "not needlessly wide": each figure (but ε) whose median U exceeds `bound` × its
+    median |error|, and each miss farther than 2 U (hi − lo) from its truth: an interval that is a
+    point beside a biased value."""
+    out: list[tuple[str, Any]] = [(name, row) for name, row in coverage(outcomes).items()
+                                  if name != "asymmetry" and row.claims
+                                  and not row.median_expanded_rel <= bound * row.median_abs_error_rel]
+    for outcome in outcomes:
+        for name in FIGURES:
+            if outcome.holds(name) is False and outcome.value.get(name) is not None:
+                lo, hi = outcome.interval[name]
+                if not abs(outcome.value[name] - outcome.truth[name]) <= hi - lo:
+                    out.append((name, outcome))
+    return out
+
+
+def pairwise_e_n(outcomes: list[ShotOutcome], name: str) -> np.ndarray:
+    """E_n = |x₁ − x₂| / √(U₁² + U₂²) of the figure over every pair of the shots that claim it
+    with an interval (U: half the interval's width)."""
+    import itertools
+
+    shots = [o for o in outcomes if o.value.get(name) is not None and o.interval.get(name) is not None]
+    return np.array([abs(a.value[name] - b.value[name])
+                     / math.hypot(a.interval[name][1] - a.interval[name][0], b.interval[name][1] - b.interval[name][0])
+                     * 2.0 for a, b in itertools.combinations(shots, 2)])
+

@@ -14,19 +14,23 @@ shots would pass with probability P(X ≥ 49 | n = 50, p = 0.90) = 0.034 (≤ 5 
 with 0.74, at 99 % with 0.91. f_n, whose interval is a calibrated 95 % one, is held at 2 misses
 (F_N_MAX_MISSES: P(pass | 90 %) = 0.11); the power the issue asks for every figure is the 200-shot
 study's (tests/studies/test_realistic_coverage_powered.py, `make studies`, CI). This module guards
-the suite against a collapse of any figure's coverage. docs/coverage_realistic.py prints the full
-study (more shots, each effect alone, the demo over many seeds).
+against a collapse of any figure's coverage. Its tests of the study are marked `study`: `make
+studies` runs them (CI, after `make test`) on the 200-shot study's first 50 shots, computed once
+(tests/realistic_study.py keeps each shot's outcome per process); `make test` keeps the thresholds'
+power and the one low shot below. docs/coverage_realistic.py prints the full study (more shots,
+each effect alone, the demo over many seeds).
 """
 
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
 from scipy.stats import binom
 
-from tests.realistic_study import FIGURES, coverage, run_study
+from tests.realistic_study import coverage, pairwise_e_n, run_study, too_wide_or_far
 
 SHOTS = 50
 MAX_MISSES = 1
@@ -36,7 +40,7 @@ TRUE_F_N_HZ = 29_700.0  # the mounted resonance (config/sim.toml: 27 kHz × 1.10
 
 @pytest.fixture(scope="module")
 def study():
-    return run_study("shipped", SHOTS, draws=DRAWS)
+    return run_study("shipped", SHOTS, draws=DRAWS, workers=os.cpu_count() or 1)
 
 
 def test_the_test_rejects_a_coverage_of_90_percent() -> None:
@@ -59,6 +63,7 @@ def test_f_ns_threshold_has_the_stated_power() -> None:
     assert binom.cdf(F_N_MAX_MISSES, SHOTS, 0.02) >= 0.9
 
 
+@pytest.mark.study
 @pytest.mark.parametrize("name", ["sensitivity", "damping_ratio", "natural_frequency_hz", "fbsd_5", "fbsd_10"])
 def test_each_interval_holds_the_truth_on_the_realistic_simulator(study, name: str) -> None:
     row = coverage(study)[name]
@@ -66,6 +71,7 @@ def test_each_interval_holds_the_truth_on_the_realistic_simulator(study, name: s
     assert row.claims - row.holds <= (F_N_MAX_MISSES if name == "natural_frequency_hz" else MAX_MISSES), row
 
 
+@pytest.mark.study
 def test_the_intervals_are_not_needlessly_wide(study) -> None:
     """The median U at most 7.5 × the median |error| (the issue asks 4 ×: not yet met; measured 5.4-6.7
     since a refitted variant's Type B shift is what the record's noise does not explain
@@ -74,17 +80,10 @@ def test_the_intervals_are_not_needlessly_wide(study) -> None:
     since the order's row is weighed by its evidence, 5.2-8.3 before, when this asked 10 ×; the
     structure row is most of what remains: docs/systematic-effects.md), and the
     shots that miss do so by a little (within 2 U): no interval is a point beside a biased value."""
-    for name, row in coverage(study).items():
-        if name == "asymmetry" or not row.claims:
-            continue
-        assert row.median_expanded_rel <= 7.5 * row.median_abs_error_rel, (name, row)
-    for outcome in study:
-        for name in FIGURES:
-            if outcome.holds(name) is False and outcome.value.get(name) is not None:
-                lo, hi = outcome.interval[name]
-                assert abs(outcome.value[name] - outcome.truth[name]) <= hi - lo, (name, outcome)  # 2 U
+    assert too_wide_or_far(study, 7.5) == []
 
 
+@pytest.mark.study
 def test_no_mode_is_claimed_that_the_truth_lacks(study) -> None:
     """The simulated sensor has one mode (29.7 kHz, ζ 0.05): every claimed mode is it (issue 40
     item 3: shots claimed modes at 18.5, 20.2, 20.8, 33.65 and 55-66 kHz, ζ up to 0.75), f_n within
@@ -95,6 +94,7 @@ def test_no_mode_is_claimed_that_the_truth_lacks(study) -> None:
             assert abs(f_hz / TRUE_F_N_HZ - 1) < 0.005, outcome
 
 
+@pytest.mark.study
 def test_the_planner_and_the_analysis_agree_on_the_band(study) -> None:
     """Both use one rule (analysis.excitation.supported_band): the planner on the predicted pulse,
     the analysis on the measured one, whose noise, onset glitches and cut where the model stops
@@ -106,20 +106,17 @@ def test_the_planner_and_the_analysis_agree_on_the_band(study) -> None:
     assert 0.7 <= float(np.median(ratios)) <= 1.3, float(np.median(ratios))
 
 
+@pytest.mark.study
 def test_one_unchanged_sensor_agrees_with_itself(study) -> None:
     """Issue 40 item 5: the study's shots are one sensor at different levels and projectiles; the
     DC gain and the FBSD of every pair of them agree within their uncertainties. E_n = |x₁ − x₂| /
     √(U₁² + U₂²) exceeds 1 on 4.6 % of pairs for unbiased normal estimates with exact 95 % U (the
     difference beyond 2 of its standard deviations); more is a false drift between shots of one
-    sensor. Measured: 1, 3 and 19 of 1 225 pairs (DC gain, FBSD ±5 %, ±10 %)."""
-    import itertools
-
+    sensor. Measured: 1, 3 and 19 of 1 225 pairs (DC gain, FBSD ±5 %, ±10 %); 1, 1 and 1 since decision
+    0026 (2026-11-29; over the 200-shot study's 19 900 pairs: 0.09-0.13 %)."""
     for name in ("sensitivity", "fbsd_5", "fbsd_10"):
-        shots = [o for o in study if o.value.get(name) is not None and o.interval.get(name) is not None]
-        assert len(shots) >= 0.9 * SHOTS, name
-        e_n = np.array([abs(a.value[name] - b.value[name])
-                        / math.hypot(a.interval[name][1] - a.interval[name][0], b.interval[name][1] - b.interval[name][0])
-                        * 2.0 for a, b in itertools.combinations(shots, 2)])
+        e_n = pairwise_e_n(study, name)
+        assert e_n.size >= math.comb(math.ceil(0.9 * SHOTS), 2), name  # claimed on ≥ 90 % of the shots
         assert np.mean(e_n > 1.0) <= 0.046, (name, np.sort(e_n)[-5:])
 
 

@@ -14,13 +14,17 @@
 - the same over independent campaigns (the world's seed changed: other noise, other speeds):
   every one of NON_LINEAR_SEEDS recovers the slope within its U and tells it from zero, and every
   one of LINEAR_SEEDS holds zero. Power: an interval that held the truth in only half the
-  campaigns would pass the five non-linear ones with probability 0.5⁵ = 3 %.
+  campaigns would pass the five non-linear ones with probability 0.5⁵ = 3 %. That test is marked
+  `study` (`make studies`, CI after `make test`: 32 shots); `make test` keeps the first two, one
+  campaign each.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -79,7 +83,12 @@ def campaign_results(nonlinearity: float, seed: int, tmp_path_factory: pytest.Te
     """Each of `_campaign`'s shots' results as analyse_raw_shot gives them, computed once per
     test run (tests/lab/test_certificate_linearity.py certifies the same campaign, often on
     another xdist worker: tests/shared_results.py)."""
-    return once_per_run(run_folder(tmp_path_factory), f"linearity-campaign-{nonlinearity:g}-{seed}",
+    return _shared_campaign_results(run_folder(tmp_path_factory), (nonlinearity, seed))
+
+
+def _shared_campaign_results(folder: Path, key: tuple[float, int]) -> tuple[dict, ...]:
+    nonlinearity, seed = key
+    return once_per_run(folder, f"linearity-campaign-{nonlinearity:g}-{seed}",
                         functools.partial(_computed_campaign_results, nonlinearity, seed))
 
 
@@ -102,9 +111,14 @@ def _computed_campaign_results(nonlinearity: float, seed: int) -> tuple[dict, ..
 
 @pytest.fixture(scope="module")
 def campaigns(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[float, int], list[KeyFigures]]:
-    out = {(NONLINEARITY, seed): _campaign(NONLINEARITY, seed, tmp_path_factory) for seed in NON_LINEAR_SEEDS}
-    out.update({(0.0, seed): _campaign(0.0, seed, tmp_path_factory) for seed in LINEAR_SEEDS})
-    return out
+    """Every independent campaign (NON_LINEAR_SEEDS, LINEAR_SEEDS), on the machine's cores."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    keys = [(NONLINEARITY, seed) for seed in NON_LINEAR_SEEDS] + [(0.0, seed) for seed in LINEAR_SEEDS]
+    folder = run_folder(tmp_path_factory)
+    with ProcessPoolExecutor(os.cpu_count() or 1) as pool:
+        results = list(pool.map(functools.partial(_shared_campaign_results, folder), keys))
+    return {key: [KeyFigures.from_results(r) for r in shots] for key, shots in zip(keys, results, strict=True)}
 
 
 def _fit(figures: list[KeyFigures]):
@@ -121,19 +135,20 @@ def _fit(figures: list[KeyFigures]):
     return fit
 
 
-def test_a_known_non_linearity_is_recovered_within_its_uncertainty(campaigns) -> None:
-    fit = _fit(campaigns[NONLINEARITY, 0])
+def test_a_known_non_linearity_is_recovered_within_its_uncertainty(tmp_path_factory: pytest.TempPathFactory) -> None:
+    fit = _fit(_campaign(NONLINEARITY, 0, tmp_path_factory))
     assert abs(fit.slope_rel_per_m_s2 - NONLINEARITY) <= fit.expanded_slope_rel_per_m_s2, fit.text()
     assert abs(fit.slope_rel_per_m_s2) > fit.expanded_slope_rel_per_m_s2  # told apart from a linear sensor
     # the levels span > 3e5 m/s² (> 2.5e5 with one shot left out, see _fit)
     assert fit.peak_max_m_s2 - fit.peak_min_m_s2 > (3e5 if fit.n == len(SHOTS) else 2.5e5)
 
 
-def test_a_linear_sensor_has_a_slope_within_its_uncertainty_of_zero(campaigns) -> None:
-    fit = _fit(campaigns[0.0, 0])
+def test_a_linear_sensor_has_a_slope_within_its_uncertainty_of_zero(tmp_path_factory: pytest.TempPathFactory) -> None:
+    fit = _fit(_campaign(0.0, 0, tmp_path_factory))
     assert abs(fit.slope_rel_per_m_s2) <= fit.expanded_slope_rel_per_m_s2, fit.text()
 
 
+@pytest.mark.study
 def test_every_independent_campaign_finds_the_slope_it_was_given(campaigns) -> None:
     for seed in NON_LINEAR_SEEDS:
         fit = _fit(campaigns[NONLINEARITY, seed])

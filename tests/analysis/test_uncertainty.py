@@ -7,6 +7,9 @@ their width is compared with 2 × 1.96 × the spread of the estimates over the s
 1.4826 × the median absolute deviation, as a few shots choose another order). The reference
 chain is set to zero there (its contribution is exact and is tested apart).
 
+Who runs it: the study's tests are marked `study` (`make studies`, CI after `make test`; 140 shots
+of the study cost ~110 s of CPU, spread over the machine's cores); `make test` keeps the others.
+
 What 140 shots can tell (issue 45 item 3, issue 40): each figure passes with at least
 MIN_INSIDE = 133 of its 140 intervals holding the truth. Were its true coverage 90 %, it would pass
 with probability P(X ≥ 133 | n = 140, p = 0.90) = 0.034 (scipy.stats.binom; ≤ 5 %); at 95 % with
@@ -28,6 +31,7 @@ issue 40: DC gain 133/140, ζ 127/140.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -61,20 +65,30 @@ def _figures(result) -> dict[str, object]:
 @pytest.fixture(scope="module")
 def shots() -> dict[str, object]:
     """The study's shots: each figure's values, intervals and u ("figures"), and what each
-    identification read of its residual ("model_error": identify's noise report)."""
+    identification read of its residual ("model_error": identify's noise report). On the
+    machine's cores: each shot is a pure function of its seed (`_shot`)."""
+    from concurrent.futures import ProcessPoolExecutor
+
     out: dict[str, dict[str, list[float]]] = {}
     model_error = []
-    for shot in range(SHOTS):
-        ident = identify(record(CASE, 1000 + shot))
-        model_error.append(ident.noise.model_error.to_dict())
-        result = evaluate(ident, AnalysisOptions(draws=DRAWS, order_draws=ORDER_DRAWS, seed=shot, **NO_CHAIN))
-        for name, e in _figures(result).items():
-            row = out.setdefault(name, {"value": [], "lo": [], "hi": [], "u": []})
-            row["value"].append(e.value)
-            row["lo"].append(e.interval[0])
-            row["hi"].append(e.interval[1])
-            row["u"].append(e.u)
+    with ProcessPoolExecutor(os.cpu_count() or 1) as pool:
+        for figures, noise in pool.map(_shot, range(SHOTS)):
+            model_error.append(noise)
+            for name, e in figures.items():
+                row = out.setdefault(name, {"value": [], "lo": [], "hi": [], "u": []})
+                row["value"].append(e.value)
+                row["lo"].append(e.interval[0])
+                row["hi"].append(e.interval[1])
+                row["u"].append(e.u)
     return {"figures": out, "model_error": model_error}
+
+
+def _shot(shot: int) -> tuple[dict[str, Estimate], dict]:
+    """One shot of the study (its record's noise seeded by 1000 + shot, its draws by shot): each
+    figure's estimate, and identify's model error report."""
+    ident = identify(record(CASE, 1000 + shot))
+    result = evaluate(ident, AnalysisOptions(draws=DRAWS, order_draws=ORDER_DRAWS, seed=shot, **NO_CHAIN))
+    return _figures(result), ident.noise.model_error.to_dict()
 
 
 @pytest.fixture(scope="module")
@@ -95,6 +109,7 @@ def test_the_test_rejects_a_coverage_of_90_percent() -> None:
     assert binom.sf(MIN_INSIDE - 1, SHOTS, 0.97) >= 0.9
 
 
+@pytest.mark.study
 def test_about_95_percent_of_the_intervals_contain_the_truth(study) -> None:
     """Each figure's intervals hold the truth in at least MIN_INSIDE of the shots (a true coverage
     of 90 % passes with probability 0.034); the sensitivity (DC gain), the certificate's headline,
@@ -108,6 +123,7 @@ def test_about_95_percent_of_the_intervals_contain_the_truth(study) -> None:
     assert rates["dc_gain"] <= 0.99 * SHOTS, rates
 
 
+@pytest.mark.study
 def test_a_right_model_is_rarely_taken_for_model_error(shots) -> None:
     """The study's sensor is in the fitted family, so its residual is noise alone. Measured over
     the 140 shots (stop 35): median 0.69× what the noise explains, all but one below 1.4×; that
@@ -122,6 +138,7 @@ def test_a_right_model_is_rarely_taken_for_model_error(shots) -> None:
     assert 0.5 < float(np.median(ratios)) < 1.0, np.median(ratios)  # the noise explains it (the fit's look errs high)
 
 
+@pytest.mark.study
 def test_the_intervals_are_not_needlessly_wide(study) -> None:
     """The typical (median) interval width against the width the spread of the estimates over the
     shots calls for (2 × 1.96 × the robust spread), and the median u against that spread: near
