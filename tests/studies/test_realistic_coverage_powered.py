@@ -28,6 +28,7 @@ import os
 import numpy as np
 import pytest
 
+from tests.analysis.test_coverage_realistic import TRUE_F_N_HZ
 from tests.realistic_study import coverage, pairwise_e_n, run_study, too_wide_or_far
 from tests.studies.binomial import max_misses, pass_probability
 
@@ -72,4 +73,15 @@ def test_one_unchanged_sensor_agrees_with_itself_over_200_shots(study, name: str
     e_n = pairwise_e_n(study, name)
     assert e_n.size >= math.comb(math.ceil(0.9 * SHOTS), 2), name  # claimed on ≥ 90 % of the shots
     assert np.mean(e_n > 1.0) <= 0.046, np.sort(e_n)[-5:]
+
+
+@pytest.mark.xfail(strict=True, reason="shot 60 (projectile No. 3, 1.824 bar) claims a second mode at 171.3 kHz, ζ 0.0024 "
+                   "(2026-11-29): docs/systematic-effects.md, 'Known: a spurious mode on 1 shot of 200'")
+def test_no_mode_is_claimed_that_the_truth_lacks_over_200_shots(study) -> None:
+    """Issue 40 item 3 on all 200 shots: every claimed mode is the sensor's (29.7 kHz, f_n within
+    0.5 %). test_coverage_realistic holds it on the first 50. Known to fail on one shot (strict:
+    a fix makes this test fail until the mark is removed)."""
+    wrong = [(o.shot_number, o.modes_hz) for o in study
+             if len(o.modes_hz) > 1 or any(abs(f_hz / TRUE_F_N_HZ - 1) >= 0.005 for f_hz in o.modes_hz)]
+    assert wrong == []
 
