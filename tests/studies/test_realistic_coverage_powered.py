@@ -14,8 +14,8 @@ their spread 1.05 standard uncertainties. Telling 95 % from 90 % needs some 200 
 
 The plan is tests.realistic_study's (fixed before any result was seen); its first 50 shots are
 test_coverage_realistic's, which `make studies` runs before this module in the same process: they
-are computed once (tests/realistic_study.py keeps each shot's outcome). Each figure (the five of issue 40 item 2, and ε, the tension/compression asymmetry of the
-bonded mount: tests/analysis/test_bonded_bar_shots.py's five shots cannot test its coverage) passes with at most `max_misses(claims)` misses: the largest count whose
+are computed once (tests/realistic_study.py keeps each shot's outcome). Each figure (the five of
+issue 40 item 2, and ε, the tension/compression asymmetry of the bonded mount: tests/analysis/test_bonded_bar_shots.py's five shots cannot test its coverage) passes with at most `max_misses(claims)` misses: the largest count whose
 probability at a 90 % coverage is ≤ 5 % (scipy.stats.binom). For 200 claims that is 12 misses:
 P(pass | 90 %) = 0.032, P(pass | 95 %) = 0.80, P(pass | 97 %) = 0.99.
 """
