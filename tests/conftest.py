@@ -18,8 +18,9 @@ pytest_plugins = ("tests.scope_order",)  # longest modules first on the xdist wo
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 
-# The statistical studies the suite computes (module fixtures of 50-140 simulated shots: 40-65 s of
-# CPU on an idle machine) are charged to the first test that asks for them. On a machine half as
+# The statistical studies in tests/analysis (module fixtures of 50-140 simulated shots: 40-65 s of
+# CPU on an idle machine; marked `study`, so `make studies` and CI's oldest-pair stage run them, not
+# `make test`) are charged to the first test that asks for them. On a machine half as
 # fast with other work beside it (seen: a coverage study in another checkout) that test outlasted
 # pyproject.toml's 300 s hang guard, whose thread method ends the xdist worker ("node down: Not
 # properly terminated"). The tests that use one get a longer guard; every other test keeps 300 s.

@@ -27,6 +27,7 @@ LABELS = {"sensitivity": "DC gain", "natural_frequency_hz": "f_n", "damping_rati
           "fbsd_10": "FBSD ±10 %", "asymmetry": "ε (tension/compression)"}
 PRESSURE_BAR = (1.0, 6.0)
 PROJECTILES = (1, 2, 3)
+TRUE_F_N_HZ = 29_700.0  # the shipped sensor's mounted resonance (config/sim.toml: 27 kHz × 1.10), its one mode
 PLAN_SEED = 2040  # the shot plan's generator (issue 40): fixed once, before any result was seen
 # The study judges the method, so the reference chain's Type B inputs (grating, interferometer,
 # amplifier and digitizer gains: exact in the simulator, a pure scale of the DC gain whose
@@ -278,3 +279,9 @@ def pairwise_e_n(outcomes: list[ShotOutcome], name: str) -> np.ndarray:
                      / math.hypot(a.interval[name][1] - a.interval[name][0], b.interval[name][1] - b.interval[name][0])
                      * 2.0 for a, b in itertools.combinations(shots, 2)])
 
+
+def modes_the_truth_lacks(outcomes: list[ShotOutcome]) -> list[tuple[int, list[float]]]:
+    """(shot number, modes claimed) of each shot that claims more than the sensor's one mode, or
+    one more than 0.5 % from its TRUE_F_N_HZ (issue 40 items 3 and 4)."""
+    return [(o.shot_number, o.modes_hz) for o in outcomes
+            if len(o.modes_hz) > 1 or any(abs(f_hz / TRUE_F_N_HZ - 1) >= 0.005 for f_hz in o.modes_hz)]

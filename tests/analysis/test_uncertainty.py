@@ -7,8 +7,8 @@ their width is compared with 2 × 1.96 × the spread of the estimates over the s
 1.4826 × the median absolute deviation, as a few shots choose another order). The reference
 chain is set to zero there (its contribution is exact and is tested apart).
 
-Who runs it: the study's tests are marked `study` (`make studies`, CI after `make test`; 140 shots
-of the study cost ~110 s of CPU, spread over the machine's cores); `make test` keeps the others.
+Who runs it: the study's tests are marked `study` (`make studies`, CI after `make test`: the 140
+shots took 58 s on 2 cores there, spread over a process pool); `make test` keeps the others.
 
 What 140 shots can tell (issue 45 item 3, issue 40): each figure passes with at least
 MIN_INSIDE = 133 of its 140 intervals holding the truth. Were its true coverage 90 %, it would pass

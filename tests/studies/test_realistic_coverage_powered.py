@@ -28,8 +28,13 @@ import os
 import numpy as np
 import pytest
 
-from tests.analysis.test_coverage_realistic import TRUE_F_N_HZ
-from tests.realistic_study import coverage, pairwise_e_n, run_study, too_wide_or_far
+from tests.realistic_study import (
+    coverage,
+    modes_the_truth_lacks,
+    pairwise_e_n,
+    run_study,
+    too_wide_or_far,
+)
 from tests.studies.binomial import max_misses, pass_probability
 
 pytestmark = pytest.mark.study
@@ -81,7 +86,5 @@ def test_no_mode_is_claimed_that_the_truth_lacks_over_200_shots(study) -> None:
     """Issue 40 item 3 on all 200 shots: every claimed mode is the sensor's (29.7 kHz, f_n within
     0.5 %). test_coverage_realistic holds it on the first 50. Known to fail on one shot (strict:
     a fix makes this test fail until the mark is removed)."""
-    wrong = [(o.shot_number, o.modes_hz) for o in study
-             if len(o.modes_hz) > 1 or any(abs(f_hz / TRUE_F_N_HZ - 1) >= 0.005 for f_hz in o.modes_hz)]
-    assert wrong == []
+    assert modes_the_truth_lacks(study) == []
 
