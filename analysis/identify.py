@@ -31,6 +31,7 @@ from hopkinson.analysis.identify_stages import (
     OrderSearch,
     Settlement,
     WeighedSearch,
+    band_without_onset,
     claim,
     search_orders,
     settle,
@@ -236,11 +237,22 @@ def identify(record: Record, options: AnalysisOptions | None = None, *, sine_ter
     try:
         result = _identify(record, options, sine_terms)
     except _BeyondTheFirstNull as failed:  # no model past the first null: fitted below it
-        cut = BandCut(failed.top_hz, failed.stretch_hz, math.inf, str(failed.cause))
+        result = _cut(record, options, sine_terms, BandCut(failed.top_hz, failed.stretch_hz, math.inf,
+                                                          str(failed.cause)))
     else:
-        if result.claim.band_cut is None:
-            return result
-        cut = result.claim.band_cut
+        if result.claim.band_cut is not None:
+            result = _cut(record, options, sine_terms, result.claim.band_cut)
+    onset_cut = band_without_onset(result.prep, result.settlement.final, result.sample_interval_s)
+    if onset_cut is None:
+        return result
+    try:
+        return _cut(record, options, sine_terms, onset_cut)
+    except AnalysisError:  # no model below that top: the band as the record's reference has it
+        return result
+
+
+def _cut(record: Record, options: AnalysisOptions, sine_terms: SineTerms | None, cut: BandCut) -> Identification:
+    """The stages again on the band below the `cut`'s top, its finding first."""
     again = _identify(record, options, sine_terms, band_top_hz=cut.top_hz)
     return replace(again, findings=(cut.finding, *again.findings),
                    preprocessing=replace(again.preprocessing, band_cut=cut))

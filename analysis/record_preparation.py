@@ -120,6 +120,18 @@ class Prepared:
             return self.u
         return self.u + self.terms.correction(coefficients)[self.start : self.start + self.u.size]
 
+    def band_without_onset(self, coefficients: np.ndarray, dt: float) -> SupportedBand | None:
+        """The band the reference supports with the fitted onset disturbances taken out (None where
+        none are fitted): its demodulation glitches are the reference's errors, not the bar's
+        motion, and their broad spectrum can stand above the reference's noise far beyond the
+        pulse's own (`band_of`)."""
+        columns = self.terms.columns(ONSET)
+        if not columns.size or np.asarray(coefficients).size != self.terms.count:
+            return None
+        onset = np.zeros(self.terms.count)
+        onset[columns] = np.asarray(coefficients)[columns]
+        return band_of(self.noise.u + self.terms.correction(onset), dt, self.noise.noise_u)
+
     def with_terms(self, terms: InputTerms) -> SpectralData:
         """The fitted data with `terms`' input terms (per bin: data with input terms are never grouped)."""
         assert self.bin_index is not None and not self.spectral.grouped
@@ -325,6 +337,18 @@ def measure_noise(activity: Activity, dt: float) -> NoiseLooks:
                       draw_noise_y, tuple(findings))
 
 
+def band_of(u: np.ndarray, dt: float, noise_u: NoiseSpectrum) -> SupportedBand:
+    """The band the reference `u` supports above its noise (analysis.excitation.supported_band),
+    past its first null not into the analysis rate's last fifth."""
+    try:
+        support = supported_band(u, dt, noise_psd=noise_u.at if noise_u.samples else None)
+    except AnalysisError as exc:
+        raise AnalysisError(f"the reference's pulse is lost in its noise: {exc}") from None
+    if len(support.intervals_hz) > 1:
+        support = support.below(NULLS_CROSSED_TO * 0.5 / dt)
+    return support
+
+
 def fitted_band(activity: Activity, noise: NoiseLooks, dt: float,
                 band_top_hz: float | None = None) -> Prepared:
     """The band the excitation supports (where the reference's spectrum stands 20 dB above its
@@ -340,12 +364,7 @@ def fitted_band(activity: Activity, noise: NoiseLooks, dt: float,
         if start + fast <= n:
             end = start + fast
     uw, yw = u[start:end], y[start:end]
-    try:
-        support = supported_band(u, dt, noise_psd=noise_u.at if noise_u.samples else None)
-    except AnalysisError as exc:
-        raise AnalysisError(f"the reference's pulse is lost in its noise: {exc}") from None
-    if len(support.intervals_hz) > 1:  # past the first null, not into the analysis rate's last fifth
-        support = support.below(NULLS_CROSSED_TO * 0.5 / dt)
+    support = band_of(u, dt, noise_u)
     if band_top_hz is not None:
         support = support.below(band_top_hz)
     band = support.hull_hz
