@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from hopkinson.analysis.excitation import glitch_window, pulse_peak_index
 from hopkinson.analysis.sample_counts import ceil_count
 
 ASYMMETRY = "asymmetry"
@@ -133,7 +134,7 @@ def input_terms(u: np.ndarray, dt: float, pulse_start: int, noise_rms: float, bu
     after the pulse (record_preparation: coherent motion); `motion_ramp_s` and `onset_s` (before,
     after the foot) as the module docstring, the defaults nominal (analysis.systematics varies them)."""
     n = u.size
-    i_peak = int(np.argmax(np.abs(u)))
+    i_peak = pulse_peak_index(u, glitch_window(dt))  # the pulse's, not an onset glitch's
     polarity = 1.0 if u[i_peak] >= 0 else -1.0
     peak = abs(float(u[i_peak]))
     names: list[str] = []

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from hopkinson.analysis.excitation import glitch_window, pulse_peak_index
 from hopkinson.analysis.input_terms import MOTION
 from hopkinson.analysis.model import DiscreteModel
 
@@ -133,7 +134,7 @@ def _static_gain(identification: Any, ctx: _Fitted, prep: Any, draws: Sequence[D
                       f"{QUASI_STATIC:.0%} of its DC gain)")
     u = prep.u
     terms = prep.terms
-    polarity = terms.polarity if terms.count else (1.0 if u[int(np.argmax(np.abs(u)))] >= 0 else -1.0)
+    polarity = terms.polarity if terms.count else (1.0 if u[pulse_peak_index(u, glitch_window(dt))] >= 0 else -1.0)
     motion = np.zeros(n)
     fitted = _fitted_inputs(identification, ctx)
     cols = terms.columns(MOTION)

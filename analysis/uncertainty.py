@@ -23,7 +23,12 @@ import numpy as np
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.estimate import COVERAGE, Estimate, coverage_ends
-from hopkinson.analysis.excitation import peak_estimate, pulse_width
+from hopkinson.analysis.excitation import (
+    glitch_window,
+    peak_estimate,
+    pulse_peak_index,
+    pulse_width,
+)
 from hopkinson.analysis.findings import Finding, FindingCode, texts
 from hopkinson.analysis.frequency_fit import OrderFit, is_stable
 from hopkinson.analysis.identify import (
@@ -385,7 +390,7 @@ def _peak_figures(
         pulse = pulse_width(ref, dt)
     except AnalysisError:
         return {}
-    i_ref = int(np.argmax(np.abs(ref)))
+    i_ref = pulse_peak_index(ref, glitch_window(dt))
     i_resp = int(np.argmax(np.abs(resp)))
     width = max(1, int(round(pulse.width_s / dt)))
     half = max(PEAK_SEGMENT // 2, 3 * width)

@@ -86,6 +86,6 @@ def test_no_mode_is_claimed_that_the_truth_lacks_over_200_shots(study) -> None:
     0.5 %). test_coverage_realistic holds it on the first 50. Until decision 0027 (the band judged on
     the reference without its fitted onset disturbances) shot 60 claimed a second mode at 171.3 kHz,
     ζ 0.0024, in a band its reference's glitches had lifted to 204 kHz
-    (tests/analysis/test_band_without_onset.py holds that shot in `make test`)."""
+    (tests/analysis/test_onset_glitches.py holds that shot in `make test`)."""
     assert modes_the_truth_lacks(study) == []
 
