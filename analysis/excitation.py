@@ -93,19 +93,21 @@ def pulse_peak_index(x: np.ndarray, window: int = GLITCH_SAMPLES) -> int:
     first = int(np.argmax(size))
     if x.size < 2 * window:
         return first
-    mean = np.convolve(x, np.full(window, 1.0 / window), mode="same")
-    candidates = size.copy()
+    candidates = size
     for _ in range(MAX_GLITCHES):
         i = int(np.argmax(candidates))
         if not candidates[i] > 0:
             break
         sign = 1.0 if x[i] >= 0 else -1.0
-        if sign * mean[i] >= PULSE_MEAN_SHARE * size[i]:
+        start = i - window // 2  # the span about i, zeros beyond the record's ends
+        if sign * float(np.sum(x[max(0, start) : start + window])) >= PULSE_MEAN_SHARE * size[i] * window:
             return i
-        above = sign * x >= 0.5 * size[i]
-        lo = i - _run(above[:i][::-1])
-        hi = i + _run(above[i + 1 :])
-        candidates[lo : hi + 1] = 0.0
+        reach = slice(max(0, i - 4 * window), i + 4 * window + 1)  # a glitch's lobe is far shorter
+        above = sign * x[reach] >= 0.5 * size[i]
+        at = i - reach.start
+        if candidates is size:
+            candidates = size.copy()
+        candidates[i - _run(above[:at][::-1]) : i + _run(above[at + 1 :]) + 1] = 0.0
     return first
 
 
