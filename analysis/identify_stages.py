@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from hopkinson.analysis.claims import claim_findings, claimed_modes, delay_findings
+from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.findings import Finding, FindingCode
 from hopkinson.analysis.frequency_fit import OrderFit, OrderProblem, predicted_bins, response
 from hopkinson.analysis.input_terms import ASYMMETRY, MOTION
@@ -343,7 +344,7 @@ class BandCut:
 
     top_hz: float  # the band's new top (the last stretch kept ends there)
     stretch_hz: tuple[float, float]  # the first stretch dropped
-    ratio: float  # its residual per bin over what the noise explains (inf: no model was stable there)
+    ratio: float  # its residual per bin over what the noise explains (inf: no model was stable there; nan: by_onset)
     failure: str = ""  # why no model fitted the stretches past the first null (ratio inf)
     by_onset: bool = False  # the band above top_hz stood above the noise only by the fitted onset disturbances
 
@@ -382,8 +383,12 @@ ONSET_BAND_SHARE = 0.9
 
 def band_without_onset(prep: Prepared, fit: OrderFit, dt: float) -> BandCut | None:
     """The band's cut where the fitted onset disturbances alone held the reference above its noise
-    at its top (`ONSET_BAND_SHARE`), or None."""
-    support = prep.band_without_onset(fit.inputs, dt)
+    at its top (`ONSET_BAND_SHARE`), or None (also where the reference without them stands nowhere
+    above its noise: the band as fitted then stands, as it did before this judgement)."""
+    try:
+        support = prep.band_without_onset(fit.inputs, dt)
+    except AnalysisError:
+        return None
     top = prep.band[1]
     if support is None or not support.top_hz < ONSET_BAND_SHARE * top:
         return None
