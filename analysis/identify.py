@@ -31,8 +31,8 @@ from hopkinson.analysis.identify_stages import (
     OrderSearch,
     Settlement,
     WeighedSearch,
-    band_without_onset,
     claim,
+    onset_band_cut,
     search_orders,
     settle,
     weigh_model_error,
@@ -242,7 +242,7 @@ def identify(record: Record, options: AnalysisOptions | None = None, *, sine_ter
     else:
         if result.claim.band_cut is not None:
             result = _cut(record, options, sine_terms, result.claim.band_cut)
-    onset_cut = band_without_onset(result.prep, result.settlement.final, result.sample_interval_s)
+    onset_cut = onset_band_cut(result.prep, result.settlement.final, result.sample_interval_s)
     if onset_cut is None:
         return result
     try:

@@ -381,7 +381,7 @@ class BandCut:
 ONSET_BAND_SHARE = 0.9
 
 
-def band_without_onset(prep: Prepared, fit: OrderFit, dt: float) -> BandCut | None:
+def onset_band_cut(prep: Prepared, fit: OrderFit, dt: float) -> BandCut | None:
     """The band's cut where the fitted onset disturbances alone held the reference above its noise
     at its top (`ONSET_BAND_SHARE`), or None (also where the reference without them stands nowhere
     above its noise: the band as fitted then stands, as it did before this judgement)."""

@@ -112,22 +112,37 @@ class ShotOutcome:
         return iv is not None and iv[0] <= self.truth[name] <= iv[1]
 
 
+def simulated_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int) -> tuple[dict, dict]:
+    """One shot of `world` as the rig captures it (100 MS/s, 200 000 samples, 20 000 before the
+    trigger): its channels and its truth."""
+    from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
+
+    return simulate_shot(world, pressure_bar, projectile, CaptureSettings(100e6, 200_000, 20_000),
+                         shot_number=shot_number)
+
+
+def analysed_shot(channels: dict, truth: dict, chain: bool = False, **params: Any) -> Any:
+    """The simulated shot analysed as the rig does (the sensor's own gains; `chain`: with the
+    reference chain's default Type B inputs, as a rig's shot, else NO_CHAIN; `params`: more
+    AnalysisOptions): its ShotAnalysis."""
+    from hopkinson.analysis.options import AnalysisOptions
+    from hopkinson.analysis.shot_analysis import analyse_raw_shot
+
+    return analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
+        amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
+        **{**({} if chain else NO_CHAIN), **params}), quadrature_v=channels.get(3))
+
+
 def run_shot(world: Any, projectile: int, pressure_bar: float, shot_number: int, draws: int = 100,
              keep_results: bool = False, chain: bool = False, **params: Any) -> ShotOutcome:
     """Simulate and analyse one shot as the rig does; its figures against the sensor's truth
     (`chain`: with the reference chain's default Type B inputs, as a rig's shot; else NO_CHAIN)."""
     from hopkinson.analysis.key_figures import Figure, KeyFigures
-    from hopkinson.analysis.options import AnalysisOptions
-    from hopkinson.analysis.shot_analysis import analyse_raw_shot
-    from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
 
-    channels, truth = simulate_shot(world, pressure_bar, projectile, CaptureSettings(100e6, 200_000, 20_000),
-                                    shot_number=shot_number)
+    channels, truth = simulated_shot(world, projectile, pressure_bar, shot_number)
     out = ShotOutcome(projectile, pressure_bar, shot_number, shot_truth_figures(truth))
     try:
-        result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
-            amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"],
-            draws=draws, seed=shot_number, **{**({} if chain else NO_CHAIN), **params}), quadrature_v=channels.get(3))
+        result = analysed_shot(channels, truth, chain, draws=draws, seed=shot_number, **params)
     except Exception as exc:  # noqa: BLE001 - a shot the analysis refuses counts as not holding its truth
         out.error = f"{type(exc).__name__}: {exc}"
         return out

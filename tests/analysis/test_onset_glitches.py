@@ -2,7 +2,7 @@
 of the reference, and neither make the band nor stand for the pulse.
 
 - The band is what the pulse supports, judged on the reference without its fitted onset
-  disturbances (analysis.identify_stages.band_without_onset, decision 0027).
+  disturbances (analysis.identify_stages.onset_band_cut, decision 0027).
 - The pulse's peak is the pulse's, not a glitch's (analysis.excitation.pulse_peak_index), and the
   direction of motion is the motion's (analysis.reduce: read where the phase has moved
   DIRECTION_FRINGES), where the glitches outgrow the pulse (decision 0028).
@@ -27,21 +27,21 @@ import numpy as np
 
 from hopkinson.analysis.excitation import glitch_window, pulse_peak_index, pulse_width
 from hopkinson.analysis.findings import FindingCode
-from hopkinson.analysis.options import AnalysisOptions
-from hopkinson.analysis.shot_analysis import analyse_raw_shot
-from hopkinson.drivers.sim.world import CaptureSettings, simulate_shot
-from tests.realistic_study import NO_CHAIN, TRUE_F_N_HZ, planned_top_hz, world_params
+from tests.realistic_study import (
+    TRUE_F_N_HZ,
+    analysed_shot,
+    planned_top_hz,
+    simulated_shot,
+    world_params,
+)
 from tests.sim_truth import shot_truth_figures
 
 PROJECTILE, PRESSURE_BAR, SHOT_NUMBER = 3, 1.824, 60  # the 200-shot study's shot 60 (tests/realistic_study.py)
 
 
 def test_the_onsets_glitches_do_not_make_the_band_nor_a_mode() -> None:
-    channels, truth = simulate_shot(world_params("shipped"), PRESSURE_BAR, PROJECTILE,
-                                    CaptureSettings(100e6, 200_000, 20_000), shot_number=SHOT_NUMBER)
-    ident = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
-        amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"], uncertainty=False,
-        **NO_CHAIN), quadrature_v=channels.get(3)).identification
+    channels, truth = simulated_shot(world_params("shipped"), PROJECTILE, PRESSURE_BAR, SHOT_NUMBER)
+    ident = analysed_shot(channels, truth, uncertainty=False).identification
     planned = planned_top_hz(PROJECTILE, PRESSURE_BAR)
     top = ident.supported_band_hz[1]
     assert 0.5 * planned <= top <= 1.3 * planned, (top, planned)  # was 204 kHz against 112
@@ -80,8 +80,8 @@ def test_the_pulses_peak_is_not_a_glitchs() -> None:
 
 
 def test_a_record_whose_largest_sample_is_its_pulses_keeps_it() -> None:
-    """Half-sine pulses of 5-300 µs, single or
-    with an opposite lobe of half to nearly all their size, in noise, at 1 and 10 MS/s."""
+    """Half-sine pulses of 5-300 µs, single or with an opposite lobe of half to nearly all their
+    size, in noise, at 1 and 10 MS/s: the rule moves no clean pulse's peak."""
     rng = np.random.default_rng(3)
     for _ in range(100):
         for dt in (1e-6, 1e-7):
@@ -105,11 +105,8 @@ def test_a_shot_whose_glitches_outgrow_its_pulse_is_analysed_as_its_pulse() -> N
     shipped = world_params("shipped")
     world = dataclasses.replace(shipped, realism=dataclasses.replace(shipped.realism, reference=dataclasses.replace(
         shipped.realism.reference, onset_glitches=6, onset_glitch_rad=2.0)))
-    channels, truth = simulate_shot(world, 4.055, 1, CaptureSettings(100e6, 200_000, 20_000), shot_number=1)
-    result = analyse_raw_shot(channels[1], channels[2], 1e-8, AnalysisOptions(
-        amp_gain=truth["amplifier_gain"], sensitivity_v_per_m_s2=truth["sensitivity_v_per_m_s2"], uncertainty=False,
-        **NO_CHAIN), quadrature_v=channels.get(3))
-    ident = result.identification
+    channels, truth = simulated_shot(world, 1, 4.055, 1)
+    ident = analysed_shot(channels, truth, uncertainty=False).identification
     sensor = shot_truth_figures(truth)
     assert math.isclose(ident.model.dc_gain, sensor["sensitivity"], rel_tol=0.005), (ident.model.dc_gain, sensor)
     assert ident.prep.terms.columns("onset").size, ident.prep.terms.not_fitted
