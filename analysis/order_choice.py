@@ -202,13 +202,19 @@ class Refitter:
     fit ran it (GUM-S1: each draw re-runs the estimator), so it can land on either branch."""
 
     def __init__(self, spectral: SpectralData, fits: dict[int, OrderFit], delay: str | float, max_delay: float,
-                 branches: dict[int, list[OrderFit]] | None = None) -> None:
+                 branches: dict[int, list[OrderFit]] | None = None, lowest_bin_cycles: float = 0.0) -> None:
         self.spectral = spectral
         self.fits = fits
         self.delay = delay
         self.max_delay = max_delay
         self.branches = branches or {}
+        self.lowest_bin_cycles = lowest_bin_cycles  # the lowest fitted bin (cycles per sample; 0: not checked)
         self._quick: dict[tuple[int, int], QuickRefit] = {}
+
+    def places(self, fit: OrderFit) -> bool:
+        """Whether the data can place every real pole of `fit`: none lies far below the lowest
+        fitted bin (`pole_below_band`; order_search's rule for a candidate of the order test)."""
+        return not pole_below_band(fit, self.lowest_bin_cycles, 1.0)
 
     def fit(self, data: SpectralData, order: int, exact: bool = True) -> OrderFit | None:
         """The order's optimum on `data` (None: not fitted nominally, or unstable); `exact`
@@ -231,11 +237,13 @@ class Refitter:
 
 def decide(refitter: Refitter, data: SpectralData, candidates: list[int], significance: float
            ) -> tuple[int | None, dict[int, OrderFit]]:
-    """The order test on one draw over `candidates` (each refitted); and the refits.
+    """The order test on one draw over `candidates` (each refitted); and the refits. A refit
+    with a real pole the data cannot place (`Refitter.places`) is no candidate in that draw, as
+    the nominal order test has it (order_search._candidate_cost).
 
     Orders the quick refit cannot settle keep the best cost it reached (an upper bound): such
     an order is far from the data (an under-fit one) and loses the comparison anyway."""
-    fits = {m: f for m in candidates if (f := refitter.fit(data, m, exact=False)) is not None}
+    fits = {m: f for m in candidates if (f := refitter.fit(data, m, exact=False)) is not None and refitter.places(f)}
     costs = {m: f.cost for m, f in fits.items()}
     parameters = {m: f.parameters for m, f in fits.items()}
     chosen, _ = choose_order(costs, parameters, data.bins, response_change(fits, data), significance)
@@ -274,3 +282,11 @@ def modal_order(fractions: dict[int, float], fallback: int) -> int:
 def fractions_text(fractions: dict[Any, float]) -> str:
     return ", ".join(f"order {k}: {v:.0%}" for k, v in sorted(fractions.items(), key=lambda kv: int(kv[0])))
 
+
+def pole_below_band(fit: OrderFit, lowest_bin_hz: float, dt: float) -> bool:
+    """Whether the fit has a real pole whose frequency lies below a tenth of the lowest
+    fitted bin's (undetermined by the fitted data)."""
+    roots = np.roots(fit.a) if fit.a.size > 1 else np.array([])
+    real = roots[(np.abs(roots.imag) < 1e-12) & (roots.real > 0)].real
+    f_hz = -np.log(np.clip(real, 1e-300, None)) / (2.0 * np.pi * dt)
+    return bool(np.any(f_hz < 0.1 * lowest_bin_hz))

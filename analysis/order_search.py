@@ -36,6 +36,7 @@ from hopkinson.analysis.order_choice import (
     choose_stable_order,
     fractions_text,
     order_stability,
+    pole_below_band,
     response_change,
 )
 from hopkinson.analysis.quick_refit import delay_branches
@@ -409,7 +410,8 @@ def order_stability_evidence(prep: Prepared, data: SpectralData, sweep: OrderSwe
     noise_draws = NoiseDraws(data, prep.u_bins, prep.y_bins, prep.draw_var_u, prep.draw_var_y, omega_bins, prep.group,
                              STABILITY_SEED,
                              centre_y=predicted_bins(sweep.fits[chosen], data, omega_bins, prep.u_bins))
-    refitter = Refitter(data, sweep.fits, sweep.delay_mode, setup.max_delay)
+    refitter = Refitter(data, sweep.fits, sweep.delay_mode, setup.max_delay,
+                        lowest_bin_cycles=setup.lowest_bin_hz * setup.sample_interval_s)
     candidates = [m for m in candidates_around(chosen, sweep.fits) if math.isfinite(sweep.costs[m])]
     fractions, _, _ = order_stability(noise_draws, refitter, candidates, draws, setup.significance)
     findings: tuple[Finding, ...] = ()
@@ -493,11 +495,3 @@ def marginal_modes_text(fit: OrderFit, dt: float) -> str:
             "the reference (a second drive path, motion the reference does not see) or a mode in a null of the "
             "excitation whose damping the data do not fix")
 
-
-def pole_below_band(fit: OrderFit, lowest_bin_hz: float, dt: float) -> bool:
-    """Whether the fit has a real pole whose frequency lies below a tenth of the lowest
-    fitted bin's (undetermined by the fitted data)."""
-    roots = np.roots(fit.a) if fit.a.size > 1 else np.array([])
-    real = roots[(np.abs(roots.imag) < 1e-12) & (roots.real > 0)].real
-    f_hz = -np.log(np.clip(real, 1e-300, None)) / (2.0 * np.pi * dt)
-    return bool(np.any(f_hz < 0.1 * lowest_bin_hz))

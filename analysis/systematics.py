@@ -321,7 +321,7 @@ def _defensible(variant: OrderFit, nominal: OrderFit, ident: Identification) -> 
     """Whether a variant fit is an alternative the record allows: it fits about as well as the
     nominal, and has no real pole far below the lowest fitted bin (which the data cannot place:
     a spare pole near DC moved a variant's DC gain to a quarter)."""
-    from hopkinson.analysis.order_search import pole_below_band
+    from hopkinson.analysis.order_choice import pole_below_band
 
     if not variant.cost <= DEFENSIBLE_COST * max(nominal.cost, 1.0):
         return False

@@ -135,7 +135,7 @@ def evaluate(
     gain_factor = response_factor / reference_factor
 
     # -- the model figures: the settle stage re-run per draw ---------------------------------
-    fits, skews, branch = _refits(drawn.noise, bands, orders["per_draw"])
+    fits, skews, branch, per_draw = _refits(drawn.noise, bands, orders["per_draw"], n_hat)
     # A draw on another delay branch is not reflected (Estimate.of_draws); one on a part of the
     # band is reflected or not at even odds: its offset is the model's, of either sign.
     reflect = np.where(bands.per_draw > 0, bands.flip, branch == 0)
@@ -204,7 +204,7 @@ def evaluate(
                **{f"fbsd_{k}_hz": v for k, v in fbsd_values.items()}}
     draws_by_figure = {"dc_gain": dc_draws, "natural_frequency_hz": fn_draws, "damping_ratio": zeta_draws,
                        **{f"fbsd_{k}_hz": fbsd_draws[k] for k in fbsd_values}}
-    figure_budget = budget(ident, options, inflate, nominal, draws_by_figure, orders["per_draw"], good,
+    figure_budget = budget(ident, options, inflate, nominal, draws_by_figure, per_draw, good,
                      peaks.get("shares", {}), nominal_branch, bands.per_draw, type_b,
                      {**nominal, "shock_sensitivity": shock_value})
     order_info = {"chosen": n_hat, "selection": ident.order_selection, "fraction_by_order": orders["fractions"],
@@ -321,22 +321,31 @@ def response_band(model: DiscreteModel, draws: list[DiscreteModel], band_hz: tup
             "phase_deg": floats(phase), "phase_low_deg": floats(phase + lo_p), "phase_high_deg": floats(phase + hi_p)}
 
 
-def _refits(draws: NoiseDraws, bands: BandVariants, orders: list[int]
-            ) -> tuple[list[OrderFit | None], np.ndarray, np.ndarray]:
+def _refits(draws: NoiseDraws, bands: BandVariants, orders: list[int], chosen: int
+            ) -> tuple[list[OrderFit | None], np.ndarray, np.ndarray, list[int]]:
     """One refit per draw at its order, on the record with fresh noise and a skew, over its part
-    of the band; each draw's skew (samples) and the delay branch it landed on (0: the nominal
-    fit's)."""
+    of the band; each draw's skew (samples), the delay branch it landed on (0: the nominal
+    fit's) and the order it was refitted at. A draw whose order is not the `chosen` one and whose
+    refit there has a real pole the data cannot place (Refitter.places) is refitted at the chosen
+    order: the order test would not choose such a fit (order_search._candidate_cost), and its
+    pole near DC takes the DC gain anywhere (a 70 kHz sensor behind PTB's pulse: poles at 0–3 Hz,
+    the lowest bin at 606 Hz, DC gains −37 … +330× the truth in 7 of 100 draws)."""
     fits: list[OrderFit | None] = []
     skews = np.zeros(len(orders))
     branch = np.zeros(len(orders), dtype=int)
+    used = list(orders)
     for r, order in enumerate(orders):
         data, skews[r] = draws.data(r)
         v = int(bands.per_draw[r])
         if v:
             data = data.below(bands.omega_max[v])
-        fit, branch[r] = bands.refitters[v].fit_branch(data, order)
+        refitter = bands.refitters[v]
+        fit, branch[r] = refitter.fit_branch(data, order)
+        if order != chosen and fit is not None and not refitter.places(fit):
+            used[r] = chosen
+            fit, branch[r] = refitter.fit_branch(data, chosen)
         fits.append(fit)
-    return fits, skews, branch
+    return fits, skews, branch, used
 
 
 def _fbsd_draws(fits: list[OrderFit | None], good: np.ndarray, nominal: dict, dt: float) -> dict[str, np.ndarray]:

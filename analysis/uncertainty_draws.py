@@ -48,7 +48,7 @@ def draw(ident: Identification, options: AnalysisOptions, seed: int, rng: np.ran
                        2.0 * np.pi * prep.bin_hz * dt, prep.group, seed, inflate, options.u_channel_skew_s / dt,
                        level_u=prep.noise.draw_noise_u, level_y=ident.claim.response_noise, bin_hz=prep.bin_hz)
     refitter = Refitter(fitted.data, fitted.sweep.fits, fitted.sweep.delay_mode, fitted.setup.max_delay,
-                        fitted.branches)
+                        fitted.branches, _lowest_bin_cycles(ident))
     orders = _order_assignment(ident, noise, refitter, options, rng)
     bands = _band_variants(ident, refitter, orders["per_draw"], rng)
     return Draws(noise, inflate, chain, refitter, orders, bands)
@@ -126,7 +126,7 @@ def _band_variants(ident: Identification, refitter: Refitter, orders: list[int],
     top = float(np.max(ident.settlement.data.omega))
     for fraction in BAND_TOPS[1:] if ident.settlement.model_error_detected else ():
         part = ident.settlement.data.below(fraction * top)
-        prepared = _refitter_on(part, ident, sorted(set(orders)))
+        prepared = _refitter_on(part, ident, sorted({*orders, ident.order}))  # (a draw may fall back to it)
         if prepared is not None:
             omega_max.append(fraction * top)
             refitters.append(prepared)
@@ -149,4 +149,10 @@ def _refitter_on(part: SpectralData, ident: Identification, orders: list[int]) -
         if not all(is_stable(f.a) for f in refit):
             return None
         fits[n], branches[n] = refit[0], refit[1:]
-    return Refitter(part, fits, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay, branches)
+    return Refitter(part, fits, ident.settlement.sweep.delay_mode, ident.settlement.setup.max_delay, branches,
+                    _lowest_bin_cycles(ident))
+
+
+def _lowest_bin_cycles(ident: Identification) -> float:
+    """The lowest fitted bin in cycles per sample (Refitter.places)."""
+    return ident.settlement.setup.lowest_bin_hz * ident.settlement.setup.sample_interval_s

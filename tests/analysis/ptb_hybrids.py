@@ -21,16 +21,24 @@ HYBRID_MAX_MISSES = 4  # max_misses(99): 9 until the studies (measured: 0 of 99)
 
 # ---------------------------------------------------------------------------- hybrids
 F_N_HZ, ZETA, SENSITIVITY = 55e3, 0.03, 0.23  # a sensor like PTB's (sine: mode near 51–57 kHz)
-_WN = 2 * np.pi * F_N_HZ
-TRUTH = signal.lti([SENSITIVITY * _WN**2], [1.0, 2 * ZETA * _WN, _WN**2])  # the known sensor of every hybrid
 
 
-def hybrid_record(tension: float = 1.0, compression: float = 1.0, seed: int = 5) -> tuple[Record, signal.lti]:
+def sensor(f_n_hz: float, zeta: float) -> signal.lti:
+    """A known continuous sensor of one mode, SENSITIVITY at DC."""
+    wn = 2 * np.pi * f_n_hz
+    return signal.lti([SENSITIVITY * wn**2], [1.0, 2 * zeta * wn, wn**2])
+
+
+TRUTH = sensor(F_N_HZ, ZETA)  # the known sensor of every hybrid
+
+
+def hybrid_record(tension: float = 1.0, compression: float = 1.0, seed: int = 5,
+                  truth: signal.lti = TRUTH) -> tuple[Record, signal.lti]:
     """PTB's real reference (its pulse, its motion after the pulse, its noise) driving a known
-    continuous sensor, each lobe of the pulse with its own gain (issue 17 measured ×0.993 in
-    tension and ×1.0145 in compression), plus white noise at 0.01 % of the response's peak."""
+    continuous sensor (`truth`), each lobe of the pulse with its own gain (issue 17 measured
+    ×0.993 in tension and ×1.0145 in compression), plus white noise at 0.01 % of the response's
+    peak."""
     rec = ptb_record()
-    truth = TRUTH
     ref = rec.reference
     drive = np.where(ref >= 0, tension, compression) * ref
     _, y, _ = signal.lsim(truth, drive, rec.time_s - rec.time_s[0])
