@@ -35,6 +35,11 @@ refit moves them together) and added to every Monte Carlo draw:
   sensitivity (the DC gain and S_sh; the response's shape, so f_n, ζ and the FBSD, is not
   changed by it). What the record does show of a transverse drive (the kick at the impact) is
   the onset's disturbances, corrected.
+- **tension/compression asymmetry, not driven** (`one_direction_row`): where the pulse has no
+  opposite lobe (a separating mount's, a closed-form half-sine), ε cannot be fitted and the fit
+  reads the main direction's gain S_main, while the sensitivity reported is the mean of both
+  directions, S_main·(1 + ε/2) (analysis.input_terms). With ε unknown within the stated bound
+  (AnalysisOptions.asymmetry_bound_rel), the DC gain and S_sh shift by up to bound/2.
 """
 
 from __future__ import annotations
@@ -485,3 +490,16 @@ def transverse_row(dc_gain: float, shock_sensitivity: float | None, sensitivity_
     return TypeB("transverse sensitivity × transverse motion", shifts,
                  f"stated transverse sensitivity {sensitivity_rel:.3g} × the bar's transverse motion share "
                  f"{motion_rel:.3g}")
+
+
+def one_direction_row(dc_gain: float, shock_sensitivity: float | None, bound_rel: float) -> TypeB | None:
+    """The Type B of an asymmetry the pulse did not drive (module docstring): a shift of bound/2
+    of the DC gain and S_sh (the mean of both directions, S_main·(1 + ε/2), |ε| ≤ bound)."""
+    if not bound_rel > 0:
+        return None
+    shifts = {"dc_gain": 0.5 * bound_rel * dc_gain}
+    if shock_sensitivity is not None:
+        shifts["shock_sensitivity"] = 0.5 * bound_rel * shock_sensitivity
+    return TypeB("tension/compression asymmetry (one direction driven)", shifts,
+                 f"the pulse drives one direction only: the mean of both directions' sensitivities for |ε| ≤ "
+                 f"{bound_rel:.3g} (the stated bound)")

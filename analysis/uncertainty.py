@@ -117,7 +117,8 @@ def evaluate(
     """Monte Carlo uncertainty of `ident`'s figures (and of `reduction`'s, when given)."""
     # Imported here, not at the top: `hopkinson identify --no-uncertainty` never evaluates, and these
     # modules (the systematic rows, the draws, the budget) are a sixth of the analysis' import time.
-    from hopkinson.analysis.systematics import transverse_row, variant_bounds
+    from hopkinson.analysis.input_terms import ASYMMETRY
+    from hopkinson.analysis.systematics import one_direction_row, transverse_row, variant_bounds
     from hopkinson.analysis.uncertainty_budget import budget, nearest_mode
     from hopkinson.analysis.uncertainty_draws import draw
 
@@ -175,6 +176,9 @@ def evaluate(
     transverse = transverse_row(model.dc_gain, shock_value, options.transverse_sensitivity_rel,
                                 options.transverse_motion_rel)
     type_b += [transverse] if transverse is not None else []
+    if ASYMMETRY in ident.prep.terms.not_fitted and ASYMMETRY not in ident.prep.unseen:  # one direction driven
+        one_direction = one_direction_row(model.dc_gain, shock_value, options.asymmetry_bound_rel)
+        type_b += [one_direction] if one_direction is not None else []
     figure_draws = {"dc_gain": dc_draws, "natural_frequency_hz": fn_draws, "damping_ratio": zeta_draws,
                     **{f"fbsd_{k}_hz": fbsd_draws[k] for k in fbsd_draws}}
     added_shock = np.zeros(options.draws)

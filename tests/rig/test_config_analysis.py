@@ -38,6 +38,7 @@ def test_every_key_has_the_options_default(section: type) -> None:
     ("analysis", "dcm_widening", 1.0), ("analysis", "dcm_noise_gain_limit", 0.0), ("analysis", "grating_pitch_m", 0.01),
     ("analysis", "orders", [1, 1]), ("analysis", "amp_gain_2", 0.0), ("uncertainty", "draws", 49),
     ("uncertainty", "amplifier_gain_rel", 0.6), ("uncertainty", "transverse_motion_rel", 1.5),
+    ("uncertainty", "asymmetry_bound_rel", -0.01),
 ])
 def test_what_the_analysis_refuses_the_file_refuses_in_one_line(tmp_path: Path, section: str, key: str,
                                                                 value: object) -> None:
