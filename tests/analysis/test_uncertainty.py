@@ -45,7 +45,8 @@ from hopkinson.analysis.uncertainty import Estimate, evaluate, shot_uncertainty
 from tests.analysis.hard_records import Case, record, truth_figures
 
 NO_CHAIN = dict(u_grating_pitch_rel=0.0, u_interferometer_rel=0.0, u_amp_gain_rel=0.0, u_digitizer_gain_rel=0.0,
-                u_channel_skew_s=0.0, transverse_motion_rel=0.0)  # the transverse row too: these records have none
+                u_channel_skew_s=0.0, transverse_motion_rel=0.0,  # the transverse row too: these records have none
+                asymmetry_bound_rel=0.0)  # nor an asymmetry (their half-sine drives one direction of a symmetric sensor)
 MIN_INSIDE = 133  # of SHOTS: see the module docstring for the test's power
 CASE = Case(reference_noise=0.02, response_noise=0.02, samples=10_000)
 SHOTS = 140
@@ -155,9 +156,14 @@ def test_the_intervals_are_not_needlessly_wide(study) -> None:
 def test_reference_chain_adds_in_quadrature_to_the_dc_gain() -> None:
     ident = identify(record(CASE, 7))
     noise_only = evaluate(ident, AnalysisOptions(draws=DRAWS, seed=1, **NO_CHAIN))
-    chain = evaluate(ident, AnalysisOptions(draws=DRAWS, seed=1))
+    chain = evaluate(ident, AnalysisOptions(draws=DRAWS, seed=1, asymmetry_bound_rel=0.0))
     expected = math.sqrt((noise_only.dc_gain.u / noise_only.dc_gain.value) ** 2 + 1e-4**2 + 5e-4**2 + 2e-3**2 + 2e-3**2)
     assert chain.dc_gain.u / chain.dc_gain.value == pytest.approx(expected, rel=0.2)
+    # A half-sine drives one direction: the stated bound on |ε| (3 %) adds a rectangle of half it
+    one_way = evaluate(ident, AnalysisOptions(draws=DRAWS, seed=1, **{**NO_CHAIN, "asymmetry_bound_rel": 0.03}))
+    expected = math.hypot(noise_only.dc_gain.u / noise_only.dc_gain.value, 0.015 / math.sqrt(3))
+    assert one_way.dc_gain.u / one_way.dc_gain.value == pytest.approx(expected, rel=0.2)
+    assert one_way.natural_frequency_hz.u == pytest.approx(noise_only.natural_frequency_hz.u, rel=1e-9)  # a gain: the shape is not moved
     budget = {b["source"]: b for b in chain.to_dict()["budget"]}
     assert budget["amplifier gain"]["u_rel"] == 2e-3 and budget["grating pitch"]["u_rel"] == 1e-4
     # The chain scales the sensitivity only: f_n's interval is the same with or without it.
