@@ -192,6 +192,15 @@ class Reduction:
         """The PM beat's demodulation (None for a quadrature interferometer)."""
         return self.reference.beat
 
+    def check_direction_known(self, source: str) -> None:
+        """AnalysisError where the reference's direction of motion is not known everywhere: one
+        photodetector (the PM beat) whose velocity falls back towards rest after the pulse
+        (`check_speed_keeps_its_sign`). Called where figures are made from the record (the
+        analysis of a raw shot, `hopkinson reduce`), not by the reduction itself, which the
+        simulator's own checks read either way."""
+        if self.reference.method == PM_BEAT:
+            check_speed_keeps_its_sign(self.velocity_m_s, source)
+
     def quantities(self) -> dict[str, Any]:
         """JSON-ready shock quantities and reduction diagnostics."""
         return {
@@ -360,8 +369,6 @@ def _reduce_sensor(reference: ReferencePhase, response: np.ndarray, channel: Sen
                                    start_time_s + reference.start_time_s, sample_rate_hz)
     demod: Demodulated = differentiate(at_rate.reference, at_rate.sample_interval_s, at_rate.start_time_s,
                                        reference.beat, bandwidth_hz)
-    if reference.method == PM_BEAT:
-        check_speed_keeps_its_sign(demod.velocity_m_s, source)
     rate = 1.0 / at_rate.sample_interval_s
     response_out = lowpass(at_rate.response, demod.bandwidth_hz, rate)
     acceleration = demod.acceleration_m_s2

@@ -314,6 +314,7 @@ def analyse_raw_shot(doppler_v: np.ndarray, response_v: np.ndarray, sample_inter
                              grating_pitch_m=params.grating_pitch_m, orders=params.orders,
                              sample_rate_hz=params.sample_rate_hz, source=source, full_scale_v=full_scale_v)
     first = reduced.pop("response")
+    first.check_direction_known(source)
     analysis = analyse_record(first.record, params, reduction=first.quantities())
     for role, reduction in reduced.items():
         try:

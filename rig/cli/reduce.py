@@ -202,6 +202,7 @@ def run_reduce(args: argparse.Namespace) -> int:
         source=str(args.raw),
         full_scale_v={**raw.full_scale_v, **full_scale_v},
     )
+    reduction.check_direction_known(str(args.raw))
     out = write_record(args.output, reduction.record)
     result = {"raw": str(args.raw), "output": str(out), "samples": reduction.record.n_samples,
               **reduction.quantities()}
