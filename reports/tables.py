@@ -299,8 +299,8 @@ BUDGET_NOTE = ("Relative standard uncertainty (%) of each figure from each sourc
                "Type A: evaluated from the record (its noise, the fit's scatter; '(fitted)': a correction applied to "
                "the record, the tension/compression asymmetry, the bar's motion after the pulse, the onset's "
                "disturbances, and its estimate's uncertainty). Type B: from other knowledge (the reference chain's "
-               "certificates, the stated transverse sensitivity, and bounds, rectangular, on how the corrections and "
-               "the model are made).")
+               "certificates, the stated transverse sensitivity and asymmetry bound, and bounds, rectangular, on how "
+               "the corrections and the model are made).")
 
 
 def budget_rows(entry: ShotEntry) -> tuple[list[str], list[list[str]]]:
