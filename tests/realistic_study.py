@@ -69,9 +69,10 @@ def shot_plan(shots: int, seed: int = PLAN_SEED) -> list[tuple[int, float, int]]
     return [(PROJECTILES[i % len(PROJECTILES)], round(float(pressures[i]), 3), i + 1) for i in range(shots)]
 
 
-def world_params(name: str = "shipped", **changes: Any) -> Any:
-    """config/sim.toml's world, with the effect `name` alone (WORLDS) and `changes` to its
-    accelerometer (e.g. nonlinearity_per_m_s2)."""
+def world_params(name: str = "shipped", *, bar_mount: str | None = None, **changes: Any) -> Any:
+    """config/sim.toml's world, with the effect `name` alone (WORLDS), the sensor on another
+    `bar_mount` ("bonded" or "separating"; None: as shipped) and `changes` to its accelerometer
+    (e.g. nonlinearity_per_m_s2)."""
     from pathlib import Path
 
     from hopkinson.rig.config import load_sim_config
@@ -80,6 +81,8 @@ def world_params(name: str = "shipped", **changes: Any) -> Any:
     change = WORLDS[name]
     if change is not None:
         world = dataclasses.replace(world, realism=change(world.realism))
+    if bar_mount is not None:
+        world = dataclasses.replace(world, realism=dataclasses.replace(world.realism, bar_mount=bar_mount))
     if changes:
         world = dataclasses.replace(world, accelerometer=dataclasses.replace(world.accelerometer, **changes))
     return world

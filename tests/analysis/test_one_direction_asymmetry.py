@@ -12,7 +12,6 @@ intervals held it. With the row (the default bound 3 %), 24 of 24, median U 1.47
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import pytest
@@ -25,9 +24,7 @@ ROW = "tension/compression asymmetry (one direction driven)"
 
 @pytest.fixture(scope="module")
 def shot():
-    world = world_params("shipped")
-    world = dataclasses.replace(world, realism=dataclasses.replace(world.realism, bar_mount="separating"))
-    out = run_shot(world, 2, 3.0, 1, draws=60, keep_results=True)
+    out = run_shot(world_params("shipped", bar_mount="separating"), 2, 3.0, 1, draws=60, keep_results=True)
     assert out.error is None, out.error
     return out
 

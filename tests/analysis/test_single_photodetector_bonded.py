@@ -10,22 +10,23 @@ separating mount, is analysed as before.
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 
 import numpy as np
 import pytest
 
 from hopkinson.analysis.errors import AnalysisError
 from hopkinson.analysis.options import AnalysisOptions
-from hopkinson.analysis.reduce import RETURN_TO_REST_SHARE, reduce_raw
+from hopkinson.analysis.reduce import RETURN_TO_REST_SHARE, reduce_raw, write_raw_table
 from hopkinson.analysis.shot_analysis import analyse_raw_shot
+from hopkinson.rig.cli.main import main
 from tests.realistic_study import simulated_shot, world_params
 
 
+@functools.cache
 def shot(mount: str) -> dict:
-    world = world_params("shipped")
-    world = dataclasses.replace(world, realism=dataclasses.replace(world.realism, bar_mount=mount))
-    channels, _ = simulated_shot(world, 2, 3.0, 2)
+    """Shot 2 of the shipped world (projectile 2, 3 bar) on `mount`: its channels."""
+    channels, _ = simulated_shot(world_params("shipped", bar_mount=mount), 2, 3.0, 2)
     return channels
 
 
@@ -52,3 +53,15 @@ def test_one_photodetector_and_a_separating_mount_reduce_as_the_paper_has_it() -
     reduction.check_direction_known("shot")
     v = reduction.velocity_m_s
     assert np.min(v[int(np.argmax(v)):]) > 0.9 * np.max(v)  # flight: the velocity keeps its peak
+
+
+def test_hopkinson_reduce_refuses_it_in_one_line_writes_nothing_and_keeps_the_raw_file(tmp_path, capsys) -> None:
+    channels = shot("bonded")
+    raw = write_raw_table(tmp_path / "raw.npz", np.arange(channels[1].size) * 1e-8, channels[1], channels[2])
+    before = raw.read_bytes()
+    out = tmp_path / "record.npz"
+    code = main(["reduce", str(raw), "-o", str(out)])
+    stderr = capsys.readouterr().err.strip()
+    assert code == 2
+    assert stderr.count("\n") == 0 and str(raw) in stderr and "doppler_quadrature" in stderr, stderr
+    assert not out.exists() and raw.read_bytes() == before
