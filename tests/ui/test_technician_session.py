@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from PySide6.QtCore import QCoreApplication, QPoint, QPointF, Qt
 from PySide6.QtGui import QWheelEvent
+from pytestqt.exceptions import TimeoutError as QtWaitTimeout
 
 from hopkinson.analysis.key_figures import KeyFigures
 from hopkinson.rig.journal import Journal
@@ -46,11 +47,29 @@ def wheel(widget, steps: int = -2) -> None:
     QCoreApplication.sendEvent(widget, event)
 
 
+def until(qtbot, window, condition, what: str, timeout_ms: int = SHOT_TIMEOUT_MS) -> None:
+    """Wait for `condition`; on a timeout, fail saying what the panel showed (its message line,
+    state and last log rows), so a stall on a loaded machine explains itself."""
+    try:
+        qtbot.waitUntil(condition, timeout=timeout_ms)
+    except QtWaitTimeout:
+        rows = "; ".join(f"{kind}: {text}" for kind, text in window.log_view.messages()[-8:])
+        pytest.fail(f"{what}: not within {timeout_ms / 1000:g} s. Message line: {window.banner.full_text!r}; "
+                    f"state {window.state_bar.state}; last log rows: {rows}")
+
+
+def click_when_enabled(qtbot, window, button, what: str) -> None:
+    """Click `button` once it is enabled, as a technician would (the rig's links may be
+    re-checked for a moment between two steps)."""
+    until(qtbot, window, button.isEnabled, f"{what} enabled")
+    qtbot.mouseClick(button, Qt.MouseButton.LeftButton)
+
+
 def fire(qtbot, window, questions: list[str]):
     """ARM, wait for FIRE, FIRE (the confirmation's text kept), wait for the verdict drawn."""
     window.confirm_fire = lambda: questions.append(window.fire_question()) or True
-    qtbot.mouseClick(window.arm_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(window.fire_button.isEnabled, timeout=SHOT_TIMEOUT_MS)
+    click_when_enabled(qtbot, window, window.arm_button, "ARM")
+    until(qtbot, window, window.fire_button.isEnabled, "FIRE enabled once armed")
     with qtbot.waitSignal(window.shot_view_shown, timeout=SHOT_TIMEOUT_MS) as shown:
         qtbot.mouseClick(window.fire_button, Qt.MouseButton.LeftButton)
     return shown.args[0]
@@ -110,7 +129,7 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
     # ARM asks first; answered No, nothing moves
     asked: list[list[str]] = []
     w.confirm_setup = lambda problems: asked.append(problems) or False
-    qtbot.mouseClick(w.arm_button, Qt.MouseButton.LeftButton)
+    click_when_enabled(qtbot, w, w.arm_button, "ARM")
     assert len(asked) == 1 and any("above the target" in p for p in asked[0])
     assert any("exceeds the sensor's range" in p for p in asked[0])
     assert not w.busy and not w.link.shot_running and w.state_bar.state == "IDLE"
@@ -206,13 +225,13 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
     tab.confirm_campaign = lambda plan: "each"
     fired: list[str] = []
     w.confirm_fire = lambda: fired.append(w.fire_question()) or True
-    qtbot.mouseClick(tab.run_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(w.fire_button.isEnabled, timeout=SHOT_TIMEOUT_MS)  # the first shot waits armed
+    click_when_enabled(qtbot, w, tab.run_button, "the campaign's Run")
+    until(qtbot, w, w.fire_button.isEnabled, "FIRE for the campaign's first shot")  # it waits armed
     assert panel.world.shots_fired == 2 and "ARMED" in w.banner.full_text
     qtbot.mouseClick(w.fire_button, Qt.MouseButton.LeftButton)
     assert fired and fired[0].startswith("FIRE the armed shot now?\n\nCampaign shot s001-r1 (1 of 2)")
-    qtbot.waitUntil(lambda: tab.column("Verdict")[0] in ("ACCEPT", "REPEAT"), timeout=SHOT_TIMEOUT_MS)
-    qtbot.waitUntil(w.fire_button.isEnabled, timeout=SHOT_TIMEOUT_MS)  # the second waits for its own FIRE
+    until(qtbot, w, lambda: tab.column("Verdict")[0] in ("ACCEPT", "REPEAT"), "the first campaign shot's verdict")
+    until(qtbot, w, w.fire_button.isEnabled, "FIRE for the campaign's second shot")  # it waits for its own FIRE
     assert tab.column("Level")[0] == "40\u00a0000 g" and tab.column("State")[0] == "ANALYSED"
     assert tab.column("Sensitivity")[0].startswith("0.") and "±" in tab.column("Sensitivity")[0]
     assert tab.table.horizontalHeaderItem(8).text() == "Sensitivity\n(µV/(m/s²))"
@@ -222,10 +241,10 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
     run = tab.run_folder
     w.ask_close = lambda: "finish"
     qtbot.mouseClick(w.fire_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: w.state_bar.state in ("STORE", "ANALYSE"), timeout=SHOT_TIMEOUT_MS)
+    until(qtbot, w, lambda: w.state_bar.state in ("STORE", "ANALYSE"), "the second shot stored")
     w.close()
     assert w.isVisible() and "Closing once the shot" in w.banner.full_text  # not yet: the shot is finished first
-    qtbot.waitUntil(lambda: not w.isVisible(), timeout=SHOT_TIMEOUT_MS)
+    until(qtbot, w, lambda: not w.isVisible(), "the window closed after the shot")
     assert panel.world.shots_fired == 4
     last = read_shot(run.shot_path("s002-r1"), load_raw=False)
     assert last.state == "analysed" and last.results  # the fired shot kept its analysis
