@@ -19,7 +19,7 @@ from hopkinson.rig.level_control import (
 )
 from hopkinson.rig.plan import CampaignPlan, PlannedShot, load_plan
 from hopkinson.rig.run_folder import PLAN_NAME, RunFolder, create_run_folder, open_run_folder
-from hopkinson.rig.shot import ShotRequest
+from hopkinson.rig.shot import ShotRequest, sensor_stated
 
 if TYPE_CHECKING:
     from hopkinson.rig.config import RigConfig
@@ -108,7 +108,7 @@ def shot_request(plan: CampaignPlan, shot: PlannedShot, run: RunFolder, level: L
         sensor_identities=plan.sensor_identities(),
         analysis=AnalysisOverrides(
             **shot.analysis.analysis_options(), sensitivity_v_per_m_s2=sensor.sensitivity_v_per_m_s2,
-            sine_calibration=sensor.sine_calibration, transverse_sensitivity_rel=sensor.transverse_sensitivity_rel),
+            sine_calibration=sensor.sine_calibration, **sensor_stated(sensor)),
         out_dir=run.shots_dir, shot_name=shot.id, campaign_id=run.campaign_id, campaign_uuid=campaign_uuid,
         shot_id=shot.id,
         shot_index=shot.index, confirm_timeout_s=0.0, level=level.to_dict() if level is not None else None,

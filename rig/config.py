@@ -401,12 +401,12 @@ AnalysisConfig = options_section(
 UncertaintyConfig = options_section(
     "UncertaintyConfig", __name__, "[uncertainty]: the reference chain's relative standard uncertainties (k = 1, "
     "from the lab's calibration certificates; the defaults are typical values), the channel skew, the bar's "
-    "transverse motion, the bound on an asymmetry a one-direction pulse does not drive and the Monte Carlo draws "
-    "per shot (analysis.uncertainty).",
+    "transverse motion, the sensors' stated transverse sensitivity and asymmetry bound where a plan or the panel "
+    "does not state a sensor's own, and the Monte Carlo draws per shot (analysis.uncertainty).",
     {"grating_pitch_rel": "u_grating_pitch_rel", "interferometer_rel": "u_interferometer_rel",
      "amplifier_gain_rel": "u_amp_gain_rel", "digitizer_gain_rel": "u_digitizer_gain_rel",
      "channel_skew_s": "u_channel_skew_s", "draws": "draws", "transverse_motion_rel": "transverse_motion_rel",
-     "asymmetry_bound_rel": "asymmetry_bound_rel"})
+     "transverse_sensitivity_rel": "transverse_sensitivity_rel", "asymmetry_bound_rel": "asymmetry_bound_rel"})
 
 
 @dataclass(frozen=True)

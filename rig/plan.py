@@ -11,7 +11,10 @@ Example (config/campaigns/example.toml is the documented one)::
     model = "AYZ-3"
     serial = "SN0001"
     sensitivity_v_per_m_s2 = 2.0e-7   # optional nominal sensitivity (amplifier output)
-    transverse_sensitivity_rel = 0.05 # optional: its stated (datasheet) transverse sensitivity (default 5 %)
+    transverse_sensitivity_rel = 0.05 # optional: its stated (datasheet) transverse sensitivity (default:
+                                      # the rig config's [uncertainty] one, 5 % as shipped)
+    asymmetry_bound_rel = 0.03        # optional: a bound on its tension/compression asymmetry, carried
+                                      # where a pulse drives one direction only (default: the rig's)
     sensitivity_unit = "µV/(m/s²)"    # optional: the unit results show it in (analysis.sensitivity_units)
     tolerance_percent = 5.0           # optional: the sensor's tolerance on its nominal (each shot's verdict)
     sine_calibration = "sine.csv"     # optional: the sensor's sine calibration (frequency_hz,
@@ -125,7 +128,11 @@ class Accelerometer:
     tolerance_percent: Annotated[Annotated[Number, Field(gt=0, lt=100)] | None, Field(description=(
         "the sensor's tolerance on its nominal sensitivity, per cent: a shot beyond it is flagged"))] = None
     transverse_sensitivity_rel: Annotated[Annotated[Number, Field(ge=0, le=1)] | None, Field(description=(
-        "its stated (datasheet) transverse sensitivity, a fraction; unset: 5 % (a Type B row of the budget)"))] = None
+        "its stated (datasheet) transverse sensitivity, a fraction; unset: the rig config's [uncertainty] "
+        "transverse_sensitivity_rel (a Type B row of the budget)"))] = None
+    asymmetry_bound_rel: Annotated[Annotated[Number, Field(ge=0, le=1)] | None, Field(description=(
+        "a bound on its tension/compression asymmetry |ε|, a fraction, carried where a pulse drives one direction "
+        "only; unset: the rig config's [uncertainty] asymmetry_bound_rel (a Type B row of the budget)"))] = None
 
 
 @dataclass(frozen=True)

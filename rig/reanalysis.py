@@ -28,6 +28,7 @@ from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import load_plan
 from hopkinson.rig.run_folder import PLAN_NAME, SHOTS_DIR, RunFolder, open_run_folder
 from hopkinson.rig.shot import (
+    SENSOR_STATED,
     AnalyseFn,
     RecordedAnalysis,
     ShotRequest,
@@ -80,7 +81,7 @@ def stored_params(shot: Shot, config: RigConfig | None) -> AnalysisOptions:
                             "it cannot be re-analysed as it was")
     settings = dict(shot.meta.config.get("shot_settings", {}))
     asked = dict(settings.get("analysis_options") or {})
-    for sensor_own in ("sensitivity_v_per_m_s2", "transverse_sensitivity_rel"):  # recorded under their own keys
+    for sensor_own in ("sensitivity_v_per_m_s2", *SENSOR_STATED):  # recorded under their own keys
         if settings.get(sensor_own) is not None:
             asked[sensor_own] = settings[sensor_own]
     known = {f.name for f in dataclasses.fields(AnalysisOverrides)}

@@ -65,9 +65,19 @@ from hopkinson.rig.shotfile_writer import add_analysis, write_raw_shot
 QUADRATURE_ROLE = "doppler_quadrature"
 PROJECTILES = (1, 2, 3)  # the projectiles the rig's loader takes
 MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("response"), in this order
-# The sensor's own options (its nominal sensitivity, its sine calibration, its transverse
-# sensitivity) and the order of the options the first shot files' settings recorded.
-SENSOR_OPTIONS = ("sensitivity_v_per_m_s2", "sine_calibration", "transverse_sensitivity_rel")
+# What a sensor's data sheet states that the budget carries (analysis.systematics): a plan's
+# [accelerometer] or the panel gives them, the rig config's [uncertainty] where neither does; a
+# shot file records them under their own keys in its settings (rig.reanalysis reads them back).
+SENSOR_STATED = ("transverse_sensitivity_rel", "asymmetry_bound_rel")
+# The sensor's own options (its nominal sensitivity, its sine calibration, what it states) and
+# the order of the options the first shot files' settings recorded.
+SENSOR_OPTIONS = ("sensitivity_v_per_m_s2", "sine_calibration", *SENSOR_STATED)
+
+
+def sensor_stated(sensor: Any) -> dict[str, float | None]:
+    """What `sensor` (a plan's [accelerometer]) states of SENSOR_STATED, as analysis options
+    (None: not stated there)."""
+    return {name: getattr(sensor, name) for name in SENSOR_STATED}
 RECORDED_FIRST = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
 
 
@@ -287,8 +297,9 @@ def shot_meta(request: ShotRequest, config: RigConfig, identities: dict[str, str
     snapshot["shot_settings"] = dict(captured.settings,
                                      sensitivity_v_per_m_s2=request.sensitivity(config),
                                      analysis_options=request.recorded_options())
-    if request.analysis.transverse_sensitivity_rel is not None:  # the sensor's stated one (a plan's)
-        snapshot["shot_settings"]["transverse_sensitivity_rel"] = float(request.analysis.transverse_sensitivity_rel)
+    for name in SENSOR_STATED:  # the sensor's stated ones (a plan's, the panel's)
+        if getattr(request.analysis, name) is not None:
+            snapshot["shot_settings"][name] = float(getattr(request.analysis, name))
     if request.level is not None:
         snapshot["shot_settings"]["level_control"] = dict(request.level)
     if request.sensitivity_unit is not None:

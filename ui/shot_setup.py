@@ -8,6 +8,9 @@ its plausible range naming that unit (`refused`: one line for the window's banne
 sensitivity is entered in the sensor's own unit, chosen beside it (analysis.sensitivity_units:
 µV/(m/s²), mV/g, pC/(m/s²), …); the request carries its SI value and the unit's name, which
 the shot file records, so results come back in that unit. f_n is in kHz everywhere on the panel.
+What the sensor's data sheet states that the budget carries, its transverse sensitivity and a
+bound on its tension/compression asymmetry, is entered in per cent (the rig config's
+[uncertainty] values until changed); the shot file records both (rig.shot.SENSOR_STATED).
 
 The shot matches the plan. Under the pressure the form shows what the set-up will do
 (ui.setup_check: the bar model's peak in g and km/s², the pulse width and the band for the
@@ -102,6 +105,15 @@ class ShotSetup(QWidget):
         self.tolerance = UnitSpinBox("Tolerance", "%", (0.1, 50.0), 0.0, decimals=1, step=0.5, special="not set",
                                      tip="the sensor's tolerance on its nominal sensitivity: a shot outside it is "
                                          "flagged")
+        stated = config.uncertainty  # the rig's values where a sensor states none (analysis.systematics)
+        self.transverse = UnitSpinBox("Transverse sensitivity", "%", (0.0, 100.0),
+                                      100 * stated.transverse_sensitivity_rel, decimals=1, step=0.5,
+                                      tip="the sensor's stated (data-sheet) transverse sensitivity: times the bar's "
+                                          "transverse motion, a Type B row of the sensitivity's uncertainty")
+        self.asymmetry = UnitSpinBox("Asymmetry bound", "%", (0.0, 100.0), 100 * stated.asymmetry_bound_rel,
+                                     decimals=1, step=0.5,
+                                     tip="a bound on the sensor's tension/compression asymmetry: carried (half of "
+                                         "it) where a pulse drives one direction only")
         self.sensor_range = UnitSpinBox("Sensor range", "g", (100.0, 2e6), 0.0, decimals=0, step=1000.0,
                                         special="not set", tip="the highest shock the sensor is rated for: a set-up "
                                                                "predicted above it asks before ARM")
@@ -152,6 +164,8 @@ class ShotSetup(QWidget):
         form.addRow("Nominal sens.", sensitivity_row)
         form.addRow("Tolerance (± %)", self.tolerance)
         form.addRow("Sensor range (g)", self.sensor_range)
+        form.addRow("Transverse sens.", self.transverse)
+        form.addRow("Asymmetry bound", self.asymmetry)
         form.addRow("Sine calibration", sine_row)
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             form.addRow("2nd accelerometer", self.accelerometer_2_model)
@@ -263,6 +277,8 @@ class ShotSetup(QWidget):
             tolerance_percent=tolerance or None,
             analysis=AnalysisOverrides(
                 sensitivity_v_per_m_s2=self.unit.to_si(self.sensitivity.value()),
+                transverse_sensitivity_rel=round(self.transverse.value() / 100, 6),
+                asymmetry_bound_rel=round(self.asymmetry.value() / 100, 6),
                 max_order=self.max_order.value(),
                 sample_rate_hz=self.sample_rate.value() * 1e3,
                 dcm_ratio=ratio if ratio > 0 else None,
@@ -352,6 +368,7 @@ class ShotSetup(QWidget):
             # the key keeps its old name: a set-up remembered before units were chosen was in µV/(m/s²)
             "sensitivity_uv_per_m_s2": self.sensitivity, "pressure_bar": self.pressure,
             "tolerance_percent": self.tolerance, "sensor_range_g": self.sensor_range,
+            "transverse_sensitivity_percent": self.transverse, "asymmetry_bound_percent": self.asymmetry,
             "max_order": self.max_order, "sample_rate_khz": self.sample_rate,
             "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping,
             "target_peak_g": self.planner.target_g, "sensor_fn_khz": self.planner.sensor_fn_khz}

@@ -95,16 +95,17 @@ def test_a_shot_never_analysed_is_analysed_from_its_configuration(shot_file: Pat
 
 def test_a_shot_never_analysed_keeps_what_its_request_asked(shot_file: Path, capsys) -> None:
     """The options the shot's request asked (recorded in its settings: a plan's order, the draws)
-    and its sensor's own sensitivity and stated transverse sensitivity are the re-analysis' too,
-    not the rig configuration's."""
+    and its sensor's own sensitivity, stated transverse sensitivity and asymmetry bound are the
+    re-analysis' too, not the rig configuration's."""
     _never_analysed(shot_file, analysis_options={"max_order": 5, "uncertainty": False},
-                    sensitivity_v_per_m_s2=3.0e-7, transverse_sensitivity_rel=0.02)
+                    sensitivity_v_per_m_s2=3.0e-7, transverse_sensitivity_rel=0.02, asymmetry_bound_rel=0.05)
     assert main(["analyse", str(shot_file), "--json"]) == 0
     (row,) = json.loads(capsys.readouterr().out)["shots"]
     assert row["ok"], row
     params = read_shot(shot_file).results["params"]
     assert params["max_order"] == 5 and params["uncertainty"] is False
     assert params["sensitivity_v_per_m_s2"] == 3.0e-7 and params["transverse_sensitivity_rel"] == 0.02
+    assert params["asymmetry_bound_rel"] == 0.05
 
 
 @pytest.mark.parametrize("make, message", [

@@ -14,7 +14,7 @@ from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import load_plan
-from hopkinson.rig.shot import CapturedShot, ShotRequest, ShotRequestError, shot_meta
+from hopkinson.rig.shot import CapturedShot, ShotRequest, ShotRequestError, analysis_params, shot_meta
 
 REPO = Path(__file__).resolve().parents[2]
 PLAN = """
@@ -77,10 +77,13 @@ def test_the_shot_file_settings_record_them(tmp_path: Path) -> None:
     assert settings["sensitivity_unit"] == "mV/g" and settings["sensitivity_tolerance_percent"] == 3.0
     plain = shot_meta(ShotRequest(pressure_bar=2.0, out_dir=tmp_path), config, {}, captured).config["shot_settings"]
     assert "sensitivity_unit" not in plain and "sensitivity_tolerance_percent" not in plain
-    assert "transverse_sensitivity_rel" not in plain
-    # the sensor's stated transverse sensitivity (a plan's): what a later re-analysis needs (rig.reanalysis)
-    stated = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(transverse_sensitivity_rel=0.03), out_dir=tmp_path)
-    assert shot_meta(stated, config, {}, captured).config["shot_settings"]["transverse_sensitivity_rel"] == 0.03
+    assert "transverse_sensitivity_rel" not in plain and "asymmetry_bound_rel" not in plain
+    # what the sensor states (a plan's, the panel's): what a later re-analysis needs (rig.reanalysis)
+    stated = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(transverse_sensitivity_rel=0.03,
+                                                                      asymmetry_bound_rel=0.045), out_dir=tmp_path)
+    settings = shot_meta(stated, config, {}, captured).config["shot_settings"]
+    assert (settings["transverse_sensitivity_rel"], settings["asymmetry_bound_rel"]) == (0.03, 0.045)
+    assert "asymmetry_bound_rel" not in settings["analysis_options"]  # recorded once, under its own key
 
 
 def test_a_campaign_shot_carries_the_plans_unit_and_tolerance(tmp_path: Path) -> None:
@@ -88,10 +91,18 @@ def test_a_campaign_shot_carries_the_plans_unit_and_tolerance(tmp_path: Path) ->
 
     from hopkinson.rig.campaign_setup import shot_request
 
-    plan = load_plan(plan_with(tmp_path, 'sensitivity_unit = "mV/g"\ntolerance_percent = 2.5'))
+    plan = load_plan(plan_with(tmp_path, 'sensitivity_unit = "mV/g"\ntolerance_percent = 2.5\n'
+                                         'transverse_sensitivity_rel = 0.01\nasymmetry_bound_rel = 0.07'))
     run = SimpleNamespace(shots_dir=tmp_path, campaign_id="t-run")
     request = shot_request(plan, plan.shots[0], run)  # type: ignore[arg-type]
     assert (request.sensitivity_unit, request.tolerance_percent) == ("mV/g", 2.5)
+    assert (request.analysis.transverse_sensitivity_rel, request.analysis.asymmetry_bound_rel) == (0.01, 0.07)
+    params = analysis_params(request, load_rig_config(REPO / "config" / "rig-sim.toml"), {})
+    assert (params.transverse_sensitivity_rel, params.asymmetry_bound_rel) == (0.01, 0.07)  # the sensor's, not the rig's
+    plain = shot_request(load_plan(plan_with(tmp_path, "")), plan.shots[0], run)  # type: ignore[arg-type]
+    assert (plain.analysis.transverse_sensitivity_rel, plain.analysis.asymmetry_bound_rel) == (None, None)
+    with pytest.raises(ConfigError, match=r"accelerometer\.asymmetry_bound_rel"):
+        load_plan(plan_with(tmp_path, "asymmetry_bound_rel = 1.5"))
 
 
 def test_a_shots_judgement_reads_its_unit_nominal_tolerance_and_target() -> None:

@@ -15,7 +15,8 @@ from hopkinson.rig.cli.main import main
 from hopkinson.rig.shotfile import read_shot
 
 REPO = Path(__file__).resolve().parents[2]
-CHANGED = {"dcm_widening": "5.0", "dcm_noise_gain_limit": "6.0", "grating_pitch_rel": "3e-4", "draws": "120"}
+CHANGED = {"dcm_widening": "5.0", "dcm_noise_gain_limit": "6.0", "grating_pitch_rel": "3e-4", "draws": "120",
+           "transverse_sensitivity_rel": "0.01", "asymmetry_bound_rel": "0.04"}
 
 
 def _rig_toml(tmp_path: Path) -> Path:
@@ -74,6 +75,7 @@ def test_a_requests_analysis_overrides_merge_over_the_config_and_name_a_bad_valu
     assert (params.draws, params.dcm_damping, params.max_order) == (80, 0.6, 7)
     assert (params.sensitivity_v_per_m_s2, params.transverse_sensitivity_rel, params.amp_gain) == (3e-7, 0.1, 20.0)
     assert params.dcm_widening == 5.0 and params.u_grating_pitch_rel == 3e-4  # the configuration's
+    assert params.asymmetry_bound_rel == 0.04  # the rig's, where the request states none for its sensor
     assert list(request.recorded_options().items()) == [("max_order", 7), ("dcm_damping", 0.6), ("draws", 80)]
     with pytest.raises(ShotRequestError, match=r"^analysis option max_order: an integer from 1 to 60, got 0$"):
         ShotRequest(pressure_bar=1.0, out_dir=tmp_path, analysis=AnalysisOverrides(max_order=0)).check(config)

@@ -63,6 +63,12 @@ def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_d
     heartbeat.start(10)
     threads: set[str] = set()
     w.link.bus.subscribe(lambda e: threads.add(threading.current_thread().name))
+    # what the sensor's data sheet states, in per cent (the rig config's 5 % and 3 % until changed)
+    stated = w.setup.transverse, w.setup.asymmetry
+    assert [s.value() for s in stated] == [100 * w.config.uncertainty.transverse_sensitivity_rel,
+                                           100 * w.config.uncertainty.asymmetry_bound_rel] == [5.0, 3.0]
+    stated[0].setValue(1.0)
+    stated[1].setValue(6.0)
 
     with qtbot.waitSignal(w.shot_view_shown, timeout=SHOT_TIMEOUT_MS) as shown:
         outcome = fire_one_shot(qtbot, panel)
@@ -76,6 +82,14 @@ def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_d
     # the plots hold this shot's data, read back independently from its file
     view = shown.args[0]
     shot = read_shot(outcome.shot_path)
+    # the stated values reached the analysis and the file: the transverse row is S_t·r_T/√3 (a
+    # rectangle of half-width S_t·r_T) of the DC gain, with the rig's r_T
+    params, settings = shot.results["params"], shot.meta.config["shot_settings"]
+    assert (params["transverse_sensitivity_rel"], params["asymmetry_bound_rel"]) == (0.01, 0.06)
+    assert (settings["transverse_sensitivity_rel"], settings["asymmetry_bound_rel"]) == (0.01, 0.06)
+    (row,) = [b for b in shot.results["uncertainty"]["budget"] if b["source"].startswith("transverse sensitivity")]
+    motion = w.config.uncertainty.transverse_motion_rel
+    assert row["u_rel_by_figure"]["dc_gain"] == pytest.approx(0.01 * motion / math.sqrt(3), rel=1e-9)
     plots = w.plots
     x, y = plots.pm_curve.getOriginalDataset()
     assert np.array_equal(y, shot.raw.volts("doppler")) and np.allclose(x, shot.raw.time_s)
