@@ -1,5 +1,5 @@
 """The campaign plan editor: a plan's name, operator, sensor (nominal sensitivity in its own
-unit, tolerance), authorisation and its shot entries (a pressure in bar or a target peak in g,
+unit, tolerance, the transverse sensitivity and asymmetry bound it states), authorisation and its shot entries (a pressure in bar or a target peak in g,
 the projectile, the repeats), written as the plan TOML `hopkinson campaign run` reads
 (rig.plan; checked by rig.plan.plan_from_dict before it is saved).
 
@@ -56,6 +56,10 @@ class PlanEntry:
     extra: tuple[tuple[str, Any], ...] = ()
 
 
+# PlanFields' per-cent fields -> the plan's [accelerometer] keys (fractions)
+STATED_KEYS = {"transverse_percent": "transverse_sensitivity_rel", "asymmetry_percent": "asymmetry_bound_rel"}
+
+
 @dataclass(frozen=True)
 class PlanFields:
     name: str
@@ -67,6 +71,10 @@ class PlanFields:
     tolerance_percent: float  # 0: not given
     authorise_firing: bool
     description: str = ""
+    # what the sensor's data sheet states (rig.shot.SENSOR_STATED), per cent (0: not stated: the
+    # rig config's [uncertainty] value)
+    transverse_percent: float = 0.0
+    asymmetry_percent: float = 0.0
 
 
 def plan_document(fields: PlanFields, entries: list[PlanEntry], base: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -78,7 +86,7 @@ def plan_document(fields: PlanFields, entries: list[PlanEntry], base: dict[str, 
     doc["authorise_firing"] = bool(fields.authorise_firing)
     acc = dict(doc.get("accelerometer") or {})
     acc["model"], acc["serial"] = fields.model.strip(), fields.serial.strip()
-    for key in ("sensitivity_v_per_m_s2", "sensitivity_unit", "tolerance_percent"):
+    for key in ("sensitivity_v_per_m_s2", "sensitivity_unit", "tolerance_percent", *STATED_KEYS.values()):
         acc.pop(key, None)
     if fields.sensitivity > 0:
         unit = UNITS[fields.unit]
@@ -86,6 +94,9 @@ def plan_document(fields: PlanFields, entries: list[PlanEntry], base: dict[str, 
         acc["sensitivity_unit"] = unit.name
     if fields.tolerance_percent > 0:
         acc["tolerance_percent"] = fields.tolerance_percent
+    for name, key in STATED_KEYS.items():
+        if getattr(fields, name) > 0:
+            acc[key] = round(getattr(fields, name) / 100, 6)
     doc["accelerometer"] = acc
     shots = []
     for e in entries:
@@ -159,11 +170,20 @@ class PlanEditor(QDialog):
             lambda: self.sensitivity.set_plausible(*UNITS[str(self.unit.currentData())].plausible_range()))
         self.tolerance = UnitSpinBox("Tolerance", "%", (0.1, 50.0), float(acc.get("tolerance_percent") or 0.0),
                                      decimals=1, special="not set")
+        stated = {key: 100 * float(acc.get(key) or 0.0) for key in STATED_KEYS.values()}
+        self.transverse = UnitSpinBox("Transverse sensitivity", "%", (0.01, 100.0),
+                                      stated["transverse_sensitivity_rel"], decimals=2, step=0.5, special="the rig's",
+                                      tip="the sensor's stated (data-sheet) transverse sensitivity; not set: the rig "
+                                          "config's [uncertainty] one")
+        self.asymmetry = UnitSpinBox("Asymmetry bound", "%", (0.01, 100.0), stated["asymmetry_bound_rel"],
+                                     decimals=2, step=0.5, special="the rig's",
+                                     tip="a bound on the sensor's tension/compression asymmetry, carried where a "
+                                         "pulse drives one direction only; not set: the rig config's")
         self.authorise = QCheckBox("fire every shot without asking (else each shot is confirmed with FIRE)")
         self.authorise.setChecked(bool(self.base.get("authorise_firing", False)))
         self.message = QLabel("")
         self.message.setWordWrap(True)
-        for spin in (self.sensitivity, self.tolerance):
+        for spin in (self.sensitivity, self.tolerance, self.transverse, self.asymmetry):
             spin.refused.connect(lambda text: self._say("warning", f"Not taken: {text}."))
 
         self.table = QTableWidget(0, 4)
@@ -190,6 +210,8 @@ class PlanEditor(QDialog):
         row.addWidget(self.unit)
         form.addRow("Nominal sens.", row)
         form.addRow("Tolerance (± %)", self.tolerance)
+        form.addRow("Transverse sens.", self.transverse)
+        form.addRow("Asymmetry bound", self.asymmetry)
         form.addRow("", self.authorise)
         buttons_row = QHBoxLayout()
         buttons_row.addWidget(add)
@@ -243,7 +265,8 @@ class PlanEditor(QDialog):
     def fields(self) -> PlanFields:
         return PlanFields(self.name.text(), self.operator.text(), self.model.text(), self.serial.text(),
                           self.sensitivity.value(), str(self.unit.currentData()), self.tolerance.value(),
-                          self.authorise.isChecked(), str(self.base.get("description", "")))
+                          self.authorise.isChecked(), str(self.base.get("description", "")),
+                          self.transverse.value(), self.asymmetry.value())
 
     def ask_path(self) -> Path | None:
         """Where to save the plan (a dialog; tests replace it)."""

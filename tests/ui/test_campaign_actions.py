@@ -5,6 +5,7 @@ how a campaign ended is said without command lines."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -117,11 +118,15 @@ def test_the_plan_editor_writes_a_plan_and_keeps_what_it_does_not_show(tmp_path)
     doc, _text = read_toml(source, "plan file")
     entries = entries_of(doc)
     assert [(e.kind, e.value, e.projectile, e.repeats) for e in entries] == [(PRESSURE, 2.0, 3, 1)]
-    fields = PlanFields("edited", "A. Technician", "SIM-ACC", "SN-ACT", 1.96, "µV/g", 5.0, False)
+    fields = PlanFields("edited", "A. Technician", "SIM-ACC", "SN-ACT", 1.96, "µV/g", 5.0, False,
+                        transverse_percent=1.5, asymmetry_percent=4.0)
     edited = plan_document(fields, entries + [PlanEntry(TARGET, 50_000.0, 2, 3)], doc)
     plan = save_plan(edited, tmp_path / "edited.toml")
     assert plan.name == "edited" and not plan.authorise_firing
     assert plan.accelerometer.sensitivity_unit == "µV/g" and plan.accelerometer.tolerance_percent == 5.0
+    assert (plan.accelerometer.transverse_sensitivity_rel, plan.accelerometer.asymmetry_bound_rel) == (0.015, 0.04)
+    unstated = plan_document(dataclasses.replace(fields, transverse_percent=0.0, asymmetry_percent=0.0), entries, edited)
+    assert not {"transverse_sensitivity_rel", "asymmetry_bound_rel"} & set(unstated["accelerometer"])  # the rig's
     assert abs(plan.accelerometer.sensitivity_v_per_m_s2 - 1.96e-6 / 9.80665) < 1e-15
     assert [s.id for s in plan.shots] == ["s001-r1", "s002-r1", "s002-r2", "s002-r3"]
     assert plan.shots[0].pressure_bar == 2.0 and plan.shots[0].analysis.max_order == 5  # its override kept

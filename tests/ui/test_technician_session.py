@@ -211,6 +211,8 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
         dialog.serial.setText("SN-24017")
         dialog.sensitivity.setValue(0.2)
         dialog.tolerance.setValue(5.0)
+        assert dialog.transverse.text() == dialog.asymmetry.text() == "the rig's"  # not stated: the rig config's
+        dialog.transverse.setValue(2.0)  # the data sheet's 2 %
         dialog.table.setRowCount(0)
         dialog._extras.clear()
         for target in (40_000.0, 50_000.0):
@@ -248,6 +250,8 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
     assert panel.world.shots_fired == 4
     last = read_shot(run.shot_path("s002-r1"), load_raw=False)
     assert last.state == "analysed" and last.results  # the fired shot kept its analysis
+    params = last.results["params"]  # the plan's stated transverse sensitivity; the rig's asymmetry bound
+    assert (params["transverse_sensitivity_rel"], params["asymmetry_bound_rel"]) == (0.02, 0.03)
     with Journal.open(run) as journal:
         assert [s.state.value for s in journal.statuses()] == ["ANALYSED", "ANALYSED"]
     assert errors == []
