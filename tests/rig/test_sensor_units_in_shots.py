@@ -14,7 +14,13 @@ from hopkinson.drivers.digitizer import Waveform
 from hopkinson.rig.config import load_rig_config
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import load_plan
-from hopkinson.rig.shot import CapturedShot, ShotRequest, ShotRequestError, analysis_params, shot_meta
+from hopkinson.rig.shot import (
+    CapturedShot,
+    ShotRequest,
+    ShotRequestError,
+    analysis_params,
+    shot_meta,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 PLAN = """
