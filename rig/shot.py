@@ -72,13 +72,13 @@ SENSOR_STATED = ("transverse_sensitivity_rel", "asymmetry_bound_rel")
 # The sensor's own options (its nominal sensitivity, its sine calibration, what it states) and
 # the order of the options the first shot files' settings recorded.
 SENSOR_OPTIONS = ("sensitivity_v_per_m_s2", "sine_calibration", *SENSOR_STATED)
+RECORDED_FIRST = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
 
 
 def sensor_stated(sensor: Any) -> dict[str, float | None]:
     """What `sensor` (a plan's [accelerometer]) states of SENSOR_STATED, as analysis options
     (None: not stated there)."""
     return {name: getattr(sensor, name) for name in SENSOR_STATED}
-RECORDED_FIRST = ("max_order", "order", "sample_rate_hz", "dcm_ratio", "dcm_damping", "uncertainty", "draws")
 
 
 class ShotRequestError(ConfigError):
