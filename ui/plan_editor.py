@@ -1,7 +1,8 @@
 """The campaign plan editor: a plan's name, operator, sensor (nominal sensitivity in its own
 unit, tolerance, the transverse sensitivity and asymmetry bound it states), authorisation and
-its shot entries (a pressure in bar or a target peak in g, the projectile, the repeats), written as the plan TOML `hopkinson campaign run` reads
-(rig.plan; checked by rig.plan.plan_from_dict before it is saved).
+its shot entries (a pressure in bar or a target peak in g, the projectile, the repeats),
+written as the plan TOML `hopkinson campaign run` reads (rig.plan; checked by
+rig.plan.plan_from_dict before it is saved).
 
 Editing a loaded plan keeps what the editor does not show (its [defaults], each entry's
 [shots.analysis] overrides, a sine calibration, a second accelerometer): the editor changes only
