@@ -372,10 +372,13 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
 def sensor_params(params: AnalysisOptions, config: RigConfig) -> dict[str, AnalysisOptions]:
     """role -> the analysis parameters of each further sensor: the first sensor's, with that
     sensor's conditioner gain and nominal sensitivity ([analysis] amp_gain_2,
-    sensitivity_2_v_per_m_s2)."""
-    a = config.analysis
+    sensitivity_2_v_per_m_s2), and neither the first sensor's sine calibration nor what its data
+    sheet states (SENSOR_STATED): the rig config's [uncertainty] values, as for any sensor that
+    states none."""
+    a, rig = config.analysis, config.uncertainty.analysis_options()
     return {"response_2": dataclasses.replace(params, amp_gain=a.amp_gain_2, sine_calibration=None,
-                                              sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2)}
+                                              sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2,
+                                              **{name: rig[name] for name in SENSOR_STATED})}
 
 
 def analyse_raw(raw: RawShot, params: AnalysisOptions,

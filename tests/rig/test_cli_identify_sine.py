@@ -128,7 +128,8 @@ def test_ptb_record_with_its_sine_compensates_within_two_and_one_percent(tmp_pat
 def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
     """The route of a plan's [accelerometer] sine_calibration and the panel's shot set-up: the
     shot request's sine_calibration reaches the analysis options, the shot's analysis fits it,
-    a further sensor never inherits it, and an unreadable file is refused before anything moves."""
+    a further sensor never inherits it (nor the first sensor's stated transverse sensitivity and
+    asymmetry bound), and an unreadable file is refused before anything moves."""
     from hopkinson.analysis.options import AnalysisOptions, AnalysisOverrides
     from hopkinson.analysis.shot_analysis import analyse_record
     from hopkinson.rig.campaign_setup import shot_request
@@ -139,11 +140,16 @@ def test_a_shot_analysis_with_the_plans_sine_fits_both(files, tmp_path) -> None:
 
     _, sine, _ = files
     config = load_rig_config("config/rig-sim.toml")
-    request = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(sine_calibration=str(sine)), out_dir=tmp_path)
+    request = ShotRequest(pressure_bar=2.0, analysis=AnalysisOverrides(
+        sine_calibration=str(sine), transverse_sensitivity_rel=0.01, asymmetry_bound_rel=0.08), out_dir=tmp_path)
     request.check(config)
     params = analysis_params(request, config, {})
     assert params.sine_calibration == str(sine)
-    assert sensor_params(params, config)["response_2"].sine_calibration is None
+    second = sensor_params(params, config)["response_2"]
+    assert second.sine_calibration is None
+    # nor what the first sensor's data sheet states: the rig's values, as for a sensor stating none
+    assert (second.transverse_sensitivity_rel, second.asymmetry_bound_rel) == (
+        config.uncertainty.transverse_sensitivity_rel, config.uncertainty.asymmetry_bound_rel) == (0.05, 0.03)
     analysis = analyse_record(record(Case(), 3), AnalysisOptions(uncertainty=False, sine_calibration=str(sine)))
     joint = analysis.to_dict()["identification"]["sine_joint"]
     assert joint["consistent"] is True and joint["source"] == str(sine)
