@@ -13,7 +13,8 @@ is the dialog.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +39,9 @@ from PySide6.QtWidgets import (
 from hopkinson.analysis.sensitivity_units import DEFAULT_UNIT, G_M_S2, UNITS
 from hopkinson.rig.errors import ConfigError
 from hopkinson.rig.plan import CampaignPlan, plan_from_dict
-from hopkinson.rig.shot import PROJECTILES
+from hopkinson.rig.shot import PROJECTILES, SENSOR_STATED
 from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
+from hopkinson.ui.sensor_stated import StatedFields
 from hopkinson.ui.widgets import TEXT_COLOURS
 
 PRESSURE, TARGET = "pressure (bar)", "target (g)"
@@ -57,10 +59,6 @@ class PlanEntry:
     extra: tuple[tuple[str, Any], ...] = ()
 
 
-# PlanFields' per-cent fields -> the plan's [accelerometer] keys (fractions)
-STATED_KEYS = {"transverse_percent": "transverse_sensitivity_rel", "asymmetry_percent": "asymmetry_bound_rel"}
-
-
 @dataclass(frozen=True)
 class PlanFields:
     name: str
@@ -72,10 +70,9 @@ class PlanFields:
     tolerance_percent: float  # 0: not given
     authorise_firing: bool
     description: str = ""
-    # what the sensor's data sheet states (rig.shot.SENSOR_STATED), per cent (0: not stated: the
-    # rig config's [uncertainty] value)
-    transverse_percent: float = 0.0
-    asymmetry_percent: float = 0.0
+    # what the sensor's data sheet states (rig.shot.SENSOR_STATED), fractions (absent or None: not
+    # stated: the rig config's [uncertainty] value)
+    stated: Mapping[str, float | None] = field(default_factory=dict)
 
 
 def plan_document(fields: PlanFields, entries: list[PlanEntry], base: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -87,7 +84,7 @@ def plan_document(fields: PlanFields, entries: list[PlanEntry], base: dict[str, 
     doc["authorise_firing"] = bool(fields.authorise_firing)
     acc = dict(doc.get("accelerometer") or {})
     acc["model"], acc["serial"] = fields.model.strip(), fields.serial.strip()
-    for key in ("sensitivity_v_per_m_s2", "sensitivity_unit", "tolerance_percent", *STATED_KEYS.values()):
+    for key in ("sensitivity_v_per_m_s2", "sensitivity_unit", "tolerance_percent", *SENSOR_STATED):
         acc.pop(key, None)
     if fields.sensitivity > 0:
         unit = UNITS[fields.unit]
@@ -95,9 +92,7 @@ def plan_document(fields: PlanFields, entries: list[PlanEntry], base: dict[str, 
         acc["sensitivity_unit"] = unit.name
     if fields.tolerance_percent > 0:
         acc["tolerance_percent"] = fields.tolerance_percent
-    for name, key in STATED_KEYS.items():
-        if getattr(fields, name) > 0:
-            acc[key] = round(getattr(fields, name) / 100, 6)
+    acc |= {key: value for key, value in fields.stated.items() if value is not None}
     doc["accelerometer"] = acc
     shots = []
     for e in entries:
@@ -171,20 +166,12 @@ class PlanEditor(QDialog):
             lambda: self.sensitivity.set_plausible(*UNITS[str(self.unit.currentData())].plausible_range()))
         self.tolerance = UnitSpinBox("Tolerance", "%", (0.1, 50.0), float(acc.get("tolerance_percent") or 0.0),
                                      decimals=1, special="not set")
-        stated = {key: 100 * float(acc.get(key) or 0.0) for key in STATED_KEYS.values()}
-        self.transverse = UnitSpinBox("Transverse sensitivity", "%", (0.01, 100.0),
-                                      stated["transverse_sensitivity_rel"], decimals=2, step=0.5, special="the rig's",
-                                      tip="the sensor's stated (data-sheet) transverse sensitivity; not set: the rig "
-                                          "config's [uncertainty] one")
-        self.asymmetry = UnitSpinBox("Asymmetry bound", "%", (0.01, 100.0), stated["asymmetry_bound_rel"],
-                                     decimals=2, step=0.5, special="the rig's",
-                                     tip="a bound on the sensor's tension/compression asymmetry, carried where a "
-                                         "pulse drives one direction only; not set: the rig config's")
+        self.stated = StatedFields(acc, unset_text="the rig's")
         self.authorise = QCheckBox("fire every shot without asking (else each shot is confirmed with FIRE)")
         self.authorise.setChecked(bool(self.base.get("authorise_firing", False)))
         self.message = QLabel("")
         self.message.setWordWrap(True)
-        for spin in (self.sensitivity, self.tolerance, self.transverse, self.asymmetry):
+        for spin in (self.sensitivity, self.tolerance, *self.stated.spins.values()):
             spin.refused.connect(lambda text: self._say("warning", f"Not taken: {text}."))
 
         self.table = QTableWidget(0, 4)
@@ -211,8 +198,7 @@ class PlanEditor(QDialog):
         row.addWidget(self.unit)
         form.addRow("Nominal sens.", row)
         form.addRow("Tolerance (± %)", self.tolerance)
-        form.addRow("Transverse sens.", self.transverse)
-        form.addRow("Asymmetry bound", self.asymmetry)
+        self.stated.add_rows(form)
         form.addRow("", self.authorise)
         buttons_row = QHBoxLayout()
         buttons_row.addWidget(add)
@@ -267,7 +253,7 @@ class PlanEditor(QDialog):
         return PlanFields(self.name.text(), self.operator.text(), self.model.text(), self.serial.text(),
                           self.sensitivity.value(), str(self.unit.currentData()), self.tolerance.value(),
                           self.authorise.isChecked(), str(self.base.get("description", "")),
-                          self.transverse.value(), self.asymmetry.value())
+                          self.stated.fractions())
 
     def ask_path(self) -> Path | None:
         """Where to save the plan (a dialog; tests replace it)."""

@@ -53,6 +53,7 @@ from hopkinson.rig.config import RigConfig
 from hopkinson.rig.shot import PROJECTILES, ShotRequest, second_accelerometer
 from hopkinson.ui.inputs import ComboBox, IntSpinBox, UnitSpinBox
 from hopkinson.ui.sensor_lookup import RecordAdvice, record_advice
+from hopkinson.ui.sensor_stated import StatedFields
 from hopkinson.ui.setup_check import SetupPrediction, predict_setup
 from hopkinson.ui.shot_planner import ShotPlanner
 from hopkinson.ui.widgets import TEXT_COLOURS, section_title
@@ -105,15 +106,8 @@ class ShotSetup(QWidget):
         self.tolerance = UnitSpinBox("Tolerance", "%", (0.1, 50.0), 0.0, decimals=1, step=0.5, special="not set",
                                      tip="the sensor's tolerance on its nominal sensitivity: a shot outside it is "
                                          "flagged")
-        stated = config.uncertainty  # the rig's values where a sensor states none (analysis.systematics)
-        self.transverse = UnitSpinBox("Transverse sensitivity", "%", (0.0, 100.0),
-                                      100 * stated.transverse_sensitivity_rel, decimals=1, step=0.5,
-                                      tip="the sensor's stated (data-sheet) transverse sensitivity: times the bar's "
-                                          "transverse motion, a Type B row of the sensitivity's uncertainty")
-        self.asymmetry = UnitSpinBox("Asymmetry bound", "%", (0.0, 100.0), 100 * stated.asymmetry_bound_rel,
-                                     decimals=1, step=0.5,
-                                     tip="a bound on the sensor's tension/compression asymmetry: carried (half of "
-                                         "it) where a pulse drives one direction only")
+        # what the sensor states, starting at the rig's values (those of a sensor that states none)
+        self.stated = StatedFields(config.uncertainty.analysis_options())
         self.sensor_range = UnitSpinBox("Sensor range", "g", (100.0, 2e6), 0.0, decimals=0, step=1000.0,
                                         special="not set", tip="the highest shock the sensor is rated for: a set-up "
                                                                "predicted above it asks before ARM")
@@ -164,8 +158,7 @@ class ShotSetup(QWidget):
         form.addRow("Nominal sens.", sensitivity_row)
         form.addRow("Tolerance (± %)", self.tolerance)
         form.addRow("Sensor range (g)", self.sensor_range)
-        form.addRow("Transverse sens.", self.transverse)
-        form.addRow("Asymmetry bound", self.asymmetry)
+        self.stated.add_rows(form)
         form.addRow("Sine calibration", sine_row)
         if self.accelerometer_2_model is not None and self.accelerometer_2_serial is not None:
             form.addRow("2nd accelerometer", self.accelerometer_2_model)
@@ -277,8 +270,7 @@ class ShotSetup(QWidget):
             tolerance_percent=tolerance or None,
             analysis=AnalysisOverrides(
                 sensitivity_v_per_m_s2=self.unit.to_si(self.sensitivity.value()),
-                transverse_sensitivity_rel=round(self.transverse.value() / 100, 6),
-                asymmetry_bound_rel=round(self.asymmetry.value() / 100, 6),
+                **self.stated.fractions(),
                 max_order=self.max_order.value(),
                 sample_rate_hz=self.sample_rate.value() * 1e3,
                 dcm_ratio=ratio if ratio > 0 else None,
@@ -368,7 +360,8 @@ class ShotSetup(QWidget):
             # the key keeps its old name: a set-up remembered before units were chosen was in µV/(m/s²)
             "sensitivity_uv_per_m_s2": self.sensitivity, "pressure_bar": self.pressure,
             "tolerance_percent": self.tolerance, "sensor_range_g": self.sensor_range,
-            "transverse_sensitivity_percent": self.transverse, "asymmetry_bound_percent": self.asymmetry,
+            "transverse_sensitivity_percent": self.stated.spins["transverse_sensitivity_rel"],
+            "asymmetry_bound_percent": self.stated.spins["asymmetry_bound_rel"],
             "max_order": self.max_order, "sample_rate_khz": self.sample_rate,
             "dcm_ratio": self.dcm_ratio, "dcm_damping": self.dcm_damping,
             "target_peak_g": self.planner.target_g, "sensor_fn_khz": self.planner.sensor_fn_khz}

@@ -119,13 +119,13 @@ def test_the_plan_editor_writes_a_plan_and_keeps_what_it_does_not_show(tmp_path)
     entries = entries_of(doc)
     assert [(e.kind, e.value, e.projectile, e.repeats) for e in entries] == [(PRESSURE, 2.0, 3, 1)]
     fields = PlanFields("edited", "A. Technician", "SIM-ACC", "SN-ACT", 1.96, "µV/g", 5.0, False,
-                        transverse_percent=1.5, asymmetry_percent=4.0)
+                        stated={"transverse_sensitivity_rel": 0.015, "asymmetry_bound_rel": 0.04})
     edited = plan_document(fields, entries + [PlanEntry(TARGET, 50_000.0, 2, 3)], doc)
     plan = save_plan(edited, tmp_path / "edited.toml")
     assert plan.name == "edited" and not plan.authorise_firing
     assert plan.accelerometer.sensitivity_unit == "µV/g" and plan.accelerometer.tolerance_percent == 5.0
     assert (plan.accelerometer.transverse_sensitivity_rel, plan.accelerometer.asymmetry_bound_rel) == (0.015, 0.04)
-    unstated = plan_document(dataclasses.replace(fields, transverse_percent=0.0, asymmetry_percent=0.0), entries, edited)
+    unstated = plan_document(dataclasses.replace(fields, stated={"transverse_sensitivity_rel": None}), entries, edited)
     assert not {"transverse_sensitivity_rel", "asymmetry_bound_rel"} & set(unstated["accelerometer"])  # the rig's
     assert abs(plan.accelerometer.sensitivity_v_per_m_s2 - 1.96e-6 / 9.80665) < 1e-15
     assert [s.id for s in plan.shots] == ["s001-r1", "s002-r1", "s002-r2", "s002-r3"]

@@ -64,7 +64,7 @@ def test_arm_fire_shows_the_shot_and_its_analysis(qtbot, make_panel, artifacts_d
     threads: set[str] = set()
     w.link.bus.subscribe(lambda e: threads.add(threading.current_thread().name))
     # what the sensor's data sheet states, in per cent (the rig config's 5 % and 3 % until changed)
-    stated = w.setup.transverse, w.setup.asymmetry
+    stated = tuple(w.setup.stated.spins.values())  # transverse, asymmetry
     assert [s.value() for s in stated] == [100 * w.config.uncertainty.transverse_sensitivity_rel,
                                            100 * w.config.uncertainty.asymmetry_bound_rel] == [5.0, 3.0]
     stated[0].setValue(1.0)

@@ -211,8 +211,9 @@ def test_a_technicians_day(qtbot, make_panel, tmp_path, artifacts_dir, errors, c
         dialog.serial.setText("SN-24017")
         dialog.sensitivity.setValue(0.2)
         dialog.tolerance.setValue(5.0)
-        assert dialog.transverse.text() == dialog.asymmetry.text() == "the rig's"  # not stated: the rig config's
-        dialog.transverse.setValue(2.0)  # the data sheet's 2 %
+        transverse, asymmetry = dialog.stated.spins.values()
+        assert transverse.text() == asymmetry.text() == "the rig's"  # not stated: the rig config's
+        transverse.setValue(2.0)  # the data sheet's 2 %
         dialog.table.setRowCount(0)
         dialog._extras.clear()
         for target in (40_000.0, 50_000.0):
