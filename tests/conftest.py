@@ -68,8 +68,9 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     SciPy, matplotlib, PySide6, pyqtgraph, SQLAlchemy and the product (~250 000 objects; 0.12 s
     per full collection on this session's 2-core machine, more on a slower one), and walked them
     again at every automatic generation-2 collection and at ui.app.dispose's gc.collect after each
-    panel a test closes. Measured 2026-11-29 (`make test`, 3 workers, two runs each): user CPU
-    294 and 305 s against 327 and 320 s, wall 3:21 and 3:29 against 3:37 and 3:33. What is frozen
+    panel a test closes. Measured 2026-11-29 (`make test`, 3 workers): user CPU 294, 305 and
+    315 s against 327 and 320 s without, wall 3:21, 3:29 and 3:33 against 3:37 and 3:33 (a few
+    per cent; runs differ by ±10 s). What is frozen
     lives for the whole run anyway (modules, classes, functions, the collected tests); one of them
     that became garbage later would only stay unfreed. Objects the tests make are not frozen."""
     import gc
