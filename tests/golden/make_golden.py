@@ -1,6 +1,7 @@
 """Golden outputs of the analysis commands (issue 46 item 1; docs/golden-outputs.md).
 
     .venv/bin/python tests/golden/make_golden.py               # (re)write tests/golden/outputs/*.json
+    .venv/bin/python tests/golden/make_golden.py --stack       # this numerical stack's own set of the same goldens
     .venv/bin/python tests/golden/make_golden.py --check       # recompute and compare, name the first difference
     .venv/bin/python tests/golden/make_golden.py --out DIR     # write elsewhere (tests/golden/test_golden.py)
     .venv/bin/python tests/golden/make_golden.py --only ptb-   # the goldens whose name starts so
@@ -29,6 +30,7 @@ import io
 import json
 import os
 import platform
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
@@ -38,6 +40,10 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[2]
 OUTPUTS = Path(__file__).resolve().parent / "outputs"
 PLATFORM_FILE = "_platform.json"  # the numerical stack the goldens were made on (not a golden)
+# Other numerical stacks' sets of the same goldens, one folder each (named by `stack_id`), made from a
+# tree whose outputs/ is current (`--stack`): bit-identity holds per stack, so a refactor is checked
+# on every stack that has a set. Making outputs/ again (a change of the method) removes them all.
+STACKS = OUTPUTS / "stacks"
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 VOLATILE_KEYS = frozenset({"utc_time", "software_version", "uuid", "cpu_s", "elapsed_s", "created_utc"})
 DRAWS = "50"  # the CLI's smallest: goldens check the arithmetic, not the intervals' stability
@@ -277,9 +283,11 @@ def make(out: Path, only: str = "") -> dict[str, str]:
     """Compute every golden (those whose name starts with `only`), write each normalised text to
     `out/<name>.json` and the platform's fingerprint beside them; name -> text."""
     out.mkdir(parents=True, exist_ok=True)
-    if not only and out.resolve() == OUTPUTS:  # a golden no longer made leaves no stale file behind
-        for stale in out.glob("*.json"):
-            stale.unlink()
+    if out.resolve() == OUTPUTS:
+        if not only:  # a golden no longer made leaves no stale file behind
+            for stale in out.glob("*.json"):
+                stale.unlink()
+        shutil.rmtree(STACKS, ignore_errors=True)  # the other stacks' sets hold what the method made before
     texts: dict[str, str] = {}
     with tempfile.TemporaryDirectory(prefix="golden-") as folder:
         work = Path(folder).resolve()
@@ -305,18 +313,58 @@ def platform_difference(folder: Path = OUTPUTS) -> str | None:
     return first_difference(saved, now)
 
 
+def stack_id(fingerprint: dict[str, Any]) -> str:
+    """A stack set's folder name: the machine, its SIMD level and a digest of the whole fingerprint."""
+    digest = hashlib.sha256(golden_text(fingerprint).encode()).hexdigest()[:10]
+    simd = "-".join(str(s) for s in fingerprint.get("simd_found") or ()) or "nosimd"
+    return f"{fingerprint.get('machine', 'cpu')}-{simd}-{digest}".lower()
+
+
+def golden_sets() -> list[Path]:
+    """outputs/ and every other stack's set (each folder holding a platform file)."""
+    others = sorted(p for p in STACKS.iterdir() if (p / PLATFORM_FILE).is_file()) if STACKS.is_dir() else []
+    return [OUTPUTS, *others]
+
+
+def own_set() -> Path | None:
+    """The set made on this numerical stack, or None."""
+    return next((folder for folder in golden_sets() if platform_difference(folder) is None), None)
+
+
+def not_this_stack() -> str:
+    """Why no set is this stack's: how it differs from outputs/', and how many other sets there are."""
+    others = len(golden_sets()) - 1
+    return (f"another numerical stack than the goldens' ({platform_difference()})"
+            + (f" and than the {others} other stacks' sets in {STACKS.relative_to(REPO)}" if others else ""))
+
+
 def check(only: str = "") -> list[str]:
-    """Recompute and compare with tests/golden/outputs: one line per golden that differs (the
-    first line says so when the numerical stack is not the goldens' own)."""
-    with tempfile.TemporaryDirectory(prefix="golden-out-") as folder:
-        now = make(Path(folder), only)
-    saved = {k: v for k, v in saved_goldens().items() if k.startswith(only)}
+    """Recompute and compare with this stack's set (outputs/ where none is): one line per golden
+    that differs (the first line says so when no set is this numerical stack's own)."""
+    folder = own_set()
+    with tempfile.TemporaryDirectory(prefix="golden-out-") as work:
+        now = make(Path(work), only)
+    saved = {k: v for k, v in saved_goldens(folder or OUTPUTS).items() if k.startswith(only)}
     problems = [f"{name}: saved, but no longer made" for name in sorted(set(saved) - set(now))]
     problems += [f"{name}: made, but no golden saved" for name in sorted(set(now) - set(saved))]
     problems += [p for name in sorted(set(saved) & set(now)) if (p := compare_texts(name, saved[name], now[name]))]
-    if problems and (other := platform_difference()) is not None:
-        problems.insert(0, f"(not the numerical stack the goldens were made on: {PLATFORM_FILE} {other})")
+    if problems and folder is None:
+        problems.insert(0, f"({not_this_stack()})")
     return problems
+
+
+def make_stack_set() -> Path:
+    """This stack's own set of the goldens outputs/ holds, in STACKS/<stack_id>; refused where
+    outputs/ is this stack's already or the goldens made now are not the ones outputs/ names."""
+    if platform_difference() is None:
+        raise SystemExit("make_golden.py --stack: outputs/ was made on this numerical stack; nothing to add")
+    folder = STACKS / stack_id(platform_fingerprint())
+    texts = make(folder)
+    if sorted(texts) != sorted(saved_goldens()):
+        shutil.rmtree(folder)
+        raise SystemExit("make_golden.py --stack: this tree makes other goldens than outputs/ holds; "
+                         "make outputs/ first")
+    return folder
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -328,7 +376,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=OUTPUTS, help="folder for the goldens (default %(default)s)")
     p.add_argument("--only", default="", metavar="PREFIX", help="only the goldens whose name starts so")
     p.add_argument("--check", action="store_true", help="compare with the saved goldens instead of writing")
+    p.add_argument("--stack", action="store_true",
+                   help=f"add this numerical stack's own set of outputs/' goldens (in {STACKS.relative_to(REPO)})")
     args = p.parse_args(argv)
+    if args.stack:
+        print(f"this numerical stack's goldens written to {make_stack_set()}")
+        return 0
     if args.check:
         problems = check(args.only)
         print("\n".join(problems) if problems else "every golden output is bit-identical")

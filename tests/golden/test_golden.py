@@ -4,7 +4,8 @@ Every golden in tests/golden/outputs is made again by tests/golden/make_golden.p
 process: one BLAS thread, no test plugin's seeding) and compared as text with the saved one; a
 difference names the golden and the first JSON path where it differs. Bit-identity holds only on
 the numerical stack the goldens were made on (outputs/_platform.json: Python, NumPy, SciPy,
-their BLAS, the CPU's SIMD extensions): elsewhere the comparison is skipped, saying why.
+their BLAS, the CPU's SIMD extensions): the comparison is with this stack's set (outputs/, or
+another stack's set of the same goldens in outputs/stacks/), and skipped, saying why, where none is.
 """
 
 from __future__ import annotations
@@ -18,21 +19,32 @@ import pytest
 
 from tests.golden import make_golden
 from tests.golden.make_golden import (
+    PLATFORM_FILE,
     compare_texts,
     first_difference,
-    platform_difference,
+    golden_sets,
+    not_this_stack,
+    own_set,
     saved_goldens,
+    stack_id,
 )
 
 SAVED = saved_goldens()
 
 
 @pytest.fixture(scope="module")
-def recomputed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+def own() -> dict[str, str]:
+    """name -> text of this stack's set (the test is skipped where no set is this stack's)."""
+    folder = own_set()
+    if folder is None:
+        pytest.skip(f"{not_this_stack()}: bit-identity is not defined across BLAS kernels; make this stack's "
+                    "set on the commit before a refactor (docs/golden-outputs.md)")
+    return saved_goldens(folder)
+
+
+@pytest.fixture(scope="module")
+def recomputed(own: dict[str, str], tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     """name -> text of every golden made now."""
-    if (other := platform_difference()) is not None:
-        pytest.skip(f"another numerical stack than the goldens' ({other}): bit-identity is not defined across "
-                    "BLAS kernels; regenerate on this machine before a refactor (docs/golden-outputs.md)")
     out = tmp_path_factory.mktemp("golden")
     done = subprocess.run([sys.executable, make_golden.__file__, "--out", str(out)], capture_output=True,
                           text=True, timeout=900, check=False)
@@ -51,11 +63,22 @@ def test_the_same_goldens_are_made(recomputed: dict[str, str]) -> None:
     assert sorted(recomputed) == sorted(SAVED)
 
 
+def test_every_stacks_set_holds_the_same_goldens_from_its_own_stack() -> None:
+    """A stack's set is outputs/' goldens made on another stack: the same names, its folder named
+    by its own platform file, never outputs/' stack again."""
+    primary = (golden_sets()[0] / PLATFORM_FILE).read_text(encoding="utf-8")
+    for folder in golden_sets()[1:]:
+        platform_text = (folder / PLATFORM_FILE).read_text(encoding="utf-8")
+        assert sorted(saved_goldens(folder)) == sorted(SAVED), folder.name
+        assert folder.name == stack_id(json.loads(platform_text)), folder.name
+        assert platform_text != primary, f"{folder.name}: outputs/' own stack"
+
+
 @pytest.mark.parametrize("name", sorted(SAVED))
-def test_the_output_is_bit_identical(recomputed: dict[str, str], name: str) -> None:
+def test_the_output_is_bit_identical(own: dict[str, str], recomputed: dict[str, str], name: str) -> None:
     if name not in recomputed:
         pytest.fail(f"{name}: saved, but no longer made")
-    problem = compare_texts(name, SAVED[name], recomputed[name])
+    problem = compare_texts(name, own[name], recomputed[name])
     assert problem is None, f"golden output changed: {problem}"
 
 
