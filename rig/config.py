@@ -395,9 +395,12 @@ class TimeoutsConfig:
 AnalysisConfig = options_section(
     "AnalysisConfig", __name__, "[analysis]: interferometer and sensor constants, the analysis rate and the "
     "automatic DCM's limits (analysis.options); amp_gain_2 and sensitivity_2_v_per_m_s2: a second sensor "
-    "(digitizer role response_2), through its own conditioner set by hand (both 1: its results in volts).",
+    "(digitizer role response_2), through its own conditioner set by hand (both 1: its results in volts); "
+    "transverse_sensitivity_2_rel and asymmetry_bound_2_rel: what its data sheet states (unset: [uncertainty]'s).",
     ("grating_pitch_m", "orders", "sensitivity_v_per_m_s2", "sample_rate_hz", "dcm_widening", "dcm_noise_gain_limit"),
-    apart={"amp_gain_2": "amp_gain", "sensitivity_2_v_per_m_s2": "sensitivity_v_per_m_s2"})
+    unset=("transverse_sensitivity_2_rel", "asymmetry_bound_2_rel"),
+    apart={"amp_gain_2": "amp_gain", "sensitivity_2_v_per_m_s2": "sensitivity_v_per_m_s2",
+           "transverse_sensitivity_2_rel": "transverse_sensitivity_rel", "asymmetry_bound_2_rel": "asymmetry_bound_rel"})
 UncertaintyConfig = options_section(
     "UncertaintyConfig", __name__, "[uncertainty]: the reference chain's relative standard uncertainties (k = 1, "
     "from the lab's calibration certificates; the defaults are typical values), the channel skew, the bar's "

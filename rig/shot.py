@@ -69,6 +69,10 @@ MORE_SENSOR_ROLES = ("response_2",)  # sensors analysed like the first ("respons
 # [accelerometer] or the panel gives them, the rig config's [uncertainty] where neither does; a
 # shot file records them under their own keys in its settings (rig.reanalysis reads them back).
 SENSOR_STATED = ("transverse_sensitivity_rel", "asymmetry_bound_rel")
+# The second sensor's (response_2) are the rig config's [analysis] keys, beside its gain and
+# sensitivity (the snapshot in its shot files keeps them): SENSOR_STATED's option -> its key.
+SECOND_SENSOR_STATED = {"transverse_sensitivity_rel": "transverse_sensitivity_2_rel",
+                        "asymmetry_bound_rel": "asymmetry_bound_2_rel"}
 # The sensor's own options (its nominal sensitivity, its sine calibration, what it states) and
 # the order of the options the first shot files' settings recorded.
 SENSOR_OPTIONS = ("sensitivity_v_per_m_s2", "sine_calibration", *SENSOR_STATED)
@@ -372,13 +376,15 @@ def analysis_params(request: ShotRequest, config: RigConfig, settings: dict[str,
 def sensor_params(params: AnalysisOptions, config: RigConfig) -> dict[str, AnalysisOptions]:
     """role -> the analysis parameters of each further sensor: the first sensor's, with that
     sensor's conditioner gain and nominal sensitivity ([analysis] amp_gain_2,
-    sensitivity_2_v_per_m_s2), and neither the first sensor's sine calibration nor what its data
-    sheet states (SENSOR_STATED): the rig config's [uncertainty] values, as for any sensor that
-    states none."""
+    sensitivity_2_v_per_m_s2) and what its own data sheet states ([analysis]
+    transverse_sensitivity_2_rel, asymmetry_bound_2_rel; unset: the rig config's [uncertainty]
+    values, as for any sensor that states none), never the first sensor's sine calibration or
+    stated values."""
     a, rig = config.analysis, config.uncertainty.analysis_options()
+    stated = {name: own if (own := getattr(a, SECOND_SENSOR_STATED[name])) is not None else rig[name]
+              for name in SENSOR_STATED}
     return {"response_2": dataclasses.replace(params, amp_gain=a.amp_gain_2, sine_calibration=None,
-                                              sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2,
-                                              **{name: rig[name] for name in SENSOR_STATED})}
+                                              sensitivity_v_per_m_s2=a.sensitivity_2_v_per_m_s2, **stated)}
 
 
 def analyse_raw(raw: RawShot, params: AnalysisOptions,

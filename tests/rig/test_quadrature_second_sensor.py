@@ -9,7 +9,9 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import math
 import re
+import shutil
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 from types import SimpleNamespace
@@ -43,16 +45,23 @@ enabled = true
 # The reference acceleration against the simulated truth over the pulse, as a fraction of the
 # peak: the same tolerance for the quadrature pair and for the PM beat of the same shot.
 RMS_TOL, PEAK_TOL = 5e-3, 3e-3
+# What the second sensor's data sheet states, in the rig config's [analysis] (rig.shot.SECOND_SENSOR_STATED)
+SECOND_STATED = {"transverse_sensitivity_2_rel": 0.02, "asymmetry_bound_2_rel": 0.04}
 
 
 @pytest.fixture(scope="module")
 def fired(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
-    """One shot (2 bar, ~50 000 g), analysed with a 50-draw uncertainty for both sensors."""
+    """One shot (2 bar, ~50 000 g), analysed with a 50-draw uncertainty for both sensors; the
+    rig config states the second sensor's own transverse sensitivity and asymmetry bound
+    (SECOND_STATED), the first sensor's are the rig's [uncertainty] values."""
     folder = tmp_path_factory.mktemp("quadrature-shot")
     text = (REPO / "config" / "rig-sim.toml").read_text(encoding="utf-8")
     for key, value in {"evacuate_s": 2.0, "charge_s": 3.0, "arm_s": 1.0, "capture_s": 2.0, "safe_s": 3.0}.items():
         text, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
         assert n == 1, key
+    text, n = re.subn(r"^(sensitivity_2_v_per_m_s2 = .*)$",
+                      lambda m: m.group(1) + "".join(f"\n{k} = {v}" for k, v in SECOND_STATED.items()), text, flags=re.M)
+    assert n == 1
     (folder / "rig.toml").write_text(text, encoding="utf-8")
     (folder / "sim.toml").write_text(SIM_TOML, encoding="utf-8")
     out, err = io.StringIO(), io.StringIO()
@@ -75,6 +84,33 @@ def test_the_shot_records_four_channels_and_summarises_both_sensors(fired) -> No
     assert fired.shot.meta.sensor_identities == {"response_2": {"model": "AYZ-3", "serial": "SN0002"}}
     assert re.search(r"^results: .*f_n 2[67]\.\d+ ± 0\.\d+ kHz.*FBSD ±5 % \d", fired.out, flags=re.M), fired.out
     assert re.search(r"^response_2: .*f_n 3[23]\.\d+ ± 0\.\d+ kHz.*FBSD ±5 % \d", fired.out, flags=re.M), fired.out
+
+
+def test_each_sensors_budget_carries_what_its_own_data_sheet_states(fired) -> None:
+    """The second sensor's transverse row is its own stated S_t (rig config [analysis]
+    transverse_sensitivity_2_rel) times the bar's r_T over √3, its asymmetry bound its own; the
+    first sensor keeps the rig's [uncertainty] values. Re-analysed from the file, the same."""
+    config = load_rig_config(REPO / "config" / "rig-sim.toml")
+    motion = config.uncertainty.transverse_motion_rel
+    first = (config.uncertainty.transverse_sensitivity_rel, config.uncertainty.asymmetry_bound_rel)
+    second = (SECOND_STATED["transverse_sensitivity_2_rel"], SECOND_STATED["asymmetry_bound_2_rel"])
+    assert first != second
+    for results in (fired.shot.results, read_shot(_reanalysed(fired)).results):
+        for stated, sensor in ((first, results), (second, results["sensors"]["response_2"])):
+            params = sensor["params"]
+            assert (params["transverse_sensitivity_rel"], params["asymmetry_bound_rel"]) == stated
+            (row,) = [b for b in sensor["uncertainty"]["budget"] if b["source"].startswith("transverse sensitivity")]
+            assert row["u_rel_by_figure"]["dc_gain"] == pytest.approx(stated[0] * motion / math.sqrt(3), rel=1e-9)
+
+
+def _reanalysed(fired) -> Path:
+    """A copy of the shot analysed again (`hopkinson analyse`: the rig config from its snapshot)."""
+    copy = fired.shot.path.with_name("q1-again.h5")
+    if not copy.exists():
+        shutil.copyfile(fired.shot.path, copy)
+        with redirect_stdout(io.StringIO()):
+            assert main(["analyse", str(copy), "--draws", "50"]) == 0
+    return copy
 
 
 def _reference_errors(record, truth: dict, dt: float, peak_estimate: float) -> tuple[float, float]:
