@@ -359,6 +359,7 @@ def make_stack_set() -> Path:
     if platform_difference() is None:
         raise SystemExit("make_golden.py --stack: outputs/ was made on this numerical stack; nothing to add")
     folder = STACKS / stack_id(platform_fingerprint())
+    shutil.rmtree(folder, ignore_errors=True)  # a golden no longer made leaves no stale file behind
     texts = make(folder)
     if sorted(texts) != sorted(saved_goldens()):
         shutil.rmtree(folder)
