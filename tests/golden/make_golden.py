@@ -306,11 +306,11 @@ def saved_goldens(folder: Path = OUTPUTS) -> dict[str, str]:
     return {p.stem: p.read_text(encoding="utf-8") for p in sorted(folder.glob("*.json")) if p.name != PLATFORM_FILE}
 
 
-def platform_difference(folder: Path = OUTPUTS) -> str | None:
-    """How this numerical stack differs from the one the goldens in `folder` were made on, or None."""
+def platform_difference(folder: Path = OUTPUTS, now: dict[str, Any] | None = None) -> str | None:
+    """How this numerical stack (`now`: its fingerprint as saved, when the caller has it) differs
+    from the one the goldens in `folder` were made on, or None."""
     saved = json.loads((folder / PLATFORM_FILE).read_text(encoding="utf-8"))
-    now = json.loads(golden_text(platform_fingerprint()))
-    return first_difference(saved, now)
+    return first_difference(saved, now if now is not None else json.loads(golden_text(platform_fingerprint())))
 
 
 def stack_id(fingerprint: dict[str, Any]) -> str:
@@ -327,8 +327,9 @@ def golden_sets() -> list[Path]:
 
 
 def own_set() -> Path | None:
-    """The set made on this numerical stack, or None."""
-    return next((folder for folder in golden_sets() if platform_difference(folder) is None), None)
+    """The set made on this numerical stack, or None (the stack's fingerprint taken once)."""
+    now = json.loads(golden_text(platform_fingerprint()))
+    return next((folder for folder in golden_sets() if platform_difference(folder, now) is None), None)
 
 
 def not_this_stack() -> str:

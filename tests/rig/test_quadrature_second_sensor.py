@@ -93,7 +93,7 @@ def test_each_sensors_budget_carries_what_its_own_data_sheet_states(fired) -> No
     config = load_rig_config(REPO / "config" / "rig-sim.toml")
     motion = config.uncertainty.transverse_motion_rel
     first = (config.uncertainty.transverse_sensitivity_rel, config.uncertainty.asymmetry_bound_rel)
-    second = (SECOND_STATED["transverse_sensitivity_2_rel"], SECOND_STATED["asymmetry_bound_2_rel"])
+    second = tuple(SECOND_STATED.values())  # in SENSOR_STATED's order: transverse, asymmetry
     assert first != second
     for results in (fired.shot.results, read_shot(_reanalysed(fired)).results):
         for stated, sensor in ((first, results), (second, results["sensors"]["response_2"])):
